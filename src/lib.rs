@@ -1,0 +1,8 @@
+//! splatray: ray tracing point clouds as surface splats, after Linsen et al.
+//! 2007 and Botsch et al. 2004 (the report in `docs/`, cited by section and
+//! equation number), with two interchangeable acceleration backends — an
+//! octree and Embree 4 user-geometry discs — feeding one shading path.
+
+pub mod accel;
+pub mod embree;
+pub mod splat;

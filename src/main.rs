@@ -1,0 +1,54 @@
+//! The `splatray` command line.
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "splatray",
+    version,
+    about = "Ray tracing point clouds as surface splats"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Print splatray's version, the Embree version in use (asked from the
+    /// device), the Embree library loaded and the thread count.
+    Info,
+}
+
+fn info() -> Result<(), String> {
+    let device = splatray::embree::Device::new().map_err(|e| e.to_string())?;
+    let (a, b, c) = device.version();
+    println!("splatray {}", env!("CARGO_PKG_VERSION"));
+    println!("embree   {a}.{b}.{c} (reported by the device)");
+    match splatray::embree::Device::library_path() {
+        Some(p) => println!("library  {}", p.display()),
+        None => println!("library  (not found in /proc/self/maps)"),
+    }
+    println!(
+        "found by {} ({})",
+        env!("SPLATRAY_EMBREE_FOUND_BY"),
+        env!("SPLATRAY_EMBREE_LIB_DIR")
+    );
+    println!("threads  {}", rayon::current_num_threads());
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Info => info(),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("splatray: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,131 @@
+//! Surface splats: oriented discs and ellipses with a linear "Phong" normal
+//! field (report §2.1 and §4.1).
+
+use glam::{Vec2, Vec3};
+
+/// The linear normal field of a Phong splat, eq. (4) of §4.1–4.2.
+///
+/// A normal is stored in the two-parameter tangent-plane form of fig. 13:
+/// the point `(x, y, 1)` where it pierces the plane at unit distance above the
+/// splat, in the splat's frame `(u_axis, v_axis, normal)`. The field is
+/// `N(u, v) = (x_c + alpha * u, y_c + beta * v, 1)`, with `(u, v)` the
+/// splat-local coordinates *normalised by the radii* (so `|(u,v)| = 1` on the
+/// rim), which keeps `alpha` and `beta` scale-free.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C)]
+pub struct NormalField {
+    /// Centre normal, tangent-plane form `(x_c, y_c)` (eq. 4).
+    pub xc: f32,
+    /// Centre normal, tangent-plane form `(x_c, y_c)` (eq. 4).
+    pub yc: f32,
+    /// Slope of the field along `u_axis` (eq. 4).
+    pub alpha: f32,
+    /// Slope of the field along `v_axis` (eq. 4).
+    pub beta: f32,
+}
+
+impl NormalField {
+    /// A constant field equal to the splat normal (a flat splat).
+    pub const FLAT: NormalField = NormalField {
+        xc: 0.0,
+        yc: 0.0,
+        alpha: 0.0,
+        beta: 0.0,
+    };
+}
+
+/// One surface splat (DESIGN §3).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Splat {
+    /// Centre `c_i`, eq. (2).
+    pub center: Vec3,
+    /// Unit normal `n_i`.
+    pub normal: Vec3,
+    /// Unit tangent of the major axis `u_i` (§2.1).
+    pub u_axis: Vec3,
+    /// Unit tangent of the minor axis `v_i`, `normal × u_axis`.
+    pub v_axis: Vec3,
+    /// Radii `(r_u, r_v)`, eq. (3); equal for circular splats.
+    pub radii: Vec2,
+    /// Linear RGB colour in `[0, 1]`.
+    pub color: Vec3,
+    /// Phong normal field, eq. (4).
+    pub field: NormalField,
+}
+
+impl Splat {
+    /// A circular flat splat with an arbitrary tangent frame. `normal` need not
+    /// be unit length; a zero or NaN normal gives `None`.
+    #[must_use]
+    pub fn disc(center: Vec3, normal: Vec3, radius: f32) -> Option<Splat> {
+        let n = normal.try_normalize()?;
+        let (u, v) = tangent_frame(n);
+        Some(Splat {
+            center,
+            normal: n,
+            u_axis: u,
+            v_axis: v,
+            radii: Vec2::splat(radius),
+            color: Vec3::splat(0.8),
+            field: NormalField::FLAT,
+        })
+    }
+
+    /// The hot-loop description of this splat's surface.
+    #[must_use]
+    pub fn disc_geometry(&self) -> Disc {
+        Disc {
+            center: self.center,
+            normal: self.normal,
+            u_scaled: self.u_axis / self.radii.x,
+            v_scaled: self.v_axis / self.radii.y,
+        }
+    }
+
+    /// Half extents of the tight axis-aligned box around the (elliptical) disc:
+    /// along world axis `i`, `sqrt((r_u u_i)^2 + (r_v v_i)^2)`.
+    #[must_use]
+    pub fn half_extent(&self) -> Vec3 {
+        let a = self.u_axis * self.radii.x;
+        let b = self.v_axis * self.radii.y;
+        (a * a + b * b).map(f32::sqrt)
+    }
+
+    /// The normal of the Phong field at normalised local coordinates `(u, v)`,
+    /// eq. (4), as a unit world-space vector.
+    #[must_use]
+    pub fn field_normal(&self, u: f32, v: f32) -> Vec3 {
+        let f = &self.field;
+        let x = f.xc + f.alpha * u;
+        let y = f.yc + f.beta * v;
+        (self.u_axis * x + self.v_axis * y + self.normal).normalize()
+    }
+}
+
+/// A right-handed orthonormal tangent frame `(u, v)` for unit normal `n`
+/// (Duff et al. 2017, branchless).
+#[must_use]
+pub fn tangent_frame(n: Vec3) -> (Vec3, Vec3) {
+    let sign = 1.0f32.copysign(n.z);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    let u = Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+    let v = Vec3::new(b, sign + n.y * n.y * a, -n.y);
+    (u, v)
+}
+
+/// What the intersection hot loop reads of a splat: 48 contiguous bytes.
+/// The tangent axes are pre-divided by the radii, so the local coordinates
+/// it yields are already normalised (`|(u,v)| <= 1` on the splat).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
+pub struct Disc {
+    /// Splat centre; all intersection math is relative to it.
+    pub center: Vec3,
+    /// Unit normal.
+    pub normal: Vec3,
+    /// `u_axis / r_u`.
+    pub u_scaled: Vec3,
+    /// `v_axis / r_v`.
+    pub v_scaled: Vec3,
+}
