@@ -7,6 +7,7 @@
 
 pub mod brute;
 pub mod embree;
+pub mod resolve;
 
 use crate::splat::Disc;
 use glam::Vec3;
