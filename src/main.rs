@@ -19,6 +19,8 @@ enum Command {
     /// Print splatray's version, the Embree version in use (asked from the
     /// device), the Embree library loaded and the thread count.
     Info,
+    /// Render a scene (default: the bundled scenes/bunny.toml) to an image.
+    Render(splatray::cli::render::RenderArgs),
 }
 
 fn info() -> Result<(), String> {
@@ -43,6 +45,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info => info(),
+        Command::Render(args) => splatray::cli::render::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -24,6 +24,13 @@ impl Brute {
     }
 }
 
+impl Brute {
+    /// Records the build time measured by the caller.
+    pub fn set_build_seconds(&mut self, s: f64) {
+        self.stats.build_seconds = s;
+    }
+}
+
 impl Backend for Brute {
     fn name(&self) -> &'static str {
         "brute"

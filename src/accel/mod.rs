@@ -238,6 +238,56 @@ pub struct BuildStats {
     pub mean_refs_per_leaf: f64,
 }
 
+/// Which backend to build.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BackendKind {
+    /// Every ray against every splat (the oracle; small scenes only).
+    Brute,
+    /// Embree 4 user-geometry discs.
+    Embree,
+}
+
+impl std::str::FromStr for BackendKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<BackendKind, String> {
+        match s {
+            "brute" => Ok(BackendKind::Brute),
+            "embree" => Ok(BackendKind::Embree),
+            _ => Err(format!(
+                "unknown backend '{s}' (expected octree, embree or brute)"
+            )),
+        }
+    }
+}
+
+impl BackendKind {
+    /// The backend's name as the command line spells it.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            BackendKind::Brute => "brute",
+            BackendKind::Embree => "embree",
+        }
+    }
+
+    /// Builds this backend over `splats`.
+    pub fn build(self, splats: &[crate::splat::Splat]) -> Result<Box<dyn Backend>, String> {
+        Ok(match self {
+            BackendKind::Brute => {
+                let discs: Vec<Disc> = splats.iter().map(|s| s.disc_geometry()).collect();
+                let start = std::time::Instant::now();
+                let mut b = brute::Brute::new(&discs);
+                b.set_build_seconds(start.elapsed().as_secs_f64());
+                Box::new(b)
+            }
+            BackendKind::Embree => {
+                let device = crate::embree::Device::new().map_err(|e| e.to_string())?;
+                Box::new(embree::EmbreeBackend::new(&device, splats).map_err(|e| e.to_string())?)
+            }
+        })
+    }
+}
+
 /// One acceleration backend (DESIGN §2). Implemented by the brute-force
 /// oracle, the octree and Embree.
 pub trait Backend: Send + Sync {

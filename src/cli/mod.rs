@@ -1,0 +1,3 @@
+//! Subcommands of the `splatray` binary.
+
+pub mod render;

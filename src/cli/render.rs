@@ -1,0 +1,187 @@
+//! `splatray render`.
+
+use crate::accel::BackendKind;
+use crate::accel::resolve::ShadingMode;
+use crate::render::integrator::{Frame, RayCounts, render};
+use crate::render::output::{
+    Aov, aov_path, check_output_path, write_aov, write_atomic, write_image,
+};
+use crate::render::scene::{Scene, load_scene};
+use std::path::{Path, PathBuf};
+
+/// Options of `splatray render`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct RenderArgs {
+    /// Scene file (TOML). Default: the bundled scenes/bunny.toml.
+    pub scene: Option<PathBuf>,
+    /// Acceleration backend: octree, embree or brute.
+    #[arg(long, default_value = "embree")]
+    pub backend: BackendKind,
+    /// Output image (.png, or .exr for linear radiance). Default: the
+    /// scene's name with .png, in the current folder.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Override the camera's width.
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Override the camera's height.
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Override samples per pixel.
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// Override the shading mode: flat, blended or phong.
+    #[arg(long)]
+    pub shading: Option<ShadingMode>,
+    /// Write a JSON report here.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Also write these AOVs as EXR beside the image (comma separated:
+    /// depth,normal,splat).
+    #[arg(long, value_delimiter = ',')]
+    pub aov: Vec<Aov>,
+}
+
+/// The bundled default scene: `scenes/bunny.toml` under the current folder,
+/// else under the source tree this binary was built from.
+#[must_use]
+pub fn default_scene() -> PathBuf {
+    let local = PathBuf::from("scenes/bunny.toml");
+    if local.is_file() {
+        local
+    } else {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/bunny.toml")
+    }
+}
+
+/// Applies command-line overrides to a loaded scene.
+pub fn apply_overrides(
+    scene: &mut Scene,
+    width: Option<u32>,
+    height: Option<u32>,
+    spp: Option<u32>,
+    shading: Option<ShadingMode>,
+) -> Result<(), String> {
+    let c = scene.camera;
+    let w = width.unwrap_or(c.width);
+    let h = height.unwrap_or(c.height);
+    let spp = spp.unwrap_or(c.spp);
+    if w == 0 || h == 0 || w > 1 << 15 || h > 1 << 15 {
+        return Err(format!("resolution {w}x{h} must be in 1..=32768"));
+    }
+    if spp == 0 || spp > 4096 {
+        return Err(format!("spp {spp} must be in 1..=4096"));
+    }
+    // Keep the vertical field of view; widen or narrow the horizontal one.
+    let half_h = c.up.length();
+    let half_w = half_h * w as f32 / h as f32;
+    scene.camera.right = c.right.normalize() * half_w;
+    scene.camera.width = w;
+    scene.camera.height = h;
+    scene.camera.spp = spp;
+    if let Some(s) = shading {
+        scene.options.shading = s;
+        scene.shading_of.iter_mut().for_each(|m| *m = None);
+    }
+    Ok(())
+}
+
+/// The render report (JSON).
+#[derive(Debug, serde::Serialize)]
+pub struct RenderReport {
+    /// Backend name.
+    pub backend: String,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Splats in the scene.
+    pub splats: usize,
+    /// Seconds to read points and generate splats.
+    pub splat_seconds: f64,
+    /// Seconds to build the acceleration structure.
+    pub build_seconds: f64,
+    /// Seconds to render.
+    pub render_seconds: f64,
+    /// Rays by kind.
+    pub rays: RayCounts,
+    /// Millions of rays (all kinds) per second of render time.
+    pub mrays_per_s: f64,
+}
+
+impl RenderReport {
+    /// The report of one render.
+    #[must_use]
+    pub fn new(scene: &Scene, backend: &str, build_seconds: f64, frame: &Frame) -> RenderReport {
+        RenderReport {
+            backend: backend.to_string(),
+            width: frame.width,
+            height: frame.height,
+            spp: scene.camera.spp,
+            splats: scene.splats.len(),
+            splat_seconds: scene.load.splat_seconds,
+            build_seconds,
+            render_seconds: frame.seconds,
+            rays: frame.rays,
+            mrays_per_s: frame.rays.total() as f64 / frame.seconds.max(1e-9) / 1e6,
+        }
+    }
+}
+
+/// Writes `value` as pretty JSON to `path`, atomically.
+pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), String> {
+    let text = serde_json::to_string_pretty(value).map_err(|e| e.to_string())?;
+    write_atomic(path, |tmp| {
+        std::fs::write(tmp, text + "\n").map_err(|e| format!("{}: {e}", path.display()))
+    })
+}
+
+/// Runs `splatray render`.
+pub fn run(args: &RenderArgs) -> Result<(), String> {
+    let scene_path = args.scene.clone().unwrap_or_else(default_scene);
+    let output = args.output.clone().unwrap_or_else(|| {
+        let stem = scene_path
+            .file_stem()
+            .map_or("render".into(), |s| s.to_string_lossy().into_owned());
+        PathBuf::from(format!("{stem}.png"))
+    });
+    // Every output is checked before the work starts.
+    check_output_path(&output)?;
+    if let Some(r) = &args.report {
+        check_output_path(&r.with_extension("png"))?;
+    }
+    let mut scene = load_scene(&scene_path)?;
+    apply_overrides(&mut scene, args.width, args.height, args.spp, args.shading)?;
+    for w in &scene.load.warnings {
+        eprintln!("warning: {w}");
+    }
+    let backend = args.backend.build(&scene.splats)?;
+    let build_seconds = backend.stats().build_seconds;
+    let frame = render(&scene, backend.as_ref(), true);
+    write_image(&frame, &output)?;
+    for &a in &args.aov {
+        write_aov(&frame, a, &aov_path(&output, a))?;
+    }
+    let report = RenderReport::new(&scene, backend.name(), build_seconds, &frame);
+    if let Some(r) = &args.report {
+        write_json(r, &report)?;
+    }
+    println!(
+        "{}: {}x{} spp {}, {} splats ({:.2} s to make), {} build {:.3} s, render {:.3} s, {} rays ({:.2} Mrays/s) -> {}",
+        scene_path.display(),
+        frame.width,
+        frame.height,
+        scene.camera.spp,
+        scene.splats.len(),
+        scene.load.splat_seconds,
+        backend.name(),
+        build_seconds,
+        frame.seconds,
+        frame.rays.total(),
+        report.mrays_per_s,
+        output.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,375 @@
+//! The Whitted integrator of §1.2: primary rays through pixel centres (or
+//! stratified samples), shadow rays to every light, mirror reflection,
+//! refraction with Fresnel and total internal reflection, recursion to a
+//! maximum depth. It sees only the [`Backend`] trait and the shared
+//! resolver, so every backend renders with identical shading.
+
+use super::scene::{Light, Material, Scene};
+use crate::accel::resolve::{SurfaceHit, resolve};
+use crate::accel::{Backend, CandidateHits, Ray};
+use glam::Vec3;
+use rayon::prelude::*;
+use std::io::IsTerminal;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+/// Rays traced, by kind.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct RayCounts {
+    /// Camera rays.
+    pub primary: u64,
+    /// Shadow rays.
+    pub shadow: u64,
+    /// Mirror and Fresnel reflection rays.
+    pub reflection: u64,
+    /// Refraction rays.
+    pub refraction: u64,
+}
+
+impl RayCounts {
+    /// All rays.
+    #[must_use]
+    pub fn total(&self) -> u64 {
+        self.primary + self.shadow + self.reflection + self.refraction
+    }
+
+    fn add(self, o: RayCounts) -> RayCounts {
+        RayCounts {
+            primary: self.primary + o.primary,
+            shadow: self.shadow + o.shadow,
+            reflection: self.reflection + o.reflection,
+            refraction: self.refraction + o.refraction,
+        }
+    }
+}
+
+/// A rendered frame: linear radiance and the arbitrary output variables of
+/// the first sample of every pixel (the pixel centre when `spp == 1`).
+#[derive(Clone, Debug)]
+pub struct Frame {
+    /// Width, pixels.
+    pub width: u32,
+    /// Height, pixels.
+    pub height: u32,
+    /// Linear RGB radiance, row-major, top row first.
+    pub rgb: Vec<Vec3>,
+    /// Primary hit distance, `+inf` on a miss.
+    pub depth: Vec<f32>,
+    /// Resolved shading normal of the primary hit (zero on a miss).
+    pub normal: Vec<Vec3>,
+    /// Resolved splat id of the primary hit, `u32::MAX` on a miss.
+    pub splat: Vec<u32>,
+    /// Rays traced.
+    pub rays: RayCounts,
+    /// Wall seconds spent rendering.
+    pub seconds: f64,
+}
+
+/// A small counter-based generator (PCG-style hash), deterministic per
+/// pixel and sample, so renders are reproducible and backends see the same
+/// sample positions.
+#[derive(Clone, Copy)]
+struct Rng(u64);
+
+impl Rng {
+    fn new(a: u32, b: u32, c: u32) -> Rng {
+        Rng(((a as u64) << 40) ^ ((b as u64) << 20) ^ c as u64 ^ 0x9E37_79B9_7F4A_7C15)
+    }
+    fn next_f32(&mut self) -> f32 {
+        self.0 = self
+            .0
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        let mut x = self.0;
+        x ^= x >> 33;
+        x = x.wrapping_mul(0xff51_afd7_ed55_8ccd);
+        x ^= x >> 33;
+        (x >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+struct Tracer<'a> {
+    scene: &'a Scene,
+    backend: &'a dyn Backend,
+}
+
+struct Scratch {
+    hits: CandidateHits,
+    rays: RayCounts,
+    rng: Rng,
+}
+
+fn reflect(d: Vec3, n: Vec3) -> Vec3 {
+    d - 2.0 * d.dot(n) * n
+}
+
+/// Exact Fresnel reflectance for unpolarised light; `cos_i > 0`, `eta` the
+/// ratio of indices (incident over transmitted). Returns 1 under total
+/// internal reflection.
+fn fresnel(cos_i: f32, eta: f32) -> f32 {
+    let sin2_t = eta * eta * (1.0 - cos_i * cos_i).max(0.0);
+    if sin2_t >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    let rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    let rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    0.5 * (rs * rs + rp * rp)
+}
+
+impl Tracer<'_> {
+    fn intersect(&self, ray: &Ray, t_min: f32, s: &mut Scratch) -> Option<SurfaceHit> {
+        self.backend
+            .intersect(ray, t_min, f32::INFINITY, &mut s.hits);
+        let mode = self.scene.shading_for(s.hits.nearest()?.id);
+        resolve(&s.hits, ray, &self.scene.splats, mode)
+    }
+
+    fn visible(&self, p: Vec3, dir: Vec3, dist: f32, eps: f32, s: &mut Scratch) -> bool {
+        s.rays.shadow += 1;
+        !self
+            .backend
+            .occluded(&Ray { origin: p, dir }, eps, dist - eps)
+    }
+
+    /// Irradiance-weighted light reaching `p` with facing normal `n`, plus
+    /// the Blinn–Phong highlight toward `-view` when `spec > 0`.
+    #[allow(clippy::too_many_arguments)]
+    fn direct(
+        &self,
+        p: Vec3,
+        n: Vec3,
+        eps: f32,
+        view: Vec3,
+        albedo: Vec3,
+        spec: (f32, f32),
+        s: &mut Scratch,
+    ) -> Vec3 {
+        let mut sum = Vec3::ZERO;
+        let mut add = |l: Vec3, e: Vec3| {
+            let cos = n.dot(l);
+            let mut c = albedo * cos;
+            if spec.0 > 0.0 {
+                let h = (l - view).normalize_or_zero();
+                c += Vec3::splat(spec.0 * n.dot(h).max(0.0).powf(spec.1));
+            }
+            sum += c * e;
+        };
+        for light in &self.scene.lights {
+            match *light {
+                Light::Point { position, power } => {
+                    let to = position - p;
+                    let d2 = to.length_squared();
+                    let d = d2.sqrt();
+                    let l = to / d;
+                    if n.dot(l) > 0.0 && self.visible(p, l, d, eps, s) {
+                        add(l, power / d2);
+                    }
+                }
+                Light::Directional { direction, power } => {
+                    let l = -direction;
+                    if n.dot(l) > 0.0 && self.visible(p, l, f32::INFINITY, eps, s) {
+                        add(l, power);
+                    }
+                }
+                Light::Sphere {
+                    position,
+                    radius,
+                    power,
+                    samples,
+                } => {
+                    // Stratified points on the disc of the sphere facing `p`.
+                    let axis = (p - position).normalize_or_zero();
+                    let (a, b) = crate::splat::tangent_frame(if axis == Vec3::ZERO {
+                        Vec3::Z
+                    } else {
+                        axis
+                    });
+                    let k = (samples as f32).sqrt().ceil() as u32;
+                    let share = 1.0 / (k * k) as f32;
+                    for i in 0..k {
+                        for j in 0..k {
+                            let r = radius * ((i as f32 + s.rng.next_f32()) / k as f32).sqrt();
+                            let phi =
+                                std::f32::consts::TAU * (j as f32 + s.rng.next_f32()) / k as f32;
+                            let q = position + a * (r * phi.cos()) + b * (r * phi.sin());
+                            let to = q - p;
+                            let d2 = to.length_squared();
+                            let d = d2.sqrt();
+                            let l = to / d;
+                            if n.dot(l) > 0.0 && self.visible(p, l, d, eps, s) {
+                                add(l, power * (share / d2));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        sum
+    }
+
+    fn shade(&self, ray: &Ray, hit: Option<SurfaceHit>, depth: u32, s: &mut Scratch) -> Vec3 {
+        let Some(hit) = hit else {
+            return self.scene.background;
+        };
+        let sc = self.scene;
+        let splat = &sc.splats[hit.id as usize];
+        let n = if hit.front { hit.normal } else { -hit.normal };
+        let material = sc.materials[sc.material_of[hit.id as usize] as usize];
+        // Secondary rays skip hits within eps_self of their origin (§3.2,
+        // fig. 9 right). Overlapping neighbours of the splat a ray leaves
+        // stand up to about its radius away along the ray on a curved
+        // surface, so the window grows to that radius: the surface is not
+        // resolved finer than its splats anyway.
+        let eps = sc.options.scale.eps_self.max(splat.radii.max_element());
+        let deeper = depth + 1 < sc.options.max_depth;
+        match material {
+            Material::Diffuse { color } => {
+                let albedo = color * splat.color;
+                albedo * sc.options.ambient
+                    + self.direct(hit.point, n, eps, ray.dir, albedo, (0.0, 0.0), s)
+            }
+            Material::Phong {
+                color,
+                specular,
+                shininess,
+            } => {
+                let albedo = color * splat.color;
+                albedo * sc.options.ambient
+                    + self.direct(hit.point, n, eps, ray.dir, albedo, (specular, shininess), s)
+            }
+            Material::Mirror { color } => {
+                if !deeper {
+                    return Vec3::ZERO;
+                }
+                let r = Ray::new(hit.point, reflect(ray.dir, n));
+                color * self.trace(&r, eps, depth + 1, s, false)
+            }
+            Material::Glass { color, ior } => {
+                if !deeper {
+                    return Vec3::ZERO;
+                }
+                let cos_i = (-ray.dir.dot(n)).clamp(0.0, 1.0);
+                let eta = if hit.front { 1.0 / ior } else { ior };
+                let f = fresnel(cos_i, eta);
+                let refl = Ray::new(hit.point, reflect(ray.dir, n));
+                let mut out = f * self.trace(&refl, eps, depth + 1, s, false);
+                if f < 1.0 {
+                    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+                    let dir = eta * ray.dir + (eta * cos_i - k.max(0.0).sqrt()) * n;
+                    let refr = Ray::new(hit.point, dir);
+                    out += (1.0 - f) * color * self.trace(&refr, eps, depth + 1, s, true);
+                }
+                out
+            }
+        }
+    }
+
+    fn trace(&self, ray: &Ray, t_min: f32, depth: u32, s: &mut Scratch, refraction: bool) -> Vec3 {
+        if refraction {
+            s.rays.refraction += 1;
+        } else {
+            s.rays.reflection += 1;
+        }
+        let hit = self.intersect(ray, t_min, s);
+        self.shade(ray, hit, depth, s)
+    }
+}
+
+/// Renders the scene's camera view with `backend`. Parallel over rows with
+/// rayon; a progress line on stderr when `progress` and stderr is a
+/// terminal.
+#[must_use]
+pub fn render(scene: &Scene, backend: &dyn Backend, progress: bool) -> Frame {
+    let cam = &scene.camera;
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let tracer = Tracer { scene, backend };
+    let start = Instant::now();
+    let rows_done = AtomicUsize::new(0);
+    let show = progress && std::io::stderr().is_terminal();
+    let k = (cam.spp as f32).sqrt().ceil() as u32;
+    let per_pixel = cam.spp;
+    let rows: Vec<(Vec<Vec3>, Vec<f32>, Vec<Vec3>, Vec<u32>, RayCounts)> = (0..h)
+        .into_par_iter()
+        .map(|y| {
+            let mut s = Scratch {
+                hits: CandidateHits::new(scene.options.scale.xi),
+                rays: RayCounts::default(),
+                rng: Rng::new(y as u32, 0, 0),
+            };
+            let mut rgb = Vec::with_capacity(w);
+            let mut depth = Vec::with_capacity(w);
+            let mut normal = Vec::with_capacity(w);
+            let mut splat = Vec::with_capacity(w);
+            for x in 0..w {
+                let mut sum = Vec3::ZERO;
+                for i in 0..per_pixel {
+                    s.rng = Rng::new(x as u32, y as u32, i);
+                    let (ox, oy) = if per_pixel == 1 {
+                        (0.5, 0.5)
+                    } else {
+                        let (cx, cy) = (i % k, i / k % k);
+                        (
+                            (cx as f32 + s.rng.next_f32()) / k as f32,
+                            (cy as f32 + s.rng.next_f32()) / k as f32,
+                        )
+                    };
+                    let ray = cam.ray(x as f32 + ox, y as f32 + oy);
+                    s.rays.primary += 1;
+                    let hit = tracer.intersect(&ray, 0.0, &mut s);
+                    if i == 0 {
+                        depth.push(hit.map_or(f32::INFINITY, |h| h.t));
+                        normal.push(hit.map_or(Vec3::ZERO, |h| h.normal));
+                        splat.push(hit.map_or(u32::MAX, |h| h.id));
+                    }
+                    sum += tracer.shade(&ray, hit, 0, &mut s);
+                }
+                rgb.push(sum / per_pixel as f32);
+            }
+            if show {
+                let done = rows_done.fetch_add(1, Ordering::Relaxed) + 1;
+                if done % 8 == 0 || done == h {
+                    eprint!("\rrender {:3}%", done * 100 / h);
+                }
+            }
+            (rgb, depth, normal, splat, s.rays)
+        })
+        .collect();
+    if show {
+        eprintln!();
+    }
+    let mut frame = Frame {
+        width: cam.width,
+        height: cam.height,
+        rgb: Vec::with_capacity(w * h),
+        depth: Vec::with_capacity(w * h),
+        normal: Vec::with_capacity(w * h),
+        splat: Vec::with_capacity(w * h),
+        rays: RayCounts::default(),
+        seconds: 0.0,
+    };
+    for (rgb, depth, normal, splat, rays) in rows {
+        frame.rgb.extend(rgb);
+        frame.depth.extend(depth);
+        frame.normal.extend(normal);
+        frame.splat.extend(splat);
+        frame.rays = frame.rays.add(rays);
+    }
+    frame.seconds = start.elapsed().as_secs_f64();
+    frame
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fresnel;
+
+    #[test]
+    fn fresnel_limits() {
+        // Normal incidence, glass: ((1-1.5)/(1+1.5))^2 = 0.04.
+        assert!((fresnel(1.0, 1.0 / 1.5) - 0.04).abs() < 1e-6);
+        // Beyond the critical angle inside glass: total internal reflection.
+        assert_eq!(fresnel(0.1, 1.5), 1.0);
+        // Matched indices: no reflection.
+        assert!(fresnel(0.7, 1.0).abs() < 1e-7);
+    }
+}

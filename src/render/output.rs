@@ -1,0 +1,167 @@
+//! Image output: sRGB PNG for looking at, linear EXR for the radiance and
+//! the AOVs. Every file is written to a temporary name beside the target
+//! and renamed into place, so a failure never leaves a half-written file.
+
+use super::integrator::Frame;
+use glam::Vec3;
+use image::{ImageBuffer, ImageFormat, Rgb};
+use std::path::{Path, PathBuf};
+
+fn srgb(x: f32) -> u8 {
+    let x = if x.is_finite() {
+        x.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let v = if x <= 0.003_130_8 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    };
+    (v * 255.0 + 0.5) as u8
+}
+
+/// The frame's radiance as an 8-bit sRGB image.
+#[must_use]
+pub fn to_srgb8(frame: &Frame) -> ImageBuffer<Rgb<u8>, Vec<u8>> {
+    let data = frame
+        .rgb
+        .iter()
+        .flat_map(|c| [srgb(c.x), srgb(c.y), srgb(c.z)])
+        .collect();
+    ImageBuffer::from_raw(frame.width, frame.height, data).unwrap_or_default()
+}
+
+/// Writes `bytes`-producing `write` into `path` atomically (temp + rename).
+pub fn write_atomic(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), String>,
+) -> Result<(), String> {
+    let name = path
+        .file_name()
+        .ok_or_else(|| format!("{}: not a file name", path.display()))?;
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(name);
+    tmp_name.push(".partial");
+    let tmp: PathBuf = path.with_file_name(tmp_name);
+    let result = write(&tmp)
+        .and_then(|()| std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display())));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+fn format_of(path: &Path) -> Result<ImageFormat, String> {
+    match path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
+        Some("png") => Ok(ImageFormat::Png),
+        Some("exr") => Ok(ImageFormat::OpenExr),
+        _ => Err(format!(
+            "{}: output must end in .png or .exr",
+            path.display()
+        )),
+    }
+}
+
+/// Checks an output path before any work is done: known extension, and an
+/// existing folder.
+pub fn check_output_path(path: &Path) -> Result<(), String> {
+    format_of(path)?;
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
+    if let Some(d) = dir {
+        if !d.is_dir() {
+            return Err(format!("{}: folder does not exist", d.display()));
+        }
+    }
+    Ok(())
+}
+
+fn write_rgb32f(path: &Path, w: u32, h: u32, px: impl Iterator<Item = Vec3>) -> Result<(), String> {
+    let data: Vec<f32> = px.flat_map(|c| c.to_array()).collect();
+    let img: ImageBuffer<Rgb<f32>, Vec<f32>> =
+        ImageBuffer::from_raw(w, h, data).ok_or("image size mismatch")?;
+    write_atomic(path, |tmp| {
+        img.save_with_format(tmp, ImageFormat::OpenExr)
+            .map_err(|e| format!("{}: {e}", path.display()))
+    })
+}
+
+/// Writes the frame: PNG (sRGB, 8 bit) or EXR (linear float) by extension.
+pub fn write_image(frame: &Frame, path: &Path) -> Result<(), String> {
+    match format_of(path)? {
+        ImageFormat::OpenExr => {
+            write_rgb32f(path, frame.width, frame.height, frame.rgb.iter().copied())
+        }
+        _ => {
+            let img = to_srgb8(frame);
+            write_atomic(path, |tmp| {
+                img.save_with_format(tmp, ImageFormat::Png)
+                    .map_err(|e| format!("{}: {e}", path.display()))
+            })
+        }
+    }
+}
+
+/// The AOVs a render can write beside its image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Aov {
+    /// Primary hit distance (miss: +inf).
+    Depth,
+    /// Resolved shading normal.
+    Normal,
+    /// Resolved splat id (miss: -1).
+    Splat,
+}
+
+impl std::str::FromStr for Aov {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Aov, String> {
+        match s {
+            "depth" => Ok(Aov::Depth),
+            "normal" => Ok(Aov::Normal),
+            "splat" => Ok(Aov::Splat),
+            _ => Err(format!(
+                "unknown AOV '{s}' (expected depth, normal or splat)"
+            )),
+        }
+    }
+}
+
+/// Where an AOV of `image` goes: `out.png` → `out.depth.exr`.
+#[must_use]
+pub fn aov_path(image: &Path, aov: Aov) -> PathBuf {
+    let stem = image
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let name = match aov {
+        Aov::Depth => "depth",
+        Aov::Normal => "normal",
+        Aov::Splat => "splat",
+    };
+    image.with_file_name(format!("{stem}.{name}.exr"))
+}
+
+/// Writes one AOV as a linear EXR (the value in all three channels for
+/// depth and splat id).
+pub fn write_aov(frame: &Frame, aov: Aov, path: &Path) -> Result<(), String> {
+    let (w, h) = (frame.width, frame.height);
+    match aov {
+        Aov::Depth => write_rgb32f(path, w, h, frame.depth.iter().map(|&d| Vec3::splat(d))),
+        Aov::Normal => write_rgb32f(path, w, h, frame.normal.iter().copied()),
+        Aov::Splat => write_rgb32f(
+            path,
+            w,
+            h,
+            frame
+                .splat
+                .iter()
+                .map(|&id| Vec3::splat(if id == u32::MAX { -1.0 } else { id as f32 })),
+        ),
+    }
+}
