@@ -276,6 +276,15 @@ impl Tracer<'_> {
     }
 }
 
+/// One rendered image row and what it traced.
+struct Row {
+    rgb: Vec<Vec3>,
+    depth: Vec<f32>,
+    normal: Vec<Vec3>,
+    splat: Vec<u32>,
+    rays: RayCounts,
+}
+
 /// Renders the scene's camera view with `backend`. Parallel over rows with
 /// rayon; a progress line on stderr when `progress` and stderr is a
 /// terminal.
@@ -289,7 +298,7 @@ pub fn render(scene: &Scene, backend: &dyn Backend, progress: bool) -> Frame {
     let show = progress && std::io::stderr().is_terminal();
     let k = (cam.spp as f32).sqrt().ceil() as u32;
     let per_pixel = cam.spp;
-    let rows: Vec<(Vec<Vec3>, Vec<f32>, Vec<Vec3>, Vec<u32>, RayCounts)> = (0..h)
+    let rows: Vec<Row> = (0..h)
         .into_par_iter()
         .map(|y| {
             let mut s = Scratch {
@@ -332,7 +341,13 @@ pub fn render(scene: &Scene, backend: &dyn Backend, progress: bool) -> Frame {
                     eprint!("\rrender {:3}%", done * 100 / h);
                 }
             }
-            (rgb, depth, normal, splat, s.rays)
+            Row {
+                rgb,
+                depth,
+                normal,
+                splat,
+                rays: s.rays,
+            }
         })
         .collect();
     if show {
@@ -348,12 +363,12 @@ pub fn render(scene: &Scene, backend: &dyn Backend, progress: bool) -> Frame {
         rays: RayCounts::default(),
         seconds: 0.0,
     };
-    for (rgb, depth, normal, splat, rays) in rows {
-        frame.rgb.extend(rgb);
-        frame.depth.extend(depth);
-        frame.normal.extend(normal);
-        frame.splat.extend(splat);
-        frame.rays = frame.rays.add(rays);
+    for row in rows {
+        frame.rgb.extend(row.rgb);
+        frame.depth.extend(row.depth);
+        frame.normal.extend(row.normal);
+        frame.splat.extend(row.splat);
+        frame.rays = frame.rays.add(row.rays);
     }
     frame.seconds = start.elapsed().as_secs_f64();
     frame

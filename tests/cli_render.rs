@@ -1,0 +1,129 @@
+//! `splatray render` on bad scene files: one clear line, non-zero exit, and
+//! no output file, partial or whole.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("splatray-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Runs `render` on a scene text; returns (success, stderr, output exists,
+/// any file left in the folder besides the scene and its inputs).
+fn render(dir: &Path, scene: &str) -> (bool, String, bool) {
+    let scene_path = dir.join("scene.toml");
+    std::fs::write(&scene_path, scene).unwrap();
+    let out = dir.join("out.png");
+    let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+        .arg("render")
+        .arg(&scene_path)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let leftovers = std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .any(|e| e.file_name().to_string_lossy().contains("out."));
+    (
+        o.status.success(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+        leftovers,
+    )
+}
+
+const CAMERA: &str =
+    "[camera]\nfrom = [0.0, 0.0, 3.0]\nat = [0.0, 0.0, 0.0]\nwidth = 16\nheight = 16\n";
+
+fn assert_clean_failure(name: &str, scene: &str, expect: &[&str]) {
+    let dir = tmpdir(name);
+    let (ok, err, leftovers) = render(&dir, scene);
+    assert!(!ok, "{name}: render should fail");
+    assert_eq!(
+        err.trim().lines().count(),
+        1,
+        "{name}: one line, got:\n{err}"
+    );
+    for e in expect {
+        assert!(err.contains(e), "{name}: '{e}' not in: {err}");
+    }
+    assert!(!leftovers, "{name}: an output file was left behind");
+    assert!(!err.contains("panicked"), "{name}: {err}");
+}
+
+#[test]
+fn good_scene_renders() {
+    let dir = tmpdir("good");
+    let scene = format!(
+        "{CAMERA}[[model]]\nshape = {{ kind = \"sphere\", radius = 1.0, splats = 100 }}\n[[light]]\nkind = \"point\"\nposition = [1.0, 1.0, 3.0]\n"
+    );
+    let (ok, err, made) = render(&dir, &scene);
+    assert!(ok, "{err}");
+    assert!(made);
+    let img = image::open(dir.join("out.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (16, 16));
+}
+
+#[test]
+fn missing_model_file() {
+    let scene = format!("{CAMERA}[[model]]\npoints = \"nope/missing.ply\"\n");
+    assert_clean_failure("missing", &scene, &["missing.ply"]);
+}
+
+#[test]
+fn unknown_key_names_key_and_line() {
+    let scene = format!(
+        "{CAMERA}[[model]]\nshape = {{ kind = \"sphere\", radius = 1.0, splats = 10 }}\ncolour = [1, 0, 0]\n"
+    );
+    assert_clean_failure("unknown", &scene, &["colour", "line 8"]);
+}
+
+#[test]
+fn negative_resolution() {
+    let scene = "[camera]\nfrom = [0.0, 0.0, 3.0]\nat = [0.0, 0.0, 0.0]\nwidth = -16\n[[model]]\nshape = { kind = \"sphere\", radius = 1.0, splats = 10 }\n";
+    assert_clean_failure("negres", scene, &["line 4"]);
+}
+
+#[test]
+fn zero_resolution() {
+    let scene = format!(
+        "{}[[model]]\nshape = {{ kind = \"sphere\", radius = 1.0, splats = 10 }}\n",
+        CAMERA.replace("width = 16", "width = 0")
+    );
+    assert_clean_failure("zerores", &scene, &["resolution"]);
+}
+
+#[test]
+fn non_ply_model() {
+    let dir = tmpdir("nonply");
+    std::fs::write(dir.join("model.ply"), "this is not a ply file\n1 2 3\n").unwrap();
+    let scene = format!("{CAMERA}[[model]]\npoints = \"model.ply\"\n");
+    let (ok, err, leftovers) = render(&dir, &scene);
+    assert!(!ok);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains("model.ply"), "{err}");
+    assert!(!leftovers);
+}
+
+#[test]
+fn bad_output_extension_fails_before_work() {
+    let dir = tmpdir("ext");
+    let scene_path = dir.join("scene.toml");
+    std::fs::write(
+        &scene_path,
+        format!("{CAMERA}[[model]]\nshape = {{ kind = \"sphere\", radius = 1.0, splats = 10 }}\n"),
+    )
+    .unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+        .args(["render"])
+        .arg(&scene_path)
+        .arg("-o")
+        .arg(dir.join("out.jpg"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains(".png or .exr"));
+}
