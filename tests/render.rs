@@ -191,12 +191,15 @@ intensity = 30
 samples = 4
 "#,
     );
-    let a = render_with(&sc, BackendKind::Embree);
-    let b = render_with(&sc, BackendKind::Brute);
-    assert_eq!(a.rays, b.rays, "ray counts differ");
+    let a = render_with(&sc, BackendKind::Brute);
     assert!(a.rays.refraction > 0 && a.rays.reflection > 0 && a.rays.shadow > 0);
-    assert_eq!(a.splat, b.splat, "resolved splats differ");
-    assert_eq!(a.depth, b.depth, "depths differ");
-    assert_eq!(a.normal, b.normal, "normals differ");
-    assert_eq!(a.rgb, b.rgb, "radiance differs");
+    for kind in [BackendKind::Embree, BackendKind::Octree] {
+        let b = render_with(&sc, kind);
+        let k = kind.name();
+        assert_eq!(a.rays, b.rays, "{k}: ray counts differ");
+        assert_eq!(a.splat, b.splat, "{k}: resolved splats differ");
+        assert_eq!(a.depth, b.depth, "{k}: depths differ");
+        assert_eq!(a.normal, b.normal, "{k}: normals differ");
+        assert_eq!(a.rgb, b.rgb, "{k}: radiance differs");
+    }
 }

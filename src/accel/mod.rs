@@ -7,6 +7,7 @@
 
 pub mod brute;
 pub mod embree;
+pub mod octree;
 pub mod resolve;
 
 use crate::splat::Disc;
@@ -103,7 +104,9 @@ pub const MAX_CANDIDATES: usize = 32;
 pub struct CandidateHits {
     xi: f32,
     len: usize,
-    overflowed: bool,
+    /// Smallest `t` of a hit dropped for lack of room (`+inf` when none):
+    /// the window overflowed iff that hit still lies inside the final window.
+    min_dropped: f32,
     items: [Candidate; MAX_CANDIDATES],
 }
 
@@ -115,7 +118,7 @@ impl CandidateHits {
         CandidateHits {
             xi,
             len: 0,
-            overflowed: false,
+            min_dropped: f32::INFINITY,
             items: [Candidate {
                 id: 0,
                 t: 0.0,
@@ -128,7 +131,7 @@ impl CandidateHits {
     /// Empties the window, keeping `xi`.
     pub fn clear(&mut self) {
         self.len = 0;
-        self.overflowed = false;
+        self.min_dropped = f32::INFINITY;
     }
 
     /// The window width `xi`.
@@ -155,10 +158,14 @@ impl CandidateHits {
         self.len == 0
     }
 
-    /// True when more than [`MAX_CANDIDATES`] hits fell in the window.
+    /// True when more than [`MAX_CANDIDATES`] hits fell in the final window.
+    ///
+    /// Like the candidates themselves this does not depend on the order in
+    /// which hits were offered: a hit dropped while the window was full only
+    /// counts if it still lies within `t0 + xi` of the final nearest hit.
     #[must_use]
     pub fn overflowed(&self) -> bool {
-        self.overflowed
+        self.len > 0 && self.min_dropped <= self.far()
     }
 
     /// The far end of the window, `t0 + xi`, or `+inf` while empty: a hit
@@ -183,10 +190,11 @@ impl CandidateHits {
         }
         let pos = items.partition_point(|h| (h.t, h.id) < (c.t, c.id));
         if self.len == MAX_CANDIDATES {
-            self.overflowed = true;
             if pos == MAX_CANDIDATES {
+                self.min_dropped = self.min_dropped.min(c.t);
                 return self.far();
             }
+            self.min_dropped = self.min_dropped.min(self.items[MAX_CANDIDATES - 1].t);
             self.len -= 1;
         }
         self.items.copy_within(pos..self.len, pos + 1);
@@ -245,6 +253,8 @@ pub enum BackendKind {
     Brute,
     /// Embree 4 user-geometry discs.
     Embree,
+    /// The octree of §3.1.
+    Octree,
 }
 
 impl std::str::FromStr for BackendKind {
@@ -253,6 +263,7 @@ impl std::str::FromStr for BackendKind {
         match s {
             "brute" => Ok(BackendKind::Brute),
             "embree" => Ok(BackendKind::Embree),
+            "octree" => Ok(BackendKind::Octree),
             _ => Err(format!(
                 "unknown backend '{s}' (expected octree, embree or brute)"
             )),
@@ -267,6 +278,7 @@ impl BackendKind {
         match self {
             BackendKind::Brute => "brute",
             BackendKind::Embree => "embree",
+            BackendKind::Octree => "octree",
         }
     }
 
@@ -284,6 +296,10 @@ impl BackendKind {
                 let device = crate::embree::Device::new().map_err(|e| e.to_string())?;
                 Box::new(embree::EmbreeBackend::new(&device, splats).map_err(|e| e.to_string())?)
             }
+            BackendKind::Octree => Box::new(octree::Octree::new(
+                splats,
+                &octree::OctreeParams::default(),
+            )),
         })
     }
 }

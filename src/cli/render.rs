@@ -15,7 +15,7 @@ pub struct RenderArgs {
     /// Scene file (TOML). Default: the bundled scenes/bunny.toml.
     pub scene: Option<PathBuf>,
     /// Acceleration backend: octree, embree or brute.
-    #[arg(long, default_value = "embree")]
+    #[arg(long, default_value = "octree")]
     pub backend: BackendKind,
     /// Output image (.png, or .exr for linear radiance). Default: the
     /// scene's name with .png, in the current folder.

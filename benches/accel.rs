@@ -1,0 +1,248 @@
+//! Build and trace benchmarks of the acceleration backends, side by side on
+//! the same splats and rays: the octree (exact and bounding-square overlap
+//! tests, §3.1) and Embree 4 user-geometry discs. The brute-force oracle is
+//! left out (quadratic).
+//!
+//! Splats lie on the procedural blobby surface of the test suite; primary
+//! rays come from a 1024×1024 pinhole camera, traced in parallel with rayon
+//! over rows; shadow rays go from each primary hit toward a point light with
+//! `t_min = eps_self`. Throughput is reported as rays per second.
+//!
+//! ```sh
+//! cargo bench --bench accel -- --sample-size 10
+//! SPLATRAY_BENCH_SIZES=35000,1000000,4000000 cargo bench --bench accel -- --sample-size 10
+//! ```
+//!
+//! Before criterion runs, a one-pass summary table (build seconds, structure
+//! figures, primary and shadow rays/s, octree/Embree ratio) is printed to
+//! stderr, all measured in this run.
+
+#[path = "../tests/common/mod.rs"]
+mod common;
+
+use common::{Query, blobby_splats, camera_queries, diagonal};
+use criterion::{BatchSize, Criterion, SamplingMode, Throughput};
+use glam::Vec3;
+use rayon::prelude::*;
+use splatray::accel::embree::EmbreeBackend;
+use splatray::accel::octree::{Octree, OctreeParams, OverlapTest};
+use splatray::accel::resolve::{ShadingMode, resolve};
+use splatray::accel::{Backend, CandidateHits, SceneScale};
+use splatray::embree::Device;
+use splatray::splat::Splat;
+use std::hint::black_box;
+use std::time::Instant;
+
+const W: usize = 1024;
+const H: usize = 1024;
+
+fn sizes() -> Vec<usize> {
+    std::env::var("SPLATRAY_BENCH_SIZES")
+        .ok()
+        .map(|s| s.split(',').filter_map(|x| x.trim().parse().ok()).collect())
+        .unwrap_or_else(|| vec![35_000, 1_000_000])
+}
+
+/// Who is benchmarked: name and builder.
+type Build = fn(&Device, &[Splat]) -> Box<dyn Backend>;
+
+fn builders() -> Vec<(&'static str, Build)> {
+    vec![
+        ("octree", |_, s| {
+            Box::new(Octree::new(s, &OctreeParams::default()))
+        }),
+        ("octree-square", |_, s| {
+            Box::new(Octree::new(
+                s,
+                &OctreeParams {
+                    overlap: OverlapTest::BoundingSquare,
+                    ..OctreeParams::default()
+                },
+            ))
+        }),
+        ("embree", |d, s| {
+            Box::new(EmbreeBackend::new(d, s).expect("embree scene"))
+        }),
+    ]
+}
+
+/// Traces `queries` in parallel, `W` rays per task (a row); returns hits.
+fn trace(backend: &dyn Backend, queries: &[Query], xi: f32) -> usize {
+    queries
+        .par_chunks(W)
+        .map(|row| {
+            let mut hits = CandidateHits::new(xi);
+            row.iter()
+                .filter(|q| {
+                    backend.intersect(&q.ray, q.t_min, q.t_max, &mut hits);
+                    !hits.is_empty()
+                })
+                .count()
+        })
+        .sum()
+}
+
+/// Shadow rays in parallel; returns how many are occluded.
+fn shadow(backend: &dyn Backend, queries: &[Query]) -> usize {
+    queries
+        .par_chunks(W)
+        .map(|row| {
+            row.iter()
+                .filter(|q| backend.occluded(&q.ray, q.t_min, q.t_max))
+                .count()
+        })
+        .sum()
+}
+
+struct Scene {
+    splats: Vec<Splat>,
+    scale: SceneScale,
+    primary: Vec<Query>,
+    shadow: Vec<Query>,
+}
+
+fn scene(n: usize) -> Scene {
+    let splats = blobby_splats(n, 0x5eed_2007);
+    let scale = SceneScale::from_diagonal(diagonal(&splats));
+    let primary = camera_queries(Vec3::new(0.7, 1.1, 4.0), Vec3::ZERO, W, H);
+    // Shadow rays from the hits of the primary rays (found by the octree;
+    // the agreement suite shows every backend finds the same).
+    let probe = Octree::new(&splats, &OctreeParams::default());
+    let light = Vec3::new(5.0, 6.0, 3.0);
+    let shadow: Vec<Query> = primary
+        .par_iter()
+        .filter_map(|q| {
+            let mut h = CandidateHits::new(scale.xi);
+            probe.intersect(&q.ray, q.t_min, q.t_max, &mut h);
+            let hit = resolve(&h, &q.ray, &splats, ShadingMode::Flat)?;
+            let to_light = light - hit.point;
+            Some(Query {
+                ray: splatray::accel::Ray {
+                    origin: hit.point,
+                    dir: to_light.normalize(),
+                },
+                t_min: scale.eps_self,
+                t_max: to_light.length(),
+            })
+        })
+        .collect();
+    Scene {
+        splats,
+        scale,
+        primary,
+        shadow,
+    }
+}
+
+/// Median of `runs` timings of `f`, in seconds.
+fn median_seconds(runs: usize, mut f: impl FnMut()) -> f64 {
+    let mut t: Vec<f64> = (0..runs)
+        .map(|_| {
+            let s = Instant::now();
+            f();
+            s.elapsed().as_secs_f64()
+        })
+        .collect();
+    t.sort_by(f64::total_cmp);
+    t[t.len() / 2]
+}
+
+fn summary(device: &Device, scenes: &[(usize, Scene)]) {
+    eprintln!(
+        "\n{:>9} {:>14} {:>8} {:>9} {:>8} {:>10} {:>9} {:>11} {:>11} {:>8}",
+        "splats",
+        "backend",
+        "build s",
+        "nodes",
+        "leaves",
+        "refs/leaf",
+        "MB",
+        "primary/s",
+        "shadow/s",
+        "vs embree"
+    );
+    for (n, sc) in scenes {
+        let mut rows = Vec::new();
+        for (name, build) in builders() {
+            let build_s = median_seconds(3, || drop(black_box(build(device, &sc.splats))));
+            let b = build(device, &sc.splats);
+            trace(b.as_ref(), &sc.primary, sc.scale.xi);
+            let prim = median_seconds(3, || {
+                black_box(trace(b.as_ref(), &sc.primary, sc.scale.xi));
+            });
+            let shad = median_seconds(3, || {
+                black_box(shadow(b.as_ref(), &sc.shadow));
+            });
+            rows.push((name, build_s, b.stats().clone(), prim, shad));
+        }
+        let embree_prim = rows
+            .iter()
+            .find(|r| r.0 == "embree")
+            .map(|r| r.3)
+            .unwrap_or(f64::NAN);
+        for (name, build_s, s, prim, shad) in rows {
+            eprintln!(
+                "{:>9} {:>14} {:>8.3} {:>9} {:>8} {:>10.2} {:>9.1} {:>11.3e} {:>11.3e} {:>8.2}",
+                n,
+                name,
+                build_s,
+                s.nodes,
+                s.leaves,
+                s.mean_refs_per_leaf,
+                s.memory_bytes as f64 / 1e6,
+                sc.primary.len() as f64 / prim,
+                sc.shadow.len() as f64 / shad,
+                embree_prim / prim
+            );
+        }
+    }
+    eprintln!(
+        "(build s: median of 3; rays/s: median of 3 passes of {}x{} primary rays and of the shadow rays of their hits; \
+         'vs embree' = octree primary rays/s / Embree primary rays/s; {} threads)\n",
+        W,
+        H,
+        rayon::current_num_threads()
+    );
+}
+
+fn main() {
+    let device = Device::new().expect("embree device");
+    let scenes: Vec<(usize, Scene)> = sizes().into_iter().map(|n| (n, scene(n))).collect();
+    summary(&device, &scenes);
+
+    let mut c = Criterion::default()
+        .sample_size(10)
+        .warm_up_time(std::time::Duration::from_secs(1))
+        .measurement_time(std::time::Duration::from_secs(3))
+        .configure_from_args();
+    for (n, sc) in &scenes {
+        let mut g = c.benchmark_group(format!("build/{n}"));
+        g.sampling_mode(SamplingMode::Flat);
+        g.throughput(Throughput::Elements(*n as u64));
+        for (name, build) in builders() {
+            g.bench_function(name, |bch| {
+                bch.iter_batched(
+                    || (),
+                    |()| build(&device, &sc.splats),
+                    BatchSize::PerIteration,
+                )
+            });
+        }
+        g.finish();
+        for (name, build) in builders() {
+            let b = build(&device, &sc.splats);
+            let mut g = c.benchmark_group(format!("trace/{n}"));
+            g.sampling_mode(SamplingMode::Flat);
+            g.throughput(Throughput::Elements(sc.primary.len() as u64));
+            g.bench_function(format!("{name}/primary"), |bch| {
+                bch.iter(|| trace(b.as_ref(), &sc.primary, sc.scale.xi))
+            });
+            g.throughput(Throughput::Elements(sc.shadow.len() as u64));
+            g.bench_function(format!("{name}/shadow"), |bch| {
+                bch.iter(|| shadow(b.as_ref(), &sc.shadow))
+            });
+            g.finish();
+        }
+    }
+    c.final_summary();
+}

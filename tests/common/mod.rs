@@ -1,0 +1,403 @@
+//! Helpers shared by the backend test suites: a seeded generator, procedural
+//! splat models, ray sets, and the one agreement check every backend is run
+//! through against the brute-force oracle (after svenstaro/bvh's
+//! `testbase.rs`).
+#![allow(dead_code)]
+
+use glam::{Vec2, Vec3};
+use splatray::accel::brute::Brute;
+use splatray::accel::embree::EmbreeBackend;
+use splatray::accel::octree::{Octree, OctreeParams, OverlapTest};
+use splatray::accel::resolve::{ShadingMode, resolve};
+use splatray::accel::{Backend, CandidateHits, Ray};
+use splatray::embree::Device;
+use splatray::splat::{NormalField, Splat};
+
+/// The default seed; `SPLATRAY_SEED` overrides it so a failure can be
+/// replayed.
+pub const DEFAULT_SEED: u64 = 0x5eed_2007;
+
+/// The seed of this run: `SPLATRAY_SEED` (decimal or `0x` hex) or
+/// [`DEFAULT_SEED`].
+pub fn seed() -> u64 {
+    match std::env::var("SPLATRAY_SEED") {
+        Ok(s) => {
+            let s = s.trim();
+            let parsed = match s.strip_prefix("0x") {
+                Some(h) => u64::from_str_radix(h, 16),
+                None => s.parse(),
+            };
+            parsed.unwrap_or_else(|_| panic!("SPLATRAY_SEED={s} is not a number"))
+        }
+        Err(_) => DEFAULT_SEED,
+    }
+}
+
+/// SplitMix64: tiny, seedable, the same on every platform.
+pub struct Rng(u64);
+
+impl Rng {
+    /// A generator from `seed`.
+    pub fn new(seed: u64) -> Rng {
+        Rng(seed)
+    }
+
+    /// Next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `[0, 1)`.
+    pub fn f32(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// Uniform in `[lo, hi)`.
+    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * self.f32()
+    }
+
+    /// Uniform on the unit sphere.
+    pub fn unit(&mut self) -> Vec3 {
+        loop {
+            let v = Vec3::new(
+                self.range(-1.0, 1.0),
+                self.range(-1.0, 1.0),
+                self.range(-1.0, 1.0),
+            );
+            let l = v.length_squared();
+            if l > 1e-4 && l <= 1.0 {
+                return v / l.sqrt();
+            }
+        }
+    }
+
+    /// Uniform index below `n`.
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n as u64) as usize
+    }
+}
+
+/// Radius of the blobby surface in direction `d` (unit): a sphere with
+/// bumps, "bunny-like" enough to have concave and convex parts.
+fn blob_radius(d: [f64; 3]) -> f64 {
+    1.0 + 0.22 * (3.0 * d[0]).sin() * (2.0 * d[1] + 0.5).sin() * (4.0 * d[2]).cos()
+        + 0.1 * (5.0 * d[1]).cos()
+}
+
+fn blob_field(p: [f64; 3]) -> f64 {
+    let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+    l - blob_radius([p[0] / l, p[1] / l, p[2] / l])
+}
+
+/// `n` splats on a blobby closed surface of size ~2.4, with jittered
+/// positions and normals, half of them elliptical, random tangent frames,
+/// and small Phong normal fields (so every shading mode matters). Splat
+/// radii are large enough that neighbours overlap, as in §2.
+pub fn blobby_splats(n: usize, seed: u64) -> Vec<Splat> {
+    let mut rng = Rng::new(seed);
+    let area = 4.0 * std::f32::consts::PI * 1.1 * 1.1;
+    let r = 1.8 * (area / (std::f32::consts::PI * n as f32)).sqrt();
+    (0..n)
+        .map(|_| {
+            let d = rng.unit();
+            let dd = [f64::from(d.x), f64::from(d.y), f64::from(d.z)];
+            let rad = blob_radius(dd);
+            let p = [dd[0] * rad, dd[1] * rad, dd[2] * rad];
+            let h = 1e-5;
+            let mut g = [0.0f64; 3];
+            for (k, gk) in g.iter_mut().enumerate() {
+                let mut a = p;
+                let mut b = p;
+                a[k] += h;
+                b[k] -= h;
+                *gk = (blob_field(a) - blob_field(b)) / (2.0 * h);
+            }
+            let normal =
+                Vec3::new(g[0] as f32, g[1] as f32, g[2] as f32).normalize() + rng.unit() * 0.05;
+            let center = Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32) + rng.unit() * (0.05 * r);
+            let mut s = Splat::disc(center, normal, r * rng.range(0.8, 1.2)).unwrap();
+            // Rotate the tangent frame randomly in the plane.
+            let a = rng.range(0.0, std::f32::consts::TAU);
+            let (sa, ca) = a.sin_cos();
+            let (u, v) = (s.u_axis, s.v_axis);
+            s.u_axis = u * ca + v * sa;
+            s.v_axis = s.normal.cross(s.u_axis);
+            if rng.f32() < 0.5 {
+                s.radii = Vec2::new(s.radii.x * 1.4, s.radii.y * 0.75);
+            }
+            s.field = NormalField {
+                xc: rng.range(-0.05, 0.05),
+                yc: rng.range(-0.05, 0.05),
+                alpha: rng.range(-0.2, 0.2),
+                beta: rng.range(-0.2, 0.2),
+            };
+            s
+        })
+        .collect()
+}
+
+/// A ray query: the ray and its `[t_min, t_max]`.
+#[derive(Clone, Copy, Debug)]
+pub struct Query {
+    /// The ray.
+    pub ray: Ray,
+    /// Lower end of the interval (0 or `eps_self`).
+    pub t_min: f32,
+    /// Upper end of the interval.
+    pub t_max: f32,
+}
+
+/// Seeded random rays around `splats` (bounding box centre `c`, size `s`):
+/// most aimed at a jittered splat centre (so they hit), some in random
+/// directions, some with a finite `t_max`.
+pub fn random_queries(splats: &[Splat], count: usize, seed: u64) -> Vec<Query> {
+    let mut rng = Rng::new(seed ^ 0xa5a5_a5a5);
+    let (lo, hi) = bounds(splats);
+    let c = (lo + hi) * 0.5;
+    let s = (hi - lo).max_element().max(f32::MIN_POSITIVE);
+    (0..count)
+        .map(|i| {
+            let origin = c + Vec3::new(
+                rng.range(-1.5, 1.5),
+                rng.range(-1.5, 1.5),
+                rng.range(-1.5, 1.5),
+            ) * s;
+            let dir = if i % 5 == 4 || splats.is_empty() {
+                rng.unit()
+            } else {
+                let target = splats[rng.below(splats.len())].center + rng.unit() * (0.02 * s);
+                (target - origin).normalize()
+            };
+            let t_max = if i % 7 == 6 {
+                rng.range(0.5, 3.0) * s
+            } else {
+                f32::INFINITY
+            };
+            Query {
+                ray: Ray { origin, dir },
+                t_min: 0.0,
+                t_max,
+            }
+        })
+        .collect()
+}
+
+/// Pinhole camera rays, `w × h`, from `eye` looking at `at` with a vertical
+/// field of view of 40°.
+pub fn camera_queries(eye: Vec3, at: Vec3, w: usize, h: usize) -> Vec<Query> {
+    let fwd = (at - eye).normalize();
+    let right = fwd.cross(Vec3::Y).normalize();
+    let up = right.cross(fwd);
+    let tan = (20f32).to_radians().tan();
+    let mut out = Vec::with_capacity(w * h);
+    for y in 0..h {
+        for x in 0..w {
+            let px = ((x as f32 + 0.5) / w as f32 * 2.0 - 1.0) * tan * w as f32 / h as f32;
+            let py = (1.0 - (y as f32 + 0.5) / h as f32 * 2.0) * tan;
+            out.push(Query {
+                ray: Ray {
+                    origin: eye,
+                    dir: (fwd + right * px + up * py).normalize(),
+                },
+                t_min: 0.0,
+                t_max: f32::INFINITY,
+            });
+        }
+    }
+    out
+}
+
+/// Bounding box of the splat centres (`(0, 0)` when empty).
+pub fn bounds(splats: &[Splat]) -> (Vec3, Vec3) {
+    if splats.is_empty() {
+        return (Vec3::ZERO, Vec3::ZERO);
+    }
+    splats.iter().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), s| {
+            let e = s.half_extent();
+            (lo.min(s.center - e), hi.max(s.center + e))
+        },
+    )
+}
+
+/// Bounding-box diagonal of the splats.
+pub fn diagonal(splats: &[Splat]) -> f32 {
+    let (lo, hi) = bounds(splats);
+    (hi - lo).length()
+}
+
+/// The oracle plus every backend under test: octree (exact overlap),
+/// octree (bounding-square overlap) and Embree.
+pub struct Backends {
+    /// The brute-force oracle.
+    pub oracle: Brute,
+    /// The backends checked against it.
+    pub tested: Vec<Box<dyn Backend>>,
+}
+
+/// Builds the oracle and every tested backend over `splats`.
+pub fn backends(splats: &[Splat]) -> Backends {
+    let discs: Vec<_> = splats.iter().map(Splat::disc_geometry).collect();
+    let device = Device::new().expect("embree device");
+    let exact = Octree::new(splats, &OctreeParams::default());
+    let square = Octree::new(
+        splats,
+        &OctreeParams {
+            overlap: OverlapTest::BoundingSquare,
+            ..OctreeParams::default()
+        },
+    );
+    let embree = EmbreeBackend::new(&device, splats).expect("embree scene");
+    Backends {
+        oracle: Brute::new(&discs),
+        tested: vec![Box::new(exact), Box::new(square), Box::new(embree)],
+    }
+}
+
+fn describe(q: &Query, splats: &[Splat], hits: &CandidateHits) -> String {
+    let mut s = format!("ray {:?} t_min {:?} t_max {:?}\n", q.ray, q.t_min, q.t_max);
+    for c in hits.as_slice() {
+        s += &format!("    {c:?} splat {:?}\n", splats[c.id as usize]);
+    }
+    s
+}
+
+/// Checks `backend` against the oracle on every query: identical candidate
+/// windows (ids, `t`, `u`, `v` compared bit for bit: every backend calls the
+/// same `intersect_disc` on the same `Disc` values, so nothing may differ),
+/// identical overflow flags, identical `occluded` answers, and identical
+/// resolved hits in all three shading modes. Returns a replayable
+/// description of the first disagreement.
+pub fn agree(
+    oracle: &dyn Backend,
+    backend: &dyn Backend,
+    splats: &[Splat],
+    queries: &[Query],
+    xi: f32,
+) -> Result<(), String> {
+    let mut want = CandidateHits::new(xi);
+    let mut got = CandidateHits::new(xi);
+    for (i, q) in queries.iter().enumerate() {
+        oracle.intersect(&q.ray, q.t_min, q.t_max, &mut want);
+        backend.intersect(&q.ray, q.t_min, q.t_max, &mut got);
+        let bits = |h: &CandidateHits| {
+            h.as_slice()
+                .iter()
+                .map(|c| (c.id, c.t.to_bits(), c.u.to_bits(), c.v.to_bits()))
+                .collect::<Vec<_>>()
+        };
+        let head = || {
+            format!(
+                "{} vs {}, query {i}, xi {xi:?}",
+                backend.name(),
+                oracle.name()
+            )
+        };
+        if bits(&want) != bits(&got) || want.overflowed() != got.overflowed() {
+            return Err(format!(
+                "{}: candidate windows differ\n  {} (overflowed {}): {}  {} (overflowed {}): {}",
+                head(),
+                oracle.name(),
+                want.overflowed(),
+                describe(q, splats, &want),
+                backend.name(),
+                got.overflowed(),
+                describe(q, splats, &got)
+            ));
+        }
+        for mode in [ShadingMode::Flat, ShadingMode::Blended, ShadingMode::Phong] {
+            let a = resolve(&want, &q.ray, splats, mode);
+            let b = resolve(&got, &q.ray, splats, mode);
+            if a != b {
+                return Err(format!(
+                    "{}: resolved hits differ in {mode:?}: {a:?} vs {b:?}\n  {}",
+                    head(),
+                    describe(q, splats, &want)
+                ));
+            }
+        }
+        let occ_want = oracle.occluded(&q.ray, q.t_min, q.t_max);
+        let occ_got = backend.occluded(&q.ray, q.t_min, q.t_max);
+        if occ_want != occ_got || occ_want == want.is_empty() {
+            return Err(format!(
+                "{}: occluded {} ({}) vs {} ({}), window empty: {}\n  {}",
+                head(),
+                occ_want,
+                oracle.name(),
+                occ_got,
+                backend.name(),
+                want.is_empty(),
+                describe(q, splats, &want)
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Runs [`agree`] for every tested backend; panics with the seed and the
+/// replayable description of the first disagreement.
+pub fn assert_all_agree(b: &Backends, splats: &[Splat], queries: &[Query], xi: f32, what: &str) {
+    for backend in &b.tested {
+        if let Err(e) = agree(&b.oracle, backend.as_ref(), splats, queries, xi) {
+            panic!("{what}: {e}\n(replay with SPLATRAY_SEED={:#x})", seed());
+        }
+    }
+}
+
+/// How many queries of `queries` hit something in the oracle.
+pub fn count_hits(oracle: &dyn Backend, queries: &[Query], xi: f32) -> usize {
+    let mut h = CandidateHits::new(xi);
+    queries
+        .iter()
+        .filter(|q| {
+            oracle.intersect(&q.ray, q.t_min, q.t_max, &mut h);
+            !h.is_empty()
+        })
+        .count()
+}
+
+/// Secondary rays from each resolved primary hit: the mirror reflection and
+/// a shadow ray toward `light`, both starting at the hit with
+/// `t_min = eps_self` (§3.2, fig. 9 right).
+pub fn secondary_queries(
+    oracle: &dyn Backend,
+    splats: &[Splat],
+    primaries: &[Query],
+    xi: f32,
+    eps_self: f32,
+    light: Vec3,
+) -> Vec<Query> {
+    let mut h = CandidateHits::new(xi);
+    let mut out = Vec::new();
+    for q in primaries {
+        oracle.intersect(&q.ray, q.t_min, q.t_max, &mut h);
+        if let Some(hit) = resolve(&h, &q.ray, splats, ShadingMode::Phong) {
+            let n = if hit.front { hit.normal } else { -hit.normal };
+            let d = q.ray.dir - 2.0 * q.ray.dir.dot(n) * n;
+            out.push(Query {
+                ray: Ray {
+                    origin: hit.point,
+                    dir: d.normalize(),
+                },
+                t_min: eps_self,
+                t_max: f32::INFINITY,
+            });
+            let to_light = light - hit.point;
+            out.push(Query {
+                ray: Ray {
+                    origin: hit.point,
+                    dir: to_light.normalize(),
+                },
+                t_min: eps_self,
+                t_max: to_light.length(),
+            });
+        }
+    }
+    out
+}

@@ -1,0 +1,517 @@
+//! Hard cases, each run on every backend (octree with both overlap tests,
+//! Embree) and against the brute-force oracle. Failure messages print the ray
+//! (`{:?}` of f32 round-trips exactly) and the splats involved, so any failure
+//! can be replayed.
+
+mod common;
+
+use common::*;
+use glam::{DVec3, Vec2, Vec3};
+use splatray::accel::resolve::{ShadingMode, resolve};
+use splatray::accel::{Backend, CandidateHits, MAX_CANDIDATES, Ray, SceneScale};
+use splatray::splat::{NormalField, Splat};
+
+fn q(origin: Vec3, dir: Vec3) -> Query {
+    Query {
+        ray: Ray { origin, dir },
+        t_min: 0.0,
+        t_max: f32::INFINITY,
+    }
+}
+
+/// A `k × k` grid of splats with normal `normal` through `origin`, spacing
+/// `step`, radius `radius`.
+fn plane(k: usize, step: f32, radius: f32, origin: Vec3, normal: Vec3) -> Vec<Splat> {
+    let n = normal.normalize();
+    let (u, v) = splatray::splat::tangent_frame(n);
+    let half = (k as f32 - 1.0) * 0.5;
+    (0..k * k)
+        .map(|i| {
+            let a = ((i % k) as f32 - half) * step;
+            let b = ((i / k) as f32 - half) * step;
+            Splat::disc(origin + u * a + v * b, n, radius).unwrap()
+        })
+        .collect()
+}
+
+/// Every tested backend's window for `query`, checked equal to the oracle's;
+/// returns the oracle's.
+fn windows(b: &Backends, splats: &[Splat], query: &Query, xi: f32, what: &str) -> CandidateHits {
+    assert_all_agree(b, splats, std::slice::from_ref(query), xi, what);
+    let mut h = CandidateHits::new(xi);
+    b.oracle
+        .intersect(&query.ray, query.t_min, query.t_max, &mut h);
+    h
+}
+
+#[test]
+fn grazing_rays_up_to_89_99_degrees() {
+    let n = Vec3::new(0.2, 0.1, 1.0).normalize();
+    let mut splats = vec![Splat::disc(Vec3::new(0.3, -0.2, 0.5), n, 0.5).unwrap()];
+    // Neighbours so the trees have more than one cell.
+    splats.extend(blobby_splats(500, 3).into_iter().map(|mut s| {
+        s.center += Vec3::new(4.0, 0.0, 0.0);
+        s
+    }));
+    let s = splats[0];
+    let b = backends(&splats);
+    let xi = SceneScale::from_diagonal(diagonal(&splats)).xi;
+    let mut queries = Vec::new();
+    for angle in [0.0f32, 30.0, 60.0, 80.0, 89.0, 89.9, 89.99] {
+        for k in 0..8 {
+            let az = k as f32 * 0.785;
+            for radial in [0.0f32, 0.3, 0.6, 0.9] {
+                let target =
+                    s.center + (s.u_axis * az.cos() + s.v_axis * az.sin()) * (0.5 * radial);
+                let (sa, ca) = angle.to_radians().sin_cos();
+                let tang = s.u_axis * (az + 1.0).cos() + s.v_axis * (az + 1.0).sin();
+                let dir = (-n * ca + tang * sa).normalize();
+                let query = q(target - dir * 2.0, dir);
+                let h = windows(&b, &splats, &query, xi, "grazing ray");
+                assert!(
+                    h.as_slice().iter().any(|c| c.id == 0),
+                    "grazing ray at {angle}° through radial {radial} must hit splat 0: {:?}\n{s:?}",
+                    query.ray
+                );
+                queries.push(query);
+            }
+        }
+    }
+    // Grazing rays over the blobby model: nearly in a splat's plane.
+    let model = blobby_splats(2000, seed());
+    let b = backends(&model);
+    let xi = SceneScale::from_diagonal(diagonal(&model)).xi;
+    let mut rng = Rng::new(seed());
+    let grazing: Vec<Query> = (0..600)
+        .map(|i| {
+            let s = model[rng.below(model.len())];
+            let angle = [89.0f32, 89.9, 89.99][i % 3].to_radians();
+            let az = rng.range(0.0, std::f32::consts::TAU);
+            let tang = s.u_axis * az.cos() + s.v_axis * az.sin();
+            let dir = (-s.normal * angle.cos() + tang * angle.sin()).normalize();
+            q(s.center - dir * 1.0, dir)
+        })
+        .collect();
+    assert_all_agree(&b, &model, &grazing, xi, "grazing rays over the model");
+}
+
+#[test]
+fn rays_through_the_rim_hit_inside_and_miss_outside() {
+    // Circular and elliptical splats away from the origin.
+    let n = Vec3::new(-0.3, 0.4, 1.0).normalize();
+    let mut circ = Splat::disc(Vec3::new(0.25, -0.5, 0.75), n, 1.0).unwrap();
+    circ.field = NormalField::FLAT;
+    let ell = Splat {
+        center: Vec3::new(3.5, 0.5, -0.25),
+        radii: Vec2::new(1.0, 0.6),
+        ..circ
+    };
+    let splats = vec![circ, ell];
+    let b = backends(&splats);
+    let xi = SceneScale::from_diagonal(diagonal(&splats)).xi;
+    let mut checked = 0;
+    for (id, s) in splats.iter().enumerate() {
+        let d = s.disc_geometry();
+        let f64v = |v: Vec3| DVec3::new(v.x.into(), v.y.into(), v.z.into());
+        for k in 0..16 {
+            let phi = k as f64 * std::f64::consts::TAU / 16.0 + 0.1;
+            for factor in [1.0 - 1e-6, 1.0 + 1e-6] {
+                let local = f64v(s.u_axis) * (f64::from(s.radii.x) * phi.cos())
+                    + f64v(s.v_axis) * (f64::from(s.radii.y) * phi.sin());
+                let p = f64v(s.center) + local * factor;
+                let tilt = f64v(s.u_axis) * (phi + 2.0).cos() + f64v(s.v_axis) * (phi + 2.0).sin();
+                let dir = (-f64v(s.normal) * 0.866 + tilt * 0.5).normalize();
+                let o = p - dir;
+                let ray = Ray {
+                    origin: o.as_vec3(),
+                    dir: dir.as_vec3(),
+                };
+                // Where the f32 ray really meets the f32 disc, in f64.
+                let (ro, rd) = (f64v(ray.origin), f64v(ray.dir));
+                let t = f64v(d.normal).dot(f64v(d.center) - ro) / f64v(d.normal).dot(rd);
+                let rel = ro + rd * t - f64v(d.center);
+                let rho = rel.dot(f64v(d.u_scaled)).hypot(rel.dot(f64v(d.v_scaled)));
+                assert!(
+                    (rho - factor).abs() < 3e-7,
+                    "test set-up: ray {ray:?} meets splat {id} at radial {rho}, wanted {factor}"
+                );
+                let inside = factor < 1.0;
+                let query = q(ray.origin, ray.dir);
+                let h = windows(&b, &splats, &query, xi, "rim ray");
+                let hit = h.as_slice().iter().any(|c| c.id == id as u32);
+                assert_eq!(
+                    hit, inside,
+                    "ray {ray:?} through radial {rho} (exact, f64) of splat {id} {s:?}: hit {hit}"
+                );
+                for backend in &b.tested {
+                    assert_eq!(
+                        backend.occluded(&ray, 0.0, f32::INFINITY),
+                        inside,
+                        "{} occluded, ray {ray:?}, radial {rho}, splat {s:?}",
+                        backend.name()
+                    );
+                }
+                checked += 1;
+            }
+        }
+    }
+    assert_eq!(checked, 64);
+}
+
+#[test]
+fn rays_parallel_to_splats_miss_without_nan() {
+    // A grid of splats in the plane z = 0.5, and rays exactly in that plane
+    // (dir.z == 0), through centres and between them.
+    let splats = plane(12, 0.2, 0.15, Vec3::new(0.0, 0.0, 0.5), Vec3::Z);
+    let b = backends(&splats);
+    let xi = SceneScale::from_diagonal(diagonal(&splats)).xi;
+    let mut queries = Vec::new();
+    for s in splats.iter().step_by(7) {
+        for dir in [
+            Vec3::X,
+            Vec3::Y,
+            Vec3::new(1.0, 0.3, 0.0).normalize(),
+            -Vec3::X,
+        ] {
+            queries.push(q(s.center - dir * 3.0, dir));
+            queries.push(q(s.center, dir));
+        }
+    }
+    for query in &queries {
+        assert_eq!(query.ray.dir.z, 0.0);
+        let h = windows(&b, &splats, query, xi, "parallel ray");
+        assert!(
+            h.is_empty(),
+            "parallel ray {:?} hit {:?}",
+            query.ray,
+            h.as_slice()
+        );
+        for backend in &b.tested {
+            let mut got = CandidateHits::new(xi);
+            backend.intersect(&query.ray, 0.0, f32::INFINITY, &mut got);
+            assert!(got.as_slice().iter().all(|c| c.t.is_finite()));
+            assert!(!backend.occluded(&query.ray, 0.0, f32::INFINITY));
+        }
+    }
+    // Axis-aligned rays (two zero direction components, infinite inverse
+    // directions in the octree), some with origins exactly on cell planes.
+    let mut axis = Vec::new();
+    for i in -12..=12 {
+        for j in -12..=12 {
+            let o = Vec3::new(i as f32 * 0.1, j as f32 * 0.1, 2.0);
+            axis.push(q(o, -Vec3::Z));
+            axis.push(q(Vec3::new(o.x, o.y, -1.0), Vec3::Z));
+        }
+    }
+    let hits = count_hits(&b.oracle, &axis, xi);
+    assert!(
+        hits > axis.len() / 2,
+        "axis-aligned rays hit the grid: {hits}"
+    );
+    assert_all_agree(&b, &splats, &axis, xi, "axis-aligned rays");
+    // A NaN ray hits nothing anywhere.
+    let nan = q(Vec3::ZERO, Vec3::new(f32::NAN, 0.0, 1.0));
+    assert!(windows(&b, &splats, &nan, xi, "NaN ray").is_empty());
+}
+
+fn translated(splats: &[Splat], by: Vec3) -> Vec<Splat> {
+    splats
+        .iter()
+        .map(|s| Splat {
+            center: s.center + by,
+            ..*s
+        })
+        .collect()
+}
+
+fn scaled(splats: &[Splat], k: f32) -> Vec<Splat> {
+    splats
+        .iter()
+        .map(|s| Splat {
+            center: s.center * k,
+            radii: s.radii * k,
+            ..*s
+        })
+        .collect()
+}
+
+fn agree_on(splats: &[Splat], what: &str) {
+    let b = backends(splats);
+    let scale = SceneScale::from_diagonal(diagonal(splats));
+    let queries = random_queries(splats, 800, seed());
+    let hits = count_hits(&b.oracle, &queries, scale.xi);
+    assert!(hits > queries.len() / 3, "{what}: only {hits} hits");
+    assert_all_agree(&b, splats, &queries, scale.xi, what);
+    let (lo, hi) = bounds(splats);
+    let c = (lo + hi) * 0.5;
+    let s = (hi - lo).max_element();
+    let camera = camera_queries(c + Vec3::new(0.3, 0.5, 1.8) * s, c, 24, 24);
+    assert_all_agree(&b, splats, &camera, scale.xi, what);
+}
+
+#[test]
+fn model_far_from_the_origin() {
+    let model = blobby_splats(1500, seed());
+    let far = translated(&model, Vec3::new(1e5, -1e5, 1e5));
+    // The renderer re-centres scenes on load: the re-centred model must work
+    // like any other...
+    let (lo, hi) = bounds(&far);
+    let recentred = translated(&far, -(lo + hi) * 0.5);
+    agree_on(&recentred, "re-centred model");
+    // ...and even the raw translated one (f32 spacing 0.0078 there, so
+    // splats are coarse) must give the same answers on every backend.
+    agree_on(&far, "model translated by 1e5");
+}
+
+#[test]
+fn model_scaled_by_1e_minus_4_and_1e4() {
+    let model = blobby_splats(1500, seed());
+    agree_on(&scaled(&model, 1e-4), "model scaled by 1e-4");
+    agree_on(&scaled(&model, 1e4), "model scaled by 1e4");
+}
+
+#[test]
+fn many_coplanar_overlapping_splats_fill_the_window() {
+    // Radius 7 spacings: every point is covered by ~150 splats, all at the
+    // same t (plane z = 0, normal exactly +z), so the window keeps the 32
+    // smallest ids and reports the overflow.
+    let step = 0.05;
+    let splats = plane(40, step, 7.0 * step, Vec3::ZERO, Vec3::Z);
+    let b = backends(&splats);
+    let xi = SceneScale::from_diagonal(diagonal(&splats)).xi;
+    let mut rng = Rng::new(seed());
+    for _ in 0..60 {
+        let target = Vec3::new(rng.range(-0.6, 0.6), rng.range(-0.6, 0.6), 0.0);
+        let dir = Vec3::new(rng.range(-0.5, 0.5), rng.range(-0.5, 0.5), -1.0).normalize();
+        let query = q(target - dir * 2.0, dir);
+        let h = windows(&b, &splats, &query, xi, "coplanar splats");
+        let mut covering: Vec<u32> = splats
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| {
+                splatray::accel::intersect_disc(&s.disc_geometry(), &query.ray, 0.0, f32::INFINITY)
+                    .is_some()
+            })
+            .map(|(i, _)| i as u32)
+            .collect();
+        covering.sort_unstable();
+        assert!(
+            covering.len() > MAX_CANDIDATES,
+            "set-up: {} cover",
+            covering.len()
+        );
+        let ids: Vec<u32> = h.as_slice().iter().map(|c| c.id).collect();
+        assert_eq!(
+            ids,
+            covering[..MAX_CANDIDATES],
+            "window of ray {:?} must hold the 32 smallest ids",
+            query.ray
+        );
+        assert!(h.overflowed(), "ray {:?}: overflow not reported", query.ray);
+    }
+    // A tilted dense plane: t varies across splats, so the window is cut by
+    // xi and ordered by (t, id).
+    let tilted = plane(
+        40,
+        step,
+        5.0 * step,
+        Vec3::new(0.1, 0.2, 0.3),
+        Vec3::new(0.3, -0.2, 1.0),
+    );
+    let b = backends(&tilted);
+    let xi = SceneScale::from_diagonal(diagonal(&tilted)).xi;
+    let queries = random_queries(&tilted, 400, seed());
+    assert_all_agree(&b, &tilted, &queries, xi, "tilted dense plane");
+}
+
+#[test]
+fn thin_sheet_sides_are_never_blended() {
+    // Two planes closer than xi, normals facing away from each other.
+    let xi = 1e-3 * 2.0;
+    let mut splats = plane(20, 0.1, 0.12, Vec3::ZERO, Vec3::Z);
+    splats.extend(plane(
+        20,
+        0.1,
+        0.12,
+        Vec3::new(0.03, 0.04, -xi / 4.0),
+        -Vec3::Z,
+    ));
+    for (i, s) in splats.iter_mut().enumerate() {
+        s.field = NormalField {
+            xc: 0.02,
+            yc: -0.01,
+            alpha: if i % 2 == 0 { 0.1 } else { -0.1 },
+            beta: 0.05,
+        };
+    }
+    let b = backends(&splats);
+    let mut rng = Rng::new(seed());
+    let mut mixed = 0;
+    for k in 0..200 {
+        let from_above = k % 2 == 0;
+        let target = Vec3::new(rng.range(-0.7, 0.7), rng.range(-0.7, 0.7), 0.0);
+        let mut dir = Vec3::new(rng.range(-0.6, 0.6), rng.range(-0.6, 0.6), -1.0).normalize();
+        if !from_above {
+            dir.z = -dir.z;
+        }
+        let query = q(target - dir * 2.0, dir);
+        let h = windows(&b, &splats, &query, xi, "thin sheet");
+        assert!(!h.is_empty(), "ray {:?} must hit the sheet", query.ray);
+        let facing = |c: &splatray::accel::Candidate| splats[c.id as usize].normal.dot(dir) < 0.0;
+        let front = h.as_slice().iter().filter(|c| facing(c)).count();
+        if front < h.as_slice().len() {
+            mixed += 1;
+        }
+        for mode in [ShadingMode::Flat, ShadingMode::Blended, ShadingMode::Phong] {
+            let hit = resolve(&h, &query.ray, &splats, mode).unwrap();
+            assert!(
+                hit.front && hit.normal.dot(dir) < 0.0,
+                "{mode:?}: ray {:?} got normal {} (front {}) on the far side; window {:?}",
+                query.ray,
+                hit.normal,
+                hit.front,
+                h.as_slice()
+            );
+            if mode != ShadingMode::Flat {
+                assert_eq!(hit.blended as usize, front, "only same-side splats blended");
+            }
+        }
+    }
+    assert!(
+        mixed > 50,
+        "the test needs windows holding both sides: {mixed}"
+    );
+}
+
+#[test]
+fn reflection_rays_off_a_mirror_plane_do_not_hit_it_again() {
+    let splats = plane(
+        30,
+        0.05,
+        0.12,
+        Vec3::new(0.1, -0.05, 0.2),
+        Vec3::new(0.1, 0.2, 1.0),
+    );
+    let scale = SceneScale::from_diagonal(diagonal(&splats));
+    let b = backends(&splats);
+    let mut rng = Rng::new(seed());
+    let mut reflections = Vec::new();
+    let mut self_hits_without_eps = 0;
+    for _ in 0..200 {
+        let target = Vec3::new(rng.range(-0.5, 0.5), rng.range(-0.5, 0.5), 0.2);
+        let dir = Vec3::new(rng.range(-0.7, 0.7), rng.range(-0.7, 0.7), -1.0).normalize();
+        let primary = q(target - dir * 2.0, dir);
+        let h = windows(&b, &splats, &primary, scale.xi, "mirror primary");
+        let hit = resolve(&h, &primary.ray, &splats, ShadingMode::Flat)
+            .unwrap_or_else(|| panic!("ray {:?} must hit the mirror", primary.ray));
+        let n = hit.geometric_normal;
+        let r = (dir - 2.0 * dir.dot(n) * n).normalize();
+        let refl = Query {
+            ray: Ray {
+                origin: hit.point,
+                dir: r,
+            },
+            t_min: scale.eps_self,
+            t_max: f32::INFINITY,
+        };
+        let h = windows(&b, &splats, &refl, scale.xi, "mirror reflection");
+        assert!(
+            h.is_empty(),
+            "reflection {:?} (t_min {}) hit the mirror again: {:?}",
+            refl.ray,
+            refl.t_min,
+            h.as_slice()
+        );
+        for backend in &b.tested {
+            assert!(!backend.occluded(&refl.ray, refl.t_min, f32::INFINITY));
+        }
+        let mut raw = CandidateHits::new(scale.xi);
+        b.oracle.intersect(&refl.ray, 0.0, f32::INFINITY, &mut raw);
+        if !raw.is_empty() {
+            self_hits_without_eps += 1;
+        }
+        reflections.push(refl);
+    }
+    // Without eps_self the same rays do hit the overlapping splats they
+    // start on: the guard is what keeps them clean (fig. 9 right).
+    assert!(
+        self_hits_without_eps > 20,
+        "set-up: only {self_hits_without_eps} rays self-hit with t_min = 0"
+    );
+}
+
+#[test]
+fn coincident_duplicates_are_both_candidates() {
+    let mut splats = blobby_splats(1000, seed());
+    let dup: Vec<Splat> = splats.iter().step_by(10).copied().collect();
+    let n = splats.len() as u32;
+    splats.extend(&dup);
+    let b = backends(&splats);
+    let xi = SceneScale::from_diagonal(diagonal(&splats)).xi;
+    // The copy of splat `10 k` has id `n + k`.
+    let twin = |id: u32| {
+        if id >= n {
+            Some((id - n) * 10)
+        } else if id % 10 == 0 {
+            Some(n + id / 10)
+        } else {
+            None
+        }
+    };
+    let mut with_pairs = 0;
+    for s in &dup {
+        let dir = (-s.normal + s.u_axis * 0.2).normalize();
+        let query = q(s.center - dir * 0.5, dir);
+        let h = windows(&b, &splats, &query, xi, "duplicates");
+        let ids: Vec<u32> = h.as_slice().iter().map(|c| c.id).collect();
+        for &id in &ids {
+            if let Some(t) = twin(id) {
+                assert!(
+                    ids.contains(&t),
+                    "ray {:?}: splat {id} is a candidate but its copy {t} is not: {ids:?}",
+                    query.ray
+                );
+                with_pairs += 1;
+            }
+        }
+        let mut sorted = ids.clone();
+        sorted.sort_unstable();
+        sorted.dedup();
+        assert_eq!(sorted.len(), ids.len(), "ids repeated: {ids:?}");
+    }
+    assert!(
+        with_pairs >= dup.len(),
+        "set-up: the rays aimed at duplicated splats found only {with_pairs} of them"
+    );
+    // 300 copies of one splat: the octree's depth limit copes, and the
+    // window keeps the 32 smallest ids.
+    let one = Splat::disc(Vec3::new(0.1, 0.2, 0.3), Vec3::new(0.0, 1.0, 1.0), 0.05).unwrap();
+    let mut pile = vec![one; 300];
+    // Other splats beside the pile, so the tree has more than one cell.
+    pile.extend(translated(&blobby_splats(300, 9), Vec3::new(4.0, 0.0, 0.0)));
+    let b = backends(&pile);
+    let query = q(one.center + one.normal, -one.normal);
+    let h = windows(&b, &pile, &query, 1e-3, "300 coincident splats");
+    let ids: Vec<u32> = h.as_slice().iter().map(|c| c.id).collect();
+    assert_eq!(ids, (0..MAX_CANDIDATES as u32).collect::<Vec<_>>());
+    assert!(h.overflowed());
+}
+
+#[test]
+fn empty_scene_is_never_hit() {
+    let b = backends(&[]);
+    let queries = [
+        q(Vec3::ZERO, Vec3::Z),
+        q(Vec3::splat(5.0), -Vec3::ONE.normalize()),
+        q(Vec3::ZERO, Vec3::new(f32::NAN, 0.0, 0.0)),
+    ];
+    assert_all_agree(&b, &[], &queries, 1e-3, "empty scene");
+    for backend in &b.tested {
+        let mut h = CandidateHits::new(1e-3);
+        for query in &queries {
+            backend.intersect(&query.ray, 0.0, f32::INFINITY, &mut h);
+            assert!(h.is_empty(), "{} hit an empty scene", backend.name());
+            assert!(!backend.occluded(&query.ray, 0.0, f32::INFINITY));
+        }
+    }
+}
