@@ -8,3 +8,4 @@ pub mod cli;
 pub mod embree;
 pub mod render;
 pub mod splat;
+pub mod validate;

@@ -21,6 +21,9 @@ enum Command {
     Info,
     /// Render a scene (default: the bundled scenes/bunny.toml) to an image.
     Render(splatray::cli::render::RenderArgs),
+    /// Render a scene with the octree and Embree in one run and report their
+    /// agreement ray for ray, image for image, and their speeds.
+    Compare(splatray::cli::compare::CompareArgs),
 }
 
 fn info() -> Result<(), String> {
@@ -46,6 +49,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Info => info(),
         Command::Render(args) => splatray::cli::render::run(&args),
+        Command::Compare(args) => splatray::cli::compare::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

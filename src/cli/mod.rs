@@ -1,3 +1,4 @@
 //! Subcommands of the `splatray` binary.
 
+pub mod compare;
 pub mod render;

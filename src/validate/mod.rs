@@ -1,0 +1,4 @@
+//! Cross-validation: the same scene through two backends, ray for ray and
+//! image for image (DESIGN §2, §4).
+
+pub mod compare;
