@@ -4,5 +4,7 @@
 //! octree and Embree 4 user-geometry discs — feeding one shading path.
 
 pub mod accel;
+pub mod cli;
 pub mod embree;
+pub mod io;
 pub mod splat;

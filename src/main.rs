@@ -19,6 +19,10 @@ enum Command {
     /// Print splatray's version, the Embree version in use (asked from the
     /// device), the Embree library loaded and the thread count.
     Info,
+    /// Sample points uniformly by area from a triangle mesh (PLY).
+    Sample(splatray::cli::sample_cmd::SampleArgs),
+    /// Turn a point cloud into splats with Phong normal fields.
+    Splat(splatray::cli::splat_cmd::SplatArgs),
 }
 
 fn info() -> Result<(), String> {
@@ -43,6 +47,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info => info(),
+        Command::Sample(a) => splatray::cli::sample_cmd::run(&a),
+        Command::Splat(a) => splatray::cli::splat_cmd::run(&a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
