@@ -239,7 +239,12 @@ fn read_rows<E: PropertyAccess>(
     Parser::<E>::new()
         .read_payload_for_element(cursor, def, header)
         .map_err(|e| {
-            if e.kind() == std::io::ErrorKind::UnexpectedEof {
+            // ply-rs-bw sometimes wraps the end of file in another error.
+            let text = e.to_string();
+            if e.kind() == std::io::ErrorKind::UnexpectedEof
+                || text.contains("UnexpectedEof")
+                || text.contains("fill whole buffer")
+            {
                 IoErrorKind::Truncated(format!(
                     "the file ends inside element \"{}\" (header promises {}): {e}",
                     def.name, def.count

@@ -23,7 +23,7 @@ pub struct SplatParams {
     /// Error threshold `ϵ` of §2.1 as a fraction of the cloud's bounding-box
     /// diagonal (default 0.002).
     pub epsilon_rel: f32,
-    /// Density factor `k ∈ (0, 1]` of §2.2 (default 0.6).
+    /// Density factor `k ∈ (0, 1]` of §2.2 (default 0.7).
     pub density: f32,
     /// Grow elliptical splats along the minimum-curvature direction (§2.1).
     pub ellipses: bool,
@@ -37,7 +37,7 @@ impl Default for SplatParams {
         SplatParams {
             k: 12,
             epsilon_rel: 0.002,
-            density: 0.6,
+            density: 0.7,
             ellipses: false,
             field_radius_factor: 1.5,
         }

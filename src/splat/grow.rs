@@ -45,6 +45,8 @@ pub struct Grown {
 struct Growth {
     /// Accepted points with their metric distance².
     accepted: Vec<(u32, f32)>,
+    /// Every point reached by the traversal (accepted or not).
+    visited: Vec<u32>,
     h_min: f32,
     h_max: f32,
 }
@@ -79,6 +81,7 @@ impl Grower<'_> {
         let max_d2 = max_d * max_d;
         let mut g = Growth {
             accepted: Vec::new(),
+            visited: vec![i as u32],
             h_min: 0.0,
             h_max: 0.0,
         };
@@ -105,6 +108,7 @@ impl Grower<'_> {
                     continue;
                 }
                 self.stamp[q] = round;
+                g.visited.push(q as u32);
                 let d = inp.points[q] - p;
                 let (x, y) = (a.dot(d) / aspect, b.dot(d));
                 let qd2 = x * x + y * y;
@@ -259,15 +263,29 @@ pub fn grow_all(inp: &GrowInput<'_>, mut progress: impl FnMut(usize)) -> Grown {
         let (a, b, aspect) = frame;
         let center = p + n * (0.5 * (growth.h_min + growth.h_max)); // eq. (2)
         let mut color = DVec3::ZERO;
-        let limit2 = (inp.density * r) * (inp.density * r);
-        for &(j, d2) in &growth.accepted {
-            let j = j as usize;
-            covered[j] = true;
-            if d2 <= limit2 {
-                active[j] = false;
-            }
+        for &(j, _) in &growth.accepted {
             if let Some(c) = inp.colors {
-                color += c[j].as_dvec3();
+                color += c[j as usize].as_dvec3();
+            }
+        }
+        // Density control (§2.2): every point reached that lies on this splat
+        // (within ϵ of its plane, inside its disc, facing the same way) is
+        // covered, and seeds nothing within the projected distance k·r.
+        let limit2 = (inp.density * r) * (inp.density * r);
+        let (r2, hc) = (r * r, 0.5 * (growth.h_min + growth.h_max));
+        for &j in &growth.visited {
+            let j = j as usize;
+            let d = inp.points[j] - p;
+            let (x, y) = (a.dot(d) / aspect, b.dot(d));
+            let d2 = x * x + y * y;
+            let on = d2 <= r2
+                && (n.dot(d) - hc).abs() <= inp.epsilon
+                && (j == i || inp.normals[j].dot(n) > 0.0);
+            if on {
+                covered[j] = true;
+                if d2 <= limit2 {
+                    active[j] = false;
+                }
             }
         }
         active[i] = false;
