@@ -6,6 +6,7 @@
 pub mod accel;
 pub mod cli;
 pub mod embree;
+pub mod io;
 pub mod render;
 pub mod splat;
 pub mod validate;

@@ -24,6 +24,10 @@ enum Command {
     /// Render a scene with the octree and Embree in one run and report their
     /// agreement ray for ray, image for image, and their speeds.
     Compare(splatray::cli::compare::CompareArgs),
+    /// Sample points uniformly by area from a triangle mesh (PLY).
+    Sample(splatray::cli::sample_cmd::SampleArgs),
+    /// Turn a point cloud into splats with Phong normal fields.
+    Splat(splatray::cli::splat_cmd::SplatArgs),
 }
 
 fn info() -> Result<(), String> {
@@ -50,6 +54,8 @@ fn main() -> ExitCode {
         Command::Info => info(),
         Command::Render(args) => splatray::cli::render::run(&args),
         Command::Compare(args) => splatray::cli::compare::run(&args),
+        Command::Sample(a) => splatray::cli::sample_cmd::run(&a),
+        Command::Splat(a) => splatray::cli::splat_cmd::run(&a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,4 +1,7 @@
 //! Subcommands of the `splatray` binary.
 
 pub mod compare;
+pub mod progress;
 pub mod render;
+pub mod sample_cmd;
+pub mod splat_cmd;

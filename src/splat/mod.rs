@@ -129,3 +129,14 @@ pub struct Disc {
     /// `v_axis / r_v`.
     pub v_scaled: Vec3,
 }
+
+pub mod field;
+mod generate;
+pub mod grow;
+pub mod knn;
+pub mod normals;
+
+pub use generate::{
+    GenerateError, Skipped, SplatParams, SplatReport, StageSeconds, count_on_splats, coverage,
+    generate, generate_with_progress, on_splat,
+};

@@ -1,0 +1,303 @@
+//! Points in, splats out: readers for PLY, PCD and XYZ point clouds, a PLY
+//! mesh reader and area-uniform mesh sampler, and the splat PLY format.
+//!
+//! Every reader is defensive: a header's counts are never trusted for
+//! allocations (reservations are capped by the file's size), non-finite
+//! coordinates are skipped and counted in [`PointCloud::skipped`], and every
+//! failure is one [`IoError`] whose message is a single line naming the file.
+
+mod error;
+mod lzf;
+mod pcd;
+mod ply;
+mod sample;
+mod splat_ply;
+mod xyz;
+
+pub use error::{IoError, IoErrorKind};
+pub use lzf::lzf_decompress;
+pub use sample::sample_mesh;
+pub use splat_ply::{read_splats, write_splats};
+
+use glam::Vec3;
+use std::path::Path;
+
+/// A point cloud as read from a file (or sampled from a mesh).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PointCloud {
+    /// Point positions; all finite.
+    pub positions: Vec<Vec3>,
+    /// Per-point normals when the file has them, as stored (not necessarily
+    /// unit length; zero or NaN ones are re-estimated by the splat generator).
+    pub normals: Option<Vec<Vec3>>,
+    /// Per-point linear RGB colour in `[0, 1]` when the file has colour.
+    pub colors: Option<Vec<Vec3>>,
+    /// Points left out while reading, as `(reason, count)`.
+    pub skipped: Vec<(String, usize)>,
+}
+
+impl PointCloud {
+    /// Number of points kept.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// `true` when no point was kept.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+
+    /// Total number of skipped points over all reasons.
+    #[must_use]
+    pub fn skipped_total(&self) -> usize {
+        self.skipped.iter().map(|(_, n)| n).sum()
+    }
+
+    /// Add `count` skipped points under `reason` (merged with an existing
+    /// entry of the same reason; a zero count is not recorded).
+    pub fn add_skipped(&mut self, reason: &str, count: usize) {
+        if count == 0 {
+            return;
+        }
+        match self.skipped.iter_mut().find(|(r, _)| r == reason) {
+            Some((_, n)) => *n += count,
+            None => self.skipped.push((reason.to_string(), count)),
+        }
+    }
+}
+
+/// A triangle mesh.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Mesh {
+    /// Vertex positions.
+    pub positions: Vec<Vec3>,
+    /// Triangles as indices into `positions`; polygons are fan-triangulated.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// The point file formats understood by [`read_points`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// Stanford PLY (ascii, binary little or big endian).
+    Ply,
+    /// PCL's PCD v0.7 (ascii, binary, binary_compressed).
+    Pcd,
+    /// Whitespace separated `x y z [nx ny nz]` text.
+    Xyz,
+}
+
+impl Format {
+    /// The format from the file extension (`.ply`, `.pcd`, `.xyz`, `.txt`,
+    /// case-insensitive), or `None`.
+    #[must_use]
+    pub fn from_extension(path: &Path) -> Option<Format> {
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        match ext.as_str() {
+            "ply" => Some(Format::Ply),
+            "pcd" => Some(Format::Pcd),
+            "xyz" | "txt" => Some(Format::Xyz),
+            _ => None,
+        }
+    }
+
+    /// The format guessed from a file's first bytes, or `None`.
+    #[must_use]
+    pub fn sniff(head: &[u8]) -> Option<Format> {
+        if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
+            return Some(Format::Ply);
+        }
+        let text = String::from_utf8_lossy(head);
+        let first = text
+            .lines()
+            .map(str::trim)
+            .find(|l| !l.is_empty() && !(l.starts_with('#') && !l.contains(".PCD")));
+        match first {
+            Some(l)
+                if l.contains(".PCD") || l.starts_with("VERSION") || l.starts_with("FIELDS") =>
+            {
+                Some(Format::Pcd)
+            }
+            Some(l) => {
+                let n = xyz::split_fields(l).count();
+                let numeric = xyz::split_fields(l).all(|t| t.parse::<f64>().is_ok());
+                (numeric && (n == 3 || n == 6)).then_some(Format::Xyz)
+            }
+            None => None,
+        }
+    }
+}
+
+/// Read the whole file, mapping failures to [`IoError`].
+fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
+    let bytes = std::fs::read(path).map_err(|e| IoError::new(path, IoErrorKind::Io(e)))?;
+    if bytes.is_empty() {
+        return Err(IoError::new(path, IoErrorKind::Empty));
+    }
+    Ok(bytes)
+}
+
+/// Read a point cloud from a `.ply`, `.pcd`, `.xyz` or `.txt` file; files
+/// with another extension are recognised by their first bytes.
+///
+/// Points with a NaN or infinite coordinate are skipped and counted in
+/// [`PointCloud::skipped`].
+///
+/// # Errors
+/// An [`IoError`] when the file cannot be read, is empty, has an unknown
+/// format, a malformed header or body, or holds no usable point.
+pub fn read_points(path: &Path) -> Result<PointCloud, IoError> {
+    let bytes = read_file(path)?;
+    let format = Format::from_extension(path)
+        .or_else(|| Format::sniff(&bytes[..bytes.len().min(4096)]))
+        .ok_or_else(|| IoError::new(path, IoErrorKind::UnknownFormat))?;
+    let cloud = match format {
+        Format::Ply => ply::read_cloud(&bytes),
+        Format::Pcd => pcd::read_cloud(&bytes),
+        Format::Xyz => xyz::read_cloud(&bytes),
+    }
+    .map_err(|kind| IoError::new(path, kind))?;
+    if cloud.is_empty() {
+        let why = if cloud.skipped.is_empty() {
+            "the file holds no points".to_string()
+        } else {
+            let parts: Vec<String> = cloud
+                .skipped
+                .iter()
+                .map(|(r, n)| format!("{n} skipped: {r}"))
+                .collect();
+            format!("no usable point ({})", parts.join(", "))
+        };
+        return Err(IoError::new(path, IoErrorKind::NoPoints(why)));
+    }
+    Ok(cloud)
+}
+
+/// Read a triangle mesh from a PLY file with a `face` element
+/// (`vertex_indices` or `vertex_index` lists); polygons are triangulated as
+/// fans, faces with fewer than three vertices are dropped.
+///
+/// # Errors
+/// An [`IoError`] when the file cannot be read or parsed, has no faces, a
+/// face index out of range, or a non-finite vertex used by a face.
+pub fn read_mesh(path: &Path) -> Result<Mesh, IoError> {
+    let bytes = read_file(path)?;
+    if Format::sniff(&bytes[..bytes.len().min(4096)]) != Some(Format::Ply) {
+        return Err(IoError::new(
+            path,
+            IoErrorKind::Header(
+                "a mesh must be a PLY file (it does not start with \"ply\")".into(),
+            ),
+        ));
+    }
+    ply::read_mesh(&bytes).map_err(|kind| IoError::new(path, kind))
+}
+
+/// Write a point cloud as binary little-endian PLY (`x y z`, plus
+/// `nx ny nz` and float `red green blue` when present), atomically (a
+/// temporary file in the same folder, then renamed).
+///
+/// # Errors
+/// An [`IoError`] when the file cannot be written.
+pub fn write_points(path: &Path, cloud: &PointCloud) -> Result<(), IoError> {
+    let n = cloud.len();
+    let normals = cloud.normals.as_ref().filter(|v| v.len() == n);
+    let colors = cloud.colors.as_ref().filter(|v| v.len() == n);
+    let mut header = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment written by splatray {}\nelement vertex {n}\nproperty float x\nproperty float y\nproperty float z\n",
+        env!("CARGO_PKG_VERSION")
+    );
+    if normals.is_some() {
+        header.push_str("property float nx\nproperty float ny\nproperty float nz\n");
+    }
+    if colors.is_some() {
+        header.push_str("property float red\nproperty float green\nproperty float blue\n");
+    }
+    header.push_str("end_header\n");
+    let per = 3 + 3 * usize::from(normals.is_some()) + 3 * usize::from(colors.is_some());
+    let mut out = Vec::with_capacity(header.len() + n * per * 4);
+    out.extend_from_slice(header.as_bytes());
+    for i in 0..n {
+        let mut put = |v: Vec3| {
+            for c in v.to_array() {
+                out.extend_from_slice(&c.to_le_bytes());
+            }
+        };
+        put(cloud.positions[i]);
+        if let Some(ns) = normals {
+            put(ns[i]);
+        }
+        if let Some(cs) = colors {
+            put(cs[i]);
+        }
+    }
+    write_atomically(path, &out)
+}
+
+/// Write `bytes` to a temporary file beside `path`, then rename it over
+/// `path`, so a failure never leaves a half-written output.
+pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
+    use std::io::Write;
+    let name = path
+        .file_name()
+        .ok_or_else(|| IoError::new(path, IoErrorKind::Header("not a file name".into())))?;
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(name);
+    tmp_name.push(format!(".{}.partial", std::process::id()));
+    let tmp = path.with_file_name(tmp_name);
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    result.map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        IoError::new(path, IoErrorKind::Io(e))
+    })
+}
+
+/// sRGB-encoded component in `[0, 1]` to linear.
+#[must_use]
+pub fn srgb_to_linear(c: f32) -> f32 {
+    let c = c.clamp(0.0, 1.0);
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Keep the points whose position is finite, dropping the matching normals
+/// and colours, and count the rest in `skipped`.
+pub(crate) fn drop_non_finite(cloud: &mut PointCloud) {
+    let keep: Vec<bool> = cloud.positions.iter().map(|p| p.is_finite()).collect();
+    let dropped = keep.iter().filter(|k| !**k).count();
+    if dropped == 0 {
+        return;
+    }
+    fn filter(v: &mut Vec<Vec3>, keep: &[bool]) {
+        let mut i = 0;
+        v.retain(|_| {
+            i += 1;
+            keep[i - 1]
+        });
+    }
+    filter(&mut cloud.positions, &keep);
+    if let Some(n) = cloud.normals.as_mut() {
+        filter(n, &keep);
+    }
+    if let Some(c) = cloud.colors.as_mut() {
+        filter(c, &keep);
+    }
+    cloud.add_skipped("non-finite coordinates", dropped);
+}
+
+/// Write a text file atomically (see [`write_points`]).
+///
+/// # Errors
+/// An [`IoError`] when the file cannot be written.
+pub fn write_text(path: &Path, text: &str) -> Result<(), IoError> {
+    write_atomically(path, text.as_bytes())
+}

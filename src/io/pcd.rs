@@ -1,0 +1,332 @@
+//! PCL's PCD v0.7 point clouds: `ascii`, `binary` and `binary_compressed`
+//! (LZF, fields stored one after another) bodies; fields `x y z`, optional
+//! `normal_x normal_y normal_z`, and `rgb` or `rgba` (packed `0xAARRGGBB`).
+
+use super::lzf::lzf_decompress;
+use super::{IoErrorKind, PointCloud, drop_non_finite, srgb_to_linear};
+use glam::Vec3;
+
+#[derive(Clone, Debug)]
+struct Field {
+    name: String,
+    size: usize,
+    kind: u8,
+    count: usize,
+    /// Byte offset of this field within a binary record.
+    offset: usize,
+}
+
+impl Field {
+    /// Decode element `e` of this field from little-endian bytes.
+    fn decode(&self, b: &[u8]) -> f64 {
+        let arr4 = |b: &[u8]| [b[0], b[1], b[2], b[3]];
+        match (self.kind, self.size) {
+            (b'F', 4) => f64::from(f32::from_le_bytes(arr4(b))),
+            (b'F', 8) => f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]),
+            (b'U', 1) => f64::from(b[0]),
+            (b'I', 1) => f64::from(b[0] as i8),
+            (b'U', 2) => f64::from(u16::from_le_bytes([b[0], b[1]])),
+            (b'I', 2) => f64::from(i16::from_le_bytes([b[0], b[1]])),
+            (b'U', 4) => f64::from(u32::from_le_bytes(arr4(b))),
+            (b'I', 4) => f64::from(i32::from_le_bytes(arr4(b))),
+            _ => f64::NAN,
+        }
+    }
+
+    /// The packed colour bits of an `rgb`/`rgba` field.
+    fn color_bits(&self, b: &[u8]) -> u32 {
+        u32::from_le_bytes([b[0], b[1], b[2], b[3]])
+    }
+}
+
+struct PcdHeader {
+    fields: Vec<Field>,
+    points: usize,
+    data: String,
+    /// Offset of the body in the file.
+    body: usize,
+    record: usize,
+}
+
+fn parse_header(bytes: &[u8]) -> Result<PcdHeader, IoErrorKind> {
+    let mut pos = 0usize;
+    let mut names: Vec<String> = Vec::new();
+    let mut sizes: Vec<usize> = Vec::new();
+    let mut kinds: Vec<u8> = Vec::new();
+    let mut counts: Vec<usize> = Vec::new();
+    let (mut width, mut height, mut points) = (None::<usize>, None::<usize>, None::<usize>);
+    let mut data = None;
+    while pos < bytes.len() {
+        let end = bytes[pos..]
+            .iter()
+            .position(|&b| b == b'\n')
+            .map_or(bytes.len(), |i| pos + i + 1);
+        let line = String::from_utf8_lossy(&bytes[pos..end]).trim().to_string();
+        pos = end;
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let mut it = line.split_whitespace();
+        let key = it.next().unwrap_or("").to_ascii_uppercase();
+        let rest: Vec<&str> = it.collect();
+        let num = |s: &str| -> Result<usize, IoErrorKind> {
+            s.parse::<usize>()
+                .map_err(|_| IoErrorKind::Header(format!("{key}: \"{s}\" is not a count")))
+        };
+        match key.as_str() {
+            "VERSION" | "VIEWPOINT" => {}
+            "FIELDS" | "COLUMNS" => names = rest.iter().map(|s| s.to_string()).collect(),
+            "SIZE" => sizes = rest.iter().map(|s| num(s)).collect::<Result<_, _>>()?,
+            "TYPE" => {
+                kinds = rest
+                    .iter()
+                    .map(|s| s.bytes().next().unwrap_or(b'?').to_ascii_uppercase())
+                    .collect();
+            }
+            "COUNT" => counts = rest.iter().map(|s| num(s)).collect::<Result<_, _>>()?,
+            "WIDTH" => width = Some(num(rest.first().unwrap_or(&""))?),
+            "HEIGHT" => height = Some(num(rest.first().unwrap_or(&""))?),
+            "POINTS" => points = Some(num(rest.first().unwrap_or(&""))?),
+            "DATA" => {
+                data = Some(rest.first().unwrap_or(&"").to_ascii_lowercase());
+                break;
+            }
+            _ => {
+                return Err(IoErrorKind::Header(format!(
+                    "unexpected line \"{}\" before DATA",
+                    line.chars().take(40).collect::<String>()
+                )));
+            }
+        }
+    }
+    let data = data.ok_or_else(|| IoErrorKind::Header("no DATA line".into()))?;
+    if names.is_empty() {
+        return Err(IoErrorKind::Header("no FIELDS line".into()));
+    }
+    if counts.is_empty() {
+        counts = vec![1; names.len()];
+    }
+    if sizes.len() != names.len() || kinds.len() != names.len() || counts.len() != names.len() {
+        return Err(IoErrorKind::Header(format!(
+            "FIELDS has {} entries but SIZE {}, TYPE {}, COUNT {}",
+            names.len(),
+            sizes.len(),
+            kinds.len(),
+            counts.len()
+        )));
+    }
+    let mut fields = Vec::with_capacity(names.len());
+    let mut offset = 0usize;
+    for i in 0..names.len() {
+        let ok = matches!(
+            (kinds[i], sizes[i]),
+            (b'F', 4 | 8) | (b'U' | b'I', 1 | 2 | 4 | 8)
+        );
+        if !ok || counts[i] == 0 || counts[i] > 1 << 16 {
+            return Err(IoErrorKind::Header(format!(
+                "field \"{}\": unsupported TYPE {} SIZE {} COUNT {}",
+                names[i], kinds[i] as char, sizes[i], counts[i]
+            )));
+        }
+        fields.push(Field {
+            name: names[i].clone(),
+            size: sizes[i],
+            kind: kinds[i],
+            count: counts[i],
+            offset,
+        });
+        offset += sizes[i] * counts[i];
+    }
+    let points = match (points, width, height) {
+        (Some(p), _, _) => p,
+        (None, Some(w), Some(h)) => w.saturating_mul(h),
+        _ => {
+            return Err(IoErrorKind::Header(
+                "no POINTS (or WIDTH and HEIGHT) line".into(),
+            ));
+        }
+    };
+    Ok(PcdHeader {
+        fields,
+        points,
+        data,
+        body: pos,
+        record: offset,
+    })
+}
+
+/// Where the values we want sit: (field index, element) for each column.
+struct Columns {
+    xyz: [usize; 3],
+    normal: Option<[usize; 3]>,
+    color: Option<usize>,
+}
+
+fn columns(h: &PcdHeader) -> Result<Columns, IoErrorKind> {
+    let find = |n: &str| h.fields.iter().position(|f| f.name == n);
+    let xyz = match (find("x"), find("y"), find("z")) {
+        (Some(x), Some(y), Some(z)) => [x, y, z],
+        _ => return Err(IoErrorKind::Header("FIELDS lacks x, y and z".into())),
+    };
+    let normal = match (find("normal_x"), find("normal_y"), find("normal_z")) {
+        (Some(x), Some(y), Some(z)) => Some([x, y, z]),
+        _ => None,
+    };
+    let color = find("rgb")
+        .or_else(|| find("rgba"))
+        .filter(|&i| h.fields[i].size == 4);
+    Ok(Columns { xyz, normal, color })
+}
+
+fn unpack_color(bits: u32) -> Vec3 {
+    let c = |s: u32| srgb_to_linear(((bits >> s) & 0xff) as f32 / 255.0);
+    Vec3::new(c(16), c(8), c(0))
+}
+
+/// Read a PCD cloud.
+pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
+    let h = parse_header(bytes)?;
+    let cols = columns(&h)?;
+    let body = &bytes[h.body.min(bytes.len())..];
+    let n = h.points;
+    let mut cloud = PointCloud::default();
+    let mut normals = Vec::new();
+    let mut colors = Vec::new();
+    match h.data.as_str() {
+        "ascii" => {
+            let text = String::from_utf8_lossy(body);
+            // A token takes at least two bytes, so the body bounds the count.
+            let cap = n.min(body.len() / (2 * h.fields.len()).max(1));
+            cloud.positions.reserve(cap);
+            let mut firsts = Vec::with_capacity(h.fields.len());
+            let mut acc = 0usize;
+            for f in &h.fields {
+                firsts.push(acc);
+                acc += f.count;
+            }
+            let mut lines = text.lines().filter(|l| !l.trim().is_empty());
+            let mut toks: Vec<&str> = Vec::with_capacity(acc);
+            for i in 0..n {
+                let Some(line) = lines.next() else {
+                    return Err(IoErrorKind::Truncated(format!(
+                        "the header promises {n} points but the body ends after {i}"
+                    )));
+                };
+                toks.clear();
+                toks.extend(line.split_whitespace());
+                if toks.len() < acc {
+                    return Err(IoErrorKind::Data(format!(
+                        "point {i}: {} values, the header asks for {acc}",
+                        toks.len()
+                    )));
+                }
+                let val = |fi: usize| -> Result<f64, IoErrorKind> {
+                    let t = toks[firsts[fi]];
+                    t.parse::<f64>().map_err(|_| {
+                        IoErrorKind::Data(format!("point {i}: \"{t}\" is not a number"))
+                    })
+                };
+                let v3 = |f: [usize; 3]| -> Result<Vec3, IoErrorKind> {
+                    Ok(Vec3::new(
+                        val(f[0])? as f32,
+                        val(f[1])? as f32,
+                        val(f[2])? as f32,
+                    ))
+                };
+                cloud.positions.push(v3(cols.xyz)?);
+                if let Some(nf) = cols.normal {
+                    normals.push(v3(nf)?);
+                }
+                if let Some(cf) = cols.color {
+                    let t = toks[firsts[cf]];
+                    let bits = if h.fields[cf].kind == b'F' {
+                        t.parse::<f32>().map(f32::to_bits).ok()
+                    } else {
+                        t.parse::<u32>().ok()
+                    }
+                    .ok_or_else(|| {
+                        IoErrorKind::Data(format!("point {i}: colour \"{t}\" is not a number"))
+                    })?;
+                    colors.push(unpack_color(bits));
+                }
+            }
+        }
+        "binary" | "binary_compressed" => {
+            let need = (n as u128) * (h.record as u128);
+            let decompressed;
+            // (data, stride between points, byte offset of field f's element 0)
+            let (data, soa): (&[u8], bool) = if h.data == "binary" {
+                if need > body.len() as u128 {
+                    return Err(IoErrorKind::Truncated(format!(
+                        "the header promises {n} points ({need} bytes) but only {} bytes follow it",
+                        body.len()
+                    )));
+                }
+                (body, false)
+            } else {
+                if body.len() < 8 {
+                    return Err(IoErrorKind::Truncated(
+                        "the compressed body lacks its 8-byte size header".into(),
+                    ));
+                }
+                let comp = u32::from_le_bytes([body[0], body[1], body[2], body[3]]) as usize;
+                let raw = u32::from_le_bytes([body[4], body[5], body[6], body[7]]) as usize;
+                if raw as u128 != need {
+                    return Err(IoErrorKind::Data(format!(
+                        "uncompressed size {raw} bytes does not match {n} points of {} bytes",
+                        h.record
+                    )));
+                }
+                let Some(packed) = body.get(8..8 + comp) else {
+                    return Err(IoErrorKind::Truncated(format!(
+                        "the compressed body should be {comp} bytes, only {} follow",
+                        body.len() - 8
+                    )));
+                };
+                decompressed = lzf_decompress(packed, raw).map_err(IoErrorKind::Data)?;
+                (&decompressed[..], true)
+            };
+            // Field f, element 0 of point i starts at:
+            let at = |f: usize, i: usize| -> usize {
+                let fd = &h.fields[f];
+                if soa {
+                    // Fields one after another, each for all points.
+                    n * fd.offset + i * fd.size * fd.count
+                } else {
+                    i * h.record + fd.offset
+                }
+            };
+            cloud.positions.reserve(n);
+            for i in 0..n {
+                let v3 = |f: [usize; 3]| {
+                    let g = |k: usize| {
+                        let o = at(f[k], i);
+                        h.fields[f[k]].decode(&data[o..o + h.fields[f[k]].size]) as f32
+                    };
+                    Vec3::new(g(0), g(1), g(2))
+                };
+                cloud.positions.push(v3(cols.xyz));
+                if let Some(nf) = cols.normal {
+                    normals.push(v3(nf));
+                }
+                if let Some(cf) = cols.color {
+                    let o = at(cf, i);
+                    colors.push(unpack_color(h.fields[cf].color_bits(&data[o..o + 4])));
+                }
+            }
+        }
+        other => {
+            return Err(IoErrorKind::Header(format!(
+                "DATA \"{other}\" (expected ascii, binary or binary_compressed)"
+            )));
+        }
+    }
+    if cols.normal.is_some() {
+        cloud.normals = Some(normals);
+    }
+    if cols.color.is_some() {
+        cloud.colors = Some(colors);
+    }
+    drop_non_finite(&mut cloud);
+    Ok(cloud)
+}

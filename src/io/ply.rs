@@ -1,0 +1,376 @@
+//! PLY reading on top of `ply-rs-bw` (ascii, binary little and big endian).
+//!
+//! The parser is driven element by element with small typed rows instead of
+//! its generic hash-map elements. Before a binary body is parsed its minimum
+//! size is checked against the bytes that follow the header, so a header that
+//! promises more elements than the file holds fails at once with a clear
+//! message; `ply-rs-bw` itself caps its reservations, so a huge count never
+//! turns into a huge allocation.
+
+use super::{IoErrorKind, Mesh, PointCloud, drop_non_finite, srgb_to_linear};
+use glam::Vec3;
+use ply_rs_bw::parser::Parser;
+use ply_rs_bw::ply::{
+    ElementDef, Encoding, Header, Property, PropertyAccess, PropertyType, ScalarType,
+};
+use std::io::Cursor;
+
+/// A scalar property as `f64` (lists give `None`).
+fn scalar(p: &Property) -> Option<f64> {
+    Some(match *p {
+        Property::Char(v) => f64::from(v),
+        Property::UChar(v) => f64::from(v),
+        Property::Short(v) => f64::from(v),
+        Property::UShort(v) => f64::from(v),
+        Property::Int(v) => f64::from(v),
+        Property::UInt(v) => f64::from(v),
+        Property::Float(v) => f64::from(v),
+        Property::Double(v) => v,
+        _ => return None,
+    })
+}
+
+/// A colour property normalised to `[0, 1]` (integers by their type's range).
+fn unit_color(p: &Property) -> Option<f64> {
+    Some(match *p {
+        Property::UChar(v) => f64::from(v) / 255.0,
+        Property::UShort(v) => f64::from(v) / 65535.0,
+        Property::Char(_) | Property::Short(_) | Property::Int(_) | Property::UInt(_) => {
+            scalar(p)? / 255.0
+        }
+        Property::Float(v) => f64::from(v),
+        Property::Double(v) => v,
+        _ => return None,
+    })
+}
+
+/// One vertex of a point cloud: position, optional normal and colour.
+pub(crate) struct PointRow {
+    v: [f64; 9],
+}
+
+impl PropertyAccess for PointRow {
+    fn new() -> Self {
+        PointRow { v: [f64::NAN; 9] }
+    }
+    fn set_property(&mut self, name: &str, p: Property) {
+        let (i, val) = match name {
+            "x" => (0, scalar(&p)),
+            "y" => (1, scalar(&p)),
+            "z" => (2, scalar(&p)),
+            "nx" => (3, scalar(&p)),
+            "ny" => (4, scalar(&p)),
+            "nz" => (5, scalar(&p)),
+            "red" | "r" | "diffuse_red" => (6, unit_color(&p)),
+            "green" | "g" | "diffuse_green" => (7, unit_color(&p)),
+            "blue" | "b" | "diffuse_blue" => (8, unit_color(&p)),
+            _ => return,
+        };
+        self.v[i] = val.unwrap_or(f64::NAN);
+    }
+}
+
+/// One splat vertex of a splat file: every property as `f32`, by the index
+/// of its name in [`super::splat_ply::SPLAT_PROPS`].
+pub(crate) struct SplatRow {
+    pub(crate) v: [f32; super::splat_ply::SPLAT_PROPS.len()],
+}
+
+impl PropertyAccess for SplatRow {
+    fn new() -> Self {
+        SplatRow {
+            v: [f32::NAN; super::splat_ply::SPLAT_PROPS.len()],
+        }
+    }
+    fn set_property(&mut self, name: &str, p: Property) {
+        if let Some(i) = super::splat_ply::SPLAT_PROPS
+            .iter()
+            .position(|n| *n == name)
+        {
+            // Lossless for the float32 properties the writer produces.
+            self.v[i] = match p {
+                Property::Float(f) => f,
+                other => scalar(&other).map_or(f32::NAN, |d| d as f32),
+            };
+        }
+    }
+}
+
+/// One face: its vertex index list, `None` when an index is negative.
+struct FaceRow {
+    idx: Option<Vec<u32>>,
+}
+
+fn list_u32<T: Copy>(v: &[T], f: impl Fn(T) -> Option<u32>) -> Option<Vec<u32>> {
+    v.iter().map(|&x| f(x)).collect()
+}
+
+impl PropertyAccess for FaceRow {
+    fn new() -> Self {
+        FaceRow {
+            idx: Some(Vec::new()),
+        }
+    }
+    fn set_property(&mut self, name: &str, p: Property) {
+        if name != "vertex_indices" && name != "vertex_index" {
+            return;
+        }
+        self.idx = match p {
+            Property::ListChar(v) => list_u32(&v, |x| u32::try_from(x).ok()),
+            Property::ListUChar(v) => list_u32(&v, |x| Some(u32::from(x))),
+            Property::ListShort(v) => list_u32(&v, |x| u32::try_from(x).ok()),
+            Property::ListUShort(v) => list_u32(&v, |x| Some(u32::from(x))),
+            Property::ListInt(v) => list_u32(&v, |x| u32::try_from(x).ok()),
+            Property::ListUInt(v) => Some(v),
+            _ => None,
+        };
+    }
+}
+
+/// An element read only to get past it.
+struct SkipRow;
+
+impl PropertyAccess for SkipRow {
+    fn new() -> Self {
+        SkipRow
+    }
+}
+
+fn scalar_size(t: &ScalarType) -> usize {
+    match t {
+        ScalarType::Char | ScalarType::UChar => 1,
+        ScalarType::Short | ScalarType::UShort => 2,
+        ScalarType::Int | ScalarType::UInt | ScalarType::Float => 4,
+        ScalarType::Double => 8,
+    }
+}
+
+/// The fewest bytes a binary element can occupy (lists counted as empty).
+fn min_element_bytes(def: &ElementDef) -> usize {
+    def.properties
+        .values()
+        .map(|p| match &p.data_type {
+            PropertyType::Scalar(t) => scalar_size(t),
+            PropertyType::List(len, _) => scalar_size(len),
+        })
+        .sum()
+}
+
+/// A parsed header and the body that follows it.
+pub(crate) struct PlyFile<'a> {
+    pub(crate) header: Header,
+    cursor: Cursor<&'a [u8]>,
+}
+
+impl<'a> PlyFile<'a> {
+    /// Parse the header and check that a binary body is long enough for the
+    /// header's element counts.
+    pub(crate) fn open(bytes: &'a [u8]) -> Result<PlyFile<'a>, IoErrorKind> {
+        if !(bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r\n")) {
+            return Err(IoErrorKind::Header(
+                "a PLY file must start with \"ply\"".into(),
+            ));
+        }
+        let mut cursor = Cursor::new(bytes);
+        let header = Parser::<SkipRow>::new()
+            .read_header(&mut cursor)
+            .map_err(|e| IoErrorKind::Header(e.to_string()))?;
+        if header.encoding != Encoding::Ascii {
+            let rest = bytes.len() as u64 - cursor.position().min(bytes.len() as u64);
+            let mut need: u128 = 0;
+            for def in header.elements.values() {
+                need += def.count as u128 * min_element_bytes(def) as u128;
+            }
+            if need > u128::from(rest) {
+                let counts: Vec<String> = header
+                    .elements
+                    .values()
+                    .map(|d| format!("{} {}", d.count, d.name))
+                    .collect();
+                return Err(IoErrorKind::Truncated(format!(
+                    "the header promises {} (at least {need} bytes) but only {rest} bytes follow it",
+                    counts.join(" and ")
+                )));
+            }
+        }
+        Ok(PlyFile { header, cursor })
+    }
+
+    /// Read every element in order, handing the rows of the ones named in
+    /// `want` to the callbacks (vertex rows as `V`, face rows as lists).
+    fn read<V: PropertyAccess>(
+        mut self,
+        mut on_vertex: impl FnMut(Vec<V>),
+        mut on_face: Option<&mut dyn FnMut(Vec<Option<Vec<u32>>>)>,
+    ) -> Result<(), IoErrorKind> {
+        let defs: Vec<ElementDef> = self.header.elements.values().cloned().collect();
+        for def in &defs {
+            if def.name == "vertex" {
+                let rows = read_rows::<V>(&mut self.cursor, def, &self.header)?;
+                on_vertex(rows);
+            } else if def.name == "face" && on_face.is_some() {
+                let rows = read_rows::<FaceRow>(&mut self.cursor, def, &self.header)?;
+                if let Some(f) = on_face.as_mut() {
+                    f(rows.into_iter().map(|r| r.idx).collect());
+                }
+            } else {
+                // Elements after the last one we need are never parsed.
+                let later_needed = defs
+                    .iter()
+                    .skip_while(|d| d.name != def.name)
+                    .skip(1)
+                    .any(|d| d.name == "vertex" || (d.name == "face" && on_face.is_some()));
+                if !later_needed {
+                    break;
+                }
+                read_rows::<SkipRow>(&mut self.cursor, def, &self.header)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Read the vertex element as rows of `V` (must exist).
+    pub(crate) fn read_vertices<V: PropertyAccess>(self) -> Result<Vec<V>, IoErrorKind> {
+        if !self.header.elements.contains_key("vertex") {
+            return Err(IoErrorKind::Header("no \"vertex\" element".into()));
+        }
+        let mut out = Vec::new();
+        self.read::<V>(|rows| out = rows, None)?;
+        Ok(out)
+    }
+}
+
+fn read_rows<E: PropertyAccess>(
+    cursor: &mut Cursor<&[u8]>,
+    def: &ElementDef,
+    header: &Header,
+) -> Result<Vec<E>, IoErrorKind> {
+    Parser::<E>::new()
+        .read_payload_for_element(cursor, def, header)
+        .map_err(|e| {
+            // ply-rs-bw sometimes wraps the end of file in another error.
+            let text = e.to_string();
+            if e.kind() == std::io::ErrorKind::UnexpectedEof
+                || text.contains("UnexpectedEof")
+                || text.contains("fill whole buffer")
+            {
+                IoErrorKind::Truncated(format!(
+                    "the file ends inside element \"{}\" (header promises {}): {e}",
+                    def.name, def.count
+                ))
+            } else {
+                IoErrorKind::Data(format!("in element \"{}\": {e}", def.name))
+            }
+        })
+}
+
+/// Does the vertex element declare all of `names`?
+fn has_props(header: &Header, names: &[&str]) -> bool {
+    header
+        .elements
+        .get("vertex")
+        .is_some_and(|v| names.iter().all(|n| v.properties.contains_key(*n)))
+}
+
+fn has_any_prop(header: &Header, names: &[&str]) -> bool {
+    header
+        .elements
+        .get("vertex")
+        .is_some_and(|v| names.iter().any(|n| v.properties.contains_key(*n)))
+}
+
+/// Read a PLY point cloud: `x y z`, optional `nx ny nz` and colour.
+pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
+    let file = PlyFile::open(bytes)?;
+    if !has_props(&file.header, &["x", "y", "z"]) {
+        return Err(IoErrorKind::Header(
+            "the \"vertex\" element lacks x, y and z properties".into(),
+        ));
+    }
+    let with_normals = has_props(&file.header, &["nx", "ny", "nz"]);
+    let with_colors = has_any_prop(&file.header, &["red", "r", "diffuse_red"])
+        && has_any_prop(&file.header, &["green", "g", "diffuse_green"])
+        && has_any_prop(&file.header, &["blue", "b", "diffuse_blue"]);
+    let rows = file.read_vertices::<PointRow>()?;
+    let mut cloud = PointCloud {
+        positions: rows
+            .iter()
+            .map(|r| Vec3::new(r.v[0] as f32, r.v[1] as f32, r.v[2] as f32))
+            .collect(),
+        normals: with_normals.then(|| {
+            rows.iter()
+                .map(|r| Vec3::new(r.v[3] as f32, r.v[4] as f32, r.v[5] as f32))
+                .collect()
+        }),
+        colors: with_colors.then(|| {
+            rows.iter()
+                .map(|r| {
+                    let c = |x: f64| srgb_to_linear(if x.is_finite() { x as f32 } else { 0.0 });
+                    Vec3::new(c(r.v[6]), c(r.v[7]), c(r.v[8]))
+                })
+                .collect()
+        }),
+        skipped: Vec::new(),
+    };
+    drop_non_finite(&mut cloud);
+    Ok(cloud)
+}
+
+/// Read a PLY mesh: vertices and fan-triangulated faces.
+pub(crate) fn read_mesh(bytes: &[u8]) -> Result<Mesh, IoErrorKind> {
+    let file = PlyFile::open(bytes)?;
+    if !has_props(&file.header, &["x", "y", "z"]) {
+        return Err(IoErrorKind::Header(
+            "the \"vertex\" element lacks x, y and z properties".into(),
+        ));
+    }
+    let face_ok = file.header.elements.get("face").is_some_and(|f| {
+        f.properties.contains_key("vertex_indices") || f.properties.contains_key("vertex_index")
+    });
+    if !face_ok {
+        return Err(IoErrorKind::Header(
+            "no \"face\" element with a vertex_indices list: not a mesh".into(),
+        ));
+    }
+    let mut positions = Vec::new();
+    let mut faces = Vec::new();
+    let mut take_faces = |rows: Vec<Option<Vec<u32>>>| faces = rows;
+    file.read::<PointRow>(
+        |rows| {
+            positions = rows
+                .iter()
+                .map(|r| Vec3::new(r.v[0] as f32, r.v[1] as f32, r.v[2] as f32))
+                .collect();
+        },
+        Some(&mut take_faces),
+    )?;
+    let n = positions.len();
+    let mut triangles = Vec::with_capacity(faces.len());
+    for (fi, face) in faces.iter().enumerate() {
+        let Some(idx) = face else {
+            return Err(IoErrorKind::Data(format!(
+                "face {fi} has a negative vertex index"
+            )));
+        };
+        if let Some(&bad) = idx.iter().find(|&&i| i as usize >= n) {
+            return Err(IoErrorKind::Data(format!(
+                "face {fi} uses vertex {bad} but there are only {n} vertices"
+            )));
+        }
+        if let Some(&bad) = idx.iter().find(|&&i| !positions[i as usize].is_finite()) {
+            return Err(IoErrorKind::Data(format!(
+                "face {fi} uses vertex {bad}, which has a non-finite coordinate"
+            )));
+        }
+        for k in 1..idx.len().saturating_sub(1) {
+            triangles.push([idx[0], idx[k], idx[k + 1]]);
+        }
+    }
+    if triangles.is_empty() {
+        return Err(IoErrorKind::NoPoints("the mesh has no triangles".into()));
+    }
+    Ok(Mesh {
+        positions,
+        triangles,
+    })
+}

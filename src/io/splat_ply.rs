@@ -1,0 +1,138 @@
+//! The splat file: a binary little-endian PLY whose `vertex` element is one
+//! splat, readable by other tools (MeshLab reads `x y z nx ny nz radius` as
+//! point splats) and read back by [`read_splats`] without loss.
+
+use super::ply::{PlyFile, SplatRow};
+use super::{IoError, IoErrorKind, write_atomically};
+use crate::splat::{NormalField, Splat};
+use glam::{Vec2, Vec3};
+use std::path::Path;
+
+/// The float32 vertex properties of a splat file, in order: centre, normal,
+/// radius along `u` (MeshLab's `radius`), the `u` and `v` axes, the radius
+/// along `v`, the normal field of eq. (4) and the linear RGB colour.
+pub(crate) const SPLAT_PROPS: [&str; 21] = [
+    "x",
+    "y",
+    "z",
+    "nx",
+    "ny",
+    "nz",
+    "radius",
+    "ux",
+    "uy",
+    "uz",
+    "vx",
+    "vy",
+    "vz",
+    "radius_v",
+    "field_xc",
+    "field_yc",
+    "field_alpha",
+    "field_beta",
+    "red",
+    "green",
+    "blue",
+];
+
+fn to_row(s: &Splat) -> [f32; 21] {
+    let f = &s.field;
+    [
+        s.center.x, s.center.y, s.center.z, s.normal.x, s.normal.y, s.normal.z, s.radii.x,
+        s.u_axis.x, s.u_axis.y, s.u_axis.z, s.v_axis.x, s.v_axis.y, s.v_axis.z, s.radii.y, f.xc,
+        f.yc, f.alpha, f.beta, s.color.x, s.color.y, s.color.z,
+    ]
+}
+
+/// Write `splats` to `path` as a binary little-endian float32 PLY (see
+/// [`SPLAT_PROPS`] for the vertex properties; colours are stored linear, as
+/// floats in `[0, 1]`). The file is written to a temporary file in the same
+/// folder and renamed, so a failure never leaves a half-written output.
+///
+/// # Errors
+/// An [`IoError`] when the file cannot be written.
+pub fn write_splats(path: &Path, splats: &[Splat]) -> Result<(), IoError> {
+    let mut header = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment splatray {} splats: Linsen et al. 2007 discs with Botsch et al. 2004 normal fields\nelement vertex {}\n",
+        env!("CARGO_PKG_VERSION"),
+        splats.len()
+    );
+    for p in SPLAT_PROPS {
+        header.push_str("property float ");
+        header.push_str(p);
+        header.push('\n');
+    }
+    header.push_str("end_header\n");
+    let mut out = Vec::with_capacity(header.len() + splats.len() * SPLAT_PROPS.len() * 4);
+    out.extend_from_slice(header.as_bytes());
+    for s in splats {
+        for v in to_row(s) {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    write_atomically(path, &out)
+}
+
+/// Read splats written by [`write_splats`] (any PLY encoding with the same
+/// property names). A file with only `x y z nx ny nz radius` gives circular
+/// flat grey splats.
+///
+/// # Errors
+/// An [`IoError`] when the file cannot be read or parsed, lacks the
+/// properties, or holds a splat with a non-finite value, a zero normal or a
+/// non-positive radius.
+pub fn read_splats(path: &Path) -> Result<Vec<Splat>, IoError> {
+    let err = |k| IoError::new(path, k);
+    let bytes = super::read_file(path)?;
+    let file = PlyFile::open(&bytes).map_err(err)?;
+    let vertex = file
+        .header
+        .elements
+        .get("vertex")
+        .ok_or_else(|| err(IoErrorKind::Header("no \"vertex\" element".into())))?;
+    let has = |n: &str| vertex.properties.contains_key(n);
+    if let Some(missing) = SPLAT_PROPS[..7].iter().find(|n| !has(n)) {
+        return Err(err(IoErrorKind::Header(format!(
+            "not a splat file: the vertex element lacks \"{missing}\""
+        ))));
+    }
+    let full = SPLAT_PROPS.iter().all(|n| has(n));
+    let rows = file.read_vertices::<SplatRow>().map_err(err)?;
+    let mut splats = Vec::with_capacity(rows.len());
+    for (i, r) in rows.iter().enumerate() {
+        let v = &r.v;
+        let bad = |what: &str| err(IoErrorKind::Data(format!("splat {i}: {what}")));
+        let used = if full { &v[..] } else { &v[..7] };
+        if used.iter().any(|x| !x.is_finite()) {
+            return Err(bad("non-finite value"));
+        }
+        let center = Vec3::new(v[0], v[1], v[2]);
+        let normal = Vec3::new(v[3], v[4], v[5]);
+        if v[6] <= 0.0 || normal.length_squared() == 0.0 {
+            return Err(bad("zero normal or non-positive radius"));
+        }
+        let splat = if full {
+            if v[13] <= 0.0 {
+                return Err(bad("non-positive radius_v"));
+            }
+            Splat {
+                center,
+                normal,
+                u_axis: Vec3::new(v[7], v[8], v[9]),
+                v_axis: Vec3::new(v[10], v[11], v[12]),
+                radii: Vec2::new(v[6], v[13]),
+                field: NormalField {
+                    xc: v[14],
+                    yc: v[15],
+                    alpha: v[16],
+                    beta: v[17],
+                },
+                color: Vec3::new(v[18], v[19], v[20]),
+            }
+        } else {
+            Splat::disc(center, normal, v[6]).ok_or_else(|| bad("zero normal"))?
+        };
+        splats.push(splat);
+    }
+    Ok(splats)
+}

@@ -1,0 +1,441 @@
+//! Points in, splats out: the whole splat generation pipeline of §2 and §4
+//! behind one call, [`generate`].
+
+use super::Splat;
+use super::field;
+use super::grow::{GrowInput, grow_all};
+use super::knn::{Knn, build_tree};
+use super::normals;
+use crate::io::PointCloud;
+use glam::Vec3;
+use kiddo::SquaredEuclidean;
+use kiddo::immutable::float::kdtree::ImmutableKdTree;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::fmt;
+use std::time::Instant;
+
+/// Parameters of splat generation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SplatParams {
+    /// Neighbours per point in the neighbourhood graph of §2 (default 12).
+    pub k: usize,
+    /// Error threshold `ϵ` of §2.1 as a fraction of the cloud's bounding-box
+    /// diagonal (default 0.002).
+    pub epsilon_rel: f32,
+    /// Density factor `k ∈ (0, 1]` of §2.2 (default 0.7).
+    pub density: f32,
+    /// Grow elliptical splats along the minimum-curvature direction (§2.1).
+    pub ellipses: bool,
+    /// Normal-field radius as a multiple of the splat radius (fig. 15;
+    /// default 1.5).
+    pub field_radius_factor: f32,
+}
+
+impl Default for SplatParams {
+    fn default() -> Self {
+        SplatParams {
+            k: 12,
+            epsilon_rel: 0.002,
+            density: 0.7,
+            ellipses: false,
+            field_radius_factor: 1.5,
+        }
+    }
+}
+
+/// Points left out, and why.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Skipped {
+    /// Why they were left out.
+    pub reason: String,
+    /// How many.
+    pub count: usize,
+}
+
+/// Wall-clock seconds per stage.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct StageSeconds {
+    /// Reading the input (filled in by the caller that read it; 0 here).
+    pub read: f64,
+    /// Cleaning, kd-tree and k nearest neighbours.
+    pub knn: f64,
+    /// Normal estimation and orientation.
+    pub normals: f64,
+    /// Splat growth with density control.
+    pub grow: f64,
+    /// Normal-field fitting and the coverage check.
+    pub fit: f64,
+    /// All of the above (the caller adds `read`).
+    pub total: f64,
+}
+
+/// What [`generate`] did, for people and for `--report` JSON.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SplatReport {
+    /// Points in the input, including those the reader skipped.
+    pub input_points: usize,
+    /// Points used to grow splats.
+    pub used_points: usize,
+    /// Points left out (by the reader and here), with why.
+    pub skipped_points: Vec<Skipped>,
+    /// Splats generated.
+    pub splats: usize,
+    /// How many of them are elliptical.
+    pub elliptical_splats: usize,
+    /// Fraction of the used points lying on at least one splat: within `ϵ`
+    /// of its plane and inside its disc.
+    pub coverage: f64,
+    /// Mean splat radius (mean of both radii), in the cloud's units.
+    pub mean_radius: f64,
+    /// Splats whose normal field fell back to flat (too few points or a
+    /// singular fit).
+    pub fallback_normal_fields: usize,
+    /// Normals estimated by plane fits (all of them when the input has none;
+    /// else the zero or non-finite input normals).
+    pub estimated_normals: usize,
+    /// The absolute error threshold `ϵ` used.
+    pub epsilon: f64,
+    /// The bounding-box diagonal of the used points.
+    pub bbox_diagonal: f64,
+    /// Neighbours per point actually used.
+    pub k: usize,
+    /// Notes about the input that did not stop generation.
+    pub warnings: Vec<String>,
+    /// Time per stage.
+    pub seconds: StageSeconds,
+}
+
+/// Why no splats could be made.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum GenerateError {
+    /// A parameter is out of range.
+    BadParams(String),
+    /// Fewer distinct finite points than a plane fit needs.
+    TooFewPoints {
+        /// Distinct finite points.
+        usable: usize,
+        /// Points needed.
+        needed: usize,
+    },
+    /// All points lie on one line: there is no surface to cover.
+    Collinear,
+}
+
+impl fmt::Display for GenerateError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            GenerateError::BadParams(s) => write!(f, "bad splat parameters: {s}"),
+            GenerateError::TooFewPoints { usable, needed } => write!(
+                f,
+                "only {usable} distinct finite points, at least {needed} are needed to fit splats"
+            ),
+            GenerateError::Collinear => {
+                write!(
+                    f,
+                    "all points lie on one line: there is no surface to splat"
+                )
+            }
+        }
+    }
+}
+
+impl std::error::Error for GenerateError {}
+
+/// Distinct finite points, in Morton (Z-curve) order for locality, as
+/// indices into the cloud; and the number of duplicates dropped.
+fn clean_order(pos: &[Vec3]) -> (Vec<u32>, usize, usize) {
+    let finite: Vec<u32> = (0..pos.len() as u32)
+        .filter(|&i| pos[i as usize].is_finite())
+        .collect();
+    let non_finite = pos.len() - finite.len();
+    if finite.is_empty() {
+        return (finite, non_finite, 0);
+    }
+    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+    for &i in &finite {
+        lo = lo.min(pos[i as usize]);
+        hi = hi.max(pos[i as usize]);
+    }
+    let scale = Vec3::splat((1u32 << 21) as f32 - 1.0) / (hi - lo).max(Vec3::splat(1e-30));
+    let spread = |v: u64| {
+        let mut x = v & 0x1f_ffff;
+        x = (x | x << 32) & 0x1f00000000ffff;
+        x = (x | x << 16) & 0x1f0000ff0000ff;
+        x = (x | x << 8) & 0x100f00f00f00f00f;
+        x = (x | x << 4) & 0x10c30c30c30c30c3;
+        (x | x << 2) & 0x1249249249249249
+    };
+    let mut keyed: Vec<(u64, [u32; 3], u32)> = finite
+        .par_iter()
+        .map(|&i| {
+            let p = pos[i as usize];
+            let q = ((p - lo) * scale).as_uvec3();
+            let m =
+                spread(u64::from(q.x)) | spread(u64::from(q.y)) << 1 | spread(u64::from(q.z)) << 2;
+            (m, [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()], i)
+        })
+        .collect();
+    keyed.par_sort_unstable();
+    let before = keyed.len();
+    // -0.0 and 0.0 differ in bits but not in position: compare values.
+    keyed.dedup_by(|a, b| a.0 == b.0 && a.1.map(f32::from_bits) == b.1.map(f32::from_bits));
+    let dupes = before - keyed.len();
+    (keyed.into_iter().map(|k| k.2).collect(), non_finite, dupes)
+}
+
+/// Turn a point cloud into splats: neighbourhoods (§2), normals, splat growth
+/// (§2.1, eqs. 1–3) with density control (§2.2), and Phong normal fields
+/// (§4.1–4.2, eq. 4).
+///
+/// Non-finite and duplicate points are skipped and counted. Input normals
+/// are used (normalised) where present; zero or NaN ones are re-estimated.
+/// Splat colour is the mean colour of the points a splat took, or grey 0.8.
+///
+/// # Errors
+/// [`GenerateError`] when the parameters are out of range, fewer than 3
+/// distinct points remain, or all points are collinear.
+pub fn generate(
+    cloud: &PointCloud,
+    params: &SplatParams,
+) -> Result<(Vec<Splat>, SplatReport), GenerateError> {
+    generate_with_progress(cloud, params, |_, _| {})
+}
+
+/// [`generate`], calling `progress(stage, fraction_done)` now and then from
+/// the calling thread (for a progress line).
+///
+/// # Errors
+/// As [`generate`].
+pub fn generate_with_progress(
+    cloud: &PointCloud,
+    params: &SplatParams,
+    mut progress: impl FnMut(&str, f64),
+) -> Result<(Vec<Splat>, SplatReport), GenerateError> {
+    let t0 = Instant::now();
+    check_params(params)?;
+    let mut report = SplatReport {
+        input_points: cloud.positions.len() + cloud.skipped_total(),
+        ..SplatReport::default()
+    };
+    for (reason, count) in &cloud.skipped {
+        report.skipped_points.push(Skipped {
+            reason: reason.clone(),
+            count: *count,
+        });
+    }
+    // --- clean, reorder, kNN -------------------------------------------------
+    progress("neighbours", 0.0);
+    let (order, non_finite, dupes) = clean_order(&cloud.positions);
+    for (why, count) in [
+        ("non-finite coordinates", non_finite),
+        ("duplicate point", dupes),
+    ] {
+        if count > 0 {
+            report.skipped_points.push(Skipped {
+                reason: why.into(),
+                count,
+            });
+        }
+    }
+    let n = order.len();
+    report.used_points = n;
+    if n < 3 {
+        return Err(GenerateError::TooFewPoints {
+            usable: n,
+            needed: 3,
+        });
+    }
+    let points: Vec<Vec3> = order.iter().map(|&i| cloud.positions[i as usize]).collect();
+    let colors: Option<Vec<Vec3>> = cloud
+        .colors
+        .as_ref()
+        .filter(|c| c.len() == cloud.positions.len())
+        .map(|c| order.iter().map(|&i| c[i as usize]).collect());
+    let (lo, hi) = points.iter().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(a, b), p| (a.min(*p), b.max(*p)),
+    );
+    let diagonal = f64::from((hi - lo).length());
+    report.bbox_diagonal = diagonal;
+    let (_, vals, _) = normals::plane_fit(points.iter().copied());
+    if vals[1] <= 1e-12 * vals[2] {
+        return Err(GenerateError::Collinear);
+    }
+    if vals[0] <= 1e-12 * vals[2] {
+        report
+            .warnings
+            .push("all points are coplanar: normals are oriented by a convention only".into());
+    }
+    let k = params.k.min(n - 1);
+    if k < params.k {
+        report.warnings.push(format!(
+            "only {n} points: using k = {k} neighbours instead of {}",
+            params.k
+        ));
+    }
+    report.k = k;
+    let tree = build_tree(&points);
+    let knn = Knn::build(&tree, &points, k);
+    let t1 = Instant::now();
+    // --- normals ---------------------------------------------------------------
+    progress("normals", 0.0);
+    let input_normals: Option<Vec<Vec3>> = cloud
+        .normals
+        .as_ref()
+        .filter(|v| v.len() == cloud.positions.len())
+        .map(|v| order.iter().map(|&i| v[i as usize]).collect());
+    let mut fixed = vec![false; n];
+    let mut nrm = vec![Vec3::Z; n];
+    let mut to_estimate = n;
+    if let Some(inp) = &input_normals {
+        to_estimate = 0;
+        for i in 0..n {
+            match inp[i].try_normalize() {
+                Some(m) => {
+                    nrm[i] = m;
+                    fixed[i] = true;
+                }
+                None => to_estimate += 1,
+            }
+        }
+    }
+    if to_estimate > 0 {
+        let est = normals::estimate(&points, &knn);
+        for i in 0..n {
+            if !fixed[i] {
+                nrm[i] = est[i];
+            }
+        }
+        normals::orient(&points, &knn, &mut nrm, &fixed);
+    }
+    if input_normals.is_some() && to_estimate > 0 {
+        report.warnings.push(format!(
+            "{to_estimate} zero or non-finite input normals were re-estimated"
+        ));
+    }
+    report.estimated_normals = to_estimate;
+    let t2 = Instant::now();
+    // --- growth --------------------------------------------------------------
+    let epsilon = (f64::from(params.epsilon_rel) * diagonal) as f32;
+    report.epsilon = f64::from(epsilon);
+    let input = GrowInput {
+        points: &points,
+        normals: &nrm,
+        colors: colors.as_deref(),
+        knn: &knn,
+        epsilon,
+        density: params.density,
+        ellipses: params.ellipses,
+    };
+    let grown = grow_all(&input, |i| progress("growing splats", i as f64 / n as f64));
+    let mut splats = grown.splats;
+    let t3 = Instant::now();
+    // --- fields and coverage ---------------------------------------------------
+    progress("normal fields", 0.0);
+    report.fallback_normal_fields = field::fit_all(
+        &mut splats,
+        params.field_radius_factor,
+        &tree,
+        &points,
+        &nrm,
+    );
+    report.coverage = coverage(&points, &grown.covered, &splats, epsilon);
+    report.splats = splats.len();
+    report.elliptical_splats = grown.elliptical;
+    report.mean_radius = splats
+        .iter()
+        .map(|s| 0.5 * f64::from(s.radii.x + s.radii.y))
+        .sum::<f64>()
+        / splats.len().max(1) as f64;
+    let t4 = Instant::now();
+    report.seconds = StageSeconds {
+        read: 0.0,
+        knn: (t1 - t0).as_secs_f64(),
+        normals: (t2 - t1).as_secs_f64(),
+        grow: (t3 - t2).as_secs_f64(),
+        fit: (t4 - t3).as_secs_f64(),
+        total: (t4 - t0).as_secs_f64(),
+    };
+    Ok((splats, report))
+}
+
+fn check_params(p: &SplatParams) -> Result<(), GenerateError> {
+    let bad = |s: String| Err(GenerateError::BadParams(s));
+    if p.k < 3 || p.k > 256 {
+        return bad(format!("k = {} (must be 3..=256)", p.k));
+    }
+    if !(p.epsilon_rel > 0.0 && p.epsilon_rel < 1.0) {
+        return bad(format!("epsilon = {} (must be in (0, 1))", p.epsilon_rel));
+    }
+    if !(p.density > 0.0 && p.density <= 1.0) {
+        return bad(format!("density = {} (must be in (0, 1])", p.density));
+    }
+    if !(p.field_radius_factor >= 1.0 && p.field_radius_factor <= 10.0) {
+        return bad(format!(
+            "field radius factor = {} (must be in [1, 10])",
+            p.field_radius_factor
+        ));
+    }
+    Ok(())
+}
+
+/// Does `p` lie on `s`: within `epsilon` of its plane and inside its disc?
+#[must_use]
+pub fn on_splat(s: &Splat, p: Vec3, epsilon: f32) -> bool {
+    let d = p - s.center;
+    if d.dot(s.normal).abs() > epsilon {
+        return false;
+    }
+    let (u, v) = (d.dot(s.u_axis) / s.radii.x, d.dot(s.v_axis) / s.radii.y);
+    u * u + v * v <= 1.0
+}
+
+/// Fraction of `points` lying on at least one splat. Points marked `covered`
+/// were taken into a splat by growth and lie on it by construction; the
+/// others are tested against every splat whose centre is near enough.
+#[must_use]
+pub fn coverage(points: &[Vec3], covered: &[bool], splats: &[Splat], epsilon: f32) -> f64 {
+    if points.is_empty() {
+        return 0.0;
+    }
+    let rest: Vec<usize> = (0..points.len()).filter(|&i| !covered[i]).collect();
+    let found = if rest.is_empty() || splats.is_empty() {
+        0
+    } else {
+        count_on_splats(
+            rest.iter()
+                .map(|&i| points[i])
+                .collect::<Vec<_>>()
+                .as_slice(),
+            splats,
+            epsilon,
+        )
+    };
+    (points.len() - rest.len() + found) as f64 / points.len() as f64
+}
+
+/// How many of `points` lie on at least one of `splats` (see [`on_splat`]).
+#[must_use]
+pub fn count_on_splats(points: &[Vec3], splats: &[Splat], epsilon: f32) -> usize {
+    if splats.is_empty() {
+        return 0;
+    }
+    let centers: Vec<[f32; 3]> = splats.iter().map(|s| s.center.to_array()).collect();
+    let tree: ImmutableKdTree<f32, u32, 3, 32> = ImmutableKdTree::new_from_slice(&centers);
+    let reach = splats
+        .iter()
+        .map(|s| s.radii.x.max(s.radii.y))
+        .fold(0f32, f32::max)
+        + epsilon;
+    points
+        .par_iter()
+        .with_min_len(256)
+        .filter(|p| {
+            tree.within_unsorted::<SquaredEuclidean>(&p.to_array(), reach * reach)
+                .iter()
+                .any(|nb| on_splat(&splats[nb.item as usize], **p, epsilon))
+        })
+        .count()
+}

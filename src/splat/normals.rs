@@ -1,0 +1,254 @@
+//! Normals: a least-squares plane through each point and its `k` nearest
+//! neighbours (§2.1), oriented consistently by propagation along a minimum
+//! spanning tree of the neighbourhood graph (Hoppe et al. 1992).
+
+use super::knn::Knn;
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+
+/// Eigen-decomposition of a symmetric 3×3 matrix by cyclic Jacobi rotations
+/// (robust for repeated and zero eigenvalues). Returns the eigenvalues in
+/// ascending order and the matching unit eigenvectors.
+#[must_use]
+pub fn sym_eigen3(m: [[f64; 3]; 3]) -> ([f64; 3], [DVec3; 3]) {
+    let mut a = m;
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    let scale = a[0][0].abs() + a[1][1].abs() + a[2][2].abs() + 1e-300;
+    for _sweep in 0..50 {
+        let off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+        if off <= (1e-15 * scale) * (1e-15 * scale) {
+            break;
+        }
+        for (p, q) in [(0usize, 1usize), (0, 2), (1, 2)] {
+            let apq = a[p][q];
+            if apq == 0.0 {
+                continue;
+            }
+            let theta = (a[q][q] - a[p][p]) / (2.0 * apq);
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let c = 1.0 / (t * t + 1.0).sqrt();
+            let s = t * c;
+            for row in &mut a {
+                let (kp, kq) = (row[p], row[q]);
+                row[p] = c * kp - s * kq;
+                row[q] = s * kp + c * kq;
+            }
+            for k in 0..3 {
+                let (pk, qk) = (a[p][k], a[q][k]);
+                a[p][k] = c * pk - s * qk;
+                a[q][k] = s * pk + c * qk;
+            }
+            for row in &mut v {
+                let (kp, kq) = (row[p], row[q]);
+                row[p] = c * kp - s * kq;
+                row[q] = s * kp + c * kq;
+            }
+        }
+    }
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&i, &j| a[i][i].total_cmp(&a[j][j]));
+    let vals = order.map(|i| a[i][i]);
+    let vecs = order.map(|i| DVec3::new(v[0][i], v[1][i], v[2][i]).normalize_or_zero());
+    (vals, vecs)
+}
+
+/// The least-squares plane of `points`, accumulated relative to their
+/// centroid in `f64`: (centroid, eigenvalues ascending, eigenvectors).
+#[must_use]
+pub fn plane_fit(points: impl Iterator<Item = Vec3> + Clone) -> (DVec3, [f64; 3], [DVec3; 3]) {
+    let mut c = DVec3::ZERO;
+    let mut n = 0f64;
+    for p in points.clone() {
+        c += p.as_dvec3();
+        n += 1.0;
+    }
+    c /= n.max(1.0);
+    let mut m = [[0f64; 3]; 3];
+    for p in points {
+        let d = p.as_dvec3() - c;
+        let d = d.to_array();
+        for r in 0..3 {
+            for s in r..3 {
+                m[r][s] += d[r] * d[s];
+            }
+        }
+    }
+    m[1][0] = m[0][1];
+    m[2][0] = m[0][2];
+    m[2][1] = m[1][2];
+    let (vals, vecs) = sym_eigen3(m);
+    (c, vals, vecs)
+}
+
+/// PCA normal of every point from itself and its `k` neighbours (unoriented).
+#[must_use]
+pub fn estimate(points: &[Vec3], knn: &Knn) -> Vec<Vec3> {
+    (0..points.len())
+        .into_par_iter()
+        .with_min_len(1024)
+        .map(|i| {
+            let nb = knn.of(i);
+            let it = std::iter::once(points[i]).chain(nb.iter().map(|&j| points[j as usize]));
+            let (_, _, vecs) = plane_fit(it);
+            let n = vecs[0].as_vec3();
+            if n.is_finite() && n.length_squared() > 0.5 {
+                n
+            } else {
+                Vec3::Z
+            }
+        })
+        .collect()
+}
+
+/// Orient `normals` consistently: the edges of the symmetric kNN graph,
+/// weighted `1 - |n_i · n_j|`, form a minimum spanning forest (Kruskal,
+/// weights bucketed to 1/4096); each tree is traversed from its root and
+/// every normal flipped to agree with its parent's. Normals marked `fixed`
+/// (trusted input normals) are never flipped, and a tree holding one is rooted
+/// there. Other trees are rooted at their point of largest coordinate along
+/// the axis where that extreme point's normal is best aligned with the axis,
+/// and that root normal is made to point along `+axis` — outward for a closed
+/// surface.
+pub fn orient(points: &[Vec3], knn: &Knn, normals: &mut [Vec3], fixed: &[bool]) {
+    let n = points.len();
+    if n == 0 {
+        return;
+    }
+    let k = knn.k;
+    // Bucket sort of the directed edges by weight.
+    const BUCKETS: usize = 4096;
+    let bucket_of: Vec<u16> = (0..n * k)
+        .into_par_iter()
+        .with_min_len(4096)
+        .map(|e| {
+            let (i, j) = (e / k, knn.idx[e] as usize);
+            let w = 1.0 - normals[i].dot(normals[j]).abs().min(1.0);
+            ((w * (BUCKETS - 1) as f32) as usize).min(BUCKETS - 1) as u16
+        })
+        .collect();
+    let mut start = vec![0usize; BUCKETS + 1];
+    for &b in &bucket_of {
+        start[b as usize + 1] += 1;
+    }
+    for b in 0..BUCKETS {
+        start[b + 1] += start[b];
+    }
+    let mut sorted = vec![0u32; n * k];
+    let mut fill = start.clone();
+    for (e, &b) in bucket_of.iter().enumerate() {
+        sorted[fill[b as usize]] = e as u32;
+        fill[b as usize] += 1;
+    }
+    drop(bucket_of);
+    // Kruskal with union-find.
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    let mut size = vec![1u32; n];
+    fn find(parent: &mut [u32], mut x: u32) -> u32 {
+        while parent[x as usize] != x {
+            let g = parent[parent[x as usize] as usize];
+            parent[x as usize] = g;
+            x = g;
+        }
+        x
+    }
+    let mut tree_edges: Vec<(u32, u32)> = Vec::with_capacity(n);
+    for &e in &sorted {
+        let (i, j) = ((e as usize / k) as u32, knn.idx[e as usize]);
+        let (ri, rj) = (find(&mut parent, i), find(&mut parent, j));
+        if ri == rj {
+            continue;
+        }
+        let (big, small) = if size[ri as usize] >= size[rj as usize] {
+            (ri, rj)
+        } else {
+            (rj, ri)
+        };
+        parent[small as usize] = big;
+        size[big as usize] += size[small as usize];
+        tree_edges.push((i, j));
+        if tree_edges.len() == n - 1 {
+            break;
+        }
+    }
+    drop(sorted);
+    // Forest adjacency (CSR).
+    let mut deg = vec![0u32; n + 1];
+    for &(i, j) in &tree_edges {
+        deg[i as usize + 1] += 1;
+        deg[j as usize + 1] += 1;
+    }
+    for i in 0..n {
+        deg[i + 1] += deg[i];
+    }
+    let mut adj = vec![0u32; 2 * tree_edges.len()];
+    let mut pos: Vec<u32> = deg[..n].to_vec();
+    for &(i, j) in &tree_edges {
+        adj[pos[i as usize] as usize] = j;
+        pos[i as usize] += 1;
+        adj[pos[j as usize] as usize] = i;
+        pos[j as usize] += 1;
+    }
+    // Roots: one per tree.
+    let axis = root_axis(points, normals);
+    let mut root_of_set: Vec<u32> = vec![u32::MAX; n];
+    for i in 0..n {
+        let r = find(&mut parent, i as u32) as usize;
+        let cur = root_of_set[r];
+        let better = if cur == u32::MAX {
+            true
+        } else {
+            let c = cur as usize;
+            match (fixed[i], fixed[c]) {
+                (true, false) => true,
+                (false, true) => false,
+                _ => points[i][axis] > points[c][axis],
+            }
+        };
+        if better {
+            root_of_set[r] = i as u32;
+        }
+    }
+    let mut visited = vec![false; n];
+    let mut stack: Vec<u32> = Vec::new();
+    for &root in root_of_set.iter().filter(|&&r| r != u32::MAX) {
+        let r = root as usize;
+        if !fixed[r] && normals[r][axis] < 0.0 {
+            normals[r] = -normals[r];
+        }
+        visited[r] = true;
+        stack.push(root);
+        while let Some(x) = stack.pop() {
+            let x = x as usize;
+            for &y in &adj[deg[x] as usize..deg[x + 1] as usize] {
+                let y = y as usize;
+                if visited[y] {
+                    continue;
+                }
+                visited[y] = true;
+                if !fixed[y] && normals[y].dot(normals[x]) < 0.0 {
+                    normals[y] = -normals[y];
+                }
+                stack.push(y as u32);
+            }
+        }
+    }
+}
+
+/// The axis whose extreme (largest-coordinate) point has the normal most
+/// aligned with it.
+fn root_axis(points: &[Vec3], normals: &[Vec3]) -> usize {
+    let mut best = (0usize, -1f32);
+    for a in 0..3 {
+        let mut arg = 0usize;
+        for (i, p) in points.iter().enumerate() {
+            if p[a] > points[arg][a] {
+                arg = i;
+            }
+        }
+        let align = normals[arg][a].abs();
+        if align > best.1 {
+            best = (a, align);
+        }
+    }
+    best.0
+}

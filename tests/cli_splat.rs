@@ -1,0 +1,133 @@
+//! The `sample` and `splat` subcommands end to end, and their errors.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_splatray"))
+}
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes/data")
+        .join(name)
+}
+
+fn scratch(test: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("splatray-cli-{}-{test}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn sample_then_splat_with_report() {
+    let dir = scratch("ok");
+    let pts = dir.join("pts.ply");
+    let out = bin()
+        .args(["sample"])
+        .arg(data("bunny-mesh.ply"))
+        .args(["-n", "5000", "--seed", "4", "--noise", "0.0005", "-o"])
+        .arg(&pts)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let cloud = splatray::io::read_points(&pts).unwrap();
+    assert_eq!(cloud.len(), 5000);
+    let splats = dir.join("s.ply");
+    let report = dir.join("r.json");
+    let out = bin()
+        .arg("splat")
+        .arg(&pts)
+        .arg("-o")
+        .arg(&splats)
+        .args(["--k", "10", "--ellipses", "--report"])
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let read = splatray::io::read_splats(&splats).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(json["splats"].as_u64().unwrap() as usize, read.len());
+    assert!(read.len() < 5000);
+    assert!(json["coverage"].as_f64().unwrap() >= 0.99);
+    assert_eq!(json["k"].as_u64(), Some(10));
+    for key in ["read", "knn", "normals", "grow", "fit", "total"] {
+        assert!(json["seconds"][key].as_f64().is_some(), "{key}");
+    }
+}
+
+/// Run `splat` on `input` and expect a one-line `splatray: ...` failure.
+fn expect_failure(input: &Path, dir: &Path) -> String {
+    let out_path = dir.join("never.ply");
+    let out = bin()
+        .arg("splat")
+        .arg(input)
+        .arg("-o")
+        .arg(&out_path)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(err.starts_with("splatray: "), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(!out_path.exists(), "no output on failure");
+    err
+}
+
+#[test]
+fn bad_inputs_fail_with_one_line() {
+    let dir = scratch("bad");
+    let w = |name: &str, bytes: &[u8]| {
+        let p = dir.join(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    };
+    let err = expect_failure(&w("empty.ply", b""), &dir);
+    assert!(err.contains("empty"), "{err}");
+    expect_failure(&w("x.dat", b"\x7fELF\x00\x00"), &dir);
+    let full = std::fs::read(data("bunny-mesh.ply")).unwrap();
+    let err = expect_failure(&w("cut.ply", &full[..200_000]), &dir);
+    assert!(err.contains("truncated"), "{err}");
+    let err = expect_failure(&w("line.xyz", b"0 0 0\n1 1 1\n2 2 2\n3 3 3\n"), &dir);
+    assert!(err.contains("line"), "{err}");
+    expect_failure(&w("nan.xyz", b"nan nan nan\n"), &dir);
+    expect_failure(&dir.join("missing.pcd"), &dir);
+}
+
+#[test]
+fn warnings_do_not_fail_the_run() {
+    let dir = scratch("warn");
+    let p = dir.join("dup.xyz");
+    let mut text = String::new();
+    for i in 0..30 {
+        for j in 0..30 {
+            text.push_str(&format!("{i} {j} {}\n", (i * j) as f32 * 0.001));
+        }
+    }
+    text.push_str("0 0 0\nnan 1 1\n");
+    std::fs::write(&p, text).unwrap();
+    let out = bin()
+        .arg("splat")
+        .arg(&p)
+        .arg("-o")
+        .arg(dir.join("o.ply"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("duplicate point") && err.contains("non-finite"),
+        "{err}"
+    );
+}

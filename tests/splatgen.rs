@@ -1,0 +1,314 @@
+//! Splat generation: normals, growth, coverage, normal fields, bad clouds.
+
+use glam::{DVec3, Vec3};
+use splatray::io::{PointCloud, read_mesh, read_points, sample_mesh};
+use splatray::splat::knn::{Knn, build_tree};
+use splatray::splat::normals::{estimate, orient, sym_eigen3};
+use splatray::splat::{GenerateError, Splat, SplatParams, count_on_splats, generate, on_splat};
+use std::path::{Path, PathBuf};
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes/data")
+        .join(name)
+}
+
+/// `n` points on a Fibonacci sphere around `c` with radius `r`.
+fn sphere(n: usize, c: Vec3, r: f32, phase: f32) -> Vec<Vec3> {
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    (0..n)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+            let rr = (1.0 - y * y).sqrt();
+            let t = golden * i as f32 + phase;
+            c + r * Vec3::new(rr * t.cos(), y, rr * t.sin())
+        })
+        .collect()
+}
+
+fn cloud(positions: Vec<Vec3>) -> PointCloud {
+    PointCloud {
+        positions,
+        ..PointCloud::default()
+    }
+}
+
+#[test]
+fn jacobi_eigen_solver_on_known_and_degenerate_matrices() {
+    // Eigenvalues 1, 2, 4 with a rotated basis.
+    let (vals, vecs) = sym_eigen3([[3.0, 1.0, 0.0], [1.0, 3.0, 0.0], [0.0, 0.0, 1.0]]);
+    assert!((vals[0] - 1.0).abs() < 1e-12 && (vals[1] - 2.0).abs() < 1e-12);
+    assert!((vals[2] - 4.0).abs() < 1e-12);
+    assert!(vecs[0].dot(DVec3::Z).abs() > 1.0 - 1e-12);
+    let (vals, vecs) = sym_eigen3([[0.0; 3]; 3]);
+    assert_eq!(vals, [0.0; 3]);
+    assert!(vecs.iter().all(|v| (v.length() - 1.0).abs() < 1e-12));
+}
+
+#[test]
+fn sphere_normals_end_up_outward() {
+    let c = Vec3::new(0.3, -0.2, 0.1);
+    let pts = sphere(4000, c, 1.0, 0.0);
+    let tree = build_tree(&pts);
+    let knn = Knn::build(&tree, &pts, 12);
+    let mut n = estimate(&pts, &knn);
+    orient(&pts, &knn, &mut n, &vec![false; pts.len()]);
+    let outward = pts
+        .iter()
+        .zip(&n)
+        .filter(|(p, n)| n.dot(**p - c) > 0.0)
+        .count();
+    assert_eq!(outward, pts.len(), "every normal must point outward");
+    let (splats, rep) = generate(&cloud(pts), &SplatParams::default()).unwrap();
+    assert!(splats.iter().all(|s| s.normal.dot(s.center - c) > 0.0));
+    assert!(rep.coverage >= 0.99, "{}", rep.coverage);
+}
+
+#[test]
+fn bunny_sample_normals_match_the_true_face_normals() {
+    let mesh = read_mesh(&data("bunny-mesh.ply")).unwrap();
+    let s = sample_mesh(&mesh, 20_000, 0.0, 3);
+    let truth = s.normals.clone().unwrap();
+    let tree = build_tree(&s.positions);
+    let knn = Knn::build(&tree, &s.positions, 12);
+    let mut n = estimate(&s.positions, &knn);
+    let fixed = vec![false; n.len()];
+    orient(&s.positions, &knn, &mut n, &fixed);
+    let agree = n
+        .iter()
+        .zip(&truth)
+        .filter(|(a, b)| a.dot(**b) > 0.0)
+        .count();
+    let frac = agree as f64 / n.len() as f64;
+    assert!(
+        frac > 0.98,
+        "only {frac} of normals agree with the outward face normals"
+    );
+    let close = n
+        .iter()
+        .zip(&truth)
+        .filter(|(a, b)| a.dot(**b) > 0.9)
+        .count();
+    assert!(close as f64 / n.len() as f64 > 0.9, "{close}");
+}
+
+/// Angle in radians between unit vectors.
+fn angle(a: Vec3, b: Vec3) -> f32 {
+    a.dot(b).clamp(-1.0, 1.0).acos()
+}
+
+#[test]
+fn phong_fields_on_a_sphere_beat_flat_splats() {
+    let c = Vec3::ZERO;
+    let pts = sphere(3000, c, 1.0, 0.0);
+    let normals: Vec<Vec3> = pts.iter().map(|p| (*p - c).normalize()).collect();
+    let input = PointCloud {
+        positions: pts,
+        normals: Some(normals),
+        ..PointCloud::default()
+    };
+    let (splats, rep) = generate(&input, &SplatParams::default()).unwrap();
+    assert!(rep.fallback_normal_fields * 20 < splats.len(), "{rep:?}");
+    let (mut field_err, mut flat_err, mut tested) = (0f64, 0f64, 0usize);
+    for q in sphere(2000, c, 1.0, 0.7) {
+        let truth = (q - c).normalize();
+        // Project onto each splat along its normal; use every splat hit.
+        for s in &splats {
+            let d = q - s.center;
+            let (u, v) = (d.dot(s.u_axis) / s.radii.x, d.dot(s.v_axis) / s.radii.y);
+            if u * u + v * v > 1.0 || d.dot(s.normal).abs() > s.radii.x {
+                continue;
+            }
+            field_err += f64::from(angle(s.field_normal(u, v), truth));
+            flat_err += f64::from(angle(s.normal, truth));
+            tested += 1;
+        }
+    }
+    assert!(tested > 2000, "{tested}");
+    let (field_err, flat_err) = (field_err / tested as f64, flat_err / tested as f64);
+    assert!(
+        field_err < 0.3 * flat_err,
+        "mean field error {field_err} rad vs flat {flat_err} rad"
+    );
+}
+
+#[test]
+fn fresh_bunny_samples_lie_on_splats_no_holes() {
+    let mesh = read_mesh(&data("bunny-mesh.ply")).unwrap();
+    let mut pts = sample_mesh(&mesh, 30_000, 0.0, 11);
+    pts.normals = None;
+    let (splats, rep) = generate(&pts, &SplatParams::default()).unwrap();
+    assert!(splats.len() < 30_000 / 3, "{} splats", splats.len());
+    let fresh = sample_mesh(&mesh, 5_000, 0.0, 12345);
+    let on = count_on_splats(&fresh.positions, &splats, rep.epsilon as f32);
+    let frac = on as f64 / fresh.positions.len() as f64;
+    assert!(frac >= 0.99, "only {frac} of fresh samples lie on a splat");
+}
+
+#[test]
+fn real_scans_give_fewer_splats_than_points_and_full_coverage() {
+    for f in [
+        "bunny-scan.ply",
+        "parasaurolophus_6700.ply",
+        "milk.pcd",
+        "lamppost-ascii.pcd",
+    ] {
+        let c = read_points(&data(f)).unwrap();
+        let (splats, rep) = generate(&c, &SplatParams::default()).unwrap();
+        assert!(
+            splats.len() < rep.used_points,
+            "{f}: {} splats",
+            splats.len()
+        );
+        assert!(rep.coverage >= 0.99, "{f}: coverage {}", rep.coverage);
+        assert!(
+            splats
+                .iter()
+                .all(|s| s.radii.min_element() > 0.0 && s.center.is_finite())
+        );
+        // Independent check of the reported coverage on the used points.
+        let on = count_on_splats(&c.positions, &splats, rep.epsilon as f32);
+        assert!(on as f64 >= 0.99 * c.positions.len() as f64, "{f}: {on}");
+        let json = serde_json::to_string(&rep).unwrap();
+        assert!(json.contains("\"coverage\""));
+    }
+}
+
+#[test]
+fn input_normals_are_used_and_zero_ones_re_estimated() {
+    let c = Vec3::ZERO;
+    let pts = sphere(1500, c, 2.0, 0.0);
+    let mut normals: Vec<Vec3> = pts.iter().map(|p| 3.0 * (*p - c)).collect();
+    for n in normals.iter_mut().step_by(10) {
+        *n = Vec3::ZERO;
+    }
+    normals[5] = Vec3::NAN;
+    let input = PointCloud {
+        positions: pts,
+        normals: Some(normals),
+        ..PointCloud::default()
+    };
+    let (splats, rep) = generate(&input, &SplatParams::default()).unwrap();
+    assert_eq!(rep.estimated_normals, 151);
+    assert!(splats.iter().all(|s| s.normal.dot(s.center - c) > 0.0));
+    assert!(
+        splats
+            .iter()
+            .all(|s| (s.normal.length() - 1.0).abs() < 1e-4)
+    );
+}
+
+#[test]
+fn duplicates_and_non_finite_points_are_counted() {
+    let mut pts = sphere(500, Vec3::ZERO, 1.0, 0.0);
+    pts.extend(sphere(500, Vec3::ZERO, 1.0, 0.0));
+    pts.push(Vec3::new(f32::NAN, 0.0, 0.0));
+    let (_, rep) = generate(&cloud(pts), &SplatParams::default()).unwrap();
+    let count = |why: &str| {
+        rep.skipped_points
+            .iter()
+            .filter(|s| s.reason == why)
+            .map(|s| s.count)
+            .sum::<usize>()
+    };
+    assert_eq!(count("duplicate point"), 500);
+    assert_eq!(count("non-finite coordinates"), 1);
+    assert_eq!(rep.used_points, 500);
+}
+
+#[test]
+fn tiny_collinear_and_coplanar_clouds() {
+    // Fewer points than k: a warning, still splats.
+    let corners: Vec<Vec3> = (0..8)
+        .map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32))
+        .collect();
+    let (splats, rep) = generate(&cloud(corners), &SplatParams::default()).unwrap();
+    assert!(!splats.is_empty());
+    assert_eq!(rep.k, 7);
+    assert!(
+        rep.warnings.iter().any(|w| w.contains("k = 7")),
+        "{:?}",
+        rep.warnings
+    );
+    // Two points: nothing usable.
+    let e = generate(
+        &cloud(vec![Vec3::ZERO, Vec3::ONE, Vec3::ONE]),
+        &SplatParams::default(),
+    )
+    .unwrap_err();
+    assert_eq!(
+        e,
+        GenerateError::TooFewPoints {
+            usable: 2,
+            needed: 3
+        }
+    );
+    assert!(!e.to_string().contains('\n'));
+    // Collinear: a clear error.
+    let line: Vec<Vec3> = (0..100).map(|i| Vec3::splat(i as f32 * 0.1)).collect();
+    assert_eq!(
+        generate(&cloud(line), &SplatParams::default()).unwrap_err(),
+        GenerateError::Collinear
+    );
+    // Coplanar: fine, with a warning; splats lie in the plane.
+    let grid: Vec<Vec3> = (0..900)
+        .map(|i| Vec3::new((i % 30) as f32, (i / 30) as f32, 2.0))
+        .collect();
+    let (splats, rep) = generate(&cloud(grid.clone()), &SplatParams::default()).unwrap();
+    assert!(rep.warnings.iter().any(|w| w.contains("coplanar")));
+    assert!(splats.len() < 900 / 4, "{}", splats.len());
+    assert!(
+        splats
+            .iter()
+            .all(|s| s.normal.z.abs() > 0.999 && (s.center.z - 2.0).abs() < 1e-4)
+    );
+    assert!(rep.coverage >= 0.99);
+    // Bad parameters.
+    let bad = SplatParams {
+        density: 0.0,
+        ..SplatParams::default()
+    };
+    assert!(matches!(
+        generate(&cloud(grid), &bad),
+        Err(GenerateError::BadParams(_))
+    ));
+}
+
+#[test]
+fn ellipses_stretch_along_a_cylinder() {
+    // Cylinder of radius 1 along z, dense enough for curvature estimates.
+    let mut pts = Vec::new();
+    for i in 0..120 {
+        for j in 0..60 {
+            let t = i as f32 / 120.0 * std::f32::consts::TAU + (j % 2) as f32 * 0.02;
+            pts.push(Vec3::new(t.cos(), t.sin(), j as f32 * 0.05));
+        }
+    }
+    let params = SplatParams {
+        ellipses: true,
+        ..SplatParams::default()
+    };
+    let (splats, rep) = generate(&cloud(pts.clone()), &params).unwrap();
+    assert!(rep.elliptical_splats * 2 > splats.len(), "{rep:?}");
+    let along = splats
+        .iter()
+        .filter(|s| s.radii.x > s.radii.y)
+        .filter(|s| s.u_axis.z.abs() > 0.9)
+        .count();
+    assert!(
+        along * 10 >= rep.elliptical_splats * 9,
+        "{along} of {}",
+        rep.elliptical_splats
+    );
+    assert!(rep.coverage >= 0.99);
+    let (circles, _) = generate(&cloud(pts), &SplatParams::default()).unwrap();
+    assert!(
+        splats.len() < circles.len(),
+        "{} vs {}",
+        splats.len(),
+        circles.len()
+    );
+    let s: &Splat = &splats[0];
+    assert!(s.v_axis.abs_diff_eq(s.normal.cross(s.u_axis), 1e-5));
+    assert!(on_splat(s, s.center, 1e-6));
+}
