@@ -8,7 +8,9 @@ fn bin() -> Command {
 }
 
 fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data").join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes/data")
+        .join(name)
 }
 
 fn scratch(test: &str) -> PathBuf {
@@ -29,7 +31,11 @@ fn sample_then_splat_with_report() {
         .arg(&pts)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let cloud = splatray::io::read_points(&pts).unwrap();
     assert_eq!(cloud.len(), 5000);
     let splats = dir.join("s.ply");
@@ -43,7 +49,11 @@ fn sample_then_splat_with_report() {
         .arg(&report)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let read = splatray::io::read_splats(&splats).unwrap();
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
@@ -59,7 +69,13 @@ fn sample_then_splat_with_report() {
 /// Run `splat` on `input` and expect a one-line `splatray: ...` failure.
 fn expect_failure(input: &Path, dir: &Path) -> String {
     let out_path = dir.join("never.ply");
-    let out = bin().arg("splat").arg(input).arg("-o").arg(&out_path).output().unwrap();
+    let out = bin()
+        .arg("splat")
+        .arg(input)
+        .arg("-o")
+        .arg(&out_path)
+        .output()
+        .unwrap();
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr).to_string();
     assert!(err.starts_with("splatray: "), "{err}");
@@ -101,8 +117,17 @@ fn warnings_do_not_fail_the_run() {
     }
     text.push_str("0 0 0\nnan 1 1\n");
     std::fs::write(&p, text).unwrap();
-    let out = bin().arg("splat").arg(&p).arg("-o").arg(dir.join("o.ply")).output().unwrap();
+    let out = bin()
+        .arg("splat")
+        .arg(&p)
+        .arg("-o")
+        .arg(dir.join("o.ply"))
+        .output()
+        .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");
-    assert!(err.contains("duplicate point") && err.contains("non-finite"), "{err}");
+    assert!(
+        err.contains("duplicate point") && err.contains("non-finite"),
+        "{err}"
+    );
 }

@@ -9,7 +9,9 @@ use splatray::splat::{NormalField, Splat};
 use std::path::{Path, PathBuf};
 
 fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data").join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes/data")
+        .join(name)
 }
 
 /// A fresh scratch folder for one test.
@@ -35,7 +37,11 @@ fn must_fail<T>(r: Result<T, splatray::io::IoError>) -> splatray::io::IoError {
 }
 
 fn skipped(c: &PointCloud, reason: &str) -> usize {
-    c.skipped.iter().filter(|(r, _)| r == reason).map(|(_, n)| *n).sum()
+    c.skipped
+        .iter()
+        .filter(|(r, _)| r == reason)
+        .map(|(_, n)| *n)
+        .sum()
 }
 
 #[test]
@@ -43,11 +49,20 @@ fn bunny_mesh_binary_le_reads_as_points_and_mesh() {
     let c = read_points(&data("bunny-mesh.ply")).unwrap();
     assert_eq!(c.len(), 34_835);
     assert!(c.normals.is_none() && c.colors.is_none());
-    assert!(c.positions.iter().all(|p| p.abs().max_element() <= 1.0 + 1e-5));
+    assert!(
+        c.positions
+            .iter()
+            .all(|p| p.abs().max_element() <= 1.0 + 1e-5)
+    );
     let m = read_mesh(&data("bunny-mesh.ply")).unwrap();
     assert_eq!(m.positions.len(), 34_835);
     assert_eq!(m.triangles.len(), 69_666);
-    assert!(m.triangles.iter().flatten().all(|&i| (i as usize) < m.positions.len()));
+    assert!(
+        m.triangles
+            .iter()
+            .flatten()
+            .all(|&i| (i as usize) < m.positions.len())
+    );
 }
 
 #[test]
@@ -75,13 +90,19 @@ fn milk_pcd_binary_compressed_with_rgba() {
     let c = read_points(&data("milk.pcd")).unwrap();
     assert_eq!(c.len() + c.skipped_total(), 12_575);
     let col = c.colors.as_ref().expect("colours");
-    assert!(col.iter().all(|v| v.min_element() >= 0.0 && v.max_element() <= 1.0));
+    assert!(
+        col.iter()
+            .all(|v| v.min_element() >= 0.0 && v.max_element() <= 1.0)
+    );
     // The file packs 0x000000ff (0xAARRGGBB) for every point: pure blue.
     assert!(col.iter().all(|v| *v == Vec3::Z), "{:?}", col[0]);
     let lo = c.positions.iter().fold(Vec3::MAX, |a, p| a.min(*p));
     let hi = c.positions.iter().fold(Vec3::MIN, |a, p| a.max(*p));
     let size = hi - lo;
-    assert!(size.max_element() > 0.05 && size.max_element() < 5.0, "{size}");
+    assert!(
+        size.max_element() > 0.05 && size.max_element() < 5.0,
+        "{size}"
+    );
 }
 
 #[test]
@@ -95,7 +116,10 @@ fn lamppost_pcd_ascii() {
 fn ply_binary_big_endian_and_float_and_u8_colours() {
     let dir = scratch("be");
     let mut be = b"ply\nformat binary_big_endian 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nproperty int extra\nend_header\n".to_vec();
-    for (p, c) in [([1.0f32, 2.0, 3.0], [255u8, 0, 0]), ([4.0, 5.0, 6.0], [0, 0, 255])] {
+    for (p, c) in [
+        ([1.0f32, 2.0, 3.0], [255u8, 0, 0]),
+        ([4.0, 5.0, 6.0], [0, 0, 255]),
+    ] {
         for v in p {
             be.extend_from_slice(&v.to_be_bytes());
         }
@@ -103,13 +127,20 @@ fn ply_binary_big_endian_and_float_and_u8_colours() {
         be.extend_from_slice(&7i32.to_be_bytes());
     }
     let c = read_points(&write(&dir, "be.ply", &be)).unwrap();
-    assert_eq!(c.positions, vec![Vec3::new(1.0, 2.0, 3.0), Vec3::new(4.0, 5.0, 6.0)]);
+    assert_eq!(
+        c.positions,
+        vec![Vec3::new(1.0, 2.0, 3.0), Vec3::new(4.0, 5.0, 6.0)]
+    );
     assert_eq!(c.colors.unwrap(), vec![Vec3::X, Vec3::Z]);
     let ascii = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty double x\nproperty double y\nproperty double z\nproperty float red\nproperty float green\nproperty float blue\nend_header\n1 2 3 1 0 0.5\n";
     let c = read_points(&write(&dir, "f.ply", ascii)).unwrap();
     let col = c.colors.unwrap()[0];
     assert_eq!((col.x, col.y), (1.0, 0.0));
-    assert!((col.z - 0.214).abs() < 0.01, "sRGB 0.5 is linear ~0.214, got {}", col.z);
+    assert!(
+        (col.z - 0.214).abs() < 0.01,
+        "sRGB 0.5 is linear ~0.214, got {}",
+        col.z
+    );
 }
 
 #[test]
@@ -126,7 +157,12 @@ fn quads_are_fan_triangulated() {
 #[test]
 fn xyz_with_and_without_normals() {
     let dir = scratch("xyz");
-    let c = read_points(&write(&dir, "a.xyz", b"# comment\n1 2 3\n4,5,6\n\n7\t8 9\n")).unwrap();
+    let c = read_points(&write(
+        &dir,
+        "a.xyz",
+        b"# comment\n1 2 3\n4,5,6\n\n7\t8 9\n",
+    ))
+    .unwrap();
     assert_eq!(c.len(), 3);
     assert!(c.normals.is_none());
     let c = read_points(&write(&dir, "b.txt", b"1 2 3 0 0 1\n4 5 6 0 1 0\n")).unwrap();
@@ -152,7 +188,10 @@ fn non_finite_points_are_skipped_and_counted() {
 fn assert_one_line_naming(e: &impl std::fmt::Display, file: &Path) {
     let s = e.to_string();
     assert!(!s.contains('\n'), "not one line: {s:?}");
-    assert!(s.contains(&file.display().to_string()), "does not name the file: {s}");
+    assert!(
+        s.contains(&file.display().to_string()),
+        "does not name the file: {s}"
+    );
 }
 
 #[test]
@@ -170,7 +209,11 @@ fn empty_unknown_and_missing_files_are_clear_errors() {
     let e = must_fail(read_points(&p));
     assert!(matches!(e.kind(), IoErrorKind::Io(_)));
     assert_one_line_naming(&e, &p);
-    let p = write(&dir, "h.ply", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float q\nend_header\n1\n");
+    let p = write(
+        &dir,
+        "h.ply",
+        b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float q\nend_header\n1\n",
+    );
     let e = must_fail(read_points(&p));
     assert!(matches!(e.kind(), IoErrorKind::Header(_)), "{e}");
 }
@@ -200,7 +243,11 @@ fn truncated_binary_ply_and_lying_headers() {
     let e = must_fail(read_points(&write(&dir, "short.pcd", pcd)));
     assert!(matches!(e.kind(), IoErrorKind::Truncated(_)), "{e}");
     let milk = std::fs::read(data("milk.pcd")).unwrap();
-    let e = must_fail(read_points(&write(&dir, "milk.pcd", &milk[..milk.len() - 100])));
+    let e = must_fail(read_points(&write(
+        &dir,
+        "milk.pcd",
+        &milk[..milk.len() - 100],
+    )));
     assert!(matches!(e.kind(), IoErrorKind::Truncated(_)), "{e}");
 }
 
@@ -222,7 +269,10 @@ fn pcd_binary_with_normals_and_rgb() {
 
 #[test]
 fn lzf_rejects_corrupt_streams() {
-    assert_eq!(lzf_decompress(&[2, b'x', b'y', b'z', 1 << 5, 2], 6).unwrap(), b"xyzxyz");
+    assert_eq!(
+        lzf_decompress(&[2, b'x', b'y', b'z', 1 << 5, 2], 6).unwrap(),
+        b"xyzxyz"
+    );
     assert!(lzf_decompress(&[1 << 5, 200], 3).is_err());
 }
 
@@ -232,7 +282,12 @@ fn splat_files_round_trip_losslessly_and_atomically() {
     let mut splats = Vec::new();
     for i in 0..50 {
         let t = i as f32 * 0.37;
-        let mut s = Splat::disc(Vec3::new(t.sin(), t.cos(), t), Vec3::new(t, 1.0, -t), 0.1 + t).unwrap();
+        let mut s = Splat::disc(
+            Vec3::new(t.sin(), t.cos(), t),
+            Vec3::new(t, 1.0, -t),
+            0.1 + t,
+        )
+        .unwrap();
         s.radii = Vec2::new(0.1 + t, 0.05 + t * 0.5);
         s.v_axis = s.normal.cross(s.u_axis);
         s.color = Vec3::new(0.1, 0.2, t / 20.0);

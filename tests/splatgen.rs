@@ -8,7 +8,9 @@ use splatray::splat::{GenerateError, Splat, SplatParams, count_on_splats, genera
 use std::path::{Path, PathBuf};
 
 fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data").join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes/data")
+        .join(name)
 }
 
 /// `n` points on a Fibonacci sphere around `c` with radius `r`.
@@ -72,10 +74,21 @@ fn bunny_sample_normals_match_the_true_face_normals() {
     let mut n = estimate(&s.positions, &knn);
     let fixed = vec![false; n.len()];
     orient(&s.positions, &knn, &mut n, &fixed);
-    let agree = n.iter().zip(&truth).filter(|(a, b)| a.dot(**b) > 0.0).count();
+    let agree = n
+        .iter()
+        .zip(&truth)
+        .filter(|(a, b)| a.dot(**b) > 0.0)
+        .count();
     let frac = agree as f64 / n.len() as f64;
-    assert!(frac > 0.98, "only {frac} of normals agree with the outward face normals");
-    let close = n.iter().zip(&truth).filter(|(a, b)| a.dot(**b) > 0.9).count();
+    assert!(
+        frac > 0.98,
+        "only {frac} of normals agree with the outward face normals"
+    );
+    let close = n
+        .iter()
+        .zip(&truth)
+        .filter(|(a, b)| a.dot(**b) > 0.9)
+        .count();
     assert!(close as f64 / n.len() as f64 > 0.9, "{close}");
 }
 
@@ -142,9 +155,17 @@ fn real_scans_give_fewer_splats_than_points_and_full_coverage() {
     ] {
         let c = read_points(&data(f)).unwrap();
         let (splats, rep) = generate(&c, &SplatParams::default()).unwrap();
-        assert!(splats.len() < rep.used_points, "{f}: {} splats", splats.len());
+        assert!(
+            splats.len() < rep.used_points,
+            "{f}: {} splats",
+            splats.len()
+        );
         assert!(rep.coverage >= 0.99, "{f}: coverage {}", rep.coverage);
-        assert!(splats.iter().all(|s| s.radii.min_element() > 0.0 && s.center.is_finite()));
+        assert!(
+            splats
+                .iter()
+                .all(|s| s.radii.min_element() > 0.0 && s.center.is_finite())
+        );
         // Independent check of the reported coverage on the used points.
         let on = count_on_splats(&c.positions, &splats, rep.epsilon as f32);
         assert!(on as f64 >= 0.99 * c.positions.len() as f64, "{f}: {on}");
@@ -170,7 +191,11 @@ fn input_normals_are_used_and_zero_ones_re_estimated() {
     let (splats, rep) = generate(&input, &SplatParams::default()).unwrap();
     assert_eq!(rep.estimated_normals, 151);
     assert!(splats.iter().all(|s| s.normal.dot(s.center - c) > 0.0));
-    assert!(splats.iter().all(|s| (s.normal.length() - 1.0).abs() < 1e-4));
+    assert!(
+        splats
+            .iter()
+            .all(|s| (s.normal.length() - 1.0).abs() < 1e-4)
+    );
 }
 
 #[test]
@@ -200,11 +225,24 @@ fn tiny_collinear_and_coplanar_clouds() {
     let (splats, rep) = generate(&cloud(corners), &SplatParams::default()).unwrap();
     assert!(!splats.is_empty());
     assert_eq!(rep.k, 7);
-    assert!(rep.warnings.iter().any(|w| w.contains("k = 7")), "{:?}", rep.warnings);
+    assert!(
+        rep.warnings.iter().any(|w| w.contains("k = 7")),
+        "{:?}",
+        rep.warnings
+    );
     // Two points: nothing usable.
-    let e = generate(&cloud(vec![Vec3::ZERO, Vec3::ONE, Vec3::ONE]), &SplatParams::default())
-        .unwrap_err();
-    assert_eq!(e, GenerateError::TooFewPoints { usable: 2, needed: 3 });
+    let e = generate(
+        &cloud(vec![Vec3::ZERO, Vec3::ONE, Vec3::ONE]),
+        &SplatParams::default(),
+    )
+    .unwrap_err();
+    assert_eq!(
+        e,
+        GenerateError::TooFewPoints {
+            usable: 2,
+            needed: 3
+        }
+    );
     assert!(!e.to_string().contains('\n'));
     // Collinear: a clear error.
     let line: Vec<Vec3> = (0..100).map(|i| Vec3::splat(i as f32 * 0.1)).collect();
@@ -219,14 +257,21 @@ fn tiny_collinear_and_coplanar_clouds() {
     let (splats, rep) = generate(&cloud(grid.clone()), &SplatParams::default()).unwrap();
     assert!(rep.warnings.iter().any(|w| w.contains("coplanar")));
     assert!(splats.len() < 900 / 4, "{}", splats.len());
-    assert!(splats.iter().all(|s| s.normal.z.abs() > 0.999 && (s.center.z - 2.0).abs() < 1e-4));
+    assert!(
+        splats
+            .iter()
+            .all(|s| s.normal.z.abs() > 0.999 && (s.center.z - 2.0).abs() < 1e-4)
+    );
     assert!(rep.coverage >= 0.99);
     // Bad parameters.
     let bad = SplatParams {
         density: 0.0,
         ..SplatParams::default()
     };
-    assert!(matches!(generate(&cloud(grid), &bad), Err(GenerateError::BadParams(_))));
+    assert!(matches!(
+        generate(&cloud(grid), &bad),
+        Err(GenerateError::BadParams(_))
+    ));
 }
 
 #[test]
@@ -250,10 +295,19 @@ fn ellipses_stretch_along_a_cylinder() {
         .filter(|s| s.radii.x > s.radii.y)
         .filter(|s| s.u_axis.z.abs() > 0.9)
         .count();
-    assert!(along * 10 >= rep.elliptical_splats * 9, "{along} of {}", rep.elliptical_splats);
+    assert!(
+        along * 10 >= rep.elliptical_splats * 9,
+        "{along} of {}",
+        rep.elliptical_splats
+    );
     assert!(rep.coverage >= 0.99);
     let (circles, _) = generate(&cloud(pts), &SplatParams::default()).unwrap();
-    assert!(splats.len() < circles.len(), "{} vs {}", splats.len(), circles.len());
+    assert!(
+        splats.len() < circles.len(),
+        "{} vs {}",
+        splats.len(),
+        circles.len()
+    );
     let s: &Splat = &splats[0];
     assert!(s.v_axis.abs_diff_eq(s.normal.cross(s.u_axis), 1e-5));
     assert!(on_splat(s, s.center, 1e-6));

@@ -32,7 +32,10 @@ pub fn run(args: &SampleArgs) -> Result<(), String> {
         return Err("-n must be at least 1".into());
     }
     if !(args.noise.is_finite() && args.noise >= 0.0) {
-        return Err(format!("--noise {} must be a finite, non-negative number", args.noise));
+        return Err(format!(
+            "--noise {} must be a finite, non-negative number",
+            args.noise
+        ));
     }
     let mesh = read_mesh(&args.mesh).map_err(|e| e.to_string())?;
     let cloud = sample_mesh(&mesh, args.n, args.noise, args.seed);

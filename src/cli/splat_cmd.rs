@@ -66,7 +66,10 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
         eprintln!("splatray: warning: {w}");
     }
     for s in &report.skipped_points {
-        eprintln!("splatray: warning: skipped {} points: {}", s.count, s.reason);
+        eprintln!(
+            "splatray: warning: skipped {} points: {}",
+            s.count, s.reason
+        );
     }
     eprintln!(
         "splatray: {} points -> {} splats ({} elliptical), coverage {:.4}, mean radius {:.4e}, {} flat normal fields, {:.2} s -> {}",

@@ -26,7 +26,9 @@ pub fn lzf_decompress(input: &[u8], expected_len: usize) -> Result<Vec<u8>, Stri
                 .get(ip..ip + len)
                 .ok_or_else(|| format!("LZF literal run at byte {} runs past the end", ip - 1))?;
             if out.len() + len > expected_len {
-                return Err(format!("LZF data decompresses to more than {expected_len} bytes"));
+                return Err(format!(
+                    "LZF data decompresses to more than {expected_len} bytes"
+                ));
             }
             out.extend_from_slice(lit);
             ip += len;
@@ -55,7 +57,9 @@ pub fn lzf_decompress(input: &[u8], expected_len: usize) -> Result<Vec<u8>, Stri
                 ));
             }
             if out.len() + len > expected_len {
-                return Err(format!("LZF data decompresses to more than {expected_len} bytes"));
+                return Err(format!(
+                    "LZF data decompresses to more than {expected_len} bytes"
+                ));
             }
             let start = out.len() - back;
             for k in 0..len {

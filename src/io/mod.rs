@@ -112,9 +112,11 @@ impl Format {
         let first = text
             .lines()
             .map(str::trim)
-            .find(|l| !l.is_empty() && !(l.starts_with('#') && !l.contains(".PCD")));
+            .find(|l| !l.is_empty() && (!l.starts_with('#') || l.contains(".PCD")));
         match first {
-            Some(l) if l.contains(".PCD") || l.starts_with("VERSION") || l.starts_with("FIELDS") => {
+            Some(l)
+                if l.contains(".PCD") || l.starts_with("VERSION") || l.starts_with("FIELDS") =>
+            {
                 Some(Format::Pcd)
             }
             Some(l) => {
@@ -184,7 +186,9 @@ pub fn read_mesh(path: &Path) -> Result<Mesh, IoError> {
     if Format::sniff(&bytes[..bytes.len().min(4096)]) != Some(Format::Ply) {
         return Err(IoError::new(
             path,
-            IoErrorKind::Header("a mesh must be a PLY file (it does not start with \"ply\")".into()),
+            IoErrorKind::Header(
+                "a mesh must be a PLY file (it does not start with \"ply\")".into(),
+            ),
         ));
     }
     ply::read_mesh(&bytes).map_err(|kind| IoError::new(path, kind))

@@ -118,7 +118,10 @@ fn parse_header(bytes: &[u8]) -> Result<PcdHeader, IoErrorKind> {
     let mut fields = Vec::with_capacity(names.len());
     let mut offset = 0usize;
     for i in 0..names.len() {
-        let ok = matches!((kinds[i], sizes[i]), (b'F', 4 | 8) | (b'U' | b'I', 1 | 2 | 4 | 8));
+        let ok = matches!(
+            (kinds[i], sizes[i]),
+            (b'F', 4 | 8) | (b'U' | b'I', 1 | 2 | 4 | 8)
+        );
         if !ok || counts[i] == 0 || counts[i] > 1 << 16 {
             return Err(IoErrorKind::Header(format!(
                 "field \"{}\": unsupported TYPE {} SIZE {} COUNT {}",
@@ -137,7 +140,11 @@ fn parse_header(bytes: &[u8]) -> Result<PcdHeader, IoErrorKind> {
     let points = match (points, width, height) {
         (Some(p), _, _) => p,
         (None, Some(w), Some(h)) => w.saturating_mul(h),
-        _ => return Err(IoErrorKind::Header("no POINTS (or WIDTH and HEIGHT) line".into())),
+        _ => {
+            return Err(IoErrorKind::Header(
+                "no POINTS (or WIDTH and HEIGHT) line".into(),
+            ));
+        }
     };
     Ok(PcdHeader {
         fields,
@@ -165,7 +172,9 @@ fn columns(h: &PcdHeader) -> Result<Columns, IoErrorKind> {
         (Some(x), Some(y), Some(z)) => Some([x, y, z]),
         _ => None,
     };
-    let color = find("rgb").or_else(|| find("rgba")).filter(|&i| h.fields[i].size == 4);
+    let color = find("rgb")
+        .or_else(|| find("rgba"))
+        .filter(|&i| h.fields[i].size == 4);
     Ok(Columns { xyz, normal, color })
 }
 
@@ -218,7 +227,11 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
                     })
                 };
                 let v3 = |f: [usize; 3]| -> Result<Vec3, IoErrorKind> {
-                    Ok(Vec3::new(val(f[0])? as f32, val(f[1])? as f32, val(f[2])? as f32))
+                    Ok(Vec3::new(
+                        val(f[0])? as f32,
+                        val(f[1])? as f32,
+                        val(f[2])? as f32,
+                    ))
                 };
                 cloud.positions.push(v3(cols.xyz)?);
                 if let Some(nf) = cols.normal {

@@ -10,7 +10,9 @@
 use super::{IoErrorKind, Mesh, PointCloud, drop_non_finite, srgb_to_linear};
 use glam::Vec3;
 use ply_rs_bw::parser::Parser;
-use ply_rs_bw::ply::{ElementDef, Encoding, Header, Property, PropertyAccess, PropertyType, ScalarType};
+use ply_rs_bw::ply::{
+    ElementDef, Encoding, Header, Property, PropertyAccess, PropertyType, ScalarType,
+};
 use std::io::Cursor;
 
 /// A scalar property as `f64` (lists give `None`).
@@ -81,7 +83,10 @@ impl PropertyAccess for SplatRow {
         }
     }
     fn set_property(&mut self, name: &str, p: Property) {
-        if let Some(i) = super::splat_ply::SPLAT_PROPS.iter().position(|n| *n == name) {
+        if let Some(i) = super::splat_ply::SPLAT_PROPS
+            .iter()
+            .position(|n| *n == name)
+        {
             // Lossless for the float32 properties the writer produces.
             self.v[i] = match p {
                 Property::Float(f) => f,
@@ -102,7 +107,9 @@ fn list_u32<T: Copy>(v: &[T], f: impl Fn(T) -> Option<u32>) -> Option<Vec<u32>> 
 
 impl PropertyAccess for FaceRow {
     fn new() -> Self {
-        FaceRow { idx: Some(Vec::new()) }
+        FaceRow {
+            idx: Some(Vec::new()),
+        }
     }
     fn set_property(&mut self, name: &str, p: Property) {
         if name != "vertex_indices" && name != "vertex_index" {
@@ -149,6 +156,9 @@ fn min_element_bytes(def: &ElementDef) -> usize {
         .sum()
 }
 
+/// Where face rows (vertex index lists, `None` for a negative index) go.
+type FaceSink<'a> = &'a mut dyn FnMut(Vec<Option<Vec<u32>>>);
+
 /// A parsed header and the body that follows it.
 pub(crate) struct PlyFile<'a> {
     pub(crate) header: Header,
@@ -160,7 +170,9 @@ impl<'a> PlyFile<'a> {
     /// header's element counts.
     pub(crate) fn open(bytes: &'a [u8]) -> Result<PlyFile<'a>, IoErrorKind> {
         if !(bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r\n")) {
-            return Err(IoErrorKind::Header("a PLY file must start with \"ply\"".into()));
+            return Err(IoErrorKind::Header(
+                "a PLY file must start with \"ply\"".into(),
+            ));
         }
         let mut cursor = Cursor::new(bytes);
         let header = Parser::<SkipRow>::new()
@@ -192,7 +204,7 @@ impl<'a> PlyFile<'a> {
     fn read<V: PropertyAccess>(
         mut self,
         mut on_vertex: impl FnMut(Vec<V>),
-        mut on_face: Option<&mut dyn FnMut(Vec<Option<Vec<u32>>>)>,
+        mut on_face: Option<FaceSink<'_>>,
     ) -> Result<(), IoErrorKind> {
         let defs: Vec<ElementDef> = self.header.elements.values().cloned().collect();
         for def in &defs {
@@ -339,7 +351,9 @@ pub(crate) fn read_mesh(bytes: &[u8]) -> Result<Mesh, IoErrorKind> {
     let mut triangles = Vec::with_capacity(faces.len());
     for (fi, face) in faces.iter().enumerate() {
         let Some(idx) = face else {
-            return Err(IoErrorKind::Data(format!("face {fi} has a negative vertex index")));
+            return Err(IoErrorKind::Data(format!(
+                "face {fi} has a negative vertex index"
+            )));
         };
         if let Some(&bad) = idx.iter().find(|&&i| i as usize >= n) {
             return Err(IoErrorKind::Data(format!(

@@ -12,8 +12,27 @@ use std::path::Path;
 /// radius along `u` (MeshLab's `radius`), the `u` and `v` axes, the radius
 /// along `v`, the normal field of eq. (4) and the linear RGB colour.
 pub(crate) const SPLAT_PROPS: [&str; 21] = [
-    "x", "y", "z", "nx", "ny", "nz", "radius", "ux", "uy", "uz", "vx", "vy", "vz", "radius_v",
-    "field_xc", "field_yc", "field_alpha", "field_beta", "red", "green", "blue",
+    "x",
+    "y",
+    "z",
+    "nx",
+    "ny",
+    "nz",
+    "radius",
+    "ux",
+    "uy",
+    "uz",
+    "vx",
+    "vy",
+    "vz",
+    "radius_v",
+    "field_xc",
+    "field_yc",
+    "field_alpha",
+    "field_beta",
+    "red",
+    "green",
+    "blue",
 ];
 
 fn to_row(s: &Splat) -> [f32; 21] {

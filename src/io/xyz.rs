@@ -48,7 +48,11 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
             return Err(IoErrorKind::Data(format!(
                 "line {}: expected {cols} numbers like the first line, found {}",
                 ln + 1,
-                if n > 6 { "more than 6".to_string() } else { n.to_string() }
+                if n > 6 {
+                    "more than 6".to_string()
+                } else {
+                    n.to_string()
+                }
             )));
         }
         cloud.positions.push(Vec3::new(vals[0], vals[1], vals[2]));

@@ -1,11 +1,11 @@
 //! Points in, splats out: the whole splat generation pipeline of §2 and §4
 //! behind one call, [`generate`].
 
+use super::Splat;
 use super::field;
 use super::grow::{GrowInput, grow_all};
 use super::knn::{Knn, build_tree};
 use super::normals;
-use super::Splat;
 use crate::io::PointCloud;
 use glam::Vec3;
 use kiddo::SquaredEuclidean;
@@ -132,7 +132,10 @@ impl fmt::Display for GenerateError {
                 "only {usable} distinct finite points, at least {needed} are needed to fit splats"
             ),
             GenerateError::Collinear => {
-                write!(f, "all points lie on one line: there is no surface to splat")
+                write!(
+                    f,
+                    "all points lie on one line: there is no surface to splat"
+                )
             }
         }
     }
@@ -169,16 +172,15 @@ fn clean_order(pos: &[Vec3]) -> (Vec<u32>, usize, usize) {
         .map(|&i| {
             let p = pos[i as usize];
             let q = ((p - lo) * scale).as_uvec3();
-            let m = spread(u64::from(q.x)) | spread(u64::from(q.y)) << 1 | spread(u64::from(q.z)) << 2;
+            let m =
+                spread(u64::from(q.x)) | spread(u64::from(q.y)) << 1 | spread(u64::from(q.z)) << 2;
             (m, [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()], i)
         })
         .collect();
     keyed.par_sort_unstable();
     let before = keyed.len();
     // -0.0 and 0.0 differ in bits but not in position: compare values.
-    keyed.dedup_by(|a, b| {
-        a.0 == b.0 && a.1.map(f32::from_bits) == b.1.map(f32::from_bits)
-    });
+    keyed.dedup_by(|a, b| a.0 == b.0 && a.1.map(f32::from_bits) == b.1.map(f32::from_bits));
     let dupes = before - keyed.len();
     (keyed.into_iter().map(|k| k.2).collect(), non_finite, dupes)
 }
@@ -226,7 +228,10 @@ pub fn generate_with_progress(
     // --- clean, reorder, kNN -------------------------------------------------
     progress("neighbours", 0.0);
     let (order, non_finite, dupes) = clean_order(&cloud.positions);
-    for (why, count) in [("non-finite coordinates", non_finite), ("duplicate point", dupes)] {
+    for (why, count) in [
+        ("non-finite coordinates", non_finite),
+        ("duplicate point", dupes),
+    ] {
         if count > 0 {
             report.skipped_points.push(Skipped {
                 reason: why.into(),
@@ -248,9 +253,10 @@ pub fn generate_with_progress(
         .as_ref()
         .filter(|c| c.len() == cloud.positions.len())
         .map(|c| order.iter().map(|&i| c[i as usize]).collect());
-    let (lo, hi) = points
-        .iter()
-        .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(a, b), p| (a.min(*p), b.max(*p)));
+    let (lo, hi) = points.iter().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(a, b), p| (a.min(*p), b.max(*p)),
+    );
     let diagonal = f64::from((hi - lo).length());
     report.bbox_diagonal = diagonal;
     let (_, vals, _) = normals::plane_fit(points.iter().copied());
@@ -328,8 +334,13 @@ pub fn generate_with_progress(
     let t3 = Instant::now();
     // --- fields and coverage ---------------------------------------------------
     progress("normal fields", 0.0);
-    report.fallback_normal_fields =
-        field::fit_all(&mut splats, params.field_radius_factor, &tree, &points, &nrm);
+    report.fallback_normal_fields = field::fit_all(
+        &mut splats,
+        params.field_radius_factor,
+        &tree,
+        &points,
+        &nrm,
+    );
     report.coverage = coverage(&points, &grown.covered, &splats, epsilon);
     report.splats = splats.len();
     report.elliptical_splats = grown.elliptical;
@@ -393,7 +404,14 @@ pub fn coverage(points: &[Vec3], covered: &[bool], splats: &[Splat], epsilon: f3
     let found = if rest.is_empty() || splats.is_empty() {
         0
     } else {
-        count_on_splats(rest.iter().map(|&i| points[i]).collect::<Vec<_>>().as_slice(), splats, epsilon)
+        count_on_splats(
+            rest.iter()
+                .map(|&i| points[i])
+                .collect::<Vec<_>>()
+                .as_slice(),
+            splats,
+            epsilon,
+        )
     };
     (points.len() - rest.len() + found) as f64 / points.len() as f64
 }

@@ -112,7 +112,8 @@ impl Grower<'_> {
                 let d = inp.points[q] - p;
                 let (x, y) = (a.dot(d) / aspect, b.dot(d));
                 let qd2 = x * x + y * y;
-                self.heap.push(Reverse((u64::from(qd2.to_bits()) << 32) | q as u64));
+                self.heap
+                    .push(Reverse((u64::from(qd2.to_bits()) << 32) | q as u64));
             }
         }
         g
@@ -139,6 +140,7 @@ impl Grower<'_> {
 /// Principal directions of the height field `h(x, y)` of the accepted points
 /// (least-squares quadric `h = A x² + B xy + C y² + D x + E y + F`): the unit
 /// minimum-curvature direction in `(x, y)` and the ratio `|κ_max / κ_min|`.
+#[allow(clippy::needless_range_loop)] // index form mirrors the elimination
 fn min_curvature(samples: &[(f64, f64, f64)]) -> Option<(f64, f64, f64)> {
     if samples.len() < 8 {
         return None;
@@ -175,7 +177,11 @@ fn min_curvature(samples: &[(f64, f64, f64)]) -> Option<(f64, f64, f64)> {
     let tr = 0.5 * (h11 + h22);
     let disc = (0.25 * (h11 - h22) * (h11 - h22) + h12 * h12).sqrt();
     let (k1, k2) = (tr + disc, tr - disc);
-    let (kmax, kmin) = if k1.abs() >= k2.abs() { (k1, k2) } else { (k2, k1) };
+    let (kmax, kmin) = if k1.abs() >= k2.abs() {
+        (k1, k2)
+    } else {
+        (k2, k1)
+    };
     // Eigenvector of kmin.
     let (ex, ey) = if h12.abs() > 1e-12 * (h11.abs() + h22.abs() + 1e-300) {
         (kmin - h22, h12)
@@ -185,10 +191,14 @@ fn min_curvature(samples: &[(f64, f64, f64)]) -> Option<(f64, f64, f64)> {
         (0.0, 1.0)
     };
     let len = (ex * ex + ey * ey).sqrt();
-    if !(len > 0.0) || !kmax.is_finite() {
+    if len.is_nan() || len <= 0.0 || !kmax.is_finite() {
         return None;
     }
-    Some((ex / len, ey / len, kmax.abs() / kmin.abs().max(kmax.abs() / 64.0)))
+    Some((
+        ex / len,
+        ey / len,
+        kmax.abs() / kmin.abs().max(kmax.abs() / 64.0),
+    ))
 }
 
 /// Grow splats over the whole cloud, seeds in point order. A point taken
@@ -244,7 +254,9 @@ pub fn grow_all(inp: &GrowInput<'_>, mut progress: impl FnMut(usize)) -> Grown {
             if let Some((ex, ey, ratio)) = min_curvature(&samples) {
                 let aspect = ratio.sqrt().clamp(1.0, 4.0) as f32;
                 if aspect > 1.25 {
-                    let a = (tu.as_dvec3() * ex + tv.as_dvec3() * ey).as_vec3().normalize();
+                    let a = (tu.as_dvec3() * ex + tv.as_dvec3() * ey)
+                        .as_vec3()
+                        .normalize();
                     let b = n.cross(a);
                     let e = g.run(i, a, b, aspect, max_d);
                     let e_r = e.accepted.last().map_or(0.0, |a| a.1.sqrt());
@@ -257,7 +269,7 @@ pub fn grow_all(inp: &GrowInput<'_>, mut progress: impl FnMut(usize)) -> Grown {
                 }
             }
         }
-        if !(r > 0.0) {
+        if r.is_nan() || r <= 0.0 {
             r = 0.5 * d_k;
         }
         let (a, b, aspect) = frame;

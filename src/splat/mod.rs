@@ -137,6 +137,6 @@ pub mod knn;
 pub mod normals;
 
 pub use generate::{
-    GenerateError, SplatParams, SplatReport, Skipped, StageSeconds, count_on_splats, coverage,
+    GenerateError, Skipped, SplatParams, SplatReport, StageSeconds, count_on_splats, coverage,
     generate, generate_with_progress, on_splat,
 };
