@@ -112,7 +112,7 @@ impl Format {
         let first = text
             .lines()
             .map(str::trim)
-            .find(|l| !l.is_empty() && !(l.starts_with('#') && !l.contains(".PCD")));
+            .find(|l| !l.is_empty() && (!l.starts_with('#') || l.contains(".PCD")));
         match first {
             Some(l)
                 if l.contains(".PCD") || l.starts_with("VERSION") || l.starts_with("FIELDS") =>

@@ -156,6 +156,9 @@ fn min_element_bytes(def: &ElementDef) -> usize {
         .sum()
 }
 
+/// Where face rows (vertex index lists, `None` for a negative index) go.
+type FaceSink<'a> = &'a mut dyn FnMut(Vec<Option<Vec<u32>>>);
+
 /// A parsed header and the body that follows it.
 pub(crate) struct PlyFile<'a> {
     pub(crate) header: Header,
@@ -201,7 +204,7 @@ impl<'a> PlyFile<'a> {
     fn read<V: PropertyAccess>(
         mut self,
         mut on_vertex: impl FnMut(Vec<V>),
-        mut on_face: Option<&mut dyn FnMut(Vec<Option<Vec<u32>>>)>,
+        mut on_face: Option<FaceSink<'_>>,
     ) -> Result<(), IoErrorKind> {
         let defs: Vec<ElementDef> = self.header.elements.values().cloned().collect();
         for def in &defs {

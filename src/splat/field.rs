@@ -52,7 +52,7 @@ pub fn fit_field(
         }
         let m = normals[j].as_dvec3();
         let mn = m.dot(n);
-        if !(mn >= 0.25) {
+        if mn.is_nan() || mn < 0.25 {
             continue;
         }
         let (x, y) = (m.dot(u) / mn, m.dot(v) / mn);
@@ -71,7 +71,7 @@ pub fn fit_field(
     }
     let var_u = suu - su * su / cnt;
     let var_v = svv - sv * sv / cnt;
-    if !(var_u > 1e-3 * cnt) || !(var_v > 1e-3 * cnt) {
+    if var_u.is_nan() || var_v.is_nan() || var_u <= 1e-3 * cnt || var_v <= 1e-3 * cnt {
         return None;
     }
     let alpha = (sux - su * sx / cnt) / var_u;

@@ -140,6 +140,7 @@ impl Grower<'_> {
 /// Principal directions of the height field `h(x, y)` of the accepted points
 /// (least-squares quadric `h = A x² + B xy + C y² + D x + E y + F`): the unit
 /// minimum-curvature direction in `(x, y)` and the ratio `|κ_max / κ_min|`.
+#[allow(clippy::needless_range_loop)] // index form mirrors the elimination
 fn min_curvature(samples: &[(f64, f64, f64)]) -> Option<(f64, f64, f64)> {
     if samples.len() < 8 {
         return None;
@@ -190,7 +191,7 @@ fn min_curvature(samples: &[(f64, f64, f64)]) -> Option<(f64, f64, f64)> {
         (0.0, 1.0)
     };
     let len = (ex * ex + ey * ey).sqrt();
-    if !(len > 0.0) || !kmax.is_finite() {
+    if len.is_nan() || len <= 0.0 || !kmax.is_finite() {
         return None;
     }
     Some((
@@ -268,7 +269,7 @@ pub fn grow_all(inp: &GrowInput<'_>, mut progress: impl FnMut(usize)) -> Grown {
                 }
             }
         }
-        if !(r > 0.0) {
+        if r.is_nan() || r <= 0.0 {
             r = 0.5 * d_k;
         }
         let (a, b, aspect) = frame;

@@ -10,6 +10,7 @@ use rayon::prelude::*;
 /// (robust for repeated and zero eigenvalues). Returns the eigenvalues in
 /// ascending order and the matching unit eigenvectors.
 #[must_use]
+#[allow(clippy::needless_range_loop)] // index form mirrors the rotation formulas
 pub fn sym_eigen3(m: [[f64; 3]; 3]) -> ([f64; 3], [DVec3; 3]) {
     let mut a = m;
     let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
