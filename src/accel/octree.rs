@@ -730,8 +730,8 @@ fn may_hit(d: &Disc, r2: f32, ray: &Ray, ctx: &RayCtx) -> bool {
     let oc2 = oc.dot(oc);
     let along = oc.dot(ray.dir);
     let dist2 = oc2 - along * along * ctx.inv_len2;
-    // NaN (a NaN ray) compares false: tested, and missed, by intersect_disc.
-    !(dist2 > r2 * 1.0001 + 64.0 * f32::EPSILON * (oc2 + r2))
+    // A NaN (NaN ray) passes on to intersect_disc, which misses it.
+    dist2 <= r2 * 1.0001 + 64.0 * f32::EPSILON * (oc2 + r2) || dist2.is_nan()
 }
 
 /// Per-axis (near, far) of a slab from the parameters of its two planes.
