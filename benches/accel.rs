@@ -46,17 +46,27 @@ fn sizes() -> Vec<usize> {
 /// Who is benchmarked: name and builder.
 type Build = fn(&Device, &[Splat]) -> Box<dyn Backend>;
 
+/// The default parameters, with `max_leaf` and `max_depth` overridable from
+/// `SPLATRAY_OCTREE_MAX_LEAF` / `SPLATRAY_OCTREE_MAX_DEPTH` (for tuning).
+fn params() -> OctreeParams {
+    let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<usize>().ok());
+    let d = OctreeParams::default();
+    OctreeParams {
+        max_leaf: env("SPLATRAY_OCTREE_MAX_LEAF").unwrap_or(d.max_leaf),
+        max_depth: env("SPLATRAY_OCTREE_MAX_DEPTH").map_or(d.max_depth, |v| v as u32),
+        ..d
+    }
+}
+
 fn builders() -> Vec<(&'static str, Build)> {
     vec![
-        ("octree", |_, s| {
-            Box::new(Octree::new(s, &OctreeParams::default()))
-        }),
+        ("octree", |_, s| Box::new(Octree::new(s, &params()))),
         ("octree-square", |_, s| {
             Box::new(Octree::new(
                 s,
                 &OctreeParams {
                     overlap: OverlapTest::BoundingSquare,
-                    ..OctreeParams::default()
+                    ..params()
                 },
             ))
         }),
@@ -107,7 +117,7 @@ fn scene(n: usize) -> Scene {
     let primary = camera_queries(Vec3::new(0.7, 1.1, 4.0), Vec3::ZERO, W, H);
     // Shadow rays from the hits of the primary rays (found by the octree;
     // the agreement suite shows every backend finds the same).
-    let probe = Octree::new(&splats, &OctreeParams::default());
+    let probe = Octree::new(&splats, &params());
     let light = Vec3::new(5.0, 6.0, 3.0);
     let shadow: Vec<Query> = primary
         .par_iter()
