@@ -242,11 +242,13 @@ fn truncated_binary_ply_and_lying_headers() {
     let pcd = b"VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 3\nHEIGHT 1\nPOINTS 3\nDATA ascii\n1 2 3\n";
     let e = must_fail(read_points(&write(&dir, "short.pcd", pcd)));
     assert!(matches!(e.kind(), IoErrorKind::Truncated(_)), "{e}");
+    // milk.pcd ends in zero padding after its compressed block (as PCL
+    // writes it), so cut into the block itself.
     let milk = std::fs::read(data("milk.pcd")).unwrap();
     let e = must_fail(read_points(&write(
         &dir,
         "milk.pcd",
-        &milk[..milk.len() - 100],
+        &milk[..milk.len() / 2],
     )));
     assert!(matches!(e.kind(), IoErrorKind::Truncated(_)), "{e}");
 }
