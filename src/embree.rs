@@ -446,3 +446,161 @@ impl Drop for DiscScene {
         unsafe { sys::rtcReleaseScene(self.scene) };
     }
 }
+
+/// One hit on a [`TriangleScene`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TriangleHit {
+    /// Ray parameter.
+    pub t: f32,
+    /// Index of the mesh (in the order given to [`TriangleScene::new`]).
+    pub mesh: u32,
+    /// Triangle index within the mesh.
+    pub triangle: u32,
+    /// Barycentric coordinates of the hit (weights of vertices 1 and 2).
+    pub u: f32,
+    /// See `u`.
+    pub v: f32,
+}
+
+/// Triangle meshes in Embree's own BVH: the exact surface that splats
+/// approximate, for ground truth.
+pub struct TriangleScene {
+    device: Device,
+    scene: sys::RTCScene,
+}
+
+// SAFETY: a committed Embree scene may be queried concurrently; it holds no
+// Rust data.
+unsafe impl Send for TriangleScene {}
+// SAFETY: as above.
+unsafe impl Sync for TriangleScene {}
+
+impl TriangleScene {
+    /// Builds one Embree triangle geometry per mesh and commits the scene.
+    /// Triangles indexing past their vertices are rejected.
+    pub fn new(
+        device: &Device,
+        meshes: &[(&[glam::Vec3], &[[u32; 3]])],
+    ) -> Result<TriangleScene, EmbreeError> {
+        let raw = device.inner.raw;
+        // SAFETY: live device.
+        let scene = unsafe { sys::rtcNewScene(raw) };
+        device.check()?;
+        if scene.is_null() {
+            return Err(EmbreeError("rtcNewScene returned null".into()));
+        }
+        let out = TriangleScene {
+            device: device.clone(),
+            scene,
+        };
+        for (i, (verts, tris)) in meshes.iter().enumerate() {
+            if let Some(bad) = tris.iter().flatten().find(|&&k| k as usize >= verts.len()) {
+                return Err(EmbreeError(format!(
+                    "mesh {i}: vertex index {bad} out of {} vertices",
+                    verts.len()
+                )));
+            }
+            // SAFETY: live device; TRIANGLE is a valid type.
+            let geom = unsafe { sys::rtcNewGeometry(raw, sys::RTCGeometryType::TRIANGLE) };
+            device.check()?;
+            if geom.is_null() {
+                return Err(EmbreeError("rtcNewGeometry returned null".into()));
+            }
+            // SAFETY: `geom` is a fresh triangle geometry; Embree allocates
+            // each buffer for `len` items of the given stride (with its own
+            // padding) and returns a pointer valid until the geometry is
+            // released; we check it for null and fill exactly `len` items.
+            unsafe {
+                let vb = sys::rtcSetNewGeometryBuffer(
+                    geom,
+                    sys::RTCBufferType::VERTEX,
+                    0,
+                    sys::RTCFormat::FLOAT3,
+                    12,
+                    verts.len(),
+                ) as *mut f32;
+                let ib = sys::rtcSetNewGeometryBuffer(
+                    geom,
+                    sys::RTCBufferType::INDEX,
+                    0,
+                    sys::RTCFormat::UINT3,
+                    12,
+                    tris.len(),
+                ) as *mut u32;
+                if vb.is_null() || ib.is_null() {
+                    sys::rtcReleaseGeometry(geom);
+                    device.check()?;
+                    return Err(EmbreeError("could not allocate mesh buffers".into()));
+                }
+                let vs = std::slice::from_raw_parts_mut(vb, verts.len() * 3);
+                for (dst, v) in vs.chunks_exact_mut(3).zip(verts.iter()) {
+                    dst.copy_from_slice(&v.to_array());
+                }
+                let is = std::slice::from_raw_parts_mut(ib, tris.len() * 3);
+                for (dst, t) in is.chunks_exact_mut(3).zip(tris.iter()) {
+                    dst.copy_from_slice(t);
+                }
+                sys::rtcCommitGeometry(geom);
+                sys::rtcAttachGeometryByID(scene, geom, i as c_uint);
+                sys::rtcReleaseGeometry(geom);
+            }
+            device.check()?;
+        }
+        // SAFETY: live scene.
+        unsafe { sys::rtcCommitScene(scene) };
+        device.check()?;
+        Ok(out)
+    }
+
+    /// The nearest triangle hit in `[t_min, t_max]`.
+    #[must_use]
+    pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<TriangleHit> {
+        let mut ctx = ray_query_context();
+        let mut args = intersect_arguments(&mut ctx as *mut sys::RTCRayQueryContext);
+        let mut rayhit = sys::RTCRayHit {
+            ray: embree_ray(ray, t_min, t_max),
+            hit: sys::RTCHit {
+                Ng_x: 0.0,
+                Ng_y: 0.0,
+                Ng_z: 0.0,
+                u: 0.0,
+                v: 0.0,
+                primID: sys::RTC_INVALID_GEOMETRY_ID,
+                geomID: sys::RTC_INVALID_GEOMETRY_ID,
+                instID: [sys::RTC_INVALID_GEOMETRY_ID; 1],
+            },
+        };
+        // SAFETY: committed scene; all pointers live across the call.
+        unsafe { sys::rtcIntersect1(self.scene, &mut rayhit, &mut args) };
+        let h = &rayhit.hit;
+        (h.geomID != sys::RTC_INVALID_GEOMETRY_ID).then_some(TriangleHit {
+            t: rayhit.ray.tfar,
+            mesh: h.geomID,
+            triangle: h.primID,
+            u: h.u,
+            v: h.v,
+        })
+    }
+
+    /// True when any triangle is hit in `[t_min, t_max]`.
+    #[must_use]
+    pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        let mut r = embree_ray(ray, t_min, t_max);
+        let mut args = occluded_arguments();
+        // SAFETY: committed scene; `r` and `args` live across the call.
+        unsafe { sys::rtcOccluded1(self.scene, &mut r, &mut args) };
+        r.tfar == f32::NEG_INFINITY
+    }
+
+    /// Errors Embree reported since the last check.
+    pub fn check(&self) -> Result<(), EmbreeError> {
+        self.device.check()
+    }
+}
+
+impl Drop for TriangleScene {
+    fn drop(&mut self) {
+        // SAFETY: `scene` came from `rtcNewScene` and is released once.
+        unsafe { sys::rtcReleaseScene(self.scene) };
+    }
+}

@@ -3,10 +3,14 @@
 use super::render::{apply_overrides, default_scene, write_json};
 use crate::accel::BackendKind;
 use crate::accel::resolve::ShadingMode;
+use crate::render::integrator::render_surfaces;
 use crate::render::integrator::{Frame, render};
 use crate::render::output::{check_output_path, write_atomic};
 use crate::render::scene::load_scene;
-use crate::validate::compare::{Agreement, compare_frames, diff_image};
+use crate::validate::compare::{
+    Agreement, TruthErrors, compare_frames, diff_image, orient_to_camera, truth_errors,
+};
+use crate::validate::truth::Truth;
 use std::path::PathBuf;
 
 /// Options of `splatray compare`.
@@ -32,6 +36,10 @@ pub struct CompareArgs {
     /// Override the shading mode: flat, blended or phong.
     #[arg(long)]
     pub shading: Option<ShadingMode>,
+    /// Also trace the exact surfaces (meshes as Embree triangles, analytic
+    /// shapes) and report each backend's errors against them.
+    #[arg(long)]
+    pub truth: bool,
 }
 
 /// Speed of one backend in the comparison run.
@@ -71,6 +79,20 @@ pub struct CompareReport {
     pub embree: BackendRun,
     /// Octree rays per second over Embree's, measured in this run.
     pub octree_over_embree: f64,
+    /// Errors against the exact surfaces (with `--truth`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub truth: Option<TruthReport>,
+}
+
+/// Errors of each backend against the exact surfaces.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct TruthReport {
+    /// Seconds to render the exact surfaces.
+    pub render_seconds: f64,
+    /// The octree's splats against the surface.
+    pub octree: TruthErrors,
+    /// Embree's splats against the surface.
+    pub embree: TruthErrors,
 }
 
 /// Runs `splatray compare`.
@@ -90,6 +112,12 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
         Some(args.spp),
         args.shading,
     )?;
+    // Fail before any rendering when there is no exact surface.
+    let truth = if args.truth {
+        Some(Truth::new(&scene)?)
+    } else {
+        None
+    };
     let mut runs = Vec::new();
     for kind in [BackendKind::Octree, BackendKind::Embree] {
         let backend = kind.build(&scene.splats)?;
@@ -101,6 +129,21 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
     let agreement = compare_frames(of, ef, scene.options.scale.diagonal);
     let octree = BackendRun::of(*ob, of);
     let embree = BackendRun::of(*eb, ef);
+    let diagonal = scene.options.scale.diagonal;
+    let truth = truth.map(|t| {
+        let mut tf = render_surfaces(&scene, &t, true);
+        orient_to_camera(&mut tf, &scene.camera);
+        let errors = |f: &Frame| {
+            let mut f = f.clone();
+            orient_to_camera(&mut f, &scene.camera);
+            truth_errors(&f, &tf, diagonal)
+        };
+        TruthReport {
+            render_seconds: tf.seconds,
+            octree: errors(of),
+            embree: errors(ef),
+        }
+    });
     let report = CompareReport {
         scene: scene_path.display().to_string(),
         splats: scene.splats.len(),
@@ -108,6 +151,7 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
         agreement,
         octree,
         embree,
+        truth,
     };
     if let Some(d) = &args.diff {
         let img = diff_image(of, ef);
@@ -148,5 +192,24 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
         "  octree/embree throughput ratio {:.2} (same run)",
         report.octree_over_embree
     );
+    if let Some(t) = &report.truth {
+        println!(
+            "  against the exact surface (rendered in {:.3} s):",
+            t.render_seconds
+        );
+        for (name, e) in [("octree", &t.octree), ("embree", &t.embree)] {
+            println!(
+                "  {name}: coverage {:.5}, false hits {:.5}, depth/diag p50 {:.2e} p99 {:.2e}, normal deg mean {:.3} p99 {:.3}, PSNR {}",
+                e.coverage,
+                e.false_hits,
+                e.depth_rel_p50,
+                e.depth_rel_p99,
+                e.normal_deg_mean,
+                e.normal_deg_p99,
+                e.image_psnr_db
+                    .map_or("inf".to_string(), |p| format!("{p:.2} dB"))
+            );
+        }
+    }
     Ok(())
 }

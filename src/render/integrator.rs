@@ -88,9 +88,78 @@ impl Rng {
     }
 }
 
+/// A surface hit as the integrator needs it, whatever produced it: the
+/// splats through a backend and the resolver, or an exact surface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShadeHit {
+    /// Splat (or primitive) id, for the splat-id AOV.
+    pub id: u32,
+    /// Ray parameter.
+    pub t: f32,
+    /// Hit point.
+    pub point: Vec3,
+    /// Unit shading normal on the surface's own side (not flipped).
+    pub normal: Vec3,
+    /// True when the ray meets the front side.
+    pub front: bool,
+    /// Material index into the scene's materials.
+    pub material: u16,
+    /// Colour of the surface data (multiplies the material's albedo).
+    pub color: Vec3,
+    /// `eps_self` for rays leaving this hit.
+    pub eps: f32,
+}
+
+/// What the integrator traces against (DESIGN §2: nothing above the backend
+/// knows which backend runs; this trait also lets the exact mesh surface of
+/// `compare --truth` go through the same integrator).
+pub trait Surfaces: Sync {
+    /// The resolved hit of `ray` beyond `t_min`; `hits` is scratch space.
+    fn hit(&self, ray: &Ray, t_min: f32, hits: &mut CandidateHits) -> Option<ShadeHit>;
+    /// Any hit with `t` in `[t_min, t_max]`.
+    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool;
+}
+
+/// The splats of a scene through one backend and the shared resolver.
+pub struct SplatSurfaces<'a> {
+    /// The scene (splats, materials, options).
+    pub scene: &'a Scene,
+    /// The acceleration backend.
+    pub backend: &'a dyn Backend,
+}
+
+impl Surfaces for SplatSurfaces<'_> {
+    fn hit(&self, ray: &Ray, t_min: f32, hits: &mut CandidateHits) -> Option<ShadeHit> {
+        let sc = self.scene;
+        self.backend.intersect(ray, t_min, f32::INFINITY, hits);
+        let mode = sc.shading_for(hits.nearest()?.id);
+        let h: SurfaceHit = resolve(hits, ray, &sc.splats, mode)?;
+        let splat = &sc.splats[h.id as usize];
+        Some(ShadeHit {
+            id: h.id,
+            t: h.t,
+            point: h.point,
+            normal: h.normal,
+            front: h.front,
+            material: sc.material_of[h.id as usize],
+            color: splat.color,
+            // Secondary rays skip hits within eps_self of their origin
+            // (§3.2, fig. 9 right). Overlapping neighbours of the splat a
+            // ray leaves stand up to about its radius away along the ray on
+            // a curved surface, so the window grows to that radius: the
+            // surface is not resolved finer than its splats anyway.
+            eps: sc.options.scale.eps_self.max(splat.radii.max_element()),
+        })
+    }
+
+    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        self.backend.occluded(ray, t_min, t_max)
+    }
+}
+
 struct Tracer<'a> {
     scene: &'a Scene,
-    backend: &'a dyn Backend,
+    surfaces: &'a dyn Surfaces,
 }
 
 struct Scratch {
@@ -118,17 +187,14 @@ fn fresnel(cos_i: f32, eta: f32) -> f32 {
 }
 
 impl Tracer<'_> {
-    fn intersect(&self, ray: &Ray, t_min: f32, s: &mut Scratch) -> Option<SurfaceHit> {
-        self.backend
-            .intersect(ray, t_min, f32::INFINITY, &mut s.hits);
-        let mode = self.scene.shading_for(s.hits.nearest()?.id);
-        resolve(&s.hits, ray, &self.scene.splats, mode)
+    fn intersect(&self, ray: &Ray, t_min: f32, s: &mut Scratch) -> Option<ShadeHit> {
+        self.surfaces.hit(ray, t_min, &mut s.hits)
     }
 
     fn visible(&self, p: Vec3, dir: Vec3, dist: f32, eps: f32, s: &mut Scratch) -> bool {
         s.rays.shadow += 1;
         !self
-            .backend
+            .surfaces
             .occluded(&Ray { origin: p, dir }, eps, dist - eps)
     }
 
@@ -208,24 +274,18 @@ impl Tracer<'_> {
         sum
     }
 
-    fn shade(&self, ray: &Ray, hit: Option<SurfaceHit>, depth: u32, s: &mut Scratch) -> Vec3 {
+    fn shade(&self, ray: &Ray, hit: Option<ShadeHit>, depth: u32, s: &mut Scratch) -> Vec3 {
         let Some(hit) = hit else {
             return self.scene.background;
         };
         let sc = self.scene;
-        let splat = &sc.splats[hit.id as usize];
         let n = if hit.front { hit.normal } else { -hit.normal };
-        let material = sc.materials[sc.material_of[hit.id as usize] as usize];
-        // Secondary rays skip hits within eps_self of their origin (§3.2,
-        // fig. 9 right). Overlapping neighbours of the splat a ray leaves
-        // stand up to about its radius away along the ray on a curved
-        // surface, so the window grows to that radius: the surface is not
-        // resolved finer than its splats anyway.
-        let eps = sc.options.scale.eps_self.max(splat.radii.max_element());
+        let material = sc.materials[hit.material as usize];
+        let eps = hit.eps;
         let deeper = depth + 1 < sc.options.max_depth;
         match material {
             Material::Diffuse { color } => {
-                let albedo = color * splat.color;
+                let albedo = color * hit.color;
                 albedo * sc.options.ambient
                     + self.direct(hit.point, n, eps, ray.dir, albedo, (0.0, 0.0), s)
             }
@@ -234,7 +294,7 @@ impl Tracer<'_> {
                 specular,
                 shininess,
             } => {
-                let albedo = color * splat.color;
+                let albedo = color * hit.color;
                 albedo * sc.options.ambient
                     + self.direct(hit.point, n, eps, ray.dir, albedo, (specular, shininess), s)
             }
@@ -290,9 +350,16 @@ struct Row {
 /// terminal.
 #[must_use]
 pub fn render(scene: &Scene, backend: &dyn Backend, progress: bool) -> Frame {
+    render_surfaces(scene, &SplatSurfaces { scene, backend }, progress)
+}
+
+/// Renders the scene's camera, lights and materials against any
+/// [`Surfaces`].
+#[must_use]
+pub fn render_surfaces(scene: &Scene, surfaces: &dyn Surfaces, progress: bool) -> Frame {
     let cam = &scene.camera;
     let (w, h) = (cam.width as usize, cam.height as usize);
-    let tracer = Tracer { scene, backend };
+    let tracer = Tracer { scene, surfaces };
     let start = Instant::now();
     let rows_done = AtomicUsize::new(0);
     let show = progress && std::io::stderr().is_terminal();

@@ -431,9 +431,38 @@ pub struct LoadReport {
     pub warnings: Vec<String>,
     /// Coverage of each generated point model (§2.2).
     pub coverage: Vec<f64>,
-    /// Meshes of mesh models (the exact surfaces), in model space, with the
-    /// transform their model applies.
-    pub meshes: Vec<(crate::io::Mesh, TransformSpec)>,
+    /// The exact surface of each model where one is known (mesh models and
+    /// shapes), in world space before re-centring: ground truth for
+    /// `compare --truth`.
+    pub truth: Vec<TruthSource>,
+}
+
+/// The exact surface behind one model.
+#[derive(Clone, Debug)]
+pub enum TruthSource {
+    /// A triangle mesh (mesh models), world space.
+    Mesh {
+        /// The mesh, transformed.
+        mesh: crate::io::Mesh,
+        /// Material index.
+        material: u16,
+    },
+    /// An analytic sphere.
+    Sphere {
+        /// Centre, world space.
+        center: Vec3,
+        /// Radius.
+        radius: f32,
+        /// Material index.
+        material: u16,
+    },
+    /// A model with no exact surface (a point or splat file), and why.
+    Unknown {
+        /// 1-based model number.
+        model: usize,
+        /// What it is.
+        what: String,
+    },
 }
 
 /// A loaded scene, re-centred so that its splats' bounding box is centred at
@@ -620,6 +649,43 @@ fn shape_splats(shape: &ShapeSpec) -> Result<Vec<Splat>, String> {
     }
 }
 
+/// The exact surface of a shape model (or why there is none).
+fn shape_truth(m: &ModelSpec, model: usize, material: u16) -> TruthSource {
+    let t = &m.transform;
+    match &m.shape {
+        Some(sh) if sh.kind == "sphere" => TruthSource::Sphere {
+            center: t.point(v3(sh.center)),
+            radius: sh.radius.unwrap_or(1.0) * t.scale,
+            material,
+        },
+        Some(sh) if sh.kind == "quad" => {
+            let n = v3(sh.normal.unwrap_or([0.0, 1.0, 0.0]))
+                .try_normalize()
+                .unwrap_or(Vec3::Y);
+            let (a, b) = crate::splat::tangent_frame(n);
+            let [sx, sy] = sh.size.unwrap_or([1.0, 1.0]);
+            let c = v3(sh.center);
+            let corners = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+                .map(|(x, y)| t.point(c + a * (0.5 * sx * x) + b * (0.5 * sy * y)));
+            TruthSource::Mesh {
+                mesh: crate::io::Mesh {
+                    positions: corners.to_vec(),
+                    triangles: vec![[0, 1, 2], [0, 2, 3]],
+                },
+                material,
+            }
+        }
+        _ => TruthSource::Unknown {
+            model,
+            what: if m.points.is_some() {
+                "a point file".into()
+            } else {
+                "a splat file".into()
+            },
+        },
+    }
+}
+
 /// Loads a scene file: parses it, builds every model's splats, resolves
 /// materials, lights and camera, and re-centres everything.
 pub fn load_scene(path: &Path) -> Result<Scene, String> {
@@ -660,8 +726,15 @@ pub fn build_scene(file: &SceneFile, base: &Path) -> Result<Scene, String> {
     let mut materials = Vec::new();
     let mut shading_of = Vec::new();
     for (i, m) in file.models.iter().enumerate() {
+        let truth_before = load.truth.len();
         let mut s =
             model_splats(m, base, &mut load).map_err(|e| format!("model {}: {e}", i + 1))?;
+        let mid = u16::try_from(i).map_err(|_| "more than 65535 models".to_string())?;
+        if load.truth.len() == truth_before {
+            load.truth.push(shape_truth(m, i + 1, mid));
+        } else if let Some(TruthSource::Mesh { material, .. }) = load.truth.last_mut() {
+            *material = mid;
+        }
         if !(m.transform.scale > 0.0 && m.transform.scale.is_finite()) {
             return Err(format!(
                 "model {}: transform.scale must be positive, got {}",
@@ -675,7 +748,6 @@ pub fn build_scene(file: &SceneFile, base: &Path) -> Result<Scene, String> {
             Some(s) => Some(s.parse().map_err(|e| format!("model {}: {e}", i + 1))?),
             None => None,
         });
-        let mid = u16::try_from(i).map_err(|_| "more than 65535 models".to_string())?;
         material_of.extend(std::iter::repeat_n(mid, s.len()));
         splats.extend(s);
     }
@@ -794,7 +866,17 @@ fn model_splats_from_files(
         }
         let mesh = crate::io::read_mesh(&path).map_err(|e| e.to_string())?;
         let cloud = crate::io::sample_mesh(&mesh, samples, 0.0, spec.seed);
-        load.meshes.push((mesh, spec.transform.clone()));
+        load.truth.push(TruthSource::Mesh {
+            mesh: crate::io::Mesh {
+                positions: mesh
+                    .positions
+                    .iter()
+                    .map(|&p| spec.transform.point(p))
+                    .collect(),
+                triangles: mesh.triangles.clone(),
+            },
+            material: 0, // set by the caller
+        });
         cloud
     } else {
         return Err("a model needs exactly one of `points`, `splats`, `mesh` or `shape`".into());

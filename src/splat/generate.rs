@@ -191,7 +191,8 @@ fn clean_order(pos: &[Vec3]) -> (Vec<u32>, usize, usize) {
 ///
 /// Non-finite and duplicate points are skipped and counted. Input normals
 /// are used (normalised) where present; zero or NaN ones are re-estimated.
-/// Splat colour is the mean colour of the points a splat took, or grey 0.8.
+/// Splat colour is the mean colour of the points a splat took, or white
+/// when the cloud has no colour, so that the material alone sets the albedo.
 ///
 /// # Errors
 /// [`GenerateError`] when the parameters are out of range, fewer than 3

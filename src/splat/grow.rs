@@ -305,7 +305,7 @@ pub fn grow_all(inp: &GrowInput<'_>, mut progress: impl FnMut(usize)) -> Grown {
             Some(_) if !growth.accepted.is_empty() => {
                 (color / growth.accepted.len() as f64).as_vec3()
             }
-            _ => Vec3::splat(0.8),
+            _ => Vec3::ONE,
         };
         if aspect > 1.0 {
             elliptical += 1;

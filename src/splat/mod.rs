@@ -66,7 +66,7 @@ impl Splat {
             u_axis: u,
             v_axis: v,
             radii: Vec2::splat(radius),
-            color: Vec3::splat(0.8),
+            color: Vec3::ONE,
             field: NormalField::FLAT,
         })
     }

@@ -24,6 +24,8 @@ pub struct Agreement {
     pub dt_rel_p99: f64,
     /// Maximum |Δt| / diagonal.
     pub dt_rel_max: f64,
+    /// Mean resolved-normal angle difference, degrees.
+    pub normal_deg_mean: f64,
     /// 99th percentile of the resolved-normal angle difference, degrees.
     pub normal_deg_p99: f64,
     /// Maximum resolved-normal angle difference, degrees.
@@ -101,10 +103,66 @@ pub fn compare_frames(a: &Frame, b: &Frame, diagonal: f32) -> Agreement {
         dt_rel_p50: quantile(&mut dts, 0.5),
         dt_rel_p99: quantile(&mut dts, 0.99),
         dt_rel_max: dts.last().copied().unwrap_or(0.0),
+        normal_deg_mean: angles.iter().sum::<f64>() / angles.len().max(1) as f64,
         normal_deg_p99: quantile(&mut angles, 0.99),
         normal_deg_max: angles.last().copied().unwrap_or(0.0),
         image_psnr_db: (mse > 0.0).then(|| 10.0 * (1.0 / mse).log10()),
         image_max_abs: max_abs,
+    }
+}
+
+/// Errors of a splat render against the render of the exact surface.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct TruthErrors {
+    /// Of the pixels where the exact surface is hit, the fraction where the
+    /// splats are hit too (1 = no holes).
+    pub coverage: f64,
+    /// Fraction of all pixels where splats are hit but the surface is not.
+    pub false_hits: f64,
+    /// Median |Δdepth| / scene diagonal where both are hit.
+    pub depth_rel_p50: f64,
+    /// 99th percentile of |Δdepth| / diagonal.
+    pub depth_rel_p99: f64,
+    /// Mean angle between the resolved splat normal and the surface normal,
+    /// degrees (both turned toward the camera).
+    pub normal_deg_mean: f64,
+    /// 99th percentile of that angle, degrees.
+    pub normal_deg_p99: f64,
+    /// PSNR of the splat image against the surface's image, dB (`null` when
+    /// identical).
+    pub image_psnr_db: Option<f64>,
+}
+
+/// Turns every normal of `frame` toward the camera ray of its pixel centre,
+/// so that surfaces whose orientations differ compare by shape only.
+pub fn orient_to_camera(frame: &mut Frame, camera: &crate::render::scene::Camera) {
+    let w = frame.width as usize;
+    for (i, n) in frame.normal.iter_mut().enumerate() {
+        let ray = camera.ray((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+        if n.dot(ray.dir) > 0.0 {
+            *n = -*n;
+        }
+    }
+}
+
+/// Errors of `splats` against `truth` (both oriented with
+/// [`orient_to_camera`]).
+#[must_use]
+pub fn truth_errors(splats: &Frame, truth: &Frame, diagonal: f32) -> TruthErrors {
+    let a = compare_frames(splats, truth, diagonal);
+    let truth_hits = truth.splat.iter().filter(|&&s| s != u32::MAX).count();
+    TruthErrors {
+        coverage: if truth_hits == 0 {
+            1.0
+        } else {
+            1.0 - a.only_second as f64 / truth_hits as f64
+        },
+        false_hits: a.only_first as f64 / a.rays.max(1) as f64,
+        depth_rel_p50: a.dt_rel_p50,
+        depth_rel_p99: a.dt_rel_p99,
+        normal_deg_mean: a.normal_deg_mean,
+        normal_deg_p99: a.normal_deg_p99,
+        image_psnr_db: a.image_psnr_db,
     }
 }
 

@@ -2,3 +2,4 @@
 //! image for image (DESIGN §2, §4).
 
 pub mod compare;
+pub mod truth;

@@ -1,0 +1,154 @@
+//! Ground truth: the exact surfaces behind a scene's models (meshes traced
+//! as Embree triangles, analytic spheres), rendered through the same
+//! integrator as the splats so their figures can be compared.
+
+use crate::accel::{CandidateHits, Ray};
+use crate::embree::{Device, TriangleScene};
+use crate::render::integrator::{ShadeHit, Surfaces};
+use crate::render::scene::{Scene, TruthSource};
+use glam::Vec3;
+
+struct TruthMesh {
+    triangles: Vec<[u32; 3]>,
+    positions: Vec<Vec3>,
+    /// Area-weighted vertex normals: the smooth surface the mesh samples.
+    normals: Vec<Vec3>,
+    material: u16,
+}
+
+/// The exact surfaces of a scene, in the scene's (re-centred) coordinates.
+pub struct Truth {
+    triangles: TriangleScene,
+    meshes: Vec<TruthMesh>,
+    spheres: Vec<(Vec3, f32, u16)>,
+    eps: f32,
+}
+
+fn vertex_normals(p: &[Vec3], tris: &[[u32; 3]]) -> Vec<Vec3> {
+    let mut n = vec![Vec3::ZERO; p.len()];
+    for t in tris {
+        let [a, b, c] = t.map(|k| p[k as usize]);
+        let f = (b - a).cross(c - a); // length = twice the area
+        for &k in t {
+            n[k as usize] += f;
+        }
+    }
+    n.into_iter().map(Vec3::normalize_or_zero).collect()
+}
+
+impl Truth {
+    /// Builds the exact surfaces of every model of `scene`, or says which
+    /// model has none (point and splat files).
+    pub fn new(scene: &Scene) -> Result<Truth, String> {
+        let mut meshes = Vec::new();
+        let mut spheres = Vec::new();
+        for t in &scene.load.truth {
+            match t {
+                TruthSource::Mesh { mesh, material } => {
+                    let positions: Vec<Vec3> =
+                        mesh.positions.iter().map(|&p| p - scene.offset).collect();
+                    meshes.push(TruthMesh {
+                        normals: vertex_normals(&positions, &mesh.triangles),
+                        triangles: mesh.triangles.clone(),
+                        positions,
+                        material: *material,
+                    });
+                }
+                TruthSource::Sphere {
+                    center,
+                    radius,
+                    material,
+                } => spheres.push((*center - scene.offset, *radius, *material)),
+                TruthSource::Unknown { model, what } => {
+                    return Err(format!(
+                        "model {model} is {what}: it has no exact surface to compare against \
+                         (use `mesh` with `samples`, or a `shape`)"
+                    ));
+                }
+            }
+        }
+        let device = Device::new().map_err(|e| e.to_string())?;
+        let refs: Vec<(&[Vec3], &[[u32; 3]])> = meshes
+            .iter()
+            .map(|m| (m.positions.as_slice(), m.triangles.as_slice()))
+            .collect();
+        let triangles = TriangleScene::new(&device, &refs).map_err(|e| e.to_string())?;
+        Ok(Truth {
+            triangles,
+            meshes,
+            spheres,
+            eps: scene.options.scale.eps_self,
+        })
+    }
+
+    fn sphere_hit(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<(f32, usize)> {
+        let mut best: Option<(f32, usize)> = None;
+        for (i, &(c, r, _)) in self.spheres.iter().enumerate() {
+            let oc = ray.origin - c;
+            let b = oc.dot(ray.dir);
+            let disc = b * b - (oc.length_squared() - r * r);
+            if disc < 0.0 {
+                continue;
+            }
+            let sq = disc.sqrt();
+            for t in [-b - sq, -b + sq] {
+                if t >= t_min && t <= t_max && best.is_none_or(|(bt, _)| t < bt) {
+                    best = Some((t, i));
+                    break;
+                }
+            }
+        }
+        best
+    }
+}
+
+impl Surfaces for Truth {
+    fn hit(&self, ray: &Ray, t_min: f32, _hits: &mut CandidateHits) -> Option<ShadeHit> {
+        let tri = self.triangles.intersect(ray, t_min, f32::INFINITY);
+        let t_max = tri.map_or(f32::INFINITY, |h| h.t);
+        if let Some((t, i)) = self.sphere_hit(ray, t_min, t_max) {
+            let (c, _, material) = self.spheres[i];
+            let point = ray.at(t);
+            let n = (point - c).normalize();
+            return Some(ShadeHit {
+                id: i as u32,
+                t,
+                point,
+                normal: n,
+                front: n.dot(ray.dir) < 0.0,
+                material,
+                color: Vec3::ONE,
+                eps: self.eps,
+            });
+        }
+        let h = tri?;
+        let m = &self.meshes[h.mesh as usize];
+        let [a, b, c] = m.triangles[h.triangle as usize];
+        let (pa, pb, pc) = (
+            m.positions[a as usize],
+            m.positions[b as usize],
+            m.positions[c as usize],
+        );
+        let ng = (pb - pa).cross(pc - pa).normalize_or_zero();
+        let ns = ((1.0 - h.u - h.v) * m.normals[a as usize]
+            + h.u * m.normals[b as usize]
+            + h.v * m.normals[c as usize])
+            .try_normalize()
+            .unwrap_or(ng);
+        let ns = if ns.dot(ng) < 0.0 { -ns } else { ns };
+        Some(ShadeHit {
+            id: h.triangle,
+            t: h.t,
+            point: ray.at(h.t),
+            normal: ns,
+            front: ng.dot(ray.dir) < 0.0,
+            material: m.material,
+            color: Vec3::ONE,
+            eps: self.eps,
+        })
+    }
+
+    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        self.sphere_hit(ray, t_min, t_max).is_some() || self.triangles.occluded(ray, t_min, t_max)
+    }
+}
