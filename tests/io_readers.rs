@@ -176,6 +176,20 @@ fn xyz_with_and_without_normals() {
 }
 
 #[test]
+fn formats_are_sniffed_when_the_extension_says_nothing() {
+    let dir = scratch("sniff");
+    for (src, name, n) in [
+        ("milk.pcd", "milk.bin", 12_575),
+        ("bunny-scan.ply", "scan.dat", 1_889),
+        ("lamppost-ascii.pcd", "lamp", 1_771),
+    ] {
+        let p = write(&dir, name, &std::fs::read(data(src)).unwrap());
+        let c = read_points(&p).unwrap();
+        assert_eq!(c.len() + c.skipped_total(), n, "{name}");
+    }
+}
+
+#[test]
 fn non_finite_points_are_skipped_and_counted() {
     let dir = scratch("nan");
     let c = read_points(&write(&dir, "n.xyz", b"1 2 3\nnan 0 0\n0 inf 0\n4 5 6\n")).unwrap();
