@@ -29,6 +29,7 @@ fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
 }
 
 /// The error of a read that must fail (without printing a whole cloud).
+#[track_caller]
 fn must_fail<T>(r: Result<T, splatray::io::IoError>) -> splatray::io::IoError {
     match r {
         Ok(_) => panic!("expected an error, the read succeeded"),
@@ -172,6 +173,20 @@ fn xyz_with_and_without_normals() {
     // Sniffed without an extension.
     let c = read_points(&write(&dir, "noext", b"1 2 3\n4 5 6\n")).unwrap();
     assert_eq!(c.len(), 2);
+}
+
+#[test]
+fn formats_are_sniffed_when_the_extension_says_nothing() {
+    let dir = scratch("sniff");
+    for (src, name, n) in [
+        ("milk.pcd", "milk.bin", 12_575),
+        ("bunny-scan.ply", "scan.dat", 1_889),
+        ("lamppost-ascii.pcd", "lamp", 1_771),
+    ] {
+        let p = write(&dir, name, &std::fs::read(data(src)).unwrap());
+        let c = read_points(&p).unwrap();
+        assert_eq!(c.len() + c.skipped_total(), n, "{name}");
+    }
 }
 
 #[test]

@@ -137,12 +137,22 @@ fn fresh_bunny_samples_lie_on_splats_no_holes() {
     let mesh = read_mesh(&data("bunny-mesh.ply")).unwrap();
     let mut pts = sample_mesh(&mesh, 30_000, 0.0, 11);
     pts.normals = None;
-    let (splats, rep) = generate(&pts, &SplatParams::default()).unwrap();
-    assert!(splats.len() < 30_000 / 3, "{} splats", splats.len());
     let fresh = sample_mesh(&mesh, 5_000, 0.0, 12345);
-    let on = count_on_splats(&fresh.positions, &splats, rep.epsilon as f32);
-    let frac = on as f64 / fresh.positions.len() as f64;
-    assert!(frac >= 0.99, "only {frac} of fresh samples lie on a splat");
+    for ellipses in [false, true] {
+        let params = SplatParams {
+            ellipses,
+            ..SplatParams::default()
+        };
+        let (splats, rep) = generate(&pts, &params).unwrap();
+        assert!(splats.len() < 30_000 / 3, "{} splats", splats.len());
+        assert_eq!(rep.elliptical_splats > 0, ellipses);
+        let on = count_on_splats(&fresh.positions, &splats, rep.epsilon as f32);
+        let frac = on as f64 / fresh.positions.len() as f64;
+        assert!(
+            frac >= 0.99,
+            "ellipses {ellipses}: only {frac} of fresh samples lie on a splat"
+        );
+    }
 }
 
 #[test]

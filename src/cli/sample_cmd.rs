@@ -3,6 +3,9 @@
 use crate::io::{read_mesh, sample_mesh, write_points};
 use std::path::PathBuf;
 
+/// The most points `sample` makes (about 2 GB of output).
+pub const MAX_SAMPLES: usize = 100_000_000;
+
 /// Arguments of `splatray sample`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct SampleArgs {
@@ -28,8 +31,8 @@ pub struct SampleArgs {
 /// # Errors
 /// When the mesh cannot be read, has no area, or the output cannot be written.
 pub fn run(args: &SampleArgs) -> Result<(), String> {
-    if args.n == 0 {
-        return Err("-n must be at least 1".into());
+    if args.n == 0 || args.n > MAX_SAMPLES {
+        return Err(format!("-n must be between 1 and {MAX_SAMPLES}"));
     }
     if !(args.noise.is_finite() && args.noise >= 0.0) {
         return Err(format!(

@@ -43,35 +43,33 @@ impl Knn {
     pub fn build(tree: &PointTree, points: &[Vec3], k: usize) -> Knn {
         let k = k.clamp(1, points.len().saturating_sub(1).max(1));
         let q = NonZero::new(k + 1).unwrap_or(NonZero::<usize>::MIN);
-        let rows: Vec<(Vec<u32>, f32)> = points
-            .par_iter()
+        let mut idx = vec![0u32; points.len() * k];
+        let mut kth_distance = vec![0f32; points.len()];
+        idx.par_chunks_mut(k)
+            .zip(kth_distance.par_iter_mut())
             .enumerate()
             .with_min_len(1024)
-            .map(|(i, p)| {
-                let found = tree.nearest_n::<SquaredEuclidean>(&p.to_array(), q);
-                let mut row: Vec<u32> = Vec::with_capacity(k);
+            .for_each(|(i, (row, kth))| {
+                let found = tree.nearest_n::<SquaredEuclidean>(&points[i].to_array(), q);
+                let mut len = 0usize;
                 let mut last = 0f32;
                 for nb in found {
-                    if nb.item as usize == i || row.len() == k {
+                    if nb.item as usize == i || len == k {
                         continue;
                     }
-                    row.push(nb.item);
+                    row[len] = nb.item;
+                    len += 1;
                     last = nb.distance;
                 }
                 // Pad (only with fewer found than asked) with the last one.
-                while row.len() < k {
-                    let fill = row.last().copied().unwrap_or(if i == 0 { 1 } else { 0 });
-                    row.push(fill);
-                }
-                (row, last.sqrt())
-            })
-            .collect();
-        let mut idx = Vec::with_capacity(points.len() * k);
-        let mut kth_distance = Vec::with_capacity(points.len());
-        for (row, d) in rows {
-            idx.extend_from_slice(&row);
-            kth_distance.push(d);
-        }
+                let fill = if len > 0 {
+                    row[len - 1]
+                } else {
+                    u32::from(i == 0)
+                };
+                row[len..].fill(fill);
+                *kth = last.sqrt();
+            });
         Knn {
             k,
             idx,

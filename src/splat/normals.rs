@@ -118,25 +118,35 @@ pub fn orient(points: &[Vec3], knn: &Knn, normals: &mut [Vec3], fixed: &[bool]) 
     let k = knn.k;
     // Bucket sort of the directed edges by weight.
     const BUCKETS: usize = 4096;
+    const NO_EDGE: u16 = u16::MAX;
     let bucket_of: Vec<u16> = (0..n * k)
         .into_par_iter()
         .with_min_len(4096)
         .map(|e| {
             let (i, j) = (e / k, knn.idx[e] as usize);
+            // A mutual pair is one undirected edge: keep it once.
+            if j < i && knn.of(j).contains(&(i as u32)) || i == j {
+                return NO_EDGE;
+            }
             let w = 1.0 - normals[i].dot(normals[j]).abs().min(1.0);
             ((w * (BUCKETS - 1) as f32) as usize).min(BUCKETS - 1) as u16
         })
         .collect();
     let mut start = vec![0usize; BUCKETS + 1];
     for &b in &bucket_of {
-        start[b as usize + 1] += 1;
+        if b != NO_EDGE {
+            start[b as usize + 1] += 1;
+        }
     }
     for b in 0..BUCKETS {
         start[b + 1] += start[b];
     }
-    let mut sorted = vec![0u32; n * k];
+    let mut sorted = vec![0u32; start[BUCKETS]];
     let mut fill = start.clone();
     for (e, &b) in bucket_of.iter().enumerate() {
+        if b == NO_EDGE {
+            continue;
+        }
         sorted[fill[b as usize]] = e as u32;
         fill[b as usize] += 1;
     }
