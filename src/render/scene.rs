@@ -7,7 +7,7 @@
 use crate::accel::SceneScale;
 use crate::accel::resolve::ShadingMode;
 use crate::splat::Splat;
-use glam::{Mat3, Vec2, Vec3};
+use glam::{DVec3, Mat3, Vec2, Vec3};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -37,10 +37,10 @@ fn white() -> [f32; 3] {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraSpec {
-    /// Eye position.
-    pub from: [f32; 3],
+    /// Eye position (f64, so far-from-origin scenes keep their precision).
+    pub from: [f64; 3],
     /// Point looked at.
-    pub at: [f32; 3],
+    pub at: [f64; 3],
     /// Up vector.
     #[serde(default = "default_up")]
     pub up: [f32; 3],
@@ -69,9 +69,9 @@ pub struct TransformSpec {
     /// Rotation, degrees about x, y, z.
     #[serde(default)]
     pub rotate: [f32; 3],
-    /// Translation.
+    /// Translation (f64: applied before re-centring, in double precision).
     #[serde(default)]
-    pub translate: [f32; 3],
+    pub translate: [f64; 3],
 }
 
 impl Default for TransformSpec {
@@ -90,18 +90,21 @@ impl TransformSpec {
         Mat3::from_rotation_z(z) * Mat3::from_rotation_y(y) * Mat3::from_rotation_x(x)
     }
 
-    /// Applies the transform to a point.
+    /// Applies the transform to a point, then subtracts `shift`; the
+    /// translation and the shift are applied in f64, so a model placed far
+    /// from the origin and shifted back keeps f32 precision (DESIGN §4).
     #[must_use]
-    pub fn point(&self, p: Vec3) -> Vec3 {
-        self.rotation() * (p * self.scale) + Vec3::from(self.translate)
+    pub fn point(&self, p: Vec3, shift: DVec3) -> Vec3 {
+        ((self.rotation() * (p * self.scale)).as_dvec3() + DVec3::from(self.translate) - shift)
+            .as_vec3()
     }
 
-    /// Applies the transform to every splat.
-    pub fn apply(&self, splats: &mut [Splat]) {
+    /// Applies the transform to every splat, then subtracts `shift` (in f64,
+    /// as [`TransformSpec::point`]).
+    pub fn apply(&self, splats: &mut [Splat], shift: DVec3) {
         let rot = self.rotation();
-        let t = Vec3::from(self.translate);
         for s in splats {
-            s.center = rot * (s.center * self.scale) + t;
+            s.center = self.point(s.center, shift);
             s.normal = (rot * s.normal).normalize();
             s.u_axis = (rot * s.u_axis).normalize();
             s.v_axis = (rot * s.v_axis).normalize();
@@ -220,7 +223,7 @@ pub struct LightSpec {
     /// `point`, `directional` or `sphere`.
     pub kind: String,
     /// Position (`point`, `sphere`).
-    pub position: Option<[f32; 3]>,
+    pub position: Option<[f64; 3]>,
     /// Direction the light travels (`directional`).
     pub direction: Option<[f32; 3]>,
     /// Colour.
@@ -556,16 +559,28 @@ fn material(spec: &MaterialSpec) -> Result<Material, String> {
     })
 }
 
-fn light(spec: &LightSpec) -> Result<Light, String> {
+/// A position given in f64, shifted (in f64) and then made f32.
+fn shifted(p: [f64; 3], shift: DVec3) -> Vec3 {
+    (DVec3::from(p) - shift).as_vec3()
+}
+
+fn light(spec: &LightSpec, shift: DVec3) -> Result<Light, String> {
     let power = v3(spec.color) * spec.intensity;
     finite("light.color × intensity", &power.to_array())?;
     let need = |v: Option<[f32; 3]>, what: &str| {
         v.map(v3)
             .ok_or_else(|| format!("a {} light needs `{what}`", spec.kind))
     };
+    let position = || {
+        let p = spec
+            .position
+            .ok_or_else(|| format!("a {} light needs `position`", spec.kind))?;
+        finite("light.position", &p.map(|x| x as f32))?;
+        Ok::<Vec3, String>(shifted(p, shift))
+    };
     Ok(match spec.kind.as_str() {
         "point" => Light::Point {
-            position: need(spec.position, "position")?,
+            position: position()?,
             power,
         },
         "directional" => Light::Directional {
@@ -580,7 +595,7 @@ fn light(spec: &LightSpec) -> Result<Light, String> {
                 return Err(format!("light.radius must be positive, got {radius}"));
             }
             Light::Sphere {
-                position: need(spec.position, "position")?,
+                position: position()?,
                 radius,
                 power,
                 samples: spec.samples.unwrap_or(16).max(1),
@@ -599,6 +614,7 @@ fn model_splats(
     spec: &ModelSpec,
     base: &Path,
     load: &mut LoadReport,
+    shift: DVec3,
 ) -> Result<Vec<Splat>, String> {
     let sources = [
         spec.points.is_some(),
@@ -613,7 +629,7 @@ fn model_splats(
         return shape_splats(shape);
     }
     let resolve = |p: &PathBuf| base.join(p);
-    model_splats_from_files(spec, &resolve, load)
+    model_splats_from_files(spec, &resolve, load, shift)
 }
 
 fn shape_splats(shape: &ShapeSpec) -> Result<Vec<Splat>, String> {
@@ -650,11 +666,11 @@ fn shape_splats(shape: &ShapeSpec) -> Result<Vec<Splat>, String> {
 }
 
 /// The exact surface of a shape model (or why there is none).
-fn shape_truth(m: &ModelSpec, model: usize, material: u16) -> TruthSource {
+fn shape_truth(m: &ModelSpec, model: usize, material: u16, shift: DVec3) -> TruthSource {
     let t = &m.transform;
     match &m.shape {
         Some(sh) if sh.kind == "sphere" => TruthSource::Sphere {
-            center: t.point(v3(sh.center)),
+            center: t.point(v3(sh.center), shift),
             radius: sh.radius.unwrap_or(1.0) * t.scale,
             material,
         },
@@ -666,7 +682,7 @@ fn shape_truth(m: &ModelSpec, model: usize, material: u16) -> TruthSource {
             let [sx, sy] = sh.size.unwrap_or([1.0, 1.0]);
             let c = v3(sh.center);
             let corners = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
-                .map(|(x, y)| t.point(c + a * (0.5 * sx * x) + b * (0.5 * sy * y)));
+                .map(|(x, y)| t.point(c + a * (0.5 * sx * x) + b * (0.5 * sy * y), shift));
             TruthSource::Mesh {
                 mesh: crate::io::Mesh {
                     positions: corners.to_vec(),
@@ -713,8 +729,15 @@ pub fn build_scene(file: &SceneFile, base: &Path) -> Result<Scene, String> {
     if c.spp == 0 || c.spp > 4096 {
         return Err(format!("camera.spp {} must be in 1..=4096", c.spp));
     }
-    finite("camera.from", &c.from)?;
-    finite("camera.at", &c.at)?;
+    finite("camera.from", &c.from.map(|x| x as f32))?;
+    finite("camera.at", &c.at.map(|x| x as f32))?;
+    // Models, camera and lights are first shifted, in f64, by the first
+    // model's translation, so that a scene placed far from the origin keeps
+    // its f32 precision; what remains is re-centred below.
+    let shift = file
+        .models
+        .first()
+        .map_or(DVec3::ZERO, |m| DVec3::from(m.transform.translate));
     finite("background", &file.background)?;
     if file.models.is_empty() {
         return Err("the scene has no [[model]]".into());
@@ -728,10 +751,10 @@ pub fn build_scene(file: &SceneFile, base: &Path) -> Result<Scene, String> {
     for (i, m) in file.models.iter().enumerate() {
         let truth_before = load.truth.len();
         let mut s =
-            model_splats(m, base, &mut load).map_err(|e| format!("model {}: {e}", i + 1))?;
+            model_splats(m, base, &mut load, shift).map_err(|e| format!("model {}: {e}", i + 1))?;
         let mid = u16::try_from(i).map_err(|_| "more than 65535 models".to_string())?;
         if load.truth.len() == truth_before {
-            load.truth.push(shape_truth(m, i + 1, mid));
+            load.truth.push(shape_truth(m, i + 1, mid, shift));
         } else if let Some(TruthSource::Mesh { material, .. }) = load.truth.last_mut() {
             *material = mid;
         }
@@ -742,7 +765,7 @@ pub fn build_scene(file: &SceneFile, base: &Path) -> Result<Scene, String> {
                 m.transform.scale
             ));
         }
-        m.transform.apply(&mut s);
+        m.transform.apply(&mut s, shift);
         materials.push(material(&m.material).map_err(|e| format!("model {}: {e}", i + 1))?);
         shading_of.push(match &m.material.shading {
             Some(s) => Some(s.parse().map_err(|e| format!("model {}: {e}", i + 1))?),
@@ -755,7 +778,7 @@ pub fn build_scene(file: &SceneFile, base: &Path) -> Result<Scene, String> {
     let lights = file
         .lights
         .iter()
-        .map(light)
+        .map(|l| light(l, shift))
         .collect::<Result<Vec<_>, _>>()?;
 
     // Re-centre on the splats' bounding box.
@@ -796,8 +819,8 @@ pub fn build_scene(file: &SceneFile, base: &Path) -> Result<Scene, String> {
         })
         .collect();
     let camera = Camera::look_at(
-        v3(c.from) - offset,
-        v3(c.at) - offset,
+        shifted(c.from, shift) - offset,
+        shifted(c.at, shift) - offset,
         v3(c.up),
         c.fov,
         c.width,
@@ -847,6 +870,7 @@ fn model_splats_from_files(
     spec: &ModelSpec,
     resolve: &dyn Fn(&PathBuf) -> PathBuf,
     load: &mut LoadReport,
+    shift: DVec3,
 ) -> Result<Vec<Splat>, String> {
     if let Some(p) = &spec.splats {
         return crate::io::read_splats(&resolve(p)).map_err(|e| e.to_string());
@@ -871,7 +895,7 @@ fn model_splats_from_files(
                 positions: mesh
                     .positions
                     .iter()
-                    .map(|&p| spec.transform.point(p))
+                    .map(|&p| spec.transform.point(p, shift))
                     .collect(),
                 triangles: mesh.triangles.clone(),
             },
