@@ -127,3 +127,59 @@ fn bad_output_extension_fails_before_work() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains(".png or .exr"));
 }
+
+#[test]
+fn report_and_aovs_are_written() {
+    let dir = tmpdir("aov");
+    let scene_path = dir.join("scene.toml");
+    std::fs::write(
+        &scene_path,
+        format!("{CAMERA}[[model]]\nshape = {{ kind = \"sphere\", radius = 1.0, splats = 200 }}\n[[light]]\nkind = \"directional\"\ndirection = [0.0, 0.0, -1.0]\n"),
+    )
+    .unwrap();
+    let out = dir.join("img.png");
+    let report = dir.join("r.json");
+    let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+        .arg("render")
+        .arg(&scene_path)
+        .arg("-o")
+        .arg(&out)
+        .args([
+            "--backend",
+            "embree",
+            "--aov",
+            "depth,normal,splat",
+            "--report",
+        ])
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(v["backend"], "embree");
+    assert_eq!(v["width"], 16);
+    assert_eq!(v["rays"]["primary"], 256);
+    assert!(v["rays"]["shadow"].as_u64().unwrap() > 0);
+    assert_eq!(v["rays"]["refraction"], 0, "no glass, no refraction rays");
+    for k in [
+        "splats",
+        "build_seconds",
+        "render_seconds",
+        "mrays_per_s",
+        "spp",
+        "height",
+    ] {
+        assert!(v[k].is_number(), "{k} in {v}");
+    }
+    // The depth AOV: the centre pixel sees the sphere at distance ~2.
+    let depth = image::open(dir.join("img.depth.exr")).unwrap().to_rgb32f();
+    let d = depth.get_pixel(8, 8)[0];
+    assert!((d - 2.0).abs() < 0.05, "centre depth {d}");
+    assert!(depth.get_pixel(0, 0)[0].is_infinite(), "corner should miss");
+    let ids = image::open(dir.join("img.splat.exr")).unwrap().to_rgb32f();
+    assert!(ids.get_pixel(8, 8)[0] >= 0.0);
+    assert_eq!(ids.get_pixel(0, 0)[0], -1.0);
+    let n = image::open(dir.join("img.normal.exr")).unwrap().to_rgb32f();
+    assert!(n.get_pixel(8, 8)[2] > 0.9, "centre normal faces the camera");
+}
