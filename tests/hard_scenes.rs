@@ -85,3 +85,19 @@ fn far_from_origin_renders_like_the_origin() {
     assert!(c.hit_agreement > 0.999, "{c:?}");
     assert!(c.image_psnr_db.is_none_or(|p| p > 45.0), "{c:?}");
 }
+
+/// Every bundled scene renders with both backends to the same image (small
+/// resolution), without NaN.
+#[test]
+fn bundled_scenes_render_identically_with_both_backends() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    for name in ["bunny.toml", "glass.toml", "shading.toml"] {
+        let s = small(load_scene(&root.join(name)).unwrap());
+        let o = render_with(&s, BackendKind::Octree);
+        let e = render_with(&s, BackendKind::Embree);
+        assert!(o.rgb.iter().all(|c| c.is_finite()), "{name}: NaN pixel");
+        assert!(o.splat.iter().any(|&id| id != u32::MAX), "{name}: empty");
+        assert_eq!(o.rays, e.rays, "{name}: ray counts differ");
+        assert_eq!(o.rgb, e.rgb, "{name}: images differ");
+    }
+}
