@@ -236,6 +236,23 @@ fn embree_ray(ray: &Ray, t_min: f32, t_max: f32) -> sys::RTCRay {
     }
 }
 
+/// A ray with an empty hit record, as `rtcIntersect1` expects it.
+fn embree_rayhit(ray: &Ray, t_min: f32, t_max: f32) -> sys::RTCRayHit {
+    sys::RTCRayHit {
+        ray: embree_ray(ray, t_min, t_max),
+        hit: sys::RTCHit {
+            Ng_x: 0.0,
+            Ng_y: 0.0,
+            Ng_z: 0.0,
+            u: 0.0,
+            v: 0.0,
+            primID: sys::RTC_INVALID_GEOMETRY_ID,
+            geomID: sys::RTC_INVALID_GEOMETRY_ID,
+            instID: [sys::RTC_INVALID_GEOMETRY_ID; 1],
+        },
+    }
+}
+
 /// Bounds callback: the tight box of the disc, padded by a few ulps of its
 /// coordinates so that rounding can never cull a real hit.
 unsafe extern "C" fn disc_bounds(args: *const sys::RTCBoundsFunctionArguments) {
@@ -403,19 +420,7 @@ impl DiscScene {
             t_max,
         };
         let mut args = intersect_arguments(&mut ctx.base as *mut sys::RTCRayQueryContext);
-        let mut rayhit = sys::RTCRayHit {
-            ray: embree_ray(ray, t_min, t_max),
-            hit: sys::RTCHit {
-                Ng_x: 0.0,
-                Ng_y: 0.0,
-                Ng_z: 0.0,
-                u: 0.0,
-                v: 0.0,
-                primID: sys::RTC_INVALID_GEOMETRY_ID,
-                geomID: sys::RTC_INVALID_GEOMETRY_ID,
-                instID: [sys::RTC_INVALID_GEOMETRY_ID; 1],
-            },
-        };
+        let mut rayhit = embree_rayhit(ray, t_min, t_max);
         // SAFETY: committed scene; `rayhit` and `args` live across the call;
         // `args.context` points at `ctx.base`, the first field of the repr(C)
         // `GatherContext` whose `hits` borrows `hits` mutably for the call.
@@ -557,19 +562,7 @@ impl TriangleScene {
     pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<TriangleHit> {
         let mut ctx = ray_query_context();
         let mut args = intersect_arguments(&mut ctx as *mut sys::RTCRayQueryContext);
-        let mut rayhit = sys::RTCRayHit {
-            ray: embree_ray(ray, t_min, t_max),
-            hit: sys::RTCHit {
-                Ng_x: 0.0,
-                Ng_y: 0.0,
-                Ng_z: 0.0,
-                u: 0.0,
-                v: 0.0,
-                primID: sys::RTC_INVALID_GEOMETRY_ID,
-                geomID: sys::RTC_INVALID_GEOMETRY_ID,
-                instID: [sys::RTC_INVALID_GEOMETRY_ID; 1],
-            },
-        };
+        let mut rayhit = embree_rayhit(ray, t_min, t_max);
         // SAFETY: committed scene; all pointers live across the call.
         unsafe { sys::rtcIntersect1(self.scene, &mut rayhit, &mut args) };
         let h = &rayhit.hit;
