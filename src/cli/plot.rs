@@ -89,7 +89,13 @@ where
         .y_desc(y_desc)
         .label_style((FAMILY, 14))
         .axis_desc_style((FAMILY, 15))
-        .light_line_style(RGBColor(235, 235, 235))
+        .x_labels(20)
+        .x_label_formatter(&|v| {
+            let s = format!("{v:.3}");
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        })
+        .max_light_lines(1)
+        .light_line_style(RGBColor(240, 240, 240))
         .draw()
         .map_err(err)?;
     for (mi, mode) in MODES.into_iter().enumerate() {
