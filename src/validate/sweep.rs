@@ -310,3 +310,69 @@ pub fn run_sweep(
     }
     Ok(rows)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn geometric_plan_spans_the_range_in_order() {
+        let p = SweepPlan::geometric(0.05, 0.0005, 5, 32, 24).unwrap();
+        assert_eq!(p.epsilons.len(), 5);
+        assert!((p.epsilons[0] - 0.05).abs() < 1e-7);
+        assert!((p.epsilons[4] - 0.0005).abs() < 1e-8);
+        assert!((p.epsilons[2] - 0.005).abs() < 1e-6, "{:?}", p.epsilons);
+        assert!(p.epsilons.windows(2).all(|w| w[1] < w[0]));
+        for (c, f, n) in [
+            (0.001, 0.01, 5),
+            (0.01, 0.0, 5),
+            (f32::NAN, 0.1, 5),
+            (0.1, 0.01, 1),
+        ] {
+            assert!(SweepPlan::geometric(c, f, n, 8, 8).is_err(), "{c} {f} {n}");
+        }
+    }
+
+    #[test]
+    fn csv_line_matches_the_header() {
+        let e = TruthErrors {
+            coverage: 1.0,
+            false_hits: 0.0,
+            depth_rel_p50: 0.0,
+            depth_rel_p99: 0.0,
+            normal_deg_mean: 1.5,
+            normal_deg_p99: 3.0,
+            image_psnr_db: None,
+        };
+        let r = SweepRow {
+            step: 2,
+            epsilon: 0.01,
+            shading: ShadingMode::Blended,
+            splats: 10,
+            scene_splats: 12,
+            splat_seconds: 0.5,
+            octree_build_s: 0.1,
+            embree_build_s: 0.2,
+            octree_render_s: 0.3,
+            embree_render_s: 0.4,
+            octree: e.clone(),
+            embree: TruthErrors {
+                image_psnr_db: Some(30.0),
+                ..e
+            },
+            backends_identical: false,
+        };
+        let text = csv_text(&[r]);
+        let mut lines = text.lines();
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let cells: Vec<&str> = lines.next().unwrap().split(',').collect();
+        assert_eq!(header.len(), cells.len());
+        let cell = |k: &str| cells[header.iter().position(|h| *h == k).unwrap()];
+        assert_eq!(cell("shading"), "blended");
+        assert_eq!(cell("normal_deg_mean"), "1.5");
+        assert_eq!(cell("psnr_db"), "inf");
+        assert_eq!(cell("embree_psnr_db"), "30");
+        assert_eq!(cell("backends_identical"), "false");
+        assert_eq!(cell("embree_render_s"), "0.4");
+    }
+}
