@@ -28,6 +28,11 @@ enum Command {
     Sample(splatray::cli::sample_cmd::SampleArgs),
     /// Turn a point cloud into splats with Phong normal fields.
     Splat(splatray::cli::splat_cmd::SplatArgs),
+    /// Vary the splat budget (epsilon) and the shading mode; measure splat
+    /// generation, build and render seconds of both backends and the errors
+    /// against the exact surface; write a CSV and a time-against-error plot
+    /// (report §4.4, fig. 16).
+    Sweep(splatray::cli::sweep::SweepArgs),
 }
 
 fn info() -> Result<(), String> {
@@ -56,6 +61,7 @@ fn main() -> ExitCode {
         Command::Compare(args) => splatray::cli::compare::run(&args),
         Command::Sample(a) => splatray::cli::sample_cmd::run(&a),
         Command::Splat(a) => splatray::cli::splat_cmd::run(&a),
+        Command::Sweep(a) => splatray::cli::sweep::run(&a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -2,4 +2,5 @@
 //! image for image (DESIGN §2, §4).
 
 pub mod compare;
+pub mod sweep;
 pub mod truth;

@@ -1,0 +1,228 @@
+//! The speed-against-error plot of `splatray sweep`: the report's resolution
+//! scaling (§4.4, fig. 16), measured. Drawn with `plotters` and the DejaVu
+//! Sans font the project ships (`assets/fonts/`), so it needs no system
+//! fonts; written as PNG and as SVG beside it.
+
+use crate::render::output::write_atomic;
+use crate::validate::compare::TruthErrors;
+use crate::validate::sweep::{MODES, SweepRow, mode_name};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use std::path::Path;
+
+/// DejaVu Sans (Bitstream Vera licence, see `assets/fonts/README.md`).
+static FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
+const FAMILY: &str = "sans-serif";
+const SIZE: (u32, u32) = (1280, 560);
+
+fn err<E: std::fmt::Display>(e: E) -> String {
+    format!("plot: {e}")
+}
+
+fn mode_color(i: usize) -> RGBColor {
+    [
+        RGBColor(214, 39, 40),
+        RGBColor(44, 160, 44),
+        RGBColor(31, 119, 180),
+    ][i % 3]
+}
+
+fn short_count(n: usize) -> String {
+    if n >= 10_000 {
+        format!("{}k", (n as f64 / 1000.0).round())
+    } else if n >= 1000 {
+        format!("{:.1}k", n as f64 / 1000.0)
+    } else {
+        n.to_string()
+    }
+}
+
+/// One panel: `y` of every row against render seconds, log-scaled seconds.
+fn panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    rows: &[SweepRow],
+    caption: &str,
+    y_desc: &str,
+    y: fn(&TruthErrors) -> Option<f64>,
+    legend: bool,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let mut xs = Vec::new();
+    let mut ys = Vec::new();
+    for r in rows {
+        xs.extend([r.octree_render_s, r.embree_render_s]);
+        ys.extend([y(&r.octree), y(&r.embree)].into_iter().flatten());
+    }
+    let fin = |v: &Vec<f64>| {
+        v.iter()
+            .copied()
+            .filter(|x| x.is_finite())
+            .collect::<Vec<_>>()
+    };
+    let (xs, ys) = (fin(&xs), fin(&ys));
+    let lo = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = |v: &[f64]| v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let (x0, x1) = if xs.is_empty() {
+        (1e-3, 1.0)
+    } else {
+        (lo(&xs).max(1e-6) / 1.3, hi(&xs).max(1e-6) * 1.6)
+    };
+    let (y0, y1) = if ys.is_empty() {
+        (0.0, 1.0)
+    } else {
+        let (a, b) = (lo(&ys), hi(&ys));
+        let pad = ((b - a) * 0.08).max(1e-3);
+        (a - pad, b + pad)
+    };
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, (FAMILY, 20))
+        .margin(12)
+        .x_label_area_size(42)
+        .y_label_area_size(58)
+        .build_cartesian_2d((x0..x1).log_scale(), y0..y1)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("render seconds (log scale)")
+        .y_desc(y_desc)
+        .label_style((FAMILY, 14))
+        .axis_desc_style((FAMILY, 15))
+        .x_labels(20)
+        .x_label_formatter(&|v| {
+            let s = format!("{v:.3}");
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        })
+        .max_light_lines(1)
+        .light_line_style(RGBColor(240, 240, 240))
+        .draw()
+        .map_err(err)?;
+    for (mi, mode) in MODES.into_iter().enumerate() {
+        let color = mode_color(mi);
+        for octree in [true, false] {
+            let pts: Vec<(f64, f64, usize)> = rows
+                .iter()
+                .filter(|r| r.shading == mode)
+                .filter_map(|r| {
+                    let (s, e) = if octree {
+                        (r.octree_render_s, &r.octree)
+                    } else {
+                        (r.embree_render_s, &r.embree)
+                    };
+                    y(e).filter(|v| v.is_finite()).map(|v| (s, v, r.splats))
+                })
+                .collect();
+            let name = format!(
+                "{} {}",
+                if octree { "octree" } else { "embree" },
+                mode_name(mode)
+            );
+            let xy = pts.iter().map(|&(x, y, _)| (x, y));
+            let line = if octree {
+                chart
+                    .draw_series(LineSeries::new(xy, color.stroke_width(2)))
+                    .map_err(err)?
+            } else {
+                chart
+                    .draw_series(DashedLineSeries::new(xy, 6, 4, color.stroke_width(2)))
+                    .map_err(err)?
+            };
+            line.label(name).legend(move |(x, y)| {
+                if octree {
+                    PathElement::new(vec![(x, y), (x + 22, y)], color.stroke_width(2))
+                } else {
+                    PathElement::new(vec![(x, y), (x + 8, y)], color.stroke_width(2))
+                }
+            });
+            chart
+                .draw_series(pts.iter().map(|&(x, y, _)| {
+                    if octree {
+                        Circle::new((x, y), 4, color.filled()).into_dyn()
+                    } else {
+                        TriangleMarker::new((x, y), 5, color.stroke_width(2)).into_dyn()
+                    }
+                }))
+                .map_err(err)?;
+            if octree {
+                chart
+                    .draw_series(pts.iter().map(|&(x, y, n)| {
+                        EmptyElement::at((x, y))
+                            + Text::new(short_count(n), (6, -14), (FAMILY, 12).into_font())
+                    }))
+                    .map_err(err)?;
+            }
+        }
+    }
+    if legend {
+        chart
+            .configure_series_labels()
+            .label_font((FAMILY, 13))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK.mix(0.4))
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(err)?;
+    }
+    Ok(())
+}
+
+fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, rows: &[SweepRow]) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE).map_err(err)?;
+    let root = root
+        .titled(
+            "Render time against error over the splat budget (labels: splats; report fig. 16)",
+            (FAMILY, 22),
+        )
+        .map_err(err)?;
+    let (left, right) = root.split_horizontally(SIZE.0 / 2);
+    panel(
+        &left,
+        rows,
+        "mean normal error vs exact surface",
+        "normal error, degrees (mean)",
+        |e| Some(e.normal_deg_mean),
+        true,
+    )?;
+    panel(
+        &right,
+        rows,
+        "image PSNR vs exact surface",
+        "PSNR, dB (higher is better)",
+        |e| e.image_psnr_db,
+        false,
+    )?;
+    root.present().map_err(err)
+}
+
+/// Draws the sweep's rows (render seconds against mean normal error and
+/// against image PSNR, one curve per backend and shading mode, points
+/// labelled with splat counts) into `png` and into the SVG of the same stem.
+/// Both files are written atomically; errors are one line.
+pub fn plot_sweep(rows: &[SweepRow], png: &Path) -> Result<(), String> {
+    plotters::style::register_font(FAMILY, FontStyle::Normal, FONT)
+        .map_err(|_| "plot: the embedded font is invalid".to_string())?;
+    let mut buf = vec![255u8; (SIZE.0 * SIZE.1 * 3) as usize];
+    draw(
+        BitMapBackend::with_buffer(&mut buf, SIZE).into_drawing_area(),
+        rows,
+    )?;
+    let img = image::RgbImage::from_raw(SIZE.0, SIZE.1, buf)
+        .ok_or_else(|| "plot: image buffer has the wrong size".to_string())?;
+    let mut svg = String::new();
+    draw(
+        SVGBackend::with_string(&mut svg, SIZE).into_drawing_area(),
+        rows,
+    )?;
+    write_atomic(png, |tmp| {
+        img.save_with_format(tmp, image::ImageFormat::Png)
+            .map_err(|e| format!("{}: {e}", png.display()))
+    })?;
+    let svg_path = png.with_extension("svg");
+    write_atomic(&svg_path, |tmp| {
+        std::fs::write(tmp, svg).map_err(|e| format!("{}: {e}", svg_path.display()))
+    })
+}

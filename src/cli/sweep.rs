@@ -1,0 +1,156 @@
+//! `splatray sweep`: render time against error over the splat budget and the
+//! shading mode — the report's resolution scaling (§4.4, fig. 16) measured,
+//! flat splats against blended (eq. 5) and Phong splats (eq. 4).
+
+use super::render::default_scene;
+use crate::render::output::{check_output_path, write_atomic};
+use crate::render::scene::parse_scene_file;
+use crate::validate::sweep::{MODES, SweepPlan, SweepRow, csv_text, mode_name, run_sweep};
+use std::path::{Path, PathBuf};
+
+/// Coarsest default `ϵ` (fraction of the bounding-box diagonal, §2.1).
+pub const EPS_COARSE: f32 = 0.05;
+/// Finest default `ϵ`.
+pub const EPS_FINE: f32 = 0.0005;
+
+/// Options of `splatray sweep`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct SweepArgs {
+    /// Scene file (TOML). Default: the bundled scenes/bunny.toml.
+    pub scene: Option<PathBuf>,
+    /// Write one CSV row per (budget step, shading mode) here.
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+    /// Draw render time against error here (.png; an .svg of the same stem
+    /// is written beside it).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Image width for every render (the scene's is overridden).
+    #[arg(long, default_value_t = 320)]
+    pub width: u32,
+    /// Image height for every render.
+    #[arg(long, default_value_t = 240)]
+    pub height: u32,
+    /// Budget steps, spaced geometrically in epsilon (at least 5).
+    #[arg(long, default_value_t = 6)]
+    pub steps: usize,
+    /// Coarsest epsilon (fraction of each model's bounding-box diagonal).
+    #[arg(long, default_value_t = EPS_COARSE)]
+    pub eps_coarse: f32,
+    /// Finest epsilon.
+    #[arg(long, default_value_t = EPS_FINE)]
+    pub eps_fine: f32,
+}
+
+fn check_csv_path(path: &Path) -> Result<(), String> {
+    if path.extension().and_then(|e| e.to_str()) != Some("csv") {
+        return Err(format!(
+            "{}: the CSV output must end in .csv",
+            path.display()
+        ));
+    }
+    match path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        Some(d) if !d.is_dir() => Err(format!("{}: folder does not exist", d.display())),
+        _ => Ok(()),
+    }
+}
+
+/// Runs `splatray sweep`: checks every output first, then measures (printing
+/// each figure as it is measured), then writes the CSV and the plot.
+pub fn run(args: &SweepArgs) -> Result<(), String> {
+    if !(5..=64).contains(&args.steps) {
+        return Err(format!("--steps {} must be in 5..=64", args.steps));
+    }
+    if args.width == 0 || args.height == 0 || args.width > 1 << 15 || args.height > 1 << 15 {
+        return Err(format!(
+            "resolution {}x{} must be in 1..=32768",
+            args.width, args.height
+        ));
+    }
+    if let Some(c) = &args.csv {
+        check_csv_path(c)?;
+    }
+    if let Some(p) = &args.plot {
+        check_output_path(p)?;
+        if p.extension().and_then(|e| e.to_str()) != Some("png") {
+            return Err(format!("{}: the plot must end in .png", p.display()));
+        }
+    }
+    let plan = SweepPlan::geometric(
+        args.eps_coarse,
+        args.eps_fine,
+        args.steps,
+        args.width,
+        args.height,
+    )?;
+    let scene_path = args.scene.clone().unwrap_or_else(default_scene);
+    let file = parse_scene_file(&scene_path)?;
+    let base = scene_path.parent().unwrap_or(Path::new("."));
+    println!(
+        "{}: sweeping epsilon {} .. {} in {} steps, {}x{} pixels, shading {}",
+        scene_path.display(),
+        args.eps_coarse,
+        args.eps_fine,
+        args.steps,
+        args.width,
+        args.height,
+        MODES.map(mode_name).join(", ")
+    );
+    let rows = run_sweep(&file, base, &plan, &mut |line| println!("{line}"))
+        .map_err(|e| format!("{}: {e}", scene_path.display()))?;
+    summary(&rows);
+    if let Some(c) = &args.csv {
+        let text = csv_text(&rows);
+        write_atomic(c, |tmp| {
+            std::fs::write(tmp, text).map_err(|e| format!("{}: {e}", c.display()))
+        })?;
+        println!("wrote {}", c.display());
+    }
+    if let Some(p) = &args.plot {
+        super::plot::plot_sweep(&rows, p)?;
+        println!(
+            "wrote {} and {}",
+            p.display(),
+            p.with_extension("svg").display()
+        );
+    }
+    Ok(())
+}
+
+/// The summary lines: the span of the budget, and per mode the normal error
+/// and PSNR at the coarsest and finest steps (all from this run's rows).
+fn summary(rows: &[SweepRow]) {
+    let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
+        return;
+    };
+    println!(
+        "summary: {} .. {} splats ({:.1}x), backends identical in {}/{} rows",
+        first.splats,
+        last.splats,
+        last.splats as f64 / first.splats.max(1) as f64,
+        rows.iter().filter(|r| r.backends_identical).count(),
+        rows.len()
+    );
+    for mode in MODES {
+        let of: Vec<&SweepRow> = rows.iter().filter(|r| r.shading == mode).collect();
+        if let (Some(a), Some(b)) = (of.first(), of.last()) {
+            let p = |r: &SweepRow| {
+                r.octree
+                    .image_psnr_db
+                    .map_or("inf".to_string(), |p| format!("{p:.2}"))
+            };
+            println!(
+                "  {:<7} normal deg mean {:.3} -> {:.3}, PSNR {} -> {} dB, octree render {:.3} -> {:.3} s, embree {:.3} -> {:.3} s",
+                mode_name(mode),
+                a.octree.normal_deg_mean,
+                b.octree.normal_deg_mean,
+                p(a),
+                p(b),
+                a.octree_render_s,
+                b.octree_render_s,
+                a.embree_render_s,
+                b.embree_render_s
+            );
+        }
+    }
+}

@@ -1,0 +1,221 @@
+//! `splatray sweep` end to end on a small mesh scene (the bundled bunny mesh,
+//! few samples, 48×36 pixels, 5 budget steps): the CSV's columns and rows,
+//! splat counts growing as epsilon shrinks, Phong normal fields beating flat
+//! splats at every budget (§4.4, fig. 16), both plot files, and clean
+//! one-line failures on bad input.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("splatray-sweep-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn mesh() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data/bunny-mesh.ply")
+}
+
+/// A bunny sampled with few points plus a sphere shape (which must stay as
+/// it is), one point light.
+fn write_scene(dir: &Path) -> PathBuf {
+    let scene = format!(
+        r#"
+[camera]
+from = [1.5, 1.1, 4.4]
+at = [0.0, -0.1, 0.0]
+fov = 34
+
+[[model]]
+mesh = "{}"
+samples = 6000
+seed = 3
+
+[[model]]
+shape = {{ kind = "sphere", center = [1.6, -0.6, -1.0], radius = 0.35, splats = 400 }}
+
+[[light]]
+kind = "point"
+position = [2.0, 4.0, 3.0]
+intensity = 20.0
+"#,
+        mesh().display().to_string().replace('\\', "/")
+    );
+    let p = dir.join("scene.toml");
+    std::fs::write(&p, scene).unwrap();
+    p
+}
+
+fn sweep(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_splatray"))
+        .arg("sweep")
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+const COLUMNS: [&str; 21] = [
+    "step",
+    "epsilon",
+    "shading",
+    "splats",
+    "scene_splats",
+    "splat_seconds",
+    "octree_build_s",
+    "embree_build_s",
+    "octree_render_s",
+    "embree_render_s",
+    "coverage",
+    "false_hits",
+    "depth_rel_p50",
+    "depth_rel_p99",
+    "normal_deg_mean",
+    "normal_deg_p99",
+    "psnr_db",
+    "backends_identical",
+    "embree_coverage",
+    "embree_normal_deg_mean",
+    "embree_psnr_db",
+];
+
+#[test]
+fn sweep_measures_budget_against_error() {
+    let dir = tmpdir("run");
+    let scene = write_scene(&dir);
+    let csv = dir.join("s.csv");
+    let png = dir.join("s.png");
+    let o = sweep(&[
+        scene.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+        "--plot",
+        png.to_str().unwrap(),
+        "--width",
+        "48",
+        "--height",
+        "36",
+        "--steps",
+        "5",
+    ]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "sweep failed: {}\n{stdout}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(stdout.contains("exact surface: rendered once"), "{stdout}");
+    assert!(stdout.contains("summary:"), "{stdout}");
+
+    // The CSV: every documented column, one row per (step, mode).
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(header, COLUMNS);
+    let rows: Vec<HashMap<&str, &str>> = lines
+        .map(|l| {
+            let cells: Vec<&str> = l.split(',').collect();
+            assert_eq!(cells.len(), header.len(), "row {l}");
+            header.iter().copied().zip(cells).collect()
+        })
+        .collect();
+    let num = |r: &HashMap<&str, &str>, k: &str| -> f64 {
+        r[k].parse::<f64>()
+            .unwrap_or_else(|_| panic!("{k} = {}", r[k]))
+    };
+    let of = |mode: &str| -> Vec<&HashMap<&str, &str>> {
+        rows.iter().filter(|r| r["shading"] == mode).collect()
+    };
+    let (flat, blended, phong) = (of("flat"), of("blended"), of("phong"));
+    for m in [&flat, &blended, &phong] {
+        assert_eq!(m.len(), 5, "rows per shading mode");
+    }
+    assert_eq!(rows.len(), 15);
+
+    // Splats grow as epsilon shrinks; the shape's 400 splats are not varied.
+    for w in flat.windows(2) {
+        assert!(num(w[1], "epsilon") < num(w[0], "epsilon"));
+        assert!(
+            num(w[1], "splats") > num(w[0], "splats"),
+            "splats must grow as epsilon shrinks: {} then {}",
+            w[0]["splats"],
+            w[1]["splats"]
+        );
+    }
+    for r in &rows {
+        assert_eq!(num(r, "scene_splats") - num(r, "splats"), 400.0);
+        assert_eq!(r["backends_identical"], "true", "backends differ: {r:?}");
+        assert!(num(r, "coverage") > 0.9, "coverage {r:?}");
+        for k in ["splat_seconds", "octree_build_s", "embree_build_s"] {
+            assert!(num(r, k) > 0.0, "{k} not measured");
+        }
+    }
+    let span = num(flat[4], "splats") / num(flat[0], "splats");
+    assert!(span >= 3.0, "splat span only {span:.2}x");
+
+    // Phong normal fields (eq. 4, blended by eq. 5) beat flat splats at every
+    // budget against the exact surface's normals (§4.4, fig. 16).
+    for (f, p) in flat.iter().zip(&phong) {
+        assert_eq!(f["splats"], p["splats"]);
+        assert!(
+            num(p, "normal_deg_mean") < num(f, "normal_deg_mean"),
+            "step {}: phong {} deg not below flat {} deg",
+            f["step"],
+            p["normal_deg_mean"],
+            f["normal_deg_mean"]
+        );
+    }
+    // The same budget renders the same geometry: coverage does not depend on
+    // the shading mode.
+    for (f, p) in flat.iter().zip(&phong) {
+        assert_eq!(f["coverage"], p["coverage"]);
+    }
+
+    // Both plot files, the PNG at its drawn size.
+    let img = image::open(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (1280, 560));
+    let svg = std::fs::read_to_string(dir.join("s.svg")).unwrap();
+    assert!(svg.contains("<svg") && svg.contains("normal error"));
+    let leftovers: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains("partial"))
+        .collect();
+    assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
+}
+
+fn assert_clean_failure(args: &[&str], expect: &str) {
+    let o = sweep(args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{args:?} should fail");
+    assert_eq!(err.trim().lines().count(), 1, "one line, got:\n{err}");
+    assert!(err.contains(expect), "'{expect}' not in: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
+fn bad_input_fails_in_one_line() {
+    let dir = tmpdir("bad");
+    let scene = write_scene(&dir);
+    let s = scene.to_str().unwrap();
+    assert_clean_failure(&[s, "--steps", "3"], "--steps 3");
+    assert_clean_failure(
+        &[s, "--eps-coarse", "0.001", "--eps-fine", "0.01"],
+        "coarse > fine",
+    );
+    assert_clean_failure(&[s, "--csv", "out.txt"], "must end in .csv");
+    assert_clean_failure(&[s, "--plot", "/no/such/dir/p.png"], "does not exist");
+    assert_clean_failure(&[s, "--width", "0"], "resolution");
+    assert_clean_failure(&[dir.join("none.toml").to_str().unwrap()], "cannot read");
+    // Only shapes: nothing to vary.
+    let shapes = dir.join("shapes.toml");
+    std::fs::write(
+        &shapes,
+        "[camera]\nfrom = [0.0, 0.0, 3.0]\nat = [0.0, 0.0, 0.0]\n\n[[model]]\n\
+         shape = { kind = \"sphere\", radius = 1.0, splats = 50 }\n",
+    )
+    .unwrap();
+    assert_clean_failure(&[shapes.to_str().unwrap()], "nothing to vary");
+}
