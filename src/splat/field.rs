@@ -30,7 +30,7 @@ fn solve3(m: [[f64; 3]; 3], r: [f64; 3]) -> Option<[f64; 3]> {
     };
     let d = det(m);
     let scale = m.iter().flatten().fold(0f64, |a, &x| a.max(x.abs()));
-    if !(d.abs() > 1e-9 * scale * scale * scale) {
+    if d.is_nan() || d.abs() <= 1e-9 * scale * scale * scale {
         return None;
     }
     let mut out = [0.0; 3];
