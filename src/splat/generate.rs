@@ -28,7 +28,12 @@ pub struct SplatParams {
     /// Grow elliptical splats along the minimum-curvature direction (§2.1).
     pub ellipses: bool,
     /// Normal-field radius as a multiple of the splat radius (fig. 15;
-    /// default 1.5).
+    /// default 1.2, "slightly larger" as §4.3 puts it). Measured with
+    /// `splatray sweep --width 160 --height 120` on the bunny, mean normal
+    /// error of Phong splats at 679…40k splats: 1.0 → 7.40 … 0.83°,
+    /// 1.2 → 7.53 … 0.69°, 1.5 → 7.68 … 0.72°, 2.5 → 8.88 … 1.48°; with 1.5
+    /// and 2.5 blending constant normals beat the fields at mid budgets
+    /// (3.20° against 3.39° at 4k splats), with 1.0 and 1.2 never.
     pub field_radius_factor: f32,
 }
 
@@ -39,7 +44,7 @@ impl Default for SplatParams {
             epsilon_rel: 0.002,
             density: 0.7,
             ellipses: false,
-            field_radius_factor: 1.5,
+            field_radius_factor: 1.2,
         }
     }
 }
