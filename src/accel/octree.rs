@@ -104,25 +104,26 @@ const UNEMITTED: u32 = u32::MAX;
 #[repr(C)]
 struct Node {
     /// Interior: index in `nodes` of its first stored child. Leaf: index in
-    /// `ref_ids`/`ref_discs` of its first splat reference.
+    /// `packs` of its first [`DiscPack`].
     first: u32,
     /// Interior: [`INTERIOR`] | 8-bit mask of the stored (non-empty)
     /// children, bit `o` for octant `o = x | y << 1 | z << 2` (1 = upper
     /// half); child `o` sits at `first + popcount(mask & ((1 << o) - 1))`.
-    /// Leaf: the number of references (bit 31 clear).
+    /// Leaf: the number of packs (bit 31 clear).
     meta: u32,
 }
 
 /// The octree of §3.1 over a set of splats.
 pub struct Octree {
     nodes: Vec<Node>,
-    /// Splat id of each reference, leaf by leaf.
-    ref_ids: Vec<u32>,
-    /// The disc of each reference (a copy, in reference order, so a leaf's
-    /// discs are contiguous in memory).
-    ref_discs: Vec<Disc>,
-    /// Squared larger radius of each reference's disc, for [`may_hit`].
-    ref_r2: Vec<f32>,
+    /// The discs of each leaf's references, [`LANES`] to a pack (copies in
+    /// reference order, so a leaf's discs are contiguous in memory; the last
+    /// pack of a leaf padded with [`DiscPack::EMPTY`] lanes).
+    packs: Vec<DiscPack>,
+    /// Splat id of each lane of `packs` ([`NO_SPLAT`] on padding lanes).
+    pack_ids: Vec<u32>,
+    /// Splat references (lanes holding a splat).
+    references: usize,
     /// Lower corner of the root cube.
     root_lo: Vec3,
     /// Edge length of the root cube.
@@ -557,31 +558,49 @@ impl Octree {
         for p in &pairs {
             leaf_count[(p >> 32) as usize] += 1;
         }
+        let references = pairs.len();
+        // Packs per leaf, and each leaf's first pack.
+        let leaf_packs: Vec<u32> = leaf_count
+            .iter()
+            .map(|&c| c.div_ceil(LANES as u32))
+            .collect();
         let mut leaf_start = vec![0u32; leaves as usize];
         let mut acc = 0u32;
-        for (s, c) in leaf_start.iter_mut().zip(&leaf_count) {
+        for (s, c) in leaf_start.iter_mut().zip(&leaf_packs) {
             *s = acc;
             acc += c;
         }
-        let ref_ids: Vec<u32> = pairs
-            .par_iter()
-            .map(|p| order[(*p & 0xffff_ffff) as usize])
-            .collect();
+        let mut pack_ids = vec![NO_SPLAT; acc as usize * LANES];
+        let mut next = 0usize;
+        for (leaf, &count) in leaf_count.iter().enumerate() {
+            let at = leaf_start[leaf] as usize * LANES;
+            for (slot, p) in pack_ids[at..at + count as usize]
+                .iter_mut()
+                .zip(&pairs[next..next + count as usize])
+            {
+                *slot = order[(*p & 0xffff_ffff) as usize];
+            }
+            next += count as usize;
+        }
         drop(pairs);
-        let ref_discs: Vec<Disc> = ref_ids.par_iter().map(|&i| discs[i as usize]).collect();
-        let ref_r2: Vec<f32> = ref_ids
-            .par_iter()
-            .map(|&i| {
-                let r = splats[i as usize].radii.max_element();
-                r * r
+        let packs: Vec<DiscPack> = pack_ids
+            .par_chunks(LANES)
+            .map(|ids| {
+                let mut p = DiscPack::EMPTY;
+                for (lane, &id) in ids.iter().enumerate() {
+                    if id != NO_SPLAT {
+                        p.set(lane, &discs[id as usize]);
+                    }
+                }
+                p
             })
             .collect();
 
         // Flatten.
-        count_refs(&mut root, &leaf_count);
+        count_refs(&mut root, &leaf_packs);
         let mut nodes = vec![Node { first: 0, meta: 0 }];
         let mut emitted = 0;
-        emit(&root, 0, &mut nodes, &leaf_start, &leaf_count, &mut emitted);
+        emit(&root, 0, &mut nodes, &leaf_start, &leaf_packs, &mut emitted);
         debug_assert_eq!(emitted, nodes.len(), "every node slot emitted once");
         debug_assert!(
             nodes.iter().all(|nd| nd.meta != UNEMITTED),
@@ -597,22 +616,21 @@ impl Octree {
         let stats = BuildStats {
             build_seconds: start.elapsed().as_secs_f64(),
             memory_bytes: std::mem::size_of_val(nodes.as_slice())
-                + std::mem::size_of_val(ref_ids.as_slice())
-                + std::mem::size_of_val(ref_discs.as_slice())
-                + std::mem::size_of_val(ref_r2.as_slice()),
+                + std::mem::size_of_val(packs.as_slice())
+                + std::mem::size_of_val(pack_ids.as_slice()),
             nodes: nodes.len(),
             leaves: leaf_nodes,
             mean_refs_per_leaf: if nonempty == 0 {
                 0.0
             } else {
-                ref_ids.len() as f64 / nonempty as f64
+                references as f64 / nonempty as f64
             },
         };
         Octree {
             nodes,
-            ref_ids,
-            ref_discs,
-            ref_r2,
+            packs,
+            pack_ids,
+            references,
             root_lo,
             root_size,
             pad,
@@ -623,14 +641,14 @@ impl Octree {
     /// Total splat references (a splat counts once per leaf holding it).
     #[must_use]
     pub fn references(&self) -> usize {
-        self.ref_ids.len()
+        self.references
     }
 
     /// Front-to-back traversal from the root; `visitor` sees the leaves.
     /// Returns true when the visitor stopped it.
     #[inline]
     fn traverse<V: Visitor>(&self, ray: &Ray, t_min: f32, visitor: &mut V) -> bool {
-        if self.ref_ids.is_empty() {
+        if self.references == 0 {
             return false;
         }
         let ctx = RayCtx {
@@ -640,7 +658,6 @@ impl Octree {
                 | usize::from(ray.dir.y.is_sign_negative()) << 1
                 | usize::from(ray.dir.z.is_sign_negative()) << 2,
             t_min,
-            inv_len2: 1.0 / ray.dir.length_squared(),
         };
         let pad = Vec3::splat(self.pad);
         let lo = self.root_lo;
@@ -665,10 +682,8 @@ impl Octree {
         if node.meta & INTERIOR == 0 {
             let range = node.first as usize..(node.first + node.meta) as usize;
             return visitor.leaf(
-                &self.ref_discs[range.clone()],
-                &self.ref_r2[range.clone()],
-                &self.ref_ids[range],
-                ctx,
+                &self.packs[range.clone()],
+                &self.pack_ids[range.start * LANES..range.end * LANES],
             );
         }
         let mask = node.meta & 0xff;
@@ -706,6 +721,114 @@ impl Octree {
     }
 }
 
+/// Discs per [`DiscPack`].
+const LANES: usize = 4;
+
+/// Splat id of a padding lane.
+const NO_SPLAT: u32 = u32::MAX;
+
+/// [`LANES`] discs of one leaf stored component by component (SoA), so that
+/// [`DiscPack::may_hit`] tests them together in a loop LLVM vectorises.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+struct DiscPack {
+    center: [[f32; LANES]; 3],
+    normal: [[f32; LANES]; 3],
+    u_scaled: [[f32; LANES]; 3],
+    v_scaled: [[f32; LANES]; 3],
+}
+
+/// A ray's origin and direction broadcast for [`DiscPack::may_hit`].
+struct RayLanes {
+    origin: [f32; 3],
+    dir: [f32; 3],
+}
+
+impl RayLanes {
+    fn new(ray: &Ray) -> RayLanes {
+        RayLanes {
+            origin: ray.origin.to_array(),
+            dir: ray.dir.to_array(),
+        }
+    }
+}
+
+impl DiscPack {
+    /// All lanes padding: a zero normal, so no ray can hit them (`n·d` is
+    /// 0 or NaN, hence `t` is never finite).
+    const EMPTY: DiscPack = DiscPack {
+        center: [[0.0; LANES]; 3],
+        normal: [[0.0; LANES]; 3],
+        u_scaled: [[0.0; LANES]; 3],
+        v_scaled: [[0.0; LANES]; 3],
+    };
+
+    fn set(&mut self, lane: usize, d: &Disc) {
+        for k in 0..3 {
+            self.center[k][lane] = d.center[k];
+            self.normal[k][lane] = d.normal[k];
+            self.u_scaled[k][lane] = d.u_scaled[k];
+            self.v_scaled[k][lane] = d.v_scaled[k];
+        }
+    }
+
+    /// The disc of `lane`, bit for bit as stored.
+    #[inline]
+    fn disc(&self, lane: usize) -> Disc {
+        let get = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][lane], a[1][lane], a[2][lane]);
+        Disc {
+            center: get(&self.center),
+            normal: get(&self.normal),
+            u_scaled: get(&self.u_scaled),
+            v_scaled: get(&self.v_scaled),
+        }
+    }
+
+    /// Bit `l` set when lane `l` may be hit in `[t_min, t_max]`: the
+    /// operations of [`intersect_disc`] in the same order per lane (glam's
+    /// `dot` is `x*x' + y*y' + z*z'`, left to right; no fused operations), so
+    /// the mask equals "`intersect_disc` hits" except that the rim test is
+    /// relaxed by `1e-4` — a conservative filter in any case, since each
+    /// set lane is then decided by `intersect_disc` itself.
+    #[inline(always)]
+    fn may_hit(&self, ray: &RayLanes, t_min: f32, t_max: f32) -> u32 {
+        let [ox, oy, oz] = ray.origin;
+        let [dx, dy, dz] = ray.dir;
+        let [nx, ny, nz] = &self.normal;
+        let [cx, cy, cz] = &self.center;
+        let [ux, uy, uz] = &self.u_scaled;
+        let [vx, vy, vz] = &self.v_scaled;
+        // One element-wise operation per line, so each is one vector op.
+        let denom = lanes(|l| (nx[l] * dx) + (ny[l] * dy) + (nz[l] * dz));
+        let ocx = lanes(|l| ox - cx[l]);
+        let ocy = lanes(|l| oy - cy[l]);
+        let ocz = lanes(|l| oz - cz[l]);
+        let num = lanes(|l| (nx[l] * ocx[l]) + (ny[l] * ocy[l]) + (nz[l] * ocz[l]));
+        let t = lanes(|l| -num[l] / denom[l]);
+        let px = lanes(|l| ocx[l] + dx * t[l]);
+        let py = lanes(|l| ocy[l] + dy * t[l]);
+        let pz = lanes(|l| ocz[l] + dz * t[l]);
+        let u = lanes(|l| (px[l] * ux[l]) + (py[l] * uy[l]) + (pz[l] * uz[l]));
+        let v = lanes(|l| (px[l] * vx[l]) + (py[l] * vy[l]) + (pz[l] * vz[l]));
+        let r2 = lanes(|l| u[l] * u[l] + v[l] * v[l]);
+        let mut mask = 0;
+        for l in 0..LANES {
+            let hit = (t[l] >= t_min)
+                & (t[l] <= t_max)
+                & (t[l].abs() < f32::INFINITY)
+                & (r2[l] <= 1.0001);
+            mask |= u32::from(hit) << l;
+        }
+        mask
+    }
+}
+
+/// `[f(0), .., f(LANES - 1)]`.
+#[inline(always)]
+fn lanes(f: impl Fn(usize) -> f32) -> [f32; LANES] {
+    std::array::from_fn(f)
+}
+
 /// Per-ray constants of the traversal.
 struct RayCtx {
     origin: Vec3,
@@ -714,24 +837,6 @@ struct RayCtx {
     /// Bit `k` set when `dir[k]` is negative (sign bit, so `-0.0` counts).
     sign_mask: usize,
     t_min: f32,
-    /// `1 / (dir · dir)` (1 for the unit directions of the convention).
-    inv_len2: f32,
-}
-
-/// Conservative pre-test, cheaper than [`intersect_disc`] (no division): false
-/// only when the ray's line passes farther from the disc centre than its
-/// larger radius, so the disc cannot be hit. The slack (relative 1e-4 of
-/// `r²` plus 64 ulps of `|oc|² + r²`) exceeds the rounding of both this
-/// test and `intersect_disc`'s hit point, so a disc `intersect_disc` would
-/// accept is never skipped and the candidates stay bit-identical.
-#[inline]
-fn may_hit(d: &Disc, r2: f32, ray: &Ray, ctx: &RayCtx) -> bool {
-    let oc = ray.origin - d.center;
-    let oc2 = oc.dot(oc);
-    let along = oc.dot(ray.dir);
-    let dist2 = oc2 - along * along * ctx.inv_len2;
-    // A NaN (NaN ray) passes on to intersect_disc, which misses it.
-    dist2 <= r2 * 1.0001 + 64.0 * f32::EPSILON * (oc2 + r2) || dist2.is_nan()
 }
 
 /// Per-axis (near, far) of a slab from the parameters of its two planes.
@@ -770,14 +875,15 @@ fn min4(t: f32, v: Vec3) -> f32 {
 trait Visitor {
     /// Cells entered beyond this are skipped.
     fn cutoff(&self) -> f32;
-    /// Tests a leaf's discs (with their squared radii and ids); true stops
+    /// Tests a leaf's disc packs (with their lanes' splat ids); true stops
     /// the traversal.
-    fn leaf(&mut self, discs: &[Disc], r2: &[f32], ids: &[u32], ctx: &RayCtx) -> bool;
+    fn leaf(&mut self, packs: &[DiscPack], ids: &[u32]) -> bool;
 }
 
 /// `intersect`: gathers the candidate window.
 struct Gather<'a> {
     ray: &'a Ray,
+    lanes: RayLanes,
     t_min: f32,
     t_max: f32,
     hits: &'a mut CandidateHits,
@@ -790,14 +896,19 @@ impl Visitor for Gather<'_> {
     }
 
     #[inline]
-    fn leaf(&mut self, discs: &[Disc], r2: &[f32], ids: &[u32], ctx: &RayCtx) -> bool {
+    fn leaf(&mut self, packs: &[DiscPack], ids: &[u32]) -> bool {
         let mut cut = self.cutoff();
-        for ((d, &r2), &id) in discs.iter().zip(r2).zip(ids) {
-            if !may_hit(d, r2, self.ray, ctx) {
-                continue;
-            }
-            if let Some((t, u, v)) = intersect_disc(d, self.ray, self.t_min, cut) {
-                cut = self.hits.offer(Candidate { id, t, u, v }).min(self.t_max);
+        for (pack, ids) in packs.iter().zip(ids.chunks_exact(LANES)) {
+            let mut mask = pack.may_hit(&self.lanes, self.t_min, cut);
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                // The shared routine decides, with the window's current end.
+                if let Some((t, u, v)) = intersect_disc(&pack.disc(lane), self.ray, self.t_min, cut)
+                {
+                    let id = ids[lane];
+                    cut = self.hits.offer(Candidate { id, t, u, v }).min(self.t_max);
+                }
             }
         }
         false
@@ -807,6 +918,7 @@ impl Visitor for Gather<'_> {
 /// `occluded`: stops at the first hit.
 struct AnyHit<'a> {
     ray: &'a Ray,
+    lanes: RayLanes,
     t_min: f32,
     t_max: f32,
 }
@@ -818,10 +930,17 @@ impl Visitor for AnyHit<'_> {
     }
 
     #[inline]
-    fn leaf(&mut self, discs: &[Disc], r2: &[f32], _ids: &[u32], ctx: &RayCtx) -> bool {
-        discs.iter().zip(r2).any(|(d, &r2)| {
-            may_hit(d, r2, self.ray, ctx)
-                && intersect_disc(d, self.ray, self.t_min, self.t_max).is_some()
+    fn leaf(&mut self, packs: &[DiscPack], _ids: &[u32]) -> bool {
+        packs.iter().any(|pack| {
+            let mut mask = pack.may_hit(&self.lanes, self.t_min, self.t_max);
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                if intersect_disc(&pack.disc(lane), self.ray, self.t_min, self.t_max).is_some() {
+                    return true;
+                }
+            }
+            false
         })
     }
 }
@@ -835,6 +954,7 @@ impl Backend for Octree {
         hits.clear();
         let mut g = Gather {
             ray,
+            lanes: RayLanes::new(ray),
             t_min,
             t_max,
             hits,
@@ -843,7 +963,12 @@ impl Backend for Octree {
     }
 
     fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        let mut a = AnyHit { ray, t_min, t_max };
+        let mut a = AnyHit {
+            ray,
+            lanes: RayLanes::new(ray),
+            t_min,
+            t_max,
+        };
         self.traverse(ray, t_min, &mut a)
     }
 
