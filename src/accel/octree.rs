@@ -696,25 +696,33 @@ impl Octree {
         // Slab parameters of the padded lower and upper halves on each axis.
         let (lower_near, lower_far) = slab((lo - pad - o) * inv, (mid + pad - o) * inv);
         let (upper_near, upper_far) = slab((mid - pad - o) * inv, (hi + pad - o) * inv);
+        // Entry and exit of all eight children at once, branch free; only
+        // the children whose interval is non-empty are visited.
+        let cut = visitor.cutoff();
+        let near = [lower_near.to_array(), upper_near.to_array()];
+        let far = [lower_far.to_array(), upper_far.to_array()];
+        let corner = |oct: usize, v: &[[f32; 3]; 2]| {
+            Vec3::new(v[oct & 1][0], v[(oct >> 1) & 1][1], v[oct >> 2][2])
+        };
+        let entry: [f32; 8] = std::array::from_fn(|oct| max4(ctx.t_min, corner(oct, &near)));
+        let exit: [f32; 8] = std::array::from_fn(|oct| min4(cut, corner(oct, &far)));
+        let mut open = 0u32;
+        for oct in 0..8 {
+            open |= u32::from(entry[oct] <= exit[oct]) << oct;
+        }
+        let open = open & mask;
+        if open == 0 {
+            return false;
+        }
         for i in 0..8 {
             let oct = i ^ ctx.sign_mask;
-            if mask & (1 << oct) == 0 {
+            // The window may have shrunk since `exit` was computed.
+            if open & (1 << oct) == 0 || !(entry[oct] <= visitor.cutoff()) {
                 continue;
             }
-            let pick = |l: Vec3, u: Vec3| {
-                Vec3::new(
-                    if oct & 1 != 0 { u.x } else { l.x },
-                    if oct & 2 != 0 { u.y } else { l.y },
-                    if oct & 4 != 0 { u.z } else { l.z },
-                )
-            };
-            let entry = max4(ctx.t_min, pick(lower_near, upper_near));
-            let exit = min4(visitor.cutoff(), pick(lower_far, upper_far));
-            if entry <= exit {
-                let child = node.first as usize + (mask & ((1 << oct) - 1)).count_ones() as usize;
-                if self.visit(child, child_lo(lo, half, oct), half, ctx, visitor) {
-                    return true;
-                }
+            let child = node.first as usize + (mask & ((1 << oct) - 1)).count_ones() as usize;
+            if self.visit(child, child_lo(lo, half, oct), half, ctx, visitor) {
+                return true;
             }
         }
         false
