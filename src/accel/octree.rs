@@ -521,44 +521,51 @@ impl Octree {
         let mut leaves = 0u32;
         number_leaves(&mut root, &mut leaves);
 
-        // 3. Every leaf each splat overlaps, as (leaf, key) pairs sorted.
-        let mut pairs: Vec<u64> = (0..n as u32)
-            .into_par_iter()
-            .fold(Vec::new, |mut out, key| {
-                let id = order[key as usize] as usize;
-                let e = extents[id] + Vec3::splat(pad);
-                let c = splats[id].center;
-                // The broken test-only tree: an empty footprint meets no
-                // cell, so only the leaf holding the centre gets the splat.
-                let (lo, hi) = if params.skip_overlap_insertion {
-                    (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY))
-                } else {
-                    (c - e, c + e)
-                };
-                let fp = Footprint {
-                    lo,
-                    hi,
-                    disc: discs[id],
-                    exact: params.overlap == OverlapTest::Exact,
-                };
-                insert_overlaps(&root, root_lo, root_size, pad, key, &fp, &mut out);
+        // 3. Every leaf each splat overlaps. Splats are read in Morton order
+        // (one parallel gather first, so the descent reads memory in order),
+        // in chunks of consecutive keys; each chunk lists `(leaf << 32) | key`
+        // in key order, so the chunks concatenated are sorted by key and a
+        // stable counting sort by leaf yields every leaf's keys in order.
+        let sorted: Vec<(Disc, Vec3)> = order
+            .par_iter()
+            .map(|&i| (discs[i as usize], extents[i as usize]))
+            .collect();
+        drop(discs);
+        drop(extents);
+        const CHUNK: usize = 2048;
+        let chunks: Vec<Vec<u64>> = sorted
+            .par_chunks(CHUNK)
+            .enumerate()
+            .map(|(c, chunk)| {
+                let mut out = Vec::with_capacity(chunk.len() * 8);
+                for (j, (disc, extent)) in chunk.iter().enumerate() {
+                    let key = (c * CHUNK + j) as u32;
+                    let e = *extent + Vec3::splat(pad);
+                    // The broken test-only tree: an empty footprint meets no
+                    // cell, so only the leaf holding the centre gets the splat.
+                    let (lo, hi) = if params.skip_overlap_insertion {
+                        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY))
+                    } else {
+                        (disc.center - e, disc.center + e)
+                    };
+                    let fp = Footprint {
+                        lo,
+                        hi,
+                        disc: *disc,
+                        exact: params.overlap == OverlapTest::Exact,
+                    };
+                    insert_overlaps(&root, root_lo, root_size, pad, key, &fp, &mut out);
+                }
                 out
             })
-            .reduce(Vec::new, |mut a, mut b| {
-                if a.len() < b.len() {
-                    std::mem::swap(&mut a, &mut b);
-                }
-                a.extend_from_slice(&b);
-                a
-            });
-        pairs.par_sort_unstable();
-        assert!(pairs.len() < INTERIOR as usize, "too many splat references");
+            .collect();
+        let references: usize = chunks.iter().map(Vec::len).sum();
+        assert!(references < INTERIOR as usize, "too many splat references");
 
         let mut leaf_count = vec![0u32; leaves as usize];
-        for p in &pairs {
+        for p in chunks.iter().flatten() {
             leaf_count[(p >> 32) as usize] += 1;
         }
-        let references = pairs.len();
         // Packs per leaf, and each leaf's first pack.
         let leaf_packs: Vec<u32> = leaf_count
             .iter()
@@ -570,31 +577,39 @@ impl Octree {
             *s = acc;
             acc += c;
         }
-        let mut pack_ids = vec![NO_SPLAT; acc as usize * LANES];
-        let mut next = 0usize;
-        for (leaf, &count) in leaf_count.iter().enumerate() {
-            let at = leaf_start[leaf] as usize * LANES;
-            for (slot, p) in pack_ids[at..at + count as usize]
-                .iter_mut()
-                .zip(&pairs[next..next + count as usize])
-            {
-                *slot = order[(*p & 0xffff_ffff) as usize];
-            }
-            next += count as usize;
+        // Counting sort: each leaf's keys, in key order, padded to whole packs.
+        let mut pack_keys = vec![NO_SPLAT; acc as usize * LANES];
+        let mut cursor: Vec<u32> = leaf_start.iter().map(|&s| s * LANES as u32).collect();
+        for p in chunks.iter().flatten() {
+            let c = &mut cursor[(p >> 32) as usize];
+            pack_keys[*c as usize] = (p & 0xffff_ffff) as u32;
+            *c += 1;
         }
-        drop(pairs);
-        let packs: Vec<DiscPack> = pack_ids
+        drop(chunks);
+        drop(cursor);
+        let packs: Vec<DiscPack> = pack_keys
             .par_chunks(LANES)
-            .map(|ids| {
+            .map(|keys| {
                 let mut p = DiscPack::EMPTY;
-                for (lane, &id) in ids.iter().enumerate() {
-                    if id != NO_SPLAT {
-                        p.set(lane, &discs[id as usize]);
+                for (lane, &k) in keys.iter().enumerate() {
+                    if k != NO_SPLAT {
+                        p.set(lane, &sorted[k as usize].0);
                     }
                 }
                 p
             })
             .collect();
+        let pack_ids: Vec<u32> = pack_keys
+            .par_iter()
+            .map(|&k| {
+                if k == NO_SPLAT {
+                    NO_SPLAT
+                } else {
+                    order[k as usize]
+                }
+            })
+            .collect();
+        drop(pack_keys);
 
         // Flatten.
         count_refs(&mut root, &leaf_packs);
@@ -717,7 +732,7 @@ impl Octree {
         for i in 0..8 {
             let oct = i ^ ctx.sign_mask;
             // The window may have shrunk since `exit` was computed.
-            if open & (1 << oct) == 0 || !(entry[oct] <= visitor.cutoff()) {
+            if open & (1 << oct) == 0 || entry[oct] > visitor.cutoff() {
                 continue;
             }
             let child = node.first as usize + (mask & ((1 << oct) - 1)).count_ones() as usize;
