@@ -828,6 +828,14 @@ impl DiscPack {
         let ocz = lanes(|l| oz - cz[l]);
         let num = lanes(|l| (nx[l] * ocx[l]) + (ny[l] * ocy[l]) + (nz[l] * ocz[l]));
         let t = lanes(|l| -num[l] / denom[l]);
+        // Once the window is narrow most planes are crossed outside it.
+        let mut in_range = 0;
+        for (l, t) in t.iter().enumerate() {
+            in_range |= u32::from((*t >= t_min) & (*t <= t_max) & (t.abs() < f32::INFINITY)) << l;
+        }
+        if in_range == 0 {
+            return 0;
+        }
         let px = lanes(|l| ocx[l] + dx * t[l]);
         let py = lanes(|l| ocy[l] + dy * t[l]);
         let pz = lanes(|l| ocz[l] + dz * t[l]);
@@ -835,14 +843,10 @@ impl DiscPack {
         let v = lanes(|l| (px[l] * vx[l]) + (py[l] * vy[l]) + (pz[l] * vz[l]));
         let r2 = lanes(|l| u[l] * u[l] + v[l] * v[l]);
         let mut mask = 0;
-        for l in 0..LANES {
-            let hit = (t[l] >= t_min)
-                & (t[l] <= t_max)
-                & (t[l].abs() < f32::INFINITY)
-                & (r2[l] <= 1.0001);
-            mask |= u32::from(hit) << l;
+        for (l, r2) in r2.iter().enumerate() {
+            mask |= u32::from(*r2 <= 1.0001) << l;
         }
-        mask
+        mask & in_range
     }
 }
 
