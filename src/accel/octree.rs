@@ -14,20 +14,24 @@
 //! followed by a recursive split of the sorted range — the same tree as
 //! inserting one splat at a time, since a cell is split exactly when it holds
 //! more than `max_leaf` centres. Step 3 descends the tree once per splat, in
-//! parallel.
+//! parallel over chunks of splats in Morton order; a stable counting sort by
+//! leaf then groups the references (no sort of 64-bit pairs).
 //!
 //! The built tree is flattened into 8-byte [`Node`]s (children of a node stored
-//! contiguously, empty children left out) and one array of splat references,
-//! with a copy of each referenced [`Disc`] in reference order so a leaf's discs
-//! are read contiguously.
+//! contiguously, empty children left out) and the leaves' references, stored
+//! as [`DiscPack`]s: copies of [`LANES`] discs component by component (SoA),
+//! so a leaf's discs are read contiguously and tested four at a time.
 //!
-//! Traversal (§3.2) visits the children of a cell in the order given by the
-//! ray direction's signs (`i ^ sign_mask`, a front-to-back order for
-//! octants), and skips every cell whose entry lies beyond the far end of the
-//! candidate window (`hits.far()`, nearest + `xi`, §4.3): no hit there can
-//! still be a candidate. Every ray–splat test is the shared
-//! [`intersect_disc`], every hit goes through [`CandidateHits::offer`], so the
-//! candidates are bit-identical to those of the other backends.
+//! Traversal (§3.2) computes the entry and exit of a cell's eight children at
+//! once, then visits the non-empty ones in the order given by the ray
+//! direction's signs (`i ^ sign_mask`, a front-to-back order for octants),
+//! skipping every cell whose entry lies beyond the far end of the candidate
+//! window (`hits.far()`, nearest + `xi`, §4.3): no hit there can still be a
+//! candidate. In a leaf, [`DiscPack::may_hit`] repeats the operations of the
+//! shared [`intersect_disc`] on four lanes as a filter; every lane it lets
+//! through is decided by [`intersect_disc`] itself and offered to
+//! [`CandidateHits::offer`], so the candidates are bit-identical to those of
+//! the other backends.
 //!
 //! Robustness: cells are padded by a few ulps of the scene's coordinates both
 //! when splats are inserted and when rays are clipped, so that rounding in the
