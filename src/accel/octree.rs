@@ -380,6 +380,44 @@ fn insert_overlaps(
     }
 }
 
+/// Step 3 for one splat, started below the root: descends along the cells
+/// holding the splat's centre while the child cell contains the whole
+/// (padded) footprint with a margin of two more paddings, then runs
+/// [`insert_overlaps`] from there. Every cell left out lies outside that
+/// child, so its padded box cannot meet the footprint and holds no centre:
+/// the references are exactly those of [`insert_overlaps`] from the root.
+fn insert_splat(
+    root: &BuildNode,
+    lo: Vec3,
+    size: f32,
+    pad: f32,
+    key: u32,
+    fp: &Footprint,
+    out: &mut Vec<u64>,
+) {
+    let (mut node, mut lo, mut size) = (root, lo, size);
+    while let BuildNode::Interior { children, .. } = node {
+        let Some(oct) = children.iter().position(|c| {
+            let (b, e) = c.range();
+            b <= key && key < e
+        }) else {
+            break;
+        };
+        let half = size * 0.5;
+        let clo = child_lo(lo, half, oct);
+        let margin = Vec3::splat(3.0 * pad);
+        let inside =
+            fp.lo.cmpge(clo + margin).all() && fp.hi.cmple(clo + Vec3::splat(half) - margin).all();
+        if !inside {
+            break;
+        }
+        node = &children[oct];
+        lo = clo;
+        size = half;
+    }
+    insert_overlaps(node, lo, size, pad, key, fp, out);
+}
+
 /// Fills the subtree reference counts; returns this subtree's.
 fn count_refs(node: &mut BuildNode, leaf_count: &[u32]) -> u64 {
     match node {
@@ -558,7 +596,7 @@ impl Octree {
                         disc: *disc,
                         exact: params.overlap == OverlapTest::Exact,
                     };
-                    insert_overlaps(&root, root_lo, root_size, pad, key, &fp, &mut out);
+                    insert_splat(&root, root_lo, root_size, pad, key, &fp, &mut out);
                 }
                 out
             })
