@@ -1055,6 +1055,54 @@ mod tests {
     }
 
     #[test]
+    fn pack_filter_passes_every_hit_of_intersect_disc() {
+        // Rays aimed near the rims (so hits and misses are close calls),
+        // some grazing, some with a finite window: every lane that
+        // `intersect_disc` hits must be in the mask.
+        let mut state = 0x0bad_cafe_1234_5678u64;
+        let mut rnd = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 40) as f32) / (1u64 << 24) as f32 - 0.5
+        };
+        let mut hits = 0;
+        for _ in 0..20_000 {
+            let mut pack = DiscPack::EMPTY;
+            let mut discs = [None; LANES];
+            for (lane, slot) in discs.iter_mut().enumerate().take(LANES - 1) {
+                let n = Vec3::new(rnd(), rnd(), rnd());
+                let c = Vec3::new(rnd(), rnd(), rnd());
+                let Some(s) = Splat::disc(c, n, 0.2 + rnd().abs()) else {
+                    continue;
+                };
+                let d = s.disc_geometry();
+                pack.set(lane, &d);
+                *slot = Some(d);
+            }
+            let origin = Vec3::new(rnd(), rnd(), rnd()) * 8.0;
+            let target =
+                discs[0].map_or(Vec3::ZERO, |d| d.center) + Vec3::new(rnd(), rnd(), rnd()) * 0.9;
+            let ray = Ray::new(origin, target - origin);
+            let t_max = if rnd() > 0.3 {
+                f32::INFINITY
+            } else {
+                4.0 + rnd()
+            };
+            let mask = pack.may_hit(&RayLanes::new(&ray), 0.0, t_max);
+            for (lane, d) in discs.iter().enumerate() {
+                let hit = d.is_some_and(|d| intersect_disc(&d, &ray, 0.0, t_max).is_some());
+                hits += usize::from(hit);
+                assert!(!hit || mask & (1 << lane) != 0, "lane {lane} filtered out");
+                if d.is_none() {
+                    assert_eq!(mask & (1 << lane), 0, "padding lane passed");
+                }
+            }
+        }
+        assert!(hits > 1000, "the rays should often hit: {hits}");
+    }
+
+    #[test]
     fn morton_spread_interleaves() {
         assert_eq!(spread3(0b101), 0b001_000_001);
         assert_eq!(spread3(0x1f_ffff).count_ones(), 21);
