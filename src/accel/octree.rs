@@ -14,20 +14,24 @@
 //! followed by a recursive split of the sorted range — the same tree as
 //! inserting one splat at a time, since a cell is split exactly when it holds
 //! more than `max_leaf` centres. Step 3 descends the tree once per splat, in
-//! parallel.
+//! parallel over chunks of splats in Morton order; a stable counting sort by
+//! leaf then groups the references (no sort of 64-bit pairs).
 //!
 //! The built tree is flattened into 8-byte [`Node`]s (children of a node stored
-//! contiguously, empty children left out) and one array of splat references,
-//! with a copy of each referenced [`Disc`] in reference order so a leaf's discs
-//! are read contiguously.
+//! contiguously, empty children left out) and the leaves' references, stored
+//! as [`DiscPack`]s: copies of [`LANES`] discs component by component (SoA),
+//! so a leaf's discs are read contiguously and tested four at a time.
 //!
-//! Traversal (§3.2) visits the children of a cell in the order given by the
-//! ray direction's signs (`i ^ sign_mask`, a front-to-back order for
-//! octants), and skips every cell whose entry lies beyond the far end of the
-//! candidate window (`hits.far()`, nearest + `xi`, §4.3): no hit there can
-//! still be a candidate. Every ray–splat test is the shared
-//! [`intersect_disc`], every hit goes through [`CandidateHits::offer`], so the
-//! candidates are bit-identical to those of the other backends.
+//! Traversal (§3.2) computes the entry and exit of a cell's eight children at
+//! once, then visits the non-empty ones in the order given by the ray
+//! direction's signs (`i ^ sign_mask`, a front-to-back order for octants),
+//! skipping every cell whose entry lies beyond the far end of the candidate
+//! window (`hits.far()`, nearest + `xi`, §4.3): no hit there can still be a
+//! candidate. In a leaf, [`DiscPack::may_hit`] repeats the operations of the
+//! shared [`intersect_disc`] on four lanes as a filter; every lane it lets
+//! through is decided by [`intersect_disc`] itself and offered to
+//! [`CandidateHits::offer`], so the candidates are bit-identical to those of
+//! the other backends.
 //!
 //! Robustness: cells are padded by a few ulps of the scene's coordinates both
 //! when splats are inserted and when rays are clipped, so that rounding in the
@@ -104,25 +108,26 @@ const UNEMITTED: u32 = u32::MAX;
 #[repr(C)]
 struct Node {
     /// Interior: index in `nodes` of its first stored child. Leaf: index in
-    /// `ref_ids`/`ref_discs` of its first splat reference.
+    /// `packs` of its first [`DiscPack`].
     first: u32,
     /// Interior: [`INTERIOR`] | 8-bit mask of the stored (non-empty)
     /// children, bit `o` for octant `o = x | y << 1 | z << 2` (1 = upper
     /// half); child `o` sits at `first + popcount(mask & ((1 << o) - 1))`.
-    /// Leaf: the number of references (bit 31 clear).
+    /// Leaf: the number of packs (bit 31 clear).
     meta: u32,
 }
 
 /// The octree of §3.1 over a set of splats.
 pub struct Octree {
     nodes: Vec<Node>,
-    /// Splat id of each reference, leaf by leaf.
-    ref_ids: Vec<u32>,
-    /// The disc of each reference (a copy, in reference order, so a leaf's
-    /// discs are contiguous in memory).
-    ref_discs: Vec<Disc>,
-    /// Squared larger radius of each reference's disc, for [`may_hit`].
-    ref_r2: Vec<f32>,
+    /// The discs of each leaf's references, [`LANES`] to a pack (copies in
+    /// reference order, so a leaf's discs are contiguous in memory; the last
+    /// pack of a leaf padded with [`DiscPack::EMPTY`] lanes).
+    packs: Vec<DiscPack>,
+    /// Splat id of each lane of `packs` ([`NO_SPLAT`] on padding lanes).
+    pack_ids: Vec<u32>,
+    /// Splat references (lanes holding a splat).
+    references: usize,
     /// Lower corner of the root cube.
     root_lo: Vec3,
     /// Edge length of the root cube.
@@ -375,6 +380,44 @@ fn insert_overlaps(
     }
 }
 
+/// Step 3 for one splat, started below the root: descends along the cells
+/// holding the splat's centre while the child cell contains the whole
+/// (padded) footprint with a margin of two more paddings, then runs
+/// [`insert_overlaps`] from there. Every cell left out lies outside that
+/// child, so its padded box cannot meet the footprint and holds no centre:
+/// the references are exactly those of [`insert_overlaps`] from the root.
+fn insert_splat(
+    root: &BuildNode,
+    lo: Vec3,
+    size: f32,
+    pad: f32,
+    key: u32,
+    fp: &Footprint,
+    out: &mut Vec<u64>,
+) {
+    let (mut node, mut lo, mut size) = (root, lo, size);
+    while let BuildNode::Interior { children, .. } = node {
+        let Some(oct) = children.iter().position(|c| {
+            let (b, e) = c.range();
+            b <= key && key < e
+        }) else {
+            break;
+        };
+        let half = size * 0.5;
+        let clo = child_lo(lo, half, oct);
+        let margin = Vec3::splat(3.0 * pad);
+        let inside =
+            fp.lo.cmpge(clo + margin).all() && fp.hi.cmple(clo + Vec3::splat(half) - margin).all();
+        if !inside {
+            break;
+        }
+        node = &children[oct];
+        lo = clo;
+        size = half;
+    }
+    insert_overlaps(node, lo, size, pad, key, fp, out);
+}
+
 /// Fills the subtree reference counts; returns this subtree's.
 fn count_refs(node: &mut BuildNode, leaf_count: &[u32]) -> u64 {
     match node {
@@ -520,68 +563,101 @@ impl Octree {
         let mut leaves = 0u32;
         number_leaves(&mut root, &mut leaves);
 
-        // 3. Every leaf each splat overlaps, as (leaf, key) pairs sorted.
-        let mut pairs: Vec<u64> = (0..n as u32)
-            .into_par_iter()
-            .fold(Vec::new, |mut out, key| {
-                let id = order[key as usize] as usize;
-                let e = extents[id] + Vec3::splat(pad);
-                let c = splats[id].center;
-                // The broken test-only tree: an empty footprint meets no
-                // cell, so only the leaf holding the centre gets the splat.
-                let (lo, hi) = if params.skip_overlap_insertion {
-                    (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY))
-                } else {
-                    (c - e, c + e)
-                };
-                let fp = Footprint {
-                    lo,
-                    hi,
-                    disc: discs[id],
-                    exact: params.overlap == OverlapTest::Exact,
-                };
-                insert_overlaps(&root, root_lo, root_size, pad, key, &fp, &mut out);
+        // 3. Every leaf each splat overlaps. Splats are read in Morton order
+        // (one parallel gather first, so the descent reads memory in order),
+        // in chunks of consecutive keys; each chunk lists `(leaf << 32) | key`
+        // in key order, so the chunks concatenated are sorted by key and a
+        // stable counting sort by leaf yields every leaf's keys in order.
+        let sorted: Vec<(Disc, Vec3)> = order
+            .par_iter()
+            .map(|&i| (discs[i as usize], extents[i as usize]))
+            .collect();
+        drop(discs);
+        drop(extents);
+        const CHUNK: usize = 2048;
+        let chunks: Vec<Vec<u64>> = sorted
+            .par_chunks(CHUNK)
+            .enumerate()
+            .map(|(c, chunk)| {
+                let mut out = Vec::with_capacity(chunk.len() * 8);
+                for (j, (disc, extent)) in chunk.iter().enumerate() {
+                    let key = (c * CHUNK + j) as u32;
+                    let e = *extent + Vec3::splat(pad);
+                    // The broken test-only tree: an empty footprint meets no
+                    // cell, so only the leaf holding the centre gets the splat.
+                    let (lo, hi) = if params.skip_overlap_insertion {
+                        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY))
+                    } else {
+                        (disc.center - e, disc.center + e)
+                    };
+                    let fp = Footprint {
+                        lo,
+                        hi,
+                        disc: *disc,
+                        exact: params.overlap == OverlapTest::Exact,
+                    };
+                    insert_splat(&root, root_lo, root_size, pad, key, &fp, &mut out);
+                }
                 out
             })
-            .reduce(Vec::new, |mut a, mut b| {
-                if a.len() < b.len() {
-                    std::mem::swap(&mut a, &mut b);
-                }
-                a.extend_from_slice(&b);
-                a
-            });
-        pairs.par_sort_unstable();
-        assert!(pairs.len() < INTERIOR as usize, "too many splat references");
+            .collect();
+        let references: usize = chunks.iter().map(Vec::len).sum();
+        assert!(references < INTERIOR as usize, "too many splat references");
 
         let mut leaf_count = vec![0u32; leaves as usize];
-        for p in &pairs {
+        for p in chunks.iter().flatten() {
             leaf_count[(p >> 32) as usize] += 1;
         }
+        // Packs per leaf, and each leaf's first pack.
+        let leaf_packs: Vec<u32> = leaf_count
+            .iter()
+            .map(|&c| c.div_ceil(LANES as u32))
+            .collect();
         let mut leaf_start = vec![0u32; leaves as usize];
         let mut acc = 0u32;
-        for (s, c) in leaf_start.iter_mut().zip(&leaf_count) {
+        for (s, c) in leaf_start.iter_mut().zip(&leaf_packs) {
             *s = acc;
             acc += c;
         }
-        let ref_ids: Vec<u32> = pairs
-            .par_iter()
-            .map(|p| order[(*p & 0xffff_ffff) as usize])
-            .collect();
-        drop(pairs);
-        let ref_discs: Vec<Disc> = ref_ids.par_iter().map(|&i| discs[i as usize]).collect();
-        let ref_r2: Vec<f32> = ref_ids
-            .par_iter()
-            .map(|&i| {
-                let r = splats[i as usize].radii.max_element();
-                r * r
+        // Counting sort: each leaf's keys, in key order, padded to whole packs.
+        let mut pack_keys = vec![NO_SPLAT; acc as usize * LANES];
+        let mut cursor: Vec<u32> = leaf_start.iter().map(|&s| s * LANES as u32).collect();
+        for p in chunks.iter().flatten() {
+            let c = &mut cursor[(p >> 32) as usize];
+            pack_keys[*c as usize] = (p & 0xffff_ffff) as u32;
+            *c += 1;
+        }
+        drop(chunks);
+        drop(cursor);
+        let packs: Vec<DiscPack> = pack_keys
+            .par_chunks(LANES)
+            .map(|keys| {
+                let mut p = DiscPack::EMPTY;
+                for (lane, &k) in keys.iter().enumerate() {
+                    if k != NO_SPLAT {
+                        p.set(lane, &sorted[k as usize].0);
+                    }
+                }
+                p
             })
             .collect();
+        let pack_ids: Vec<u32> = pack_keys
+            .par_iter()
+            .map(|&k| {
+                if k == NO_SPLAT {
+                    NO_SPLAT
+                } else {
+                    order[k as usize]
+                }
+            })
+            .collect();
+        drop(pack_keys);
 
         // Flatten.
-        count_refs(&mut root, &leaf_count);
+        count_refs(&mut root, &leaf_packs);
         let mut nodes = vec![Node { first: 0, meta: 0 }];
         let mut emitted = 0;
-        emit(&root, 0, &mut nodes, &leaf_start, &leaf_count, &mut emitted);
+        emit(&root, 0, &mut nodes, &leaf_start, &leaf_packs, &mut emitted);
         debug_assert_eq!(emitted, nodes.len(), "every node slot emitted once");
         debug_assert!(
             nodes.iter().all(|nd| nd.meta != UNEMITTED),
@@ -597,22 +673,21 @@ impl Octree {
         let stats = BuildStats {
             build_seconds: start.elapsed().as_secs_f64(),
             memory_bytes: std::mem::size_of_val(nodes.as_slice())
-                + std::mem::size_of_val(ref_ids.as_slice())
-                + std::mem::size_of_val(ref_discs.as_slice())
-                + std::mem::size_of_val(ref_r2.as_slice()),
+                + std::mem::size_of_val(packs.as_slice())
+                + std::mem::size_of_val(pack_ids.as_slice()),
             nodes: nodes.len(),
             leaves: leaf_nodes,
             mean_refs_per_leaf: if nonempty == 0 {
                 0.0
             } else {
-                ref_ids.len() as f64 / nonempty as f64
+                references as f64 / nonempty as f64
             },
         };
         Octree {
             nodes,
-            ref_ids,
-            ref_discs,
-            ref_r2,
+            packs,
+            pack_ids,
+            references,
             root_lo,
             root_size,
             pad,
@@ -623,14 +698,14 @@ impl Octree {
     /// Total splat references (a splat counts once per leaf holding it).
     #[must_use]
     pub fn references(&self) -> usize {
-        self.ref_ids.len()
+        self.references
     }
 
     /// Front-to-back traversal from the root; `visitor` sees the leaves.
     /// Returns true when the visitor stopped it.
     #[inline]
     fn traverse<V: Visitor>(&self, ray: &Ray, t_min: f32, visitor: &mut V) -> bool {
-        if self.ref_ids.is_empty() {
+        if self.references == 0 {
             return false;
         }
         let ctx = RayCtx {
@@ -640,7 +715,6 @@ impl Octree {
                 | usize::from(ray.dir.y.is_sign_negative()) << 1
                 | usize::from(ray.dir.z.is_sign_negative()) << 2,
             t_min,
-            inv_len2: 1.0 / ray.dir.length_squared(),
         };
         let pad = Vec3::splat(self.pad);
         let lo = self.root_lo;
@@ -665,10 +739,8 @@ impl Octree {
         if node.meta & INTERIOR == 0 {
             let range = node.first as usize..(node.first + node.meta) as usize;
             return visitor.leaf(
-                &self.ref_discs[range.clone()],
-                &self.ref_r2[range.clone()],
-                &self.ref_ids[range],
-                ctx,
+                &self.packs[range.clone()],
+                &self.pack_ids[range.start * LANES..range.end * LANES],
             );
         }
         let mask = node.meta & 0xff;
@@ -681,29 +753,149 @@ impl Octree {
         // Slab parameters of the padded lower and upper halves on each axis.
         let (lower_near, lower_far) = slab((lo - pad - o) * inv, (mid + pad - o) * inv);
         let (upper_near, upper_far) = slab((mid - pad - o) * inv, (hi + pad - o) * inv);
+        // Entry and exit of all eight children at once, branch free; only
+        // the children whose interval is non-empty are visited.
+        let cut = visitor.cutoff();
+        let near = [lower_near.to_array(), upper_near.to_array()];
+        let far = [lower_far.to_array(), upper_far.to_array()];
+        let corner = |oct: usize, v: &[[f32; 3]; 2]| {
+            Vec3::new(v[oct & 1][0], v[(oct >> 1) & 1][1], v[oct >> 2][2])
+        };
+        let entry: [f32; 8] = std::array::from_fn(|oct| max4(ctx.t_min, corner(oct, &near)));
+        let exit: [f32; 8] = std::array::from_fn(|oct| min4(cut, corner(oct, &far)));
+        let mut open = 0u32;
+        for oct in 0..8 {
+            open |= u32::from(entry[oct] <= exit[oct]) << oct;
+        }
+        let open = open & mask;
+        if open == 0 {
+            return false;
+        }
         for i in 0..8 {
             let oct = i ^ ctx.sign_mask;
-            if mask & (1 << oct) == 0 {
+            // The window may have shrunk since `exit` was computed.
+            if open & (1 << oct) == 0 || entry[oct] > visitor.cutoff() {
                 continue;
             }
-            let pick = |l: Vec3, u: Vec3| {
-                Vec3::new(
-                    if oct & 1 != 0 { u.x } else { l.x },
-                    if oct & 2 != 0 { u.y } else { l.y },
-                    if oct & 4 != 0 { u.z } else { l.z },
-                )
-            };
-            let entry = max4(ctx.t_min, pick(lower_near, upper_near));
-            let exit = min4(visitor.cutoff(), pick(lower_far, upper_far));
-            if entry <= exit {
-                let child = node.first as usize + (mask & ((1 << oct) - 1)).count_ones() as usize;
-                if self.visit(child, child_lo(lo, half, oct), half, ctx, visitor) {
-                    return true;
-                }
+            let child = node.first as usize + (mask & ((1 << oct) - 1)).count_ones() as usize;
+            if self.visit(child, child_lo(lo, half, oct), half, ctx, visitor) {
+                return true;
             }
         }
         false
     }
+}
+
+/// Discs per [`DiscPack`].
+const LANES: usize = 4;
+
+/// Splat id of a padding lane.
+const NO_SPLAT: u32 = u32::MAX;
+
+/// [`LANES`] discs of one leaf stored component by component (SoA), so that
+/// [`DiscPack::may_hit`] tests them together in a loop LLVM vectorises.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+struct DiscPack {
+    center: [[f32; LANES]; 3],
+    normal: [[f32; LANES]; 3],
+    u_scaled: [[f32; LANES]; 3],
+    v_scaled: [[f32; LANES]; 3],
+}
+
+/// A ray's origin and direction broadcast for [`DiscPack::may_hit`].
+struct RayLanes {
+    origin: [f32; 3],
+    dir: [f32; 3],
+}
+
+impl RayLanes {
+    fn new(ray: &Ray) -> RayLanes {
+        RayLanes {
+            origin: ray.origin.to_array(),
+            dir: ray.dir.to_array(),
+        }
+    }
+}
+
+impl DiscPack {
+    /// All lanes padding: a zero normal, so no ray can hit them (`n·d` is
+    /// 0 or NaN, hence `t` is never finite).
+    const EMPTY: DiscPack = DiscPack {
+        center: [[0.0; LANES]; 3],
+        normal: [[0.0; LANES]; 3],
+        u_scaled: [[0.0; LANES]; 3],
+        v_scaled: [[0.0; LANES]; 3],
+    };
+
+    fn set(&mut self, lane: usize, d: &Disc) {
+        for k in 0..3 {
+            self.center[k][lane] = d.center[k];
+            self.normal[k][lane] = d.normal[k];
+            self.u_scaled[k][lane] = d.u_scaled[k];
+            self.v_scaled[k][lane] = d.v_scaled[k];
+        }
+    }
+
+    /// The disc of `lane`, bit for bit as stored.
+    #[inline]
+    fn disc(&self, lane: usize) -> Disc {
+        let get = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][lane], a[1][lane], a[2][lane]);
+        Disc {
+            center: get(&self.center),
+            normal: get(&self.normal),
+            u_scaled: get(&self.u_scaled),
+            v_scaled: get(&self.v_scaled),
+        }
+    }
+
+    /// Bit `l` set when lane `l` may be hit in `[t_min, t_max]`: the
+    /// operations of [`intersect_disc`] in the same order per lane (glam's
+    /// `dot` is `x*x' + y*y' + z*z'`, left to right; no fused operations), so
+    /// the mask equals "`intersect_disc` hits" except that the rim test is
+    /// relaxed by `1e-4` — a conservative filter in any case, since each
+    /// set lane is then decided by `intersect_disc` itself.
+    #[inline(always)]
+    fn may_hit(&self, ray: &RayLanes, t_min: f32, t_max: f32) -> u32 {
+        let [ox, oy, oz] = ray.origin;
+        let [dx, dy, dz] = ray.dir;
+        let [nx, ny, nz] = &self.normal;
+        let [cx, cy, cz] = &self.center;
+        let [ux, uy, uz] = &self.u_scaled;
+        let [vx, vy, vz] = &self.v_scaled;
+        // One element-wise operation per line, so each is one vector op.
+        let denom = lanes(|l| (nx[l] * dx) + (ny[l] * dy) + (nz[l] * dz));
+        let ocx = lanes(|l| ox - cx[l]);
+        let ocy = lanes(|l| oy - cy[l]);
+        let ocz = lanes(|l| oz - cz[l]);
+        let num = lanes(|l| (nx[l] * ocx[l]) + (ny[l] * ocy[l]) + (nz[l] * ocz[l]));
+        let t = lanes(|l| -num[l] / denom[l]);
+        // Once the window is narrow most planes are crossed outside it.
+        let mut in_range = 0;
+        for (l, t) in t.iter().enumerate() {
+            in_range |= u32::from((*t >= t_min) & (*t <= t_max) & (t.abs() < f32::INFINITY)) << l;
+        }
+        if in_range == 0 {
+            return 0;
+        }
+        let px = lanes(|l| ocx[l] + dx * t[l]);
+        let py = lanes(|l| ocy[l] + dy * t[l]);
+        let pz = lanes(|l| ocz[l] + dz * t[l]);
+        let u = lanes(|l| (px[l] * ux[l]) + (py[l] * uy[l]) + (pz[l] * uz[l]));
+        let v = lanes(|l| (px[l] * vx[l]) + (py[l] * vy[l]) + (pz[l] * vz[l]));
+        let r2 = lanes(|l| u[l] * u[l] + v[l] * v[l]);
+        let mut mask = 0;
+        for (l, r2) in r2.iter().enumerate() {
+            mask |= u32::from(*r2 <= 1.0001) << l;
+        }
+        mask & in_range
+    }
+}
+
+/// `[f(0), .., f(LANES - 1)]`.
+#[inline(always)]
+fn lanes(f: impl Fn(usize) -> f32) -> [f32; LANES] {
+    std::array::from_fn(f)
 }
 
 /// Per-ray constants of the traversal.
@@ -714,24 +906,6 @@ struct RayCtx {
     /// Bit `k` set when `dir[k]` is negative (sign bit, so `-0.0` counts).
     sign_mask: usize,
     t_min: f32,
-    /// `1 / (dir · dir)` (1 for the unit directions of the convention).
-    inv_len2: f32,
-}
-
-/// Conservative pre-test, cheaper than [`intersect_disc`] (no division): false
-/// only when the ray's line passes farther from the disc centre than its
-/// larger radius, so the disc cannot be hit. The slack (relative 1e-4 of
-/// `r²` plus 64 ulps of `|oc|² + r²`) exceeds the rounding of both this
-/// test and `intersect_disc`'s hit point, so a disc `intersect_disc` would
-/// accept is never skipped and the candidates stay bit-identical.
-#[inline]
-fn may_hit(d: &Disc, r2: f32, ray: &Ray, ctx: &RayCtx) -> bool {
-    let oc = ray.origin - d.center;
-    let oc2 = oc.dot(oc);
-    let along = oc.dot(ray.dir);
-    let dist2 = oc2 - along * along * ctx.inv_len2;
-    // A NaN (NaN ray) passes on to intersect_disc, which misses it.
-    dist2 <= r2 * 1.0001 + 64.0 * f32::EPSILON * (oc2 + r2) || dist2.is_nan()
 }
 
 /// Per-axis (near, far) of a slab from the parameters of its two planes.
@@ -770,14 +944,15 @@ fn min4(t: f32, v: Vec3) -> f32 {
 trait Visitor {
     /// Cells entered beyond this are skipped.
     fn cutoff(&self) -> f32;
-    /// Tests a leaf's discs (with their squared radii and ids); true stops
+    /// Tests a leaf's disc packs (with their lanes' splat ids); true stops
     /// the traversal.
-    fn leaf(&mut self, discs: &[Disc], r2: &[f32], ids: &[u32], ctx: &RayCtx) -> bool;
+    fn leaf(&mut self, packs: &[DiscPack], ids: &[u32]) -> bool;
 }
 
 /// `intersect`: gathers the candidate window.
 struct Gather<'a> {
     ray: &'a Ray,
+    lanes: RayLanes,
     t_min: f32,
     t_max: f32,
     hits: &'a mut CandidateHits,
@@ -790,14 +965,19 @@ impl Visitor for Gather<'_> {
     }
 
     #[inline]
-    fn leaf(&mut self, discs: &[Disc], r2: &[f32], ids: &[u32], ctx: &RayCtx) -> bool {
+    fn leaf(&mut self, packs: &[DiscPack], ids: &[u32]) -> bool {
         let mut cut = self.cutoff();
-        for ((d, &r2), &id) in discs.iter().zip(r2).zip(ids) {
-            if !may_hit(d, r2, self.ray, ctx) {
-                continue;
-            }
-            if let Some((t, u, v)) = intersect_disc(d, self.ray, self.t_min, cut) {
-                cut = self.hits.offer(Candidate { id, t, u, v }).min(self.t_max);
+        for (pack, ids) in packs.iter().zip(ids.chunks_exact(LANES)) {
+            let mut mask = pack.may_hit(&self.lanes, self.t_min, cut);
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                // The shared routine decides, with the window's current end.
+                if let Some((t, u, v)) = intersect_disc(&pack.disc(lane), self.ray, self.t_min, cut)
+                {
+                    let id = ids[lane];
+                    cut = self.hits.offer(Candidate { id, t, u, v }).min(self.t_max);
+                }
             }
         }
         false
@@ -807,6 +987,7 @@ impl Visitor for Gather<'_> {
 /// `occluded`: stops at the first hit.
 struct AnyHit<'a> {
     ray: &'a Ray,
+    lanes: RayLanes,
     t_min: f32,
     t_max: f32,
 }
@@ -818,10 +999,17 @@ impl Visitor for AnyHit<'_> {
     }
 
     #[inline]
-    fn leaf(&mut self, discs: &[Disc], r2: &[f32], _ids: &[u32], ctx: &RayCtx) -> bool {
-        discs.iter().zip(r2).any(|(d, &r2)| {
-            may_hit(d, r2, self.ray, ctx)
-                && intersect_disc(d, self.ray, self.t_min, self.t_max).is_some()
+    fn leaf(&mut self, packs: &[DiscPack], _ids: &[u32]) -> bool {
+        packs.iter().any(|pack| {
+            let mut mask = pack.may_hit(&self.lanes, self.t_min, self.t_max);
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                if intersect_disc(&pack.disc(lane), self.ray, self.t_min, self.t_max).is_some() {
+                    return true;
+                }
+            }
+            false
         })
     }
 }
@@ -835,6 +1023,7 @@ impl Backend for Octree {
         hits.clear();
         let mut g = Gather {
             ray,
+            lanes: RayLanes::new(ray),
             t_min,
             t_max,
             hits,
@@ -843,7 +1032,12 @@ impl Backend for Octree {
     }
 
     fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        let mut a = AnyHit { ray, t_min, t_max };
+        let mut a = AnyHit {
+            ray,
+            lanes: RayLanes::new(ray),
+            t_min,
+            t_max,
+        };
         self.traverse(ray, t_min, &mut a)
     }
 
@@ -858,6 +1052,54 @@ mod tests {
 
     fn disc(c: Vec3, n: Vec3, r: f32) -> Disc {
         Splat::disc(c, n, r).unwrap().disc_geometry()
+    }
+
+    #[test]
+    fn pack_filter_passes_every_hit_of_intersect_disc() {
+        // Rays aimed near the rims (so hits and misses are close calls),
+        // some grazing, some with a finite window: every lane that
+        // `intersect_disc` hits must be in the mask.
+        let mut state = 0x0bad_cafe_1234_5678u64;
+        let mut rnd = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 40) as f32) / (1u64 << 24) as f32 - 0.5
+        };
+        let mut hits = 0;
+        for _ in 0..20_000 {
+            let mut pack = DiscPack::EMPTY;
+            let mut discs = [None; LANES];
+            for (lane, slot) in discs.iter_mut().enumerate().take(LANES - 1) {
+                let n = Vec3::new(rnd(), rnd(), rnd());
+                let c = Vec3::new(rnd(), rnd(), rnd());
+                let Some(s) = Splat::disc(c, n, 0.2 + rnd().abs()) else {
+                    continue;
+                };
+                let d = s.disc_geometry();
+                pack.set(lane, &d);
+                *slot = Some(d);
+            }
+            let origin = Vec3::new(rnd(), rnd(), rnd()) * 8.0;
+            let target =
+                discs[0].map_or(Vec3::ZERO, |d| d.center) + Vec3::new(rnd(), rnd(), rnd()) * 0.9;
+            let ray = Ray::new(origin, target - origin);
+            let t_max = if rnd() > 0.3 {
+                f32::INFINITY
+            } else {
+                4.0 + rnd()
+            };
+            let mask = pack.may_hit(&RayLanes::new(&ray), 0.0, t_max);
+            for (lane, d) in discs.iter().enumerate() {
+                let hit = d.is_some_and(|d| intersect_disc(&d, &ray, 0.0, t_max).is_some());
+                hits += usize::from(hit);
+                assert!(!hit || mask & (1 << lane) != 0, "lane {lane} filtered out");
+                if d.is_none() {
+                    assert_eq!(mask & (1 << lane), 0, "padding lane passed");
+                }
+            }
+        }
+        assert!(hits > 1000, "the rays should often hit: {hits}");
     }
 
     #[test]
