@@ -52,7 +52,7 @@ fn sphere_normals_end_up_outward() {
     let tree = build_tree(&pts);
     let knn = Knn::build(&tree, &pts, 12);
     let mut n = estimate(&pts, &knn);
-    orient(&pts, &knn, &mut n, &vec![false; pts.len()]);
+    orient(&pts, &knn, &mut n, &vec![false; pts.len()], None);
     let outward = pts
         .iter()
         .zip(&n)
@@ -73,7 +73,7 @@ fn bunny_sample_normals_match_the_true_face_normals() {
     let knn = Knn::build(&tree, &s.positions, 12);
     let mut n = estimate(&s.positions, &knn);
     let fixed = vec![false; n.len()];
-    orient(&s.positions, &knn, &mut n, &fixed);
+    orient(&s.positions, &knn, &mut n, &fixed, None);
     let agree = n
         .iter()
         .zip(&truth)
@@ -321,4 +321,39 @@ fn ellipses_stretch_along_a_cylinder() {
     let s: &Splat = &splats[0];
     assert!(s.v_axis.abs_diff_eq(s.normal.cross(s.u_axis), 1e-5));
     assert!(on_splat(s, s.center, 1e-6));
+}
+
+/// An open, gently curved sheet has no "outward": a viewpoint hint decides
+/// which way its normals (and so its splats) face, as for a real scan.
+#[test]
+fn viewpoint_hint_orients_an_open_sheet() {
+    let mut pts = Vec::new();
+    let mut state = 12345u64;
+    let mut rnd = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+    };
+    for _ in 0..3000 {
+        let (x, z) = (rnd(), rnd());
+        pts.push(Vec3::new(x, 0.05 * (x * x + z * z), z));
+    }
+    for (vp, up) in [
+        (Vec3::new(0.0, 5.0, 0.0), true),
+        (Vec3::new(0.3, -5.0, 0.1), false),
+    ] {
+        let params = SplatParams {
+            viewpoint: Some(vp),
+            ..SplatParams::default()
+        };
+        let (splats, _) = generate(&cloud(pts.clone()), &params).unwrap();
+        let facing = splats.iter().filter(|s| (s.normal.y > 0.0) == up).count();
+        assert_eq!(
+            facing,
+            splats.len(),
+            "viewpoint {vp}: {facing} of {} face it",
+            splats.len()
+        );
+    }
 }

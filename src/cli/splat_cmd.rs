@@ -30,6 +30,9 @@ pub struct SplatArgs {
     /// Write the generation report as JSON here.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// Orient estimated normals toward this point (the scanner), as X,Y,Z.
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    pub viewpoint: Option<Vec<f32>>,
 }
 
 /// Run `splatray splat`; the message of an error is one line.
@@ -44,6 +47,13 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
         epsilon_rel: args.epsilon.unwrap_or(defaults.epsilon_rel),
         density: args.density.unwrap_or(defaults.density),
         ellipses: args.ellipses,
+        viewpoint: match args.viewpoint.as_deref() {
+            None => None,
+            Some([x, y, z]) if [x, y, z].iter().all(|v| v.is_finite()) => {
+                Some(glam::Vec3::new(*x, *y, *z))
+            }
+            Some(v) => return Err(format!("--viewpoint needs three finite numbers, got {v:?}")),
+        },
         ..defaults
     };
     let mut progress = Progress::new();

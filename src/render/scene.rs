@@ -126,6 +126,8 @@ pub struct SplatSpec {
     /// Grow elliptical splats.
     #[serde(default)]
     pub ellipses: bool,
+    /// Orient estimated normals toward this point (model space).
+    pub viewpoint: Option<[f32; 3]>,
 }
 
 /// `shape = { ... }`: a procedural model.
@@ -911,6 +913,7 @@ fn model_splats_from_files(
         epsilon_rel: spec.splat.epsilon.unwrap_or(d.epsilon_rel),
         density: spec.splat.density.unwrap_or(d.density),
         ellipses: spec.splat.ellipses,
+        viewpoint: spec.splat.viewpoint.map(Vec3::from),
         ..d
     };
     let mut progress = crate::cli::progress::Progress::new();

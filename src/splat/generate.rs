@@ -35,6 +35,9 @@ pub struct SplatParams {
     /// and 2.5 blending constant normals beat the fields at mid budgets
     /// (3.20° against 3.39° at 4k splats), with 1.0 and 1.2 never.
     pub field_radius_factor: f32,
+    /// Where the scanner stood: estimated normals are oriented to face it
+    /// (instead of outward from the extreme point of each piece).
+    pub viewpoint: Option<Vec3>,
 }
 
 impl Default for SplatParams {
@@ -45,6 +48,7 @@ impl Default for SplatParams {
             density: 0.7,
             ellipses: false,
             field_radius_factor: 1.2,
+            viewpoint: None,
         }
     }
 }
@@ -314,7 +318,7 @@ pub fn generate_with_progress(
                 nrm[i] = est[i];
             }
         }
-        normals::orient(&points, &knn, &mut nrm, &fixed);
+        normals::orient(&points, &knn, &mut nrm, &fixed, params.viewpoint);
     }
     if input_normals.is_some() && to_estimate > 0 {
         report.warnings.push(format!(

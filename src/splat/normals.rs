@@ -109,8 +109,16 @@ pub fn estimate(points: &[Vec3], knn: &Knn) -> Vec<Vec3> {
 /// there. Other trees are rooted at their point of largest coordinate along
 /// the axis where that extreme point's normal is best aligned with the axis,
 /// and that root normal is made to point along `+axis` — outward for a closed
-/// surface.
-pub fn orient(points: &[Vec3], knn: &Knn, normals: &mut [Vec3], fixed: &[bool]) {
+/// surface. With a `viewpoint` (the scanner's position, as PCL and Open3D
+/// take it), each tree without fixed normals is then turned as a whole so
+/// that most of its normals face the viewpoint.
+pub fn orient(
+    points: &[Vec3],
+    knn: &Knn,
+    normals: &mut [Vec3],
+    fixed: &[bool],
+    viewpoint: Option<Vec3>,
+) {
     let n = points.len();
     if n == 0 {
         return;
@@ -240,6 +248,27 @@ pub fn orient(points: &[Vec3], knn: &Knn, normals: &mut [Vec3], fixed: &[bool]) 
                     normals[y] = -normals[y];
                 }
                 stack.push(y as u32);
+            }
+        }
+    }
+    if let Some(vp) = viewpoint {
+        // Votes per tree: +1 for a normal facing the viewpoint, -1 against;
+        // a tree holding a fixed normal is never turned.
+        let mut votes = vec![0i64; n];
+        let mut has_fixed = vec![false; n];
+        for i in 0..n {
+            let r = find(&mut parent, i as u32) as usize;
+            votes[r] += if normals[i].dot(vp - points[i]) >= 0.0 {
+                1
+            } else {
+                -1
+            };
+            has_fixed[r] |= fixed[i];
+        }
+        for i in 0..n {
+            let r = find(&mut parent, i as u32) as usize;
+            if votes[r] < 0 && !has_fixed[r] {
+                normals[i] = -normals[i];
             }
         }
     }
