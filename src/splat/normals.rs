@@ -265,10 +265,10 @@ pub fn orient(
             };
             has_fixed[r] |= fixed[i];
         }
-        for i in 0..n {
+        for (i, nrm) in normals.iter_mut().enumerate() {
             let r = find(&mut parent, i as u32) as usize;
             if votes[r] < 0 && !has_fixed[r] {
-                normals[i] = -normals[i];
+                *nrm = -*nrm;
             }
         }
     }
