@@ -798,11 +798,6 @@ const NO_SPLAT: u32 = u32::MAX;
 #[repr(C, align(64))]
 struct DiscPack {
     center: [[f32; LANES]; 3],
-    /// Per lane, `1.002 × r²` for the disc's larger radius `r` (the bound of
-    /// the division-free pre-test, see [`DiscPack::may_hit`]); `-inf` on
-    /// padding lanes. With the centre it fills the pack's first cache line,
-    /// so a pack rejected by the pre-test reads only that line.
-    reach2: [f32; LANES],
     normal: [[f32; LANES]; 3],
     u_scaled: [[f32; LANES]; 3],
     v_scaled: [[f32; LANES]; 3],
@@ -828,7 +823,6 @@ impl DiscPack {
     /// 0 or NaN, hence `t` is never finite).
     const EMPTY: DiscPack = DiscPack {
         center: [[0.0; LANES]; 3],
-        reach2: [f32::NEG_INFINITY; LANES],
         normal: [[0.0; LANES]; 3],
         u_scaled: [[0.0; LANES]; 3],
         v_scaled: [[0.0; LANES]; 3],
@@ -841,15 +835,6 @@ impl DiscPack {
             self.u_scaled[k][lane] = d.u_scaled[k];
             self.v_scaled[k][lane] = d.v_scaled[k];
         }
-        // `u_scaled = u_axis / r_u`, so `r_u² = 1 / |u_scaled|²` (in f64,
-        // then widened by 0.2 % to cover every rounding on the way).
-        let r2 = |a: Vec3| 1.0 / a.as_dvec3().length_squared();
-        let reach2 = r2(d.u_scaled).max(r2(d.v_scaled)) * 1.002;
-        self.reach2[lane] = if reach2.is_nan() {
-            f32::INFINITY
-        } else {
-            reach2 as f32
-        };
     }
 
     /// The disc of `lane`, bit for bit as stored.
@@ -864,18 +849,8 @@ impl DiscPack {
         }
     }
 
-    /// Bit `l` set when lane `l` may be hit in `[t_min, t_max]`.
-    ///
-    /// First a pre-test without division: the squared distance from the
-    /// lane's centre to the ray's line, `|oc × d|²`, against `reach2`
-    /// (`1.002 r²`) plus `2e-8 |oc|²`. A hit accepted by [`intersect_disc`]
-    /// lies within `r (1 + 1e-6)` of the centre, and the computed hit point
-    /// and cross product are each within a few ulps of `|oc|` (accepted hits
-    /// have `|t| ≤ |oc| + r`), so the true distance `r + E` with
-    /// `E ≤ 53 ε |oc|` still passes: `2 r E ≤ 0.002 r² + 500 E²` and
-    /// `501 E² ≤ 2e-8 |oc|²`. NaN fails it, and so do padding lanes.
-    ///
-    /// Then the operations of [`intersect_disc`] in the same order per lane (glam's
+    /// Bit `l` set when lane `l` may be hit in `[t_min, t_max]`: the
+    /// operations of [`intersect_disc`] in the same order per lane (glam's
     /// `dot` is `x*x' + y*y' + z*z'`, left to right; no fused operations), so
     /// the mask equals "`intersect_disc` hits" except that the rim test is
     /// relaxed by `1e-4` — a conservative filter in any case, since each
@@ -889,22 +864,10 @@ impl DiscPack {
         let [ux, uy, uz] = &self.u_scaled;
         let [vx, vy, vz] = &self.v_scaled;
         // One element-wise operation per line, so each is one vector op.
+        let denom = lanes(|l| (nx[l] * dx) + (ny[l] * dy) + (nz[l] * dz));
         let ocx = lanes(|l| ox - cx[l]);
         let ocy = lanes(|l| oy - cy[l]);
         let ocz = lanes(|l| oz - cz[l]);
-        let qx = lanes(|l| ocy[l] * dz - ocz[l] * dy);
-        let qy = lanes(|l| ocz[l] * dx - ocx[l] * dz);
-        let qz = lanes(|l| ocx[l] * dy - ocy[l] * dx);
-        let q2 = lanes(|l| qx[l] * qx[l] + qy[l] * qy[l] + qz[l] * qz[l]);
-        let oc2 = lanes(|l| ocx[l] * ocx[l] + ocy[l] * ocy[l] + ocz[l] * ocz[l]);
-        let mut near = 0;
-        for l in 0..LANES {
-            near |= u32::from(q2[l] <= self.reach2[l] + 2e-8 * oc2[l]) << l;
-        }
-        if near == 0 {
-            return 0;
-        }
-        let denom = lanes(|l| (nx[l] * dx) + (ny[l] * dy) + (nz[l] * dz));
         let num = lanes(|l| (nx[l] * ocx[l]) + (ny[l] * ocy[l]) + (nz[l] * ocz[l]));
         let t = lanes(|l| -num[l] / denom[l]);
         // Once the window is narrow most planes are crossed outside it.
@@ -912,7 +875,6 @@ impl DiscPack {
         for (l, t) in t.iter().enumerate() {
             in_range |= u32::from((*t >= t_min) & (*t <= t_max) & (t.abs() < f32::INFINITY)) << l;
         }
-        let in_range = in_range & near;
         if in_range == 0 {
             return 0;
         }
