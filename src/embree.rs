@@ -347,13 +347,56 @@ unsafe extern "C" fn disc_occluded(args: *const sys::RTCOccludedFunctionNArgumen
     }
 }
 
+/// An owned `RTCScene` of a device: released on drop.
+struct SceneHandle {
+    device: Device,
+    raw: sys::RTCScene,
+}
+
+impl SceneHandle {
+    fn new(device: &Device) -> Result<SceneHandle, EmbreeError> {
+        // SAFETY: live device.
+        let raw = unsafe { sys::rtcNewScene(device.inner.raw) };
+        device.check()?;
+        if raw.is_null() {
+            return Err(EmbreeError("rtcNewScene returned null".into()));
+        }
+        Ok(SceneHandle {
+            device: device.clone(),
+            raw,
+        })
+    }
+
+    fn commit(&self) -> Result<(), EmbreeError> {
+        // SAFETY: live scene, its geometries attached and committed.
+        unsafe { sys::rtcCommitScene(self.raw) };
+        self.device.check()
+    }
+
+    /// True when anything is hit in `[t_min, t_max]`.
+    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        let mut r = embree_ray(ray, t_min, t_max);
+        let mut args = occluded_arguments();
+        // SAFETY: committed scene; `r` and `args` live across the call.
+        unsafe { sys::rtcOccluded1(self.raw, &mut r, &mut args) };
+        r.tfar == f32::NEG_INFINITY
+    }
+}
+
+impl Drop for SceneHandle {
+    fn drop(&mut self) {
+        // SAFETY: `raw` came from `rtcNewScene` and is released once.
+        unsafe { sys::rtcReleaseScene(self.raw) };
+    }
+}
+
 /// Splats as Embree user-geometry discs, committed and ready to query from
 /// any number of threads.
 pub struct DiscScene {
-    device: Device,
-    scene: sys::RTCScene,
+    // Declared first, so dropped (released) before `_data`.
+    scene: SceneHandle,
     // Read by the callbacks through the raw pointer given to Embree; must
-    // outlive `scene` (dropped after it, see `Drop`).
+    // outlive `scene`.
     _data: Box<DiscData>,
 }
 
@@ -372,17 +415,11 @@ impl DiscScene {
             discs: splats.iter().map(Splat::disc_geometry).collect(),
         });
         let raw = device.inner.raw;
-        // SAFETY: live device.
-        let scene = unsafe { sys::rtcNewScene(raw) };
-        device.check()?;
-        if scene.is_null() {
-            return Err(EmbreeError("rtcNewScene returned null".into()));
-        }
         let out = DiscScene {
-            device: device.clone(),
-            scene,
+            scene: SceneHandle::new(device)?,
             _data: data,
         };
+        let scene = out.scene.raw;
         if count > 0 {
             // SAFETY: live device; USER is a valid geometry type.
             let geom = unsafe { sys::rtcNewGeometry(raw, sys::RTCGeometryType::USER) };
@@ -404,9 +441,7 @@ impl DiscScene {
             }
             device.check()?;
         }
-        // SAFETY: live scene with its geometry attached.
-        unsafe { sys::rtcCommitScene(scene) };
-        device.check()?;
+        out.scene.commit()?;
         Ok(out)
     }
 
@@ -424,31 +459,19 @@ impl DiscScene {
         // SAFETY: committed scene; `rayhit` and `args` live across the call;
         // `args.context` points at `ctx.base`, the first field of the repr(C)
         // `GatherContext` whose `hits` borrows `hits` mutably for the call.
-        unsafe { sys::rtcIntersect1(self.scene, &mut rayhit, &mut args) };
+        unsafe { sys::rtcIntersect1(self.scene.raw, &mut rayhit, &mut args) };
     }
 
     /// True when any splat is hit in `[t_min, t_max]`.
     #[must_use]
     pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        let mut r = embree_ray(ray, t_min, t_max);
-        let mut args = occluded_arguments();
-        // SAFETY: committed scene; `r` and `args` live across the call.
-        unsafe { sys::rtcOccluded1(self.scene, &mut r, &mut args) };
-        r.tfar == f32::NEG_INFINITY
+        self.scene.occluded(ray, t_min, t_max)
     }
 
     /// Errors reported by Embree since the last check (queries do not report
-    /// errors per call; the renderer checks once per frame).
+    /// errors per call: check after a batch).
     pub fn check(&self) -> Result<(), EmbreeError> {
-        self.device.check()
-    }
-}
-
-impl Drop for DiscScene {
-    fn drop(&mut self) {
-        // SAFETY: `scene` came from `rtcNewScene` and is released once; the
-        // callbacks' user data (`_data`) is freed only after this.
-        unsafe { sys::rtcReleaseScene(self.scene) };
+        self.scene.device.check()
     }
 }
 
@@ -470,8 +493,7 @@ pub struct TriangleHit {
 /// Triangle meshes in Embree's own BVH: the exact surface that splats
 /// approximate, for ground truth.
 pub struct TriangleScene {
-    device: Device,
-    scene: sys::RTCScene,
+    scene: SceneHandle,
 }
 
 // SAFETY: a committed Embree scene may be queried concurrently; it holds no
@@ -488,16 +510,10 @@ impl TriangleScene {
         meshes: &[(&[glam::Vec3], &[[u32; 3]])],
     ) -> Result<TriangleScene, EmbreeError> {
         let raw = device.inner.raw;
-        // SAFETY: live device.
-        let scene = unsafe { sys::rtcNewScene(raw) };
-        device.check()?;
-        if scene.is_null() {
-            return Err(EmbreeError("rtcNewScene returned null".into()));
-        }
         let out = TriangleScene {
-            device: device.clone(),
-            scene,
+            scene: SceneHandle::new(device)?,
         };
+        let scene = out.scene.raw;
         for (i, (verts, tris)) in meshes.iter().enumerate() {
             if let Some(bad) = tris.iter().flatten().find(|&&k| k as usize >= verts.len()) {
                 return Err(EmbreeError(format!(
@@ -551,9 +567,7 @@ impl TriangleScene {
             }
             device.check()?;
         }
-        // SAFETY: live scene.
-        unsafe { sys::rtcCommitScene(scene) };
-        device.check()?;
+        out.scene.commit()?;
         Ok(out)
     }
 
@@ -564,7 +578,7 @@ impl TriangleScene {
         let mut args = intersect_arguments(&mut ctx as *mut sys::RTCRayQueryContext);
         let mut rayhit = embree_rayhit(ray, t_min, t_max);
         // SAFETY: committed scene; all pointers live across the call.
-        unsafe { sys::rtcIntersect1(self.scene, &mut rayhit, &mut args) };
+        unsafe { sys::rtcIntersect1(self.scene.raw, &mut rayhit, &mut args) };
         let h = &rayhit.hit;
         (h.geomID != sys::RTC_INVALID_GEOMETRY_ID).then_some(TriangleHit {
             t: rayhit.ray.tfar,
@@ -578,22 +592,11 @@ impl TriangleScene {
     /// True when any triangle is hit in `[t_min, t_max]`.
     #[must_use]
     pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        let mut r = embree_ray(ray, t_min, t_max);
-        let mut args = occluded_arguments();
-        // SAFETY: committed scene; `r` and `args` live across the call.
-        unsafe { sys::rtcOccluded1(self.scene, &mut r, &mut args) };
-        r.tfar == f32::NEG_INFINITY
+        self.scene.occluded(ray, t_min, t_max)
     }
 
     /// Errors Embree reported since the last check.
     pub fn check(&self) -> Result<(), EmbreeError> {
-        self.device.check()
-    }
-}
-
-impl Drop for TriangleScene {
-    fn drop(&mut self) {
-        // SAFETY: `scene` came from `rtcNewScene` and is released once.
-        unsafe { sys::rtcReleaseScene(self.scene) };
+        self.scene.device.check()
     }
 }
