@@ -183,3 +183,25 @@ fn report_and_aovs_are_written() {
     let n = image::open(dir.join("img.normal.exr")).unwrap().to_rgb32f();
     assert!(n.get_pixel(8, 8)[2] > 0.9, "centre normal faces the camera");
 }
+
+#[test]
+fn camera_that_sees_nothing_gets_a_warning_naming_where_the_splats_are() {
+    let dir = tmpdir("nothing");
+    // The camera looks away from the sphere at (0, 0, 0).
+    let scene = "[camera]\nfrom = [0.0, 0.0, 3.0]\nat = [0.0, 0.0, 6.0]\nwidth = 8\nheight = 8\n[[model]]\nshape = { kind = \"sphere\", center = [10.0, 0.0, 0.0], radius = 1.0, splats = 50 }\n";
+    let (ok, err, made) = render(&dir, scene);
+    assert!(ok, "{err}");
+    assert!(made);
+    assert!(err.contains("no primary ray hit a splat"), "{err}");
+    // Splat centres lie on the sphere around x = 10, in the file's
+    // coordinates (not the re-centred ones).
+    let x_after = |key: &str| -> f32 {
+        let rest = &err[err.find(key).unwrap() + key.len()..];
+        rest[..rest.find(',').unwrap()].parse().unwrap()
+    };
+    let (lo, hi) = (x_after("span ["), x_after("to ["));
+    assert!(
+        (8.9..9.2).contains(&lo) && (10.8..11.1).contains(&hi),
+        "{lo} {hi}: {err}"
+    );
+}

@@ -138,6 +138,19 @@ pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), Str
     })
 }
 
+/// Says where the splats are when no primary ray met any: the usual cause
+/// is a camera placed for another model's coordinates.
+fn warn_nothing_hit(scene: &Scene) {
+    if let Some((lo, hi)) = scene.world_bounds() {
+        let f = |v: glam::DVec3| format!("[{:.4}, {:.4}, {:.4}]", v.x, v.y, v.z);
+        eprintln!(
+            "warning: no primary ray hit a splat; the splat centres span {} to {} in the scene's coordinates; check camera.from and camera.at",
+            f(lo),
+            f(hi)
+        );
+    }
+}
+
 /// Runs `splatray render`.
 pub fn run(args: &RenderArgs) -> Result<(), String> {
     let scene_path = args.scene.clone().unwrap_or_else(default_scene);
@@ -160,6 +173,9 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
     let backend = args.backend.build(&scene.splats)?;
     let build_seconds = backend.stats().build_seconds;
     let frame = render(&scene, backend.as_ref(), true);
+    if frame.splat.iter().all(|&id| id == u32::MAX) {
+        warn_nothing_hit(&scene);
+    }
     write_image(&frame, &output)?;
     for &a in &args.aov {
         write_aov(&frame, a, &aov_path(&output, a))?;

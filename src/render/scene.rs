@@ -416,6 +416,18 @@ pub struct RenderOptions {
 }
 
 impl Scene {
+    /// The splats' bounding box in world coordinates (as the scene file
+    /// states them), or `None` without splats.
+    #[must_use]
+    pub fn world_bounds(&self) -> Option<(DVec3, DVec3)> {
+        let (lo, hi) = self.splats.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), s| (lo.min(s.center), hi.max(s.center)),
+        );
+        let to_world = |v: Vec3| (v + self.offset).as_dvec3() + self.shift;
+        (lo.x <= hi.x).then(|| (to_world(lo), to_world(hi)))
+    }
+
     /// The shading mode for a window whose nearest hit is splat `id`: the
     /// model's override, else the scene's.
     #[must_use]
@@ -490,8 +502,11 @@ pub struct Scene {
     pub background: Vec3,
     /// Options.
     pub options: RenderOptions,
-    /// The translation subtracted on load (world = scene + offset).
+    /// The re-centring translation subtracted on load, after `shift`
+    /// (world = scene + offset + shift).
     pub offset: Vec3,
+    /// The first model's translation, subtracted in f64 before re-centring.
+    pub shift: DVec3,
     /// Load figures.
     pub load: LoadReport,
 }
@@ -862,6 +877,7 @@ pub fn build_scene(file: &SceneFile, base: &Path) -> Result<Scene, String> {
             ambient: r.ambient.unwrap_or(0.03),
         },
         offset,
+        shift,
         load,
     })
 }
