@@ -3,12 +3,11 @@
 use super::render::{apply_overrides, default_scene, write_json};
 use crate::accel::BackendKind;
 use crate::accel::resolve::ShadingMode;
-use crate::render::integrator::render_surfaces;
 use crate::render::integrator::{Frame, render};
 use crate::render::output::{check_output_path, write_atomic};
 use crate::render::scene::load_scene;
 use crate::validate::compare::{
-    Agreement, TruthErrors, compare_frames, diff_image, orient_to_camera, truth_errors,
+    Agreement, TruthErrors, compare_frames, diff_image, render_truth, truth_errors,
 };
 use crate::validate::truth::Truth;
 use std::path::PathBuf;
@@ -131,13 +130,8 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
     let embree = BackendRun::of(*eb, ef);
     let diagonal = scene.options.scale.diagonal;
     let truth = truth.map(|t| {
-        let mut tf = render_surfaces(&scene, &t, true);
-        orient_to_camera(&mut tf, &scene.camera);
-        let errors = |f: &Frame| {
-            let mut f = f.clone();
-            orient_to_camera(&mut f, &scene.camera);
-            truth_errors(&f, &tf, diagonal)
-        };
+        let tf = render_truth(&scene, &t, true);
+        let errors = |f: &Frame| truth_errors(f.clone(), &tf, &scene.camera, diagonal);
         TruthReport {
             render_seconds: tf.seconds,
             octree: errors(of),

@@ -145,11 +145,31 @@ pub fn orient_to_camera(frame: &mut Frame, camera: &crate::render::scene::Camera
     }
 }
 
-/// Errors of `splats` against `truth` (both oriented with
-/// [`orient_to_camera`]).
+/// Renders the exact surfaces of `scene` through the shared integrator,
+/// with the normals turned toward the camera ([`orient_to_camera`]): the
+/// reference for [`truth_errors`].
 #[must_use]
-pub fn truth_errors(splats: &Frame, truth: &Frame, diagonal: f32) -> TruthErrors {
-    let a = compare_frames(splats, truth, diagonal);
+pub fn render_truth(
+    scene: &crate::render::scene::Scene,
+    truth: &crate::validate::truth::Truth,
+    progress: bool,
+) -> Frame {
+    let mut f = crate::render::integrator::render_surfaces(scene, truth, progress);
+    orient_to_camera(&mut f, &scene.camera);
+    f
+}
+
+/// Errors of a splat render against `truth` (from [`render_truth`]); the
+/// splat frame's normals are turned toward `camera` first.
+#[must_use]
+pub fn truth_errors(
+    mut splats: Frame,
+    truth: &Frame,
+    camera: &crate::render::scene::Camera,
+    diagonal: f32,
+) -> TruthErrors {
+    orient_to_camera(&mut splats, camera);
+    let a = compare_frames(&splats, truth, diagonal);
     let truth_hits = truth.splat.iter().filter(|&&s| s != u32::MAX).count();
     TruthErrors {
         coverage: if truth_hits == 0 {

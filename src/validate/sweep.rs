@@ -12,9 +12,9 @@
 
 use crate::accel::BackendKind;
 use crate::accel::resolve::ShadingMode;
-use crate::render::integrator::{Frame, render, render_surfaces};
+use crate::render::integrator::{Frame, render};
 use crate::render::scene::{Scene, SceneFile, build_scene};
-use crate::validate::compare::{TruthErrors, orient_to_camera, truth_errors};
+use crate::validate::compare::{TruthErrors, render_truth, truth_errors};
 use crate::validate::truth::Truth;
 use std::path::Path;
 
@@ -228,8 +228,7 @@ pub fn run_sweep(
         set_view(&mut scene, plan, ShadingMode::Phong)?;
         if reference.is_none() {
             let truth = Truth::new(&scene)?;
-            let mut tf = render_surfaces(&scene, &truth, false);
-            orient_to_camera(&mut tf, &scene.camera);
+            let tf = render_truth(&scene, &truth, false);
             log(&format!(
                 "exact surface: rendered once in {:.3} s ({}x{})",
                 tf.seconds, plan.width, plan.height
@@ -257,10 +256,12 @@ pub fn run_sweep(
         for mode in MODES {
             set_view(&mut scene, plan, mode)?;
             let errors = |backend: &dyn crate::accel::Backend| {
-                let mut fr = render(&scene, backend, false);
+                let fr = render(&scene, backend, false);
                 let seconds = fr.seconds;
-                orient_to_camera(&mut fr, &scene.camera);
-                (seconds, truth_errors(&fr, truth_frame, diagonal))
+                (
+                    seconds,
+                    truth_errors(fr, truth_frame, &scene.camera, diagonal),
+                )
             };
             let (os, oe) = errors(octree.as_ref());
             let (es, ee) = errors(embree.as_ref());
