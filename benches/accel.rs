@@ -15,7 +15,9 @@
 //!
 //! Before criterion runs, a one-pass summary table (build seconds, structure
 //! figures, primary and shadow rays/s, octree/Embree ratio) is printed to
-//! stderr, all measured in this run.
+//! stderr, all measured in this run. "MB" is what each structure holds: the
+//! octree's nodes and packs, and for Embree the bytes its device memory
+//! monitor saw it keep for the scene.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -24,11 +26,10 @@ use common::{Query, blobby_splats, camera_queries, diagonal};
 use criterion::{BatchSize, Criterion, SamplingMode, Throughput};
 use glam::Vec3;
 use rayon::prelude::*;
-use splatray::accel::embree::EmbreeBackend;
 use splatray::accel::octree::{Octree, OctreeParams, OverlapTest};
 use splatray::accel::resolve::{ShadingMode, resolve};
-use splatray::accel::{Backend, CandidateHits, SceneScale};
-use splatray::embree::Device;
+use splatray::accel::{Backend, CandidateHits, SceneScale, backends};
+use splatray::primitive::Disc;
 use splatray::splat::Splat;
 use std::hint::black_box;
 use std::time::Instant;
@@ -43,37 +44,37 @@ fn sizes() -> Vec<usize> {
         .unwrap_or_else(|| vec![35_000, 1_000_000])
 }
 
-/// Who is benchmarked: name and builder.
-type Build = fn(&Device, &[Splat]) -> Box<dyn Backend>;
-
-/// The default parameters, with `max_leaf` and `max_depth` overridable from
-/// `SPLATRAY_OCTREE_MAX_LEAF` / `SPLATRAY_OCTREE_MAX_DEPTH` (for tuning).
-fn params() -> OctreeParams {
-    let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<usize>().ok());
-    let d = OctreeParams::default();
-    OctreeParams {
-        max_leaf: env("SPLATRAY_OCTREE_MAX_LEAF").unwrap_or(d.max_leaf),
-        max_depth: env("SPLATRAY_OCTREE_MAX_DEPTH").map_or(d.max_depth, |v| v as u32),
-        ..d
-    }
-}
+/// Who is benchmarked: every registered backend except the oracle
+/// (quadratic), and the octree with the report's bounding-square overlap
+/// test (§3.1) as a variant.
+type Build = Box<dyn Fn(&[Disc]) -> Box<dyn Backend>>;
 
 fn builders() -> Vec<(&'static str, Build)> {
-    vec![
-        ("octree", |_, s| Box::new(Octree::new(s, &params()))),
-        ("octree-square", |_, s| {
+    let mut out: Vec<(&'static str, Build)> = backends::<Disc>()
+        .into_iter()
+        .filter(|b| !b.oracle)
+        .map(|b| {
+            let build = b.build;
+            let name = b.name;
+            let f: Build = Box::new(move |d: &[Disc]| {
+                build(d).unwrap_or_else(|e| panic!("building {name}: {e}"))
+            });
+            (name, f)
+        })
+        .collect();
+    out.push((
+        "octree-square",
+        Box::new(|d: &[Disc]| {
             Box::new(Octree::new(
-                s,
+                d,
                 &OctreeParams {
                     overlap: OverlapTest::BoundingSquare,
-                    ..params()
+                    ..OctreeParams::default()
                 },
-            ))
+            )) as Box<dyn Backend>
         }),
-        ("embree", |d, s| {
-            Box::new(EmbreeBackend::new(d, s).expect("embree scene"))
-        }),
-    ]
+    ));
+    out
 }
 
 /// Traces `queries` in parallel, `W` rays per task (a row); returns hits.
@@ -105,7 +106,7 @@ fn shadow(backend: &dyn Backend, queries: &[Query]) -> usize {
 }
 
 struct Scene {
-    splats: Vec<Splat>,
+    discs: Vec<Disc>,
     scale: SceneScale,
     primary: Vec<Query>,
     shadow: Vec<Query>,
@@ -117,7 +118,8 @@ fn scene(n: usize) -> Scene {
     let primary = camera_queries(Vec3::new(0.7, 1.1, 4.0), Vec3::ZERO, W, H);
     // Shadow rays from the hits of the primary rays (found by the octree;
     // the agreement suite shows every backend finds the same).
-    let probe = Octree::new(&splats, &params());
+    let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
+    let probe = Octree::new(&discs, &OctreeParams::default());
     let light = Vec3::new(5.0, 6.0, 3.0);
     let shadow: Vec<Query> = primary
         .par_iter()
@@ -137,7 +139,7 @@ fn scene(n: usize) -> Scene {
         })
         .collect();
     Scene {
-        splats,
+        discs,
         scale,
         primary,
         shadow,
@@ -157,7 +159,7 @@ fn median_seconds(runs: usize, mut f: impl FnMut()) -> f64 {
     t[t.len() / 2]
 }
 
-fn summary(device: &Device, scenes: &[(usize, Scene)]) {
+fn summary(scenes: &[(usize, Scene)]) {
     eprintln!(
         "\n{:>9} {:>14} {:>8} {:>9} {:>8} {:>10} {:>9} {:>11} {:>11} {:>8}",
         "splats",
@@ -174,8 +176,8 @@ fn summary(device: &Device, scenes: &[(usize, Scene)]) {
     for (n, sc) in scenes {
         let mut rows = Vec::new();
         for (name, build) in builders() {
-            let build_s = median_seconds(3, || drop(black_box(build(device, &sc.splats))));
-            let b = build(device, &sc.splats);
+            let build_s = median_seconds(3, || drop(black_box(build(&sc.discs))));
+            let b = build(&sc.discs);
             trace(b.as_ref(), &sc.primary, sc.scale.xi);
             let prim = median_seconds(3, || {
                 black_box(trace(b.as_ref(), &sc.primary, sc.scale.xi));
@@ -216,9 +218,8 @@ fn summary(device: &Device, scenes: &[(usize, Scene)]) {
 }
 
 fn main() {
-    let device = Device::new().expect("embree device");
     let scenes: Vec<(usize, Scene)> = sizes().into_iter().map(|n| (n, scene(n))).collect();
-    summary(&device, &scenes);
+    summary(&scenes);
 
     let mut c = Criterion::default()
         .sample_size(10)
@@ -231,16 +232,12 @@ fn main() {
         g.throughput(Throughput::Elements(*n as u64));
         for (name, build) in builders() {
             g.bench_function(name, |bch| {
-                bch.iter_batched(
-                    || (),
-                    |()| build(&device, &sc.splats),
-                    BatchSize::PerIteration,
-                )
+                bch.iter_batched(|| (), |()| build(&sc.discs), BatchSize::PerIteration)
             });
         }
         g.finish();
         for (name, build) in builders() {
-            let b = build(&device, &sc.splats);
+            let b = build(&sc.discs);
             let mut g = c.benchmark_group(format!("trace/{n}"));
             g.sampling_mode(SamplingMode::Flat);
             g.throughput(Throughput::Elements(sc.primary.len() as u64));

@@ -3,18 +3,22 @@
 //!
 //! * [`Device`]: an Embree device whose errors (reported through the error
 //!   callback) become [`EmbreeError`]s, never silent zeros;
-//! * [`DiscScene`]: splats registered as `RTC_GEOMETRY_TYPE_USER` primitives
-//!   with tight disc bounds, queried for the candidate hits of a blending
-//!   window (DESIGN §2, §7) and for occlusion.
+//!   Its memory monitor counts the bytes Embree allocates
+//!   ([`Device::memory`]);
+//! * [`UserScene`]: a scene of one `RTC_GEOMETRY_TYPE_USER` geometry whose
+//!   bounds, intersect and occluded callbacks call a [`UserGeometry`]
+//!   implemented in safe code (the splat backend implements it beside the
+//!   backend, in `accel::embree`): this module knows nothing of splats;
+//! * [`TriangleScene`]: triangle meshes in Embree's own BVH (ground truth).
 //!
 //! Raw Embree types never leave this module.
 
-use crate::accel::{Candidate, CandidateHits, Ray, intersect_disc};
-use crate::splat::{Disc, Splat};
+use crate::geometry::Ray;
 use embree4_sys as sys;
 use std::ffi::{CStr, CString, c_char, c_uint, c_void};
 use std::fmt;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicI64, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// An error reported by Embree (through the device error callback) or by
@@ -73,9 +77,32 @@ unsafe extern "C" fn on_error(user: *mut c_void, code: u32, msg: *const c_char) 
     }
 }
 
+/// What the memory monitor callback counts: bytes Embree holds now, and the
+/// most it held since the last [`Device::reset_peak`].
+#[derive(Default)]
+struct MemoryCount {
+    current: AtomicI64,
+    peak: AtomicI64,
+}
+
+/// The device memory monitor: Embree reports each allocation (positive
+/// `bytes`) and each release (negative) once; nothing is refused.
+unsafe extern "C" fn on_memory(user: *mut c_void, bytes: isize, _post: bool) -> bool {
+    if user.is_null() {
+        return true;
+    }
+    // SAFETY: `user` is the `MemoryCount` boxed inside `DeviceInner`, which
+    // outlives the device (released in `DeviceInner::drop` before the box).
+    let count = unsafe { &*(user as *const MemoryCount) };
+    let now = count.current.fetch_add(bytes as i64, Ordering::Relaxed) + bytes as i64;
+    count.peak.fetch_max(now, Ordering::Relaxed);
+    true
+}
+
 struct DeviceInner {
     raw: sys::RTCDevice,
     errors: Box<ErrorSlot>,
+    memory: Box<MemoryCount>,
 }
 
 impl Drop for DeviceInner {
@@ -132,8 +159,17 @@ impl Device {
         // SAFETY: `raw` is a live device; `user` points to the boxed slot
         // which lives as long as the device (see `DeviceInner`).
         unsafe { sys::rtcSetDeviceErrorFunction(raw, callback, user) };
+        let memory: Box<MemoryCount> = Box::default();
+        let user = &*memory as *const MemoryCount as *mut c_void;
+        // SAFETY: as above, for the boxed memory count; `on_memory` has the
+        // signature of `RTCMemoryMonitorFunction`.
+        unsafe { sys::rtcSetDeviceMemoryMonitorFunction(raw, Some(on_memory), user) };
         let dev = Device {
-            inner: Arc::new(DeviceInner { raw, errors }),
+            inner: Arc::new(DeviceInner {
+                raw,
+                errors,
+                memory,
+            }),
         };
         dev.check()?;
         Ok(dev)
@@ -145,6 +181,27 @@ impl Device {
             Ok(mut s) => s.take().map_or(Ok(()), Err),
             Err(_) => Err(EmbreeError("error slot poisoned".into())),
         }
+    }
+
+    /// Bytes Embree holds for this device now, as its memory monitor
+    /// callback reported them (scenes, BVHs, geometry buffers).
+    #[must_use]
+    pub fn memory(&self) -> usize {
+        self.inner.memory.current.load(Ordering::Relaxed).max(0) as usize
+    }
+
+    /// The most bytes held at once since the device was made or the last
+    /// [`Device::reset_peak`].
+    #[must_use]
+    pub fn peak_memory(&self) -> usize {
+        self.inner.memory.peak.load(Ordering::Relaxed).max(0) as usize
+    }
+
+    /// Restarts the peak from the bytes held now.
+    pub fn reset_peak(&self) {
+        let m = &self.inner.memory;
+        m.peak
+            .store(m.current.load(Ordering::Relaxed), Ordering::Relaxed);
     }
 
     fn property(&self, p: sys::RTCDeviceProperty) -> isize {
@@ -174,19 +231,44 @@ impl Device {
     }
 }
 
-/// What the user-geometry callbacks read: the splat discs, addressed by
-/// primitive id. Boxed so its address is stable while Embree holds it.
-struct DiscData {
-    discs: Vec<Disc>,
+/// A user geometry: the primitives of a [`UserScene`], asked about by
+/// Embree's callbacks one primitive at a time (Embree's user-geometry
+/// contract, restated: the callbacks skip invalid lanes, accept only hits
+/// with `tnear <= t <= tfar`, and update `tfar` together with the hit).
+pub trait UserGeometry: Send + Sync + 'static {
+    /// What one [`UserScene::intersect`] call carries to the callbacks
+    /// (e.g. the window of candidate hits being gathered).
+    type Query<'q>;
+
+    /// How many primitives.
+    fn count(&self) -> usize;
+
+    /// The box `(lower, upper)` of primitive `prim`; it must contain every
+    /// point [`UserGeometry::intersect`] can accept.
+    fn bounds(&self, prim: u32) -> ([f32; 3], [f32; 3]);
+
+    /// Tests primitive `prim` with `tnear <= t <= tfar`. Returns the new
+    /// `tfar` (at most the old) when the hit is accepted, `None` otherwise.
+    /// Embree culls everything beyond the returned `tfar`.
+    fn intersect(
+        &self,
+        prim: u32,
+        ray: &Ray,
+        tnear: f32,
+        tfar: f32,
+        query: &mut Self::Query<'_>,
+    ) -> Option<f32>;
+
+    /// True when primitive `prim` is hit with `tnear <= t <= tfar`.
+    fn occluded(&self, prim: u32, ray: &Ray, tnear: f32, tfar: f32) -> bool;
 }
 
 /// The per-ray query context: begins with `RTCRayQueryContext` so Embree can
 /// hand it back to the callbacks, followed by where the candidates go.
 #[repr(C)]
-struct GatherContext {
+struct QueryContext<'q, G: UserGeometry> {
     base: sys::RTCRayQueryContext,
-    hits: *mut CandidateHits,
-    t_max: f32,
+    query: *mut G::Query<'q>,
 }
 
 /// `rtcInitRayQueryContext` (inline in `rtcore_ray.h`).
@@ -253,96 +335,70 @@ fn embree_rayhit(ray: &Ray, t_min: f32, t_max: f32) -> sys::RTCRayHit {
     }
 }
 
-/// Bounds callback: the tight box of the disc, padded by a few ulps of its
-/// coordinates so that rounding can never cull a real hit.
-unsafe extern "C" fn disc_bounds(args: *const sys::RTCBoundsFunctionArguments) {
-    // SAFETY: Embree passes valid arguments for the duration of the call;
-    // `geometryUserPtr` is the `DiscData` set in `DiscScene::new`, alive
-    // while the scene is.
-    let args = unsafe { &*args };
-    let data = unsafe { &*(args.geometryUserPtr as *const DiscData) };
-    let d = &data.discs[args.primID as usize];
-    // Half extents from the scaled axes: |u_scaled| = 1/r_u.
-    let ru = 1.0 / d.u_scaled.length();
-    let rv = 1.0 / d.v_scaled.length();
-    let a = d.u_scaled * (ru * ru);
-    let b = d.v_scaled * (rv * rv);
-    let h = (a * a + b * b).map(f32::sqrt);
-    let pad = (d.center.abs() + h) * 4.0 * f32::EPSILON;
-    let lo = d.center - h - pad;
-    let hi = d.center + h + pad;
-    // SAFETY: `bounds_o` points to one writable RTCBounds.
-    let out = unsafe { &mut *args.bounds_o };
-    out.lower_x = lo.x;
-    out.lower_y = lo.y;
-    out.lower_z = lo.z;
-    out.upper_x = hi.x;
-    out.upper_y = hi.y;
-    out.upper_z = hi.z;
+/// The ray of a callback's `RTCRay`.
+fn ray_of(r: &sys::RTCRay) -> Ray {
+    Ray {
+        origin: glam::Vec3::new(r.org_x, r.org_y, r.org_z),
+        dir: glam::Vec3::new(r.dir_x, r.dir_y, r.dir_z),
+    }
 }
 
-/// Intersect callback, following Embree's user-geometry contract: skip
-/// invalid lanes, accept only hits with `tnear <= t <= tfar`, and update
-/// `tfar` together with the hit. Instead of keeping only the closest hit it
-/// records every hit into the [`GatherContext`]'s window and moves `tfar` to
-/// `min(t_max, nearest + xi)`, so Embree culls everything beyond the window.
-/// The same primitive may be offered twice; the window dedupes by id.
-unsafe extern "C" fn disc_intersect(args: *const sys::RTCIntersectFunctionNArguments) {
+/// Bounds callback: the box [`UserGeometry::bounds`] gives.
+unsafe extern "C" fn user_bounds<G: UserGeometry>(args: *const sys::RTCBoundsFunctionArguments) {
+    // SAFETY: Embree passes valid arguments for the duration of the call;
+    // `geometryUserPtr` is the `G` boxed in `UserScene::new`, alive while
+    // the scene is.
+    let args = unsafe { &*args };
+    let geom = unsafe { &*(args.geometryUserPtr as *const G) };
+    let (lo, hi) = geom.bounds(args.primID);
+    // SAFETY: `bounds_o` points to one writable RTCBounds.
+    let out = unsafe { &mut *args.bounds_o };
+    [out.lower_x, out.lower_y, out.lower_z] = lo;
+    [out.upper_x, out.upper_y, out.upper_z] = hi;
+}
+
+/// Intersect callback: [`UserGeometry::intersect`] decides; an accepted hit
+/// moves `tfar` and records the primitive in the hit. The same primitive
+/// may be offered twice; the query must cope (the candidate window dedupes
+/// by id).
+unsafe extern "C" fn user_intersect<G: UserGeometry>(
+    args: *const sys::RTCIntersectFunctionNArguments,
+) {
     // SAFETY: valid for the call; `N == 1` since only `rtcIntersect1` is used
     // (checked), so `rayhit` is an `RTCRayHit` and `valid` has one lane.
     let args = unsafe { &*args };
     if args.N != 1 || unsafe { *args.valid } == 0 {
         return;
     }
-    // SAFETY: user pointer is the scene's `DiscData` (see `disc_bounds`).
-    let data = unsafe { &*(args.geometryUserPtr as *const DiscData) };
-    // SAFETY: the context is the `GatherContext` passed by
-    // `DiscScene::intersect` (it begins with `RTCRayQueryContext`, repr(C)),
-    // and its `hits` pointer is a live `&mut CandidateHits` for this query.
-    let ctx = unsafe { &mut *(args.context as *mut GatherContext) };
-    let hits = unsafe { &mut *ctx.hits };
+    // SAFETY: user pointer as in `user_bounds`; the context is the
+    // `QueryContext<G>` passed by `UserScene::intersect` (it begins with
+    // `RTCRayQueryContext`, repr(C)), whose `query` is a live `&mut` for
+    // this call.
+    let geom = unsafe { &*(args.geometryUserPtr as *const G) };
+    let ctx = unsafe { &mut *(args.context as *mut QueryContext<'_, G>) };
+    let query = unsafe { &mut *ctx.query };
     let rayhit = unsafe { &mut *(args.rayhit as *mut sys::RTCRayHit) };
     let r = &mut rayhit.ray;
-    let ray = Ray {
-        origin: glam::Vec3::new(r.org_x, r.org_y, r.org_z),
-        dir: glam::Vec3::new(r.dir_x, r.dir_y, r.dir_z),
-    };
-    let d = &data.discs[args.primID as usize];
-    if let Some((t, u, v)) = intersect_disc(d, &ray, r.tnear, r.tfar) {
-        let far = hits.offer(Candidate {
-            id: args.primID,
-            t,
-            u,
-            v,
-        });
-        r.tfar = far.min(ctx.t_max);
-        let h = &mut rayhit.hit;
-        h.Ng_x = d.normal.x;
-        h.Ng_y = d.normal.y;
-        h.Ng_z = d.normal.z;
-        h.u = u;
-        h.v = v;
-        h.primID = args.primID;
-        h.geomID = args.geomID;
+    if let Some(tfar) = geom.intersect(args.primID, &ray_of(r), r.tnear, r.tfar, query) {
+        r.tfar = tfar;
+        rayhit.hit.primID = args.primID;
+        rayhit.hit.geomID = args.geomID;
     }
 }
 
 /// Occluded callback: any hit in `[tnear, tfar]` ends the query, signalled
 /// by setting `tfar = -inf` as Embree requires.
-unsafe extern "C" fn disc_occluded(args: *const sys::RTCOccludedFunctionNArguments) {
-    // SAFETY: as in `disc_intersect`; `ray` is an `RTCRay` for `N == 1`.
+unsafe extern "C" fn user_occluded<G: UserGeometry>(
+    args: *const sys::RTCOccludedFunctionNArguments,
+) {
+    // SAFETY: as in `user_intersect`; `ray` is an `RTCRay` for `N == 1`.
     let args = unsafe { &*args };
     if args.N != 1 || unsafe { *args.valid } == 0 {
         return;
     }
-    let data = unsafe { &*(args.geometryUserPtr as *const DiscData) };
+    let geom = unsafe { &*(args.geometryUserPtr as *const G) };
     let r = unsafe { &mut *(args.ray as *mut sys::RTCRay) };
-    let ray = Ray {
-        origin: glam::Vec3::new(r.org_x, r.org_y, r.org_z),
-        dir: glam::Vec3::new(r.dir_x, r.dir_y, r.dir_z),
-    };
-    let d = &data.discs[args.primID as usize];
-    if intersect_disc(d, &ray, r.tnear, r.tfar).is_some() {
+    if geom.occluded(args.primID, &ray_of(r), r.tnear, r.tfar) {
         r.tfar = f32::NEG_INFINITY;
     }
 }
@@ -390,51 +446,53 @@ impl Drop for SceneHandle {
     }
 }
 
-/// Splats as Embree user-geometry discs, committed and ready to query from
-/// any number of threads.
-pub struct DiscScene {
-    // Declared first, so dropped (released) before `_data`.
+/// A committed scene of one user geometry `G`, ready to query from any
+/// number of threads.
+pub struct UserScene<G: UserGeometry> {
+    // Declared first, so dropped (released) before `geometry`.
     scene: SceneHandle,
     // Read by the callbacks through the raw pointer given to Embree; must
     // outlive `scene`.
-    _data: Box<DiscData>,
+    geometry: Box<G>,
 }
 
-// SAFETY: a committed Embree scene may be queried concurrently; `DiscData`
-// is only read.
-unsafe impl Send for DiscScene {}
+// SAFETY: a committed Embree scene may be queried concurrently; `G` is
+// `Send + Sync` and only read through `&G`.
+unsafe impl<G: UserGeometry> Send for UserScene<G> {}
 // SAFETY: as above.
-unsafe impl Sync for DiscScene {}
+unsafe impl<G: UserGeometry> Sync for UserScene<G> {}
 
-impl DiscScene {
-    /// Registers every splat as one user primitive and commits the scene.
-    pub fn new(device: &Device, splats: &[Splat]) -> Result<DiscScene, EmbreeError> {
-        let count = c_uint::try_from(splats.len())
-            .map_err(|_| EmbreeError(format!("{} splats exceed 2^32", splats.len())))?;
-        let data = Box::new(DiscData {
-            discs: splats.iter().map(Splat::disc_geometry).collect(),
-        });
+impl<G: UserGeometry> UserScene<G> {
+    /// Registers the primitives of `geometry` as one user geometry and
+    /// commits the scene.
+    pub fn new(device: &Device, geometry: G) -> Result<UserScene<G>, EmbreeError> {
+        let count = c_uint::try_from(geometry.count())
+            .map_err(|_| EmbreeError(format!("{} primitives exceed 2^32", geometry.count())))?;
         let raw = device.inner.raw;
-        let out = DiscScene {
+        let out = UserScene {
             scene: SceneHandle::new(device)?,
-            _data: data,
+            geometry: Box::new(geometry),
         };
         let scene = out.scene.raw;
         if count > 0 {
             // SAFETY: live device; USER is a valid geometry type.
             let geom = unsafe { sys::rtcNewGeometry(raw, sys::RTCGeometryType::USER) };
             device.check()?;
-            let user = &*out._data as *const DiscData as *mut c_void;
+            let user = &*out.geometry as *const G as *mut c_void;
             // SAFETY: `geom` is a fresh user geometry; the callbacks have the
-            // signatures Embree expects; `user` stays valid as long as the
-            // scene (owned by `out`). Attaching retains the geometry, so our
-            // reference is released right after.
+            // signatures Embree expects and read `user` as a `G`, which stays
+            // valid as long as the scene (owned by `out`). Attaching retains
+            // the geometry, so our reference is released right after.
             unsafe {
                 sys::rtcSetGeometryUserPrimitiveCount(geom, count);
                 sys::rtcSetGeometryUserData(geom, user);
-                sys::rtcSetGeometryBoundsFunction(geom, Some(disc_bounds), std::ptr::null_mut());
-                sys::rtcSetGeometryIntersectFunction(geom, Some(disc_intersect));
-                sys::rtcSetGeometryOccludedFunction(geom, Some(disc_occluded));
+                sys::rtcSetGeometryBoundsFunction(
+                    geom,
+                    Some(user_bounds::<G>),
+                    std::ptr::null_mut(),
+                );
+                sys::rtcSetGeometryIntersectFunction(geom, Some(user_intersect::<G>));
+                sys::rtcSetGeometryOccludedFunction(geom, Some(user_occluded::<G>));
                 sys::rtcCommitGeometry(geom);
                 sys::rtcAttachGeometry(scene, geom);
                 sys::rtcReleaseGeometry(geom);
@@ -445,24 +503,29 @@ impl DiscScene {
         Ok(out)
     }
 
-    /// Fills `hits` (cleared first) with the candidate window of `ray` in
-    /// `[t_min, t_max]` (DESIGN §2).
-    pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, hits: &mut CandidateHits) {
-        hits.clear();
-        let mut ctx = GatherContext {
+    /// The geometry the callbacks read.
+    #[must_use]
+    pub fn geometry(&self) -> &G {
+        &self.geometry
+    }
+
+    /// Traces `ray` over `[t_min, t_max]`, handing `query` to every
+    /// [`UserGeometry::intersect`] call it makes.
+    pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, query: &mut G::Query<'_>) {
+        let mut ctx = QueryContext::<G> {
             base: ray_query_context(),
-            hits: hits as *mut CandidateHits,
-            t_max,
+            query: query as *mut G::Query<'_>,
         };
         let mut args = intersect_arguments(&mut ctx.base as *mut sys::RTCRayQueryContext);
         let mut rayhit = embree_rayhit(ray, t_min, t_max);
         // SAFETY: committed scene; `rayhit` and `args` live across the call;
         // `args.context` points at `ctx.base`, the first field of the repr(C)
-        // `GatherContext` whose `hits` borrows `hits` mutably for the call.
+        // `QueryContext<G>` whose `query` borrows `query` mutably for the
+        // call, matching the type `user_intersect::<G>` reads.
         unsafe { sys::rtcIntersect1(self.scene.raw, &mut rayhit, &mut args) };
     }
 
-    /// True when any splat is hit in `[t_min, t_max]`.
+    /// True when any primitive is hit in `[t_min, t_max]`.
     #[must_use]
     pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
         self.scene.occluded(ray, t_min, t_max)

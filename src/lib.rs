@@ -6,7 +6,13 @@
 pub mod accel;
 pub mod cli;
 pub mod embree;
+pub mod error;
+pub mod geometry;
 pub mod io;
+pub mod primitive;
 pub mod render;
+pub mod rng;
 pub mod splat;
 pub mod validate;
+
+pub use error::{Error, Result};

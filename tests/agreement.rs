@@ -10,6 +10,8 @@ use common::*;
 use glam::Vec3;
 use splatray::accel::octree::{Octree, OctreeParams};
 use splatray::accel::{Backend, SceneScale};
+use splatray::primitive::Disc;
+use splatray::splat::Splat;
 
 const SPLATS: usize = 3000;
 
@@ -20,7 +22,7 @@ fn random_rays_agree_on_every_backend() {
     let scale = SceneScale::from_diagonal(diagonal(&splats));
     let b = backends(&splats);
     let queries = random_queries(&splats, 3000, seed);
-    let hits = count_hits(&b.oracle, &queries, scale.xi);
+    let hits = count_hits(b.oracle.as_ref(), &queries, scale.xi);
     assert!(
         hits > queries.len() / 2,
         "the ray set should mostly hit: {hits} of {}",
@@ -36,11 +38,11 @@ fn camera_and_secondary_rays_agree_on_every_backend() {
     let scale = SceneScale::from_diagonal(diagonal(&splats));
     let b = backends(&splats);
     let camera = camera_queries(Vec3::new(0.7, 1.1, 4.0), Vec3::ZERO, 48, 40);
-    let hits = count_hits(&b.oracle, &camera, scale.xi);
+    let hits = count_hits(b.oracle.as_ref(), &camera, scale.xi);
     assert!(hits > camera.len() / 4, "camera sees the model: {hits}");
     assert_all_agree(&b, &splats, &camera, scale.xi, "camera rays");
     let secondary = secondary_queries(
-        &b.oracle,
+        b.oracle.as_ref(),
         &splats,
         &camera,
         scale.xi,
@@ -72,7 +74,8 @@ fn wider_window_agrees_on_every_backend() {
 #[test]
 fn octree_reports_its_structure() {
     let splats = blobby_splats(SPLATS, seed());
-    let t = Octree::new(&splats, &OctreeParams::default());
+    let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
+    let t = Octree::new(&discs, &OctreeParams::default());
     let s = t.stats();
     assert_eq!(t.name(), "octree");
     assert!(s.nodes > s.leaves && s.leaves > SPLATS / 8, "{s:?}");
@@ -91,16 +94,11 @@ fn comparison_catches_the_holes_of_a_broken_octree() {
     let seed = seed();
     let splats = blobby_splats(SPLATS, seed);
     let xi = SceneScale::from_diagonal(diagonal(&splats)).xi;
-    let broken = Octree::new(
-        &splats,
-        &OctreeParams {
-            skip_overlap_insertion: true,
-            ..OctreeParams::default()
-        },
-    );
+    let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
+    let broken = Octree::without_overlap_insertion(&discs, &OctreeParams::default());
     let b = backends(&splats);
     let queries = random_queries(&splats, 2000, seed);
-    let err = agree(&b.oracle, &broken, &splats, &queries, xi)
+    let err = agree(b.oracle.as_ref(), &broken, &splats, &queries, xi)
         .expect_err("a broken octree must disagree with the oracle");
     assert!(err.contains("differ") || err.contains("occluded"), "{err}");
     assert_eq!(
@@ -108,4 +106,26 @@ fn comparison_catches_the_holes_of_a_broken_octree() {
         SPLATS,
         "broken tree holds each splat once"
     );
+}
+
+#[test]
+fn every_registered_backend_is_under_test() {
+    // The suite builds what the registry lists; the test-only second brute
+    // force (one registry line behind the `test-backends` feature, which the
+    // tests turn on) proves a new entry is picked up with no other edit.
+    let splats = blobby_splats(50, seed());
+    let b = backends(&splats);
+    let tested: Vec<&str> = b.tested.iter().map(|t| t.name()).collect();
+    for info in splatray::accel::backends::<splatray::primitive::Disc>() {
+        if info.oracle {
+            assert_eq!(b.oracle.name(), info.name);
+        } else {
+            assert!(
+                tested.contains(&info.name),
+                "{} not tested: {tested:?}",
+                info.name
+            );
+        }
+    }
+    assert!(tested.contains(&"brute-reversed"), "{tested:?}");
 }

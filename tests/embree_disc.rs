@@ -5,6 +5,7 @@ use glam::Vec3;
 use splatray::accel::embree::EmbreeBackend;
 use splatray::accel::{Backend, CandidateHits, Ray};
 use splatray::embree::Device;
+use splatray::primitive::Disc;
 use splatray::splat::Splat;
 
 #[test]
@@ -27,7 +28,7 @@ fn one_user_geometry_disc_is_hit_at_the_analytic_distance() {
     // A disc of radius 0.5 in the plane z = 2, tilted normal.
     let n = Vec3::new(0.0, 0.3, 1.0);
     let splat = Splat::disc(Vec3::new(0.1, -0.2, 2.0), n, 0.5).unwrap();
-    let backend = EmbreeBackend::new(&device, &[splat]).unwrap();
+    let backend = EmbreeBackend::new(&device, &[splat.disc_geometry()]).unwrap();
 
     let origin = Vec3::new(0.0, 0.0, -1.0);
     let dir = Vec3::new(0.05, -0.1, 1.0).normalize();
@@ -63,7 +64,7 @@ fn one_user_geometry_disc_is_hit_at_the_analytic_distance() {
 #[test]
 fn empty_scene_is_valid_and_never_hit() {
     let device = Device::new().unwrap();
-    let backend = EmbreeBackend::new(&device, &[]).unwrap();
+    let backend = EmbreeBackend::new(&device, &[] as &[Disc]).unwrap();
     let mut hits = CandidateHits::new(1e-3);
     backend.intersect(
         &Ray::new(Vec3::ZERO, Vec3::Z),

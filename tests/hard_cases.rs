@@ -8,7 +8,8 @@ mod common;
 use common::*;
 use glam::{DVec3, Vec2, Vec3};
 use splatray::accel::resolve::{ShadingMode, resolve};
-use splatray::accel::{Backend, CandidateHits, MAX_CANDIDATES, Ray, SceneScale};
+use splatray::accel::{CandidateHits, MAX_CANDIDATES, Ray, SceneScale};
+use splatray::primitive::Primitive;
 use splatray::splat::{NormalField, Splat};
 
 fn q(origin: Vec3, dir: Vec3) -> Query {
@@ -203,7 +204,7 @@ fn rays_parallel_to_splats_miss_without_nan() {
             axis.push(q(Vec3::new(o.x, o.y, -1.0), Vec3::Z));
         }
     }
-    let hits = count_hits(&b.oracle, &axis, xi);
+    let hits = count_hits(b.oracle.as_ref(), &axis, xi);
     assert!(
         hits > axis.len() / 2,
         "axis-aligned rays hit the grid: {hits}"
@@ -239,7 +240,7 @@ fn agree_on(splats: &[Splat], what: &str) {
     let b = backends(splats);
     let scale = SceneScale::from_diagonal(diagonal(splats));
     let queries = random_queries(splats, 800, seed());
-    let hits = count_hits(&b.oracle, &queries, scale.xi);
+    let hits = count_hits(b.oracle.as_ref(), &queries, scale.xi);
     assert!(hits > queries.len() / 3, "{what}: only {hits} hits");
     assert_all_agree(&b, splats, &queries, scale.xi, what);
     let (lo, hi) = bounds(splats);
@@ -289,7 +290,8 @@ fn many_coplanar_overlapping_splats_fill_the_window() {
             .iter()
             .enumerate()
             .filter(|(_, s)| {
-                splatray::accel::intersect_disc(&s.disc_geometry(), &query.ray, 0.0, f32::INFINITY)
+                s.disc_geometry()
+                    .intersect(&query.ray, 0.0, f32::INFINITY)
                     .is_some()
             })
             .map(|(i, _)| i as u32)

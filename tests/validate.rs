@@ -3,6 +3,7 @@
 
 use splatray::accel::BackendKind;
 use splatray::accel::octree::{Octree, OctreeParams};
+use splatray::primitive::Disc;
 use splatray::render::integrator::render;
 use splatray::render::scene::{Scene, build_scene, parse_scene_str};
 use splatray::validate::compare::compare_frames;
@@ -55,13 +56,8 @@ impl KindFrame {
 #[test]
 fn broken_octree_is_caught_as_holes() {
     let sc = scene();
-    let broken = Octree::new(
-        &sc.splats,
-        &OctreeParams {
-            skip_overlap_insertion: true,
-            ..OctreeParams::default()
-        },
-    );
+    let discs: Vec<Disc> = sc.splats.iter().map(|s| s.disc_geometry()).collect();
+    let broken = Octree::without_overlap_insertion(&discs, &OctreeParams::default());
     let bad = render(&sc, &broken, false);
     let good = KindFrame::new(&sc, BackendKind::Embree).0;
     let a = compare_frames(&bad, &good, sc.options.scale.diagonal);

@@ -1,62 +1,104 @@
-//! The brute-force oracle: every ray against every splat.
+//! The brute-force oracle: every ray against every primitive.
 
-use super::{Backend, BuildStats, Candidate, CandidateHits, Ray, intersect_disc};
-use crate::splat::Disc;
+use super::{Backend, BuildStats, Candidate, CandidateHits};
+use crate::geometry::Ray;
+use crate::primitive::Primitive;
+use std::time::Instant;
 
-/// Tests every splat for every ray. The reference the other backends are
-/// checked against on small inputs.
-pub struct Brute {
-    discs: Vec<Disc>,
+/// Tests every primitive for every ray. The reference the other backends
+/// are checked against on small inputs.
+pub struct Brute<P> {
+    prims: Vec<P>,
     stats: BuildStats,
 }
 
-impl Brute {
-    /// Builds (copies) the disc list.
+impl<P: Primitive> Brute<P> {
+    /// Builds (copies) the primitive list.
     #[must_use]
-    pub fn new(discs: &[Disc]) -> Brute {
-        Brute {
-            discs: discs.to_vec(),
-            stats: BuildStats {
-                memory_bytes: std::mem::size_of_val(discs),
-                ..BuildStats::default()
-            },
-        }
+    pub fn new(prims: &[P]) -> Brute<P> {
+        let start = Instant::now();
+        let prims = prims.to_vec();
+        let stats = BuildStats {
+            build_seconds: start.elapsed().as_secs_f64(),
+            memory_bytes: std::mem::size_of_val(prims.as_slice()),
+            ..BuildStats::default()
+        };
+        Brute { prims, stats }
+    }
+
+    fn hits<'a>(
+        &'a self,
+        ray: &'a Ray,
+        t_min: f32,
+        t_max: f32,
+    ) -> impl Iterator<Item = Candidate> + 'a {
+        self.prims.iter().enumerate().filter_map(move |(id, p)| {
+            p.intersect(ray, t_min, t_max).map(|h| Candidate {
+                id: id as u32,
+                t: h.t,
+                u: h.u,
+                v: h.v,
+            })
+        })
     }
 }
 
-impl Brute {
-    /// Records the build time measured by the caller.
-    pub fn set_build_seconds(&mut self, s: f64) {
-        self.stats.build_seconds = s;
-    }
-}
-
-impl Backend for Brute {
+impl<P: Primitive> Backend for Brute<P> {
     fn name(&self) -> &'static str {
         "brute"
     }
 
     fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, hits: &mut CandidateHits) {
         hits.clear();
-        for (id, d) in self.discs.iter().enumerate() {
-            if let Some((t, u, v)) = intersect_disc(d, ray, t_min, t_max) {
-                hits.offer(Candidate {
-                    id: id as u32,
-                    t,
-                    u,
-                    v,
-                });
-            }
+        for c in self.hits(ray, t_min, t_max) {
+            hits.offer(c);
         }
     }
 
     fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        self.discs
-            .iter()
-            .any(|d| intersect_disc(d, ray, t_min, t_max).is_some())
+        self.hits(ray, t_min, t_max).next().is_some()
     }
 
     fn stats(&self) -> &BuildStats {
         &self.stats
+    }
+}
+
+/// A second brute force, registered only with the `test-backends` feature:
+/// it offers the hits in reverse primitive order, so the conformance suite
+/// shows that the candidate window does not depend on the order hits
+/// arrive in, and that a backend added with one registry line is tested.
+#[cfg(feature = "test-backends")]
+pub struct BruteReversed<P>(Brute<P>);
+
+#[cfg(feature = "test-backends")]
+impl<P: Primitive> BruteReversed<P> {
+    /// Builds (copies) the primitive list.
+    #[must_use]
+    pub fn new(prims: &[P]) -> BruteReversed<P> {
+        BruteReversed(Brute::new(prims))
+    }
+}
+
+#[cfg(feature = "test-backends")]
+impl<P: Primitive> Backend for BruteReversed<P> {
+    fn name(&self) -> &'static str {
+        "brute-reversed"
+    }
+
+    fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, hits: &mut CandidateHits) {
+        hits.clear();
+        let all: Vec<Candidate> = self.0.hits(ray, t_min, t_max).collect();
+        for c in all.into_iter().rev() {
+            hits.offer(c);
+        }
+    }
+
+    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        self.0.occluded(ray, t_min, t_max)
+    }
+
+    fn stats(&self) -> &BuildStats {
+        self.0.stats()
     }
 }

@@ -1,26 +1,82 @@
-//! The Embree 4 backend: splats as user-geometry discs (DESIGN §2). Safe
-//! code only; the FFI is in [`crate::embree`].
+//! The Embree 4 backend: primitives as one user geometry, whose callbacks
+//! (below, in safe code) gather the candidate window of §4.3 into the query
+//! of each ray; the FFI is in [`crate::embree`].
 
-use super::{Backend, BuildStats, CandidateHits, Ray};
-use crate::embree::{Device, DiscScene, EmbreeError};
-use crate::splat::Splat;
+use super::{Backend, BuildStats, Candidate, CandidateHits};
+use crate::embree::{Device, EmbreeError, UserGeometry, UserScene};
+use crate::geometry::Ray;
+use crate::primitive::Primitive;
 use std::time::Instant;
 
-/// Embree's BVH over user-geometry discs.
-pub struct EmbreeBackend {
-    scene: DiscScene,
+/// The primitives as Embree sees them, addressed by primitive id.
+struct Primitives<P>(Vec<P>);
+
+/// What one ray's query carries to the intersect callback.
+struct Gather<'q> {
+    hits: &'q mut CandidateHits,
+    t_max: f32,
+}
+
+impl<P: Primitive> UserGeometry for Primitives<P> {
+    type Query<'q> = Gather<'q>;
+
+    fn count(&self) -> usize {
+        self.0.len()
+    }
+
+    /// The tight box of the primitive, padded by a few ulps of its
+    /// coordinates so that rounding can never cull a real hit.
+    fn bounds(&self, prim: u32) -> ([f32; 3], [f32; 3]) {
+        let p = &self.0[prim as usize];
+        let (c, h) = (p.center(), p.half_extent());
+        let pad = (c.abs() + h) * 4.0 * f32::EPSILON;
+        ((c - h - pad).to_array(), (c + h + pad).to_array())
+    }
+
+    /// Instead of keeping only the closest hit, records every hit into the
+    /// window and moves `tfar` to `min(t_max, nearest + xi)`, so Embree
+    /// culls everything beyond the window (§4.3).
+    #[inline]
+    fn intersect(
+        &self,
+        prim: u32,
+        ray: &Ray,
+        tnear: f32,
+        tfar: f32,
+        q: &mut Gather<'_>,
+    ) -> Option<f32> {
+        let h = self.0[prim as usize].intersect(ray, tnear, tfar)?;
+        let far = q.hits.offer(Candidate {
+            id: prim,
+            t: h.t,
+            u: h.u,
+            v: h.v,
+        });
+        Some(far.min(q.t_max))
+    }
+
+    #[inline]
+    fn occluded(&self, prim: u32, ray: &Ray, tnear: f32, tfar: f32) -> bool {
+        self.0[prim as usize].intersect(ray, tnear, tfar).is_some()
+    }
+}
+
+/// Embree's BVH over user-geometry primitives.
+pub struct EmbreeBackend<P: Primitive> {
+    scene: UserScene<Primitives<P>>,
     stats: BuildStats,
 }
 
-impl EmbreeBackend {
-    /// Builds the Embree scene over `splats` on `device`.
-    pub fn new(device: &Device, splats: &[Splat]) -> Result<EmbreeBackend, EmbreeError> {
+impl<P: Primitive> EmbreeBackend<P> {
+    /// Builds the Embree scene over `prims` on `device`. Its memory is what
+    /// the device's memory monitor saw Embree keep for it.
+    pub fn new(device: &Device, prims: &[P]) -> Result<EmbreeBackend<P>, EmbreeError> {
+        let before = device.memory();
         let start = Instant::now();
-        let scene = DiscScene::new(device, splats)?;
+        let scene = UserScene::new(device, Primitives(prims.to_vec()))?;
         let stats = BuildStats {
             build_seconds: start.elapsed().as_secs_f64(),
-            memory_bytes: std::mem::size_of_val(splats) / std::mem::size_of::<Splat>().max(1)
-                * std::mem::size_of::<crate::splat::Disc>(),
+            memory_bytes: device.memory().saturating_sub(before),
             ..BuildStats::default()
         };
         Ok(EmbreeBackend { scene, stats })
@@ -32,13 +88,15 @@ impl EmbreeBackend {
     }
 }
 
-impl Backend for EmbreeBackend {
+impl<P: Primitive> Backend for EmbreeBackend<P> {
     fn name(&self) -> &'static str {
         "embree"
     }
 
     fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, hits: &mut CandidateHits) {
-        self.scene.intersect(ray, t_min, t_max, hits);
+        hits.clear();
+        self.scene
+            .intersect(ray, t_min, t_max, &mut Gather { hits, t_max });
     }
 
     fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {

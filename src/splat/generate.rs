@@ -1,12 +1,12 @@
 //! Points in, splats out: the whole splat generation pipeline of §2 and §4
 //! behind one call, [`generate`].
 
+use super::PointCloud;
 use super::Splat;
 use super::field;
 use super::grow::{GrowInput, grow_all};
 use super::knn::{Knn, build_tree};
 use super::normals;
-use crate::io::PointCloud;
 use glam::Vec3;
 use kiddo::SquaredEuclidean;
 use kiddo::immutable::float::kdtree::ImmutableKdTree;

@@ -1,6 +1,8 @@
 //! Surface splats: oriented discs and ellipses with a linear "Phong" normal
 //! field (report §2.1 and §4.1).
 
+pub use crate::geometry::tangent_frame;
+pub use crate::primitive::Disc;
 use glam::{Vec2, Vec3};
 
 /// The linear normal field of a Phong splat, eq. (4) of §4.1–4.2.
@@ -34,7 +36,8 @@ impl NormalField {
     };
 }
 
-/// One surface splat (DESIGN §3).
+/// One surface splat: an oriented elliptical disc with a colour and a
+/// linear normal field (§2.1, §4.1).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Splat {
     /// Centre `c_i`, eq. (2).
@@ -102,40 +105,14 @@ impl Splat {
     }
 }
 
-/// A right-handed orthonormal tangent frame `(u, v)` for unit normal `n`
-/// (Duff et al. 2017, branchless).
-#[must_use]
-pub fn tangent_frame(n: Vec3) -> (Vec3, Vec3) {
-    let sign = 1.0f32.copysign(n.z);
-    let a = -1.0 / (sign + n.z);
-    let b = n.x * n.y * a;
-    let u = Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
-    let v = Vec3::new(b, sign + n.y * n.y * a, -n.y);
-    (u, v)
-}
-
-/// What the intersection hot loop reads of a splat: 48 contiguous bytes.
-/// The tangent axes are pre-divided by the radii, so the local coordinates
-/// it yields are already normalised (`|(u,v)| <= 1` on the splat).
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[repr(C)]
-pub struct Disc {
-    /// Splat centre; all intersection math is relative to it.
-    pub center: Vec3,
-    /// Unit normal.
-    pub normal: Vec3,
-    /// `u_axis / r_u`.
-    pub u_scaled: Vec3,
-    /// `v_axis / r_v`.
-    pub v_scaled: Vec3,
-}
-
+mod cloud;
 pub mod field;
 mod generate;
 pub mod grow;
 pub mod knn;
 pub mod normals;
 
+pub use cloud::PointCloud;
 pub use generate::{
     GenerateError, Skipped, SplatParams, SplatReport, StageSeconds, count_on_splats, coverage,
     generate, generate_with_progress, on_splat,

@@ -5,12 +5,10 @@
 #![allow(dead_code)]
 
 use glam::{Vec2, Vec3};
-use splatray::accel::brute::Brute;
-use splatray::accel::embree::EmbreeBackend;
 use splatray::accel::octree::{Octree, OctreeParams, OverlapTest};
 use splatray::accel::resolve::{ShadingMode, resolve};
-use splatray::accel::{Backend, CandidateHits, Ray};
-use splatray::embree::Device;
+use splatray::accel::{Backend, CandidateHits, Ray, backends as registry};
+use splatray::primitive::{Disc, Primitive};
 use splatray::splat::{NormalField, Splat};
 
 /// The default seed; `SPLATRAY_SEED` overrides it so a failure can be
@@ -33,54 +31,8 @@ pub fn seed() -> u64 {
     }
 }
 
-/// SplitMix64: tiny, seedable, the same on every platform.
-pub struct Rng(u64);
-
-impl Rng {
-    /// A generator from `seed`.
-    pub fn new(seed: u64) -> Rng {
-        Rng(seed)
-    }
-
-    /// Next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[0, 1)`.
-    pub fn f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    /// Uniform in `[lo, hi)`.
-    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.f32()
-    }
-
-    /// Uniform on the unit sphere.
-    pub fn unit(&mut self) -> Vec3 {
-        loop {
-            let v = Vec3::new(
-                self.range(-1.0, 1.0),
-                self.range(-1.0, 1.0),
-                self.range(-1.0, 1.0),
-            );
-            let l = v.length_squared();
-            if l > 1e-4 && l <= 1.0 {
-                return v / l.sqrt();
-            }
-        }
-    }
-
-    /// Uniform index below `n`.
-    pub fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-}
+/// The seeded generator of every test: the library's SplitMix64.
+pub use splatray::rng::SplitMix64 as Rng;
 
 /// Radius of the blobby surface in direction `d` (unit): a sphere with
 /// bumps, "bunny-like" enough to have concave and convex parts.
@@ -127,7 +79,7 @@ pub fn blobby_splats(n: usize, seed: u64) -> Vec<Splat> {
             let (u, v) = (s.u_axis, s.v_axis);
             s.u_axis = u * ca + v * sa;
             s.v_axis = s.normal.cross(s.u_axis);
-            if rng.f32() < 0.5 {
+            if rng.next_f32() < 0.5 {
                 s.radii = Vec2::new(s.radii.x * 1.4, s.radii.y * 0.75);
             }
             s.field = NormalField {
@@ -232,31 +184,43 @@ pub fn diagonal(splats: &[Splat]) -> f32 {
     (hi - lo).length()
 }
 
-/// The oracle plus every backend under test: octree (exact overlap),
-/// octree (bounding-square overlap) and Embree.
+/// The oracle plus every backend under test: every registered backend (the
+/// registry's oracle is the reference) and the octree with the report's
+/// bounding-square overlap test, a variant of a registered backend.
 pub struct Backends {
     /// The brute-force oracle.
-    pub oracle: Brute,
+    pub oracle: Box<dyn Backend>,
     /// The backends checked against it.
     pub tested: Vec<Box<dyn Backend>>,
 }
 
-/// Builds the oracle and every tested backend over `splats`.
+/// Builds the oracle and every tested backend over the discs of `splats`.
 pub fn backends(splats: &[Splat]) -> Backends {
-    let discs: Vec<_> = splats.iter().map(Splat::disc_geometry).collect();
-    let device = Device::new().expect("embree device");
-    let exact = Octree::new(splats, &OctreeParams::default());
-    let square = Octree::new(
-        splats,
-        &OctreeParams {
-            overlap: OverlapTest::BoundingSquare,
-            ..OctreeParams::default()
-        },
-    );
-    let embree = EmbreeBackend::new(&device, splats).expect("embree scene");
+    let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
+    backends_of(&discs)
+}
+
+/// Builds the oracle and every tested backend over primitives `prims`.
+pub fn backends_of<P: Primitive>(prims: &[P]) -> Backends {
+    let mut oracle = None;
+    let mut tested: Vec<Box<dyn Backend>> = Vec::new();
+    for info in registry::<P>() {
+        let b =
+            (info.build)(prims).unwrap_or_else(|e| panic!("building backend {}: {e}", info.name));
+        if info.oracle {
+            oracle = Some(b);
+        } else {
+            tested.push(b);
+        }
+    }
+    let square = OctreeParams {
+        overlap: OverlapTest::BoundingSquare,
+        ..OctreeParams::default()
+    };
+    tested.push(Box::new(Octree::new(prims, &square)));
     Backends {
-        oracle: Brute::new(&discs),
-        tested: vec![Box::new(exact), Box::new(square), Box::new(embree)],
+        oracle: oracle.expect("the registry lists an oracle"),
+        tested,
     }
 }
 
@@ -344,7 +308,7 @@ pub fn agree(
 /// replayable description of the first disagreement.
 pub fn assert_all_agree(b: &Backends, splats: &[Splat], queries: &[Query], xi: f32, what: &str) {
     for backend in &b.tested {
-        if let Err(e) = agree(&b.oracle, backend.as_ref(), splats, queries, xi) {
+        if let Err(e) = agree(b.oracle.as_ref(), backend.as_ref(), splats, queries, xi) {
             panic!("{what}: {e}\n(replay with SPLATRAY_SEED={:#x})", seed());
         }
     }

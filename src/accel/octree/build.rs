@@ -1,0 +1,548 @@
+//! Construction of the [`Octree`] (§3.1): root cube, split by centres in
+//! Morton order, insertion of every primitive into the leaves it overlaps,
+//! leaf packs, flattening.
+
+use super::{INTERIOR, NO_PRIMITIVE, Node, Octree, OctreeParams, OverlapTest, child_lo, lanes};
+use crate::accel::BuildStats;
+use crate::primitive::{Pack, Primitive};
+use glam::Vec3;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Bits of a Morton code per axis: the deepest level the build can reach.
+const MORTON_BITS: u32 = 21;
+
+/// A [`Node::meta`] value no real node has: marks a slot not yet emitted.
+const UNEMITTED: u32 = u32::MAX;
+
+/// Step 3 of §3.1, or (for tests only) not.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Insertion {
+    /// Every leaf a primitive overlaps gets a reference.
+    Overlaps,
+    /// Only the leaf holding the centre: the broken tree of
+    /// `Octree::without_overlap_insertion`.
+    #[cfg_attr(not(feature = "test-backends"), allow(dead_code))]
+    CentreOnly,
+}
+
+/// Builds the octree: the steps below, in order.
+pub(super) fn build<P: Primitive>(
+    prims: &[P],
+    params: &OctreeParams,
+    insertion: Insertion,
+) -> Octree<P> {
+    let start = Instant::now();
+    let n = prims.len();
+    assert!(u32::try_from(n).is_ok(), "at most 2^32 - 1 primitives");
+    let extents: Vec<Vec3> = prims
+        .par_iter()
+        .map(|p| match params.overlap {
+            OverlapTest::Exact => p.half_extent(),
+            OverlapTest::BoundingSquare => p.coarse_half_extent(),
+        })
+        .collect();
+    let cube = RootCube::around(prims, &extents);
+    let (root, order, leaves) = split_by_centres(prims, &cube, params);
+    let chunks = insert_references(prims, &extents, &order, &root, &cube, params, insertion);
+    let leaf_refs = count_per_leaf(&chunks, leaves);
+    let references: usize = leaf_refs.iter().map(|&c| c as usize).sum();
+    assert!(references < INTERIOR as usize, "too many references");
+    let leaf_packs: Vec<u32> = leaf_refs
+        .iter()
+        .map(|&c| c.div_ceil(lanes::<P>() as u32))
+        .collect();
+    let leaf_start = prefix_sums(&leaf_packs);
+    let (packs, pack_ids) = fill_packs(prims, &order, &chunks, &leaf_start, &leaf_packs);
+    drop(chunks);
+    let nodes = flatten(root, &leaf_start, &leaf_packs);
+    let leaf_nodes = nodes.iter().filter(|nd| nd.meta & INTERIOR == 0).count();
+    let nonempty = nodes
+        .iter()
+        .filter(|nd| nd.meta & INTERIOR == 0 && nd.meta > 0)
+        .count();
+    let stats = BuildStats {
+        build_seconds: start.elapsed().as_secs_f64(),
+        memory_bytes: std::mem::size_of_val(nodes.as_slice())
+            + std::mem::size_of_val(packs.as_slice())
+            + std::mem::size_of_val(pack_ids.as_slice()),
+        nodes: nodes.len(),
+        leaves: leaf_nodes,
+        mean_refs_per_leaf: if nonempty == 0 {
+            0.0
+        } else {
+            references as f64 / nonempty as f64
+        },
+    };
+    Octree {
+        nodes,
+        packs,
+        pack_ids,
+        references,
+        root_lo: cube.lo,
+        root_size: cube.size,
+        pad: cube.pad,
+        stats,
+    }
+}
+
+/// Step 1: the root cell.
+struct RootCube {
+    /// Lower corner.
+    lo: Vec3,
+    /// Edge length.
+    size: f32,
+    /// Padding added to every cell, in world units.
+    pad: f32,
+}
+
+impl RootCube {
+    /// The cube around every primitive's box (half extents `extents`),
+    /// slightly enlarged; the unit cube at the origin when there is nothing
+    /// finite to bound.
+    fn around<P: Primitive>(prims: &[P], extents: &[Vec3]) -> RootCube {
+        let (lo, hi) = prims
+            .par_iter()
+            .zip(extents)
+            .map(|(p, e)| (p.center() - *e, p.center() + *e))
+            .reduce(
+                || (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+                |a, b| (a.0.min(b.0), a.1.max(b.1)),
+            );
+        let (lo, size) = if prims.is_empty() || !lo.is_finite() || !hi.is_finite() {
+            (Vec3::ZERO, 1.0)
+        } else {
+            let size = (hi - lo).max_element();
+            let size = (size * (1.0 + 1e-5)).max(f32::MIN_POSITIVE * 1e10);
+            (lo - Vec3::splat(size * 1e-6), size * (1.0 + 2e-6))
+        };
+        // Padding: a few ulps of the largest coordinate of the root, which
+        // bounds the rounding of slab distances and hit positions for rays
+        // starting within a few scene sizes (module doc).
+        let magnitude = lo.abs().max(lo + Vec3::splat(size)).max_element();
+        let pad = 16.0 * f32::EPSILON * (magnitude.abs() + size);
+        RootCube { lo, size, pad }
+    }
+}
+
+/// Step 2: sorts the centres by Morton code and splits the sorted range.
+/// Returns the pointer tree, the primitive ids in Morton order (a
+/// primitive's position in it is its *key*) and the leaf count.
+fn split_by_centres<P: Primitive>(
+    prims: &[P],
+    cube: &RootCube,
+    params: &OctreeParams,
+) -> (BuildNode, Vec<u32>, u32) {
+    let n = prims.len();
+    let scale = (1u64 << MORTON_BITS) as f32 / cube.size;
+    let max_q = ((1u64 << MORTON_BITS) - 1) as f32;
+    let mut keyed: Vec<(u64, u32)> = prims
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let q = ((p.center() - cube.lo) * scale).clamp(Vec3::ZERO, Vec3::splat(max_q));
+            let code =
+                spread3(q.x as u64) | (spread3(q.y as u64) << 1) | (spread3(q.z as u64) << 2);
+            (code, i as u32)
+        })
+        .collect();
+    keyed.par_sort_unstable();
+    let codes: Vec<u64> = keyed.iter().map(|k| k.0).collect();
+    let order: Vec<u32> = keyed.iter().map(|k| k.1).collect();
+    drop(keyed);
+    let splitter = Splitter {
+        codes: &codes,
+        max_leaf: params.max_leaf.max(1),
+        max_depth: params.max_depth.min(MORTON_BITS),
+    };
+    let mut root = if n == 0 {
+        BuildNode::Leaf {
+            begin: 0,
+            end: 0,
+            id: 0,
+        }
+    } else {
+        splitter.split(0, n, 0)
+    };
+    let mut leaves = 0u32;
+    number_leaves(&mut root, &mut leaves);
+    (root, order, leaves)
+}
+
+/// Step 3: every leaf each primitive overlaps. Primitives are read in Morton
+/// order (one parallel gather first, so the descent reads memory in order),
+/// in chunks of consecutive keys; each chunk lists `(leaf << 32) | key` in
+/// key order, so the chunks concatenated are sorted by key and a stable
+/// counting sort by leaf yields every leaf's keys in order.
+fn insert_references<P: Primitive>(
+    prims: &[P],
+    extents: &[Vec3],
+    order: &[u32],
+    root: &BuildNode,
+    cube: &RootCube,
+    params: &OctreeParams,
+    insertion: Insertion,
+) -> Vec<Vec<u64>> {
+    let sorted: Vec<(P, Vec3)> = order
+        .par_iter()
+        .map(|&i| (prims[i as usize], extents[i as usize]))
+        .collect();
+    const CHUNK: usize = 2048;
+    sorted
+        .par_chunks(CHUNK)
+        .enumerate()
+        .map(|(c, chunk)| {
+            let mut out = Vec::with_capacity(chunk.len() * 8);
+            for (j, (prim, extent)) in chunk.iter().enumerate() {
+                let key = (c * CHUNK + j) as u32;
+                let e = *extent + Vec3::splat(cube.pad);
+                // The broken test-only tree: an empty footprint meets no
+                // cell, so only the leaf holding the centre gets it.
+                let (lo, hi) = match insertion {
+                    Insertion::CentreOnly => {
+                        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY))
+                    }
+                    Insertion::Overlaps => (prim.center() - e, prim.center() + e),
+                };
+                let fp = Footprint {
+                    lo,
+                    hi,
+                    prim: *prim,
+                    exact: params.overlap == OverlapTest::Exact,
+                };
+                insert_one(root, cube, key, &fp, &mut out);
+            }
+            out
+        })
+        .collect()
+}
+
+/// References per leaf.
+fn count_per_leaf(chunks: &[Vec<u64>], leaves: u32) -> Vec<u32> {
+    let mut count = vec![0u32; leaves as usize];
+    for p in chunks.iter().flatten() {
+        count[(p >> 32) as usize] += 1;
+    }
+    count
+}
+
+/// Exclusive prefix sums: each leaf's first pack.
+fn prefix_sums(counts: &[u32]) -> Vec<u32> {
+    let mut acc = 0u32;
+    counts
+        .iter()
+        .map(|&c| {
+            let s = acc;
+            acc += c;
+            s
+        })
+        .collect()
+}
+
+/// Step 4: a counting sort of the references by leaf (each leaf's keys in
+/// key order, padded to whole packs), then the packs and their lanes' ids.
+fn fill_packs<P: Primitive>(
+    prims: &[P],
+    order: &[u32],
+    chunks: &[Vec<u64>],
+    leaf_start: &[u32],
+    leaf_packs: &[u32],
+) -> (Vec<P::Pack>, Vec<u32>) {
+    let lanes = lanes::<P>();
+    let total = leaf_packs.iter().map(|&c| c as usize).sum::<usize>();
+    let mut pack_keys = vec![NO_PRIMITIVE; total * lanes];
+    let mut cursor: Vec<u32> = leaf_start.iter().map(|&s| s * lanes as u32).collect();
+    for p in chunks.iter().flatten() {
+        let c = &mut cursor[(p >> 32) as usize];
+        pack_keys[*c as usize] = (p & 0xffff_ffff) as u32;
+        *c += 1;
+    }
+    let id_of = |k: u32| {
+        if k == NO_PRIMITIVE {
+            NO_PRIMITIVE
+        } else {
+            order[k as usize]
+        }
+    };
+    let packs: Vec<P::Pack> = pack_keys
+        .par_chunks(lanes)
+        .map(|keys| {
+            let mut p = <P::Pack as Pack<P>>::EMPTY;
+            for (lane, &k) in keys.iter().enumerate() {
+                if k != NO_PRIMITIVE {
+                    p.set(lane, &prims[id_of(k) as usize]);
+                }
+            }
+            p
+        })
+        .collect();
+    let pack_ids: Vec<u32> = pack_keys.par_iter().map(|&k| id_of(k)).collect();
+    (packs, pack_ids)
+}
+
+/// Step 5: the pointer tree flattened into [`Node`]s (the build-time tree is
+/// dropped here).
+fn flatten(mut root: BuildNode, leaf_start: &[u32], leaf_packs: &[u32]) -> Vec<Node> {
+    count_refs(&mut root, leaf_packs);
+    let mut nodes = vec![Node { first: 0, meta: 0 }];
+    let mut emitted = 0;
+    emit(&root, 0, &mut nodes, leaf_start, leaf_packs, &mut emitted);
+    debug_assert_eq!(emitted, nodes.len(), "every node slot emitted once");
+    debug_assert!(
+        nodes.iter().all(|nd| nd.meta != UNEMITTED),
+        "a node slot was never emitted"
+    );
+    nodes
+}
+
+/// The pointer tree of the build, flattened afterwards.
+enum BuildNode {
+    Leaf {
+        /// Range of the cell's centres in Morton order.
+        begin: u32,
+        end: u32,
+        /// Leaf number (depth-first order), set after the split.
+        id: u32,
+    },
+    Interior {
+        begin: u32,
+        end: u32,
+        children: Box<[BuildNode; 8]>,
+        /// References in the subtree, set after step 3.
+        refs: u64,
+    },
+}
+
+impl BuildNode {
+    fn range(&self) -> (u32, u32) {
+        match self {
+            BuildNode::Leaf { begin, end, .. } | BuildNode::Interior { begin, end, .. } => {
+                (*begin, *end)
+            }
+        }
+    }
+}
+
+/// Spreads the low 21 bits of `x` to every third bit.
+fn spread3(x: u64) -> u64 {
+    let mut x = x & 0x1f_ffff;
+    x = (x | (x << 32)) & 0x1f_0000_0000_ffff;
+    x = (x | (x << 16)) & 0x1f_0000_ff00_00ff;
+    x = (x | (x << 8)) & 0x100f_00f0_0f00_f00f;
+    x = (x | (x << 4)) & 0x10c3_0c30_c30c_30c3;
+    x = (x | (x << 2)) & 0x1249_2492_4924_9249;
+    x
+}
+
+/// Octant of `code` at `depth` (0 = the root's children).
+#[inline]
+fn octant_at(code: u64, depth: u32) -> usize {
+    ((code >> (3 * (MORTON_BITS - 1 - depth))) & 7) as usize
+}
+
+struct Splitter<'a> {
+    codes: &'a [u64],
+    max_leaf: usize,
+    max_depth: u32,
+}
+
+impl Splitter<'_> {
+    /// Splits the Morton-sorted range `[begin, end)` of a cell at `depth`.
+    fn split(&self, begin: usize, end: usize, depth: u32) -> BuildNode {
+        let leaf = BuildNode::Leaf {
+            begin: begin as u32,
+            end: end as u32,
+            id: 0,
+        };
+        if end - begin <= self.max_leaf
+            || depth >= self.max_depth
+            || self.codes[begin] == self.codes[end - 1]
+        {
+            return leaf;
+        }
+        // Child boundaries: the sorted codes are grouped by octant at `depth`.
+        let mut bounds = [end; 9];
+        bounds[0] = begin;
+        for (oct, b) in bounds.iter_mut().enumerate().take(8).skip(1) {
+            *b = begin + self.codes[begin..end].partition_point(|&c| octant_at(c, depth) < oct);
+        }
+        let make = |oct: usize| self.split(bounds[oct], bounds[oct + 1], depth + 1);
+        let children: Vec<BuildNode> = if end - begin > 20_000 {
+            (0..8).into_par_iter().map(make).collect()
+        } else {
+            (0..8).map(make).collect()
+        };
+        let children: Box<[BuildNode; 8]> = match children.into_boxed_slice().try_into() {
+            Ok(c) => c,
+            Err(_) => unreachable!("eight children"),
+        };
+        BuildNode::Interior {
+            begin: begin as u32,
+            end: end as u32,
+            children,
+            refs: 0,
+        }
+    }
+}
+
+/// Numbers the leaves depth first; returns the leaf count.
+fn number_leaves(node: &mut BuildNode, next: &mut u32) {
+    match node {
+        BuildNode::Leaf { id, .. } => {
+            *id = *next;
+            *next += 1;
+        }
+        BuildNode::Interior { children, .. } => {
+            for c in children.iter_mut() {
+                number_leaves(c, next);
+            }
+        }
+    }
+}
+
+/// What step 3 tests a primitive with.
+struct Footprint<P> {
+    /// Padded bounds of the tested box (tight or coarse).
+    lo: Vec3,
+    hi: Vec3,
+    prim: P,
+    exact: bool,
+}
+
+/// Step 3 for one primitive: pushes `(leaf << 32) | key` for every leaf whose
+/// padded cell the primitive overlaps, plus the leaf holding its centre.
+#[allow(clippy::too_many_arguments)]
+fn insert_overlaps<P: Primitive>(
+    node: &BuildNode,
+    lo: Vec3,
+    size: f32,
+    pad: f32,
+    key: u32,
+    fp: &Footprint<P>,
+    out: &mut Vec<u64>,
+) {
+    let (begin, end) = node.range();
+    let holds_centre = begin <= key && key < end;
+    let cell_lo = lo - Vec3::splat(pad);
+    let cell_hi = lo + Vec3::splat(size + pad);
+    let boxes_meet = fp.lo.cmple(cell_hi).all() && fp.hi.cmpge(cell_lo).all();
+    if !holds_centre && !boxes_meet {
+        return;
+    }
+    match node {
+        BuildNode::Leaf { id, .. } => {
+            if holds_centre || !fp.exact || fp.prim.meets_box(cell_lo, cell_hi) {
+                out.push((u64::from(*id) << 32) | u64::from(key));
+            }
+        }
+        BuildNode::Interior { children, .. } => {
+            let half = size * 0.5;
+            for (oct, c) in children.iter().enumerate() {
+                insert_overlaps(c, child_lo(lo, half, oct), half, pad, key, fp, out);
+            }
+        }
+    }
+}
+
+/// Step 3 for one primitive, started below the root: descends along the cells
+/// holding the splat's centre while the child cell contains the whole
+/// (padded) footprint with a margin of two more paddings, then runs
+/// [`insert_overlaps`] from there. Every cell left out lies outside that
+/// child, so its padded box cannot meet the footprint and holds no centre:
+/// the references are exactly those of [`insert_overlaps`] from the root.
+fn insert_one<P: Primitive>(
+    root: &BuildNode,
+    cube: &RootCube,
+    key: u32,
+    fp: &Footprint<P>,
+    out: &mut Vec<u64>,
+) {
+    let pad = cube.pad;
+    let (mut node, mut lo, mut size) = (root, cube.lo, cube.size);
+    while let BuildNode::Interior { children, .. } = node {
+        let Some(oct) = children.iter().position(|c| {
+            let (b, e) = c.range();
+            b <= key && key < e
+        }) else {
+            break;
+        };
+        let half = size * 0.5;
+        let clo = child_lo(lo, half, oct);
+        let margin = Vec3::splat(3.0 * pad);
+        let inside =
+            fp.lo.cmpge(clo + margin).all() && fp.hi.cmple(clo + Vec3::splat(half) - margin).all();
+        if !inside {
+            break;
+        }
+        node = &children[oct];
+        lo = clo;
+        size = half;
+    }
+    insert_overlaps(node, lo, size, pad, key, fp, out);
+}
+
+/// Fills the subtree reference counts; returns this subtree's.
+fn count_refs(node: &mut BuildNode, leaf_count: &[u32]) -> u64 {
+    match node {
+        BuildNode::Leaf { id, .. } => u64::from(leaf_count[*id as usize]),
+        BuildNode::Interior { children, refs, .. } => {
+            *refs = children.iter_mut().map(|c| count_refs(c, leaf_count)).sum();
+            *refs
+        }
+    }
+}
+
+fn subtree_refs(node: &BuildNode, leaf_count: &[u32]) -> u64 {
+    match node {
+        BuildNode::Leaf { id, .. } => u64::from(leaf_count[*id as usize]),
+        BuildNode::Interior { refs, .. } => *refs,
+    }
+}
+
+/// Writes `node` into `nodes[slot]`, appending its non-empty children
+/// contiguously (pbrt's flattening, depth first).
+fn emit(
+    node: &BuildNode,
+    slot: usize,
+    nodes: &mut Vec<Node>,
+    leaf_start: &[u32],
+    leaf_count: &[u32],
+    emitted: &mut usize,
+) {
+    *emitted += 1;
+    match node {
+        BuildNode::Leaf { id, .. } => {
+            nodes[slot] = Node {
+                first: leaf_start[*id as usize],
+                meta: leaf_count[*id as usize],
+            };
+        }
+        BuildNode::Interior { children, .. } => {
+            let mut mask = 0u32;
+            for (oct, c) in children.iter().enumerate() {
+                if subtree_refs(c, leaf_count) > 0 {
+                    mask |= 1 << oct;
+                }
+            }
+            let first = nodes.len();
+            nodes.resize(
+                first + mask.count_ones() as usize,
+                Node {
+                    first: 0,
+                    meta: UNEMITTED,
+                },
+            );
+            nodes[slot] = Node {
+                first: first as u32,
+                meta: INTERIOR | mask,
+            };
+            let mut j = first;
+            for (oct, c) in children.iter().enumerate() {
+                if mask & (1 << oct) != 0 {
+                    emit(c, j, nodes, leaf_start, leaf_count, emitted);
+                    j += 1;
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,197 @@
+//! The octree of report §3.1, traversed front to back as in §3.2, generic
+//! over the [`Primitive`] it holds.
+//!
+//! Build (§3.1, in [`build`]):
+//! 1. the root is the bounding cube of every primitive;
+//! 2. each primitive is inserted by its *centre* into the leaf containing it,
+//!    and a leaf holding more than [`OctreeParams::max_leaf`] centres is split
+//!    into eight octants, down to [`OctreeParams::max_depth`] (a cell whose
+//!    centres all fall in one finest cell, e.g. coincident splats, stays a
+//!    leaf);
+//! 3. once the tree stands, each primitive is added to *every* leaf it
+//!    overlaps ([`OverlapTest`]), so a ray finds it in whichever cell it meets
+//!    it (fig. 8).
+//!
+//! Steps 1–2 are done as one parallel sort of the centres' Morton codes
+//! followed by a recursive split of the sorted range — the same tree as
+//! inserting one primitive at a time, since a cell is split exactly when it
+//! holds more than `max_leaf` centres. Step 3 descends the tree once per
+//! primitive, in parallel over chunks in Morton order; a stable counting sort
+//! by leaf then groups the references (no sort of 64-bit pairs).
+//!
+//! The built tree is flattened into 8-byte [`Node`]s (children of a node
+//! stored contiguously, empty children left out) and the leaves' references,
+//! stored as the primitive's [`Pack`]s: copies of `Pack::LANES` primitives
+//! (for discs, SoA), so a leaf's primitives are read contiguously and
+//! filtered several at a time.
+//!
+//! Traversal (§3.2, in [`traverse`]) computes the entry and exit of a cell's
+//! eight children at once, then visits the non-empty ones in the order given
+//! by the ray direction's signs (`i ^ sign_mask`, a front-to-back order for
+//! octants), skipping every cell whose entry lies beyond the far end of the
+//! candidate window (`hits.far()`, nearest + `xi`, §4.3): no hit there can
+//! still be a candidate. In a leaf, [`Pack::may_hit`] filters; every lane it
+//! lets through is decided by [`Primitive::intersect`] and offered to
+//! [`CandidateHits::offer`], so the candidates are bit-identical to those of
+//! the other backends.
+//!
+//! Robustness: cells are padded by a few ulps of the scene's coordinates both
+//! when primitives are inserted and when rays are clipped, so that rounding
+//! in the slab test or in a hit's position can never make a ray skip a cell
+//! holding a primitive it hits. Zero direction components give infinite
+//! inverse directions; the NaN of `0 * inf` (origin exactly on a padded
+//! plane) is resolved to "miss this cell", which is safe because the padded
+//! neighbour then contains the whole ray. A NaN ray visits cells but never
+//! hits anything.
+
+mod build;
+mod traverse;
+
+use super::{Backend, BuildStats, CandidateHits};
+use crate::geometry::Ray;
+use crate::primitive::{Pack, Primitive};
+use glam::Vec3;
+
+/// How a primitive is tested against a leaf cell in step 3 of §3.1.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OverlapTest {
+    /// The exact test, [`Primitive::meets_box`] (for a disc: the elliptical
+    /// disc meets the padded box).
+    Exact,
+    /// The report's approximation (§3.1): the primitive's coarse box
+    /// ([`Primitive::coarse_half_extent`], for a splat the box of its
+    /// bounding square `c ± r_u u ± r_v v`) meets the cell. Conservative
+    /// (never misses an overlap), but adds references to cells the primitive
+    /// misses.
+    BoundingSquare,
+}
+
+/// Build parameters of the [`Octree`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct OctreeParams {
+    /// A leaf holding more centres than this is split (§3.1).
+    pub max_leaf: usize,
+    /// Deepest level (root = 0), at most 21. Guarantees termination when many
+    /// primitives share a centre.
+    pub max_depth: u32,
+    /// The primitive/cell test of step 3 (§3.1).
+    pub overlap: OverlapTest,
+}
+
+impl Default for OctreeParams {
+    /// `max_leaf = 8`, `max_depth = 16`, exact overlap test (measured better
+    /// than the bounding square: see `docs/development.md`).
+    fn default() -> Self {
+        OctreeParams {
+            max_leaf: 8,
+            max_depth: 16,
+            overlap: OverlapTest::Exact,
+        }
+    }
+}
+
+/// Flag in [`Node::meta`] marking an interior node.
+const INTERIOR: u32 = 1 << 31;
+
+/// Primitive id of a padding lane.
+const NO_PRIMITIVE: u32 = u32::MAX;
+
+/// One node of the flattened octree: 8 bytes, no bounds (a cell's box is
+/// derived from its parent's during traversal).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(C)]
+struct Node {
+    /// Interior: index in `nodes` of its first stored child. Leaf: index in
+    /// `packs` of its first pack.
+    first: u32,
+    /// Interior: [`INTERIOR`] | 8-bit mask of the stored (non-empty)
+    /// children, bit `o` for octant `o = x | y << 1 | z << 2` (1 = upper
+    /// half); child `o` sits at `first + popcount(mask & ((1 << o) - 1))`.
+    /// Leaf: the number of packs (bit 31 clear).
+    meta: u32,
+}
+
+/// Lower corner of child octant `oct` of the cell `(lo, 2 * half)`. Build
+/// and traversal derive boxes with this same arithmetic, so they agree to
+/// the bit.
+#[inline]
+fn child_lo(lo: Vec3, half: f32, oct: usize) -> Vec3 {
+    Vec3::new(
+        if oct & 1 != 0 { lo.x + half } else { lo.x },
+        if oct & 2 != 0 { lo.y + half } else { lo.y },
+        if oct & 4 != 0 { lo.z + half } else { lo.z },
+    )
+}
+
+/// The octree of §3.1 over a set of primitives.
+pub struct Octree<P: Primitive> {
+    nodes: Vec<Node>,
+    /// The primitives of each leaf's references, `P::Pack::LANES` to a pack
+    /// (copies in reference order, so a leaf's primitives are contiguous in
+    /// memory; the last pack of a leaf padded with empty lanes).
+    packs: Vec<P::Pack>,
+    /// Primitive id of each lane of `packs` ([`NO_PRIMITIVE`] on padding).
+    pack_ids: Vec<u32>,
+    /// References (lanes holding a primitive).
+    references: usize,
+    /// Lower corner of the root cube.
+    root_lo: Vec3,
+    /// Edge length of the root cube.
+    root_size: f32,
+    /// Padding added to every cell, in world units.
+    pad: f32,
+    stats: BuildStats,
+}
+
+impl<P: Primitive> Octree<P> {
+    /// Builds the octree of §3.1 over `prims` (primitive `i` gets id `i`).
+    ///
+    /// Panics if there are 2^31 or more references or 2^32 primitives.
+    #[must_use]
+    pub fn new(prims: &[P], params: &OctreeParams) -> Octree<P> {
+        build::build(prims, params, build::Insertion::Overlaps)
+    }
+
+    /// **A deliberately broken octree, for testing the validation tools.**
+    /// Step 3 of §3.1 is skipped: each primitive sits only in the leaf
+    /// holding its centre, so rays miss the parts that reach into
+    /// neighbouring cells — exactly the holes fig. 8 warns about. Never
+    /// render with it.
+    #[cfg(feature = "test-backends")]
+    #[must_use]
+    pub fn without_overlap_insertion(prims: &[P], params: &OctreeParams) -> Octree<P> {
+        build::build(prims, params, build::Insertion::CentreOnly)
+    }
+
+    /// Total references (a primitive counts once per leaf holding it).
+    #[must_use]
+    pub fn references(&self) -> usize {
+        self.references
+    }
+}
+
+impl<P: Primitive> Backend for Octree<P> {
+    fn name(&self) -> &'static str {
+        "octree"
+    }
+
+    fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, hits: &mut CandidateHits) {
+        hits.clear();
+        let mut g = traverse::Gather::new(ray, t_min, t_max, hits);
+        self.traverse(ray, t_min, &mut g);
+    }
+
+    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        let mut a = traverse::AnyHit::new(ray, t_min, t_max);
+        self.traverse(ray, t_min, &mut a)
+    }
+
+    fn stats(&self) -> &BuildStats {
+        &self.stats
+    }
+}
+
+/// Lanes per pack of `P`.
+const fn lanes<P: Primitive>() -> usize {
+    <P::Pack as Pack<P>>::LANES
+}

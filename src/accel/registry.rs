@@ -1,0 +1,87 @@
+//! The one list of acceleration backends. The command line (`--backend`,
+//! its help), `compare`, `sweep`, the plot, the conformance tests and the
+//! benchmarks all iterate [`backends`]: a backend added here is built,
+//! selected, cross-validated against the brute-force oracle, benchmarked and
+//! compared with no other edit (`docs/DESIGN.md`, "Adding a backend").
+
+use super::Backend;
+use super::brute::Brute;
+use super::embree::EmbreeBackend;
+use super::octree::{Octree, OctreeParams};
+use crate::embree::Device;
+use crate::error::{Error, Result};
+use crate::primitive::{Disc, Primitive};
+use crate::splat::Splat;
+
+/// One registered backend, for primitives of type `P`.
+pub struct BackendInfo<P> {
+    /// The name `--backend` takes and reports print.
+    pub name: &'static str,
+    /// One line for the help text.
+    pub about: &'static str,
+    /// True for a reference that tests every primitive for every ray: used
+    /// as the oracle on small inputs, left out of `compare`, `sweep` and the
+    /// benchmarks (quadratic).
+    pub oracle: bool,
+    /// Builds the backend over the primitives (primitive `i` gets id `i`).
+    pub build: fn(&[P]) -> Result<Box<dyn Backend>>,
+}
+
+/// Every backend, for primitives of type `P`: the scene's backends first
+/// (the first one is the default and the reference of `compare`), the
+/// oracle last.
+#[must_use]
+pub fn backends<P: Primitive>() -> Vec<BackendInfo<P>> {
+    vec![
+        BackendInfo {
+            name: "octree",
+            about: "the octree of §3.1 (default)",
+            oracle: false,
+            build: |p| Ok(Box::new(Octree::new(p, &OctreeParams::default()))),
+        },
+        BackendInfo {
+            name: "embree",
+            about: "Embree 4, primitives as user geometry",
+            oracle: false,
+            build: |p| Ok(Box::new(EmbreeBackend::new(&Device::new()?, p)?)),
+        },
+        BackendInfo {
+            name: "brute",
+            about: "every ray against every primitive (the oracle; small scenes only)",
+            oracle: true,
+            build: |p| Ok(Box::new(Brute::new(p))),
+        },
+        #[cfg(feature = "test-backends")]
+        BackendInfo {
+            name: "brute-reversed",
+            about: "test only: brute force offering hits in reverse order",
+            oracle: false,
+            build: |p| Ok(Box::new(super::brute::BruteReversed::new(p))),
+        },
+    ]
+}
+
+/// The names of every backend, in registry order.
+#[must_use]
+pub fn names() -> Vec<&'static str> {
+    backends::<Disc>().iter().map(|b| b.name).collect()
+}
+
+/// The registered backend called `name`, or an error listing the names.
+pub fn find<P: Primitive>(name: &str) -> Result<BackendInfo<P>> {
+    backends::<P>()
+        .into_iter()
+        .find(|b| b.name == name)
+        .ok_or_else(|| {
+            Error::invalid(format!(
+                "unknown backend '{name}' (expected one of: {})",
+                names().join(", ")
+            ))
+        })
+}
+
+/// Builds the backend called `name` over the discs of `splats`.
+pub fn build(name: &str, splats: &[Splat]) -> Result<Box<dyn Backend>> {
+    let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
+    (find::<Disc>(name)?.build)(&discs)
+}

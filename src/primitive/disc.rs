@@ -1,0 +1,393 @@
+//! The oriented elliptical disc of a splat (§2.1, fig. 3): the primitive of
+//! every scene today.
+
+use super::{Hit, Pack, PackRay, Primitive};
+use crate::geometry::Ray;
+use glam::Vec3;
+
+/// What the intersection hot loop reads of a splat: 48 contiguous bytes.
+/// The tangent axes are pre-divided by the radii, so the local coordinates
+/// it yields are already normalised (`|(u,v)| <= 1` on the splat).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
+pub struct Disc {
+    /// Splat centre; all intersection math is relative to it.
+    pub center: Vec3,
+    /// Unit normal.
+    pub normal: Vec3,
+    /// `u_axis / r_u`.
+    pub u_scaled: Vec3,
+    /// `v_axis / r_v`.
+    pub v_scaled: Vec3,
+}
+
+impl Primitive for Disc {
+    type Pack = DiscPack;
+
+    /// Intersects a ray with the disc, relative to its centre.
+    ///
+    /// Accepts `t_min <= t <= t_max` and the closed disc `u² + v² <= 1` (the
+    /// rim counts as on the splat). A ray parallel to the splat plane
+    /// (`n·d == 0`) misses, and so does a near-parallel one whose `t` is not
+    /// finite; NaN in the ray or disc makes every comparison false, hence a
+    /// miss. No division happens unless `n·d != 0`.
+    #[inline]
+    fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit> {
+        let denom = self.normal.dot(ray.dir);
+        if denom == 0.0 {
+            return None;
+        }
+        let oc = ray.origin - self.center;
+        let t = -self.normal.dot(oc) / denom;
+        if !(t >= t_min && t <= t_max && t.is_finite()) {
+            return None;
+        }
+        let p = oc + ray.dir * t;
+        let u = p.dot(self.u_scaled);
+        let v = p.dot(self.v_scaled);
+        if u * u + v * v <= 1.0 {
+            Some(Hit { t, u, v })
+        } else {
+            None
+        }
+    }
+
+    #[inline]
+    fn center(&self) -> Vec3 {
+        self.center
+    }
+
+    /// Along world axis `i`, `sqrt((r_u u_i)² + (r_v v_i)²)`, with the axes
+    /// and radii recovered from the scaled axes (`|u_scaled| = 1 / r_u`).
+    fn half_extent(&self) -> Vec3 {
+        let (a, b) = self.axes();
+        (a * a + b * b).map(f32::sqrt)
+    }
+
+    /// The box of the bounding square `c ± r_u u ± r_v v` (§3.1).
+    fn coarse_half_extent(&self) -> Vec3 {
+        let (a, b) = self.axes();
+        a.abs() + b.abs()
+    }
+
+    /// The box's section by the splat plane is the convex hull of the points
+    /// where the plane crosses box edges (plus corners lying on it). In the
+    /// disc's normalised coordinates the disc is the unit circle, so the two
+    /// meet iff the disc centre lies in the box (then it lies in the section)
+    /// or the hull comes within distance 1 of the origin; the latter is
+    /// checked over all segments between section points, which include the
+    /// hull's edges and otherwise lie inside it.
+    fn meets_box(&self, lo: Vec3, hi: Vec3) -> bool {
+        if self.center.cmpge(lo).all() && self.center.cmple(hi).all() {
+            return true;
+        }
+        let half = (hi - lo) * 0.5;
+        let rel_mid = (lo + half) - self.center;
+        if self.normal.dot(rel_mid).abs() > self.normal.abs().dot(half) {
+            return false;
+        }
+        let mut s = [0.0f32; 8];
+        let mut uv = [[0.0f32; 2]; 8];
+        for k in 0..8 {
+            let rel = lo - self.center
+                + Vec3::new(
+                    if k & 1 != 0 { hi.x - lo.x } else { 0.0 },
+                    if k & 2 != 0 { hi.y - lo.y } else { 0.0 },
+                    if k & 4 != 0 { hi.z - lo.z } else { 0.0 },
+                );
+            s[k] = self.normal.dot(rel);
+            uv[k] = [rel.dot(self.u_scaled), rel.dot(self.v_scaled)];
+        }
+        let mut pts = [[0.0f32; 2]; 12];
+        let mut n = 0;
+        for k in 0..8 {
+            if s[k] == 0.0 {
+                pts[n] = uv[k];
+                n += 1;
+            }
+        }
+        for a in 0..8 {
+            for bit in [1usize, 2, 4] {
+                if a & bit != 0 {
+                    continue;
+                }
+                let b = a | bit;
+                if (s[a] < 0.0 && s[b] > 0.0) || (s[a] > 0.0 && s[b] < 0.0) {
+                    let t = s[a] / (s[a] - s[b]);
+                    pts[n] = [
+                        uv[a][0] + (uv[b][0] - uv[a][0]) * t,
+                        uv[a][1] + (uv[b][1] - uv[a][1]) * t,
+                    ];
+                    n += 1;
+                }
+            }
+        }
+        let pts = &pts[..n.min(12)];
+        for (i, p) in pts.iter().enumerate() {
+            if p[0] * p[0] + p[1] * p[1] <= 1.0 {
+                return true;
+            }
+            for q in &pts[i + 1..] {
+                if segment_within_unit(*p, *q) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+}
+
+impl Disc {
+    /// The semi-axes `r_u u` and `r_v v` as world vectors.
+    fn axes(&self) -> (Vec3, Vec3) {
+        let ru = 1.0 / self.u_scaled.length();
+        let rv = 1.0 / self.v_scaled.length();
+        (self.u_scaled * (ru * ru), self.v_scaled * (rv * rv))
+    }
+}
+
+/// Does the segment `pq` pass within distance 1 of the origin?
+fn segment_within_unit(p: [f32; 2], q: [f32; 2]) -> bool {
+    let e = [q[0] - p[0], q[1] - p[1]];
+    let ee = e[0] * e[0] + e[1] * e[1];
+    if ee <= 0.0 {
+        return false;
+    }
+    let t = (-(p[0] * e[0] + p[1] * e[1]) / ee).clamp(0.0, 1.0);
+    let x = p[0] + e[0] * t;
+    let y = p[1] + e[1] * t;
+    x * x + y * y <= 1.0
+}
+
+/// Discs per [`DiscPack`].
+const LANES: usize = 4;
+
+/// [`LANES`] discs stored component by component (SoA), so that
+/// [`DiscPack::may_hit`] tests them together in a loop LLVM vectorises.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+pub struct DiscPack {
+    center: [[f32; LANES]; 3],
+    normal: [[f32; LANES]; 3],
+    u_scaled: [[f32; LANES]; 3],
+    v_scaled: [[f32; LANES]; 3],
+}
+
+impl Pack<Disc> for DiscPack {
+    const LANES: usize = LANES;
+
+    /// All lanes padding: a zero normal, so no ray can hit them (`n·d` is
+    /// 0 or NaN, hence `t` is never finite).
+    const EMPTY: DiscPack = DiscPack {
+        center: [[0.0; LANES]; 3],
+        normal: [[0.0; LANES]; 3],
+        u_scaled: [[0.0; LANES]; 3],
+        v_scaled: [[0.0; LANES]; 3],
+    };
+
+    fn set(&mut self, lane: usize, d: &Disc) {
+        for k in 0..3 {
+            self.center[k][lane] = d.center[k];
+            self.normal[k][lane] = d.normal[k];
+            self.u_scaled[k][lane] = d.u_scaled[k];
+            self.v_scaled[k][lane] = d.v_scaled[k];
+        }
+    }
+
+    #[inline]
+    fn get(&self, lane: usize) -> Disc {
+        let get = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][lane], a[1][lane], a[2][lane]);
+        Disc {
+            center: get(&self.center),
+            normal: get(&self.normal),
+            u_scaled: get(&self.u_scaled),
+            v_scaled: get(&self.v_scaled),
+        }
+    }
+
+    /// The operations of [`Disc::intersect`] in the same order per lane
+    /// (glam's `dot` is `x*x' + y*y' + z*z'`, left to right; no fused
+    /// operations), so the mask equals "`intersect` hits" except that the
+    /// rim test is relaxed by `1e-4` — a conservative filter in any case,
+    /// since each set lane is then decided by `intersect` itself.
+    #[inline(always)]
+    fn may_hit(&self, ray: &PackRay, t_min: f32, t_max: f32) -> u32 {
+        let [ox, oy, oz] = ray.origin;
+        let [dx, dy, dz] = ray.dir;
+        let [nx, ny, nz] = &self.normal;
+        let [cx, cy, cz] = &self.center;
+        let [ux, uy, uz] = &self.u_scaled;
+        let [vx, vy, vz] = &self.v_scaled;
+        // One element-wise operation per line, so each is one vector op.
+        let denom = lanes(|l| (nx[l] * dx) + (ny[l] * dy) + (nz[l] * dz));
+        let ocx = lanes(|l| ox - cx[l]);
+        let ocy = lanes(|l| oy - cy[l]);
+        let ocz = lanes(|l| oz - cz[l]);
+        let num = lanes(|l| (nx[l] * ocx[l]) + (ny[l] * ocy[l]) + (nz[l] * ocz[l]));
+        let t = lanes(|l| -num[l] / denom[l]);
+        // Once the window is narrow most planes are crossed outside it.
+        let mut in_range = 0;
+        for (l, t) in t.iter().enumerate() {
+            in_range |= u32::from((*t >= t_min) & (*t <= t_max) & (t.abs() < f32::INFINITY)) << l;
+        }
+        if in_range == 0 {
+            return 0;
+        }
+        let px = lanes(|l| ocx[l] + dx * t[l]);
+        let py = lanes(|l| ocy[l] + dy * t[l]);
+        let pz = lanes(|l| ocz[l] + dz * t[l]);
+        let u = lanes(|l| (px[l] * ux[l]) + (py[l] * uy[l]) + (pz[l] * uz[l]));
+        let v = lanes(|l| (px[l] * vx[l]) + (py[l] * vy[l]) + (pz[l] * vz[l]));
+        let r2 = lanes(|l| u[l] * u[l] + v[l] * v[l]);
+        let mut mask = 0;
+        for (l, r2) in r2.iter().enumerate() {
+            mask |= u32::from(*r2 <= 1.0001) << l;
+        }
+        mask & in_range
+    }
+}
+
+/// `[f(0), .., f(LANES - 1)]`.
+#[inline(always)]
+fn lanes(f: impl Fn(usize) -> f32) -> [f32; LANES] {
+    std::array::from_fn(f)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+    use crate::splat::Splat;
+
+    fn disc(c: Vec3, n: Vec3, r: f32) -> Disc {
+        Splat::disc(c, n, r).unwrap().disc_geometry()
+    }
+
+    #[test]
+    fn pack_filter_passes_every_hit_of_intersect() {
+        // Rays aimed near the rims (so hits and misses are close calls),
+        // some grazing, some with a finite window: every lane that
+        // `intersect` hits must be in the mask.
+        let mut rng = SplitMix64::new(0x0bad_cafe_1234_5678);
+        let mut rnd = || rng.next_f32() - 0.5;
+        let mut hits = 0;
+        for _ in 0..20_000 {
+            let mut pack = DiscPack::EMPTY;
+            let mut discs = [None; LANES];
+            for (lane, slot) in discs.iter_mut().enumerate().take(LANES - 1) {
+                let n = Vec3::new(rnd(), rnd(), rnd());
+                let c = Vec3::new(rnd(), rnd(), rnd());
+                let Some(s) = Splat::disc(c, n, 0.2 + rnd().abs()) else {
+                    continue;
+                };
+                let d = s.disc_geometry();
+                pack.set(lane, &d);
+                *slot = Some(d);
+            }
+            let origin = Vec3::new(rnd(), rnd(), rnd()) * 8.0;
+            let target =
+                discs[0].map_or(Vec3::ZERO, |d| d.center) + Vec3::new(rnd(), rnd(), rnd()) * 0.9;
+            let ray = Ray::new(origin, target - origin);
+            let t_max = if rnd() > 0.3 {
+                f32::INFINITY
+            } else {
+                4.0 + rnd()
+            };
+            let mask = pack.may_hit(&PackRay::new(&ray), 0.0, t_max);
+            for (lane, d) in discs.iter().enumerate() {
+                let hit = d.is_some_and(|d| d.intersect(&ray, 0.0, t_max).is_some());
+                hits += usize::from(hit);
+                assert!(!hit || mask & (1 << lane) != 0, "lane {lane} filtered out");
+                if d.is_none() {
+                    assert_eq!(mask & (1 << lane), 0, "padding lane passed");
+                } else {
+                    assert_eq!(pack.get(lane), d.unwrap(), "lane {lane} stored bit for bit");
+                }
+            }
+        }
+        assert!(hits > 1000, "the rays should often hit: {hits}");
+    }
+
+    #[test]
+    fn exact_overlap_known_cases() {
+        let d = disc(Vec3::ZERO, Vec3::Z, 1.0);
+        // The box corner region near (0.8, 0.8): the disc rim passes at
+        // 1/sqrt(2) ≈ 0.707 on the diagonal, so a box from 0.72 misses.
+        assert!(!d.meets_box(Vec3::new(0.72, 0.72, -1.0), Vec3::new(2.0, 2.0, 1.0)));
+        assert!(d.meets_box(Vec3::new(0.70, 0.70, -1.0), Vec3::new(2.0, 2.0, 1.0)));
+        // Off the plane: misses however close in x, y.
+        assert!(!d.meets_box(Vec3::new(-1.0, -1.0, 0.01), Vec3::new(1.0, 1.0, 1.0)));
+        // Touching the plane with a face: meets.
+        assert!(d.meets_box(Vec3::new(-0.1, -0.1, 0.0), Vec3::new(0.1, 0.1, 1.0)));
+        // Box strictly inside the disc's slab but beside it along x.
+        assert!(!d.meets_box(Vec3::new(1.01, -0.1, -0.1), Vec3::new(2.0, 0.1, 0.1)));
+        assert!(d.meets_box(Vec3::new(0.99, -0.1, -0.1), Vec3::new(2.0, 0.1, 0.1)));
+    }
+
+    #[test]
+    fn exact_overlap_agrees_with_dense_sampling() {
+        // Any sampled disc point inside the box forces `true`; a `true`
+        // without a sampled point must be a near miss of the sampling.
+        let mut rng = SplitMix64::new(0x1234_5678_9abc_def0);
+        let mut rnd = || rng.next_f32();
+        for case in 0..400 {
+            let n = Vec3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5);
+            let s = Splat {
+                radii: glam::Vec2::new(0.3 + rnd() * 0.5, 0.1 + rnd() * 0.3),
+                ..Splat::disc(Vec3::ZERO, n, 1.0).unwrap()
+            };
+            let d = s.disc_geometry();
+            let lo = Vec3::new(rnd() - 0.9, rnd() - 0.9, rnd() - 0.9);
+            let hi = lo + Vec3::new(rnd(), rnd(), rnd()) * 0.6 + Vec3::splat(0.01);
+            let exact = d.meets_box(lo, hi);
+            let mut sampled = false;
+            let mut near = false;
+            for i in 0..64 {
+                for j in 0..64 {
+                    let a = i as f32 / 63.0 * 2.0 - 1.0;
+                    let b = j as f32 / 63.0 * 2.0 - 1.0;
+                    if a * a + b * b > 1.0 {
+                        continue;
+                    }
+                    let p = s.center + s.u_axis * (a * s.radii.x) + s.v_axis * (b * s.radii.y);
+                    let e = Vec3::splat(0.02);
+                    sampled |= p.cmpge(lo).all() && p.cmple(hi).all();
+                    near |= p.cmpge(lo - e).all() && p.cmple(hi + e).all();
+                }
+            }
+            assert!(
+                !sampled || exact,
+                "case {case}: a disc point lies in the box but the exact test says no: {s:?} {lo} {hi}"
+            );
+            assert!(
+                !exact || near,
+                "case {case}: exact test says yes but no disc point is near the box: {s:?} {lo} {hi}"
+            );
+        }
+    }
+
+    #[test]
+    fn bounds_contain_the_rim() {
+        let mut rng = SplitMix64::new(7);
+        for _ in 0..200 {
+            let s = Splat {
+                radii: glam::Vec2::new(rng.range(0.1, 2.0), rng.range(0.1, 2.0)),
+                ..Splat::disc(rng.unit() * 3.0, rng.unit(), 1.0).unwrap()
+            };
+            let d = s.disc_geometry();
+            let (h, sq) = (d.half_extent(), d.coarse_half_extent());
+            assert!(
+                h.cmple(sq * (1.0 + 1e-6)).all(),
+                "tight {h} within square {sq}"
+            );
+            for k in 0..64 {
+                let phi = k as f32 * std::f32::consts::TAU / 64.0;
+                let p = s.u_axis * (s.radii.x * phi.cos()) + s.v_axis * (s.radii.y * phi.sin());
+                assert!(
+                    p.abs().cmple(h * (1.0 + 1e-5) + 1e-6).all(),
+                    "{p} outside {h}"
+                );
+            }
+        }
+    }
+}

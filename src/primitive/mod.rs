@@ -1,0 +1,133 @@
+//! Primitives: the surfaces a backend intersects, each owning everything a
+//! backend asks of it — the ray intersection, its bounds, the exact overlap
+//! test with an axis-aligned box (the octree's step 3 of §3.1), and an
+//! optional SIMD pack. Backends are generic over [`Primitive`], so the hot
+//! loop is monomorphised per primitive; see `docs/DESIGN.md`, "The primitive
+//! contract", for what an implementation must guarantee.
+//!
+//! Today there is one: [`Disc`], the oriented elliptical disc of a splat
+//! (circles are the case `r_u = r_v`).
+
+mod disc;
+
+pub use disc::{Disc, DiscPack};
+
+use glam::Vec3;
+
+use crate::geometry::Ray;
+
+/// Where a ray meets a primitive: the ray parameter and the hit's local
+/// coordinates, normalised so that the primitive is `u² + v² <= 1`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Ray parameter of the hit.
+    pub t: f32,
+    /// First local coordinate (along the major axis, divided by its radius).
+    pub u: f32,
+    /// Second local coordinate.
+    pub v: f32,
+}
+
+/// A surface primitive as the backends see it.
+///
+/// The contract (relied on by the cross-validation): [`Primitive::intersect`]
+/// is the only routine that decides a hit, in every backend, so two backends
+/// that test the same primitives return bit-identical hits; every other
+/// method may only be conservative — the box of [`Primitive::half_extent`]
+/// and [`Primitive::meets_box`] must never exclude a point that
+/// `intersect` can return (padding against rounding is the backends' job),
+/// and [`Pack::may_hit`] must pass every lane `intersect` hits.
+pub trait Primitive: Copy + Send + Sync + 'static {
+    /// How a backend stores several primitives to test them together; use
+    /// [`Single`] for a primitive without a SIMD filter of its own.
+    type Pack: Pack<Self>;
+
+    /// The hit of `ray` with `t_min <= t <= t_max`, or `None`. NaN anywhere
+    /// must give `None`, never a NaN `t`.
+    fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit>;
+
+    /// Centre: the point the octree files the primitive under (§3.1).
+    fn center(&self) -> Vec3;
+
+    /// Half extents of the tight axis-aligned box around the primitive,
+    /// centred at [`Primitive::center`].
+    fn half_extent(&self) -> Vec3;
+
+    /// Half extents of a coarser box for a cheaper, looser overlap test (the
+    /// report's bounding square of a splat, §3.1); the tight box by default.
+    fn coarse_half_extent(&self) -> Vec3 {
+        self.half_extent()
+    }
+
+    /// Exact test: does the primitive meet the closed box `[lo, hi]`?
+    fn meets_box(&self, lo: Vec3, hi: Vec3) -> bool;
+}
+
+/// A ray's origin and direction as plain arrays, broadcast to every lane of
+/// a [`Pack`] test.
+#[derive(Clone, Copy, Debug)]
+pub struct PackRay {
+    /// Origin.
+    pub origin: [f32; 3],
+    /// Direction.
+    pub dir: [f32; 3],
+}
+
+impl PackRay {
+    /// The ray's components.
+    #[must_use]
+    pub fn new(ray: &Ray) -> PackRay {
+        PackRay {
+            origin: ray.origin.to_array(),
+            dir: ray.dir.to_array(),
+        }
+    }
+}
+
+/// [`Pack::LANES`] primitives stored together (SoA for a SIMD filter).
+pub trait Pack<P>: Copy + Send + Sync + 'static {
+    /// Primitives per pack.
+    const LANES: usize;
+    /// A pack whose every lane is padding that no ray can hit.
+    const EMPTY: Self;
+    /// Stores `p` in `lane`, bit for bit.
+    fn set(&mut self, lane: usize, p: &P);
+    /// The primitive of `lane`, bit for bit as stored.
+    fn get(&self, lane: usize) -> P;
+    /// Bit `l` set when lane `l` may be hit in `[t_min, t_max]`: a filter
+    /// that must pass every lane [`Primitive::intersect`] hits and no padding
+    /// lane; each lane passed is then decided by `intersect` itself.
+    fn may_hit(&self, ray: &PackRay, t_min: f32, t_max: f32) -> u32;
+}
+
+/// The pack of a primitive with no SIMD filter: one primitive, tested by
+/// [`Primitive::intersect`] itself (`None` is padding).
+#[derive(Clone, Copy, Debug)]
+pub struct Single<P>(Option<P>);
+
+impl<P: Primitive> Pack<P> for Single<P> {
+    const LANES: usize = 1;
+    const EMPTY: Self = Single(None);
+
+    fn set(&mut self, _lane: usize, p: &P) {
+        self.0 = Some(*p);
+    }
+
+    fn get(&self, _lane: usize) -> P {
+        match self.0 {
+            Some(p) => p,
+            None => unreachable!("padding lanes are never passed by may_hit"),
+        }
+    }
+
+    fn may_hit(&self, ray: &PackRay, t_min: f32, t_max: f32) -> u32 {
+        let ray = Ray {
+            origin: ray.origin.into(),
+            dir: ray.dir.into(),
+        };
+        u32::from(
+            self.0
+                .is_some_and(|p| p.intersect(&ray, t_min, t_max).is_some()),
+        )
+    }
+}
