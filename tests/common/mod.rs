@@ -7,8 +7,8 @@
 use glam::{Vec2, Vec3};
 use splatray::accel::octree::{Octree, OctreeParams, OverlapTest};
 use splatray::accel::resolve::{ShadingMode, resolve};
-use splatray::accel::{Backend, CandidateHits, Ray, backends as registry};
-use splatray::primitive::{Disc, Primitive};
+use splatray::accel::{Backend, BuildStats, CandidateHits, Ray, backends as registry};
+use splatray::primitive::{Disc, Hit, Primitive, Single};
 use splatray::splat::{NormalField, Splat};
 
 /// The default seed; `SPLATRAY_SEED` overrides it so a failure can be
@@ -184,43 +184,103 @@ pub fn diagonal(splats: &[Splat]) -> f32 {
     (hi - lo).length()
 }
 
-/// The oracle plus every backend under test: every registered backend (the
-/// registry's oracle is the reference) and the octree with the report's
-/// bounding-square overlap test, a variant of a registered backend.
+/// A second primitive, defined outside the library as a user would: the
+/// disc without its SIMD pack ([`Single`]), every method delegated. Its
+/// hits are the disc's bit for bit, so backends built over it must agree
+/// with the oracle built over discs.
+#[derive(Clone, Copy, Debug)]
+pub struct Unpacked(pub Disc);
+
+impl Primitive for Unpacked {
+    type Pack = Single<Unpacked>;
+    fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit> {
+        self.0.intersect(ray, t_min, t_max)
+    }
+    fn center(&self) -> Vec3 {
+        self.0.center()
+    }
+    fn half_extent(&self) -> Vec3 {
+        self.0.half_extent()
+    }
+    fn coarse_half_extent(&self) -> Vec3 {
+        self.0.coarse_half_extent()
+    }
+    fn meets_box(&self, lo: Vec3, hi: Vec3) -> bool {
+        self.0.meets_box(lo, hi)
+    }
+}
+
+/// A backend under a label that says which primitive and variant it is
+/// (`octree<unpacked>`), for failure messages.
+struct Labelled {
+    label: &'static str,
+    inner: Box<dyn Backend>,
+}
+
+impl Backend for Labelled {
+    fn name(&self) -> &'static str {
+        self.label
+    }
+    fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, hits: &mut CandidateHits) {
+        self.inner.intersect(ray, t_min, t_max, hits);
+    }
+    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        self.inner.occluded(ray, t_min, t_max)
+    }
+    fn stats(&self) -> &BuildStats {
+        self.inner.stats()
+    }
+}
+
+fn labelled(label: String, inner: Box<dyn Backend>) -> Box<dyn Backend> {
+    Box::new(Labelled {
+        label: Box::leak(label.into_boxed_str()),
+        inner,
+    })
+}
+
+/// The oracle plus every backend under test.
 pub struct Backends {
-    /// The brute-force oracle.
+    /// The brute-force oracle, over discs.
     pub oracle: Box<dyn Backend>,
-    /// The backends checked against it.
+    /// The backends checked against it: every registered backend over
+    /// discs and over [`Unpacked`] discs (the registry's oracle included
+    /// for the latter), and the octree with the report's bounding-square
+    /// overlap test (§3.1), a variant of a registered backend.
     pub tested: Vec<Box<dyn Backend>>,
 }
 
-/// Builds the oracle and every tested backend over the discs of `splats`.
-pub fn backends(splats: &[Splat]) -> Backends {
-    let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
-    backends_of(&discs)
-}
-
-/// Builds the oracle and every tested backend over primitives `prims`.
-pub fn backends_of<P: Primitive>(prims: &[P]) -> Backends {
-    let mut oracle = None;
-    let mut tested: Vec<Box<dyn Backend>> = Vec::new();
+fn build_all<P: Primitive>(prims: &[P], primitive: &str, out: &mut Vec<Box<dyn Backend>>) {
     for info in registry::<P>() {
         let b =
             (info.build)(prims).unwrap_or_else(|e| panic!("building backend {}: {e}", info.name));
-        if info.oracle {
-            oracle = Some(b);
-        } else {
-            tested.push(b);
-        }
+        out.push(labelled(format!("{}<{primitive}>", info.name), b));
     }
+}
+
+/// Builds the oracle and every tested backend over the splats.
+pub fn backends(splats: &[Splat]) -> Backends {
+    let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
+    let mut all = Vec::new();
+    build_all(&discs, "disc", &mut all);
+    let oracle_at = registry::<Disc>()
+        .iter()
+        .position(|b| b.oracle)
+        .expect("the registry lists an oracle");
+    let oracle = all.remove(oracle_at);
+    let unpacked: Vec<Unpacked> = discs.iter().copied().map(Unpacked).collect();
+    build_all(&unpacked, "unpacked", &mut all);
     let square = OctreeParams {
         overlap: OverlapTest::BoundingSquare,
         ..OctreeParams::default()
     };
-    tested.push(Box::new(Octree::new(prims, &square)));
+    all.push(labelled(
+        "octree-square<disc>".into(),
+        Box::new(Octree::new(&discs, &square)),
+    ));
     Backends {
-        oracle: oracle.expect("the registry lists an oracle"),
-        tested,
+        oracle,
+        tested: all,
     }
 }
 

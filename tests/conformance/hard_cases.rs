@@ -1,11 +1,9 @@
-//! Hard cases, each run on every backend (octree with both overlap tests,
-//! Embree) and against the brute-force oracle. Failure messages print the ray
-//! (`{:?}` of f32 round-trips exactly) and the splats involved, so any failure
-//! can be replayed.
+//! Hard cases, each run on every tested backend (`common::backends`) and
+//! against the brute-force oracle. Failure messages print the ray (`{:?}`
+//! of f32 round-trips exactly) and the splats involved, so any failure can
+//! be replayed.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 use glam::{DVec3, Vec2, Vec3};
 use splatray::accel::resolve::{ShadingMode, resolve};
 use splatray::accel::{CandidateHits, MAX_CANDIDATES, Ray, SceneScale};

@@ -1,12 +1,11 @@
-//! The generic agreement suite (DESIGN §2): written once, run on every
-//! backend (octree with either overlap test, Embree) against the brute-force
-//! oracle. Candidate windows must be bit-identical, `occluded` answers equal,
-//! and the shared resolver must give the same surface hit in every shading
-//! mode. Seeded; `SPLATRAY_SEED` overrides the seed, printed on failure.
+//! Agreement with the brute-force oracle, written once and run on every
+//! tested backend (`common::backends`: every registered backend, for every
+//! primitive, plus the octree's bounding-square variant). Candidate windows
+//! must be bit-identical, `occluded` answers equal, and the shared resolver
+//! must give the same surface hit in every shading mode. Seeded;
+//! `SPLATRAY_SEED` overrides the seed, printed on failure.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 use glam::Vec3;
 use splatray::accel::octree::{Octree, OctreeParams};
 use splatray::accel::{Backend, SceneScale};
@@ -110,22 +109,25 @@ fn comparison_catches_the_holes_of_a_broken_octree() {
 
 #[test]
 fn every_registered_backend_is_under_test() {
-    // The suite builds what the registry lists; the test-only second brute
-    // force (one registry line behind the `test-backends` feature, which the
-    // tests turn on) proves a new entry is picked up with no other edit.
+    // The suite builds what the registry lists, for every primitive; the
+    // test-only second brute force (one registry line behind the
+    // `test-backends` feature, which the tests turn on) proves a new entry
+    // is picked up with no other edit.
     let splats = blobby_splats(50, seed());
     let b = backends(&splats);
     let tested: Vec<&str> = b.tested.iter().map(|t| t.name()).collect();
     for info in splatray::accel::backends::<splatray::primitive::Disc>() {
-        if info.oracle {
-            assert_eq!(b.oracle.name(), info.name);
-        } else {
-            assert!(
-                tested.contains(&info.name),
-                "{} not tested: {tested:?}",
-                info.name
-            );
+        for primitive in ["disc", "unpacked"] {
+            let label = format!("{}<{primitive}>", info.name);
+            if info.oracle && primitive == "disc" {
+                assert_eq!(b.oracle.name(), label);
+            } else {
+                assert!(
+                    tested.contains(&label.as_str()),
+                    "{label} not tested: {tested:?}"
+                );
+            }
         }
     }
-    assert!(tested.contains(&"brute-reversed"), "{tested:?}");
+    assert!(tested.contains(&"brute-reversed<disc>"), "{tested:?}");
 }
