@@ -1,4 +1,5 @@
-//! Acceleration backends and the contract they share (DESIGN §2).
+//! Acceleration backends and the contract they share (`docs/DESIGN.md`,
+//! "The backend contract").
 //!
 //! Every backend answers the same two questions about a ray — the candidate
 //! hits within the blending window `xi` of the nearest hit (§4.3), and
@@ -18,7 +19,8 @@ pub use crate::geometry::Ray;
 pub use registry::{BackendInfo, backends};
 pub use window::{Candidate, CandidateHits, MAX_CANDIDATES};
 
-/// Scene-relative tolerances (DESIGN §2): never absolute constants.
+/// Scene-relative tolerances (`docs/DESIGN.md`, "Tolerances"): never
+/// absolute constants.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SceneScale {
     /// Bounding-box diagonal of the splat set.
@@ -98,7 +100,7 @@ impl BackendKind {
     }
 }
 
-/// One acceleration backend (DESIGN §2). Implemented by the brute-force
+/// One acceleration backend (`docs/DESIGN.md`, "The backend contract"). Implemented by the brute-force
 /// oracle, the octree and Embree.
 pub trait Backend: Send + Sync {
     /// Short name: `brute`, `octree`, `embree`.

@@ -1,5 +1,6 @@
 //! The one function that turns a window of candidate hits into the surface
-//! hit, shared by every backend (DESIGN §2; report §3.2 and §4.3).
+//! hit, shared by every backend (`docs/DESIGN.md`, "The backend contract";
+//! report §3.2 and §4.3).
 
 use super::{Candidate, CandidateHits, Ray};
 use crate::splat::Splat;
