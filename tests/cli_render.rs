@@ -1,15 +1,12 @@
 //! `splatray render` on bad scene files: one clear line, non-zero exit, and
 //! no output file, partial or whole.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
 
-fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("splatray-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+use common::scratch;
+
+use std::path::Path;
+use std::process::Command;
 
 /// Runs `render` on a scene text; returns (success, stderr, output exists,
 /// any file left in the folder besides the scene and its inputs).
@@ -39,7 +36,7 @@ const CAMERA: &str =
     "[camera]\nfrom = [0.0, 0.0, 3.0]\nat = [0.0, 0.0, 0.0]\nwidth = 16\nheight = 16\n";
 
 fn assert_clean_failure(name: &str, scene: &str, expect: &[&str]) {
-    let dir = tmpdir(name);
+    let dir = scratch(name);
     let (ok, err, leftovers) = render(&dir, scene);
     assert!(!ok, "{name}: render should fail");
     assert_eq!(
@@ -56,7 +53,7 @@ fn assert_clean_failure(name: &str, scene: &str, expect: &[&str]) {
 
 #[test]
 fn good_scene_renders() {
-    let dir = tmpdir("good");
+    let dir = scratch("good");
     let scene = format!(
         "{CAMERA}[[model]]\nshape = {{ kind = \"sphere\", radius = 1.0, splats = 100 }}\n[[light]]\nkind = \"point\"\nposition = [1.0, 1.0, 3.0]\n"
     );
@@ -98,7 +95,7 @@ fn zero_resolution() {
 
 #[test]
 fn non_ply_model() {
-    let dir = tmpdir("nonply");
+    let dir = scratch("nonply");
     std::fs::write(dir.join("model.ply"), "this is not a ply file\n1 2 3\n").unwrap();
     let scene = format!("{CAMERA}[[model]]\npoints = \"model.ply\"\n");
     let (ok, err, leftovers) = render(&dir, &scene);
@@ -110,7 +107,7 @@ fn non_ply_model() {
 
 #[test]
 fn bad_output_extension_fails_before_work() {
-    let dir = tmpdir("ext");
+    let dir = scratch("ext");
     let scene_path = dir.join("scene.toml");
     std::fs::write(
         &scene_path,
@@ -130,7 +127,7 @@ fn bad_output_extension_fails_before_work() {
 
 #[test]
 fn report_and_aovs_are_written() {
-    let dir = tmpdir("aov");
+    let dir = scratch("aov");
     let scene_path = dir.join("scene.toml");
     std::fs::write(
         &scene_path,
@@ -186,7 +183,7 @@ fn report_and_aovs_are_written() {
 
 #[test]
 fn camera_that_sees_nothing_gets_a_warning_naming_where_the_splats_are() {
-    let dir = tmpdir("nothing");
+    let dir = scratch("nothing");
     // The camera looks away from the sphere at (0, 0, 0).
     let scene = "[camera]\nfrom = [0.0, 0.0, 3.0]\nat = [0.0, 0.0, 6.0]\nwidth = 8\nheight = 8\n[[model]]\nshape = { kind = \"sphere\", center = [10.0, 0.0, 0.0], radius = 1.0, splats = 50 }\n";
     let (ok, err, made) = render(&dir, scene);

@@ -1,5 +1,9 @@
 //! Readers and writers on the bundled scans and on hand-made bad inputs.
 
+mod common;
+
+use common::{data, scratch};
+
 use glam::{Vec2, Vec3};
 use splatray::io::{
     IoErrorKind, PointCloud, lzf_decompress, read_mesh, read_points, read_splats, sample_mesh,
@@ -7,20 +11,6 @@ use splatray::io::{
 };
 use splatray::splat::{NormalField, Splat};
 use std::path::{Path, PathBuf};
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("scenes/data")
-        .join(name)
-}
-
-/// A fresh scratch folder for one test.
-fn scratch(test: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("splatray-io-{}-{test}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
     let p = dir.join(name);

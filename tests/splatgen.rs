@@ -1,17 +1,14 @@
 //! Splat generation: normals, growth, coverage, normal fields, bad clouds.
 
+mod common;
+
+use common::data;
+
 use glam::{DVec3, Vec3};
 use splatray::io::{PointCloud, read_mesh, read_points, sample_mesh};
 use splatray::splat::knn::{Knn, build_tree};
 use splatray::splat::normals::{estimate, orient, sym_eigen3};
 use splatray::splat::{GenerateError, Splat, SplatParams, count_on_splats, generate, on_splat};
-use std::path::{Path, PathBuf};
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("scenes/data")
-        .join(name)
-}
 
 /// `n` points on a Fibonacci sphere around `c` with radius `r`.
 fn sphere(n: usize, c: Vec3, r: f32, phase: f32) -> Vec<Vec3> {
@@ -328,13 +325,8 @@ fn ellipses_stretch_along_a_cylinder() {
 #[test]
 fn viewpoint_hint_orients_an_open_sheet() {
     let mut pts = Vec::new();
-    let mut state = 12345u64;
-    let mut rnd = || {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-    };
+    let mut rng = splatray::rng::SplitMix64::new(12345);
+    let mut rnd = || rng.next_f32() * 2.0 - 1.0;
     for _ in 0..3000 {
         let (x, z) = (rnd(), rnd());
         pts.push(Vec3::new(x, 0.05 * (x * x + z * z), z));

@@ -4,16 +4,13 @@
 //! splats at every budget (§4.4, fig. 16), both plot files, and clean
 //! one-line failures on bad input.
 
+mod common;
+
+use common::scratch;
+
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-
-fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("splatray-sweep-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 fn mesh() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data/bunny-mesh.ply")
@@ -83,7 +80,7 @@ const COLUMNS: [&str; 21] = [
 
 #[test]
 fn sweep_measures_budget_against_error() {
-    let dir = tmpdir("run");
+    let dir = scratch("run");
     let scene = write_scene(&dir);
     let csv = dir.join("s.csv");
     let png = dir.join("s.png");
@@ -197,7 +194,7 @@ fn assert_clean_failure(args: &[&str], expect: &str) {
 
 #[test]
 fn bad_input_fails_in_one_line() {
-    let dir = tmpdir("bad");
+    let dir = scratch("bad");
     let scene = write_scene(&dir);
     let s = scene.to_str().unwrap();
     assert_clean_failure(&[s, "--steps", "3"], "--steps 3");

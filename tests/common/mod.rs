@@ -10,6 +10,27 @@ use splatray::accel::resolve::{ShadingMode, resolve};
 use splatray::accel::{Backend, BuildStats, CandidateHits, Ray, backends as registry};
 use splatray::primitive::{Disc, Hit, Primitive, Single};
 use splatray::splat::{NormalField, Splat};
+use std::path::{Path, PathBuf};
+
+/// A bundled data file, `scenes/data/NAME`.
+pub fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes/data")
+        .join(name)
+}
+
+/// A fresh, empty scratch folder for one test (unique per process and name).
+pub fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("splatray-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// The `splatray` binary built for these tests.
+pub fn bin() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_splatray"))
+}
 
 /// The default seed; `SPLATRAY_SEED` overrides it so a failure can be
 /// replayed.
