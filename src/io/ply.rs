@@ -16,7 +16,7 @@ use ply_rs_bw::ply::{
 use std::io::Cursor;
 
 /// A scalar property as `f64` (lists give `None`).
-fn scalar(p: &Property) -> Option<f64> {
+pub(super) fn scalar(p: &Property) -> Option<f64> {
     Some(match *p {
         Property::Char(v) => f64::from(v),
         Property::UChar(v) => f64::from(v),
@@ -67,32 +67,6 @@ impl PropertyAccess for PointRow {
             _ => return,
         };
         self.v[i] = val.unwrap_or(f64::NAN);
-    }
-}
-
-/// One splat vertex of a splat file: every property as `f32`, by the index
-/// of its name in [`super::splat_ply::SPLAT_PROPS`].
-pub(crate) struct SplatRow {
-    pub(crate) v: [f32; super::splat_ply::SPLAT_PROPS.len()],
-}
-
-impl PropertyAccess for SplatRow {
-    fn new() -> Self {
-        SplatRow {
-            v: [f32::NAN; super::splat_ply::SPLAT_PROPS.len()],
-        }
-    }
-    fn set_property(&mut self, name: &str, p: Property) {
-        if let Some(i) = super::splat_ply::SPLAT_PROPS
-            .iter()
-            .position(|n| *n == name)
-        {
-            // Lossless for the float32 properties the writer produces.
-            self.v[i] = match p {
-                Property::Float(f) => f,
-                other => scalar(&other).map_or(f32::NAN, |d| d as f32),
-            };
-        }
     }
 }
 

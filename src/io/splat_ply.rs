@@ -2,10 +2,11 @@
 //! splat, readable by other tools (MeshLab reads `x y z nx ny nz radius` as
 //! point splats) and read back by [`read_splats`] without loss.
 
-use super::ply::{PlyFile, SplatRow};
+use super::ply::{PlyFile, scalar};
 use super::{IoError, IoErrorKind, write_atomically};
 use crate::splat::{NormalField, Splat};
 use glam::{Vec2, Vec3};
+use ply_rs_bw::ply::{Property, PropertyAccess};
 use std::path::Path;
 
 /// The float32 vertex properties of a splat file, in order: centre, normal,
@@ -34,6 +35,29 @@ pub(crate) const SPLAT_PROPS: [&str; 21] = [
     "green",
     "blue",
 ];
+
+/// One splat vertex of a splat file: every property as `f32`, by the index
+/// of its name in [`SPLAT_PROPS`].
+pub(crate) struct SplatRow {
+    pub(crate) v: [f32; SPLAT_PROPS.len()],
+}
+
+impl PropertyAccess for SplatRow {
+    fn new() -> Self {
+        SplatRow {
+            v: [f32::NAN; SPLAT_PROPS.len()],
+        }
+    }
+    fn set_property(&mut self, name: &str, p: Property) {
+        if let Some(i) = SPLAT_PROPS.iter().position(|n| *n == name) {
+            // Lossless for the float32 properties the writer produces.
+            self.v[i] = match p {
+                Property::Float(f) => f,
+                other => scalar(&other).map_or(f32::NAN, |d| d as f32),
+            };
+        }
+    }
+}
 
 fn to_row(s: &Splat) -> [f32; 21] {
     let f = &s.field;
