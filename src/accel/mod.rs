@@ -96,7 +96,12 @@ impl BackendKind {
 
     /// Builds this backend over `splats`.
     pub fn build(self, splats: &[crate::splat::Splat]) -> Result<Box<dyn Backend>, String> {
-        registry::build(self.name(), splats).map_err(|e| e.to_string())
+        let discs: Vec<crate::primitive::Disc> = splats
+            .iter()
+            .map(crate::splat::Splat::disc_geometry)
+            .collect();
+        let info = registry::find(self.name()).ok_or_else(|| registry::unknown(self.name()))?;
+        (info.build)(&discs).map_err(|e| e.to_string())
     }
 }
 

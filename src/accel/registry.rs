@@ -8,10 +8,8 @@ use super::Backend;
 use super::brute::Brute;
 use super::embree::EmbreeBackend;
 use super::octree::{Octree, OctreeParams};
-use crate::embree::Device;
-use crate::error::{Error, Result};
+use crate::embree::{Device, EmbreeError};
 use crate::primitive::{Disc, Primitive};
-use crate::splat::Splat;
 
 /// One registered backend, for primitives of type `P`.
 pub struct BackendInfo<P> {
@@ -24,7 +22,7 @@ pub struct BackendInfo<P> {
     /// benchmarks (quadratic).
     pub oracle: bool,
     /// Builds the backend over the primitives (primitive `i` gets id `i`).
-    pub build: fn(&[P]) -> Result<Box<dyn Backend>>,
+    pub build: fn(&[P]) -> Result<Box<dyn Backend>, EmbreeError>,
 }
 
 /// Every backend, for primitives of type `P`: the scene's backends first
@@ -67,21 +65,17 @@ pub fn names() -> Vec<&'static str> {
     backends::<Disc>().iter().map(|b| b.name).collect()
 }
 
-/// The registered backend called `name`, or an error listing the names.
-pub fn find<P: Primitive>(name: &str) -> Result<BackendInfo<P>> {
-    backends::<P>()
-        .into_iter()
-        .find(|b| b.name == name)
-        .ok_or_else(|| {
-            Error::invalid(format!(
-                "unknown backend '{name}' (expected one of: {})",
-                names().join(", ")
-            ))
-        })
+/// The registered backend called `name`.
+#[must_use]
+pub fn find<P: Primitive>(name: &str) -> Option<BackendInfo<P>> {
+    backends::<P>().into_iter().find(|b| b.name == name)
 }
 
-/// Builds the backend called `name` over the discs of `splats`.
-pub fn build(name: &str, splats: &[Splat]) -> Result<Box<dyn Backend>> {
-    let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
-    (find::<Disc>(name)?.build)(&discs)
+/// The one-line message for a backend name the registry does not list.
+#[must_use]
+pub fn unknown(name: &str) -> String {
+    format!(
+        "unknown backend '{name}' (expected one of: {})",
+        names().join(", ")
+    )
 }
