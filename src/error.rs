@@ -61,23 +61,18 @@ impl std::error::Error for Error {
     }
 }
 
-impl From<IoError> for Error {
-    fn from(e: IoError) -> Error {
-        Error::Io(e)
-    }
+/// `From` for each wrapped error type.
+macro_rules! wrap {
+    ($($ty:ty => $variant:ident),* $(,)?) => {$(
+        impl From<$ty> for Error {
+            fn from(e: $ty) -> Error {
+                Error::$variant(e)
+            }
+        }
+    )*};
 }
 
-impl From<EmbreeError> for Error {
-    fn from(e: EmbreeError) -> Error {
-        Error::Embree(e)
-    }
-}
-
-impl From<GenerateError> for Error {
-    fn from(e: GenerateError) -> Error {
-        Error::Generate(e)
-    }
-}
+wrap!(IoError => Io, EmbreeError => Embree, GenerateError => Generate);
 
 impl From<String> for Error {
     fn from(s: String) -> Error {
