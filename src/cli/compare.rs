@@ -4,7 +4,7 @@ use super::render::{apply_overrides, default_scene, write_json};
 use crate::accel::BackendKind;
 use crate::accel::resolve::ShadingMode;
 use crate::render::integrator::{Frame, render};
-use crate::render::output::{check_output_path, write_atomic};
+use crate::render::output::{check_output_path, save};
 use crate::render::scene::load_scene;
 use crate::validate::compare::{
     Agreement, TruthErrors, compare_frames, diff_image, render_truth, truth_errors,
@@ -148,11 +148,7 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
         truth,
     };
     if let Some(d) = &args.diff {
-        let img = diff_image(of, ef);
-        write_atomic(d, |tmp| {
-            img.save_with_format(tmp, image::ImageFormat::Png)
-                .map_err(|e| format!("{}: {e}", d.display()))
-        })?;
+        save(&diff_image(of, ef), d, image::ImageFormat::Png)?;
     }
     if let Some(r) = &args.report {
         write_json(r, &report)?;

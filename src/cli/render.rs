@@ -3,9 +3,7 @@
 use crate::accel::BackendKind;
 use crate::accel::resolve::ShadingMode;
 use crate::render::integrator::{Frame, RayCounts, render};
-use crate::render::output::{
-    Aov, aov_path, check_output_path, write_aov, write_atomic, write_image,
-};
+use crate::render::output::{Aov, aov_path, check_output_path, write_aov, write_image};
 use crate::render::scene::{Scene, load_scene};
 use std::path::{Path, PathBuf};
 
@@ -133,9 +131,7 @@ impl RenderReport {
 /// Writes `value` as pretty JSON to `path`, atomically.
 pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), String> {
     let text = serde_json::to_string_pretty(value).map_err(|e| e.to_string())?;
-    write_atomic(path, |tmp| {
-        std::fs::write(tmp, text + "\n").map_err(|e| format!("{}: {e}", path.display()))
-    })
+    crate::io::write_text(path, &(text + "\n")).map_err(|e| e.to_string())
 }
 
 /// Says where the splats are when no primary ray met any: the usual cause

@@ -3,7 +3,7 @@
 //! flat splats against blended (eq. 5) and Phong splats (eq. 4).
 
 use super::render::default_scene;
-use crate::render::output::{check_output_path, write_atomic};
+use crate::render::output::check_output_path;
 use crate::render::scene::parse_scene_file;
 use crate::validate::sweep::{MODES, SweepPlan, SweepRow, csv_text, mode_name, run_sweep};
 use std::path::{Path, PathBuf};
@@ -100,10 +100,7 @@ pub fn run(args: &SweepArgs) -> Result<(), String> {
         .map_err(|e| format!("{}: {e}", scene_path.display()))?;
     summary(&rows);
     if let Some(c) = &args.csv {
-        let text = csv_text(&rows);
-        write_atomic(c, |tmp| {
-            std::fs::write(tmp, text).map_err(|e| format!("{}: {e}", c.display()))
-        })?;
+        crate::io::write_text(c, &csv_text(&rows)).map_err(|e| e.to_string())?;
         println!("wrote {}", c.display());
     }
     if let Some(p) = &args.plot {
