@@ -7,6 +7,8 @@ pub mod accel;
 pub mod cli;
 pub mod embree;
 pub mod io;
+pub mod progress;
 pub mod render;
+pub mod scene;
 pub mod splat;
 pub mod validate;

@@ -2,9 +2,10 @@
 //! shading mode — the report's resolution scaling (§4.4, fig. 16) measured,
 //! flat splats against blended (eq. 5) and Phong splats (eq. 4).
 
+use super::progress::ProgressLine;
 use super::render::default_scene;
 use crate::render::output::check_output_path;
-use crate::render::scene::parse_scene_file;
+use crate::scene::parse_scene_file;
 use crate::validate::sweep::{MODES, SweepPlan, SweepRow, csv_text, mode_name, run_sweep};
 use std::path::{Path, PathBuf};
 
@@ -96,8 +97,13 @@ pub fn run(args: &SweepArgs) -> Result<(), String> {
         args.height,
         MODES.map(mode_name).join(", ")
     );
-    let rows = run_sweep(&file, base, &plan, &mut |line| println!("{line}"))
-        .map_err(|e| format!("{}: {e}", scene_path.display()))?;
+    let line = ProgressLine::new();
+    let progress = |stage: &str, f: f64| line.update(stage, f);
+    let rows = run_sweep(&file, base, &plan, Some(&progress), &mut |text| {
+        line.finish();
+        println!("{text}");
+    })
+    .map_err(|e| format!("{}: {e}", scene_path.display()))?;
     summary(&rows);
     if let Some(c) = &args.csv {
         crate::io::write_text(c, &csv_text(&rows)).map_err(|e| e.to_string())?;
