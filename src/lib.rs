@@ -4,7 +4,6 @@
 //! octree and Embree 4 user-geometry discs — feeding one shading path.
 
 pub mod accel;
-pub mod cli;
 pub mod embree;
 pub mod io;
 pub mod progress;

@@ -2,15 +2,15 @@
 
 use super::progress::ProgressLine;
 use super::render::{default_scene, write_json};
-use crate::accel::BackendKind;
-use crate::accel::resolve::ShadingMode;
-use crate::render::integrator::{Frame, render};
-use crate::render::output::{check_output_path, save};
-use crate::scene::load_scene;
-use crate::validate::compare::{
+use splatray::accel::BackendKind;
+use splatray::accel::resolve::ShadingMode;
+use splatray::render::integrator::{Frame, render};
+use splatray::render::output::{check_output_path, save};
+use splatray::scene::load_scene;
+use splatray::validate::compare::{
     Agreement, TruthErrors, compare_frames, diff_image, render_truth, truth_errors,
 };
-use crate::validate::truth::Truth;
+use splatray::validate::truth::Truth;
 use std::path::PathBuf;
 
 /// Options of `splatray compare`.

@@ -3,10 +3,10 @@
 //! Sans font the project ships (`assets/fonts/`), so it needs no system
 //! fonts; written as PNG and as SVG beside it.
 
-use crate::validate::compare::TruthErrors;
-use crate::validate::sweep::{MODES, SweepRow, mode_name};
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use splatray::validate::compare::TruthErrors;
+use splatray::validate::sweep::{MODES, SweepRow, mode_name};
 use std::path::Path;
 
 /// DejaVu Sans (Bitstream Vera licence, see `assets/fonts/README.md`).
@@ -216,6 +216,6 @@ pub fn plot_sweep(rows: &[SweepRow], png: &Path) -> Result<(), String> {
         SVGBackend::with_string(&mut svg, SIZE).into_drawing_area(),
         rows,
     )?;
-    crate::render::output::save(&img, png, image::ImageFormat::Png)?;
-    crate::io::write_text(&png.with_extension("svg"), &svg).map_err(|e| e.to_string())
+    splatray::render::output::save(&img, png, image::ImageFormat::Png)?;
+    splatray::io::write_text(&png.with_extension("svg"), &svg).map_err(|e| e.to_string())
 }

@@ -1,11 +1,11 @@
 //! `splatray render`.
 
 use super::progress::ProgressLine;
-use crate::accel::BackendKind;
-use crate::accel::resolve::ShadingMode;
-use crate::render::integrator::{Frame, RayCounts, render};
-use crate::render::output::{Aov, aov_path, check_output_path, write_aov, write_image};
-use crate::scene::{Scene, load_scene};
+use splatray::accel::BackendKind;
+use splatray::accel::resolve::ShadingMode;
+use splatray::render::integrator::{Frame, RayCounts, render};
+use splatray::render::output::{Aov, aov_path, check_output_path, write_aov, write_image};
+use splatray::scene::{Scene, load_scene};
 use std::path::{Path, PathBuf};
 
 /// Options of `splatray render`.
@@ -100,7 +100,7 @@ impl RenderReport {
 /// Writes `value` as pretty JSON to `path`, atomically.
 pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), String> {
     let text = serde_json::to_string_pretty(value).map_err(|e| e.to_string())?;
-    crate::io::write_text(path, &(text + "\n")).map_err(|e| e.to_string())
+    splatray::io::write_text(path, &(text + "\n")).map_err(|e| e.to_string())
 }
 
 /// Says where the splats are when no primary ray met any: the usual cause

@@ -2,8 +2,8 @@
 //! [--ellipses] [--report R.json]`.
 
 use super::progress::ProgressLine;
-use crate::io::{read_points, write_splats};
-use crate::splat::{SplatParams, generate_with_progress};
+use splatray::io::{read_points, write_splats};
+use splatray::splat::{SplatParams, generate_with_progress};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -70,7 +70,7 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
     write_splats(&args.output, &splats).map_err(|e| e.to_string())?;
     if let Some(path) = &args.report {
         let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
-        crate::io::write_text(path, &json).map_err(|e| e.to_string())?;
+        splatray::io::write_text(path, &json).map_err(|e| e.to_string())?;
     }
     for w in &report.warnings {
         eprintln!("splatray: warning: {w}");

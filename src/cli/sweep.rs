@@ -4,9 +4,9 @@
 
 use super::progress::ProgressLine;
 use super::render::default_scene;
-use crate::render::output::check_output_path;
-use crate::scene::parse_scene_file;
-use crate::validate::sweep::{MODES, SweepPlan, SweepRow, csv_text, mode_name, run_sweep};
+use splatray::render::output::check_output_path;
+use splatray::scene::parse_scene_file;
+use splatray::validate::sweep::{MODES, SweepPlan, SweepRow, csv_text, mode_name, run_sweep};
 use std::path::{Path, PathBuf};
 
 /// Coarsest default `ϵ` (fraction of the bounding-box diagonal, §2.1).
@@ -106,7 +106,7 @@ pub fn run(args: &SweepArgs) -> Result<(), String> {
     .map_err(|e| format!("{}: {e}", scene_path.display()))?;
     summary(&rows);
     if let Some(c) = &args.csv {
-        crate::io::write_text(c, &csv_text(&rows)).map_err(|e| e.to_string())?;
+        splatray::io::write_text(c, &csv_text(&rows)).map_err(|e| e.to_string())?;
         println!("wrote {}", c.display());
     }
     if let Some(p) = &args.plot {
