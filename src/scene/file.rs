@@ -329,3 +329,43 @@ pub fn parse_scene_str(text: &str) -> Result<SceneFile, String> {
         }
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const HEAD: &str = "[camera]\nfrom = [0.0, 0.0, 3.0]\nat = [0.0, 0.0, 0.0]\n[[model]]\n";
+
+    #[test]
+    fn unknown_kinds_are_line_numbered_parse_errors() {
+        for (line, expect) in [
+            (
+                "shape = { kind = \"cube\", radius = 1.0, splats = 10 }",
+                "line 5: unknown variant `cube`",
+            ),
+            (
+                "shape = { kind = \"sphere\", radius = 1.0, splats = 10 }\nmaterial = { kind = \"glas\" }",
+                "line 6: unknown variant `glas`, expected one of `diffuse`, `phong`, `mirror`, `glass`",
+            ),
+            (
+                "shape = { kind = \"sphere\", radius = 1.0, splats = 10 }\n[render]\nshading = \"smooth\"",
+                "line 7: unknown variant `smooth`, expected one of `flat`, `blended`, `phong`",
+            ),
+        ] {
+            let e = parse_scene_str(&format!("{HEAD}{line}\n")).unwrap_err();
+            assert!(e.starts_with(expect), "{e}");
+            assert_eq!(e.lines().count(), 1, "{e}");
+        }
+        let f = parse_scene_str(&format!(
+            "{HEAD}shape = {{ kind = \"quad\", size = [1.0, 1.0], splats = 10 }}\n\
+             material = {{ shading = \"flat\" }}\n[[light]]\nkind = \"directional\"\n\
+             direction = [0.0, -1.0, 0.0]\n"
+        ))
+        .unwrap();
+        let m = &f.models[0];
+        assert_eq!(m.shape.as_ref().map(|s| s.kind), Some(ShapeKind::Quad));
+        assert_eq!(m.material.kind, MaterialKind::Diffuse);
+        assert_eq!(m.material.shading, Some(ShadingMode::Flat));
+        assert_eq!(f.lights[0].kind, LightKind::Directional);
+    }
+}

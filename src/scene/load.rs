@@ -464,3 +464,40 @@ fn render_options(r: &RenderSpec, diagonal: f32) -> Result<RenderOptions, String
         ambient: r.ambient.unwrap_or(0.03),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::parse_scene_str;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    #[test]
+    fn every_model_yields_one_truth_with_its_material() {
+        let text = "[camera]\nfrom = [0.0, 0.0, 3.0]\nat = [0.0, 0.0, 0.0]\n\
+            [[model]]\nshape = { kind = \"sphere\", radius = 1.0, splats = 50 }\n\
+            [[model]]\nmesh = \"data/bunny-mesh.ply\"\nsamples = 2000\n\
+            [[model]]\nshape = { kind = \"quad\", size = [1.0, 1.0], splats = 20 }\n";
+        let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+        let calls = AtomicUsize::new(0);
+        let progress = |_: &str, f: f64| {
+            assert!((0.0..=1.0).contains(&f));
+            calls.fetch_add(1, Ordering::Relaxed);
+        };
+        let s = build_scene(&parse_scene_str(text).unwrap(), &base, Some(&progress)).unwrap();
+        assert!(
+            calls.load(Ordering::Relaxed) > 0,
+            "splat generation reports"
+        );
+        let materials: Vec<(&str, u16)> = s
+            .load
+            .truth
+            .iter()
+            .map(|t| match t {
+                TruthSource::Sphere { material, .. } => ("sphere", *material),
+                TruthSource::Mesh { material, .. } => ("mesh", *material),
+                TruthSource::Unknown { .. } => ("unknown", u16::MAX),
+            })
+            .collect();
+        assert_eq!(materials, [("sphere", 0), ("mesh", 1), ("mesh", 2)]);
+    }
+}

@@ -145,66 +145,6 @@ pub struct RenderOptions {
     pub ambient: f32,
 }
 
-impl Scene {
-    /// The splats' bounding box in world coordinates (as the scene file
-    /// states them), or `None` without splats.
-    #[must_use]
-    pub fn world_bounds(&self) -> Option<(DVec3, DVec3)> {
-        let (lo, hi) = self.splats.iter().fold(
-            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-            |(lo, hi), s| (lo.min(s.center), hi.max(s.center)),
-        );
-        let to_world = |v: Vec3| (v + self.offset).as_dvec3() + self.shift;
-        (lo.x <= hi.x).then(|| (to_world(lo), to_world(hi)))
-    }
-
-    /// The shading mode for a window whose nearest hit is splat `id`: the
-    /// model's override, else the scene's.
-    #[must_use]
-    pub fn shading_for(&self, id: u32) -> ShadingMode {
-        let m = self.material_of[id as usize] as usize;
-        self.shading_of[m].unwrap_or(self.options.shading)
-    }
-
-    /// Changes the view after loading: the resolution (keeping the vertical
-    /// field of view, widening or narrowing the horizontal one), the samples
-    /// per pixel, and the shading mode of the whole scene (which then
-    /// replaces every model's own). `None` keeps what the scene file says.
-    ///
-    /// # Errors
-    /// One line when the resolution is outside `1..=32768` or `spp` outside
-    /// `1..=4096`; the scene is then unchanged.
-    pub fn set_view(
-        &mut self,
-        width: Option<u32>,
-        height: Option<u32>,
-        spp: Option<u32>,
-        shading: Option<ShadingMode>,
-    ) -> Result<(), String> {
-        let c = self.camera;
-        let w = width.unwrap_or(c.width);
-        let h = height.unwrap_or(c.height);
-        let spp = spp.unwrap_or(c.spp);
-        if w == 0 || h == 0 || w > 1 << 15 || h > 1 << 15 {
-            return Err(format!("resolution {w}x{h} must be in 1..=32768"));
-        }
-        if spp == 0 || spp > 4096 {
-            return Err(format!("spp {spp} must be in 1..=4096"));
-        }
-        let half_h = c.up.length();
-        let half_w = half_h * w as f32 / h as f32;
-        self.camera.right = c.right.normalize() * half_w;
-        self.camera.width = w;
-        self.camera.height = h;
-        self.camera.spp = spp;
-        if let Some(s) = shading {
-            self.options.shading = s;
-            self.shading_of.iter_mut().for_each(|m| *m = None);
-        }
-        Ok(())
-    }
-}
-
 /// What loading measured.
 #[derive(Clone, Debug, Default)]
 pub struct LoadReport {
@@ -277,4 +217,64 @@ pub struct Scene {
     pub shift: DVec3,
     /// Load figures.
     pub load: LoadReport,
+}
+
+impl Scene {
+    /// The splats' bounding box in world coordinates (as the scene file
+    /// states them), or `None` without splats.
+    #[must_use]
+    pub fn world_bounds(&self) -> Option<(DVec3, DVec3)> {
+        let (lo, hi) = self.splats.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), s| (lo.min(s.center), hi.max(s.center)),
+        );
+        let to_world = |v: Vec3| (v + self.offset).as_dvec3() + self.shift;
+        (lo.x <= hi.x).then(|| (to_world(lo), to_world(hi)))
+    }
+
+    /// The shading mode for a window whose nearest hit is splat `id`: the
+    /// model's override, else the scene's.
+    #[must_use]
+    pub fn shading_for(&self, id: u32) -> ShadingMode {
+        let m = self.material_of[id as usize] as usize;
+        self.shading_of[m].unwrap_or(self.options.shading)
+    }
+
+    /// Changes the view after loading: the resolution (keeping the vertical
+    /// field of view, widening or narrowing the horizontal one), the samples
+    /// per pixel, and the shading mode of the whole scene (which then
+    /// replaces every model's own). `None` keeps what the scene file says.
+    ///
+    /// # Errors
+    /// One line when the resolution is outside `1..=32768` or `spp` outside
+    /// `1..=4096`; the scene is then unchanged.
+    pub fn set_view(
+        &mut self,
+        width: Option<u32>,
+        height: Option<u32>,
+        spp: Option<u32>,
+        shading: Option<ShadingMode>,
+    ) -> Result<(), String> {
+        let c = self.camera;
+        let w = width.unwrap_or(c.width);
+        let h = height.unwrap_or(c.height);
+        let spp = spp.unwrap_or(c.spp);
+        if w == 0 || h == 0 || w > 1 << 15 || h > 1 << 15 {
+            return Err(format!("resolution {w}x{h} must be in 1..=32768"));
+        }
+        if spp == 0 || spp > 4096 {
+            return Err(format!("spp {spp} must be in 1..=4096"));
+        }
+        let half_h = c.up.length();
+        let half_w = half_h * w as f32 / h as f32;
+        self.camera.right = c.right.normalize() * half_w;
+        self.camera.width = w;
+        self.camera.height = h;
+        self.camera.spp = spp;
+        if let Some(s) = shading {
+            self.options.shading = s;
+            self.shading_of.iter_mut().for_each(|m| *m = None);
+        }
+        Ok(())
+    }
 }
