@@ -4,14 +4,15 @@
 //! octree and Embree 4 user-geometry discs — feeding one shading path.
 
 pub mod accel;
-pub mod cli;
 pub mod embree;
 pub mod error;
 pub mod geometry;
 pub mod io;
 pub mod primitive;
+pub mod progress;
 pub mod render;
 pub mod rng;
+pub mod scene;
 pub mod splat;
 pub mod validate;
 

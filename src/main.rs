@@ -1,5 +1,7 @@
 //! The `splatray` command line.
 
+mod cli;
+
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -20,19 +22,19 @@ enum Command {
     /// device), the Embree library loaded and the thread count.
     Info,
     /// Render a scene (default: the bundled scenes/bunny.toml) to an image.
-    Render(splatray::cli::render::RenderArgs),
+    Render(cli::render::RenderArgs),
     /// Render a scene with the octree and Embree in one run and report their
     /// agreement ray for ray, image for image, and their speeds.
-    Compare(splatray::cli::compare::CompareArgs),
+    Compare(cli::compare::CompareArgs),
     /// Sample points uniformly by area from a triangle mesh (PLY).
-    Sample(splatray::cli::sample_cmd::SampleArgs),
+    Sample(cli::sample_cmd::SampleArgs),
     /// Turn a point cloud into splats with Phong normal fields.
-    Splat(splatray::cli::splat_cmd::SplatArgs),
+    Splat(cli::splat_cmd::SplatArgs),
     /// Vary the splat budget (epsilon) and the shading mode; measure splat
     /// generation, build and render seconds of both backends and the errors
     /// against the exact surface; write a CSV and a time-against-error plot
     /// (report §4.4, fig. 16).
-    Sweep(splatray::cli::sweep::SweepArgs),
+    Sweep(cli::sweep::SweepArgs),
 }
 
 fn info() -> Result<(), String> {
@@ -57,11 +59,11 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info => info(),
-        Command::Render(args) => splatray::cli::render::run(&args),
-        Command::Compare(args) => splatray::cli::compare::run(&args),
-        Command::Sample(a) => splatray::cli::sample_cmd::run(&a),
-        Command::Splat(a) => splatray::cli::splat_cmd::run(&a),
-        Command::Sweep(a) => splatray::cli::sweep::run(&a),
+        Command::Render(args) => cli::render::run(&args),
+        Command::Compare(args) => cli::compare::run(&args),
+        Command::Sample(a) => cli::sample_cmd::run(&a),
+        Command::Splat(a) => cli::splat_cmd::run(&a),
+        Command::Sweep(a) => cli::sweep::run(&a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

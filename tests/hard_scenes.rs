@@ -4,7 +4,7 @@
 
 use splatray::accel::BackendKind;
 use splatray::render::integrator::{Frame, render};
-use splatray::render::scene::{Scene, build_scene, load_scene, parse_scene_str};
+use splatray::scene::{Scene, build_scene, load_scene, parse_scene_str};
 use splatray::validate::compare::compare_frames;
 use std::path::{Path, PathBuf};
 
@@ -22,13 +22,13 @@ fn scenes() -> Vec<PathBuf> {
 }
 
 fn small(mut s: Scene) -> Scene {
-    splatray::cli::render::apply_overrides(&mut s, Some(96), Some(72), Some(1), None).unwrap();
+    s.set_view(Some(96), Some(72), Some(1), None).unwrap();
     s
 }
 
 fn render_with(s: &Scene, kind: BackendKind) -> Frame {
     let b = kind.build(&s.splats).unwrap();
-    render(s, b.as_ref(), false)
+    render(s, b.as_ref(), None)
 }
 
 #[test]
@@ -36,7 +36,7 @@ fn every_hard_scene_agrees_across_backends_without_nan() {
     let list = scenes();
     assert!(list.len() >= 4, "{list:?}");
     for path in list {
-        let s = small(load_scene(&path).unwrap());
+        let s = small(load_scene(&path, None).unwrap());
         let o = render_with(&s, BackendKind::Octree);
         let e = render_with(&s, BackendKind::Embree);
         let name = path.display();
@@ -76,8 +76,9 @@ fn far_from_origin_renders_like_the_origin() {
         .replace("100002.0", "2.0")
         .replace("100003.0", "3.0");
     assert_ne!(text, near_text);
-    let far = small(load_scene(&path).unwrap());
-    let near = small(build_scene(&parse_scene_str(&near_text).unwrap(), Path::new(".")).unwrap());
+    let far = small(load_scene(&path, None).unwrap());
+    let near =
+        small(build_scene(&parse_scene_str(&near_text).unwrap(), Path::new("."), None).unwrap());
     let a = render_with(&far, BackendKind::Octree);
     let b = render_with(&near, BackendKind::Octree);
     let c = compare_frames(&a, &b, far.options.scale.diagonal);
@@ -92,7 +93,7 @@ fn far_from_origin_renders_like_the_origin() {
 fn bundled_scenes_render_identically_with_both_backends() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
     for name in ["bunny.toml", "glass.toml", "shading.toml"] {
-        let s = small(load_scene(&root.join(name)).unwrap());
+        let s = small(load_scene(&root.join(name), None).unwrap());
         let o = render_with(&s, BackendKind::Octree);
         let e = render_with(&s, BackendKind::Embree);
         assert!(o.rgb.iter().all(|c| c.is_finite()), "{name}: NaN pixel");

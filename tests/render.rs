@@ -5,16 +5,16 @@ use glam::Vec3;
 use splatray::accel::BackendKind;
 use splatray::accel::resolve::ShadingMode;
 use splatray::render::integrator::{Frame, render};
-use splatray::render::scene::{Scene, build_scene, parse_scene_str};
+use splatray::scene::{Scene, build_scene, parse_scene_str};
 use std::path::Path;
 
 fn scene(text: &str) -> Scene {
-    build_scene(&parse_scene_str(text).unwrap(), Path::new(".")).unwrap()
+    build_scene(&parse_scene_str(text).unwrap(), Path::new("."), None).unwrap()
 }
 
 fn render_with(scene: &Scene, kind: BackendKind) -> Frame {
     let backend = kind.build(&scene.splats).unwrap();
-    render(scene, backend.as_ref(), false)
+    render(scene, backend.as_ref(), None)
 }
 
 /// A diffuse splat sphere (albedo 1) under a directional light (irradiance

@@ -5,7 +5,7 @@ use splatray::accel::BackendKind;
 use splatray::accel::octree::{Octree, OctreeParams};
 use splatray::primitive::Disc;
 use splatray::render::integrator::render;
-use splatray::render::scene::{Scene, build_scene, parse_scene_str};
+use splatray::scene::{Scene, build_scene, parse_scene_str};
 use splatray::validate::compare::compare_frames;
 use std::path::Path;
 use std::process::Command;
@@ -29,7 +29,7 @@ intensity = 20
 "#;
 
 fn scene() -> Scene {
-    build_scene(&parse_scene_str(SCENE).unwrap(), Path::new(".")).unwrap()
+    build_scene(&parse_scene_str(SCENE).unwrap(), Path::new("."), None).unwrap()
 }
 
 #[test]
@@ -49,7 +49,7 @@ struct KindFrame(splatray::render::integrator::Frame);
 impl KindFrame {
     fn new(sc: &Scene, kind: BackendKind) -> KindFrame {
         let b = kind.build(&sc.splats).unwrap();
-        KindFrame(render(sc, b.as_ref(), false))
+        KindFrame(render(sc, b.as_ref(), None))
     }
 }
 
@@ -58,7 +58,7 @@ fn broken_octree_is_caught_as_holes() {
     let sc = scene();
     let discs: Vec<Disc> = sc.splats.iter().map(|s| s.disc_geometry()).collect();
     let broken = Octree::without_overlap_insertion(&discs, &OctreeParams::default());
-    let bad = render(&sc, &broken, false);
+    let bad = render(&sc, &broken, None);
     let good = KindFrame::new(&sc, BackendKind::Embree).0;
     let a = compare_frames(&bad, &good, sc.options.scale.diagonal);
     eprintln!("broken octree vs embree: {a:?}");

@@ -11,6 +11,9 @@ use super::octree::{Octree, OctreeParams};
 use crate::embree::{Device, EmbreeError};
 use crate::primitive::{Disc, Primitive};
 
+/// Builds a backend over primitives (primitive `i` gets id `i`).
+pub type BuildFn<P> = fn(&[P]) -> Result<Box<dyn Backend>, EmbreeError>;
+
 /// One registered backend, for primitives of type `P`.
 pub struct BackendInfo<P> {
     /// The name `--backend` takes and reports print.
@@ -22,7 +25,7 @@ pub struct BackendInfo<P> {
     /// benchmarks (quadratic).
     pub oracle: bool,
     /// Builds the backend over the primitives (primitive `i` gets id `i`).
-    pub build: fn(&[P]) -> Result<Box<dyn Backend>, EmbreeError>,
+    pub build: BuildFn<P>,
 }
 
 /// Every backend, for primitives of type `P`: the scene's backends first

@@ -7,7 +7,8 @@ use crate::splat::Splat;
 use glam::Vec3;
 
 /// How the shading normal is formed (report §4).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum ShadingMode {
     /// One constant normal per splat: the winning splat's.
     Flat,

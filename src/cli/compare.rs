@@ -1,15 +1,16 @@
 //! `splatray compare`: one scene through the octree and Embree in one run.
 
-use super::render::{apply_overrides, default_scene, write_json};
-use crate::accel::BackendKind;
-use crate::accel::resolve::ShadingMode;
-use crate::render::integrator::{Frame, render};
-use crate::render::output::{check_output_path, write_atomic};
-use crate::render::scene::load_scene;
-use crate::validate::compare::{
+use super::progress::ProgressLine;
+use super::render::{default_scene, write_json};
+use splatray::accel::BackendKind;
+use splatray::accel::resolve::ShadingMode;
+use splatray::render::integrator::{Frame, render};
+use splatray::render::output::{check_output_path, save};
+use splatray::scene::load_scene;
+use splatray::validate::compare::{
     Agreement, TruthErrors, compare_frames, diff_image, render_truth, truth_errors,
 };
-use crate::validate::truth::Truth;
+use splatray::validate::truth::Truth;
 use std::path::PathBuf;
 
 /// Options of `splatray compare`.
@@ -103,14 +104,11 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
     if let Some(r) = &args.report {
         check_output_path(&r.with_extension("png"))?;
     }
-    let mut scene = load_scene(&scene_path)?;
-    apply_overrides(
-        &mut scene,
-        args.width,
-        args.height,
-        Some(args.spp),
-        args.shading,
-    )?;
+    let line = ProgressLine::new();
+    let progress = |stage: &str, f: f64| line.update(stage, f);
+    let mut scene = load_scene(&scene_path, Some(&progress))?;
+    line.finish();
+    scene.set_view(args.width, args.height, Some(args.spp), args.shading)?;
     // Fail before any rendering when there is no exact surface.
     let truth = if args.truth {
         Some(Truth::new(&scene)?)
@@ -120,7 +118,7 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
     let mut runs = Vec::new();
     for kind in [BackendKind::Octree, BackendKind::Embree] {
         let backend = kind.build(&scene.splats)?;
-        let frame = render(&scene, backend.as_ref(), true);
+        let frame = render(&scene, backend.as_ref(), Some(&progress));
         runs.push((backend.stats().build_seconds, frame));
     }
     let (ob, of) = &runs[0];
@@ -130,7 +128,7 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
     let embree = BackendRun::of(*eb, ef);
     let diagonal = scene.options.scale.diagonal;
     let truth = truth.map(|t| {
-        let tf = render_truth(&scene, &t, true);
+        let tf = render_truth(&scene, &t, Some(&progress));
         let errors = |f: &Frame| truth_errors(f.clone(), &tf, &scene.camera, diagonal);
         TruthReport {
             render_seconds: tf.seconds,
@@ -138,6 +136,7 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
             embree: errors(ef),
         }
     });
+    line.finish();
     let report = CompareReport {
         scene: scene_path.display().to_string(),
         splats: scene.splats.len(),
@@ -148,11 +147,7 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
         truth,
     };
     if let Some(d) = &args.diff {
-        let img = diff_image(of, ef);
-        write_atomic(d, |tmp| {
-            img.save_with_format(tmp, image::ImageFormat::Png)
-                .map_err(|e| format!("{}: {e}", d.display()))
-        })?;
+        save(&diff_image(of, ef), d, image::ImageFormat::Png)?;
     }
     if let Some(r) = &args.report {
         write_json(r, &report)?;

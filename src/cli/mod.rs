@@ -1,4 +1,5 @@
-//! Subcommands of the `splatray` binary.
+//! Subcommands of the `splatray` binary (a module of the binary: the
+//! library does not depend on it).
 
 pub mod compare;
 pub mod plot;

@@ -3,11 +3,10 @@
 //! Sans font the project ships (`assets/fonts/`), so it needs no system
 //! fonts; written as PNG and as SVG beside it.
 
-use crate::render::output::write_atomic;
-use crate::validate::compare::TruthErrors;
-use crate::validate::sweep::{MODES, SweepRow, mode_name};
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use splatray::validate::compare::TruthErrors;
+use splatray::validate::sweep::{MODES, SweepRow, mode_name};
 use std::path::Path;
 
 /// DejaVu Sans (Bitstream Vera licence, see `assets/fonts/README.md`).
@@ -217,12 +216,6 @@ pub fn plot_sweep(rows: &[SweepRow], png: &Path) -> Result<(), String> {
         SVGBackend::with_string(&mut svg, SIZE).into_drawing_area(),
         rows,
     )?;
-    write_atomic(png, |tmp| {
-        img.save_with_format(tmp, image::ImageFormat::Png)
-            .map_err(|e| format!("{}: {e}", png.display()))
-    })?;
-    let svg_path = png.with_extension("svg");
-    write_atomic(&svg_path, |tmp| {
-        std::fs::write(tmp, svg).map_err(|e| format!("{}: {e}", svg_path.display()))
-    })
+    splatray::render::output::save(&img, png, image::ImageFormat::Png)?;
+    splatray::io::write_text(&png.with_extension("svg"), &svg).map_err(|e| e.to_string())
 }

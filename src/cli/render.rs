@@ -1,12 +1,11 @@
 //! `splatray render`.
 
-use crate::accel::BackendKind;
-use crate::accel::resolve::ShadingMode;
-use crate::render::integrator::{Frame, RayCounts, render};
-use crate::render::output::{
-    Aov, aov_path, check_output_path, write_aov, write_atomic, write_image,
-};
-use crate::render::scene::{Scene, load_scene};
+use super::progress::ProgressLine;
+use splatray::accel::BackendKind;
+use splatray::accel::resolve::ShadingMode;
+use splatray::render::integrator::{Frame, RayCounts, render};
+use splatray::render::output::{Aov, aov_path, check_output_path, write_aov, write_image};
+use splatray::scene::{Scene, load_scene};
 use std::path::{Path, PathBuf};
 
 /// Options of `splatray render`.
@@ -52,38 +51,6 @@ pub fn default_scene() -> PathBuf {
     } else {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/bunny.toml")
     }
-}
-
-/// Applies command-line overrides to a loaded scene.
-pub fn apply_overrides(
-    scene: &mut Scene,
-    width: Option<u32>,
-    height: Option<u32>,
-    spp: Option<u32>,
-    shading: Option<ShadingMode>,
-) -> Result<(), String> {
-    let c = scene.camera;
-    let w = width.unwrap_or(c.width);
-    let h = height.unwrap_or(c.height);
-    let spp = spp.unwrap_or(c.spp);
-    if w == 0 || h == 0 || w > 1 << 15 || h > 1 << 15 {
-        return Err(format!("resolution {w}x{h} must be in 1..=32768"));
-    }
-    if spp == 0 || spp > 4096 {
-        return Err(format!("spp {spp} must be in 1..=4096"));
-    }
-    // Keep the vertical field of view; widen or narrow the horizontal one.
-    let half_h = c.up.length();
-    let half_w = half_h * w as f32 / h as f32;
-    scene.camera.right = c.right.normalize() * half_w;
-    scene.camera.width = w;
-    scene.camera.height = h;
-    scene.camera.spp = spp;
-    if let Some(s) = shading {
-        scene.options.shading = s;
-        scene.shading_of.iter_mut().for_each(|m| *m = None);
-    }
-    Ok(())
 }
 
 /// The render report (JSON).
@@ -133,9 +100,7 @@ impl RenderReport {
 /// Writes `value` as pretty JSON to `path`, atomically.
 pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), String> {
     let text = serde_json::to_string_pretty(value).map_err(|e| e.to_string())?;
-    write_atomic(path, |tmp| {
-        std::fs::write(tmp, text + "\n").map_err(|e| format!("{}: {e}", path.display()))
-    })
+    splatray::io::write_text(path, &(text + "\n")).map_err(|e| e.to_string())
 }
 
 /// Says where the splats are when no primary ray met any: the usual cause
@@ -165,14 +130,18 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
     if let Some(r) = &args.report {
         check_output_path(&r.with_extension("png"))?;
     }
-    let mut scene = load_scene(&scene_path)?;
-    apply_overrides(&mut scene, args.width, args.height, args.spp, args.shading)?;
+    let line = ProgressLine::new();
+    let progress = |stage: &str, f: f64| line.update(stage, f);
+    let mut scene = load_scene(&scene_path, Some(&progress))?;
+    line.finish();
+    scene.set_view(args.width, args.height, args.spp, args.shading)?;
     for w in &scene.load.warnings {
         eprintln!("warning: {w}");
     }
     let backend = args.backend.build(&scene.splats)?;
     let build_seconds = backend.stats().build_seconds;
-    let frame = render(&scene, backend.as_ref(), true);
+    let frame = render(&scene, backend.as_ref(), Some(&progress));
+    line.finish();
     if frame.splat.iter().all(|&id| id == u32::MAX) {
         warn_nothing_hit(&scene);
     }

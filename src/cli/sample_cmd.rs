@@ -1,6 +1,6 @@
 //! `splatray sample MESH.ply -n N -o points.ply [--noise SIGMA] [--seed S]`.
 
-use crate::io::{read_mesh, sample_mesh, write_points};
+use splatray::io::{read_mesh, sample_mesh, write_points};
 use std::path::PathBuf;
 
 /// The most points `sample` makes (about 2 GB of output).

@@ -1,9 +1,9 @@
 //! `splatray splat IN -o OUT.ply [--epsilon E] [--k K] [--density F]
 //! [--ellipses] [--report R.json]`.
 
-use super::progress::Progress;
-use crate::io::{read_points, write_splats};
-use crate::splat::{SplatParams, generate_with_progress};
+use super::progress::ProgressLine;
+use splatray::io::{read_points, write_splats};
+use splatray::splat::{SplatParams, generate_with_progress};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -56,21 +56,21 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
         },
         ..defaults
     };
-    let mut progress = Progress::new();
-    progress.update("reading", 0.0);
+    let line = ProgressLine::new();
+    line.update("reading", 0.0);
     let t0 = Instant::now();
     let cloud = read_points(&args.input).map_err(|e| e.to_string())?;
     let read = t0.elapsed().as_secs_f64();
     let (splats, mut report) =
-        generate_with_progress(&cloud, &params, |stage, f| progress.update(stage, f))
+        generate_with_progress(&cloud, &params, Some(&|stage, f| line.update(stage, f)))
             .map_err(|e| format!("{}: {e}", args.input.display()))?;
-    progress.finish();
+    line.finish();
     report.seconds.read = read;
     report.seconds.total += read;
     write_splats(&args.output, &splats).map_err(|e| e.to_string())?;
     if let Some(path) = &args.report {
         let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
-        crate::io::write_text(path, &json).map_err(|e| e.to_string())?;
+        splatray::io::write_text(path, &json).map_err(|e| e.to_string())?;
     }
     for w in &report.warnings {
         eprintln!("splatray: warning: {w}");

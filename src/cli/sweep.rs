@@ -2,10 +2,11 @@
 //! shading mode — the report's resolution scaling (§4.4, fig. 16) measured,
 //! flat splats against blended (eq. 5) and Phong splats (eq. 4).
 
+use super::progress::ProgressLine;
 use super::render::default_scene;
-use crate::render::output::{check_output_path, write_atomic};
-use crate::render::scene::parse_scene_file;
-use crate::validate::sweep::{MODES, SweepPlan, SweepRow, csv_text, mode_name, run_sweep};
+use splatray::render::output::check_output_path;
+use splatray::scene::parse_scene_file;
+use splatray::validate::sweep::{MODES, SweepPlan, SweepRow, csv_text, mode_name, run_sweep};
 use std::path::{Path, PathBuf};
 
 /// Coarsest default `ϵ` (fraction of the bounding-box diagonal, §2.1).
@@ -96,14 +97,16 @@ pub fn run(args: &SweepArgs) -> Result<(), String> {
         args.height,
         MODES.map(mode_name).join(", ")
     );
-    let rows = run_sweep(&file, base, &plan, &mut |line| println!("{line}"))
-        .map_err(|e| format!("{}: {e}", scene_path.display()))?;
+    let line = ProgressLine::new();
+    let progress = |stage: &str, f: f64| line.update(stage, f);
+    let rows = run_sweep(&file, base, &plan, Some(&progress), &mut |text| {
+        line.finish();
+        println!("{text}");
+    })
+    .map_err(|e| format!("{}: {e}", scene_path.display()))?;
     summary(&rows);
     if let Some(c) = &args.csv {
-        let text = csv_text(&rows);
-        write_atomic(c, |tmp| {
-            std::fs::write(tmp, text).map_err(|e| format!("{}: {e}", c.display()))
-        })?;
+        splatray::io::write_text(c, &csv_text(&rows)).map_err(|e| e.to_string())?;
         println!("wrote {}", c.display());
     }
     if let Some(p) = &args.plot {

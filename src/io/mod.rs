@@ -6,6 +6,7 @@
 //! coordinates are skipped and counted in [`PointCloud::skipped`], and every
 //! failure is one [`IoError`] whose message is a single line naming the file.
 
+mod atomic;
 mod error;
 mod lzf;
 mod pcd;
@@ -15,6 +16,7 @@ mod splat_ply;
 mod xyz;
 
 pub use crate::splat::PointCloud;
+pub use atomic::{write_atomic, write_bytes};
 pub use error::{IoError, IoErrorKind};
 pub use lzf::lzf_decompress;
 pub use sample::sample_mesh;
@@ -187,30 +189,7 @@ pub fn write_points(path: &Path, cloud: &PointCloud) -> Result<(), IoError> {
             put(cs[i]);
         }
     }
-    write_atomically(path, &out)
-}
-
-/// Write `bytes` to a temporary file beside `path`, then rename it over
-/// `path`, so a failure never leaves a half-written output.
-pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
-    use std::io::Write;
-    let name = path
-        .file_name()
-        .ok_or_else(|| IoError::new(path, IoErrorKind::Header("not a file name".into())))?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(name);
-    tmp_name.push(format!(".{}.partial", std::process::id()));
-    let tmp = path.with_file_name(tmp_name);
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    result.map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        IoError::new(path, IoErrorKind::Io(e))
-    })
+    write_bytes(path, &out)
 }
 
 /// sRGB-encoded component in `[0, 1]` to linear.
@@ -249,10 +228,10 @@ pub(crate) fn drop_non_finite(cloud: &mut PointCloud) {
     cloud.add_skipped("non-finite coordinates", dropped);
 }
 
-/// Write a text file atomically (see [`write_points`]).
+/// Write a text file atomically (see [`write_atomic`]).
 ///
 /// # Errors
 /// An [`IoError`] when the file cannot be written.
 pub fn write_text(path: &Path, text: &str) -> Result<(), IoError> {
-    write_atomically(path, text.as_bytes())
+    write_bytes(path, text.as_bytes())
 }

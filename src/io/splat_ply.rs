@@ -3,7 +3,7 @@
 //! point splats) and read back by [`read_splats`] without loss.
 
 use super::ply::{PlyFile, scalar};
-use super::{IoError, IoErrorKind, write_atomically};
+use super::{IoError, IoErrorKind, write_bytes};
 use crate::splat::{NormalField, Splat};
 use glam::{Vec2, Vec3};
 use ply_rs_bw::ply::{Property, PropertyAccess};
@@ -94,7 +94,7 @@ pub fn write_splats(path: &Path, splats: &[Splat]) -> Result<(), IoError> {
             out.extend_from_slice(&v.to_le_bytes());
         }
     }
-    write_atomically(path, &out)
+    write_bytes(path, &out)
 }
 
 /// Read splats written by [`write_splats`] (any PLY encoding with the same

@@ -4,12 +4,12 @@
 //! maximum depth. It sees only the [`Backend`] trait and the shared
 //! resolver, so every backend renders with identical shading.
 
-use super::scene::{Light, Material, Scene};
 use crate::accel::resolve::{SurfaceHit, resolve};
 use crate::accel::{Backend, CandidateHits, Ray};
+use crate::progress::{Progress, notify};
+use crate::scene::{Light, Material, Scene};
 use glam::Vec3;
 use rayon::prelude::*;
-use std::io::IsTerminal;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
@@ -346,23 +346,26 @@ struct Row {
 }
 
 /// Renders the scene's camera view with `backend`. Parallel over rows with
-/// rayon; a progress line on stderr when `progress` and stderr is a
-/// terminal.
+/// rayon; reports stage `render` to `progress` as rows are done.
 #[must_use]
-pub fn render(scene: &Scene, backend: &dyn Backend, progress: bool) -> Frame {
+pub fn render(scene: &Scene, backend: &dyn Backend, progress: Option<Progress<'_>>) -> Frame {
     render_surfaces(scene, &SplatSurfaces { scene, backend }, progress)
 }
 
 /// Renders the scene's camera, lights and materials against any
-/// [`Surfaces`].
+/// [`Surfaces`]; reports stage `render` to `progress` as rows are done
+/// (from rayon's threads).
 #[must_use]
-pub fn render_surfaces(scene: &Scene, surfaces: &dyn Surfaces, progress: bool) -> Frame {
+pub fn render_surfaces(
+    scene: &Scene,
+    surfaces: &dyn Surfaces,
+    progress: Option<Progress<'_>>,
+) -> Frame {
     let cam = &scene.camera;
     let (w, h) = (cam.width as usize, cam.height as usize);
     let tracer = Tracer { scene, surfaces };
     let start = Instant::now();
     let rows_done = AtomicUsize::new(0);
-    let show = progress && std::io::stderr().is_terminal();
     let k = (cam.spp as f32).sqrt().ceil() as u32;
     let per_pixel = cam.spp;
     let rows: Vec<Row> = (0..h)
@@ -402,11 +405,9 @@ pub fn render_surfaces(scene: &Scene, surfaces: &dyn Surfaces, progress: bool) -
                 }
                 rgb.push(sum / per_pixel as f32);
             }
-            if show {
+            if progress.is_some() {
                 let done = rows_done.fetch_add(1, Ordering::Relaxed) + 1;
-                if done % 8 == 0 || done == h {
-                    eprint!("\rrender {:3}%", done * 100 / h);
-                }
+                notify(progress, "render", done as f64 / h as f64);
             }
             Row {
                 rgb,
@@ -417,9 +418,6 @@ pub fn render_surfaces(scene: &Scene, surfaces: &dyn Surfaces, progress: bool) -
             }
         })
         .collect();
-    if show {
-        eprintln!();
-    }
     let mut frame = Frame {
         width: cam.width,
         height: cam.height,

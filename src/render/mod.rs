@@ -1,7 +1,5 @@
-//! The renderer (report §1.2, §4): scenes, the Whitted integrator and image
-//! output.
+//! The renderer (report §1.2, §4): the Whitted integrator and image output
+//! (scenes are in [`crate::scene`]).
 
 pub mod integrator;
 pub mod output;
-pub mod scene;
-pub mod shapes;

@@ -1,6 +1,7 @@
 //! Image output: sRGB PNG for looking at, linear EXR for the radiance and
-//! the AOVs. Every file is written to a temporary name beside the target
-//! and renamed into place, so a failure never leaves a half-written file.
+//! the AOVs. Every file is written through [`crate::io::write_atomic`]
+//! (a temporary name beside the target, renamed into place), so a failure
+//! never leaves a half-written file.
 
 use super::integrator::Frame;
 use glam::Vec3;
@@ -32,26 +33,6 @@ pub fn to_srgb8(frame: &Frame) -> ImageBuffer<Rgb<u8>, Vec<u8>> {
     ImageBuffer::from_raw(frame.width, frame.height, data).unwrap_or_default()
 }
 
-/// Writes `bytes`-producing `write` into `path` atomically (temp + rename).
-pub fn write_atomic(
-    path: &Path,
-    write: impl FnOnce(&Path) -> Result<(), String>,
-) -> Result<(), String> {
-    let name = path
-        .file_name()
-        .ok_or_else(|| format!("{}: not a file name", path.display()))?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(name);
-    tmp_name.push(".partial");
-    let tmp: PathBuf = path.with_file_name(tmp_name);
-    let result = write(&tmp)
-        .and_then(|()| std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display())));
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
-}
-
 fn format_of(path: &Path) -> Result<ImageFormat, String> {
     match path
         .extension()
@@ -81,14 +62,23 @@ pub fn check_output_path(path: &Path) -> Result<(), String> {
     Ok(())
 }
 
+/// Saves `img` in `format` to `path` atomically; errors are one line naming
+/// the file.
+pub fn save<P, C>(img: &ImageBuffer<P, C>, path: &Path, format: ImageFormat) -> Result<(), String>
+where
+    P: image::PixelWithColorType,
+    [P::Subpixel]: image::EncodableLayout,
+    C: std::ops::Deref<Target = [P::Subpixel]>,
+{
+    crate::io::write_atomic(path, |tmp| img.save_with_format(tmp, format))
+        .map_err(|e| e.to_string())
+}
+
 fn write_rgb32f(path: &Path, w: u32, h: u32, px: impl Iterator<Item = Vec3>) -> Result<(), String> {
     let data: Vec<f32> = px.flat_map(|c| c.to_array()).collect();
     let img: ImageBuffer<Rgb<f32>, Vec<f32>> =
         ImageBuffer::from_raw(w, h, data).ok_or("image size mismatch")?;
-    write_atomic(path, |tmp| {
-        img.save_with_format(tmp, ImageFormat::OpenExr)
-            .map_err(|e| format!("{}: {e}", path.display()))
-    })
+    save(&img, path, ImageFormat::OpenExr)
 }
 
 /// Writes the frame: PNG (sRGB, 8 bit) or EXR (linear float) by extension.
@@ -97,13 +87,7 @@ pub fn write_image(frame: &Frame, path: &Path) -> Result<(), String> {
         ImageFormat::OpenExr => {
             write_rgb32f(path, frame.width, frame.height, frame.rgb.iter().copied())
         }
-        _ => {
-            let img = to_srgb8(frame);
-            write_atomic(path, |tmp| {
-                img.save_with_format(tmp, ImageFormat::Png)
-                    .map_err(|e| format!("{}: {e}", path.display()))
-            })
-        }
+        _ => save(&to_srgb8(frame), path, ImageFormat::Png),
     }
 }
 

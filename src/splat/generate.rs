@@ -7,6 +7,7 @@ use super::field;
 use super::grow::{GrowInput, grow_all};
 use super::knn::{Knn, build_tree};
 use super::normals;
+use crate::progress::{Progress, notify};
 use glam::Vec3;
 use kiddo::SquaredEuclidean;
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
@@ -210,18 +211,18 @@ pub fn generate(
     cloud: &PointCloud,
     params: &SplatParams,
 ) -> Result<(Vec<Splat>, SplatReport), GenerateError> {
-    generate_with_progress(cloud, params, |_, _| {})
+    generate_with_progress(cloud, params, None)
 }
 
-/// [`generate`], calling `progress(stage, fraction_done)` now and then from
-/// the calling thread (for a progress line).
+/// [`generate`], reporting `(stage, fraction_done)` to `progress` now and
+/// then from the calling thread (for a progress line).
 ///
 /// # Errors
 /// As [`generate`].
 pub fn generate_with_progress(
     cloud: &PointCloud,
     params: &SplatParams,
-    mut progress: impl FnMut(&str, f64),
+    progress: Option<Progress<'_>>,
 ) -> Result<(Vec<Splat>, SplatReport), GenerateError> {
     let t0 = Instant::now();
     check_params(params)?;
@@ -236,7 +237,7 @@ pub fn generate_with_progress(
         });
     }
     // --- clean, reorder, kNN -------------------------------------------------
-    progress("neighbours", 0.0);
+    notify(progress, "neighbours", 0.0);
     let (order, non_finite, dupes) = clean_order(&cloud.positions);
     for (why, count) in [
         ("non-finite coordinates", non_finite),
@@ -290,7 +291,7 @@ pub fn generate_with_progress(
     let knn = Knn::build(&tree, &points, k);
     let t1 = Instant::now();
     // --- normals ---------------------------------------------------------------
-    progress("normals", 0.0);
+    notify(progress, "normals", 0.0);
     let input_normals: Option<Vec<Vec3>> = cloud
         .normals
         .as_ref()
@@ -339,11 +340,13 @@ pub fn generate_with_progress(
         density: params.density,
         ellipses: params.ellipses,
     };
-    let grown = grow_all(&input, |i| progress("growing splats", i as f64 / n as f64));
+    let grown = grow_all(&input, |i| {
+        notify(progress, "growing splats", i as f64 / n as f64);
+    });
     let mut splats = grown.splats;
     let t3 = Instant::now();
     // --- fields and coverage ---------------------------------------------------
-    progress("normal fields", 0.0);
+    notify(progress, "normal fields", 0.0);
     report.fallback_normal_fields = field::fit_all(
         &mut splats,
         params.field_radius_factor,

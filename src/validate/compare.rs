@@ -135,7 +135,7 @@ pub struct TruthErrors {
 
 /// Turns every normal of `frame` toward the camera ray of its pixel centre,
 /// so that surfaces whose orientations differ compare by shape only.
-pub fn orient_to_camera(frame: &mut Frame, camera: &crate::render::scene::Camera) {
+pub fn orient_to_camera(frame: &mut Frame, camera: &crate::scene::Camera) {
     let w = frame.width as usize;
     for (i, n) in frame.normal.iter_mut().enumerate() {
         let ray = camera.ray((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
@@ -147,12 +147,13 @@ pub fn orient_to_camera(frame: &mut Frame, camera: &crate::render::scene::Camera
 
 /// Renders the exact surfaces of `scene` through the shared integrator,
 /// with the normals turned toward the camera ([`orient_to_camera`]): the
-/// reference for [`truth_errors`].
+/// reference for [`truth_errors`]. Reports to `progress` as
+/// [`crate::render::integrator::render_surfaces`] does.
 #[must_use]
 pub fn render_truth(
-    scene: &crate::render::scene::Scene,
+    scene: &crate::scene::Scene,
     truth: &crate::validate::truth::Truth,
-    progress: bool,
+    progress: Option<crate::progress::Progress<'_>>,
 ) -> Frame {
     let mut f = crate::render::integrator::render_surfaces(scene, truth, progress);
     orient_to_camera(&mut f, &scene.camera);
@@ -165,7 +166,7 @@ pub fn render_truth(
 pub fn truth_errors(
     mut splats: Frame,
     truth: &Frame,
-    camera: &crate::render::scene::Camera,
+    camera: &crate::scene::Camera,
     diagonal: f32,
 ) -> TruthErrors {
     orient_to_camera(&mut splats, camera);

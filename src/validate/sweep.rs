@@ -12,8 +12,9 @@
 
 use crate::accel::BackendKind;
 use crate::accel::resolve::ShadingMode;
+use crate::progress::Progress;
 use crate::render::integrator::{Frame, render};
-use crate::render::scene::{Scene, SceneFile, build_scene};
+use crate::scene::{ModelSpec, Scene, SceneFile, build_scene};
 use crate::validate::compare::{TruthErrors, render_truth, truth_errors};
 use crate::validate::truth::Truth;
 use std::path::Path;
@@ -161,20 +162,14 @@ pub fn csv_text(rows: &[SweepRow]) -> String {
     s
 }
 
-fn is_generated(m: &crate::render::scene::ModelSpec) -> bool {
+fn is_generated(m: &ModelSpec) -> bool {
     m.points.is_some() || m.mesh.is_some()
 }
 
 /// Sets the camera resolution (keeping the vertical field of view) and the
 /// shading mode of every material.
 fn set_view(scene: &mut Scene, plan: &SweepPlan, mode: ShadingMode) -> Result<(), String> {
-    crate::cli::render::apply_overrides(
-        scene,
-        Some(plan.width),
-        Some(plan.height),
-        Some(1),
-        Some(mode),
-    )
+    scene.set_view(Some(plan.width), Some(plan.height), Some(1), Some(mode))
 }
 
 /// Moves a step's scene into the coordinates of the reference (first) step,
@@ -197,8 +192,9 @@ fn reframe(step: &mut Scene, reference: &Scene) {
 /// Runs a sweep over `plan` for the scene `file` (relative paths against
 /// `base`): per budget step the splats are generated once, both backends
 /// built once, and each shading mode of [`MODES`] rendered by both and
-/// compared with the exact surface. `log` receives one progress line per
-/// measurement as it is made.
+/// compared with the exact surface. Splat generation reports to `progress`
+/// (renders do not); `log` receives one line per measurement as it is
+/// made.
 ///
 /// Errors (one line) when no model is made from points or a mesh, when a
 /// model has no exact surface (point files), or when loading fails.
@@ -206,6 +202,7 @@ pub fn run_sweep(
     file: &SceneFile,
     base: &Path,
     plan: &SweepPlan,
+    progress: Option<Progress<'_>>,
     log: &mut dyn FnMut(&str),
 ) -> Result<Vec<SweepRow>, String> {
     if !file.models.iter().any(is_generated) {
@@ -224,11 +221,11 @@ pub fn run_sweep(
         for m in f.models.iter_mut().filter(|m| is_generated(m)) {
             m.splat.epsilon = Some(eps);
         }
-        let mut scene = build_scene(&f, base)?;
+        let mut scene = build_scene(&f, base, progress)?;
         set_view(&mut scene, plan, ShadingMode::Phong)?;
         if reference.is_none() {
             let truth = Truth::new(&scene)?;
-            let tf = render_truth(&scene, &truth, false);
+            let tf = render_truth(&scene, &truth, None);
             log(&format!(
                 "exact surface: rendered once in {:.3} s ({}x{})",
                 tf.seconds, plan.width, plan.height
@@ -256,7 +253,7 @@ pub fn run_sweep(
         for mode in MODES {
             set_view(&mut scene, plan, mode)?;
             let errors = |backend: &dyn crate::accel::Backend| {
-                let fr = render(&scene, backend, false);
+                let fr = render(&scene, backend, None);
                 let seconds = fr.seconds;
                 (
                     seconds,

@@ -5,7 +5,7 @@
 use crate::accel::{CandidateHits, Ray};
 use crate::embree::{Device, TriangleScene};
 use crate::render::integrator::{ShadeHit, Surfaces};
-use crate::render::scene::{Scene, TruthSource};
+use crate::scene::{Scene, TruthSource};
 use glam::Vec3;
 
 struct TruthMesh {

@@ -1,0 +1,371 @@
+//! The scene file format (TOML): one serde struct per table, and the
+//! parser.
+//!
+//! A scene states only what it needs; everything omitted has a default and
+//! costs nothing at render time. Unknown keys and unknown kinds (material,
+//! light, shape, shading mode) are errors naming the key or value and the
+//! line (serde's `deny_unknown_fields` and enums, reported by the TOML
+//! parser).
+
+use crate::accel::resolve::ShadingMode;
+use crate::splat::Splat;
+use glam::{DVec3, Mat3, Vec3};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+fn default_up() -> [f32; 3] {
+    [0.0, 1.0, 0.0]
+}
+fn default_fov() -> f32 {
+    40.0
+}
+fn default_width() -> u32 {
+    640
+}
+fn default_height() -> u32 {
+    480
+}
+fn one_u32() -> u32 {
+    1
+}
+fn one_f32() -> f32 {
+    1.0
+}
+fn white() -> [f32; 3] {
+    [1.0, 1.0, 1.0]
+}
+
+/// `material.kind`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MaterialKind {
+    /// Lambertian.
+    #[default]
+    Diffuse,
+    /// Lambertian plus a Blinn–Phong highlight.
+    Phong,
+    /// Perfect mirror.
+    Mirror,
+    /// Dielectric with Fresnel reflection and refraction.
+    Glass,
+}
+
+/// `light.kind`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LightKind {
+    /// A point light (needs `position`).
+    Point,
+    /// A directional light (needs `direction`).
+    Directional,
+    /// A spherical area light (needs `position` and `radius`).
+    Sphere,
+}
+
+impl std::fmt::Display for LightKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            LightKind::Point => "point",
+            LightKind::Directional => "directional",
+            LightKind::Sphere => "sphere",
+        })
+    }
+}
+
+/// `shape.kind`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ShapeKind {
+    /// A sphere (needs `radius`).
+    Sphere,
+    /// A rectangle (needs `size`; `normal` defaults to +y).
+    Quad,
+}
+
+/// `[camera]`: a pinhole camera.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraSpec {
+    /// Eye position (f64, so far-from-origin scenes keep their precision).
+    pub from: [f64; 3],
+    /// Point looked at.
+    pub at: [f64; 3],
+    /// Up vector.
+    #[serde(default = "default_up")]
+    pub up: [f32; 3],
+    /// Vertical field of view, degrees.
+    #[serde(default = "default_fov")]
+    pub fov: f32,
+    /// Image width, pixels.
+    #[serde(default = "default_width")]
+    pub width: u32,
+    /// Image height, pixels.
+    #[serde(default = "default_height")]
+    pub height: u32,
+    /// Samples per pixel (stratified when > 1).
+    #[serde(default = "one_u32")]
+    pub spp: u32,
+}
+
+/// A model's placement: uniform scale, then rotation (degrees about x, y,
+/// z, applied in that order), then translation. Uniform so discs stay discs.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransformSpec {
+    /// Uniform scale.
+    #[serde(default = "one_f32")]
+    pub scale: f32,
+    /// Rotation, degrees about x, y, z.
+    #[serde(default)]
+    pub rotate: [f32; 3],
+    /// Translation (f64: applied before re-centring, in double precision).
+    #[serde(default)]
+    pub translate: [f64; 3],
+}
+
+impl Default for TransformSpec {
+    fn default() -> Self {
+        TransformSpec {
+            scale: 1.0,
+            rotate: [0.0; 3],
+            translate: [0.0; 3],
+        }
+    }
+}
+
+impl TransformSpec {
+    fn rotation(&self) -> Mat3 {
+        let [x, y, z] = self.rotate.map(f32::to_radians);
+        Mat3::from_rotation_z(z) * Mat3::from_rotation_y(y) * Mat3::from_rotation_x(x)
+    }
+
+    /// Applies the transform to a point, then subtracts `shift`; the
+    /// translation and the shift are applied in f64, so a model placed far
+    /// from the origin and shifted back keeps f32 precision (DESIGN §4).
+    #[must_use]
+    pub fn point(&self, p: Vec3, shift: DVec3) -> Vec3 {
+        ((self.rotation() * (p * self.scale)).as_dvec3() + DVec3::from(self.translate) - shift)
+            .as_vec3()
+    }
+
+    /// Applies the transform to every splat, then subtracts `shift` (in f64,
+    /// as [`TransformSpec::point`]).
+    pub fn apply(&self, splats: &mut [Splat], shift: DVec3) {
+        let rot = self.rotation();
+        for s in splats {
+            s.center = self.point(s.center, shift);
+            s.normal = (rot * s.normal).normalize();
+            s.u_axis = (rot * s.u_axis).normalize();
+            s.v_axis = (rot * s.v_axis).normalize();
+            s.radii *= self.scale;
+        }
+    }
+}
+
+/// `splat = { ... }`: parameters of splat generation for point models.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SplatSpec {
+    /// Growth error threshold, fraction of the model's bounding-box diagonal.
+    pub epsilon: Option<f32>,
+    /// Neighbourhood size.
+    pub k: Option<usize>,
+    /// Density factor `k` of §2.2.
+    pub density: Option<f32>,
+    /// Grow elliptical splats.
+    #[serde(default)]
+    pub ellipses: bool,
+    /// Orient estimated normals toward this point (model space).
+    pub viewpoint: Option<[f32; 3]>,
+}
+
+/// `shape = { ... }`: a procedural model.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShapeSpec {
+    /// `sphere` or `quad`.
+    pub kind: ShapeKind,
+    /// Centre.
+    #[serde(default)]
+    pub center: [f32; 3],
+    /// Sphere radius.
+    pub radius: Option<f32>,
+    /// Quad size (two edge lengths).
+    pub size: Option<[f32; 2]>,
+    /// Quad normal.
+    pub normal: Option<[f32; 3]>,
+    /// Number of splats.
+    pub splats: usize,
+}
+
+/// `material = { ... }`.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialSpec {
+    /// `diffuse` (the default), `phong`, `mirror` or `glass`.
+    #[serde(default)]
+    pub kind: MaterialKind,
+    /// Albedo; multiplies the point colours when the data has them.
+    pub color: Option<[f32; 3]>,
+    /// Blinn–Phong specular strength (`phong`).
+    pub specular: Option<f32>,
+    /// Blinn–Phong exponent (`phong`).
+    pub shininess: Option<f32>,
+    /// Mirror reflectance (`mirror`).
+    pub reflectance: Option<f32>,
+    /// Index of refraction (`glass`).
+    pub ior: Option<f32>,
+    /// Shading mode for this model's splats (`flat`, `blended`, `phong`),
+    /// overriding `[render] shading`.
+    pub shading: Option<ShadingMode>,
+}
+
+/// `[[model]]`: exactly one of `points`, `splats`, `mesh` (with `samples`)
+/// or `shape`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelSpec {
+    /// A point file (PLY, PCD, XYZ) turned into splats.
+    pub points: Option<PathBuf>,
+    /// A splat PLY written by `splatray splat`.
+    pub splats: Option<PathBuf>,
+    /// A triangle mesh (PLY) to sample points from.
+    pub mesh: Option<PathBuf>,
+    /// How many points to sample from `mesh`.
+    pub samples: Option<usize>,
+    /// Seed for the mesh sampling.
+    #[serde(default)]
+    pub seed: u64,
+    /// A procedural shape.
+    pub shape: Option<ShapeSpec>,
+    /// Placement.
+    #[serde(default)]
+    pub transform: TransformSpec,
+    /// Splat generation parameters.
+    #[serde(default)]
+    pub splat: SplatSpec,
+    /// Surface material.
+    #[serde(default)]
+    pub material: MaterialSpec,
+}
+
+/// `[[light]]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightSpec {
+    /// `point`, `directional` or `sphere`.
+    pub kind: LightKind,
+    /// Position (`point`, `sphere`).
+    pub position: Option<[f64; 3]>,
+    /// Direction the light travels (`directional`).
+    pub direction: Option<[f32; 3]>,
+    /// Colour.
+    #[serde(default = "white")]
+    pub color: [f32; 3],
+    /// Intensity (radiant intensity for point lights, irradiance for
+    /// directional ones).
+    #[serde(default = "one_f32")]
+    pub intensity: f32,
+    /// Radius (`sphere`).
+    pub radius: Option<f32>,
+    /// Shadow samples per shading point (`sphere`).
+    pub samples: Option<u32>,
+}
+
+/// `[render]`.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderSpec {
+    /// Maximum recursion depth for reflection and refraction.
+    pub max_depth: Option<u32>,
+    /// `flat`, `blended` or `phong` (default `phong`).
+    pub shading: Option<ShadingMode>,
+    /// Blending window `xi`, fraction of the scene diagonal (§4.3).
+    pub xi: Option<f32>,
+    /// Self-intersection distance, fraction of the scene diagonal (§3.2).
+    pub eps_self: Option<f32>,
+    /// Ambient term.
+    pub ambient: Option<f32>,
+}
+
+/// The whole scene file.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    /// The camera.
+    pub camera: CameraSpec,
+    /// Background radiance.
+    #[serde(default)]
+    pub background: [f32; 3],
+    /// Models.
+    #[serde(default, rename = "model")]
+    pub models: Vec<ModelSpec>,
+    /// Lights.
+    #[serde(default, rename = "light")]
+    pub lights: Vec<LightSpec>,
+    /// Render options.
+    #[serde(default)]
+    pub render: RenderSpec,
+}
+
+/// Reads and parses a scene file. Errors are one line (the TOML parser's
+/// message, which names the key and the line, is folded onto it).
+pub fn parse_scene_file(path: &Path) -> Result<SceneFile, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("{}: cannot read scene: {e}", path.display()))?;
+    parse_scene_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Parses scene TOML text.
+pub fn parse_scene_str(text: &str) -> Result<SceneFile, String> {
+    toml::from_str::<SceneFile>(text).map_err(|e| {
+        let msg = e.message().to_string();
+        match e.span() {
+            Some(span) => {
+                let line = text[..span.start.min(text.len())].matches('\n').count() + 1;
+                format!("line {line}: {msg}")
+            }
+            None => msg,
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const HEAD: &str = "[camera]\nfrom = [0.0, 0.0, 3.0]\nat = [0.0, 0.0, 0.0]\n[[model]]\n";
+
+    #[test]
+    fn unknown_kinds_are_line_numbered_parse_errors() {
+        for (line, expect) in [
+            (
+                "shape = { kind = \"cube\", radius = 1.0, splats = 10 }",
+                "line 5: unknown variant `cube`",
+            ),
+            (
+                "shape = { kind = \"sphere\", radius = 1.0, splats = 10 }\nmaterial = { kind = \"glas\" }",
+                "line 6: unknown variant `glas`, expected one of `diffuse`, `phong`, `mirror`, `glass`",
+            ),
+            (
+                "shape = { kind = \"sphere\", radius = 1.0, splats = 10 }\n[render]\nshading = \"smooth\"",
+                "line 7: unknown variant `smooth`, expected one of `flat`, `blended`, `phong`",
+            ),
+        ] {
+            let e = parse_scene_str(&format!("{HEAD}{line}\n")).unwrap_err();
+            assert!(e.starts_with(expect), "{e}");
+            assert_eq!(e.lines().count(), 1, "{e}");
+        }
+        let f = parse_scene_str(&format!(
+            "{HEAD}shape = {{ kind = \"quad\", size = [1.0, 1.0], splats = 10 }}\n\
+             material = {{ shading = \"flat\" }}\n[[light]]\nkind = \"directional\"\n\
+             direction = [0.0, -1.0, 0.0]\n"
+        ))
+        .unwrap();
+        let m = &f.models[0];
+        assert_eq!(m.shape.as_ref().map(|s| s.kind), Some(ShapeKind::Quad));
+        assert_eq!(m.material.kind, MaterialKind::Diffuse);
+        assert_eq!(m.material.shading, Some(ShadingMode::Flat));
+        assert_eq!(f.lights[0].kind, LightKind::Directional);
+    }
+}

@@ -1,0 +1,503 @@
+//! Loading a scene: every model's splats (read, generated from points or a
+//! sampled mesh, or built procedurally) and its exact surface, the
+//! materials, lights and camera resolved, and everything re-centred.
+
+use super::file::{
+    CameraSpec, LightKind, LightSpec, MaterialKind, MaterialSpec, ModelSpec, RenderSpec, SceneFile,
+    ShapeKind, ShapeSpec, TransformSpec, parse_scene_file,
+};
+use super::model::{Camera, Light, LoadReport, Material, RenderOptions, Scene, TruthSource};
+use crate::accel::SceneScale;
+use crate::accel::resolve::ShadingMode;
+use crate::io::{Mesh, PointCloud};
+use crate::progress::Progress;
+use crate::splat::Splat;
+use glam::{DVec3, Vec2, Vec3};
+use std::path::Path;
+
+/// Loads a scene file: parses it, builds every model's splats, resolves
+/// materials, lights and camera, and re-centres everything. Splat
+/// generation reports to `progress`.
+///
+/// # Errors
+/// One line naming the file (and the model, where one is at fault).
+pub fn load_scene(path: &Path, progress: Option<Progress<'_>>) -> Result<Scene, String> {
+    let file = parse_scene_file(path)?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    build_scene(&file, base, progress).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Builds a scene from a parsed file; relative model paths are resolved
+/// against `base`. Splat generation reports to `progress`.
+///
+/// # Errors
+/// One line (naming the model where one is at fault).
+pub fn build_scene(
+    file: &SceneFile,
+    base: &Path,
+    progress: Option<Progress<'_>>,
+) -> Result<Scene, String> {
+    let c = &file.camera;
+    check_camera(c)?;
+    // Models, camera and lights are first shifted, in f64, by the first
+    // model's translation, so that a scene placed far from the origin keeps
+    // its f32 precision; what remains is re-centred below.
+    let shift = file
+        .models
+        .first()
+        .map_or(DVec3::ZERO, |m| DVec3::from(m.transform.translate));
+    finite("background", &file.background)?;
+    if file.models.is_empty() {
+        return Err("the scene has no [[model]]".into());
+    }
+    let mut models = load_models(&file.models, base, shift, progress)?;
+    let lights = file
+        .lights
+        .iter()
+        .map(|l| light(l, shift))
+        .collect::<Result<Vec<_>, _>>()?;
+    let (offset, diagonal) = recentre(&mut models.splats);
+    let lights = lights.into_iter().map(|l| moved(l, offset)).collect();
+    let camera = Camera::look_at(
+        shifted(c.from, shift) - offset,
+        shifted(c.at, shift) - offset,
+        v3(c.up),
+        c.fov,
+        c.width,
+        c.height,
+        c.spp,
+    )?;
+    Ok(Scene {
+        splats: models.splats,
+        material_of: models.material_of,
+        materials: models.materials,
+        shading_of: models.shading_of,
+        camera,
+        lights,
+        background: v3(file.background),
+        options: render_options(&file.render, diagonal)?,
+        offset,
+        shift,
+        load: models.load,
+    })
+}
+
+/// The camera's resolution, samples and position are in range.
+fn check_camera(c: &CameraSpec) -> Result<(), String> {
+    if c.width == 0 || c.height == 0 {
+        return Err(format!(
+            "camera resolution {}x{} must be positive",
+            c.width, c.height
+        ));
+    }
+    if c.width > 1 << 15 || c.height > 1 << 15 {
+        return Err(format!(
+            "camera resolution {}x{} is over 32768",
+            c.width, c.height
+        ));
+    }
+    if c.spp == 0 || c.spp > 4096 {
+        return Err(format!("camera.spp {} must be in 1..=4096", c.spp));
+    }
+    finite("camera.from", &c.from.map(|x| x as f32))?;
+    finite("camera.at", &c.at.map(|x| x as f32))
+}
+
+/// Every model's splats (transformed, shifted, not yet re-centred) with
+/// their materials, and what loading measured.
+struct Models {
+    splats: Vec<Splat>,
+    material_of: Vec<u16>,
+    materials: Vec<Material>,
+    shading_of: Vec<Option<ShadingMode>>,
+    load: LoadReport,
+}
+
+/// Loads every model in order; model `i` gets material `i`.
+fn load_models(
+    specs: &[ModelSpec],
+    base: &Path,
+    shift: DVec3,
+    progress: Option<Progress<'_>>,
+) -> Result<Models, String> {
+    let start = std::time::Instant::now();
+    let mut out = Models {
+        splats: Vec::new(),
+        material_of: Vec::new(),
+        materials: Vec::new(),
+        shading_of: Vec::new(),
+        load: LoadReport::default(),
+    };
+    for (i, m) in specs.iter().enumerate() {
+        let number = i + 1;
+        let in_model = |e: String| format!("model {number}: {e}");
+        let mid = u16::try_from(i).map_err(|_| "more than 65535 models".to_string())?;
+        let (mut s, truth) =
+            model_source(m, number, mid, base, shift, &mut out.load, progress).map_err(in_model)?;
+        out.load.truth.push(truth);
+        if !(m.transform.scale > 0.0 && m.transform.scale.is_finite()) {
+            return Err(in_model(format!(
+                "transform.scale must be positive, got {}",
+                m.transform.scale
+            )));
+        }
+        m.transform.apply(&mut s, shift);
+        out.materials.push(material(&m.material).map_err(in_model)?);
+        out.shading_of.push(m.material.shading);
+        out.material_of.extend(std::iter::repeat_n(mid, s.len()));
+        out.splats.extend(s);
+    }
+    out.load.splat_seconds = start.elapsed().as_secs_f64();
+    Ok(out)
+}
+
+/// Splats of one model in model space, before its transform, and the exact
+/// surface behind it (world space, shifted; `material` is its material
+/// index, `number` its 1-based number).
+fn model_source(
+    spec: &ModelSpec,
+    number: usize,
+    material: u16,
+    base: &Path,
+    shift: DVec3,
+    load: &mut LoadReport,
+    progress: Option<Progress<'_>>,
+) -> Result<(Vec<Splat>, TruthSource), String> {
+    let sources = [
+        spec.points.is_some(),
+        spec.splats.is_some(),
+        spec.mesh.is_some(),
+        spec.shape.is_some(),
+    ];
+    if sources.iter().filter(|&&b| b).count() != 1 {
+        return Err("a model needs exactly one of `points`, `splats`, `mesh` or `shape`".into());
+    }
+    if let Some(shape) = &spec.shape {
+        let splats = shape_splats(shape)?;
+        return Ok((splats, shape_truth(shape, &spec.transform, material, shift)));
+    }
+    let unknown = |what: &str| TruthSource::Unknown {
+        model: number,
+        what: what.into(),
+    };
+    if let Some(p) = &spec.splats {
+        let splats = crate::io::read_splats(&base.join(p)).map_err(|e| e.to_string())?;
+        return Ok((splats, unknown("a splat file")));
+    }
+    if let Some(p) = &spec.points {
+        if spec.samples.is_some() {
+            return Err("`samples` applies to `mesh` models only".into());
+        }
+        let cloud = crate::io::read_points(&base.join(p)).map_err(|e| e.to_string())?;
+        let splats = generate_splats(spec, &cloud, load, progress)?;
+        return Ok((splats, unknown("a point file")));
+    }
+    let Some(p) = &spec.mesh else {
+        unreachable!("exactly one source is set")
+    };
+    let (cloud, mesh) = sample_mesh_model(spec, &base.join(p))?;
+    let splats = generate_splats(spec, &cloud, load, progress)?;
+    let truth = TruthSource::Mesh {
+        mesh: Mesh {
+            positions: mesh
+                .positions
+                .iter()
+                .map(|&p| spec.transform.point(p, shift))
+                .collect(),
+            triangles: mesh.triangles,
+        },
+        material,
+    };
+    Ok((splats, truth))
+}
+
+/// A mesh model's points (sampled by area with the model's seed) and the
+/// mesh itself, in model space.
+fn sample_mesh_model(spec: &ModelSpec, path: &Path) -> Result<(PointCloud, Mesh), String> {
+    let samples = spec
+        .samples
+        .ok_or_else(|| format!("{}: a mesh model needs `samples`", path.display()))?;
+    if samples == 0 || samples > 50_000_000 {
+        return Err(format!("samples {samples} must be in 1..=50000000"));
+    }
+    let mesh = crate::io::read_mesh(path).map_err(|e| e.to_string())?;
+    let cloud = crate::io::sample_mesh(&mesh, samples, 0.0, spec.seed);
+    Ok((cloud, mesh))
+}
+
+/// Splat generation (§2, §4.1–4.2) of a point or mesh model with its
+/// `splat` parameters; what it reports is added to `load`.
+fn generate_splats(
+    spec: &ModelSpec,
+    cloud: &PointCloud,
+    load: &mut LoadReport,
+    progress: Option<Progress<'_>>,
+) -> Result<Vec<Splat>, String> {
+    let d = crate::splat::SplatParams::default();
+    let params = crate::splat::SplatParams {
+        k: spec.splat.k.unwrap_or(d.k),
+        epsilon_rel: spec.splat.epsilon.unwrap_or(d.epsilon_rel),
+        density: spec.splat.density.unwrap_or(d.density),
+        ellipses: spec.splat.ellipses,
+        viewpoint: spec.splat.viewpoint.map(Vec3::from),
+        ..d
+    };
+    let (splats, report) = crate::splat::generate_with_progress(cloud, &params, progress)
+        .map_err(|e| e.to_string())?;
+    load.input_points += report.input_points;
+    for s in &report.skipped_points {
+        load.warnings
+            .push(format!("{} points skipped: {}", s.count, s.reason));
+    }
+    load.warnings.extend(report.warnings.iter().cloned());
+    load.coverage.push(report.coverage);
+    Ok(splats)
+}
+
+/// The splats of a procedural shape, in model space.
+fn shape_splats(shape: &ShapeSpec) -> Result<Vec<Splat>, String> {
+    if shape.splats == 0 {
+        return Err("shape.splats must be at least 1".into());
+    }
+    let center = v3(shape.center);
+    finite("shape.center", &shape.center)?;
+    match shape.kind {
+        ShapeKind::Sphere => {
+            let r = shape.radius.ok_or("a sphere shape needs `radius`")?;
+            if !(r > 0.0 && r.is_finite()) {
+                return Err(format!("shape.radius must be positive, got {r}"));
+            }
+            Ok(super::shapes::sphere(center, r, shape.splats))
+        }
+        ShapeKind::Quad => {
+            let size = shape.size.ok_or("a quad shape needs `size`")?;
+            if !(size[0] > 0.0 && size[1] > 0.0 && size[0].is_finite() && size[1].is_finite()) {
+                return Err(format!("shape.size must be positive, got {size:?}"));
+            }
+            let normal = v3(shape.normal.unwrap_or([0.0, 1.0, 0.0]));
+            Ok(super::shapes::quad(
+                center,
+                normal,
+                Vec2::from(size),
+                shape.splats,
+            ))
+        }
+    }
+}
+
+/// The exact surface of a shape placed by `t` (world space, shifted): the
+/// analytic sphere, or the quad's two triangles.
+fn shape_truth(sh: &ShapeSpec, t: &TransformSpec, material: u16, shift: DVec3) -> TruthSource {
+    match sh.kind {
+        ShapeKind::Sphere => TruthSource::Sphere {
+            center: t.point(v3(sh.center), shift),
+            radius: sh.radius.unwrap_or(1.0) * t.scale,
+            material,
+        },
+        ShapeKind::Quad => {
+            let n = v3(sh.normal.unwrap_or([0.0, 1.0, 0.0]))
+                .try_normalize()
+                .unwrap_or(Vec3::Y);
+            let (a, b) = crate::splat::tangent_frame(n);
+            let [sx, sy] = sh.size.unwrap_or([1.0, 1.0]);
+            let c = v3(sh.center);
+            let corners = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+                .map(|(x, y)| t.point(c + a * (0.5 * sx * x) + b * (0.5 * sy * y), shift));
+            TruthSource::Mesh {
+                mesh: Mesh {
+                    positions: corners.to_vec(),
+                    triangles: vec![[0, 1, 2], [0, 2, 3]],
+                },
+                material,
+            }
+        }
+    }
+}
+
+fn v3(a: [f32; 3]) -> Vec3 {
+    Vec3::from(a)
+}
+
+fn finite(name: &str, v: &[f32]) -> Result<(), String> {
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(format!("{name}: values must be finite, got {v:?}"))
+    }
+}
+
+/// A position given in f64, shifted (in f64) and then made f32.
+fn shifted(p: [f64; 3], shift: DVec3) -> Vec3 {
+    (DVec3::from(p) - shift).as_vec3()
+}
+
+fn material(spec: &MaterialSpec) -> Result<Material, String> {
+    let color = v3(spec.color.unwrap_or([0.8, 0.8, 0.8]));
+    finite("material.color", &color.to_array())?;
+    Ok(match spec.kind {
+        MaterialKind::Diffuse => Material::Diffuse { color },
+        MaterialKind::Phong => Material::Phong {
+            color,
+            specular: spec.specular.unwrap_or(0.4),
+            shininess: spec.shininess.unwrap_or(40.0),
+        },
+        MaterialKind::Mirror => Material::Mirror {
+            color: Vec3::splat(spec.reflectance.unwrap_or(0.9)) * spec.color.map_or(Vec3::ONE, v3),
+        },
+        MaterialKind::Glass => {
+            let ior = spec.ior.unwrap_or(1.5);
+            if !(ior > 0.0 && ior.is_finite()) {
+                return Err(format!("material.ior must be positive, got {ior}"));
+            }
+            Material::Glass {
+                color: spec.color.map_or(Vec3::ONE, v3),
+                ior,
+            }
+        }
+    })
+}
+
+fn light(spec: &LightSpec, shift: DVec3) -> Result<Light, String> {
+    let power = v3(spec.color) * spec.intensity;
+    finite("light.color × intensity", &power.to_array())?;
+    let position = || {
+        let p = spec
+            .position
+            .ok_or_else(|| format!("a {} light needs `position`", spec.kind))?;
+        finite("light.position", &p.map(|x| x as f32))?;
+        Ok::<Vec3, String>(shifted(p, shift))
+    };
+    Ok(match spec.kind {
+        LightKind::Point => Light::Point {
+            position: position()?,
+            power,
+        },
+        LightKind::Directional => Light::Directional {
+            direction: spec
+                .direction
+                .map(v3)
+                .ok_or("a directional light needs `direction`")?
+                .try_normalize()
+                .ok_or("light.direction must be non-zero")?,
+            power,
+        },
+        LightKind::Sphere => {
+            let radius = spec.radius.ok_or("a sphere light needs `radius`")?;
+            if !(radius > 0.0 && radius.is_finite()) {
+                return Err(format!("light.radius must be positive, got {radius}"));
+            }
+            Light::Sphere {
+                position: position()?,
+                radius,
+                power,
+                samples: spec.samples.unwrap_or(16).max(1),
+            }
+        }
+    })
+}
+
+/// Re-centres the splats on their bounding box (DESIGN §4: far-from-origin
+/// scenes keep their precision); returns the offset subtracted and the
+/// box's diagonal (1 without splats).
+fn recentre(splats: &mut [Splat]) -> (Vec3, f32) {
+    let (lo, hi) = splats.iter().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), s| {
+            let h = s.half_extent();
+            (lo.min(s.center - h), hi.max(s.center + h))
+        },
+    );
+    let (offset, diagonal) = if lo.x <= hi.x {
+        ((lo + hi) * 0.5, (hi - lo).length().max(f32::MIN_POSITIVE))
+    } else {
+        (Vec3::ZERO, 1.0)
+    };
+    for s in splats {
+        s.center -= offset;
+    }
+    (offset, diagonal)
+}
+
+/// A light moved by the re-centring `offset` (directional lights have no
+/// position).
+fn moved(l: Light, offset: Vec3) -> Light {
+    match l {
+        Light::Point { position, power } => Light::Point {
+            position: position - offset,
+            power,
+        },
+        Light::Sphere {
+            position,
+            radius,
+            power,
+            samples,
+        } => Light::Sphere {
+            position: position - offset,
+            radius,
+            power,
+            samples,
+        },
+        d @ Light::Directional { .. } => d,
+    }
+}
+
+/// `[render]` resolved: `xi` (§4.3) and `eps_self` (§3.2) are fractions of
+/// the scene diagonal.
+fn render_options(r: &RenderSpec, diagonal: f32) -> Result<RenderOptions, String> {
+    let mut scale = SceneScale::from_diagonal(diagonal);
+    if let Some(xi) = r.xi {
+        if !(xi >= 0.0 && xi.is_finite()) {
+            return Err(format!("render.xi must be >= 0, got {xi}"));
+        }
+        scale.xi = xi * diagonal;
+    }
+    if let Some(e) = r.eps_self {
+        if !(e >= 0.0 && e.is_finite()) {
+            return Err(format!("render.eps_self must be >= 0, got {e}"));
+        }
+        scale.eps_self = e * diagonal;
+    }
+    Ok(RenderOptions {
+        max_depth: r.max_depth.unwrap_or(5),
+        shading: r.shading.unwrap_or(ShadingMode::Phong),
+        scale,
+        ambient: r.ambient.unwrap_or(0.03),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::parse_scene_str;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    #[test]
+    fn every_model_yields_one_truth_with_its_material() {
+        let text = "[camera]\nfrom = [0.0, 0.0, 3.0]\nat = [0.0, 0.0, 0.0]\n\
+            [[model]]\nshape = { kind = \"sphere\", radius = 1.0, splats = 50 }\n\
+            [[model]]\nmesh = \"data/bunny-mesh.ply\"\nsamples = 2000\n\
+            [[model]]\nshape = { kind = \"quad\", size = [1.0, 1.0], splats = 20 }\n";
+        let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+        let calls = AtomicUsize::new(0);
+        let progress = |_: &str, f: f64| {
+            assert!((0.0..=1.0).contains(&f));
+            calls.fetch_add(1, Ordering::Relaxed);
+        };
+        let s = build_scene(&parse_scene_str(text).unwrap(), &base, Some(&progress)).unwrap();
+        assert!(
+            calls.load(Ordering::Relaxed) > 0,
+            "splat generation reports"
+        );
+        let materials: Vec<(&str, u16)> = s
+            .load
+            .truth
+            .iter()
+            .map(|t| match t {
+                TruthSource::Sphere { material, .. } => ("sphere", *material),
+                TruthSource::Mesh { material, .. } => ("mesh", *material),
+                TruthSource::Unknown { .. } => ("unknown", u16::MAX),
+            })
+            .collect();
+        assert_eq!(materials, [("sphere", 0), ("mesh", 1), ("mesh", 2)]);
+    }
+}

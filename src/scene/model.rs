@@ -1,0 +1,280 @@
+//! The resolved scene: what the integrator renders (camera, lights,
+//! materials, splats) in re-centred f32 coordinates, and what loading
+//! measured and knew about the exact surfaces.
+
+use crate::accel::SceneScale;
+use crate::accel::resolve::ShadingMode;
+use crate::splat::Splat;
+use glam::{DVec3, Vec3};
+
+/// A surface material.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Material {
+    /// Lambertian.
+    Diffuse {
+        /// Albedo.
+        color: Vec3,
+    },
+    /// Lambertian plus Blinn–Phong highlight.
+    Phong {
+        /// Albedo.
+        color: Vec3,
+        /// Specular strength.
+        specular: f32,
+        /// Exponent.
+        shininess: f32,
+    },
+    /// Perfect mirror.
+    Mirror {
+        /// Reflectance (tint).
+        color: Vec3,
+    },
+    /// Dielectric with Fresnel reflection and refraction.
+    Glass {
+        /// Transmission tint.
+        color: Vec3,
+        /// Index of refraction.
+        ior: f32,
+    },
+}
+
+/// A light source.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Light {
+    /// Point light at `position`, falling off as `1/d²`.
+    Point {
+        /// Position.
+        position: Vec3,
+        /// Colour × intensity.
+        power: Vec3,
+    },
+    /// Directional light travelling along `direction`.
+    Directional {
+        /// Unit direction the light travels.
+        direction: Vec3,
+        /// Colour × irradiance.
+        power: Vec3,
+    },
+    /// Spherical area light: soft shadows from `samples` stratified points.
+    Sphere {
+        /// Centre.
+        position: Vec3,
+        /// Radius.
+        radius: f32,
+        /// Colour × intensity.
+        power: Vec3,
+        /// Shadow rays per shading point.
+        samples: u32,
+    },
+}
+
+/// A pinhole camera, resolved.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// Eye.
+    pub origin: Vec3,
+    /// Unit forward.
+    pub forward: Vec3,
+    /// Unit right, scaled by the half-width of the image plane at distance 1.
+    pub right: Vec3,
+    /// Unit up, scaled by the half-height of the image plane at distance 1.
+    pub up: Vec3,
+    /// Width, pixels.
+    pub width: u32,
+    /// Height, pixels.
+    pub height: u32,
+    /// Samples per pixel.
+    pub spp: u32,
+}
+
+impl Camera {
+    /// Builds a camera looking from `from` at `at`.
+    pub fn look_at(
+        from: Vec3,
+        at: Vec3,
+        up: Vec3,
+        fov_deg: f32,
+        width: u32,
+        height: u32,
+        spp: u32,
+    ) -> Result<Camera, String> {
+        let forward = (at - from)
+            .try_normalize()
+            .ok_or("camera: `from` and `at` coincide")?;
+        let right = forward
+            .cross(up)
+            .try_normalize()
+            .ok_or("camera: `up` is parallel to the view direction")?;
+        let true_up = right.cross(forward);
+        if !(fov_deg > 0.0 && fov_deg < 180.0) {
+            return Err(format!("camera: fov {fov_deg} must be in (0, 180) degrees"));
+        }
+        let half_h = (fov_deg.to_radians() * 0.5).tan();
+        let half_w = half_h * width as f32 / height as f32;
+        Ok(Camera {
+            origin: from,
+            forward,
+            right: right * half_w,
+            up: true_up * half_h,
+            width,
+            height,
+            spp,
+        })
+    }
+
+    /// The primary ray through image position `(px, py)` in pixels (pixel
+    /// centres at `+0.5`; `y` down).
+    #[must_use]
+    pub fn ray(&self, px: f32, py: f32) -> crate::accel::Ray {
+        let sx = 2.0 * px / self.width as f32 - 1.0;
+        let sy = 1.0 - 2.0 * py / self.height as f32;
+        crate::accel::Ray::new(self.origin, self.forward + self.right * sx + self.up * sy)
+    }
+}
+
+/// Render options, resolved.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderOptions {
+    /// Maximum recursion depth.
+    pub max_depth: u32,
+    /// Shading mode.
+    pub shading: ShadingMode,
+    /// `xi`, `eps_self` and the diagonal.
+    pub scale: SceneScale,
+    /// Ambient term.
+    pub ambient: f32,
+}
+
+/// What loading measured.
+#[derive(Clone, Debug, Default)]
+pub struct LoadReport {
+    /// Seconds spent reading and generating splats.
+    pub splat_seconds: f64,
+    /// Input points across point models.
+    pub input_points: usize,
+    /// One line per warning (skipped points and the like).
+    pub warnings: Vec<String>,
+    /// Coverage of each generated point model (§2.2).
+    pub coverage: Vec<f64>,
+    /// The exact surface of each model where one is known (mesh models and
+    /// shapes), in world space before re-centring: ground truth for
+    /// `compare --truth`.
+    pub truth: Vec<TruthSource>,
+}
+
+/// The exact surface behind one model.
+#[derive(Clone, Debug)]
+pub enum TruthSource {
+    /// A triangle mesh (mesh models), world space.
+    Mesh {
+        /// The mesh, transformed.
+        mesh: crate::io::Mesh,
+        /// Material index.
+        material: u16,
+    },
+    /// An analytic sphere.
+    Sphere {
+        /// Centre, world space.
+        center: Vec3,
+        /// Radius.
+        radius: f32,
+        /// Material index.
+        material: u16,
+    },
+    /// A model with no exact surface (a point or splat file), and why.
+    Unknown {
+        /// 1-based model number.
+        model: usize,
+        /// What it is.
+        what: String,
+    },
+}
+
+/// A loaded scene, re-centred so that its splats' bounding box is centred at
+/// the origin (DESIGN §4: far-from-origin scenes keep their precision).
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// All splats of all models.
+    pub splats: Vec<Splat>,
+    /// Material index of each splat.
+    pub material_of: Vec<u16>,
+    /// Materials.
+    pub materials: Vec<Material>,
+    /// Shading-mode override of each material (`None`: the scene's mode).
+    pub shading_of: Vec<Option<ShadingMode>>,
+    /// Camera.
+    pub camera: Camera,
+    /// Lights.
+    pub lights: Vec<Light>,
+    /// Background radiance.
+    pub background: Vec3,
+    /// Options.
+    pub options: RenderOptions,
+    /// The re-centring translation subtracted on load, after `shift`
+    /// (world = scene + offset + shift).
+    pub offset: Vec3,
+    /// The first model's translation, subtracted in f64 before re-centring.
+    pub shift: DVec3,
+    /// Load figures.
+    pub load: LoadReport,
+}
+
+impl Scene {
+    /// The splats' bounding box in world coordinates (as the scene file
+    /// states them), or `None` without splats.
+    #[must_use]
+    pub fn world_bounds(&self) -> Option<(DVec3, DVec3)> {
+        let (lo, hi) = self.splats.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), s| (lo.min(s.center), hi.max(s.center)),
+        );
+        let to_world = |v: Vec3| (v + self.offset).as_dvec3() + self.shift;
+        (lo.x <= hi.x).then(|| (to_world(lo), to_world(hi)))
+    }
+
+    /// The shading mode for a window whose nearest hit is splat `id`: the
+    /// model's override, else the scene's.
+    #[must_use]
+    pub fn shading_for(&self, id: u32) -> ShadingMode {
+        let m = self.material_of[id as usize] as usize;
+        self.shading_of[m].unwrap_or(self.options.shading)
+    }
+
+    /// Changes the view after loading: the resolution (keeping the vertical
+    /// field of view, widening or narrowing the horizontal one), the samples
+    /// per pixel, and the shading mode of the whole scene (which then
+    /// replaces every model's own). `None` keeps what the scene file says.
+    ///
+    /// # Errors
+    /// One line when the resolution is outside `1..=32768` or `spp` outside
+    /// `1..=4096`; the scene is then unchanged.
+    pub fn set_view(
+        &mut self,
+        width: Option<u32>,
+        height: Option<u32>,
+        spp: Option<u32>,
+        shading: Option<ShadingMode>,
+    ) -> Result<(), String> {
+        let c = self.camera;
+        let w = width.unwrap_or(c.width);
+        let h = height.unwrap_or(c.height);
+        let spp = spp.unwrap_or(c.spp);
+        if w == 0 || h == 0 || w > 1 << 15 || h > 1 << 15 {
+            return Err(format!("resolution {w}x{h} must be in 1..=32768"));
+        }
+        if spp == 0 || spp > 4096 {
+            return Err(format!("spp {spp} must be in 1..=4096"));
+        }
+        let half_h = c.up.length();
+        let half_w = half_h * w as f32 / h as f32;
+        self.camera.right = c.right.normalize() * half_w;
+        self.camera.width = w;
+        self.camera.height = h;
+        self.camera.spp = spp;
+        if let Some(s) = shading {
+            self.options.shading = s;
+            self.shading_of.iter_mut().for_each(|m| *m = None);
+        }
+        Ok(())
+    }
+}
