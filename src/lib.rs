@@ -11,6 +11,7 @@ pub mod io;
 pub mod primitive;
 pub mod progress;
 pub mod render;
+pub mod resolve;
 pub mod rng;
 pub mod scene;
 pub mod splat;

@@ -3,8 +3,8 @@
 
 use glam::Vec3;
 use splatray::accel::BackendKind;
-use splatray::accel::resolve::ShadingMode;
 use splatray::render::integrator::{Frame, render};
+use splatray::resolve::ShadingMode;
 use splatray::scene::{Scene, build_scene, parse_scene_str};
 use std::path::Path;
 

@@ -12,36 +12,11 @@ pub mod brute;
 pub mod embree;
 pub mod octree;
 pub mod registry;
-pub mod resolve;
 mod window;
 
 pub use crate::geometry::Ray;
 pub use registry::{BackendInfo, backends};
 pub use window::{Candidate, CandidateHits, MAX_CANDIDATES};
-
-/// Scene-relative tolerances (`docs/DESIGN.md`, "Tolerances"): never
-/// absolute constants.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SceneScale {
-    /// Bounding-box diagonal of the splat set.
-    pub diagonal: f32,
-    /// Blending window `xi` of §4.3.
-    pub xi: f32,
-    /// Self-intersection distance `eps_self` of §3.2 (fig. 9 right).
-    pub eps_self: f32,
-}
-
-impl SceneScale {
-    /// Default fractions of the diagonal: `xi = 1e-3 d`, `eps_self = 1e-4 d`.
-    #[must_use]
-    pub fn from_diagonal(diagonal: f32) -> SceneScale {
-        SceneScale {
-            diagonal,
-            xi: 1e-3 * diagonal,
-            eps_self: 1e-4 * diagonal,
-        }
-    }
-}
 
 /// Figures about one built acceleration structure.
 #[derive(Clone, Debug, Default, PartialEq)]

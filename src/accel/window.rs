@@ -43,7 +43,7 @@ pub struct CandidateHits {
 
 impl CandidateHits {
     /// An empty window of width `xi` (scene-relative, see
-    /// [`crate::accel::SceneScale`]).
+    /// [`crate::scene::SceneScale`]).
     #[must_use]
     pub fn new(xi: f32) -> CandidateHits {
         CandidateHits {

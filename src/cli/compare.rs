@@ -3,9 +3,9 @@
 use super::progress::ProgressLine;
 use super::render::{default_scene, write_json};
 use splatray::accel::BackendKind;
-use splatray::accel::resolve::ShadingMode;
 use splatray::render::integrator::{Frame, render};
 use splatray::render::output::{check_output_path, save};
+use splatray::resolve::ShadingMode;
 use splatray::scene::load_scene;
 use splatray::validate::compare::{
     Agreement, TruthErrors, compare_frames, diff_image, render_truth, truth_errors,

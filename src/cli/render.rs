@@ -2,9 +2,9 @@
 
 use super::progress::ProgressLine;
 use splatray::accel::BackendKind;
-use splatray::accel::resolve::ShadingMode;
 use splatray::render::integrator::{Frame, RayCounts, render};
 use splatray::render::output::{Aov, aov_path, check_output_path, write_aov, write_image};
+use splatray::resolve::ShadingMode;
 use splatray::scene::{Scene, load_scene};
 use std::path::{Path, PathBuf};
 

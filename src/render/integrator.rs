@@ -4,9 +4,9 @@
 //! maximum depth. It sees only the [`Backend`] trait and the shared
 //! resolver, so every backend renders with identical shading.
 
-use crate::accel::resolve::{SurfaceHit, resolve};
 use crate::accel::{Backend, CandidateHits, Ray};
 use crate::progress::{Progress, notify};
+use crate::resolve::{SurfaceHit, resolve};
 use crate::scene::{Light, Material, Scene};
 use glam::Vec3;
 use rayon::prelude::*;

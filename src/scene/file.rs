@@ -7,7 +7,7 @@
 //! line (serde's `deny_unknown_fields` and enums, reported by the TOML
 //! parser).
 
-use crate::accel::resolve::ShadingMode;
+use crate::resolve::ShadingMode;
 use crate::splat::Splat;
 use glam::{DVec3, Mat3, Vec3};
 use serde::Deserialize;

@@ -7,10 +7,10 @@ use super::file::{
     ShapeKind, ShapeSpec, TransformSpec, parse_scene_file,
 };
 use super::model::{Camera, Light, LoadReport, Material, RenderOptions, Scene, TruthSource};
-use crate::accel::SceneScale;
-use crate::accel::resolve::ShadingMode;
 use crate::io::{Mesh, PointCloud};
 use crate::progress::Progress;
+use crate::resolve::ShadingMode;
+use crate::scene::SceneScale;
 use crate::splat::Splat;
 use glam::{DVec3, Vec2, Vec3};
 use std::path::Path;

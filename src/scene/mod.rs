@@ -18,4 +18,6 @@ pub use file::{
     ShapeKind, ShapeSpec, SplatSpec, TransformSpec, parse_scene_file, parse_scene_str,
 };
 pub use load::{build_scene, load_scene};
-pub use model::{Camera, Light, LoadReport, Material, RenderOptions, Scene, TruthSource};
+pub use model::{
+    Camera, Light, LoadReport, Material, RenderOptions, Scene, SceneScale, TruthSource,
+};

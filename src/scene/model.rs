@@ -2,8 +2,7 @@
 //! materials, splats) in re-centred f32 coordinates, and what loading
 //! measured and knew about the exact surfaces.
 
-use crate::accel::SceneScale;
-use crate::accel::resolve::ShadingMode;
+use crate::resolve::ShadingMode;
 use crate::splat::Splat;
 use glam::{DVec3, Vec3};
 
@@ -129,6 +128,30 @@ impl Camera {
         let sx = 2.0 * px / self.width as f32 - 1.0;
         let sy = 1.0 - 2.0 * py / self.height as f32;
         crate::accel::Ray::new(self.origin, self.forward + self.right * sx + self.up * sy)
+    }
+}
+
+/// Scene-relative tolerances (`docs/DESIGN.md`, "Tolerances"): never
+/// absolute constants.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SceneScale {
+    /// Bounding-box diagonal of the splat set.
+    pub diagonal: f32,
+    /// Blending window `xi` of §4.3.
+    pub xi: f32,
+    /// Self-intersection distance `eps_self` of §3.2 (fig. 9 right).
+    pub eps_self: f32,
+}
+
+impl SceneScale {
+    /// Default fractions of the diagonal: `xi = 1e-3 d`, `eps_self = 1e-4 d`.
+    #[must_use]
+    pub fn from_diagonal(diagonal: f32) -> SceneScale {
+        SceneScale {
+            diagonal,
+            xi: 1e-3 * diagonal,
+            eps_self: 1e-4 * diagonal,
+        }
     }
 }
 

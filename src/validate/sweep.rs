@@ -11,9 +11,9 @@
 //! rendered once.
 
 use crate::accel::BackendKind;
-use crate::accel::resolve::ShadingMode;
 use crate::progress::Progress;
 use crate::render::integrator::{Frame, render};
+use crate::resolve::ShadingMode;
 use crate::scene::{ModelSpec, Scene, SceneFile, build_scene};
 use crate::validate::compare::{TruthErrors, render_truth, truth_errors};
 use crate::validate::truth::Truth;

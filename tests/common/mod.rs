@@ -6,9 +6,9 @@
 
 use glam::{Vec2, Vec3};
 use splatray::accel::octree::{Octree, OctreeParams, OverlapTest};
-use splatray::accel::resolve::{ShadingMode, resolve};
 use splatray::accel::{Backend, BuildStats, CandidateHits, Ray, backends as registry};
 use splatray::primitive::{Disc, Hit, Primitive, Single};
+use splatray::resolve::{ShadingMode, resolve};
 use splatray::splat::{NormalField, Splat};
 use std::path::{Path, PathBuf};
 

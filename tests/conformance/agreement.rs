@@ -7,9 +7,10 @@
 
 use crate::common::*;
 use glam::Vec3;
+use splatray::accel::Backend;
 use splatray::accel::octree::{Octree, OctreeParams};
-use splatray::accel::{Backend, SceneScale};
 use splatray::primitive::Disc;
+use splatray::scene::SceneScale;
 use splatray::splat::Splat;
 
 const SPLATS: usize = 3000;

@@ -5,9 +5,10 @@
 
 use crate::common::*;
 use glam::{DVec3, Vec2, Vec3};
-use splatray::accel::resolve::{ShadingMode, resolve};
-use splatray::accel::{CandidateHits, MAX_CANDIDATES, Ray, SceneScale};
+use splatray::accel::{CandidateHits, MAX_CANDIDATES, Ray};
 use splatray::primitive::Primitive;
+use splatray::resolve::{ShadingMode, resolve};
+use splatray::scene::SceneScale;
 use splatray::splat::{NormalField, Splat};
 
 fn q(origin: Vec3, dir: Vec3) -> Query {

@@ -2,7 +2,8 @@
 //! hit, shared by every backend (`docs/DESIGN.md`, "The backend contract";
 //! report §3.2 and §4.3).
 
-use super::{Candidate, CandidateHits, Ray};
+use crate::accel::{Candidate, CandidateHits};
+use crate::geometry::Ray;
 use crate::splat::Splat;
 use glam::Vec3;
 
