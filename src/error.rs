@@ -85,3 +85,11 @@ impl From<&str> for Error {
         Error::Invalid(s.to_string())
     }
 }
+
+/// For callers whose errors are still one-line strings: `?` turns an
+/// [`Error`] into its message.
+impl From<Error> for String {
+    fn from(e: Error) -> String {
+        e.to_string()
+    }
+}

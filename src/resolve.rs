@@ -5,6 +5,7 @@
 use crate::accel::{Candidate, CandidateHits};
 use crate::geometry::Ray;
 use crate::splat::Splat;
+use crate::{Error, Result};
 use glam::Vec3;
 
 /// How the shading normal is formed (report §4).
@@ -21,15 +22,15 @@ pub enum ShadingMode {
 }
 
 impl std::str::FromStr for ShadingMode {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
         match s {
             "flat" => Ok(ShadingMode::Flat),
             "blended" => Ok(ShadingMode::Blended),
             "phong" => Ok(ShadingMode::Phong),
-            _ => Err(format!(
+            _ => Err(Error::invalid(format!(
                 "unknown shading mode '{s}' (expected flat, blended or phong)"
-            )),
+            ))),
         }
     }
 }

@@ -2,8 +2,10 @@
 //! each rendered by both backends, which must agree ray for ray and pixel
 //! for pixel, with no NaN anywhere.
 
-use splatray::accel::BackendKind;
-use splatray::render::integrator::{Frame, render};
+mod common;
+
+use common::render_with;
+
 use splatray::scene::{Scene, build_scene, load_scene, parse_scene_str};
 use splatray::validate::compare::compare_frames;
 use std::path::{Path, PathBuf};
@@ -26,19 +28,14 @@ fn small(mut s: Scene) -> Scene {
     s
 }
 
-fn render_with(s: &Scene, kind: BackendKind) -> Frame {
-    let b = kind.build(&s.splats).unwrap();
-    render(s, b.as_ref(), None)
-}
-
 #[test]
 fn every_hard_scene_agrees_across_backends_without_nan() {
     let list = scenes();
     assert!(list.len() >= 4, "{list:?}");
     for path in list {
         let s = small(load_scene(&path, None).unwrap());
-        let o = render_with(&s, BackendKind::Octree);
-        let e = render_with(&s, BackendKind::Embree);
+        let o = render_with(&s, "octree");
+        let e = render_with(&s, "embree");
         let name = path.display();
         assert!(
             o.splat.iter().any(|&id| id != u32::MAX),
@@ -79,8 +76,8 @@ fn far_from_origin_renders_like_the_origin() {
     let far = small(load_scene(&path, None).unwrap());
     let near =
         small(build_scene(&parse_scene_str(&near_text).unwrap(), Path::new("."), None).unwrap());
-    let a = render_with(&far, BackendKind::Octree);
-    let b = render_with(&near, BackendKind::Octree);
+    let a = render_with(&far, "octree");
+    let b = render_with(&near, "octree");
     let c = compare_frames(&a, &b, far.options.scale.diagonal);
     eprintln!("far vs near: {c:?}");
     assert!(c.hit_agreement > 0.999, "{c:?}");
@@ -94,8 +91,8 @@ fn bundled_scenes_render_identically_with_both_backends() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
     for name in ["bunny.toml", "glass.toml", "shading.toml"] {
         let s = small(load_scene(&root.join(name), None).unwrap());
-        let o = render_with(&s, BackendKind::Octree);
-        let e = render_with(&s, BackendKind::Embree);
+        let o = render_with(&s, "octree");
+        let e = render_with(&s, "embree");
         assert!(o.rgb.iter().all(|c| c.is_finite()), "{name}: NaN pixel");
         assert!(o.splat.iter().any(|&id| id != u32::MAX), "{name}: empty");
         assert_eq!(o.rays, e.rays, "{name}: ray counts differ");

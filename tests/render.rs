@@ -1,20 +1,17 @@
 //! Analytic image tests for the integrator and the shading modes, and
 //! backend image agreement on a small render.
 
+mod common;
+
+use common::render_with;
+
 use glam::Vec3;
-use splatray::accel::BackendKind;
-use splatray::render::integrator::{Frame, render};
 use splatray::resolve::ShadingMode;
 use splatray::scene::{Scene, build_scene, parse_scene_str};
 use std::path::Path;
 
 fn scene(text: &str) -> Scene {
     build_scene(&parse_scene_str(text).unwrap(), Path::new("."), None).unwrap()
-}
-
-fn render_with(scene: &Scene, kind: BackendKind) -> Frame {
-    let backend = kind.build(&scene.splats).unwrap();
-    render(scene, backend.as_ref(), None)
 }
 
 /// A diffuse splat sphere (albedo 1) under a directional light (irradiance
@@ -45,7 +42,7 @@ ambient = 0.0
 fn lambert_error(mode: ShadingMode) -> (f64, f32, usize) {
     let mut sc = scene(LAMBERT);
     sc.options.shading = mode;
-    let frame = render_with(&sc, BackendKind::Embree);
+    let frame = render_with(&sc, "embree");
     let center = -sc.offset; // the sphere's centre in scene coordinates
     let l = -Vec3::new(-0.5, -0.4, -1.0).normalize();
     let (mut sum, mut max, mut n) = (0.0f64, 0.0f32, 0usize);
@@ -111,7 +108,7 @@ shape = { kind = "sphere", center = [0.0, 0.0, 0.0], radius = 1.0, splats = 2000
 material = { kind = "mirror", reflectance = 1.0 }
 "#,
     );
-    let frame = render_with(&sc, BackendKind::Embree);
+    let frame = render_with(&sc, "embree");
     assert!(frame.rays.reflection > 1000, "{:?}", frame.rays);
     for (i, c) in frame.rgb.iter().enumerate() {
         assert!(
@@ -142,7 +139,7 @@ material = { kind = "glass", ior = 1.5 }
 max_depth = 12
 "#,
     );
-    let frame = render_with(&sc, BackendKind::Embree);
+    let frame = render_with(&sc, "embree");
     assert!(frame.rays.refraction > 1000, "{:?}", frame.rays);
     let mut low = 0;
     let mut sum = 0.0f64;
@@ -191,11 +188,11 @@ intensity = 30
 samples = 4
 "#,
     );
-    let a = render_with(&sc, BackendKind::Brute);
+    let a = render_with(&sc, "brute");
     assert!(a.rays.refraction > 0 && a.rays.reflection > 0 && a.rays.shadow > 0);
-    for kind in [BackendKind::Embree, BackendKind::Octree] {
-        let b = render_with(&sc, kind);
-        let k = kind.name();
+    for info in splatray::accel::registry::renderers() {
+        let b = render_with(&sc, info.name);
+        let k = info.name;
         assert_eq!(a.rays, b.rays, "{k}: ray counts differ");
         assert_eq!(a.splat, b.splat, "{k}: resolved splats differ");
         assert_eq!(a.depth, b.depth, "{k}: depths differ");

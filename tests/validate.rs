@@ -1,7 +1,10 @@
 //! `compare`: the report schema, and a deliberately broken octree (§3.1
 //! step 3 skipped) caught as holes.
 
-use splatray::accel::BackendKind;
+mod common;
+
+use common::render_with;
+
 use splatray::accel::octree::{Octree, OctreeParams};
 use splatray::primitive::Disc;
 use splatray::render::integrator::render;
@@ -35,22 +38,14 @@ fn scene() -> Scene {
 #[test]
 fn correct_backends_agree_completely() {
     let sc = scene();
-    let o = KindFrame::new(&sc, BackendKind::Octree);
-    let e = KindFrame::new(&sc, BackendKind::Embree);
-    let a = compare_frames(&o.0, &e.0, sc.options.scale.diagonal);
+    let o = render_with(&sc, "octree");
+    let e = render_with(&sc, "embree");
+    let a = compare_frames(&o, &e, sc.options.scale.diagonal);
     assert_eq!(a.hit_agreement, 1.0, "{a:?}");
     assert_eq!(a.same_splat, 1.0, "{a:?}");
     assert_eq!(a.dt_rel_max, 0.0, "{a:?}");
     assert_eq!(a.normal_deg_max, 0.0, "{a:?}");
     assert_eq!(a.image_psnr_db, None, "{a:?}");
-}
-
-struct KindFrame(splatray::render::integrator::Frame);
-impl KindFrame {
-    fn new(sc: &Scene, kind: BackendKind) -> KindFrame {
-        let b = kind.build(&sc.splats).unwrap();
-        KindFrame(render(sc, b.as_ref(), None))
-    }
 }
 
 #[test]
@@ -59,7 +54,7 @@ fn broken_octree_is_caught_as_holes() {
     let discs: Vec<Disc> = sc.splats.iter().map(|s| s.disc_geometry()).collect();
     let broken = Octree::without_overlap_insertion(&discs, &OctreeParams::default());
     let bad = render(&sc, &broken, None);
-    let good = KindFrame::new(&sc, BackendKind::Embree).0;
+    let good = render_with(&sc, "embree");
     let a = compare_frames(&bad, &good, sc.options.scale.diagonal);
     eprintln!("broken octree vs embree: {a:?}");
     // Holes: rays the broken tree misses that Embree hits; never the reverse.
@@ -89,6 +84,17 @@ fn compare_report_has_the_documented_keys() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    // One entry per rendering backend of the registry, the reference first;
+    // every other one carries its agreement with the reference.
+    let by_name = |name: &str| {
+        v["backends"]
+            .as_array()
+            .and_then(|a| a.iter().find(|b| b["name"] == name))
+            .unwrap_or_else(|| panic!("backend {name} missing in {v}"))
+            .clone()
+    };
+    assert_eq!(v["backends"][0]["name"], "octree", "{v}");
+    let agreement = &by_name("embree")["agreement"];
     for k in [
         "rays",
         "hit_agreement",
@@ -99,14 +105,26 @@ fn compare_report_has_the_documented_keys() {
         "normal_deg_p99",
         "image_max_abs",
     ] {
-        assert!(v[k].is_number(), "{k} missing or not a number in {v}");
+        assert!(
+            agreement[k].is_number(),
+            "{k} missing or not a number in {v}"
+        );
     }
-    assert!(v.get("image_psnr_db").is_some(), "image_psnr_db missing");
+    assert!(
+        agreement.get("image_psnr_db").is_some(),
+        "image_psnr_db missing"
+    );
     assert_eq!(v["rays"], 96 * 72);
+    assert_eq!(agreement["rays"], 96 * 72);
     for b in ["octree", "embree"] {
         for k in ["build_seconds", "mrays_per_s"] {
-            assert!(v[b][k].as_f64().is_some_and(|x| x >= 0.0), "{b}.{k} in {v}");
+            let x = &by_name(b)[k];
+            assert!(x.as_f64().is_some_and(|x| x >= 0.0), "{b}.{k} in {v}");
         }
+        assert!(
+            by_name(b)["memory_bytes"].as_u64().is_some_and(|m| m > 0),
+            "{b} memory in {v}"
+        );
     }
     let img = image::open(&diff).unwrap();
     assert_eq!((img.width(), img.height()), (3 * 96, 72));

@@ -33,53 +33,6 @@ pub struct BuildStats {
     pub mean_refs_per_leaf: f64,
 }
 
-/// Which backend to build.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum BackendKind {
-    /// Every ray against every splat (the oracle; small scenes only).
-    Brute,
-    /// Embree 4 user-geometry discs.
-    Embree,
-    /// The octree of §3.1.
-    Octree,
-}
-
-impl std::str::FromStr for BackendKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<BackendKind, String> {
-        match s {
-            "brute" => Ok(BackendKind::Brute),
-            "embree" => Ok(BackendKind::Embree),
-            "octree" => Ok(BackendKind::Octree),
-            _ => Err(format!(
-                "unknown backend '{s}' (expected octree, embree or brute)"
-            )),
-        }
-    }
-}
-
-impl BackendKind {
-    /// The backend's name as the command line spells it.
-    #[must_use]
-    pub fn name(self) -> &'static str {
-        match self {
-            BackendKind::Brute => "brute",
-            BackendKind::Embree => "embree",
-            BackendKind::Octree => "octree",
-        }
-    }
-
-    /// Builds this backend over `splats`.
-    pub fn build(self, splats: &[crate::splat::Splat]) -> Result<Box<dyn Backend>, String> {
-        let discs: Vec<crate::primitive::Disc> = splats
-            .iter()
-            .map(crate::splat::Splat::disc_geometry)
-            .collect();
-        let info = registry::find(self.name()).ok_or_else(|| registry::unknown(self.name()))?;
-        (info.build)(&discs).map_err(|e| e.to_string())
-    }
-}
-
 /// One acceleration backend (`docs/DESIGN.md`, "The backend contract"). Implemented by the brute-force
 /// oracle, the octree and Embree.
 pub trait Backend: Send + Sync {

@@ -10,6 +10,7 @@ use super::embree::EmbreeBackend;
 use super::octree::{Octree, OctreeParams};
 use crate::embree::{Device, EmbreeError};
 use crate::primitive::{Disc, Primitive};
+use crate::splat::Splat;
 
 /// Builds a backend over primitives (primitive `i` gets id `i`).
 pub type BuildFn<P> = fn(&[P]) -> Result<Box<dyn Backend>, EmbreeError>;
@@ -20,17 +21,18 @@ pub struct BackendInfo<P> {
     pub name: &'static str,
     /// One line for the help text.
     pub about: &'static str,
-    /// True for a reference that tests every primitive for every ray: used
-    /// as the oracle on small inputs, left out of `compare`, `sweep` and the
-    /// benchmarks (quadratic).
+    /// True for a brute force that tests every primitive for every ray:
+    /// quadratic, so left out of `compare`, `sweep` and the benchmarks; the
+    /// first one is the oracle of the conformance tests, any other is tested
+    /// against it like every backend.
     pub oracle: bool,
     /// Builds the backend over the primitives (primitive `i` gets id `i`).
     pub build: BuildFn<P>,
 }
 
 /// Every backend, for primitives of type `P`: the scene's backends first
-/// (the first one is the default and the reference of `compare`), the
-/// oracle last.
+/// (the first one is the default and the reference of `compare`), then the
+/// brute forces (the first of them is the oracle).
 #[must_use]
 pub fn backends<P: Primitive>() -> Vec<BackendInfo<P>> {
     vec![
@@ -56,7 +58,7 @@ pub fn backends<P: Primitive>() -> Vec<BackendInfo<P>> {
         BackendInfo {
             name: "brute-reversed",
             about: "test only: brute force offering hits in reverse order",
-            oracle: false,
+            oracle: true,
             build: |p| Ok(Box::new(super::brute::BruteReversed::new(p))),
         },
     ]
@@ -81,4 +83,22 @@ pub fn unknown(name: &str) -> String {
         "unknown backend '{name}' (expected one of: {})",
         names().join(", ")
     )
+}
+
+/// The backends that render scenes: every registered one but the oracle,
+/// in registry order (the first is the reference of `compare` and `sweep`).
+#[must_use]
+pub fn renderers() -> Vec<BackendInfo<Disc>> {
+    backends::<Disc>()
+        .into_iter()
+        .filter(|b| !b.oracle)
+        .collect()
+}
+
+impl BackendInfo<Disc> {
+    /// Builds this backend over the discs of `splats`.
+    pub fn build_splats(&self, splats: &[Splat]) -> Result<Box<dyn Backend>, EmbreeError> {
+        let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
+        (self.build)(&discs)
+    }
 }

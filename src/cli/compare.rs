@@ -1,8 +1,10 @@
-//! `splatray compare`: one scene through the octree and Embree in one run.
+//! `splatray compare`: one scene through every rendering backend of the
+//! registry in one run, each compared ray for ray with the first (the
+//! reference).
 
 use super::progress::ProgressLine;
 use super::render::{default_scene, write_json};
-use splatray::accel::BackendKind;
+use splatray::accel::registry;
 use splatray::render::integrator::{Frame, render};
 use splatray::render::output::{check_output_path, save};
 use splatray::resolve::ShadingMode;
@@ -21,7 +23,8 @@ pub struct CompareArgs {
     /// Write the JSON report here.
     #[arg(long)]
     pub report: Option<PathBuf>,
-    /// Write a difference heat map here (PNG): octree | embree | difference.
+    /// Write a difference heat map here (PNG): the reference backend | the
+    /// second backend | difference.
     #[arg(long)]
     pub diff: Option<PathBuf>,
     /// Override the camera's width.
@@ -42,25 +45,29 @@ pub struct CompareArgs {
     pub truth: bool,
 }
 
-/// Speed of one backend in the comparison run.
+/// One backend in the comparison run: its speed and memory, and (except
+/// for the reference) its agreement with the reference.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct BackendRun {
+    /// The backend's registry name.
+    pub name: &'static str,
     /// Seconds to build the acceleration structure.
     pub build_seconds: f64,
+    /// Bytes the structure holds (for Embree, what its memory monitor
+    /// counted).
+    pub memory_bytes: usize,
     /// Seconds to render.
     pub render_seconds: f64,
     /// Millions of rays (all kinds) per second.
     pub mrays_per_s: f64,
-}
-
-impl BackendRun {
-    fn of(build_seconds: f64, f: &Frame) -> BackendRun {
-        BackendRun {
-            build_seconds,
-            render_seconds: f.seconds,
-            mrays_per_s: f.rays.total() as f64 / f.seconds.max(1e-9) / 1e6,
-        }
-    }
+    /// The reference's rays per second over this backend's, measured in
+    /// this run (absent for the reference).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference_over_this: Option<f64>,
+    /// Agreement of the reference (first) with this backend, primary ray
+    /// for primary ray (absent for the reference).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub agreement: Option<Agreement>,
 }
 
 /// The `compare` report.
@@ -70,15 +77,10 @@ pub struct CompareReport {
     pub scene: String,
     /// Splats.
     pub splats: usize,
-    /// Agreement figures (octree first, Embree second).
-    #[serde(flatten)]
-    pub agreement: Agreement,
-    /// The octree's speed.
-    pub octree: BackendRun,
-    /// Embree's speed.
-    pub embree: BackendRun,
-    /// Octree rays per second over Embree's, measured in this run.
-    pub octree_over_embree: f64,
+    /// Primary rays compared (one per pixel).
+    pub rays: usize,
+    /// Every rendering backend of the registry, the reference first.
+    pub backends: Vec<BackendRun>,
     /// Errors against the exact surfaces (with `--truth`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub truth: Option<TruthReport>,
@@ -89,10 +91,23 @@ pub struct CompareReport {
 pub struct TruthReport {
     /// Seconds to render the exact surfaces.
     pub render_seconds: f64,
-    /// The octree's splats against the surface.
-    pub octree: TruthErrors,
-    /// Embree's splats against the surface.
-    pub embree: TruthErrors,
+    /// Each backend's splats against the surface, in the order of
+    /// [`CompareReport::backends`].
+    pub backends: Vec<NamedTruthErrors>,
+}
+
+/// One backend's errors against the exact surface.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct NamedTruthErrors {
+    /// The backend's registry name.
+    pub name: &'static str,
+    /// Its errors.
+    #[serde(flatten)]
+    pub errors: TruthErrors,
+}
+
+fn mrays_per_s(f: &Frame) -> f64 {
+    f.rays.total() as f64 / f.seconds.max(1e-9) / 1e6
 }
 
 /// Runs `splatray compare`.
@@ -115,80 +130,113 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
     } else {
         None
     };
-    let mut runs = Vec::new();
-    for kind in [BackendKind::Octree, BackendKind::Embree] {
-        let backend = kind.build(&scene.splats)?;
-        let frame = render(&scene, backend.as_ref(), Some(&progress));
-        runs.push((backend.stats().build_seconds, frame));
-    }
-    let (ob, of) = &runs[0];
-    let (eb, ef) = &runs[1];
-    let agreement = compare_frames(of, ef, scene.options.scale.diagonal);
-    let octree = BackendRun::of(*ob, of);
-    let embree = BackendRun::of(*eb, ef);
     let diagonal = scene.options.scale.diagonal;
+    let mut frames: Vec<Frame> = Vec::new();
+    let mut backends: Vec<BackendRun> = Vec::new();
+    for info in registry::renderers() {
+        let backend = info
+            .build_splats(&scene.splats)
+            .map_err(|e| e.to_string())?;
+        let frame = render(&scene, backend.as_ref(), Some(&progress));
+        let stats = backend.stats();
+        let (reference_over_this, agreement) = match frames.first() {
+            Some(reference) => (
+                Some(mrays_per_s(reference) / mrays_per_s(&frame).max(1e-12)),
+                Some(compare_frames(reference, &frame, diagonal)),
+            ),
+            None => (None, None),
+        };
+        backends.push(BackendRun {
+            name: info.name,
+            build_seconds: stats.build_seconds,
+            memory_bytes: stats.memory_bytes,
+            render_seconds: frame.seconds,
+            mrays_per_s: mrays_per_s(&frame),
+            reference_over_this,
+            agreement,
+        });
+        frames.push(frame);
+    }
     let truth = truth.map(|t| {
         let tf = render_truth(&scene, &t, Some(&progress));
-        let errors = |f: &Frame| truth_errors(f.clone(), &tf, &scene.camera, diagonal);
         TruthReport {
             render_seconds: tf.seconds,
-            octree: errors(of),
-            embree: errors(ef),
+            backends: backends
+                .iter()
+                .zip(&frames)
+                .map(|(b, f)| NamedTruthErrors {
+                    name: b.name,
+                    errors: truth_errors(f.clone(), &tf, &scene.camera, diagonal),
+                })
+                .collect(),
         }
     });
     line.finish();
     let report = CompareReport {
         scene: scene_path.display().to_string(),
         splats: scene.splats.len(),
-        octree_over_embree: octree.mrays_per_s / embree.mrays_per_s.max(1e-12),
-        agreement,
-        octree,
-        embree,
+        rays: frames.first().map_or(0, |f| f.depth.len()),
+        backends,
         truth,
     };
-    if let Some(d) = &args.diff {
-        save(&diff_image(of, ef), d, image::ImageFormat::Png)?;
+    if let (Some(d), [a, b, ..]) = (&args.diff, frames.as_slice()) {
+        save(&diff_image(a, b), d, image::ImageFormat::Png)?;
     }
     if let Some(r) = &args.report {
         write_json(r, &report)?;
     }
-    let a = &report.agreement;
+    print_report(&report);
+    Ok(())
+}
+
+/// The report as lines on stdout.
+fn print_report(report: &CompareReport) {
     println!(
         "{}: {} splats, {} primary rays",
-        report.scene, report.splats, a.rays
+        report.scene, report.splats, report.rays
     );
-    println!(
-        "  hit agreement {:.6}, same splat {:.6}, only octree {}, only embree {}",
-        a.hit_agreement, a.same_splat, a.only_first, a.only_second
-    );
-    println!(
-        "  |dt|/diagonal p50 {:.3e} p99 {:.3e} max {:.3e}; normal deg p99 {:.3e} max {:.3e}",
-        a.dt_rel_p50, a.dt_rel_p99, a.dt_rel_max, a.normal_deg_p99, a.normal_deg_max
-    );
-    println!(
-        "  image PSNR {} dB, max |diff| {:.3e}",
-        a.image_psnr_db
-            .map_or("inf (identical)".to_string(), |p| format!("{p:.2}")),
-        a.image_max_abs
-    );
-    for (name, r) in [("octree", &report.octree), ("embree", &report.embree)] {
+    let Some(reference) = report.backends.first() else {
+        return;
+    };
+    for r in &report.backends {
         println!(
-            "  {name}: build {:.3} s, render {:.3} s, {:.2} Mrays/s",
-            r.build_seconds, r.render_seconds, r.mrays_per_s
+            "  {}: build {:.3} s ({:.1} MB), render {:.3} s, {:.2} Mrays/s",
+            r.name,
+            r.build_seconds,
+            r.memory_bytes as f64 / 1e6,
+            r.render_seconds,
+            r.mrays_per_s
         );
+        let (Some(a), Some(ratio)) = (&r.agreement, r.reference_over_this) else {
+            continue;
+        };
+        let (x, y) = (reference.name, r.name);
+        println!(
+            "    {x} vs {y}: hit agreement {:.6}, same splat {:.6}, only {x} {}, only {y} {}",
+            a.hit_agreement, a.same_splat, a.only_first, a.only_second
+        );
+        println!(
+            "    |dt|/diagonal p50 {:.3e} p99 {:.3e} max {:.3e}; normal deg p99 {:.3e} max {:.3e}",
+            a.dt_rel_p50, a.dt_rel_p99, a.dt_rel_max, a.normal_deg_p99, a.normal_deg_max
+        );
+        println!(
+            "    image PSNR {} dB, max |diff| {:.3e}",
+            a.image_psnr_db
+                .map_or("inf (identical)".to_string(), |p| format!("{p:.2}")),
+            a.image_max_abs
+        );
+        println!("    {x}/{y} throughput ratio {ratio:.2} (same run)");
     }
-    println!(
-        "  octree/embree throughput ratio {:.2} (same run)",
-        report.octree_over_embree
-    );
     if let Some(t) = &report.truth {
         println!(
             "  against the exact surface (rendered in {:.3} s):",
             t.render_seconds
         );
-        for (name, e) in [("octree", &t.octree), ("embree", &t.embree)] {
+        for b in &t.backends {
+            let e = &b.errors;
             println!(
-                "  {name}: coverage {:.5}, false hits {:.5}, depth/diag p50 {:.2e} p99 {:.2e}, normal deg mean {:.3} p99 {:.3}, PSNR {}",
+                "  {}: coverage {:.5}, false hits {:.5}, depth/diag p50 {:.2e} p99 {:.2e}, normal deg mean {:.3} p99 {:.3}, PSNR {}",
+                b.name,
                 e.coverage,
                 e.false_hits,
                 e.depth_rel_p50,
@@ -200,5 +248,4 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
             );
         }
     }
-    Ok(())
 }

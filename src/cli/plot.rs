@@ -51,8 +51,8 @@ where
     let mut xs = Vec::new();
     let mut ys = Vec::new();
     for r in rows {
-        xs.extend([r.octree_render_s, r.embree_render_s]);
-        ys.extend([y(&r.octree), y(&r.embree)].into_iter().flatten());
+        xs.extend(r.backends.iter().map(|b| b.render_s));
+        ys.extend(r.backends.iter().filter_map(|b| y(&b.errors)));
     }
     let fin = |v: &Vec<f64>| {
         v.iter()
@@ -99,26 +99,28 @@ where
         .map_err(err)?;
     for (mi, mode) in MODES.into_iter().enumerate() {
         let color = mode_color(mi);
-        for octree in [true, false] {
+        let count = rows.first().map_or(0, |r| r.backends.len());
+        for k in 0..count {
+            // The reference backend (the first) solid with dots and splat
+            // counts, every other one dashed with triangles.
+            let reference = k == 0;
             let pts: Vec<(f64, f64, usize)> = rows
                 .iter()
                 .filter(|r| r.shading == mode)
                 .filter_map(|r| {
-                    let (s, e) = if octree {
-                        (r.octree_render_s, &r.octree)
-                    } else {
-                        (r.embree_render_s, &r.embree)
-                    };
-                    y(e).filter(|v| v.is_finite()).map(|v| (s, v, r.splats))
+                    let b = &r.backends[k];
+                    y(&b.errors)
+                        .filter(|v| v.is_finite())
+                        .map(|v| (b.render_s, v, r.splats))
                 })
                 .collect();
             let name = format!(
                 "{} {}",
-                if octree { "octree" } else { "embree" },
+                rows.first().map_or("", |r| r.backends[k].name),
                 mode_name(mode)
             );
             let xy = pts.iter().map(|&(x, y, _)| (x, y));
-            let line = if octree {
+            let line = if reference {
                 chart
                     .draw_series(LineSeries::new(xy, color.stroke_width(2)))
                     .map_err(err)?
@@ -128,7 +130,7 @@ where
                     .map_err(err)?
             };
             line.label(name).legend(move |(x, y)| {
-                if octree {
+                if reference {
                     PathElement::new(vec![(x, y), (x + 22, y)], color.stroke_width(2))
                 } else {
                     PathElement::new(vec![(x, y), (x + 8, y)], color.stroke_width(2))
@@ -136,14 +138,14 @@ where
             });
             chart
                 .draw_series(pts.iter().map(|&(x, y, _)| {
-                    if octree {
+                    if reference {
                         Circle::new((x, y), 4, color.filled()).into_dyn()
                     } else {
                         TriangleMarker::new((x, y), 5, color.stroke_width(2)).into_dyn()
                     }
                 }))
                 .map_err(err)?;
-            if octree {
+            if reference {
                 chart
                     .draw_series(pts.iter().map(|&(x, y, n)| {
                         EmptyElement::at((x, y))

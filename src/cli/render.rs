@@ -1,7 +1,7 @@
 //! `splatray render`.
 
 use super::progress::ProgressLine;
-use splatray::accel::BackendKind;
+use splatray::accel::registry;
 use splatray::render::integrator::{Frame, RayCounts, render};
 use splatray::render::output::{Aov, aov_path, check_output_path, write_aov, write_image};
 use splatray::resolve::ShadingMode;
@@ -13,9 +13,14 @@ use std::path::{Path, PathBuf};
 pub struct RenderArgs {
     /// Scene file (TOML). Default: the bundled scenes/bunny.toml.
     pub scene: Option<PathBuf>,
-    /// Acceleration backend: octree, embree or brute.
-    #[arg(long, default_value = "octree")]
-    pub backend: BackendKind,
+    /// Acceleration backend (every backend of the registry; the first is
+    /// the default).
+    #[arg(
+        long,
+        default_value_t = default_backend(),
+        value_parser = clap::builder::PossibleValuesParser::new(registry::names()),
+    )]
+    pub backend: String,
     /// Output image (.png, or .exr for linear radiance). Default: the
     /// scene's name with .png, in the current folder.
     #[arg(short, long)]
@@ -39,6 +44,11 @@ pub struct RenderArgs {
     /// depth,normal,splat).
     #[arg(long, value_delimiter = ',')]
     pub aov: Vec<Aov>,
+}
+
+/// The default backend: the registry's first.
+fn default_backend() -> String {
+    registry::names()[0].to_string()
 }
 
 /// The bundled default scene: `scenes/bunny.toml` under the current folder,
@@ -138,7 +148,10 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
     for w in &scene.load.warnings {
         eprintln!("warning: {w}");
     }
-    let backend = args.backend.build(&scene.splats)?;
+    let info = registry::find(&args.backend).ok_or_else(|| registry::unknown(&args.backend))?;
+    let backend = info
+        .build_splats(&scene.splats)
+        .map_err(|e| e.to_string())?;
     let build_seconds = backend.stats().build_seconds;
     let frame = render(&scene, backend.as_ref(), Some(&progress));
     line.finish();

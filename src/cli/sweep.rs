@@ -138,21 +138,25 @@ fn summary(rows: &[SweepRow]) {
         let of: Vec<&SweepRow> = rows.iter().filter(|r| r.shading == mode).collect();
         if let (Some(a), Some(b)) = (of.first(), of.last()) {
             let p = |r: &SweepRow| {
-                r.octree
+                r.reference()
+                    .errors
                     .image_psnr_db
                     .map_or("inf".to_string(), |p| format!("{p:.2}"))
             };
+            let renders: Vec<String> = a
+                .backends
+                .iter()
+                .zip(&b.backends)
+                .map(|(x, y)| format!("{} render {:.3} -> {:.3} s", x.name, x.render_s, y.render_s))
+                .collect();
             println!(
-                "  {:<7} normal deg mean {:.3} -> {:.3}, PSNR {} -> {} dB, octree render {:.3} -> {:.3} s, embree {:.3} -> {:.3} s",
+                "  {:<7} normal deg mean {:.3} -> {:.3}, PSNR {} -> {} dB, {}",
                 mode_name(mode),
-                a.octree.normal_deg_mean,
-                b.octree.normal_deg_mean,
+                a.reference().errors.normal_deg_mean,
+                b.reference().errors.normal_deg_mean,
                 p(a),
                 p(b),
-                a.octree_render_s,
-                b.octree_render_s,
-                a.embree_render_s,
-                b.embree_render_s
+                renders.join(", ")
             );
         }
     }

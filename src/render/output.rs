@@ -4,6 +4,7 @@
 //! never leaves a half-written file.
 
 use super::integrator::Frame;
+use crate::{Error, Result};
 use glam::Vec3;
 use image::{ImageBuffer, ImageFormat, Rgb};
 use std::path::{Path, PathBuf};
@@ -33,7 +34,7 @@ pub fn to_srgb8(frame: &Frame) -> ImageBuffer<Rgb<u8>, Vec<u8>> {
     ImageBuffer::from_raw(frame.width, frame.height, data).unwrap_or_default()
 }
 
-fn format_of(path: &Path) -> Result<ImageFormat, String> {
+fn format_of(path: &Path) -> Result<ImageFormat> {
     match path
         .extension()
         .and_then(|e| e.to_str())
@@ -42,21 +43,24 @@ fn format_of(path: &Path) -> Result<ImageFormat, String> {
     {
         Some("png") => Ok(ImageFormat::Png),
         Some("exr") => Ok(ImageFormat::OpenExr),
-        _ => Err(format!(
+        _ => Err(Error::invalid(format!(
             "{}: output must end in .png or .exr",
             path.display()
-        )),
+        ))),
     }
 }
 
 /// Checks an output path before any work is done: known extension, and an
 /// existing folder.
-pub fn check_output_path(path: &Path) -> Result<(), String> {
+pub fn check_output_path(path: &Path) -> Result<()> {
     format_of(path)?;
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
     if let Some(d) = dir {
         if !d.is_dir() {
-            return Err(format!("{}: folder does not exist", d.display()));
+            return Err(Error::invalid(format!(
+                "{}: folder does not exist",
+                d.display()
+            )));
         }
     }
     Ok(())
@@ -64,25 +68,24 @@ pub fn check_output_path(path: &Path) -> Result<(), String> {
 
 /// Saves `img` in `format` to `path` atomically; errors are one line naming
 /// the file.
-pub fn save<P, C>(img: &ImageBuffer<P, C>, path: &Path, format: ImageFormat) -> Result<(), String>
+pub fn save<P, C>(img: &ImageBuffer<P, C>, path: &Path, format: ImageFormat) -> Result<()>
 where
     P: image::PixelWithColorType,
     [P::Subpixel]: image::EncodableLayout,
     C: std::ops::Deref<Target = [P::Subpixel]>,
 {
-    crate::io::write_atomic(path, |tmp| img.save_with_format(tmp, format))
-        .map_err(|e| e.to_string())
+    crate::io::write_atomic(path, |tmp| img.save_with_format(tmp, format)).map_err(Error::from)
 }
 
-fn write_rgb32f(path: &Path, w: u32, h: u32, px: impl Iterator<Item = Vec3>) -> Result<(), String> {
+fn write_rgb32f(path: &Path, w: u32, h: u32, px: impl Iterator<Item = Vec3>) -> Result<()> {
     let data: Vec<f32> = px.flat_map(|c| c.to_array()).collect();
     let img: ImageBuffer<Rgb<f32>, Vec<f32>> =
-        ImageBuffer::from_raw(w, h, data).ok_or("image size mismatch")?;
+        ImageBuffer::from_raw(w, h, data).ok_or_else(|| Error::invalid("image size mismatch"))?;
     save(&img, path, ImageFormat::OpenExr)
 }
 
 /// Writes the frame: PNG (sRGB, 8 bit) or EXR (linear float) by extension.
-pub fn write_image(frame: &Frame, path: &Path) -> Result<(), String> {
+pub fn write_image(frame: &Frame, path: &Path) -> Result<()> {
     match format_of(path)? {
         ImageFormat::OpenExr => {
             write_rgb32f(path, frame.width, frame.height, frame.rgb.iter().copied())
@@ -103,15 +106,15 @@ pub enum Aov {
 }
 
 impl std::str::FromStr for Aov {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Aov, String> {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Aov> {
         match s {
             "depth" => Ok(Aov::Depth),
             "normal" => Ok(Aov::Normal),
             "splat" => Ok(Aov::Splat),
-            _ => Err(format!(
+            _ => Err(Error::invalid(format!(
                 "unknown AOV '{s}' (expected depth, normal or splat)"
-            )),
+            ))),
         }
     }
 }
@@ -133,7 +136,7 @@ pub fn aov_path(image: &Path, aov: Aov) -> PathBuf {
 
 /// Writes one AOV as a linear EXR (the value in all three channels for
 /// depth and splat id).
-pub fn write_aov(frame: &Frame, aov: Aov, path: &Path) -> Result<(), String> {
+pub fn write_aov(frame: &Frame, aov: Aov, path: &Path) -> Result<()> {
     let (w, h) = (frame.width, frame.height);
     match aov {
         Aov::Depth => write_rgb32f(path, w, h, frame.depth.iter().map(|&d| Vec3::splat(d))),

@@ -9,6 +9,7 @@
 
 use crate::resolve::ShadingMode;
 use crate::splat::Splat;
+use crate::{Error, Result};
 use glam::{DVec3, Mat3, Vec3};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -310,22 +311,22 @@ pub struct SceneFile {
 
 /// Reads and parses a scene file. Errors are one line (the TOML parser's
 /// message, which names the key and the line, is folded onto it).
-pub fn parse_scene_file(path: &Path) -> Result<SceneFile, String> {
+pub fn parse_scene_file(path: &Path) -> Result<SceneFile> {
     let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("{}: cannot read scene: {e}", path.display()))?;
-    parse_scene_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+        .map_err(|e| Error::invalid(format!("{}: cannot read scene: {e}", path.display())))?;
+    parse_scene_str(&text).map_err(|e| e.context(path.display()))
 }
 
 /// Parses scene TOML text.
-pub fn parse_scene_str(text: &str) -> Result<SceneFile, String> {
+pub fn parse_scene_str(text: &str) -> Result<SceneFile> {
     toml::from_str::<SceneFile>(text).map_err(|e| {
         let msg = e.message().to_string();
         match e.span() {
             Some(span) => {
                 let line = text[..span.start.min(text.len())].matches('\n').count() + 1;
-                format!("line {line}: {msg}")
+                Error::invalid(format!("line {line}: {msg}"))
             }
-            None => msg,
+            None => Error::invalid(msg),
         }
     })
 }
@@ -352,7 +353,9 @@ mod tests {
                 "line 7: unknown variant `smooth`, expected one of `flat`, `blended`, `phong`",
             ),
         ] {
-            let e = parse_scene_str(&format!("{HEAD}{line}\n")).unwrap_err();
+            let e = parse_scene_str(&format!("{HEAD}{line}\n"))
+                .unwrap_err()
+                .to_string();
             assert!(e.starts_with(expect), "{e}");
             assert_eq!(e.lines().count(), 1, "{e}");
         }

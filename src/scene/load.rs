@@ -12,6 +12,7 @@ use crate::progress::Progress;
 use crate::resolve::ShadingMode;
 use crate::scene::SceneScale;
 use crate::splat::Splat;
+use crate::{Error, Result};
 use glam::{DVec3, Vec2, Vec3};
 use std::path::Path;
 
@@ -21,10 +22,10 @@ use std::path::Path;
 ///
 /// # Errors
 /// One line naming the file (and the model, where one is at fault).
-pub fn load_scene(path: &Path, progress: Option<Progress<'_>>) -> Result<Scene, String> {
+pub fn load_scene(path: &Path, progress: Option<Progress<'_>>) -> Result<Scene> {
     let file = parse_scene_file(path)?;
     let base = path.parent().unwrap_or(Path::new("."));
-    build_scene(&file, base, progress).map_err(|e| format!("{}: {e}", path.display()))
+    build_scene(&file, base, progress).map_err(|e| e.context(path.display()))
 }
 
 /// Builds a scene from a parsed file; relative model paths are resolved
@@ -32,11 +33,7 @@ pub fn load_scene(path: &Path, progress: Option<Progress<'_>>) -> Result<Scene, 
 ///
 /// # Errors
 /// One line (naming the model where one is at fault).
-pub fn build_scene(
-    file: &SceneFile,
-    base: &Path,
-    progress: Option<Progress<'_>>,
-) -> Result<Scene, String> {
+pub fn build_scene(file: &SceneFile, base: &Path, progress: Option<Progress<'_>>) -> Result<Scene> {
     let c = &file.camera;
     check_camera(c)?;
     // Models, camera and lights are first shifted, in f64, by the first
@@ -48,7 +45,7 @@ pub fn build_scene(
         .map_or(DVec3::ZERO, |m| DVec3::from(m.transform.translate));
     finite("background", &file.background)?;
     if file.models.is_empty() {
-        return Err("the scene has no [[model]]".into());
+        return Err(Error::invalid("the scene has no [[model]]"));
     }
     let mut models = load_models(&file.models, base, shift, progress)?;
     let lights = file
@@ -83,21 +80,24 @@ pub fn build_scene(
 }
 
 /// The camera's resolution, samples and position are in range.
-fn check_camera(c: &CameraSpec) -> Result<(), String> {
+fn check_camera(c: &CameraSpec) -> Result<()> {
     if c.width == 0 || c.height == 0 {
-        return Err(format!(
+        return Err(Error::invalid(format!(
             "camera resolution {}x{} must be positive",
             c.width, c.height
-        ));
+        )));
     }
     if c.width > 1 << 15 || c.height > 1 << 15 {
-        return Err(format!(
+        return Err(Error::invalid(format!(
             "camera resolution {}x{} is over 32768",
             c.width, c.height
-        ));
+        )));
     }
     if c.spp == 0 || c.spp > 4096 {
-        return Err(format!("camera.spp {} must be in 1..=4096", c.spp));
+        return Err(Error::invalid(format!(
+            "camera.spp {} must be in 1..=4096",
+            c.spp
+        )));
     }
     finite("camera.from", &c.from.map(|x| x as f32))?;
     finite("camera.at", &c.at.map(|x| x as f32))
@@ -119,7 +119,7 @@ fn load_models(
     base: &Path,
     shift: DVec3,
     progress: Option<Progress<'_>>,
-) -> Result<Models, String> {
+) -> Result<Models> {
     let start = std::time::Instant::now();
     let mut out = Models {
         splats: Vec::new(),
@@ -130,16 +130,16 @@ fn load_models(
     };
     for (i, m) in specs.iter().enumerate() {
         let number = i + 1;
-        let in_model = |e: String| format!("model {number}: {e}");
-        let mid = u16::try_from(i).map_err(|_| "more than 65535 models".to_string())?;
+        let in_model = |e: Error| e.context(format_args!("model {number}"));
+        let mid = u16::try_from(i).map_err(|_| Error::invalid("more than 65535 models"))?;
         let (mut s, truth) =
             model_source(m, number, mid, base, shift, &mut out.load, progress).map_err(in_model)?;
         out.load.truth.push(truth);
         if !(m.transform.scale > 0.0 && m.transform.scale.is_finite()) {
-            return Err(in_model(format!(
+            return Err(in_model(Error::invalid(format!(
                 "transform.scale must be positive, got {}",
                 m.transform.scale
-            )));
+            ))));
         }
         m.transform.apply(&mut s, shift);
         out.materials.push(material(&m.material).map_err(in_model)?);
@@ -162,7 +162,7 @@ fn model_source(
     shift: DVec3,
     load: &mut LoadReport,
     progress: Option<Progress<'_>>,
-) -> Result<(Vec<Splat>, TruthSource), String> {
+) -> Result<(Vec<Splat>, TruthSource)> {
     let sources = [
         spec.points.is_some(),
         spec.splats.is_some(),
@@ -170,7 +170,9 @@ fn model_source(
         spec.shape.is_some(),
     ];
     if sources.iter().filter(|&&b| b).count() != 1 {
-        return Err("a model needs exactly one of `points`, `splats`, `mesh` or `shape`".into());
+        return Err(Error::invalid(
+            "a model needs exactly one of `points`, `splats`, `mesh` or `shape`",
+        ));
     }
     if let Some(shape) = &spec.shape {
         let splats = shape_splats(shape)?;
@@ -181,14 +183,14 @@ fn model_source(
         what: what.into(),
     };
     if let Some(p) = &spec.splats {
-        let splats = crate::io::read_splats(&base.join(p)).map_err(|e| e.to_string())?;
+        let splats = crate::io::read_splats(&base.join(p))?;
         return Ok((splats, unknown("a splat file")));
     }
     if let Some(p) = &spec.points {
         if spec.samples.is_some() {
-            return Err("`samples` applies to `mesh` models only".into());
+            return Err(Error::invalid("`samples` applies to `mesh` models only"));
         }
-        let cloud = crate::io::read_points(&base.join(p)).map_err(|e| e.to_string())?;
+        let cloud = crate::io::read_points(&base.join(p))?;
         let splats = generate_splats(spec, &cloud, load, progress)?;
         return Ok((splats, unknown("a point file")));
     }
@@ -213,14 +215,16 @@ fn model_source(
 
 /// A mesh model's points (sampled by area with the model's seed) and the
 /// mesh itself, in model space.
-fn sample_mesh_model(spec: &ModelSpec, path: &Path) -> Result<(PointCloud, Mesh), String> {
-    let samples = spec
-        .samples
-        .ok_or_else(|| format!("{}: a mesh model needs `samples`", path.display()))?;
+fn sample_mesh_model(spec: &ModelSpec, path: &Path) -> Result<(PointCloud, Mesh)> {
+    let samples = spec.samples.ok_or_else(|| {
+        Error::invalid(format!("{}: a mesh model needs `samples`", path.display()))
+    })?;
     if samples == 0 || samples > 50_000_000 {
-        return Err(format!("samples {samples} must be in 1..=50000000"));
+        return Err(Error::invalid(format!(
+            "samples {samples} must be in 1..=50000000"
+        )));
     }
-    let mesh = crate::io::read_mesh(path).map_err(|e| e.to_string())?;
+    let mesh = crate::io::read_mesh(path)?;
     let cloud = crate::io::sample_mesh(&mesh, samples, 0.0, spec.seed);
     Ok((cloud, mesh))
 }
@@ -232,7 +236,7 @@ fn generate_splats(
     cloud: &PointCloud,
     load: &mut LoadReport,
     progress: Option<Progress<'_>>,
-) -> Result<Vec<Splat>, String> {
+) -> Result<Vec<Splat>> {
     let d = crate::splat::SplatParams::default();
     let params = crate::splat::SplatParams {
         k: spec.splat.k.unwrap_or(d.k),
@@ -242,8 +246,7 @@ fn generate_splats(
         viewpoint: spec.splat.viewpoint.map(Vec3::from),
         ..d
     };
-    let (splats, report) = crate::splat::generate_with_progress(cloud, &params, progress)
-        .map_err(|e| e.to_string())?;
+    let (splats, report) = crate::splat::generate_with_progress(cloud, &params, progress)?;
     load.input_points += report.input_points;
     for s in &report.skipped_points {
         load.warnings
@@ -255,24 +258,32 @@ fn generate_splats(
 }
 
 /// The splats of a procedural shape, in model space.
-fn shape_splats(shape: &ShapeSpec) -> Result<Vec<Splat>, String> {
+fn shape_splats(shape: &ShapeSpec) -> Result<Vec<Splat>> {
     if shape.splats == 0 {
-        return Err("shape.splats must be at least 1".into());
+        return Err(Error::invalid("shape.splats must be at least 1"));
     }
     let center = v3(shape.center);
     finite("shape.center", &shape.center)?;
     match shape.kind {
         ShapeKind::Sphere => {
-            let r = shape.radius.ok_or("a sphere shape needs `radius`")?;
+            let r = shape
+                .radius
+                .ok_or_else(|| Error::invalid("a sphere shape needs `radius`"))?;
             if !(r > 0.0 && r.is_finite()) {
-                return Err(format!("shape.radius must be positive, got {r}"));
+                return Err(Error::invalid(format!(
+                    "shape.radius must be positive, got {r}"
+                )));
             }
             Ok(super::shapes::sphere(center, r, shape.splats))
         }
         ShapeKind::Quad => {
-            let size = shape.size.ok_or("a quad shape needs `size`")?;
+            let size = shape
+                .size
+                .ok_or_else(|| Error::invalid("a quad shape needs `size`"))?;
             if !(size[0] > 0.0 && size[1] > 0.0 && size[0].is_finite() && size[1].is_finite()) {
-                return Err(format!("shape.size must be positive, got {size:?}"));
+                return Err(Error::invalid(format!(
+                    "shape.size must be positive, got {size:?}"
+                )));
             }
             let normal = v3(shape.normal.unwrap_or([0.0, 1.0, 0.0]));
             Ok(super::shapes::quad(
@@ -318,11 +329,13 @@ fn v3(a: [f32; 3]) -> Vec3 {
     Vec3::from(a)
 }
 
-fn finite(name: &str, v: &[f32]) -> Result<(), String> {
+fn finite(name: &str, v: &[f32]) -> Result<()> {
     if v.iter().all(|x| x.is_finite()) {
         Ok(())
     } else {
-        Err(format!("{name}: values must be finite, got {v:?}"))
+        Err(Error::invalid(format!(
+            "{name}: values must be finite, got {v:?}"
+        )))
     }
 }
 
@@ -331,7 +344,7 @@ fn shifted(p: [f64; 3], shift: DVec3) -> Vec3 {
     (DVec3::from(p) - shift).as_vec3()
 }
 
-fn material(spec: &MaterialSpec) -> Result<Material, String> {
+fn material(spec: &MaterialSpec) -> Result<Material> {
     let color = v3(spec.color.unwrap_or([0.8, 0.8, 0.8]));
     finite("material.color", &color.to_array())?;
     Ok(match spec.kind {
@@ -347,7 +360,9 @@ fn material(spec: &MaterialSpec) -> Result<Material, String> {
         MaterialKind::Glass => {
             let ior = spec.ior.unwrap_or(1.5);
             if !(ior > 0.0 && ior.is_finite()) {
-                return Err(format!("material.ior must be positive, got {ior}"));
+                return Err(Error::invalid(format!(
+                    "material.ior must be positive, got {ior}"
+                )));
             }
             Material::Glass {
                 color: spec.color.map_or(Vec3::ONE, v3),
@@ -357,15 +372,15 @@ fn material(spec: &MaterialSpec) -> Result<Material, String> {
     })
 }
 
-fn light(spec: &LightSpec, shift: DVec3) -> Result<Light, String> {
+fn light(spec: &LightSpec, shift: DVec3) -> Result<Light> {
     let power = v3(spec.color) * spec.intensity;
     finite("light.color × intensity", &power.to_array())?;
     let position = || {
         let p = spec
             .position
-            .ok_or_else(|| format!("a {} light needs `position`", spec.kind))?;
+            .ok_or_else(|| Error::invalid(format!("a {} light needs `position`", spec.kind)))?;
         finite("light.position", &p.map(|x| x as f32))?;
-        Ok::<Vec3, String>(shifted(p, shift))
+        Ok::<Vec3, Error>(shifted(p, shift))
     };
     Ok(match spec.kind {
         LightKind::Point => Light::Point {
@@ -376,15 +391,19 @@ fn light(spec: &LightSpec, shift: DVec3) -> Result<Light, String> {
             direction: spec
                 .direction
                 .map(v3)
-                .ok_or("a directional light needs `direction`")?
+                .ok_or_else(|| Error::invalid("a directional light needs `direction`"))?
                 .try_normalize()
-                .ok_or("light.direction must be non-zero")?,
+                .ok_or_else(|| Error::invalid("light.direction must be non-zero"))?,
             power,
         },
         LightKind::Sphere => {
-            let radius = spec.radius.ok_or("a sphere light needs `radius`")?;
+            let radius = spec
+                .radius
+                .ok_or_else(|| Error::invalid("a sphere light needs `radius`"))?;
             if !(radius > 0.0 && radius.is_finite()) {
-                return Err(format!("light.radius must be positive, got {radius}"));
+                return Err(Error::invalid(format!(
+                    "light.radius must be positive, got {radius}"
+                )));
             }
             Light::Sphere {
                 position: position()?,
@@ -443,17 +462,19 @@ fn moved(l: Light, offset: Vec3) -> Light {
 
 /// `[render]` resolved: `xi` (§4.3) and `eps_self` (§3.2) are fractions of
 /// the scene diagonal.
-fn render_options(r: &RenderSpec, diagonal: f32) -> Result<RenderOptions, String> {
+fn render_options(r: &RenderSpec, diagonal: f32) -> Result<RenderOptions> {
     let mut scale = SceneScale::from_diagonal(diagonal);
     if let Some(xi) = r.xi {
         if !(xi >= 0.0 && xi.is_finite()) {
-            return Err(format!("render.xi must be >= 0, got {xi}"));
+            return Err(Error::invalid(format!("render.xi must be >= 0, got {xi}")));
         }
         scale.xi = xi * diagonal;
     }
     if let Some(e) = r.eps_self {
         if !(e >= 0.0 && e.is_finite()) {
-            return Err(format!("render.eps_self must be >= 0, got {e}"));
+            return Err(Error::invalid(format!(
+                "render.eps_self must be >= 0, got {e}"
+            )));
         }
         scale.eps_self = e * diagonal;
     }

@@ -4,6 +4,7 @@
 
 use crate::resolve::ShadingMode;
 use crate::splat::Splat;
+use crate::{Error, Result};
 use glam::{DVec3, Vec3};
 
 /// A surface material.
@@ -96,17 +97,19 @@ impl Camera {
         width: u32,
         height: u32,
         spp: u32,
-    ) -> Result<Camera, String> {
+    ) -> Result<Camera> {
         let forward = (at - from)
             .try_normalize()
-            .ok_or("camera: `from` and `at` coincide")?;
+            .ok_or_else(|| Error::invalid("camera: `from` and `at` coincide"))?;
         let right = forward
             .cross(up)
             .try_normalize()
-            .ok_or("camera: `up` is parallel to the view direction")?;
+            .ok_or_else(|| Error::invalid("camera: `up` is parallel to the view direction"))?;
         let true_up = right.cross(forward);
         if !(fov_deg > 0.0 && fov_deg < 180.0) {
-            return Err(format!("camera: fov {fov_deg} must be in (0, 180) degrees"));
+            return Err(Error::invalid(format!(
+                "camera: fov {fov_deg} must be in (0, 180) degrees"
+            )));
         }
         let half_h = (fov_deg.to_radians() * 0.5).tan();
         let half_w = half_h * width as f32 / height as f32;
@@ -277,16 +280,18 @@ impl Scene {
         height: Option<u32>,
         spp: Option<u32>,
         shading: Option<ShadingMode>,
-    ) -> Result<(), String> {
+    ) -> Result<()> {
         let c = self.camera;
         let w = width.unwrap_or(c.width);
         let h = height.unwrap_or(c.height);
         let spp = spp.unwrap_or(c.spp);
         if w == 0 || h == 0 || w > 1 << 15 || h > 1 << 15 {
-            return Err(format!("resolution {w}x{h} must be in 1..=32768"));
+            return Err(Error::invalid(format!(
+                "resolution {w}x{h} must be in 1..=32768"
+            )));
         }
         if spp == 0 || spp > 4096 {
-            return Err(format!("spp {spp} must be in 1..=4096"));
+            return Err(Error::invalid(format!("spp {spp} must be in 1..=4096")));
         }
         let half_h = c.up.length();
         let half_w = half_h * w as f32 / h as f32;

@@ -5,12 +5,13 @@
 //!
 //! Each budget step regenerates the splats of every model made from points
 //! or a mesh with another error threshold `ϵ` (§2.1); shapes and splat files
-//! stay as they are. Both backends are built once per step and render the
-//! scene in every shading mode; each render is compared with the exact
+//! stay as they are. Every rendering backend of the registry is built once
+//! per step and renders the scene in every shading mode; each render is compared with the exact
 //! surface of `compare --truth`, which does not depend on the budget and is
 //! rendered once.
 
-use crate::accel::BackendKind;
+use crate::accel::registry::renderers;
+use crate::error::{Error, Result};
 use crate::progress::Progress;
 use crate::render::integrator::{Frame, render};
 use crate::resolve::ShadingMode;
@@ -54,14 +55,14 @@ impl SweepPlan {
         steps: usize,
         width: u32,
         height: u32,
-    ) -> Result<SweepPlan, String> {
+    ) -> Result<SweepPlan> {
         if !(fine > 0.0 && coarse > fine && coarse.is_finite()) {
-            return Err(format!(
+            return Err(Error::invalid(format!(
                 "epsilon range {coarse}..{fine} must be finite with coarse > fine > 0"
-            ));
+            )));
         }
         if steps < 2 {
-            return Err(format!("steps {steps} must be at least 2"));
+            return Err(Error::invalid(format!("steps {steps} must be at least 2")));
         }
         let ratio = f64::from(fine) / f64::from(coarse);
         let epsilons = (0..steps)
@@ -73,6 +74,19 @@ impl SweepPlan {
             height,
         })
     }
+}
+
+/// One backend's figures in one row of the sweep.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BackendFigures {
+    /// The backend's registry name.
+    pub name: &'static str,
+    /// Build seconds (once per step).
+    pub build_s: f64,
+    /// Render seconds in this row's mode.
+    pub render_s: f64,
+    /// Its render against the exact surface.
+    pub errors: TruthErrors,
 }
 
 /// One row of the sweep: one budget step in one shading mode, every figure
@@ -91,69 +105,104 @@ pub struct SweepRow {
     pub scene_splats: usize,
     /// Seconds `build_scene` spent reading, sampling and generating splats.
     pub splat_seconds: f64,
-    /// Octree build seconds (once per step).
-    pub octree_build_s: f64,
-    /// Embree build seconds (once per step).
-    pub embree_build_s: f64,
-    /// Octree render seconds in this mode.
-    pub octree_render_s: f64,
-    /// Embree render seconds in this mode.
-    pub embree_render_s: f64,
-    /// The octree's render against the exact surface.
-    pub octree: TruthErrors,
-    /// Embree's render against the exact surface.
-    pub embree: TruthErrors,
-    /// True when both backends' errors are equal bit for bit (the contract of
-    /// DESIGN §2 says they should be).
+    /// Every rendering backend of the registry, the reference first.
+    pub backends: Vec<BackendFigures>,
+    /// True when every backend's errors equal the reference's bit for bit
+    /// (the backend contract of `docs/DESIGN.md` says they should).
     pub backends_identical: bool,
 }
 
-/// The CSV header, matching [`csv_line`].
-pub const CSV_HEADER: &str = "step,epsilon,shading,splats,scene_splats,splat_seconds,\
-octree_build_s,embree_build_s,octree_render_s,embree_render_s,\
-coverage,false_hits,depth_rel_p50,depth_rel_p99,normal_deg_mean,normal_deg_p99,psnr_db,\
-backends_identical,embree_coverage,embree_normal_deg_mean,embree_psnr_db";
+impl SweepRow {
+    /// The reference backend's figures (the first).
+    #[must_use]
+    pub fn reference(&self) -> &BackendFigures {
+        &self.backends[0]
+    }
+}
 
 fn psnr(p: Option<f64>) -> String {
     p.map_or("inf".to_string(), |p| p.to_string())
 }
 
-/// One CSV line (no newline) for `r`: the unprefixed truth errors are the
-/// octree's, `embree_*` repeats the key ones for Embree. An infinite PSNR
-/// (identical images) is written `inf`.
+/// The CSV header for backends `names` (reference first), matching
+/// [`csv_line`]: per backend `NAME_build_s` and `NAME_render_s`; the
+/// reference's truth errors unprefixed; then per other backend its key
+/// errors as `NAME_coverage`, `NAME_normal_deg_mean`, `NAME_psnr_db`.
+#[must_use]
+pub fn csv_header(names: &[&str]) -> String {
+    let mut h = vec![
+        "step".to_string(),
+        "epsilon".into(),
+        "shading".into(),
+        "splats".into(),
+        "scene_splats".into(),
+        "splat_seconds".into(),
+    ];
+    h.extend(names.iter().map(|n| format!("{n}_build_s")));
+    h.extend(names.iter().map(|n| format!("{n}_render_s")));
+    h.extend(
+        [
+            "coverage",
+            "false_hits",
+            "depth_rel_p50",
+            "depth_rel_p99",
+            "normal_deg_mean",
+            "normal_deg_p99",
+            "psnr_db",
+            "backends_identical",
+        ]
+        .map(String::from),
+    );
+    for n in names.iter().skip(1) {
+        h.extend(["coverage", "normal_deg_mean", "psnr_db"].map(|k| format!("{n}_{k}")));
+    }
+    h.join(",")
+}
+
+/// One CSV line (no newline) for `r`, in the columns of [`csv_header`]. An
+/// infinite PSNR (identical images) is written `inf`.
 #[must_use]
 pub fn csv_line(r: &SweepRow) -> String {
-    let (o, e) = (&r.octree, &r.embree);
-    format!(
-        "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-        r.step,
-        r.epsilon,
-        mode_name(r.shading),
-        r.splats,
-        r.scene_splats,
-        r.splat_seconds,
-        r.octree_build_s,
-        r.embree_build_s,
-        r.octree_render_s,
-        r.embree_render_s,
-        o.coverage,
-        o.false_hits,
-        o.depth_rel_p50,
-        o.depth_rel_p99,
-        o.normal_deg_mean,
-        o.normal_deg_p99,
+    let o = &r.reference().errors;
+    let mut c = vec![
+        r.step.to_string(),
+        r.epsilon.to_string(),
+        mode_name(r.shading).to_string(),
+        r.splats.to_string(),
+        r.scene_splats.to_string(),
+        r.splat_seconds.to_string(),
+    ];
+    c.extend(r.backends.iter().map(|b| b.build_s.to_string()));
+    c.extend(r.backends.iter().map(|b| b.render_s.to_string()));
+    c.extend([
+        o.coverage.to_string(),
+        o.false_hits.to_string(),
+        o.depth_rel_p50.to_string(),
+        o.depth_rel_p99.to_string(),
+        o.normal_deg_mean.to_string(),
+        o.normal_deg_p99.to_string(),
         psnr(o.image_psnr_db),
-        r.backends_identical,
-        e.coverage,
-        e.normal_deg_mean,
-        psnr(e.image_psnr_db),
-    )
+        r.backends_identical.to_string(),
+    ]);
+    for b in r.backends.iter().skip(1) {
+        let e = &b.errors;
+        c.extend([
+            e.coverage.to_string(),
+            e.normal_deg_mean.to_string(),
+            psnr(e.image_psnr_db),
+        ]);
+    }
+    c.join(",")
 }
 
 /// The whole CSV text, header first, one line per row.
 #[must_use]
 pub fn csv_text(rows: &[SweepRow]) -> String {
-    let mut s = String::from(CSV_HEADER);
+    let names: Vec<&str> = rows
+        .first()
+        .map(|r| r.backends.iter().map(|b| b.name).collect())
+        .unwrap_or_default();
+    let mut s = csv_header(&names);
     s.push('\n');
     for r in rows {
         s.push_str(&csv_line(r));
@@ -168,7 +217,7 @@ fn is_generated(m: &ModelSpec) -> bool {
 
 /// Sets the camera resolution (keeping the vertical field of view) and the
 /// shading mode of every material.
-fn set_view(scene: &mut Scene, plan: &SweepPlan, mode: ShadingMode) -> Result<(), String> {
+fn set_view(scene: &mut Scene, plan: &SweepPlan, mode: ShadingMode) -> Result<()> {
     scene.set_view(Some(plan.width), Some(plan.height), Some(1), Some(mode))
 }
 
@@ -204,11 +253,11 @@ pub fn run_sweep(
     plan: &SweepPlan,
     progress: Option<Progress<'_>>,
     log: &mut dyn FnMut(&str),
-) -> Result<Vec<SweepRow>, String> {
+) -> Result<Vec<SweepRow>> {
     if !file.models.iter().any(is_generated) {
-        return Err(
-            "the scene has no model made from points or a mesh: nothing to vary".to_string(),
-        );
+        return Err(Error::invalid(
+            "the scene has no model made from points or a mesh: nothing to vary",
+        ));
     }
     let generated: Vec<u16> = (0..file.models.len())
         .filter(|&i| is_generated(&file.models[i]))
@@ -241,27 +290,74 @@ pub fn run_sweep(
             .iter()
             .filter(|m| generated.contains(m))
             .count();
-        let octree = BackendKind::Octree.build(&scene.splats)?;
-        let embree = BackendKind::Embree.build(&scene.splats)?;
-        let (ob, eb) = (octree.stats().build_seconds, embree.stats().build_seconds);
+        let mut built = Vec::new();
+        for info in renderers() {
+            let b = info.build_splats(&scene.splats)?;
+            built.push((info.name, b));
+        }
+        let builds: Vec<String> = built
+            .iter()
+            .map(|(n, b)| format!("{n} {:.3} s", b.stats().build_seconds))
+            .collect();
         log(&format!(
-            "step {step}: epsilon {eps:.5}, {splats} splats ({} in the scene) generated in {:.2} s; build octree {ob:.3} s, embree {eb:.3} s",
+            "step {step}: epsilon {eps:.5}, {splats} splats ({} in the scene) generated in {:.2} s; build {}",
             scene.splats.len(),
-            scene.load.splat_seconds
+            scene.load.splat_seconds,
+            builds.join(", ")
         ));
         let diagonal = scene.options.scale.diagonal;
         for mode in MODES {
             set_view(&mut scene, plan, mode)?;
-            let errors = |backend: &dyn crate::accel::Backend| {
-                let fr = render(&scene, backend, None);
-                let seconds = fr.seconds;
-                (
-                    seconds,
-                    truth_errors(fr, truth_frame, &scene.camera, diagonal),
-                )
+            let backends: Vec<BackendFigures> = built
+                .iter()
+                .map(|(name, b)| {
+                    let fr = render(&scene, b.as_ref(), None);
+                    BackendFigures {
+                        name,
+                        build_s: b.stats().build_seconds,
+                        render_s: fr.seconds,
+                        errors: truth_errors(fr, truth_frame, &scene.camera, diagonal),
+                    }
+                })
+                .collect();
+            let reference = &backends[0];
+            let differ: Vec<&BackendFigures> = backends
+                .iter()
+                .filter(|b| b.errors != reference.errors)
+                .collect();
+            let renders: Vec<String> = backends
+                .iter()
+                .map(|b| format!("{} {:.3} s", b.name, b.render_s))
+                .collect();
+            let o = &reference.errors;
+            let fmt_psnr = |p: Option<f64>| p.map_or("inf".to_string(), |p| format!("{p:.2} dB"));
+            let differences: String = if differ.is_empty() {
+                ", backends identical".to_string()
+            } else {
+                differ
+                    .iter()
+                    .map(|b| {
+                        format!(
+                            "; {} differs: normal deg mean {:.3}, PSNR {}",
+                            b.name,
+                            b.errors.normal_deg_mean,
+                            fmt_psnr(b.errors.image_psnr_db)
+                        )
+                    })
+                    .collect()
             };
-            let (os, oe) = errors(octree.as_ref());
-            let (es, ee) = errors(embree.as_ref());
+            log(&format!(
+                "  {:<7} render {}; coverage {:.5}, false hits {:.5}, depth/diag p50 {:.2e} p99 {:.2e}, normal deg mean {:.3} p99 {:.3}, PSNR {}{differences}",
+                mode_name(mode),
+                renders.join(", "),
+                o.coverage,
+                o.false_hits,
+                o.depth_rel_p50,
+                o.depth_rel_p99,
+                o.normal_deg_mean,
+                o.normal_deg_p99,
+                fmt_psnr(o.image_psnr_db),
+            ));
             let row = SweepRow {
                 step,
                 epsilon: eps,
@@ -269,40 +365,9 @@ pub fn run_sweep(
                 splats,
                 scene_splats: scene.splats.len(),
                 splat_seconds: scene.load.splat_seconds,
-                octree_build_s: ob,
-                embree_build_s: eb,
-                octree_render_s: os,
-                embree_render_s: es,
-                backends_identical: oe == ee,
-                octree: oe,
-                embree: ee,
+                backends_identical: differ.is_empty(),
+                backends,
             };
-            log(&format!(
-                "  {:<7} render octree {:.3} s, embree {:.3} s; coverage {:.5}, false hits {:.5}, depth/diag p50 {:.2e} p99 {:.2e}, normal deg mean {:.3} p99 {:.3}, PSNR {}{}",
-                mode_name(mode),
-                os,
-                es,
-                row.octree.coverage,
-                row.octree.false_hits,
-                row.octree.depth_rel_p50,
-                row.octree.depth_rel_p99,
-                row.octree.normal_deg_mean,
-                row.octree.normal_deg_p99,
-                row.octree
-                    .image_psnr_db
-                    .map_or("inf".to_string(), |p| format!("{p:.2} dB")),
-                if row.backends_identical {
-                    ", backends identical".to_string()
-                } else {
-                    format!(
-                        "; embree differs: normal deg mean {:.3}, PSNR {}",
-                        row.embree.normal_deg_mean,
-                        row.embree
-                            .image_psnr_db
-                            .map_or("inf".to_string(), |p| format!("{p:.2} dB"))
-                    )
-                }
-            ));
             rows.push(row);
         }
     }
@@ -349,15 +414,23 @@ mod tests {
             splats: 10,
             scene_splats: 12,
             splat_seconds: 0.5,
-            octree_build_s: 0.1,
-            embree_build_s: 0.2,
-            octree_render_s: 0.3,
-            embree_render_s: 0.4,
-            octree: e.clone(),
-            embree: TruthErrors {
-                image_psnr_db: Some(30.0),
-                ..e
-            },
+            backends: vec![
+                BackendFigures {
+                    name: "octree",
+                    build_s: 0.1,
+                    render_s: 0.3,
+                    errors: e.clone(),
+                },
+                BackendFigures {
+                    name: "embree",
+                    build_s: 0.2,
+                    render_s: 0.4,
+                    errors: TruthErrors {
+                        image_psnr_db: Some(30.0),
+                        ..e
+                    },
+                },
+            ],
             backends_identical: false,
         };
         let text = csv_text(&[r]);
@@ -372,5 +445,12 @@ mod tests {
         assert_eq!(cell("embree_psnr_db"), "30");
         assert_eq!(cell("backends_identical"), "false");
         assert_eq!(cell("embree_render_s"), "0.4");
+        assert_eq!(
+            header.join(","),
+            "step,epsilon,shading,splats,scene_splats,splat_seconds,\
+octree_build_s,embree_build_s,octree_render_s,embree_render_s,\
+coverage,false_hits,depth_rel_p50,depth_rel_p99,normal_deg_mean,normal_deg_p99,psnr_db,\
+backends_identical,embree_coverage,embree_normal_deg_mean,embree_psnr_db"
+        );
     }
 }

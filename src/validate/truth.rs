@@ -6,6 +6,7 @@ use crate::accel::{CandidateHits, Ray};
 use crate::embree::{Device, TriangleScene};
 use crate::render::integrator::{ShadeHit, Surfaces};
 use crate::scene::{Scene, TruthSource};
+use crate::{Error, Result};
 use glam::Vec3;
 
 struct TruthMesh {
@@ -39,7 +40,7 @@ fn vertex_normals(p: &[Vec3], tris: &[[u32; 3]]) -> Vec<Vec3> {
 impl Truth {
     /// Builds the exact surfaces of every model of `scene`, or says which
     /// model has none (point and splat files).
-    pub fn new(scene: &Scene) -> Result<Truth, String> {
+    pub fn new(scene: &Scene) -> Result<Truth> {
         let mut meshes = Vec::new();
         let mut spheres = Vec::new();
         for t in &scene.load.truth {
@@ -60,19 +61,19 @@ impl Truth {
                     material,
                 } => spheres.push((*center - scene.offset, *radius, *material)),
                 TruthSource::Unknown { model, what } => {
-                    return Err(format!(
+                    return Err(Error::invalid(format!(
                         "model {model} is {what}: it has no exact surface to compare against \
                          (use `mesh` with `samples`, or a `shape`)"
-                    ));
+                    )));
                 }
             }
         }
-        let device = Device::new().map_err(|e| e.to_string())?;
+        let device = Device::new()?;
         let refs: Vec<(&[Vec3], &[[u32; 3]])> = meshes
             .iter()
             .map(|m| (m.positions.as_slice(), m.triangles.as_slice()))
             .collect();
-        let triangles = TriangleScene::new(&device, &refs).map_err(|e| e.to_string())?;
+        let triangles = TriangleScene::new(&device, &refs)?;
         Ok(Truth {
             triangles,
             meshes,

@@ -32,6 +32,18 @@ pub fn bin() -> std::process::Command {
     std::process::Command::new(env!("CARGO_BIN_EXE_splatray"))
 }
 
+/// Renders `scene` with the registered backend `name` (no progress).
+pub fn render_with(
+    scene: &splatray::scene::Scene,
+    name: &str,
+) -> splatray::render::integrator::Frame {
+    let info = splatray::accel::registry::find(name).unwrap_or_else(|| panic!("no backend {name}"));
+    let b = info
+        .build_splats(&scene.splats)
+        .unwrap_or_else(|e| panic!("building {name}: {e}"));
+    splatray::render::integrator::render(scene, b.as_ref(), None)
+}
+
 /// The default seed; `SPLATRAY_SEED` overrides it so a failure can be
 /// replayed.
 pub const DEFAULT_SEED: u64 = 0x5eed_2007;
