@@ -23,15 +23,16 @@ enum Command {
     Info,
     /// Render a scene (default: the bundled scenes/bunny.toml) to an image.
     Render(cli::render::RenderArgs),
-    /// Render a scene with the octree and Embree in one run and report their
-    /// agreement ray for ray, image for image, and their speeds.
+    /// Render a scene with every registered backend in one run and report
+    /// each one's agreement with the first ray for ray, image for image,
+    /// and their speeds and memory.
     Compare(cli::compare::CompareArgs),
     /// Sample points uniformly by area from a triangle mesh (PLY).
     Sample(cli::sample_cmd::SampleArgs),
     /// Turn a point cloud into splats with Phong normal fields.
     Splat(cli::splat_cmd::SplatArgs),
     /// Vary the splat budget (epsilon) and the shading mode; measure splat
-    /// generation, build and render seconds of both backends and the errors
+    /// generation, build and render seconds of every backend and the errors
     /// against the exact surface; write a CSV and a time-against-error plot
     /// (report §4.4, fig. 16).
     Sweep(cli::sweep::SweepArgs),

@@ -110,7 +110,7 @@ pub struct ShadeHit {
     pub eps: f32,
 }
 
-/// What the integrator traces against (DESIGN §2: nothing above the backend
+/// What the integrator traces against (`docs/DESIGN.md`, "The backend contract": nothing above the backend
 /// knows which backend runs; this trait also lets the exact mesh surface of
 /// `compare --truth` go through the same integrator).
 pub trait Surfaces: Sync {

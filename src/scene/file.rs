@@ -142,7 +142,7 @@ impl TransformSpec {
 
     /// Applies the transform to a point, then subtracts `shift`; the
     /// translation and the shift are applied in f64, so a model placed far
-    /// from the origin and shifted back keeps f32 precision (DESIGN §4).
+    /// from the origin and shifted back keeps f32 precision (`docs/DESIGN.md`, "Tolerances").
     #[must_use]
     pub fn point(&self, p: Vec3, shift: DVec3) -> Vec3 {
         ((self.rotation() * (p * self.scale)).as_dvec3() + DVec3::from(self.translate) - shift)

@@ -415,7 +415,7 @@ fn light(spec: &LightSpec, shift: DVec3) -> Result<Light> {
     })
 }
 
-/// Re-centres the splats on their bounding box (DESIGN §4: far-from-origin
+/// Re-centres the splats on their bounding box (`docs/DESIGN.md`, "Tolerances": far-from-origin
 /// scenes keep their precision); returns the offset subtracted and the
 /// box's diagonal (1 without splats).
 fn recentre(splats: &mut [Splat]) -> (Vec3, f32) {

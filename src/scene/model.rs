@@ -217,7 +217,8 @@ pub enum TruthSource {
 }
 
 /// A loaded scene, re-centred so that its splats' bounding box is centred at
-/// the origin (DESIGN §4: far-from-origin scenes keep their precision).
+/// the origin (`docs/DESIGN.md`, "Tolerances": far-from-origin scenes keep their
+/// precision).
 #[derive(Clone, Debug)]
 pub struct Scene {
     /// All splats of all models.

@@ -1,5 +1,5 @@
 //! Cross-validation: the same scene through two backends, ray for ray and
-//! image for image (DESIGN §2, §4).
+//! image for image (`docs/DESIGN.md`, "The backend contract").
 
 pub mod compare;
 pub mod sweep;

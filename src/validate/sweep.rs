@@ -239,7 +239,7 @@ fn reframe(step: &mut Scene, reference: &Scene) {
 }
 
 /// Runs a sweep over `plan` for the scene `file` (relative paths against
-/// `base`): per budget step the splats are generated once, both backends
+/// `base`): per budget step the splats are generated once, every rendering backend
 /// built once, and each shading mode of [`MODES`] rendered by both and
 /// compared with the exact surface. Splat generation reports to `progress`
 /// (renders do not); `log` receives one line per measurement as it is
