@@ -3,12 +3,11 @@
 //! reference).
 
 use super::progress::ProgressLine;
-use super::render::{default_scene, write_json};
+use super::render::write_json;
+use super::view::SceneArgs;
 use splatray::accel::registry;
 use splatray::render::integrator::{Frame, render};
 use splatray::render::output::{check_output_path, save};
-use splatray::resolve::ShadingMode;
-use splatray::scene::load_scene;
 use splatray::validate::compare::{
     Agreement, TruthErrors, compare_frames, diff_image, render_truth, truth_errors,
 };
@@ -18,8 +17,9 @@ use std::path::PathBuf;
 /// Options of `splatray compare`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct CompareArgs {
-    /// Scene file (TOML). Default: the bundled scenes/bunny.toml.
-    pub scene: Option<PathBuf>,
+    /// The scene and its view overrides.
+    #[command(flatten)]
+    pub view: SceneArgs,
     /// Write the JSON report here.
     #[arg(long)]
     pub report: Option<PathBuf>,
@@ -27,18 +27,9 @@ pub struct CompareArgs {
     /// second backend | difference.
     #[arg(long)]
     pub diff: Option<PathBuf>,
-    /// Override the camera's width.
-    #[arg(long)]
-    pub width: Option<u32>,
-    /// Override the camera's height.
-    #[arg(long)]
-    pub height: Option<u32>,
     /// Samples per pixel (default 1: one primary ray per pixel centre).
     #[arg(long, default_value_t = 1)]
     pub spp: u32,
-    /// Override the shading mode: flat, blended or phong.
-    #[arg(long)]
-    pub shading: Option<ShadingMode>,
     /// Also trace the exact surfaces (meshes as Embree triangles, analytic
     /// shapes) and report each backend's errors against them.
     #[arg(long)]
@@ -112,7 +103,7 @@ fn mrays_per_s(f: &Frame) -> f64 {
 
 /// Runs `splatray compare`.
 pub fn run(args: &CompareArgs) -> Result<(), String> {
-    let scene_path = args.scene.clone().unwrap_or_else(default_scene);
+    let scene_path = args.view.path();
     if let Some(d) = &args.diff {
         check_output_path(d)?;
     }
@@ -121,9 +112,7 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
     }
     let line = ProgressLine::new();
     let progress = |stage: &str, f: f64| line.update(stage, f);
-    let mut scene = load_scene(&scene_path, Some(&progress))?;
-    line.finish();
-    scene.set_view(args.width, args.height, Some(args.spp), args.shading)?;
+    let scene = args.view.load(Some(args.spp), &line)?;
     // Fail before any rendering when there is no exact surface.
     let truth = if args.truth {
         Some(Truth::new(&scene)?)

@@ -8,3 +8,4 @@ pub mod render;
 pub mod sample_cmd;
 pub mod splat_cmd;
 pub mod sweep;
+pub mod view;

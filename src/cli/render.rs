@@ -1,18 +1,19 @@
 //! `splatray render`.
 
 use super::progress::ProgressLine;
+use super::view::SceneArgs;
 use splatray::accel::registry;
 use splatray::render::integrator::{Frame, RayCounts, render};
 use splatray::render::output::{Aov, aov_path, check_output_path, write_aov, write_image};
-use splatray::resolve::ShadingMode;
-use splatray::scene::{Scene, load_scene};
+use splatray::scene::Scene;
 use std::path::{Path, PathBuf};
 
 /// Options of `splatray render`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct RenderArgs {
-    /// Scene file (TOML). Default: the bundled scenes/bunny.toml.
-    pub scene: Option<PathBuf>,
+    /// The scene and its view overrides.
+    #[command(flatten)]
+    pub view: SceneArgs,
     /// Acceleration backend (every backend of the registry; the first is
     /// the default).
     #[arg(
@@ -25,18 +26,9 @@ pub struct RenderArgs {
     /// scene's name with .png, in the current folder.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
-    /// Override the camera's width.
-    #[arg(long)]
-    pub width: Option<u32>,
-    /// Override the camera's height.
-    #[arg(long)]
-    pub height: Option<u32>,
     /// Override samples per pixel.
     #[arg(long)]
     pub spp: Option<u32>,
-    /// Override the shading mode: flat, blended or phong.
-    #[arg(long)]
-    pub shading: Option<ShadingMode>,
     /// Write a JSON report here.
     #[arg(long)]
     pub report: Option<PathBuf>,
@@ -49,18 +41,6 @@ pub struct RenderArgs {
 /// The default backend: the registry's first.
 fn default_backend() -> String {
     registry::names()[0].to_string()
-}
-
-/// The bundled default scene: `scenes/bunny.toml` under the current folder,
-/// else under the source tree this binary was built from.
-#[must_use]
-pub fn default_scene() -> PathBuf {
-    let local = PathBuf::from("scenes/bunny.toml");
-    if local.is_file() {
-        local
-    } else {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/bunny.toml")
-    }
 }
 
 /// The render report (JSON).
@@ -128,7 +108,7 @@ fn warn_nothing_hit(scene: &Scene) {
 
 /// Runs `splatray render`.
 pub fn run(args: &RenderArgs) -> Result<(), String> {
-    let scene_path = args.scene.clone().unwrap_or_else(default_scene);
+    let scene_path = args.view.path();
     let output = args.output.clone().unwrap_or_else(|| {
         let stem = scene_path
             .file_stem()
@@ -142,12 +122,7 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
     }
     let line = ProgressLine::new();
     let progress = |stage: &str, f: f64| line.update(stage, f);
-    let mut scene = load_scene(&scene_path, Some(&progress))?;
-    line.finish();
-    scene.set_view(args.width, args.height, args.spp, args.shading)?;
-    for w in &scene.load.warnings {
-        eprintln!("warning: {w}");
-    }
+    let scene = args.view.load(args.spp, &line)?;
     let info = registry::find(&args.backend).ok_or_else(|| registry::unknown(&args.backend))?;
     let backend = info
         .build_splats(&scene.splats)

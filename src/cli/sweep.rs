@@ -3,7 +3,7 @@
 //! flat splats against blended (eq. 5) and Phong splats (eq. 4).
 
 use super::progress::ProgressLine;
-use super::render::default_scene;
+use super::view::default_scene;
 use splatray::render::output::check_output_path;
 use splatray::scene::parse_scene_file;
 use splatray::validate::sweep::{MODES, SweepPlan, SweepRow, csv_text, mode_name, run_sweep};
