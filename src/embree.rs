@@ -240,6 +240,10 @@ pub trait UserGeometry: Send + Sync + 'static {
     /// (e.g. the window of candidate hits being gathered).
     type Query<'q>;
 
+    /// What one [`UserScene::occluded`] call carries to the callbacks (e.g.
+    /// which hits to skip).
+    type ShadowQuery<'q>;
+
     /// How many primitives.
     fn count(&self) -> usize;
 
@@ -259,8 +263,16 @@ pub trait UserGeometry: Send + Sync + 'static {
         query: &mut Self::Query<'_>,
     ) -> Option<f32>;
 
-    /// True when primitive `prim` is hit with `tnear <= t <= tfar`.
-    fn occluded(&self, prim: u32, ray: &Ray, tnear: f32, tfar: f32) -> bool;
+    /// True when primitive `prim` is hit with `tnear <= t <= tfar` (a hit
+    /// that counts for `query`).
+    fn occluded(
+        &self,
+        prim: u32,
+        ray: &Ray,
+        tnear: f32,
+        tfar: f32,
+        query: &Self::ShadowQuery<'_>,
+    ) -> bool;
 }
 
 /// The per-ray query context: begins with `RTCRayQueryContext` so Embree can
@@ -269,6 +281,14 @@ pub trait UserGeometry: Send + Sync + 'static {
 struct QueryContext<'q, G: UserGeometry> {
     base: RayQueryContext,
     query: *mut G::Query<'q>,
+}
+
+/// The per-ray context of an occlusion query, laid out like
+/// [`QueryContext`]: Embree's context first, then the shadow query.
+#[repr(C)]
+struct ShadowContext<'q, G: UserGeometry> {
+    base: RayQueryContext,
+    query: *const G::ShadowQuery<'q>,
 }
 
 /// `RTCRayQueryContext` as Embree 4.3 and later lay it out: the
@@ -316,12 +336,13 @@ fn intersect_arguments(ctx: *mut sys::RTCRayQueryContext) -> sys::RTCIntersectAr
     }
 }
 
-/// `rtcInitOccludedArguments` (inline in `rtcore_scene.h`).
-fn occluded_arguments() -> sys::RTCOccludedArguments {
+/// `rtcInitOccludedArguments` (inline in `rtcore_scene.h`), with the
+/// context set (null: Embree's default).
+fn occluded_arguments(ctx: *mut sys::RTCRayQueryContext) -> sys::RTCOccludedArguments {
     sys::RTCOccludedArguments {
         flags: sys::RTCRayQueryFlags::INCOHERENT,
         feature_mask: sys::RTCFeatureFlags::RTC_FEATURE_FLAG_ALL,
-        context: std::ptr::null_mut(),
+        context: ctx,
         filter: None,
         occluded: None,
     }
@@ -426,9 +447,15 @@ unsafe extern "C" fn user_occluded<G: UserGeometry>(
     if args.N != 1 || unsafe { *args.valid } == 0 {
         return;
     }
+    // SAFETY: user pointer as in `user_bounds`; the context is the
+    // `ShadowContext<G>` passed by `UserScene::occluded` (it begins with
+    // `RTCRayQueryContext`, repr(C)), whose `query` is a live shared
+    // reference for this call.
     let geom = unsafe { &*(args.geometryUserPtr as *const G) };
+    let ctx = unsafe { &*(args.context as *const ShadowContext<'_, G>) };
+    let query = unsafe { &*ctx.query };
     let r = unsafe { &mut *(args.ray as *mut sys::RTCRay) };
-    if geom.occluded(args.primID, &ray_of(r), r.tnear, r.tfar) {
+    if geom.occluded(args.primID, &ray_of(r), r.tnear, r.tfar, query) {
         r.tfar = f32::NEG_INFINITY;
     }
 }
@@ -459,11 +486,23 @@ impl SceneHandle {
         self.device.check()
     }
 
-    /// True when anything is hit in `[t_min, t_max]`.
-    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+    /// True when anything is hit in `[t_min, t_max]`; `ctx` is handed to
+    /// the user callbacks (null for Embree's default context).
+    ///
+    /// # Safety
+    /// A non-null `ctx` must point to a live context of the type the
+    /// scene's user callbacks read, valid for the whole call.
+    unsafe fn occluded(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        ctx: *mut sys::RTCRayQueryContext,
+    ) -> bool {
         let mut r = embree_ray(ray, t_min, t_max);
-        let mut args = occluded_arguments();
-        // SAFETY: committed scene; `r` and `args` live across the call.
+        let mut args = occluded_arguments(ctx);
+        // SAFETY: committed scene; `r` and `args` live across the call;
+        // `ctx` as the caller guarantees.
         unsafe { sys::rtcOccluded1(self.raw, &mut r, &mut args) };
         r.tfar == f32::NEG_INFINITY
     }
@@ -562,10 +601,25 @@ impl<G: UserGeometry> UserScene<G> {
         };
     }
 
-    /// True when any primitive is hit in `[t_min, t_max]`.
+    /// True when any primitive is hit in `[t_min, t_max]`, handing `query`
+    /// to every [`UserGeometry::occluded`] call it makes.
     #[must_use]
-    pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        self.scene.occluded(ray, t_min, t_max)
+    pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32, query: &G::ShadowQuery<'_>) -> bool {
+        let mut ctx = ShadowContext::<G> {
+            base: ray_query_context(),
+            query: query as *const G::ShadowQuery<'_>,
+        };
+        // SAFETY: the repr(C) `ShadowContext<G>` begins with the context
+        // Embree reads, and its `query` borrows `query` for the call,
+        // matching the type `user_occluded::<G>` reads.
+        unsafe {
+            self.scene.occluded(
+                ray,
+                t_min,
+                t_max,
+                (&mut ctx as *mut ShadowContext<'_, G>).cast(),
+            )
+        }
     }
 
     /// Errors reported by Embree since the last check (queries do not report
@@ -699,7 +753,8 @@ impl TriangleScene {
     /// True when any triangle is hit in `[t_min, t_max]`.
     #[must_use]
     pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        self.scene.occluded(ray, t_min, t_max)
+        // SAFETY: null context: a triangle scene has no user callbacks.
+        unsafe { self.scene.occluded(ray, t_min, t_max, std::ptr::null_mut()) }
     }
 
     /// Errors Embree reported since the last check.

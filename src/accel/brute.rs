@@ -1,6 +1,6 @@
 //! The brute-force oracle: every ray against every primitive.
 
-use super::{Backend, BuildStats, Candidate, CandidateHits};
+use super::{Backend, BuildStats, Candidate, CandidateHits, Departure, Skip};
 use crate::geometry::Ray;
 use crate::primitive::Primitive;
 use std::time::Instant;
@@ -26,15 +26,19 @@ impl<P: Primitive> Brute<P> {
         Brute { prims, stats }
     }
 
+    /// Every hit that counts, in primitive order.
     fn hits<'a>(
         &'a self,
         ray: &'a Ray,
         t_min: f32,
         t_max: f32,
+        from: Option<&'a Departure>,
     ) -> impl Iterator<Item = Candidate> + 'a {
         self.prims.iter().enumerate().filter_map(move |(id, p)| {
-            p.intersect(ray, t_min, t_max).map(|h| Candidate {
-                id: id as u32,
+            let h = p.intersect(ray, t_min, t_max)?;
+            let id = id as u32;
+            (!from.skips(ray.dir, id, p)).then_some(Candidate {
+                id,
                 t: h.t,
                 u: h.u,
                 v: h.v,
@@ -48,15 +52,22 @@ impl<P: Primitive> Backend for Brute<P> {
         "brute"
     }
 
-    fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, hits: &mut CandidateHits) {
+    fn intersect_from(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        from: Option<&Departure>,
+        hits: &mut CandidateHits,
+    ) {
         hits.clear();
-        for c in self.hits(ray, t_min, t_max) {
+        for c in self.hits(ray, t_min, t_max, from) {
             hits.offer(c);
         }
     }
 
-    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        self.hits(ray, t_min, t_max).next().is_some()
+    fn occluded_from(&self, ray: &Ray, t_min: f32, t_max: f32, from: Option<&Departure>) -> bool {
+        self.hits(ray, t_min, t_max, from).next().is_some()
     }
 
     fn stats(&self) -> &BuildStats {
@@ -86,16 +97,23 @@ impl<P: Primitive> Backend for BruteReversed<P> {
         "brute-reversed"
     }
 
-    fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, hits: &mut CandidateHits) {
+    fn intersect_from(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        from: Option<&Departure>,
+        hits: &mut CandidateHits,
+    ) {
         hits.clear();
-        let all: Vec<Candidate> = self.0.hits(ray, t_min, t_max).collect();
+        let all: Vec<Candidate> = self.0.hits(ray, t_min, t_max, from).collect();
         for c in all.into_iter().rev() {
             hits.offer(c);
         }
     }
 
-    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        self.0.occluded(ray, t_min, t_max)
+    fn occluded_from(&self, ray: &Ray, t_min: f32, t_max: f32, from: Option<&Departure>) -> bool {
+        self.0.occluded_from(ray, t_min, t_max, from)
     }
 
     fn stats(&self) -> &BuildStats {

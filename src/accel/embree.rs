@@ -2,7 +2,7 @@
 //! (below, in safe code) gather the candidate window of §4.3 into the query
 //! of each ray; the FFI is in [`crate::embree`].
 
-use super::{Backend, BuildStats, Candidate, CandidateHits};
+use super::{Backend, BuildStats, Candidate, CandidateHits, Departure, Skip};
 use crate::embree::{Device, EmbreeError, UserGeometry, UserScene};
 use crate::geometry::Ray;
 use crate::primitive::Primitive;
@@ -15,10 +15,13 @@ struct Primitives<P>(Vec<P>);
 struct Gather<'q> {
     hits: &'q mut CandidateHits,
     t_max: f32,
+    /// The splat a secondary ray leaves (hits it skips are not offered).
+    from: Option<&'q Departure>,
 }
 
 impl<P: Primitive> UserGeometry for Primitives<P> {
     type Query<'q> = Gather<'q>;
+    type ShadowQuery<'q> = Option<&'q Departure>;
 
     fn count(&self) -> usize {
         self.0.len()
@@ -45,7 +48,11 @@ impl<P: Primitive> UserGeometry for Primitives<P> {
         tfar: f32,
         q: &mut Gather<'_>,
     ) -> Option<f32> {
-        let h = self.0[prim as usize].intersect(ray, tnear, tfar)?;
+        let p = &self.0[prim as usize];
+        let h = p.intersect(ray, tnear, tfar)?;
+        if q.from.skips(ray.dir, prim, p) {
+            return None;
+        }
         let far = q.hits.offer(Candidate {
             id: prim,
             t: h.t,
@@ -56,8 +63,16 @@ impl<P: Primitive> UserGeometry for Primitives<P> {
     }
 
     #[inline]
-    fn occluded(&self, prim: u32, ray: &Ray, tnear: f32, tfar: f32) -> bool {
-        self.0[prim as usize].intersect(ray, tnear, tfar).is_some()
+    fn occluded(
+        &self,
+        prim: u32,
+        ray: &Ray,
+        tnear: f32,
+        tfar: f32,
+        from: &Option<&Departure>,
+    ) -> bool {
+        let p = &self.0[prim as usize];
+        p.intersect(ray, tnear, tfar).is_some() && !from.skips(ray.dir, prim, p)
     }
 }
 
@@ -93,14 +108,21 @@ impl<P: Primitive> Backend for EmbreeBackend<P> {
         "embree"
     }
 
-    fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, hits: &mut CandidateHits) {
+    fn intersect_from(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        from: Option<&Departure>,
+        hits: &mut CandidateHits,
+    ) {
         hits.clear();
         self.scene
-            .intersect(ray, t_min, t_max, &mut Gather { hits, t_max });
+            .intersect(ray, t_min, t_max, &mut Gather { hits, t_max, from });
     }
 
-    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        self.scene.occluded(ray, t_min, t_max)
+    fn occluded_from(&self, ray: &Ray, t_min: f32, t_max: f32, from: Option<&Departure>) -> bool {
+        self.scene.occluded(ray, t_min, t_max, &from)
     }
 
     fn stats(&self) -> &BuildStats {

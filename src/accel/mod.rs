@@ -9,12 +9,16 @@
 //! [`registry`].
 
 pub mod brute;
+mod departure;
 pub mod embree;
 pub mod octree;
 pub mod registry;
 mod window;
 
 pub use crate::geometry::Ray;
+pub use departure::{
+    Departure, NoSkip, SAME_SURFACE_COS, SAME_SURFACE_HEIGHT, SAME_SURFACE_RIM, Skip, WAY_OUT_COS,
+};
 pub use registry::{BackendInfo, backends};
 pub use window::{Candidate, CandidateHits, MAX_CANDIDATES};
 
@@ -40,12 +44,32 @@ pub trait Backend: Send + Sync {
     fn name(&self) -> &'static str;
 
     /// Fills `hits` (cleared first) with the candidate hits of `ray` in
-    /// `[t_min, t_max]`: the nearest and all within `hits.xi()` of it.
-    fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, hits: &mut CandidateHits);
+    /// `[t_min, t_max]`: the nearest and all within the window of it. With
+    /// `from`, a secondary ray leaving that splat: every hit
+    /// [`Departure::skips`] is left out before it counts (as if absent).
+    fn intersect_from(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        from: Option<&Departure>,
+        hits: &mut CandidateHits,
+    );
 
-    /// True when any splat is hit with `t` in `[t_min, t_max]`.
-    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool;
+    /// True when any splat is hit with `t` in `[t_min, t_max]`, leaving out
+    /// the hits `from` skips (as [`Backend::intersect_from`]).
+    fn occluded_from(&self, ray: &Ray, t_min: f32, t_max: f32, from: Option<&Departure>) -> bool;
 
     /// Build figures.
     fn stats(&self) -> &BuildStats;
+
+    /// [`Backend::intersect_from`] for a primary ray: nothing skipped.
+    fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, hits: &mut CandidateHits) {
+        self.intersect_from(ray, t_min, t_max, None, hits);
+    }
+
+    /// [`Backend::occluded_from`] with nothing skipped.
+    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        self.occluded_from(ray, t_min, t_max, None)
+    }
 }

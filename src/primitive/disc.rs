@@ -1,7 +1,7 @@
 //! The oriented elliptical disc of a splat (§2.1, fig. 3): the primitive of
 //! every scene today.
 
-use super::{Hit, Pack, PackRay, Primitive};
+use super::{Hit, Local, Pack, PackRay, Primitive};
 use crate::geometry::Ray;
 use glam::Vec3;
 
@@ -134,6 +134,26 @@ impl Primitive for Disc {
             }
         }
         false
+    }
+
+    /// `(u, v)` of `p`'s projection (the tangent axes are orthogonal to the
+    /// normal, so projecting first changes nothing) and its height above the
+    /// plane over the larger radius (`1 / min(|u_scaled|, |v_scaled|)`).
+    #[inline]
+    fn locate(&self, p: Vec3) -> Local {
+        let d = p - self.center;
+        let u = d.dot(self.u_scaled);
+        let v = d.dot(self.v_scaled);
+        let inv_r_max = self
+            .u_scaled
+            .length_squared()
+            .min(self.v_scaled.length_squared())
+            .sqrt();
+        Local {
+            radial2: u * u + v * v,
+            height: self.normal.dot(d) * inv_r_max,
+            normal: self.normal,
+        }
     }
 }
 

@@ -28,6 +28,20 @@ pub struct Hit {
     pub v: f32,
 }
 
+/// Where a point lies relative to a primitive: what the self-hit rule of
+/// secondary rays ([`crate::accel::Departure`]) asks of every primitive.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Local {
+    /// Squared normalised radial coordinate of the point's projection onto
+    /// the primitive (`u² + v²`: 1 on the rim).
+    pub radial2: f32,
+    /// Signed distance of the point from the primitive's surface, divided
+    /// by the primitive's largest radius.
+    pub height: f32,
+    /// The primitive's unit normal at the projection (its own side).
+    pub normal: Vec3,
+}
+
 /// A surface primitive as the backends see it.
 ///
 /// The contract (relied on by the cross-validation): [`Primitive::intersect`]
@@ -61,6 +75,12 @@ pub trait Primitive: Copy + Send + Sync + 'static {
 
     /// Exact test: does the primitive meet the closed box `[lo, hi]`?
     fn meets_box(&self, lo: Vec3, hi: Vec3) -> bool;
+
+    /// Where `p` lies relative to the primitive ([`Local`]): the geometry
+    /// the self-hit rule of secondary rays decides on, in every backend
+    /// alike (`docs/DESIGN.md`, "The backend contract"). NaN in `p` gives
+    /// NaN fields, which the rule treats as "not the same surface".
+    fn locate(&self, p: Vec3) -> Local;
 }
 
 /// A ray's origin and direction as plain arrays, broadcast to every lane of

@@ -4,7 +4,7 @@
 //! maximum depth. It sees only the [`Backend`] trait and the shared
 //! resolver, so every backend renders with identical shading.
 
-use crate::accel::{Backend, CandidateHits, Ray};
+use crate::accel::{Backend, CandidateHits, Departure, Ray};
 use crate::progress::{Progress, notify};
 use crate::resolve::{SurfaceHit, resolve};
 use crate::scene::{Light, Material, Scene};
@@ -100,24 +100,32 @@ pub struct ShadeHit {
     pub point: Vec3,
     /// Unit shading normal on the surface's own side (not flipped).
     pub normal: Vec3,
+    /// Unit plane normal of the winning splat (or the exact surface's
+    /// normal), on its own side: the orientation secondary rays leaving
+    /// this hit compare neighbours against.
+    pub geometric_normal: Vec3,
     /// True when the ray meets the front side.
     pub front: bool,
     /// Material index into the scene's materials.
     pub material: u16,
     /// Colour of the surface data (multiplies the material's albedo).
     pub color: Vec3,
-    /// `eps_self` for rays leaving this hit.
-    pub eps: f32,
 }
 
 /// What the integrator traces against (`docs/DESIGN.md`, "The backend contract": nothing above the backend
 /// knows which backend runs; this trait also lets the exact mesh surface of
 /// `compare --truth` go through the same integrator).
 pub trait Surfaces: Sync {
-    /// The resolved hit of `ray` beyond `t_min`; `hits` is scratch space.
-    fn hit(&self, ray: &Ray, t_min: f32, hits: &mut CandidateHits) -> Option<ShadeHit>;
-    /// Any hit with `t` in `[t_min, t_max]`.
-    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool;
+    /// The resolved hit of `ray`: a camera ray when `from` is `None`, else
+    /// a secondary ray leaving the hit `from`, which skips the surface it
+    /// leaves as the surfaces define it. `hits` is scratch space.
+    fn hit(&self, ray: &Ray, from: Option<&ShadeHit>, hits: &mut CandidateHits)
+    -> Option<ShadeHit>;
+    /// Any hit before `t_max` of a ray leaving the hit `from` (a shadow ray;
+    /// `t_max` already short of the light by the surfaces' `eps_self`).
+    fn occluded(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> bool;
+    /// `eps_self` (§3.2): secondary rays start this far from their origin.
+    fn eps_self(&self) -> f32;
 }
 
 /// The splats of a scene through one backend and the shared resolver.
@@ -128,10 +136,37 @@ pub struct SplatSurfaces<'a> {
     pub backend: &'a dyn Backend,
 }
 
+impl SplatSurfaces<'_> {
+    /// The splat a secondary ray leaving `from` starts on: the shared
+    /// self-hit rule of every backend skips it and its overlapping,
+    /// similarly oriented neighbours (`accel::Departure`).
+    fn departure(from: &ShadeHit) -> Departure {
+        Departure {
+            id: from.id,
+            point: from.point,
+            normal: from.geometric_normal,
+        }
+    }
+}
+
 impl Surfaces for SplatSurfaces<'_> {
-    fn hit(&self, ray: &Ray, t_min: f32, hits: &mut CandidateHits) -> Option<ShadeHit> {
+    fn hit(
+        &self,
+        ray: &Ray,
+        from: Option<&ShadeHit>,
+        hits: &mut CandidateHits,
+    ) -> Option<ShadeHit> {
         let sc = self.scene;
-        self.backend.intersect(ray, t_min, f32::INFINITY, hits);
+        match from {
+            None => self.backend.intersect(ray, 0.0, f32::INFINITY, hits),
+            Some(f) => self.backend.intersect_from(
+                ray,
+                self.eps_self(),
+                f32::INFINITY,
+                Some(&Self::departure(f)),
+                hits,
+            ),
+        }
         let mode = sc.shading_for(hits.nearest()?.id);
         let h: SurfaceHit = resolve(hits, ray, &sc.splats, mode)?;
         let splat = &sc.splats[h.id as usize];
@@ -140,20 +175,20 @@ impl Surfaces for SplatSurfaces<'_> {
             t: h.t,
             point: h.point,
             normal: h.normal,
+            geometric_normal: h.geometric_normal,
             front: h.front,
             material: sc.material_of[h.id as usize],
             color: splat.color,
-            // Secondary rays skip hits within eps_self of their origin
-            // (§3.2, fig. 9 right). Overlapping neighbours of the splat a
-            // ray leaves stand up to about its radius away along the ray on
-            // a curved surface, so the window grows to that radius: the
-            // surface is not resolved finer than its splats anyway.
-            eps: sc.options.scale.eps_self.max(splat.radii.max_element()),
         })
     }
 
-    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        self.backend.occluded(ray, t_min, t_max)
+    fn occluded(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> bool {
+        self.backend
+            .occluded_from(ray, self.eps_self(), t_max, Some(&Self::departure(from)))
+    }
+
+    fn eps_self(&self) -> f32 {
+        self.scene.options.scale.eps_self
     }
 }
 
@@ -187,30 +222,34 @@ fn fresnel(cos_i: f32, eta: f32) -> f32 {
 }
 
 impl Tracer<'_> {
-    fn intersect(&self, ray: &Ray, t_min: f32, s: &mut Scratch) -> Option<ShadeHit> {
-        self.surfaces.hit(ray, t_min, &mut s.hits)
+    fn intersect(&self, ray: &Ray, from: Option<&ShadeHit>, s: &mut Scratch) -> Option<ShadeHit> {
+        self.surfaces.hit(ray, from, &mut s.hits)
     }
 
-    fn visible(&self, p: Vec3, dir: Vec3, dist: f32, eps: f32, s: &mut Scratch) -> bool {
+    /// Is the light at distance `dist` along `dir` visible from the hit?
+    fn visible(&self, from: &ShadeHit, dir: Vec3, dist: f32, s: &mut Scratch) -> bool {
         s.rays.shadow += 1;
+        let ray = Ray {
+            origin: from.point,
+            dir,
+        };
         !self
             .surfaces
-            .occluded(&Ray { origin: p, dir }, eps, dist - eps)
+            .occluded(&ray, from, dist - self.surfaces.eps_self())
     }
 
     /// Irradiance-weighted light reaching `p` with facing normal `n`, plus
     /// the Blinn–Phong highlight toward `-view` when `spec > 0`.
-    #[allow(clippy::too_many_arguments)]
     fn direct(
         &self,
-        p: Vec3,
+        hit: &ShadeHit,
         n: Vec3,
-        eps: f32,
         view: Vec3,
         albedo: Vec3,
         spec: (f32, f32),
         s: &mut Scratch,
     ) -> Vec3 {
+        let p = hit.point;
         let mut sum = Vec3::ZERO;
         let mut add = |l: Vec3, e: Vec3| {
             let cos = n.dot(l);
@@ -228,13 +267,13 @@ impl Tracer<'_> {
                     let d2 = to.length_squared();
                     let d = d2.sqrt();
                     let l = to / d;
-                    if n.dot(l) > 0.0 && self.visible(p, l, d, eps, s) {
+                    if n.dot(l) > 0.0 && self.visible(hit, l, d, s) {
                         add(l, power / d2);
                     }
                 }
                 Light::Directional { direction, power } => {
                     let l = -direction;
-                    if n.dot(l) > 0.0 && self.visible(p, l, f32::INFINITY, eps, s) {
+                    if n.dot(l) > 0.0 && self.visible(hit, l, f32::INFINITY, s) {
                         add(l, power);
                     }
                 }
@@ -263,7 +302,7 @@ impl Tracer<'_> {
                             let d2 = to.length_squared();
                             let d = d2.sqrt();
                             let l = to / d;
-                            if n.dot(l) > 0.0 && self.visible(p, l, d, eps, s) {
+                            if n.dot(l) > 0.0 && self.visible(hit, l, d, s) {
                                 add(l, power * (share / d2));
                             }
                         }
@@ -281,13 +320,11 @@ impl Tracer<'_> {
         let sc = self.scene;
         let n = if hit.front { hit.normal } else { -hit.normal };
         let material = sc.materials[hit.material as usize];
-        let eps = hit.eps;
         let deeper = depth + 1 < sc.options.max_depth;
         match material {
             Material::Diffuse { color } => {
                 let albedo = color * hit.color;
-                albedo * sc.options.ambient
-                    + self.direct(hit.point, n, eps, ray.dir, albedo, (0.0, 0.0), s)
+                albedo * sc.options.ambient + self.direct(&hit, n, ray.dir, albedo, (0.0, 0.0), s)
             }
             Material::Phong {
                 color,
@@ -296,14 +333,14 @@ impl Tracer<'_> {
             } => {
                 let albedo = color * hit.color;
                 albedo * sc.options.ambient
-                    + self.direct(hit.point, n, eps, ray.dir, albedo, (specular, shininess), s)
+                    + self.direct(&hit, n, ray.dir, albedo, (specular, shininess), s)
             }
             Material::Mirror { color } => {
                 if !deeper {
                     return Vec3::ZERO;
                 }
                 let r = Ray::new(hit.point, reflect(ray.dir, n));
-                color * self.trace(&r, eps, depth + 1, s, false)
+                color * self.trace(&r, &hit, depth + 1, s, false)
             }
             Material::Glass { color, ior } => {
                 if !deeper {
@@ -313,25 +350,32 @@ impl Tracer<'_> {
                 let eta = if hit.front { 1.0 / ior } else { ior };
                 let f = fresnel(cos_i, eta);
                 let refl = Ray::new(hit.point, reflect(ray.dir, n));
-                let mut out = f * self.trace(&refl, eps, depth + 1, s, false);
+                let mut out = f * self.trace(&refl, &hit, depth + 1, s, false);
                 if f < 1.0 {
                     let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
                     let dir = eta * ray.dir + (eta * cos_i - k.max(0.0).sqrt()) * n;
                     let refr = Ray::new(hit.point, dir);
-                    out += (1.0 - f) * color * self.trace(&refr, eps, depth + 1, s, true);
+                    out += (1.0 - f) * color * self.trace(&refr, &hit, depth + 1, s, true);
                 }
                 out
             }
         }
     }
 
-    fn trace(&self, ray: &Ray, t_min: f32, depth: u32, s: &mut Scratch, refraction: bool) -> Vec3 {
+    fn trace(
+        &self,
+        ray: &Ray,
+        from: &ShadeHit,
+        depth: u32,
+        s: &mut Scratch,
+        refraction: bool,
+    ) -> Vec3 {
         if refraction {
             s.rays.refraction += 1;
         } else {
             s.rays.reflection += 1;
         }
-        let hit = self.intersect(ray, t_min, s);
+        let hit = self.intersect(ray, Some(from), s);
         self.shade(ray, hit, depth, s)
     }
 }
@@ -395,7 +439,7 @@ pub fn render_surfaces(
                     };
                     let ray = cam.ray(x as f32 + ox, y as f32 + oy);
                     s.rays.primary += 1;
-                    let hit = tracer.intersect(&ray, 0.0, &mut s);
+                    let hit = tracer.intersect(&ray, None, &mut s);
                     if i == 0 {
                         depth.push(hit.map_or(f32::INFINITY, |h| h.t));
                         normal.push(hit.map_or(Vec3::ZERO, |h| h.normal));

@@ -104,7 +104,13 @@ impl Truth {
 }
 
 impl Surfaces for Truth {
-    fn hit(&self, ray: &Ray, t_min: f32, _hits: &mut CandidateHits) -> Option<ShadeHit> {
+    fn hit(
+        &self,
+        ray: &Ray,
+        from: Option<&ShadeHit>,
+        _hits: &mut CandidateHits,
+    ) -> Option<ShadeHit> {
+        let t_min = if from.is_some() { self.eps } else { 0.0 };
         let tri = self.triangles.intersect(ray, t_min, f32::INFINITY);
         let t_max = tri.map_or(f32::INFINITY, |h| h.t);
         if let Some((t, i)) = self.sphere_hit(ray, t_min, t_max) {
@@ -116,10 +122,10 @@ impl Surfaces for Truth {
                 t,
                 point,
                 normal: n,
+                geometric_normal: n,
                 front: n.dot(ray.dir) < 0.0,
                 material,
                 color: Vec3::ONE,
-                eps: self.eps,
             });
         }
         let h = tri?;
@@ -142,14 +148,21 @@ impl Surfaces for Truth {
             t: h.t,
             point: ray.at(h.t),
             normal: ns,
+            geometric_normal: ng,
             front: ng.dot(ray.dir) < 0.0,
             material: m.material,
             color: Vec3::ONE,
-            eps: self.eps,
         })
     }
 
-    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+    /// Exact surfaces need no self-hit rule: a shadow ray skips only the
+    /// first `eps_self`.
+    fn occluded(&self, ray: &Ray, _from: &ShadeHit, t_max: f32) -> bool {
+        let t_min = self.eps;
         self.sphere_hit(ray, t_min, t_max).is_some() || self.triangles.occluded(ray, t_min, t_max)
+    }
+
+    fn eps_self(&self) -> f32 {
+        self.eps
     }
 }

@@ -6,8 +6,8 @@
 
 use glam::{Vec2, Vec3};
 use splatray::accel::octree::{Octree, OctreeParams, OverlapTest};
-use splatray::accel::{Backend, BuildStats, CandidateHits, Ray, backends as registry};
-use splatray::primitive::{Disc, Hit, Primitive, Single};
+use splatray::accel::{Backend, BuildStats, CandidateHits, Departure, Ray, backends as registry};
+use splatray::primitive::{Disc, Hit, Local, Primitive, Single};
 use splatray::resolve::{ShadingMode, resolve};
 use splatray::splat::{NormalField, Splat};
 use std::path::{Path, PathBuf};
@@ -126,7 +126,8 @@ pub fn blobby_splats(n: usize, seed: u64) -> Vec<Splat> {
         .collect()
 }
 
-/// A ray query: the ray and its `[t_min, t_max]`.
+/// A ray query: the ray, its `[t_min, t_max]`, and for a secondary ray the
+/// splat it leaves (whose surface the backends skip).
 #[derive(Clone, Copy, Debug)]
 pub struct Query {
     /// The ray.
@@ -135,6 +136,25 @@ pub struct Query {
     pub t_min: f32,
     /// Upper end of the interval.
     pub t_max: f32,
+    /// The splat a secondary ray leaves, `None` for a primary ray.
+    pub from: Option<Departure>,
+}
+
+impl Query {
+    /// A primary-ray query: nothing skipped.
+    pub fn new(ray: Ray, t_min: f32, t_max: f32) -> Query {
+        Query {
+            ray,
+            t_min,
+            t_max,
+            from: None,
+        }
+    }
+
+    /// The same ray and interval with nothing skipped.
+    pub fn without_departure(self) -> Query {
+        Query { from: None, ..self }
+    }
 }
 
 /// Seeded random rays around `splats` (bounding box centre `c`, size `s`):
@@ -163,11 +183,7 @@ pub fn random_queries(splats: &[Splat], count: usize, seed: u64) -> Vec<Query> {
             } else {
                 f32::INFINITY
             };
-            Query {
-                ray: Ray { origin, dir },
-                t_min: 0.0,
-                t_max,
-            }
+            Query::new(Ray { origin, dir }, 0.0, t_max)
         })
         .collect()
 }
@@ -184,14 +200,14 @@ pub fn camera_queries(eye: Vec3, at: Vec3, w: usize, h: usize) -> Vec<Query> {
         for x in 0..w {
             let px = ((x as f32 + 0.5) / w as f32 * 2.0 - 1.0) * tan * w as f32 / h as f32;
             let py = (1.0 - (y as f32 + 0.5) / h as f32 * 2.0) * tan;
-            out.push(Query {
-                ray: Ray {
+            out.push(Query::new(
+                Ray {
                     origin: eye,
                     dir: (fwd + right * px + up * py).normalize(),
                 },
-                t_min: 0.0,
-                t_max: f32::INFINITY,
-            });
+                0.0,
+                f32::INFINITY,
+            ));
         }
     }
     out
@@ -241,6 +257,9 @@ impl Primitive for Unpacked {
     fn meets_box(&self, lo: Vec3, hi: Vec3) -> bool {
         self.0.meets_box(lo, hi)
     }
+    fn locate(&self, p: Vec3) -> Local {
+        self.0.locate(p)
+    }
 }
 
 /// A backend under a label that says which primitive and variant it is
@@ -254,11 +273,18 @@ impl Backend for Labelled {
     fn name(&self) -> &'static str {
         self.label
     }
-    fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, hits: &mut CandidateHits) {
-        self.inner.intersect(ray, t_min, t_max, hits);
+    fn intersect_from(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        from: Option<&Departure>,
+        hits: &mut CandidateHits,
+    ) {
+        self.inner.intersect_from(ray, t_min, t_max, from, hits);
     }
-    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        self.inner.occluded(ray, t_min, t_max)
+    fn occluded_from(&self, ray: &Ray, t_min: f32, t_max: f32, from: Option<&Departure>) -> bool {
+        self.inner.occluded_from(ray, t_min, t_max, from)
     }
     fn stats(&self) -> &BuildStats {
         self.inner.stats()
@@ -318,7 +344,10 @@ pub fn backends(splats: &[Splat]) -> Backends {
 }
 
 fn describe(q: &Query, splats: &[Splat], hits: &CandidateHits) -> String {
-    let mut s = format!("ray {:?} t_min {:?} t_max {:?}\n", q.ray, q.t_min, q.t_max);
+    let mut s = format!(
+        "ray {:?} t_min {:?} t_max {:?} from {:?}\n",
+        q.ray, q.t_min, q.t_max, q.from
+    );
     for c in hits.as_slice() {
         s += &format!("    {c:?} splat {:?}\n", splats[c.id as usize]);
     }
@@ -327,10 +356,12 @@ fn describe(q: &Query, splats: &[Splat], hits: &CandidateHits) -> String {
 
 /// Checks `backend` against the oracle on every query: identical candidate
 /// windows (ids, `t`, `u`, `v` compared bit for bit: every backend calls the
-/// same `intersect_disc` on the same `Disc` values, so nothing may differ),
-/// identical overflow flags, identical `occluded` answers, and identical
-/// resolved hits in all three shading modes. Returns a replayable
-/// description of the first disagreement.
+/// same `Primitive::intersect` on the same `Disc` values and the same
+/// self-hit rule, `Departure::skips`, so nothing may differ), identical
+/// overflow flags, identical `occluded` answers (closest-hit and any-hit
+/// queries skip the same hits), and identical resolved hits in all three
+/// shading modes. Returns a replayable description of the first
+/// disagreement.
 pub fn agree(
     oracle: &dyn Backend,
     backend: &dyn Backend,
@@ -341,8 +372,9 @@ pub fn agree(
     let mut want = CandidateHits::new(xi);
     let mut got = CandidateHits::new(xi);
     for (i, q) in queries.iter().enumerate() {
-        oracle.intersect(&q.ray, q.t_min, q.t_max, &mut want);
-        backend.intersect(&q.ray, q.t_min, q.t_max, &mut got);
+        let from = q.from.as_ref();
+        oracle.intersect_from(&q.ray, q.t_min, q.t_max, from, &mut want);
+        backend.intersect_from(&q.ray, q.t_min, q.t_max, from, &mut got);
         let bits = |h: &CandidateHits| {
             h.as_slice()
                 .iter()
@@ -379,8 +411,8 @@ pub fn agree(
                 ));
             }
         }
-        let occ_want = oracle.occluded(&q.ray, q.t_min, q.t_max);
-        let occ_got = backend.occluded(&q.ray, q.t_min, q.t_max);
+        let occ_want = oracle.occluded_from(&q.ray, q.t_min, q.t_max, from);
+        let occ_got = backend.occluded_from(&q.ray, q.t_min, q.t_max, from);
         if occ_want != occ_got || occ_want == want.is_empty() {
             return Err(format!(
                 "{}: occluded {} ({}) vs {} ({}), window empty: {}\n  {}",
@@ -407,21 +439,59 @@ pub fn assert_all_agree(b: &Backends, splats: &[Splat], queries: &[Query], xi: f
     }
 }
 
+/// Every tested backend's window for `query`, checked equal to the oracle's;
+/// returns the oracle's.
+pub fn windows(
+    b: &Backends,
+    splats: &[Splat],
+    query: &Query,
+    xi: f32,
+    what: &str,
+) -> CandidateHits {
+    assert_all_agree(b, splats, std::slice::from_ref(query), xi, what);
+    let mut h = CandidateHits::new(xi);
+    b.oracle.intersect_from(
+        &query.ray,
+        query.t_min,
+        query.t_max,
+        query.from.as_ref(),
+        &mut h,
+    );
+    h
+}
+
 /// How many queries of `queries` hit something in the oracle.
 pub fn count_hits(oracle: &dyn Backend, queries: &[Query], xi: f32) -> usize {
     let mut h = CandidateHits::new(xi);
     queries
         .iter()
         .filter(|q| {
-            oracle.intersect(&q.ray, q.t_min, q.t_max, &mut h);
+            oracle.intersect_from(&q.ray, q.t_min, q.t_max, q.from.as_ref(), &mut h);
             !h.is_empty()
+        })
+        .count()
+}
+
+/// How many queries of `queries` the self-hit rule changes in the oracle:
+/// the window or the any-hit answer differs from the same ray's with
+/// nothing skipped.
+pub fn count_skipping(oracle: &dyn Backend, queries: &[Query], xi: f32) -> usize {
+    let mut with = CandidateHits::new(xi);
+    let mut without = CandidateHits::new(xi);
+    queries
+        .iter()
+        .filter(|q| {
+            oracle.intersect_from(&q.ray, q.t_min, q.t_max, q.from.as_ref(), &mut with);
+            oracle.intersect(&q.ray, q.t_min, q.t_max, &mut without);
+            with.as_slice() != without.as_slice()
         })
         .count()
 }
 
 /// Secondary rays from each resolved primary hit: the mirror reflection and
 /// a shadow ray toward `light`, both starting at the hit with
-/// `t_min = eps_self` (§3.2, fig. 9 right).
+/// `t_min = eps_self` (§3.2, fig. 9 right) and leaving the winning splat
+/// (`from`), as the integrator traces them.
 pub fn secondary_queries(
     oracle: &dyn Backend,
     splats: &[Splat],
@@ -435,6 +505,11 @@ pub fn secondary_queries(
     for q in primaries {
         oracle.intersect(&q.ray, q.t_min, q.t_max, &mut h);
         if let Some(hit) = resolve(&h, &q.ray, splats, ShadingMode::Phong) {
+            let from = Some(Departure {
+                id: hit.id,
+                point: hit.point,
+                normal: hit.geometric_normal,
+            });
             let n = if hit.front { hit.normal } else { -hit.normal };
             let d = q.ray.dir - 2.0 * q.ray.dir.dot(n) * n;
             out.push(Query {
@@ -444,6 +519,7 @@ pub fn secondary_queries(
                 },
                 t_min: eps_self,
                 t_max: f32::INFINITY,
+                from,
             });
             let to_light = light - hit.point;
             out.push(Query {
@@ -453,6 +529,7 @@ pub fn secondary_queries(
                 },
                 t_min: eps_self,
                 t_max: to_light.length(),
+                from,
             });
         }
     }

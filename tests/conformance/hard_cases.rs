@@ -12,11 +12,7 @@ use splatray::scene::SceneScale;
 use splatray::splat::{NormalField, Splat};
 
 fn q(origin: Vec3, dir: Vec3) -> Query {
-    Query {
-        ray: Ray { origin, dir },
-        t_min: 0.0,
-        t_max: f32::INFINITY,
-    }
+    Query::new(Ray { origin, dir }, 0.0, f32::INFINITY)
 }
 
 /// A `k × k` grid of splats with normal `normal` through `origin`, spacing
@@ -32,16 +28,6 @@ fn plane(k: usize, step: f32, radius: f32, origin: Vec3, normal: Vec3) -> Vec<Sp
             Splat::disc(origin + u * a + v * b, n, radius).unwrap()
         })
         .collect()
-}
-
-/// Every tested backend's window for `query`, checked equal to the oracle's;
-/// returns the oracle's.
-fn windows(b: &Backends, splats: &[Splat], query: &Query, xi: f32, what: &str) -> CandidateHits {
-    assert_all_agree(b, splats, std::slice::from_ref(query), xi, what);
-    let mut h = CandidateHits::new(xi);
-    b.oracle
-        .intersect(&query.ray, query.t_min, query.t_max, &mut h);
-    h
 }
 
 #[test]
@@ -407,14 +393,14 @@ fn reflection_rays_off_a_mirror_plane_do_not_hit_it_again() {
             .unwrap_or_else(|| panic!("ray {:?} must hit the mirror", primary.ray));
         let n = hit.geometric_normal;
         let r = (dir - 2.0 * dir.dot(n) * n).normalize();
-        let refl = Query {
-            ray: Ray {
+        let refl = Query::new(
+            Ray {
                 origin: hit.point,
                 dir: r,
             },
-            t_min: scale.eps_self,
-            t_max: f32::INFINITY,
-        };
+            scale.eps_self,
+            f32::INFINITY,
+        );
         let h = windows(&b, &splats, &refl, scale.xi, "mirror reflection");
         assert!(
             h.is_empty(),

@@ -8,5 +8,6 @@
 mod common;
 
 mod agreement;
+mod departure;
 mod hard_cases;
 mod window;

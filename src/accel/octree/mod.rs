@@ -47,7 +47,7 @@
 mod build;
 mod traverse;
 
-use super::{Backend, BuildStats, CandidateHits};
+use super::{Backend, BuildStats, CandidateHits, Departure, NoSkip};
 use crate::geometry::Ray;
 use crate::primitive::{Pack, Primitive};
 use glam::Vec3;
@@ -175,15 +175,38 @@ impl<P: Primitive> Backend for Octree<P> {
         "octree"
     }
 
-    fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, hits: &mut CandidateHits) {
+    /// One traversal per kind of query, monomorphised: primary rays
+    /// ([`NoSkip`]) pay nothing for the self-hit rule.
+    fn intersect_from(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        from: Option<&Departure>,
+        hits: &mut CandidateHits,
+    ) {
         hits.clear();
-        let mut g = traverse::Gather::new(ray, t_min, t_max, hits);
-        self.traverse(ray, t_min, &mut g);
+        match from {
+            None => {
+                let mut g = traverse::Gather::new(ray, t_min, t_max, NoSkip, hits);
+                self.traverse(ray, t_min, &mut g);
+            }
+            Some(d) => {
+                let mut g = traverse::Gather::new(ray, t_min, t_max, d, hits);
+                self.traverse(ray, t_min, &mut g);
+            }
+        }
     }
 
-    fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        let mut a = traverse::AnyHit::new(ray, t_min, t_max);
-        self.traverse(ray, t_min, &mut a)
+    fn occluded_from(&self, ray: &Ray, t_min: f32, t_max: f32, from: Option<&Departure>) -> bool {
+        match from {
+            None => self.traverse(
+                ray,
+                t_min,
+                &mut traverse::AnyHit::new(ray, t_min, t_max, NoSkip),
+            ),
+            Some(d) => self.traverse(ray, t_min, &mut traverse::AnyHit::new(ray, t_min, t_max, d)),
+        }
     }
 
     fn stats(&self) -> &BuildStats {

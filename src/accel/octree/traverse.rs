@@ -2,7 +2,7 @@
 //! leaves: gather the candidate window, or stop at the first hit.
 
 use super::{INTERIOR, Octree, child_lo, lanes};
-use crate::accel::{Candidate, CandidateHits};
+use crate::accel::{Candidate, CandidateHits, Skip};
 use crate::geometry::Ray;
 use crate::primitive::{Pack, PackRay, Primitive};
 use glam::Vec3;
@@ -144,28 +144,37 @@ pub(super) trait Visitor<P: Primitive> {
     fn leaf(&mut self, packs: &[P::Pack], ids: &[u32]) -> bool;
 }
 
-/// `intersect`: gathers the candidate window.
-pub(super) struct Gather<'a> {
+/// `intersect`: gathers the candidate window, leaving out what `skip`
+/// skips.
+pub(super) struct Gather<'a, S> {
     ray: &'a Ray,
     lanes: PackRay,
     t_min: f32,
     t_max: f32,
+    skip: S,
     hits: &'a mut CandidateHits,
 }
 
-impl<'a> Gather<'a> {
-    pub(super) fn new(ray: &'a Ray, t_min: f32, t_max: f32, hits: &'a mut CandidateHits) -> Self {
+impl<'a, S: Skip> Gather<'a, S> {
+    pub(super) fn new(
+        ray: &'a Ray,
+        t_min: f32,
+        t_max: f32,
+        skip: S,
+        hits: &'a mut CandidateHits,
+    ) -> Self {
         Gather {
             ray,
             lanes: PackRay::new(ray),
             t_min,
             t_max,
+            skip,
             hits,
         }
     }
 }
 
-impl<P: Primitive> Visitor<P> for Gather<'_> {
+impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, S> {
     #[inline]
     fn cutoff(&self) -> f32 {
         self.t_max.min(self.hits.far())
@@ -179,8 +188,13 @@ impl<P: Primitive> Visitor<P> for Gather<'_> {
             while mask != 0 {
                 let lane = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
-                // The shared routine decides, with the window's current end.
-                if let Some(h) = pack.get(lane).intersect(self.ray, self.t_min, cut) {
+                // The shared routine decides, with the window's current end,
+                // and the shared rule skips.
+                let prim = pack.get(lane);
+                if let Some(h) = prim.intersect(self.ray, self.t_min, cut) {
+                    if self.skip.skips(self.ray.dir, ids[lane], &prim) {
+                        continue;
+                    }
                     let c = Candidate {
                         id: ids[lane],
                         t: h.t,
@@ -195,47 +209,51 @@ impl<P: Primitive> Visitor<P> for Gather<'_> {
     }
 }
 
-/// `occluded`: stops at the first hit.
-pub(super) struct AnyHit<'a> {
+/// `occluded`: stops at the first hit that `skip` does not skip.
+pub(super) struct AnyHit<'a, S> {
     ray: &'a Ray,
     lanes: PackRay,
     t_min: f32,
     t_max: f32,
+    skip: S,
 }
 
-impl<'a> AnyHit<'a> {
-    pub(super) fn new(ray: &'a Ray, t_min: f32, t_max: f32) -> Self {
+impl<'a, S: Skip> AnyHit<'a, S> {
+    pub(super) fn new(ray: &'a Ray, t_min: f32, t_max: f32, skip: S) -> Self {
         AnyHit {
             ray,
             lanes: PackRay::new(ray),
             t_min,
             t_max,
+            skip,
         }
     }
 }
 
-impl<P: Primitive> Visitor<P> for AnyHit<'_> {
+impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, S> {
     #[inline]
     fn cutoff(&self) -> f32 {
         self.t_max
     }
 
     #[inline]
-    fn leaf(&mut self, packs: &[P::Pack], _ids: &[u32]) -> bool {
-        packs.iter().any(|pack| {
-            let mut mask = pack.may_hit(&self.lanes, self.t_min, self.t_max);
-            while mask != 0 {
-                let lane = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                if pack
-                    .get(lane)
-                    .intersect(self.ray, self.t_min, self.t_max)
-                    .is_some()
-                {
-                    return true;
+    fn leaf(&mut self, packs: &[P::Pack], ids: &[u32]) -> bool {
+        packs
+            .iter()
+            .zip(ids.chunks_exact(lanes::<P>()))
+            .any(|(pack, ids)| {
+                let mut mask = pack.may_hit(&self.lanes, self.t_min, self.t_max);
+                while mask != 0 {
+                    let lane = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    let prim = pack.get(lane);
+                    if prim.intersect(self.ray, self.t_min, self.t_max).is_some()
+                        && !self.skip.skips(self.ray.dir, ids[lane], &prim)
+                    {
+                        return true;
+                    }
                 }
-            }
-            false
-        })
+                false
+            })
     }
 }
