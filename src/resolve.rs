@@ -60,7 +60,23 @@ fn faces_front(s: &Splat, ray: &Ray) -> bool {
     s.normal.dot(ray.dir) < 0.0
 }
 
-/// Resolves the candidate window into one surface hit, or `None` when empty.
+/// Resolves the candidate window into one surface hit, or `None` when empty:
+/// [`resolve_within`] over the whole window (`hits.xi()`).
+#[must_use]
+pub fn resolve(
+    hits: &CandidateHits,
+    ray: &Ray,
+    splats: &[Splat],
+    mode: ShadingMode,
+) -> Option<SurfaceHit> {
+    resolve_within(hits, ray, splats, mode, hits.xi())
+}
+
+/// Resolves the candidates within `window` of the nearest (at most the
+/// window the backend gathered, `hits.xi()`) into one surface hit, or
+/// `None` when empty. The window is the nearest splat's model's `xi`
+/// ([`crate::scene::Scene::xi_for`]): a backend gathers the widest of the
+/// scene's windows, and each surface blends over its own depth.
 ///
 /// Among candidates facing the same side as the nearest, the winner is the
 /// one whose hit lies closest to its splat's centre (smallest `|(u,v)|`,
@@ -71,17 +87,20 @@ fn faces_front(s: &Splat, ray: &Ray) -> bool {
 /// (thin sheets). When every weight is zero (all hits on rims) or the sum
 /// cancels, the winner's own normal is used.
 #[must_use]
-pub fn resolve(
+pub fn resolve_within(
     hits: &CandidateHits,
     ray: &Ray,
     splats: &[Splat],
     mode: ShadingMode,
+    window: f32,
 ) -> Option<SurfaceHit> {
     let nearest = hits.nearest()?;
     let front = faces_front(&splats[nearest.id as usize], ray);
+    let far = nearest.t + window.min(hits.xi());
     let same_side = hits
         .as_slice()
         .iter()
+        .take_while(|c| c.t <= far)
         .filter(|c| faces_front(&splats[c.id as usize], ray) == front);
     let key = |c: &Candidate| (c.radial(), c.t, c.id);
     let winner = *same_side.clone().min_by(|a, b| {
@@ -121,4 +140,45 @@ pub fn resolve(
         front,
         blended,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accel::Candidate;
+
+    /// Two parallel splats facing the ray, 0.05 apart: the nearer hit near
+    /// its rim, the farther near its centre.
+    fn two_layers() -> (Vec<Splat>, CandidateHits, Ray) {
+        let splats = vec![
+            Splat::disc(Vec3::new(0.0, 0.0, 0.0), Vec3::Z, 1.0).unwrap(),
+            Splat::disc(Vec3::new(0.0, 0.0, -0.05), Vec3::Z, 1.0).unwrap(),
+        ];
+        let ray = Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z);
+        let mut hits = CandidateHits::new(0.1);
+        for (id, t, u) in [(0u32, 5.0f32, 0.9f32), (1, 5.05, 0.1)] {
+            hits.offer(Candidate { id, t, u, v: 0.0 });
+        }
+        (splats, hits, ray)
+    }
+
+    #[test]
+    fn the_window_decides_which_candidates_compete() {
+        let (splats, hits, ray) = two_layers();
+        // The whole gathered window: the hit nearer its centre wins.
+        let all = resolve(&hits, &ray, &splats, ShadingMode::Flat).unwrap();
+        assert_eq!((all.id, all.blended), (1, 1));
+        let wide = resolve_within(&hits, &ray, &splats, ShadingMode::Blended, 0.06).unwrap();
+        assert_eq!((wide.id, wide.blended), (1, 2));
+        // A window narrower than the layers' distance: only the nearest.
+        let narrow = resolve_within(&hits, &ray, &splats, ShadingMode::Blended, 0.01).unwrap();
+        assert_eq!((narrow.id, narrow.blended), (0, 1));
+        // Never wider than what was gathered.
+        let mut few = CandidateHits::new(0.01);
+        for c in hits.as_slice() {
+            few.offer(*c);
+        }
+        let capped = resolve_within(&few, &ray, &splats, ShadingMode::Blended, 1.0).unwrap();
+        assert_eq!(capped.id, 0);
+    }
 }

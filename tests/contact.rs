@@ -9,7 +9,7 @@ use common::{Rng, render_with};
 use glam::{Vec2, Vec3};
 use splatray::accel::{Backend, CandidateHits, Ray};
 use splatray::render::integrator::{Frame, ShadeHit, SplatSurfaces, Surfaces, render_surfaces};
-use splatray::resolve::resolve;
+use splatray::resolve::resolve_within;
 use splatray::scene::{Light, Scene, build_scene, parse_scene_file, parse_scene_str};
 use splatray::splat::{PointCloud, SplatParams, generate};
 use splatray::validate::compare::{render_truth, truth_errors};
@@ -262,7 +262,14 @@ impl Surfaces for Guard<'_> {
         self.splats
             .backend
             .intersect(ray, t_min, f32::INFINITY, hits);
-        let h = resolve(hits, ray, &sc.splats, sc.shading_for(hits.nearest()?.id))?;
+        let nearest = hits.nearest()?.id;
+        let h = resolve_within(
+            hits,
+            ray,
+            &sc.splats,
+            sc.shading_for(nearest),
+            sc.xi_for(nearest),
+        )?;
         Some(ShadeHit {
             id: h.id,
             t: h.t,

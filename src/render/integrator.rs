@@ -6,7 +6,7 @@
 
 use crate::accel::{Backend, CandidateHits, Departure, Ray};
 use crate::progress::{Progress, notify};
-use crate::resolve::{SurfaceHit, resolve};
+use crate::resolve::{SurfaceHit, resolve_within};
 use crate::scene::{Light, Material, Scene};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -167,8 +167,9 @@ impl Surfaces for SplatSurfaces<'_> {
                 hits,
             ),
         }
-        let mode = sc.shading_for(hits.nearest()?.id);
-        let h: SurfaceHit = resolve(hits, ray, &sc.splats, mode)?;
+        let nearest = hits.nearest()?.id;
+        let mode = sc.shading_for(nearest);
+        let h: SurfaceHit = resolve_within(hits, ray, &sc.splats, mode, sc.xi_for(nearest))?;
         let splat = &sc.splats[h.id as usize];
         Some(ShadeHit {
             id: h.id,

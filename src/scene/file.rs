@@ -281,7 +281,8 @@ pub struct RenderSpec {
     pub max_depth: Option<u32>,
     /// `flat`, `blended` or `phong` (default `phong`).
     pub shading: Option<ShadingMode>,
-    /// Blending window `xi`, fraction of the scene diagonal (§4.3).
+    /// Blending window `xi` of every model, fraction of the scene diagonal
+    /// (§4.3); by default each model's is measured on its splats.
     pub xi: Option<f32>,
     /// Self-intersection distance, fraction of the scene diagonal (§3.2).
     pub eps_self: Option<f32>,

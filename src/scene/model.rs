@@ -140,14 +140,18 @@ impl Camera {
 pub struct SceneScale {
     /// Bounding-box diagonal of the splat set.
     pub diagonal: f32,
-    /// Blending window `xi` of §4.3.
+    /// Blending window `xi` of §4.3 the backends gather: the widest of the
+    /// models' windows ([`Scene::xi_of`]); the resolver trims it to the
+    /// nearest splat's model's.
     pub xi: f32,
     /// Self-intersection distance `eps_self` of §3.2 (fig. 9 right).
     pub eps_self: f32,
 }
 
 impl SceneScale {
-    /// Default fractions of the diagonal: `xi = 1e-3 d`, `eps_self = 1e-4 d`.
+    /// Fractions of the diagonal: `xi = 1e-3 d` (one window for every
+    /// splat; a loaded scene measures each model's instead), `eps_self =
+    /// 1e-4 d`.
     #[must_use]
     pub fn from_diagonal(diagonal: f32) -> SceneScale {
         SceneScale {
@@ -229,6 +233,9 @@ pub struct Scene {
     pub materials: Vec<Material>,
     /// Shading-mode override of each material (`None`: the scene's mode).
     pub shading_of: Vec<Option<ShadingMode>>,
+    /// The blending window `xi` (§4.3) of each material's (model's) splats;
+    /// `options.scale.xi`, the window the backends gather, is the widest.
+    pub xi_of: Vec<f32>,
     /// Camera.
     pub camera: Camera,
     /// Lights.
@@ -265,6 +272,13 @@ impl Scene {
     pub fn shading_for(&self, id: u32) -> ShadingMode {
         let m = self.material_of[id as usize] as usize;
         self.shading_of[m].unwrap_or(self.options.shading)
+    }
+
+    /// The blending window for a window whose nearest hit is splat `id`:
+    /// its model's `xi`.
+    #[must_use]
+    pub fn xi_for(&self, id: u32) -> f32 {
+        self.xi_of[self.material_of[id as usize] as usize]
     }
 
     /// Changes the view after loading: the resolution (keeping the vertical

@@ -224,8 +224,9 @@ fn set_view(scene: &mut Scene, plan: &SweepPlan, mode: ShadingMode) -> Result<()
 /// Moves a step's scene into the coordinates of the reference (first) step,
 /// so that the one render of the exact surface serves every step: the
 /// re-centring offset of a scene depends on its splats' bounding box, hence
-/// slightly on the budget. Camera, lights and the scene-relative `xi` and
-/// `eps_self` are the reference's too.
+/// slightly on the budget. Camera, lights and the scene-relative
+/// `eps_self` are the reference's too; the blending windows stay the
+/// step's own, measured on its splats.
 fn reframe(step: &mut Scene, reference: &Scene) {
     let shift = step.offset - reference.offset;
     for s in &mut step.splats {
@@ -234,7 +235,9 @@ fn reframe(step: &mut Scene, reference: &Scene) {
     step.offset = reference.offset;
     step.camera = reference.camera;
     step.lights.clone_from(&reference.lights);
+    let xi = step.options.scale.xi;
     step.options = reference.options;
+    step.options.scale.xi = xi;
     step.shading_of.clone_from(&reference.shading_of);
 }
 
