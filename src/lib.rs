@@ -13,6 +13,7 @@ pub mod progress;
 pub mod render;
 pub mod resolve;
 pub mod rng;
+pub mod scanner;
 pub mod scene;
 pub mod splat;
 pub mod validate;

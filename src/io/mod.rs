@@ -151,13 +151,17 @@ pub fn read_mesh(path: &Path) -> Result<Mesh, IoError> {
     ply::read_mesh(&bytes).map_err(|kind| IoError::new(path, kind))
 }
 
-/// Write a point cloud as binary little-endian PLY (`x y z`, plus
-/// `nx ny nz` and float `red green blue` when present), atomically (a
-/// temporary file in the same folder, then renamed).
+/// Write a point cloud, atomically (a temporary file in the same folder,
+/// then renamed): a `.pcd` path gets binary PCD with the cloud's
+/// `VIEWPOINT` (see [`pcd::encode`]); any other path binary little-endian
+/// PLY (`x y z`, plus `nx ny nz` and float `red green blue` when present).
 ///
 /// # Errors
 /// An [`IoError`] when the file cannot be written.
 pub fn write_points(path: &Path, cloud: &PointCloud) -> Result<(), IoError> {
+    if Format::from_extension(path) == Some(Format::Pcd) {
+        return write_bytes(path, &pcd::encode(cloud));
+    }
     let n = cloud.len();
     let normals = cloud.normals.as_ref().filter(|v| v.len() == n);
     let colors = cloud.colors.as_ref().filter(|v| v.len() == n);

@@ -41,6 +41,8 @@ impl Field {
 
 struct PcdHeader {
     fields: Vec<Field>,
+    /// The sensor origin of `VIEWPOINT tx ty tz qw qx qy qz`.
+    viewpoint: Option<Vec3>,
     points: usize,
     data: String,
     /// Offset of the body in the file.
@@ -56,6 +58,7 @@ fn parse_header(bytes: &[u8]) -> Result<PcdHeader, IoErrorKind> {
     let mut counts: Vec<usize> = Vec::new();
     let (mut width, mut height, mut points) = (None::<usize>, None::<usize>, None::<usize>);
     let mut data = None;
+    let mut viewpoint = None;
     while pos < bytes.len() {
         let end = bytes[pos..]
             .iter()
@@ -74,7 +77,17 @@ fn parse_header(bytes: &[u8]) -> Result<PcdHeader, IoErrorKind> {
                 .map_err(|_| IoErrorKind::Header(format!("{key}: \"{s}\" is not a count")))
         };
         match key.as_str() {
-            "VERSION" | "VIEWPOINT" => {}
+            "VERSION" => {}
+            "VIEWPOINT" => {
+                let v: Vec<f64> = rest.iter().filter_map(|s| s.parse().ok()).collect();
+                if v.len() != 7 || rest.len() != 7 || v.iter().any(|x| !x.is_finite()) {
+                    return Err(IoErrorKind::Header(format!(
+                        "VIEWPOINT needs 7 finite numbers (tx ty tz qw qx qy qz), got \"{}\"",
+                        rest.join(" ").chars().take(60).collect::<String>()
+                    )));
+                }
+                viewpoint = Some(Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32));
+            }
             "FIELDS" | "COLUMNS" => names = rest.iter().map(|s| s.to_string()).collect(),
             "SIZE" => sizes = rest.iter().map(|s| num(s)).collect::<Result<_, _>>()?,
             "TYPE" => {
@@ -148,6 +161,7 @@ fn parse_header(bytes: &[u8]) -> Result<PcdHeader, IoErrorKind> {
     };
     Ok(PcdHeader {
         fields,
+        viewpoint,
         points,
         data,
         body: pos,
@@ -189,7 +203,10 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
     let cols = columns(&h)?;
     let body = &bytes[h.body.min(bytes.len())..];
     let n = h.points;
-    let mut cloud = PointCloud::default();
+    let mut cloud = PointCloud {
+        viewpoint: h.viewpoint,
+        ..PointCloud::default()
+    };
     let mut normals = Vec::new();
     let mut colors = Vec::new();
     match h.data.as_str() {
@@ -329,4 +346,46 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
     }
     drop_non_finite(&mut cloud);
     Ok(cloud)
+}
+
+/// Encode `cloud` as a binary PCD v0.7 (`x y z`, plus `normal_x normal_y
+/// normal_z` when present), with `VIEWPOINT` set to the cloud's viewpoint
+/// (identity orientation) when it has one.
+#[must_use]
+pub fn encode(cloud: &PointCloud) -> Vec<u8> {
+    let n = cloud.len();
+    let normals = cloud.normals.as_ref().filter(|v| v.len() == n);
+    let vp = cloud.viewpoint.unwrap_or(Vec3::ZERO);
+    let (fields, sizes, types, counts) = if normals.is_some() {
+        (
+            "x y z normal_x normal_y normal_z",
+            "4 4 4 4 4 4",
+            "F F F F F F",
+            "1 1 1 1 1 1",
+        )
+    } else {
+        ("x y z", "4 4 4", "F F F", "1 1 1")
+    };
+    let header = format!(
+        "# .PCD v0.7 - Point Cloud Data file format (written by splatray {})\nVERSION 0.7\nFIELDS {fields}\nSIZE {sizes}\nTYPE {types}\nCOUNT {counts}\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT {} {} {} 1 0 0 0\nPOINTS {n}\nDATA binary\n",
+        env!("CARGO_PKG_VERSION"),
+        vp.x,
+        vp.y,
+        vp.z
+    );
+    let per = if normals.is_some() { 24 } else { 12 };
+    let mut out = Vec::with_capacity(header.len() + n * per);
+    out.extend_from_slice(header.as_bytes());
+    for i in 0..n {
+        let mut put = |v: Vec3| {
+            for c in v.to_array() {
+                out.extend_from_slice(&c.to_le_bytes());
+            }
+        };
+        put(cloud.positions[i]);
+        if let Some(ns) = normals {
+            put(ns[i]);
+        }
+    }
+    out
 }

@@ -288,6 +288,7 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
                 .collect()
         }),
         skipped: Vec::new(),
+        viewpoint: None,
     };
     drop_non_finite(&mut cloud);
     Ok(cloud)

@@ -81,5 +81,6 @@ pub fn sample_mesh(mesh: &Mesh, n: usize, noise_sigma: f32, seed: u64) -> PointC
         normals: Some(normals),
         colors: None,
         skipped: Vec::new(),
+        viewpoint: None,
     }
 }

@@ -180,6 +180,34 @@ pub struct SplatSpec {
     pub viewpoint: Option<[f32; 3]>,
 }
 
+/// `scan = { ... }`: a synthetic range scan of a mesh model (see
+/// [`crate::scanner`]); the mesh stays the exact surface.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScanSpec {
+    /// The scanner's position (model space).
+    pub from: [f32; 3],
+    /// The point it looks at (default: the mesh's centre).
+    pub at: Option<[f32; 3]>,
+    /// Rays per row and rows.
+    pub rays: Option<[u32; 2]>,
+    /// `raster` or `lines`.
+    #[serde(default)]
+    pub pattern: crate::scanner::ScanPattern,
+    /// Vertical field of view, degrees (default: the mesh fills it).
+    pub fov: Option<f32>,
+    /// Range noise, absolute (model units).
+    pub range_noise: Option<f32>,
+    /// Range noise as a multiple of the scan's point spacing.
+    pub range_noise_spacing: Option<f32>,
+    /// Fraction of returns replaced by outliers.
+    #[serde(default)]
+    pub outliers: f32,
+    /// Fraction of returns dropped.
+    #[serde(default)]
+    pub missing: f32,
+}
+
 /// `shape = { ... }`: a procedural model.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -232,9 +260,11 @@ pub struct ModelSpec {
     pub splats: Option<PathBuf>,
     /// A triangle mesh (PLY) to sample points from.
     pub mesh: Option<PathBuf>,
-    /// How many points to sample from `mesh`.
+    /// How many points to sample from `mesh` uniformly by area.
     pub samples: Option<usize>,
-    /// Seed for the mesh sampling.
+    /// Or: scan `mesh` from a viewpoint, like a range scanner.
+    pub scan: Option<ScanSpec>,
+    /// Seed for the mesh sampling or scan.
     #[serde(default)]
     pub seed: u64,
     /// A procedural shape.

@@ -187,8 +187,10 @@ fn model_source(
         return Ok((splats, unknown("a splat file")));
     }
     if let Some(p) = &spec.points {
-        if spec.samples.is_some() {
-            return Err(Error::invalid("`samples` applies to `mesh` models only"));
+        if spec.samples.is_some() || spec.scan.is_some() {
+            return Err(Error::invalid(
+                "`samples` and `scan` apply to `mesh` models only",
+            ));
         }
         let cloud = crate::io::read_points(&base.join(p))?;
         let splats = generate_splats(spec, &cloud, load, progress)?;
@@ -213,11 +215,47 @@ fn model_source(
     Ok((splats, truth))
 }
 
-/// A mesh model's points (sampled by area with the model's seed) and the
-/// mesh itself, in model space.
+/// A mesh model's points (sampled by area, or scanned, with the model's
+/// seed) and the mesh itself, in model space.
 fn sample_mesh_model(spec: &ModelSpec, path: &Path) -> Result<(PointCloud, Mesh)> {
+    if let Some(scan) = &spec.scan {
+        if spec.samples.is_some() {
+            return Err(Error::invalid(format!(
+                "{}: a mesh model takes `samples` or `scan`, not both",
+                path.display()
+            )));
+        }
+        if scan.range_noise.is_some() && scan.range_noise_spacing.is_some() {
+            return Err(Error::invalid(
+                "scan: give `range_noise` or `range_noise_spacing`, not both",
+            ));
+        }
+        let [columns, rows] = scan.rays.unwrap_or([640, 480]);
+        let params = crate::scanner::ScanParams {
+            from: Vec3::from(scan.from),
+            at: scan.at.map(Vec3::from),
+            columns,
+            rows,
+            fov: scan.fov,
+            pattern: scan.pattern,
+            range_noise: match (scan.range_noise, scan.range_noise_spacing) {
+                (_, Some(f)) => crate::scanner::RangeNoise::Spacing(f),
+                (s, None) => crate::scanner::RangeNoise::Absolute(s.unwrap_or(0.0)),
+            },
+            outliers: scan.outliers,
+            missing: scan.missing,
+            seed: spec.seed,
+        };
+        let mesh = crate::io::read_mesh(path)?;
+        let scan = crate::scanner::scan_mesh(&mesh, &params)
+            .map_err(|e| Error::invalid(format!("{}: {e}", path.display())))?;
+        return Ok((scan.cloud, mesh));
+    }
     let samples = spec.samples.ok_or_else(|| {
-        Error::invalid(format!("{}: a mesh model needs `samples`", path.display()))
+        Error::invalid(format!(
+            "{}: a mesh model needs `samples` or `scan`",
+            path.display()
+        ))
     })?;
     if samples == 0 || samples > 50_000_000 {
         return Err(Error::invalid(format!(
@@ -243,7 +281,7 @@ fn generate_splats(
         epsilon_rel: spec.splat.epsilon.unwrap_or(d.epsilon_rel),
         density: spec.splat.density.unwrap_or(d.density),
         ellipses: spec.splat.ellipses,
-        viewpoint: spec.splat.viewpoint.map(Vec3::from),
+        viewpoint: spec.splat.viewpoint.map(Vec3::from).or(cloud.viewpoint),
         ..d
     };
     let (splats, report) = crate::splat::generate_with_progress(cloud, &params, progress)?;

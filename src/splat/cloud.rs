@@ -14,6 +14,10 @@ pub struct PointCloud {
     pub colors: Option<Vec<Vec3>>,
     /// Points left out while reading, as `(reason, count)`.
     pub skipped: Vec<(String, usize)>,
+    /// Where the scanner stood (PCD `VIEWPOINT`), in the positions' frame:
+    /// every point was seen from here, so the segment from it to a point is
+    /// free space.
+    pub viewpoint: Option<Vec3>,
 }
 
 impl PointCloud {
