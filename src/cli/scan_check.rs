@@ -65,10 +65,11 @@ pub fn run(args: &ScanCheckArgs) -> Result<(), String> {
     }
     let pct = |f: f64| 100.0 * f;
     println!(
-        "{}: {} points, {} held out, {} splats; lines of sight at tolerance {}: consistent {:.2} %, early {:.2} %, gross early {:.2} %, late {:.2} %, miss {:.2} %; largest splat {:.1}x the median radius",
+        "{}: {} points, {} held out ({} of them outliers, not checked), {} splats; lines of sight at tolerance {}: consistent {:.2} %, early {:.2} %, gross early {:.2} %, late {:.2} %, miss {:.2} %; largest splat {:.1}x the median radius",
         args.input.display(),
         r.points,
         r.held_out,
+        r.held_out_outliers,
         r.splats,
         args.tolerance,
         pct(r.consistent_fraction),

@@ -7,6 +7,7 @@ use super::field;
 use super::grow::{GrowInput, grow_all};
 use super::knn::{Knn, build_tree};
 use super::normals;
+use super::outliers;
 use crate::progress::{Progress, notify};
 use glam::Vec3;
 use kiddo::SquaredEuclidean;
@@ -39,6 +40,8 @@ pub struct SplatParams {
     /// Where the scanner stood: estimated normals are oriented to face it
     /// (instead of outward from the extreme point of each piece).
     pub viewpoint: Option<Vec3>,
+    /// Leave out statistical outliers (see [`super::outliers`]).
+    pub remove_outliers: bool,
 }
 
 impl Default for SplatParams {
@@ -50,6 +53,7 @@ impl Default for SplatParams {
             ellipses: false,
             field_radius_factor: 1.2,
             viewpoint: None,
+            remove_outliers: true,
         }
     }
 }
@@ -238,7 +242,7 @@ pub fn generate_with_progress(
     }
     // --- clean, reorder, kNN -------------------------------------------------
     notify(progress, "neighbours", 0.0);
-    let (order, non_finite, dupes) = clean_order(&cloud.positions);
+    let (mut order, non_finite, dupes) = clean_order(&cloud.positions);
     for (why, count) in [
         ("non-finite coordinates", non_finite),
         ("duplicate point", dupes),
@@ -250,7 +254,7 @@ pub fn generate_with_progress(
             });
         }
     }
-    let n = order.len();
+    let mut n = order.len();
     report.used_points = n;
     if n < 3 {
         return Err(GenerateError::TooFewPoints {
@@ -258,18 +262,12 @@ pub fn generate_with_progress(
             needed: 3,
         });
     }
-    let points: Vec<Vec3> = order.iter().map(|&i| cloud.positions[i as usize]).collect();
-    let colors: Option<Vec<Vec3>> = cloud
+    let mut points: Vec<Vec3> = order.iter().map(|&i| cloud.positions[i as usize]).collect();
+    let mut colors: Option<Vec<Vec3>> = cloud
         .colors
         .as_ref()
         .filter(|c| c.len() == cloud.positions.len())
         .map(|c| order.iter().map(|&i| c[i as usize]).collect());
-    let (lo, hi) = points.iter().fold(
-        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
-        |(a, b), p| (a.min(*p), b.max(*p)),
-    );
-    let diagonal = f64::from((hi - lo).length());
-    report.bbox_diagonal = diagonal;
     let (_, vals, _) = normals::plane_fit(points.iter().copied());
     if vals[1] <= 1e-12 * vals[2] {
         return Err(GenerateError::Collinear);
@@ -287,8 +285,38 @@ pub fn generate_with_progress(
         ));
     }
     report.k = k;
-    let tree = build_tree(&points);
-    let knn = Knn::build(&tree, &points, k);
+    let mut tree = build_tree(&points);
+    let mut knn = Knn::build(&tree, &points, k);
+    // --- outliers ------------------------------------------------------------
+    if params.remove_outliers {
+        let out = outliers::flag(&points, &knn, params.viewpoint);
+        let count = out.iter().filter(|&&o| o).count();
+        if count > 0 && n - count > k {
+            retain_unflagged(&mut order, &out);
+            retain_unflagged(&mut points, &out);
+            if let Some(c) = colors.as_mut() {
+                retain_unflagged(c, &out);
+            }
+            report.skipped_points.push(Skipped {
+                reason: format!(
+                    "statistical outlier (k-th neighbour over {}x its neighbours' or {}x the cloud's 90th percentile)",
+                    outliers::LOCAL_RATIO,
+                    outliers::GLOBAL_RATIO
+                ),
+                count,
+            });
+            n -= count;
+            report.used_points = n;
+            tree = build_tree(&points);
+            knn = Knn::build(&tree, &points, k);
+        }
+    }
+    let (lo, hi) = points.iter().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(a, b), p| (a.min(*p), b.max(*p)),
+    );
+    let diagonal = f64::from((hi - lo).length());
+    report.bbox_diagonal = diagonal;
     let t1 = Instant::now();
     // --- normals ---------------------------------------------------------------
     notify(progress, "normals", 0.0);
@@ -372,6 +400,12 @@ pub fn generate_with_progress(
         total: (t4 - t0).as_secs_f64(),
     };
     Ok((splats, report))
+}
+
+/// Keeps the items of `v` whose flag is false.
+fn retain_unflagged<T>(v: &mut Vec<T>, flagged: &[bool]) {
+    let mut it = flagged.iter();
+    v.retain(|_| !it.next().copied().unwrap_or(false));
 }
 
 fn check_params(p: &SplatParams) -> Result<(), GenerateError> {

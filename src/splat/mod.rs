@@ -111,6 +111,7 @@ mod generate;
 pub mod grow;
 pub mod knn;
 pub mod normals;
+pub mod outliers;
 
 pub use cloud::PointCloud;
 pub use generate::{

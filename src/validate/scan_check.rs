@@ -7,7 +7,7 @@
 use crate::accel::registry;
 use crate::accel::{CandidateHits, Ray};
 use crate::rng::SplitMix64;
-use crate::splat::{PointCloud, SplatParams, SplatReport, generate_with_progress};
+use crate::splat::{PointCloud, SplatParams, SplatReport, generate_with_progress, outliers};
 use crate::{Error, Result};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -50,7 +50,10 @@ pub struct ScanCheckReport {
     pub points: usize,
     /// Points held out of generation.
     pub held_out: usize,
-    /// Rays cast: one per held-out point.
+    /// Held-out points the generator's outlier test rejects (on the whole
+    /// cloud): not checked, since no surface was seen there.
+    pub held_out_outliers: usize,
+    /// Rays cast: one per held-out point that is not an outlier.
     pub rays: usize,
     /// `|t - d| <= tolerance·d`.
     pub consistent: usize,
@@ -134,6 +137,13 @@ pub fn scan_check(
     let keep: Vec<bool> = (0..n)
         .map(|i| !held_out(params.seed, i, params.holdout))
         .collect();
+    // Held-out points the generator would reject as outliers were not seen
+    // on a surface: they are counted, not checked.
+    let rejected = if params.splat.remove_outliers {
+        outliers::find(&cloud.positions, params.splat.k, Some(vp))
+    } else {
+        vec![false; n]
+    };
     let pick = |v: &Vec<Vec3>, k: bool| -> Vec<Vec3> {
         v.iter()
             .zip(&keep)
@@ -156,7 +166,13 @@ pub fn scan_check(
         skipped: cloud.skipped.clone(),
         viewpoint: Some(vp),
     };
-    let test = pick(&cloud.positions, false);
+    let held: Vec<usize> = (0..n).filter(|&i| !keep[i]).collect();
+    let test: Vec<Vec3> = held
+        .iter()
+        .filter(|&&i| !rejected[i])
+        .map(|&i| cloud.positions[i])
+        .collect();
+    let held_out_outliers = held.len() - test.len();
     let t0 = Instant::now();
     let sp = SplatParams {
         viewpoint: Some(vp),
@@ -212,7 +228,8 @@ pub fn scan_check(
     let frac = |k: usize| counts[k] as f64 / rays.max(1) as f64;
     Ok(ScanCheckReport {
         points: n,
-        held_out: rays,
+        held_out: held.len(),
+        held_out_outliers,
         rays,
         consistent: counts[0],
         early: counts[1],
