@@ -6,6 +6,7 @@
 pub mod accel;
 pub mod embree;
 pub mod error;
+pub mod freespace;
 pub mod geometry;
 pub mod io;
 pub mod primitive;

@@ -2,8 +2,9 @@
 //! [--ellipses] [--report R.json]`.
 
 use super::progress::ProgressLine;
+use splatray::freespace::generate_trimmed;
 use splatray::io::{read_points, write_splats};
-use splatray::splat::{PointCloud, SplatParams, generate_with_progress};
+use splatray::splat::{PointCloud, SplatParams};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -98,9 +99,15 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
     let cloud = read_points(&args.input).map_err(|e| e.to_string())?;
     let read = t0.elapsed().as_secs_f64();
     let params = args.splat.params(&cloud)?;
-    let (splats, mut report) =
-        generate_with_progress(&cloud, &params, Some(&|stage, f| line.update(stage, f)))
+    let (splats, mut report, trim) =
+        generate_trimmed(&cloud, &params, Some(&|stage, f| line.update(stage, f)))
             .map_err(|e| format!("{}: {e}", args.input.display()))?;
+    if let Some(t) = trim.filter(|t| t.shrunk > 0) {
+        eprintln!(
+            "splatray: {} splats shrunk off {} of {} lines of sight from the viewpoint ({} still blocked)",
+            t.shrunk, t.blocked, t.rays, t.still_blocked
+        );
+    }
     line.finish();
     report.seconds.read = read;
     report.seconds.total += read;

@@ -284,7 +284,13 @@ fn generate_splats(
         viewpoint: spec.splat.viewpoint.map(Vec3::from).or(cloud.viewpoint),
         ..d
     };
-    let (splats, report) = crate::splat::generate_with_progress(cloud, &params, progress)?;
+    let (splats, report, trim) = crate::freespace::generate_trimmed(cloud, &params, progress)?;
+    if let Some(t) = trim.filter(|t| t.shrunk > 0) {
+        load.warnings.push(format!(
+            "{} splats shrunk off {} blocked lines of sight from the viewpoint",
+            t.shrunk, t.blocked
+        ));
+    }
     load.input_points += report.input_points;
     for s in &report.skipped_points {
         load.warnings

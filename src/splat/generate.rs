@@ -277,7 +277,7 @@ pub fn generate_with_progress(
             .warnings
             .push("all points are coplanar: normals are oriented by a convention only".into());
     }
-    let k = params.k.min(n - 1);
+    let mut k = params.k.min(n - 1);
     if k < params.k {
         report.warnings.push(format!(
             "only {n} points: using k = {k} neighbours instead of {}",
@@ -341,7 +341,37 @@ pub fn generate_with_progress(
         }
     }
     if to_estimate > 0 {
-        let est = normals::estimate(&points, &knn);
+        let (est, wide, collinear, degenerate) = normals::estimate_multiscale(&points, &tree, &knn);
+        if (collinear * 20 > n || wide * 5 > n) && k < params.k * normals::WIDE_FACTOR {
+            // Anisotropic sampling (scan lines) or heavy noise: the k nearest
+            // neighbours of many points lie along one line or do not reach
+            // past the noise, so the neighbourhood graph would not join the
+            // lines. Growth and orientation get a wider graph.
+            let wider = (k * normals::WIDE_FACTOR).min(n - 1).min(256);
+            report.warnings.push(format!(
+                "the {k} nearest neighbours of {:.1} % of the points lie on one line or \
+                 within the noise (scan lines?): growing splats with k = {wider}",
+                100.0 * wide.max(collinear) as f64 / n as f64
+            ));
+            k = wider;
+            report.k = k;
+            knn = Knn::build(&tree, &points, k);
+        }
+        if wide * 100 > n {
+            report.warnings.push(format!(
+                "{wide} normals ({:.1} %) came from a {}x wider neighbourhood: the {k} nearest \
+                 neighbours were too noisy or lay along one scan line",
+                100.0 * wide as f64 / n as f64,
+                normals::WIDE_FACTOR
+            ));
+        }
+        if degenerate > 0 {
+            report.warnings.push(format!(
+                "{degenerate} points have collinear neighbourhoods even with {} neighbours: \
+                 their normals are a guess",
+                normals::WIDE_MAX
+            ));
+        }
         for i in 0..n {
             if !fixed[i] {
                 nrm[i] = est[i];

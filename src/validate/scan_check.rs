@@ -6,8 +6,9 @@
 
 use crate::accel::registry;
 use crate::accel::{CandidateHits, Ray};
+use crate::freespace::{TrimReport, generate_trimmed};
 use crate::rng::SplitMix64;
-use crate::splat::{PointCloud, SplatParams, SplatReport, generate_with_progress, outliers};
+use crate::splat::{PointCloud, SplatParams, SplatReport, outliers};
 use crate::{Error, Result};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -90,6 +91,8 @@ pub struct ScanCheckReport {
     pub max_over_median_radius: f64,
     /// The generation report.
     pub generation: SplatReport,
+    /// What free-space trimming did (on the points not held out).
+    pub trim: Option<TrimReport>,
     /// Seconds to generate the splats.
     pub splat_seconds: f64,
     /// Seconds to cast the rays (including the backend build).
@@ -178,7 +181,7 @@ pub fn scan_check(
         viewpoint: Some(vp),
         ..params.splat.clone()
     };
-    let (splats, generation) = generate_with_progress(&train, &sp, progress)?;
+    let (splats, generation, trim) = generate_trimmed(&train, &sp, progress)?;
     let t1 = Instant::now();
     let info = &registry::renderers()[0];
     let backend = info.build_splats(&splats)?;
@@ -248,6 +251,7 @@ pub fn scan_check(
         max_radius,
         max_over_median_radius: max_radius / median_radius.max(f64::MIN_POSITIVE),
         generation,
+        trim,
         splat_seconds: (t1 - t0).as_secs_f64(),
         check_seconds: (t2 - t1).as_secs_f64(),
     })
