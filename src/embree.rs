@@ -267,15 +267,41 @@ pub trait UserGeometry: Send + Sync + 'static {
 /// hand it back to the callbacks, followed by where the candidates go.
 #[repr(C)]
 struct QueryContext<'q, G: UserGeometry> {
-    base: sys::RTCRayQueryContext,
+    base: RayQueryContext,
     query: *mut G::Query<'q>,
 }
 
-/// `rtcInitRayQueryContext` (inline in `rtcore_ray.h`).
-fn ray_query_context() -> sys::RTCRayQueryContext {
-    sys::RTCRayQueryContext {
-        instID: [sys::RTC_INVALID_GEOMETRY_ID; 1],
+/// `RTCRayQueryContext` as Embree 4.3 and later lay it out: the
+/// `embree4-sys` bindings come from the 4.2 headers, which lack the
+/// `instPrimID` stack that a library built with instance arrays (the
+/// default, and the PyPI build `scripts/setup.sh` installs) reads after
+/// `instID` and copies into every hit. Without this field Embree reads past
+/// the context.
+#[repr(C)]
+struct RayQueryContext {
+    base: sys::RTCRayQueryContext,
+    inst_prim_id: [c_uint; 1],
+}
+
+/// `rtcInitRayQueryContext` (inline in `rtcore_ray.h`), for the layout of
+/// [`RayQueryContext`].
+fn ray_query_context() -> RayQueryContext {
+    RayQueryContext {
+        base: sys::RTCRayQueryContext {
+            instID: [sys::RTC_INVALID_GEOMETRY_ID; 1],
+        },
+        inst_prim_id: [sys::RTC_INVALID_GEOMETRY_ID; 1],
     }
+}
+
+/// An `RTCRayHit` with room after it for the fields Embree 4.3 and later
+/// append to `RTCHit` (`instPrimID`, then padding to 16 bytes), which the
+/// 4.2 bindings lack: Embree writes `instPrimID` with every triangle hit, so
+/// a bare `RTCRayHit` would have it overwrite whatever follows on the stack.
+#[repr(C)]
+struct RayHitSlot {
+    rayhit: sys::RTCRayHit,
+    tail: [c_uint; 4],
 }
 
 /// `rtcInitIntersectArguments` (inline in `rtcore_scene.h`), with the
@@ -318,20 +344,24 @@ fn embree_ray(ray: &Ray, t_min: f32, t_max: f32) -> sys::RTCRay {
     }
 }
 
-/// A ray with an empty hit record, as `rtcIntersect1` expects it.
-fn embree_rayhit(ray: &Ray, t_min: f32, t_max: f32) -> sys::RTCRayHit {
-    sys::RTCRayHit {
-        ray: embree_ray(ray, t_min, t_max),
-        hit: sys::RTCHit {
-            Ng_x: 0.0,
-            Ng_y: 0.0,
-            Ng_z: 0.0,
-            u: 0.0,
-            v: 0.0,
-            primID: sys::RTC_INVALID_GEOMETRY_ID,
-            geomID: sys::RTC_INVALID_GEOMETRY_ID,
-            instID: [sys::RTC_INVALID_GEOMETRY_ID; 1],
+/// A ray with an empty hit record, as `rtcIntersect1` expects it, in a
+/// [`RayHitSlot`].
+fn embree_rayhit(ray: &Ray, t_min: f32, t_max: f32) -> RayHitSlot {
+    RayHitSlot {
+        rayhit: sys::RTCRayHit {
+            ray: embree_ray(ray, t_min, t_max),
+            hit: sys::RTCHit {
+                Ng_x: 0.0,
+                Ng_y: 0.0,
+                Ng_z: 0.0,
+                u: 0.0,
+                v: 0.0,
+                primID: sys::RTC_INVALID_GEOMETRY_ID,
+                geomID: sys::RTC_INVALID_GEOMETRY_ID,
+                instID: [sys::RTC_INVALID_GEOMETRY_ID; 1],
+            },
         },
+        tail: [sys::RTC_INVALID_GEOMETRY_ID; 4],
     }
 }
 
@@ -516,13 +546,20 @@ impl<G: UserGeometry> UserScene<G> {
             base: ray_query_context(),
             query: query as *mut G::Query<'_>,
         };
-        let mut args = intersect_arguments(&mut ctx.base as *mut sys::RTCRayQueryContext);
-        let mut rayhit = embree_rayhit(ray, t_min, t_max);
-        // SAFETY: committed scene; `rayhit` and `args` live across the call;
-        // `args.context` points at `ctx.base`, the first field of the repr(C)
-        // `QueryContext<G>` whose `query` borrows `query` mutably for the
-        // call, matching the type `user_intersect::<G>` reads.
-        unsafe { sys::rtcIntersect1(self.scene.raw, &mut rayhit, &mut args) };
+        let mut args = intersect_arguments((&mut ctx as *mut QueryContext<'_, G>).cast());
+        let mut slot = embree_rayhit(ray, t_min, t_max);
+        // SAFETY: committed scene; `slot` and `args` live across the call,
+        // the slot with room for the hit Embree writes; `args.context`
+        // points at the repr(C) `QueryContext<G>`, which begins with the
+        // context Embree reads and whose `query` borrows `query` mutably
+        // for the call, matching the type `user_intersect::<G>` reads.
+        unsafe {
+            sys::rtcIntersect1(
+                self.scene.raw,
+                (&mut slot as *mut RayHitSlot).cast(),
+                &mut args,
+            );
+        };
     }
 
     /// True when any primitive is hit in `[t_min, t_max]`.
@@ -638,13 +675,20 @@ impl TriangleScene {
     #[must_use]
     pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<TriangleHit> {
         let mut ctx = ray_query_context();
-        let mut args = intersect_arguments(&mut ctx as *mut sys::RTCRayQueryContext);
-        let mut rayhit = embree_rayhit(ray, t_min, t_max);
-        // SAFETY: committed scene; all pointers live across the call.
-        unsafe { sys::rtcIntersect1(self.scene.raw, &mut rayhit, &mut args) };
-        let h = &rayhit.hit;
+        let mut args = intersect_arguments((&mut ctx as *mut RayQueryContext).cast());
+        let mut slot = embree_rayhit(ray, t_min, t_max);
+        // SAFETY: committed scene; all pointers live across the call; the
+        // context and the slot have the layout and room Embree 4.3+ uses.
+        unsafe {
+            sys::rtcIntersect1(
+                self.scene.raw,
+                (&mut slot as *mut RayHitSlot).cast(),
+                &mut args,
+            );
+        };
+        let h = &slot.rayhit.hit;
         (h.geomID != sys::RTC_INVALID_GEOMETRY_ID).then_some(TriangleHit {
-            t: rayhit.ray.tfar,
+            t: slot.rayhit.ray.tfar,
             mesh: h.geomID,
             triangle: h.primID,
             u: h.u,
@@ -661,5 +705,55 @@ impl TriangleScene {
     /// Errors Embree reported since the last check.
     pub fn check(&self) -> Result<(), EmbreeError> {
         self.scene.device.check()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    /// Regression: the 4.2 headers of `embree4-sys` declare an `RTCHit`
+    /// without the `instPrimID` that Embree 4.3 and later write with every
+    /// triangle hit, just past the bindings' `RTCRayHit`; a bare `RTCRayHit`
+    /// on the stack had that write land on the caller's next variable (it
+    /// once replaced the y component of a ray's direction). The slot's tail
+    /// must take the write, and the hit must be what the ray meets.
+    #[test]
+    fn triangle_hits_stay_inside_the_slot() {
+        let device = Device::new().unwrap();
+        let positions = [
+            Vec3::new(-1.0, -1.0, 0.0),
+            Vec3::new(1.0, -1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+        ];
+        let scene = TriangleScene::new(&device, &[(&positions[..], &[[0, 1, 2]][..])]).unwrap();
+        let ray = Ray::new(Vec3::new(0.1, 0.0, 2.0), Vec3::new(0.0, 0.0, -1.0));
+        let mut ctx = ray_query_context();
+        let mut args = intersect_arguments((&mut ctx as *mut RayQueryContext).cast());
+        let mut slot = embree_rayhit(&ray, 0.0, f32::INFINITY);
+        let sentinel = 0x5eed_5eed;
+        slot.tail = [sentinel; 4];
+        // SAFETY: as in `TriangleScene::intersect`.
+        unsafe {
+            sys::rtcIntersect1(
+                scene.scene.raw,
+                (&mut slot as *mut RayHitSlot).cast(),
+                &mut args,
+            );
+        };
+        assert_eq!(slot.rayhit.hit.geomID, 0);
+        assert_eq!(slot.rayhit.ray.tfar, 2.0);
+        let (major, minor, _) = device.version();
+        if (major, minor) >= (4, 3) {
+            // Embree copied the context's `instPrimID` into the hit: the
+            // first word of the tail, which the bindings' struct lacks.
+            assert_eq!(
+                slot.tail[0],
+                sys::RTC_INVALID_GEOMETRY_ID,
+                "Embree {major}.{minor} wrote no instPrimID past RTCHit"
+            );
+        }
+        assert_eq!(slot.tail[1..], [sentinel; 3], "nothing beyond instPrimID");
     }
 }
