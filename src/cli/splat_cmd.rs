@@ -2,6 +2,7 @@
 //! [--ellipses] [--report R.json]`.
 
 use super::progress::ProgressLine;
+use glam::DVec3;
 use splatray::freespace::generate_trimmed;
 use splatray::io::{read_points, write_splats};
 use splatray::splat::{PointCloud, SplatParams};
@@ -39,10 +40,11 @@ pub struct SplatOptions {
     /// Grow elliptical splats along the minimum-curvature direction.
     #[arg(long)]
     pub ellipses: bool,
-    /// Where the scanner stood, as X,Y,Z: normals are oriented toward it.
-    /// Default: the cloud's own (a PCD's VIEWPOINT).
+    /// Where the scanner stood, as X,Y,Z in the input's coordinates:
+    /// normals are oriented toward it. Default: the cloud's own (a PCD's
+    /// VIEWPOINT).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
-    pub viewpoint: Option<Vec<f32>>,
+    pub viewpoint: Option<Vec<f64>>,
     /// Ignore the cloud's own viewpoint.
     #[arg(long, conflicts_with = "viewpoint")]
     pub no_viewpoint: bool,
@@ -53,18 +55,19 @@ impl SplatOptions {
     ///
     /// # Errors
     /// Not three finite numbers.
-    pub fn viewpoint(&self) -> Result<Option<glam::Vec3>, String> {
+    pub fn viewpoint(&self) -> Result<Option<DVec3>, String> {
         match self.viewpoint.as_deref() {
             None => Ok(None),
             Some([x, y, z]) if [x, y, z].iter().all(|v| v.is_finite()) => {
-                Ok(Some(glam::Vec3::new(*x, *y, *z)))
+                Ok(Some(DVec3::new(*x, *y, *z)))
             }
             Some(v) => Err(format!("--viewpoint needs three finite numbers, got {v:?}")),
         }
     }
 
     /// The generation parameters for `cloud`: the options given, defaults
-    /// for the rest, the viewpoint given or else the cloud's own.
+    /// for the rest, the viewpoint given (made relative to the cloud's
+    /// origin, in f64) or else the cloud's own.
     ///
     /// # Errors
     /// A malformed viewpoint.
@@ -73,7 +76,9 @@ impl SplatOptions {
         let viewpoint = if self.no_viewpoint {
             None
         } else {
-            self.viewpoint()?.or(cloud.viewpoint)
+            self.viewpoint()?
+                .map(|v| cloud.local_viewpoint(v))
+                .or(cloud.viewpoint)
         };
         Ok(SplatParams {
             k: self.k.unwrap_or(defaults.k),
@@ -111,7 +116,7 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
     line.finish();
     report.seconds.read = read;
     report.seconds.total += read;
-    write_splats(&args.output, &splats).map_err(|e| e.to_string())?;
+    write_splats(&args.output, &splats, cloud.origin).map_err(|e| e.to_string())?;
     if let Some(path) = &args.report {
         let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
         splatray::io::write_text(path, &json).map_err(|e| e.to_string())?;
@@ -126,13 +131,16 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
         );
     }
     eprintln!(
-        "splatray: {} points -> {} splats ({} elliptical), coverage {:.4}, mean radius {:.4e}, {} flat normal fields, {:.2} s -> {}",
+        "splatray: {} points -> {} splats ({} elliptical), coverage {:.4}, mean radius {:.4e}, {} flat normal fields, origin [{:?}, {:?}, {:?}], {:.2} s -> {}",
         report.used_points,
         report.splats,
         report.elliptical_splats,
         report.coverage,
         report.mean_radius,
         report.fallback_normal_fields,
+        cloud.origin.x,
+        cloud.origin.y,
+        cloud.origin.z,
         report.seconds.total,
         args.output.display()
     );

@@ -80,7 +80,6 @@ pub fn sample_mesh(mesh: &Mesh, n: usize, noise_sigma: f32, seed: u64) -> PointC
         positions,
         normals: Some(normals),
         colors: None,
-        skipped: Vec::new(),
-        viewpoint: None,
+        ..PointCloud::default()
     }
 }

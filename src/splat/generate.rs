@@ -4,6 +4,7 @@
 use super::PointCloud;
 use super::Splat;
 use super::field;
+use super::frame::{UnitFrame, first_unusable};
 use super::grow::{GrowInput, grow_all};
 use super::knn::{Knn, build_tree};
 use super::normals;
@@ -38,7 +39,9 @@ pub struct SplatParams {
     /// (3.20° against 3.39° at 4k splats), with 1.0 and 1.2 never.
     pub field_radius_factor: f32,
     /// Where the scanner stood: estimated normals are oriented to face it
-    /// (instead of outward from the extreme point of each piece).
+    /// (instead of outward from the extreme point of each piece). In the
+    /// cloud's frame, like its positions (relative to
+    /// [`PointCloud::origin`]).
     pub viewpoint: Option<Vec3>,
     /// Leave out statistical outliers (see [`super::outliers`]).
     pub remove_outliers: bool,
@@ -112,6 +115,9 @@ pub struct SplatReport {
     pub epsilon: f64,
     /// The bounding-box diagonal of the used points.
     pub bbox_diagonal: f64,
+    /// The cloud's origin: splat centres are offsets from it (as the
+    /// cloud's positions are), in the file's coordinates.
+    pub origin: [f64; 3],
     /// Neighbours per point actually used.
     pub k: usize,
     /// Notes about the input that did not stop generation.
@@ -135,6 +141,9 @@ pub enum GenerateError {
     },
     /// All points lie on one line: there is no surface to cover.
     Collinear,
+    /// The splats do not fit single precision in the cloud's units (a
+    /// centre or radius overflowed, or a radius underflowed to zero).
+    OutOfRange(String),
 }
 
 impl fmt::Display for GenerateError {
@@ -151,6 +160,7 @@ impl fmt::Display for GenerateError {
                     "all points lie on one line: there is no surface to splat"
                 )
             }
+            GenerateError::OutOfRange(s) => write!(f, "{s}"),
         }
     }
 }
@@ -208,9 +218,15 @@ fn clean_order(pos: &[Vec3]) -> (Vec<u32>, usize, usize) {
 /// Splat colour is the mean colour of the points a splat took, or white
 /// when the cloud has no colour, so that the material alone sets the albedo.
 ///
+/// The splats are in the cloud's frame: centres are offsets from
+/// [`PointCloud::origin`] (also given as [`SplatReport::origin`]). Growth
+/// runs in a unit-scale frame, so any scale works that single precision
+/// can hold (`docs/DESIGN.md`, "Precision").
+///
 /// # Errors
 /// [`GenerateError`] when the parameters are out of range, fewer than 3
-/// distinct points remain, or all points are collinear.
+/// distinct points remain, all points are collinear, or the splats do not
+/// fit single precision in the cloud's units.
 pub fn generate(
     cloud: &PointCloud,
     params: &SplatParams,
@@ -230,6 +246,23 @@ pub fn generate_with_progress(
 ) -> Result<(Vec<Splat>, SplatReport), GenerateError> {
     let t0 = Instant::now();
     check_params(params)?;
+    // Growth runs in a unit-scale frame (centred, divided by the diagonal),
+    // so no squared distance or threshold overflows or underflows; the
+    // splats and the report's lengths are mapped back at the end.
+    let frame = UnitFrame::of(&cloud.positions);
+    let unit_cloud = PointCloud {
+        positions: cloud.positions.iter().map(|&p| frame.unit(p)).collect(),
+        origin: cloud.origin,
+        normals: cloud.normals.clone(),
+        colors: cloud.colors.clone(),
+        skipped: cloud.skipped.clone(),
+        viewpoint: cloud.viewpoint.map(|v| frame.unit_viewpoint(v)),
+    };
+    let unit_params = SplatParams {
+        viewpoint: params.viewpoint.map(|v| frame.unit_viewpoint(v)),
+        ..params.clone()
+    };
+    let (cloud, params) = (&unit_cloud, &unit_params);
     let mut report = SplatReport {
         input_points: cloud.positions.len() + cloud.skipped_total(),
         ..SplatReport::default()
@@ -420,6 +453,27 @@ pub fn generate_with_progress(
         .map(|s| 0.5 * f64::from(s.radii.x + s.radii.y))
         .sum::<f64>()
         / splats.len().max(1) as f64;
+    // Back to the cloud's units, and nothing that single precision cannot
+    // hold leaves here.
+    for s in &mut splats {
+        *s = frame.splat_from_unit(s);
+    }
+    if let Some(why) = first_unusable(&splats) {
+        return Err(GenerateError::OutOfRange(format!(
+            "the cloud spans {:e} units: {why}",
+            frame.scale
+        )));
+    }
+    report.epsilon = frame.length_from_unit(report.epsilon);
+    report.bbox_diagonal = frame.length_from_unit(report.bbox_diagonal);
+    report.mean_radius = frame.length_from_unit(report.mean_radius);
+    report.origin = cloud.origin.to_array();
+    if frame.scale < f64::from(f32::MIN_POSITIVE) {
+        report.warnings.push(format!(
+            "the cloud spans only {:e} units, below single precision's normal range: its positions are coarsely quantised",
+            frame.scale
+        ));
+    }
     let t4 = Instant::now();
     report.seconds = StageSeconds {
         read: 0.0,

@@ -21,7 +21,8 @@ pub struct ScanCheckParams {
     /// Splat generation, as `splat` would run it (the viewpoint is set to
     /// the check's).
     pub splat: SplatParams,
-    /// The scanner's position; default: the cloud's own (PCD `VIEWPOINT`).
+    /// The scanner's position, in the cloud's frame (relative to
+    /// [`PointCloud::origin`]); default: the cloud's own (PCD `VIEWPOINT`).
     pub viewpoint: Option<Vec3>,
     /// A hit within `tolerance × d` of the point's distance `d` is
     /// consistent.
@@ -79,7 +80,7 @@ pub struct ScanCheckReport {
     pub miss_fraction: f64,
     /// The tolerance used.
     pub tolerance: f64,
-    /// The viewpoint used.
+    /// The viewpoint used, in the cloud file's coordinates.
     pub viewpoint: [f64; 3],
     /// Splats made from the points not held out.
     pub splats: usize,
@@ -168,6 +169,7 @@ pub fn scan_check(
             .map(|v| pick(v, true)),
         skipped: cloud.skipped.clone(),
         viewpoint: Some(vp),
+        origin: cloud.origin,
     };
     let held: Vec<usize> = (0..n).filter(|&i| !keep[i]).collect();
     let test: Vec<Vec3> = held
@@ -245,7 +247,7 @@ pub fn scan_check(
         late_fraction: frac(3),
         miss_fraction: frac(4),
         tolerance: f64::from(tol),
-        viewpoint: vp.as_dvec3().to_array(),
+        viewpoint: (cloud.origin + vp.as_dvec3()).to_array(),
         splats: splats.len(),
         median_radius,
         max_radius,
