@@ -465,3 +465,43 @@ fn non_finite_splats_are_not_written() {
     assert!(!e.contains('\n') && e.contains("not finite"), "{e}");
     assert!(!p.exists());
 }
+
+/// `--viewpoint` is in the input's coordinates: a far open sheet faces a
+/// viewpoint given in world coordinates, above or below it.
+#[test]
+fn a_world_viewpoint_orients_a_far_sheet() {
+    let dir = scratch("far-viewpoint");
+    let mut rng = common::Rng::new(common::seed());
+    let pts: Vec<DVec3> = (0..3000)
+        .map(|_| {
+            let (x, z) = (rng.next_f64() * 2.0 - 1.0, rng.next_f64() * 2.0 - 1.0);
+            FAR + DVec3::new(x, 0.05 * (x * x + z * z), z)
+        })
+        .collect();
+    let input = dir.join("sheet.ply");
+    write_ply_f64(&input, &pts);
+    for (dy, up) in [(5.0, true), (-5.0, false)] {
+        let vp = FAR + DVec3::new(0.3, dy, 0.1);
+        let output = dir.join("s.ply");
+        let out = bin()
+            .arg("splat")
+            .arg(&input)
+            .arg("-o")
+            .arg(&output)
+            .arg(format!("--viewpoint={:?},{:?},{:?}", vp.x, vp.y, vp.z))
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let set = read_splats(&output).unwrap();
+        let facing = set
+            .splats
+            .iter()
+            .filter(|s| (s.normal.y > 0.0) == up)
+            .count();
+        assert_eq!(facing, set.splats.len(), "viewpoint {vp}");
+    }
+}
