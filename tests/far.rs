@@ -249,7 +249,11 @@ fn splat_files_and_scenes_keep_the_origin() {
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");
-    assert!(err.contains("origin [500000"), "{err}");
+    let o = cloud.origin;
+    assert!(
+        err.contains(&format!("origin [{:?}, {:?}, {:?}]", o.x, o.y, o.z)),
+        "{err}"
+    );
     let set = read_splats(&cli_splats).unwrap();
     assert_eq!(set.origin, cloud.origin);
     assert!(off_sphere(&set.splats, set.origin, FAR, RADIUS) <= rep.epsilon);
@@ -504,4 +508,44 @@ fn a_world_viewpoint_orients_a_far_sheet() {
             .count();
         assert_eq!(facing, set.splats.len(), "viewpoint {vp}");
     }
+}
+
+/// One stray return a thousand kilometres off (as lidar has) costs the rest
+/// of the cloud no precision: the origin and the unit frame are robust
+/// centres (medians), not bounding-box centres, which would put the far
+/// sphere half a million units from its origin.
+#[test]
+fn a_stray_far_point_costs_the_rest_no_precision() {
+    let dir = scratch("far-stray");
+    let near_path = dir.join("near.ply");
+    write_ply_f64(&near_path, &sphere(POINTS, DVec3::ZERO, RADIUS));
+    let (near_cloud, near, _) = splat_file(&near_path);
+    let near_median = median(&normal_errors(&near, near_cloud.origin, DVec3::ZERO));
+    let mut pts = sphere(POINTS, FAR, RADIUS);
+    pts.push(FAR + DVec3::new(1e6, 0.0, 0.0));
+    let path = dir.join("stray.ply");
+    write_ply_f64(&path, &pts);
+    let (cloud, splats, rep) = splat_file(&path);
+    assert!((cloud.origin - FAR).length() < RADIUS, "{}", cloud.origin);
+    let m = median(&normal_errors(&splats, cloud.origin, FAR));
+    eprintln!(
+        "far sphere and a stray point: median {m:.4}° (clean at the origin {near_median:.4}°)"
+    );
+    assert!(m <= 1.1 * near_median, "median {m}° against {near_median}°");
+    assert!(off_sphere(&splats, cloud.origin, FAR, RADIUS) <= rep.epsilon);
+    // In memory, without a reader: the unit frame alone.
+    let mut positions: Vec<Vec3> = sphere(POINTS, DVec3::ZERO, RADIUS)
+        .iter()
+        .map(|p| p.as_vec3())
+        .collect();
+    positions.push(Vec3::new(1e6, 0.0, 0.0));
+    let stray = PointCloud {
+        positions,
+        ..PointCloud::default()
+    };
+    let (splats, rep) = generate(&stray, &SplatParams::default()).unwrap();
+    let m = median(&normal_errors(&splats, DVec3::ZERO, DVec3::ZERO));
+    eprintln!("in memory: median {m:.4}°");
+    assert!(m <= 1.1 * near_median, "median {m}° against {near_median}°");
+    assert!(off_sphere(&splats, DVec3::ZERO, DVec3::ZERO, RADIUS) <= rep.epsilon);
 }

@@ -114,7 +114,7 @@ fn ply_binary_big_endian_and_float_and_u8_colours() {
         be.extend_from_slice(&7i32.to_be_bytes());
     }
     let c = read_points(&write(&dir, "be.ply", &be)).unwrap();
-    // Re-centred on the bounding box: the origin is its centre.
+    // Re-centred on the per-axis medians (of two points, their midpoint).
     assert_eq!(c.origin, DVec3::new(2.5, 3.5, 4.5));
     assert_eq!(c.positions, vec![Vec3::splat(-1.5), Vec3::splat(1.5)]);
     assert_eq!(c.colors.unwrap(), vec![Vec3::X, Vec3::Z]);

@@ -8,8 +8,8 @@
 //!
 //! Coordinates are parsed in double precision (PLY `double` or `float`, PCD
 //! `F 8` or `F 4`, text) and re-centred, still in double precision, on the
-//! centre of the cloud's bounding box before they become single-precision
-//! offsets from [`PointCloud::origin`] (`docs/DESIGN.md`, "Precision").
+//! cloud's per-axis medians before they become single-precision offsets
+//! from [`PointCloud::origin`] (`docs/DESIGN.md`, "Precision").
 
 mod atomic;
 mod error;
@@ -104,8 +104,8 @@ fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
 /// with another extension are recognised by their first bytes.
 ///
 /// Points with a NaN or infinite coordinate are skipped and counted in
-/// [`PointCloud::skipped`]. The positions are offsets from the centre of the
-/// points' bounding box, [`PointCloud::origin`], computed in f64.
+/// [`PointCloud::skipped`]. The positions are offsets from the points'
+/// per-axis medians, [`PointCloud::origin`], computed in f64.
 ///
 /// # Errors
 /// An [`IoError`] when the file cannot be read, is empty, has an unknown
@@ -239,9 +239,9 @@ pub fn srgb_to_linear(c: f32) -> f32 {
 
 /// A cloud from positions in the file's coordinates, in f64: points with a
 /// non-finite coordinate are dropped (with their normals and colours) and
-/// counted in `skipped`; the rest are re-centred, in f64, on the centre of
-/// their bounding box, which becomes the cloud's origin, and only then made
-/// f32 (`docs/DESIGN.md`, "Precision").
+/// counted in `skipped`; the rest are re-centred, in f64, on their per-axis
+/// medians (which a few far outliers do not move), which become the
+/// cloud's origin, and only then made f32 (`docs/DESIGN.md`, "Precision").
 ///
 /// `normals` and `colors`, when given, have one entry per position.
 pub(crate) fn cloud_from_world(
@@ -267,22 +267,13 @@ pub(crate) fn cloud_from_world(
             colors.map(|c| kept(&c, &keep)),
         )
     };
-    let (lo, hi) = world
-        .iter()
-        .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| {
-            (lo.min(*p), hi.max(*p))
-        });
-    // Halves first: the sum of two coordinates near f64::MAX overflows.
-    let origin = if lo.x <= hi.x {
-        lo * 0.5 + hi * 0.5
-    } else {
-        DVec3::ZERO
-    };
+    let origin = crate::splat::frame::robust_centre_size(world.len(), |i| world[i])
+        .map_or(DVec3::ZERO, |(centre, _)| centre);
     let positions: Vec<Vec3> = world.iter().map(|p| (*p - origin).as_vec3()).collect();
-    if !positions.iter().all(|p| p.is_finite()) {
+    if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
         return Err(IoErrorKind::Data(format!(
-            "the points reach {:e} units from the centre of their bounding box, more than single precision holds ({:e})",
-            (hi * 0.5 - lo * 0.5).max_element(),
+            "a point lies {:e} units from the cloud's median, more than single precision holds ({:e})",
+            (world[i] - origin).abs().max_element(),
             f32::MAX
         )));
     }

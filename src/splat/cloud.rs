@@ -6,10 +6,10 @@ use glam::{DVec3, Vec3};
 ///
 /// Positions are single-precision offsets from an `origin` held in double
 /// precision: point `i` lies at `origin + positions[i]` in the file's
-/// coordinates. The readers put the origin at the centre of the cloud's
-/// bounding box, so a georeferenced scan millions of units from zero keeps
-/// the precision of its size, not of its distance (`docs/DESIGN.md`,
-/// "Precision").
+/// coordinates. The readers put the origin at the cloud's per-axis medians
+/// (a robust centre: a few far outliers do not move it), so a georeferenced
+/// scan millions of units from zero keeps the precision of its size, not of
+/// its distance (`docs/DESIGN.md`, "Precision").
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PointCloud {
     /// Point positions relative to `origin`; all finite.

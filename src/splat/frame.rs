@@ -1,7 +1,8 @@
 //! The unit-scale frame splat generation runs in: positions re-centred on
-//! their bounding box and divided by its diagonal, in f64, so no squared
+//! a robust centre and divided by a robust size, in f64, so no squared
 //! distance, covariance or threshold overflows or underflows whatever the
-//! cloud's units (`docs/DESIGN.md`, "Precision").
+//! cloud's units, and a few far outliers cost the rest no precision
+//! (`docs/DESIGN.md`, "Precision").
 
 use super::Splat;
 use glam::{DVec3, Vec3};
@@ -11,37 +12,94 @@ use glam::{DVec3, Vec3};
 /// rather than overflowing f32.
 const FAR_VIEWPOINT: f64 = 1e30;
 
-/// Maps between a cloud's coordinates and a frame where its bounding box is
-/// centred on zero with a diagonal of 1: `unit = (p - center) / scale`.
+/// At most this many points (a regular stride through the finite ones)
+/// estimate the robust centre and size.
+const ROBUST_SAMPLE: usize = 1 << 20;
+
+/// The farthest point lies at most this many sizes from the centre in the
+/// unit frame (the size grows to keep it there), so squared distances stay
+/// far inside f32's range (1e24 against 3e38).
+const MAX_REACH: f64 = 1e12;
+
+/// A centre and a size of a point set that a few far outliers do not move:
+/// per axis the median and the 10th-to-90th percentile range (from at most
+/// [`ROBUST_SAMPLE`] points), the size being the largest range. `point(i)`
+/// gives point `i` of `n`; non-finite ones are left out. `None` when no
+/// point is finite.
+pub(crate) fn robust_centre_size(n: usize, point: impl Fn(usize) -> DVec3) -> Option<(DVec3, f64)> {
+    let stride = n.div_ceil(ROBUST_SAMPLE).max(1);
+    let mut centre = [0.0; 3];
+    let mut size = 0f64;
+    let mut vals: Vec<f64> = Vec::with_capacity(n.min(ROBUST_SAMPLE));
+    for (axis, c) in centre.iter_mut().enumerate() {
+        vals.clear();
+        vals.extend(
+            (0..n)
+                .map(&point)
+                .filter(|p| p.is_finite())
+                .step_by(stride)
+                .map(|p| p[axis]),
+        );
+        if vals.is_empty() {
+            return None;
+        }
+        let last = (vals.len() - 1) as f64;
+        // Linear between the two nearest ranks (the median of two is their
+        // midpoint).
+        let mut quantile = |f: f64| {
+            let at = last * f;
+            let k = at.floor() as usize;
+            let (_, &mut a, above) = vals.select_nth_unstable_by(k, f64::total_cmp);
+            let t = at - k as f64;
+            if t > 0.0 {
+                let b = above.iter().copied().fold(f64::INFINITY, f64::min);
+                a * (1.0 - t) + b * t
+            } else {
+                a
+            }
+        };
+        *c = quantile(0.5);
+        // Halves first: the difference of two coordinates near f64::MAX
+        // overflows.
+        size = size.max(2.0 * (quantile(0.9) * 0.5 - quantile(0.1) * 0.5));
+    }
+    Some((DVec3::from(centre), size))
+}
+
+/// Maps between a cloud's coordinates and a frame where it is centred on
+/// zero with a size of about 1: `unit = (p - center) / scale`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct UnitFrame {
-    /// Centre of the finite positions' bounding box.
+    /// The robust centre of the finite positions (per-axis medians).
     pub(crate) center: DVec3,
-    /// Diagonal of that box (1 when it is empty or a single point).
+    /// Their robust size (see [`robust_centre_size`]), grown when needed so
+    /// that no point lies more than [`MAX_REACH`] sizes from the centre; 1
+    /// when there is no extent at all.
     pub(crate) scale: f64,
 }
 
 impl UnitFrame {
     /// The frame of the finite ones among `positions`.
     pub(crate) fn of(positions: &[Vec3]) -> UnitFrame {
-        let (lo, hi) = positions.iter().filter(|p| p.is_finite()).fold(
-            (DVec3::INFINITY, DVec3::NEG_INFINITY),
-            |(lo, hi), p| {
-                let p = p.as_dvec3();
-                (lo.min(p), hi.max(p))
-            },
-        );
-        if lo.x > hi.x {
+        let Some((center, robust)) =
+            robust_centre_size(positions.len(), |i| positions[i].as_dvec3())
+        else {
             return UnitFrame {
                 center: DVec3::ZERO,
                 scale: 1.0,
             };
-        }
-        let diagonal = (hi - lo).length();
+        };
+        let reach = positions
+            .iter()
+            .filter(|p| p.is_finite())
+            .map(|p| (p.as_dvec3() - center).abs().max_element())
+            .fold(0f64, f64::max);
+        let base = if robust > 0.0 { robust } else { reach };
+        let scale = base.max(reach / MAX_REACH);
         UnitFrame {
-            center: (lo + hi) * 0.5,
-            scale: if diagonal > 0.0 && diagonal.is_finite() {
-                diagonal
+            center,
+            scale: if scale > 0.0 && scale.is_finite() {
+                scale
             } else {
                 1.0
             },
@@ -116,10 +174,12 @@ mod tests {
         ] {
             let pts = [c - Vec3::splat(r), c + Vec3::splat(r), c];
             let f = UnitFrame::of(&pts);
+            // Three points: the 10th and 90th percentiles are the extremes.
             let d = f64::from(r) * 2.0 * 3f64.sqrt();
-            assert!((f.scale / d - 1.0).abs() < 1e-6, "{f:?}");
+            assert!((f.scale / (2.0 * f64::from(r)) - 1.0).abs() < 1e-6, "{f:?}");
             let u = pts.map(|p| f.unit(p));
-            assert!((u[1] - u[0]).length() > 0.999 && (u[1] - u[0]).length() < 1.001);
+            let l = (u[1] - u[0]).length();
+            assert!((l - 3f32.sqrt()).abs() < 1e-5, "{l}");
             let s = Splat::disc(u[1], Vec3::Z, 0.25).unwrap();
             let back = f.splat_from_unit(&s);
             assert!(
@@ -131,6 +191,27 @@ mod tests {
         }
         assert_eq!(UnitFrame::of(&[Vec3::NAN]).scale, 1.0);
         assert_eq!(UnitFrame::of(&[Vec3::ONE, Vec3::ONE]).scale, 1.0);
+    }
+
+    #[test]
+    fn a_far_outlier_moves_neither_centre_nor_size() {
+        // 1000 points in the unit cube around (5, 5, 5), one at 1e7.
+        let mut pts: Vec<Vec3> = (0..1000)
+            .map(|i| Vec3::new((i % 10) as f32, (i / 10 % 10) as f32, (i / 100) as f32) / 9.0)
+            .map(|p| p + Vec3::splat(4.5))
+            .collect();
+        pts.push(Vec3::new(1e7, 0.0, 0.0));
+        let f = UnitFrame::of(&pts);
+        assert!((f.center - DVec3::splat(5.0)).length() < 0.1, "{f:?}");
+        assert!(f.scale > 0.7 && f.scale < 1.0, "{f:?}");
+        // Far beyond MAX_REACH sizes, the size grows to keep it in range.
+        pts.push(Vec3::new(-3e38, 0.0, 0.0));
+        let f = UnitFrame::of(&pts);
+        assert!((f.scale / (3e38 / MAX_REACH) - 1.0).abs() < 1e-6, "{f:?}");
+        assert!(pts.iter().all(|&p| f.unit(p).is_finite()));
+        // A cloud that is one point but for one other.
+        let f = UnitFrame::of(&[Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, Vec3::X]);
+        assert_eq!(f.scale, 1.0, "{f:?}");
     }
 
     #[test]

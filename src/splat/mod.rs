@@ -107,7 +107,7 @@ impl Splat {
 
 mod cloud;
 pub mod field;
-mod frame;
+pub(crate) mod frame;
 mod generate;
 pub mod grow;
 pub mod knn;
