@@ -218,6 +218,32 @@ fn far_points_written_back_keep_their_world_position() {
     }
 }
 
+/// A far cloud written as PCD gets `F 8` coordinates and its `VIEWPOINT` in
+/// world coordinates; read back, both are where they were.
+#[test]
+fn far_points_written_as_pcd_keep_their_viewpoint() {
+    let dir = scratch("far-pcd");
+    let pts = sphere(500, FAR, RADIUS);
+    write_pcd_f64(&dir.join("in.pcd"), &pts, true);
+    let mut cloud = read_points(&dir.join("in.pcd")).unwrap();
+    let vp = FAR + DVec3::new(30.0, 40.0, -5.0);
+    cloud.viewpoint = Some(cloud.local_viewpoint(vp));
+    write_points(&dir.join("out.pcd"), &cloud).unwrap();
+    let text = std::fs::read(dir.join("out.pcd")).unwrap();
+    let head = String::from_utf8_lossy(&text[..300]).to_string();
+    assert!(head.contains("SIZE 8 8 8\n"), "{head}");
+    let back = read_points(&dir.join("out.pcd")).unwrap();
+    for i in 0..pts.len() {
+        let d = (back.world(i) - pts[i]).length();
+        assert!(
+            d <= 2.0 * f64::from(f32::EPSILON) * RADIUS,
+            "point {i} moved by {d}"
+        );
+    }
+    let back_vp = back.origin + back.viewpoint.unwrap().as_dvec3();
+    assert!((back_vp - vp).length() < 1e-5, "{back_vp} vs {vp}");
+}
+
 /// Splat centres come back from a splat file in world coordinates, exactly;
 /// and a scene places a far cloud (as points or as a splat file) where it
 /// is: it renders like the same scene at the origin.

@@ -174,19 +174,21 @@ mod tests {
         ] {
             let pts = [c - Vec3::splat(r), c + Vec3::splat(r), c];
             let f = UnitFrame::of(&pts);
-            // Three points: the 10th and 90th percentiles are the extremes.
+            // Three points c - r, c, c + r per axis: the 10th and 90th
+            // percentiles are c ∓ 0.8 r.
             let d = f64::from(r) * 2.0 * 3f64.sqrt();
-            assert!((f.scale / (2.0 * f64::from(r)) - 1.0).abs() < 1e-6, "{f:?}");
+            assert!((f.scale / (1.6 * f64::from(r)) - 1.0).abs() < 1e-6, "{f:?}");
+            assert!((f.center - c.as_dvec3()).length() <= 1e-6 * d, "{f:?}");
             let u = pts.map(|p| f.unit(p));
             let l = (u[1] - u[0]).length();
-            assert!((l - 3f32.sqrt()).abs() < 1e-5, "{l}");
+            assert!((l - 3f32.sqrt() / 0.8).abs() < 1e-5, "{l}");
             let s = Splat::disc(u[1], Vec3::Z, 0.25).unwrap();
             let back = f.splat_from_unit(&s);
             assert!(
                 (back.center - pts[1]).length() <= 1e-6 * d as f32,
                 "{back:?}"
             );
-            assert!((f64::from(back.radii.x) / (0.25 * d) - 1.0).abs() < 1e-6);
+            assert!((f64::from(back.radii.x) / (0.25 * f.scale) - 1.0).abs() < 1e-6);
             assert_eq!(first_unusable(&[back]), None);
         }
         assert_eq!(UnitFrame::of(&[Vec3::NAN]).scale, 1.0);
@@ -209,9 +211,12 @@ mod tests {
         let f = UnitFrame::of(&pts);
         assert!((f.scale / (3e38 / MAX_REACH) - 1.0).abs() < 1e-6, "{f:?}");
         assert!(pts.iter().all(|&p| f.unit(p).is_finite()));
-        // A cloud that is one point but for one other.
-        let f = UnitFrame::of(&[Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, Vec3::X]);
-        assert_eq!(f.scale, 1.0, "{f:?}");
+        // A cloud that is one point but for one other: no percentile range,
+        // the size is the reach.
+        let mut one = vec![Vec3::ZERO; 20];
+        one.push(Vec3::X * 4.0);
+        let f = UnitFrame::of(&one);
+        assert_eq!((f.center, f.scale), (DVec3::ZERO, 4.0), "{f:?}");
     }
 
     #[test]
