@@ -233,8 +233,8 @@ fn far_points_written_as_pcd_keep_their_viewpoint() {
     let head = String::from_utf8_lossy(&text[..300]).to_string();
     assert!(head.contains("SIZE 8 8 8\n"), "{head}");
     let back = read_points(&dir.join("out.pcd")).unwrap();
-    for i in 0..pts.len() {
-        let d = (back.world(i) - pts[i]).length();
+    for (i, p) in pts.iter().enumerate() {
+        let d = (back.world(i) - *p).length();
         assert!(
             d <= 2.0 * f64::from(f32::EPSILON) * RADIUS,
             "point {i} moved by {d}"
