@@ -3,7 +3,7 @@
 mod common;
 
 use common::{Rng, data, scratch};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use splatray::io::{read_mesh, read_points, write_points};
 use splatray::scanner::{RangeNoise, ScanParams, ScanPattern, scan_mesh};
 use splatray::splat::{PointCloud, SplatParams, generate};
@@ -40,8 +40,19 @@ fn scanner_counts_add_up_and_keeps_its_viewpoint_through_pcd() {
     let path = scratch("scan-roundtrip").join("scan.pcd");
     write_points(&path, &scan.cloud).unwrap();
     let back = read_points(&path).unwrap();
-    assert_eq!(back.viewpoint, Some(Vec3::new(1.5, 1.0, 3.5)));
-    assert_eq!(back.positions, scan.cloud.positions);
+    // Read back re-centred on the cloud's medians: the viewpoint and the
+    // positions are offsets from the origin, each within one f32 rounding
+    // of an offset of at most a few units.
+    let vp = back.origin + back.viewpoint.unwrap().as_dvec3();
+    assert!(
+        (vp - DVec3::new(1.5, 1.0, 3.5)).abs().max_element() < 1e-6,
+        "{vp}"
+    );
+    assert_eq!(back.len(), scan.cloud.len());
+    for (i, p) in scan.cloud.positions.iter().enumerate() {
+        let d = (back.world(i) - p.as_dvec3()).abs().max_element();
+        assert!(d <= f64::from(f32::EPSILON), "point {i} moved by {d}");
+    }
 }
 
 fn check(cloud: &PointCloud, remove_outliers: bool) -> ScanCheckReport {
