@@ -21,7 +21,8 @@ enum Command {
     /// Print splatray's version, the Embree version in use (asked from the
     /// device), the Embree library loaded and the thread count.
     Info,
-    /// Render a scene (default: the bundled scenes/bunny.toml) to an image.
+    /// Render a scene (default: the bundled scenes/bunny.toml), or a point
+    /// cloud with a scene made for it, to an image.
     Render(cli::render::RenderArgs),
     /// Render a scene with every registered backend in one run and report
     /// each one's agreement with the first ray for ray, image for image,
