@@ -147,6 +147,30 @@ fn synthetic_scans_render_from_their_viewpoint() {
 }
 
 #[test]
+fn a_far_cloud_renders() {
+    // A georeferenced-looking sphere of points millions of units from zero.
+    let dir = scratch("cloud-far");
+    let far = dir.join("far.xyz");
+    let mut text = String::new();
+    let n = 3000;
+    for i in 0..n {
+        // A Fibonacci sphere of radius 2.
+        let y = 1.0 - 2.0 * (f64::from(i) + 0.5) / f64::from(n);
+        let r = (1.0 - y * y).sqrt();
+        let a = f64::from(i) * 2.399_963_229_728_653;
+        let (x, z) = (r * a.cos(), r * a.sin());
+        text += &format!(
+            "{:.4} {:.4} {:.4}\n",
+            4_500_000.0 + 2.0 * x,
+            5_300_000.0 + 2.0 * y,
+            250.0 + 2.0 * z
+        );
+    }
+    std::fs::write(&far, text).unwrap();
+    render_cloud(&far, &dir, "far", 0.25);
+}
+
+#[test]
 fn a_splat_file_renders_as_splats() {
     let dir = scratch("cloud-splats");
     let splats = dir.join("bunny.splats.ply");

@@ -176,10 +176,10 @@ pub fn survey_file(path: &Path) -> Result<Survey> {
     let is_ply = Format::from_extension(path) == Some(Format::Ply)
         || head(path).is_some_and(|h| Format::sniff(&h) == Some(Format::Ply));
     if is_ply && is_splat_ply(path) {
-        let splats = read_splats(path)?;
-        let centres: Vec<Vec3> = splats.iter().map(|s| s.center).collect();
-        let colors = splats.iter().any(|s| s.color != Vec3::ONE);
-        return survey(CloudKind::Splats, &centres, None, colors)
+        let set = read_splats(path)?;
+        let centres: Vec<Vec3> = set.splats.iter().map(|s| s.center).collect();
+        let colors = set.splats.iter().any(|s| s.color != Vec3::ONE);
+        return survey(CloudKind::Splats, &centres, set.origin, None, colors)
             .map_err(|e| e.context(path.display()));
     }
     let cloud = read_points(path)?;
@@ -190,21 +190,25 @@ pub fn survey_file(path: &Path) -> Result<Survey> {
     survey(
         CloudKind::Points,
         &cloud.positions,
-        cloud.viewpoint.map(Vec3::as_dvec3),
+        cloud.origin,
+        cloud.viewpoint,
         colors,
     )
     .map_err(|e| e.context(path.display()))
 }
 
-/// Surveys positions: a sample of at most [`SURVEY_SAMPLE`] (every n-th
-/// point), its outliers removed, and its bounding box.
+/// Surveys positions, offsets from `origin` (as the readers give them; the
+/// viewpoint is in the same frame): a sample of at most [`SURVEY_SAMPLE`]
+/// (every n-th point), its outliers removed, and its bounding box, all in
+/// the file's coordinates.
 ///
 /// # Errors
 /// When no position is finite.
 pub fn survey(
     kind: CloudKind,
     positions: &[Vec3],
-    viewpoint: Option<DVec3>,
+    origin: DVec3,
+    viewpoint: Option<Vec3>,
     colors: bool,
 ) -> Result<Survey> {
     let finite: Vec<Vec3> = positions
@@ -217,13 +221,14 @@ pub fn survey(
     }
     let stride = finite.len().div_ceil(SURVEY_SAMPLE);
     let sample: Vec<Vec3> = finite.iter().step_by(stride).copied().collect();
-    let keep = inliers(&sample, viewpoint.map(DVec3::as_vec3));
+    let viewpoint = viewpoint.filter(|v| v.is_finite());
+    let keep = inliers(&sample, viewpoint);
     let outliers = keep.iter().filter(|k| !**k).count();
     let sample: Vec<DVec3> = sample
         .iter()
         .zip(&keep)
         .filter(|(_, k)| **k)
-        .map(|(p, _)| p.as_dvec3())
+        .map(|(p, _)| origin + p.as_dvec3())
         .collect();
     let (lo, hi) = sample.iter().fold(
         (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
@@ -232,7 +237,7 @@ pub fn survey(
     Ok(Survey {
         kind,
         points: positions.len(),
-        viewpoint: viewpoint.filter(|v| v.is_finite()),
+        viewpoint: viewpoint.map(|v| origin + v.as_dvec3()),
         colors,
         sample,
         outliers,
@@ -797,13 +802,13 @@ mod tests {
     #[test]
     fn outliers_are_left_out_of_the_framing() {
         let mut pts = box_points(Vec3::new(10.0, 0.0, 0.0), Vec3::ONE, 30);
-        let clean = survey(CloudKind::Points, &pts, None, false).unwrap();
+        let clean = survey(CloudKind::Points, &pts, DVec3::ZERO, None, false).unwrap();
         assert_eq!(clean.outliers, 0);
         // A few stray points far out.
         for k in 0..5 {
             pts.push(Vec3::new(10.0 + 20.0 * k as f32, 15.0, -9.0));
         }
-        let s = survey(CloudKind::Points, &pts, None, false).unwrap();
+        let s = survey(CloudKind::Points, &pts, DVec3::ZERO, None, false).unwrap();
         assert_eq!(s.outliers, 5);
         assert!((s.hi - s.lo - DVec3::ONE).abs().max_element() < 1e-5);
     }
@@ -816,7 +821,7 @@ mod tests {
             (Vec3::new(0.01, 0.02, 0.015), 0.5),
         ] {
             let pts = box_points(Vec3::new(3.0, -1.0, 100.0), size, 10);
-            let s = survey(CloudKind::Points, &pts, None, false).unwrap();
+            let s = survey(CloudKind::Points, &pts, DVec3::ZERO, None, false).unwrap();
             let v = choose_view(&s, None, aspect);
             assert!(s.sample.iter().all(|p| in_frame(&v, *p, aspect)), "{v:?}");
             // Not too small: a narrower frame cuts points off.
@@ -842,7 +847,8 @@ mod tests {
         let s = survey(
             CloudKind::Points,
             &ground,
-            Some(DVec3::new(20.0, 20.0, 2.0)),
+            DVec3::ZERO,
+            Some(Vec3::new(20.0, 20.0, 2.0)),
             false,
         )
         .unwrap();
@@ -857,7 +863,14 @@ mod tests {
         // A pole along z, scanned from 10 units away along x, looked down on:
         // z is up (the lamppost).
         let pole = box_points(Vec3::new(-10.0, 0.0, -2.5), Vec3::new(1.0, 0.8, 6.0), 12);
-        let s = survey(CloudKind::Points, &pole, Some(DVec3::ZERO), false).unwrap();
+        let s = survey(
+            CloudKind::Points,
+            &pole,
+            DVec3::ZERO,
+            Some(Vec3::ZERO),
+            false,
+        )
+        .unwrap();
         let v = choose_view(&s, None, 4.0 / 3.0);
         assert_eq!(v.from, DVec3::ZERO, "{}", v.note);
         assert_eq!(v.up, DVec3::Z, "{}", v.note);
@@ -870,7 +883,14 @@ mod tests {
         // A viewpoint looking along -z at an object: +z is along the line
         // of sight, +y is up (the milk carton, the synthetic scans).
         let obj = box_points(Vec3::new(0.25, -0.1, -0.7), Vec3::splat(0.15), 10);
-        let s = survey(CloudKind::Points, &obj, Some(DVec3::ZERO), false).unwrap();
+        let s = survey(
+            CloudKind::Points,
+            &obj,
+            DVec3::ZERO,
+            Some(Vec3::ZERO),
+            false,
+        )
+        .unwrap();
         let v = choose_view(&s, None, 1.0);
         assert_eq!((v.from, v.up), (DVec3::ZERO, DVec3::Y), "{}", v.note);
         assert!(s.sample.iter().all(|p| in_frame(&v, *p, 1.0)));
@@ -887,7 +907,7 @@ mod tests {
                     pts.push(Vec3::new(r * a.cos(), y, r * a.sin()));
                 }
             }
-            survey(CloudKind::Points, &pts, None, false).unwrap()
+            survey(CloudKind::Points, &pts, DVec3::ZERO, None, false).unwrap()
         };
         assert_eq!(choose_view(&cone(false), None, 1.0).up, DVec3::Y);
         let v = choose_view(&cone(true), None, 1.0);
@@ -902,7 +922,8 @@ mod tests {
         let s = survey(
             CloudKind::Points,
             &obj,
-            Some(DVec3::new(0.1, 0.0, 0.0)),
+            DVec3::ZERO,
+            Some(Vec3::new(0.1, 0.0, 0.0)),
             false,
         )
         .unwrap();
@@ -924,9 +945,14 @@ mod tests {
 
     #[test]
     fn scene_text_parses_and_keeps_the_view() {
-        let obj = box_points(Vec3::new(1e5, 2.0, -3.0), Vec3::splat(0.5), 8);
-        let s = survey(CloudKind::Points, &obj, None, true).unwrap();
+        // Offsets from a far origin, as the readers give them: the view is
+        // in the file's coordinates.
+        let obj = box_points(Vec3::new(0.0, 2.0, -3.0), Vec3::splat(0.5), 8);
+        let origin = DVec3::new(5e6, -3e6, 100.0);
+        let s = survey(CloudKind::Points, &obj, origin, None, true).unwrap();
+        assert!((s.center() - origin - DVec3::new(0.0, 2.0, -3.0)).length() < 1e-6);
         let v = choose_view(&s, None, 4.0 / 3.0);
+        assert!((v.at - s.center()).length() < 1.0, "{v:?}");
         let o = CloudSceneOptions {
             spp: 4,
             shading: Some(ShadingMode::Flat),
