@@ -6,6 +6,7 @@
 pub mod accel;
 pub mod embree;
 pub mod error;
+pub mod freespace;
 pub mod geometry;
 pub mod io;
 pub mod primitive;
@@ -13,6 +14,7 @@ pub mod progress;
 pub mod render;
 pub mod resolve;
 pub mod rng;
+pub mod scanner;
 pub mod scene;
 pub mod splat;
 pub mod validate;

@@ -21,13 +21,15 @@ enum Command {
     /// Print splatray's version, the Embree version in use (asked from the
     /// device), the Embree library loaded and the thread count.
     Info,
-    /// Render a scene (default: the bundled scenes/bunny.toml) to an image.
+    /// Render a scene (default: the bundled scenes/bunny.toml), or a point
+    /// cloud with a scene made for it, to an image.
     Render(cli::render::RenderArgs),
     /// Render a scene with every registered backend in one run and report
     /// each one's agreement with the first ray for ray, image for image,
     /// and their speeds and memory.
     Compare(cli::compare::CompareArgs),
-    /// Sample points uniformly by area from a triangle mesh (PLY).
+    /// Sample points from a triangle mesh (PLY): uniformly by area, or as a
+    /// range scanner sees it from a viewpoint (--scan-from).
     Sample(cli::sample_cmd::SampleArgs),
     /// Turn a point cloud into splats with Phong normal fields.
     Splat(cli::splat_cmd::SplatArgs),
@@ -36,6 +38,10 @@ enum Command {
     /// against the exact surface; write a CSV and a time-against-error plot
     /// (report §4.4, fig. 16).
     Sweep(cli::sweep::SweepArgs),
+    /// Check splats against the scan itself: hold out some points, splat the
+    /// rest, and cast a ray from the scanner to every held-out point; report
+    /// how many meet the splats at the point, early, late or not at all.
+    ScanCheck(cli::scan_check::ScanCheckArgs),
 }
 
 fn info() -> Result<(), String> {
@@ -65,6 +71,7 @@ fn main() -> ExitCode {
         Command::Sample(a) => cli::sample_cmd::run(&a),
         Command::Splat(a) => cli::splat_cmd::run(&a),
         Command::Sweep(a) => cli::sweep::run(&a),
+        Command::ScanCheck(a) => cli::scan_check::run(&a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -41,9 +41,14 @@ fn sample_then_splat_with_report() {
         String::from_utf8_lossy(&out.stderr)
     );
     let read = splatray::io::read_splats(&splats).unwrap();
+    // The splats carry the cloud's origin (the centre of its bounding box).
+    assert_eq!(read.origin, cloud.origin);
+    assert_ne!(read.origin, glam::DVec3::ZERO);
+    let read = read.splats;
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     assert_eq!(json["splats"].as_u64().unwrap() as usize, read.len());
+    assert_eq!(json["origin"][1].as_f64(), Some(cloud.origin.y));
     assert!(read.len() < 5000);
     assert!(json["coverage"].as_f64().unwrap() >= 0.99);
     assert_eq!(json["k"].as_u64(), Some(10));

@@ -4,10 +4,10 @@ mod common;
 
 use common::{data, scratch};
 
-use glam::{Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 use splatray::io::{
-    IoErrorKind, PointCloud, lzf_decompress, read_mesh, read_points, read_splats, sample_mesh,
-    write_points, write_splats,
+    IoErrorKind, PointCloud, SplatSet, lzf_decompress, read_mesh, read_points, read_splats,
+    sample_mesh, write_points, write_splats,
 };
 use splatray::splat::{NormalField, Splat};
 use std::path::{Path, PathBuf};
@@ -40,11 +40,7 @@ fn bunny_mesh_binary_le_reads_as_points_and_mesh() {
     let c = read_points(&data("bunny-mesh.ply")).unwrap();
     assert_eq!(c.len(), 34_835);
     assert!(c.normals.is_none() && c.colors.is_none());
-    assert!(
-        c.positions
-            .iter()
-            .all(|p| p.abs().max_element() <= 1.0 + 1e-5)
-    );
+    assert!((0..c.len()).all(|i| c.world(i).abs().max_element() <= 1.0 + 1e-5));
     let m = read_mesh(&data("bunny-mesh.ply")).unwrap();
     assert_eq!(m.positions.len(), 34_835);
     assert_eq!(m.triangles.len(), 69_666);
@@ -62,7 +58,7 @@ fn bunny_scan_ascii_with_extra_properties_and_faces() {
     assert_eq!(c.len(), 1_889);
     assert!(c.normals.is_none());
     // First vertex line: -0.0369122 0.127512 0.00276757 0.850855 0.5
-    assert!((c.positions[0] - Vec3::new(-0.0369122, 0.127512, 0.00276757)).length() < 1e-6);
+    assert!((c.world(0) - DVec3::new(-0.0369122, 0.127512, 0.00276757)).length() < 1e-6);
     let m = read_mesh(&data("bunny-scan.ply")).unwrap();
     assert_eq!(m.triangles.len(), 3_851);
 }
@@ -100,7 +96,7 @@ fn milk_pcd_binary_compressed_with_rgba() {
 fn lamppost_pcd_ascii() {
     let c = read_points(&data("lamppost-ascii.pcd")).unwrap();
     assert_eq!(c.len(), 1_771);
-    assert_eq!(c.positions[1], Vec3::new(-10.015625, 0.0, 0.042999268));
+    assert!((c.world(1) - DVec3::new(-10.015625, 0.0, 0.042999268)).length() < 1e-6);
 }
 
 #[test]
@@ -118,10 +114,9 @@ fn ply_binary_big_endian_and_float_and_u8_colours() {
         be.extend_from_slice(&7i32.to_be_bytes());
     }
     let c = read_points(&write(&dir, "be.ply", &be)).unwrap();
-    assert_eq!(
-        c.positions,
-        vec![Vec3::new(1.0, 2.0, 3.0), Vec3::new(4.0, 5.0, 6.0)]
-    );
+    // Re-centred on the per-axis medians (of two points, their midpoint).
+    assert_eq!(c.origin, DVec3::new(2.5, 3.5, 4.5));
+    assert_eq!(c.positions, vec![Vec3::splat(-1.5), Vec3::splat(1.5)]);
     assert_eq!(c.colors.unwrap(), vec![Vec3::X, Vec3::Z]);
     let ascii = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty double x\nproperty double y\nproperty double z\nproperty float red\nproperty float green\nproperty float blue\nend_header\n1 2 3 1 0 0.5\n";
     let c = read_points(&write(&dir, "f.ply", ascii)).unwrap();
@@ -269,7 +264,7 @@ fn pcd_binary_with_normals_and_rgb() {
         b.extend_from_slice(&0x00ff_0000u32.to_le_bytes());
     }
     let c = read_points(&write(&dir, "b.pcd", &b)).unwrap();
-    assert_eq!(c.positions[1], Vec3::new(1.0, 1.0, 2.0));
+    assert_eq!(c.world(1), DVec3::new(1.0, 1.0, 2.0));
     assert_eq!(c.normals.unwrap()[0], Vec3::Z);
     assert_eq!(c.colors.unwrap()[0], Vec3::X);
 }
@@ -307,12 +302,24 @@ fn splat_files_round_trip_losslessly_and_atomically() {
         splats.push(s);
     }
     let p = dir.join("s.ply");
-    write_splats(&p, &splats).unwrap();
-    assert_eq!(read_splats(&p).unwrap(), splats);
+    // An origin that only f64 holds: it comes back bit for bit.
+    let origin = DVec3::new(512_345.678_901_234, 4_012_345.123_456_789, -0.1);
+    write_splats(&p, &splats, origin).unwrap();
+    assert_eq!(
+        read_splats(&p).unwrap(),
+        SplatSet {
+            splats: splats.clone(),
+            origin
+        }
+    );
     let leftovers: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
     assert_eq!(leftovers.len(), 1, "only the output remains");
     // Writing into a missing folder fails cleanly and leaves nothing.
-    let e = must_fail(write_splats(&dir.join("no/such/dir/s.ply"), &splats));
+    let e = must_fail(write_splats(
+        &dir.join("no/such/dir/s.ply"),
+        &splats,
+        DVec3::ZERO,
+    ));
     assert_one_line_naming(&e, &dir.join("no/such/dir/s.ply"));
     // A point cloud is not a splat file.
     let e = must_fail(read_splats(&data("bunny-scan.ply")));
@@ -344,6 +351,13 @@ fn sampling_is_deterministic_area_uniform_with_face_normals() {
     let dir = scratch("sample");
     write_points(&dir.join("p.ply"), &a).unwrap();
     let back = read_points(&dir.join("p.ply")).unwrap();
-    assert_eq!(back.positions, a.positions);
+    assert_eq!(back.len(), a.len());
+    // Re-centred on read: each position within one f32 rounding of the
+    // offset from the new origin (the bunny is within 1 of zero).
+    assert_ne!(back.origin, DVec3::ZERO);
+    for (i, p) in a.positions.iter().enumerate() {
+        let d = (back.world(i) - p.as_dvec3()).abs().max_element();
+        assert!(d <= f64::from(f32::EPSILON), "point {i} moved by {d}");
+    }
     assert_eq!(back.normals, a.normals);
 }

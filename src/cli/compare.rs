@@ -104,6 +104,12 @@ fn mrays_per_s(f: &Frame) -> f64 {
 /// Runs `splatray compare`.
 pub fn run(args: &CompareArgs) -> Result<(), String> {
     let scene_path = args.view.path();
+    if args.truth && args.view.is_cloud() {
+        return Err(format!(
+            "{}: --truth needs exact surfaces, and a point cloud has none (write a scene with a `mesh` model or a `shape`)",
+            scene_path.display()
+        ));
+    }
     if let Some(d) = &args.diff {
         check_output_path(d)?;
     }

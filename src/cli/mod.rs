@@ -6,6 +6,7 @@ pub mod plot;
 pub mod progress;
 pub mod render;
 pub mod sample_cmd;
+pub mod scan_check;
 pub mod splat_cmd;
 pub mod sweep;
 pub mod view;

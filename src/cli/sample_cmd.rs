@@ -1,6 +1,10 @@
-//! `splatray sample MESH.ply -n N -o points.ply [--noise SIGMA] [--seed S]`.
+//! `splatray sample MESH.ply -n N -o points.ply [--noise SIGMA] [--seed S]`,
+//! or a synthetic scan: `splatray sample MESH.ply --scan-from X,Y,Z -o
+//! scan.pcd [--pattern raster|lines] [--rays W,H] [--range-noise S |
+//! --range-noise-spacing F] [--outliers F] [--missing F]`.
 
 use splatray::io::{read_mesh, sample_mesh, write_points};
+use splatray::scanner::{RangeNoise, ScanParams, ScanPattern, scan_mesh};
 use std::path::PathBuf;
 
 /// The most points `sample` makes (about 2 GB of output).
@@ -11,27 +15,85 @@ pub const MAX_SAMPLES: usize = 100_000_000;
 pub struct SampleArgs {
     /// Triangle mesh to sample (PLY with faces).
     pub mesh: PathBuf,
-    /// Number of points.
-    #[arg(short = 'n', long = "points")]
-    pub n: usize,
-    /// Output point cloud (binary PLY with x y z nx ny nz).
+    /// Number of points sampled uniformly by area (not with --scan-from).
+    #[arg(short = 'n', long = "points", required_unless_present = "scan_from")]
+    pub n: Option<usize>,
+    /// Output point cloud: binary PLY (x y z nx ny nz), or PCD when the
+    /// name ends in .pcd (a scan's VIEWPOINT is kept only there).
     #[arg(short = 'o', long = "output")]
     pub output: PathBuf,
     /// Standard deviation of isotropic Gaussian noise added to positions, in
-    /// the mesh's units.
-    #[arg(long, default_value_t = 0.0)]
+    /// the mesh's units (area sampling).
+    #[arg(long, default_value_t = 0.0, conflicts_with = "scan_from")]
     pub noise: f32,
     /// Seed of the generator; the same seed gives the same points.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Scan the mesh from this point (X,Y,Z) like a range scanner instead of
+    /// sampling its area: points where the rays meet it, no normals, the
+    /// viewpoint written as the PCD's VIEWPOINT.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_negative_numbers = true,
+        num_args = 1
+    )]
+    pub scan_from: Option<Vec<f32>>,
+    /// The point the scanner looks at (X,Y,Z). Default: the mesh's centre.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_negative_numbers = true,
+        requires = "scan_from"
+    )]
+    pub scan_at: Option<Vec<f32>>,
+    /// raster (a camera's pixel grid) or lines (equal angular steps, the
+    /// lines `W/H` times farther apart than the samples along them).
+    #[arg(long, default_value = "raster", requires = "scan_from")]
+    pub pattern: ScanPattern,
+    /// Rays per row and rows, as W,H.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "640,480",
+        requires = "scan_from"
+    )]
+    pub rays: Vec<u32>,
+    /// Vertical field of view, degrees. Default: the mesh fills it.
+    #[arg(long, requires = "scan_from")]
+    pub fov: Option<f32>,
+    /// Gaussian range noise along each ray, in the mesh's units.
+    #[arg(long, requires = "scan_from", conflicts_with = "range_noise_spacing")]
+    pub range_noise: Option<f32>,
+    /// Gaussian range noise as a multiple of the scan's median point spacing.
+    #[arg(long, requires = "scan_from")]
+    pub range_noise_spacing: Option<f32>,
+    /// Fraction of returns replaced by outliers on the same ray.
+    #[arg(long, default_value_t = 0.0, requires = "scan_from")]
+    pub outliers: f32,
+    /// Fraction of returns dropped.
+    #[arg(long, default_value_t = 0.0, requires = "scan_from")]
+    pub missing: f32,
+}
+
+fn vec3(v: &[f32], what: &str) -> Result<glam::Vec3, String> {
+    match v {
+        [x, y, z] => Ok(glam::Vec3::new(*x, *y, *z)),
+        _ => Err(format!("{what} needs three numbers X,Y,Z, got {}", v.len())),
+    }
 }
 
 /// Run `splatray sample`; the message of an error is one line.
 ///
 /// # Errors
-/// When the mesh cannot be read, has no area, or the output cannot be written.
+/// When the mesh cannot be read, has no area, the scan sees nothing, or the
+/// output cannot be written.
 pub fn run(args: &SampleArgs) -> Result<(), String> {
-    if args.n == 0 || args.n > MAX_SAMPLES {
+    if let Some(from) = &args.scan_from {
+        return scan(args, vec3(from, "--scan-from")?);
+    }
+    let n = args.n.unwrap_or(0);
+    if n == 0 || n > MAX_SAMPLES {
         return Err(format!("-n must be between 1 and {MAX_SAMPLES}"));
     }
     if !(args.noise.is_finite() && args.noise >= 0.0) {
@@ -41,7 +103,7 @@ pub fn run(args: &SampleArgs) -> Result<(), String> {
         ));
     }
     let mesh = read_mesh(&args.mesh).map_err(|e| e.to_string())?;
-    let cloud = sample_mesh(&mesh, args.n, args.noise, args.seed);
+    let cloud = sample_mesh(&mesh, n, args.noise, args.seed);
     if cloud.is_empty() {
         return Err(format!(
             "{}: the mesh has no triangle with a non-zero area to sample",
@@ -53,6 +115,52 @@ pub fn run(args: &SampleArgs) -> Result<(), String> {
         "splatray: {} points from {} triangles -> {}",
         cloud.len(),
         mesh.triangles.len(),
+        args.output.display()
+    );
+    Ok(())
+}
+
+fn scan(args: &SampleArgs, from: glam::Vec3) -> Result<(), String> {
+    if args.n.is_some() {
+        return Err("-n and --scan-from exclude each other: a scan's rays set the points".into());
+    }
+    let [columns, rows] = args.rays[..] else {
+        return Err(format!(
+            "--rays needs two numbers W,H, got {}",
+            args.rays.len()
+        ));
+    };
+    let params = ScanParams {
+        from,
+        at: args
+            .scan_at
+            .as_deref()
+            .map(|v| vec3(v, "--scan-at"))
+            .transpose()?,
+        columns,
+        rows,
+        fov: args.fov,
+        pattern: args.pattern,
+        range_noise: match (args.range_noise, args.range_noise_spacing) {
+            (_, Some(f)) => RangeNoise::Spacing(f),
+            (s, None) => RangeNoise::Absolute(s.unwrap_or(0.0)),
+        },
+        outliers: args.outliers,
+        missing: args.missing,
+        seed: args.seed,
+    };
+    let mesh = read_mesh(&args.mesh).map_err(|e| e.to_string())?;
+    let scan = scan_mesh(&mesh, &params)?;
+    write_points(&args.output, &scan.cloud).map_err(|e| e.to_string())?;
+    eprintln!(
+        "splatray: scan of {} rays: {} returns, {} missing, {} outliers, {} points (spacing {:.3e}, range noise {:.3e}) -> {}",
+        scan.rays,
+        scan.returns,
+        scan.missing,
+        scan.outliers,
+        scan.cloud.len(),
+        scan.spacing,
+        scan.noise_sigma,
         args.output.display()
     );
     Ok(())

@@ -2,8 +2,10 @@
 //! [--ellipses] [--report R.json]`.
 
 use super::progress::ProgressLine;
+use glam::DVec3;
+use splatray::freespace::generate_trimmed;
 use splatray::io::{read_points, write_splats};
-use splatray::splat::{SplatParams, generate_with_progress};
+use splatray::splat::{PointCloud, SplatParams};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -15,6 +17,17 @@ pub struct SplatArgs {
     /// Output splat file (binary PLY).
     #[arg(short = 'o', long = "output")]
     pub output: PathBuf,
+    /// Splat generation options.
+    #[command(flatten)]
+    pub splat: SplatOptions,
+    /// Write the generation report as JSON here.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+}
+
+/// The splat generation options `splat` and `scan-check` share.
+#[derive(Clone, Debug, clap::Args)]
+pub struct SplatOptions {
     /// Error threshold ϵ of §2.1 as a fraction of the bounding-box diagonal.
     #[arg(long)]
     pub epsilon: Option<f32>,
@@ -27,12 +40,55 @@ pub struct SplatArgs {
     /// Grow elliptical splats along the minimum-curvature direction.
     #[arg(long)]
     pub ellipses: bool,
-    /// Write the generation report as JSON here.
-    #[arg(long)]
-    pub report: Option<PathBuf>,
-    /// Orient estimated normals toward this point (the scanner), as X,Y,Z.
+    /// Where the scanner stood, as X,Y,Z in the input's coordinates:
+    /// normals are oriented toward it. Default: the cloud's own (a PCD's
+    /// VIEWPOINT).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
-    pub viewpoint: Option<Vec<f32>>,
+    pub viewpoint: Option<Vec<f64>>,
+    /// Ignore the cloud's own viewpoint.
+    #[arg(long, conflicts_with = "viewpoint")]
+    pub no_viewpoint: bool,
+}
+
+impl SplatOptions {
+    /// The viewpoint given on the command line, checked.
+    ///
+    /// # Errors
+    /// Not three finite numbers.
+    pub fn viewpoint(&self) -> Result<Option<DVec3>, String> {
+        match self.viewpoint.as_deref() {
+            None => Ok(None),
+            Some([x, y, z]) if [x, y, z].iter().all(|v| v.is_finite()) => {
+                Ok(Some(DVec3::new(*x, *y, *z)))
+            }
+            Some(v) => Err(format!("--viewpoint needs three finite numbers, got {v:?}")),
+        }
+    }
+
+    /// The generation parameters for `cloud`: the options given, defaults
+    /// for the rest, the viewpoint given (made relative to the cloud's
+    /// origin, in f64) or else the cloud's own.
+    ///
+    /// # Errors
+    /// A malformed viewpoint.
+    pub fn params(&self, cloud: &PointCloud) -> Result<SplatParams, String> {
+        let defaults = SplatParams::default();
+        let viewpoint = if self.no_viewpoint {
+            None
+        } else {
+            self.viewpoint()?
+                .map(|v| cloud.local_viewpoint(v))
+                .or(cloud.viewpoint)
+        };
+        Ok(SplatParams {
+            k: self.k.unwrap_or(defaults.k),
+            epsilon_rel: self.epsilon.unwrap_or(defaults.epsilon_rel),
+            density: self.density.unwrap_or(defaults.density),
+            ellipses: self.ellipses,
+            viewpoint,
+            ..defaults
+        })
+    }
 }
 
 /// Run `splatray splat`; the message of an error is one line.
@@ -41,33 +97,26 @@ pub struct SplatArgs {
 /// When the input cannot be read, no splat can be made, or an output cannot
 /// be written.
 pub fn run(args: &SplatArgs) -> Result<(), String> {
-    let defaults = SplatParams::default();
-    let params = SplatParams {
-        k: args.k.unwrap_or(defaults.k),
-        epsilon_rel: args.epsilon.unwrap_or(defaults.epsilon_rel),
-        density: args.density.unwrap_or(defaults.density),
-        ellipses: args.ellipses,
-        viewpoint: match args.viewpoint.as_deref() {
-            None => None,
-            Some([x, y, z]) if [x, y, z].iter().all(|v| v.is_finite()) => {
-                Some(glam::Vec3::new(*x, *y, *z))
-            }
-            Some(v) => return Err(format!("--viewpoint needs three finite numbers, got {v:?}")),
-        },
-        ..defaults
-    };
+    args.splat.viewpoint()?;
     let line = ProgressLine::new();
     line.update("reading", 0.0);
     let t0 = Instant::now();
     let cloud = read_points(&args.input).map_err(|e| e.to_string())?;
     let read = t0.elapsed().as_secs_f64();
-    let (splats, mut report) =
-        generate_with_progress(&cloud, &params, Some(&|stage, f| line.update(stage, f)))
+    let params = args.splat.params(&cloud)?;
+    let (splats, mut report, trim) =
+        generate_trimmed(&cloud, &params, Some(&|stage, f| line.update(stage, f)))
             .map_err(|e| format!("{}: {e}", args.input.display()))?;
+    if let Some(t) = trim.filter(|t| t.shrunk > 0) {
+        eprintln!(
+            "splatray: {} splats shrunk off {} of {} lines of sight from the viewpoint ({} still blocked)",
+            t.shrunk, t.blocked, t.rays, t.still_blocked
+        );
+    }
     line.finish();
     report.seconds.read = read;
     report.seconds.total += read;
-    write_splats(&args.output, &splats).map_err(|e| e.to_string())?;
+    write_splats(&args.output, &splats, cloud.origin).map_err(|e| e.to_string())?;
     if let Some(path) = &args.report {
         let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
         splatray::io::write_text(path, &json).map_err(|e| e.to_string())?;
@@ -82,13 +131,16 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
         );
     }
     eprintln!(
-        "splatray: {} points -> {} splats ({} elliptical), coverage {:.4}, mean radius {:.4e}, {} flat normal fields, {:.2} s -> {}",
+        "splatray: {} points -> {} splats ({} elliptical), coverage {:.4}, mean radius {:.4e}, {} flat normal fields, origin [{:?}, {:?}, {:?}], {:.2} s -> {}",
         report.used_points,
         report.splats,
         report.elliptical_splats,
         report.coverage,
         report.mean_radius,
         report.fallback_normal_fields,
+        cloud.origin.x,
+        cloud.origin.y,
+        cloud.origin.z,
         report.seconds.total,
         args.output.display()
     );

@@ -1,15 +1,23 @@
-//! What `render` and `compare` share: the scene to load and the view
+//! What `render` and `compare` share: the scene to load — a scene file, or
+//! a point cloud given alone, for which a scene is made — and the view
 //! overrides applied to it.
 
 use super::progress::ProgressLine;
+use glam::DVec3;
 use splatray::resolve::ShadingMode;
-use splatray::scene::{Scene, load_scene};
+use splatray::scene::cloud::{
+    CloudSceneOptions, DEFAULT_SIZE, choose_view, is_cloud_path, path_from, scene_text, survey_file,
+};
+use splatray::scene::{Scene, build_scene, load_scene, parse_scene_str};
 use std::path::{Path, PathBuf};
 
 /// The scene and its view overrides (flattened into a command's options).
 #[derive(Clone, Debug, clap::Args)]
 pub struct SceneArgs {
-    /// Scene file (TOML). Default: the bundled scenes/bunny.toml.
+    /// Scene file (TOML), or a point cloud (.ply, .pcd, .xyz, .txt, or
+    /// recognised by its first bytes; a splat PLY from `splatray splat` too)
+    /// rendered with a camera, lights and material made for it. Default: the
+    /// bundled scenes/bunny.toml.
     pub scene: Option<PathBuf>,
     /// Override the camera's width.
     #[arg(long)]
@@ -20,29 +28,151 @@ pub struct SceneArgs {
     /// Override the shading mode: flat, blended or phong.
     #[arg(long)]
     pub shading: Option<ShadingMode>,
+    /// A point cloud's up axis: x, y, z, -x, -y, -z or X,Y,Z. Default: a
+    /// flat cloud's thinnest side; +z when the cloud's viewpoint looks down
+    /// along +z; else +y (docs/DESIGN.md, "A point cloud without a scene").
+    #[arg(long, value_parser = parse_up, allow_hyphen_values = true)]
+    pub up: Option<DVec3>,
+    /// Write the scene made for a point cloud here (TOML, the cloud's path
+    /// relative to it), to edit and render again: it renders the same image.
+    #[arg(long, value_name = "SCENE.toml")]
+    pub save_scene: Option<PathBuf>,
+}
+
+/// `--up`: an axis name or three numbers.
+fn parse_up(s: &str) -> Result<DVec3, String> {
+    let axis = match s.trim() {
+        "x" | "+x" => Some(DVec3::X),
+        "y" | "+y" => Some(DVec3::Y),
+        "z" | "+z" => Some(DVec3::Z),
+        "-x" => Some(DVec3::NEG_X),
+        "-y" => Some(DVec3::NEG_Y),
+        "-z" => Some(DVec3::NEG_Z),
+        _ => None,
+    };
+    if let Some(a) = axis {
+        return Ok(a);
+    }
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("'{s}' is not an axis (x, y, z, -x, -y, -z) or X,Y,Z"))?;
+    match v.as_slice() {
+        [x, y, z] => DVec3::new(*x, *y, *z)
+            .try_normalize()
+            .ok_or_else(|| format!("'{s}' must be a non-zero, finite vector")),
+        _ => Err(format!(
+            "'{s}' is not an axis (x, y, z, -x, -y, -z) or X,Y,Z"
+        )),
+    }
 }
 
 impl SceneArgs {
-    /// The scene file: the one given, else the bundled default.
+    /// The scene file or cloud: the one given, else the bundled default.
     #[must_use]
     pub fn path(&self) -> PathBuf {
         self.scene.clone().unwrap_or_else(default_scene)
     }
 
+    /// Whether the input is a point cloud rather than a scene file.
+    #[must_use]
+    pub fn is_cloud(&self) -> bool {
+        is_cloud_path(&self.path())
+    }
+
     /// Loads the scene (progress on `line`), applies the overrides and
-    /// `spp`, and prints the loader's warnings.
+    /// `spp`, and prints the loader's warnings. A point cloud gets a scene
+    /// made for it (saved with `--save-scene`).
     ///
     /// # Errors
     /// A scene that does not load or an override out of range, as one line.
     pub fn load(&self, spp: Option<u32>, line: &ProgressLine) -> Result<Scene, String> {
-        let progress = |stage: &str, f: f64| line.update(stage, f);
-        let mut scene = load_scene(&self.path(), Some(&progress))?;
-        line.finish();
-        scene.set_view(self.width, self.height, spp, self.shading)?;
+        let path = self.path();
+        let scene = if is_cloud_path(&path) {
+            self.load_cloud(&path, spp, line)?
+        } else {
+            if self.up.is_some() || self.save_scene.is_some() {
+                return Err(format!(
+                    "{}: --up and --save-scene apply to a point cloud, not to a scene file",
+                    path.display()
+                ));
+            }
+            let progress = |stage: &str, f: f64| line.update(stage, f);
+            let mut scene = load_scene(&path, Some(&progress))?;
+            line.finish();
+            scene.set_view(self.width, self.height, spp, self.shading)?;
+            scene
+        };
         for w in &scene.load.warnings {
             eprintln!("warning: {w}");
         }
         Ok(scene)
+    }
+
+    /// A point cloud's scene: surveyed, a camera chosen, written as scene
+    /// text (the overrides in it) and built from that text, so that the
+    /// scene saved renders the same image.
+    fn load_cloud(
+        &self,
+        path: &Path,
+        spp: Option<u32>,
+        line: &ProgressLine,
+    ) -> Result<Scene, String> {
+        let o = CloudSceneOptions {
+            width: self.width.unwrap_or(DEFAULT_SIZE.0),
+            height: self.height.unwrap_or(DEFAULT_SIZE.1),
+            spp: spp.unwrap_or(1),
+            shading: self.shading,
+        };
+        if o.width == 0 || o.height == 0 || o.width > 1 << 15 || o.height > 1 << 15 {
+            return Err(format!(
+                "resolution {}x{} must be in 1..=32768",
+                o.width, o.height
+            ));
+        }
+        if let Some(s) = &self.save_scene {
+            check_folder(s)?;
+        }
+        line.update("reading the cloud", 0.0);
+        let survey = survey_file(path)?;
+        let view = choose_view(&survey, self.up, f64::from(o.width) / f64::from(o.height));
+        let text = scene_text(path, &survey, &view, &o)?;
+        let file = parse_scene_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        let progress = |stage: &str, f: f64| line.update(stage, f);
+        let scene = build_scene(&file, Path::new(""), Some(&progress))
+            .map_err(|e| e.context(path.display()))?;
+        line.finish();
+        let outliers = if survey.outliers > 0 {
+            format!(
+                " ({} outliers of a {}-point sample left out of the framing)",
+                survey.outliers,
+                survey.sample.len() + survey.outliers
+            )
+        } else {
+            String::new()
+        };
+        eprintln!(
+            "{}: {} {} without a scene: {}{outliers}",
+            path.display(),
+            survey.points,
+            survey.kind.key(),
+            view.note
+        );
+        if let Some(s) = &self.save_scene {
+            let folder = s.parent().unwrap_or(Path::new(""));
+            let text = scene_text(&path_from(folder, path), &survey, &view, &o)?;
+            splatray::io::write_text(s, &text).map_err(|e| e.to_string())?;
+        }
+        Ok(scene)
+    }
+}
+
+/// The folder of an output file exists.
+fn check_folder(path: &Path) -> Result<(), String> {
+    match path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        Some(d) if !d.is_dir() => Err(format!("{}: folder does not exist", d.display())),
+        _ => Ok(()),
     }
 }
 

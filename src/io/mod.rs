@@ -5,6 +5,11 @@
 //! allocations (reservations are capped by the file's size), non-finite
 //! coordinates are skipped and counted in [`PointCloud::skipped`], and every
 //! failure is one [`IoError`] whose message is a single line naming the file.
+//!
+//! Coordinates are parsed in double precision (PLY `double` or `float`, PCD
+//! `F 8` or `F 4`, text) and re-centred, still in double precision, on the
+//! cloud's per-axis medians before they become single-precision offsets
+//! from [`PointCloud::origin`] (`docs/DESIGN.md`, "Precision").
 
 mod atomic;
 mod error;
@@ -20,9 +25,9 @@ pub use atomic::{write_atomic, write_bytes};
 pub use error::{IoError, IoErrorKind};
 pub use lzf::lzf_decompress;
 pub use sample::sample_mesh;
-pub use splat_ply::{read_splats, write_splats};
+pub use splat_ply::{SplatSet, read_splats, write_splats};
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use std::path::Path;
 
 /// A triangle mesh.
@@ -99,11 +104,13 @@ fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
 /// with another extension are recognised by their first bytes.
 ///
 /// Points with a NaN or infinite coordinate are skipped and counted in
-/// [`PointCloud::skipped`].
+/// [`PointCloud::skipped`]. The positions are offsets from the points'
+/// per-axis medians, [`PointCloud::origin`], computed in f64.
 ///
 /// # Errors
 /// An [`IoError`] when the file cannot be read, is empty, has an unknown
-/// format, a malformed header or body, or holds no usable point.
+/// format, a malformed header or body, holds no usable point, or its points
+/// span more than single precision holds.
 pub fn read_points(path: &Path) -> Result<PointCloud, IoError> {
     let bytes = read_file(path)?;
     let format = Format::from_extension(path)
@@ -151,18 +158,37 @@ pub fn read_mesh(path: &Path) -> Result<Mesh, IoError> {
     ply::read_mesh(&bytes).map_err(|kind| IoError::new(path, kind))
 }
 
-/// Write a point cloud as binary little-endian PLY (`x y z`, plus
-/// `nx ny nz` and float `red green blue` when present), atomically (a
-/// temporary file in the same folder, then renamed).
+/// Write a point cloud, atomically (a temporary file in the same folder,
+/// then renamed): a `.pcd` path gets binary PCD with the cloud's
+/// `VIEWPOINT` (see [`pcd::encode`]); any other path binary little-endian
+/// PLY (`x y z`, plus `nx ny nz` and float `red green blue` when present).
+/// Positions (and the viewpoint) are written in the file's coordinates,
+/// `origin + positions[i]`: as `float` (PCD `F 4`) when the origin is zero,
+/// else as `double` (`F 8`), so a far cloud keeps its precision.
 ///
 /// # Errors
-/// An [`IoError`] when the file cannot be written.
+/// An [`IoError`] when the file cannot be written, or a position or the
+/// origin is not finite.
 pub fn write_points(path: &Path, cloud: &PointCloud) -> Result<(), IoError> {
     let n = cloud.len();
+    if let Some(i) = (0..n).find(|&i| !cloud.world(i).is_finite()) {
+        return Err(IoError::new(
+            path,
+            IoErrorKind::Data(format!(
+                "point {i} is not finite ({}), nothing written",
+                cloud.world(i)
+            )),
+        ));
+    }
+    if Format::from_extension(path) == Some(Format::Pcd) {
+        return write_bytes(path, &pcd::encode(cloud));
+    }
     let normals = cloud.normals.as_ref().filter(|v| v.len() == n);
     let colors = cloud.colors.as_ref().filter(|v| v.len() == n);
+    let wide = cloud.origin != DVec3::ZERO;
+    let coord = if wide { "double" } else { "float" };
     let mut header = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment written by splatray {}\nelement vertex {n}\nproperty float x\nproperty float y\nproperty float z\n",
+        "ply\nformat binary_little_endian 1.0\ncomment written by splatray {}\nelement vertex {n}\nproperty {coord} x\nproperty {coord} y\nproperty {coord} z\n",
         env!("CARGO_PKG_VERSION")
     );
     if normals.is_some() {
@@ -172,21 +198,29 @@ pub fn write_points(path: &Path, cloud: &PointCloud) -> Result<(), IoError> {
         header.push_str("property float red\nproperty float green\nproperty float blue\n");
     }
     header.push_str("end_header\n");
-    let per = 3 + 3 * usize::from(normals.is_some()) + 3 * usize::from(colors.is_some());
-    let mut out = Vec::with_capacity(header.len() + n * per * 4);
+    let per = if wide { 24 } else { 12 }
+        + 12 * usize::from(normals.is_some())
+        + 12 * usize::from(colors.is_some());
+    let mut out = Vec::with_capacity(header.len() + n * per);
     out.extend_from_slice(header.as_bytes());
+    let put = |out: &mut Vec<u8>, v: Vec3| {
+        for c in v.to_array() {
+            out.extend_from_slice(&c.to_le_bytes());
+        }
+    };
     for i in 0..n {
-        let mut put = |v: Vec3| {
-            for c in v.to_array() {
+        if wide {
+            for c in cloud.world(i).to_array() {
                 out.extend_from_slice(&c.to_le_bytes());
             }
-        };
-        put(cloud.positions[i]);
+        } else {
+            put(&mut out, cloud.positions[i]);
+        }
         if let Some(ns) = normals {
-            put(ns[i]);
+            put(&mut out, ns[i]);
         }
         if let Some(cs) = colors {
-            put(cs[i]);
+            put(&mut out, cs[i]);
         }
     }
     write_bytes(path, &out)
@@ -203,29 +237,55 @@ pub fn srgb_to_linear(c: f32) -> f32 {
     }
 }
 
-/// Keep the points whose position is finite, dropping the matching normals
-/// and colours, and count the rest in `skipped`.
-pub(crate) fn drop_non_finite(cloud: &mut PointCloud) {
-    let keep: Vec<bool> = cloud.positions.iter().map(|p| p.is_finite()).collect();
+/// A cloud from positions in the file's coordinates, in f64: points with a
+/// non-finite coordinate are dropped (with their normals and colours) and
+/// counted in `skipped`; the rest are re-centred, in f64, on their per-axis
+/// medians (which a few far outliers do not move), which become the
+/// cloud's origin, and only then made f32 (`docs/DESIGN.md`, "Precision").
+///
+/// `normals` and `colors`, when given, have one entry per position.
+pub(crate) fn cloud_from_world(
+    world: Vec<DVec3>,
+    normals: Option<Vec<Vec3>>,
+    colors: Option<Vec<Vec3>>,
+) -> Result<PointCloud, IoErrorKind> {
+    let keep: Vec<bool> = world.iter().map(|p| p.is_finite()).collect();
     let dropped = keep.iter().filter(|k| !**k).count();
-    if dropped == 0 {
-        return;
+    fn kept<T: Copy>(v: &[T], keep: &[bool]) -> Vec<T> {
+        v.iter()
+            .zip(keep)
+            .filter(|(_, k)| **k)
+            .map(|(x, _)| *x)
+            .collect()
     }
-    fn filter(v: &mut Vec<Vec3>, keep: &[bool]) {
-        let mut i = 0;
-        v.retain(|_| {
-            i += 1;
-            keep[i - 1]
-        });
+    let (world, normals, colors) = if dropped == 0 {
+        (world, normals, colors)
+    } else {
+        (
+            kept(&world, &keep),
+            normals.map(|n| kept(&n, &keep)),
+            colors.map(|c| kept(&c, &keep)),
+        )
+    };
+    let origin = crate::splat::frame::robust_centre_size(world.len(), |i| world[i])
+        .map_or(DVec3::ZERO, |(centre, _)| centre);
+    let positions: Vec<Vec3> = world.iter().map(|p| (*p - origin).as_vec3()).collect();
+    if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
+        return Err(IoErrorKind::Data(format!(
+            "a point lies {:e} units from the cloud's median, more than single precision holds ({:e})",
+            (world[i] - origin).abs().max_element(),
+            f32::MAX
+        )));
     }
-    filter(&mut cloud.positions, &keep);
-    if let Some(n) = cloud.normals.as_mut() {
-        filter(n, &keep);
-    }
-    if let Some(c) = cloud.colors.as_mut() {
-        filter(c, &keep);
-    }
+    let mut cloud = PointCloud {
+        positions,
+        origin,
+        normals,
+        colors,
+        ..PointCloud::default()
+    };
     cloud.add_skipped("non-finite coordinates", dropped);
+    Ok(cloud)
 }
 
 /// Write a text file atomically (see [`write_atomic`]).

@@ -3,8 +3,8 @@
 //! `normal_x normal_y normal_z`, and `rgb` or `rgba` (packed `0xAARRGGBB`).
 
 use super::lzf::lzf_decompress;
-use super::{IoErrorKind, PointCloud, drop_non_finite, srgb_to_linear};
-use glam::Vec3;
+use super::{IoErrorKind, PointCloud, cloud_from_world, srgb_to_linear};
+use glam::{DVec3, Vec3};
 
 #[derive(Clone, Debug)]
 struct Field {
@@ -41,6 +41,9 @@ impl Field {
 
 struct PcdHeader {
     fields: Vec<Field>,
+    /// The sensor origin of `VIEWPOINT tx ty tz qw qx qy qz`, in the file's
+    /// coordinates.
+    viewpoint: Option<DVec3>,
     points: usize,
     data: String,
     /// Offset of the body in the file.
@@ -56,6 +59,7 @@ fn parse_header(bytes: &[u8]) -> Result<PcdHeader, IoErrorKind> {
     let mut counts: Vec<usize> = Vec::new();
     let (mut width, mut height, mut points) = (None::<usize>, None::<usize>, None::<usize>);
     let mut data = None;
+    let mut viewpoint = None;
     while pos < bytes.len() {
         let end = bytes[pos..]
             .iter()
@@ -74,7 +78,17 @@ fn parse_header(bytes: &[u8]) -> Result<PcdHeader, IoErrorKind> {
                 .map_err(|_| IoErrorKind::Header(format!("{key}: \"{s}\" is not a count")))
         };
         match key.as_str() {
-            "VERSION" | "VIEWPOINT" => {}
+            "VERSION" => {}
+            "VIEWPOINT" => {
+                let v: Vec<f64> = rest.iter().filter_map(|s| s.parse().ok()).collect();
+                if v.len() != 7 || rest.len() != 7 || v.iter().any(|x| !x.is_finite()) {
+                    return Err(IoErrorKind::Header(format!(
+                        "VIEWPOINT needs 7 finite numbers (tx ty tz qw qx qy qz), got \"{}\"",
+                        rest.join(" ").chars().take(60).collect::<String>()
+                    )));
+                }
+                viewpoint = Some(DVec3::new(v[0], v[1], v[2]));
+            }
             "FIELDS" | "COLUMNS" => names = rest.iter().map(|s| s.to_string()).collect(),
             "SIZE" => sizes = rest.iter().map(|s| num(s)).collect::<Result<_, _>>()?,
             "TYPE" => {
@@ -148,6 +162,7 @@ fn parse_header(bytes: &[u8]) -> Result<PcdHeader, IoErrorKind> {
     };
     Ok(PcdHeader {
         fields,
+        viewpoint,
         points,
         data,
         body: pos,
@@ -183,13 +198,14 @@ fn unpack_color(bits: u32) -> Vec3 {
     Vec3::new(c(16), c(8), c(0))
 }
 
-/// Read a PCD cloud.
+/// Read a PCD cloud (coordinates kept in f64 until the cloud is re-centred,
+/// so `F 8` fields keep their precision).
 pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
     let h = parse_header(bytes)?;
     let cols = columns(&h)?;
     let body = &bytes[h.body.min(bytes.len())..];
     let n = h.points;
-    let mut cloud = PointCloud::default();
+    let mut world: Vec<DVec3> = Vec::new();
     let mut normals = Vec::new();
     let mut colors = Vec::new();
     match h.data.as_str() {
@@ -197,7 +213,7 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
             let text = String::from_utf8_lossy(body);
             // A token takes at least two bytes, so the body bounds the count.
             let cap = n.min(body.len() / (2 * h.fields.len()).max(1));
-            cloud.positions.reserve(cap);
+            world.reserve(cap);
             let mut firsts = Vec::with_capacity(h.fields.len());
             let mut acc = 0usize;
             for f in &h.fields {
@@ -226,16 +242,12 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
                         IoErrorKind::Data(format!("point {i}: \"{t}\" is not a number"))
                     })
                 };
-                let v3 = |f: [usize; 3]| -> Result<Vec3, IoErrorKind> {
-                    Ok(Vec3::new(
-                        val(f[0])? as f32,
-                        val(f[1])? as f32,
-                        val(f[2])? as f32,
-                    ))
+                let v3 = |f: [usize; 3]| -> Result<DVec3, IoErrorKind> {
+                    Ok(DVec3::new(val(f[0])?, val(f[1])?, val(f[2])?))
                 };
-                cloud.positions.push(v3(cols.xyz)?);
+                world.push(v3(cols.xyz)?);
                 if let Some(nf) = cols.normal {
-                    normals.push(v3(nf)?);
+                    normals.push(v3(nf)?.as_vec3());
                 }
                 if let Some(cf) = cols.color {
                     let t = toks[firsts[cf]];
@@ -296,18 +308,18 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
                     i * h.record + fd.offset
                 }
             };
-            cloud.positions.reserve(n);
+            world.reserve(n);
             for i in 0..n {
                 let v3 = |f: [usize; 3]| {
                     let g = |k: usize| {
                         let o = at(f[k], i);
-                        h.fields[f[k]].decode(&data[o..o + h.fields[f[k]].size]) as f32
+                        h.fields[f[k]].decode(&data[o..o + h.fields[f[k]].size])
                     };
-                    Vec3::new(g(0), g(1), g(2))
+                    DVec3::new(g(0), g(1), g(2))
                 };
-                cloud.positions.push(v3(cols.xyz));
+                world.push(v3(cols.xyz));
                 if let Some(nf) = cols.normal {
-                    normals.push(v3(nf));
+                    normals.push(v3(nf).as_vec3());
                 }
                 if let Some(cf) = cols.color {
                     let o = at(cf, i);
@@ -321,12 +333,66 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
             )));
         }
     }
-    if cols.normal.is_some() {
-        cloud.normals = Some(normals);
-    }
-    if cols.color.is_some() {
-        cloud.colors = Some(colors);
-    }
-    drop_non_finite(&mut cloud);
+    let mut cloud = cloud_from_world(
+        world,
+        cols.normal.is_some().then_some(normals),
+        cols.color.is_some().then_some(colors),
+    )?;
+    // In the positions' frame, like them: relative to the origin.
+    cloud.viewpoint = h.viewpoint.map(|v| cloud.local_viewpoint(v));
     Ok(cloud)
+}
+
+/// Encode `cloud` as a binary PCD v0.7 (`x y z`, plus `normal_x normal_y
+/// normal_z` when present), with `VIEWPOINT` set to the cloud's viewpoint
+/// (identity orientation) when it has one. Positions and the viewpoint are
+/// in the file's coordinates (`origin + ...`): `F 4` when the origin is
+/// zero, else `F 8`.
+#[must_use]
+pub fn encode(cloud: &PointCloud) -> Vec<u8> {
+    let n = cloud.len();
+    let normals = cloud.normals.as_ref().filter(|v| v.len() == n);
+    let wide = cloud.origin != DVec3::ZERO;
+    let vp = cloud
+        .viewpoint
+        .map_or(DVec3::ZERO, |v| cloud.origin + v.as_dvec3());
+    let xyz = if wide { "8 8 8" } else { "4 4 4" };
+    let (fields, sizes, types, counts) = if normals.is_some() {
+        (
+            "x y z normal_x normal_y normal_z",
+            format!("{xyz} 4 4 4"),
+            "F F F F F F",
+            "1 1 1 1 1 1",
+        )
+    } else {
+        ("x y z", xyz.to_string(), "F F F", "1 1 1")
+    };
+    let header = format!(
+        "# .PCD v0.7 - Point Cloud Data file format (written by splatray {})\nVERSION 0.7\nFIELDS {fields}\nSIZE {sizes}\nTYPE {types}\nCOUNT {counts}\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT {} {} {} 1 0 0 0\nPOINTS {n}\nDATA binary\n",
+        env!("CARGO_PKG_VERSION"),
+        vp.x,
+        vp.y,
+        vp.z
+    );
+    let per = if wide { 24 } else { 12 } + if normals.is_some() { 12 } else { 0 };
+    let mut out = Vec::with_capacity(header.len() + n * per);
+    out.extend_from_slice(header.as_bytes());
+    let put = |out: &mut Vec<u8>, v: Vec3| {
+        for c in v.to_array() {
+            out.extend_from_slice(&c.to_le_bytes());
+        }
+    };
+    for i in 0..n {
+        if wide {
+            for c in cloud.world(i).to_array() {
+                out.extend_from_slice(&c.to_le_bytes());
+            }
+        } else {
+            put(&mut out, cloud.positions[i]);
+        }
+        if let Some(ns) = normals {
+            put(&mut out, ns[i]);
+        }
+    }
+    out
 }

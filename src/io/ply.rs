@@ -7,8 +7,8 @@
 //! message; `ply-rs-bw` itself caps its reservations, so a huge count never
 //! turns into a huge allocation.
 
-use super::{IoErrorKind, Mesh, PointCloud, drop_non_finite, srgb_to_linear};
-use glam::Vec3;
+use super::{IoErrorKind, Mesh, PointCloud, cloud_from_world, srgb_to_linear};
+use glam::{DVec3, Vec3};
 use ply_rs_bw::parser::Parser;
 use ply_rs_bw::ply::{
     ElementDef, Encoding, Header, Property, PropertyAccess, PropertyType, ScalarType,
@@ -256,7 +256,8 @@ fn has_any_prop(header: &Header, names: &[&str]) -> bool {
         .is_some_and(|v| names.iter().any(|n| v.properties.contains_key(*n)))
 }
 
-/// Read a PLY point cloud: `x y z`, optional `nx ny nz` and colour.
+/// Read a PLY point cloud: `x y z` (any scalar type, kept in f64 until the
+/// cloud is re-centred), optional `nx ny nz` and colour.
 pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
     let file = PlyFile::open(bytes)?;
     if !has_props(&file.header, &["x", "y", "z"]) {
@@ -269,28 +270,24 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
         && has_any_prop(&file.header, &["green", "g", "diffuse_green"])
         && has_any_prop(&file.header, &["blue", "b", "diffuse_blue"]);
     let rows = file.read_vertices::<PointRow>()?;
-    let mut cloud = PointCloud {
-        positions: rows
-            .iter()
-            .map(|r| Vec3::new(r.v[0] as f32, r.v[1] as f32, r.v[2] as f32))
-            .collect(),
-        normals: with_normals.then(|| {
-            rows.iter()
-                .map(|r| Vec3::new(r.v[3] as f32, r.v[4] as f32, r.v[5] as f32))
-                .collect()
-        }),
-        colors: with_colors.then(|| {
-            rows.iter()
-                .map(|r| {
-                    let c = |x: f64| srgb_to_linear(if x.is_finite() { x as f32 } else { 0.0 });
-                    Vec3::new(c(r.v[6]), c(r.v[7]), c(r.v[8]))
-                })
-                .collect()
-        }),
-        skipped: Vec::new(),
-    };
-    drop_non_finite(&mut cloud);
-    Ok(cloud)
+    let world = rows
+        .iter()
+        .map(|r| DVec3::new(r.v[0], r.v[1], r.v[2]))
+        .collect();
+    let normals = with_normals.then(|| {
+        rows.iter()
+            .map(|r| Vec3::new(r.v[3] as f32, r.v[4] as f32, r.v[5] as f32))
+            .collect()
+    });
+    let colors = with_colors.then(|| {
+        rows.iter()
+            .map(|r| {
+                let c = |x: f64| srgb_to_linear(if x.is_finite() { x as f32 } else { 0.0 });
+                Vec3::new(c(r.v[6]), c(r.v[7]), c(r.v[8]))
+            })
+            .collect()
+    });
+    cloud_from_world(world, normals, colors)
 }
 
 /// Read a PLY mesh: vertices and fan-triangulated faces.

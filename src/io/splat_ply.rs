@@ -1,11 +1,17 @@
 //! The splat file: a binary little-endian PLY whose `vertex` element is one
 //! splat, readable by other tools (MeshLab reads `x y z nx ny nz radius` as
 //! point splats) and read back by [`read_splats`] without loss.
+//!
+//! Splat centres are float offsets from an origin held in double precision,
+//! written as the header line `comment splatray origin X Y Z` (shortest
+//! round-trip decimals), so a splat file made from a georeferenced cloud
+//! keeps its world position exactly. Other tools ignore the comment and
+//! show the splats around their origin.
 
 use super::ply::{PlyFile, scalar};
 use super::{IoError, IoErrorKind, write_bytes};
 use crate::splat::{NormalField, Splat};
-use glam::{Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 use ply_rs_bw::ply::{Property, PropertyAccess};
 use std::path::Path;
 
@@ -59,6 +65,19 @@ impl PropertyAccess for SplatRow {
     }
 }
 
+/// What a splat file holds: the splats, their centres relative to `origin`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SplatSet {
+    /// The splats; centre `i` lies at `origin + splats[i].center` in the
+    /// coordinates of the cloud they were made from.
+    pub splats: Vec<Splat>,
+    /// Where the centres are measured from (zero when the file says nothing).
+    pub origin: DVec3,
+}
+
+/// The header comment that carries the origin.
+const ORIGIN_COMMENT: &str = "splatray origin";
+
 fn to_row(s: &Splat) -> [f32; 21] {
     let f = &s.field;
     [
@@ -68,17 +87,42 @@ fn to_row(s: &Splat) -> [f32; 21] {
     ]
 }
 
-/// Write `splats` to `path` as a binary little-endian float32 PLY (see
-/// [`SPLAT_PROPS`] for the vertex properties; colours are stored linear, as
-/// floats in `[0, 1]`). The file is written to a temporary file in the same
-/// folder and renamed, so a failure never leaves a half-written output.
+/// Write `splats`, whose centres are offsets from `origin`, to `path` as a
+/// binary little-endian float32 PLY (see [`SPLAT_PROPS`] for the vertex
+/// properties; colours are stored linear, as floats in `[0, 1]`; the origin
+/// goes into a header comment). The file is written to a temporary file in
+/// the same folder and renamed, so a failure never leaves a half-written
+/// output.
 ///
 /// # Errors
-/// An [`IoError`] when the file cannot be written.
-pub fn write_splats(path: &Path, splats: &[Splat]) -> Result<(), IoError> {
+/// An [`IoError`] when a splat has a non-finite value or a radius that is
+/// not positive, the origin is not finite (nothing is written then), or the
+/// file cannot be written.
+pub fn write_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<(), IoError> {
+    let bad = |what: String| {
+        Err(IoError::new(
+            path,
+            IoErrorKind::Data(format!("{what}, nothing written")),
+        ))
+    };
+    if !origin.is_finite() {
+        return bad(format!("the splats' origin {origin} is not finite"));
+    }
+    if let Some(i) = splats
+        .iter()
+        .position(|s| !to_row(s).iter().all(|v| v.is_finite()) || s.radii.min_element() <= 0.0)
+    {
+        return bad(format!(
+            "splat {i} has a non-finite value or a radius that is not positive (centre {}, radii {})",
+            splats[i].center, splats[i].radii
+        ));
+    }
     let mut header = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment splatray {} splats: Linsen et al. 2007 discs with Botsch et al. 2004 normal fields\nelement vertex {}\n",
+        "ply\nformat binary_little_endian 1.0\ncomment splatray {} splats: Linsen et al. 2007 discs with Botsch et al. 2004 normal fields\ncomment {ORIGIN_COMMENT} {:?} {:?} {:?}\nelement vertex {}\n",
         env!("CARGO_PKG_VERSION"),
+        origin.x,
+        origin.y,
+        origin.z,
         splats.len()
     );
     for p in SPLAT_PROPS {
@@ -97,18 +141,45 @@ pub fn write_splats(path: &Path, splats: &[Splat]) -> Result<(), IoError> {
     write_bytes(path, &out)
 }
 
+/// The origin of a `comment splatray origin X Y Z` header line, if any.
+fn origin_of(comments: &[String]) -> Result<Option<DVec3>, IoErrorKind> {
+    let Some(rest) = comments
+        .iter()
+        .find_map(|c| c.trim().strip_prefix(ORIGIN_COMMENT))
+    else {
+        return Ok(None);
+    };
+    let vals: Vec<f64> = rest
+        .split_whitespace()
+        .map(str::parse::<f64>)
+        .collect::<Result<_, _>>()
+        .map_err(|_| {
+            IoErrorKind::Header(format!("\"{ORIGIN_COMMENT}{rest}\" is not three numbers"))
+        })?;
+    match vals[..] {
+        [x, y, z] if vals.iter().all(|v| v.is_finite()) => Ok(Some(DVec3::new(x, y, z))),
+        _ => Err(IoErrorKind::Header(format!(
+            "\"{ORIGIN_COMMENT}{rest}\" is not three finite numbers"
+        ))),
+    }
+}
+
 /// Read splats written by [`write_splats`] (any PLY encoding with the same
-/// property names). A file with only `x y z nx ny nz radius` gives circular
-/// flat grey splats.
+/// property names), with the origin of their centres (zero when the header
+/// has no `comment splatray origin`). A file with only
+/// `x y z nx ny nz radius` gives circular flat grey splats.
 ///
 /// # Errors
 /// An [`IoError`] when the file cannot be read or parsed, lacks the
-/// properties, or holds a splat with a non-finite value, a zero normal or a
-/// non-positive radius.
-pub fn read_splats(path: &Path) -> Result<Vec<Splat>, IoError> {
+/// properties, has a malformed origin comment, or holds a splat with a
+/// non-finite value, a zero normal or a non-positive radius.
+pub fn read_splats(path: &Path) -> Result<SplatSet, IoError> {
     let err = |k| IoError::new(path, k);
     let bytes = super::read_file(path)?;
     let file = PlyFile::open(&bytes).map_err(err)?;
+    let origin = origin_of(&file.header.comments)
+        .map_err(err)?
+        .unwrap_or(DVec3::ZERO);
     let vertex = file
         .header
         .elements
@@ -158,5 +229,5 @@ pub fn read_splats(path: &Path) -> Result<Vec<Splat>, IoError> {
         };
         splats.push(splat);
     }
-    Ok(splats)
+    Ok(SplatSet { splats, origin })
 }

@@ -1,8 +1,8 @@
 //! Plain text points: one `x y z [nx ny nz]` per line, separated by spaces,
 //! tabs or commas; `#` starts a comment.
 
-use super::{IoErrorKind, PointCloud, drop_non_finite};
-use glam::Vec3;
+use super::{IoErrorKind, PointCloud, cloud_from_world};
+use glam::DVec3;
 
 /// The fields of one line.
 pub(crate) fn split_fields(line: &str) -> impl Iterator<Item = &str> {
@@ -10,28 +10,28 @@ pub(crate) fn split_fields(line: &str) -> impl Iterator<Item = &str> {
         .filter(|t| !t.is_empty())
 }
 
-/// Read an XYZ cloud; the first data line fixes whether normals are present
-/// (3 or 6 columns); any other line shape is an error naming the line.
+/// Read an XYZ cloud (coordinates parsed as f64); the first data line fixes
+/// whether normals are present (3 or 6 columns); any other line shape is an
+/// error naming the line.
 pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
     let text = std::str::from_utf8(bytes)
         .map_err(|e| IoErrorKind::Data(format!("not UTF-8 text: {e}")))?;
-    let mut cloud = PointCloud::default();
+    let mut world = Vec::with_capacity(bytes.len() / 24);
     let mut normals = Vec::new();
     let mut cols = 0usize;
-    cloud.positions.reserve(bytes.len() / 24);
     for (ln, line) in text.lines().enumerate() {
         let line = line.split('#').next().unwrap_or("").trim();
         if line.is_empty() {
             continue;
         }
-        let mut vals = [0f32; 6];
+        let mut vals = [0f64; 6];
         let mut n = 0usize;
         for tok in split_fields(line) {
             if n == 6 {
                 n += 1;
                 break;
             }
-            vals[n] = tok.parse::<f32>().map_err(|_| {
+            vals[n] = tok.parse::<f64>().map_err(|_| {
                 IoErrorKind::Data(format!("line {}: \"{tok}\" is not a number", ln + 1))
             })?;
             n += 1;
@@ -55,14 +55,10 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
                 }
             )));
         }
-        cloud.positions.push(Vec3::new(vals[0], vals[1], vals[2]));
+        world.push(DVec3::new(vals[0], vals[1], vals[2]));
         if cols == 6 {
-            normals.push(Vec3::new(vals[3], vals[4], vals[5]));
+            normals.push(DVec3::new(vals[3], vals[4], vals[5]).as_vec3());
         }
     }
-    if cols == 6 {
-        cloud.normals = Some(normals);
-    }
-    drop_non_finite(&mut cloud);
-    Ok(cloud)
+    cloud_from_world(world, (cols == 6).then_some(normals), None)
 }

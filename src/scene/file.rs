@@ -10,7 +10,7 @@
 use crate::resolve::ShadingMode;
 use crate::splat::Splat;
 use crate::{Error, Result};
-use glam::{DVec3, Mat3, Vec3};
+use glam::{DMat3, DVec3, Mat3, Vec3};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -140,21 +140,48 @@ impl TransformSpec {
         Mat3::from_rotation_z(z) * Mat3::from_rotation_y(y) * Mat3::from_rotation_x(x)
     }
 
-    /// Applies the transform to a point, then subtracts `shift`; the
-    /// translation and the shift are applied in f64, so a model placed far
-    /// from the origin and shifted back keeps f32 precision (`docs/DESIGN.md`, "Tolerances").
-    #[must_use]
-    pub fn point(&self, p: Vec3, shift: DVec3) -> Vec3 {
-        ((self.rotation() * (p * self.scale)).as_dvec3() + DVec3::from(self.translate) - shift)
-            .as_vec3()
+    fn rotation_f64(&self) -> DMat3 {
+        let [x, y, z] = self.rotate.map(|a| f64::from(a).to_radians());
+        DMat3::from_rotation_z(z) * DMat3::from_rotation_y(y) * DMat3::from_rotation_x(x)
     }
 
-    /// Applies the transform to every splat, then subtracts `shift` (in f64,
-    /// as [`TransformSpec::point`]).
-    pub fn apply(&self, splats: &mut [Splat], shift: DVec3) {
+    /// Where the model-space point `p` lands, all in f64 (a far point
+    /// cloud's origin, see [`crate::splat::PointCloud::origin`]).
+    #[must_use]
+    pub fn world_of(&self, p: DVec3) -> DVec3 {
+        self.rotation_f64() * (p * f64::from(self.scale)) + DVec3::from(self.translate)
+    }
+
+    /// Applies the transform to a point, then subtracts `shift`; the
+    /// translation and the shift are applied in f64, so a model placed far
+    /// from the origin and shifted back keeps f32 precision (`docs/DESIGN.md`, "Precision").
+    #[must_use]
+    pub fn point(&self, p: Vec3, shift: DVec3) -> Vec3 {
+        self.point_from(DVec3::ZERO, p, shift)
+    }
+
+    /// [`TransformSpec::point`] for the model-space point `origin + p`: the
+    /// origin is placed and shifted in f64 before the small offset `p` is
+    /// added, so a cloud far from zero lands where it is with the precision
+    /// of its size.
+    #[must_use]
+    pub fn point_from(&self, origin: DVec3, p: Vec3, shift: DVec3) -> Vec3 {
+        self.point_at(self.world_of(origin) - shift, self.rotation(), p)
+    }
+
+    /// `base + R (s p)`, the f32 part rotated in f32 and added in f64.
+    fn point_at(&self, base: DVec3, rot: Mat3, p: Vec3) -> Vec3 {
+        ((rot * (p * self.scale)).as_dvec3() + base).as_vec3()
+    }
+
+    /// Applies the transform to every splat, whose centres are offsets from
+    /// the model-space point `origin`, then subtracts `shift` (in f64, as
+    /// [`TransformSpec::point_from`]).
+    pub fn apply(&self, splats: &mut [Splat], origin: DVec3, shift: DVec3) {
         let rot = self.rotation();
+        let base = self.world_of(origin) - shift;
         for s in splats {
-            s.center = self.point(s.center, shift);
+            s.center = self.point_at(base, rot, s.center);
             s.normal = (rot * s.normal).normalize();
             s.u_axis = (rot * s.u_axis).normalize();
             s.v_axis = (rot * s.v_axis).normalize();
@@ -176,8 +203,37 @@ pub struct SplatSpec {
     /// Grow elliptical splats.
     #[serde(default)]
     pub ellipses: bool,
-    /// Orient estimated normals toward this point (model space).
+    /// Orient estimated normals toward this point (model space: the point
+    /// file's coordinates).
     pub viewpoint: Option<[f32; 3]>,
+}
+
+/// `scan = { ... }`: a synthetic range scan of a mesh model (see
+/// [`crate::scanner`]); the mesh stays the exact surface.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScanSpec {
+    /// The scanner's position (model space).
+    pub from: [f32; 3],
+    /// The point it looks at (default: the mesh's centre).
+    pub at: Option<[f32; 3]>,
+    /// Rays per row and rows.
+    pub rays: Option<[u32; 2]>,
+    /// `raster` or `lines`.
+    #[serde(default)]
+    pub pattern: crate::scanner::ScanPattern,
+    /// Vertical field of view, degrees (default: the mesh fills it).
+    pub fov: Option<f32>,
+    /// Range noise, absolute (model units).
+    pub range_noise: Option<f32>,
+    /// Range noise as a multiple of the scan's point spacing.
+    pub range_noise_spacing: Option<f32>,
+    /// Fraction of returns replaced by outliers.
+    #[serde(default)]
+    pub outliers: f32,
+    /// Fraction of returns dropped.
+    #[serde(default)]
+    pub missing: f32,
 }
 
 /// `shape = { ... }`: a procedural model.
@@ -232,9 +288,11 @@ pub struct ModelSpec {
     pub splats: Option<PathBuf>,
     /// A triangle mesh (PLY) to sample points from.
     pub mesh: Option<PathBuf>,
-    /// How many points to sample from `mesh`.
+    /// How many points to sample from `mesh` uniformly by area.
     pub samples: Option<usize>,
-    /// Seed for the mesh sampling.
+    /// Or: scan `mesh` from a viewpoint, like a range scanner.
+    pub scan: Option<ScanSpec>,
+    /// Seed for the mesh sampling or scan.
     #[serde(default)]
     pub seed: u64,
     /// A procedural shape.

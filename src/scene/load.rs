@@ -36,18 +36,16 @@ pub fn load_scene(path: &Path, progress: Option<Progress<'_>>) -> Result<Scene> 
 pub fn build_scene(file: &SceneFile, base: &Path, progress: Option<Progress<'_>>) -> Result<Scene> {
     let c = &file.camera;
     check_camera(c)?;
-    // Models, camera and lights are first shifted, in f64, by the first
-    // model's translation, so that a scene placed far from the origin keeps
-    // its f32 precision; what remains is re-centred below.
-    let shift = file
-        .models
-        .first()
-        .map_or(DVec3::ZERO, |m| DVec3::from(m.transform.translate));
+    // Models, camera and lights are first shifted, in f64, by where the
+    // first model's origin lands (its translation, plus a point cloud's own
+    // origin placed by its transform), so that a scene placed far from the
+    // origin keeps its f32 precision; what remains is re-centred below.
     finite("background", &file.background)?;
     if file.models.is_empty() {
         return Err(Error::invalid("the scene has no [[model]]"));
     }
-    let mut models = load_models(&file.models, base, shift, progress)?;
+    let mut models = load_models(&file.models, base, progress)?;
+    let shift = models.shift;
     let lights = file
         .lights
         .iter()
@@ -106,9 +104,10 @@ fn check_camera(c: &CameraSpec) -> Result<()> {
 }
 
 /// Every model's splats (transformed, shifted, not yet re-centred) with
-/// their materials, and what loading measured.
+/// their materials, the shift, and what loading measured.
 struct Models {
     splats: Vec<Splat>,
+    shift: DVec3,
     material_of: Vec<u16>,
     materials: Vec<Material>,
     shading_of: Vec<Option<ShadingMode>>,
@@ -117,16 +116,14 @@ struct Models {
     load: LoadReport,
 }
 
-/// Loads every model in order; model `i` gets material `i`.
-fn load_models(
-    specs: &[ModelSpec],
-    base: &Path,
-    shift: DVec3,
-    progress: Option<Progress<'_>>,
-) -> Result<Models> {
+/// Loads every model in order; model `i` gets material `i`. The shift is
+/// where the first model's origin lands.
+fn load_models(specs: &[ModelSpec], base: &Path, progress: Option<Progress<'_>>) -> Result<Models> {
     let start = std::time::Instant::now();
+    let mut shift = None;
     let mut out = Models {
         splats: Vec::new(),
+        shift: DVec3::ZERO,
         material_of: Vec::new(),
         materials: Vec::new(),
         shading_of: Vec::new(),
@@ -137,38 +134,86 @@ fn load_models(
         let number = i + 1;
         let in_model = |e: Error| e.context(format_args!("model {number}"));
         let mid = u16::try_from(i).map_err(|_| Error::invalid("more than 65535 models"))?;
-        let (mut s, truth) =
-            model_source(m, number, mid, base, shift, &mut out.load, progress).map_err(in_model)?;
-        out.load.truth.push(truth);
+        let mut src = model_source(m, base, &mut out.load, progress).map_err(in_model)?;
         if !(m.transform.scale > 0.0 && m.transform.scale.is_finite()) {
             return Err(in_model(Error::invalid(format!(
                 "transform.scale must be positive, got {}",
                 m.transform.scale
             ))));
         }
-        m.transform.apply(&mut s, shift);
-        out.standoff.push(crate::splat::standoff::standoff(&s));
+        let shift = *shift.get_or_insert_with(|| m.transform.world_of(src.origin));
+        out.load
+            .truth
+            .push(truth_of(src.truth, m, number, mid, shift));
+        let s = &mut src.splats;
+        m.transform.apply(s, src.origin, shift);
+        out.standoff.push(crate::splat::standoff::standoff(s));
         out.materials.push(material(&m.material).map_err(in_model)?);
         out.shading_of.push(m.material.shading);
         out.material_of.extend(std::iter::repeat_n(mid, s.len()));
-        out.splats.extend(s);
+        out.splats.append(s);
     }
+    out.shift = shift.unwrap_or(DVec3::ZERO);
     out.load.splat_seconds = start.elapsed().as_secs_f64();
     Ok(out)
 }
 
-/// Splats of one model in model space, before its transform, and the exact
-/// surface behind it (world space, shifted; `material` is its material
-/// index, `number` its 1-based number).
-fn model_source(
+/// One model's splats in model space, before its transform: centres are
+/// offsets from `origin` (a point cloud's or splat file's origin; zero for
+/// meshes and shapes).
+struct Source<'a> {
+    splats: Vec<Splat>,
+    origin: DVec3,
+    truth: PendingTruth<'a>,
+}
+
+/// The exact surface behind a model, before it is placed.
+enum PendingTruth<'a> {
+    /// The model's procedural shape.
+    Shape(&'a ShapeSpec),
+    /// The sampled mesh, in model space.
+    Mesh(Mesh),
+    /// None known: what the model was made from.
+    Unknown(&'static str),
+}
+
+/// The exact surface of model `number` (material `material`), placed by its
+/// transform and shifted.
+fn truth_of(
+    pending: PendingTruth<'_>,
     spec: &ModelSpec,
     number: usize,
     material: u16,
-    base: &Path,
     shift: DVec3,
+) -> TruthSource {
+    match pending {
+        PendingTruth::Shape(shape) => shape_truth(shape, &spec.transform, material, shift),
+        PendingTruth::Mesh(mesh) => TruthSource::Mesh {
+            mesh: Mesh {
+                positions: mesh
+                    .positions
+                    .iter()
+                    .map(|&p| spec.transform.point(p, shift))
+                    .collect(),
+                triangles: mesh.triangles,
+            },
+            material,
+        },
+        PendingTruth::Unknown(what) => TruthSource::Unknown {
+            model: number,
+            what: what.into(),
+        },
+    }
+}
+
+/// Splats of one model in model space, before its transform, and the exact
+/// surface behind it (placed later, by [`truth_of`]).
+fn model_source<'a>(
+    spec: &'a ModelSpec,
+    base: &Path,
     load: &mut LoadReport,
     progress: Option<Progress<'_>>,
-) -> Result<(Vec<Splat>, TruthSource)> {
+) -> Result<Source<'a>> {
     let sources = [
         spec.points.is_some(),
         spec.splats.is_some(),
@@ -181,49 +226,85 @@ fn model_source(
         ));
     }
     if let Some(shape) = &spec.shape {
-        let splats = shape_splats(shape)?;
-        return Ok((splats, shape_truth(shape, &spec.transform, material, shift)));
+        return Ok(Source {
+            splats: shape_splats(shape)?,
+            origin: DVec3::ZERO,
+            truth: PendingTruth::Shape(shape),
+        });
     }
-    let unknown = |what: &str| TruthSource::Unknown {
-        model: number,
-        what: what.into(),
-    };
     if let Some(p) = &spec.splats {
-        let splats = crate::io::read_splats(&base.join(p))?;
-        return Ok((splats, unknown("a splat file")));
+        let set = crate::io::read_splats(&base.join(p))?;
+        return Ok(Source {
+            splats: set.splats,
+            origin: set.origin,
+            truth: PendingTruth::Unknown("a splat file"),
+        });
     }
     if let Some(p) = &spec.points {
-        if spec.samples.is_some() {
-            return Err(Error::invalid("`samples` applies to `mesh` models only"));
+        if spec.samples.is_some() || spec.scan.is_some() {
+            return Err(Error::invalid(
+                "`samples` and `scan` apply to `mesh` models only",
+            ));
         }
         let cloud = crate::io::read_points(&base.join(p))?;
-        let splats = generate_splats(spec, &cloud, load, progress)?;
-        return Ok((splats, unknown("a point file")));
+        return Ok(Source {
+            splats: generate_splats(spec, &cloud, load, progress)?,
+            origin: cloud.origin,
+            truth: PendingTruth::Unknown("a point file"),
+        });
     }
     let Some(p) = &spec.mesh else {
         unreachable!("exactly one source is set")
     };
     let (cloud, mesh) = sample_mesh_model(spec, &base.join(p))?;
-    let splats = generate_splats(spec, &cloud, load, progress)?;
-    let truth = TruthSource::Mesh {
-        mesh: Mesh {
-            positions: mesh
-                .positions
-                .iter()
-                .map(|&p| spec.transform.point(p, shift))
-                .collect(),
-            triangles: mesh.triangles,
-        },
-        material,
-    };
-    Ok((splats, truth))
+    Ok(Source {
+        splats: generate_splats(spec, &cloud, load, progress)?,
+        origin: cloud.origin,
+        truth: PendingTruth::Mesh(mesh),
+    })
 }
 
-/// A mesh model's points (sampled by area with the model's seed) and the
-/// mesh itself, in model space.
+/// A mesh model's points (sampled by area, or scanned, with the model's
+/// seed) and the mesh itself, in model space.
 fn sample_mesh_model(spec: &ModelSpec, path: &Path) -> Result<(PointCloud, Mesh)> {
+    if let Some(scan) = &spec.scan {
+        if spec.samples.is_some() {
+            return Err(Error::invalid(format!(
+                "{}: a mesh model takes `samples` or `scan`, not both",
+                path.display()
+            )));
+        }
+        if scan.range_noise.is_some() && scan.range_noise_spacing.is_some() {
+            return Err(Error::invalid(
+                "scan: give `range_noise` or `range_noise_spacing`, not both",
+            ));
+        }
+        let [columns, rows] = scan.rays.unwrap_or([640, 480]);
+        let params = crate::scanner::ScanParams {
+            from: Vec3::from(scan.from),
+            at: scan.at.map(Vec3::from),
+            columns,
+            rows,
+            fov: scan.fov,
+            pattern: scan.pattern,
+            range_noise: match (scan.range_noise, scan.range_noise_spacing) {
+                (_, Some(f)) => crate::scanner::RangeNoise::Spacing(f),
+                (s, None) => crate::scanner::RangeNoise::Absolute(s.unwrap_or(0.0)),
+            },
+            outliers: scan.outliers,
+            missing: scan.missing,
+            seed: spec.seed,
+        };
+        let mesh = crate::io::read_mesh(path)?;
+        let scan = crate::scanner::scan_mesh(&mesh, &params)
+            .map_err(|e| Error::invalid(format!("{}: {e}", path.display())))?;
+        return Ok((scan.cloud, mesh));
+    }
     let samples = spec.samples.ok_or_else(|| {
-        Error::invalid(format!("{}: a mesh model needs `samples`", path.display()))
+        Error::invalid(format!(
+            "{}: a mesh model needs `samples` or `scan`",
+            path.display()
+        ))
     })?;
     if samples == 0 || samples > 50_000_000 {
         return Err(Error::invalid(format!(
@@ -249,10 +330,20 @@ fn generate_splats(
         epsilon_rel: spec.splat.epsilon.unwrap_or(d.epsilon_rel),
         density: spec.splat.density.unwrap_or(d.density),
         ellipses: spec.splat.ellipses,
-        viewpoint: spec.splat.viewpoint.map(Vec3::from),
+        viewpoint: spec
+            .splat
+            .viewpoint
+            .map(|v| cloud.local_viewpoint(Vec3::from(v).as_dvec3()))
+            .or(cloud.viewpoint),
         ..d
     };
-    let (splats, report) = crate::splat::generate_with_progress(cloud, &params, progress)?;
+    let (splats, report, trim) = crate::freespace::generate_trimmed(cloud, &params, progress)?;
+    if let Some(t) = trim.filter(|t| t.shrunk > 0) {
+        load.warnings.push(format!(
+            "{} splats shrunk off {} blocked lines of sight from the viewpoint",
+            t.shrunk, t.blocked
+        ));
+    }
     load.input_points += report.input_points;
     for s in &report.skipped_points {
         load.warnings
@@ -421,7 +512,7 @@ fn light(spec: &LightSpec, shift: DVec3) -> Result<Light> {
     })
 }
 
-/// Re-centres the splats on their bounding box (`docs/DESIGN.md`, "Tolerances": far-from-origin
+/// Re-centres the splats on their bounding box (`docs/DESIGN.md`, "Precision": far-from-origin
 /// scenes keep their precision); returns the offset subtracted and the
 /// box's diagonal (1 without splats).
 fn recentre(splats: &mut [Splat]) -> (Vec3, f32) {

@@ -1,4 +1,5 @@
-//! Scenes: the TOML file format ([`file`]), loading it into splats,
+//! Scenes: the TOML file format ([`file`]), the scene made for a point
+//! cloud given alone ([`cloud`]), loading it into splats,
 //! materials, lights and a camera ([`load`]), the resolved scene the
 //! integrator renders ([`model`]), and the procedural shapes whose exact
 //! surfaces are known ([`shapes`]).
@@ -8,6 +9,7 @@
 //! precision; each model keeps its exact surface (meshes and shapes) as
 //! ground truth for `compare --truth`.
 
+pub mod cloud;
 pub mod file;
 pub mod load;
 pub mod model;

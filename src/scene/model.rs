@@ -221,7 +221,7 @@ pub enum TruthSource {
 }
 
 /// A loaded scene, re-centred so that its splats' bounding box is centred at
-/// the origin (`docs/DESIGN.md`, "Tolerances": far-from-origin scenes keep their
+/// the origin (`docs/DESIGN.md`, "Precision": far-from-origin scenes keep their
 /// precision).
 #[derive(Clone, Debug)]
 pub struct Scene {
@@ -247,7 +247,9 @@ pub struct Scene {
     /// The re-centring translation subtracted on load, after `shift`
     /// (world = scene + offset + shift).
     pub offset: Vec3,
-    /// The first model's translation, subtracted in f64 before re-centring.
+    /// Where the first model's origin lands (its translation, plus a point
+    /// cloud's origin placed by its transform), subtracted in f64 before
+    /// re-centring.
     pub shift: DVec3,
     /// Load figures.
     pub load: LoadReport,

@@ -4,9 +4,11 @@
 use super::PointCloud;
 use super::Splat;
 use super::field;
+use super::frame::{UnitFrame, first_unusable};
 use super::grow::{GrowInput, grow_all};
 use super::knn::{Knn, build_tree};
 use super::normals;
+use super::outliers;
 use crate::progress::{Progress, notify};
 use glam::Vec3;
 use kiddo::SquaredEuclidean;
@@ -37,8 +39,12 @@ pub struct SplatParams {
     /// (3.20° against 3.39° at 4k splats), with 1.0 and 1.2 never.
     pub field_radius_factor: f32,
     /// Where the scanner stood: estimated normals are oriented to face it
-    /// (instead of outward from the extreme point of each piece).
+    /// (instead of outward from the extreme point of each piece). In the
+    /// cloud's frame, like its positions (relative to
+    /// [`PointCloud::origin`]).
     pub viewpoint: Option<Vec3>,
+    /// Leave out statistical outliers (see [`super::outliers`]).
+    pub remove_outliers: bool,
 }
 
 impl Default for SplatParams {
@@ -50,6 +56,7 @@ impl Default for SplatParams {
             ellipses: false,
             field_radius_factor: 1.2,
             viewpoint: None,
+            remove_outliers: true,
         }
     }
 }
@@ -108,6 +115,9 @@ pub struct SplatReport {
     pub epsilon: f64,
     /// The bounding-box diagonal of the used points.
     pub bbox_diagonal: f64,
+    /// The cloud's origin: splat centres are offsets from it (as the
+    /// cloud's positions are), in the file's coordinates.
+    pub origin: [f64; 3],
     /// Neighbours per point actually used.
     pub k: usize,
     /// Notes about the input that did not stop generation.
@@ -131,6 +141,9 @@ pub enum GenerateError {
     },
     /// All points lie on one line: there is no surface to cover.
     Collinear,
+    /// The splats do not fit single precision in the cloud's units (a
+    /// centre or radius overflowed, or a radius underflowed to zero).
+    OutOfRange(String),
 }
 
 impl fmt::Display for GenerateError {
@@ -147,6 +160,7 @@ impl fmt::Display for GenerateError {
                     "all points lie on one line: there is no surface to splat"
                 )
             }
+            GenerateError::OutOfRange(s) => write!(f, "{s}"),
         }
     }
 }
@@ -204,9 +218,15 @@ fn clean_order(pos: &[Vec3]) -> (Vec<u32>, usize, usize) {
 /// Splat colour is the mean colour of the points a splat took, or white
 /// when the cloud has no colour, so that the material alone sets the albedo.
 ///
+/// The splats are in the cloud's frame: centres are offsets from
+/// [`PointCloud::origin`] (also given as [`SplatReport::origin`]). Growth
+/// runs in a unit-scale frame, so any scale works that single precision
+/// can hold (`docs/DESIGN.md`, "Precision").
+///
 /// # Errors
 /// [`GenerateError`] when the parameters are out of range, fewer than 3
-/// distinct points remain, or all points are collinear.
+/// distinct points remain, all points are collinear, or the splats do not
+/// fit single precision in the cloud's units.
 pub fn generate(
     cloud: &PointCloud,
     params: &SplatParams,
@@ -226,6 +246,23 @@ pub fn generate_with_progress(
 ) -> Result<(Vec<Splat>, SplatReport), GenerateError> {
     let t0 = Instant::now();
     check_params(params)?;
+    // Growth runs in a unit-scale frame (centred, divided by the diagonal),
+    // so no squared distance or threshold overflows or underflows; the
+    // splats and the report's lengths are mapped back at the end.
+    let frame = UnitFrame::of(&cloud.positions);
+    let unit_cloud = PointCloud {
+        positions: cloud.positions.iter().map(|&p| frame.unit(p)).collect(),
+        origin: cloud.origin,
+        normals: cloud.normals.clone(),
+        colors: cloud.colors.clone(),
+        skipped: cloud.skipped.clone(),
+        viewpoint: cloud.viewpoint.map(|v| frame.unit_viewpoint(v)),
+    };
+    let unit_params = SplatParams {
+        viewpoint: params.viewpoint.map(|v| frame.unit_viewpoint(v)),
+        ..params.clone()
+    };
+    let (cloud, params) = (&unit_cloud, &unit_params);
     let mut report = SplatReport {
         input_points: cloud.positions.len() + cloud.skipped_total(),
         ..SplatReport::default()
@@ -238,7 +275,7 @@ pub fn generate_with_progress(
     }
     // --- clean, reorder, kNN -------------------------------------------------
     notify(progress, "neighbours", 0.0);
-    let (order, non_finite, dupes) = clean_order(&cloud.positions);
+    let (mut order, non_finite, dupes) = clean_order(&cloud.positions);
     for (why, count) in [
         ("non-finite coordinates", non_finite),
         ("duplicate point", dupes),
@@ -250,7 +287,7 @@ pub fn generate_with_progress(
             });
         }
     }
-    let n = order.len();
+    let mut n = order.len();
     report.used_points = n;
     if n < 3 {
         return Err(GenerateError::TooFewPoints {
@@ -258,18 +295,12 @@ pub fn generate_with_progress(
             needed: 3,
         });
     }
-    let points: Vec<Vec3> = order.iter().map(|&i| cloud.positions[i as usize]).collect();
-    let colors: Option<Vec<Vec3>> = cloud
+    let mut points: Vec<Vec3> = order.iter().map(|&i| cloud.positions[i as usize]).collect();
+    let mut colors: Option<Vec<Vec3>> = cloud
         .colors
         .as_ref()
         .filter(|c| c.len() == cloud.positions.len())
         .map(|c| order.iter().map(|&i| c[i as usize]).collect());
-    let (lo, hi) = points.iter().fold(
-        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
-        |(a, b), p| (a.min(*p), b.max(*p)),
-    );
-    let diagonal = f64::from((hi - lo).length());
-    report.bbox_diagonal = diagonal;
     let (_, vals, _) = normals::plane_fit(points.iter().copied());
     if vals[1] <= 1e-12 * vals[2] {
         return Err(GenerateError::Collinear);
@@ -279,7 +310,7 @@ pub fn generate_with_progress(
             .warnings
             .push("all points are coplanar: normals are oriented by a convention only".into());
     }
-    let k = params.k.min(n - 1);
+    let mut k = params.k.min(n - 1);
     if k < params.k {
         report.warnings.push(format!(
             "only {n} points: using k = {k} neighbours instead of {}",
@@ -287,8 +318,38 @@ pub fn generate_with_progress(
         ));
     }
     report.k = k;
-    let tree = build_tree(&points);
-    let knn = Knn::build(&tree, &points, k);
+    let mut tree = build_tree(&points);
+    let mut knn = Knn::build(&tree, &points, k);
+    // --- outliers ------------------------------------------------------------
+    if params.remove_outliers {
+        let out = outliers::flag(&points, &knn, params.viewpoint);
+        let count = out.iter().filter(|&&o| o).count();
+        if count > 0 && n - count > k {
+            retain_unflagged(&mut order, &out);
+            retain_unflagged(&mut points, &out);
+            if let Some(c) = colors.as_mut() {
+                retain_unflagged(c, &out);
+            }
+            report.skipped_points.push(Skipped {
+                reason: format!(
+                    "statistical outlier (k-th neighbour over {}x its neighbours' or {}x the cloud's 90th percentile)",
+                    outliers::LOCAL_RATIO,
+                    outliers::GLOBAL_RATIO
+                ),
+                count,
+            });
+            n -= count;
+            report.used_points = n;
+            tree = build_tree(&points);
+            knn = Knn::build(&tree, &points, k);
+        }
+    }
+    let (lo, hi) = points.iter().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(a, b), p| (a.min(*p), b.max(*p)),
+    );
+    let diagonal = f64::from((hi - lo).length());
+    report.bbox_diagonal = diagonal;
     let t1 = Instant::now();
     // --- normals ---------------------------------------------------------------
     notify(progress, "normals", 0.0);
@@ -313,7 +374,37 @@ pub fn generate_with_progress(
         }
     }
     if to_estimate > 0 {
-        let est = normals::estimate(&points, &knn);
+        let (est, wide, collinear, degenerate) = normals::estimate_multiscale(&points, &tree, &knn);
+        if (collinear * 20 > n || wide * 5 > n) && k < params.k * normals::WIDE_FACTOR {
+            // Anisotropic sampling (scan lines) or heavy noise: the k nearest
+            // neighbours of many points lie along one line or do not reach
+            // past the noise, so the neighbourhood graph would not join the
+            // lines. Growth and orientation get a wider graph.
+            let wider = (k * normals::WIDE_FACTOR).min(n - 1).min(256);
+            report.warnings.push(format!(
+                "the {k} nearest neighbours of {:.1} % of the points lie on one line or \
+                 within the noise (scan lines?): growing splats with k = {wider}",
+                100.0 * wide.max(collinear) as f64 / n as f64
+            ));
+            k = wider;
+            report.k = k;
+            knn = Knn::build(&tree, &points, k);
+        }
+        if wide * 100 > n {
+            report.warnings.push(format!(
+                "{wide} normals ({:.1} %) came from a {}x wider neighbourhood: the {k} nearest \
+                 neighbours were too noisy or lay along one scan line",
+                100.0 * wide as f64 / n as f64,
+                normals::WIDE_FACTOR
+            ));
+        }
+        if degenerate > 0 {
+            report.warnings.push(format!(
+                "{degenerate} points have collinear neighbourhoods even with {} neighbours: \
+                 their normals are a guess",
+                normals::WIDE_MAX
+            ));
+        }
         for i in 0..n {
             if !fixed[i] {
                 nrm[i] = est[i];
@@ -362,6 +453,27 @@ pub fn generate_with_progress(
         .map(|s| 0.5 * f64::from(s.radii.x + s.radii.y))
         .sum::<f64>()
         / splats.len().max(1) as f64;
+    // Back to the cloud's units, and nothing that single precision cannot
+    // hold leaves here.
+    for s in &mut splats {
+        *s = frame.splat_from_unit(s);
+    }
+    if let Some(why) = first_unusable(&splats) {
+        return Err(GenerateError::OutOfRange(format!(
+            "the cloud spans {:e} units: {why}",
+            frame.scale
+        )));
+    }
+    report.epsilon = frame.length_from_unit(report.epsilon);
+    report.bbox_diagonal = frame.length_from_unit(report.bbox_diagonal);
+    report.mean_radius = frame.length_from_unit(report.mean_radius);
+    report.origin = cloud.origin.to_array();
+    if frame.scale < f64::from(f32::MIN_POSITIVE) {
+        report.warnings.push(format!(
+            "the cloud spans only {:e} units, below single precision's normal range: its positions are coarsely quantised",
+            frame.scale
+        ));
+    }
     let t4 = Instant::now();
     report.seconds = StageSeconds {
         read: 0.0,
@@ -372,6 +484,12 @@ pub fn generate_with_progress(
         total: (t4 - t0).as_secs_f64(),
     };
     Ok((splats, report))
+}
+
+/// Keeps the items of `v` whose flag is false.
+fn retain_unflagged<T>(v: &mut Vec<T>, flagged: &[bool]) {
+    let mut it = flagged.iter();
+    v.retain(|_| !it.next().copied().unwrap_or(false));
 }
 
 fn check_params(p: &SplatParams) -> Result<(), GenerateError> {

@@ -107,10 +107,12 @@ impl Splat {
 
 mod cloud;
 pub mod field;
+pub(crate) mod frame;
 mod generate;
 pub mod grow;
 pub mod knn;
 pub mod normals;
+pub mod outliers;
 pub mod standoff;
 
 pub use cloud::PointCloud;

@@ -101,6 +101,85 @@ pub fn estimate(points: &[Vec3], knn: &Knn) -> Vec<Vec3> {
         .collect()
 }
 
+/// A neighbourhood is collinear (no plane to fit) when its middle
+/// eigenvalue is below this fraction of the largest.
+pub const COLLINEAR: f64 = 1e-3;
+
+/// Where the normal of the `k` nearest neighbours and that of a neighbourhood
+/// [`WIDE_FACTOR`] times larger differ by more than this many degrees, the
+/// wide one is taken: the small neighbourhood is too small for the noise, or
+/// lies along one scan line (anisotropic sampling).
+pub const DISAGREE_DEG: f32 = 30.0;
+
+/// How many times more neighbours the wide neighbourhood has.
+pub const WIDE_FACTOR: usize = 4;
+
+/// The most neighbours a wide neighbourhood grows to while it stays
+/// collinear (scan lines far apart).
+pub const WIDE_MAX: usize = 256;
+
+/// PCA normals that survive noise and anisotropic sampling: each point's
+/// normal from itself and its `k` neighbours (as [`estimate`]) and from a
+/// wide neighbourhood of [`WIDE_FACTOR`]·k points, doubled up to
+/// [`WIDE_MAX`] while it is collinear; the wide one replaces the small one
+/// where the small is collinear or they differ by over [`DISAGREE_DEG`].
+/// Returns the normals, how many took the wide neighbourhood, how many of
+/// those because the small one was collinear, and how many stayed collinear
+/// even at [`WIDE_MAX`] (their normals are a guess).
+#[must_use]
+pub fn estimate_multiscale(
+    points: &[Vec3],
+    tree: &super::knn::PointTree,
+    knn: &Knn,
+) -> (Vec<Vec3>, usize, usize, usize) {
+    use kiddo::SquaredEuclidean;
+    use std::num::NonZero;
+    let cos_max = DISAGREE_DEG.to_radians().cos();
+    let n = points.len();
+    let out: Vec<(Vec3, u8)> = (0..n)
+        .into_par_iter()
+        .with_min_len(512)
+        .map(|i| {
+            let nb = knn.of(i);
+            let it = std::iter::once(points[i]).chain(nb.iter().map(|&j| points[j as usize]));
+            let (_, vals, vecs) = plane_fit(it);
+            let small = vecs[0].as_vec3();
+            let small_ok =
+                small.is_finite() && small.length_squared() > 0.5 && vals[1] > COLLINEAR * vals[2];
+            let mut m = (knn.k * WIDE_FACTOR).min(n);
+            loop {
+                let Some(q) = NonZero::new(m) else {
+                    return (if small_ok { small } else { Vec3::Z }, 2);
+                };
+                let found = tree.nearest_n::<SquaredEuclidean>(&points[i].to_array(), q);
+                let (_, wv, wvecs) = plane_fit(found.iter().map(|f| points[f.item as usize]));
+                let wide = wvecs[0].as_vec3();
+                let wide_ok =
+                    wide.is_finite() && wide.length_squared() > 0.5 && wv[1] > COLLINEAR * wv[2];
+                if wide_ok {
+                    if small_ok && small.dot(wide).abs() >= cos_max {
+                        return (small, 0);
+                    }
+                    return (wide, if small_ok { 1 } else { 3 });
+                }
+                if m >= WIDE_MAX.min(n) {
+                    return (if small_ok { small } else { Vec3::Z }, 2);
+                }
+                m = (m * 2).min(WIDE_MAX).min(n);
+            }
+        })
+        .collect();
+    let collinear = out.iter().filter(|o| o.1 == 3).count();
+    let wide = out.iter().filter(|o| o.1 == 1).count() + collinear;
+    let degenerate = out.iter().filter(|o| o.1 == 2).count();
+    (
+        out.into_iter().map(|o| o.0).collect(),
+        wide,
+        collinear,
+        degenerate,
+    )
+}
+
 /// Orient `normals` consistently: the edges of the symmetric kNN graph,
 /// weighted `1 - |n_i · n_j|`, form a minimum spanning forest (Kruskal,
 /// weights bucketed to 1/4096); each tree is traversed from its root and

@@ -2,5 +2,6 @@
 //! image for image (`docs/DESIGN.md`, "The backend contract").
 
 pub mod compare;
+pub mod scan_check;
 pub mod sweep;
 pub mod truth;

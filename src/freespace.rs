@@ -1,0 +1,180 @@
+//! Lines of sight are free space: where the scanner's viewpoint is known,
+//! every scanned point was seen from it, so no splat may cross the segment
+//! from the viewpoint to a point short of that point. Splats at a
+//! foreground edge overhang the silhouette by up to their radius and would
+//! hide the background the scanner saw just beyond it; they are shrunk
+//! away from the lines of sight they block.
+
+use crate::accel::octree::{Octree, OctreeParams};
+use crate::accel::{Backend, CandidateHits, Ray};
+use crate::splat::{PointCloud, Splat, SplatParams, SplatReport, generate_with_progress, outliers};
+use crate::{Error, Result};
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+/// Passes of trimming: a shrunk splat can uncover a splat behind it that
+/// blocks the same line of sight.
+pub const PASSES: usize = 3;
+
+/// A hit counts as blocking when it lies more than this many `ϵ` (the
+/// growth threshold of eq. 1) in front of the point: closer hits are the
+/// point's own surface, within the noise the splats were grown to.
+pub const MARGIN_EPS: f32 = 2.0;
+
+/// If more than this fraction of the lines of sight are blocked, the
+/// viewpoint is not the scanner's (a cloud registered from several scans,
+/// or a default `VIEWPOINT`): nothing is trimmed and a warning says so.
+pub const IMPLAUSIBLE: f64 = 0.2;
+
+/// What trimming did.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct TrimReport {
+    /// Lines of sight cast per pass.
+    pub rays: usize,
+    /// Lines blocked in the first pass.
+    pub blocked: usize,
+    /// Splats shrunk (over all passes).
+    pub shrunk: usize,
+    /// Lines still blocked after the last pass.
+    pub still_blocked: usize,
+    /// True when the viewpoint looked implausible and nothing was trimmed.
+    pub skipped: bool,
+}
+
+/// For every point, the first splat blocking its line of sight, with the
+/// hit's normalised disc coordinates.
+fn blocked(splats: &[Splat], points: &[Vec3], vp: Vec3, margin: f32) -> Vec<Option<(u32, Vec2)>> {
+    let discs: Vec<_> = splats.iter().map(Splat::disc_geometry).collect();
+    let octree = Octree::new(&discs, &OctreeParams::default());
+    points
+        .par_iter()
+        .with_min_len(512)
+        .map_init(
+            || CandidateHits::new(0.0),
+            |hits, &p| {
+                let d = (p - vp).length();
+                let dir = (p - vp).try_normalize()?;
+                let t_max = d - margin;
+                if t_max <= 0.0 {
+                    return None;
+                }
+                octree.intersect(&Ray { origin: vp, dir }, 0.0, t_max, hits);
+                let h = hits.nearest()?;
+                (h.t < t_max).then_some((h.id, Vec2::new(h.u, h.v)))
+            },
+        )
+        .collect()
+}
+
+/// Shrinks splat `s` so the normalised disc point `q` (|q| ≤ 1) falls just
+/// outside it: the new disc lies inside the old one, touching it on the
+/// side away from `q`, so the splat keeps as much of its surface as it can.
+fn shrink_away(s: &mut Splat, q: Vec2) {
+    let len = q.length();
+    let dir = if len > 1e-6 { q / len } else { Vec2::X };
+    // New centre at -a·dir, radius 1 - a (normalised); q at distance
+    // len + a must exceed it: a > (1 - len) / 2.
+    let a = ((1.0 - len) * 0.5 + 0.01).min(0.95);
+    let shift = -a * dir;
+    s.center += s.u_axis * (shift.x * s.radii.x) + s.v_axis * (shift.y * s.radii.y);
+    s.radii *= 1.0 - a;
+    // The same field over the smaller disc: old (u, v) = shift + (1-a)(u', v')
+    // in eq. (4)'s normalised coordinates.
+    let f = &mut s.field;
+    f.xc += f.alpha * shift.x;
+    f.yc += f.beta * shift.y;
+    f.alpha *= 1.0 - a;
+    f.beta *= 1.0 - a;
+}
+
+/// Trims `splats` so that no line of sight from `viewpoint` to one of
+/// `points` is blocked more than `margin` in front of its point.
+#[must_use]
+pub fn trim(splats: &mut [Splat], points: &[Vec3], viewpoint: Vec3, margin: f32) -> TrimReport {
+    let mut report = TrimReport {
+        rays: points.len(),
+        ..TrimReport::default()
+    };
+    if splats.is_empty() || points.is_empty() {
+        return report;
+    }
+    for pass in 0..PASSES {
+        let b = blocked(splats, points, viewpoint, margin);
+        let count = b.iter().flatten().count();
+        if pass == 0 {
+            report.blocked = count;
+            if count as f64 > IMPLAUSIBLE * points.len() as f64 {
+                report.skipped = true;
+                report.still_blocked = count;
+                return report;
+            }
+        }
+        if count == 0 {
+            report.still_blocked = 0;
+            return report;
+        }
+        // One shrink per splat per pass, away from its most central
+        // violation (the one that needs the largest cut).
+        let mut worst: Vec<Option<Vec2>> = vec![None; splats.len()];
+        for (id, q) in b.into_iter().flatten() {
+            let w = &mut worst[id as usize];
+            if w.is_none_or(|o| q.length() < o.length()) {
+                *w = Some(q);
+            }
+        }
+        for (s, w) in splats.iter_mut().zip(worst) {
+            if let Some(q) = w {
+                shrink_away(s, q);
+                report.shrunk += 1;
+            }
+        }
+    }
+    report.still_blocked = blocked(splats, points, viewpoint, margin)
+        .iter()
+        .flatten()
+        .count();
+    report
+}
+
+/// Splat generation ([`generate_with_progress`]) followed, when the
+/// parameters carry a viewpoint, by free-space trimming against the
+/// cloud's points (its outliers left out, as generation leaves them out).
+///
+/// # Errors
+/// As [`generate_with_progress`].
+pub fn generate_trimmed(
+    cloud: &PointCloud,
+    params: &SplatParams,
+    progress: Option<crate::progress::Progress<'_>>,
+) -> Result<(Vec<Splat>, SplatReport, Option<TrimReport>)> {
+    let (mut splats, mut report) = generate_with_progress(cloud, params, progress)?;
+    let Some(vp) = params.viewpoint else {
+        return Ok((splats, report, None));
+    };
+    if !vp.is_finite() {
+        return Err(Error::invalid("the viewpoint must be finite"));
+    }
+    crate::progress::notify(progress, "free space", 0.0);
+    let flags = if params.remove_outliers {
+        outliers::find(&cloud.positions, report.k.max(1), Some(vp))
+    } else {
+        vec![false; cloud.len()]
+    };
+    let points: Vec<Vec3> = cloud
+        .positions
+        .iter()
+        .zip(&flags)
+        .filter(|(p, o)| !**o && p.is_finite())
+        .map(|(p, _)| *p)
+        .collect();
+    let margin = MARGIN_EPS * report.epsilon as f32;
+    let t = trim(&mut splats, &points, vp, margin);
+    if t.skipped {
+        report.warnings.push(format!(
+            "{:.1} % of the lines of sight from the viewpoint are blocked: it does not look like \
+             the scanner's position, so no splat was trimmed (give --viewpoint, or --no-viewpoint)",
+            100.0 * t.blocked as f64 / t.rays.max(1) as f64
+        ));
+    }
+    Ok((splats, report, Some(t)))
+}

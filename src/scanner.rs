@@ -1,0 +1,297 @@
+//! A synthetic range scanner: rays cast from a viewpoint onto a triangle
+//! mesh, with the defects of real scans (range noise, outliers, missing
+//! returns). The mesh stays the exact surface, so a scan of it can be
+//! splatted and compared with `compare --truth`; the viewpoint is kept with
+//! the points, as a real scanner's `VIEWPOINT`.
+
+use crate::embree::{Device, TriangleScene};
+use crate::geometry::Ray;
+use crate::io::Mesh;
+use crate::rng::SplitMix64;
+use crate::splat::PointCloud;
+use crate::{Error, Result};
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// How the rays sweep the field of view.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ScanPattern {
+    /// A pinhole camera's pixel grid (a depth camera or stereo rig):
+    /// `columns × rows` rays, square pixels.
+    #[default]
+    Raster,
+    /// Scan lines at equal angular steps (a line scanner or lidar): `rows`
+    /// lines of `columns` samples each over a square field, so the spacing
+    /// between lines is `columns / rows` times the spacing along them.
+    Lines,
+}
+
+impl std::str::FromStr for ScanPattern {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "raster" => Ok(ScanPattern::Raster),
+            "lines" => Ok(ScanPattern::Lines),
+            _ => Err(Error::invalid(format!(
+                "unknown scan pattern '{s}' (expected raster or lines)"
+            ))),
+        }
+    }
+}
+
+/// Range noise: absolute, or relative to the scan's own point spacing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RangeNoise {
+    /// Standard deviation in the mesh's units.
+    Absolute(f32),
+    /// Standard deviation as a multiple of the median point spacing (the
+    /// larger angular step times the range).
+    Spacing(f32),
+}
+
+/// What the scanner does.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ScanParams {
+    /// The scanner's position, in the mesh's coordinates.
+    pub from: Vec3,
+    /// The point it looks at (default: the centre of the mesh's bounding box).
+    pub at: Option<Vec3>,
+    /// Samples per row (per line).
+    pub columns: u32,
+    /// Rows (lines).
+    pub rows: u32,
+    /// Vertical field of view in degrees (default: the mesh's bounding sphere
+    /// fills it with a 5 % margin).
+    pub fov: Option<f32>,
+    /// Raster or scan lines.
+    pub pattern: ScanPattern,
+    /// Gaussian noise along the ray on every range.
+    pub range_noise: RangeNoise,
+    /// Fraction of returns replaced by an outlier: a point on the same ray
+    /// at a uniformly random range between half and 1.5 times the true one.
+    pub outliers: f32,
+    /// Fraction of returns dropped at random.
+    pub missing: f32,
+    /// Seed: the same seed gives the same scan on any machine.
+    pub seed: u64,
+}
+
+impl Default for ScanParams {
+    fn default() -> Self {
+        ScanParams {
+            from: Vec3::new(0.0, 0.0, 4.0),
+            at: None,
+            columns: 640,
+            rows: 480,
+            fov: None,
+            pattern: ScanPattern::Raster,
+            range_noise: RangeNoise::Absolute(0.0),
+            outliers: 0.0,
+            missing: 0.0,
+            seed: 1,
+        }
+    }
+}
+
+/// The most rays a scan casts.
+pub const MAX_SCAN_RAYS: u64 = 100_000_000;
+
+/// A scan and what happened to its rays.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scan {
+    /// The points, with `viewpoint` set to the scanner's position.
+    pub cloud: PointCloud,
+    /// Rays cast.
+    pub rays: usize,
+    /// Rays that met the mesh.
+    pub returns: usize,
+    /// Returns dropped as missing.
+    pub missing: usize,
+    /// Returns replaced by outliers.
+    pub outliers: usize,
+    /// Median point spacing: the larger angular step times the range.
+    pub spacing: f32,
+    /// The range noise's standard deviation, in the mesh's units.
+    pub noise_sigma: f32,
+}
+
+fn check(p: &ScanParams) -> Result<()> {
+    let bad = |s: String| Err(Error::invalid(s));
+    if !p.from.is_finite() || p.at.is_some_and(|a| !a.is_finite()) {
+        return bad("the scanner position and target must be finite".into());
+    }
+    if p.columns == 0 || p.rows == 0 {
+        return bad(format!(
+            "a scan needs at least one ray per row and one row, got {}x{}",
+            p.columns, p.rows
+        ));
+    }
+    if u64::from(p.columns) * u64::from(p.rows) > MAX_SCAN_RAYS {
+        return bad(format!(
+            "{}x{} rays is more than the {MAX_SCAN_RAYS} a scan may cast",
+            p.columns, p.rows
+        ));
+    }
+    if p.fov.is_some_and(|f| !(f > 0.0 && f < 179.0)) {
+        return bad(format!(
+            "scan field of view {:?} degrees must be in (0, 179)",
+            p.fov
+        ));
+    }
+    let sigma = match p.range_noise {
+        RangeNoise::Absolute(s) | RangeNoise::Spacing(s) => s,
+    };
+    if !(sigma.is_finite() && sigma >= 0.0) {
+        return bad(format!(
+            "range noise {sigma} must be finite and non-negative"
+        ));
+    }
+    for (what, f) in [("outliers", p.outliers), ("missing", p.missing)] {
+        if !(0.0..=0.5).contains(&f) {
+            return bad(format!("the {what} fraction {f} must be in [0, 0.5]"));
+        }
+    }
+    Ok(())
+}
+
+/// Scans `mesh` from `params.from`.
+///
+/// # Errors
+/// Parameters out of range, a target at the scanner's position, a mesh
+/// Embree cannot build, or a scan that sees nothing.
+pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
+    check(params)?;
+    let (lo, hi) = mesh.positions.iter().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(a, b), p| (a.min(*p), b.max(*p)),
+    );
+    if mesh.triangles.is_empty() || !(lo.is_finite() && hi.is_finite()) {
+        return Err(Error::invalid("the mesh has no finite triangles to scan"));
+    }
+    let center = 0.5 * (lo + hi);
+    let at = params.at.unwrap_or(center);
+    let forward = (at - params.from)
+        .try_normalize()
+        .ok_or_else(|| Error::invalid("the scanner looks at its own position"))?;
+    let up_hint = if forward.y.abs() > 0.99 {
+        Vec3::Z
+    } else {
+        Vec3::Y
+    };
+    let right = forward.cross(up_hint).normalize();
+    let up = right.cross(forward);
+    let vfov = match params.fov {
+        Some(f) => f.to_radians(),
+        None => {
+            let dist = (center - params.from).length();
+            let radius = 0.5 * (hi - lo).length();
+            if dist <= radius {
+                90f32.to_radians()
+            } else {
+                (2.0 * (radius / dist).asin() * 1.05).min(170f32.to_radians())
+            }
+        }
+    };
+    let (cols, rows) = (params.columns as usize, params.rows as usize);
+    // Ray direction of sample (c, r), and the larger angular step.
+    let (dir_of, step): (Box<dyn Fn(usize, usize) -> Vec3 + Sync>, f32) = match params.pattern {
+        ScanPattern::Raster => {
+            let half_h = (0.5 * vfov).tan();
+            let half_w = half_h * cols as f32 / rows as f32;
+            let f = move |c: usize, r: usize| {
+                let x = ((c as f32 + 0.5) / cols as f32 * 2.0 - 1.0) * half_w;
+                let y = (1.0 - (r as f32 + 0.5) / rows as f32 * 2.0) * half_h;
+                (forward + right * x + up * y).normalize()
+            };
+            (Box::new(f), 2.0 * half_h / rows as f32)
+        }
+        ScanPattern::Lines => {
+            let f = move |c: usize, r: usize| {
+                let az = ((c as f32 + 0.5) / cols as f32 - 0.5) * vfov;
+                let el = (0.5 - (r as f32 + 0.5) / rows as f32) * vfov;
+                (forward * (el.cos() * az.cos()) + right * (el.cos() * az.sin()) + up * el.sin())
+                    .normalize()
+            };
+            (Box::new(f), vfov / cols.min(rows) as f32)
+        }
+    };
+    let device = Device::new()?;
+    let tris = TriangleScene::new(&device, &[(&mesh.positions, &mesh.triangles)])?;
+    // Exact ranges first (the noise may be relative to the spacing).
+    let ranges: Vec<f32> = (0..rows * cols)
+        .into_par_iter()
+        .with_min_len(1024)
+        .map(|k| {
+            let ray = Ray {
+                origin: params.from,
+                dir: dir_of(k % cols, k / cols),
+            };
+            tris.intersect(&ray, 0.0, f32::INFINITY)
+                .map_or(f32::INFINITY, |h| h.t)
+        })
+        .collect();
+    let mut hit_ranges: Vec<f32> = ranges.iter().copied().filter(|t| t.is_finite()).collect();
+    if hit_ranges.is_empty() {
+        return Err(Error::invalid(format!(
+            "no ray of the scan from {:?} meets the mesh",
+            params.from.to_array()
+        )));
+    }
+    let mid = hit_ranges.len() / 2;
+    let median_range = *hit_ranges.select_nth_unstable_by(mid, f32::total_cmp).1;
+    let spacing = median_range * step;
+    let sigma = match params.range_noise {
+        RangeNoise::Absolute(s) => s,
+        RangeNoise::Spacing(f) => f * spacing,
+    };
+    // Per-ray defects, from a generator seeded per ray (thread-independent).
+    let samples: Vec<Option<(Vec3, u8)>> = ranges
+        .par_iter()
+        .enumerate()
+        .with_min_len(1024)
+        .map(|(k, &t)| {
+            if !t.is_finite() {
+                return None;
+            }
+            let mut rng =
+                SplitMix64::new(params.seed ^ (k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+            if rng.next_f32() < params.missing {
+                return Some((Vec3::ZERO, 1));
+            }
+            let dir = dir_of(k % cols, k / cols);
+            if rng.next_f32() < params.outliers {
+                let r = t * rng.range(0.5, 1.5);
+                return Some((params.from + dir * r, 2));
+            }
+            let r = t + (rng.next_gaussian() as f32) * sigma;
+            Some((params.from + dir * r, 0))
+        })
+        .collect();
+    let mut scan = Scan {
+        cloud: PointCloud {
+            viewpoint: Some(params.from),
+            ..PointCloud::default()
+        },
+        rays: rows * cols,
+        returns: hit_ranges.len(),
+        missing: 0,
+        outliers: 0,
+        spacing,
+        noise_sigma: sigma,
+    };
+    for (p, kind) in samples.into_iter().flatten() {
+        match kind {
+            1 => scan.missing += 1,
+            2 => {
+                scan.outliers += 1;
+                scan.cloud.positions.push(p);
+            }
+            _ => scan.cloud.positions.push(p),
+        }
+    }
+    if scan.cloud.is_empty() {
+        return Err(Error::invalid("every return of the scan went missing"));
+    }
+    Ok(scan)
+}

@@ -1,0 +1,81 @@
+//! Statistical outlier removal: a point whose neighbours are much farther
+//! away than is usual, locally or over the whole cloud, is not on a surface
+//! the scan sampled (a spurious return, a mixed pixel far behind an edge),
+//! and would grow a giant splat.
+
+use super::knn::{Knn, build_tree};
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// A point is a local outlier when its k-th neighbour distance exceeds this
+/// many times the median k-th neighbour distance of its neighbours (and
+/// [`LOCAL_FLOOR`] times the cloud's median). On
+/// uniform random samples of a surface the ratio stays below about 2; a half
+/// neighbourhood at a boundary gives about √2.
+pub const LOCAL_RATIO: f32 = 3.0;
+
+/// ... but only when its k-th neighbour distance also exceeds this many
+/// times the cloud's 90th percentile: clouds sampled unevenly (mesh vertices
+/// crowded at some places, merged scans) have ordinary points beside
+/// crowded ones.
+pub const LOCAL_FLOOR: f32 = 1.0;
+
+/// A point is a global outlier when its k-th neighbour distance exceeds this
+/// many times the cloud's 90th percentile (robust to a few per cent of
+/// outliers, and to a cloud sampled unevenly). Spurious returns scattered through the
+/// scanned volume are each other's neighbours, so the local test alone
+/// keeps them. With a viewpoint the distances are divided by the range
+/// first, since a scan's spacing grows with it.
+pub const GLOBAL_RATIO: f32 = 3.0;
+
+/// Flags the outliers among `points` with neighbourhood graph `knn` (see
+/// [`LOCAL_RATIO`] and [`GLOBAL_RATIO`]).
+#[must_use]
+pub fn flag(points: &[Vec3], knn: &Knn, viewpoint: Option<Vec3>) -> Vec<bool> {
+    let n = knn.kth_distance.len();
+    if n == 0 {
+        return Vec::new();
+    }
+    let scaled: Vec<f32> = match viewpoint {
+        Some(vp) => points
+            .iter()
+            .zip(&knn.kth_distance)
+            .map(|(p, d)| d / (*p - vp).length().max(f32::MIN_POSITIVE))
+            .collect(),
+        None => knn.kth_distance.clone(),
+    };
+    let mut sorted = scaled.clone();
+    let q = (n - 1) * 9 / 10;
+    let global = *sorted.select_nth_unstable_by(q, f32::total_cmp).1;
+    (0..n)
+        .into_par_iter()
+        .with_min_len(1024)
+        .map(|i| {
+            if scaled[i] > GLOBAL_RATIO * global {
+                return true;
+            }
+            let mut d: Vec<f32> = knn
+                .of(i)
+                .iter()
+                .map(|&j| knn.kth_distance[j as usize])
+                .collect();
+            if d.is_empty() {
+                return false;
+            }
+            let mid = d.len() / 2;
+            let m = *d.select_nth_unstable_by(mid, f32::total_cmp).1;
+            knn.kth_distance[i] > LOCAL_RATIO * m && scaled[i] > LOCAL_FLOOR * global
+        })
+        .collect()
+}
+
+/// [`flag`] on a cloud of distinct points, building its own `k`-nearest
+/// neighbour graph.
+#[must_use]
+pub fn find(points: &[Vec3], k: usize, viewpoint: Option<Vec3>) -> Vec<bool> {
+    if points.len() <= k {
+        return vec![false; points.len()];
+    }
+    let tree = build_tree(points);
+    flag(points, &Knn::build(&tree, points, k), viewpoint)
+}

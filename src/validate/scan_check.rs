@@ -1,0 +1,260 @@
+//! The scan as its own ground truth: every scanned point was seen from the
+//! scanner, so the ray from the viewpoint to it must meet the splats at the
+//! point, not before (a phantom occluder) and not after (a hole). A stated
+//! fraction of the points is held out of splat generation, so nothing that
+//! uses the lines of sight while making splats can fit the check.
+
+use crate::accel::registry;
+use crate::accel::{CandidateHits, Ray};
+use crate::freespace::{TrimReport, generate_trimmed};
+use crate::rng::SplitMix64;
+use crate::splat::{PointCloud, SplatParams, SplatReport, outliers};
+use crate::{Error, Result};
+use glam::Vec3;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::time::Instant;
+
+/// What `scan-check` does.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ScanCheckParams {
+    /// Splat generation, as `splat` would run it (the viewpoint is set to
+    /// the check's).
+    pub splat: SplatParams,
+    /// The scanner's position, in the cloud's frame (relative to
+    /// [`PointCloud::origin`]); default: the cloud's own (PCD `VIEWPOINT`).
+    pub viewpoint: Option<Vec3>,
+    /// A hit within `tolerance × d` of the point's distance `d` is
+    /// consistent.
+    pub tolerance: f32,
+    /// Fraction of the points held out of splat generation and checked.
+    pub holdout: f32,
+    /// Seed of the hold-out choice.
+    pub seed: u64,
+}
+
+impl Default for ScanCheckParams {
+    fn default() -> Self {
+        ScanCheckParams {
+            splat: SplatParams::default(),
+            viewpoint: None,
+            tolerance: 0.01,
+            holdout: 0.1,
+            seed: 1,
+        }
+    }
+}
+
+/// Counts and fractions of the checked lines of sight.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct ScanCheckReport {
+    /// Points in the cloud.
+    pub points: usize,
+    /// Points held out of generation.
+    pub held_out: usize,
+    /// Held-out points the generator's outlier test rejects (on the whole
+    /// cloud): not checked, since no surface was seen there.
+    pub held_out_outliers: usize,
+    /// Rays cast: one per held-out point that is not an outlier.
+    pub rays: usize,
+    /// `|t - d| <= tolerance·d`.
+    pub consistent: usize,
+    /// `t < d - tolerance·d`: something stands in front of a point the
+    /// scanner saw.
+    pub early: usize,
+    /// `t < 0.9 d` (a subset of `early`).
+    pub gross_early: usize,
+    /// `t > d + tolerance·d`: the ray passes the point through a hole.
+    pub late: usize,
+    /// No splat at all on the ray.
+    pub miss: usize,
+    /// `consistent / rays`.
+    pub consistent_fraction: f64,
+    /// `early / rays`.
+    pub early_fraction: f64,
+    /// `gross_early / rays`.
+    pub gross_early_fraction: f64,
+    /// `late / rays`.
+    pub late_fraction: f64,
+    /// `miss / rays`.
+    pub miss_fraction: f64,
+    /// The tolerance used.
+    pub tolerance: f64,
+    /// The viewpoint used, in the cloud file's coordinates.
+    pub viewpoint: [f64; 3],
+    /// Splats made from the points not held out.
+    pub splats: usize,
+    /// Median splat radius (the larger radius of each splat).
+    pub median_radius: f64,
+    /// Largest splat radius.
+    pub max_radius: f64,
+    /// `max_radius / median_radius`.
+    pub max_over_median_radius: f64,
+    /// The generation report.
+    pub generation: SplatReport,
+    /// What free-space trimming did (on the points not held out).
+    pub trim: Option<TrimReport>,
+    /// Seconds to generate the splats.
+    pub splat_seconds: f64,
+    /// Seconds to cast the rays (including the backend build).
+    pub check_seconds: f64,
+}
+
+/// Is point `i` held out? A hash of `(seed, i)`, so the choice does not
+/// depend on thread count or order.
+fn held_out(seed: u64, i: usize, fraction: f32) -> bool {
+    let mut r = SplitMix64::new(seed ^ (i as u64).wrapping_mul(0xA24B_AED4_963E_E407));
+    r.next_f32() < fraction
+}
+
+/// Runs the check on `cloud`.
+///
+/// # Errors
+/// No viewpoint, parameters out of range, too few points, or a backend
+/// that cannot be built.
+pub fn scan_check(
+    cloud: &PointCloud,
+    params: &ScanCheckParams,
+    progress: Option<crate::progress::Progress<'_>>,
+) -> Result<ScanCheckReport> {
+    let vp = params.viewpoint.or(cloud.viewpoint).ok_or_else(|| {
+        Error::invalid(
+            "the cloud has no viewpoint (no PCD VIEWPOINT): give the scanner's position with --viewpoint X,Y,Z",
+        )
+    })?;
+    if !vp.is_finite() {
+        return Err(Error::invalid("the viewpoint must be finite"));
+    }
+    if !(params.tolerance > 0.0 && params.tolerance < 1.0) {
+        return Err(Error::invalid(format!(
+            "tolerance {} must be in (0, 1)",
+            params.tolerance
+        )));
+    }
+    if !(params.holdout > 0.0 && params.holdout <= 0.5) {
+        return Err(Error::invalid(format!(
+            "hold-out fraction {} must be in (0, 0.5]",
+            params.holdout
+        )));
+    }
+    let n = cloud.len();
+    let keep: Vec<bool> = (0..n)
+        .map(|i| !held_out(params.seed, i, params.holdout))
+        .collect();
+    // Held-out points the generator would reject as outliers were not seen
+    // on a surface: they are counted, not checked.
+    let rejected = if params.splat.remove_outliers {
+        outliers::find(&cloud.positions, params.splat.k, Some(vp))
+    } else {
+        vec![false; n]
+    };
+    let pick = |v: &Vec<Vec3>, k: bool| -> Vec<Vec3> {
+        v.iter()
+            .zip(&keep)
+            .filter(|(_, kk)| **kk == k)
+            .map(|(p, _)| *p)
+            .collect()
+    };
+    let train = PointCloud {
+        positions: pick(&cloud.positions, true),
+        normals: cloud
+            .normals
+            .as_ref()
+            .filter(|v| v.len() == n)
+            .map(|v| pick(v, true)),
+        colors: cloud
+            .colors
+            .as_ref()
+            .filter(|v| v.len() == n)
+            .map(|v| pick(v, true)),
+        skipped: cloud.skipped.clone(),
+        viewpoint: Some(vp),
+        origin: cloud.origin,
+    };
+    let held: Vec<usize> = (0..n).filter(|&i| !keep[i]).collect();
+    let test: Vec<Vec3> = held
+        .iter()
+        .filter(|&&i| !rejected[i])
+        .map(|&i| cloud.positions[i])
+        .collect();
+    let held_out_outliers = held.len() - test.len();
+    let t0 = Instant::now();
+    let sp = SplatParams {
+        viewpoint: Some(vp),
+        ..params.splat.clone()
+    };
+    let (splats, generation, trim) = generate_trimmed(&train, &sp, progress)?;
+    let t1 = Instant::now();
+    let info = &registry::renderers()[0];
+    let backend = info.build_splats(&splats)?;
+    let tol = params.tolerance;
+    // (consistent, early, gross_early, late, miss)
+    let counts = test
+        .par_iter()
+        .with_min_len(512)
+        .map_init(
+            || CandidateHits::new(0.0),
+            |hits, &p| {
+                let d = (p - vp).length();
+                let mut c = [0usize; 5];
+                let Some(dir) = (p - vp).try_normalize() else {
+                    return c;
+                };
+                let ray = Ray { origin: vp, dir };
+                backend.intersect(&ray, 0.0, f32::INFINITY, hits);
+                match hits.nearest() {
+                    None => c[4] = 1,
+                    Some(h) if h.t < d - tol * d => {
+                        c[1] = 1;
+                        if h.t < 0.9 * d {
+                            c[2] = 1;
+                        }
+                    }
+                    Some(h) if h.t > d + tol * d => c[3] = 1,
+                    Some(_) => c[0] = 1,
+                }
+                c
+            },
+        )
+        .reduce(|| [0usize; 5], |a, b| std::array::from_fn(|k| a[k] + b[k]));
+    let t2 = Instant::now();
+    let mut radii: Vec<f32> = splats.iter().map(|s| s.radii.max_element()).collect();
+    let (median_radius, max_radius) = if radii.is_empty() {
+        (0.0, 0.0)
+    } else {
+        let mid = radii.len() / 2;
+        let m = *radii.select_nth_unstable_by(mid, f32::total_cmp).1;
+        (
+            f64::from(m),
+            f64::from(radii.iter().copied().fold(0f32, f32::max)),
+        )
+    };
+    let rays = test.len();
+    let frac = |k: usize| counts[k] as f64 / rays.max(1) as f64;
+    Ok(ScanCheckReport {
+        points: n,
+        held_out: held.len(),
+        held_out_outliers,
+        rays,
+        consistent: counts[0],
+        early: counts[1],
+        gross_early: counts[2],
+        late: counts[3],
+        miss: counts[4],
+        consistent_fraction: frac(0),
+        early_fraction: frac(1),
+        gross_early_fraction: frac(2),
+        late_fraction: frac(3),
+        miss_fraction: frac(4),
+        tolerance: f64::from(tol),
+        viewpoint: (cloud.origin + vp.as_dvec3()).to_array(),
+        splats: splats.len(),
+        median_radius,
+        max_radius,
+        max_over_median_radius: max_radius / median_radius.max(f64::MIN_POSITIVE),
+        generation,
+        trim,
+        splat_seconds: (t1 - t0).as_secs_f64(),
+        check_seconds: (t2 - t1).as_secs_f64(),
+    })
+}

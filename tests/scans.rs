@@ -1,0 +1,178 @@
+//! Real-scan robustness: the synthetic scanner, `scan-check`, outliers.
+
+mod common;
+
+use common::{Rng, data, scratch};
+use glam::{DVec3, Vec3};
+use splatray::io::{read_mesh, read_points, write_points};
+use splatray::scanner::{RangeNoise, ScanParams, ScanPattern, scan_mesh};
+use splatray::splat::{PointCloud, SplatParams, generate};
+use splatray::validate::scan_check::{ScanCheckParams, ScanCheckReport, scan_check};
+
+fn bunny_scan(pattern: ScanPattern, columns: u32, rows: u32) -> splatray::scanner::Scan {
+    let mesh = read_mesh(&data("bunny-mesh.ply")).unwrap();
+    scan_mesh(
+        &mesh,
+        &ScanParams {
+            from: Vec3::new(1.5, 1.0, 3.5),
+            columns,
+            rows,
+            pattern,
+            range_noise: RangeNoise::Spacing(0.5),
+            outliers: 0.01,
+            missing: 0.05,
+            seed: 7,
+            ..ScanParams::default()
+        },
+    )
+    .unwrap()
+}
+
+#[test]
+fn scanner_counts_add_up_and_keeps_its_viewpoint_through_pcd() {
+    let scan = bunny_scan(ScanPattern::Raster, 200, 150);
+    assert_eq!(scan.rays, 200 * 150);
+    assert_eq!(scan.returns, scan.cloud.len() + scan.missing);
+    let n = scan.returns as f64;
+    assert!((scan.missing as f64 / n - 0.05).abs() < 0.02, "{scan:?}");
+    assert!((scan.outliers as f64 / n - 0.01).abs() < 0.01);
+    assert!(scan.noise_sigma > 0.0 && (scan.noise_sigma - 0.5 * scan.spacing).abs() < 1e-6);
+    let path = scratch("scan-roundtrip").join("scan.pcd");
+    write_points(&path, &scan.cloud).unwrap();
+    let back = read_points(&path).unwrap();
+    // Read back re-centred on the cloud's medians: the viewpoint and the
+    // positions are offsets from the origin, each within one f32 rounding
+    // of an offset of at most a few units.
+    let vp = back.origin + back.viewpoint.unwrap().as_dvec3();
+    assert!(
+        (vp - DVec3::new(1.5, 1.0, 3.5)).abs().max_element() < 1e-6,
+        "{vp}"
+    );
+    assert_eq!(back.len(), scan.cloud.len());
+    for (i, p) in scan.cloud.positions.iter().enumerate() {
+        let d = (back.world(i) - p.as_dvec3()).abs().max_element();
+        assert!(d <= f64::from(f32::EPSILON), "point {i} moved by {d}");
+    }
+}
+
+fn check(cloud: &PointCloud, remove_outliers: bool) -> ScanCheckReport {
+    scan_check(
+        cloud,
+        &ScanCheckParams {
+            splat: SplatParams {
+                remove_outliers,
+                ..SplatParams::default()
+            },
+            ..ScanCheckParams::default()
+        },
+        None,
+    )
+    .unwrap()
+}
+
+#[test]
+fn raster_scan_lines_of_sight_are_free_and_no_splat_is_giant() {
+    let scan = bunny_scan(ScanPattern::Raster, 480, 360);
+    let r = check(&scan.cloud, true);
+    assert!(r.rays > 1500, "{r:?}");
+    assert!(r.gross_early_fraction <= 0.002, "{r:?}");
+    assert!(r.consistent_fraction >= 0.98, "{r:?}");
+    assert!(r.miss_fraction <= 0.005, "{r:?}");
+    assert!(r.max_over_median_radius <= 8.0, "{r:?}");
+    assert!(r.held_out_outliers > 0, "{r:?}");
+    // The same check sees the phantom discs the outliers grow when they are
+    // kept: it can fail.
+    let kept = check(&scan.cloud, false);
+    assert!(kept.gross_early_fraction > 0.05, "{kept:?}");
+    assert!(kept.max_over_median_radius > 8.0, "{kept:?}");
+}
+
+#[test]
+fn scan_check_needs_a_viewpoint() {
+    let mut cloud = bunny_scan(ScanPattern::Raster, 64, 48).cloud;
+    cloud.viewpoint = None;
+    let e = scan_check(&cloud, &ScanCheckParams::default(), None).unwrap_err();
+    assert!(e.to_string().contains("viewpoint"), "{e}");
+}
+
+fn sphere(n: usize, r: f32, seed: u64) -> Vec<Vec3> {
+    let mut rng = Rng::new(seed);
+    (0..n).map(|_| rng.unit() * r).collect()
+}
+
+#[test]
+fn one_far_outlier_grows_no_giant_splat() {
+    let pts = sphere(20_000, 1.0, 3);
+    let clean = PointCloud {
+        positions: pts.clone(),
+        ..PointCloud::default()
+    };
+    let (base, _) = generate(&clean, &SplatParams::default()).unwrap();
+    let mut with = pts;
+    with.push(Vec3::new(300.0, 200.0, -100.0));
+    let dirty = PointCloud {
+        positions: with,
+        ..PointCloud::default()
+    };
+    let (splats, rep) = generate(&dirty, &SplatParams::default()).unwrap();
+    assert!(
+        rep.skipped_points
+            .iter()
+            .any(|s| s.reason.contains("outlier") && s.count >= 1),
+        "{rep:?}"
+    );
+    let max = splats.iter().map(|s| s.radii.x).fold(0f32, f32::max);
+    assert!(max < 0.5, "largest radius {max}");
+    let ratio = splats.len() as f64 / base.len() as f64;
+    assert!(
+        (0.9..1.1).contains(&ratio),
+        "{} vs {}",
+        splats.len(),
+        base.len()
+    );
+}
+
+#[test]
+fn cli_sample_scan_and_scan_check_write_what_they_say() {
+    let dir = scratch("cli-scan");
+    let pcd = dir.join("scan.pcd");
+    let out = common::bin()
+        .args(["sample"])
+        .arg(data("bunny-mesh.ply"))
+        .args(["--scan-from", "1.5,1.0,3.5", "--rays", "160,120", "-o"])
+        .arg(&pcd)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report = dir.join("check.json");
+    let out = common::bin()
+        .arg("scan-check")
+        .arg(&pcd)
+        .arg("--report")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert!(json["rays"].as_u64().unwrap() > 0);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("consistent"));
+    // -n and --scan-from exclude each other: one line, exit 1.
+    let out = common::bin()
+        .args(["sample"])
+        .arg(data("bunny-mesh.ply"))
+        .args(["-n", "10", "--scan-from", "1,1,1", "-o"])
+        .arg(dir.join("never.pcd"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(!dir.join("never.pcd").exists());
+}
