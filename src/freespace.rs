@@ -41,6 +41,20 @@ pub struct TrimReport {
     pub skipped: bool,
 }
 
+/// The line of sight from `viewpoint` to `point`: the ray and the point's
+/// distance along it; `None` when they coincide.
+#[must_use]
+pub fn sight_line(viewpoint: Vec3, point: Vec3) -> Option<(Ray, f32)> {
+    let dir = (point - viewpoint).try_normalize()?;
+    Some((
+        Ray {
+            origin: viewpoint,
+            dir,
+        },
+        (point - viewpoint).length(),
+    ))
+}
+
 /// For every point, the first splat blocking its line of sight, with the
 /// hit's normalised disc coordinates.
 fn blocked(splats: &[Splat], points: &[Vec3], vp: Vec3, margin: f32) -> Vec<Option<(u32, Vec2)>> {
@@ -52,13 +66,12 @@ fn blocked(splats: &[Splat], points: &[Vec3], vp: Vec3, margin: f32) -> Vec<Opti
         .map_init(
             || CandidateHits::new(0.0),
             |hits, &p| {
-                let d = (p - vp).length();
-                let dir = (p - vp).try_normalize()?;
+                let (ray, d) = sight_line(vp, p)?;
                 let t_max = d - margin;
                 if t_max <= 0.0 {
                     return None;
                 }
-                octree.intersect(&Ray { origin: vp, dir }, 0.0, t_max, hits);
+                octree.intersect(&ray, 0.0, t_max, hits);
                 let h = hits.nearest()?;
                 (h.t < t_max).then_some((h.id, Vec2::new(h.u, h.v)))
             },

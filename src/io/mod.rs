@@ -203,27 +203,40 @@ pub fn write_points(path: &Path, cloud: &PointCloud) -> Result<(), IoError> {
         + 12 * usize::from(colors.is_some());
     let mut out = Vec::with_capacity(header.len() + n * per);
     out.extend_from_slice(header.as_bytes());
+    encode_records(&mut out, cloud, wide, normals, colors);
+    write_bytes(path, &out)
+}
+
+/// Appends one little-endian record per point: the position (world f64
+/// when `wide`, else the f32 offset), then the normal and the colour (f32)
+/// when given. Shared by the PLY and PCD writers.
+pub(crate) fn encode_records(
+    out: &mut Vec<u8>,
+    cloud: &PointCloud,
+    wide: bool,
+    normals: Option<&Vec<Vec3>>,
+    colors: Option<&Vec<Vec3>>,
+) {
     let put = |out: &mut Vec<u8>, v: Vec3| {
         for c in v.to_array() {
             out.extend_from_slice(&c.to_le_bytes());
         }
     };
-    for i in 0..n {
+    for i in 0..cloud.len() {
         if wide {
             for c in cloud.world(i).to_array() {
                 out.extend_from_slice(&c.to_le_bytes());
             }
         } else {
-            put(&mut out, cloud.positions[i]);
+            put(out, cloud.positions[i]);
         }
         if let Some(ns) = normals {
-            put(&mut out, ns[i]);
+            put(out, ns[i]);
         }
         if let Some(cs) = colors {
-            put(&mut out, cs[i]);
+            put(out, cs[i]);
         }
     }
-    write_bytes(path, &out)
 }
 
 /// sRGB-encoded component in `[0, 1]` to linear.

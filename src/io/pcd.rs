@@ -377,22 +377,6 @@ pub fn encode(cloud: &PointCloud) -> Vec<u8> {
     let per = if wide { 24 } else { 12 } + if normals.is_some() { 12 } else { 0 };
     let mut out = Vec::with_capacity(header.len() + n * per);
     out.extend_from_slice(header.as_bytes());
-    let put = |out: &mut Vec<u8>, v: Vec3| {
-        for c in v.to_array() {
-            out.extend_from_slice(&c.to_le_bytes());
-        }
-    };
-    for i in 0..n {
-        if wide {
-            for c in cloud.world(i).to_array() {
-                out.extend_from_slice(&c.to_le_bytes());
-            }
-        } else {
-            put(&mut out, cloud.positions[i]);
-        }
-        if let Some(ns) = normals {
-            put(&mut out, ns[i]);
-        }
-    }
+    super::encode_records(&mut out, cloud, wide, normals, None);
     out
 }

@@ -118,6 +118,27 @@ pub const WIDE_FACTOR: usize = 4;
 /// collinear (scan lines far apart).
 pub const WIDE_MAX: usize = 256;
 
+/// The unit normal of the least-squares plane of `points`, or `None` when
+/// the fit fails or the points are collinear (see [`COLLINEAR`]).
+fn fitted_normal(points: impl Iterator<Item = Vec3> + Clone) -> Option<Vec3> {
+    let (_, vals, vecs) = plane_fit(points);
+    let n = vecs[0].as_vec3();
+    (n.is_finite() && n.length_squared() > 0.5 && vals[1] > COLLINEAR * vals[2]).then_some(n)
+}
+
+/// Which neighbourhood a point's normal came from.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Scale {
+    /// The `k` nearest, confirmed by the wide one.
+    Small,
+    /// The wide one: the small one disagreed.
+    Wide,
+    /// The wide one: the small one was collinear.
+    WideForCollinear,
+    /// Collinear even at [`WIDE_MAX`]: a guess.
+    Degenerate,
+}
+
 /// PCA normals that survive noise and anisotropic sampling: each point's
 /// normal from itself and its `k` neighbours (as [`estimate`]) and from a
 /// wide neighbourhood of [`WIDE_FACTOR`]·k points, doubled up to
@@ -136,42 +157,39 @@ pub fn estimate_multiscale(
     use std::num::NonZero;
     let cos_max = DISAGREE_DEG.to_radians().cos();
     let n = points.len();
-    let out: Vec<(Vec3, u8)> = (0..n)
+    let out: Vec<(Vec3, Scale)> = (0..n)
         .into_par_iter()
         .with_min_len(512)
         .map(|i| {
             let nb = knn.of(i);
-            let it = std::iter::once(points[i]).chain(nb.iter().map(|&j| points[j as usize]));
-            let (_, vals, vecs) = plane_fit(it);
-            let small = vecs[0].as_vec3();
-            let small_ok =
-                small.is_finite() && small.length_squared() > 0.5 && vals[1] > COLLINEAR * vals[2];
+            let small = fitted_normal(
+                std::iter::once(points[i]).chain(nb.iter().map(|&j| points[j as usize])),
+            );
+            let guess = (small.unwrap_or(Vec3::Z), Scale::Degenerate);
             let mut m = (knn.k * WIDE_FACTOR).min(n);
             loop {
                 let Some(q) = NonZero::new(m) else {
-                    return (if small_ok { small } else { Vec3::Z }, 2);
+                    return guess;
                 };
                 let found = tree.nearest_n::<SquaredEuclidean>(&points[i].to_array(), q);
-                let (_, wv, wvecs) = plane_fit(found.iter().map(|f| points[f.item as usize]));
-                let wide = wvecs[0].as_vec3();
-                let wide_ok =
-                    wide.is_finite() && wide.length_squared() > 0.5 && wv[1] > COLLINEAR * wv[2];
-                if wide_ok {
-                    if small_ok && small.dot(wide).abs() >= cos_max {
-                        return (small, 0);
-                    }
-                    return (wide, if small_ok { 1 } else { 3 });
+                if let Some(wide) = fitted_normal(found.iter().map(|f| points[f.item as usize])) {
+                    return match small {
+                        Some(s) if s.dot(wide).abs() >= cos_max => (s, Scale::Small),
+                        Some(_) => (wide, Scale::Wide),
+                        None => (wide, Scale::WideForCollinear),
+                    };
                 }
                 if m >= WIDE_MAX.min(n) {
-                    return (if small_ok { small } else { Vec3::Z }, 2);
+                    return guess;
                 }
                 m = (m * 2).min(WIDE_MAX).min(n);
             }
         })
         .collect();
-    let collinear = out.iter().filter(|o| o.1 == 3).count();
-    let wide = out.iter().filter(|o| o.1 == 1).count() + collinear;
-    let degenerate = out.iter().filter(|o| o.1 == 2).count();
+    let count = |k: Scale| out.iter().filter(|o| o.1 == k).count();
+    let collinear = count(Scale::WideForCollinear);
+    let wide = count(Scale::Wide) + collinear;
+    let degenerate = count(Scale::Degenerate);
     (
         out.into_iter().map(|o| o.0).collect(),
         wide,

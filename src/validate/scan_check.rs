@@ -4,9 +4,9 @@
 //! fraction of the points is held out of splat generation, so nothing that
 //! uses the lines of sight while making splats can fit the check.
 
+use crate::accel::CandidateHits;
 use crate::accel::registry;
-use crate::accel::{CandidateHits, Ray};
-use crate::freespace::{TrimReport, generate_trimmed};
+use crate::freespace::{TrimReport, generate_trimmed, sight_line};
 use crate::rng::SplitMix64;
 use crate::splat::{PointCloud, SplatParams, SplatReport, outliers};
 use crate::{Error, Result};
@@ -195,12 +195,10 @@ pub fn scan_check(
         .map_init(
             || CandidateHits::new(0.0),
             |hits, &p| {
-                let d = (p - vp).length();
                 let mut c = [0usize; 5];
-                let Some(dir) = (p - vp).try_normalize() else {
+                let Some((ray, d)) = sight_line(vp, p) else {
                     return c;
                 };
-                let ray = Ray { origin: vp, dir };
                 backend.intersect(&ray, 0.0, f32::INFINITY, hits);
                 match hits.nearest() {
                     None => c[4] = 1,
