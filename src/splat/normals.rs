@@ -137,6 +137,8 @@ enum Scale {
     WideForCollinear,
     /// Collinear even at [`WIDE_MAX`]: a guess.
     Degenerate,
+    /// The wide neighbourhood held two sheets: the point's own sheet.
+    Sheet,
 }
 
 /// PCA normals that survive noise and anisotropic sampling: each point's
@@ -160,31 +162,42 @@ pub fn estimate_multiscale(
     let out: Vec<(Vec3, Scale)> = (0..n)
         .into_par_iter()
         .with_min_len(512)
-        .map(|i| {
-            let nb = knn.of(i);
-            let small = fitted_normal(
-                std::iter::once(points[i]).chain(nb.iter().map(|&j| points[j as usize])),
-            );
-            let guess = (small.unwrap_or(Vec3::Z), Scale::Degenerate);
-            let mut m = (knn.k * WIDE_FACTOR).min(n);
-            loop {
-                let Some(q) = NonZero::new(m) else {
-                    return guess;
-                };
-                let found = tree.nearest_n::<SquaredEuclidean>(&points[i].to_array(), q);
-                if let Some(wide) = fitted_normal(found.iter().map(|f| points[f.item as usize])) {
-                    return match small {
-                        Some(s) if s.dot(wide).abs() >= cos_max => (s, Scale::Small),
-                        Some(_) => (wide, Scale::Wide),
-                        None => (wide, Scale::WideForCollinear),
+        .map_init(
+            || (Vec::new(), Vec::new()),
+            |(ids, heights), i| {
+                let nb = knn.of(i);
+                let small = fitted_normal(
+                    std::iter::once(points[i]).chain(nb.iter().map(|&j| points[j as usize])),
+                );
+                let guess = (small.unwrap_or(Vec3::Z), Scale::Degenerate);
+                let mut m = (knn.k * WIDE_FACTOR).min(n);
+                loop {
+                    let Some(q) = NonZero::new(m) else {
+                        return guess;
                     };
+                    let found = tree.nearest_n::<SquaredEuclidean>(&points[i].to_array(), q);
+                    if let Some(wide) = fitted_normal(found.iter().map(|f| points[f.item as usize]))
+                    {
+                        // Two sheets (a thin plate's faces) in the wide
+                        // neighbourhood: the normal of the point's own.
+                        ids.clear();
+                        ids.extend(found.iter().map(|f| f.item).filter(|&j| j as usize != i));
+                        if let Some((_, own)) = sheet_of(points, points[i], wide, ids, heights) {
+                            return (own, Scale::Sheet);
+                        }
+                        return match small {
+                            Some(s) if s.dot(wide).abs() >= cos_max => (s, Scale::Small),
+                            Some(_) => (wide, Scale::Wide),
+                            None => (wide, Scale::WideForCollinear),
+                        };
+                    }
+                    if m >= WIDE_MAX.min(n) {
+                        return guess;
+                    }
+                    m = (m * 2).min(WIDE_MAX).min(n);
                 }
-                if m >= WIDE_MAX.min(n) {
-                    return guess;
-                }
-                m = (m * 2).min(WIDE_MAX).min(n);
-            }
-        })
+            },
+        )
         .collect();
     let count = |k: Scale| out.iter().filter(|o| o.1 == k).count();
     let collinear = count(Scale::WideForCollinear);
@@ -221,6 +234,10 @@ pub fn orient(
         return;
     }
     let k = knn.k;
+    let sheets = own_sheets(points, knn, normals);
+    let across = |i: usize, j: usize| {
+        sheets[i].across(points[j] - points[i]) && sheets[j].across(points[i] - points[j])
+    };
     // Bucket sort of the directed edges by weight.
     const BUCKETS: usize = 4096;
     const NO_EDGE: u16 = u16::MAX;
@@ -233,8 +250,8 @@ pub fn orient(
             if j < i && knn.of(j).contains(&(i as u32)) || i == j {
                 return NO_EDGE;
             }
-            let w = 1.0 - normals[i].dot(normals[j]).abs().min(1.0);
-            ((w * (BUCKETS - 1) as f32) as usize).min(BUCKETS - 1) as u16
+            let w = edge_weight(normals[i], normals[j], points[j] - points[i], across(i, j));
+            ((w * (BUCKETS - 1) as f32 / 2.0) as usize).min(BUCKETS - 1) as u16
         })
         .collect();
     let mut start = vec![0usize; BUCKETS + 1];
@@ -267,7 +284,8 @@ pub fn orient(
         }
         x
     }
-    let mut tree_edges: Vec<(u32, u32)> = Vec::with_capacity(n);
+    // (i, j, whether they lie on two sheets facing apart).
+    let mut tree_edges: Vec<(u32, u32, bool)> = Vec::with_capacity(n);
     for &e in &sorted {
         let (i, j) = ((e as usize / k) as u32, knn.idx[e as usize]);
         let (ri, rj) = (find(&mut parent, i), find(&mut parent, j));
@@ -281,7 +299,7 @@ pub fn orient(
         };
         parent[small as usize] = big;
         size[big as usize] += size[small as usize];
-        tree_edges.push((i, j));
+        tree_edges.push((i, j, across(i as usize, j as usize)));
         if tree_edges.len() == n - 1 {
             break;
         }
@@ -289,19 +307,19 @@ pub fn orient(
     drop(sorted);
     // Forest adjacency (CSR).
     let mut deg = vec![0u32; n + 1];
-    for &(i, j) in &tree_edges {
+    for &(i, j, _) in &tree_edges {
         deg[i as usize + 1] += 1;
         deg[j as usize + 1] += 1;
     }
     for i in 0..n {
         deg[i + 1] += deg[i];
     }
-    let mut adj = vec![0u32; 2 * tree_edges.len()];
+    let mut adj = vec![(0u32, false); 2 * tree_edges.len()];
     let mut pos: Vec<u32> = deg[..n].to_vec();
-    for &(i, j) in &tree_edges {
-        adj[pos[i as usize] as usize] = j;
+    for &(i, j, cross) in &tree_edges {
+        adj[pos[i as usize] as usize] = (j, cross);
         pos[i as usize] += 1;
-        adj[pos[j as usize] as usize] = i;
+        adj[pos[j as usize] as usize] = (i, cross);
         pos[j as usize] += 1;
     }
     // Roots: one per tree.
@@ -335,13 +353,16 @@ pub fn orient(
         stack.push(root);
         while let Some(x) = stack.pop() {
             let x = x as usize;
-            for &y in &adj[deg[x] as usize..deg[x + 1] as usize] {
+            for &(y, cross) in &adj[deg[x] as usize..deg[x + 1] as usize] {
                 let y = y as usize;
                 if visited[y] {
                     continue;
                 }
                 visited[y] = true;
-                if !fixed[y] && normals[y].dot(normals[x]) < 0.0 {
+                // Across a thin gap the two sheets face apart (a thin solid)
+                // or towards each other (a thin slot): opposite either way.
+                let agree = normals[y].dot(normals[x]);
+                if !fixed[y] && (if cross { agree > 0.0 } else { agree < 0.0 }) {
                     normals[y] = -normals[y];
                 }
                 stack.push(y as u32);
@@ -369,6 +390,172 @@ pub fn orient(
             }
         }
     }
+}
+
+/// A point's own sheet among its neighbours: the band of heights `[lo, hi]`
+/// along `axis` (the sheet's normal), measured from the point, that holds
+/// it; neighbours beyond lie on another sheet (the far face of a thin plate,
+/// the far wall of a slot) whose normals face the opposite way.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sheet {
+    /// The normal of the point's own sheet.
+    pub axis: Vec3,
+    /// Lowest height on the point's own sheet.
+    pub lo: f32,
+    /// Highest height on the point's own sheet.
+    pub hi: f32,
+}
+
+impl Sheet {
+    /// One sheet holding every neighbour.
+    pub const ALL: Sheet = Sheet {
+        axis: Vec3::Z,
+        lo: f32::NEG_INFINITY,
+        hi: f32::INFINITY,
+    };
+
+    /// Whether a neighbour at `offset` from the point lies on another sheet.
+    #[must_use]
+    pub fn across(&self, offset: Vec3) -> bool {
+        let h = self.axis.dot(offset);
+        h < self.lo || h > self.hi
+    }
+}
+
+/// A gap in the heights splits two sheets only when it is this many times
+/// the spread of the heights on the point's own side: range noise and
+/// curvature fill the heights of one noisy sheet without such a gap.
+pub const SHEET_GAP_SPREAD: f32 = 4.0;
+
+/// The fewest neighbours that make a second sheet (fewer are stray noise).
+pub const SHEET_MIN: usize = 3;
+
+/// The own sheet of the point `p` with the (unoriented) normal `normal`
+/// among `neighbours` (see [`Sheet`]), and the normal refitted to that sheet
+/// alone; `None` when the neighbours hold one sheet. Their heights above the
+/// tangent plane are sorted; the widest gap on either side of the point that
+/// leaves at least [`SHEET_MIN`] neighbours beyond it and a quarter of them
+/// on the point's side is a candidate. The plane is refitted to the
+/// neighbours on the point's side (a normal tilted by the far sheet would
+/// smear the heights), and the gap confirmed when, across that plane, it is
+/// at least the nearest neighbour's distance and [`SHEET_GAP_SPREAD`] times
+/// the spread (standard deviation) of the point's own side. A noisy single
+/// surface has no such gap.
+#[must_use]
+pub fn sheet_of(
+    points: &[Vec3],
+    p: Vec3,
+    normal: Vec3,
+    neighbours: &[u32],
+    h: &mut Vec<(f32, u32)>,
+) -> Option<(Sheet, Vec3)> {
+    let d1 = neighbours
+        .iter()
+        .map(|&j| p.distance(points[j as usize]))
+        .filter(|&d| d > 0.0)
+        .fold(f32::MAX, f32::min);
+    h.clear();
+    h.push((0.0, u32::MAX));
+    h.extend(
+        neighbours
+            .iter()
+            .map(|&j| (normal.dot(points[j as usize] - p), j)),
+    );
+    h.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let me = h.iter().position(|x| x.1 == u32::MAX)?;
+    let widest = |range: std::ops::RangeInclusive<usize>| {
+        range
+            .filter(|&g| g >= 1 && g < h.len())
+            .map(|g| (h[g].0 - h[g - 1].0, g))
+            .max_by(|a, b| a.0.total_cmp(&b.0))
+    };
+    // A gap between h[g-1] and h[g]: below the point g <= me, above g > me.
+    let below = widest(SHEET_MIN..=me);
+    let above = widest(me + 1..=h.len().saturating_sub(SHEET_MIN));
+    let lo_g = below.map_or(0, |b| b.1);
+    let hi_g = above.map_or(h.len(), |a| a.1);
+    let own = &h[lo_g..hi_g];
+    if own.len() < 4 || own.len() * 4 < h.len() || (below.is_none() && above.is_none()) {
+        return None;
+    }
+    let at = |x: &(f32, u32)| {
+        if x.1 == u32::MAX {
+            p
+        } else {
+            points[x.1 as usize]
+        }
+    };
+    let (c, _, vecs) = plane_fit(own.iter().map(at));
+    let m = vecs[0].as_vec3();
+    if !m.is_finite() || m.length_squared() < 0.5 {
+        return None;
+    }
+    let m = if m.dot(normal) < 0.0 { -m } else { m };
+    let c = c.as_vec3();
+    let height = |x: &(f32, u32)| m.dot(at(x) - c);
+    let count = own.len() as f32;
+    let mean = own.iter().map(height).sum::<f32>() / count;
+    let sd = (own
+        .iter()
+        .map(|x| (height(x) - mean) * (height(x) - mean))
+        .sum::<f32>()
+        / count)
+        .sqrt();
+    let (own_lo, own_hi) = own
+        .iter()
+        .map(height)
+        .fold((f32::MAX, f32::MIN), |(a, b), x| (a.min(x), b.max(x)));
+    let need = d1.max(SHEET_GAP_SPREAD * sd);
+    let mut sheet = Sheet {
+        axis: m,
+        ..Sheet::ALL
+    };
+    // The bounds are heights along the refitted normal, from `p`, halfway
+    // across the confirmed gap.
+    let from_p = m.dot(c - p);
+    if below.is_some() {
+        let far = h[..lo_g].iter().map(height).fold(f32::MIN, f32::max);
+        if own_lo - far >= need {
+            sheet.lo = from_p + 0.5 * (own_lo + far);
+        }
+    }
+    if above.is_some() {
+        let far = h[hi_g..].iter().map(height).fold(f32::MAX, f32::min);
+        if far - own_hi >= need {
+            sheet.hi = from_p + 0.5 * (own_hi + far);
+        }
+    }
+    (sheet.lo.is_finite() || sheet.hi.is_finite()).then_some((sheet, m))
+}
+
+/// For every point, its own sheet among its graph neighbours
+/// ([`sheet_of`] with its normal).
+#[must_use]
+pub fn own_sheets(points: &[Vec3], knn: &Knn, normals: &[Vec3]) -> Vec<Sheet> {
+    (0..points.len())
+        .into_par_iter()
+        .with_min_len(1024)
+        .map_init(Vec::new, |h, i| {
+            sheet_of(points, points[i], normals[i], knn.of(i), h).map_or(Sheet::ALL, |s| s.0)
+        })
+        .collect()
+}
+
+/// The weight in `[0, 2]` of the graph edge between normals `a` and `b`
+/// `offset` apart, lowest first into the spanning tree. Along one sheet it is
+/// Hoppe's `1 - |a·b|` plus `2 |a·d||b·d|` for the unit offset `d`: an edge
+/// running along both normals (a step between two close sheets, or noise)
+/// is taken last. An edge across two confirmed sheets (see [`Sheet`]) weighs
+/// `0.5 + 1 - |a·b|`: after the clean edges along each sheet, before such
+/// steep steps, so the sheets are joined where they are known to face apart.
+#[must_use]
+pub fn edge_weight(a: Vec3, b: Vec3, offset: Vec3, across: bool) -> f32 {
+    let turn = 1.0 - a.dot(b).abs().min(1.0);
+    if across {
+        return 0.25 + turn;
+    }
+    let d = offset.normalize_or_zero();
+    (turn + 8.0 * a.dot(d).abs() * b.dot(d).abs()).min(2.0)
 }
 
 /// The axis whose extreme (largest-coordinate) point has the normal most
