@@ -21,6 +21,20 @@ pub const PASSES: usize = 3;
 /// point's own surface, within the noise the splats were grown to.
 pub const MARGIN_EPS: f32 = 2.0;
 
+/// A hit also counts as the point's own surface within this many times the
+/// cloud's noise (the points' scatter about their local planes,
+/// [`SplatReport::noise`]): a point pushed behind its surface by range noise
+/// is seen through that surface's splats.
+pub const MARGIN_NOISE: f32 = 3.0;
+
+/// The margin is measured across the blocking splat (the point's depth
+/// behind its plane): seen at a grazing angle, the point's own surface
+/// meets the line of sight far in front of a point pushed behind it by
+/// noise. Along the line of sight, a hit more than this many margins in
+/// front of the point blocks at any angle (a foreground edge overhanging the
+/// background is seen at a grazing angle too).
+pub const MARGIN_ALONG: f32 = 2.0;
+
 /// If more than this fraction of the lines of sight are blocked, the
 /// viewpoint is not the scanner's (a cloud registered from several scans,
 /// or a default `VIEWPOINT`): nothing is trimmed and a warning says so.
@@ -55,8 +69,9 @@ pub fn sight_line(viewpoint: Vec3, point: Vec3) -> Option<(Ray, f32)> {
     ))
 }
 
-/// For every point, the first splat blocking its line of sight, with the
-/// hit's normalised disc coordinates.
+/// For every point, the first splat blocking its line of sight (more than
+/// `margin` in front of it, see [`MARGIN_ALONG`]), with the hit's
+/// normalised disc coordinates.
 fn blocked(splats: &[Splat], points: &[Vec3], vp: Vec3, margin: f32) -> Vec<Option<(u32, Vec2)>> {
     let discs: Vec<_> = splats.iter().map(Splat::disc_geometry).collect();
     let octree = Octree::new(&discs, &OctreeParams::default());
@@ -73,7 +88,11 @@ fn blocked(splats: &[Splat], points: &[Vec3], vp: Vec3, margin: f32) -> Vec<Opti
                 }
                 octree.intersect(&ray, 0.0, t_max, hits);
                 let h = hits.nearest()?;
-                (h.t < t_max).then_some((h.id, Vec2::new(h.u, h.v)))
+                let depth = d - h.t;
+                let cos = splats[h.id as usize].normal.dot(ray.dir).abs();
+                let blocks =
+                    depth > margin && (depth * cos > margin || depth > MARGIN_ALONG * margin);
+                blocks.then_some((h.id, Vec2::new(h.u, h.v)))
             },
         )
         .collect()
@@ -180,7 +199,7 @@ pub fn generate_trimmed(
         .filter(|(p, o)| !**o && p.is_finite())
         .map(|(p, _)| *p)
         .collect();
-    let margin = MARGIN_EPS * report.epsilon as f32;
+    let margin = (MARGIN_EPS * report.epsilon as f32).max(MARGIN_NOISE * report.noise as f32);
     let t = trim(&mut splats, &points, vp, margin);
     if t.skipped {
         report.warnings.push(format!(

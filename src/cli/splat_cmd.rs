@@ -131,12 +131,14 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
         );
     }
     eprintln!(
-        "splatray: {} points -> {} splats ({} elliptical), coverage {:.4}, mean radius {:.4e}, {} flat normal fields, origin [{:?}, {:?}, {:?}], {:.2} s -> {}",
+        "splatray: {} points -> {} splats ({} elliptical), coverage {:.4}, mean radius {:.4e}, epsilon {:.3e}, noise {:.3e}, {} flat normal fields, origin [{:?}, {:?}, {:?}], {:.2} s -> {}",
         report.used_points,
         report.splats,
         report.elliptical_splats,
         report.coverage,
         report.mean_radius,
+        report.epsilon,
+        report.noise,
         report.fallback_normal_fields,
         cloud.origin.x,
         cloud.origin.y,

@@ -3,6 +3,7 @@
 
 use super::PointCloud;
 use super::Splat;
+use super::denoise;
 use super::field;
 use super::frame::{UnitFrame, first_unusable};
 use super::grow::{GrowInput, grow_all};
@@ -111,6 +112,11 @@ pub struct SplatReport {
     /// Normals estimated by plane fits (all of them when the input has none;
     /// else the zero or non-finite input normals).
     pub estimated_normals: usize,
+    /// The points' scatter about their local planes: the median over the
+    /// points of the standard deviation of each one's neighbourhood about
+    /// the plane its normal was fitted to (range noise, plus curvature), in
+    /// the cloud's units; 0 when every normal was given.
+    pub noise: f64,
     /// The absolute error threshold `ϵ` used.
     pub epsilon: f64,
     /// The bounding-box diagonal of the used points.
@@ -374,7 +380,13 @@ pub fn generate_with_progress(
         }
     }
     if to_estimate > 0 {
-        let (est, wide, collinear, degenerate) = normals::estimate_multiscale(&points, &tree, &knn);
+        let normals::Estimated {
+            normals: est,
+            wide,
+            collinear,
+            degenerate,
+            ..
+        } = normals::estimate_multiscale(&points, &tree, &knn, params.viewpoint);
         if (collinear * 20 > n || wide * 5 > n) && k < params.k * normals::WIDE_FACTOR {
             // Anisotropic sampling (scan lines) or heavy noise: the k nearest
             // neighbours of many points lie along one line or do not reach
@@ -418,6 +430,28 @@ pub fn generate_with_progress(
         ));
     }
     report.estimated_normals = to_estimate;
+    // Range noise beyond the growth threshold: each splat would sit at its
+    // seed's noisy height (eq. 2 centres it on the span of the points it
+    // took), overlapping splats at scattered depths. The points are moved
+    // onto their local quadratic surfaces first.
+    let local = denoise::fit_all(&points, &nrm, &knn);
+    report.noise = median(local.iter().flatten().map(|l| l.sd).collect());
+    let epsilon = f64::from(params.epsilon_rel) * diagonal;
+    if report.noise > NOISE_PROJECT * epsilon {
+        let mut moved = 0usize;
+        for ((p, n), l) in points.iter_mut().zip(&nrm).zip(&local) {
+            if let Some(l) = l {
+                *p += *n * l.offset;
+                moved += 1;
+            }
+        }
+        report.warnings.push(format!(
+            "the points scatter {:.2}x epsilon about their local surfaces (range noise?): \
+             {moved} points were moved onto them before growing splats",
+            report.noise / epsilon
+        ));
+        tree = build_tree(&points);
+    }
     let t2 = Instant::now();
     // --- growth --------------------------------------------------------------
     let epsilon = (f64::from(params.epsilon_rel) * diagonal) as f32;
@@ -465,6 +499,7 @@ pub fn generate_with_progress(
         )));
     }
     report.epsilon = frame.length_from_unit(report.epsilon);
+    report.noise = frame.length_from_unit(report.noise);
     report.bbox_diagonal = frame.length_from_unit(report.bbox_diagonal);
     report.mean_radius = frame.length_from_unit(report.mean_radius);
     report.origin = cloud.origin.to_array();
@@ -569,4 +604,18 @@ pub fn count_on_splats(points: &[Vec3], splats: &[Splat], epsilon: f32) -> usize
                 .any(|nb| on_splat(&splats[nb.item as usize], **p, epsilon))
         })
         .count()
+}
+
+/// Points are moved onto their local planes before growth when the cloud's
+/// noise ([`SplatReport::noise`]) exceeds this fraction of `ϵ`.
+pub const NOISE_PROJECT: f64 = 0.25;
+
+/// The median of `values` (0 for none).
+fn median(mut values: Vec<f32>) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let mid = values.len() / 2;
+    let (_, m, _) = values.select_nth_unstable_by(mid, f32::total_cmp);
+    f64::from(*m)
 }

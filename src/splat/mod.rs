@@ -106,6 +106,7 @@ impl Splat {
 }
 
 mod cloud;
+pub mod denoise;
 pub mod field;
 pub(crate) mod frame;
 mod generate;
@@ -117,6 +118,6 @@ pub mod standoff;
 
 pub use cloud::PointCloud;
 pub use generate::{
-    GenerateError, Skipped, SplatParams, SplatReport, StageSeconds, count_on_splats, coverage,
-    generate, generate_with_progress, on_splat,
+    GenerateError, NOISE_PROJECT, Skipped, SplatParams, SplatReport, StageSeconds, count_on_splats,
+    coverage, generate, generate_with_progress, on_splat,
 };

@@ -111,6 +111,10 @@ pub const COLLINEAR: f64 = 1e-3;
 /// lies along one scan line (anisotropic sampling).
 pub const DISAGREE_DEG: f32 = 30.0;
 
+/// A fitted plane whose normal is within this cosine of perpendicular to
+/// the line of sight holds the scanner (see [`fitted_normal`]): about 2.9°.
+pub const EDGE_ON: f32 = 0.05;
+
 /// How many times more neighbours the wide neighbourhood has.
 pub const WIDE_FACTOR: usize = 4;
 
@@ -120,10 +124,32 @@ pub const WIDE_MAX: usize = 256;
 
 /// The unit normal of the least-squares plane of `points`, or `None` when
 /// the fit fails or the points are collinear (see [`COLLINEAR`]).
-fn fitted_normal(points: impl Iterator<Item = Vec3> + Clone) -> Option<Vec3> {
+///
+/// With `sight`, the unit direction from the point to the scanner, a plane
+/// holding that direction (within [`EDGE_ON`]) is refused too: the points of
+/// one scan line lie in the plane of its fan of rays, so a neighbourhood
+/// taken from one line fits that plane, seen edge-on from the scanner,
+/// however the surface under it is turned.
+fn fitted_normal(points: impl Iterator<Item = Vec3> + Clone, sight: Option<Vec3>) -> Option<Vec3> {
     let (_, vals, vecs) = plane_fit(points);
     let n = vecs[0].as_vec3();
-    (n.is_finite() && n.length_squared() > 0.5 && vals[1] > COLLINEAR * vals[2]).then_some(n)
+    let edge_on = sight.is_some_and(|s| n.dot(s).abs() < EDGE_ON);
+    (n.is_finite() && n.length_squared() > 0.5 && vals[1] > COLLINEAR * vals[2] && !edge_on)
+        .then_some(n)
+}
+
+/// What [`estimate_multiscale`] found.
+pub struct Estimated {
+    /// Unoriented unit normals.
+    pub normals: Vec<Vec3>,
+    /// How many took the wide neighbourhood.
+    pub wide: usize,
+    /// How many of those because the small one was collinear.
+    pub collinear: usize,
+    /// How many stayed collinear even at [`WIDE_MAX`] (a guess).
+    pub degenerate: usize,
+    /// How many took their own sheet of two (see [`sheet_of`]).
+    pub sheets: usize,
 }
 
 /// Which neighbourhood a point's normal came from.
@@ -146,15 +172,15 @@ enum Scale {
 /// wide neighbourhood of [`WIDE_FACTOR`]·k points, doubled up to
 /// [`WIDE_MAX`] while it is collinear; the wide one replaces the small one
 /// where the small is collinear or they differ by over [`DISAGREE_DEG`].
-/// Returns the normals, how many took the wide neighbourhood, how many of
-/// those because the small one was collinear, and how many stayed collinear
-/// even at [`WIDE_MAX`] (their normals are a guess).
+/// Where the wide neighbourhood holds two sheets (a thin plate's faces),
+/// the normal of the point's own ([`sheet_of`]).
 #[must_use]
 pub fn estimate_multiscale(
     points: &[Vec3],
     tree: &super::knn::PointTree,
     knn: &Knn,
-) -> (Vec<Vec3>, usize, usize, usize) {
+    viewpoint: Option<Vec3>,
+) -> Estimated {
     use kiddo::SquaredEuclidean;
     use std::num::NonZero;
     let cos_max = DISAGREE_DEG.to_radians().cos();
@@ -166,8 +192,10 @@ pub fn estimate_multiscale(
             || (Vec::new(), Vec::new()),
             |(ids, heights), i| {
                 let nb = knn.of(i);
+                let sight = viewpoint.and_then(|v| (v - points[i]).try_normalize());
                 let small = fitted_normal(
                     std::iter::once(points[i]).chain(nb.iter().map(|&j| points[j as usize])),
+                    sight,
                 );
                 let guess = (small.unwrap_or(Vec3::Z), Scale::Degenerate);
                 let mut m = (knn.k * WIDE_FACTOR).min(n);
@@ -176,7 +204,8 @@ pub fn estimate_multiscale(
                         return guess;
                     };
                     let found = tree.nearest_n::<SquaredEuclidean>(&points[i].to_array(), q);
-                    if let Some(wide) = fitted_normal(found.iter().map(|f| points[f.item as usize]))
+                    if let Some(wide) =
+                        fitted_normal(found.iter().map(|f| points[f.item as usize]), sight)
                     {
                         // Two sheets (a thin plate's faces) in the wide
                         // neighbourhood: the normal of the point's own.
@@ -201,14 +230,13 @@ pub fn estimate_multiscale(
         .collect();
     let count = |k: Scale| out.iter().filter(|o| o.1 == k).count();
     let collinear = count(Scale::WideForCollinear);
-    let wide = count(Scale::Wide) + collinear;
-    let degenerate = count(Scale::Degenerate);
-    (
-        out.into_iter().map(|o| o.0).collect(),
-        wide,
+    Estimated {
+        wide: count(Scale::Wide) + collinear,
         collinear,
-        degenerate,
-    )
+        degenerate: count(Scale::Degenerate),
+        sheets: count(Scale::Sheet),
+        normals: out.into_iter().map(|o| o.0).collect(),
+    }
 }
 
 /// Orient `normals` consistently: the edges of the symmetric kNN graph,

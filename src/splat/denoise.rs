@@ -1,0 +1,191 @@
+//! Range noise: how far the points scatter about the surface, and moving
+//! them onto it. Each point's neighbourhood (the growth graph of §2) is fitted
+//! with a quadratic height field over the point's tangent plane,
+//! `h(x, y) = a + b x + c y + d x² + e xy + f y²`; the fit follows the
+//! surface's curvature, so what is left is noise. The noise of the cloud is
+//! the median scatter; a noisy cloud has its points moved to `h(0, 0)`
+//! along their normals (a moving-least-squares projection of degree two).
+
+use super::knn::Knn;
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+
+/// One point's quadratic fit: the height of the fitted surface above the
+/// point (along its normal) and the standard deviation of the neighbourhood
+/// about it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Local {
+    /// `h(0, 0)`: where the fitted surface lies along the point's normal.
+    pub offset: f32,
+    /// Scatter of the neighbourhood about the fitted surface (unbiased for
+    /// its six parameters).
+    pub sd: f32,
+}
+
+/// Fits of fewer points than this are not made (six parameters).
+const MIN_POINTS: usize = 10;
+
+/// The quadratic fit at every point over its graph neighbours facing the
+/// same way (consistently oriented `normals`; see the module notes); `None`
+/// where the neighbourhood is too small or degenerate (one scan line) to fit.
+#[must_use]
+pub fn fit_all(points: &[Vec3], normals: &[Vec3], knn: &Knn) -> Vec<Option<Local>> {
+    (0..points.len())
+        .into_par_iter()
+        .with_min_len(1024)
+        .map_init(Vec::new, |nb, i| {
+            // The point's own side only: the far face of a thin plate has
+            // its normals turned the other way.
+            nb.clear();
+            nb.extend(
+                knn.of(i)
+                    .iter()
+                    .filter(|&&j| normals[j as usize].dot(normals[i]) > 0.0),
+            );
+            fit(points, normals[i], i, nb)
+        })
+        .collect()
+}
+
+fn fit(points: &[Vec3], n: Vec3, i: usize, nb: &[u32]) -> Option<Local> {
+    let n = n.as_dvec3().try_normalize()?;
+    let p = points[i].as_dvec3();
+    let u = n.any_orthonormal_vector();
+    let v = n.cross(u);
+    // Scale the coordinates by the neighbourhood's size so the normal
+    // equations are well conditioned at any scale.
+    let scale = nb
+        .iter()
+        .map(|&j| (points[j as usize].as_dvec3() - p).length())
+        .fold(0.0f64, f64::max);
+    if scale.is_nan() || scale <= 0.0 || nb.len() + 1 < MIN_POINTS {
+        return None;
+    }
+    let mut ata = [[0f64; 6]; 6];
+    let mut atb = [0f64; 6];
+    let mut samples = Vec::with_capacity(nb.len() + 1);
+    for q in std::iter::once(p).chain(nb.iter().map(|&j| points[j as usize].as_dvec3())) {
+        let d: DVec3 = (q - p) / scale;
+        let (x, y, h) = (d.dot(u), d.dot(v), d.dot(n));
+        let row = [1.0, x, y, x * x, x * y, y * y];
+        for r in 0..6 {
+            for c in 0..6 {
+                ata[r][c] += row[r] * row[c];
+            }
+            atb[r] += row[r] * h;
+        }
+        samples.push((row, h));
+    }
+    let coef = solve6(ata, atb)?;
+    let ssr: f64 = samples
+        .iter()
+        .map(|(row, h)| {
+            let f: f64 = row.iter().zip(&coef).map(|(a, b)| a * b).sum();
+            (h - f) * (h - f)
+        })
+        .sum();
+    let dof = samples.len().saturating_sub(6).max(1) as f64;
+    let local = Local {
+        offset: (coef[0] * scale) as f32,
+        sd: ((ssr / dof).sqrt() * scale) as f32,
+    };
+    (local.offset.is_finite() && local.sd.is_finite()).then_some(local)
+}
+
+/// Solves the 6×6 normal equations by Gaussian elimination with partial
+/// pivoting; `None` when they are singular (the points do not determine a
+/// quadratic surface, e.g. they lie on one line).
+#[allow(clippy::needless_range_loop)] // index form mirrors the elimination
+fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
+    let norm = a.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+    for col in 0..6 {
+        let piv = (col..6).max_by(|&r, &s| a[r][col].abs().total_cmp(&a[s][col].abs()))?;
+        if a[piv][col].abs() <= 1e-10 * norm {
+            return None;
+        }
+        a.swap(col, piv);
+        b.swap(col, piv);
+        for r in col + 1..6 {
+            let f = a[r][col] / a[col][col];
+            for c in col..6 {
+                a[r][c] -= f * a[col][c];
+            }
+            b[r] -= f * b[col];
+        }
+    }
+    let mut x = [0f64; 6];
+    for r in (0..6).rev() {
+        let s: f64 = (r + 1..6).map(|c| a[r][c] * x[c]).sum();
+        x[r] = (b[r] - s) / a[r][r];
+    }
+    Some(x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+    use crate::splat::knn::build_tree;
+
+    /// A patch of the sphere of radius 1 around its north pole, with range
+    /// noise `sigma` along the radius.
+    fn cap(sigma: f32) -> (Vec<Vec3>, Vec<Vec3>) {
+        let mut rng = SplitMix64::new(3);
+        let mut pts = Vec::new();
+        for i in 0..60 {
+            for j in 0..60 {
+                let (x, y) = ((i as f32 - 30.0) * 0.01, (j as f32 - 30.0) * 0.01);
+                let dir = Vec3::new(x, y, 1.0).normalize();
+                pts.push(dir * (1.0 + sigma * rng.next_gaussian() as f32));
+            }
+        }
+        let normals = pts.iter().map(|p| p.normalize()).collect();
+        (pts, normals)
+    }
+
+    #[test]
+    fn curvature_is_not_noise_and_noise_is_measured() {
+        for sigma in [0.0f32, 0.002] {
+            let (pts, nrm) = cap(sigma);
+            let knn = Knn::build(&build_tree(&pts), &pts, 24);
+            let fits: Vec<Local> = fit_all(&pts, &nrm, &knn).into_iter().flatten().collect();
+            assert!(fits.len() > pts.len() * 9 / 10);
+            let mut sd: Vec<f32> = fits.iter().map(|f| f.sd).collect();
+            sd.sort_by(f32::total_cmp);
+            let med = sd[sd.len() / 2];
+            // Clean: the quadric follows the sphere (a plane would leave
+            // the sagitta, ~1e-4 here). Noisy: about sigma.
+            if sigma == 0.0 {
+                assert!(med < 2e-6, "clean sphere scatter {med}");
+            } else {
+                assert!(
+                    (med / sigma - 1.0).abs() < 0.25,
+                    "scatter {med} for noise {sigma}"
+                );
+            }
+            // Projection lands closer to the sphere than the points were.
+            let before: f32 = pts.iter().map(|p| (p.length() - 1.0).abs()).sum();
+            let after: f32 = pts
+                .iter()
+                .zip(&nrm)
+                .zip(fit_all(&pts, &nrm, &knn))
+                .map(|((p, n), f)| ((*p + *n * f.map_or(0.0, |f| f.offset)).length() - 1.0).abs())
+                .sum();
+            if sigma > 0.0 {
+                assert!(after < 0.5 * before, "{after} vs {before}");
+            } else {
+                assert!(after < 1e-3 * pts.len() as f32 * 1e-3, "{after}");
+            }
+        }
+    }
+
+    #[test]
+    fn one_line_has_no_quadric() {
+        let pts: Vec<Vec3> = (0..40)
+            .map(|i| Vec3::new(i as f32 * 0.01, 0.0, 0.0))
+            .collect();
+        let nrm = vec![Vec3::Z; pts.len()];
+        let knn = Knn::build(&build_tree(&pts), &pts, 12);
+        assert!(fit_all(&pts, &nrm, &knn).iter().all(Option::is_none));
+    }
+}
