@@ -119,6 +119,49 @@ impl Grower<'_> {
         g
     }
 
+    /// The smallest circle, in the metric `(a, b, aspect)` around seed `i`,
+    /// holding the seed, the points `growth` took and the seed's same-facing
+    /// `k` neighbours (all within `r`): its centre's offset from the seed and
+    /// its radius (at most `r`).
+    fn enclosing(
+        &self,
+        i: usize,
+        growth: &Growth,
+        a: Vec3,
+        b: Vec3,
+        aspect: f32,
+        r: f32,
+    ) -> (Vec2, f32) {
+        let inp = self.inp;
+        let (p, n) = (inp.points[i], inp.normals[i]);
+        let metric = |q: usize| {
+            let d = inp.points[q] - p;
+            Vec2::new(a.dot(d) / aspect, b.dot(d))
+        };
+        let mut pts: Vec<Vec2> = vec![Vec2::ZERO];
+        pts.extend(growth.accepted.iter().map(|&(j, _)| metric(j as usize)));
+        pts.extend(
+            inp.knn
+                .of(i)
+                .iter()
+                .filter(|&&q| inp.normals[q as usize].dot(n) > 0.0)
+                .map(|&q| metric(q as usize)),
+        );
+        // A fixed shuffle per seed: the incremental algorithm's expected
+        // linear time, and the same splats on every run.
+        let mut rng = crate::rng::SplitMix64::new(i as u64);
+        for k in (1..pts.len()).rev() {
+            let m = (rng.next_u64() % (k as u64 + 1)) as usize;
+            pts.swap(k, m);
+        }
+        let (c, rad) = min_circle(&pts);
+        if !c.is_finite() || !rad.is_finite() || rad >= r {
+            return (Vec2::ZERO, r);
+        }
+        // A hair larger, so the points on the circle stay inside in f32.
+        (c, rad * (1.0 + 1e-4) + 1e-7 * r)
+    }
+
     /// The metric radius that covers the seed's same-facing `k` neighbours.
     fn cover_radius(&self, i: usize, a: Vec3, b: Vec3, aspect: f32) -> f32 {
         let inp = self.inp;
@@ -135,6 +178,49 @@ impl Grower<'_> {
         }
         r2.sqrt()
     }
+}
+
+/// The smallest circle holding `pts` (Welzl's incremental algorithm,
+/// expected linear time for points in random order): centre and radius.
+fn min_circle(pts: &[Vec2]) -> (Vec2, f32) {
+    let inside = |c: Vec2, r: f32, q: Vec2| q.distance(c) <= r * (1.0 + 1e-6);
+    let Some(&first) = pts.first() else {
+        return (Vec2::ZERO, 0.0);
+    };
+    let (mut c, mut r) = (first, 0.0f32);
+    for i in 1..pts.len() {
+        if inside(c, r, pts[i]) {
+            continue;
+        }
+        (c, r) = (pts[i], 0.0);
+        for j in 0..i {
+            if inside(c, r, pts[j]) {
+                continue;
+            }
+            c = 0.5 * (pts[i] + pts[j]);
+            r = 0.5 * pts[i].distance(pts[j]);
+            for k in 0..j {
+                if inside(c, r, pts[k]) {
+                    continue;
+                }
+                (c, r) =
+                    circumcircle(pts[i], pts[j], pts[k]).unwrap_or((c, r.max(c.distance(pts[k]))));
+            }
+        }
+    }
+    (c, r)
+}
+
+/// The circle through three points; `None` when they are collinear.
+fn circumcircle(a: Vec2, b: Vec2, c: Vec2) -> Option<(Vec2, f32)> {
+    let (b, c2) = (b - a, c - a);
+    let d = 2.0 * (b.x * c2.y - b.y * c2.x);
+    if d.abs() <= f32::EPSILON * (b.length_squared() + c2.length_squared()) {
+        return None;
+    }
+    let (bb, cc) = (b.length_squared(), c2.length_squared());
+    let u = Vec2::new(c2.y * bb - b.y * cc, b.x * cc - c2.x * bb) / d;
+    Some((a + u, u.length()))
 }
 
 /// Principal directions of the height field `h(x, y)` of the accepted points
@@ -273,7 +359,16 @@ pub fn grow_all(inp: &GrowInput<'_>, mut progress: impl FnMut(usize)) -> Grown {
             r = 0.5 * d_k;
         }
         let (a, b, aspect) = frame;
-        let center = p + n * (0.5 * (growth.h_min + growth.h_max)); // eq. (2)
+        // The disc over what it covers: the smallest circle (in the growth
+        // metric) around the seed, the points taken and the neighbours the
+        // radius was widened to cover. Inside a surface it is the disc of
+        // eq. (3); at a border, where all of them lie on one side, it moves
+        // inward and shrinks instead of overhanging the border by its radius.
+        let (shift, r) = g.enclosing(i, &growth, a, b, aspect, r);
+        let center = p
+            + n * (0.5 * (growth.h_min + growth.h_max)) // eq. (2)
+            + a * (shift.x * aspect)
+            + b * shift.y;
         let mut color = DVec3::ZERO;
         for &(j, _) in &growth.accepted {
             if let Some(c) = inp.colors {
@@ -288,7 +383,7 @@ pub fn grow_all(inp: &GrowInput<'_>, mut progress: impl FnMut(usize)) -> Grown {
         for &j in &growth.visited {
             let j = j as usize;
             let d = inp.points[j] - p;
-            let (x, y) = (a.dot(d) / aspect, b.dot(d));
+            let (x, y) = (a.dot(d) / aspect - shift.x, b.dot(d) - shift.y);
             let d2 = x * x + y * y;
             let on = d2 <= r2
                 && (n.dot(d) - hc).abs() <= inp.epsilon
