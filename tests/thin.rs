@@ -217,3 +217,43 @@ fn a_plane_under_heavy_noise_faces_one_way() {
         splats.len()
     );
 }
+
+/// A square sheet: the splats along its border are discs over the points
+/// they cover, not discs centred on border seeds that overhang the border by
+/// their radius.
+#[test]
+fn splats_at_a_border_do_not_overhang_it() {
+    let mut rng = SplitMix64::new(11);
+    let mut pts = Vec::new();
+    for i in 0..100 {
+        for j in 0..100 {
+            let x = (i as f32 + 0.5 + 0.3 * (rng.next_f32() - 0.5)) * 0.01;
+            let y = (j as f32 + 0.5 + 0.3 * (rng.next_f32() - 0.5)) * 0.01;
+            pts.push(Vec3::new(x, y, 0.02 * (x * x + y * y)));
+        }
+    }
+    let (lo, hi) = (0.005 * 0.85, 1.0 - 0.005 * 0.85);
+    let (splats, _) = splat(pts, None);
+    let overhang = |sp: &Splat| {
+        let r = sp.radii.max_element();
+        let c = sp.center;
+        [lo - (c.x - r), c.x + r - hi, lo - (c.y - r), c.y + r - hi]
+            .into_iter()
+            .fold(0.0f32, f32::max)
+    };
+    let radius = median(splats.iter().map(|sp| sp.radii.max_element()).collect());
+    let border: Vec<f32> = splats.iter().map(overhang).filter(|&o| o > 0.0).collect();
+    let mean = border.iter().sum::<f32>() / border.len().max(1) as f32;
+    eprintln!(
+        "border: {} of {} splats overhang, mean {mean} (median radius {radius})",
+        border.len(),
+        splats.len()
+    );
+    // A disc centred on a seed at the border overhangs it by its radius;
+    // centred over the points it covers, by half of it or less (a half-disc
+    // of points still needs the full circle).
+    assert!(
+        mean < 0.5 * radius,
+        "mean overhang {mean}, median radius {radius}"
+    );
+}
