@@ -128,4 +128,18 @@ fn compare_report_has_the_documented_keys() {
     }
     let img = image::open(&diff).unwrap();
     assert_eq!((img.width(), img.height()), (3 * 96, 72));
+    // No truth asked: no truth panel.
+    assert!(!dir.join("d-truth.png").exists());
+    // With --truth: the reference against the exact surfaces beside it.
+    let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+        .arg("compare")
+        .arg(&scene)
+        .arg("--truth")
+        .arg("--diff")
+        .arg(&diff)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let img = image::open(dir.join("d-truth.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (3 * 96, 72));
 }

@@ -24,7 +24,9 @@ pub struct CompareArgs {
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Write a difference heat map here (PNG): the reference backend | the
-    /// second backend | difference.
+    /// second backend | difference. With `--truth`, also `D-truth.png`: the
+    /// reference backend | the exact surfaces | difference (rays only one
+    /// hit in magenta: holes and overhang).
     #[arg(long)]
     pub diff: Option<PathBuf>,
     /// Samples per pixel (default 1: one primary ray per pixel centre).
@@ -101,6 +103,15 @@ fn mrays_per_s(f: &Frame) -> f64 {
     f.rays.total() as f64 / f.seconds.max(1e-9) / 1e6
 }
 
+/// Where `--diff D.png` with `--truth` puts the reference backend against
+/// the exact surfaces: `D-truth.png`.
+fn truth_diff_path(diff: &std::path::Path) -> PathBuf {
+    let stem = diff
+        .file_stem()
+        .map_or_else(|| "diff".to_string(), |s| s.to_string_lossy().into_owned());
+    diff.with_file_name(format!("{stem}-truth.png"))
+}
+
 /// Runs `splatray compare`.
 pub fn run(args: &CompareArgs) -> Result<(), String> {
     let scene_path = args.view.path();
@@ -112,6 +123,9 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
     }
     if let Some(d) = &args.diff {
         check_output_path(d)?;
+        if args.truth {
+            check_output_path(&truth_diff_path(d))?;
+        }
     }
     if let Some(r) = &args.report {
         check_output_path(&r.with_extension("png"))?;
@@ -152,19 +166,17 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
         });
         frames.push(frame);
     }
-    let truth = truth.map(|t| {
-        let tf = render_truth(&scene, &t, Some(&progress));
-        TruthReport {
-            render_seconds: tf.seconds,
-            backends: backends
-                .iter()
-                .zip(&frames)
-                .map(|(b, f)| NamedTruthErrors {
-                    name: b.name,
-                    errors: truth_errors(f.clone(), &tf, &scene.camera, diagonal),
-                })
-                .collect(),
-        }
+    let truth_frame = truth.map(|t| render_truth(&scene, &t, Some(&progress)));
+    let truth = truth_frame.as_ref().map(|tf| TruthReport {
+        render_seconds: tf.seconds,
+        backends: backends
+            .iter()
+            .zip(&frames)
+            .map(|(b, f)| NamedTruthErrors {
+                name: b.name,
+                errors: truth_errors(f.clone(), tf, &scene.camera, diagonal),
+            })
+            .collect(),
     });
     line.finish();
     let report = CompareReport {
@@ -176,6 +188,13 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
     };
     if let (Some(d), [a, b, ..]) = (&args.diff, frames.as_slice()) {
         save(&diff_image(a, b), d, image::ImageFormat::Png)?;
+    }
+    if let (Some(d), Some(tf), Some(a)) = (&args.diff, &truth_frame, frames.first()) {
+        save(
+            &diff_image(a, tf),
+            &truth_diff_path(d),
+            image::ImageFormat::Png,
+        )?;
     }
     if let Some(r) = &args.report {
         write_json(r, &report)?;
