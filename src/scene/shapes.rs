@@ -53,38 +53,71 @@ pub fn sphere(center: Vec3, radius: f32, n: usize) -> Vec<Splat> {
         .collect()
 }
 
-/// About `n` flat splats on a square grid covering the rectangle centred at
-/// `center`, spanning `size.x` and `size.y` along the two tangents of
-/// [`tangent_frame`]`(normal)` (for `normal = +y`: along x and z), facing
-/// `normal`.
+/// About `n` splats covering the rectangle `size` around `center`, facing
+/// `normal`: a grid of cells, each covered by the ellipse through its
+/// corners (15 % larger, so neighbours overlap). The outermost cell of each
+/// row and column is split into three thin ones: their flat ellipses
+/// overhang the rectangle's edge by about a tenth of a cell instead of a
+/// third (a disc over a cell at the edge reaches past it by its radius less
+/// half the cell).
 #[must_use]
 pub fn quad(center: Vec3, normal: Vec3, size: Vec2, n: usize) -> Vec<Splat> {
     let normal = normal.try_normalize().unwrap_or(Vec3::Y);
     let (tu, tv) = tangent_frame(normal);
     let n = n.max(1) as f32;
-    let h = (size.x * size.y / n).sqrt().max(f32::MIN_POSITIVE);
-    let nx = (size.x / h).ceil().max(1.0) as usize;
-    let ny = (size.y / h).ceil().max(1.0) as usize;
-    let (hx, hy) = (size.x / nx as f32, size.y / ny as f32);
-    // Half the cell diagonal reaches the cell corners; 15% more overlaps.
-    let r = 1.15 * 0.5 * (hx * hx + hy * hy).sqrt();
-    let mut out = Vec::with_capacity(nx * ny);
-    for j in 0..ny {
-        for i in 0..nx {
-            let a = -0.5 * size.x + (i as f32 + 0.5) * hx;
-            let b = -0.5 * size.y + (j as f32 + 0.5) * hy;
+    let mut h = (size.x * size.y / n).sqrt().max(f32::MIN_POSITIVE);
+    // The split edge cells add to the count: widen the cells until it is
+    // about `n` again.
+    for _ in 0..4 {
+        let count = (edges(size.x, h).len() - 1) * (edges(size.y, h).len() - 1);
+        h *= (count as f32 / n).sqrt().max(1.0);
+    }
+    let xs = edges(size.x, h);
+    let ys = edges(size.y, h);
+    let mut out = Vec::with_capacity(xs.len() * ys.len());
+    for y in ys.windows(2) {
+        for x in xs.windows(2) {
+            let (w, d) = (x[1] - x[0], y[1] - y[0]);
+            let a = 0.5 * (x[0] + x[1]);
+            let b = 0.5 * (y[0] + y[1]);
+            // The ellipse through the cell's corners has semi-axes
+            // (w, d)/sqrt(2); u along the longer side.
+            let r = 1.15 * std::f32::consts::FRAC_1_SQRT_2 * Vec2::new(w, d);
+            let (u_axis, v_axis, radii) = if r.x >= r.y {
+                (tu, tv, r)
+            } else {
+                (tv, -tu, Vec2::new(r.y, r.x))
+            };
             out.push(Splat {
                 center: center + tu * a + tv * b,
                 normal,
-                u_axis: tu,
-                v_axis: tv,
-                radii: Vec2::splat(r),
+                u_axis,
+                v_axis: normal.cross(u_axis).normalize_or(v_axis),
+                radii,
                 color: Vec3::ONE,
                 field: NormalField::FLAT,
             });
         }
     }
     out
+}
+
+/// Cell boundaries across a side of length `len` centred on 0: cells of
+/// about `h`, the first and last split into three.
+fn edges(len: f32, h: f32) -> Vec<f32> {
+    let cells = (len / h).ceil().max(1.0) as usize;
+    let step = len / cells as f32;
+    let start = -0.5 * len;
+    let mut e = vec![start];
+    for i in 0..cells {
+        let (lo, hi) = (start + i as f32 * step, start + (i + 1) as f32 * step);
+        if (i == 0 || i + 1 == cells) && cells > 2 {
+            e.push(lo + (hi - lo) / 3.0);
+            e.push(lo + 2.0 * (hi - lo) / 3.0);
+        }
+        e.push(hi);
+    }
+    e
 }
 
 #[cfg(test)]
@@ -108,16 +141,34 @@ mod tests {
     }
 
     #[test]
-    fn quad_covers_its_rectangle() {
+    fn quad_covers_its_rectangle_and_barely_overhangs_it() {
         let q = quad(Vec3::ZERO, Vec3::Y, Vec2::new(4.0, 2.0), 200);
-        assert!(q.len() >= 200 && q.len() < 260, "{}", q.len());
+        assert!((170..=230).contains(&q.len()), "{}", q.len());
+        let inside = |s: &Splat, p: Vec3| {
+            let d = p - s.center;
+            (d.dot(s.u_axis) / s.radii.x).powi(2) + (d.dot(s.v_axis) / s.radii.y).powi(2) <= 1.0
+        };
         // Every point of a fine grid lies inside some splat.
-        for i in 0..=40 {
-            for j in 0..=20 {
-                let p = Vec3::new(-2.0 + 0.1 * i as f32, 0.0, -1.0 + 0.1 * j as f32);
-                let covered = q.iter().any(|s| (p - s.center).length() <= s.radii.x);
-                assert!(covered, "hole at {p}");
+        for i in 0..=80 {
+            for j in 0..=40 {
+                let p = Vec3::new(-2.0 + 0.05 * i as f32, 0.0, -1.0 + 0.05 * j as f32);
+                assert!(q.iter().any(|s| inside(s, p)), "hole at {p}");
             }
         }
+        // Past the edges: the farthest any splat reaches beyond the
+        // rectangle, against the cell size (a disc per cell: a third).
+        let cell = (8.0f32 / 200.0).sqrt();
+        let reach = q
+            .iter()
+            .map(|s| {
+                let ext = |axis: Vec3| {
+                    ((s.u_axis.dot(axis) * s.radii.x).powi(2)
+                        + (s.v_axis.dot(axis) * s.radii.y).powi(2))
+                    .sqrt()
+                };
+                (s.center.x.abs() + ext(Vec3::X) - 2.0).max(s.center.z.abs() + ext(Vec3::Z) - 1.0)
+            })
+            .fold(0.0f32, f32::max);
+        assert!(reach < 0.15 * cell, "reach {reach} for cells of {cell}");
     }
 }
