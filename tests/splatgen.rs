@@ -356,3 +356,39 @@ fn viewpoint_hint_orients_an_open_sheet() {
         );
     }
 }
+
+/// The coverage on the points splats grow from holds by construction; the
+/// held-out one fails when the splats do not lie along the surface (here:
+/// given normals turned 90 degrees) and holds on good splats.
+#[test]
+fn held_out_coverage_can_fail() {
+    use splatray::validate::holdout::heldout_coverage;
+    let c = Vec3::new(0.1, 0.2, -0.3);
+    let pts = sphere(6000, c, 1.0, 0.0);
+    let good = cloud(pts.clone());
+    let params = SplatParams::default();
+    let h = heldout_coverage(&good, &params, 0.1, 1).unwrap();
+    assert!(h.tested > 450 && h.tested < 750, "{h:?}");
+    assert!(h.coverage >= 0.99, "{h:?}");
+    // Normals in the tangent plane: splats stand across the surface.
+    let tangent: Vec<Vec3> = pts
+        .iter()
+        .map(|p| {
+            (*p - c)
+                .cross(Vec3::new(0.3, 1.0, 0.2))
+                .normalize_or(Vec3::X)
+        })
+        .collect();
+    let bad = PointCloud {
+        normals: Some(tangent),
+        ..cloud(pts)
+    };
+    let (_, rep) = generate(&bad, &params).unwrap();
+    assert!(
+        rep.coverage >= 0.99,
+        "the grown-from coverage {}",
+        rep.coverage
+    );
+    let h = heldout_coverage(&bad, &params, 0.1, 1).unwrap();
+    assert!(h.coverage < 0.5, "{h:?}");
+}

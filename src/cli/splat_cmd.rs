@@ -6,6 +6,7 @@ use glam::DVec3;
 use splatray::freespace::generate_trimmed;
 use splatray::io::{read_points, write_splats};
 use splatray::splat::{PointCloud, SplatParams};
+use splatray::validate::holdout::{HeldOutCoverage, heldout_coverage};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -23,6 +24,20 @@ pub struct SplatArgs {
     /// Write the generation report as JSON here.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// Also grow splats without this fraction of the points (in (0, 0.5];
+    /// 0 skips it) and report how many of those lie on them: a coverage
+    /// that can fail (the output splats use every point).
+    #[arg(long, default_value_t = 0.1)]
+    pub holdout: f32,
+}
+
+/// The report `--report` writes: the generation's, and the held-out
+/// coverage when it was measured.
+#[derive(serde::Serialize)]
+struct Report<'a> {
+    #[serde(flatten)]
+    generation: &'a splatray::splat::SplatReport,
+    heldout_coverage: Option<HeldOutCoverage>,
 }
 
 /// The splat generation options `splat` and `scan-check` share.
@@ -98,6 +113,12 @@ impl SplatOptions {
 /// be written.
 pub fn run(args: &SplatArgs) -> Result<(), String> {
     args.splat.viewpoint()?;
+    if !(args.holdout == 0.0 || (args.holdout > 0.0 && args.holdout <= 0.5)) {
+        return Err(format!(
+            "--holdout {} must be 0 (off) or in (0, 0.5]",
+            args.holdout
+        ));
+    }
     let line = ProgressLine::new();
     line.update("reading", 0.0);
     let t0 = Instant::now();
@@ -113,12 +134,25 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
             t.shrunk, t.blocked, t.rays, t.still_blocked
         );
     }
+    let mut heldout_failed = None;
+    let heldout = if args.holdout > 0.0 {
+        line.update("held-out coverage", 0.0);
+        heldout_coverage(&cloud, &params, args.holdout, 1)
+            .map_err(|e| heldout_failed = Some(e.to_string()))
+            .ok()
+    } else {
+        None
+    };
     line.finish();
     report.seconds.read = read;
     report.seconds.total += read;
     write_splats(&args.output, &splats, cloud.origin).map_err(|e| e.to_string())?;
     if let Some(path) = &args.report {
-        let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
+        let out = Report {
+            generation: &report,
+            heldout_coverage: heldout.clone(),
+        };
+        let json = serde_json::to_string_pretty(&out).map_err(|e| e.to_string())?;
         splatray::io::write_text(path, &json).map_err(|e| e.to_string())?;
     }
     for w in &report.warnings {
@@ -146,5 +180,19 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
         report.seconds.total,
         args.output.display()
     );
+    if let Some(h) = &heldout {
+        eprintln!(
+            "splatray: held-out coverage {:.4}: splats grown without {:.0} % of the points hold {} of the {} tested (within {:.3e} of a splat's plane; {} held-out outliers not tested)",
+            h.coverage,
+            100.0 * h.fraction,
+            h.found,
+            h.tested,
+            h.tolerance,
+            h.outliers
+        );
+    }
+    if let Some(e) = heldout_failed {
+        eprintln!("splatray: warning: held-out coverage not measured: {e}");
+    }
     Ok(())
 }

@@ -112,10 +112,11 @@ pub struct SplatReport {
     /// Normals estimated by plane fits (all of them when the input has none;
     /// else the zero or non-finite input normals).
     pub estimated_normals: usize,
-    /// The points' scatter about their local planes: the median over the
-    /// points of the standard deviation of each one's neighbourhood about
-    /// the plane its normal was fitted to (range noise, plus curvature), in
-    /// the cloud's units; 0 when every normal was given.
+    /// The points' scatter about their local surfaces: the median over the
+    /// points whose normals were estimated of the standard deviation of each
+    /// one's same-facing neighbourhood about its fitted quadratic height
+    /// field (range noise; see [`super::denoise`]), in the cloud's units; 0
+    /// when every normal was given.
     pub noise: f64,
     /// The absolute error threshold `ϵ` used.
     pub epsilon: f64,
@@ -433,8 +434,19 @@ pub fn generate_with_progress(
     // Range noise beyond the growth threshold: each splat would sit at its
     // seed's noisy height (eq. 2 centres it on the span of the points it
     // took), overlapping splats at scattered depths. The points are moved
-    // onto their local quadratic surfaces first.
-    let local = denoise::fit_all(&points, &nrm, &knn);
+    // onto their local quadratic surfaces first. Only where the normals
+    // were estimated here: given normals are kept as they are, and so are
+    // their points.
+    let local = if to_estimate > 0 {
+        denoise::fit_all(&points, &nrm, &knn)
+    } else {
+        Vec::new()
+    };
+    let local: Vec<Option<denoise::Local>> = local
+        .into_iter()
+        .zip(&fixed)
+        .map(|(l, &f)| l.filter(|_| !f))
+        .collect();
     report.noise = median(local.iter().flatten().map(|l| l.sd).collect());
     let epsilon = f64::from(params.epsilon_rel) * diagonal;
     if report.noise > NOISE_PROJECT * epsilon {

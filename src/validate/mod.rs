@@ -2,6 +2,7 @@
 //! image for image (`docs/DESIGN.md`, "The backend contract").
 
 pub mod compare;
+pub mod holdout;
 pub mod scan_check;
 pub mod sweep;
 pub mod truth;

@@ -4,11 +4,11 @@
 //! fraction of the points is held out of splat generation, so nothing that
 //! uses the lines of sight while making splats can fit the check.
 
+use super::holdout;
 use crate::accel::CandidateHits;
 use crate::accel::registry;
 use crate::freespace::{TrimReport, generate_trimmed, sight_line};
-use crate::rng::SplitMix64;
-use crate::splat::{PointCloud, SplatParams, SplatReport, outliers};
+use crate::splat::{PointCloud, SplatParams, SplatReport};
 use crate::{Error, Result};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -100,13 +100,6 @@ pub struct ScanCheckReport {
     pub check_seconds: f64,
 }
 
-/// Is point `i` held out? A hash of `(seed, i)`, so the choice does not
-/// depend on thread count or order.
-fn held_out(seed: u64, i: usize, fraction: f32) -> bool {
-    let mut r = SplitMix64::new(seed ^ (i as u64).wrapping_mul(0xA24B_AED4_963E_E407));
-    r.next_f32() < fraction
-}
-
 /// Runs the check on `cloud`.
 ///
 /// # Errors
@@ -131,58 +124,17 @@ pub fn scan_check(
             params.tolerance
         )));
     }
-    if !(params.holdout > 0.0 && params.holdout <= 0.5) {
-        return Err(Error::invalid(format!(
-            "hold-out fraction {} must be in (0, 0.5]",
-            params.holdout
-        )));
-    }
-    let n = cloud.len();
-    let keep: Vec<bool> = (0..n)
-        .map(|i| !held_out(params.seed, i, params.holdout))
-        .collect();
-    // Held-out points the generator would reject as outliers were not seen
-    // on a surface: they are counted, not checked.
-    let rejected = if params.splat.remove_outliers {
-        outliers::find(&cloud.positions, params.splat.k, Some(vp))
-    } else {
-        vec![false; n]
-    };
-    let pick = |v: &Vec<Vec3>, k: bool| -> Vec<Vec3> {
-        v.iter()
-            .zip(&keep)
-            .filter(|(_, kk)| **kk == k)
-            .map(|(p, _)| *p)
-            .collect()
-    };
-    let train = PointCloud {
-        positions: pick(&cloud.positions, true),
-        normals: cloud
-            .normals
-            .as_ref()
-            .filter(|v| v.len() == n)
-            .map(|v| pick(v, true)),
-        colors: cloud
-            .colors
-            .as_ref()
-            .filter(|v| v.len() == n)
-            .map(|v| pick(v, true)),
-        skipped: cloud.skipped.clone(),
-        viewpoint: Some(vp),
-        origin: cloud.origin,
-    };
-    let held: Vec<usize> = (0..n).filter(|&i| !keep[i]).collect();
-    let test: Vec<Vec3> = held
-        .iter()
-        .filter(|&&i| !rejected[i])
-        .map(|&i| cloud.positions[i])
-        .collect();
-    let held_out_outliers = held.len() - test.len();
-    let t0 = Instant::now();
     let sp = SplatParams {
         viewpoint: Some(vp),
         ..params.splat.clone()
     };
+    // Held-out points the generator would reject as outliers were not seen
+    // on a surface: they are counted, not checked.
+    let split = holdout::split(cloud, &sp, params.holdout, params.seed)?;
+    let (mut train, test, held_out_outliers) = (split.train, split.test, split.held_out_outliers);
+    train.viewpoint = Some(vp);
+    let held_len = split.held_out;
+    let t0 = Instant::now();
     let (splats, generation, trim) = generate_trimmed(&train, &sp, progress)?;
     let t1 = Instant::now();
     let info = &registry::renderers()[0];
@@ -230,8 +182,8 @@ pub fn scan_check(
     let rays = test.len();
     let frac = |k: usize| counts[k] as f64 / rays.max(1) as f64;
     Ok(ScanCheckReport {
-        points: n,
-        held_out: held.len(),
+        points: cloud.len(),
+        held_out: held_len,
         held_out_outliers,
         rays,
         consistent: counts[0],

@@ -1,0 +1,140 @@
+//! Held-out points: a fixed fraction of a cloud left out of splat
+//! generation, to test the finished splats against points they were not
+//! grown from. `scan-check` casts lines of sight to them; the held-out
+//! coverage asks whether they lie on the splats at all, which a coverage
+//! measured on the points the splats were grown from cannot fail to do.
+
+use crate::freespace::generate_trimmed;
+use crate::rng::SplitMix64;
+use crate::splat::{PointCloud, SplatParams, count_on_splats, outliers};
+use crate::{Error, Result};
+use glam::Vec3;
+
+/// Is point `i` held out? A hash of `(seed, i)`, so the choice does not
+/// depend on thread count or order.
+#[must_use]
+pub fn held_out(seed: u64, i: usize, fraction: f32) -> bool {
+    let mut r = SplitMix64::new(seed ^ (i as u64).wrapping_mul(0xA24B_AED4_963E_E407));
+    r.next_f32() < fraction
+}
+
+/// A cloud split into the points splats are grown from and the held-out
+/// ones.
+pub struct Split {
+    /// The cloud without the held-out points (normals, colours and
+    /// viewpoint kept).
+    pub train: PointCloud,
+    /// The held-out points the outlier test keeps (those it rejects were
+    /// not seen on a surface: they are counted, not tested).
+    pub test: Vec<Vec3>,
+    /// Held-out points in all.
+    pub held_out: usize,
+    /// Held-out points the outlier test rejects.
+    pub held_out_outliers: usize,
+}
+
+/// Splits `cloud`, holding out `fraction` (in `(0, 0.5]`) of its points by
+/// [`held_out`] with `seed`.
+///
+/// # Errors
+/// The fraction is out of range.
+pub fn split(cloud: &PointCloud, params: &SplatParams, fraction: f32, seed: u64) -> Result<Split> {
+    if !(fraction > 0.0 && fraction <= 0.5) {
+        return Err(Error::invalid(format!(
+            "hold-out fraction {fraction} must be in (0, 0.5]"
+        )));
+    }
+    let n = cloud.len();
+    let keep: Vec<bool> = (0..n).map(|i| !held_out(seed, i, fraction)).collect();
+    let rejected = if params.remove_outliers {
+        outliers::find(&cloud.positions, params.k, params.viewpoint)
+    } else {
+        vec![false; n]
+    };
+    let pick = |v: &Vec<Vec3>| -> Vec<Vec3> {
+        v.iter()
+            .zip(&keep)
+            .filter(|(_, k)| **k)
+            .map(|(p, _)| *p)
+            .collect()
+    };
+    let train = PointCloud {
+        positions: pick(&cloud.positions),
+        normals: cloud
+            .normals
+            .as_ref()
+            .filter(|v| v.len() == n)
+            .map(&pick),
+        colors: cloud
+            .colors
+            .as_ref()
+            .filter(|v| v.len() == n)
+            .map(&pick),
+        skipped: cloud.skipped.clone(),
+        viewpoint: cloud.viewpoint,
+        origin: cloud.origin,
+    };
+    let held: Vec<usize> = (0..n).filter(|&i| !keep[i]).collect();
+    let test: Vec<Vec3> = held
+        .iter()
+        .filter(|&&i| !rejected[i])
+        .map(|&i| cloud.positions[i])
+        .collect();
+    Ok(Split {
+        train,
+        held_out: held.len(),
+        held_out_outliers: held.len() - test.len(),
+        test,
+    })
+}
+
+/// What the held-out coverage measured.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct HeldOutCoverage {
+    /// The fraction of the points held out.
+    pub fraction: f32,
+    /// Held-out points tested (outliers left out).
+    pub tested: usize,
+    /// Held-out points the outlier test rejected (not tested).
+    pub outliers: usize,
+    /// Tested points lying on a splat.
+    pub found: usize,
+    /// `found / tested`.
+    pub coverage: f64,
+    /// How far from a splat's plane a point may lie: ϵ, plus three times
+    /// the measured noise where the cloud was moved onto its local
+    /// surfaces (held-out points keep their noise).
+    pub tolerance: f64,
+}
+
+/// Grows splats from `cloud` without `fraction` of its points (as
+/// [`generate_trimmed`] would from all of them) and tests the held-out
+/// points against them: the share lying on a splat (see
+/// [`crate::splat::on_splat`]).
+///
+/// # Errors
+/// As [`split`] and [`generate_trimmed`].
+pub fn heldout_coverage(
+    cloud: &PointCloud,
+    params: &SplatParams,
+    fraction: f32,
+    seed: u64,
+) -> Result<HeldOutCoverage> {
+    let s = split(cloud, params, fraction, seed)?;
+    let (splats, report, _) = generate_trimmed(&s.train, params, None)?;
+    let moved = report.noise > crate::splat::NOISE_PROJECT * report.epsilon;
+    let tolerance = report.epsilon + if moved { 3.0 * report.noise } else { 0.0 };
+    let found = count_on_splats(&s.test, &splats, tolerance as f32);
+    Ok(HeldOutCoverage {
+        fraction,
+        tested: s.test.len(),
+        outliers: s.held_out_outliers,
+        found,
+        coverage: if s.test.is_empty() {
+            1.0
+        } else {
+            found as f64 / s.test.len() as f64
+        },
+        tolerance,
+    })
+}
