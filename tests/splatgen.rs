@@ -392,3 +392,25 @@ fn held_out_coverage_can_fail() {
     let h = heldout_coverage(&bad, &params, 0.1, 1).unwrap();
     assert!(h.coverage < 0.5, "{h:?}");
 }
+
+/// The number of splats follows epsilon and the surface, not the sampling
+/// density: eight times the points on a sphere give about as many splats
+/// (with a growth cap of 12 k-th neighbour distances alone: 106 and 493).
+#[test]
+fn splat_count_does_not_follow_the_density() {
+    let params = SplatParams {
+        epsilon_rel: 0.03,
+        ..SplatParams::default()
+    };
+    let count = |n: usize| {
+        let (splats, rep) = generate(&cloud(sphere(n, Vec3::ZERO, 1.0, 0.0)), &params).unwrap();
+        assert!(rep.coverage >= 0.99, "{n}: coverage {}", rep.coverage);
+        splats.len()
+    };
+    let (sparse, dense) = (count(20_000), count(160_000));
+    eprintln!("{sparse} splats from 20k points, {dense} from 160k");
+    assert!(
+        (dense as f64) < 1.3 * sparse as f64,
+        "{sparse} splats from 20k points, {dense} from 160k"
+    );
+}

@@ -11,6 +11,13 @@ use std::collections::BinaryHeap;
 /// whole surface and far past its borders.
 pub const MAX_RADIUS_FACTOR: f32 = 12.0;
 
+/// ... or past this many `ϵ`, whichever is larger: on a densely sampled
+/// surface 12 k-th neighbour distances shrink below the radius eq. (1)
+/// allows, and the number of splats would follow the sampling density
+/// instead of `ϵ` and the surface. The bunny at the default `ϵ`: 1M samples
+/// 21,732 splats, 10M 39,146 with the neighbour cap alone, 26,896 with this.
+pub const MAX_RADIUS_EPS: f32 = 8.0;
+
 /// What the growth stage needs.
 pub struct GrowInput<'a> {
     /// Point positions (distinct, finite).
@@ -319,7 +326,7 @@ pub fn grow_all(inp: &GrowInput<'_>, mut progress: impl FnMut(usize)) -> Grown {
         let n = inp.normals[i];
         let d_k = inp.knn.kth_distance[i].max(f32::MIN_POSITIVE);
         let (tu, tv) = tangent_frame(n);
-        let max_d = MAX_RADIUS_FACTOR * d_k;
+        let max_d = (MAX_RADIUS_FACTOR * d_k).max(MAX_RADIUS_EPS * inp.epsilon);
         let mut growth = g.run(i, tu, tv, 1.0, max_d);
         let grown_r = growth.accepted.last().map_or(0.0, |a| a.1.sqrt()); // eq. (3)
         let mut frame = (tu, tv, 1.0f32);

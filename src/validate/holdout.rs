@@ -60,16 +60,8 @@ pub fn split(cloud: &PointCloud, params: &SplatParams, fraction: f32, seed: u64)
     };
     let train = PointCloud {
         positions: pick(&cloud.positions),
-        normals: cloud
-            .normals
-            .as_ref()
-            .filter(|v| v.len() == n)
-            .map(&pick),
-        colors: cloud
-            .colors
-            .as_ref()
-            .filter(|v| v.len() == n)
-            .map(&pick),
+        normals: cloud.normals.as_ref().filter(|v| v.len() == n).map(&pick),
+        colors: cloud.colors.as_ref().filter(|v| v.len() == n).map(&pick),
         skipped: cloud.skipped.clone(),
         viewpoint: cloud.viewpoint,
         origin: cloud.origin,
