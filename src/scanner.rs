@@ -10,7 +10,7 @@ use crate::io::Mesh;
 use crate::rng::SplitMix64;
 use crate::splat::PointCloud;
 use crate::{Error, Result};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 /// How the rays sweep the field of view.
@@ -53,10 +53,11 @@ pub enum RangeNoise {
 /// What the scanner does.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ScanParams {
-    /// The scanner's position, in the mesh's coordinates.
-    pub from: Vec3,
+    /// The scanner's position, in the mesh file's coordinates (f64: a far
+    /// mesh's origin is subtracted before single precision).
+    pub from: DVec3,
     /// The point it looks at (default: the centre of the mesh's bounding box).
-    pub at: Option<Vec3>,
+    pub at: Option<DVec3>,
     /// Samples per row (per line).
     pub columns: u32,
     /// Rows (lines).
@@ -80,7 +81,7 @@ pub struct ScanParams {
 impl Default for ScanParams {
     fn default() -> Self {
         ScanParams {
-            from: Vec3::new(0.0, 0.0, 4.0),
+            from: DVec3::new(0.0, 0.0, 4.0),
             at: None,
             columns: 640,
             rows: 480,
@@ -170,8 +171,15 @@ pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
         return Err(Error::invalid("the mesh has no finite triangles to scan"));
     }
     let center = 0.5 * (lo + hi);
-    let at = params.at.unwrap_or(center);
-    let forward = (at - params.from)
+    // In the mesh's frame: offsets from its origin.
+    let from = (params.from - mesh.origin).as_vec3();
+    let at = params.at.map_or(center, |a| (a - mesh.origin).as_vec3());
+    if !from.is_finite() || !at.is_finite() {
+        return Err(Error::invalid(
+            "the scanner is farther from the mesh than single precision holds",
+        ));
+    }
+    let forward = (at - from)
         .try_normalize()
         .ok_or_else(|| Error::invalid("the scanner looks at its own position"))?;
     let up_hint = if forward.y.abs() > 0.99 {
@@ -184,7 +192,7 @@ pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
     let vfov = match params.fov {
         Some(f) => f.to_radians(),
         None => {
-            let dist = (center - params.from).length();
+            let dist = (center - from).length();
             let radius = 0.5 * (hi - lo).length();
             if dist <= radius {
                 90f32.to_radians()
@@ -224,7 +232,7 @@ pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
         .with_min_len(1024)
         .map(|k| {
             let ray = Ray {
-                origin: params.from,
+                origin: from,
                 dir: dir_of(k % cols, k / cols),
             };
             tris.intersect(&ray, 0.0, f32::INFINITY)
@@ -262,15 +270,16 @@ pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
             let dir = dir_of(k % cols, k / cols);
             if rng.next_f32() < params.outliers {
                 let r = t * rng.range(0.5, 1.5);
-                return Some((params.from + dir * r, 2));
+                return Some((from + dir * r, 2));
             }
             let r = t + (rng.next_gaussian() as f32) * sigma;
-            Some((params.from + dir * r, 0))
+            Some((from + dir * r, 0))
         })
         .collect();
     let mut scan = Scan {
         cloud: PointCloud {
-            viewpoint: Some(params.from),
+            viewpoint: Some(from),
+            origin: mesh.origin,
             ..PointCloud::default()
         },
         rays: rows * cols,

@@ -575,3 +575,87 @@ fn a_stray_far_point_costs_the_rest_no_precision() {
     assert!(m <= 1.1 * near_median, "median {m}° against {near_median}°");
     assert!(off_sphere(&splats, DVec3::ZERO, DVec3::ZERO, RADIUS) <= rep.epsilon);
 }
+
+/// A UV sphere mesh of radius `r` around `c` (vertices computed in f64),
+/// written as ASCII PLY with `double` vertices.
+fn write_mesh_f64(path: &Path, c: DVec3, r: f64) {
+    let (rings, segs) = (24usize, 48usize);
+    let mut v = vec![c + DVec3::new(0.0, r, 0.0)];
+    for i in 1..rings {
+        let th = std::f64::consts::PI * i as f64 / rings as f64;
+        for j in 0..segs {
+            let ph = std::f64::consts::TAU * j as f64 / segs as f64;
+            v.push(c + r * DVec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()));
+        }
+    }
+    v.push(c - DVec3::new(0.0, r, 0.0));
+    let ring = |i: usize, j: usize| 1 + (i - 1) * segs + j % segs;
+    let mut f = Vec::new();
+    for j in 0..segs {
+        f.push([0, ring(1, j + 1), ring(1, j)]);
+        f.push([v.len() - 1, ring(rings - 1, j), ring(rings - 1, j + 1)]);
+    }
+    for i in 1..rings - 1 {
+        for j in 0..segs {
+            f.push([ring(i, j), ring(i, j + 1), ring(i + 1, j + 1)]);
+            f.push([ring(i, j), ring(i + 1, j + 1), ring(i + 1, j)]);
+        }
+    }
+    let mut s = format!(
+        "ply\nformat ascii 1.0\nelement vertex {}\nproperty double x\nproperty double y\n\
+         property double z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        v.len(),
+        f.len()
+    );
+    for p in &v {
+        s += &format!("{:.17e} {:.17e} {:.17e}\n", p.x, p.y, p.z);
+    }
+    for t in &f {
+        s += &format!("3 {} {} {}\n", t[0], t[1], t[2]);
+    }
+    std::fs::write(path, s).unwrap();
+}
+
+/// A mesh far from zero is read in f64 and re-centred like a point cloud:
+/// its samples and a scan of it lie on it as tightly as at the origin, and
+/// the scan's viewpoint is where the scanner stood. (Read in f32, a mesh at
+/// 4e6 had its vertices rounded to a quarter unit.)
+#[test]
+fn a_far_mesh_samples_and_scans_like_one_at_the_origin() {
+    use splatray::io::{read_mesh, sample_mesh};
+    use splatray::scanner::{ScanParams, scan_mesh};
+    let dir = scratch("far-mesh");
+    let off = |cloud: &PointCloud, c: DVec3| {
+        (0..cloud.len())
+            .map(|i| ((cloud.world(i) - c).length() - RADIUS).abs())
+            .fold(0.0f64, f64::max)
+    };
+    let mut worst = Vec::new();
+    for (name, c) in [("near.ply", DVec3::ZERO), ("far.ply", FAR)] {
+        let path = dir.join(name);
+        write_mesh_f64(&path, c, RADIUS);
+        let mesh = read_mesh(&path).unwrap();
+        assert!((mesh.origin - c).length() < 1.0, "{name}: {}", mesh.origin);
+        let samples = sample_mesh(&mesh, 20_000, 0.0, 3);
+        assert_eq!(samples.origin, mesh.origin);
+        let from = c + DVec3::new(3.0, 5.0, 40.0);
+        let scan = scan_mesh(
+            &mesh,
+            &ScanParams {
+                from,
+                columns: 200,
+                rows: 150,
+                ..ScanParams::default()
+            },
+        )
+        .unwrap();
+        let vp = scan.cloud.origin + scan.cloud.viewpoint.unwrap().as_dvec3();
+        assert!((vp - from).length() < 1e-5, "{name}: viewpoint {vp}");
+        worst.push((off(&samples, c), off(&scan.cloud, c)));
+    }
+    let ((near_s, near_c), (far_s, far_c)) = (worst[0], worst[1]);
+    eprintln!("off the sphere: samples {near_s:e} / {far_s:e}, scan {near_c:e} / {far_c:e}");
+    // The flat triangles' sagitta, plus single-precision offsets of ~10.
+    assert!(far_s <= near_s + 1e-5, "samples {far_s} vs {near_s}");
+    assert!(far_c <= near_c + 1e-5, "scan {far_c} vs {near_c}");
+}

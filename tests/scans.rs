@@ -14,7 +14,7 @@ fn bunny_scan(pattern: ScanPattern, columns: u32, rows: u32) -> splatray::scanne
     scan_mesh(
         &mesh,
         &ScanParams {
-            from: Vec3::new(1.5, 1.0, 3.5),
+            from: DVec3::new(1.5, 1.0, 3.5),
             columns,
             rows,
             pattern,
@@ -49,8 +49,8 @@ fn scanner_counts_add_up_and_keeps_its_viewpoint_through_pcd() {
         "{vp}"
     );
     assert_eq!(back.len(), scan.cloud.len());
-    for (i, p) in scan.cloud.positions.iter().enumerate() {
-        let d = (back.world(i) - p.as_dvec3()).abs().max_element();
+    for i in 0..scan.cloud.len() {
+        let d = (back.world(i) - scan.cloud.world(i)).abs().max_element();
         assert!(d <= f64::from(f32::EPSILON), "point {i} moved by {d}");
     }
 }

@@ -38,7 +38,7 @@ pub struct SampleArgs {
         allow_negative_numbers = true,
         num_args = 1
     )]
-    pub scan_from: Option<Vec<f32>>,
+    pub scan_from: Option<Vec<f64>>,
     /// The point the scanner looks at (X,Y,Z). Default: the mesh's centre.
     #[arg(
         long,
@@ -46,7 +46,7 @@ pub struct SampleArgs {
         allow_negative_numbers = true,
         requires = "scan_from"
     )]
-    pub scan_at: Option<Vec<f32>>,
+    pub scan_at: Option<Vec<f64>>,
     /// raster (a camera's pixel grid) or lines (equal angular steps, the
     /// lines `W/H` times farther apart than the samples along them).
     #[arg(long, default_value = "raster", requires = "scan_from")]
@@ -76,9 +76,9 @@ pub struct SampleArgs {
     pub missing: f32,
 }
 
-fn vec3(v: &[f32], what: &str) -> Result<glam::Vec3, String> {
+fn vec3(v: &[f64], what: &str) -> Result<glam::DVec3, String> {
     match v {
-        [x, y, z] => Ok(glam::Vec3::new(*x, *y, *z)),
+        [x, y, z] => Ok(glam::DVec3::new(*x, *y, *z)),
         _ => Err(format!("{what} needs three numbers X,Y,Z, got {}", v.len())),
     }
 }
@@ -120,7 +120,7 @@ pub fn run(args: &SampleArgs) -> Result<(), String> {
     Ok(())
 }
 
-fn scan(args: &SampleArgs, from: glam::Vec3) -> Result<(), String> {
+fn scan(args: &SampleArgs, from: glam::DVec3) -> Result<(), String> {
     if args.n.is_some() {
         return Err("-n and --scan-from exclude each other: a scan's rays set the points".into());
     }

@@ -37,6 +37,9 @@ pub struct Mesh {
     pub positions: Vec<Vec3>,
     /// Triangles as indices into `positions`; polygons are fan-triangulated.
     pub triangles: Vec<[u32; 3]>,
+    /// The positions are offsets from this point (read in f64 and
+    /// re-centred, as a point cloud's: [`PointCloud::origin`]).
+    pub origin: DVec3,
 }
 
 /// The point file formats understood by [`read_points`].

@@ -306,18 +306,23 @@ pub(crate) fn read_mesh(bytes: &[u8]) -> Result<Mesh, IoErrorKind> {
             "no \"face\" element with a vertex_indices list: not a mesh".into(),
         ));
     }
-    let mut positions = Vec::new();
+    let mut world: Vec<DVec3> = Vec::new();
     let mut faces = Vec::new();
     let mut take_faces = |rows: Vec<Option<Vec<u32>>>| faces = rows;
     file.read::<PointRow>(
         |rows| {
-            positions = rows
+            world = rows
                 .iter()
-                .map(|r| Vec3::new(r.v[0] as f32, r.v[1] as f32, r.v[2] as f32))
+                .map(|r| DVec3::new(r.v[0], r.v[1], r.v[2]))
                 .collect();
         },
         Some(&mut take_faces),
     )?;
+    // Re-centred in f64 before single precision, as a point cloud is.
+    let finite: Vec<DVec3> = world.iter().copied().filter(|p| p.is_finite()).collect();
+    let origin = crate::splat::frame::robust_centre_size(finite.len(), |i| finite[i])
+        .map_or(DVec3::ZERO, |(centre, _)| centre);
+    let positions: Vec<Vec3> = world.iter().map(|p| (*p - origin).as_vec3()).collect();
     let n = positions.len();
     let mut triangles = Vec::with_capacity(faces.len());
     for (fi, face) in faces.iter().enumerate() {
@@ -346,5 +351,6 @@ pub(crate) fn read_mesh(bytes: &[u8]) -> Result<Mesh, IoErrorKind> {
     Ok(Mesh {
         positions,
         triangles,
+        origin,
     })
 }

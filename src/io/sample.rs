@@ -80,6 +80,7 @@ pub fn sample_mesh(mesh: &Mesh, n: usize, noise_sigma: f32, seed: u64) -> PointC
         positions,
         normals: Some(normals),
         colors: None,
+        origin: mesh.origin,
         ..PointCloud::default()
     }
 }

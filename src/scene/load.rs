@@ -193,9 +193,10 @@ fn truth_of(
                 positions: mesh
                     .positions
                     .iter()
-                    .map(|&p| spec.transform.point(p, shift))
+                    .map(|&p| spec.transform.point_from(mesh.origin, p, shift))
                     .collect(),
                 triangles: mesh.triangles,
+                origin: DVec3::ZERO,
             },
             material,
         },
@@ -281,8 +282,8 @@ fn sample_mesh_model(spec: &ModelSpec, path: &Path) -> Result<(PointCloud, Mesh)
         }
         let [columns, rows] = scan.rays.unwrap_or([640, 480]);
         let params = crate::scanner::ScanParams {
-            from: Vec3::from(scan.from),
-            at: scan.at.map(Vec3::from),
+            from: Vec3::from(scan.from).as_dvec3(),
+            at: scan.at.map(|a| Vec3::from(a).as_dvec3()),
             columns,
             rows,
             fov: scan.fov,
@@ -415,6 +416,7 @@ fn shape_truth(sh: &ShapeSpec, t: &TransformSpec, material: u16, shift: DVec3) -
                 mesh: Mesh {
                     positions: corners.to_vec(),
                     triangles: vec![[0, 1, 2], [0, 2, 3]],
+                    origin: DVec3::ZERO,
                 },
                 material,
             }
