@@ -12,9 +12,11 @@ use crate::{Error, Result};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
-/// Passes of trimming: a shrunk splat can uncover a splat behind it that
-/// blocks the same line of sight.
-pub const PASSES: usize = 3;
+/// Most passes of trimming (they stop when no line is blocked): a shrunk
+/// splat can uncover a splat behind it that blocks the same line of sight,
+/// and each pass shrinks a splat once. On `lamppost-ascii.pcd` 3 passes left
+/// 115 of 305 blocked lines blocked, 8 leave 12.
+pub const PASSES: usize = 8;
 
 /// A hit counts as blocking when it lies more than this many `ϵ` (the
 /// growth threshold of eq. 1) in front of the point: closer hits are the
