@@ -131,3 +131,34 @@ fn warnings_do_not_fail_the_run() {
         "{err}"
     );
 }
+
+/// A report that cannot be written fails the run before any work, in one
+/// line, and leaves no splat file (nor a temporary) behind.
+#[test]
+fn an_unwritable_report_leaves_no_output() {
+    let dir = scratch("report-fails");
+    let report_dir = dir.join("a-folder");
+    std::fs::create_dir_all(&report_dir).unwrap();
+    for report in [dir.join("missing").join("r.json"), report_dir.clone()] {
+        let out_path = dir.join("out.ply");
+        let out = bin()
+            .arg("splat")
+            .arg(data("milk.pcd"))
+            .arg("-o")
+            .arg(&out_path)
+            .arg("--report")
+            .arg(&report)
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr).to_string();
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(err.contains("folder"), "{err}");
+        let left: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .filter(|n| n != "a-folder")
+            .collect();
+        assert!(left.is_empty(), "left behind: {left:?}");
+    }
+}

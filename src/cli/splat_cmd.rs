@@ -4,7 +4,7 @@
 use super::progress::ProgressLine;
 use glam::DVec3;
 use splatray::freespace::generate_trimmed;
-use splatray::io::{read_points, write_splats};
+use splatray::io::{Batch, encode_splats, read_points};
 use splatray::splat::{PointCloud, SplatParams};
 use splatray::validate::holdout::{HeldOutCoverage, heldout_coverage};
 use std::path::PathBuf;
@@ -106,6 +106,18 @@ impl SplatOptions {
     }
 }
 
+/// An output path that can be written: not a folder, in a folder that
+/// exists. Checked before any work.
+fn writable(path: &std::path::Path) -> Result<(), String> {
+    if path.is_dir() {
+        return Err(format!("{}: is a folder, not a file", path.display()));
+    }
+    match path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        Some(d) if !d.is_dir() => Err(format!("{}: folder does not exist", d.display())),
+        _ => Ok(()),
+    }
+}
+
 /// Run `splatray splat`; the message of an error is one line.
 ///
 /// # Errors
@@ -113,6 +125,10 @@ impl SplatOptions {
 /// be written.
 pub fn run(args: &SplatArgs) -> Result<(), String> {
     args.splat.viewpoint()?;
+    writable(&args.output)?;
+    if let Some(r) = &args.report {
+        writable(r)?;
+    }
     if !(args.holdout == 0.0 || (args.holdout > 0.0 && args.holdout <= 0.5)) {
         return Err(format!(
             "--holdout {} must be 0 (off) or in (0, 0.5]",
@@ -146,15 +162,24 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
     line.finish();
     report.seconds.read = read;
     report.seconds.total += read;
-    write_splats(&args.output, &splats, cloud.origin).map_err(|e| e.to_string())?;
+    // The splat file and the report are committed together: a failure in
+    // either leaves neither.
+    let bytes = encode_splats(&args.output, &splats, cloud.origin).map_err(|e| e.to_string())?;
+    let mut batch = Batch::new();
+    batch
+        .stage(&args.output, |t| std::fs::write(t, &bytes))
+        .map_err(|e| e.to_string())?;
     if let Some(path) = &args.report {
         let out = Report {
             generation: &report,
             heldout_coverage: heldout.clone(),
         };
         let json = serde_json::to_string_pretty(&out).map_err(|e| e.to_string())?;
-        splatray::io::write_text(path, &json).map_err(|e| e.to_string())?;
+        batch
+            .stage(path, |t| std::fs::write(t, &json))
+            .map_err(|e| e.to_string())?;
     }
+    batch.commit().map_err(|e| e.to_string())?;
     for w in &report.warnings {
         eprintln!("splatray: warning: {w}");
     }

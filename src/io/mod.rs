@@ -21,11 +21,11 @@ mod splat_ply;
 mod xyz;
 
 pub use crate::splat::PointCloud;
-pub use atomic::{write_atomic, write_bytes};
+pub use atomic::{Batch, write_atomic, write_bytes};
 pub use error::{IoError, IoErrorKind};
 pub use lzf::lzf_decompress;
 pub use sample::sample_mesh;
-pub use splat_ply::{SplatSet, read_splats, write_splats};
+pub use splat_ply::{SplatSet, encode_splats, read_splats, write_splats};
 
 use glam::{DVec3, Vec3};
 use std::path::Path;

@@ -99,6 +99,15 @@ fn to_row(s: &Splat) -> [f32; 21] {
 /// not positive, the origin is not finite (nothing is written then), or the
 /// file cannot be written.
 pub fn write_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<(), IoError> {
+    write_bytes(path, &encode_splats(path, splats, origin)?)
+}
+
+/// The bytes [`write_splats`] writes to `path` (named in errors), to write
+/// them with other outputs of one run ([`super::Batch`]).
+///
+/// # Errors
+/// As [`write_splats`], before anything is written.
+pub fn encode_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<Vec<u8>, IoError> {
     let bad = |what: String| {
         Err(IoError::new(
             path,
@@ -138,7 +147,7 @@ pub fn write_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<(), 
             out.extend_from_slice(&v.to_le_bytes());
         }
     }
-    write_bytes(path, &out)
+    Ok(out)
 }
 
 /// The origin of a `comment splatray origin X Y Z` header line, if any.
