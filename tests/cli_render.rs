@@ -202,3 +202,45 @@ fn camera_that_sees_nothing_gets_a_warning_naming_where_the_splats_are() {
         "{lo} {hi}: {err}"
     );
 }
+
+/// An output that cannot be written (a report or an AOV path that is a
+/// folder) fails the run before any work, in one line, and leaves none of
+/// its outputs: the image, AOVs and report are committed together.
+#[test]
+fn an_unwritable_report_or_aov_leaves_no_output() {
+    let dir = scratch("outputs");
+    let scene = format!(
+        "{CAMERA}[[model]]\nshape = {{ kind = \"sphere\", radius = 1.0, splats = 100 }}\n[[light]]\nkind = \"point\"\nposition = [1.0, 1.0, 3.0]\n"
+    );
+    let scene_path = dir.join("scene.toml");
+    std::fs::write(&scene_path, scene).unwrap();
+    std::fs::create_dir_all(dir.join("r-folder")).unwrap();
+    std::fs::create_dir_all(dir.join("out.depth.exr")).unwrap();
+    for extra in [
+        vec!["--report", "r-folder"],
+        vec!["--aov", "normal,depth", "--report", "r.json"],
+    ] {
+        let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+            .current_dir(&dir)
+            .arg("render")
+            .arg(&scene_path)
+            .args(["-o", "out.png"])
+            .args(&extra)
+            .output()
+            .unwrap();
+        assert!(!o.status.success(), "{extra:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(err.contains("is a folder"), "{err}");
+        let mut left: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(
+            left,
+            ["out.depth.exr", "r-folder", "scene.toml"],
+            "{extra:?}"
+        );
+    }
+}

@@ -7,7 +7,7 @@ use super::render::write_json;
 use super::view::SceneArgs;
 use splatray::accel::registry;
 use splatray::render::integrator::{Frame, render};
-use splatray::render::output::{check_output_path, save};
+use splatray::render::output::{check_output_path, check_writable, save};
 use splatray::validate::compare::{
     Agreement, TruthErrors, compare_frames, diff_image, render_truth, truth_errors,
 };
@@ -128,7 +128,7 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
         }
     }
     if let Some(r) = &args.report {
-        check_output_path(&r.with_extension("png"))?;
+        check_writable(r)?;
     }
     let line = ProgressLine::new();
     let progress = |stage: &str, f: f64| line.update(stage, f);

@@ -3,8 +3,11 @@
 use super::progress::ProgressLine;
 use super::view::SceneArgs;
 use splatray::accel::registry;
+use splatray::io::Batch;
 use splatray::render::integrator::{Frame, RayCounts, render};
-use splatray::render::output::{Aov, aov_path, check_output_path, write_aov, write_image};
+use splatray::render::output::{
+    Aov, aov_path, check_output_path, check_writable, write_aov_into, write_image_into,
+};
 use splatray::scene::Scene;
 use std::path::{Path, PathBuf};
 
@@ -117,8 +120,11 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
     });
     // Every output is checked before the work starts.
     check_output_path(&output)?;
+    for &a in &args.aov {
+        check_output_path(&aov_path(&output, a))?;
+    }
     if let Some(r) = &args.report {
-        check_output_path(&r.with_extension("png"))?;
+        check_writable(r)?;
     }
     let line = ProgressLine::new();
     let progress = |stage: &str, f: f64| line.update(stage, f);
@@ -133,14 +139,21 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
     if frame.splat.iter().all(|&id| id == u32::MAX) {
         warn_nothing_hit(&scene);
     }
-    write_image(&frame, &output)?;
+    // The image, its AOVs and the report are committed together: a failure
+    // in any leaves none.
+    let mut batch = Batch::new();
+    write_image_into(&mut batch, &frame, &output)?;
     for &a in &args.aov {
-        write_aov(&frame, a, &aov_path(&output, a))?;
+        write_aov_into(&mut batch, &frame, a, &aov_path(&output, a))?;
     }
     let report = RenderReport::new(&scene, backend.name(), build_seconds, &frame);
     if let Some(r) = &args.report {
-        write_json(r, &report)?;
+        let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
+        batch
+            .stage(r, |t| std::fs::write(t, text + "\n"))
+            .map_err(|e| e.to_string())?;
     }
+    batch.commit().map_err(|e| e.to_string())?;
     println!(
         "{}: {}x{} spp {}, {} splats ({:.2} s to make), {} build {:.3} s, render {:.3} s, {} rays ({:.2} Mrays/s) -> {}",
         scene_path.display(),

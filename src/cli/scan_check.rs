@@ -5,7 +5,7 @@ use super::progress::ProgressLine;
 use super::render::write_json;
 use super::splat_cmd::SplatOptions;
 use splatray::io::read_points;
-use splatray::render::output::check_output_path;
+use splatray::render::output::check_writable;
 use splatray::validate::scan_check::{ScanCheckParams, scan_check};
 use std::path::PathBuf;
 
@@ -38,7 +38,7 @@ pub struct ScanCheckArgs {
 /// An unreadable cloud, no viewpoint, bad options, an unwritable report.
 pub fn run(args: &ScanCheckArgs) -> Result<(), String> {
     if let Some(r) = &args.report {
-        check_output_path(&r.with_extension("png"))?;
+        check_writable(r)?;
     }
     let cloud = read_points(&args.input).map_err(|e| e.to_string())?;
     let splat = args.splat.params(&cloud)?;

@@ -4,6 +4,7 @@
 //! never leaves a half-written file.
 
 use super::integrator::Frame;
+use crate::io::Batch;
 use crate::{Error, Result};
 use glam::Vec3;
 use image::{ImageBuffer, ImageFormat, Rgb};
@@ -54,6 +55,18 @@ fn format_of(path: &Path) -> Result<ImageFormat> {
 /// existing folder.
 pub fn check_output_path(path: &Path) -> Result<()> {
     format_of(path)?;
+    check_writable(path)
+}
+
+/// Checks a path a run will write before any work is done: not a folder, in
+/// a folder that exists (any extension).
+pub fn check_writable(path: &Path) -> Result<()> {
+    if path.is_dir() {
+        return Err(Error::invalid(format!(
+            "{}: is a folder, not a file",
+            path.display()
+        )));
+    }
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
     if let Some(d) = dir {
         if !d.is_dir() {
@@ -74,23 +87,60 @@ where
     [P::Subpixel]: image::EncodableLayout,
     C: std::ops::Deref<Target = [P::Subpixel]>,
 {
-    crate::io::write_atomic(path, |tmp| img.save_with_format(tmp, format)).map_err(Error::from)
+    let mut batch = Batch::new();
+    save_into(&mut batch, img, path, format)?;
+    batch.commit().map_err(Error::from)
 }
 
-fn write_rgb32f(path: &Path, w: u32, h: u32, px: impl Iterator<Item = Vec3>) -> Result<()> {
+/// [`save`] as one output of a run, committed with the others
+/// ([`Batch::commit`]).
+pub fn save_into<P, C>(
+    batch: &mut Batch,
+    img: &ImageBuffer<P, C>,
+    path: &Path,
+    format: ImageFormat,
+) -> Result<()>
+where
+    P: image::PixelWithColorType,
+    [P::Subpixel]: image::EncodableLayout,
+    C: std::ops::Deref<Target = [P::Subpixel]>,
+{
+    batch
+        .stage(path, |tmp| img.save_with_format(tmp, format))
+        .map_err(Error::from)
+}
+
+fn write_rgb32f(
+    batch: &mut Batch,
+    path: &Path,
+    w: u32,
+    h: u32,
+    px: impl Iterator<Item = Vec3>,
+) -> Result<()> {
     let data: Vec<f32> = px.flat_map(|c| c.to_array()).collect();
     let img: ImageBuffer<Rgb<f32>, Vec<f32>> =
         ImageBuffer::from_raw(w, h, data).ok_or_else(|| Error::invalid("image size mismatch"))?;
-    save(&img, path, ImageFormat::OpenExr)
+    save_into(batch, &img, path, ImageFormat::OpenExr)
 }
 
 /// Writes the frame: PNG (sRGB, 8 bit) or EXR (linear float) by extension.
 pub fn write_image(frame: &Frame, path: &Path) -> Result<()> {
+    let mut batch = Batch::new();
+    write_image_into(&mut batch, frame, path)?;
+    batch.commit().map_err(Error::from)
+}
+
+/// [`write_image`] as one output of a run ([`Batch`]).
+pub fn write_image_into(batch: &mut Batch, frame: &Frame, path: &Path) -> Result<()> {
     match format_of(path)? {
-        ImageFormat::OpenExr => {
-            write_rgb32f(path, frame.width, frame.height, frame.rgb.iter().copied())
-        }
-        _ => save(&to_srgb8(frame), path, ImageFormat::Png),
+        ImageFormat::OpenExr => write_rgb32f(
+            batch,
+            path,
+            frame.width,
+            frame.height,
+            frame.rgb.iter().copied(),
+        ),
+        _ => save_into(batch, &to_srgb8(frame), path, ImageFormat::Png),
     }
 }
 
@@ -137,11 +187,25 @@ pub fn aov_path(image: &Path, aov: Aov) -> PathBuf {
 /// Writes one AOV as a linear EXR (the value in all three channels for
 /// depth and splat id).
 pub fn write_aov(frame: &Frame, aov: Aov, path: &Path) -> Result<()> {
+    let mut batch = Batch::new();
+    write_aov_into(&mut batch, frame, aov, path)?;
+    batch.commit().map_err(Error::from)
+}
+
+/// [`write_aov`] as one output of a run ([`Batch`]).
+pub fn write_aov_into(batch: &mut Batch, frame: &Frame, aov: Aov, path: &Path) -> Result<()> {
     let (w, h) = (frame.width, frame.height);
     match aov {
-        Aov::Depth => write_rgb32f(path, w, h, frame.depth.iter().map(|&d| Vec3::splat(d))),
-        Aov::Normal => write_rgb32f(path, w, h, frame.normal.iter().copied()),
+        Aov::Depth => write_rgb32f(
+            batch,
+            path,
+            w,
+            h,
+            frame.depth.iter().map(|&d| Vec3::splat(d)),
+        ),
+        Aov::Normal => write_rgb32f(batch, path, w, h, frame.normal.iter().copied()),
         Aov::Splat => write_rgb32f(
+            batch,
             path,
             w,
             h,
