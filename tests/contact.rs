@@ -9,7 +9,6 @@ use common::{Rng, render_with};
 use glam::{Vec2, Vec3};
 use splatray::accel::{Backend, CandidateHits, Ray};
 use splatray::render::integrator::{Frame, ShadeHit, SplatSurfaces, Surfaces, render_surfaces};
-use splatray::resolve::resolve_within;
 use splatray::scene::{Light, Scene, build_scene, parse_scene_file, parse_scene_str};
 use splatray::splat::{PointCloud, SplatParams, generate};
 use splatray::validate::compare::{render_truth, truth_errors};
@@ -257,29 +256,11 @@ impl Surfaces for Guard<'_> {
         from: Option<&ShadeHit>,
         hits: &mut CandidateHits,
     ) -> Option<ShadeHit> {
-        let sc = self.splats.scene;
         let t_min = from.map_or(0.0, |f| self.t_min(f));
         self.splats
             .backend
             .intersect(ray, t_min, f32::INFINITY, hits);
-        let nearest = hits.nearest()?.id;
-        let h = resolve_within(
-            hits,
-            ray,
-            &sc.splats,
-            sc.shading_for(nearest),
-            sc.xi_for(nearest),
-        )?;
-        Some(ShadeHit {
-            id: h.id,
-            t: h.t,
-            point: h.point,
-            normal: h.normal,
-            geometric_normal: h.geometric_normal,
-            front: h.front,
-            material: sc.material_of[h.id as usize],
-            color: sc.splats[h.id as usize].color,
-        })
+        self.splats.resolve(hits, ray)
     }
 
     fn occluded(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> bool {

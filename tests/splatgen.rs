@@ -8,9 +8,7 @@ use glam::{DVec3, Vec3};
 use splatray::io::{PointCloud, read_mesh, read_points, sample_mesh};
 use splatray::splat::knn::{Knn, build_tree};
 use splatray::splat::normals::{estimate, orient, sym_eigen3};
-use splatray::splat::{
-    GenerateError, NOISE_PROJECT, Splat, SplatParams, count_on_splats, generate, on_splat,
-};
+use splatray::splat::{GenerateError, Splat, SplatParams, count_on_splats, generate, on_splat};
 
 /// `n` points on a Fibonacci sphere around `c` with radius `r`.
 fn sphere(n: usize, c: Vec3, r: f32, phase: f32) -> Vec<Vec3> {
@@ -179,8 +177,12 @@ fn real_scans_give_fewer_splats_than_points_and_full_coverage() {
         // within eps of a splat's plane, or, where the cloud was noisy enough
         // to be moved onto its local surfaces before growth, within eps plus
         // three times the noise measured about those surfaces.
-        let moved = rep.noise > NOISE_PROJECT * rep.epsilon;
-        let tol = rep.epsilon + if moved { 3.0 * rep.noise } else { 0.0 };
+        let tol = rep.epsilon
+            + if rep.moved_onto_surfaces() {
+                3.0 * rep.noise
+            } else {
+                0.0
+            };
         let on = count_on_splats(&c.positions, &splats, tol as f32);
         assert!(on as f64 >= 0.99 * c.positions.len() as f64, "{f}: {on}");
         let json = serde_json::to_string(&rep).unwrap();

@@ -5,6 +5,7 @@ use super::progress::ProgressLine;
 use glam::DVec3;
 use splatray::freespace::generate_trimmed;
 use splatray::io::{Batch, encode_splats, read_points};
+use splatray::render::output::check_writable;
 use splatray::splat::{PointCloud, SplatParams};
 use splatray::validate::holdout::{HeldOutCoverage, heldout_coverage};
 use std::path::PathBuf;
@@ -106,18 +107,6 @@ impl SplatOptions {
     }
 }
 
-/// An output path that can be written: not a folder, in a folder that
-/// exists. Checked before any work.
-fn writable(path: &std::path::Path) -> Result<(), String> {
-    if path.is_dir() {
-        return Err(format!("{}: is a folder, not a file", path.display()));
-    }
-    match path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        Some(d) if !d.is_dir() => Err(format!("{}: folder does not exist", d.display())),
-        _ => Ok(()),
-    }
-}
-
 /// Run `splatray splat`; the message of an error is one line.
 ///
 /// # Errors
@@ -125,9 +114,9 @@ fn writable(path: &std::path::Path) -> Result<(), String> {
 /// be written.
 pub fn run(args: &SplatArgs) -> Result<(), String> {
     args.splat.viewpoint()?;
-    writable(&args.output)?;
+    check_writable(&args.output)?;
     if let Some(r) = &args.report {
-        writable(r)?;
+        check_writable(r)?;
     }
     if !(args.holdout == 0.0 || (args.holdout > 0.0 && args.holdout <= 0.5)) {
         return Err(format!(

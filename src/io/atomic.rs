@@ -31,15 +31,9 @@ pub fn write_atomic<E: std::fmt::Display>(
     path: &Path,
     write: impl FnOnce(&Path) -> Result<(), E>,
 ) -> Result<(), IoError> {
-    let tmp = temp_path(path)?;
-    let result = write(&tmp)
-        .map_err(|e| std::io::Error::other(e.to_string()))
-        .and_then(|()| std::fs::File::open(&tmp)?.sync_all())
-        .and_then(|()| std::fs::rename(&tmp, path));
-    result.map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        IoError::new(path, IoErrorKind::Io(e))
-    })
+    let mut batch = Batch::new();
+    batch.stage(path, write)?;
+    batch.commit()
 }
 
 /// Writes `bytes` to `path` atomically (see [`write_atomic`]).

@@ -137,6 +137,27 @@ pub struct SplatSurfaces<'a> {
 }
 
 impl SplatSurfaces<'_> {
+    /// The surface `ray` meets among the candidate `hits` a backend
+    /// gathered for it (§3.2, eq. 5, within the nearest splat's model's
+    /// window), with its material and colour.
+    #[must_use]
+    pub fn resolve(&self, hits: &CandidateHits, ray: &Ray) -> Option<ShadeHit> {
+        let sc = self.scene;
+        let nearest = hits.nearest()?.id;
+        let mode = sc.shading_for(nearest);
+        let h: SurfaceHit = resolve_within(hits, ray, &sc.splats, mode, sc.xi_for(nearest))?;
+        Some(ShadeHit {
+            id: h.id,
+            t: h.t,
+            point: h.point,
+            normal: h.normal,
+            geometric_normal: h.geometric_normal,
+            front: h.front,
+            material: sc.material_of[h.id as usize],
+            color: sc.splats[h.id as usize].color,
+        })
+    }
+
     /// The splat a secondary ray leaving `from` starts on: the shared
     /// self-hit rule of every backend skips it and its overlapping,
     /// similarly oriented neighbours (`accel::Departure`).
@@ -156,7 +177,6 @@ impl Surfaces for SplatSurfaces<'_> {
         from: Option<&ShadeHit>,
         hits: &mut CandidateHits,
     ) -> Option<ShadeHit> {
-        let sc = self.scene;
         match from {
             None => self.backend.intersect(ray, 0.0, f32::INFINITY, hits),
             Some(f) => self.backend.intersect_from(
@@ -167,20 +187,7 @@ impl Surfaces for SplatSurfaces<'_> {
                 hits,
             ),
         }
-        let nearest = hits.nearest()?.id;
-        let mode = sc.shading_for(nearest);
-        let h: SurfaceHit = resolve_within(hits, ray, &sc.splats, mode, sc.xi_for(nearest))?;
-        let splat = &sc.splats[h.id as usize];
-        Some(ShadeHit {
-            id: h.id,
-            t: h.t,
-            point: h.point,
-            normal: h.normal,
-            geometric_normal: h.geometric_normal,
-            front: h.front,
-            material: sc.material_of[h.id as usize],
-            color: splat.color,
-        })
+        self.resolve(hits, ray)
     }
 
     fn occluded(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> bool {

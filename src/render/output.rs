@@ -87,9 +87,7 @@ where
     [P::Subpixel]: image::EncodableLayout,
     C: std::ops::Deref<Target = [P::Subpixel]>,
 {
-    let mut batch = Batch::new();
-    save_into(&mut batch, img, path, format)?;
-    batch.commit().map_err(Error::from)
+    crate::io::write_atomic(path, |tmp| img.save_with_format(tmp, format)).map_err(Error::from)
 }
 
 /// [`save`] as one output of a run, committed with the others

@@ -133,6 +133,16 @@ pub struct SplatReport {
     pub seconds: StageSeconds,
 }
 
+impl SplatReport {
+    /// Whether the points were moved onto their local surfaces before growth
+    /// (the noise exceeded [`NOISE_PROJECT`] times `ϵ`): points not moved
+    /// (held out, or the raw input) lie within that noise of the splats.
+    #[must_use]
+    pub fn moved_onto_surfaces(&self) -> bool {
+        self.noise > NOISE_PROJECT * self.epsilon
+    }
+}
+
 /// Why no splats could be made.
 #[derive(Clone, Debug, PartialEq)]
 #[non_exhaustive]
@@ -448,8 +458,9 @@ pub fn generate_with_progress(
         .map(|(l, &f)| l.filter(|_| !f))
         .collect();
     report.noise = median(local.iter().flatten().map(|l| l.sd).collect());
-    let epsilon = f64::from(params.epsilon_rel) * diagonal;
-    if report.noise > NOISE_PROJECT * epsilon {
+    let epsilon = (f64::from(params.epsilon_rel) * diagonal) as f32;
+    report.epsilon = f64::from(epsilon);
+    if report.moved_onto_surfaces() {
         let mut moved = 0usize;
         for ((p, n), l) in points.iter_mut().zip(&nrm).zip(&local) {
             if let Some(l) = l {
@@ -460,14 +471,12 @@ pub fn generate_with_progress(
         report.warnings.push(format!(
             "the points scatter {:.2}x epsilon about their local surfaces (range noise?): \
              {moved} points were moved onto them before growing splats",
-            report.noise / epsilon
+            report.noise / report.epsilon
         ));
         tree = build_tree(&points);
     }
     let t2 = Instant::now();
     // --- growth --------------------------------------------------------------
-    let epsilon = (f64::from(params.epsilon_rel) * diagonal) as f32;
-    report.epsilon = f64::from(epsilon);
     let input = GrowInput {
         points: &points,
         normals: &nrm,

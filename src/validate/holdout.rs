@@ -114,8 +114,12 @@ pub fn heldout_coverage(
 ) -> Result<HeldOutCoverage> {
     let s = split(cloud, params, fraction, seed)?;
     let (splats, report, _) = generate_trimmed(&s.train, params, None)?;
-    let moved = report.noise > crate::splat::NOISE_PROJECT * report.epsilon;
-    let tolerance = report.epsilon + if moved { 3.0 * report.noise } else { 0.0 };
+    let tolerance = report.epsilon
+        + if report.moved_onto_surfaces() {
+            3.0 * report.noise
+        } else {
+            0.0
+        };
     let found = count_on_splats(&s.test, &splats, tolerance as f32);
     Ok(HeldOutCoverage {
         fraction,
