@@ -80,6 +80,8 @@ fn raster_scan_lines_of_sight_are_free_and_no_splat_is_giant() {
     assert!(r.miss_fraction <= 0.005, "{r:?}");
     assert!(r.max_over_median_radius <= 8.0, "{r:?}");
     assert!(r.held_out_outliers > 0, "{r:?}");
+    assert!(r.viewpoint_is_scanner, "{:?}", r.generation.facing_away);
+    assert!(!r.trim.as_ref().unwrap().skipped, "{r:?}");
     // The same check sees the phantom discs the outliers grow when they are
     // kept: it can fail.
     let kept = check(&scan.cloud, false);
@@ -111,6 +113,42 @@ fn scan_check_needs_a_viewpoint() {
     cloud.viewpoint = None;
     let e = scan_check(&cloud, &ScanCheckParams::default(), None).unwrap_err();
     assert!(e.to_string().contains("viewpoint"), "{e}");
+}
+
+/// A viewpoint that is not the scanner's (a cloud scanned from all sides, a
+/// default `VIEWPOINT`): half a closed sphere faces away from it, which no
+/// scanner sees. Trimming against it would cut the near side for hiding the
+/// far side; nothing is trimmed, and scan-check says its lines of sight
+/// check nothing.
+#[test]
+fn a_viewpoint_seeing_backs_of_surfaces_is_not_the_scanners() {
+    let cloud = PointCloud {
+        positions: sphere(6000, 1.0, 5),
+        viewpoint: Some(Vec3::new(6.0, 0.0, 0.0)),
+        ..PointCloud::default()
+    };
+    let r = check(&cloud, true);
+    let away = r.generation.facing_away.unwrap();
+    assert!((0.3..0.6).contains(&away), "{away}");
+    assert!(!r.viewpoint_is_scanner);
+    let t = r.trim.as_ref().unwrap();
+    assert!(t.skipped && t.shrunk == 0, "{t:?}");
+    assert!(
+        r.generation
+            .warnings
+            .iter()
+            .any(|w| w.contains("face away")),
+        "{:?}",
+        r.generation.warnings
+    );
+    // The bundled lamppost: points on every side of a pole, few on the side
+    // facing its default VIEWPOINT.
+    let lamp = check(&read_points(&data("lamppost-ascii.pcd")).unwrap(), true);
+    assert!(
+        !lamp.viewpoint_is_scanner,
+        "{:?}",
+        lamp.generation.facing_away
+    );
 }
 
 fn sphere(n: usize, r: f32, seed: u64) -> Vec<Vec3> {

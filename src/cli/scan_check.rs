@@ -79,6 +79,12 @@ pub fn run(args: &ScanCheckArgs) -> Result<(), String> {
         pct(r.miss_fraction),
         r.max_over_median_radius
     );
+    if !r.viewpoint_is_scanner {
+        eprintln!(
+            "splatray: warning: the viewpoint is not the scanner's position, so these lines of sight \
+             check nothing: give the scanner's position with --viewpoint X,Y,Z"
+        );
+    }
     if let Some(path) = &args.report {
         write_json(path, &r)?;
     }

@@ -127,6 +127,12 @@ pub struct SplatReport {
     pub origin: [f64; 3],
     /// Neighbours per point actually used.
     pub k: usize,
+    /// With a viewpoint and estimated normals: the share of those points
+    /// whose consistently oriented normal faces away from the viewpoint by
+    /// more than [`FACING_AWAY_COS`]. A scanner sees only surfaces facing
+    /// it, so a large share says the viewpoint is not the scanner's (a
+    /// cloud registered from several scans, or a default `VIEWPOINT`).
+    pub facing_away: Option<f64>,
     /// Notes about the input that did not stop generation.
     pub warnings: Vec<String>,
     /// Time per stage.
@@ -140,6 +146,34 @@ impl SplatReport {
     #[must_use]
     pub fn moved_onto_surfaces(&self) -> bool {
         self.noise > NOISE_PROJECT * self.epsilon
+    }
+}
+
+/// A normal facing away from the line of sight by more than this cosine
+/// (past edge-on by about 11.5°; noise tilts grazing normals slightly
+/// past it) counts as seen from behind.
+pub const FACING_AWAY_COS: f32 = -0.2;
+
+/// The share of the points with estimated (not `fixed`) normals that face
+/// away from `viewpoint` by more than [`FACING_AWAY_COS`].
+fn facing_away(points: &[Vec3], normals: &[Vec3], fixed: &[bool], viewpoint: Vec3) -> f64 {
+    let (mut away, mut all) = (0usize, 0usize);
+    for ((p, n), f) in points.iter().zip(normals).zip(fixed) {
+        let Some(sight) = (viewpoint - *p).try_normalize() else {
+            continue;
+        };
+        if *f {
+            continue;
+        }
+        all += 1;
+        if n.dot(sight) < FACING_AWAY_COS {
+            away += 1;
+        }
+    }
+    if all == 0 {
+        0.0
+    } else {
+        away as f64 / all as f64
     }
 }
 
@@ -434,6 +468,9 @@ pub fn generate_with_progress(
             }
         }
         normals::orient(&points, &knn, &mut nrm, &fixed, params.viewpoint);
+        report.facing_away = params
+            .viewpoint
+            .map(|vp| facing_away(&points, &nrm, &fixed, vp));
     }
     if input_normals.is_some() && to_estimate > 0 {
         report.warnings.push(format!(

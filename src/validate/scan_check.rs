@@ -94,6 +94,11 @@ pub struct ScanCheckReport {
     pub generation: SplatReport,
     /// What free-space trimming did (on the points not held out).
     pub trim: Option<TrimReport>,
+    /// False when too many points face away from the viewpoint
+    /// ([`crate::freespace::FACING_AWAY_MAX`]): it is not the scanner's
+    /// position, points behind real surfaces are counted early, and the
+    /// lines of sight check nothing.
+    pub viewpoint_is_scanner: bool,
     /// Seconds to generate the splats.
     pub splat_seconds: f64,
     /// Seconds to cast the rays (including the backend build).
@@ -202,6 +207,9 @@ pub fn scan_check(
         median_radius,
         max_radius,
         max_over_median_radius: max_radius / median_radius.max(f64::MIN_POSITIVE),
+        viewpoint_is_scanner: generation
+            .facing_away
+            .is_none_or(|a| a <= crate::freespace::FACING_AWAY_MAX),
         generation,
         trim,
         splat_seconds: (t1 - t0).as_secs_f64(),
