@@ -37,6 +37,22 @@ pub struct SceneArgs {
     /// relative to it), to edit and render again: it renders the same image.
     #[arg(long, value_name = "SCENE.toml")]
     pub save_scene: Option<PathBuf>,
+    /// The most rays the render may trace, worst case (every glass hit
+    /// reflecting and refracting to max_depth, every light sample).
+    #[arg(long, default_value_t = splatray::render::budget::DEFAULT_MAX_RAYS, value_parser = positive)]
+    pub max_rays: f64,
+    /// The most memory the render may take, GB (default: what the machine
+    /// has available).
+    #[arg(long, value_name = "GB", value_parser = positive)]
+    pub max_memory: Option<f64>,
+}
+
+/// A finite number above zero.
+fn positive(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
+        _ => Err(format!("'{s}' must be a finite number above 0")),
+    }
 }
 
 /// `--up`: an axis name or three numbers.
@@ -69,6 +85,22 @@ fn parse_up(s: &str) -> Result<DVec3, String> {
 }
 
 impl SceneArgs {
+    /// Checks the worst-case rays and the memory of rendering `frames`
+    /// frames of `scene` against `--max-rays` and `--max-memory` (or the
+    /// memory available).
+    ///
+    /// # Errors
+    /// Over a limit: one line with the cost and the flag.
+    pub fn check_budget(&self, scene: &Scene, frames: u32) -> Result<(), String> {
+        let limits = splatray::render::budget::Limits {
+            max_rays: self.max_rays,
+            max_bytes: self.max_memory.map(|gb| (gb * 1e9) as u64),
+        };
+        splatray::render::budget::check(scene, frames, &limits)
+            .map(|_| ())
+            .map_err(|e| format!("{}: {e}", self.path().display()))
+    }
+
     /// The scene file or cloud: the one given, else the bundled default.
     #[must_use]
     pub fn path(&self) -> PathBuf {

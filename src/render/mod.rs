@@ -1,5 +1,6 @@
 //! The renderer (report §1.2, §4): the Whitted integrator and image output
 //! (scenes are in [`crate::scene`]).
 
+pub mod budget;
 pub mod integrator;
 pub mod output;

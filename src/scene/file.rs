@@ -7,6 +7,7 @@
 //! line (serde's `deny_unknown_fields` and enums, reported by the TOML
 //! parser).
 
+use super::num;
 use crate::resolve::ShadingMode;
 use crate::splat::Splat;
 use crate::{Error, Result};
@@ -88,14 +89,16 @@ pub enum ShapeKind {
 #[serde(deny_unknown_fields)]
 pub struct CameraSpec {
     /// Eye position (f64, so far-from-origin scenes keep their precision).
+    #[serde(deserialize_with = "num::finite")]
     pub from: [f64; 3],
     /// Point looked at.
+    #[serde(deserialize_with = "num::finite")]
     pub at: [f64; 3],
     /// Up vector.
-    #[serde(default = "default_up")]
+    #[serde(default = "default_up", deserialize_with = "num::finite")]
     pub up: [f32; 3],
     /// Vertical field of view, degrees.
-    #[serde(default = "default_fov")]
+    #[serde(default = "default_fov", deserialize_with = "num::fov")]
     pub fov: f32,
     /// Image width, pixels.
     #[serde(default = "default_width")]
@@ -114,13 +117,15 @@ pub struct CameraSpec {
 #[serde(deny_unknown_fields)]
 pub struct TransformSpec {
     /// Uniform scale.
-    #[serde(default = "one_f32")]
+    #[serde(default = "one_f32", deserialize_with = "num::positive")]
     pub scale: f32,
     /// Rotation, degrees about x, y, z.
     #[serde(default)]
+    #[serde(deserialize_with = "num::finite")]
     pub rotate: [f32; 3],
     /// Translation (f64: applied before re-centring, in double precision).
     #[serde(default)]
+    #[serde(deserialize_with = "num::finite")]
     pub translate: [f64; 3],
 }
 
@@ -195,16 +200,19 @@ impl TransformSpec {
 #[serde(deny_unknown_fields)]
 pub struct SplatSpec {
     /// Growth error threshold, fraction of the model's bounding-box diagonal.
+    #[serde(default, deserialize_with = "num::positive")]
     pub epsilon: Option<f32>,
     /// Neighbourhood size.
     pub k: Option<usize>,
     /// Density factor `k` of §2.2.
+    #[serde(default, deserialize_with = "num::positive")]
     pub density: Option<f32>,
     /// Grow elliptical splats.
     #[serde(default)]
     pub ellipses: bool,
     /// Orient estimated normals toward this point (model space: the point
     /// file's coordinates).
+    #[serde(default, deserialize_with = "num::finite")]
     pub viewpoint: Option<[f32; 3]>,
 }
 
@@ -214,25 +222,31 @@ pub struct SplatSpec {
 #[serde(deny_unknown_fields)]
 pub struct ScanSpec {
     /// The scanner's position (model space).
+    #[serde(deserialize_with = "num::finite")]
     pub from: [f32; 3],
     /// The point it looks at (default: the mesh's centre).
+    #[serde(default, deserialize_with = "num::finite")]
     pub at: Option<[f32; 3]>,
     /// Rays per row and rows.
+    #[serde(default, deserialize_with = "num::generated")]
     pub rays: Option<[u32; 2]>,
     /// `raster` or `lines`.
     #[serde(default)]
     pub pattern: crate::scanner::ScanPattern,
     /// Vertical field of view, degrees (default: the mesh fills it).
+    #[serde(default, deserialize_with = "num::fov")]
     pub fov: Option<f32>,
     /// Range noise, absolute (model units).
+    #[serde(default, deserialize_with = "num::non_negative")]
     pub range_noise: Option<f32>,
     /// Range noise as a multiple of the scan's point spacing.
+    #[serde(default, deserialize_with = "num::non_negative")]
     pub range_noise_spacing: Option<f32>,
     /// Fraction of returns replaced by outliers.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "num::fraction")]
     pub outliers: f32,
     /// Fraction of returns dropped.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "num::fraction")]
     pub missing: f32,
 }
 
@@ -243,15 +257,19 @@ pub struct ShapeSpec {
     /// `sphere` or `quad`.
     pub kind: ShapeKind,
     /// Centre.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "num::finite")]
     pub center: [f32; 3],
     /// Sphere radius.
+    #[serde(default, deserialize_with = "num::positive")]
     pub radius: Option<f32>,
     /// Quad size (two edge lengths).
+    #[serde(default, deserialize_with = "num::positive")]
     pub size: Option<[f32; 2]>,
     /// Quad normal.
+    #[serde(default, deserialize_with = "num::finite")]
     pub normal: Option<[f32; 3]>,
     /// Number of splats.
+    #[serde(deserialize_with = "num::generated")]
     pub splats: usize,
 }
 
@@ -263,14 +281,19 @@ pub struct MaterialSpec {
     #[serde(default)]
     pub kind: MaterialKind,
     /// Albedo; multiplies the point colours when the data has them.
+    #[serde(default, deserialize_with = "num::non_negative")]
     pub color: Option<[f32; 3]>,
     /// Blinn–Phong specular strength (`phong`).
+    #[serde(default, deserialize_with = "num::non_negative")]
     pub specular: Option<f32>,
     /// Blinn–Phong exponent (`phong`).
+    #[serde(default, deserialize_with = "num::non_negative")]
     pub shininess: Option<f32>,
     /// Mirror reflectance (`mirror`).
+    #[serde(default, deserialize_with = "num::fraction")]
     pub reflectance: Option<f32>,
     /// Index of refraction (`glass`).
+    #[serde(default, deserialize_with = "num::positive")]
     pub ior: Option<f32>,
     /// Shading mode for this model's splats (`flat`, `blended`, `phong`),
     /// overriding `[render] shading`.
@@ -289,6 +312,7 @@ pub struct ModelSpec {
     /// A triangle mesh (PLY) to sample points from.
     pub mesh: Option<PathBuf>,
     /// How many points to sample from `mesh` uniformly by area.
+    #[serde(default, deserialize_with = "num::generated")]
     pub samples: Option<usize>,
     /// Or: scan `mesh` from a viewpoint, like a range scanner.
     pub scan: Option<ScanSpec>,
@@ -315,19 +339,23 @@ pub struct LightSpec {
     /// `point`, `directional` or `sphere`.
     pub kind: LightKind,
     /// Position (`point`, `sphere`).
+    #[serde(default, deserialize_with = "num::finite")]
     pub position: Option<[f64; 3]>,
     /// Direction the light travels (`directional`).
+    #[serde(default, deserialize_with = "num::finite")]
     pub direction: Option<[f32; 3]>,
     /// Colour.
-    #[serde(default = "white")]
+    #[serde(default = "white", deserialize_with = "num::non_negative")]
     pub color: [f32; 3],
     /// Intensity (radiant intensity for point lights, irradiance for
     /// directional ones).
-    #[serde(default = "one_f32")]
+    #[serde(default = "one_f32", deserialize_with = "num::non_negative")]
     pub intensity: f32,
     /// Radius (`sphere`).
+    #[serde(default, deserialize_with = "num::positive")]
     pub radius: Option<f32>,
     /// Shadow samples per shading point (`sphere`).
+    #[serde(default, deserialize_with = "num::light_samples")]
     pub samples: Option<u32>,
 }
 
@@ -336,15 +364,19 @@ pub struct LightSpec {
 #[serde(deny_unknown_fields)]
 pub struct RenderSpec {
     /// Maximum recursion depth for reflection and refraction.
+    #[serde(default, deserialize_with = "num::depth")]
     pub max_depth: Option<u32>,
     /// `flat`, `blended` or `phong` (default `phong`).
     pub shading: Option<ShadingMode>,
     /// Blending window `xi` of every model, fraction of the scene diagonal
     /// (§4.3); by default each model's is measured on its splats.
+    #[serde(default, deserialize_with = "num::non_negative")]
     pub xi: Option<f32>,
     /// Self-intersection distance, fraction of the scene diagonal (§3.2).
+    #[serde(default, deserialize_with = "num::non_negative")]
     pub eps_self: Option<f32>,
     /// Ambient term.
+    #[serde(default, deserialize_with = "num::non_negative")]
     pub ambient: Option<f32>,
 }
 
@@ -355,7 +387,7 @@ pub struct SceneFile {
     /// The camera.
     pub camera: CameraSpec,
     /// Background radiance.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "num::non_negative")]
     pub background: [f32; 3],
     /// Models.
     #[serde(default, rename = "model")]
@@ -382,12 +414,27 @@ pub fn parse_scene_str(text: &str) -> Result<SceneFile> {
         let msg = e.message().to_string();
         match e.span() {
             Some(span) => {
-                let line = text[..span.start.min(text.len())].matches('\n').count() + 1;
-                Error::invalid(format!("line {line}: {msg}"))
+                let start = span.start.min(text.len());
+                let line = text[..start].matches('\n').count() + 1;
+                match key_before(&text[..start]) {
+                    Some(key) => Error::invalid(format!("line {line}: `{key}` {msg}")),
+                    None => Error::invalid(format!("line {line}: {msg}")),
+                }
             }
             None => Error::invalid(msg),
         }
     })
+}
+
+/// The key whose value starts at the end of `before` (`key = ` on the same
+/// line, inline tables included), for a message about that value.
+fn key_before(before: &str) -> Option<&str> {
+    let line = &before[before.rfind('\n').map_or(0, |i| i + 1)..];
+    let lhs = line[..line.rfind('=')?].trim_end();
+    let key = &lhs[lhs
+        .rfind(|c: char| !(c.is_alphanumeric() || c == '_' || c == '-' || c == '.'))
+        .map_or(0, |i| i + 1)..];
+    (!key.is_empty()).then_some(key)
 }
 
 #[cfg(test)]
@@ -401,15 +448,15 @@ mod tests {
         for (line, expect) in [
             (
                 "shape = { kind = \"cube\", radius = 1.0, splats = 10 }",
-                "line 5: unknown variant `cube`",
+                "line 5: `kind` unknown variant `cube`",
             ),
             (
                 "shape = { kind = \"sphere\", radius = 1.0, splats = 10 }\nmaterial = { kind = \"glas\" }",
-                "line 6: unknown variant `glas`, expected one of `diffuse`, `phong`, `mirror`, `glass`",
+                "line 6: `kind` unknown variant `glas`, expected one of `diffuse`, `phong`, `mirror`, `glass`",
             ),
             (
                 "shape = { kind = \"sphere\", radius = 1.0, splats = 10 }\n[render]\nshading = \"smooth\"",
-                "line 7: unknown variant `smooth`, expected one of `flat`, `blended`, `phong`",
+                "line 7: `shading` unknown variant `smooth`, expected one of `flat`, `blended`, `phong`",
             ),
         ] {
             let e = parse_scene_str(&format!("{HEAD}{line}\n"))

@@ -52,16 +52,27 @@ pub fn build_scene(file: &SceneFile, base: &Path, progress: Option<Progress<'_>>
         .map(|l| light(l, shift))
         .collect::<Result<Vec<_>, _>>()?;
     let (offset, diagonal) = recentre(&mut models.splats);
+    if !diagonal.is_finite() || diagonal > MAX_EXTENT {
+        return Err(Error::invalid(format!(
+            "the models span {:.2e} once placed, beyond the {MAX_EXTENT:e} the renderer's f32 \
+             geometry holds (a model's size, scale or translate)",
+            models.span
+        )));
+    }
     let lights = lights.into_iter().map(|l| moved(l, offset)).collect();
-    let camera = Camera::look_at(
-        shifted(c.from, shift) - offset,
-        shifted(c.at, shift) - offset,
-        v3(c.up),
-        c.fov,
-        c.width,
-        c.height,
-        c.spp,
-    )?;
+    let (from, at) = (
+        camera_point("from", c.from, shift, offset)?,
+        camera_point("at", c.at, shift, offset)?,
+    );
+    if from == at && c.from != c.at {
+        return Err(Error::invalid(format!(
+            "camera: `from` and `at` are {:.2e} apart, too close to tell apart {:.2e} from the \
+             models in f32",
+            (DVec3::from(c.from) - DVec3::from(c.at)).length(),
+            (DVec3::from(c.from) - shift).length()
+        )));
+    }
+    let camera = Camera::look_at(from, at, v3(c.up), c.fov, c.width, c.height, c.spp)?;
     let (options, xi_of) = render_options(&file.render, diagonal, &models.standoff)?;
     Ok(Scene {
         splats: models.splats,
@@ -77,6 +88,25 @@ pub fn build_scene(file: &SceneFile, base: &Path, progress: Option<Progress<'_>>
         shift,
         load: models.load,
     })
+}
+
+/// The widest scene the renderer takes, after re-centring: the squared
+/// distances of the ray-disc tests (and a diagonal's worth of `t`) stay
+/// finite in f32.
+pub const MAX_EXTENT: f32 = 1e18;
+
+/// A camera point (f64, in the file) shifted and re-centred into the f32
+/// frame of the splats; an error if f32 cannot hold it.
+fn camera_point(key: &str, p: [f64; 3], shift: DVec3, offset: Vec3) -> Result<Vec3> {
+    let q = DVec3::from(p) - shift - offset.as_dvec3();
+    if q.abs().max_element() > f64::from(MAX_EXTENT) {
+        return Err(Error::invalid(format!(
+            "camera: `{key}` lies {:.2e} from the models, beyond the {MAX_EXTENT:e} the renderer's \
+             f32 geometry holds",
+            q.length()
+        )));
+    }
+    Ok(q.as_vec3())
 }
 
 /// The camera's resolution, samples and position are in range.
@@ -113,6 +143,9 @@ struct Models {
     shading_of: Vec<Option<ShadingMode>>,
     /// Each model's splat standoff (`splat::standoff`).
     standoff: Vec<f32>,
+    /// The diagonal of the placed splats' centres, in f64 (for a message
+    /// when f32 cannot hold it).
+    span: f64,
     load: LoadReport,
 }
 
@@ -128,8 +161,10 @@ fn load_models(specs: &[ModelSpec], base: &Path, progress: Option<Progress<'_>>)
         materials: Vec::new(),
         shading_of: Vec::new(),
         standoff: Vec::new(),
+        span: 0.0,
         load: LoadReport::default(),
     };
+    let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
     for (i, m) in specs.iter().enumerate() {
         let number = i + 1;
         let in_model = |e: Error| e.context(format_args!("model {number}"));
@@ -147,6 +182,21 @@ fn load_models(specs: &[ModelSpec], base: &Path, progress: Option<Progress<'_>>)
             .push(truth_of(src.truth, m, number, mid, shift));
         let s = &mut src.splats;
         m.transform.apply(s, src.origin, shift);
+        for sp in s.iter() {
+            let c = sp.center.as_dvec3();
+            let r = f64::from(sp.radii.max_element());
+            lo = lo.min(c - r);
+            hi = hi.max(c + r);
+        }
+        if let Some(bad) = s.iter().position(|sp| !placed_ok(sp)) {
+            return Err(in_model(Error::invalid(format!(
+                "splat {} is not finite once placed (transform.scale {}, translate {:?}): \
+                 beyond what the renderer's f32 geometry holds",
+                bad + 1,
+                m.transform.scale,
+                m.transform.translate
+            ))));
+        }
         out.standoff.push(crate::splat::standoff::standoff(s));
         out.materials.push(material(&m.material).map_err(in_model)?);
         out.shading_of.push(m.material.shading);
@@ -154,6 +204,11 @@ fn load_models(specs: &[ModelSpec], base: &Path, progress: Option<Progress<'_>>)
         out.splats.append(s);
     }
     out.shift = shift.unwrap_or(DVec3::ZERO);
+    out.span = if lo.x <= hi.x {
+        (hi - lo).length()
+    } else {
+        0.0
+    };
     out.load.splat_seconds = start.elapsed().as_secs_f64();
     Ok(out)
 }
@@ -383,7 +438,9 @@ fn shape_splats(shape: &ShapeSpec) -> Result<Vec<Splat>> {
                     "shape.size must be positive, got {size:?}"
                 )));
             }
-            let normal = v3(shape.normal.unwrap_or([0.0, 1.0, 0.0]));
+            let normal = v3(shape.normal.unwrap_or([0.0, 1.0, 0.0]))
+                .try_normalize()
+                .ok_or_else(|| Error::invalid("shape.normal must be non-zero"))?;
             Ok(super::shapes::quad(
                 center,
                 normal,
@@ -422,6 +479,20 @@ fn shape_truth(sh: &ShapeSpec, t: &TransformSpec, material: u16, shift: DVec3) -
             }
         }
     }
+}
+
+/// A placed splat the renderer can use: finite centre, frame and field,
+/// radii finite and above zero.
+fn placed_ok(s: &Splat) -> bool {
+    s.center.is_finite()
+        && s.normal.is_finite()
+        && s.u_axis.is_finite()
+        && s.v_axis.is_finite()
+        && s.radii.is_finite()
+        && s.radii.min_element() > 0.0
+        && [s.field.xc, s.field.yc, s.field.alpha, s.field.beta]
+            .iter()
+            .all(|x| x.is_finite())
 }
 
 fn v3(a: [f32; 3]) -> Vec3 {

@@ -13,6 +13,7 @@ pub mod cloud;
 pub mod file;
 pub mod load;
 pub mod model;
+pub mod num;
 pub mod shapes;
 
 pub use file::{

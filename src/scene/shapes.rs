@@ -64,16 +64,17 @@ pub fn sphere(center: Vec3, radius: f32, n: usize) -> Vec<Splat> {
 pub fn quad(center: Vec3, normal: Vec3, size: Vec2, n: usize) -> Vec<Splat> {
     let normal = normal.try_normalize().unwrap_or(Vec3::Y);
     let (tu, tv) = tangent_frame(normal);
-    let n = n.max(1) as f32;
+    let cap = n.max(1);
+    let n = cap as f32;
     let mut h = (size.x * size.y / n).sqrt().max(f32::MIN_POSITIVE);
     // The split edge cells add to the count: widen the cells until it is
     // about `n` again.
     for _ in 0..4 {
-        let count = (edges(size.x, h).len() - 1) * (edges(size.y, h).len() - 1);
+        let count = (edges(size.x, h, cap).len() - 1) * (edges(size.y, h, cap).len() - 1);
         h *= (count as f32 / n).sqrt().max(1.0);
     }
-    let xs = edges(size.x, h);
-    let ys = edges(size.y, h);
+    let xs = edges(size.x, h, cap);
+    let ys = edges(size.y, h, cap);
     let mut out = Vec::with_capacity(xs.len() * ys.len());
     for y in ys.windows(2) {
         for x in xs.windows(2) {
@@ -103,9 +104,11 @@ pub fn quad(center: Vec3, normal: Vec3, size: Vec2, n: usize) -> Vec<Splat> {
 }
 
 /// Cell boundaries across a side of length `len` centred on 0: cells of
-/// about `h`, the first and last split into three.
-fn edges(len: f32, h: f32) -> Vec<f32> {
-    let cells = (len / h).ceil().max(1.0) as usize;
+/// about `h`, the first and last split into three; at most `cap` cells (a
+/// side far longer than the other, `size = [1e30, 1e-30]`, would otherwise
+/// ask for 1e30 of them).
+fn edges(len: f32, h: f32, cap: usize) -> Vec<f32> {
+    let cells = (len / h).ceil().clamp(1.0, cap as f32) as usize;
     let step = len / cells as f32;
     let start = -0.5 * len;
     let mut e = vec![start];
