@@ -9,6 +9,7 @@ pub mod error;
 pub mod freespace;
 pub mod geometry;
 pub mod io;
+pub mod memory;
 pub mod primitive;
 pub mod progress;
 pub mod render;

@@ -23,24 +23,30 @@ enum Command {
     Info,
     /// Render a scene (default: the bundled scenes/bunny.toml), or a point
     /// cloud with a scene made for it, to an image.
+    #[command(allow_negative_numbers = true)]
     Render(cli::render::RenderArgs),
     /// Render a scene with every registered backend in one run and report
     /// each one's agreement with the first ray for ray, image for image,
     /// and their speeds and memory.
+    #[command(allow_negative_numbers = true)]
     Compare(cli::compare::CompareArgs),
     /// Sample points from a triangle mesh (PLY): uniformly by area, or as a
     /// range scanner sees it from a viewpoint (--scan-from).
+    #[command(allow_negative_numbers = true)]
     Sample(cli::sample_cmd::SampleArgs),
     /// Turn a point cloud into splats with Phong normal fields.
+    #[command(allow_negative_numbers = true)]
     Splat(cli::splat_cmd::SplatArgs),
     /// Vary the splat budget (epsilon) and the shading mode; measure splat
     /// generation, build and render seconds of every backend and the errors
     /// against the exact surface; write a CSV and a time-against-error plot
     /// (report §4.4, fig. 16).
+    #[command(allow_negative_numbers = true)]
     Sweep(cli::sweep::SweepArgs),
     /// Check splats against the scan itself: hold out some points, splat the
     /// rest, and cast a ray from the scanner to every held-out point; report
     /// how many meet the splats at the point, early, late or not at all.
+    #[command(allow_negative_numbers = true)]
     ScanCheck(cli::scan_check::ScanCheckArgs),
 }
 

@@ -323,3 +323,238 @@ fn loose_numbers_are_checked() {
     let r = run("background", "render", &bg, &[]);
     fails_cleanly("background", &r, &["`background`", "line 6"]);
 }
+
+/// Writes `bytes` to `name` in a fresh folder; returns its path.
+fn file(name: &str, bytes: &[u8]) -> std::path::PathBuf {
+    let dir = scratch(&format!("hostile-file-{name}"));
+    let p = dir.join(name);
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+/// The error of reading points from `bytes` saved as `name`.
+fn points_error(name: &str, bytes: &[u8]) -> String {
+    let e = splatray::io::read_points(&file(name, bytes))
+        .unwrap_err()
+        .to_string();
+    assert_eq!(e.lines().count(), 1, "{e}");
+    e
+}
+
+const PLY_XYZ: &str = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n";
+
+/// Class 3: a compressed PCD body that claims more than LZF can expand to
+/// fails before anything is allocated for it.
+#[test]
+fn decompression_bombs_fail_before_decompressing() {
+    let n: u32 = 300_000_000;
+    let mut bytes = format!(
+        "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {n}\nHEIGHT 1\nPOINTS {n}\nDATA binary_compressed\n"
+    )
+    .into_bytes();
+    let raw = n.wrapping_mul(12);
+    bytes.extend_from_slice(&1000u32.to_le_bytes());
+    bytes.extend_from_slice(&raw.to_le_bytes());
+    bytes.extend(std::iter::repeat_n(0u8, 1000));
+    let e = points_error("bomb.pcd", &bytes);
+    assert!(
+        e.contains("bomb.pcd") && e.contains("more than LZF can expand to"),
+        "{e}"
+    );
+}
+
+/// Class 9: a header that names a property twice, or rows with more values
+/// than the header declares, fail instead of being read shifted.
+#[test]
+fn ply_columns_are_never_read_shifted() {
+    let dup = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float x\nproperty float z\nend_header\n0 0 0 0\n1 0 0 0\n0 1 0 0\n";
+    let e = points_error("dup.ply", dup.as_bytes());
+    assert!(
+        e.contains("line 6") && e.contains("\"x\" is declared twice"),
+        "{e}"
+    );
+    let extra = format!("{PLY_XYZ}end_header\n0 0 0\n1 0 0 9\n0 1 0\n");
+    let e = points_error("extra.ply", extra.as_bytes());
+    assert!(
+        e.contains("line 9") && e.contains("past its properties"),
+        "{e}"
+    );
+    let short = format!("{PLY_XYZ}end_header\n0 0 0\n1 0\n0 1 0\n");
+    let e = points_error("short.ply", short.as_bytes());
+    assert!(
+        e.contains("line 9") && e.contains("\"z\"") && e.contains("ends early"),
+        "{e}"
+    );
+}
+
+/// Class 10: messages say what is wrong where it is.
+#[test]
+fn reader_messages_name_the_real_fault() {
+    // A list-typed coordinate is not "non-finite coordinates".
+    let list = "ply\nformat ascii 1.0\nelement vertex 3\nproperty list uchar float x\nproperty float y\nproperty float z\nend_header\n1 0 0 0\n1 1 0 0\n1 0 1 0\n";
+    let e = points_error("list.ply", list.as_bytes());
+    assert!(e.contains("\"x\" is a list"), "{e}");
+    // Float face indices are not "negative vertex index".
+    let faces = format!(
+        "{PLY_XYZ}element face 1\nproperty list uchar float vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"
+    );
+    let e = splatray::io::read_mesh(&file("faces.ply", faces.as_bytes()))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("must be a list of integers"), "{e}");
+    // 8-byte integer PCD fields are read, not turned into NaN.
+    let mut pcd = b"VERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE U U I\nCOUNT 1 1 1\nWIDTH 3\nHEIGHT 1\nPOINTS 3\nDATA binary\n".to_vec();
+    for p in [[1u64, 2, 3], [4, 5, 6], [7, 9, 8]] {
+        pcd.extend_from_slice(&p[0].to_le_bytes());
+        pcd.extend_from_slice(&p[1].to_le_bytes());
+        pcd.extend_from_slice(&(-(p[2] as i64)).to_le_bytes());
+    }
+    let c = splatray::io::read_points(&file("u8.pcd", &pcd)).unwrap();
+    assert_eq!(c.len(), 3);
+    assert_eq!(c.world(2), glam::DVec3::new(7.0, 9.0, -8.0));
+    // `nan` in an ascii PLY is a point to skip, as everywhere else.
+    let nan = format!("{PLY_XYZ}end_header\n0 0 0\nnan 0 0\n0 1 0\n");
+    let nan_path = file("nan.ply", nan.as_bytes());
+    let c = splatray::io::read_points(&nan_path).unwrap();
+    assert_eq!((c.len(), c.skipped_total()), (2, 1), "{c:?}");
+    // A negative number for a flag reaches its check.
+    let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+        .arg("splat")
+        .arg(&nan_path)
+        .args(["--epsilon", "-0.1", "-o"])
+        .arg(nan_path.with_file_name("out.ply"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("epsilon = -0.1"),
+        "{err}"
+    );
+}
+
+/// An ascii splat file with one splat row `row` (21 values).
+fn splat_file(name: &str, rows: &[&str]) -> std::path::PathBuf {
+    let props = [
+        "x",
+        "y",
+        "z",
+        "nx",
+        "ny",
+        "nz",
+        "radius",
+        "ux",
+        "uy",
+        "uz",
+        "vx",
+        "vy",
+        "vz",
+        "radius_v",
+        "field_xc",
+        "field_yc",
+        "field_alpha",
+        "field_beta",
+        "red",
+        "green",
+        "blue",
+    ];
+    let mut text = format!("ply\nformat ascii 1.0\nelement vertex {}\n", rows.len());
+    for p in props {
+        text += &format!("property float {p}\n");
+    }
+    text += "end_header\n";
+    for r in rows {
+        text += r;
+        text += "\n";
+    }
+    file(name, text.as_bytes())
+}
+
+const GOOD_SPLAT: &str = "0 0 0 0 0 1 0.1 1 0 0 0 1 0 0.1 0 0 0 0 0.5 0.5 0.5";
+
+/// Class 7 (splat files) and 11 (an empty one): every splat value is
+/// checked as it is read.
+#[test]
+fn splat_file_values_are_checked() {
+    for (name, row, expect) in [
+        (
+            "zero-u",
+            "0 0 0 0 0 1 0.1 0 0 0 0 1 0 0.1 0 0 0 0 0.5 0.5 0.5",
+            "u axis",
+        ),
+        (
+            "u-along-n",
+            "0 0 0 0 0 1 0.1 0 0 2 0 1 0 0.1 0 0 0 0 0.5 0.5 0.5",
+            "u axis",
+        ),
+        (
+            "slope",
+            "0 0 0 0 0 1 0.1 1 0 0 0 1 0 0.1 0 0 1e30 0 0.5 0.5 0.5",
+            "normal field",
+        ),
+        (
+            "colour",
+            "0 0 0 0 0 1 0.1 1 0 0 0 1 0 0.1 0 0 0 0 -1 0.5 0.5",
+            "negative colour",
+        ),
+    ] {
+        let e = splatray::io::read_splats(&splat_file(&format!("{name}.ply"), &[GOOD_SPLAT, row]))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("splat 1") && e.contains(expect), "{name}: {e}");
+    }
+    // A normal of length 1e30 is a direction: normalised without overflow.
+    let long = "0 0 0 0 0 1e30 0.1 1 0 0 0 1 0 0.1 0 0 0 0 0.5 0.5 0.5";
+    let s = splatray::io::read_splats(&splat_file("long-normal.ply", &[long])).unwrap();
+    assert_eq!(s.splats[0].normal, glam::Vec3::Z);
+    // A splat at 1e38 is read (a transform may bring it in) but not
+    // rendered as it is.
+    let far = "1e38 0 0 0 0 1 0.1 1 0 0 0 1 0 0.1 0 0 0 0 0.5 0.5 0.5";
+    let path = splat_file("far.ply", &[GOOD_SPLAT, far]);
+    let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+        .arg("render")
+        .arg(&path)
+        .arg("-o")
+        .arg(path.with_file_name("out.png"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("span"), "{err}");
+    assert!(!leftovers(path.parent().unwrap()));
+    let e = splatray::io::read_splats(&splat_file("empty.ply", &[]))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no splats"), "{e}");
+}
+
+/// Class 11: outputs under the wrong extension, and a PCD whose organised
+/// size disagrees with its point count.
+#[test]
+fn loose_file_checks() {
+    let cloud = file(
+        "c.ply",
+        format!("{PLY_XYZ}end_header\n0 0 0\n1 0 0\n0 1 0\n").as_bytes(),
+    );
+    let dir = cloud.parent().unwrap();
+    for (cmd, args, expect) in [
+        ("splat", vec!["-o", "out.png"], "must end in .ply"),
+        (
+            "sample",
+            vec!["-n", "10", "-o", "out.png"],
+            "must end in .ply or .pcd",
+        ),
+    ] {
+        let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+            .current_dir(dir)
+            .arg(cmd)
+            .arg(&cloud)
+            .args(args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(expect), "{cmd}: {err}");
+        assert!(!leftovers(dir), "{cmd} left an output");
+    }
+    let pcd = b"VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 2\nPOINTS 3\nDATA ascii\n0 0 0\n1 0 0\n0 1 0\n";
+    let e = points_error("wh.pcd", pcd);
+    assert!(e.contains("WIDTH 2 x HEIGHT 2 is not POINTS 3"), "{e}");
+}

@@ -89,6 +89,7 @@ fn vec3(v: &[f64], what: &str) -> Result<glam::DVec3, String> {
 /// When the mesh cannot be read, has no area, the scan sees nothing, or the
 /// output cannot be written.
 pub fn run(args: &SampleArgs) -> Result<(), String> {
+    splatray::render::output::check_extension(&args.output, &["ply", "pcd"])?;
     if let Some(from) = &args.scan_from {
         return scan(args, vec3(from, "--scan-from")?);
     }

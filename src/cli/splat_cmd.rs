@@ -5,7 +5,7 @@ use super::progress::ProgressLine;
 use glam::DVec3;
 use splatray::freespace::generate_trimmed;
 use splatray::io::{Batch, encode_splats, read_points};
-use splatray::render::output::check_writable;
+use splatray::render::output::{check_extension, check_writable};
 use splatray::splat::{PointCloud, SplatParams};
 use splatray::validate::holdout::{HeldOutCoverage, heldout_coverage};
 use std::path::PathBuf;
@@ -114,7 +114,7 @@ impl SplatOptions {
 /// be written.
 pub fn run(args: &SplatArgs) -> Result<(), String> {
     args.splat.viewpoint()?;
-    check_writable(&args.output)?;
+    check_extension(&args.output, &["ply"])?;
     if let Some(r) = &args.report {
         check_writable(r)?;
     }

@@ -25,7 +25,7 @@ pub use atomic::{Batch, write_atomic, write_bytes};
 pub use error::{IoError, IoErrorKind};
 pub use lzf::lzf_decompress;
 pub use sample::sample_mesh;
-pub use splat_ply::{SplatSet, encode_splats, read_splats, write_splats};
+pub use splat_ply::{SplatSet, encode_splats, parse_splats, read_splats, write_splats};
 
 use glam::{DVec3, Vec3};
 use std::path::Path;
@@ -119,12 +119,19 @@ pub fn read_points(path: &Path) -> Result<PointCloud, IoError> {
     let format = Format::from_extension(path)
         .or_else(|| Format::sniff(&bytes[..bytes.len().min(4096)]))
         .ok_or_else(|| IoError::new(path, IoErrorKind::UnknownFormat))?;
+    parse_points(&bytes, format).map_err(|kind| IoError::new(path, kind))
+}
+
+/// [`read_points`] on a file's bytes, in a known `format`.
+///
+/// # Errors
+/// As [`read_points`], without the file's name.
+pub fn parse_points(bytes: &[u8], format: Format) -> Result<PointCloud, IoErrorKind> {
     let cloud = match format {
-        Format::Ply => ply::read_cloud(&bytes),
-        Format::Pcd => pcd::read_cloud(&bytes),
-        Format::Xyz => xyz::read_cloud(&bytes),
-    }
-    .map_err(|kind| IoError::new(path, kind))?;
+        Format::Ply => ply::read_cloud(bytes),
+        Format::Pcd => pcd::read_cloud(bytes),
+        Format::Xyz => xyz::read_cloud(bytes),
+    }?;
     if cloud.is_empty() {
         let why = if cloud.skipped.is_empty() {
             "the file holds no points".to_string()
@@ -136,7 +143,7 @@ pub fn read_points(path: &Path) -> Result<PointCloud, IoError> {
                 .collect();
             format!("no usable point ({})", parts.join(", "))
         };
-        return Err(IoError::new(path, IoErrorKind::NoPoints(why)));
+        return Err(IoErrorKind::NoPoints(why));
     }
     Ok(cloud)
 }
@@ -150,15 +157,20 @@ pub fn read_points(path: &Path) -> Result<PointCloud, IoError> {
 /// face index out of range, or a non-finite vertex used by a face.
 pub fn read_mesh(path: &Path) -> Result<Mesh, IoError> {
     let bytes = read_file(path)?;
+    parse_mesh(&bytes).map_err(|kind| IoError::new(path, kind))
+}
+
+/// [`read_mesh`] on a file's bytes.
+///
+/// # Errors
+/// As [`read_mesh`], without the file's name.
+pub fn parse_mesh(bytes: &[u8]) -> Result<Mesh, IoErrorKind> {
     if Format::sniff(&bytes[..bytes.len().min(4096)]) != Some(Format::Ply) {
-        return Err(IoError::new(
-            path,
-            IoErrorKind::Header(
-                "a mesh must be a PLY file (it does not start with \"ply\")".into(),
-            ),
+        return Err(IoErrorKind::Header(
+            "a mesh must be a PLY file (it does not start with \"ply\")".into(),
         ));
     }
-    ply::read_mesh(&bytes).map_err(|kind| IoError::new(path, kind))
+    ply::read_mesh(bytes)
 }
 
 /// Write a point cloud, atomically (a temporary file in the same folder,

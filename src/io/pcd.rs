@@ -20,15 +20,18 @@ impl Field {
     /// Decode element `e` of this field from little-endian bytes.
     fn decode(&self, b: &[u8]) -> f64 {
         let arr4 = |b: &[u8]| [b[0], b[1], b[2], b[3]];
+        let arr8 = |b: &[u8]| [b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]];
         match (self.kind, self.size) {
             (b'F', 4) => f64::from(f32::from_le_bytes(arr4(b))),
-            (b'F', 8) => f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]),
+            (b'F', 8) => f64::from_le_bytes(arr8(b)),
             (b'U', 1) => f64::from(b[0]),
             (b'I', 1) => f64::from(b[0] as i8),
             (b'U', 2) => f64::from(u16::from_le_bytes([b[0], b[1]])),
             (b'I', 2) => f64::from(i16::from_le_bytes([b[0], b[1]])),
             (b'U', 4) => f64::from(u32::from_le_bytes(arr4(b))),
             (b'I', 4) => f64::from(i32::from_le_bytes(arr4(b))),
+            (b'U', 8) => u64::from_le_bytes(arr8(b)) as f64,
+            (b'I', 8) => i64::from_le_bytes(arr8(b)) as f64,
             _ => f64::NAN,
         }
     }
@@ -151,6 +154,13 @@ fn parse_header(bytes: &[u8]) -> Result<PcdHeader, IoErrorKind> {
         });
         offset += sizes[i] * counts[i];
     }
+    if let (Some(p), Some(w), Some(h)) = (points, width, height)
+        && w.checked_mul(h) != Some(p)
+    {
+        return Err(IoErrorKind::Header(format!(
+            "WIDTH {w} x HEIGHT {h} is not POINTS {p}"
+        )));
+    }
     let points = match (points, width, height) {
         (Some(p), _, _) => p,
         (None, Some(w), Some(h)) => w.saturating_mul(h),
@@ -197,6 +207,10 @@ fn unpack_color(bits: u32) -> Vec3 {
     let c = |s: u32| srgb_to_linear(((bits >> s) & 0xff) as f32 / 255.0);
     Vec3::new(c(16), c(8), c(0))
 }
+
+/// Bytes a read point takes at most: an f64 position, an f32 normal and an
+/// f32 colour.
+const POINT_BYTES: u64 = 48;
 
 /// Read a PCD cloud (coordinates kept in f64 until the cloud is re-centred,
 /// so `F 8` fields keep their precision).
@@ -295,6 +309,20 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
                         body.len() - 8
                     )));
                 };
+                // LZF expands at most 88 times (a 3-byte back reference
+                // copies 264 bytes): a size beyond that is a lie, and one
+                // the memory cannot hold fails before decompressing.
+                if raw as u128 > comp as u128 * 88 + 32 {
+                    return Err(IoErrorKind::Data(format!(
+                        "the header claims {raw} bytes from {comp} compressed, more than LZF can \
+                         expand to"
+                    )));
+                }
+                crate::memory::check(
+                    "reading the cloud",
+                    (raw as u64).saturating_add((n as u64).saturating_mul(POINT_BYTES)),
+                )
+                .map_err(IoErrorKind::Data)?;
                 decompressed = lzf_decompress(packed, raw).map_err(IoErrorKind::Data)?;
                 (&decompressed[..], true)
             };

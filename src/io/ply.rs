@@ -148,6 +148,7 @@ impl<'a> PlyFile<'a> {
                 "a PLY file must start with \"ply\"".into(),
             ));
         }
+        check_header_names(bytes)?;
         let mut cursor = Cursor::new(bytes);
         let header = Parser::<SkipRow>::new()
             .read_header(&mut cursor)
@@ -181,12 +182,23 @@ impl<'a> PlyFile<'a> {
         mut on_face: Option<FaceSink<'_>>,
     ) -> Result<(), IoErrorKind> {
         let defs: Vec<ElementDef> = self.header.elements.values().cloned().collect();
+        let mut ascii = (self.header.encoding == Encoding::Ascii).then(|| {
+            let bytes = *self.cursor.get_ref();
+            let start = (self.cursor.position() as usize).min(bytes.len());
+            AsciiBody::new(bytes, start)
+        });
         for def in &defs {
             if def.name == "vertex" {
-                let rows = read_rows::<V>(&mut self.cursor, def, &self.header)?;
+                let rows = match ascii.as_mut() {
+                    Some(a) => a.rows::<V>(def)?,
+                    None => read_rows::<V>(&mut self.cursor, def, &self.header)?,
+                };
                 on_vertex(rows);
             } else if def.name == "face" && on_face.is_some() {
-                let rows = read_rows::<FaceRow>(&mut self.cursor, def, &self.header)?;
+                let rows = match ascii.as_mut() {
+                    Some(a) => a.rows::<FaceRow>(def)?,
+                    None => read_rows::<FaceRow>(&mut self.cursor, def, &self.header)?,
+                };
                 if let Some(f) = on_face.as_mut() {
                     f(rows.into_iter().map(|r| r.idx).collect());
                 }
@@ -200,7 +212,10 @@ impl<'a> PlyFile<'a> {
                 if !later_needed {
                     break;
                 }
-                read_rows::<SkipRow>(&mut self.cursor, def, &self.header)?;
+                match ascii.as_mut() {
+                    Some(a) => drop(a.rows::<SkipRow>(def)?),
+                    None => drop(read_rows::<SkipRow>(&mut self.cursor, def, &self.header)?),
+                }
             }
         }
         Ok(())
@@ -216,6 +231,208 @@ impl<'a> PlyFile<'a> {
         Ok(out)
     }
 }
+
+/// Rejects a header that declares an element twice, or a property twice
+/// within one element: `ply-rs-bw` keeps one of each name, and the rows
+/// would be read with shifted columns.
+fn check_header_names(bytes: &[u8]) -> Result<(), IoErrorKind> {
+    let mut elements: Vec<String> = Vec::new();
+    let mut props: Vec<String> = Vec::new();
+    for (i, line) in bytes.split(|&b| b == b'\n').enumerate() {
+        let line = String::from_utf8_lossy(line);
+        let mut it = line.split_whitespace();
+        match it.next() {
+            Some("end_header") => break,
+            Some("element") => {
+                let name = it.next().unwrap_or("").to_string();
+                if elements.contains(&name) {
+                    return Err(IoErrorKind::Header(format!(
+                        "line {}: element \"{name}\" is declared twice",
+                        i + 1
+                    )));
+                }
+                elements.push(name);
+                props.clear();
+            }
+            Some("property") => {
+                let name = it.last().unwrap_or("").to_string();
+                if props.contains(&name) {
+                    return Err(IoErrorKind::Header(format!(
+                        "line {}: property \"{name}\" is declared twice in element \"{}\"",
+                        i + 1,
+                        elements.last().map_or("", String::as_str)
+                    )));
+                }
+                props.push(name);
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// An ascii PLY body read row by row with the file's line numbers: each
+/// element row on its own line, exactly the values its properties take.
+/// (`ply-rs-bw`'s ascii reader numbers element rows, not file lines, and
+/// rejects `nan`, which every other reader here takes as a point to skip.)
+struct AsciiBody<'a> {
+    lines: std::iter::Peekable<std::iter::Enumerate<std::str::Lines<'a>>>,
+    /// File line number of the body's first line, less one.
+    first: usize,
+}
+
+impl<'a> AsciiBody<'a> {
+    fn new(bytes: &'a [u8], start: usize) -> AsciiBody<'a> {
+        let text = std::str::from_utf8(&bytes[start..]).unwrap_or_else(|e| {
+            // Up to the first invalid byte; a row past it is then missing.
+            std::str::from_utf8(&bytes[start..start + e.valid_up_to()]).unwrap_or("")
+        });
+        AsciiBody {
+            lines: text.lines().enumerate().peekable(),
+            first: bytes[..start].iter().filter(|&&b| b == b'\n').count(),
+        }
+    }
+
+    fn rows<E: PropertyAccess>(&mut self, def: &ElementDef) -> Result<Vec<E>, IoErrorKind> {
+        let mut out = Vec::with_capacity(def.count.min(1 << 20));
+        for row in 0..def.count {
+            let (no, line) = loop {
+                match self.lines.next() {
+                    Some((_, l)) if l.trim().is_empty() => {}
+                    Some((i, l)) => break (self.first + i + 1, l),
+                    None => {
+                        return Err(IoErrorKind::Truncated(format!(
+                            "the file ends after {row} of the {} \"{}\" rows its header promises",
+                            def.count, def.name
+                        )));
+                    }
+                }
+            };
+            let mut toks = line.split_whitespace();
+            let mut e = E::new();
+            for p in def.properties.values() {
+                let v = ascii_property(&mut toks, &p.data_type).map_err(|why| {
+                    IoErrorKind::Data(format!(
+                        "line {no}: {} {row}, property \"{}\": {why}",
+                        def.name, p.name
+                    ))
+                })?;
+                e.set_property(&p.name, v);
+            }
+            if let Some(extra) = toks.next() {
+                return Err(IoErrorKind::Data(format!(
+                    "line {no}: {} {row} has values past its properties (\"{extra}\" and on)",
+                    def.name
+                )));
+            }
+            out.push(e);
+        }
+        Ok(out)
+    }
+}
+
+/// One ascii value (or list) of type `t` from `toks`.
+fn ascii_property<'t>(
+    toks: &mut impl Iterator<Item = &'t str>,
+    t: &PropertyType,
+) -> Result<Property, String> {
+    fn int<T: TryFrom<i64>>(s: &str) -> Result<T, String> {
+        s.parse::<i64>()
+            .ok()
+            .and_then(|v| T::try_from(v).ok())
+            .ok_or_else(|| format!("\"{s}\" is not an integer of its type"))
+    }
+    fn float(s: &str) -> Result<f64, String> {
+        s.parse::<f64>()
+            .map_err(|_| format!("\"{s}\" is not a number"))
+    }
+    let mut next = || toks.next().ok_or_else(|| "the line ends early".to_string());
+    Ok(match t {
+        PropertyType::Scalar(s) => {
+            let v = next()?;
+            match s {
+                ScalarType::Char => Property::Char(int(v)?),
+                ScalarType::UChar => Property::UChar(int(v)?),
+                ScalarType::Short => Property::Short(int(v)?),
+                ScalarType::UShort => Property::UShort(int(v)?),
+                ScalarType::Int => Property::Int(int(v)?),
+                ScalarType::UInt => Property::UInt(int(v)?),
+                ScalarType::Float => Property::Float(float(v)? as f32),
+                ScalarType::Double => Property::Double(float(v)?),
+            }
+        }
+        PropertyType::List(_, item) => {
+            let n: u32 = int(next()?)?;
+            let mut items = Vec::with_capacity((n as usize).min(64));
+            for _ in 0..n {
+                items.push(next()?);
+            }
+            let all = |f: &dyn Fn(&str) -> Result<f64, String>| -> Result<Vec<f64>, String> {
+                items.iter().map(|s| f(s)).collect()
+            };
+            match item {
+                ScalarType::Char => {
+                    Property::ListChar(items.iter().map(|s| int(s)).collect::<Result<_, _>>()?)
+                }
+                ScalarType::UChar => {
+                    Property::ListUChar(items.iter().map(|s| int(s)).collect::<Result<_, _>>()?)
+                }
+                ScalarType::Short => {
+                    Property::ListShort(items.iter().map(|s| int(s)).collect::<Result<_, _>>()?)
+                }
+                ScalarType::UShort => {
+                    Property::ListUShort(items.iter().map(|s| int(s)).collect::<Result<_, _>>()?)
+                }
+                ScalarType::Int => {
+                    Property::ListInt(items.iter().map(|s| int(s)).collect::<Result<_, _>>()?)
+                }
+                ScalarType::UInt => {
+                    Property::ListUInt(items.iter().map(|s| int(s)).collect::<Result<_, _>>()?)
+                }
+                ScalarType::Float => {
+                    Property::ListFloat(all(&float)?.into_iter().map(|x| x as f32).collect())
+                }
+                ScalarType::Double => Property::ListDouble(all(&float)?),
+            }
+        }
+    })
+}
+
+/// Rejects list-typed properties among `names` of the vertex element: a
+/// coordinate, normal or colour must be one number.
+pub(crate) fn require_scalars(header: &Header, names: &[&str]) -> Result<(), IoErrorKind> {
+    let Some(v) = header.elements.get("vertex") else {
+        return Ok(());
+    };
+    for p in v.properties.values() {
+        if names.contains(&p.name.as_str()) && matches!(p.data_type, PropertyType::List(..)) {
+            return Err(IoErrorKind::Header(format!(
+                "vertex property \"{}\" is a list; it must be a single number",
+                p.name
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The vertex properties a point cloud or mesh reads.
+const POINT_PROPS: [&str; 15] = [
+    "x",
+    "y",
+    "z",
+    "nx",
+    "ny",
+    "nz",
+    "red",
+    "green",
+    "blue",
+    "r",
+    "g",
+    "b",
+    "diffuse_red",
+    "diffuse_green",
+    "diffuse_blue",
+];
 
 fn read_rows<E: PropertyAccess>(
     cursor: &mut Cursor<&[u8]>,
@@ -265,6 +482,7 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
             "the \"vertex\" element lacks x, y and z properties".into(),
         ));
     }
+    require_scalars(&file.header, &POINT_PROPS)?;
     let with_normals = has_props(&file.header, &["nx", "ny", "nz"]);
     let with_colors = has_any_prop(&file.header, &["red", "r", "diffuse_red"])
         && has_any_prop(&file.header, &["green", "g", "diffuse_green"])
@@ -305,6 +523,28 @@ pub(crate) fn read_mesh(bytes: &[u8]) -> Result<Mesh, IoErrorKind> {
         return Err(IoErrorKind::Header(
             "no \"face\" element with a vertex_indices list: not a mesh".into(),
         ));
+    }
+    require_scalars(&file.header, &POINT_PROPS)?;
+    if let Some(p) = file.header.elements.get("face").and_then(|f| {
+        f.properties
+            .values()
+            .find(|p| p.name == "vertex_indices" || p.name == "vertex_index")
+    }) && !matches!(
+        p.data_type,
+        PropertyType::List(
+            _,
+            ScalarType::Char
+                | ScalarType::UChar
+                | ScalarType::Short
+                | ScalarType::UShort
+                | ScalarType::Int
+                | ScalarType::UInt
+        )
+    ) {
+        return Err(IoErrorKind::Header(format!(
+            "face property \"{}\" must be a list of integers, got {:?}",
+            p.name, p.data_type
+        )));
     }
     let mut world: Vec<DVec3> = Vec::new();
     let mut faces = Vec::new();

@@ -150,6 +150,11 @@ pub fn encode_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<Vec
     Ok(out)
 }
 
+/// The largest normal-field value read (eq. 4's `x_c, y_c, alpha, beta`,
+/// in units of the splat's radii; a sphere's splats have `alpha = r/R`,
+/// well below 1).
+const MAX_FIELD: f32 = 1e3;
+
 /// The origin of a `comment splatray origin X Y Z` header line, if any.
 fn origin_of(comments: &[String]) -> Result<Option<DVec3>, IoErrorKind> {
     let Some(rest) = comments
@@ -181,31 +186,39 @@ fn origin_of(comments: &[String]) -> Result<Option<DVec3>, IoErrorKind> {
 /// # Errors
 /// An [`IoError`] when the file cannot be read or parsed, lacks the
 /// properties, has a malformed origin comment, or holds a splat with a
-/// non-finite value, a zero normal or a non-positive radius.
+/// non-finite value, a zero normal or a non-positive radius, axes that are
+/// zero or not across the normal, a normal field or colour out of range;
+/// or no splats at all. (Far or huge splats are read: a scene's transform
+/// may bring them in; the scene checks what it places.)
 pub fn read_splats(path: &Path) -> Result<SplatSet, IoError> {
-    let err = |k| IoError::new(path, k);
     let bytes = super::read_file(path)?;
-    let file = PlyFile::open(&bytes).map_err(err)?;
-    let origin = origin_of(&file.header.comments)
-        .map_err(err)?
-        .unwrap_or(DVec3::ZERO);
+    parse_splats(&bytes).map_err(|k| IoError::new(path, k))
+}
+
+/// [`read_splats`] on a file's bytes.
+///
+/// # Errors
+/// As [`read_splats`], without the file's name.
+pub fn parse_splats(bytes: &[u8]) -> Result<SplatSet, IoErrorKind> {
+    let file = PlyFile::open(bytes)?;
+    let origin = origin_of(&file.header.comments)?.unwrap_or(DVec3::ZERO);
     let vertex = file
         .header
         .elements
         .get("vertex")
-        .ok_or_else(|| err(IoErrorKind::Header("no \"vertex\" element".into())))?;
+        .ok_or_else(|| IoErrorKind::Header("no \"vertex\" element".into()))?;
     let has = |n: &str| vertex.properties.contains_key(n);
     if let Some(missing) = SPLAT_PROPS[..7].iter().find(|n| !has(n)) {
-        return Err(err(IoErrorKind::Header(format!(
+        return Err(IoErrorKind::Header(format!(
             "not a splat file: the vertex element lacks \"{missing}\""
-        ))));
+        )));
     }
     let full = SPLAT_PROPS.iter().all(|n| has(n));
-    let rows = file.read_vertices::<SplatRow>().map_err(err)?;
+    let rows = file.read_vertices::<SplatRow>()?;
     let mut splats = Vec::with_capacity(rows.len());
     for (i, r) in rows.iter().enumerate() {
         let v = &r.v;
-        let bad = |what: &str| err(IoErrorKind::Data(format!("splat {i}: {what}")));
+        let bad = |what: &str| IoErrorKind::Data(format!("splat {i}: {what}"));
         let used = if full { &v[..] } else { &v[..7] };
         if used.iter().any(|x| !x.is_finite()) {
             return Err(bad("non-finite value"));
@@ -215,15 +228,49 @@ pub fn read_splats(path: &Path) -> Result<SplatSet, IoError> {
         if v[6] <= 0.0 || normal.length_squared() == 0.0 {
             return Err(bad("zero normal or non-positive radius"));
         }
+        // Scaled before normalising: a normal of length 1e30 would
+        // overflow its squared length.
+        // Unit vectors are kept bit for bit.
+        let unit = |a: Vec3| {
+            if (a.length_squared() - 1.0).abs() < 1e-5 {
+                Some(a)
+            } else {
+                (a / a.abs().max_element()).try_normalize()
+            }
+        };
+        let normal = unit(normal).ok_or_else(|| bad("zero normal"))?;
         let splat = if full {
             if v[13] <= 0.0 {
-                return Err(bad("non-positive radius_v"));
+                return Err(bad("radius_v must be above 0"));
             }
+            if let Some(x) = v[14..18].iter().find(|x| x.abs() > MAX_FIELD) {
+                return Err(bad(&format!(
+                    "normal field value {x:e} beyond {MAX_FIELD:e} (a slope across the splat)"
+                )));
+            }
+            if v[18..21].iter().any(|&c| c < 0.0) {
+                return Err(bad("negative colour"));
+            }
+            let u = Vec3::new(v[7], v[8], v[9]);
+            let u_axis = unit(u)
+                .filter(|a| a.dot(normal).abs() < 1e-4)
+                .or_else(|| unit(u - normal * normal.dot(u)))
+                .ok_or_else(|| bad("u axis zero or along the normal"))?;
+            let w = normal.cross(u_axis);
+            let given_v = Vec3::new(v[10], v[11], v[12]);
+            let v_axis = match unit(given_v) {
+                Some(g) if g.dot(w) > 0.9999 => g,
+                Some(g) if g.dot(w) < -0.9999 => g,
+                Some(g) if g.dot(w).abs() >= 0.99 => w * g.dot(w).signum(),
+                _ => {
+                    return Err(bad("v axis zero or not across the normal and the u axis"));
+                }
+            };
             Splat {
                 center,
                 normal,
-                u_axis: Vec3::new(v[7], v[8], v[9]),
-                v_axis: Vec3::new(v[10], v[11], v[12]),
+                u_axis,
+                v_axis,
                 radii: Vec2::new(v[6], v[13]),
                 field: NormalField {
                     xc: v[14],
@@ -237,6 +284,9 @@ pub fn read_splats(path: &Path) -> Result<SplatSet, IoError> {
             Splat::disc(center, normal, v[6]).ok_or_else(|| bad("zero normal"))?
         };
         splats.push(splat);
+    }
+    if splats.is_empty() {
+        return Err(IoErrorKind::NoPoints("the file holds no splats".into()));
     }
     Ok(SplatSet { splats, origin })
 }

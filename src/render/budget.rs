@@ -102,16 +102,6 @@ pub fn estimate(scene: &Scene, frames: u32) -> Estimate {
     }
 }
 
-/// The memory this machine has available now (`MemAvailable` of
-/// `/proc/meminfo`), if it says.
-#[must_use]
-pub fn available_memory() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb.saturating_mul(1024))
-}
-
 /// Checks [`estimate`] against `limits`.
 ///
 /// # Errors
@@ -145,7 +135,7 @@ pub fn check(scene: &Scene, frames: u32, limits: &Limits) -> Result<Estimate> {
     }
     let (limit, whose) = match limits.max_bytes {
         Some(b) => (Some(b), "the --max-memory limit"),
-        None => (available_memory(), "the memory available"),
+        None => (crate::memory::available(), "the memory available"),
     };
     if let Some(limit) = limit
         && e.bytes > limit

@@ -58,6 +58,27 @@ pub fn check_output_path(path: &Path) -> Result<()> {
     check_writable(path)
 }
 
+/// Checks that `path` ends in one of `allowed` (lower case, no dot), then
+/// that it can be written ([`check_writable`]): `-o out.png` for a splat
+/// file is a mistake, not a PLY to write under that name.
+///
+/// # Errors
+/// Another extension, or an unwritable path.
+pub fn check_extension(path: &Path, allowed: &[&str]) -> Result<()> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if !ext.as_deref().is_some_and(|e| allowed.contains(&e)) {
+        let list: Vec<String> = allowed.iter().map(|e| format!(".{e}")).collect();
+        return Err(Error::invalid(format!(
+            "{}: the output must end in {}",
+            path.display(),
+            list.join(" or ")
+        )));
+    }
+    check_writable(path)
+}
+
 /// Checks a path a run will write before any work is done: not a folder, in
 /// a folder that exists (any extension).
 pub fn check_writable(path: &Path) -> Result<()> {

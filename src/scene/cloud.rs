@@ -173,6 +173,21 @@ impl Survey {
 /// # Errors
 /// The reader's one-line error (no usable point among them).
 pub fn survey_file(path: &Path) -> Result<Survey> {
+    let s = survey_unchecked(path)?;
+    let span = 2.0 * s.radius();
+    if span.is_nan() || span > f64::from(super::load::MAX_EXTENT) {
+        return Err(Error::invalid(format!(
+            "{}: the {} span {span:.2e}, beyond the {:e} the renderer's f32 geometry holds",
+            path.display(),
+            s.kind.key(),
+            super::load::MAX_EXTENT
+        )));
+    }
+    Ok(s)
+}
+
+/// [`survey_file`] without the extent check.
+fn survey_unchecked(path: &Path) -> Result<Survey> {
     let is_ply = Format::from_extension(path) == Some(Format::Ply)
         || head(path).is_some_and(|h| Format::sniff(&h) == Some(Format::Ply));
     if is_ply && is_splat_ply(path) {
@@ -610,6 +625,10 @@ pub const BACKGROUND: [f64; 3] = [0.12, 0.13, 0.16];
 /// A number rounded to `digits` decimals (the shortest text that reads
 /// back as the same number after rounding).
 fn num(x: f64, digits: usize) -> String {
+    // Beyond an i64, an integer's text is no TOML number: an exponent.
+    if x.abs() >= 1e15 {
+        return format!("{x:e}");
+    }
     let s = format!("{x:.digits$}");
     let s = if s.contains('.') {
         s.trim_end_matches('0').trim_end_matches('.').to_string()
