@@ -558,3 +558,38 @@ fn loose_file_checks() {
     let e = points_error("wh.pcd", pcd);
     assert!(e.contains("WIDTH 2 x HEIGHT 2 is not POINTS 3"), "{e}");
 }
+
+/// Class 8: a comparison or a sweep whose report or CSV cannot be written
+/// fails before any work and leaves none of its other outputs.
+#[test]
+fn compare_and_sweep_outputs_are_one_batch() {
+    let dir = scratch("hostile-batch");
+    let scene_path = dir.join("scene.toml");
+    std::fs::write(&scene_path, scene("")).unwrap();
+    std::fs::create_dir_all(dir.join("out-report.json")).unwrap();
+    std::fs::create_dir_all(dir.join("out.csv")).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+        .arg("compare")
+        .arg(&scene_path)
+        .arg("--diff")
+        .arg(dir.join("out-diff.png"))
+        .arg("--report")
+        .arg(dir.join("out-report.json"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("is a folder"), "{err}");
+    assert!(!dir.join("out-diff.png").exists());
+    let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+        .arg("sweep")
+        .arg(&scene_path)
+        .arg("--csv")
+        .arg(dir.join("out.csv"))
+        .arg("--plot")
+        .arg(dir.join("out-plot.png"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("is a folder"), "{err}");
+    assert!(!dir.join("out-plot.png").exists() && !dir.join("out-plot.svg").exists());
+}

@@ -3,11 +3,11 @@
 //! reference).
 
 use super::progress::ProgressLine;
-use super::render::write_json;
 use super::view::SceneArgs;
 use splatray::accel::registry;
+use splatray::io::Batch;
 use splatray::render::integrator::{Frame, render};
-use splatray::render::output::{check_output_path, check_writable, save};
+use splatray::render::output::{check_output_path, check_writable, save_into};
 use splatray::validate::compare::{
     Agreement, TruthErrors, compare_frames, diff_image, render_truth, truth_errors,
 };
@@ -190,19 +190,27 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
         backends,
         truth,
     };
+    // The diff images and the report are committed together: a failure in
+    // any leaves none.
+    let mut batch = Batch::new();
     if let (Some(d), [a, b, ..]) = (&args.diff, frames.as_slice()) {
-        save(&diff_image(a, b), d, image::ImageFormat::Png)?;
+        save_into(&mut batch, &diff_image(a, b), d, image::ImageFormat::Png)?;
     }
     if let (Some(d), Some(tf), Some(a)) = (&args.diff, &truth_frame, frames.first()) {
-        save(
+        save_into(
+            &mut batch,
             &diff_image(a, tf),
             &truth_diff_path(d),
             image::ImageFormat::Png,
         )?;
     }
     if let Some(r) = &args.report {
-        write_json(r, &report)?;
+        let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
+        batch
+            .stage(r, |t| std::fs::write(t, text + "\n"))
+            .map_err(|e| e.to_string())?;
     }
+    batch.commit().map_err(|e| e.to_string())?;
     print_report(&report);
     Ok(())
 }

@@ -203,7 +203,11 @@ where
 /// against image PSNR, one curve per backend and shading mode, points
 /// labelled with splat counts) into `png` and into the SVG of the same stem.
 /// Both files are written atomically; errors are one line.
-pub fn plot_sweep(rows: &[SweepRow], png: &Path) -> Result<(), String> {
+pub fn plot_sweep(
+    batch: &mut splatray::io::Batch,
+    rows: &[SweepRow],
+    png: &Path,
+) -> Result<(), String> {
     plotters::style::register_font(FAMILY, FontStyle::Normal, FONT)
         .map_err(|_| "plot: the embedded font is invalid".to_string())?;
     let mut buf = vec![255u8; (SIZE.0 * SIZE.1 * 3) as usize];
@@ -218,6 +222,9 @@ pub fn plot_sweep(rows: &[SweepRow], png: &Path) -> Result<(), String> {
         SVGBackend::with_string(&mut svg, SIZE).into_drawing_area(),
         rows,
     )?;
-    splatray::render::output::save(&img, png, image::ImageFormat::Png)?;
-    splatray::io::write_text(&png.with_extension("svg"), &svg).map_err(|e| e.to_string())
+    splatray::render::output::save_into(batch, &img, png, image::ImageFormat::Png)
+        .map_err(|e| e.to_string())?;
+    batch
+        .stage(&png.with_extension("svg"), |t| std::fs::write(t, &svg))
+        .map_err(|e| e.to_string())
 }

@@ -50,10 +50,7 @@ fn check_csv_path(path: &Path) -> Result<(), String> {
             path.display()
         ));
     }
-    match path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        Some(d) if !d.is_dir() => Err(format!("{}: folder does not exist", d.display())),
-        _ => Ok(()),
-    }
+    splatray::render::output::check_writable(path).map_err(|e| e.to_string())
 }
 
 /// Runs `splatray sweep`: checks every output first, then measures (printing
@@ -105,12 +102,23 @@ pub fn run(args: &SweepArgs) -> Result<(), String> {
     })
     .map_err(|e| format!("{}: {e}", scene_path.display()))?;
     summary(&rows);
+    // The CSV and the plot are committed together: a failure in either
+    // leaves neither.
+    let mut batch = splatray::io::Batch::new();
     if let Some(c) = &args.csv {
-        splatray::io::write_text(c, &csv_text(&rows)).map_err(|e| e.to_string())?;
+        let text = csv_text(&rows);
+        batch
+            .stage(c, |t| std::fs::write(t, text))
+            .map_err(|e| e.to_string())?;
+    }
+    if let Some(p) = &args.plot {
+        super::plot::plot_sweep(&mut batch, &rows, p)?;
+    }
+    batch.commit().map_err(|e| e.to_string())?;
+    if let Some(c) = &args.csv {
         println!("wrote {}", c.display());
     }
     if let Some(p) = &args.plot {
-        super::plot::plot_sweep(&rows, p)?;
         println!(
             "wrote {} and {}",
             p.display(),

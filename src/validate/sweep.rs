@@ -275,6 +275,8 @@ pub fn run_sweep(
         }
         let mut scene = build_scene(&f, base, progress)?;
         set_view(&mut scene, plan, ShadingMode::Phong)?;
+        // Each step keeps one frame per backend and mode, and the truth's.
+        crate::render::budget::check(&scene, 8, &crate::render::budget::Limits::default())?;
         if reference.is_none() {
             let truth = Truth::new(&scene)?;
             let tf = render_truth(&scene, &truth, None);
