@@ -194,7 +194,13 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
         report.seconds.total,
         args.output.display()
     );
-    if let Some(h) = &heldout {
+    if let Some(h) = heldout.as_ref().filter(|h| h.tested == 0) {
+        eprintln!(
+            "splatray: warning: held-out coverage not measured: none of the {:.0} % of the points held out could be tested ({} held-out outliers)",
+            100.0 * h.fraction,
+            h.outliers
+        );
+    } else if let Some(h) = &heldout {
         eprintln!(
             "splatray: held-out coverage {:.4}: splats grown without {:.0} % of the points hold {} of the {} tested (within {:.3e} of a splat's plane; {} held-out outliers not tested)",
             h.coverage,
