@@ -362,3 +362,60 @@ fn sampling_is_deterministic_area_uniform_with_face_normals() {
     }
     assert_eq!(back.normals, a.normals);
 }
+
+/// What other tools read: `x y z nx ny nz` first, `radius`, and the colour
+/// as 8-bit sRGB `uchar red green blue` (MeshLab takes only that; Open3D's
+/// standard reader divides float colours by 255); this reader keeps the
+/// linear floats. A MeshLab-style file of discs with `uchar` colours reads
+/// its colours back through sRGB.
+#[test]
+fn splat_files_carry_srgb_uchar_colours_other_tools_read() {
+    let dir = scratch("splats-srgb");
+    let mut s = Splat::disc(Vec3::ZERO, Vec3::Z, 0.5).unwrap();
+    s.color = Vec3::new(0.0, 0.215_860_53, 1.0); // sRGB 0, 128, 255
+    let p = dir.join("s.ply");
+    write_splats(&p, &[s], DVec3::ZERO).unwrap();
+    let bytes = std::fs::read(&p).unwrap();
+    let end = bytes
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .unwrap()
+        + 11;
+    let header = String::from_utf8_lossy(&bytes[..end]);
+    let props: Vec<&str> = header
+        .lines()
+        .filter(|l| l.starts_with("property"))
+        .collect();
+    assert_eq!(
+        props[..6],
+        [
+            "property float x",
+            "property float y",
+            "property float z",
+            "property float nx",
+            "property float ny",
+            "property float nz"
+        ]
+    );
+    assert_eq!(props[6], "property float radius");
+    assert_eq!(
+        props[props.len() - 3..],
+        [
+            "property uchar red",
+            "property uchar green",
+            "property uchar blue"
+        ]
+    );
+    assert_eq!(bytes[bytes.len() - 3..], [0, 128, 255]);
+    assert_eq!(read_splats(&p).unwrap().splats[0].color, s.color);
+    // Discs with only uchar colours.
+    let mut text = b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty float radius\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n".to_vec();
+    for v in [0.0f32, 0.0, 0.0, 0.0, 0.0, 1.0, 0.5] {
+        text.extend_from_slice(&v.to_le_bytes());
+    }
+    text.extend_from_slice(&[0, 128, 255]);
+    let q = dir.join("meshlab.ply");
+    std::fs::write(&q, text).unwrap();
+    let c = read_splats(&q).unwrap().splats[0].color;
+    assert!((c - s.color).abs().max_element() < 1e-4, "{c}");
+}

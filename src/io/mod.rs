@@ -254,6 +254,23 @@ pub(crate) fn encode_records(
     }
 }
 
+/// A linear component as an 8-bit sRGB value (clamped to `[0, 1]`; NaN is
+/// 0).
+#[must_use]
+pub fn linear_to_srgb8(x: f32) -> u8 {
+    let x = if x.is_finite() {
+        x.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let v = if x <= 0.003_130_8 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    };
+    (v * 255.0 + 0.5) as u8
+}
+
 /// sRGB-encoded component in `[0, 1]` to linear.
 #[must_use]
 pub fn srgb_to_linear(c: f32) -> f32 {

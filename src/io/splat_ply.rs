@@ -1,6 +1,10 @@
 //! The splat file: a binary little-endian PLY whose `vertex` element is one
-//! splat, readable by other tools (MeshLab reads `x y z nx ny nz radius` as
-//! point splats) and read back by [`read_splats`] without loss.
+//! splat, read back by [`read_splats`] without loss and readable by other
+//! tools: `x y z nx ny nz` and `radius` as MeshLab, CloudCompare and Open3D
+//! expect, and the colour twice, as the 8-bit sRGB `uchar red green blue`
+//! those tools read and as linear floats `lin_red lin_green lin_blue` that
+//! this reader prefers (files written before the colour was split hold
+//! linear float `red green blue`, still read as such).
 //!
 //! Splat centres are float offsets from an origin held in double precision,
 //! written as the header line `comment splatray origin X Y Z` (shortest
@@ -17,7 +21,8 @@ use std::path::Path;
 
 /// The float32 vertex properties of a splat file, in order: centre, normal,
 /// radius along `u` (MeshLab's `radius`), the `u` and `v` axes, the radius
-/// along `v`, the normal field of eq. (4) and the linear RGB colour.
+/// along `v`, the normal field of eq. (4) and the linear RGB colour; the
+/// writer follows them with [`SRGB_PROPS`].
 pub(crate) const SPLAT_PROPS: [&str; 21] = [
     "x",
     "y",
@@ -37,25 +42,40 @@ pub(crate) const SPLAT_PROPS: [&str; 21] = [
     "field_yc",
     "field_alpha",
     "field_beta",
-    "red",
-    "green",
-    "blue",
+    "lin_red",
+    "lin_green",
+    "lin_blue",
 ];
+
+/// The 8-bit sRGB colour (`uchar`), last in the vertex: what other tools
+/// show. An older splat file holds the linear colour under these names as
+/// floats.
+pub(crate) const SRGB_PROPS: [&str; 3] = ["red", "green", "blue"];
 
 /// One splat vertex of a splat file: every property as `f32`, by the index
 /// of its name in [`SPLAT_PROPS`].
 pub(crate) struct SplatRow {
     pub(crate) v: [f32; SPLAT_PROPS.len()],
+    /// `red green blue` made linear: from `uchar` sRGB, or taken as they
+    /// are when floats (an older file's linear colour).
+    pub(crate) rgb: [f32; 3],
 }
 
 impl PropertyAccess for SplatRow {
     fn new() -> Self {
         SplatRow {
             v: [f32::NAN; SPLAT_PROPS.len()],
+            rgb: [f32::NAN; 3],
         }
     }
     fn set_property(&mut self, name: &str, p: Property) {
-        if let Some(i) = SPLAT_PROPS.iter().position(|n| *n == name) {
+        if let Some(k) = SRGB_PROPS.iter().position(|n| *n == name) {
+            self.rgb[k] = match p {
+                Property::UChar(c) => super::srgb_to_linear(f32::from(c) / 255.0),
+                Property::Float(f) => f,
+                other => scalar(&other).map_or(f32::NAN, |d| d as f32),
+            };
+        } else if let Some(i) = SPLAT_PROPS.iter().position(|n| *n == name) {
             // Lossless for the float32 properties the writer produces.
             self.v[i] = match p {
                 Property::Float(f) => f,
@@ -89,7 +109,7 @@ fn to_row(s: &Splat) -> [f32; 21] {
 
 /// Write `splats`, whose centres are offsets from `origin`, to `path` as a
 /// binary little-endian float32 PLY (see [`SPLAT_PROPS`] for the vertex
-/// properties; colours are stored linear, as floats in `[0, 1]`; the origin
+/// properties; colours are stored linear as floats and as 8-bit sRGB; the origin
 /// goes into a header comment). The file is written to a temporary file in
 /// the same folder and renamed, so a failure never leaves a half-written
 /// output.
@@ -139,13 +159,19 @@ pub fn encode_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<Vec
         header.push_str(p);
         header.push('\n');
     }
+    for p in SRGB_PROPS {
+        header.push_str("property uchar ");
+        header.push_str(p);
+        header.push('\n');
+    }
     header.push_str("end_header\n");
-    let mut out = Vec::with_capacity(header.len() + splats.len() * SPLAT_PROPS.len() * 4);
+    let mut out = Vec::with_capacity(header.len() + splats.len() * (SPLAT_PROPS.len() * 4 + 3));
     out.extend_from_slice(header.as_bytes());
     for s in splats {
         for v in to_row(s) {
             out.extend_from_slice(&v.to_le_bytes());
         }
+        out.extend(s.color.to_array().map(super::linear_to_srgb8));
     }
     Ok(out)
 }
@@ -213,11 +239,17 @@ pub fn parse_splats(bytes: &[u8]) -> Result<SplatSet, IoErrorKind> {
             "not a splat file: the vertex element lacks \"{missing}\""
         )));
     }
-    let full = SPLAT_PROPS.iter().all(|n| has(n));
+    // Linear floats when written by this version, else `red green blue`.
+    let linear = SPLAT_PROPS[18..].iter().all(|n| has(n));
+    let full =
+        SPLAT_PROPS[..18].iter().all(|n| has(n)) && (linear || SRGB_PROPS.iter().all(|n| has(n)));
     let rows = file.read_vertices::<SplatRow>()?;
     let mut splats = Vec::with_capacity(rows.len());
     for (i, r) in rows.iter().enumerate() {
-        let v = &r.v;
+        let mut v = r.v;
+        if !linear {
+            v[18..].copy_from_slice(&r.rgb);
+        }
         let bad = |what: &str| IoErrorKind::Data(format!("splat {i}: {what}"));
         let used = if full { &v[..] } else { &v[..7] };
         if used.iter().any(|x| !x.is_finite()) {
@@ -281,7 +313,12 @@ pub fn parse_splats(bytes: &[u8]) -> Result<SplatSet, IoErrorKind> {
                 color: Vec3::new(v[18], v[19], v[20]),
             }
         } else {
-            Splat::disc(center, normal, v[6]).ok_or_else(|| bad("zero normal"))?
+            let mut d = Splat::disc(center, normal, v[6]).ok_or_else(|| bad("zero normal"))?;
+            // Discs with a colour (`red green blue`) keep it.
+            if r.rgb.iter().all(|c| c.is_finite() && *c >= 0.0) {
+                d.color = Vec3::from(r.rgb);
+            }
+            d
         };
         splats.push(splat);
     }

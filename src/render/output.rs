@@ -10,19 +10,7 @@ use glam::Vec3;
 use image::{ImageBuffer, ImageFormat, Rgb};
 use std::path::{Path, PathBuf};
 
-fn srgb(x: f32) -> u8 {
-    let x = if x.is_finite() {
-        x.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let v = if x <= 0.003_130_8 {
-        12.92 * x
-    } else {
-        1.055 * x.powf(1.0 / 2.4) - 0.055
-    };
-    (v * 255.0 + 0.5) as u8
-}
+use crate::io::linear_to_srgb8 as srgb;
 
 /// The frame's radiance as an 8-bit sRGB image.
 #[must_use]
