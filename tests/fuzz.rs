@@ -33,6 +33,7 @@ impl Target {
             Target::Points(Format::Ply) => "ply",
             Target::Points(Format::Pcd) => "pcd",
             Target::Points(Format::Xyz) => "xyz",
+            Target::Points(Format::Las) => "las",
             Target::Mesh => "mesh",
             Target::Splats => "splats",
             Target::Scene => "scene",
@@ -50,11 +51,13 @@ impl Target {
             ("scene", _) => Target::Scene,
             (_, "pcd") => Target::Points(Format::Pcd),
             (_, "xyz") => Target::Points(Format::Xyz),
+            (_, "las" | "laz") => Target::Points(Format::Las),
             _ if name.starts_with("mesh-") => Target::Mesh,
             _ if name.starts_with("splats-") => Target::Splats,
             _ if name.starts_with("scene-") => Target::Scene,
             _ if name.starts_with("pcd-") => Target::Points(Format::Pcd),
             _ if name.starts_with("xyz-") => Target::Points(Format::Xyz),
+            _ if name.starts_with("las-") => Target::Points(Format::Las),
             _ => Target::Points(Format::Ply),
         }
     }
@@ -247,6 +250,31 @@ fn mutate(data: &[u8], pool: &[Vec<u8>], rng: &mut Rng) -> Vec<u8> {
     d
 }
 
+/// A 24-point LAS (or LAZ) file with colours, in memory.
+fn las_seed(compressed: bool) -> Vec<u8> {
+    let mut b = las::Builder::default();
+    b.point_format = las::point::Format::new(2).unwrap();
+    b.point_format.is_compressed = compressed;
+    let mut w =
+        las::Writer::new(std::io::Cursor::new(Vec::new()), b.into_header().unwrap()).unwrap();
+    for i in 0..24 {
+        let t = f64::from(i) * 0.7;
+        w.write_point(las::Point {
+            x: t.sin(),
+            y: t.cos(),
+            z: t * 0.1,
+            color: Some(las::Color {
+                red: 1000 * i as u16,
+                green: 0,
+                blue: 65535,
+            }),
+            ..Default::default()
+        })
+        .unwrap();
+    }
+    w.into_inner().unwrap().into_inner()
+}
+
 fn files_in(dir: &Path) -> Vec<PathBuf> {
     let mut out = Vec::new();
     let Ok(rd) = std::fs::read_dir(dir) else {
@@ -305,10 +333,14 @@ fn mutated_inputs_never_panic() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(30.0);
-    let seeds: Vec<(Target, Vec<u8>)> = files_in(&root().join("corpus"))
+    let mut seeds: Vec<(Target, Vec<u8>)> = files_in(&root().join("corpus"))
         .into_iter()
         .map(|f| (Target::of(&f), std::fs::read(&f).unwrap()))
         .collect();
+    // LAS and LAZ seeds, written here by the crate that reads them.
+    for compressed in [false, true] {
+        seeds.push((Target::Points(Format::Las), las_seed(compressed)));
+    }
     let pool: Vec<Vec<u8>> = seeds.iter().map(|(_, b)| b.clone()).collect();
     // Quiet: panics are collected, not printed.
     std::panic::set_hook(Box::new(|_| {}));

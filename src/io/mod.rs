@@ -13,6 +13,7 @@
 
 mod atomic;
 mod error;
+mod las;
 mod lzf;
 mod pcd;
 mod ply;
@@ -51,6 +52,8 @@ pub enum Format {
     Pcd,
     /// Whitespace separated `x y z [nx ny nz]` text.
     Xyz,
+    /// ASPRS LAS, or LAZ (LASzip-compressed LAS).
+    Las,
 }
 
 impl Format {
@@ -63,6 +66,7 @@ impl Format {
             "ply" => Some(Format::Ply),
             "pcd" => Some(Format::Pcd),
             "xyz" | "txt" => Some(Format::Xyz),
+            "las" | "laz" => Some(Format::Las),
             _ => None,
         }
     }
@@ -72,6 +76,9 @@ impl Format {
     pub fn sniff(head: &[u8]) -> Option<Format> {
         if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
             return Some(Format::Ply);
+        }
+        if head.starts_with(b"LASF") {
+            return Some(Format::Las);
         }
         let text = String::from_utf8_lossy(head);
         let first = text
@@ -103,7 +110,7 @@ fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
     Ok(bytes)
 }
 
-/// Read a point cloud from a `.ply`, `.pcd`, `.xyz` or `.txt` file; files
+/// Read a point cloud from a `.ply`, `.pcd`, `.xyz`, `.txt`, `.las` or `.laz` file; files
 /// with another extension are recognised by their first bytes.
 ///
 /// Points with a NaN or infinite coordinate are skipped and counted in
@@ -131,6 +138,7 @@ pub fn parse_points(bytes: &[u8], format: Format) -> Result<PointCloud, IoErrorK
         Format::Ply => ply::read_cloud(bytes),
         Format::Pcd => pcd::read_cloud(bytes),
         Format::Xyz => xyz::read_cloud(bytes),
+        Format::Las => las::read_cloud(bytes),
     }?;
     if cloud.is_empty() {
         let why = if cloud.skipped.is_empty() {

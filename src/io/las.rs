@@ -1,0 +1,164 @@
+//! ASPRS LAS and LASzip-compressed LAZ point clouds through the `las` crate
+//! (with its `laz` feature): coordinates come through each file's scale and
+//! offset in f64 (georeferenced lidar keeps its precision until the cloud is
+//! re-centred), 16-bit colours where the point format has them.
+
+use super::{IoErrorKind, PointCloud, cloud_from_world, srgb_to_linear};
+use glam::{DVec3, Vec3};
+
+/// Bytes of point records read per batch: neither the header's count nor
+/// its record length is trusted for one allocation (a corrupt record
+/// length of 65,535 bytes times a million points asked for 68 GB).
+const BATCH_BYTES: u64 = 1 << 26;
+
+/// Bytes a read point takes at most here: an f64 position and an f32
+/// colour.
+const POINT_BYTES: u64 = 36;
+
+/// A LAZ body's chunk table, checked before the `laz` crate reads it: that
+/// crate reserves the table's claimed entry count at once (a corrupt count
+/// asked for 31 GB and aborted the process). Each entry takes at least one
+/// byte of the file, so the count is bounded by the file's size.
+fn check_chunk_table(bytes: &[u8]) -> Result<(), IoErrorKind> {
+    let u32_at = |at: usize| {
+        bytes
+            .get(at..at + 4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    };
+    let i64_at = |at: usize| {
+        bytes
+            .get(at..at + 8)
+            .map(|b| i64::from_le_bytes(b.try_into().unwrap_or([0; 8])))
+    };
+    // Point data format (byte 104): LASzip sets bit 7 when compressed.
+    let compressed = bytes.get(104).is_some_and(|f| f & 0x80 != 0);
+    if !compressed {
+        return Ok(());
+    }
+    let Some(start) = u32_at(96) else {
+        return Ok(());
+    };
+    // The table's offset opens the point data; -1 means it is written in
+    // the file's last eight bytes.
+    let mut offset = i64_at(start as usize).unwrap_or(-1);
+    if offset == -1 {
+        offset = bytes.len().checked_sub(8).and_then(i64_at).unwrap_or(-1);
+    }
+    let Some(count) = usize::try_from(offset)
+        .ok()
+        .and_then(|o| u32_at(o.checked_add(4)?))
+    else {
+        return Ok(());
+    };
+    if count as usize > bytes.len() {
+        return Err(IoErrorKind::Data(format!(
+            "the LAZ chunk table claims {count} chunks in a {}-byte file",
+            bytes.len()
+        )));
+    }
+    Ok(())
+}
+
+/// The LASzip VLR of a compressed file must describe at least one item
+/// (the `laz` crate panics on none); checked by walking the VLRs.
+fn check_laszip_items(bytes: &[u8]) -> Result<(), IoErrorKind> {
+    if bytes.get(104).is_none_or(|f| f & 0x80 == 0) {
+        return Ok(());
+    }
+    let u16_at = |at: usize| {
+        bytes
+            .get(at..at + 2)
+            .map(|b| u16::from_le_bytes([b[0], b[1]]))
+    };
+    let u32_at = |at: usize| {
+        bytes
+            .get(at..at + 4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    };
+    let (Some(header_size), Some(vlrs)) = (u16_at(94), u32_at(100)) else {
+        return Ok(());
+    };
+    let mut at = usize::from(header_size);
+    for _ in 0..vlrs.min(1 << 16) {
+        let (Some(user), Some(id), Some(len)) =
+            (bytes.get(at + 2..at + 18), u16_at(at + 18), u16_at(at + 20))
+        else {
+            break;
+        };
+        let data = at + 54;
+        if user.starts_with(b"laszip encoded") && id == 22204 {
+            let items = u16_at(data + 32).unwrap_or(0);
+            if items == 0 || usize::from(len) < 34 + 6 * usize::from(items) {
+                return Err(IoErrorKind::Data(format!(
+                    "the LASzip record describes {items} point items in {len} bytes: not a \
+                     readable LAZ file"
+                )));
+            }
+            return Ok(());
+        }
+        at = data + usize::from(len);
+    }
+    Err(IoErrorKind::Data(
+        "compressed points without a LASzip record: not a readable LAZ file".into(),
+    ))
+}
+
+/// Reads a LAS or LAZ cloud. The decoders of the `las` and `laz` crates are
+/// third-party code on hostile input: what the checks above do not catch
+/// and makes them panic becomes an error here, not a crash.
+pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
+    check_chunk_table(bytes)?;
+    check_laszip_items(bytes)?;
+    std::panic::catch_unwind(|| read_unchecked(bytes)).unwrap_or_else(|e| {
+        let why = e
+            .downcast_ref::<String>()
+            .cloned()
+            .or_else(|| e.downcast_ref::<&str>().map(|s| (*s).to_string()))
+            .unwrap_or_default();
+        Err(IoErrorKind::Data(format!(
+            "the LAS/LAZ decoder failed: {why}"
+        )))
+    })
+}
+
+/// [`read_cloud`] without its guard.
+fn read_unchecked(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
+    let mut reader = las::Reader::new(std::io::Cursor::new(bytes.to_vec()))
+        .map_err(|e| IoErrorKind::Header(e.to_string()))?;
+    let header = reader.header();
+    let promised = header.number_of_points();
+    let with_color = header.point_format().has_color;
+    let batch_points = (BATCH_BYTES / u64::from(header.point_format().len()).max(1)).max(1);
+    crate::memory::check("reading the cloud", promised.saturating_mul(POINT_BYTES))
+        .map_err(IoErrorKind::Data)?;
+    let cap = usize::try_from(promised.min(1 << 24)).unwrap_or(0);
+    let mut world: Vec<DVec3> = Vec::with_capacity(cap);
+    let mut colors: Vec<Vec3> = Vec::with_capacity(if with_color { cap } else { 0 });
+    loop {
+        let batch = reader
+            .read_points(batch_points)
+            .map_err(|e| IoErrorKind::Data(format!("after {} points: {e}", world.len())))?;
+        if batch.is_empty() {
+            break;
+        }
+        for p in batch.points() {
+            let p = p.map_err(|e| IoErrorKind::Data(format!("point {}: {e}", world.len())))?;
+            world.push(DVec3::new(p.x, p.y, p.z));
+            if with_color {
+                let c = p.color.unwrap_or_default();
+                let lin = |v: u16| srgb_to_linear(f32::from(v) / 65535.0);
+                colors.push(Vec3::new(lin(c.red), lin(c.green), lin(c.blue)));
+            }
+        }
+        if world.len() as u64 >= promised {
+            break;
+        }
+    }
+    if (world.len() as u64) < promised {
+        return Err(IoErrorKind::Truncated(format!(
+            "the header promises {promised} points but the file holds {}",
+            world.len()
+        )));
+    }
+    cloud_from_world(world, None, with_color.then_some(colors))
+}
