@@ -104,7 +104,7 @@ fn scene(bytes: &[u8]) {
     let Ok(scene) = build_scene(&file, Path::new("."), None) else {
         return;
     };
-    let e = splatray::render::budget::estimate(&scene, 1);
+    let e = splatray::render::budget::estimate(&scene, splatray::render::budget::Holds::ONE);
     if e.rays <= 1e5 {
         if let Ok(backend) = splatray::accel::registry::renderers()[0].build_splats(&scene.splats) {
             let _ = splatray::render::integrator::render(&scene, backend.as_ref(), None);

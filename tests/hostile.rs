@@ -432,7 +432,8 @@ fn reader_messages_name_the_real_fault() {
     );
 }
 
-/// An ascii splat file with one splat row `row` (21 values).
+/// An ascii splat file of `rows` (21 values each), in the earlier layout
+/// (linear float `red green blue`), which the reader still takes.
 fn splat_file(name: &str, rows: &[&str]) -> std::path::PathBuf {
     let props = [
         "x",

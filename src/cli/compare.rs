@@ -133,10 +133,15 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
     let line = ProgressLine::new();
     let progress = |stage: &str, f: f64| line.update(stage, f);
     let scene = args.view.load(Some(args.spp), &line)?;
-    // One frame per backend, and the truth's.
+    // One frame per backend, and the truth's; one backend built at a time.
     let frames = registry::renderers().len() + usize::from(args.truth);
-    args.view
-        .check_budget(&scene, u32::try_from(frames).unwrap_or(u32::MAX))?;
+    args.view.check_budget(
+        &scene,
+        splatray::render::budget::Holds {
+            frames: u32::try_from(frames).unwrap_or(u32::MAX),
+            accelerators: 1,
+        },
+    )?;
     // Fail before any rendering when there is no exact surface.
     let truth = if args.truth {
         Some(Truth::new(&scene)?)

@@ -129,7 +129,8 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
     let line = ProgressLine::new();
     let progress = |stage: &str, f: f64| line.update(stage, f);
     let scene = args.view.load(args.spp, &line)?;
-    args.view.check_budget(&scene, 1)?;
+    args.view
+        .check_budget(&scene, splatray::render::budget::Holds::ONE)?;
     let info = registry::find(&args.backend).ok_or_else(|| registry::unknown(&args.backend))?;
     let backend = info
         .build_splats(&scene.splats)

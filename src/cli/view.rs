@@ -85,18 +85,22 @@ fn parse_up(s: &str) -> Result<DVec3, String> {
 }
 
 impl SceneArgs {
-    /// Checks the worst-case rays and the memory of rendering `frames`
-    /// frames of `scene` against `--max-rays` and `--max-memory` (or the
+    /// Checks the worst-case rays and the memory of rendering `scene`
+    /// while holding `holds` against `--max-rays` and `--max-memory` (or the
     /// memory available).
     ///
     /// # Errors
     /// Over a limit: one line with the cost and the flag.
-    pub fn check_budget(&self, scene: &Scene, frames: u32) -> Result<(), String> {
+    pub fn check_budget(
+        &self,
+        scene: &Scene,
+        holds: splatray::render::budget::Holds,
+    ) -> Result<(), String> {
         let limits = splatray::render::budget::Limits {
             max_rays: self.max_rays,
             max_bytes: self.max_memory.map(|gb| (gb * 1e9) as u64),
         };
-        splatray::render::budget::check(scene, frames, &limits)
+        splatray::render::budget::check(scene, holds, &limits)
             .map(|_| ())
             .map_err(|e| format!("{}: {e}", self.path().display()))
     }

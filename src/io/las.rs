@@ -15,45 +15,57 @@ const BATCH_BYTES: u64 = 1 << 26;
 /// colour.
 const POINT_BYTES: u64 = 36;
 
+/// Little-endian fields of a LAS file's raw bytes (`None` past its end).
+struct Raw<'a>(&'a [u8]);
+
+impl Raw<'_> {
+    fn at<const N: usize>(&self, at: usize) -> Option<[u8; N]> {
+        self.0.get(at..at.checked_add(N)?)?.try_into().ok()
+    }
+    fn u16(&self, at: usize) -> Option<u16> {
+        self.at(at).map(u16::from_le_bytes)
+    }
+    fn u32(&self, at: usize) -> Option<u32> {
+        self.at(at).map(u32::from_le_bytes)
+    }
+    fn i64(&self, at: usize) -> Option<i64> {
+        self.at(at).map(i64::from_le_bytes)
+    }
+    /// Point data format (byte 104): LASzip sets bit 7 when compressed.
+    fn compressed(&self) -> bool {
+        self.0.get(104).is_some_and(|f| f & 0x80 != 0)
+    }
+}
+
 /// A LAZ body's chunk table, checked before the `laz` crate reads it: that
 /// crate reserves the table's claimed entry count at once (a corrupt count
 /// asked for 31 GB and aborted the process). Each entry takes at least one
 /// byte of the file, so the count is bounded by the file's size.
-fn check_chunk_table(bytes: &[u8]) -> Result<(), IoErrorKind> {
-    let u32_at = |at: usize| {
-        bytes
-            .get(at..at + 4)
-            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    };
-    let i64_at = |at: usize| {
-        bytes
-            .get(at..at + 8)
-            .map(|b| i64::from_le_bytes(b.try_into().unwrap_or([0; 8])))
-    };
-    // Point data format (byte 104): LASzip sets bit 7 when compressed.
-    let compressed = bytes.get(104).is_some_and(|f| f & 0x80 != 0);
-    if !compressed {
-        return Ok(());
-    }
-    let Some(start) = u32_at(96) else {
+fn check_chunk_table(raw: &Raw<'_>) -> Result<(), IoErrorKind> {
+    let Some(start) = raw.u32(96) else {
         return Ok(());
     };
     // The table's offset opens the point data; -1 means it is written in
     // the file's last eight bytes.
-    let mut offset = i64_at(start as usize).unwrap_or(-1);
+    let mut offset = raw.i64(start as usize).unwrap_or(-1);
     if offset == -1 {
-        offset = bytes.len().checked_sub(8).and_then(i64_at).unwrap_or(-1);
+        offset = raw
+            .0
+            .len()
+            .checked_sub(8)
+            .and_then(|e| raw.i64(e))
+            .unwrap_or(-1);
     }
     let Some(count) = usize::try_from(offset)
         .ok()
-        .and_then(|o| u32_at(o.checked_add(4)?))
+        .and_then(|o| raw.u32(o.checked_add(4)?))
     else {
         return Ok(());
     };
-    if count as usize > bytes.len() {
+    if count as usize > raw.0.len() {
         return Err(IoErrorKind::Data(format!(
             "the LAZ chunk table claims {count} chunks in a {}-byte file",
-            bytes.len()
+            raw.0.len()
         )));
     }
     Ok(())
@@ -61,33 +73,20 @@ fn check_chunk_table(bytes: &[u8]) -> Result<(), IoErrorKind> {
 
 /// The LASzip VLR of a compressed file must describe at least one item
 /// (the `laz` crate panics on none); checked by walking the VLRs.
-fn check_laszip_items(bytes: &[u8]) -> Result<(), IoErrorKind> {
-    if bytes.get(104).is_none_or(|f| f & 0x80 == 0) {
-        return Ok(());
-    }
-    let u16_at = |at: usize| {
-        bytes
-            .get(at..at + 2)
-            .map(|b| u16::from_le_bytes([b[0], b[1]]))
-    };
-    let u32_at = |at: usize| {
-        bytes
-            .get(at..at + 4)
-            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    };
-    let (Some(header_size), Some(vlrs)) = (u16_at(94), u32_at(100)) else {
+fn check_laszip_items(raw: &Raw<'_>) -> Result<(), IoErrorKind> {
+    let (Some(header_size), Some(vlrs)) = (raw.u16(94), raw.u32(100)) else {
         return Ok(());
     };
     let mut at = usize::from(header_size);
     for _ in 0..vlrs.min(1 << 16) {
         let (Some(user), Some(id), Some(len)) =
-            (bytes.get(at + 2..at + 18), u16_at(at + 18), u16_at(at + 20))
+            (raw.at::<16>(at + 2), raw.u16(at + 18), raw.u16(at + 20))
         else {
             break;
         };
         let data = at + 54;
         if user.starts_with(b"laszip encoded") && id == 22204 {
-            let items = u16_at(data + 32).unwrap_or(0);
+            let items = raw.u16(data + 32).unwrap_or(0);
             if items == 0 || usize::from(len) < 34 + 6 * usize::from(items) {
                 return Err(IoErrorKind::Data(format!(
                     "the LASzip record describes {items} point items in {len} bytes: not a \
@@ -107,8 +106,11 @@ fn check_laszip_items(bytes: &[u8]) -> Result<(), IoErrorKind> {
 /// third-party code on hostile input: what the checks above do not catch
 /// and makes them panic becomes an error here, not a crash.
 pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
-    check_chunk_table(bytes)?;
-    check_laszip_items(bytes)?;
+    let raw = Raw(bytes);
+    if raw.compressed() {
+        check_chunk_table(&raw)?;
+        check_laszip_items(&raw)?;
+    }
     std::panic::catch_unwind(|| read_unchecked(bytes)).unwrap_or_else(|e| {
         let why = e
             .downcast_ref::<String>()

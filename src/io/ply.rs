@@ -367,32 +367,23 @@ fn ascii_property<'t>(
             for _ in 0..n {
                 items.push(next()?);
             }
-            let all = |f: &dyn Fn(&str) -> Result<f64, String>| -> Result<Vec<f64>, String> {
+            fn each<T>(
+                items: &[&str],
+                f: impl Fn(&str) -> Result<T, String>,
+            ) -> Result<Vec<T>, String> {
                 items.iter().map(|s| f(s)).collect()
-            };
+            }
             match item {
-                ScalarType::Char => {
-                    Property::ListChar(items.iter().map(|s| int(s)).collect::<Result<_, _>>()?)
-                }
-                ScalarType::UChar => {
-                    Property::ListUChar(items.iter().map(|s| int(s)).collect::<Result<_, _>>()?)
-                }
-                ScalarType::Short => {
-                    Property::ListShort(items.iter().map(|s| int(s)).collect::<Result<_, _>>()?)
-                }
-                ScalarType::UShort => {
-                    Property::ListUShort(items.iter().map(|s| int(s)).collect::<Result<_, _>>()?)
-                }
-                ScalarType::Int => {
-                    Property::ListInt(items.iter().map(|s| int(s)).collect::<Result<_, _>>()?)
-                }
-                ScalarType::UInt => {
-                    Property::ListUInt(items.iter().map(|s| int(s)).collect::<Result<_, _>>()?)
-                }
+                ScalarType::Char => Property::ListChar(each(&items, int)?),
+                ScalarType::UChar => Property::ListUChar(each(&items, int)?),
+                ScalarType::Short => Property::ListShort(each(&items, int)?),
+                ScalarType::UShort => Property::ListUShort(each(&items, int)?),
+                ScalarType::Int => Property::ListInt(each(&items, int)?),
+                ScalarType::UInt => Property::ListUInt(each(&items, int)?),
                 ScalarType::Float => {
-                    Property::ListFloat(all(&float)?.into_iter().map(|x| x as f32).collect())
+                    Property::ListFloat(each(&items, |s| float(s).map(|x| x as f32))?)
                 }
-                ScalarType::Double => Property::ListDouble(all(&float)?),
+                ScalarType::Double => Property::ListDouble(each(&items, float)?),
             }
         }
     })

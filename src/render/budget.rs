@@ -55,10 +55,28 @@ impl Default for Limits {
     }
 }
 
-/// The worst-case cost of rendering `scene` into `frames` frames of its
-/// camera's size (a comparison keeps one per backend and the truth).
+/// What a run holds in memory at once while it renders.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Holds {
+    /// Frames of the camera's size (a comparison keeps one per backend and
+    /// the truth's).
+    pub frames: u32,
+    /// Accelerators built over the splats (a sweep builds every backend's
+    /// before it renders).
+    pub accelerators: u32,
+}
+
+impl Holds {
+    /// One frame, one accelerator: a render.
+    pub const ONE: Holds = Holds {
+        frames: 1,
+        accelerators: 1,
+    };
+}
+
+/// The worst-case cost of rendering `scene` while holding `holds`.
 #[must_use]
-pub fn estimate(scene: &Scene, frames: u32) -> Estimate {
+pub fn estimate(scene: &Scene, holds: Holds) -> Estimate {
     let cam = &scene.camera;
     let pixels = u64::from(cam.width) * u64::from(cam.height);
     let depth = f64::from(scene.options.max_depth.max(1));
@@ -92,8 +110,12 @@ pub fn estimate(scene: &Scene, frames: u32) -> Estimate {
     let rays = pixels as f64 * f64::from(cam.spp) * paths * rays_per_node;
     let bytes = pixels
         .saturating_mul(BYTES_PER_PIXEL)
-        .saturating_mul(u64::from(frames.max(1)))
-        .saturating_add((scene.splats.len() as u64).saturating_mul(BYTES_PER_SPLAT));
+        .saturating_mul(u64::from(holds.frames.max(1)))
+        .saturating_add(
+            (scene.splats.len() as u64)
+                .saturating_mul(BYTES_PER_SPLAT)
+                .saturating_mul(u64::from(holds.accelerators.max(1))),
+        );
     Estimate {
         rays,
         paths,
@@ -108,8 +130,8 @@ pub fn estimate(scene: &Scene, frames: u32) -> Estimate {
 /// More rays than `limits.max_rays`, or more memory than `limits.max_bytes`
 /// (or than is available): one line with the cost, what makes it, and the
 /// flag that raises the limit.
-pub fn check(scene: &Scene, frames: u32, limits: &Limits) -> Result<Estimate> {
-    let e = estimate(scene, frames);
+pub fn check(scene: &Scene, holds: Holds, limits: &Limits) -> Result<Estimate> {
+    let e = estimate(scene, holds);
     let cam = &scene.camera;
     if e.rays > limits.max_rays {
         let why = if e.paths > 1.0 {
@@ -142,13 +164,15 @@ pub fn check(scene: &Scene, frames: u32, limits: &Limits) -> Result<Estimate> {
     {
         let gb = |b: u64| b as f64 / 1e9;
         return Err(Error::invalid(format!(
-            "the render needs about {:.1} GB ({}x{} pixels x {BYTES_PER_PIXEL} B x {frames} \
-             frame(s), {} splats x {BYTES_PER_SPLAT} B), over {whose} ({:.1} GB): lower \
-             --width/--height, or pass --max-memory GB",
+            "the render needs about {:.1} GB ({}x{} pixels x {BYTES_PER_PIXEL} B x {} \
+             frame(s), {} splats x {BYTES_PER_SPLAT} B x {} accelerator(s)), over {whose} \
+             ({:.1} GB): lower --width/--height, or pass --max-memory GB",
             gb(e.bytes),
             cam.width,
             cam.height,
+            holds.frames,
             scene.splats.len(),
+            holds.accelerators,
             gb(limit)
         )));
     }

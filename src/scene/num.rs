@@ -126,6 +126,19 @@ pub fn fov<'de, D: Deserializer<'de>, T: Deserialize<'de> + Numbers>(d: D) -> Re
     check(d, |x| (0.01..=179.0).contains(&x), "in [0.01, 179] degrees")
 }
 
+/// A count in `1..=max`; the message says why the bound is there.
+fn count<'de, D, T>(d: D, max: u64, why: &str) -> Result<T, D::Error>
+where
+    D: Deserializer<'de>,
+    T: Deserialize<'de> + Numbers,
+{
+    check(
+        d,
+        |x| (1.0..=max as f64).contains(&x),
+        &format!("in 1..={max} ({why})"),
+    )
+}
+
 /// `render.max_depth`: `1..=`[`MAX_DEPTH`].
 ///
 /// # Errors
@@ -133,10 +146,10 @@ pub fn fov<'de, D: Deserializer<'de>, T: Deserialize<'de> + Numbers>(d: D) -> Re
 pub fn depth<'de, D: Deserializer<'de>, T: Deserialize<'de> + Numbers>(
     d: D,
 ) -> Result<T, D::Error> {
-    check(
+    count(
         d,
-        |x| (1.0..=MAX_DEPTH as f64).contains(&x),
-        &format!("in 1..={MAX_DEPTH} (each level is a stack frame of the render thread)"),
+        MAX_DEPTH,
+        "each level is a stack frame of the render thread",
     )
 }
 
@@ -147,11 +160,7 @@ pub fn depth<'de, D: Deserializer<'de>, T: Deserialize<'de> + Numbers>(
 pub fn light_samples<'de, D: Deserializer<'de>, T: Deserialize<'de> + Numbers>(
     d: D,
 ) -> Result<T, D::Error> {
-    check(
-        d,
-        |x| (1.0..=MAX_LIGHT_SAMPLES as f64).contains(&x),
-        &format!("in 1..={MAX_LIGHT_SAMPLES} (shadow rays per shading point)"),
-    )
+    count(d, MAX_LIGHT_SAMPLES, "shadow rays per shading point")
 }
 
 /// A count of generated splats, points or rays: `1..=`[`MAX_GENERATED`].
@@ -161,9 +170,9 @@ pub fn light_samples<'de, D: Deserializer<'de>, T: Deserialize<'de> + Numbers>(
 pub fn generated<'de, D: Deserializer<'de>, T: Deserialize<'de> + Numbers>(
     d: D,
 ) -> Result<T, D::Error> {
-    check(
+    count(
         d,
-        |x| (1.0..=MAX_GENERATED as f64).contains(&x),
-        &format!("in 1..={MAX_GENERATED} (about 84 bytes each before the accelerators)"),
+        MAX_GENERATED,
+        "about 84 bytes each before the accelerators",
     )
 }

@@ -275,8 +275,14 @@ pub fn run_sweep(
         }
         let mut scene = build_scene(&f, base, progress)?;
         set_view(&mut scene, plan, ShadingMode::Phong)?;
-        // Each step keeps one frame per backend and mode, and the truth's.
-        crate::render::budget::check(&scene, 8, &crate::render::budget::Limits::default())?;
+        // Each step holds every backend's accelerator, the truth's frame
+        // and the one being measured.
+        let holds = crate::render::budget::Holds {
+            frames: 2,
+            accelerators: u32::try_from(crate::accel::registry::renderers().len())
+                .unwrap_or(u32::MAX),
+        };
+        crate::render::budget::check(&scene, holds, &crate::render::budget::Limits::default())?;
         if reference.is_none() {
             let truth = Truth::new(&scene)?;
             let tf = render_truth(&scene, &truth, None);
