@@ -37,6 +37,9 @@ enum Command {
     /// Turn a point cloud into splats with Phong normal fields.
     #[command(allow_negative_numbers = true)]
     Splat(cli::splat_cmd::SplatArgs),
+    /// Write splats as a Gaussian splat file (2DGS or 3DGS layout) that
+    /// Gaussian renderers and trainers read.
+    Export(cli::export::ExportArgs),
     /// Vary the splat budget (epsilon) and the shading mode; measure splat
     /// generation, build and render seconds of every backend and the errors
     /// against the exact surface; write a CSV and a time-against-error plot
@@ -76,6 +79,7 @@ fn main() -> ExitCode {
         Command::Compare(args) => cli::compare::run(&args),
         Command::Sample(a) => cli::sample_cmd::run(&a),
         Command::Splat(a) => cli::splat_cmd::run(&a),
+        Command::Export(a) => cli::export::run(&a),
         Command::Sweep(a) => cli::sweep::run(&a),
         Command::ScanCheck(a) => cli::scan_check::run(&a),
     };

@@ -11,7 +11,7 @@
 //! A panicking input is written to `target/fuzz-crashes/` and fails the
 //! run; copy it to `tests/fuzz/crashes/` once fixed.
 
-use splatray::io::{Format, parse_mesh, parse_points, parse_splats};
+use splatray::io::{Format, parse_gaussians, parse_mesh, parse_points, parse_splats};
 use splatray::scene::{build_scene, parse_scene_str};
 use splatray::splat::{SplatParams, generate};
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -24,6 +24,7 @@ enum Target {
     Points(Format),
     Mesh,
     Splats,
+    Gaussians,
     Scene,
 }
 
@@ -36,6 +37,7 @@ impl Target {
             Target::Points(Format::Las) => "las",
             Target::Mesh => "mesh",
             Target::Splats => "splats",
+            Target::Gaussians => "gaussians",
             Target::Scene => "scene",
         }
     }
@@ -48,12 +50,14 @@ impl Target {
         match (folder.to_string_lossy().as_ref(), ext.as_ref()) {
             ("mesh", _) => Target::Mesh,
             ("splats", _) => Target::Splats,
+            ("gaussians", _) => Target::Gaussians,
             ("scene", _) => Target::Scene,
             (_, "pcd") => Target::Points(Format::Pcd),
             (_, "xyz") => Target::Points(Format::Xyz),
             (_, "las" | "laz") => Target::Points(Format::Las),
             _ if name.starts_with("mesh-") => Target::Mesh,
             _ if name.starts_with("splats-") => Target::Splats,
+            _ if name.starts_with("gaussians-") => Target::Gaussians,
             _ if name.starts_with("scene-") => Target::Scene,
             _ if name.starts_with("pcd-") => Target::Points(Format::Pcd),
             _ if name.starts_with("xyz-") => Target::Points(Format::Xyz),
@@ -75,6 +79,7 @@ impl Target {
             }
             Target::Mesh => drop(parse_mesh(bytes)),
             Target::Splats => drop(parse_splats(bytes)),
+            Target::Gaussians => drop(parse_gaussians(bytes, 0.5)),
             Target::Scene => scene(bytes),
         }
     }
@@ -94,6 +99,7 @@ fn scene(bytes: &[u8]) {
             && m.points.is_none()
             && m.mesh.is_none()
             && m.splats.is_none()
+            && m.gaussians.is_none()
     }) && file.models.len() <= 4;
     if !cheap {
         return;

@@ -2,6 +2,7 @@
 //! library does not depend on it).
 
 pub mod compare;
+pub mod export;
 pub mod plot;
 pub mod progress;
 pub mod render;

@@ -13,6 +13,7 @@
 
 mod atomic;
 mod error;
+mod gaussian;
 mod las;
 mod lzf;
 mod pcd;
@@ -24,6 +25,10 @@ mod xyz;
 pub use crate::splat::PointCloud;
 pub use atomic::{Batch, write_atomic, write_bytes};
 pub use error::{IoError, IoErrorKind};
+pub use gaussian::{
+    EXPORT_OPACITY, GaussianLayout, GaussianRead, MIN_OPACITY, RADIUS_PER_SIGMA, SH_C0,
+    encode_gaussians, file_layout, parse_gaussians, read_gaussians, sniff_layout, write_gaussians,
+};
 pub use lzf::lzf_decompress;
 pub use sample::sample_mesh;
 pub use splat_ply::{SplatSet, encode_splats, parse_splats, read_splats, write_splats};
@@ -99,6 +104,30 @@ impl Format {
             None => None,
         }
     }
+}
+
+/// The scalar property names of the `vertex` element of a PLY header, from
+/// a file's first bytes (which need not hold the whole header), or `None`
+/// when they do not start a PLY file.
+#[must_use]
+pub fn vertex_property_names(head: &[u8]) -> Option<Vec<String>> {
+    if !(head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n")) {
+        return None;
+    }
+    let text = String::from_utf8_lossy(head);
+    let mut in_vertex = false;
+    let mut found = Vec::new();
+    for line in text.lines() {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.as_slice() {
+            ["end_header", ..] => break,
+            ["element", name, ..] => in_vertex = *name == "vertex",
+            ["property", "list", ..] => {}
+            ["property", _, name] if in_vertex => found.push((*name).to_string()),
+            _ => {}
+        }
+    }
+    Some(found)
 }
 
 /// Read the whole file, mapping failures to [`IoError`].
@@ -266,17 +295,22 @@ pub(crate) fn encode_records(
 /// 0).
 #[must_use]
 pub fn linear_to_srgb8(x: f32) -> u8 {
+    (linear_to_srgb(x) * 255.0 + 0.5) as u8
+}
+
+/// A linear component sRGB-encoded, in `[0, 1]` (clamped; NaN is 0).
+#[must_use]
+pub fn linear_to_srgb(x: f32) -> f32 {
     let x = if x.is_finite() {
         x.clamp(0.0, 1.0)
     } else {
         0.0
     };
-    let v = if x <= 0.003_130_8 {
+    if x <= 0.003_130_8 {
         12.92 * x
     } else {
         1.055 * x.powf(1.0 / 2.4) - 0.055
-    };
-    (v * 255.0 + 0.5) as u8
+    }
 }
 
 /// sRGB-encoded component in `[0, 1]` to linear.

@@ -96,7 +96,7 @@ pub struct SplatSet {
 }
 
 /// The header comment that carries the origin.
-const ORIGIN_COMMENT: &str = "splatray origin";
+pub(crate) const ORIGIN_COMMENT: &str = "splatray origin";
 
 fn to_row(s: &Splat) -> [f32; 21] {
     let f = &s.field;
@@ -182,7 +182,7 @@ pub fn encode_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<Vec
 const MAX_FIELD: f32 = 1e3;
 
 /// The origin of a `comment splatray origin X Y Z` header line, if any.
-fn origin_of(comments: &[String]) -> Result<Option<DVec3>, IoErrorKind> {
+pub(crate) fn origin_of(comments: &[String]) -> Result<Option<DVec3>, IoErrorKind> {
     let Some(rest) = comments
         .iter()
         .find_map(|c| c.trim().strip_prefix(ORIGIN_COMMENT))

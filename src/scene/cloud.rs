@@ -65,6 +65,8 @@ pub enum CloudKind {
     Points,
     /// A splat PLY written by `splatray splat`: a `splats` model.
     Splats,
+    /// A Gaussian splat PLY (2DGS or 3DGS layout): a `gaussians` model.
+    Gaussians,
 }
 
 impl CloudKind {
@@ -74,6 +76,7 @@ impl CloudKind {
         match self {
             CloudKind::Points => "points",
             CloudKind::Splats => "splats",
+            CloudKind::Gaussians => "gaussians",
         }
     }
 }
@@ -111,23 +114,9 @@ fn head(path: &Path) -> Option<Vec<u8>> {
 /// properties `read_splats` needs (`x y z nx ny nz radius`).
 #[must_use]
 pub fn is_splat_ply(path: &Path) -> bool {
-    let Some(h) = head(path) else { return false };
-    if !(h.starts_with(b"ply\n") || h.starts_with(b"ply\r\n")) {
+    let Some(found) = head(path).and_then(|h| crate::io::vertex_property_names(&h)) else {
         return false;
-    }
-    let text = String::from_utf8_lossy(&h);
-    let mut in_vertex = false;
-    let mut found = Vec::new();
-    for line in text.lines() {
-        let words: Vec<&str> = line.split_whitespace().collect();
-        match words.as_slice() {
-            ["end_header", ..] => break,
-            ["element", name, ..] => in_vertex = *name == "vertex",
-            ["property", "list", ..] => {}
-            ["property", _, name] if in_vertex => found.push(name.to_string()),
-            _ => {}
-        }
-    }
+    };
     ["x", "y", "z", "nx", "ny", "nz", "radius"]
         .iter()
         .all(|p| found.iter().any(|f| f == p))
@@ -190,6 +179,14 @@ pub fn survey_file(path: &Path) -> Result<Survey> {
 fn survey_unchecked(path: &Path) -> Result<Survey> {
     let is_ply = Format::from_extension(path) == Some(Format::Ply)
         || head(path).is_some_and(|h| Format::sniff(&h) == Some(Format::Ply));
+    if is_ply && crate::io::file_layout(path).is_some() {
+        let read = crate::io::read_gaussians(path, crate::io::MIN_OPACITY)?;
+        let set = read.set;
+        let centres: Vec<Vec3> = set.splats.iter().map(|s| s.center).collect();
+        let colors = set.splats.iter().any(|s| s.color != Vec3::ONE);
+        return survey(CloudKind::Gaussians, &centres, set.origin, None, colors)
+            .map_err(|e| e.context(path.display()));
+    }
     if is_ply && is_splat_ply(path) {
         let set = read_splats(path)?;
         let centres: Vec<Vec3> = set.splats.iter().map(|s| s.center).collect();
@@ -712,6 +709,13 @@ pub fn scene_text(
             } else {
                 ""
             }
+        );
+    }
+    if s.kind == CloudKind::Gaussians {
+        let _ = writeln!(
+            t,
+            "# min_opacity = {}  # the default: less opaque Gaussians are left out",
+            crate::io::MIN_OPACITY
         );
     }
     if s.colors {

@@ -300,8 +300,8 @@ pub struct MaterialSpec {
     pub shading: Option<ShadingMode>,
 }
 
-/// `[[model]]`: exactly one of `points`, `splats`, `mesh` (with `samples`)
-/// or `shape`.
+/// `[[model]]`: exactly one of `points`, `splats`, `gaussians`, `mesh`
+/// (with `samples`) or `shape`.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModelSpec {
@@ -309,6 +309,13 @@ pub struct ModelSpec {
     pub points: Option<PathBuf>,
     /// A splat PLY written by `splatray splat`.
     pub splats: Option<PathBuf>,
+    /// A Gaussian splat PLY (2DGS or 3DGS layout), its Gaussians read as
+    /// splats.
+    pub gaussians: Option<PathBuf>,
+    /// Gaussians less opaque than this are left out (`gaussians` models
+    /// only; default 0.5).
+    #[serde(default, deserialize_with = "num::fraction")]
+    pub min_opacity: Option<f32>,
     /// A triangle mesh (PLY) to sample points from.
     pub mesh: Option<PathBuf>,
     /// How many points to sample from `mesh` uniformly by area.

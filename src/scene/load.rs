@@ -273,12 +273,18 @@ fn model_source<'a>(
     let sources = [
         spec.points.is_some(),
         spec.splats.is_some(),
+        spec.gaussians.is_some(),
         spec.mesh.is_some(),
         spec.shape.is_some(),
     ];
     if sources.iter().filter(|&&b| b).count() != 1 {
         return Err(Error::invalid(
-            "a model needs exactly one of `points`, `splats`, `mesh` or `shape`",
+            "a model needs exactly one of `points`, `splats`, `gaussians`, `mesh` or `shape`",
+        ));
+    }
+    if spec.min_opacity.is_some() && spec.gaussians.is_none() {
+        return Err(Error::invalid(
+            "`min_opacity` applies to `gaussians` models only",
         ));
     }
     if let Some(shape) = &spec.shape {
@@ -294,6 +300,18 @@ fn model_source<'a>(
             splats: set.splats,
             origin: set.origin,
             truth: PendingTruth::Unknown("a splat file"),
+        });
+    }
+    if let Some(p) = &spec.gaussians {
+        let read = crate::io::read_gaussians(
+            &base.join(p),
+            spec.min_opacity.unwrap_or(crate::io::MIN_OPACITY),
+        )?;
+        load.warnings.extend(read.warnings());
+        return Ok(Source {
+            splats: read.set.splats,
+            origin: read.set.origin,
+            truth: PendingTruth::Unknown("a Gaussian splat file"),
         });
     }
     if let Some(p) = &spec.points {
