@@ -7,7 +7,9 @@
 
 use crate::accel::octree::{Octree, OctreeParams};
 use crate::accel::{Backend, CandidateHits, Ray};
-use crate::splat::{PointCloud, Splat, SplatParams, SplatReport, generate_with_progress, outliers};
+use crate::splat::{
+    PointCloud, Splat, SplatParams, SplatReport, Viewpoints, generate_with_progress, outliers,
+};
 use crate::{Error, Result};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -82,16 +84,22 @@ pub fn sight_line(viewpoint: Vec3, point: Vec3) -> Option<(Ray, f32)> {
 /// For every point, the first splat blocking its line of sight (more than
 /// `margin` in front of it, see [`MARGIN_ALONG`]), with the hit's
 /// normalised disc coordinates.
-fn blocked(splats: &[Splat], points: &[Vec3], vp: Vec3, margin: f32) -> Vec<Option<(u32, Vec2)>> {
+fn blocked(
+    splats: &[Splat],
+    points: &[Vec3],
+    vp: &Viewpoints,
+    margin: f32,
+) -> Vec<Option<(u32, Vec2)>> {
     let discs: Vec<_> = splats.iter().map(Splat::disc_geometry).collect();
     let octree = Octree::new(&discs, &OctreeParams::default());
     points
         .par_iter()
+        .enumerate()
         .with_min_len(512)
         .map_init(
             || CandidateHits::new(0.0),
-            |hits, &p| {
-                let (ray, d) = sight_line(vp, p)?;
+            |hits, (i, &p)| {
+                let (ray, d) = sight_line(vp.at(i), p)?;
                 let t_max = d - margin;
                 if t_max <= 0.0 {
                     return None;
@@ -129,10 +137,15 @@ fn shrink_away(s: &mut Splat, q: Vec2) {
     f.beta *= 1.0 - a;
 }
 
-/// Trims `splats` so that no line of sight from `viewpoint` to one of
+/// Trims `splats` so that no line of sight from its viewpoint to one of
 /// `points` is blocked more than `margin` in front of its point.
 #[must_use]
-pub fn trim(splats: &mut [Splat], points: &[Vec3], viewpoint: Vec3, margin: f32) -> TrimReport {
+pub fn trim(
+    splats: &mut [Splat],
+    points: &[Vec3],
+    viewpoint: &Viewpoints,
+    margin: f32,
+) -> TrimReport {
     let mut report = TrimReport {
         rays: points.len(),
         ..TrimReport::default()
@@ -190,7 +203,7 @@ pub fn generate_trimmed(
     progress: Option<crate::progress::Progress<'_>>,
 ) -> Result<(Vec<Splat>, SplatReport, Option<TrimReport>)> {
     let (mut splats, mut report) = generate_with_progress(cloud, params, progress)?;
-    let Some(vp) = params.viewpoint else {
+    let Some(vp) = crate::splat::viewpoints_of(cloud, params) else {
         return Ok((splats, report, None));
     };
     if !vp.is_finite() {
@@ -214,19 +227,27 @@ pub fn generate_trimmed(
     }
     crate::progress::notify(progress, "free space", 0.0);
     let flags = if params.remove_outliers {
-        outliers::find(&cloud.positions, report.k.max(1), Some(vp))
+        outliers::find(&cloud.positions, report.k.max(1), Some(&vp))
     } else {
         vec![false; cloud.len()]
     };
-    let points: Vec<Vec3> = cloud
+    let drop: Vec<bool> = cloud
         .positions
         .iter()
         .zip(&flags)
-        .filter(|(p, o)| !**o && p.is_finite())
+        .map(|(p, o)| *o || !p.is_finite())
+        .collect();
+    let points: Vec<Vec3> = cloud
+        .positions
+        .iter()
+        .zip(&drop)
+        .filter(|(_, d)| !**d)
         .map(|(p, _)| *p)
         .collect();
+    let mut vp = vp;
+    vp.retain(&drop);
     let margin = (MARGIN_EPS * report.epsilon as f32).max(MARGIN_NOISE * report.noise as f32);
-    let t = trim(&mut splats, &points, vp, margin);
+    let t = trim(&mut splats, &points, &vp, margin);
     if t.skipped {
         report.warnings.push(format!(
             "{:.1} % of the lines of sight from the viewpoint are blocked: it does not look like \

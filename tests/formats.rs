@@ -1,5 +1,6 @@
-//! Formats scanners write: LAS and LAZ, through the `las` crate, written
-//! here with the same crate.
+//! Formats scanners write: LAS and LAZ, through the `las` crate, and E57
+//! (several scans with poses), through the `e57` crate; written here with
+//! the same crates.
 
 mod common;
 
@@ -118,4 +119,306 @@ fn las_and_laz_render_with_backends_identical() {
         assert!(a["image_psnr_db"].is_null(), "{name}: {a}");
         assert!(r["splats"].as_u64().unwrap() > 100, "{r}");
     }
+}
+
+/// One scan of an E57 file: its pose (rotation w x y z, translation) and
+/// its points in the scan's own frame, with colours.
+struct E57Scan {
+    rotation: glam::DQuat,
+    at: DVec3,
+    local: Vec<DVec3>,
+}
+
+/// Two scans of a radius-1 sphere at [`CENTRE`], from opposite sides 4
+/// units away, each holding only what its scanner sees (the cap facing
+/// it), in its own frame: scanner at the origin, rotated by its pose.
+fn two_scans() -> (Vec<E57Scan>, Vec<DVec3>) {
+    let mut rng = Rng::new(5);
+    let mut world = Vec::new();
+    let scans: Vec<E57Scan> = [
+        (DVec3::new(4.0, 0.0, 0.0), 0.3),
+        (DVec3::new(-4.0, 0.0, 1.0), 2.5),
+    ]
+    .into_iter()
+    .map(|(off, angle)| {
+        let at = CENTRE + off;
+        let rotation = glam::DQuat::from_axis_angle(DVec3::new(0.3, 1.0, -0.2).normalize(), angle);
+        let mut local = Vec::new();
+        while local.len() < 2500 {
+            let d = rng.unit().as_dvec3();
+            let p = CENTRE + d;
+            // Seen from `at`: the surface faces it.
+            if d.dot((at - p).normalize()) > 0.2 {
+                local.push(rotation.inverse() * (p - at));
+                world.push(p);
+            }
+        }
+        E57Scan {
+            rotation,
+            at,
+            local,
+        }
+    })
+    .collect();
+    (scans, world)
+}
+
+/// Writes `scans` as an E57 file (f64 Cartesian coordinates, 8-bit colour).
+fn write_e57(path: &Path, scans: &[E57Scan]) {
+    use e57::{Quaternion, Record, RecordValue, Transform, Translation};
+    let mut w = e57::E57Writer::from_file(path, "splatray-test-file").unwrap();
+    for (k, s) in scans.iter().enumerate() {
+        let proto = vec![
+            Record::CARTESIAN_X_F64,
+            Record::CARTESIAN_Y_F64,
+            Record::CARTESIAN_Z_F64,
+            Record::COLOR_RED_U8,
+            Record::COLOR_GREEN_U8,
+            Record::COLOR_BLUE_U8,
+        ];
+        let mut pc = w.add_pointcloud(&format!("scan-{k}"), proto).unwrap();
+        pc.set_transform(Some(Transform {
+            rotation: Quaternion {
+                w: s.rotation.w,
+                x: s.rotation.x,
+                y: s.rotation.y,
+                z: s.rotation.z,
+            },
+            translation: Translation {
+                x: s.at.x,
+                y: s.at.y,
+                z: s.at.z,
+            },
+        }));
+        for p in &s.local {
+            pc.add_point(vec![
+                RecordValue::Double(p.x),
+                RecordValue::Double(p.y),
+                RecordValue::Double(p.z),
+                RecordValue::Integer(if k == 0 { 255 } else { 0 }),
+                RecordValue::Integer(128),
+                RecordValue::Integer(0),
+            ])
+            .unwrap();
+        }
+        pc.finalize().unwrap();
+    }
+    w.finalize().unwrap();
+}
+
+/// An E57 file of two scans with poses: every point placed by its scan's
+/// pose (in f64, 4e6 from zero), each scan's position kept as its points'
+/// viewpoint, so normals face their own scanner (outward on both sides)
+/// and free-space trimming runs; with one viewpoint for both, the far cap
+/// is turned inward.
+#[test]
+fn e57_scans_are_placed_by_their_poses_and_seen_from_their_scanners() {
+    let dir = scratch("e57-read");
+    let (scans, world) = two_scans();
+    let path = dir.join("two.e57");
+    write_e57(&path, &scans);
+    let cloud = read_points(&path).unwrap();
+    assert_eq!(cloud.len(), world.len());
+    let worst = (0..cloud.len())
+        .map(|i| (cloud.world(i) - world[i]).abs().max_element())
+        .fold(0f64, f64::max);
+    // f32 offsets from the median over a 2-unit sphere.
+    assert!(worst < 1e-6, "placed {worst:e} off");
+    let colors = cloud.colors.as_ref().expect("colours");
+    assert!(
+        (colors[0] - glam::Vec3::new(1.0, 0.2158605, 0.0))
+            .abs()
+            .max_element()
+            < 1e-4
+    );
+    let s = cloud
+        .scans
+        .as_ref()
+        .expect("two scans with their positions");
+    assert_eq!(s.positions.len(), 2);
+    for (k, sc) in scans.iter().enumerate() {
+        let at = cloud.origin + s.positions[k].as_dvec3();
+        assert!((at - sc.at).abs().max_element() < 1e-6, "scan {k} at {at}");
+        assert_eq!(s.of.iter().filter(|&&o| usize::from(o) == k).count(), 2500);
+    }
+    let centre = (CENTRE - cloud.origin).as_vec3();
+    let outward = |splats: &[splatray::splat::Splat]| {
+        splats
+            .iter()
+            .filter(|s| s.normal.dot(s.center - centre) > 0.0)
+            .count() as f64
+            / splats.len() as f64
+    };
+    let params = splatray::splat::SplatParams::default();
+    let (splats_per_scan, report, trim) =
+        splatray::freespace::generate_trimmed(&cloud, &params, None).unwrap();
+    assert!(
+        report.facing_away.unwrap() < 0.01,
+        "{:?}",
+        report.facing_away
+    );
+    let o = outward(&splats_per_scan);
+    assert!(o > 0.99, "outward {o}");
+    let trim = trim.expect("trimmed against the scanners");
+    assert!(!trim.skipped, "{trim:?}");
+    // One scanner's position for every point: the far cap, a separate
+    // piece, is turned to face it, inward.
+    let one = splatray::splat::SplatParams {
+        viewpoint: Some(s.positions[0]),
+        ..params
+    };
+    let (splats, _, _) = splatray::freespace::generate_trimmed(&cloud, &one, None).unwrap();
+    let o = outward(&splats);
+    assert!((0.3..0.7).contains(&o), "outward {o}");
+    eprintln!(
+        "two E57 scans: {:.4} of the splats face outward with each point's scanner, {o:.4} with one",
+        outward(&splats_per_scan)
+    );
+}
+
+/// `splatray compare FILE.e57`: both backends bit-identical; `scan-check`
+/// refuses several scanners and a cut file fails, each in one line.
+#[test]
+fn e57_renders_with_backends_identical() {
+    let dir = scratch("e57-render");
+    let (scans, _) = two_scans();
+    let path = dir.join("two.e57");
+    write_e57(&path, &scans);
+    let report = dir.join("r.json");
+    let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+        .arg("compare")
+        .arg(&path)
+        .args(["--width", "64", "--height", "48", "--report"])
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let a = &r["backends"][1]["agreement"];
+    assert_eq!(a["hit_agreement"], 1.0, "{a}");
+    assert_eq!(a["same_splat"], 1.0, "{a}");
+    assert!(a["image_psnr_db"].is_null(), "{a}");
+    // scan-check casts rays from one scanner: it says so.
+    let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+        .arg("scan-check")
+        .arg(&path)
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("2 scans"), "{e}");
+    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    let bytes = std::fs::read(&path).unwrap();
+    let cut = dir.join("cut.e57");
+    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let e = read_points(&cut).unwrap_err().to_string();
+    assert!(e.contains("cut.e57") && e.lines().count() == 1, "{e}");
+}
+
+/// Real files from a public package (the `las` crate's test data, in
+/// `scenes/data/`): an airborne LAZ tile 6.7e6 from zero and the Autzen
+/// LAS sample read with their georeferenced origins, and render with both
+/// backends bit-identical.
+#[test]
+fn real_las_and_laz_files_render_with_backends_identical() {
+    let dir = scratch("las-real");
+    for (name, points, origin) in [
+        (
+            "32-1-472-150-76.laz",
+            5658,
+            DVec3::new(326_417.31, 6_724_192.94, 177.92),
+        ),
+        (
+            "autzen.las",
+            106,
+            DVec3::new(637_307.12, 851_294.505, 425.245),
+        ),
+    ] {
+        let path = common::data(name);
+        let cloud = read_points(&path).unwrap();
+        assert_eq!(cloud.len(), points, "{name}");
+        assert!(
+            (cloud.origin - origin).abs().max_element() < 0.01,
+            "{name}: {}",
+            cloud.origin
+        );
+        let report = dir.join(format!("{name}.json"));
+        let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+            .arg("compare")
+            .arg(&path)
+            .args(["--width", "64", "--height", "48", "--report"])
+            .arg(&report)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        let a = &r["backends"][1]["agreement"];
+        assert_eq!(a["hit_agreement"], 1.0, "{name}: {a}");
+        assert_eq!(a["same_splat"], 1.0, "{name}: {a}");
+        assert!(a["image_psnr_db"].is_null(), "{name}: {a}");
+    }
+}
+
+/// An E57 file written by libE57Format (the reference C++ library, through
+/// pye57: `scripts/make_e57_reference.py`), not by the crate we read with:
+/// two posed scans of a unit sphere 4e6 from zero. Every point lands on
+/// the sphere, each scan's position is its pose's, normals face outward,
+/// and the backends agree bit for bit.
+#[test]
+fn an_e57_file_from_the_reference_library_reads_and_renders() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/two-scans-libe57.e57");
+    let cloud = read_points(&path).unwrap();
+    assert_eq!(cloud.len(), 1600);
+    let worst = (0..cloud.len())
+        .map(|i| ((cloud.world(i) - CENTRE).length() - 1.0).abs())
+        .fold(0f64, f64::max);
+    assert!(worst < 1e-5, "off the sphere by {worst:e}");
+    let s = cloud.scans.as_ref().expect("two scans");
+    for (k, off) in [DVec3::new(4.0, 0.0, 0.0), DVec3::new(-4.0, 0.0, 1.0)]
+        .into_iter()
+        .enumerate()
+    {
+        let at = cloud.origin + s.positions[k].as_dvec3();
+        assert!(
+            (at - (CENTRE + off)).abs().max_element() < 1e-6,
+            "scan {k} at {at}"
+        );
+    }
+    let colors = cloud.colors.as_ref().expect("colours");
+    assert!(
+        (colors[0] - glam::Vec3::new(1.0, 0.2158605, 0.0))
+            .abs()
+            .max_element()
+            < 1e-4
+    );
+    let (splats, _, trim) = splatray::freespace::generate_trimmed(
+        &cloud,
+        &splatray::splat::SplatParams::default(),
+        None,
+    )
+    .unwrap();
+    let centre = (CENTRE - cloud.origin).as_vec3();
+    let outward = splats
+        .iter()
+        .filter(|s| s.normal.dot(s.center - centre) > 0.0)
+        .count();
+    assert_eq!(outward, splats.len());
+    assert!(!trim.unwrap().skipped);
+    let dir = scratch("e57-libe57");
+    let report = dir.join("r.json");
+    let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+        .arg("compare")
+        .arg(&path)
+        .args(["--width", "64", "--height", "48", "--report"])
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let a = &r["backends"][1]["agreement"];
+    assert_eq!(a["hit_agreement"], 1.0, "{a}");
+    assert_eq!(a["same_splat"], 1.0, "{a}");
+    assert!(a["image_psnr_db"].is_null(), "{a}");
 }

@@ -35,6 +35,7 @@ impl Target {
             Target::Points(Format::Pcd) => "pcd",
             Target::Points(Format::Xyz) => "xyz",
             Target::Points(Format::Las) => "las",
+            Target::Points(Format::E57) => "e57",
             Target::Mesh => "mesh",
             Target::Splats => "splats",
             Target::Gaussians => "gaussians",
@@ -55,6 +56,7 @@ impl Target {
             (_, "pcd") => Target::Points(Format::Pcd),
             (_, "xyz") => Target::Points(Format::Xyz),
             (_, "las" | "laz") => Target::Points(Format::Las),
+            (_, "e57") => Target::Points(Format::E57),
             _ if name.starts_with("mesh-") => Target::Mesh,
             _ if name.starts_with("splats-") => Target::Splats,
             _ if name.starts_with("gaussians-") => Target::Gaussians,
@@ -62,6 +64,7 @@ impl Target {
             _ if name.starts_with("pcd-") => Target::Points(Format::Pcd),
             _ if name.starts_with("xyz-") => Target::Points(Format::Xyz),
             _ if name.starts_with("las-") => Target::Points(Format::Las),
+            _ if name.starts_with("e57-") => Target::Points(Format::E57),
             _ => Target::Points(Format::Ply),
         }
     }
@@ -281,6 +284,79 @@ fn las_seed(compressed: bool) -> Vec<u8> {
     w.into_inner().unwrap().into_inner()
 }
 
+/// A small E57 file of two scans (one with a pose, one Cartesian f32 with
+/// colour, one spherical), written by the crate that reads it.
+fn e57_seed() -> Vec<u8> {
+    use e57::{Quaternion, Record, RecordValue, Transform, Translation};
+    // The writer needs a file (it reads back what it wrote).
+    let path = std::env::temp_dir().join(format!("splatray-e57-seed-{}.e57", std::process::id()));
+    let mut w = e57::E57Writer::from_file(&path, "fuzz-seed").unwrap();
+    let mut pc = w
+        .add_pointcloud(
+            "a",
+            vec![
+                Record::CARTESIAN_X_F32,
+                Record::CARTESIAN_Y_F32,
+                Record::CARTESIAN_Z_F32,
+                Record::COLOR_RED_U8,
+                Record::COLOR_GREEN_U8,
+                Record::COLOR_BLUE_U8,
+            ],
+        )
+        .unwrap();
+    pc.set_transform(Some(Transform {
+        rotation: Quaternion {
+            w: 0.8,
+            x: 0.6,
+            y: 0.0,
+            z: 0.0,
+        },
+        translation: Translation {
+            x: 1.0,
+            y: 2.0,
+            z: 3.0,
+        },
+    }));
+    for i in 0..16 {
+        let t = i as f32 * 0.4;
+        pc.add_point(vec![
+            RecordValue::Single(t.sin()),
+            RecordValue::Single(t.cos()),
+            RecordValue::Single(t * 0.1),
+            RecordValue::Integer(i * 10),
+            RecordValue::Integer(0),
+            RecordValue::Integer(255),
+        ])
+        .unwrap();
+    }
+    pc.finalize().unwrap();
+    let mut pc = w
+        .add_pointcloud(
+            "b",
+            vec![
+                Record::SPHERICAL_AZIMUTH_F64,
+                Record::SPHERICAL_ELEVATION_F64,
+                Record::SPHERICAL_RANGE_F64,
+            ],
+        )
+        .unwrap();
+    for i in 0..16 {
+        let t = f64::from(i) * 0.2;
+        pc.add_point(vec![
+            RecordValue::Double(t),
+            RecordValue::Double(0.1 * t),
+            RecordValue::Double(2.0 + t),
+        ])
+        .unwrap();
+    }
+    pc.finalize().unwrap();
+    w.finalize().unwrap();
+    drop(w);
+    let bytes = std::fs::read(&path).unwrap();
+    let _ = std::fs::remove_file(&path);
+    bytes
+}
+
 fn files_in(dir: &Path) -> Vec<PathBuf> {
     let mut out = Vec::new();
     let Ok(rd) = std::fs::read_dir(dir) else {
@@ -347,6 +423,7 @@ fn mutated_inputs_never_panic() {
     for compressed in [false, true] {
         seeds.push((Target::Points(Format::Las), las_seed(compressed)));
     }
+    seeds.push((Target::Points(Format::E57), e57_seed()));
     let pool: Vec<Vec<u8>> = seeds.iter().map(|(_, b)| b.clone()).collect();
     // Quiet: panics are collected, not printed.
     std::panic::set_hook(Box::new(|_| {}));

@@ -68,7 +68,7 @@ pub struct SplatOptions {
     /// VIEWPOINT).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub viewpoint: Option<Vec<f64>>,
-    /// Ignore the cloud's own viewpoint.
+    /// Ignore the cloud's own viewpoint (or its scanners' positions).
     #[arg(long, conflicts_with = "viewpoint")]
     pub no_viewpoint: bool,
 }
@@ -109,6 +109,7 @@ impl SplatOptions {
             density: self.density.unwrap_or(defaults.density),
             ellipses: self.ellipses,
             viewpoint,
+            scan_viewpoints: !self.no_viewpoint,
             ..defaults
         })
     }

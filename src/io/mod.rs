@@ -1,4 +1,4 @@
-//! Points in, splats out: readers for PLY, PCD and XYZ point clouds, a PLY
+//! Points in, splats out: readers for PLY, PCD, XYZ, LAS/LAZ and E57 point clouds, a PLY
 //! mesh reader and area-uniform mesh sampler, and the splat PLY format.
 //!
 //! Every reader is defensive: a header's counts are never trusted for
@@ -12,6 +12,7 @@
 //! from [`PointCloud::origin`] (`docs/DESIGN.md`, "Precision").
 
 mod atomic;
+mod e57file;
 mod error;
 mod gaussian;
 mod las;
@@ -59,11 +60,13 @@ pub enum Format {
     Xyz,
     /// ASPRS LAS, or LAZ (LASzip-compressed LAS).
     Las,
+    /// ASTM E57: several scans, each placed by its pose.
+    E57,
 }
 
 impl Format {
     /// The format from the file extension (`.ply`, `.pcd`, `.xyz`, `.txt`,
-    /// case-insensitive), or `None`.
+    /// `.las`, `.laz`, `.e57`, case-insensitive), or `None`.
     #[must_use]
     pub fn from_extension(path: &Path) -> Option<Format> {
         let ext = path.extension()?.to_str()?.to_ascii_lowercase();
@@ -72,6 +75,7 @@ impl Format {
             "pcd" => Some(Format::Pcd),
             "xyz" | "txt" => Some(Format::Xyz),
             "las" | "laz" => Some(Format::Las),
+            "e57" => Some(Format::E57),
             _ => None,
         }
     }
@@ -84,6 +88,9 @@ impl Format {
         }
         if head.starts_with(b"LASF") {
             return Some(Format::Las);
+        }
+        if head.starts_with(e57file::MAGIC) {
+            return Some(Format::E57);
         }
         let text = String::from_utf8_lossy(head);
         let first = text
@@ -139,7 +146,7 @@ fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
     Ok(bytes)
 }
 
-/// Read a point cloud from a `.ply`, `.pcd`, `.xyz`, `.txt`, `.las` or `.laz` file; files
+/// Read a point cloud from a `.ply`, `.pcd`, `.xyz`, `.txt`, `.las`, `.laz` or `.e57` file; files
 /// with another extension are recognised by their first bytes.
 ///
 /// Points with a NaN or infinite coordinate are skipped and counted in
@@ -168,6 +175,7 @@ pub fn parse_points(bytes: &[u8], format: Format) -> Result<PointCloud, IoErrorK
         Format::Pcd => pcd::read_cloud(bytes),
         Format::Xyz => xyz::read_cloud(bytes),
         Format::Las => las::read_cloud(bytes),
+        Format::E57 => e57file::read_cloud(bytes),
     }?;
     if cloud.is_empty() {
         let why = if cloud.skipped.is_empty() {

@@ -281,7 +281,11 @@ fn inliers(sample: &[Vec3], viewpoint: Option<Vec3>) -> Vec<bool> {
     if distinct.len() < 32 {
         return vec![true; sample.len()];
     }
-    let out = crate::splat::outliers::find(&distinct, K, viewpoint);
+    let out = crate::splat::outliers::find(
+        &distinct,
+        K,
+        viewpoint.map(crate::splat::Viewpoints::One).as_ref(),
+    );
     slot.iter().map(|&d| !out[d]).collect()
 }
 

@@ -28,6 +28,79 @@ pub struct PointCloud {
     /// every point was seen from here, so the segment from it to a point is
     /// free space.
     pub viewpoint: Option<Vec3>,
+    /// A cloud registered from several scans (E57): where each scanner
+    /// stood and which scan each point came from. Splat generation uses a
+    /// point's own scanner where [`PointCloud::viewpoint`] would be used.
+    pub scans: Option<Scans>,
+}
+
+/// Several scans in one cloud.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Scans {
+    /// Each scanner's position, in the positions' frame.
+    pub positions: Vec<Vec3>,
+    /// Per point: the index of its scan in `positions`.
+    pub of: Vec<u16>,
+}
+
+/// Where points were seen from: one scanner for all, or each point's own.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Viewpoints {
+    /// Every point was seen from here.
+    One(Vec3),
+    /// Point `i` was seen from `[i]`.
+    PerPoint(Vec<Vec3>),
+}
+
+impl Viewpoints {
+    /// Where point `i` was seen from.
+    ///
+    /// # Panics
+    /// When `i` is out of range of a per-point list.
+    #[must_use]
+    pub fn at(&self, i: usize) -> Vec3 {
+        match self {
+            Viewpoints::One(v) => *v,
+            Viewpoints::PerPoint(v) => v[i],
+        }
+    }
+
+    /// Every viewpoint finite.
+    #[must_use]
+    pub fn is_finite(&self) -> bool {
+        match self {
+            Viewpoints::One(v) => v.is_finite(),
+            Viewpoints::PerPoint(v) => v.iter().all(|p| p.is_finite()),
+        }
+    }
+
+    /// The viewpoints of the points `order` picks, in that order.
+    #[must_use]
+    pub fn pick(&self, order: &[u32]) -> Viewpoints {
+        match self {
+            Viewpoints::One(v) => Viewpoints::One(*v),
+            Viewpoints::PerPoint(v) => {
+                Viewpoints::PerPoint(order.iter().map(|&i| v[i as usize]).collect())
+            }
+        }
+    }
+
+    /// Each viewpoint mapped by `f`.
+    #[must_use]
+    pub fn map(&self, f: impl Fn(Vec3) -> Vec3) -> Viewpoints {
+        match self {
+            Viewpoints::One(v) => Viewpoints::One(f(*v)),
+            Viewpoints::PerPoint(v) => Viewpoints::PerPoint(v.iter().map(|p| f(*p)).collect()),
+        }
+    }
+
+    /// Keeps the viewpoints of the points whose `drop` flag is false.
+    pub fn retain(&mut self, drop: &[bool]) {
+        if let Viewpoints::PerPoint(v) = self {
+            let mut it = drop.iter();
+            v.retain(|_| !it.next().copied().unwrap_or(false));
+        }
+    }
 }
 
 impl PointCloud {
@@ -41,6 +114,26 @@ impl PointCloud {
     #[must_use]
     pub fn is_empty(&self) -> bool {
         self.positions.is_empty()
+    }
+
+    /// Where the points were seen from, in the positions' frame: each
+    /// point's own scanner for a cloud of several scans (when the list has
+    /// one entry per point), else the one viewpoint, if any.
+    #[must_use]
+    pub fn viewpoints(&self) -> Option<Viewpoints> {
+        if let Some(s) = self
+            .scans
+            .as_ref()
+            .filter(|s| s.of.len() == self.len() && !s.positions.is_empty())
+        {
+            let last = s.positions.len() - 1;
+            return Some(Viewpoints::PerPoint(
+                s.of.iter()
+                    .map(|&k| s.positions[usize::from(k).min(last)])
+                    .collect(),
+            ));
+        }
+        self.viewpoint.map(Viewpoints::One)
     }
 
     /// Point `i` in the file's coordinates: `origin + positions[i]`, in f64.

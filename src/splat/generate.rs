@@ -1,7 +1,6 @@
 //! Points in, splats out: the whole splat generation pipeline of §2 and §4
 //! behind one call, [`generate`].
 
-use super::PointCloud;
 use super::Splat;
 use super::denoise;
 use super::field;
@@ -10,6 +9,7 @@ use super::grow::{GrowInput, grow_all};
 use super::knn::{Knn, build_tree};
 use super::normals;
 use super::outliers;
+use super::{PointCloud, Viewpoints};
 use crate::progress::{Progress, notify};
 use glam::Vec3;
 use kiddo::SquaredEuclidean;
@@ -44,8 +44,25 @@ pub struct SplatParams {
     /// cloud's frame, like its positions (relative to
     /// [`PointCloud::origin`]).
     pub viewpoint: Option<Vec3>,
+    /// Without a `viewpoint`: orient each point's normal (and trim free
+    /// space) toward its own scanner when the cloud holds several scans
+    /// ([`PointCloud::scans`]).
+    pub scan_viewpoints: bool,
     /// Leave out statistical outliers (see [`super::outliers`]).
     pub remove_outliers: bool,
+}
+
+/// Where generation takes `cloud`'s points to have been seen from, indexed
+/// as its positions: the parameters' viewpoint, else (with
+/// [`SplatParams::scan_viewpoints`]) each point's scanner in a cloud of
+/// several scans, else none.
+#[must_use]
+pub fn viewpoints_of(cloud: &PointCloud, params: &SplatParams) -> Option<Viewpoints> {
+    match params.viewpoint {
+        Some(v) => Some(Viewpoints::One(v)),
+        None if params.scan_viewpoints && cloud.scans.is_some() => cloud.viewpoints(),
+        None => None,
+    }
 }
 
 impl Default for SplatParams {
@@ -57,6 +74,7 @@ impl Default for SplatParams {
             ellipses: false,
             field_radius_factor: 1.2,
             viewpoint: None,
+            scan_viewpoints: true,
             remove_outliers: true,
         }
     }
@@ -156,10 +174,10 @@ pub const FACING_AWAY_COS: f32 = -0.2;
 
 /// The share of the points with estimated (not `fixed`) normals that face
 /// away from `viewpoint` by more than [`FACING_AWAY_COS`].
-fn facing_away(points: &[Vec3], normals: &[Vec3], fixed: &[bool], viewpoint: Vec3) -> f64 {
+fn facing_away(points: &[Vec3], normals: &[Vec3], fixed: &[bool], viewpoint: &Viewpoints) -> f64 {
     let (mut away, mut all) = (0usize, 0usize);
-    for ((p, n), f) in points.iter().zip(normals).zip(fixed) {
-        let Some(sight) = (viewpoint - *p).try_normalize() else {
+    for (i, ((p, n), f)) in points.iter().zip(normals).zip(fixed).enumerate() {
+        let Some(sight) = (viewpoint.at(i) - *p).try_normalize() else {
             continue;
         };
         if *f {
@@ -308,6 +326,14 @@ pub fn generate_with_progress(
         colors: cloud.colors.clone(),
         skipped: cloud.skipped.clone(),
         viewpoint: cloud.viewpoint.map(|v| frame.unit_viewpoint(v)),
+        scans: cloud.scans.as_ref().map(|s| super::Scans {
+            positions: s
+                .positions
+                .iter()
+                .map(|&v| frame.unit_viewpoint(v))
+                .collect(),
+            of: s.of.clone(),
+        }),
     };
     let unit_params = SplatParams {
         viewpoint: params.viewpoint.map(|v| frame.unit_viewpoint(v)),
@@ -347,6 +373,7 @@ pub fn generate_with_progress(
         });
     }
     let mut points: Vec<Vec3> = order.iter().map(|&i| cloud.positions[i as usize]).collect();
+    let mut sights = viewpoints_of(cloud, params).map(|v| v.pick(&order));
     let mut colors: Option<Vec<Vec3>> = cloud
         .colors
         .as_ref()
@@ -373,11 +400,14 @@ pub fn generate_with_progress(
     let mut knn = Knn::build(&tree, &points, k);
     // --- outliers ------------------------------------------------------------
     if params.remove_outliers {
-        let out = outliers::flag(&points, &knn, params.viewpoint);
+        let out = outliers::flag(&points, &knn, sights.as_ref());
         let count = out.iter().filter(|&&o| o).count();
         if count > 0 && n - count > k {
             retain_unflagged(&mut order, &out);
             retain_unflagged(&mut points, &out);
+            if let Some(s) = sights.as_mut() {
+                s.retain(&out);
+            }
             if let Some(c) = colors.as_mut() {
                 retain_unflagged(c, &out);
             }
@@ -431,7 +461,7 @@ pub fn generate_with_progress(
             collinear,
             degenerate,
             ..
-        } = normals::estimate_multiscale(&points, &tree, &knn, params.viewpoint);
+        } = normals::estimate_multiscale(&points, &tree, &knn, sights.as_ref());
         if (collinear * 20 > n || wide * 5 > n) && k < params.k * normals::WIDE_FACTOR {
             // Anisotropic sampling (scan lines) or heavy noise: the k nearest
             // neighbours of many points lie along one line or do not reach
@@ -467,9 +497,9 @@ pub fn generate_with_progress(
                 nrm[i] = est[i];
             }
         }
-        normals::orient(&points, &knn, &mut nrm, &fixed, params.viewpoint);
-        report.facing_away = params
-            .viewpoint
+        normals::orient(&points, &knn, &mut nrm, &fixed, sights.as_ref());
+        report.facing_away = sights
+            .as_ref()
             .map(|vp| facing_away(&points, &nrm, &fixed, vp));
     }
     if input_normals.is_some() && to_estimate > 0 {

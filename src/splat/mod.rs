@@ -116,8 +116,8 @@ pub mod normals;
 pub mod outliers;
 pub mod standoff;
 
-pub use cloud::PointCloud;
+pub use cloud::{PointCloud, Scans, Viewpoints};
 pub use generate::{
     GenerateError, NOISE_PROJECT, Skipped, SplatParams, SplatReport, StageSeconds, count_on_splats,
-    coverage, generate, generate_with_progress, on_splat,
+    coverage, generate, generate_with_progress, on_splat, viewpoints_of,
 };

@@ -179,7 +179,7 @@ pub fn estimate_multiscale(
     points: &[Vec3],
     tree: &super::knn::PointTree,
     knn: &Knn,
-    viewpoint: Option<Vec3>,
+    viewpoint: Option<&super::Viewpoints>,
 ) -> Estimated {
     use kiddo::SquaredEuclidean;
     use std::num::NonZero;
@@ -192,7 +192,7 @@ pub fn estimate_multiscale(
             || (Vec::new(), Vec::new()),
             |(ids, heights), i| {
                 let nb = knn.of(i);
-                let sight = viewpoint.and_then(|v| (v - points[i]).try_normalize());
+                let sight = viewpoint.and_then(|v| (v.at(i) - points[i]).try_normalize());
                 let small = fitted_normal(
                     std::iter::once(points[i]).chain(nb.iter().map(|&j| points[j as usize])),
                     sight,
@@ -255,7 +255,7 @@ pub fn orient(
     knn: &Knn,
     normals: &mut [Vec3],
     fixed: &[bool],
-    viewpoint: Option<Vec3>,
+    viewpoint: Option<&super::Viewpoints>,
 ) {
     let n = points.len();
     if n == 0 {
@@ -404,7 +404,7 @@ pub fn orient(
         let mut has_fixed = vec![false; n];
         for i in 0..n {
             let r = find(&mut parent, i as u32) as usize;
-            votes[r] += if normals[i].dot(vp - points[i]) >= 0.0 {
+            votes[r] += if normals[i].dot(vp.at(i) - points[i]) >= 0.0 {
                 1
             } else {
                 -1

@@ -3,6 +3,7 @@
 //! the scan sampled (a spurious return, a mixed pixel far behind an edge),
 //! and would grow a giant splat.
 
+use super::Viewpoints;
 use super::knn::{Knn, build_tree};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -31,7 +32,7 @@ pub const GLOBAL_RATIO: f32 = 3.0;
 /// Flags the outliers among `points` with neighbourhood graph `knn` (see
 /// [`LOCAL_RATIO`] and [`GLOBAL_RATIO`]).
 #[must_use]
-pub fn flag(points: &[Vec3], knn: &Knn, viewpoint: Option<Vec3>) -> Vec<bool> {
+pub fn flag(points: &[Vec3], knn: &Knn, viewpoint: Option<&Viewpoints>) -> Vec<bool> {
     let n = knn.kth_distance.len();
     if n == 0 {
         return Vec::new();
@@ -40,7 +41,8 @@ pub fn flag(points: &[Vec3], knn: &Knn, viewpoint: Option<Vec3>) -> Vec<bool> {
         Some(vp) => points
             .iter()
             .zip(&knn.kth_distance)
-            .map(|(p, d)| d / (*p - vp).length().max(f32::MIN_POSITIVE))
+            .enumerate()
+            .map(|(i, (p, d))| d / (*p - vp.at(i)).length().max(f32::MIN_POSITIVE))
             .collect(),
         None => knn.kth_distance.clone(),
     };
@@ -72,7 +74,7 @@ pub fn flag(points: &[Vec3], knn: &Knn, viewpoint: Option<Vec3>) -> Vec<bool> {
 /// [`flag`] on a cloud of distinct points, building its own `k`-nearest
 /// neighbour graph.
 #[must_use]
-pub fn find(points: &[Vec3], k: usize, viewpoint: Option<Vec3>) -> Vec<bool> {
+pub fn find(points: &[Vec3], k: usize, viewpoint: Option<&Viewpoints>) -> Vec<bool> {
     if points.len() <= k {
         return vec![false; points.len()];
     }

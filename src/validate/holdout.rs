@@ -47,7 +47,11 @@ pub fn split(cloud: &PointCloud, params: &SplatParams, fraction: f32, seed: u64)
     let n = cloud.len();
     let keep: Vec<bool> = (0..n).map(|i| !held_out(seed, i, fraction)).collect();
     let rejected = if params.remove_outliers {
-        outliers::find(&cloud.positions, params.k, params.viewpoint)
+        outliers::find(
+            &cloud.positions,
+            params.k,
+            crate::splat::viewpoints_of(cloud, params).as_ref(),
+        )
     } else {
         vec![false; n]
     };
@@ -64,6 +68,20 @@ pub fn split(cloud: &PointCloud, params: &SplatParams, fraction: f32, seed: u64)
         colors: cloud.colors.as_ref().filter(|v| v.len() == n).map(&pick),
         skipped: cloud.skipped.clone(),
         viewpoint: cloud.viewpoint,
+        scans: cloud
+            .scans
+            .as_ref()
+            .filter(|s| s.of.len() == n)
+            .map(|s| crate::splat::Scans {
+                positions: s.positions.clone(),
+                of: s
+                    .of
+                    .iter()
+                    .zip(&keep)
+                    .filter(|(_, k)| **k)
+                    .map(|(o, _)| *o)
+                    .collect(),
+            }),
         origin: cloud.origin,
     };
     let held: Vec<usize> = (0..n).filter(|&i| !keep[i]).collect();

@@ -115,6 +115,13 @@ pub fn scan_check(
     params: &ScanCheckParams,
     progress: Option<crate::progress::Progress<'_>>,
 ) -> Result<ScanCheckReport> {
+    if let Some(s) = &cloud.scans {
+        return Err(Error::invalid(format!(
+            "the cloud holds {} scans taken from different places; scan-check casts rays from one \
+             scanner: check each scan on its own",
+            s.positions.len()
+        )));
+    }
     let vp = params.viewpoint.or(cloud.viewpoint).ok_or_else(|| {
         Error::invalid(
             "the cloud has no viewpoint (no PCD VIEWPOINT): give the scanner's position with --viewpoint X,Y,Z",

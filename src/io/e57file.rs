@@ -1,0 +1,130 @@
+//! E57 (ASTM E2807, what terrestrial scanners export) through the `e57`
+//! crate: every scan's points placed by its pose (rotation and
+//! translation, in f64; spherical coordinates converted first), and each
+//! scan's position, its pose's translation, kept as the viewpoint of its
+//! points: one scan (or scans taken from one place) gives
+//! [`PointCloud::viewpoint`], several give [`PointCloud::scans`].
+//!
+//! Points flagged invalid are skipped and counted; colours (normalised by
+//! the file's colour limits) are sRGB, made linear, and kept when every
+//! scan has them. A panic inside the decoder becomes an error.
+
+use super::{IoErrorKind, PointCloud, cloud_from_world, srgb_to_linear};
+use crate::splat::Scans;
+use e57::{CartesianCoordinate, E57Reader};
+use glam::{DVec3, Vec3};
+use std::io::Cursor;
+
+/// The first bytes of every E57 file.
+pub(crate) const MAGIC: &[u8] = b"ASTM-E57";
+
+/// The bytes per point held while reading (f64 position, f32 colour, scan
+/// index), for the memory check.
+const BYTES_PER_POINT: u64 = 24 + 12 + 2;
+
+/// Read an E57 file's scans as one cloud.
+pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
+    std::panic::catch_unwind(|| read(bytes)).unwrap_or_else(|_| {
+        Err(IoErrorKind::Data(
+            "the E57 decoder failed on this file (corrupt data)".into(),
+        ))
+    })
+}
+
+fn e57_error(e: &e57::Error) -> IoErrorKind {
+    // The crate's messages can run over lines.
+    let text = e
+        .to_string()
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ");
+    IoErrorKind::Data(format!("E57: {text}"))
+}
+
+fn read(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
+    if !bytes.starts_with(MAGIC) {
+        return Err(IoErrorKind::Header(
+            "an E57 file must start with \"ASTM-E57\"".into(),
+        ));
+    }
+    let mut reader = E57Reader::new(Cursor::new(bytes)).map_err(|e| e57_error(&e))?;
+    let scans = reader.pointclouds();
+    if scans.is_empty() {
+        return Err(IoErrorKind::NoPoints("the E57 file holds no scans".into()));
+    }
+    if scans.len() > usize::from(u16::MAX) {
+        return Err(IoErrorKind::Data(format!(
+            "{} scans, more than the {} one cloud holds",
+            scans.len(),
+            u16::MAX
+        )));
+    }
+    // Each record takes at least one bit of the file: a larger claim is
+    // corrupt; the rest is checked against the memory.
+    let claimed: u64 = scans.iter().map(|s| s.records).sum();
+    if claimed > 8 * bytes.len() as u64 {
+        return Err(IoErrorKind::Data(format!(
+            "the scans claim {claimed} points, more than the file's {} bytes can hold",
+            bytes.len()
+        )));
+    }
+    crate::memory::check(
+        &format!("reading {claimed} points"),
+        claimed.saturating_mul(BYTES_PER_POINT),
+    )
+    .map_err(IoErrorKind::Data)?;
+    let colored = scans.iter().all(e57::PointCloud::has_color);
+    let mut world: Vec<DVec3> = Vec::new();
+    let mut colors: Vec<Vec3> = Vec::new();
+    let mut scan_of: Vec<u16> = Vec::new();
+    let mut positions: Vec<DVec3> = Vec::with_capacity(scans.len());
+    let (mut invalid, mut non_finite) = (0usize, 0usize);
+    for (k, scan) in scans.iter().enumerate() {
+        let at = scan.transform.as_ref().map_or(DVec3::ZERO, |t| {
+            DVec3::new(t.translation.x, t.translation.y, t.translation.z)
+        });
+        if !at.is_finite() {
+            return Err(IoErrorKind::Data(format!(
+                "scan {k}: its pose's translation {at} is not finite"
+            )));
+        }
+        positions.push(at);
+        let mut points = reader.pointcloud_simple(scan).map_err(|e| e57_error(&e))?;
+        points.intensity_to_color(false);
+        for p in points {
+            let p = p.map_err(|e| e57_error(&e))?;
+            let CartesianCoordinate::Valid { x, y, z } = p.cartesian else {
+                invalid += 1;
+                continue;
+            };
+            let w = DVec3::new(x, y, z);
+            if !w.is_finite() {
+                non_finite += 1;
+                continue;
+            }
+            world.push(w);
+            scan_of.push(k as u16);
+            if colored {
+                colors.push(p.color.map_or(Vec3::splat(0.2), |c| {
+                    Vec3::new(c.red, c.green, c.blue).map(srgb_to_linear)
+                }));
+            }
+        }
+    }
+    let mut cloud = cloud_from_world(world, None, colored.then_some(colors))?;
+    cloud.add_skipped("flagged invalid in the E57 file", invalid);
+    cloud.add_skipped("non-finite coordinates", non_finite);
+    let local: Vec<Vec3> = positions
+        .iter()
+        .map(|&p| cloud.local_viewpoint(p))
+        .collect();
+    if local.iter().all(|p| *p == local[0]) {
+        cloud.viewpoint = Some(local[0]);
+    } else {
+        cloud.scans = Some(Scans {
+            positions: local,
+            of: scan_of,
+        });
+    }
+    Ok(cloud)
+}
