@@ -5,7 +5,7 @@ use super::{INTERIOR, Octree, child_lo, lanes};
 use crate::accel::{Candidate, CandidateHits, Skip};
 use crate::geometry::Ray;
 use crate::primitive::{Pack, PackRay, Primitive};
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 impl<P: Primitive> Octree<P> {
     /// Front-to-back traversal from the root; `visitor` sees the leaves.
@@ -22,6 +22,8 @@ impl<P: Primitive> Octree<P> {
                 | usize::from(ray.dir.y.is_sign_negative()) << 1
                 | usize::from(ray.dir.z.is_sign_negative()) << 2,
             t_min,
+            origin_a: Vec3A::from(ray.origin),
+            inv_dir_a: Vec3A::ONE / Vec3A::from(ray.dir),
         };
         let pad = Vec3::splat(self.pad);
         let lo = self.root_lo;
@@ -52,14 +54,16 @@ impl<P: Primitive> Octree<P> {
         }
         let mask = node.meta & 0xff;
         let half = size * 0.5;
-        let pad = Vec3::splat(self.pad);
-        let mid = lo + Vec3::splat(half);
-        let hi = lo + Vec3::splat(size);
-        let o = ctx.origin;
-        let inv = ctx.inv_dir;
+        // The same IEEE operations as on `Vec3`, four lanes at a time.
+        let lo_a = Vec3A::from(lo);
+        let pad = Vec3A::splat(self.pad);
+        let mid = lo_a + Vec3A::splat(half);
+        let hi = lo_a + Vec3A::splat(size);
+        let o = ctx.origin_a;
+        let inv = ctx.inv_dir_a;
         // Slab parameters of the padded lower and upper halves on each axis.
-        let (lower_near, lower_far) = slab((lo - pad - o) * inv, (mid + pad - o) * inv);
-        let (upper_near, upper_far) = slab((mid - pad - o) * inv, (hi + pad - o) * inv);
+        let (lower_near, lower_far) = slab_a((lo_a - pad - o) * inv, (mid + pad - o) * inv);
+        let (upper_near, upper_far) = slab_a((mid - pad - o) * inv, (hi + pad - o) * inv);
         // Entry and exit of all eight children at once, branch free; only
         // the children whose interval is non-empty are visited.
         let cut = visitor.cutoff();
@@ -101,6 +105,9 @@ struct RayCtx {
     /// Bit `k` set when `dir[k]` is negative (sign bit, so `-0.0` counts).
     sign_mask: usize,
     t_min: f32,
+    /// `origin` and `inv_dir` in SIMD lanes.
+    origin_a: Vec3A,
+    inv_dir_a: Vec3A,
 }
 
 /// Per-axis (near, far) of a slab from the parameters of its two planes.
@@ -119,6 +126,15 @@ fn slab(a: Vec3, b: Vec3) -> (Vec3, Vec3) {
         if a.z > b.z { a.z } else { b.z },
     );
     (near, far)
+}
+
+/// [`slab`] on SIMD lanes, with the same NaN rule (`a < b` false: the
+/// other value).
+#[inline]
+fn slab_a(a: Vec3A, b: Vec3A) -> (Vec3, Vec3) {
+    let near = Vec3A::select(a.cmplt(b), a, b);
+    let far = Vec3A::select(a.cmpgt(b), a, b);
+    (Vec3::from(near), Vec3::from(far))
 }
 
 #[inline]
