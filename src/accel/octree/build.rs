@@ -61,11 +61,18 @@ pub(super) fn build<P: Primitive>(
         .iter()
         .filter(|nd| nd.meta & INTERIOR == 0 && nd.meta > 0)
         .count();
+    let grid = super::Grid::build(&nodes, cube.lo, cube.size);
+    let grid_bytes = grid.as_ref().map_or(0, |g| {
+        std::mem::size_of_val(g.node.as_slice())
+            + std::mem::size_of_val(g.lo.as_slice())
+            + std::mem::size_of_val(g.size.as_slice())
+    });
     let stats = BuildStats {
         build_seconds: start.elapsed().as_secs_f64(),
         memory_bytes: std::mem::size_of_val(nodes.as_slice())
             + std::mem::size_of_val(packs.as_slice())
-            + std::mem::size_of_val(pack_ids.as_slice()),
+            + std::mem::size_of_val(pack_ids.as_slice())
+            + grid_bytes,
         nodes: nodes.len(),
         leaves: leaf_nodes,
         mean_refs_per_leaf: if nonempty == 0 {
@@ -75,6 +82,7 @@ pub(super) fn build<P: Primitive>(
         },
     };
     Octree {
+        grid,
         nodes,
         packs,
         pack_ids,
@@ -544,5 +552,59 @@ fn emit(
                 }
             }
         }
+    }
+}
+
+impl super::Grid {
+    /// The grid over the nodes of level [`super::GRID_LEVEL`]; `None` when
+    /// the root is a leaf.
+    pub(super) fn build(nodes: &[Node], root_lo: Vec3, root_size: f32) -> Option<super::Grid> {
+        if nodes.first().is_none_or(|r| r.meta & INTERIOR == 0) {
+            return None;
+        }
+        let level = super::GRID_LEVEL;
+        let n = 1usize << level;
+        let cell = (0..level).fold(root_size, |s, _| s * 0.5);
+        let mut node = vec![super::NO_NODE; n * n * n];
+        let mut lo = vec![Vec3::ZERO; n * n * n];
+        let mut size = vec![0f32; n * n * n];
+        for z in 0..n {
+            for y in 0..n {
+                for x in 0..n {
+                    // Descend along the cell's octants (most significant
+                    // bit first) until its level or a leaf.
+                    let (mut at, mut l, mut s) = (0usize, root_lo, root_size);
+                    let mut found = true;
+                    for d in (0..level).rev() {
+                        let nd = nodes[at];
+                        if nd.meta & INTERIOR == 0 {
+                            break;
+                        }
+                        let oct = ((x >> d) & 1) | ((y >> d) & 1) << 1 | ((z >> d) & 1) << 2;
+                        let mask = nd.meta & 0xff;
+                        if mask & (1 << oct) == 0 {
+                            found = false;
+                            break;
+                        }
+                        at = nd.first as usize + (mask & ((1 << oct) - 1)).count_ones() as usize;
+                        s *= 0.5;
+                        l = child_lo(l, s, oct);
+                    }
+                    let i = x + n * (y + n * z);
+                    if found {
+                        node[i] = at as u32;
+                        lo[i] = l;
+                        size[i] = s;
+                    }
+                }
+            }
+        }
+        Some(super::Grid {
+            n,
+            cell,
+            node,
+            lo,
+            size,
+        })
     }
 }

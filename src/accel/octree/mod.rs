@@ -25,6 +25,12 @@
 //! (for discs, SoA), so a leaf's primitives are read contiguously and
 //! filtered several at a time.
 //!
+//! The cells of level [`GRID_LEVEL`] (16 per axis) are also kept as a
+//! uniform grid: a ray walks it cell by cell (3D-DDA) and descends only from
+//! the nodes of the cells it crosses, instead of from the root (the upper
+//! four levels were 59 % of the interior nodes a ray visited on the bundled
+//! bunny; `docs/development.md`, round `octree-perf3`).
+//!
 //! Traversal (§3.2, in [`traverse`]) computes the entry and exit of a cell's
 //! eight children at once, then visits the non-empty ones in the order given
 //! by the ray direction's signs (`i ^ sign_mask`, a front-to-back order for
@@ -90,6 +96,29 @@ impl Default for OctreeParams {
     }
 }
 
+/// The level whose cells form the top-level [`Grid`] (`8^GRID_LEVEL`
+/// cells).
+const GRID_LEVEL: u32 = 4;
+
+/// The cells of level [`GRID_LEVEL`] as a uniform grid: per cell, the node
+/// covering it (the cell's own node, or a leaf above that level) and the
+/// node's lower corner, derived with the same [`child_lo`] arithmetic as
+/// build and descent.
+struct Grid {
+    /// Cells per axis.
+    n: usize,
+    /// Edge length of a cell (`root_size / n`, exact: halvings).
+    cell: f32,
+    /// Per cell (`x + n (y + n z)`): node index, [`NO_NODE`] when empty.
+    node: Vec<u32>,
+    /// Per cell: lower corner and edge of that node's box.
+    lo: Vec<Vec3>,
+    size: Vec<f32>,
+}
+
+/// A grid cell with nothing in it.
+const NO_NODE: u32 = u32::MAX;
+
 /// Flag in [`Node::meta`] marking an interior node.
 const INTERIOR: u32 = 1 << 31;
 
@@ -132,6 +161,10 @@ pub struct Octree<P: Primitive> {
     packs: Vec<P::Pack>,
     /// Primitive id of each lane of `packs` ([`NO_PRIMITIVE`] on padding).
     pack_ids: Vec<u32>,
+    /// The nodes at level [`GRID_LEVEL`] as a uniform grid, walked cell by
+    /// cell instead of descending the upper levels for every ray; `None`
+    /// when the root is a leaf.
+    grid: Option<Grid>,
     /// References (lanes holding a primitive).
     references: usize,
     /// Lower corner of the root cube.

@@ -33,7 +33,83 @@ impl<P: Primitive> Octree<P> {
         let entry = max4(t_min, near);
         let exit = min4(visitor.cutoff(), far);
         // NaN compares false: a NaN entry or exit misses the root.
-        entry <= exit && self.visit(0, lo, self.root_size, &ctx, visitor)
+        let meets_root = entry <= exit;
+        if !meets_root {
+            return false;
+        }
+        match &self.grid {
+            Some(g) => self.walk_grid(g, ray, entry, &ctx, visitor),
+            None => self.visit(0, lo, self.root_size, &ctx, visitor),
+        }
+    }
+
+    /// The top levels as a uniform grid: the cells the ray crosses, front
+    /// to back from `entry` (3D-DDA, Amanatides and Woo), each cell's node
+    /// visited as a subtree (once: consecutive cells under one shallow leaf
+    /// visit it once). A crossing misjudged by rounding skips at most a
+    /// sliver of a cell thinner than the padding, whose primitives the
+    /// neighbouring cells' padded leaves also hold.
+    fn walk_grid<V: Visitor<P>>(
+        &self,
+        g: &super::Grid,
+        ray: &Ray,
+        entry: f32,
+        ctx: &RayCtx,
+        visitor: &mut V,
+    ) -> bool {
+        let n = g.n as i32;
+        let p = (ray.origin + ray.dir * entry - self.root_lo) / g.cell;
+        let start = |c: f32| (c.floor() as i32).clamp(0, n - 1);
+        let mut idx = [start(p.x), start(p.y), start(p.z)];
+        let d = ray.dir.to_array();
+        let o = ray.origin.to_array();
+        let inv = ctx.inv_dir.to_array();
+        let lo = self.root_lo.to_array();
+        let mut step = [0i32; 3];
+        let mut t_next = [f32::INFINITY; 3];
+        let mut t_delta = [f32::INFINITY; 3];
+        for a in 0..3 {
+            if d[a] > 0.0 {
+                step[a] = 1;
+                t_next[a] = (lo[a] + (idx[a] + 1) as f32 * g.cell - o[a]) * inv[a];
+                t_delta[a] = g.cell * inv[a];
+            } else if d[a] < 0.0 {
+                step[a] = -1;
+                t_next[a] = (lo[a] + idx[a] as f32 * g.cell - o[a]) * inv[a];
+                t_delta[a] = -g.cell * inv[a];
+            }
+        }
+        let mut last = super::NO_NODE;
+        // Each step leaves the grid on one axis or moves one cell: at most
+        // 3n steps cross it (a NaN ray stops at the first comparison).
+        for _ in 0..3 * g.n + 3 {
+            let i = (idx[0] + n * (idx[1] + n * idx[2])) as usize;
+            let node = g.node[i];
+            if node != super::NO_NODE && node != last {
+                last = node;
+                if self.visit(node as usize, g.lo[i], g.size[i], ctx, visitor) {
+                    return true;
+                }
+            }
+            let a = if t_next[0] < t_next[1] {
+                if t_next[0] < t_next[2] { 0 } else { 2 }
+            } else if t_next[1] < t_next[2] {
+                1
+            } else {
+                2
+            };
+            // The next cell starts beyond the window (or NaN): done.
+            let within = t_next[a] <= visitor.cutoff();
+            if !within {
+                return false;
+            }
+            idx[a] += step[a];
+            if idx[a] < 0 || idx[a] >= n {
+                return false;
+            }
+            t_next[a] += t_delta[a];
+        }
+        false
     }
 
     fn visit<V: Visitor<P>>(
