@@ -486,6 +486,22 @@ impl SceneHandle {
         self.device.check()
     }
 
+    /// The nearest hit in `[t_min, t_max]` with Embree's default context
+    /// (for scenes without user geometry: triangles, native discs).
+    fn intersect1(&self, ray: &Ray, t_min: f32, t_max: f32) -> RayHitSlot {
+        let mut ctx = ray_query_context();
+        let mut args = intersect_arguments((&mut ctx as *mut RayQueryContext).cast());
+        let mut slot = embree_rayhit(ray, t_min, t_max);
+        // SAFETY: committed scene (every constructor commits); all pointers
+        // live across the call; the context and the slot have the layout and
+        // room Embree 4.3+ uses; a scene with user callbacks does not come
+        // here (it needs its own context).
+        unsafe {
+            sys::rtcIntersect1(self.raw, (&mut slot as *mut RayHitSlot).cast(), &mut args);
+        };
+        slot
+    }
+
     /// True when anything is hit in `[t_min, t_max]`; `ctx` is handed to
     /// the user callbacks (null for Embree's default context).
     ///
@@ -728,18 +744,7 @@ impl TriangleScene {
     /// The nearest triangle hit in `[t_min, t_max]`.
     #[must_use]
     pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<TriangleHit> {
-        let mut ctx = ray_query_context();
-        let mut args = intersect_arguments((&mut ctx as *mut RayQueryContext).cast());
-        let mut slot = embree_rayhit(ray, t_min, t_max);
-        // SAFETY: committed scene; all pointers live across the call; the
-        // context and the slot have the layout and room Embree 4.3+ uses.
-        unsafe {
-            sys::rtcIntersect1(
-                self.scene.raw,
-                (&mut slot as *mut RayHitSlot).cast(),
-                &mut args,
-            );
-        };
+        let slot = self.scene.intersect1(ray, t_min, t_max);
         let h = &slot.rayhit.hit;
         (h.geomID != sys::RTC_INVALID_GEOMETRY_ID).then_some(TriangleHit {
             t: slot.rayhit.ray.tfar,
@@ -898,19 +903,8 @@ impl NativeDiscScene {
     /// Embree's distance.
     #[must_use]
     pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<(u32, f32)> {
-        let mut ctx = ray_query_context();
-        let mut args = intersect_arguments((&mut ctx as *mut RayQueryContext).cast());
-        let mut slot = embree_rayhit(ray, t_min, t_max);
-        // SAFETY: committed scene; all pointers live across the call; the
-        // context and the slot have the layout and room Embree 4.3+ uses;
-        // the filter reads only the scene's own disc list.
-        unsafe {
-            sys::rtcIntersect1(
-                self.scene.raw,
-                (&mut slot as *mut RayHitSlot).cast(),
-                &mut args,
-            );
-        };
+        // The filter reads only the scene's own disc list.
+        let slot = self.scene.intersect1(ray, t_min, t_max);
         let h = &slot.rayhit.hit;
         (h.geomID != sys::RTC_INVALID_GEOMETRY_ID).then_some((h.primID, slot.rayhit.ray.tfar))
     }

@@ -57,6 +57,30 @@ fn write_las(path: &Path, points: &[(DVec3, [u16; 3])]) {
     w.close().unwrap();
 }
 
+/// `splatray compare FILE` at 64x48, its report written to `report`: the
+/// backends agree bit for bit (every hit, every splat, the image). Returns
+/// the report.
+fn compare_identical(path: &Path, report: &Path) -> serde_json::Value {
+    let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+        .arg("compare")
+        .arg(path)
+        .args(["--width", "64", "--height", "48", "--report"])
+        .arg(report)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap();
+    let b = r["backends"].as_array().unwrap();
+    assert!(b.len() >= 2, "{r}");
+    let a = &b[1]["agreement"];
+    let name = path.display();
+    assert_eq!(a["hit_agreement"], 1.0, "{name}: {a}");
+    assert_eq!(a["same_splat"], 1.0, "{name}: {a}");
+    assert!(a["image_psnr_db"].is_null(), "{name}: {a}");
+    r
+}
+
 #[test]
 fn las_and_laz_read_through_scale_and_offset_in_f64() {
     let dir = scratch("las");
@@ -101,22 +125,7 @@ fn las_and_laz_render_with_backends_identical() {
         let path = dir.join(name);
         write_las(&path, &pts);
         let report = dir.join(format!("{name}.json"));
-        let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
-            .arg("compare")
-            .arg(&path)
-            .args(["--width", "64", "--height", "48", "--report"])
-            .arg(&report)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let r: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-        let b = r["backends"].as_array().unwrap();
-        assert!(b.len() >= 2, "{r}");
-        let a = &b[1]["agreement"];
-        assert_eq!(a["hit_agreement"], 1.0, "{name}: {a}");
-        assert_eq!(a["same_splat"], 1.0, "{name}: {a}");
-        assert!(a["image_psnr_db"].is_null(), "{name}: {a}");
+        let r = compare_identical(&path, &report);
         assert!(r["splats"].as_u64().unwrap() > 100, "{r}");
     }
 }
@@ -285,20 +294,7 @@ fn e57_renders_with_backends_identical() {
     let path = dir.join("two.e57");
     write_e57(&path, &scans);
     let report = dir.join("r.json");
-    let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
-        .arg("compare")
-        .arg(&path)
-        .args(["--width", "64", "--height", "48", "--report"])
-        .arg(&report)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-    let a = &r["backends"][1]["agreement"];
-    assert_eq!(a["hit_agreement"], 1.0, "{a}");
-    assert_eq!(a["same_splat"], 1.0, "{a}");
-    assert!(a["image_psnr_db"].is_null(), "{a}");
+    compare_identical(&path, &report);
     // scan-check casts rays from one scanner: it says so.
     let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
         .arg("scan-check")
@@ -342,21 +338,7 @@ fn real_las_and_laz_files_render_with_backends_identical() {
             "{name}: {}",
             cloud.origin
         );
-        let report = dir.join(format!("{name}.json"));
-        let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
-            .arg("compare")
-            .arg(&path)
-            .args(["--width", "64", "--height", "48", "--report"])
-            .arg(&report)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let r: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-        let a = &r["backends"][1]["agreement"];
-        assert_eq!(a["hit_agreement"], 1.0, "{name}: {a}");
-        assert_eq!(a["same_splat"], 1.0, "{name}: {a}");
-        assert!(a["image_psnr_db"].is_null(), "{name}: {a}");
+        compare_identical(&path, &dir.join(format!("{name}.json")));
     }
 }
 
@@ -407,18 +389,5 @@ fn an_e57_file_from_the_reference_library_reads_and_renders() {
     assert!(!trim.unwrap().skipped);
     let dir = scratch("e57-libe57");
     let report = dir.join("r.json");
-    let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
-        .arg("compare")
-        .arg(&path)
-        .args(["--width", "64", "--height", "48", "--report"])
-        .arg(&report)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-    let a = &r["backends"][1]["agreement"];
-    assert_eq!(a["hit_agreement"], 1.0, "{a}");
-    assert_eq!(a["same_splat"], 1.0, "{a}");
-    assert!(a["image_psnr_db"].is_null(), "{a}");
+    compare_identical(&path, &report);
 }
