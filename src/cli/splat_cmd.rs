@@ -168,24 +168,12 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
     line.finish();
     report.seconds.read = read;
     report.seconds.total += read;
-    // The splat file and the report are committed together: a failure in
-    // either leaves neither.
     let bytes = encode_splats(&args.output, &splats, cloud.origin).map_err(|e| e.to_string())?;
-    let mut batch = Batch::new();
-    batch
-        .stage(&args.output, |t| std::fs::write(t, &bytes))
-        .map_err(|e| e.to_string())?;
-    if let Some(path) = &args.report {
-        let out = Report {
-            generation: &report,
-            heldout_coverage: heldout.clone(),
-        };
-        let json = serde_json::to_string_pretty(&out).map_err(|e| e.to_string())?;
-        batch
-            .stage(path, |t| std::fs::write(t, &json))
-            .map_err(|e| e.to_string())?;
-    }
-    batch.commit().map_err(|e| e.to_string())?;
+    let out = Report {
+        generation: &report,
+        heldout_coverage: heldout.clone(),
+    };
+    commit_outputs(args, &bytes, &out)?;
     for w in &report.warnings {
         eprintln!("splatray: warning: {w}");
     }
@@ -262,26 +250,16 @@ fn from_gaussians(args: &SplatArgs, layout: GaussianLayout) -> Result<(), String
     let read = read_gaussians(&args.input, args.min_opacity).map_err(|e| e.to_string())?;
     let set = &read.set;
     let bytes = encode_splats(&args.output, &set.splats, set.origin).map_err(|e| e.to_string())?;
-    let mut batch = Batch::new();
-    batch
-        .stage(&args.output, |t| std::fs::write(t, &bytes))
-        .map_err(|e| e.to_string())?;
-    if let Some(path) = &args.report {
-        let report = GaussianReport {
-            layout: layout.name(),
-            gaussians: read.gaussians,
-            splats: set.splats.len(),
-            skipped: read.skipped.clone(),
-            not_flat: read.not_flat,
-            radius_per_sigma: splatray::io::RADIUS_PER_SIGMA,
-            min_opacity: args.min_opacity,
-        };
-        let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
-        batch
-            .stage(path, |t| std::fs::write(t, &json))
-            .map_err(|e| e.to_string())?;
-    }
-    batch.commit().map_err(|e| e.to_string())?;
+    let report = GaussianReport {
+        layout: layout.name(),
+        gaussians: read.gaussians,
+        splats: set.splats.len(),
+        skipped: read.skipped.clone(),
+        not_flat: read.not_flat,
+        radius_per_sigma: splatray::io::RADIUS_PER_SIGMA,
+        min_opacity: args.min_opacity,
+    };
+    commit_outputs(args, &bytes, &report)?;
     for w in read.warnings() {
         eprintln!("splatray: warning: {w}");
     }
@@ -304,4 +282,24 @@ fn from_gaussians(args: &SplatArgs, layout: GaussianLayout) -> Result<(), String
         args.output.display()
     );
     Ok(())
+}
+
+/// Writes the splat file and, with `--report`, `report` as JSON, as one
+/// batch: a failure in either leaves neither.
+fn commit_outputs(
+    args: &SplatArgs,
+    splats: &[u8],
+    report: &impl serde::Serialize,
+) -> Result<(), String> {
+    let mut batch = Batch::new();
+    batch
+        .stage(&args.output, |t| std::fs::write(t, splats))
+        .map_err(|e| e.to_string())?;
+    if let Some(path) = &args.report {
+        let json = serde_json::to_string_pretty(report).map_err(|e| e.to_string())?;
+        batch
+            .stage(path, |t| std::fs::write(t, &json))
+            .map_err(|e| e.to_string())?;
+    }
+    batch.commit().map_err(|e| e.to_string())
 }

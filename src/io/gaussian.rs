@@ -123,14 +123,7 @@ pub fn sniff_layout(head: &[u8]) -> Option<GaussianLayout> {
 /// 4 KiB), or `None` when it cannot be read or is not a Gaussian PLY.
 #[must_use]
 pub fn file_layout(path: &Path) -> Option<GaussianLayout> {
-    use std::io::Read;
-    let mut head = Vec::with_capacity(4096);
-    std::fs::File::open(path)
-        .ok()?
-        .take(4096)
-        .read_to_end(&mut head)
-        .ok()?;
-    sniff_layout(&head)
+    sniff_layout(&super::file_head(path)?)
 }
 
 /// Named values of one Gaussian, by index in [`ROW`].

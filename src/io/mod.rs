@@ -113,6 +113,20 @@ impl Format {
     }
 }
 
+/// The first 4 KiB of a file (to sniff its format), or `None` when it
+/// cannot be read.
+#[must_use]
+pub fn file_head(path: &Path) -> Option<Vec<u8>> {
+    use std::io::Read;
+    let mut buf = Vec::with_capacity(4096);
+    std::fs::File::open(path)
+        .ok()?
+        .take(4096)
+        .read_to_end(&mut buf)
+        .ok()?;
+    Some(buf)
+}
+
 /// The scalar property names of the `vertex` element of a PLY header, from
 /// a file's first bytes (which need not hold the whole header), or `None`
 /// when they do not start a PLY file.

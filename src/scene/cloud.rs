@@ -44,12 +44,11 @@
 //! a dark blue-grey background; splat parameters at their defaults (the
 //! file's viewpoint orients the normals, as in any scene).
 
-use crate::io::{Format, read_points, read_splats};
+use crate::io::{Format, file_head as head, read_points, read_splats};
 use crate::resolve::ShadingMode;
 use crate::{Error, Result};
 use glam::{DVec3, Vec3};
 use std::fmt::Write as _;
-use std::io::Read as _;
 use std::path::{Component, Path, PathBuf};
 
 /// Points of the cloud used for framing, at most.
@@ -97,17 +96,6 @@ pub fn is_cloud_path(path: &Path) -> bool {
         return true;
     }
     head(path).is_some_and(|h| Format::sniff(&h).is_some())
-}
-
-/// The first 4 KiB of a file, or `None` when it cannot be read.
-fn head(path: &Path) -> Option<Vec<u8>> {
-    let mut buf = Vec::with_capacity(4096);
-    std::fs::File::open(path)
-        .ok()?
-        .take(4096)
-        .read_to_end(&mut buf)
-        .ok()?;
-    Some(buf)
 }
 
 /// Whether a PLY file is a splat file: its `vertex` element has the
@@ -179,19 +167,20 @@ pub fn survey_file(path: &Path) -> Result<Survey> {
 fn survey_unchecked(path: &Path) -> Result<Survey> {
     let is_ply = Format::from_extension(path) == Some(Format::Ply)
         || head(path).is_some_and(|h| Format::sniff(&h) == Some(Format::Ply));
-    if is_ply && crate::io::file_layout(path).is_some() {
+    let splat_set = if !is_ply {
+        None
+    } else if crate::io::file_layout(path).is_some() {
         let read = crate::io::read_gaussians(path, crate::io::MIN_OPACITY)?;
-        let set = read.set;
+        Some((CloudKind::Gaussians, read.set))
+    } else if is_splat_ply(path) {
+        Some((CloudKind::Splats, read_splats(path)?))
+    } else {
+        None
+    };
+    if let Some((kind, set)) = splat_set {
         let centres: Vec<Vec3> = set.splats.iter().map(|s| s.center).collect();
         let colors = set.splats.iter().any(|s| s.color != Vec3::ONE);
-        return survey(CloudKind::Gaussians, &centres, set.origin, None, colors)
-            .map_err(|e| e.context(path.display()));
-    }
-    if is_ply && is_splat_ply(path) {
-        let set = read_splats(path)?;
-        let centres: Vec<Vec3> = set.splats.iter().map(|s| s.center).collect();
-        let colors = set.splats.iter().any(|s| s.color != Vec3::ONE);
-        return survey(CloudKind::Splats, &centres, set.origin, None, colors)
+        return survey(kind, &centres, set.origin, None, colors)
             .map_err(|e| e.context(path.display()));
     }
     let cloud = read_points(path)?;
