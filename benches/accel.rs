@@ -289,8 +289,67 @@ fn summary(scenes: &[(usize, Scene)]) {
     );
 }
 
+/// `SPLATRAY_BENCH_PAIRS=k`: the octree and Embree traced alternately, `k`
+/// passes each, so that both see the same load on a shared machine; prints
+/// the median of the `k` paired speed ratios (primary and shadow rays).
+/// With `SPLATRAY_BENCH_ONLY=octree`, only the octree (for profilers).
+fn pairs(scenes: &[(usize, Scene)], rounds: usize) {
+    let only_octree = std::env::var("SPLATRAY_BENCH_ONLY").is_ok_and(|v| v == "octree");
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let time = |f: &mut dyn FnMut()| {
+        let s = Instant::now();
+        f();
+        s.elapsed().as_secs_f64()
+    };
+    for (n, sc) in scenes {
+        let built: Vec<(&str, Box<dyn Backend>)> = builders()
+            .into_iter()
+            .filter(|(name, _)| *name == "octree" || (*name == "embree" && !only_octree))
+            .map(|(name, build)| (name, build(&sc.discs)))
+            .collect();
+        let mut prim = vec![Vec::new(); built.len()];
+        let mut shad = vec![Vec::new(); built.len()];
+        for _ in 0..rounds {
+            for (i, (_, b)) in built.iter().enumerate() {
+                prim[i].push(time(&mut || {
+                    black_box(trace(b.as_ref(), &sc.primary, sc.scale.xi));
+                }));
+                shad[i].push(time(&mut || {
+                    black_box(shadow(b.as_ref(), &sc.shadow));
+                }));
+            }
+        }
+        for (i, (name, b)) in built.iter().enumerate() {
+            eprintln!(
+                "{n:>9} {name:>8}: {:.1} MB, primary {:.3e}/s, shadow {:.3e}/s (medians of {rounds})",
+                b.stats().memory_bytes as f64 / 1e6,
+                sc.primary.len() as f64 / median(prim[i].clone()),
+                sc.shadow.len() as f64 / median(shad[i].clone()),
+            );
+        }
+        if built.len() == 2 {
+            let ratio = |v: &[Vec<f64>]| median((0..rounds).map(|r| v[1][r] / v[0][r]).collect());
+            eprintln!(
+                "{n:>9} octree/embree speed, median of {rounds} paired passes: primary {:.3}, shadow {:.3}",
+                ratio(&prim),
+                ratio(&shad)
+            );
+        }
+    }
+}
+
 fn main() {
     let scenes: Vec<(usize, Scene)> = sizes().into_iter().map(|n| (n, scene(n))).collect();
+    if let Some(k) = std::env::var("SPLATRAY_BENCH_PAIRS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+    {
+        pairs(&scenes, k);
+        return;
+    }
     summary(&scenes);
 
     let mut c = Criterion::default()

@@ -3,7 +3,7 @@
 
 use super::{Hit, Local, Pack, PackRay, Primitive};
 use crate::geometry::Ray;
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
 /// What the intersection hot loop reads of a splat: 48 contiguous bytes.
 /// The tangent axes are pre-divided by the radii, so the local coordinates
@@ -182,15 +182,15 @@ fn segment_within_unit(p: [f32; 2], q: [f32; 2]) -> bool {
 /// Discs per [`DiscPack`].
 const LANES: usize = 4;
 
-/// [`LANES`] discs stored component by component (SoA), so that
-/// [`DiscPack::may_hit`] tests them together in a loop LLVM vectorises.
+/// [`LANES`] discs stored component by component (SoA): one SSE register
+/// per coordinate, so [`DiscPack::may_hit`] tests them together.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 pub struct DiscPack {
-    center: [[f32; LANES]; 3],
-    normal: [[f32; LANES]; 3],
-    u_scaled: [[f32; LANES]; 3],
-    v_scaled: [[f32; LANES]; 3],
+    center: [Vec4; 3],
+    normal: [Vec4; 3],
+    u_scaled: [Vec4; 3],
+    v_scaled: [Vec4; 3],
 }
 
 impl Pack<Disc> for DiscPack {
@@ -199,10 +199,10 @@ impl Pack<Disc> for DiscPack {
     /// All lanes padding: a zero normal, so no ray can hit them (`n·d` is
     /// 0 or NaN, hence `t` is never finite).
     const EMPTY: DiscPack = DiscPack {
-        center: [[0.0; LANES]; 3],
-        normal: [[0.0; LANES]; 3],
-        u_scaled: [[0.0; LANES]; 3],
-        v_scaled: [[0.0; LANES]; 3],
+        center: [Vec4::ZERO; 3],
+        normal: [Vec4::ZERO; 3],
+        u_scaled: [Vec4::ZERO; 3],
+        v_scaled: [Vec4::ZERO; 3],
     };
 
     fn set(&mut self, lane: usize, d: &Disc) {
@@ -216,7 +216,7 @@ impl Pack<Disc> for DiscPack {
 
     #[inline]
     fn get(&self, lane: usize) -> Disc {
-        let get = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][lane], a[1][lane], a[2][lane]);
+        let get = |a: &[Vec4; 3]| Vec3::new(a[0][lane], a[1][lane], a[2][lane]);
         Disc {
             center: get(&self.center),
             normal: get(&self.normal),
@@ -232,45 +232,30 @@ impl Pack<Disc> for DiscPack {
     /// since each set lane is then decided by `intersect` itself.
     #[inline(always)]
     fn may_hit(&self, ray: &PackRay, t_min: f32, t_max: f32) -> u32 {
-        let [ox, oy, oz] = ray.origin;
-        let [dx, dy, dz] = ray.dir;
-        let [nx, ny, nz] = &self.normal;
-        let [cx, cy, cz] = &self.center;
-        let [ux, uy, uz] = &self.u_scaled;
-        let [vx, vy, vz] = &self.v_scaled;
-        // One element-wise operation per line, so each is one vector op.
-        let denom = lanes(|l| (nx[l] * dx) + (ny[l] * dy) + (nz[l] * dz));
-        let ocx = lanes(|l| ox - cx[l]);
-        let ocy = lanes(|l| oy - cy[l]);
-        let ocz = lanes(|l| oz - cz[l]);
-        let num = lanes(|l| (nx[l] * ocx[l]) + (ny[l] * ocy[l]) + (nz[l] * ocz[l]));
-        let t = lanes(|l| -num[l] / denom[l]);
+        let [ox, oy, oz] = ray.origin.map(Vec4::splat);
+        let [dx, dy, dz] = ray.dir.map(Vec4::splat);
+        let [nx, ny, nz] = self.normal;
+        let [cx, cy, cz] = self.center;
+        let denom = nx * dx + ny * dy + nz * dz;
+        let (ocx, ocy, ocz) = (ox - cx, oy - cy, oz - cz);
+        let num = nx * ocx + ny * ocy + nz * ocz;
+        let t = -num / denom;
         // Once the window is narrow most planes are crossed outside it.
-        let mut in_range = 0;
-        for (l, t) in t.iter().enumerate() {
-            in_range |= u32::from((*t >= t_min) & (*t <= t_max) & (t.abs() < f32::INFINITY)) << l;
-        }
+        let in_range = (t.cmpge(Vec4::splat(t_min))
+            & t.cmple(Vec4::splat(t_max))
+            & t.abs().cmplt(Vec4::INFINITY))
+        .bitmask();
         if in_range == 0 {
             return 0;
         }
-        let px = lanes(|l| ocx[l] + dx * t[l]);
-        let py = lanes(|l| ocy[l] + dy * t[l]);
-        let pz = lanes(|l| ocz[l] + dz * t[l]);
-        let u = lanes(|l| (px[l] * ux[l]) + (py[l] * uy[l]) + (pz[l] * uz[l]));
-        let v = lanes(|l| (px[l] * vx[l]) + (py[l] * vy[l]) + (pz[l] * vz[l]));
-        let r2 = lanes(|l| u[l] * u[l] + v[l] * v[l]);
-        let mut mask = 0;
-        for (l, r2) in r2.iter().enumerate() {
-            mask |= u32::from(*r2 <= 1.0001) << l;
-        }
-        mask & in_range
+        let [ux, uy, uz] = self.u_scaled;
+        let [vx, vy, vz] = self.v_scaled;
+        let (px, py, pz) = (ocx + dx * t, ocy + dy * t, ocz + dz * t);
+        let u = px * ux + py * uy + pz * uz;
+        let v = px * vx + py * vy + pz * vz;
+        let r2 = u * u + v * v;
+        r2.cmple(Vec4::splat(1.0001)).bitmask() & in_range
     }
-}
-
-/// `[f(0), .., f(LANES - 1)]`.
-#[inline(always)]
-fn lanes(f: impl Fn(usize) -> f32) -> [f32; LANES] {
-    std::array::from_fn(f)
 }
 
 #[cfg(test)]
