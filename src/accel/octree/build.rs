@@ -62,11 +62,9 @@ pub(super) fn build<P: Primitive>(
         .filter(|nd| nd.meta & INTERIOR == 0 && nd.meta > 0)
         .count();
     let grid = super::Grid::build(&nodes, cube.lo, cube.size);
-    let grid_bytes = grid.as_ref().map_or(0, |g| {
-        std::mem::size_of_val(g.node.as_slice())
-            + std::mem::size_of_val(g.lo.as_slice())
-            + std::mem::size_of_val(g.size.as_slice())
-    });
+    let grid_bytes = grid
+        .as_ref()
+        .map_or(0, |g| std::mem::size_of_val(g.cells.as_slice()));
     let stats = BuildStats {
         build_seconds: start.elapsed().as_secs_f64(),
         memory_bytes: std::mem::size_of_val(nodes.as_slice())
@@ -89,6 +87,10 @@ pub(super) fn build<P: Primitive>(
         references,
         root_lo: cube.lo,
         root_size: cube.size,
+        bounds: [
+            cube.content_lo - Vec3::splat(cube.pad),
+            cube.content_hi + Vec3::splat(cube.pad),
+        ],
         pad: cube.pad,
         stats,
     }
@@ -102,6 +104,10 @@ struct RootCube {
     size: f32,
     /// Padding added to every cell, in world units.
     pad: f32,
+    /// The box around every primitive's box (the cube when there is
+    /// nothing finite to bound).
+    content_lo: Vec3,
+    content_hi: Vec3,
 }
 
 impl RootCube {
@@ -117,7 +123,9 @@ impl RootCube {
                 || (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
                 |a, b| (a.0.min(b.0), a.1.max(b.1)),
             );
-        let (lo, size) = if prims.is_empty() || !lo.is_finite() || !hi.is_finite() {
+        let nothing = prims.is_empty() || !lo.is_finite() || !hi.is_finite();
+        let (content_lo, content_hi) = (lo, hi);
+        let (lo, size) = if nothing {
             (Vec3::ZERO, 1.0)
         } else {
             let size = (hi - lo).max_element();
@@ -129,7 +137,18 @@ impl RootCube {
         // starting within a few scene sizes (module doc).
         let magnitude = lo.abs().max(lo + Vec3::splat(size)).max_element();
         let pad = 16.0 * f32::EPSILON * (magnitude.abs() + size);
-        RootCube { lo, size, pad }
+        let (content_lo, content_hi) = if nothing {
+            (lo, lo + Vec3::splat(size))
+        } else {
+            (content_lo, content_hi)
+        };
+        RootCube {
+            lo,
+            size,
+            pad,
+            content_lo,
+            content_hi,
+        }
     }
 }
 
@@ -565,9 +584,14 @@ impl super::Grid {
         let level = super::GRID_LEVEL;
         let n = 1usize << level;
         let cell = (0..level).fold(root_size, |s, _| s * 0.5);
-        let mut node = vec![super::NO_NODE; n * n * n];
-        let mut lo = vec![Vec3::ZERO; n * n * n];
-        let mut size = vec![0f32; n * n * n];
+        let mut cells = vec![
+            super::GridCell {
+                lo: Vec3::ZERO,
+                size: 0.0,
+                node: super::NO_NODE,
+            };
+            n * n * n
+        ];
         for z in 0..n {
             for y in 0..n {
                 for x in 0..n {
@@ -592,19 +616,15 @@ impl super::Grid {
                     }
                     let i = x + n * (y + n * z);
                     if found {
-                        node[i] = at as u32;
-                        lo[i] = l;
-                        size[i] = s;
+                        cells[i] = super::GridCell {
+                            lo: l,
+                            size: s,
+                            node: at as u32,
+                        };
                     }
                 }
             }
         }
-        Some(super::Grid {
-            n,
-            cell,
-            node,
-            lo,
-            size,
-        })
+        Some(super::Grid { n, cell, cells })
     }
 }

@@ -109,11 +109,17 @@ struct Grid {
     n: usize,
     /// Edge length of a cell (`root_size / n`, exact: halvings).
     cell: f32,
-    /// Per cell (`x + n (y + n z)`): node index, [`NO_NODE`] when empty.
-    node: Vec<u32>,
-    /// Per cell: lower corner and edge of that node's box.
-    lo: Vec<Vec3>,
-    size: Vec<f32>,
+    /// Per cell (`x + n (y + n z)`): the node and its box.
+    cells: Vec<GridCell>,
+}
+
+/// One cell of the [`Grid`]: the node covering it ([`NO_NODE`] when empty),
+/// and that node's lower corner and edge.
+#[derive(Clone, Copy, Debug)]
+struct GridCell {
+    lo: Vec3,
+    size: f32,
+    node: u32,
 }
 
 /// A grid cell with nothing in it.
@@ -171,6 +177,10 @@ pub struct Octree<P: Primitive> {
     root_lo: Vec3,
     /// Edge length of the root cube.
     root_size: f32,
+    /// The padded box around every primitive: rays are clipped to it
+    /// before the grid walk, so a scene much flatter than its cube (a
+    /// floor) is left where its content ends, not where the cube does.
+    bounds: [Vec3; 2],
     /// Padding added to every cell, in world units.
     pad: f32,
     stats: BuildStats,

@@ -8,7 +8,8 @@ use crate::primitive::{Pack, PackRay, Primitive};
 use glam::{Vec3, Vec3A};
 
 impl<P: Primitive> Octree<P> {
-    /// Front-to-back traversal from the root; `visitor` sees the leaves.
+    /// Front-to-back traversal from the root (the ray clipped to the box
+    /// around the content); `visitor` sees the leaves.
     /// Returns true when the visitor stopped it.
     #[inline]
     pub(super) fn traverse<V: Visitor<P>>(&self, ray: &Ray, t_min: f32, visitor: &mut V) -> bool {
@@ -25,10 +26,9 @@ impl<P: Primitive> Octree<P> {
             origin_a: Vec3A::from(ray.origin),
             inv_dir_a: Vec3A::ONE / Vec3A::from(ray.dir),
         };
-        let pad = Vec3::splat(self.pad);
-        let lo = self.root_lo;
-        let a = (lo - pad - ctx.origin) * ctx.inv_dir;
-        let b = (lo + Vec3::splat(self.root_size) + pad - ctx.origin) * ctx.inv_dir;
+        let [lo, hi] = self.bounds;
+        let a = (lo - ctx.origin) * ctx.inv_dir;
+        let b = (hi - ctx.origin) * ctx.inv_dir;
         let (near, far) = slab(a, b);
         let entry = max4(t_min, near);
         let exit = min4(visitor.cutoff(), far);
@@ -38,8 +38,8 @@ impl<P: Primitive> Octree<P> {
             return false;
         }
         match &self.grid {
-            Some(g) => self.walk_grid(g, ray, entry, &ctx, visitor),
-            None => self.visit(0, lo, self.root_size, &ctx, visitor),
+            Some(g) => self.walk_grid(g, ray, entry, exit, &ctx, visitor),
+            None => self.visit(0, self.root_lo, self.root_size, &ctx, visitor),
         }
     }
 
@@ -54,62 +54,78 @@ impl<P: Primitive> Octree<P> {
         g: &super::Grid,
         ray: &Ray,
         entry: f32,
+        exit: f32,
         ctx: &RayCtx,
         visitor: &mut V,
     ) -> bool {
         let n = g.n as i32;
         let p = (ray.origin + ray.dir * entry - self.root_lo) / g.cell;
         let start = |c: f32| (c.floor() as i32).clamp(0, n - 1);
-        let mut idx = [start(p.x), start(p.y), start(p.z)];
+        let idx = [start(p.x), start(p.y), start(p.z)];
         let d = ray.dir.to_array();
         let o = ray.origin.to_array();
         let inv = ctx.inv_dir.to_array();
         let lo = self.root_lo.to_array();
-        let mut step = [0i32; 3];
-        let mut t_next = [f32::INFINITY; 3];
-        let mut t_delta = [f32::INFINITY; 3];
-        for a in 0..3 {
+        // Per axis, in registers: the step of the cell index, the cells
+        // left before the grid's face, where the next crossing is, and
+        // how far apart crossings are.
+        let axis = |a: usize, stride: i32| {
+            let i = idx[a];
             if d[a] > 0.0 {
-                step[a] = 1;
-                t_next[a] = (lo[a] + (idx[a] + 1) as f32 * g.cell - o[a]) * inv[a];
-                t_delta[a] = g.cell * inv[a];
+                (
+                    stride,
+                    n - 1 - i,
+                    (lo[a] + (i + 1) as f32 * g.cell - o[a]) * inv[a],
+                    g.cell * inv[a],
+                )
             } else if d[a] < 0.0 {
-                step[a] = -1;
-                t_next[a] = (lo[a] + idx[a] as f32 * g.cell - o[a]) * inv[a];
-                t_delta[a] = -g.cell * inv[a];
+                (
+                    -stride,
+                    i,
+                    (lo[a] + i as f32 * g.cell - o[a]) * inv[a],
+                    -g.cell * inv[a],
+                )
+            } else {
+                (0, 0, f32::INFINITY, f32::INFINITY)
             }
-        }
+        };
+        let (sx, mut left_x, mut tx, dx) = axis(0, 1);
+        let (sy, mut left_y, mut ty, dy) = axis(1, n);
+        let (sz, mut left_z, mut tz, dz) = axis(2, n * n);
+        let mut i = idx[0] + n * (idx[1] + n * idx[2]);
         let mut last = super::NO_NODE;
-        // Each step leaves the grid on one axis or moves one cell: at most
-        // 3n steps cross it (a NaN ray stops at the first comparison).
-        for _ in 0..3 * g.n + 3 {
-            let i = (idx[0] + n * (idx[1] + n * idx[2])) as usize;
-            let node = g.node[i];
-            if node != super::NO_NODE && node != last {
-                last = node;
-                if self.visit(node as usize, g.lo[i], g.size[i], ctx, visitor) {
+        // Each step uses up one of the cells left on an axis, so the walk
+        // ends (a NaN ray stops at the first comparison).
+        loop {
+            let cell = &g.cells[i as usize];
+            if cell.node != super::NO_NODE && cell.node != last {
+                last = cell.node;
+                if self.visit(cell.node as usize, cell.lo, cell.size, ctx, visitor) {
                     return true;
                 }
             }
-            let a = if t_next[0] < t_next[1] {
-                if t_next[0] < t_next[2] { 0 } else { 2 }
-            } else if t_next[1] < t_next[2] {
-                1
+            // The next cell, on the axis crossed first; it starts beyond
+            // the window or the content (or NaN), or lies outside the
+            // grid: done.
+            let (t, left, step, delta) = if tx < ty {
+                if tx < tz {
+                    (&mut tx, &mut left_x, sx, dx)
+                } else {
+                    (&mut tz, &mut left_z, sz, dz)
+                }
+            } else if ty < tz {
+                (&mut ty, &mut left_y, sy, dy)
             } else {
-                2
+                (&mut tz, &mut left_z, sz, dz)
             };
-            // The next cell starts beyond the window (or NaN): done.
-            let within = t_next[a] <= visitor.cutoff();
-            if !within {
+            let within = *t <= visitor.cutoff() && *t <= exit;
+            if !within || *left == 0 {
                 return false;
             }
-            idx[a] += step[a];
-            if idx[a] < 0 || idx[a] >= n {
-                return false;
-            }
-            t_next[a] += t_delta[a];
+            *left -= 1;
+            i += step;
+            *t += delta;
         }
-        false
     }
 
     fn visit<V: Visitor<P>>(
