@@ -5,7 +5,7 @@ use super::{INTERIOR, Octree, child_lo, lanes};
 use crate::accel::{Candidate, CandidateHits, Skip};
 use crate::geometry::Ray;
 use crate::primitive::{Pack, PackRay, Primitive};
-use glam::{Vec3, Vec3A};
+use glam::{Vec3, Vec3A, Vec4};
 
 impl<P: Primitive> Octree<P> {
     /// Front-to-back traversal from the root (the ray clipped to the box
@@ -156,28 +156,40 @@ impl<P: Primitive> Octree<P> {
         // Slab parameters of the padded lower and upper halves on each axis.
         let (lower_near, lower_far) = slab_a((lo_a - pad - o) * inv, (mid + pad - o) * inv);
         let (upper_near, upper_far) = slab_a((mid - pad - o) * inv, (hi + pad - o) * inv);
-        // Entry and exit of all eight children at once, branch free; only
-        // the children whose interval is non-empty are visited.
+        // Entry and exit of all eight children at once, branch free, four
+        // children (one half along z) to a register: lane `l` of a half is
+        // child `l | z << 2`, so its x slab is that of bit 0 and its y slab
+        // that of bit 1. `max`/`min` are `maxps`/`minps` (`a > b ? a : b`),
+        // the scalar comparisons' NaN rule; only the children whose
+        // interval is non-empty are visited.
         let cut = visitor.cutoff();
-        let near = [lower_near.to_array(), upper_near.to_array()];
-        let far = [lower_far.to_array(), upper_far.to_array()];
-        let corner = |oct: usize, v: &[[f32; 3]; 2]| {
-            Vec3::new(v[oct & 1][0], v[(oct >> 1) & 1][1], v[oct >> 2][2])
+        let pick = |lower: f32, upper: f32, mixed_x: bool| {
+            if mixed_x {
+                Vec4::new(lower, upper, lower, upper)
+            } else {
+                Vec4::new(lower, lower, upper, upper)
+            }
         };
-        let entry: [f32; 8] = std::array::from_fn(|oct| max4(ctx.t_min, corner(oct, &near)));
-        let exit: [f32; 8] = std::array::from_fn(|oct| min4(cut, corner(oct, &far)));
-        let mut open = 0u32;
-        for oct in 0..8 {
-            open |= u32::from(entry[oct] <= exit[oct]) << oct;
-        }
-        let open = open & mask;
+        let near_xy =
+            pick(lower_near.x, upper_near.x, true).max(pick(lower_near.y, upper_near.y, false));
+        let far_xy =
+            pick(lower_far.x, upper_far.x, true).min(pick(lower_far.y, upper_far.y, false));
+        let t_min = Vec4::splat(ctx.t_min);
+        let cut4 = Vec4::splat(cut);
+        let entry_lo = near_xy.max(Vec4::splat(lower_near.z)).max(t_min);
+        let entry_hi = near_xy.max(Vec4::splat(upper_near.z)).max(t_min);
+        let exit_lo = far_xy.min(Vec4::splat(lower_far.z)).min(cut4);
+        let exit_hi = far_xy.min(Vec4::splat(upper_far.z)).min(cut4);
+        let open =
+            (entry_lo.cmple(exit_lo).bitmask() | entry_hi.cmple(exit_hi).bitmask() << 4) & mask;
         if open == 0 {
             return false;
         }
+        let entry = [entry_lo.to_array(), entry_hi.to_array()];
         for i in 0..8 {
             let oct = i ^ ctx.sign_mask;
             // The window may have shrunk since `exit` was computed.
-            if open & (1 << oct) == 0 || entry[oct] > visitor.cutoff() {
+            if open & (1 << oct) == 0 || entry[oct >> 2][oct & 3] > visitor.cutoff() {
                 continue;
             }
             let child = node.first as usize + (mask & ((1 << oct) - 1)).count_ones() as usize;
