@@ -60,7 +60,10 @@ impl<P: Primitive> Octree<P> {
     ) -> bool {
         let n = g.n as i32;
         let p = (ray.origin + ray.dir * entry - self.root_lo) / g.cell;
-        let start = |c: f32| (c.floor() as i32).clamp(0, n - 1);
+        // Truncation, not `floor` (a libm call without SSE4.1): the two
+        // differ only on negative `c`, where both clamp to cell 0; NaN and
+        // out-of-range values saturate alike.
+        let start = |c: f32| (c as i32).clamp(0, n - 1);
         let idx = [start(p.x), start(p.y), start(p.z)];
         let d = ray.dir.to_array();
         let o = ray.origin.to_array();
