@@ -30,7 +30,7 @@ use common::{Query, blobby_splats, camera_queries, diagonal};
 use criterion::{BatchSize, Criterion, SamplingMode, Throughput};
 use glam::Vec3;
 use rayon::prelude::*;
-use splatray::accel::octree::{Octree, OctreeParams, OverlapTest};
+use splatray::accel::octree::{Layout, Octree, OctreeParams, OverlapTest};
 use splatray::accel::{Backend, BuildStats, Candidate, CandidateHits, Departure, Ray, backends};
 use splatray::embree::{Device, NativeDiscScene};
 use splatray::primitive::Disc;
@@ -71,6 +71,18 @@ fn builders() -> Vec<(&'static str, Build)> {
     out.push((
         "embree-native",
         Box::new(|d: &[Disc]| Box::new(Native::new(d)) as Box<dyn Backend>),
+    ));
+    out.push((
+        "octree-shared",
+        Box::new(|d: &[Disc]| {
+            Box::new(Octree::new(
+                d,
+                &OctreeParams {
+                    layout: Layout::Shared,
+                    ..OctreeParams::default()
+                },
+            )) as Box<dyn Backend>
+        }),
     ));
     out.push((
         "octree-square",
@@ -220,20 +232,29 @@ fn scene(n: usize) -> Scene {
 
 /// Median of `runs` timings of `f`, in seconds.
 fn median_seconds(runs: usize, mut f: impl FnMut()) -> f64 {
-    let mut t: Vec<f64> = (0..runs)
-        .map(|_| {
-            let s = Instant::now();
-            f();
-            s.elapsed().as_secs_f64()
-        })
-        .collect();
-    t.sort_by(f64::total_cmp);
-    t[t.len() / 2]
+    median((0..runs).map(|_| seconds(&mut f)).collect())
 }
 
-fn summary(scenes: &[(usize, Scene)]) {
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn seconds(f: &mut dyn FnMut()) -> f64 {
+    let s = Instant::now();
+    f();
+    s.elapsed().as_secs_f64()
+}
+
+/// The one-pass table: per backend, the median of 3 builds, then `rounds`
+/// passes of the primary and the shadow rays, the backends taking turns
+/// pass by pass so that all see the same load on a shared machine. Rays/s
+/// are medians over the passes; "vs embree" is the median over the passes
+/// of the row's speed / Embree user geometry's speed in the same pass.
+/// With `only` set, just the backends of those names.
+fn summary(scenes: &[(usize, Scene)], rounds: usize, only: Option<&[String]>) {
     eprintln!(
-        "\n{:>9} {:>14} {:>8} {:>9} {:>8} {:>10} {:>9} {:>11} {:>11} {:>8}",
+        "\n{:>9} {:>14} {:>8} {:>9} {:>8} {:>10} {:>9} {:>11} {:>11} {:>8} {:>8}",
         "splats",
         "backend",
         "build s",
@@ -243,30 +264,42 @@ fn summary(scenes: &[(usize, Scene)]) {
         "MB",
         "primary/s",
         "shadow/s",
-        "vs embree"
+        "vs embree",
+        "(shadow)"
     );
     for (n, sc) in scenes {
-        let mut rows = Vec::new();
-        for (name, build) in builders() {
-            let build_s = median_seconds(3, || drop(black_box(build(&sc.discs))));
-            let b = build(&sc.discs);
-            trace(b.as_ref(), &sc.primary, sc.scale.xi);
-            let prim = median_seconds(3, || {
-                black_box(trace(b.as_ref(), &sc.primary, sc.scale.xi));
-            });
-            let shad = median_seconds(3, || {
-                black_box(shadow(b.as_ref(), &sc.shadow));
-            });
-            rows.push((name, build_s, b.stats().clone(), prim, shad));
+        let built: Vec<(&str, f64, Box<dyn Backend>)> = builders()
+            .into_iter()
+            .filter(|(name, _)| only.is_none_or(|o| o.iter().any(|x| x == name)))
+            .map(|(name, build)| {
+                let build_s = median_seconds(3, || drop(black_box(build(&sc.discs))));
+                let b = build(&sc.discs);
+                trace(b.as_ref(), &sc.primary, sc.scale.xi);
+                (name, build_s, b)
+            })
+            .collect();
+        let mut prim = vec![Vec::new(); built.len()];
+        let mut shad = vec![Vec::new(); built.len()];
+        for _ in 0..rounds {
+            for (i, (_, _, b)) in built.iter().enumerate() {
+                prim[i].push(seconds(&mut || {
+                    black_box(trace(b.as_ref(), &sc.primary, sc.scale.xi));
+                }));
+                shad[i].push(seconds(&mut || {
+                    black_box(shadow(b.as_ref(), &sc.shadow));
+                }));
+            }
         }
-        let embree_prim = rows
-            .iter()
-            .find(|r| r.0 == "embree")
-            .map(|r| r.3)
-            .unwrap_or(f64::NAN);
-        for (name, build_s, s, prim, shad) in rows {
+        let embree = built.iter().position(|b| b.0 == "embree");
+        let vs = |times: &[Vec<f64>], i: usize| {
+            embree.map_or(f64::NAN, |e| {
+                median((0..rounds).map(|r| times[e][r] / times[i][r]).collect())
+            })
+        };
+        for (i, (name, build_s, b)) in built.iter().enumerate() {
+            let s = b.stats();
             eprintln!(
-                "{:>9} {:>14} {:>8.3} {:>9} {:>8} {:>10.2} {:>9.1} {:>11.3e} {:>11.3e} {:>8.2}",
+                "{:>9} {:>14} {:>8.3} {:>9} {:>8} {:>10.2} {:>9.1} {:>11.3e} {:>11.3e} {:>8.3} {:>8.3}",
                 n,
                 name,
                 build_s,
@@ -274,83 +307,34 @@ fn summary(scenes: &[(usize, Scene)]) {
                 s.leaves,
                 s.mean_refs_per_leaf,
                 s.memory_bytes as f64 / 1e6,
-                sc.primary.len() as f64 / prim,
-                sc.shadow.len() as f64 / shad,
-                embree_prim / prim
+                sc.primary.len() as f64 / median(prim[i].clone()),
+                sc.shadow.len() as f64 / median(shad[i].clone()),
+                vs(&prim, i),
+                vs(&shad, i),
             );
         }
     }
     eprintln!(
-        "(build s: median of 3; rays/s: median of 3 passes of {}x{} primary rays and of the shadow rays of their hits; \
-         'vs embree' = the row's primary rays/s / Embree user-geometry primary rays/s; {} threads)\n",
-        W,
-        H,
+        "(build s: median of 3; rays/s: median of {rounds} passes of {W}x{H} primary rays and of the shadow rays of \
+         their hits, the backends taking turns pass by pass; 'vs embree': median over the passes of the row's speed / \
+         Embree user geometry's in the same pass, primary and (shadow) rays; {} threads)\n",
         rayon::current_num_threads()
     );
 }
 
-/// `SPLATRAY_BENCH_PAIRS=k`: the octree and Embree traced alternately, `k`
-/// passes each, so that both see the same load on a shared machine; prints
-/// the median of the `k` paired speed ratios (primary and shadow rays).
-/// With `SPLATRAY_BENCH_ONLY=octree`, only the octree (for profilers).
-fn pairs(scenes: &[(usize, Scene)], rounds: usize) {
-    let only_octree = std::env::var("SPLATRAY_BENCH_ONLY").is_ok_and(|v| v == "octree");
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
-    let time = |f: &mut dyn FnMut()| {
-        let s = Instant::now();
-        f();
-        s.elapsed().as_secs_f64()
-    };
-    for (n, sc) in scenes {
-        let built: Vec<(&str, Box<dyn Backend>)> = builders()
-            .into_iter()
-            .filter(|(name, _)| *name == "octree" || (*name == "embree" && !only_octree))
-            .map(|(name, build)| (name, build(&sc.discs)))
-            .collect();
-        let mut prim = vec![Vec::new(); built.len()];
-        let mut shad = vec![Vec::new(); built.len()];
-        for _ in 0..rounds {
-            for (i, (_, b)) in built.iter().enumerate() {
-                prim[i].push(time(&mut || {
-                    black_box(trace(b.as_ref(), &sc.primary, sc.scale.xi));
-                }));
-                shad[i].push(time(&mut || {
-                    black_box(shadow(b.as_ref(), &sc.shadow));
-                }));
-            }
-        }
-        for (i, (name, b)) in built.iter().enumerate() {
-            eprintln!(
-                "{n:>9} {name:>8}: {:.1} MB, primary {:.3e}/s, shadow {:.3e}/s (medians of {rounds})",
-                b.stats().memory_bytes as f64 / 1e6,
-                sc.primary.len() as f64 / median(prim[i].clone()),
-                sc.shadow.len() as f64 / median(shad[i].clone()),
-            );
-        }
-        if built.len() == 2 {
-            let ratio = |v: &[Vec<f64>]| median((0..rounds).map(|r| v[1][r] / v[0][r]).collect());
-            eprintln!(
-                "{n:>9} octree/embree speed, median of {rounds} paired passes: primary {:.3}, shadow {:.3}",
-                ratio(&prim),
-                ratio(&shad)
-            );
-        }
-    }
-}
-
 fn main() {
     let scenes: Vec<(usize, Scene)> = sizes().into_iter().map(|n| (n, scene(n))).collect();
+    let only: Option<Vec<String>> = std::env::var("SPLATRAY_BENCH_ONLY")
+        .ok()
+        .map(|v| v.split(',').map(|x| x.trim().to_string()).collect());
     if let Some(k) = std::env::var("SPLATRAY_BENCH_PAIRS")
         .ok()
         .and_then(|v| v.parse().ok())
     {
-        pairs(&scenes, k);
+        summary(&scenes, k, only.as_deref());
         return;
     }
-    summary(&scenes);
+    summary(&scenes, 3, only.as_deref());
 
     let mut c = Criterion::default()
         .sample_size(10)

@@ -5,7 +5,7 @@
 #![allow(dead_code)]
 
 use glam::{Vec2, Vec3};
-use splatray::accel::octree::{Octree, OctreeParams, OverlapTest};
+use splatray::accel::octree::{Layout, Octree, OctreeParams, OverlapTest};
 use splatray::accel::{Backend, BuildStats, CandidateHits, Departure, Ray, backends as registry};
 use splatray::primitive::{Disc, Hit, Local, Primitive, Single};
 use splatray::resolve::{ShadingMode, resolve};
@@ -336,6 +336,18 @@ pub fn backends(splats: &[Splat]) -> Backends {
     all.push(labelled(
         "octree-square<disc>".into(),
         Box::new(Octree::new(&discs, &square)),
+    ));
+    let shared = OctreeParams {
+        layout: Layout::Shared,
+        ..OctreeParams::default()
+    };
+    all.push(labelled(
+        "octree-shared<disc>".into(),
+        Box::new(Octree::new(&discs, &shared)),
+    ));
+    all.push(labelled(
+        "octree-shared<unpacked>".into(),
+        Box::new(Octree::new(&unpacked, &shared)),
     ));
     Backends {
         oracle,

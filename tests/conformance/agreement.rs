@@ -8,7 +8,7 @@
 use crate::common::*;
 use glam::Vec3;
 use splatray::accel::Backend;
-use splatray::accel::octree::{Octree, OctreeParams};
+use splatray::accel::octree::{Layout, Octree, OctreeParams};
 use splatray::primitive::Disc;
 use splatray::scene::SceneScale;
 use splatray::splat::Splat;
@@ -97,6 +97,21 @@ fn octree_reports_its_structure() {
     assert!(s.mean_refs_per_leaf > 1.0, "{s:?}");
     assert!(s.memory_bytes >= t.references() * 52, "{s:?}");
     assert!(s.build_seconds > 0.0);
+    // The shared layout holds every splat once (52 bytes with its id) and
+    // the leaves' entries, far less than the copies.
+    let shared = Octree::new(
+        &discs,
+        &OctreeParams {
+            layout: Layout::Shared,
+            ..OctreeParams::default()
+        },
+    );
+    let m = shared.stats().memory_bytes;
+    assert_eq!(shared.references(), t.references());
+    assert!(
+        m >= SPLATS * 52 && m < s.memory_bytes / 2,
+        "{m} against {s:?}"
+    );
 }
 
 #[test]

@@ -2,7 +2,10 @@
 //! Morton order, insertion of every primitive into the leaves it overlaps,
 //! leaf packs, flattening.
 
-use super::{INTERIOR, NO_PRIMITIVE, Node, Octree, OctreeParams, OverlapTest, child_lo, lanes};
+use super::{
+    ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Layout, NO_PRIMITIVE, Node, Octree, OctreeParams,
+    OverlapTest, child_lo, lanes,
+};
 use crate::accel::BuildStats;
 use crate::primitive::{Pack, Primitive};
 use glam::Vec3;
@@ -48,14 +51,26 @@ pub(super) fn build<P: Primitive>(
     let leaf_refs = count_per_leaf(&chunks, leaves);
     let references: usize = leaf_refs.iter().map(|&c| c as usize).sum();
     assert!(references < INTERIOR as usize, "too many references");
-    let leaf_packs: Vec<u32> = leaf_refs
-        .iter()
-        .map(|&c| c.div_ceil(lanes::<P>() as u32))
-        .collect();
-    let leaf_start = prefix_sums(&leaf_packs);
-    let (packs, pack_ids) = fill_packs(prims, &order, &chunks, &leaf_start, &leaf_packs);
+    let (packs, pack_ids, entries, leaf_entries) = match params.layout {
+        Layout::Copies => {
+            let leaf_packs: Vec<u32> = leaf_refs
+                .iter()
+                .map(|&c| c.div_ceil(lanes::<P>() as u32))
+                .collect();
+            let first = prefix_sums(&leaf_packs);
+            let (packs, pack_ids) = fill_packs(prims, &order, &chunks, &first, &leaf_packs);
+            // A leaf's packs are contiguous: no entries.
+            (packs, pack_ids, Vec::new(), leaf_packs)
+        }
+        Layout::Shared => {
+            let (packs, pack_ids) = morton_packs(prims, &order);
+            let (entries, leaf_entries) = leaf_entries::<P>(&chunks, &leaf_refs);
+            (packs, pack_ids, entries, leaf_entries)
+        }
+    };
     drop(chunks);
-    let nodes = flatten(root, &leaf_start, &leaf_packs);
+    let leaf_start = prefix_sums(&leaf_entries);
+    let nodes = flatten(root, &leaf_start, &leaf_entries);
     let leaf_nodes = nodes.iter().filter(|nd| nd.meta & INTERIOR == 0).count();
     let nonempty = nodes
         .iter()
@@ -70,6 +85,7 @@ pub(super) fn build<P: Primitive>(
         memory_bytes: std::mem::size_of_val(nodes.as_slice())
             + std::mem::size_of_val(packs.as_slice())
             + std::mem::size_of_val(pack_ids.as_slice())
+            + std::mem::size_of_val(entries.as_slice())
             + grid_bytes,
         nodes: nodes.len(),
         leaves: leaf_nodes,
@@ -84,6 +100,8 @@ pub(super) fn build<P: Primitive>(
         nodes,
         packs,
         pack_ids,
+        entries,
+        shared: params.layout == Layout::Shared,
         references,
         root_lo: cube.lo,
         root_size: cube.size,
@@ -266,7 +284,7 @@ fn prefix_sums(counts: &[u32]) -> Vec<u32> {
         .collect()
 }
 
-/// Step 4: a counting sort of the references by leaf (each leaf's keys in
+/// Step 4, [`Layout::Copies`]: a counting sort of the references by leaf (each leaf's keys in
 /// key order, padded to whole packs), then the packs and their lanes' ids.
 fn fill_packs<P: Primitive>(
     prims: &[P],
@@ -305,6 +323,74 @@ fn fill_packs<P: Primitive>(
         .collect();
     let pack_ids: Vec<u32> = pack_keys.par_iter().map(|&k| id_of(k)).collect();
     (packs, pack_ids)
+}
+
+/// Step 4, [`Layout::Shared`]: the primitives in Morton order, `P::Pack::LANES` to a pack
+/// (pack `k / LANES`, lane `k % LANES` holds the primitive of key `k`; the
+/// last pack padded with empty lanes), and each lane's primitive id.
+fn morton_packs<P: Primitive>(prims: &[P], order: &[u32]) -> (Vec<P::Pack>, Vec<u32>) {
+    let lanes = lanes::<P>();
+    assert!(
+        order.len().div_ceil(lanes) <= ENTRY_PACK as usize,
+        "too many primitives for an entry's pack index"
+    );
+    let packs: Vec<P::Pack> = order
+        .par_chunks(lanes)
+        .map(|ids| {
+            let mut p = <P::Pack as Pack<P>>::EMPTY;
+            for (lane, &i) in ids.iter().enumerate() {
+                p.set(lane, &prims[i as usize]);
+            }
+            p
+        })
+        .collect();
+    let mut pack_ids = order.to_vec();
+    pack_ids.resize(packs.len() * lanes, NO_PRIMITIVE);
+    (packs, pack_ids)
+}
+
+/// Step 4, [`Layout::Shared`], continued: a counting sort of the references by leaf (each leaf's keys in
+/// key order), then each leaf's keys as entries: the index of a Morton pack
+/// with the mask of its lanes the leaf references ([`ENTRY_PACK`],
+/// [`ENTRY_MASK_SHIFT`]). Returns the entries, leaf after leaf, and each
+/// leaf's entry count.
+fn leaf_entries<P: Primitive>(chunks: &[Vec<u64>], leaf_refs: &[u32]) -> (Vec<u32>, Vec<u32>) {
+    let lanes = lanes::<P>() as u32;
+    let start = prefix_sums(leaf_refs);
+    let total = leaf_refs.iter().map(|&c| c as usize).sum::<usize>();
+    let mut keys = vec![0u32; total];
+    let mut cursor = start.clone();
+    for p in chunks.iter().flatten() {
+        let c = &mut cursor[(p >> 32) as usize];
+        keys[*c as usize] = (p & 0xffff_ffff) as u32;
+        *c += 1;
+    }
+    let mut entries = Vec::with_capacity(total / 2 + 1);
+    let counts = start
+        .iter()
+        .zip(leaf_refs)
+        .map(|(&s, &n)| {
+            let before = entries.len();
+            let mut current: Option<(u32, u32)> = None;
+            for &k in &keys[s as usize..(s + n) as usize] {
+                let (pack, lane) = (k / lanes, k % lanes);
+                match &mut current {
+                    Some((p, mask)) if *p == pack => *mask |= 1 << lane,
+                    _ => {
+                        if let Some((p, mask)) = current {
+                            entries.push(p | mask << ENTRY_MASK_SHIFT);
+                        }
+                        current = Some((pack, 1 << lane));
+                    }
+                }
+            }
+            if let Some((p, mask)) = current {
+                entries.push(p | mask << ENTRY_MASK_SHIFT);
+            }
+            (entries.len() - before) as u32
+        })
+        .collect();
+    (entries, counts)
 }
 
 /// Step 5: the pointer tree flattened into [`Node`]s (the build-time tree is

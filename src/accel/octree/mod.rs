@@ -72,6 +72,21 @@ pub enum OverlapTest {
     BoundingSquare,
 }
 
+/// How the leaves hold their primitives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layout {
+    /// Each leaf's references copied into packs of its own, so a leaf's
+    /// primitives are read contiguously and every pack is full but the
+    /// last: the fastest layout, at about 5 copies of every primitive.
+    Copies,
+    /// Every primitive stored once, in packs in the Morton order of the
+    /// centres; a leaf lists the packs it needs with a mask of the lanes it
+    /// references, so neighbouring leaves share packs (a fifth of the
+    /// memory of [`Layout::Copies`], but about twice the pack tests per
+    /// ray: `docs/development.md`, round `octree-perf4`).
+    Shared,
+}
+
 /// Build parameters of the [`Octree`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct OctreeParams {
@@ -82,16 +97,20 @@ pub struct OctreeParams {
     pub max_depth: u32,
     /// The primitive/cell test of step 3 (§3.1).
     pub overlap: OverlapTest,
+    /// How the leaves hold their primitives.
+    pub layout: Layout,
 }
 
 impl Default for OctreeParams {
     /// `max_leaf = 8`, `max_depth = 16`, exact overlap test (measured better
-    /// than the bounding square: see `docs/development.md`).
+    /// than the bounding square: see `docs/development.md`), copies in the
+    /// leaves.
     fn default() -> Self {
         OctreeParams {
             max_leaf: 8,
             max_depth: 16,
             overlap: OverlapTest::Exact,
+            layout: Layout::Copies,
         }
     }
 }
@@ -131,18 +150,29 @@ const INTERIOR: u32 = 1 << 31;
 /// Primitive id of a padding lane.
 const NO_PRIMITIVE: u32 = u32::MAX;
 
+/// Where a leaf entry's lane mask starts (at most 4 lanes per pack).
+const ENTRY_MASK_SHIFT: u32 = 28;
+
+/// The pack index bits of a leaf entry.
+const ENTRY_PACK: u32 = (1 << ENTRY_MASK_SHIFT) - 1;
+
+const _: () = assert!(
+    <crate::primitive::DiscPack as Pack<crate::primitive::Disc>>::LANES <= 4,
+    "a leaf entry holds a 4-lane mask"
+);
+
 /// One node of the flattened octree: 8 bytes, no bounds (a cell's box is
 /// derived from its parent's during traversal).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(C)]
 struct Node {
-    /// Interior: index in `nodes` of its first stored child. Leaf: index in
-    /// `packs` of its first pack.
+    /// Interior: index in `nodes` of its first stored child. Leaf: index of
+    /// its first pack ([`Layout::Copies`]) or entry ([`Layout::Shared`]).
     first: u32,
     /// Interior: [`INTERIOR`] | 8-bit mask of the stored (non-empty)
     /// children, bit `o` for octant `o = x | y << 1 | z << 2` (1 = upper
     /// half); child `o` sits at `first + popcount(mask & ((1 << o) - 1))`.
-    /// Leaf: the number of packs (bit 31 clear).
+    /// Leaf: the number of packs or entries (bit 31 clear).
     meta: u32,
 }
 
@@ -161,12 +191,21 @@ fn child_lo(lo: Vec3, half: f32, oct: usize) -> Vec3 {
 /// The octree of §3.1 over a set of primitives.
 pub struct Octree<P: Primitive> {
     nodes: Vec<Node>,
-    /// The primitives of each leaf's references, `P::Pack::LANES` to a pack
-    /// (copies in reference order, so a leaf's primitives are contiguous in
-    /// memory; the last pack of a leaf padded with empty lanes).
+    /// The primitives, `P::Pack::LANES` to a pack (SoA): with
+    /// [`Layout::Copies`] each leaf's references copied in reference order
+    /// (the last pack of a leaf padded with empty lanes), with
+    /// [`Layout::Shared`] every primitive once in Morton order.
     packs: Vec<P::Pack>,
     /// Primitive id of each lane of `packs` ([`NO_PRIMITIVE`] on padding).
     pack_ids: Vec<u32>,
+    /// [`Layout::Shared`]: the leaves' references, leaf after leaf: per
+    /// entry, the index of a pack in `packs` (bits below
+    /// [`ENTRY_MASK_SHIFT`]) and the mask of the lanes the leaf references
+    /// (the bits above). Empty with [`Layout::Copies`], whose leaves own a
+    /// range of `packs`.
+    entries: Vec<u32>,
+    /// The layout is [`Layout::Shared`].
+    shared: bool,
     /// The nodes at level [`GRID_LEVEL`] as a uniform grid, walked cell by
     /// cell instead of descending the upper levels for every ray; `None`
     /// when the root is a leaf.

@@ -1,7 +1,7 @@
 //! Front-to-back traversal of the [`Octree`] (§3.2) and what it does in the
 //! leaves: gather the candidate window, or stop at the first hit.
 
-use super::{INTERIOR, Octree, child_lo, lanes};
+use super::{ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Octree, child_lo, lanes};
 use crate::accel::{Candidate, CandidateHits, Skip};
 use crate::geometry::Ray;
 use crate::primitive::{Pack, PackRay, Primitive};
@@ -142,10 +142,20 @@ impl<P: Primitive> Octree<P> {
         let node = self.nodes[index];
         if node.meta & INTERIOR == 0 {
             let range = node.first as usize..(node.first + node.meta) as usize;
-            return visitor.leaf(
-                &self.packs[range.clone()],
-                &self.pack_ids[range.start * lanes::<P>()..range.end * lanes::<P>()],
-            );
+            let l = lanes::<P>();
+            if self.shared {
+                // One branch, the same for every leaf of the tree.
+                return self.entries[range].iter().any(|&e| {
+                    let p = (e & ENTRY_PACK) as usize;
+                    let ids = &self.pack_ids[p * l..(p + 1) * l];
+                    visitor.pack(&self.packs[p], ids, e >> ENTRY_MASK_SHIFT)
+                });
+            }
+            let ids = &self.pack_ids[range.start * l..range.end * l];
+            return self.packs[range]
+                .iter()
+                .zip(ids.chunks_exact(l))
+                .any(|(pack, ids)| visitor.pack(pack, ids, u32::MAX));
         }
         let mask = node.meta & 0xff;
         let half = size * 0.5;
@@ -262,9 +272,9 @@ fn min4(t: f32, v: Vec3) -> f32 {
 pub(super) trait Visitor<P: Primitive> {
     /// Cells entered beyond this are skipped.
     fn cutoff(&self) -> f32;
-    /// Tests a leaf's packs (with their lanes' primitive ids); true stops
-    /// the traversal.
-    fn leaf(&mut self, packs: &[P::Pack], ids: &[u32]) -> bool;
+    /// Tests the lanes of a leaf's pack set in `lanes` (`ids`: the lanes'
+    /// primitive ids); true stops the traversal.
+    fn pack(&mut self, pack: &P::Pack, ids: &[u32], lanes: u32) -> bool;
 }
 
 /// `intersect`: gathers the candidate window, leaving out what `skip`
@@ -276,6 +286,9 @@ pub(super) struct Gather<'a, S> {
     t_max: f32,
     skip: S,
     hits: &'a mut CandidateHits,
+    /// `t_max` or the window's far end, whichever is nearer: kept up to
+    /// date as candidates are offered.
+    cut: f32,
 }
 
 impl<'a, S: Skip> Gather<'a, S> {
@@ -291,6 +304,7 @@ impl<'a, S: Skip> Gather<'a, S> {
             lanes: PackRay::new(ray),
             t_min,
             t_max,
+            cut: t_max.min(hits.far()),
             skip,
             hits,
         }
@@ -300,32 +314,29 @@ impl<'a, S: Skip> Gather<'a, S> {
 impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, S> {
     #[inline]
     fn cutoff(&self) -> f32 {
-        self.t_max.min(self.hits.far())
+        self.cut
     }
 
-    #[inline]
-    fn leaf(&mut self, packs: &[P::Pack], ids: &[u32]) -> bool {
-        let mut cut = self.t_max.min(self.hits.far());
-        for (pack, ids) in packs.iter().zip(ids.chunks_exact(lanes::<P>())) {
-            let mut mask = pack.may_hit(&self.lanes, self.t_min, cut);
-            while mask != 0 {
-                let lane = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                // The shared routine decides, with the window's current end,
-                // and the shared rule skips.
-                let prim = pack.get(lane);
-                if let Some(h) = prim.intersect(self.ray, self.t_min, cut) {
-                    if self.skip.skips(self.ray.dir, ids[lane], &prim) {
-                        continue;
-                    }
-                    let c = Candidate {
-                        id: ids[lane],
-                        t: h.t,
-                        u: h.u,
-                        v: h.v,
-                    };
-                    cut = self.hits.offer(c).min(self.t_max);
+    #[inline(always)]
+    fn pack(&mut self, pack: &P::Pack, ids: &[u32], lanes: u32) -> bool {
+        let mut mask = pack.may_hit(&self.lanes, self.t_min, self.cut) & lanes;
+        while mask != 0 {
+            let lane = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            // The shared routine decides, with the window's current end,
+            // and the shared rule skips.
+            let prim = pack.get(lane);
+            if let Some(h) = prim.intersect(self.ray, self.t_min, self.cut) {
+                if self.skip.skips(self.ray.dir, ids[lane], &prim) {
+                    continue;
                 }
+                let c = Candidate {
+                    id: ids[lane],
+                    t: h.t,
+                    u: h.u,
+                    v: h.v,
+                };
+                self.cut = self.hits.offer(c).min(self.t_max);
             }
         }
         false
@@ -359,24 +370,19 @@ impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, S> {
         self.t_max
     }
 
-    #[inline]
-    fn leaf(&mut self, packs: &[P::Pack], ids: &[u32]) -> bool {
-        packs
-            .iter()
-            .zip(ids.chunks_exact(lanes::<P>()))
-            .any(|(pack, ids)| {
-                let mut mask = pack.may_hit(&self.lanes, self.t_min, self.t_max);
-                while mask != 0 {
-                    let lane = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
-                    let prim = pack.get(lane);
-                    if prim.intersect(self.ray, self.t_min, self.t_max).is_some()
-                        && !self.skip.skips(self.ray.dir, ids[lane], &prim)
-                    {
-                        return true;
-                    }
-                }
-                false
-            })
+    #[inline(always)]
+    fn pack(&mut self, pack: &P::Pack, ids: &[u32], lanes: u32) -> bool {
+        let mut mask = pack.may_hit(&self.lanes, self.t_min, self.t_max) & lanes;
+        while mask != 0 {
+            let lane = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            let prim = pack.get(lane);
+            if prim.intersect(self.ray, self.t_min, self.t_max).is_some()
+                && !self.skip.skips(self.ray.dir, ids[lane], &prim)
+            {
+                return true;
+            }
+        }
+        false
     }
 }
