@@ -3,8 +3,8 @@
 //! leaf packs, flattening.
 
 use super::{
-    ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Layout, NO_PRIMITIVE, Node, Octree, OctreeParams,
-    OverlapTest, child_lo, lanes,
+    ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Layout, LeafBox, NO_PRIMITIVE, Node, Octree,
+    OctreeParams, OverlapTest, child_lo, lanes,
 };
 use crate::accel::BuildStats;
 use crate::primitive::{Pack, Primitive};
@@ -68,9 +68,11 @@ pub(super) fn build<P: Primitive>(
             (packs, pack_ids, entries, leaf_entries)
         }
     };
+    let mut leaf_boxes = content_boxes(prims, &extents, &order, &chunks, leaves, cube.pad);
     drop(chunks);
+    clip_to_cells(&root, cube.lo, cube.size, cube.pad, &mut leaf_boxes);
     let leaf_start = prefix_sums(&leaf_entries);
-    let nodes = flatten(root, &leaf_start, &leaf_entries);
+    let (nodes, boxes) = flatten(root, &leaf_start, &leaf_entries, &leaf_boxes);
     let leaf_nodes = nodes.iter().filter(|nd| nd.meta & INTERIOR == 0).count();
     let nonempty = nodes
         .iter()
@@ -86,6 +88,7 @@ pub(super) fn build<P: Primitive>(
             + std::mem::size_of_val(packs.as_slice())
             + std::mem::size_of_val(pack_ids.as_slice())
             + std::mem::size_of_val(entries.as_slice())
+            + std::mem::size_of_val(boxes.as_slice())
             + grid_bytes,
         nodes: nodes.len(),
         leaves: leaf_nodes,
@@ -98,6 +101,7 @@ pub(super) fn build<P: Primitive>(
     Octree {
         grid,
         nodes,
+        boxes,
         packs,
         pack_ids,
         entries,
@@ -395,17 +399,92 @@ fn leaf_entries<P: Primitive>(chunks: &[Vec<u64>], leaf_refs: &[u32]) -> (Vec<u3
 
 /// Step 5: the pointer tree flattened into [`Node`]s (the build-time tree is
 /// dropped here).
-fn flatten(mut root: BuildNode, leaf_start: &[u32], leaf_packs: &[u32]) -> Vec<Node> {
+fn flatten(
+    mut root: BuildNode,
+    leaf_start: &[u32],
+    leaf_packs: &[u32],
+    leaf_boxes: &[LeafBox],
+) -> (Vec<Node>, Vec<LeafBox>) {
     count_refs(&mut root, leaf_packs);
-    let mut nodes = vec![Node { first: 0, meta: 0 }];
-    let mut emitted = 0;
-    emit(&root, 0, &mut nodes, leaf_start, leaf_packs, &mut emitted);
-    debug_assert_eq!(emitted, nodes.len(), "every node slot emitted once");
+    let mut out = Flat {
+        nodes: vec![Node { first: 0, meta: 0 }],
+        boxes: vec![EMPTY_BOX],
+        leaf_start,
+        leaf_count: leaf_packs,
+        leaf_boxes,
+        emitted: 0,
+    };
+    emit(&root, 0, &mut out);
+    debug_assert_eq!(out.emitted, out.nodes.len(), "every node slot emitted once");
     debug_assert!(
-        nodes.iter().all(|nd| nd.meta != UNEMITTED),
+        out.nodes.iter().all(|nd| nd.meta != UNEMITTED),
         "a node slot was never emitted"
     );
-    nodes
+    (out.nodes, out.boxes)
+}
+
+/// What [`emit`] writes and reads.
+struct Flat<'a> {
+    nodes: Vec<Node>,
+    /// Per node: a leaf's content box, [`EMPTY_BOX`] for interior nodes.
+    boxes: Vec<LeafBox>,
+    leaf_start: &'a [u32],
+    leaf_count: &'a [u32],
+    leaf_boxes: &'a [LeafBox],
+    emitted: usize,
+}
+
+/// The box of nothing (every ray misses it).
+const EMPTY_BOX: LeafBox = [Vec3::INFINITY, Vec3::NEG_INFINITY];
+
+/// Step 4c: per leaf, the box around the padded footprints of the
+/// primitives it references (the footprints of step 3).
+fn content_boxes<P: Primitive>(
+    prims: &[P],
+    extents: &[Vec3],
+    order: &[u32],
+    chunks: &[Vec<u64>],
+    leaves: u32,
+    pad: f32,
+) -> Vec<LeafBox> {
+    let by_key: Vec<LeafBox> = order
+        .par_iter()
+        .map(|&i| {
+            let (c, e) = (
+                prims[i as usize].center(),
+                extents[i as usize] + Vec3::splat(pad),
+            );
+            [c - e, c + e]
+        })
+        .collect();
+    let mut boxes = vec![EMPTY_BOX; leaves as usize];
+    for r in chunks.iter().flatten() {
+        let b = &mut boxes[(r >> 32) as usize];
+        let k = &by_key[(r & 0xffff_ffff) as usize];
+        b[0] = b[0].min(k[0]);
+        b[1] = b[1].max(k[1]);
+    }
+    boxes
+}
+
+/// Step 4c, continued: each leaf's content box clipped to its padded cell.
+/// A hit a ray finds on a primitive of the leaf inside the leaf's cell lies
+/// in both (with a padding's margin, as for the cells themselves); a hit
+/// outside the cell lies in another leaf holding the same primitive.
+fn clip_to_cells(node: &BuildNode, lo: Vec3, size: f32, pad: f32, boxes: &mut [LeafBox]) {
+    match node {
+        BuildNode::Leaf { id, .. } => {
+            let b = &mut boxes[*id as usize];
+            b[0] = b[0].max(lo - Vec3::splat(pad));
+            b[1] = b[1].min(lo + Vec3::splat(size + pad));
+        }
+        BuildNode::Interior { children, .. } => {
+            let half = size * 0.5;
+            for (oct, c) in children.iter().enumerate() {
+                clip_to_cells(c, child_lo(lo, half, oct), half, pad, boxes);
+            }
+        }
+    }
 }
 
 /// The pointer tree of the build, flattened afterwards.
@@ -612,47 +691,45 @@ fn subtree_refs(node: &BuildNode, leaf_count: &[u32]) -> u64 {
     }
 }
 
-/// Writes `node` into `nodes[slot]`, appending its non-empty children
-/// contiguously (pbrt's flattening, depth first).
-fn emit(
-    node: &BuildNode,
-    slot: usize,
-    nodes: &mut Vec<Node>,
-    leaf_start: &[u32],
-    leaf_count: &[u32],
-    emitted: &mut usize,
-) {
-    *emitted += 1;
+/// Writes `node` into `nodes[slot]` (and its box into `boxes[slot]`),
+/// appending its non-empty children contiguously (pbrt's flattening, depth
+/// first).
+fn emit(node: &BuildNode, slot: usize, out: &mut Flat) {
+    out.emitted += 1;
     match node {
         BuildNode::Leaf { id, .. } => {
-            nodes[slot] = Node {
-                first: leaf_start[*id as usize],
-                meta: leaf_count[*id as usize],
+            let id = *id as usize;
+            out.nodes[slot] = Node {
+                first: out.leaf_start[id],
+                meta: out.leaf_count[id],
             };
+            out.boxes[slot] = out.leaf_boxes[id];
         }
         BuildNode::Interior { children, .. } => {
             let mut mask = 0u32;
             for (oct, c) in children.iter().enumerate() {
-                if subtree_refs(c, leaf_count) > 0 {
+                if subtree_refs(c, out.leaf_count) > 0 {
                     mask |= 1 << oct;
                 }
             }
-            let first = nodes.len();
-            nodes.resize(
-                first + mask.count_ones() as usize,
+            let first = out.nodes.len();
+            let stored = first + mask.count_ones() as usize;
+            out.nodes.resize(
+                stored,
                 Node {
                     first: 0,
                     meta: UNEMITTED,
                 },
             );
-            nodes[slot] = Node {
+            out.boxes.resize(stored, EMPTY_BOX);
+            out.nodes[slot] = Node {
                 first: first as u32,
                 meta: INTERIOR | mask,
             };
             let mut j = first;
             for (oct, c) in children.iter().enumerate() {
                 if mask & (1 << oct) != 0 {
-                    emit(c, j, nodes, leaf_start, leaf_count, emitted);
+                    emit(c, j, out);
                     j += 1;
                 }
             }

@@ -36,7 +36,11 @@
 //! by the ray direction's signs (`i ^ sign_mask`, a front-to-back order for
 //! octants), skipping every cell whose entry lies beyond the far end of the
 //! candidate window (`hits.far()`, nearest + `xi`, §4.3): no hit there can
-//! still be a candidate. In a leaf, [`Pack::may_hit`] filters; every lane it
+//! still be a candidate. A leaf whose content box (its primitives' padded
+//! footprints clipped to its padded cell) the ray misses within the window
+//! is skipped: on a floor that box is a thin slab, which a shadow ray
+//! leaving the floor or a primary ray skimming it passes over. In a leaf,
+//! [`Pack::may_hit`] filters; every lane it
 //! lets through is decided by [`Primitive::intersect`] and offered to
 //! [`CandidateHits::offer`], so the candidates are bit-identical to those of
 //! the other backends.
@@ -147,6 +151,9 @@ const NO_NODE: u32 = u32::MAX;
 /// Flag in [`Node::meta`] marking an interior node.
 const INTERIOR: u32 = 1 << 31;
 
+/// A box as its lower and upper corners.
+type LeafBox = [Vec3; 2];
+
 /// Primitive id of a padding lane.
 const NO_PRIMITIVE: u32 = u32::MAX;
 
@@ -191,6 +198,11 @@ fn child_lo(lo: Vec3, half: f32, oct: usize) -> Vec3 {
 /// The octree of §3.1 over a set of primitives.
 pub struct Octree<P: Primitive> {
     nodes: Vec<Node>,
+    /// Per node: for a leaf, the box around its primitives' padded
+    /// footprints clipped to its padded cell (a ray that misses it skips the
+    /// leaf's packs: on a floor, a leaf's content is a thin slab); unused
+    /// for interior nodes.
+    boxes: Vec<LeafBox>,
     /// The primitives, `P::Pack::LANES` to a pack (SoA): with
     /// [`Layout::Copies`] each leaf's references copied in reference order
     /// (the last pack of a leaf padded with empty lanes), with
