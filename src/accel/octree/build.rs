@@ -733,6 +733,9 @@ fn emit(node: &BuildNode, slot: usize, out: &mut Flat) {
                     j += 1;
                 }
             }
+            out.boxes[slot] = out.boxes[first..j]
+                .iter()
+                .fold(EMPTY_BOX, |a, b| [a[0].min(b[0]), a[1].max(b[1])]);
         }
     }
 }

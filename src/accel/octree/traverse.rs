@@ -140,18 +140,18 @@ impl<P: Primitive> Octree<P> {
         visitor: &mut V,
     ) -> bool {
         let node = self.nodes[index];
+        // The node's content box, against the ray's window.
+        let [blo, bhi] = self.boxes[index];
+        let (near, far) = slab_a(
+            (Vec3A::from(blo) - ctx.origin_a) * ctx.inv_dir_a,
+            (Vec3A::from(bhi) - ctx.origin_a) * ctx.inv_dir_a,
+        );
+        // NaN compares false: a NaN entry or exit skips the node.
+        let meets = max4(ctx.t_min, near) <= min4(visitor.cutoff(), far);
+        if !meets {
+            return false;
+        }
         if node.meta & INTERIOR == 0 {
-            // The leaf's content box, against the ray's window.
-            let [blo, bhi] = self.boxes[index];
-            let (near, far) = slab_a(
-                (Vec3A::from(blo) - ctx.origin_a) * ctx.inv_dir_a,
-                (Vec3A::from(bhi) - ctx.origin_a) * ctx.inv_dir_a,
-            );
-            // NaN compares false: a NaN entry or exit skips the leaf.
-            let meets = max4(ctx.t_min, near) <= min4(visitor.cutoff(), far);
-            if !meets {
-                return false;
-            }
             let range = node.first as usize..(node.first + node.meta) as usize;
             let l = lanes::<P>();
             if self.shared {
