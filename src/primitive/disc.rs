@@ -83,8 +83,18 @@ impl Primitive for Disc {
         }
         let half = (hi - lo) * 0.5;
         let rel_mid = (lo + half) - self.center;
-        if self.normal.dot(rel_mid).abs() > self.normal.abs().dot(half) {
+        let height = self.normal.dot(rel_mid);
+        if height.abs() > self.normal.abs().dot(half) {
             return false;
+        }
+        // Quick accept: the box centre's projection onto the plane lies in
+        // the box and on the disc (a common point; rounding can only add a
+        // reference, never lose one).
+        let drop = self.normal * height;
+        let foot = rel_mid - drop;
+        let (fu, fv) = (foot.dot(self.u_scaled), foot.dot(self.v_scaled));
+        if drop.abs().cmple(half).all() && fu * fu + fv * fv <= 1.0 {
+            return true;
         }
         let mut s = [0.0f32; 8];
         let mut uv = [[0.0f32; 2]; 8];
@@ -123,10 +133,11 @@ impl Primitive for Disc {
             }
         }
         let pts = &pts[..n.min(12)];
+        // A section point on the disc settles it without the segments.
+        if pts.iter().any(|p| p[0] * p[0] + p[1] * p[1] <= 1.0) {
+            return true;
+        }
         for (i, p) in pts.iter().enumerate() {
-            if p[0] * p[0] + p[1] * p[1] <= 1.0 {
-                return true;
-            }
             for q in &pts[i + 1..] {
                 if segment_within_unit(*p, *q) {
                     return true;
@@ -211,6 +222,22 @@ impl Pack<Disc> for DiscPack {
             self.normal[k][lane] = d.normal[k];
             self.u_scaled[k][lane] = d.u_scaled[k];
             self.v_scaled[k][lane] = d.v_scaled[k];
+        }
+    }
+
+    /// Column by column (one `Vec4` per coordinate), not lane by lane.
+    fn from_fn(lane: impl Fn(usize) -> Option<Disc>) -> Self {
+        let d: [Option<Disc>; LANES] = std::array::from_fn(lane);
+        let col = |f: &dyn Fn(&Disc) -> f32| {
+            Vec4::from_array(std::array::from_fn(|l| d[l].as_ref().map_or(0.0, f)))
+        };
+        let vec =
+            |f: &dyn Fn(&Disc) -> Vec3| [col(&|d| f(d).x), col(&|d| f(d).y), col(&|d| f(d).z)];
+        DiscPack {
+            center: vec(&|d| d.center),
+            normal: vec(&|d| d.normal),
+            u_scaled: vec(&|d| d.u_scaled),
+            v_scaled: vec(&|d| d.v_scaled),
         }
     }
 
@@ -311,6 +338,36 @@ mod tests {
             }
         }
         assert!(hits > 1000, "the rays should often hit: {hits}");
+    }
+
+    #[test]
+    fn pack_from_fn_is_lane_by_lane_set() {
+        let discs = [
+            disc(Vec3::new(1.0, 2.0, 3.0), Vec3::new(0.3, -0.5, 0.8), 0.25),
+            disc(Vec3::new(-4.0, 0.5, 1e3), Vec3::Y, 2.0),
+        ];
+        let lanes = |l: usize| [Some(discs[0]), None, Some(discs[1]), None][l];
+        let mut by_set = DiscPack::EMPTY;
+        for l in 0..LANES {
+            if let Some(d) = lanes(l) {
+                by_set.set(l, &d);
+            }
+        }
+        let by_fn = DiscPack::from_fn(lanes);
+        for l in 0..LANES {
+            let (a, b) = (by_set.get(l), by_fn.get(l));
+            for (x, y) in [
+                (a.center, b.center),
+                (a.normal, b.normal),
+                (a.u_scaled, b.u_scaled),
+                (a.v_scaled, b.v_scaled),
+            ] {
+                assert_eq!(
+                    x.to_array().map(f32::to_bits),
+                    y.to_array().map(f32::to_bits)
+                );
+            }
+        }
     }
 
     #[test]

@@ -114,6 +114,16 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
     fn set(&mut self, lane: usize, p: &P);
     /// The primitive of `lane`, bit for bit as stored.
     fn get(&self, lane: usize) -> P;
+    /// The pack whose lane `l` holds `lane(l)` (padding where `None`).
+    fn from_fn(lane: impl Fn(usize) -> Option<P>) -> Self {
+        let mut pack = Self::EMPTY;
+        for l in 0..Self::LANES {
+            if let Some(p) = lane(l) {
+                pack.set(l, &p);
+            }
+        }
+        pack
+    }
     /// Bit `l` set when lane `l` may be hit in `[t_min, t_max]`: a filter
     /// that must pass every lane [`Primitive::intersect`] hits and no padding
     /// lane; each lane passed is then decided by `intersect` itself.

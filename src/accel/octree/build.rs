@@ -47,7 +47,14 @@ pub(super) fn build<P: Primitive>(
         .collect();
     let cube = RootCube::around(prims, &extents);
     let (root, order, leaves) = split_by_centres(prims, &cube, params);
-    let chunks = insert_references(prims, &extents, &order, &root, &cube, params, insertion);
+    // The primitives and their extents in Morton order (one parallel
+    // gather, so every later step reads memory in order).
+    let sorted: Vec<(P, Vec3)> = order
+        .par_iter()
+        .map(|&i| (prims[i as usize], extents[i as usize]))
+        .collect();
+    drop(extents);
+    let chunks = insert_references(&sorted, &root, &cube, params, insertion);
     let leaf_refs = count_per_leaf(&chunks, leaves);
     let references: usize = leaf_refs.iter().map(|&c| c as usize).sum();
     assert!(references < INTERIOR as usize, "too many references");
@@ -58,17 +65,18 @@ pub(super) fn build<P: Primitive>(
                 .map(|&c| c.div_ceil(lanes::<P>() as u32))
                 .collect();
             let first = prefix_sums(&leaf_packs);
-            let (packs, pack_ids) = fill_packs(prims, &order, &chunks, &first, &leaf_packs);
+            let (packs, pack_ids) = fill_packs(&sorted, &order, &chunks, &first, &leaf_packs);
             // A leaf's packs are contiguous: no entries.
             (packs, pack_ids, Vec::new(), leaf_packs)
         }
         Layout::Shared => {
-            let (packs, pack_ids) = morton_packs(prims, &order);
+            let (packs, pack_ids) = morton_packs(&sorted, &order);
             let (entries, leaf_entries) = leaf_entries::<P>(&chunks, &leaf_refs);
             (packs, pack_ids, entries, leaf_entries)
         }
     };
-    let mut leaf_boxes = content_boxes(prims, &extents, &order, &chunks, leaves, cube.pad);
+    let mut leaf_boxes = content_boxes(&sorted, &chunks, leaves, cube.pad);
+    drop(sorted);
     drop(chunks);
     clip_to_cells(&root, cube.lo, cube.size, cube.pad, &mut leaf_boxes);
     let leaf_start = prefix_sums(&leaf_entries);
@@ -219,23 +227,16 @@ fn split_by_centres<P: Primitive>(
 }
 
 /// Step 3: every leaf each primitive overlaps. Primitives are read in Morton
-/// order (one parallel gather first, so the descent reads memory in order),
-/// in chunks of consecutive keys; each chunk lists `(leaf << 32) | key` in
+/// order (`sorted`: each with its half extent), in chunks of consecutive keys; each chunk lists `(leaf << 32) | key` in
 /// key order, so the chunks concatenated are sorted by key and a stable
 /// counting sort by leaf yields every leaf's keys in order.
 fn insert_references<P: Primitive>(
-    prims: &[P],
-    extents: &[Vec3],
-    order: &[u32],
+    sorted: &[(P, Vec3)],
     root: &BuildNode,
     cube: &RootCube,
     params: &OctreeParams,
     insertion: Insertion,
 ) -> Vec<Vec<u64>> {
-    let sorted: Vec<(P, Vec3)> = order
-        .par_iter()
-        .map(|&i| (prims[i as usize], extents[i as usize]))
-        .collect();
     const CHUNK: usize = 2048;
     sorted
         .par_chunks(CHUNK)
@@ -291,7 +292,7 @@ fn prefix_sums(counts: &[u32]) -> Vec<u32> {
 /// Step 4, [`Layout::Copies`]: a counting sort of the references by leaf (each leaf's keys in
 /// key order, padded to whole packs), then the packs and their lanes' ids.
 fn fill_packs<P: Primitive>(
-    prims: &[P],
+    sorted: &[(P, Vec3)],
     order: &[u32],
     chunks: &[Vec<u64>],
     leaf_start: &[u32],
@@ -306,47 +307,40 @@ fn fill_packs<P: Primitive>(
         pack_keys[*c as usize] = (p & 0xffff_ffff) as u32;
         *c += 1;
     }
-    let id_of = |k: u32| {
-        if k == NO_PRIMITIVE {
-            NO_PRIMITIVE
-        } else {
-            order[k as usize]
-        }
-    };
     let packs: Vec<P::Pack> = pack_keys
         .par_chunks(lanes)
         .map(|keys| {
-            let mut p = <P::Pack as Pack<P>>::EMPTY;
-            for (lane, &k) in keys.iter().enumerate() {
-                if k != NO_PRIMITIVE {
-                    p.set(lane, &prims[id_of(k) as usize]);
-                }
-            }
-            p
+            <P::Pack as Pack<P>>::from_fn(|lane| {
+                let k = *keys.get(lane)?;
+                (k != NO_PRIMITIVE).then(|| sorted[k as usize].0)
+            })
         })
         .collect();
-    let pack_ids: Vec<u32> = pack_keys.par_iter().map(|&k| id_of(k)).collect();
+    let pack_ids: Vec<u32> = pack_keys
+        .par_iter()
+        .map(|&k| {
+            if k == NO_PRIMITIVE {
+                NO_PRIMITIVE
+            } else {
+                order[k as usize]
+            }
+        })
+        .collect();
     (packs, pack_ids)
 }
 
 /// Step 4, [`Layout::Shared`]: the primitives in Morton order, `P::Pack::LANES` to a pack
 /// (pack `k / LANES`, lane `k % LANES` holds the primitive of key `k`; the
 /// last pack padded with empty lanes), and each lane's primitive id.
-fn morton_packs<P: Primitive>(prims: &[P], order: &[u32]) -> (Vec<P::Pack>, Vec<u32>) {
+fn morton_packs<P: Primitive>(sorted: &[(P, Vec3)], order: &[u32]) -> (Vec<P::Pack>, Vec<u32>) {
     let lanes = lanes::<P>();
     assert!(
         order.len().div_ceil(lanes) <= ENTRY_PACK as usize,
         "too many primitives for an entry's pack index"
     );
-    let packs: Vec<P::Pack> = order
+    let packs: Vec<P::Pack> = sorted
         .par_chunks(lanes)
-        .map(|ids| {
-            let mut p = <P::Pack as Pack<P>>::EMPTY;
-            for (lane, &i) in ids.iter().enumerate() {
-                p.set(lane, &prims[i as usize]);
-            }
-            p
-        })
+        .map(|chunk| <P::Pack as Pack<P>>::from_fn(|lane| chunk.get(lane).map(|s| s.0)))
         .collect();
     let mut pack_ids = order.to_vec();
     pack_ids.resize(packs.len() * lanes, NO_PRIMITIVE);
@@ -440,20 +434,15 @@ const EMPTY_BOX: LeafBox = [Vec3::INFINITY, Vec3::NEG_INFINITY];
 /// Step 4c: per leaf, the box around the padded footprints of the
 /// primitives it references (the footprints of step 3).
 fn content_boxes<P: Primitive>(
-    prims: &[P],
-    extents: &[Vec3],
-    order: &[u32],
+    sorted: &[(P, Vec3)],
     chunks: &[Vec<u64>],
     leaves: u32,
     pad: f32,
 ) -> Vec<LeafBox> {
-    let by_key: Vec<LeafBox> = order
+    let by_key: Vec<LeafBox> = sorted
         .par_iter()
-        .map(|&i| {
-            let (c, e) = (
-                prims[i as usize].center(),
-                extents[i as usize] + Vec3::splat(pad),
-            );
+        .map(|(p, e)| {
+            let (c, e) = (p.center(), *e + Vec3::splat(pad));
             [c - e, c + e]
         })
         .collect();
