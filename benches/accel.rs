@@ -1,9 +1,9 @@
 //! Build and trace benchmarks of the acceleration backends, side by side on
-//! the same splats and rays: the octree (exact and bounding-square overlap
-//! tests, §3.1), Embree 4 user-geometry discs, and (a row for comparison,
-//! not a backend) Embree's native oriented discs with every hit confirmed
-//! by the shared disc test. The brute-force oracle is left out
-//! (quadratic).
+//! the same splats and rays: the octree (its two leaf layouts, copies and
+//! shared packs; and the report's bounding-square overlap test, §3.1),
+//! Embree 4 user-geometry discs, and (a row for comparison, not a backend)
+//! Embree's native oriented discs with every hit confirmed by the shared
+//! disc test. The brute-force oracle is left out (quadratic).
 //!
 //! Splats lie on the procedural blobby surface of the test suite; primary
 //! rays come from a 1024×1024 pinhole camera, traced in parallel with rayon
@@ -17,11 +17,15 @@
 //! SPLATRAY_BENCH_SIZES=35000,1000000,4000000 cargo bench --bench accel -- --sample-size 10
 //! ```
 //!
-//! Before criterion runs, a one-pass summary table (build seconds, structure
-//! figures, primary and shadow rays/s, octree/Embree ratio) is printed to
-//! stderr, all measured in this run. "MB" is what each structure holds: the
-//! octree's nodes and packs, and for Embree the bytes its device memory
-//! monitor saw it keep for the scene.
+//! Before criterion runs, a summary table (build seconds, structure
+//! figures, primary and shadow rays/s, the speed ratio to Embree user
+//! geometry for each kind of ray) is printed to stderr, all measured in this
+//! run: the backends take turns pass by pass, and each ratio is the median
+//! over the passes of the two speeds in the same pass.
+//! `SPLATRAY_BENCH_PAIRS=k` sets the passes (3 by default) and skips
+//! criterion; `SPLATRAY_BENCH_ONLY=octree,embree` keeps only the rows named.
+//! "MB" is what each structure holds: everything the octree keeps, and for
+//! Embree the bytes its device memory monitor saw it keep for the scene.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
