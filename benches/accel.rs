@@ -1,6 +1,7 @@
 //! Build and trace benchmarks of the acceleration backends, side by side on
-//! the same splats and rays: the octree (its two leaf layouts, copies and
-//! shared packs; and the report's bounding-square overlap test, §3.1),
+//! the same splats and rays: the octree (as registered, whose default layout
+//! depends on the size; each of its two leaf layouts, copies and shared
+//! packs; and the report's bounding-square overlap test, §3.1),
 //! Embree 4 user-geometry discs, and (a row for comparison, not a backend)
 //! Embree's native oriented discs with every hit confirmed by the shared
 //! disc test. The brute-force oracle is left out (quadratic).
@@ -75,6 +76,18 @@ fn builders() -> Vec<(&'static str, Build)> {
     out.push((
         "embree-native",
         Box::new(|d: &[Disc]| Box::new(Native::new(d)) as Box<dyn Backend>),
+    ));
+    out.push((
+        "octree-copies",
+        Box::new(|d: &[Disc]| {
+            Box::new(Octree::new(
+                d,
+                &OctreeParams {
+                    layout: Layout::Copies,
+                    ..OctreeParams::default()
+                },
+            )) as Box<dyn Backend>
+        }),
     ));
     out.push((
         "octree-shared",

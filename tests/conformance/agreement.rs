@@ -112,6 +112,25 @@ fn octree_reports_its_structure() {
         m >= SPLATS * 52 && m < s.memory_bytes / 2,
         "{m} against {s:?}"
     );
+    // The default chooses by the copies' size: copies here, shared when
+    // the copies would exceed the bound.
+    assert_eq!(t.layout(), Layout::Copies);
+    for (bound, layout, bytes) in [
+        (0, Layout::Shared, m),
+        (usize::MAX, Layout::Copies, s.memory_bytes),
+    ] {
+        let auto = Octree::new(
+            &discs,
+            &OctreeParams {
+                layout: Layout::Auto {
+                    max_copies_bytes: bound,
+                },
+                ..OctreeParams::default()
+            },
+        );
+        assert_eq!(auto.layout(), layout);
+        assert_eq!(auto.stats().memory_bytes, bytes);
+    }
 }
 
 #[test]

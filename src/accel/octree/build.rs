@@ -58,12 +58,25 @@ pub(super) fn build<P: Primitive>(
     let leaf_refs = count_per_leaf(&chunks, leaves);
     let references: usize = leaf_refs.iter().map(|&c| c as usize).sum();
     assert!(references < INTERIOR as usize, "too many references");
-    let (packs, pack_ids, entries, leaf_entries) = match params.layout {
-        Layout::Copies => {
-            let leaf_packs: Vec<u32> = leaf_refs
-                .iter()
-                .map(|&c| c.div_ceil(lanes::<P>() as u32))
-                .collect();
+    let leaf_packs: Vec<u32> = leaf_refs
+        .iter()
+        .map(|&c| c.div_ceil(lanes::<P>() as u32))
+        .collect();
+    let layout = match params.layout {
+        Layout::Auto { max_copies_bytes } => {
+            let packs: usize = leaf_packs.iter().map(|&c| c as usize).sum();
+            let bytes = packs
+                * (std::mem::size_of::<P::Pack>() + lanes::<P>() * std::mem::size_of::<u32>());
+            if bytes <= max_copies_bytes {
+                Layout::Copies
+            } else {
+                Layout::Shared
+            }
+        }
+        fixed => fixed,
+    };
+    let (packs, pack_ids, entries, leaf_entries) = match layout {
+        Layout::Copies | Layout::Auto { .. } => {
             let first = prefix_sums(&leaf_packs);
             let (packs, pack_ids) = fill_packs(&sorted, &order, &chunks, &first, &leaf_packs);
             // A leaf's packs are contiguous: no entries.
@@ -113,7 +126,7 @@ pub(super) fn build<P: Primitive>(
         packs,
         pack_ids,
         entries,
-        shared: params.layout == Layout::Shared,
+        shared: layout == Layout::Shared,
         references,
         root_lo: cube.lo,
         root_size: cube.size,

@@ -89,7 +89,19 @@ pub enum Layout {
     /// memory of [`Layout::Copies`], but about twice the pack tests per
     /// ray: `docs/development.md`, round `octree-perf4`).
     Shared,
+    /// [`Layout::Copies`] while the copies' packs would take at most this
+    /// many bytes, [`Layout::Shared`] beyond: the copies are 10–20 %
+    /// faster up to 2M splats, but at 4M the shared layout is within 0–10 %
+    /// of them in a quarter of the memory (the README's benchmark).
+    Auto {
+        /// Most bytes of packs and ids the copies may take.
+        max_copies_bytes: usize,
+    },
 }
+
+/// The default [`Layout::Auto`] bound: copies up to 512 MiB (about 1.5M
+/// splats of the benchmark's surface).
+pub const AUTO_MAX_COPIES_BYTES: usize = 512 << 20;
 
 /// Build parameters of the [`Octree`].
 #[derive(Clone, Debug, PartialEq)]
@@ -108,13 +120,15 @@ pub struct OctreeParams {
 impl Default for OctreeParams {
     /// `max_leaf = 8`, `max_depth = 16`, exact overlap test (measured better
     /// than the bounding square: see `docs/development.md`), copies in the
-    /// leaves.
+    /// leaves up to [`AUTO_MAX_COPIES_BYTES`], shared packs beyond.
     fn default() -> Self {
         OctreeParams {
             max_leaf: 8,
             max_depth: 16,
             overlap: OverlapTest::Exact,
-            layout: Layout::Copies,
+            layout: Layout::Auto {
+                max_copies_bytes: AUTO_MAX_COPIES_BYTES,
+            },
         }
     }
 }
@@ -216,7 +230,7 @@ pub struct Octree<P: Primitive> {
     /// (the bits above). Empty with [`Layout::Copies`], whose leaves own a
     /// range of `packs`.
     entries: Vec<u32>,
-    /// The layout is [`Layout::Shared`].
+    /// The layout built is [`Layout::Shared`].
     shared: bool,
     /// The nodes at level [`GRID_LEVEL`] as a uniform grid, walked cell by
     /// cell instead of descending the upper levels for every ray; `None`
@@ -261,6 +275,17 @@ impl<P: Primitive> Octree<P> {
     #[must_use]
     pub fn references(&self) -> usize {
         self.references
+    }
+
+    /// The layout built: [`Layout::Copies`] or [`Layout::Shared`] (what
+    /// [`Layout::Auto`] chose).
+    #[must_use]
+    pub fn layout(&self) -> Layout {
+        if self.shared {
+            Layout::Shared
+        } else {
+            Layout::Copies
+        }
     }
 }
 
