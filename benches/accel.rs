@@ -77,42 +77,32 @@ fn builders() -> Vec<(&'static str, Build)> {
         "embree-native",
         Box::new(|d: &[Disc]| Box::new(Native::new(d)) as Box<dyn Backend>),
     ));
-    out.push((
-        "octree-copies",
-        Box::new(|d: &[Disc]| {
-            Box::new(Octree::new(
-                d,
-                &OctreeParams {
-                    layout: Layout::Copies,
-                    ..OctreeParams::default()
-                },
-            )) as Box<dyn Backend>
-        }),
-    ));
-    out.push((
-        "octree-shared",
-        Box::new(|d: &[Disc]| {
-            Box::new(Octree::new(
-                d,
-                &OctreeParams {
-                    layout: Layout::Shared,
-                    ..OctreeParams::default()
-                },
-            )) as Box<dyn Backend>
-        }),
-    ));
-    out.push((
-        "octree-square",
-        Box::new(|d: &[Disc]| {
-            Box::new(Octree::new(
-                d,
-                &OctreeParams {
-                    overlap: OverlapTest::BoundingSquare,
-                    ..OctreeParams::default()
-                },
-            )) as Box<dyn Backend>
-        }),
-    ));
+    let octree = |params: OctreeParams| -> Build {
+        Box::new(move |d: &[Disc]| Box::new(Octree::new(d, &params)) as Box<dyn Backend>)
+    };
+    out.extend([
+        (
+            "octree-copies",
+            octree(OctreeParams {
+                layout: Layout::Copies,
+                ..OctreeParams::default()
+            }),
+        ),
+        (
+            "octree-shared",
+            octree(OctreeParams {
+                layout: Layout::Shared,
+                ..OctreeParams::default()
+            }),
+        ),
+        (
+            "octree-square",
+            octree(OctreeParams {
+                overlap: OverlapTest::BoundingSquare,
+                ..OctreeParams::default()
+            }),
+        ),
+    ]);
     out
 }
 
@@ -344,14 +334,13 @@ fn main() {
     let only: Option<Vec<String>> = std::env::var("SPLATRAY_BENCH_ONLY")
         .ok()
         .map(|v| v.split(',').map(|x| x.trim().to_string()).collect());
-    if let Some(k) = std::env::var("SPLATRAY_BENCH_PAIRS")
+    let passes: Option<usize> = std::env::var("SPLATRAY_BENCH_PAIRS")
         .ok()
-        .and_then(|v| v.parse().ok())
-    {
-        summary(&scenes, k, only.as_deref());
+        .and_then(|v| v.parse().ok());
+    summary(&scenes, passes.unwrap_or(3), only.as_deref());
+    if passes.is_some() {
         return;
     }
-    summary(&scenes, 3, only.as_deref());
 
     let mut c = Criterion::default()
         .sample_size(10)

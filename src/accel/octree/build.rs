@@ -62,31 +62,24 @@ pub(super) fn build<P: Primitive>(
         .iter()
         .map(|&c| c.div_ceil(lanes::<P>() as u32))
         .collect();
-    let layout = match params.layout {
+    let shared = match params.layout {
+        Layout::Copies => false,
+        Layout::Shared => true,
         Layout::Auto { max_copies_bytes } => {
             let packs: usize = leaf_packs.iter().map(|&c| c as usize).sum();
             let bytes = packs
                 * (std::mem::size_of::<P::Pack>() + lanes::<P>() * std::mem::size_of::<u32>());
-            if bytes <= max_copies_bytes {
-                Layout::Copies
-            } else {
-                Layout::Shared
-            }
+            bytes > max_copies_bytes
         }
-        fixed => fixed,
     };
-    let (packs, pack_ids, entries, leaf_entries) = match layout {
-        Layout::Copies | Layout::Auto { .. } => {
-            let first = prefix_sums(&leaf_packs);
-            let (packs, pack_ids) = fill_packs(&sorted, &order, &chunks, &first, &leaf_packs);
-            // A leaf's packs are contiguous: no entries.
-            (packs, pack_ids, Vec::new(), leaf_packs)
-        }
-        Layout::Shared => {
-            let (packs, pack_ids) = morton_packs(&sorted, &order);
-            let (entries, leaf_entries) = leaf_entries::<P>(&chunks, &leaf_refs);
-            (packs, pack_ids, entries, leaf_entries)
-        }
+    let (packs, pack_ids, entries, leaf_entries) = if shared {
+        let (packs, pack_ids) = morton_packs(&sorted, &order);
+        let (entries, leaf_entries) = leaf_entries::<P>(&chunks, &leaf_refs);
+        (packs, pack_ids, entries, leaf_entries)
+    } else {
+        let (packs, pack_ids) = fill_packs(&sorted, &order, &chunks, &leaf_packs);
+        // A leaf's packs are contiguous: no entries.
+        (packs, pack_ids, Vec::new(), leaf_packs)
     };
     let mut leaf_boxes = content_boxes(&sorted, &chunks, leaves, cube.pad);
     drop(sorted);
@@ -126,7 +119,7 @@ pub(super) fn build<P: Primitive>(
         packs,
         pack_ids,
         entries,
-        shared: layout == Layout::Shared,
+        shared,
         references,
         root_lo: cube.lo,
         root_size: cube.size,
@@ -240,9 +233,10 @@ fn split_by_centres<P: Primitive>(
 }
 
 /// Step 3: every leaf each primitive overlaps. Primitives are read in Morton
-/// order (`sorted`: each with its half extent), in chunks of consecutive keys; each chunk lists `(leaf << 32) | key` in
-/// key order, so the chunks concatenated are sorted by key and a stable
-/// counting sort by leaf yields every leaf's keys in order.
+/// order (`sorted`: each with its half extent), in chunks of consecutive
+/// keys; each chunk lists `(leaf << 32) | key` in key order, so the chunks
+/// concatenated are sorted by key and a stable counting sort by leaf yields
+/// every leaf's keys in order.
 fn insert_references<P: Primitive>(
     sorted: &[(P, Vec3)],
     root: &BuildNode,
@@ -289,7 +283,7 @@ fn count_per_leaf(chunks: &[Vec<u64>], leaves: u32) -> Vec<u32> {
     count
 }
 
-/// Exclusive prefix sums: each leaf's first pack.
+/// Exclusive prefix sums: each leaf's first pack, entry or reference.
 fn prefix_sums(counts: &[u32]) -> Vec<u32> {
     let mut acc = 0u32;
     counts
@@ -302,24 +296,37 @@ fn prefix_sums(counts: &[u32]) -> Vec<u32> {
         .collect()
 }
 
-/// Step 4, [`Layout::Copies`]: a counting sort of the references by leaf (each leaf's keys in
-/// key order, padded to whole packs), then the packs and their lanes' ids.
+/// The counting sort of step 4: every reference's key placed at its leaf's
+/// cursor (leaf `l`'s keys from `slots[l] * stride`, in key order, since
+/// the chunks are), in an array of `len` slots ([`NO_PRIMITIVE`] where no
+/// key goes: padding).
+fn keys_by_leaf(chunks: &[Vec<u64>], slots: &[u32], stride: u32, len: usize) -> Vec<u32> {
+    let mut keys = vec![NO_PRIMITIVE; len];
+    let mut cursor: Vec<u32> = slots.iter().map(|&s| s * stride).collect();
+    for p in chunks.iter().flatten() {
+        let c = &mut cursor[(p >> 32) as usize];
+        keys[*c as usize] = (p & 0xffff_ffff) as u32;
+        *c += 1;
+    }
+    keys
+}
+
+/// Step 4, [`Layout::Copies`]: the references sorted by leaf, each leaf's
+/// padded to whole packs, then the packs and their lanes' ids.
 fn fill_packs<P: Primitive>(
     sorted: &[(P, Vec3)],
     order: &[u32],
     chunks: &[Vec<u64>],
-    leaf_start: &[u32],
     leaf_packs: &[u32],
 ) -> (Vec<P::Pack>, Vec<u32>) {
     let lanes = lanes::<P>();
     let total = leaf_packs.iter().map(|&c| c as usize).sum::<usize>();
-    let mut pack_keys = vec![NO_PRIMITIVE; total * lanes];
-    let mut cursor: Vec<u32> = leaf_start.iter().map(|&s| s * lanes as u32).collect();
-    for p in chunks.iter().flatten() {
-        let c = &mut cursor[(p >> 32) as usize];
-        pack_keys[*c as usize] = (p & 0xffff_ffff) as u32;
-        *c += 1;
-    }
+    let pack_keys = keys_by_leaf(
+        chunks,
+        &prefix_sums(leaf_packs),
+        lanes as u32,
+        total * lanes,
+    );
     let packs: Vec<P::Pack> = pack_keys
         .par_chunks(lanes)
         .map(|keys| {
@@ -342,9 +349,10 @@ fn fill_packs<P: Primitive>(
     (packs, pack_ids)
 }
 
-/// Step 4, [`Layout::Shared`]: the primitives in Morton order, `P::Pack::LANES` to a pack
-/// (pack `k / LANES`, lane `k % LANES` holds the primitive of key `k`; the
-/// last pack padded with empty lanes), and each lane's primitive id.
+/// Step 4, [`Layout::Shared`]: the primitives in Morton order,
+/// `P::Pack::LANES` to a pack (pack `k / LANES`, lane `k % LANES` holds
+/// the primitive of key `k`; the last pack padded with empty lanes), and
+/// each lane's primitive id.
 fn morton_packs<P: Primitive>(sorted: &[(P, Vec3)], order: &[u32]) -> (Vec<P::Pack>, Vec<u32>) {
     let lanes = lanes::<P>();
     assert!(
@@ -360,8 +368,8 @@ fn morton_packs<P: Primitive>(sorted: &[(P, Vec3)], order: &[u32]) -> (Vec<P::Pa
     (packs, pack_ids)
 }
 
-/// Step 4, [`Layout::Shared`], continued: a counting sort of the references by leaf (each leaf's keys in
-/// key order), then each leaf's keys as entries: the index of a Morton pack
+/// Step 4, [`Layout::Shared`], continued: the references sorted by leaf
+/// (each leaf's keys in key order), then each leaf's keys as entries: the index of a Morton pack
 /// with the mask of its lanes the leaf references ([`ENTRY_PACK`],
 /// [`ENTRY_MASK_SHIFT`]). Returns the entries, leaf after leaf, and each
 /// leaf's entry count.
@@ -369,13 +377,7 @@ fn leaf_entries<P: Primitive>(chunks: &[Vec<u64>], leaf_refs: &[u32]) -> (Vec<u3
     let lanes = lanes::<P>() as u32;
     let start = prefix_sums(leaf_refs);
     let total = leaf_refs.iter().map(|&c| c as usize).sum::<usize>();
-    let mut keys = vec![0u32; total];
-    let mut cursor = start.clone();
-    for p in chunks.iter().flatten() {
-        let c = &mut cursor[(p >> 32) as usize];
-        keys[*c as usize] = (p & 0xffff_ffff) as u32;
-        *c += 1;
-    }
+    let keys = keys_by_leaf(chunks, &start, 1, total);
     let mut entries = Vec::with_capacity(total / 2 + 1);
     let counts = start
         .iter()
@@ -433,7 +435,8 @@ fn flatten(
 /// What [`emit`] writes and reads.
 struct Flat<'a> {
     nodes: Vec<Node>,
-    /// Per node: a leaf's content box, [`EMPTY_BOX`] for interior nodes.
+    /// Per node: its content box (a leaf's from `leaf_boxes`, an interior
+    /// node's the union of its children's).
     boxes: Vec<LeafBox>,
     leaf_start: &'a [u32],
     leaf_count: &'a [u32],

@@ -213,9 +213,9 @@ fn child_lo(lo: Vec3, half: f32, oct: usize) -> Vec3 {
 pub struct Octree<P: Primitive> {
     nodes: Vec<Node>,
     /// Per node: for a leaf, the box around its primitives' padded
-    /// footprints clipped to its padded cell (a ray that misses it skips the
-    /// leaf's packs: on a floor, a leaf's content is a thin slab); unused
-    /// for interior nodes.
+    /// footprints clipped to its padded cell; for an interior node, the
+    /// union of its children's. A ray that misses it skips the node (on a
+    /// floor, a leaf's content is a thin slab).
     boxes: Vec<LeafBox>,
     /// The primitives, `P::Pack::LANES` to a pack (SoA): with
     /// [`Layout::Copies`] each leaf's references copied in reference order
