@@ -67,6 +67,18 @@ fn info() -> Result<(), String> {
         env!("SPLATRAY_EMBREE_FOUND_BY"),
         env!("SPLATRAY_EMBREE_LIB_DIR")
     );
+    let config = splatray::embree::config_in_force();
+    let cpu = splatray::embree::cpu_isas();
+    if config.is_empty() {
+        println!(
+            "config   none: Embree runs the widest ISA this CPU has ({}); set {} to choose",
+            cpu.last().copied().unwrap_or("unknown"),
+            splatray::embree::CONFIG_VAR
+        );
+    } else {
+        println!("config   {config} (from {})", splatray::embree::CONFIG_VAR);
+    }
+    println!("cpu isas {}", cpu.join(" "));
     println!("threads  {}", rayon::current_num_threads());
     Ok(())
 }

@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# The test suite, as CI runs it: every test once with Embree's default
+# kernels (the widest ISA this CPU has), then every test but the fuzzer
+# again with Embree forced to each of its ISAs this CPU runs (sse4.2, avx2,
+# avx512), through SPLATRAY_EMBREE_CONFIG. Floats that Embree computes are
+# compared with a tolerance; candidate hits must stay identical.
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+
+cargo test --release
+
+targets=()
+for f in tests/*.rs tests/*/main.rs; do
+    name=$(basename "$f" .rs)
+    [ "$name" = main ] && name=$(basename "$(dirname "$f")")
+    [ "$name" = fuzz ] && continue
+    targets+=(--test "$name")
+done
+isas=$(cargo run --release -q -- info | sed -n 's/^cpu isas //p')
+for isa in $isas; do
+    case "$isa" in sse4.2 | avx2 | avx512) ;; *) continue ;; esac
+    echo "== tests again with Embree forced to isa=$isa"
+    SPLATRAY_EMBREE_CONFIG="isa=$isa" cargo test --release -q --lib "${targets[@]}"
+done
