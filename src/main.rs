@@ -79,6 +79,14 @@ fn info() -> Result<(), String> {
         println!("config   {config} (from {})", splatray::embree::CONFIG_VAR);
     }
     println!("cpu isas {}", cpu.join(" "));
+    match splatray::memory::limit() {
+        Some(b) => println!(
+            "memory   {:.1} GB may be allocated ({})",
+            b.bytes as f64 / 1e9,
+            b.source
+        ),
+        None => println!("memory   no bound stated by this machine"),
+    }
     println!("threads  {}", rayon::current_num_threads());
     Ok(())
 }

@@ -3,12 +3,19 @@
 //! scan.pcd [--pattern raster|lines] [--rays W,H] [--range-noise S |
 //! --range-noise-spacing F] [--outliers F] [--missing F]`.
 
-use splatray::io::{read_mesh, sample_mesh, write_points};
+use super::progress::ProgressLine;
+use splatray::io::{Format, MeshSampler, read_mesh, sample_mesh, write_points, write_sample_ply};
 use splatray::scanner::{RangeNoise, ScanParams, ScanPattern, scan_mesh};
 use std::path::PathBuf;
 
-/// The most points `sample` makes (about 2 GB of output).
-pub const MAX_SAMPLES: usize = 100_000_000;
+/// The most points `sample` makes: 10^10 (240 GB of binary PLY, written a
+/// batch at a time; a PCD is made in memory and checked against it first).
+pub const MAX_SAMPLES: usize = 10_000_000_000;
+
+/// Bytes a point takes while a PCD is made in memory: the positions and
+/// normals (24 B), the encoded records (24 B) and their copy in the file
+/// buffer.
+const PCD_BYTES_PER_POINT: u64 = 72;
 
 /// Arguments of `splatray sample`.
 #[derive(Clone, Debug, clap::Args)]
@@ -104,17 +111,41 @@ pub fn run(args: &SampleArgs) -> Result<(), String> {
         ));
     }
     let mesh = read_mesh(&args.mesh).map_err(|e| e.to_string())?;
-    let cloud = sample_mesh(&mesh, n, args.noise, args.seed);
-    if cloud.is_empty() {
-        return Err(format!(
+    let no_area = || {
+        format!(
             "{}: the mesh has no triangle with a non-zero area to sample",
             args.mesh.display()
-        ));
-    }
-    write_points(&args.output, &cloud).map_err(|e| e.to_string())?;
+        )
+    };
+    let made = if Format::from_extension(&args.output) == Some(Format::Pcd) {
+        splatray::memory::check(
+            &format!("sampling {n} points into a PCD"),
+            (n as u64).saturating_mul(PCD_BYTES_PER_POINT),
+        )
+        .map_err(|e| format!("{e}: write a .ply instead (written a batch at a time)"))?;
+        let cloud = sample_mesh(&mesh, n, args.noise, args.seed);
+        if cloud.is_empty() {
+            return Err(no_area());
+        }
+        write_points(&args.output, &cloud).map_err(|e| e.to_string())?;
+        cloud.len()
+    } else {
+        let sampler = MeshSampler::new(&mesh, n, args.noise, args.seed);
+        if sampler.is_empty() {
+            return Err(no_area());
+        }
+        let line = ProgressLine::new();
+        let written = write_sample_ply(
+            &args.output,
+            &sampler,
+            Some(&|stage, f| line.update(stage, f)),
+        );
+        line.finish();
+        written.map_err(|e| e.to_string())?;
+        sampler.len()
+    };
     eprintln!(
-        "splatray: {} points from {} triangles -> {}",
-        cloud.len(),
+        "splatray: {made} points from {} triangles -> {}",
         mesh.triangles.len(),
         args.output.display()
     );

@@ -31,7 +31,7 @@ pub use gaussian::{
     encode_gaussians, file_layout, parse_gaussians, read_gaussians, sniff_layout, write_gaussians,
 };
 pub use lzf::lzf_decompress;
-pub use sample::sample_mesh;
+pub use sample::{MeshSampler, sample_mesh, write_sample_ply};
 pub use splat_ply::{SplatSet, encode_splats, parse_splats, read_splats, write_splats};
 
 use glam::{DVec3, Vec3};
@@ -153,6 +153,10 @@ pub fn vertex_property_names(head: &[u8]) -> Option<Vec<String>> {
 
 /// Read the whole file, mapping failures to [`IoError`].
 fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
+    if let Ok(meta) = std::fs::metadata(path) {
+        crate::memory::check("reading the file whole", meta.len())
+            .map_err(|e| IoError::new(path, IoErrorKind::Data(e)))?;
+    }
     let bytes = std::fs::read(path).map_err(|e| IoError::new(path, IoErrorKind::Io(e)))?;
     if bytes.is_empty() {
         return Err(IoError::new(path, IoErrorKind::Empty));
@@ -260,18 +264,7 @@ pub fn write_points(path: &Path, cloud: &PointCloud) -> Result<(), IoError> {
     let normals = cloud.normals.as_ref().filter(|v| v.len() == n);
     let colors = cloud.colors.as_ref().filter(|v| v.len() == n);
     let wide = cloud.origin != DVec3::ZERO;
-    let coord = if wide { "double" } else { "float" };
-    let mut header = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment written by splatray {}\nelement vertex {n}\nproperty {coord} x\nproperty {coord} y\nproperty {coord} z\n",
-        env!("CARGO_PKG_VERSION")
-    );
-    if normals.is_some() {
-        header.push_str("property float nx\nproperty float ny\nproperty float nz\n");
-    }
-    if colors.is_some() {
-        header.push_str("property float red\nproperty float green\nproperty float blue\n");
-    }
-    header.push_str("end_header\n");
+    let header = ply_points_header(n, wide, normals.is_some(), colors.is_some());
     let per = if wide { 24 } else { 12 }
         + 12 * usize::from(normals.is_some())
         + 12 * usize::from(colors.is_some());
@@ -279,6 +272,25 @@ pub fn write_points(path: &Path, cloud: &PointCloud) -> Result<(), IoError> {
     out.extend_from_slice(header.as_bytes());
     encode_records(&mut out, cloud, wide, normals, colors);
     write_bytes(path, &out)
+}
+
+/// The header of a binary PLY of `n` points as [`write_points`] writes it:
+/// positions as `double` when `wide` (a far cloud) else `float`, then
+/// float normals and colours when present.
+pub(crate) fn ply_points_header(n: usize, wide: bool, normals: bool, colors: bool) -> String {
+    let coord = if wide { "double" } else { "float" };
+    let mut header = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment written by splatray {}\nelement vertex {n}\nproperty {coord} x\nproperty {coord} y\nproperty {coord} z\n",
+        env!("CARGO_PKG_VERSION")
+    );
+    if normals {
+        header.push_str("property float nx\nproperty float ny\nproperty float nz\n");
+    }
+    if colors {
+        header.push_str("property float red\nproperty float green\nproperty float blue\n");
+    }
+    header.push_str("end_header\n");
+    header
 }
 
 /// Appends one little-endian record per point: the position (world f64

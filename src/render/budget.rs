@@ -157,7 +157,10 @@ pub fn check(scene: &Scene, holds: Holds, limits: &Limits) -> Result<Estimate> {
     }
     let (limit, whose) = match limits.max_bytes {
         Some(b) => (Some(b), "the --max-memory limit"),
-        None => (crate::memory::available(), "the memory available"),
+        None => match crate::memory::limit() {
+            Some(b) => (Some(b.bytes), b.source),
+            None => (None, ""),
+        },
     };
     if let Some(limit) = limit
         && e.bytes > limit
