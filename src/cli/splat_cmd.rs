@@ -16,8 +16,11 @@ use std::time::Instant;
 /// Arguments of `splatray splat`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct SplatArgs {
-    /// Input point cloud (.ply, .pcd, .xyz/.txt, or recognised by content).
-    pub input: PathBuf,
+    /// Input point cloud (.ply, .pcd, .xyz/.txt, .las/.laz, .e57, or
+    /// recognised by content); a folder, or several files (e.g. a shell
+    /// glob of LAZ tiles), are read as one cloud in tiles.
+    #[arg(required = true, num_args = 1..)]
+    pub inputs: Vec<PathBuf>,
     /// Output splat file (binary PLY).
     #[arg(short = 'o', long = "output")]
     pub output: PathBuf,
@@ -37,6 +40,24 @@ pub struct SplatArgs {
     /// than this.
     #[arg(long, default_value_t = splatray::io::MIN_OPACITY)]
     pub min_opacity: f32,
+    /// Generate in tiles within this many GB (the whole process): points
+    /// are spilled to per-tile files beside the output and each tile
+    /// generated on its own with a halo. Default: what the process may
+    /// use (the least of MemAvailable, the cgroup's limit, RLIMIT_AS and
+    /// RLIMIT_DATA); tiles are used when the cloud would not fit it.
+    #[arg(long)]
+    pub max_memory: Option<f64>,
+    /// At most this many points (core and halo) per tile: forces tiled
+    /// generation with tiles smaller than the memory allows.
+    #[arg(long)]
+    pub tile_points: Option<u64>,
+}
+
+impl SplatArgs {
+    /// The one input of an untiled run.
+    fn input(&self) -> &std::path::Path {
+        &self.inputs[0]
+    }
 }
 
 /// The report `--report` writes: the generation's, and the held-out
@@ -138,18 +159,22 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
             args.min_opacity
         ));
     }
-    if let Some(layout) = file_layout(&args.input) {
+    let inputs = expand_inputs(&args.inputs)?;
+    if let Some(tiled) = tiled_options(args, &inputs)? {
+        return run_tiled(args, &inputs, &tiled);
+    }
+    if let Some(layout) = file_layout(args.input()) {
         return from_gaussians(args, layout);
     }
     let line = ProgressLine::new();
     line.update("reading", 0.0);
     let t0 = Instant::now();
-    let cloud = read_points(&args.input).map_err(|e| e.to_string())?;
+    let cloud = read_points(args.input()).map_err(|e| e.to_string())?;
     let read = t0.elapsed().as_secs_f64();
     let params = args.splat.params(&cloud)?;
     let (splats, mut report, trim) =
         generate_trimmed(&cloud, &params, Some(&|stage, f| line.update(stage, f)))
-            .map_err(|e| format!("{}: {e}", args.input.display()))?;
+            .map_err(|e| format!("{}: {e}", args.input().display()))?;
     if let Some(t) = trim.filter(|t| t.shrunk > 0) {
         eprintln!(
             "splatray: {} splats shrunk off {} of {} lines of sight from the viewpoint ({} still blocked)",
@@ -242,12 +267,12 @@ fn from_gaussians(args: &SplatArgs, layout: GaussianLayout) -> Result<(), String
     if o.epsilon.is_some() || o.k.is_some() || o.density.is_some() || o.ellipses {
         eprintln!(
             "splatray: warning: {} is a {} Gaussian file: its Gaussians become splats as they are, and --epsilon, --k, --density and --ellipses do not apply",
-            args.input.display(),
+            args.input().display(),
             layout.name()
         );
     }
     let t0 = Instant::now();
-    let read = read_gaussians(&args.input, args.min_opacity).map_err(|e| e.to_string())?;
+    let read = read_gaussians(args.input(), args.min_opacity).map_err(|e| e.to_string())?;
     let set = &read.set;
     let bytes = encode_splats(&args.output, &set.splats, set.origin).map_err(|e| e.to_string())?;
     let report = GaussianReport {
@@ -302,4 +327,139 @@ fn commit_outputs(
             .map_err(|e| e.to_string())?;
     }
     batch.commit().map_err(|e| e.to_string())
+}
+
+/// The inputs: files as given, and the point files of a folder (by name).
+fn expand_inputs(given: &[PathBuf]) -> Result<Vec<PathBuf>, String> {
+    let mut out = Vec::new();
+    for p in given {
+        if p.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
+                .map_err(|e| format!("{}: {e}", p.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| f.is_file() && splatray::io::Format::from_extension(f).is_some())
+                .collect();
+            found.sort();
+            if found.is_empty() {
+                return Err(format!(
+                    "{}: no point cloud files in the folder",
+                    p.display()
+                ));
+            }
+            out.extend(found);
+        } else {
+            out.push(p.clone());
+        }
+    }
+    Ok(out)
+}
+
+/// Tiled generation's options when this run takes it: `--max-memory` or
+/// `--tile-points` given, several inputs, or a cloud that would not fit
+/// the memory this process may use (estimated from its size on disk).
+fn tiled_options(
+    args: &SplatArgs,
+    inputs: &[PathBuf],
+) -> Result<Option<splatray::tiled::TiledOptions>, String> {
+    let limit = splatray::memory::available();
+    let max_memory = match args.max_memory {
+        Some(gb) if gb.is_finite() && gb > 0.0 => (gb * 1e9) as u64,
+        Some(gb) => return Err(format!("--max-memory {gb} must be a positive number of GB")),
+        None => limit.unwrap_or(u64::MAX),
+    };
+    if args.tile_points == Some(0) {
+        return Err("--tile-points must be at least 1".into());
+    }
+    // At least 12 bytes a point on disk: a file of B bytes holds at most
+    // B / 12 points.
+    let disk: u64 = inputs
+        .iter()
+        .filter_map(|p| std::fs::metadata(p).ok())
+        .map(|m| m.len())
+        .sum();
+    let too_big = (disk / 12).saturating_mul(splatray::tiled::BYTES_PER_POINT) > max_memory;
+    let tiled =
+        args.max_memory.is_some() || args.tile_points.is_some() || inputs.len() > 1 || too_big;
+    if !tiled {
+        return Ok(None);
+    }
+    if inputs.iter().any(|p| file_layout(p).is_some()) {
+        return Err(
+            "a Gaussian splat file is read as splats as it is: tiles are for point clouds".into(),
+        );
+    }
+    let name = args
+        .output
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    Ok(Some(splatray::tiled::TiledOptions {
+        max_memory,
+        tile_points: args.tile_points,
+        work: args.output.with_file_name(format!(".{name}.tiles")),
+        viewpoint: args.splat.viewpoint()?,
+        no_viewpoint: args.splat.no_viewpoint,
+    }))
+}
+
+fn run_tiled(
+    args: &SplatArgs,
+    inputs: &[PathBuf],
+    opts: &splatray::tiled::TiledOptions,
+) -> Result<(), String> {
+    let defaults = SplatParams::default();
+    let o = &args.splat;
+    let params = SplatParams {
+        k: o.k.unwrap_or(defaults.k),
+        epsilon_rel: o.epsilon.unwrap_or(defaults.epsilon_rel),
+        density: o.density.unwrap_or(defaults.density),
+        ellipses: o.ellipses,
+        scan_viewpoints: !o.no_viewpoint,
+        ..defaults
+    };
+    let line = ProgressLine::new();
+    let report = splatray::tiled::generate_tiled(
+        inputs,
+        &params,
+        opts,
+        &args.output,
+        Some(&|stage, f| line.update(stage, f)),
+    );
+    line.finish();
+    let report = report.map_err(|e| e.to_string())?;
+    if let Some(r) = &args.report {
+        let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
+        splatray::io::write_text(r, &json).map_err(|e| e.to_string())?;
+    }
+    let mut warnings: Vec<&String> = report.tiles.iter().flat_map(|t| &t.warnings).collect();
+    warnings.sort();
+    warnings.dedup();
+    for w in warnings {
+        eprintln!("splatray: warning (in a tile): {w}");
+    }
+    if args.holdout > 0.0 {
+        eprintln!("splatray: note: held-out coverage is not measured in tiled generation");
+    }
+    let resumed = report.tiles.iter().filter(|t| t.resumed).count();
+    eprintln!(
+        "splatray: {} points in {} tiles (at most {} points each with a halo of {:.3e}; {} spilled; {} resumed) -> {} splats, epsilon {:.3e}, {} splats may reach past the halo; survey {:.1} s, spill {:.1} s, generation {:.1} s, merge {:.1} s, total {:.1} s, peak memory {:.2} GB of {:.2} GB -> {}",
+        report.points,
+        report.tiles.len(),
+        report.tile_points,
+        report.halo,
+        report.spilled,
+        resumed,
+        report.splats,
+        report.epsilon,
+        report.past_halo,
+        report.seconds.survey,
+        report.seconds.spill,
+        report.seconds.generate,
+        report.seconds.merge,
+        report.seconds.total,
+        report.peak_rss as f64 / 1e9,
+        report.max_memory as f64 / 1e9,
+        args.output.display()
+    );
+    Ok(())
 }

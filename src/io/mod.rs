@@ -21,6 +21,7 @@ mod pcd;
 mod ply;
 mod sample;
 mod splat_ply;
+mod stream;
 mod xyz;
 
 pub use crate::splat::PointCloud;
@@ -32,7 +33,10 @@ pub use gaussian::{
 };
 pub use lzf::lzf_decompress;
 pub use sample::{MeshSampler, sample_mesh, write_sample_ply};
-pub use splat_ply::{SplatSet, encode_splats, parse_splats, read_splats, write_splats};
+pub use splat_ply::{
+    SPLAT_ROW_BYTES, SplatSet, encode_splats, parse_splats, read_splats, splat_header, write_splats,
+};
+pub use stream::{PointBatch, StreamInfo, stream_points};
 
 use glam::{DVec3, Vec3};
 use std::path::Path;

@@ -146,13 +146,34 @@ pub fn encode_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<Vec
             splats[i].center, splats[i].radii
         ));
     }
+    let header = splat_header(splats.len() as u64, origin);
+    let mut out = Vec::with_capacity(header.len() + splats.len() * SPLAT_ROW_BYTES);
+    out.extend_from_slice(header.as_bytes());
+    for s in splats {
+        for v in to_row(s) {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend(s.color.to_array().map(super::linear_to_srgb8));
+    }
+    Ok(out)
+}
+
+/// Bytes of one splat record in a splat file: the float properties and
+/// the 8-bit sRGB colour.
+pub const SPLAT_ROW_BYTES: usize = SPLAT_PROPS.len() * 4 + SRGB_PROPS.len();
+
+/// The header of a splat file of `count` splats whose centres are offsets
+/// from `origin`; the records follow it, [`SPLAT_ROW_BYTES`] each, so
+/// splat files of one origin join by adding their counts and concatenating
+/// their bodies.
+#[must_use]
+pub fn splat_header(count: u64, origin: DVec3) -> String {
     let mut header = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment splatray {} splats: Linsen et al. 2007 discs with Botsch et al. 2004 normal fields\ncomment {ORIGIN_COMMENT} {:?} {:?} {:?}\nelement vertex {}\n",
+        "ply\nformat binary_little_endian 1.0\ncomment splatray {} splats: Linsen et al. 2007 discs with Botsch et al. 2004 normal fields\ncomment {ORIGIN_COMMENT} {:?} {:?} {:?}\nelement vertex {count}\n",
         env!("CARGO_PKG_VERSION"),
         origin.x,
         origin.y,
         origin.z,
-        splats.len()
     );
     for p in SPLAT_PROPS {
         header.push_str("property float ");
@@ -165,15 +186,7 @@ pub fn encode_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<Vec
         header.push('\n');
     }
     header.push_str("end_header\n");
-    let mut out = Vec::with_capacity(header.len() + splats.len() * (SPLAT_PROPS.len() * 4 + 3));
-    out.extend_from_slice(header.as_bytes());
-    for s in splats {
-        for v in to_row(s) {
-            out.extend_from_slice(&v.to_le_bytes());
-        }
-        out.extend(s.color.to_array().map(super::linear_to_srgb8));
-    }
-    Ok(out)
+    header
 }
 
 /// The largest normal-field value read (eq. 4's `x_c, y_c, alpha, beta`,

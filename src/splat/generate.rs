@@ -50,6 +50,9 @@ pub struct SplatParams {
     pub scan_viewpoints: bool,
     /// Leave out statistical outliers (see [`super::outliers`]).
     pub remove_outliers: bool,
+    /// `ϵ` in the cloud's units, in place of `epsilon_rel` times this
+    /// cloud's diagonal: the tiles of one cloud share the whole cloud's.
+    pub epsilon_abs: Option<f64>,
 }
 
 /// Where generation takes `cloud`'s points to have been seen from, indexed
@@ -76,6 +79,7 @@ impl Default for SplatParams {
             viewpoint: None,
             scan_viewpoints: true,
             remove_outliers: true,
+            epsilon_abs: None,
         }
     }
 }
@@ -525,7 +529,10 @@ pub fn generate_with_progress(
         .map(|(l, &f)| l.filter(|_| !f))
         .collect();
     report.noise = median(local.iter().flatten().map(|l| l.sd).collect());
-    let epsilon = (f64::from(params.epsilon_rel) * diagonal) as f32;
+    let epsilon = match params.epsilon_abs {
+        Some(e) => (e / frame.scale) as f32,
+        None => (f64::from(params.epsilon_rel) * diagonal) as f32,
+    };
     report.epsilon = f64::from(epsilon);
     if report.moved_onto_surfaces() {
         let mut moved = 0usize;
@@ -622,6 +629,11 @@ fn check_params(p: &SplatParams) -> Result<(), GenerateError> {
     }
     if !(p.epsilon_rel > 0.0 && p.epsilon_rel < 1.0) {
         return bad(format!("epsilon = {} (must be in (0, 1))", p.epsilon_rel));
+    }
+    if let Some(e) = p.epsilon_abs
+        && !(e.is_finite() && e > 0.0)
+    {
+        return bad(format!("absolute epsilon = {e} (must be finite and > 0)"));
     }
     if !(p.density > 0.0 && p.density <= 1.0) {
         return bad(format!("density = {} (must be in (0, 1])", p.density));

@@ -1,0 +1,850 @@
+//! Out-of-core splat generation: a cloud of any size turned into splats in
+//! tiles that each fit a memory budget.
+//!
+//! 1. **Survey** (one streaming pass over every input): the count, the
+//!    bounds in f64, and a reservoir sample of 2^20 positions.
+//! 2. **Plan**: `ϵ` is the whole cloud's (`epsilon_rel` times its
+//!    diagonal); the halo is `HALO_EPS` (20) `ϵ` wide. The bounds are split
+//!    k-d fashion at the sample's medians along the longest side until each
+//!    tile's core plus halo holds at most the budget's points (estimated
+//!    from the sample). The split planes give every point of space exactly
+//!    one tile: the tile whose core holds it.
+//! 3. **Spill** (a second streaming pass): each point is appended to the
+//!    file of every tile whose core-plus-halo box holds it (positions as
+//!    f32 offsets from the tile's centre, normals and colours carried).
+//! 4. **Generate**, tile by tile: the tile's points become a cloud, splats
+//!    are generated as for any cloud ([`generate_trimmed`]: outliers,
+//!    normals, orientation, growth, fields, free-space trimming) with the
+//!    shared `ϵ`, and a splat is kept when its centre lies in the tile's
+//!    core. The result is a splat file per tile, written atomically: a rerun
+//!    with the same plan skips finished tiles.
+//! 5. **Merge**: the tiles' splat files share the cloud's origin, so the
+//!    output is one header with the total count and their records in tile
+//!    order. Same bytes for any thread count.
+//!
+//! The halo rule: a kept splat's centre lies in the core; its seed lies
+//! within one radius of the centre, growth takes points within `max_d`
+//! (`MAX_RADIUS_EPS` `ϵ` = 8 `ϵ` on a densely sampled surface) of the
+//! seed, and the normal field reads points within 1.2 radii of the centre:
+//! 16 `ϵ`, plus the neighbourhoods the normals are estimated from. Splats
+//! grown larger than that (sparse regions, where the neighbour cap
+//! `MAX_RADIUS_FACTOR` `d_k` exceeds 8 `ϵ`) are counted in the report as
+//! reaching past the halo.
+
+use crate::freespace::generate_trimmed;
+use crate::io::{IoError, IoErrorKind, SPLAT_ROW_BYTES, splat_header, stream_points, write_atomic};
+use crate::progress::{Progress, notify};
+use crate::rng::SplitMix64;
+use crate::splat::{PointCloud, Splat, SplatParams};
+use glam::{DVec3, Vec3};
+use serde::{Deserialize, Serialize};
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// The halo's width in `ϵ` (see the module's text).
+pub const HALO_EPS: f64 = 20.0;
+
+/// Bytes a point takes while its tile is generated, for planning: measured
+/// 161 B a point for a whole 10M-point cloud read and generated in memory
+/// (peak RSS 1.61 GB), rounded up.
+pub const BYTES_PER_POINT: u64 = 192;
+
+/// Memory the process holds besides its tile: the survey's sample, the
+/// spill writers' buffers, the program and its libraries.
+const FIXED_BYTES: u64 = 256 << 20;
+
+/// Positions kept by the survey to plan tiles.
+const SAMPLE: usize = 1 << 20;
+
+/// The most tiles (each holds an open spill file while spilling).
+const MAX_TILES: usize = 4096;
+
+/// How tiled generation runs.
+#[derive(Clone, Debug)]
+pub struct TiledOptions {
+    /// Bytes the whole process may use (`--max-memory`, else what
+    /// [`crate::memory::limit`] says).
+    pub max_memory: u64,
+    /// At most this many points (core and halo) per tile, below what the
+    /// memory allows (to force small tiles, as the tests do).
+    pub tile_points: Option<u64>,
+    /// The folder for the plan, spill files and finished tiles (made if
+    /// missing, removed after a successful merge).
+    pub work: PathBuf,
+    /// Where the scanner stood, in the inputs' coordinates: given, or
+    /// (`None`) a single input's own (a PCD's `VIEWPOINT`).
+    pub viewpoint: Option<DVec3>,
+    /// Ignore the inputs' own viewpoints.
+    pub no_viewpoint: bool,
+}
+
+/// An axis-aligned box in the cloud's coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Box3 {
+    /// Lower corner.
+    pub lo: [f64; 3],
+    /// Upper corner.
+    pub hi: [f64; 3],
+}
+
+impl Box3 {
+    fn grown(&self, by: f64) -> Box3 {
+        Box3 {
+            lo: self.lo.map(|v| v - by),
+            hi: self.hi.map(|v| v + by),
+        }
+    }
+    fn holds(&self, p: DVec3) -> bool {
+        (0..3).all(|a| p[a] >= self.lo[a] && p[a] <= self.hi[a])
+    }
+    fn centre(&self) -> DVec3 {
+        (DVec3::from(self.lo) + DVec3::from(self.hi)) * 0.5
+    }
+}
+
+/// A node of the plan's k-d tree: a split, or a tile.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+enum Node {
+    /// Points with `p[axis] < at` go to `below`, the rest to `above`.
+    Split {
+        axis: usize,
+        at: f64,
+        below: Box<Node>,
+        above: Box<Node>,
+    },
+    /// Tile number.
+    Tile(usize),
+}
+
+impl Node {
+    /// The tile whose core holds `p` (every point of space has one).
+    fn locate(&self, p: DVec3) -> usize {
+        match self {
+            Node::Tile(t) => *t,
+            Node::Split {
+                axis,
+                at,
+                below,
+                above,
+            } => {
+                if p[*axis] < *at {
+                    below.locate(p)
+                } else {
+                    above.locate(p)
+                }
+            }
+        }
+    }
+    /// Every tile whose core lies within `halo` of `p`.
+    fn near(&self, p: DVec3, halo: f64, out: &mut Vec<usize>) {
+        match self {
+            Node::Tile(t) => out.push(*t),
+            Node::Split {
+                axis,
+                at,
+                below,
+                above,
+            } => {
+                if p[*axis] < *at + halo {
+                    below.near(p, halo, out);
+                }
+                if p[*axis] >= *at - halo {
+                    above.near(p, halo, out);
+                }
+            }
+        }
+    }
+}
+
+/// What the survey found: enough to plan the tiles.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct Survey {
+    points: u64,
+    non_finite: u64,
+    bounds: Box3,
+    normals: bool,
+    colors: bool,
+    viewpoint: Option<[f64; 3]>,
+    #[serde(skip)]
+    sample: Vec<DVec3>,
+}
+
+/// One input file as the plan records it (a changed file is a new plan).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct InputStamp {
+    path: PathBuf,
+    bytes: u64,
+    modified_ns: u128,
+}
+
+/// Everything that decides the output; a rerun finding the same plan in
+/// the work folder resumes it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct Plan {
+    version: String,
+    inputs: Vec<InputStamp>,
+    params: String,
+    survey: Survey,
+    epsilon: f64,
+    halo: f64,
+    tile_points: u64,
+    tree: Node,
+    tiles: Vec<Box3>,
+    origin: [f64; 3],
+    viewpoint: Option<[f64; 3]>,
+}
+
+/// One tile's figures.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TileSummary {
+    /// Points spilled to it (core and halo).
+    pub points: u64,
+    /// Of those, in its core.
+    pub core_points: u64,
+    /// Splats generated from its points, and kept (centre in the core).
+    pub grown: usize,
+    /// See `grown`.
+    pub kept: usize,
+    /// Kept splats whose reach (seed to centre plus growth, about 2.2
+    /// radii) may pass the halo.
+    pub past_halo: usize,
+    /// Seconds generating it (0 when a rerun found it finished).
+    pub seconds: f64,
+    /// True when a rerun found it finished.
+    pub resumed: bool,
+    /// Its generation's warnings.
+    pub warnings: Vec<String>,
+}
+
+/// What tiled generation reports.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct TiledReport {
+    /// Finite input points.
+    pub points: u64,
+    /// Points with a non-finite coordinate, left out.
+    pub non_finite: u64,
+    /// Splats written.
+    pub splats: u64,
+    /// `ϵ`, absolute (the whole cloud's), and the halo's width.
+    pub epsilon: f64,
+    /// See `epsilon`.
+    pub halo: f64,
+    /// The bounding box's diagonal.
+    pub bbox_diagonal: f64,
+    /// The most points a tile (core and halo) was planned to hold.
+    pub tile_points: u64,
+    /// The memory budget, bytes.
+    pub max_memory: u64,
+    /// Peak resident memory of this process (`VmHWM`), bytes.
+    pub peak_rss: u64,
+    /// Points spilled in all (a point in several tiles' halos counts in each).
+    pub spilled: u64,
+    /// Kept splats whose reach may pass the halo, over all tiles.
+    pub past_halo: usize,
+    /// The splat file's origin.
+    pub origin: [f64; 3],
+    /// Seconds: survey, spill, generation, merge, total.
+    pub seconds: TiledSeconds,
+    /// Per tile, in order.
+    pub tiles: Vec<TileSummary>,
+    /// The tiles' cores, in order, and the bounds they split.
+    pub cores: Vec<Box3>,
+    /// See `cores`.
+    pub bounds: Option<Box3>,
+}
+
+impl TiledReport {
+    /// Whether `p` lies within `width` of a seam: a face of its tile's core
+    /// that another tile shares (not the cloud's bounds).
+    #[must_use]
+    pub fn seams_within(&self, p: DVec3, width: f64) -> bool {
+        let Some(bounds) = self.bounds else {
+            return false;
+        };
+        let Some(core) = self.cores.iter().find(|b| b.holds(p)) else {
+            return false;
+        };
+        (0..3).any(|a| {
+            (core.lo[a] > bounds.lo[a] && p[a] - core.lo[a] < width)
+                || (core.hi[a] < bounds.hi[a] && core.hi[a] - p[a] < width)
+        })
+    }
+}
+
+/// Where the time went.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct TiledSeconds {
+    /// Reading every input once for count, bounds and sample.
+    pub survey: f64,
+    /// Reading them again into the tiles' spill files.
+    pub spill: f64,
+    /// Generating the tiles.
+    pub generate: f64,
+    /// Joining the tiles' splats into the output.
+    pub merge: f64,
+    /// All of it.
+    pub total: f64,
+}
+
+fn io_err(path: &Path, e: std::io::Error) -> IoError {
+    IoError::new(path, IoErrorKind::Io(e))
+}
+
+fn data_err(path: &Path, msg: String) -> IoError {
+    IoError::new(path, IoErrorKind::Data(msg))
+}
+
+/// Peak resident memory of this process (`VmHWM`), bytes.
+#[must_use]
+pub fn peak_rss() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            let l = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+            l.split_whitespace().nth(1)?.parse::<u64>().ok()
+        })
+        .map_or(0, |kb| kb * 1024)
+}
+
+fn stamp(path: &Path) -> Result<InputStamp, IoError> {
+    let meta = std::fs::metadata(path).map_err(|e| io_err(path, e))?;
+    let modified_ns = meta
+        .modified()
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map_or(0, |d| d.as_nanos());
+    Ok(InputStamp {
+        path: path.to_path_buf(),
+        bytes: meta.len(),
+        modified_ns,
+    })
+}
+
+fn survey(inputs: &[PathBuf], progress: Option<Progress<'_>>) -> Result<Survey, IoError> {
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    let mut sample: Vec<DVec3> = Vec::with_capacity(SAMPLE);
+    let mut rng = SplitMix64::new(0x7115_5eed);
+    let (mut seen, mut non_finite) = (0u64, 0u64);
+    let (mut normals, mut colors) = (false, false);
+    let mut viewpoint = None;
+    for (k, path) in inputs.iter().enumerate() {
+        let info = stream_points(path, |b| {
+            for &p in b.world {
+                lo = lo.min(p);
+                hi = hi.max(p);
+                // Reservoir sampling (Algorithm R), seeded: the same input
+                // gives the same sample.
+                if sample.len() < SAMPLE {
+                    sample.push(p);
+                } else {
+                    let j = rng.next_u64() % (seen + 1);
+                    if (j as usize) < SAMPLE {
+                        sample[j as usize] = p;
+                    }
+                }
+                seen += 1;
+            }
+            notify(progress, "survey", k as f64 / inputs.len() as f64);
+            Ok(())
+        })?;
+        non_finite += info.non_finite;
+        normals |= info.normals;
+        colors |= info.colors;
+        if inputs.len() == 1 {
+            viewpoint = info.viewpoint.map(|v| v.to_array());
+        }
+    }
+    if seen < 3 {
+        return Err(data_err(
+            &inputs[0],
+            format!("{seen} usable points: at least 3 are needed"),
+        ));
+    }
+    Ok(Survey {
+        points: seen,
+        non_finite,
+        bounds: Box3 {
+            lo: lo.to_array(),
+            hi: hi.to_array(),
+        },
+        normals,
+        colors,
+        viewpoint,
+        sample,
+    })
+}
+
+/// Splits `bounds` k-d fashion until each tile's core plus `halo` holds at
+/// most `target` points as the sample estimates them; tiles are numbered
+/// in the order of the tree's leaves.
+fn plan_tiles(s: &Survey, halo: f64, target: u64) -> (Node, Vec<Box3>) {
+    let per_sample = s.points as f64 / s.sample.len().max(1) as f64;
+    let estimate = |b: &Box3| {
+        let g = b.grown(halo);
+        s.sample.iter().filter(|p| g.holds(**p)).count() as f64 * per_sample
+    };
+    let mut tiles = Vec::new();
+    fn split(
+        b: Box3,
+        idx: Vec<u32>,
+        s: &Survey,
+        halo: f64,
+        target: u64,
+        estimate: &dyn Fn(&Box3) -> f64,
+        tiles: &mut Vec<Box3>,
+    ) -> Node {
+        let side = DVec3::from(b.hi) - DVec3::from(b.lo);
+        let axis = if side.x >= side.y && side.x >= side.z {
+            0
+        } else if side.y >= side.z {
+            1
+        } else {
+            2
+        };
+        // A tile narrower than two halos would hold more halo than core:
+        // the budget cannot be met at this ϵ (the report shows it).
+        let splittable = side[axis] > 4.0 * halo && idx.len() >= 2 && tiles.len() < MAX_TILES;
+        if estimate(&b) <= target as f64 || !splittable {
+            tiles.push(b);
+            return Node::Tile(tiles.len() - 1);
+        }
+        let mut vals: Vec<f64> = idx.iter().map(|&i| s.sample[i as usize][axis]).collect();
+        let mid = vals.len() / 2;
+        let (_, m, _) = vals.select_nth_unstable_by(mid, f64::total_cmp);
+        // Keep both halves at least a halo wide.
+        let at = m.clamp(b.lo[axis] + 2.0 * halo, b.hi[axis] - 2.0 * halo);
+        let (mut lo_b, mut hi_b) = (b, b);
+        lo_b.hi[axis] = at;
+        hi_b.lo[axis] = at;
+        let (below_idx, above_idx): (Vec<u32>, Vec<u32>) = idx
+            .into_iter()
+            .partition(|&i| s.sample[i as usize][axis] < at);
+        let below = split(lo_b, below_idx, s, halo, target, estimate, tiles);
+        let above = split(hi_b, above_idx, s, halo, target, estimate, tiles);
+        Node::Split {
+            axis,
+            at,
+            below: Box::new(below),
+            above: Box::new(above),
+        }
+    }
+    let idx: Vec<u32> = (0..s.sample.len() as u32).collect();
+    let tree = split(s.bounds, idx, s, halo, target, &estimate, &mut tiles);
+    (tree, tiles)
+}
+
+/// The spill record of one point: position offset from the tile's centre
+/// (3 × f32), then the normal and the colour (3 × f32 each) when the
+/// cloud has them.
+fn record_bytes(survey: &Survey) -> usize {
+    12 + 12 * usize::from(survey.normals) + 12 * usize::from(survey.colors)
+}
+
+fn spill(
+    inputs: &[PathBuf],
+    plan: &Plan,
+    work: &Path,
+    progress: Option<Progress<'_>>,
+) -> Result<Vec<(u64, u64)>, IoError> {
+    let n = plan.tiles.len();
+    let centres: Vec<DVec3> = plan.tiles.iter().map(Box3::centre).collect();
+    let grown: Vec<Box3> = plan.tiles.iter().map(|b| b.grown(plan.halo)).collect();
+    let mut writers = Vec::with_capacity(n);
+    for t in 0..n {
+        let p = spill_path(work, t);
+        let f = std::fs::File::create(&p).map_err(|e| io_err(&p, e))?;
+        writers.push(BufWriter::with_capacity(1 << 16, f));
+    }
+    let mut counts = vec![(0u64, 0u64); n];
+    let mut near = Vec::new();
+    let mut rec = Vec::with_capacity(36);
+    let mut done = 0u64;
+    let (with_n, with_c) = (plan.survey.normals, plan.survey.colors);
+    for path in inputs {
+        stream_points(path, |b| {
+            for (i, &p) in b.world.iter().enumerate() {
+                near.clear();
+                plan.tree.near(p, plan.halo, &mut near);
+                let core = plan.tree.locate(p);
+                for &t in &near {
+                    if !grown[t].holds(p) {
+                        continue;
+                    }
+                    rec.clear();
+                    for c in (p - centres[t]).as_vec3().to_array() {
+                        rec.extend_from_slice(&c.to_le_bytes());
+                    }
+                    if with_n {
+                        let v = b.normals.map_or(Vec3::NAN, |v| v[i]);
+                        for c in v.to_array() {
+                            rec.extend_from_slice(&c.to_le_bytes());
+                        }
+                    }
+                    if with_c {
+                        let v = b.colors.map_or(Vec3::ONE, |v| v[i]);
+                        for c in v.to_array() {
+                            rec.extend_from_slice(&c.to_le_bytes());
+                        }
+                    }
+                    writers[t].write_all(&rec).map_err(|e| e.to_string())?;
+                    counts[t].0 += 1;
+                    if t == core {
+                        counts[t].1 += 1;
+                    }
+                }
+            }
+            done += b.world.len() as u64;
+            notify(
+                progress,
+                "spilling to tiles",
+                done as f64 / plan.survey.points as f64,
+            );
+            Ok(())
+        })?;
+    }
+    for (t, w) in writers.into_iter().enumerate() {
+        let p = spill_path(work, t);
+        w.into_inner()
+            .map_err(|e| io_err(&p, e.into_error()))?
+            .sync_all()
+            .map_err(|e| io_err(&p, e))?;
+    }
+    Ok(counts)
+}
+
+fn spill_path(work: &Path, t: usize) -> PathBuf {
+    work.join(format!("spill-{t:05}.bin"))
+}
+
+fn tile_path(work: &Path, t: usize) -> PathBuf {
+    work.join(format!("tile-{t:05}.ply"))
+}
+
+fn tile_report_path(work: &Path, t: usize) -> PathBuf {
+    work.join(format!("tile-{t:05}.json"))
+}
+
+/// The tile's points as a cloud centred on the tile.
+fn read_spill(plan: &Plan, work: &Path, t: usize) -> Result<PointCloud, IoError> {
+    let p = spill_path(work, t);
+    let rb = record_bytes(&plan.survey);
+    let bytes = std::fs::metadata(&p).map_err(|e| io_err(&p, e))?.len();
+    crate::memory::check(&format!("tile {t}"), bytes / rb as u64 * BYTES_PER_POINT)
+        .map_err(|e| data_err(&p, e))?;
+    let mut r =
+        BufReader::with_capacity(1 << 20, std::fs::File::open(&p).map_err(|e| io_err(&p, e))?);
+    let n = (bytes / rb as u64) as usize;
+    let (with_n, with_c) = (plan.survey.normals, plan.survey.colors);
+    let mut positions = Vec::with_capacity(n);
+    let mut normals = Vec::with_capacity(if with_n { n } else { 0 });
+    let mut colors = Vec::with_capacity(if with_c { n } else { 0 });
+    let mut rec = vec![0u8; rb];
+    let v3 = |b: &[u8]| {
+        let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+        Vec3::new(f(0), f(4), f(8))
+    };
+    for _ in 0..n {
+        r.read_exact(&mut rec).map_err(|e| io_err(&p, e))?;
+        positions.push(v3(&rec[0..12]));
+        let mut at = 12;
+        if with_n {
+            normals.push(v3(&rec[at..at + 12]));
+            at += 12;
+        }
+        if with_c {
+            colors.push(v3(&rec[at..at + 12]));
+        }
+    }
+    let origin = plan.tiles[t].centre();
+    Ok(PointCloud {
+        positions,
+        origin,
+        normals: with_n.then_some(normals),
+        colors: with_c.then_some(colors),
+        viewpoint: plan.viewpoint.map(|v| (DVec3::from(v) - origin).as_vec3()),
+        ..PointCloud::default()
+    })
+}
+
+/// Generates tile `t` and writes its kept splats (centres as offsets from
+/// the plan's origin) and its summary.
+fn generate_tile(
+    plan: &Plan,
+    params: &SplatParams,
+    work: &Path,
+    t: usize,
+    counts: (u64, u64),
+    progress: Option<Progress<'_>>,
+) -> Result<TileSummary, IoError> {
+    let t0 = Instant::now();
+    let cloud = read_spill(plan, work, t)?;
+    let mut summary = TileSummary {
+        points: counts.0,
+        core_points: counts.1,
+        ..TileSummary::default()
+    };
+    let origin = DVec3::from(plan.origin);
+    let mut kept: Vec<Splat> = Vec::new();
+    if counts.1 > 0 && cloud.len() >= 3 {
+        let tile_params = SplatParams {
+            epsilon_abs: Some(plan.epsilon),
+            viewpoint: cloud.viewpoint,
+            ..params.clone()
+        };
+        let generated = generate_trimmed(&cloud, &tile_params, progress);
+        match generated {
+            Ok((splats, report, _)) => {
+                summary.grown = splats.len();
+                summary.warnings = report.warnings;
+                for s in splats {
+                    let world = cloud.origin + s.center.as_dvec3();
+                    if plan.tree.locate(world) != t {
+                        continue;
+                    }
+                    if 2.2 * f64::from(s.radii.max_element()) > plan.halo {
+                        summary.past_halo += 1;
+                    }
+                    kept.push(Splat {
+                        center: (world - origin).as_vec3(),
+                        ..s
+                    });
+                }
+            }
+            // A tile whose points are too few or degenerate (a corner of a
+            // halo, a line) makes no splat; said in its warnings.
+            Err(e) => summary.warnings.push(format!("no splats: {e}")),
+        }
+    }
+    summary.kept = kept.len();
+    summary.seconds = t0.elapsed().as_secs_f64();
+    let out = tile_path(work, t);
+    crate::io::write_splats(&out, &kept, origin)?;
+    let json = serde_json::to_string(&summary).map_err(|e| data_err(&out, e.to_string()))?;
+    crate::io::write_text(&tile_report_path(work, t), &json)?;
+    let _ = std::fs::remove_file(spill_path(work, t));
+    Ok(summary)
+}
+
+/// Generates splats from `inputs` in tiles within `opts.max_memory`, and
+/// writes them to `output` as one splat file (see the module's text).
+///
+/// # Errors
+/// An [`IoError`] when an input cannot be read, the work folder or the
+/// output cannot be written, or the budget cannot hold even one tile.
+pub fn generate_tiled(
+    inputs: &[PathBuf],
+    params: &SplatParams,
+    opts: &TiledOptions,
+    output: &Path,
+    progress: Option<Progress<'_>>,
+) -> Result<TiledReport, IoError> {
+    let t0 = Instant::now();
+    let work = &opts.work;
+    std::fs::create_dir_all(work).map_err(|e| io_err(work, e))?;
+    let stamps = inputs
+        .iter()
+        .map(|p| stamp(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let budget_points = opts
+        .max_memory
+        .checked_sub(FIXED_BYTES)
+        .map_or(0, |b| b / BYTES_PER_POINT);
+    let target = opts
+        .tile_points
+        .map_or(budget_points, |t| t.min(budget_points));
+    if target < 1000 {
+        return Err(data_err(
+            work,
+            format!(
+                "a memory budget of {:.2} GB holds no tile (each point takes about {BYTES_PER_POINT} \
+                 bytes while its tile is generated, besides {} MB for the program)",
+                opts.max_memory as f64 / 1e9,
+                FIXED_BYTES >> 20
+            ),
+        ));
+    }
+    let params_text = format!("{params:?} {:?} {}", opts.viewpoint, opts.no_viewpoint);
+    let plan_file = work.join("plan.json");
+    let old: Option<Plan> = std::fs::read_to_string(&plan_file)
+        .ok()
+        .and_then(|s| serde_json::from_str(&s).ok())
+        .filter(|p: &Plan| {
+            p.inputs == stamps
+                && p.params == params_text
+                && p.tile_points == target
+                && p.version == env!("CARGO_PKG_VERSION")
+        });
+    let mut report = TiledReport {
+        max_memory: opts.max_memory,
+        ..TiledReport::default()
+    };
+    let resumed = old.is_some();
+    let plan = match old {
+        Some(p) => p,
+        None => {
+            // A different plan: nothing in the folder is reusable.
+            clear_work(work)?;
+            let s = survey(inputs, progress)?;
+            report.seconds.survey = t0.elapsed().as_secs_f64();
+            let diagonal = (DVec3::from(s.bounds.hi) - DVec3::from(s.bounds.lo)).length();
+            let epsilon = match params.epsilon_abs {
+                Some(e) => e,
+                None => f64::from(params.epsilon_rel) * diagonal,
+            };
+            let halo = HALO_EPS * epsilon;
+            let (tree, tiles) = plan_tiles(&s, halo, target);
+            let origin = s.bounds.centre().to_array();
+            let viewpoint = if opts.no_viewpoint {
+                None
+            } else {
+                opts.viewpoint.map(|v| v.to_array()).or(s.viewpoint)
+            };
+            Plan {
+                viewpoint,
+                version: env!("CARGO_PKG_VERSION").into(),
+                inputs: stamps,
+                params: params_text,
+                survey: s,
+                epsilon,
+                halo,
+                tile_points: target,
+                tree,
+                tiles,
+                origin,
+            }
+        }
+    };
+    let diag = (DVec3::from(plan.survey.bounds.hi) - DVec3::from(plan.survey.bounds.lo)).length();
+    report.points = plan.survey.points;
+    report.non_finite = plan.survey.non_finite;
+    report.epsilon = plan.epsilon;
+    report.halo = plan.halo;
+    report.bbox_diagonal = diag;
+    report.tile_points = plan.tile_points;
+    report.origin = plan.origin;
+    report.cores.clone_from(&plan.tiles);
+    report.bounds = Some(plan.survey.bounds);
+    let counts_file = work.join("spilled.json");
+    let counts: Vec<(u64, u64)> = match std::fs::read_to_string(&counts_file)
+        .ok()
+        .filter(|_| resumed)
+        .and_then(|s| serde_json::from_str(&s).ok())
+    {
+        Some(c) => c,
+        None => {
+            let json =
+                serde_json::to_string(&plan).map_err(|e| data_err(&plan_file, e.to_string()))?;
+            crate::io::write_text(&plan_file, &json)?;
+            let t1 = Instant::now();
+            let c = spill(inputs, &plan, work, progress)?;
+            report.seconds.spill = t1.elapsed().as_secs_f64();
+            let json =
+                serde_json::to_string(&c).map_err(|e| data_err(&counts_file, e.to_string()))?;
+            crate::io::write_text(&counts_file, &json)?;
+            c
+        }
+    };
+    report.spilled = counts.iter().map(|c| c.0).sum();
+    let t2 = Instant::now();
+    let n = plan.tiles.len();
+    for (t, &c) in counts.iter().enumerate() {
+        // The splat file is written before the summary: a summary means a
+        // finished tile.
+        let finished = std::fs::read_to_string(tile_report_path(work, t))
+            .ok()
+            .and_then(|s| serde_json::from_str::<TileSummary>(&s).ok())
+            .filter(|_| tile_path(work, t).exists());
+        let summary = match finished {
+            Some(mut s) => {
+                s.resumed = true;
+                s
+            }
+            None => {
+                let tile_progress = |stage: &str, f: f64| {
+                    notify(progress, &format!("tile {}/{n}: {stage}", t + 1), f);
+                };
+                generate_tile(&plan, params, work, t, c, Some(&tile_progress))?
+            }
+        };
+        report.past_halo += summary.past_halo;
+        report.tiles.push(summary);
+    }
+    report.seconds.generate = t2.elapsed().as_secs_f64();
+    let t3 = Instant::now();
+    report.splats = merge(&plan, work, output, progress)?;
+    report.seconds.merge = t3.elapsed().as_secs_f64();
+    let _ = std::fs::remove_dir_all(work);
+    report.peak_rss = peak_rss();
+    report.seconds.total = t0.elapsed().as_secs_f64();
+    Ok(report)
+}
+
+/// Removes what an earlier plan left in the work folder.
+fn clear_work(work: &Path) -> Result<(), IoError> {
+    for e in std::fs::read_dir(work)
+        .map_err(|e| io_err(work, e))?
+        .flatten()
+    {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.starts_with("spill-")
+            || name.starts_with("tile-")
+            || name == "plan.json"
+            || name == "spilled.json"
+        {
+            std::fs::remove_file(e.path()).map_err(|err| io_err(&e.path(), err))?;
+        }
+    }
+    Ok(())
+}
+
+/// Joins the tiles' splat files into `output`: one header with the total
+/// count, then each tile's records in tile order.
+fn merge(
+    plan: &Plan,
+    work: &Path,
+    output: &Path,
+    progress: Option<Progress<'_>>,
+) -> Result<u64, IoError> {
+    let n = plan.tiles.len();
+    let mut bodies = Vec::with_capacity(n);
+    let mut total = 0u64;
+    for t in 0..n {
+        let p = tile_path(work, t);
+        let bytes = std::fs::metadata(&p).map_err(|e| io_err(&p, e))?.len();
+        let head = header_len(&p)?;
+        let body = bytes - head;
+        if body % SPLAT_ROW_BYTES as u64 != 0 {
+            return Err(data_err(&p, "a tile's splat file is cut short".into()));
+        }
+        total += body / SPLAT_ROW_BYTES as u64;
+        bodies.push((p, head));
+    }
+    let header = splat_header(total, DVec3::from(plan.origin));
+    write_atomic(output, |tmp| -> std::io::Result<()> {
+        let mut out = BufWriter::with_capacity(1 << 20, std::fs::File::create(tmp)?);
+        out.write_all(header.as_bytes())?;
+        for (t, (p, head)) in bodies.iter().enumerate() {
+            let mut f = BufReader::new(std::fs::File::open(p)?);
+            std::io::copy(&mut (&mut f).take(*head), &mut std::io::sink())?;
+            std::io::copy(&mut f, &mut out)?;
+            notify(progress, "merging", (t + 1) as f64 / n as f64);
+        }
+        out.flush()
+    })?;
+    Ok(total)
+}
+
+/// Bytes of a splat file's header (through `end_header\n`).
+fn header_len(p: &Path) -> Result<u64, IoError> {
+    let mut head = vec![0u8; 4096];
+    let mut f = std::fs::File::open(p).map_err(|e| io_err(p, e))?;
+    let got = f.read(&mut head).map_err(|e| io_err(p, e))?;
+    let text = &head[..got];
+    let end = b"end_header\n";
+    text.windows(end.len())
+        .position(|w| w == end)
+        .map(|i| (i + end.len()) as u64)
+        .ok_or_else(|| data_err(p, "no end_header in a tile's splat file".into()))
+}

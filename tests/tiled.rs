@@ -1,0 +1,156 @@
+//! Tiled (out-of-core) generation against generation of the whole cloud
+//! in memory: about as many splats, the points as well covered at the
+//! tiles' seams as elsewhere, the same bytes for any thread count, and a
+//! rerun resuming finished tiles.
+
+mod common;
+
+use common::{bin, data, scratch};
+use glam::{DVec3, Vec3};
+use splatray::io::{read_mesh, read_splats, sample_mesh, write_points};
+use splatray::splat::{Splat, SplatParams, count_on_splats, generate};
+use splatray::tiled::{TiledOptions, generate_tiled};
+use std::path::{Path, PathBuf};
+
+/// 120,000 points of the bunny with a little noise, written as the binary
+/// PLY `sample` makes (streamed by tiled generation).
+fn cloud(dir: &Path) -> PathBuf {
+    let mesh = read_mesh(&data("bunny-mesh.ply")).unwrap();
+    let mut c = sample_mesh(&mesh, 120_000, 2e-4, 5);
+    // No normals: tiles estimate and orient their own.
+    c.normals = None;
+    let p = dir.join("points.ply");
+    write_points(&p, &c).unwrap();
+    p
+}
+
+fn options(work: PathBuf) -> TiledOptions {
+    TiledOptions {
+        max_memory: 8_000_000_000,
+        tile_points: Some(30_000),
+        work,
+        viewpoint: None,
+        no_viewpoint: false,
+    }
+}
+
+/// Points in the splats' frame.
+fn local(points: &[DVec3], origin: DVec3) -> Vec<Vec3> {
+    points.iter().map(|p| (*p - origin).as_vec3()).collect()
+}
+
+#[test]
+fn tiles_match_the_whole_cloud_and_their_seams_hold() {
+    let dir = scratch("tiled-seams");
+    let input = cloud(&dir);
+    let whole = splatray::io::read_points(&input).unwrap();
+    let params = SplatParams::default();
+    let (untiled, ureport) = generate(&whole, &params).unwrap();
+    let out = dir.join("tiled.ply");
+    let report = generate_tiled(
+        std::slice::from_ref(&input),
+        &params,
+        &options(dir.join("work")),
+        &out,
+        None,
+    )
+    .unwrap();
+    assert!(report.tiles.len() >= 6, "{} tiles", report.tiles.len());
+    assert!(!dir.join("work").exists(), "the work folder is removed");
+    let tiled = read_splats(&out).unwrap();
+    let (nu, nt) = (untiled.len() as f64, tiled.splats.len() as f64);
+    eprintln!(
+        "untiled {nu} splats, tiled {nt} in {} tiles (epsilon {:.3e} and {:.3e})",
+        report.tiles.len(),
+        ureport.epsilon,
+        report.epsilon
+    );
+    assert!((nt / nu - 1.0).abs() <= 0.02, "{nt} against {nu}");
+    // Coverage of the input points, near the tiles' seams and elsewhere.
+    let world: Vec<DVec3> = whole
+        .positions
+        .iter()
+        .map(|p| whole.origin + p.as_dvec3())
+        .collect();
+    let eps = report.epsilon as f32;
+    let seam_width = 2.0 * ureport.mean_radius;
+    let near_seam = |p: DVec3| report.seams_within(p, seam_width);
+    let (seam, rest): (Vec<DVec3>, Vec<DVec3>) = world.iter().partition(|p| near_seam(**p));
+    let share = |pts: &[DVec3], s: &[Splat], origin: DVec3| {
+        count_on_splats(&local(pts, origin), s, eps) as f64 / pts.len() as f64
+    };
+    let u_origin = whole.origin;
+    let (t_seam, t_rest) = (
+        share(&seam, &tiled.splats, tiled.origin),
+        share(&rest, &tiled.splats, tiled.origin),
+    );
+    let (u_seam, u_rest) = (
+        share(&seam, &untiled, u_origin),
+        share(&rest, &untiled, u_origin),
+    );
+    eprintln!(
+        "points on splats: near seams ({} points) tiled {t_seam:.5} untiled {u_seam:.5}; elsewhere ({}) tiled {t_rest:.5} untiled {u_rest:.5}",
+        seam.len(),
+        rest.len()
+    );
+    assert!(seam.len() > 5_000, "{} points near seams", seam.len());
+    // Holes at the seams no more frequent than elsewhere (within a point's
+    // worth of noise), and no worse than untiled.
+    assert!(
+        1.0 - t_seam <= 1.5 * (1.0 - t_rest) + 1e-3,
+        "seam {t_seam} rest {t_rest}"
+    );
+    assert!(
+        t_seam >= u_seam - 1e-3,
+        "seam {t_seam} against untiled {u_seam}"
+    );
+}
+
+#[test]
+fn same_bytes_for_any_thread_count() {
+    let dir = scratch("tiled-threads");
+    let input = cloud(&dir);
+    let run = |threads: &str, out: &Path| {
+        let o = bin()
+            .env("RAYON_NUM_THREADS", threads)
+            .arg("splat")
+            .arg(&input)
+            .arg("-o")
+            .arg(out)
+            .args(["--tile-points", "30000"])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::read(out).unwrap()
+    };
+    let one = run("1", &dir.join("one.ply"));
+    let two = run("2", &dir.join("two.ply"));
+    assert!(one == two, "tiled output differs by thread count");
+}
+
+/// A run that fails at the end (the output's folder is missing) keeps its
+/// finished tiles; the rerun resumes every one of them and writes the
+/// bytes a fresh run writes.
+#[test]
+fn a_rerun_resumes_finished_tiles() {
+    let dir = scratch("tiled-resume");
+    let input = cloud(&dir);
+    let params = SplatParams::default();
+    let inputs = std::slice::from_ref(&input);
+    let work = dir.join("work");
+    let failed = generate_tiled(
+        inputs,
+        &params,
+        &options(work.clone()),
+        &dir.join("missing/out.ply"),
+        None,
+    );
+    assert!(failed.is_err());
+    assert!(work.join("plan.json").exists());
+    let out = dir.join("resumed.ply");
+    let report = generate_tiled(inputs, &params, &options(work), &out, None).unwrap();
+    assert!(report.tiles.iter().all(|t| t.resumed), "{:?}", report.tiles);
+    let fresh = dir.join("fresh.ply");
+    generate_tiled(inputs, &params, &options(dir.join("work2")), &fresh, None).unwrap();
+    assert!(std::fs::read(&out).unwrap() == std::fs::read(&fresh).unwrap());
+}
