@@ -60,6 +60,24 @@ const SAMPLE: usize = 1 << 20;
 /// The most tiles (each holds an open spill file while spilling).
 const MAX_TILES: usize = 4096;
 
+/// Which part of tiled generation a run does. A cluster runs the stages
+/// as separate processes sharing the work folder: [`Stage::Plan`] once,
+/// [`Stage::Tile`] once per tile (on any machine, in any order, retried
+/// freely), then [`Stage::Merge`]; the output is the same bytes as
+/// [`Stage::All`] in one process.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Stage {
+    /// Survey, plan, spill, generate every tile, merge.
+    #[default]
+    All,
+    /// Survey, plan and spill, then stop (a plan already spilled is kept).
+    Plan,
+    /// Generate this one tile of an existing plan (nothing when finished).
+    Tile(usize),
+    /// Merge the finished tiles of an existing plan into the output.
+    Merge,
+}
+
 /// How tiled generation runs.
 #[derive(Clone, Debug)]
 pub struct TiledOptions {
@@ -77,6 +95,8 @@ pub struct TiledOptions {
     pub viewpoint: Option<DVec3>,
     /// Ignore the inputs' own viewpoints.
     pub no_viewpoint: bool,
+    /// Which part to run.
+    pub stage: Stage,
 }
 
 /// An axis-aligned box in the cloud's coordinates.
@@ -673,7 +693,10 @@ pub fn generate_tiled(
         .filter(|p: &Plan| {
             p.inputs == stamps
                 && p.params == params_text
-                && p.tile_points == target
+                // A tile or the merge may run on another machine, with
+                // another memory: the plan's tiles stand (a tile too large
+                // for this one is refused when read).
+                && (p.tile_points == target || matches!(opts.stage, Stage::Tile(_) | Stage::Merge))
                 && p.version == env!("CARGO_PKG_VERSION")
         });
     let mut report = TiledReport {
@@ -681,6 +704,9 @@ pub fn generate_tiled(
         ..TiledReport::default()
     };
     let resumed = old.is_some();
+    if !resumed && matches!(opts.stage, Stage::Tile(_) | Stage::Merge) {
+        return Err(no_plan(work));
+    }
     let plan = match old {
         Some(p) => p,
         None => {
@@ -727,12 +753,15 @@ pub fn generate_tiled(
     report.cores.clone_from(&plan.tiles);
     report.bounds = Some(plan.survey.bounds);
     let counts_file = work.join("spilled.json");
-    let counts: Vec<(u64, u64)> = match std::fs::read_to_string(&counts_file)
+    let spilled: Option<Vec<(u64, u64)>> = std::fs::read_to_string(&counts_file)
         .ok()
         .filter(|_| resumed)
-        .and_then(|s| serde_json::from_str(&s).ok())
-    {
+        .and_then(|s| serde_json::from_str(&s).ok());
+    let counts: Vec<(u64, u64)> = match spilled {
         Some(c) => c,
+        None if opts.stage != Stage::All && opts.stage != Stage::Plan => {
+            return Err(no_plan(work));
+        }
         None => {
             let json =
                 serde_json::to_string(&plan).map_err(|e| data_err(&plan_file, e.to_string()))?;
@@ -749,36 +778,77 @@ pub fn generate_tiled(
     report.spilled = counts.iter().map(|c| c.0).sum();
     let t2 = Instant::now();
     let n = plan.tiles.len();
+    if let Stage::Tile(t) = opts.stage
+        && t >= n
+    {
+        return Err(data_err(
+            work,
+            format!("--tile {t}: the plan has tiles 0 to {}", n - 1),
+        ));
+    }
     for (t, &c) in counts.iter().enumerate() {
-        // The splat file is written before the summary: a summary means a
-        // finished tile.
-        let finished = std::fs::read_to_string(tile_report_path(work, t))
-            .ok()
-            .and_then(|s| serde_json::from_str::<TileSummary>(&s).ok())
-            .filter(|_| tile_path(work, t).exists());
-        let summary = match finished {
+        let summary = match finished_tile(work, t) {
             Some(mut s) => {
                 s.resumed = true;
                 s
             }
-            None => {
+            None if opts.stage == Stage::All || opts.stage == Stage::Tile(t) => {
                 let tile_progress = |stage: &str, f: f64| {
                     notify(progress, &format!("tile {}/{n}: {stage}", t + 1), f);
                 };
-                generate_tile(&plan, params, work, t, c, Some(&tile_progress))?
+                match generate_tile(&plan, params, work, t, c, Some(&tile_progress)) {
+                    Ok(s) => s,
+                    // Another process finished it meanwhile (a retried
+                    // task on a cluster while the first still ran): its
+                    // spill file is gone, its result is here.
+                    Err(e) => finished_tile(work, t).ok_or(e)?,
+                }
             }
+            None if opts.stage == Stage::Merge => {
+                return Err(data_err(
+                    work,
+                    format!("tile {t} of {n} is not finished: run it with --tile {t}"),
+                ));
+            }
+            // Not this run's tile: its plan only.
+            None => TileSummary {
+                points: c.0,
+                core_points: c.1,
+                ..TileSummary::default()
+            },
         };
         report.past_halo += summary.past_halo;
         report.tiles.push(summary);
     }
     report.seconds.generate = t2.elapsed().as_secs_f64();
-    let t3 = Instant::now();
-    report.splats = merge(&plan, work, output, progress)?;
-    report.seconds.merge = t3.elapsed().as_secs_f64();
-    let _ = std::fs::remove_dir_all(work);
+    if matches!(opts.stage, Stage::All | Stage::Merge) {
+        let t3 = Instant::now();
+        report.splats = merge(&plan, work, output, progress)?;
+        report.seconds.merge = t3.elapsed().as_secs_f64();
+        let _ = std::fs::remove_dir_all(work);
+    }
     report.peak_rss = peak_rss();
     report.seconds.total = t0.elapsed().as_secs_f64();
     Ok(report)
+}
+
+/// The error of a stage that needs a plan where there is none (or one made
+/// for other inputs or options).
+fn no_plan(work: &Path) -> IoError {
+    data_err(
+        work,
+        "no tile plan for these inputs and options here: run the same command with --plan-only first"
+            .into(),
+    )
+}
+
+/// Tile `t`'s summary when it is finished: the splat file is written
+/// before the summary, so a summary means a finished tile.
+fn finished_tile(work: &Path, t: usize) -> Option<TileSummary> {
+    std::fs::read_to_string(tile_report_path(work, t))
+        .ok()
+        .and_then(|s| serde_json::from_str::<TileSummary>(&s).ok())
+        .filter(|_| tile_path(work, t).exists())
 }
 
 /// Removes what an earlier plan left in the work folder.

@@ -395,6 +395,30 @@ fn held_out_coverage_can_fail() {
     assert!(h.coverage < 0.5, "{h:?}");
 }
 
+/// The windowed held-out coverage (the default from 2,000,000 points)
+/// regrows splats from about 6 % of the cloud, in four windows, and tests
+/// the held-out points of their cores: on bunny samples every one lies on
+/// the regrown splats, as over the whole cloud.
+#[test]
+fn windowed_held_out_coverage_tests_the_window_cores() {
+    use splatray::validate::holdout::{WINDOWED_FROM, heldout_coverage_windows};
+    let mesh = read_mesh(&common::data("bunny-mesh.ply")).unwrap();
+    let c = sample_mesh(&mesh, WINDOWED_FROM + 20_000, 0.0, 21);
+    let params = SplatParams::default();
+    // The default epsilon of the whole cloud: 0.002 of its diagonal.
+    let (lo, hi) = c.positions.iter().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(a, b), p| (a.min(*p), b.max(*p)),
+    );
+    let eps = 0.002 * f64::from((hi - lo).length());
+    let (h, w) = heldout_coverage_windows(&c, &params, 0.1, 1, eps).unwrap();
+    eprintln!("{h:?} {w:?}");
+    assert_eq!(w.windows, 4, "{w:?}");
+    assert!(w.share > 0.03 && w.share <= 0.065, "{w:?}");
+    assert!(h.tested > 400, "{h:?}");
+    assert!(h.coverage >= 0.99, "{h:?}");
+}
+
 /// The number of splats follows epsilon and the surface, not the sampling
 /// density: eight times the points on a sphere give about as many splats
 /// (with a growth cap of 12 k-th neighbour distances alone: 106 and 493).

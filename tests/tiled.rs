@@ -9,7 +9,7 @@ use common::{bin, data, scratch};
 use glam::{DVec3, Vec3};
 use splatray::io::{read_mesh, read_splats, sample_mesh, write_points};
 use splatray::splat::{Splat, SplatParams, count_on_splats, generate};
-use splatray::tiled::{TiledOptions, generate_tiled};
+use splatray::tiled::{Stage, TiledOptions, generate_tiled};
 use std::path::{Path, PathBuf};
 
 /// 120,000 points of the bunny with a little noise, written as the binary
@@ -31,6 +31,7 @@ fn options(work: PathBuf) -> TiledOptions {
         work,
         viewpoint: None,
         no_viewpoint: false,
+        stage: Stage::All,
     }
 }
 
@@ -153,4 +154,66 @@ fn a_rerun_resumes_finished_tiles() {
     let fresh = dir.join("fresh.ply");
     generate_tiled(inputs, &params, &options(dir.join("work2")), &fresh, None).unwrap();
     assert!(std::fs::read(&out).unwrap() == std::fs::read(&fresh).unwrap());
+}
+
+/// The stages a cluster runs as separate processes (plan, each tile in any
+/// order, merge) give the bytes of one run; out-of-order stages are
+/// refused in one line and leave no output.
+#[test]
+fn stages_run_apart_give_the_same_bytes() {
+    let dir = scratch("tiled-stages");
+    let input = cloud(&dir);
+    let run = |out: &Path, extra: &[&str]| {
+        bin()
+            .arg("splat")
+            .arg(&input)
+            .arg("-o")
+            .arg(out)
+            .args(["--tile-points", "30000"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let whole = dir.join("whole.ply");
+    let o = run(&whole, &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let staged = dir.join("staged.ply");
+    // No plan yet.
+    for extra in [&["--tile", "0"][..], &["--merge-only"][..]] {
+        let o = run(&staged, extra);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success());
+        assert!(err.contains("--plan-only first"), "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    }
+    let plan = dir.join("plan.json");
+    let o = run(
+        &staged,
+        &["--plan-only", "--report", plan.to_str().unwrap()],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!staged.exists(), "planning writes no output");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&plan).unwrap()).unwrap();
+    let n = report["cores"].as_array().unwrap().len();
+    assert!(n >= 6, "{n} tiles");
+    // One tile short: the merge names it.
+    for t in (1..n).rev() {
+        let o = run(&staged, &["--tile", &t.to_string()]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let o = run(&staged, &["--merge-only"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("tile 0 of"), "{err}");
+    assert!(!staged.exists());
+    let o = run(&staged, &["--tile", &n.to_string()]);
+    assert!(!o.status.success());
+    // A tile run twice (a retried task) is found finished.
+    for _ in 0..2 {
+        let o = run(&staged, &["--tile", "0"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let o = run(&staged, &["--merge-only"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::read(&staged).unwrap() == std::fs::read(&whole).unwrap());
 }

@@ -9,7 +9,9 @@ use splatray::io::{
 };
 use splatray::render::output::{check_extension, check_writable};
 use splatray::splat::{PointCloud, SplatParams};
-use splatray::validate::holdout::{HeldOutCoverage, heldout_coverage};
+use splatray::validate::holdout::{
+    HeldOutCoverage, Windows, heldout_coverage, heldout_coverage_windows,
+};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -35,6 +37,11 @@ pub struct SplatArgs {
     /// that can fail (the output splats use every point).
     #[arg(long, default_value_t = 0.1)]
     pub holdout: f32,
+    /// Measure the held-out coverage over the whole cloud (splats grown a
+    /// second time from all but the held-out points) instead of in four
+    /// windows holding about 6 % of it (clouds of 2,000,000 points or more).
+    #[arg(long)]
+    pub holdout_full: bool,
     /// When the input is a Gaussian splat file (2DGS or 3DGS layout, read
     /// as splats without growing them): leave out Gaussians less opaque
     /// than this.
@@ -51,6 +58,18 @@ pub struct SplatArgs {
     /// generation with tiles smaller than the memory allows.
     #[arg(long)]
     pub tile_points: Option<u64>,
+    /// Tiled generation in stages, for a cluster sharing the output's
+    /// folder: survey, plan and spill the tiles, then stop (the report's
+    /// `cores` lists the tiles).
+    #[arg(long, conflicts_with_all = ["tile", "merge_only"])]
+    pub plan_only: bool,
+    /// Generate this one tile of the plan `--plan-only` made with the same
+    /// inputs and options (nothing when it is finished).
+    #[arg(long, conflicts_with = "merge_only")]
+    pub tile: Option<usize>,
+    /// Merge the finished tiles of that plan into the output.
+    #[arg(long)]
+    pub merge_only: bool,
 }
 
 impl SplatArgs {
@@ -67,6 +86,10 @@ struct Report<'a> {
     #[serde(flatten)]
     generation: &'a splatray::splat::SplatReport,
     heldout_coverage: Option<HeldOutCoverage>,
+    /// Where it was measured (absent when measured over the whole cloud).
+    heldout_windows: Option<Windows>,
+    /// What measuring it took.
+    heldout_seconds: Option<f64>,
 }
 
 /// The splat generation options `splat` and `scan-check` share.
@@ -182,14 +205,27 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
         );
     }
     let mut heldout_failed = None;
+    let mut windows = None;
+    let t_heldout = Instant::now();
     let heldout = if args.holdout > 0.0 {
         line.update("held-out coverage", 0.0);
-        heldout_coverage(&cloud, &params, args.holdout, 1)
+        let measured = if args.holdout_full {
+            heldout_coverage(&cloud, &params, args.holdout, 1)
+        } else {
+            heldout_coverage_windows(&cloud, &params, args.holdout, 1, report.epsilon).map(
+                |(h, w)| {
+                    windows = Some(w);
+                    h
+                },
+            )
+        };
+        measured
             .map_err(|e| heldout_failed = Some(e.to_string()))
             .ok()
     } else {
         None
     };
+    let heldout_seconds = t_heldout.elapsed().as_secs_f64();
     line.finish();
     report.seconds.read = read;
     report.seconds.total += read;
@@ -197,6 +233,8 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
     let out = Report {
         generation: &report,
         heldout_coverage: heldout.clone(),
+        heldout_windows: windows.clone(),
+        heldout_seconds: heldout.is_some().then_some(heldout_seconds),
     };
     commit_outputs(args, &bytes, &out)?;
     for w in &report.warnings {
@@ -231,14 +269,24 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
             h.outliers
         );
     } else if let Some(h) = &heldout {
+        let whre = match windows.as_ref().filter(|w| w.windows > 0) {
+            Some(w) => format!(
+                "in {} windows holding {:.1} % of the cloud",
+                w.windows,
+                100.0 * w.share
+            ),
+            None => "over the whole cloud".into(),
+        };
         eprintln!(
-            "splatray: held-out coverage {:.4}: splats grown without {:.0} % of the points hold {} of the {} tested (within {:.3e} of a splat's plane; {} held-out outliers not tested)",
+            "splatray: held-out coverage {:.4}: splats grown without {:.0} % of the points hold {} of the {} tested (within {:.3e} of a splat's plane; {} held-out outliers not tested), {whre}: {:.2} s, {:.0} % of generation",
             h.coverage,
             100.0 * h.fraction,
             h.found,
             h.tested,
             h.tolerance,
-            h.outliers
+            h.outliers,
+            heldout_seconds,
+            100.0 * heldout_seconds / report.seconds.total.max(1e-9)
         );
     }
     if let Some(e) = heldout_failed {
@@ -378,8 +426,17 @@ fn tiled_options(
         .map(|m| m.len())
         .sum();
     let too_big = (disk / 12).saturating_mul(splatray::tiled::BYTES_PER_POINT) > max_memory;
-    let tiled =
-        args.max_memory.is_some() || args.tile_points.is_some() || inputs.len() > 1 || too_big;
+    let stage = match (args.plan_only, args.tile, args.merge_only) {
+        (true, _, _) => splatray::tiled::Stage::Plan,
+        (_, Some(t), _) => splatray::tiled::Stage::Tile(t),
+        (_, _, true) => splatray::tiled::Stage::Merge,
+        _ => splatray::tiled::Stage::All,
+    };
+    let tiled = args.max_memory.is_some()
+        || args.tile_points.is_some()
+        || inputs.len() > 1
+        || too_big
+        || stage != splatray::tiled::Stage::All;
     if !tiled {
         return Ok(None);
     }
@@ -399,6 +456,7 @@ fn tiled_options(
         work: args.output.with_file_name(format!(".{name}.tiles")),
         viewpoint: args.splat.viewpoint()?,
         no_viewpoint: args.splat.no_viewpoint,
+        stage,
     }))
 }
 
@@ -436,6 +494,40 @@ fn run_tiled(
     warnings.dedup();
     for w in warnings {
         eprintln!("splatray: warning (in a tile): {w}");
+    }
+    match opts.stage {
+        splatray::tiled::Stage::Plan => {
+            eprintln!(
+                "splatray: {} points planned in {} tiles (at most {} points each with a halo of {:.3e}; {} spilled), epsilon {:.3e}; survey {:.1} s, spill {:.1} s, in {}: run each tile with --tile T (0 to {}), then --merge-only",
+                report.points,
+                report.tiles.len(),
+                report.tile_points,
+                report.halo,
+                report.spilled,
+                report.epsilon,
+                report.seconds.survey,
+                report.seconds.spill,
+                opts.work.display(),
+                report.tiles.len() - 1
+            );
+            return Ok(());
+        }
+        splatray::tiled::Stage::Tile(t) => {
+            let s = &report.tiles[t];
+            eprintln!(
+                "splatray: tile {t} of {}: {} points ({} in its core) -> {} splats kept of {} grown{}, {:.1} s, peak memory {:.2} GB",
+                report.tiles.len(),
+                s.points,
+                s.core_points,
+                s.kept,
+                s.grown,
+                if s.resumed { " (already finished)" } else { "" },
+                s.seconds,
+                report.peak_rss as f64 / 1e9,
+            );
+            return Ok(());
+        }
+        splatray::tiled::Stage::All | splatray::tiled::Stage::Merge => {}
     }
     if args.holdout > 0.0 {
         eprintln!("splatray: note: held-out coverage is not measured in tiled generation");
