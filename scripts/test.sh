@@ -22,3 +22,16 @@ for isa in $isas; do
     echo "== tests again with Embree forced to isa=$isa"
     SPLATRAY_EMBREE_CONFIG="isa=$isa" cargo test --release -q --lib "${targets[@]}"
 done
+
+# The Dask driver (python/): its dependencies in a virtual environment of
+# its own, then its tests against the release binary built above.
+venv=python/.venv
+if [ ! -x "$venv/bin/python" ] || ! cmp -s python/requirements.txt "$venv/requirements.txt"; then
+    echo "== python/.venv: installing python/requirements.txt"
+    rm -rf "$venv"
+    python3 -m venv "$venv"
+    "$venv/bin/pip" install -q --disable-pip-version-check -r python/requirements.txt
+    cp python/requirements.txt "$venv/requirements.txt"
+fi
+echo "== the Dask driver's tests (LocalCluster of 2 worker processes)"
+(cd python && .venv/bin/python -m pytest -q -p no:cacheprovider tests)

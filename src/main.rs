@@ -51,6 +51,28 @@ enum Command {
     /// how many meet the splats at the point, early, late or not at all.
     #[command(allow_negative_numbers = true)]
     ScanCheck(cli::scan_check::ScanCheckArgs),
+    /// Join the bands of one image (`render --band I/N`, rendered apart)
+    /// top to bottom into the image a whole render writes.
+    Stitch(StitchArgs),
+}
+
+/// Arguments of `splatray stitch`.
+#[derive(clap::Args)]
+struct StitchArgs {
+    /// The bands, top to bottom (PNG or EXR, one width).
+    #[arg(required = true, num_args = 1..)]
+    parts: Vec<std::path::PathBuf>,
+    /// The image (the parts' format).
+    #[arg(short, long)]
+    output: std::path::PathBuf,
+}
+
+fn stitch(a: &StitchArgs) -> Result<(), String> {
+    splatray::render::output::check_output_path(&a.output).map_err(|e| e.to_string())?;
+    let (w, h) =
+        splatray::render::output::stitch(&a.parts, &a.output).map_err(|e| e.to_string())?;
+    println!("{} bands -> {w}x{h} {}", a.parts.len(), a.output.display());
+    Ok(())
 }
 
 fn info() -> Result<(), String> {
@@ -102,6 +124,7 @@ fn main() -> ExitCode {
         Command::Export(a) => cli::export::run(&a),
         Command::Sweep(a) => cli::sweep::run(&a),
         Command::ScanCheck(a) => cli::scan_check::run(&a),
+        Command::Stitch(a) => stitch(&a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -244,3 +244,77 @@ fn an_unwritable_report_or_aov_leaves_no_output() {
         );
     }
 }
+
+/// Bands rendered apart (`--band I/N`, uneven: 37 rows in 3 bands, one of
+/// them in another backend) and stitched are the whole render's bytes, PNG
+/// and EXR; a wrong band or a mixed stitch is one line.
+#[test]
+fn bands_stitch_into_the_whole_render() {
+    let dir = scratch("render-bands");
+    let scene_path = dir.join("scene.toml");
+    let scene = format!(
+        "{}[[model]]\nshape = {{ kind = \"sphere\", center = [0.0, 0.0, 0.0], radius = 1.0, splats = 3000 }}\n\
+         [[light]]\nkind = \"sphere\"\nposition = [2.0, 3.0, 3.0]\nradius = 0.5\nintensity = 20.0\nsamples = 4\n",
+        CAMERA
+            .replace("height = 16", "height = 37")
+            .replace("width = 16", "width = 29")
+    );
+    std::fs::write(&scene_path, scene).unwrap();
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_splatray"))
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let s = scene_path.to_str().unwrap();
+    for ext in ["png", "exr"] {
+        let whole = dir.join(format!("whole.{ext}"));
+        let o = run(&["render", s, "--spp", "4", "-o", whole.to_str().unwrap()]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let mut parts = Vec::new();
+        for i in 0..3 {
+            let p = dir.join(format!("band{i}.{ext}"));
+            let backend = if i == 1 { "embree" } else { "octree" };
+            let band = format!("{i}/3");
+            let o = run(&[
+                "render",
+                s,
+                "--spp",
+                "4",
+                "--backend",
+                backend,
+                "--band",
+                &band,
+                "-o",
+                p.to_str().unwrap(),
+            ]);
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            parts.push(p.to_str().unwrap().to_string());
+        }
+        let stitched = dir.join(format!("stitched.{ext}"));
+        let mut args = vec!["stitch".to_string()];
+        args.extend(parts.iter().cloned());
+        args.extend(["-o".into(), stitched.to_str().unwrap().into()]);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = run(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(
+            std::fs::read(&stitched).unwrap() == std::fs::read(&whole).unwrap(),
+            "stitched {ext} differs from the whole render"
+        );
+    }
+    let bad = run(&["render", s, "--band", "3/3", "-o", "x.png"]);
+    assert!(!bad.status.success());
+    let mixed = dir.join("mixed.png");
+    let o = run(&[
+        "stitch",
+        dir.join("band0.png").to_str().unwrap(),
+        dir.join("band1.exr").to_str().unwrap(),
+        "-o",
+        mixed.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("band1.exr"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(!mixed.exists());
+}

@@ -4,7 +4,7 @@ use super::progress::ProgressLine;
 use super::view::SceneArgs;
 use splatray::accel::registry;
 use splatray::io::Batch;
-use splatray::render::integrator::{Frame, RayCounts, render};
+use splatray::render::integrator::{Frame, RayCounts, render, render_rows};
 use splatray::render::output::{
     Aov, aov_path, check_output_path, check_writable, write_aov_into, write_image_into,
 };
@@ -39,6 +39,39 @@ pub struct RenderArgs {
     /// depth,normal,splat).
     #[arg(long, value_delimiter = ',')]
     pub aov: Vec<Aov>,
+    /// Render band I of N (I from 0): rows I·H/N to (I+1)·H/N of the image,
+    /// the same pixels a whole render gives them; `splatray stitch` joins
+    /// the bands (what a cluster's render tasks do).
+    #[arg(long, value_name = "I/N", value_parser = parse_band)]
+    pub band: Option<(u32, u32)>,
+}
+
+/// `I/N` with `I < N`.
+fn parse_band(s: &str) -> Result<(u32, u32), String> {
+    let (i, n) = s
+        .split_once('/')
+        .ok_or_else(|| format!("'{s}': expected I/N, e.g. 0/4"))?;
+    let i: u32 = i
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{s}': expected I/N, e.g. 0/4"))?;
+    let n: u32 = n
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{s}': expected I/N, e.g. 0/4"))?;
+    if n == 0 || i >= n {
+        return Err(format!(
+            "'{s}': the band I must be below N, and N at least 1"
+        ));
+    }
+    Ok((i, n))
+}
+
+/// The rows of band `i` of `n` in an image `height` rows high.
+#[must_use]
+pub fn band_rows(height: u32, (i, n): (u32, u32)) -> std::ops::Range<u32> {
+    let at = |k: u32| (u64::from(height) * u64::from(k) / u64::from(n)) as u32;
+    at(i)..at(i + 1)
 }
 
 /// The default backend: the registry's first.
@@ -120,6 +153,9 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
     });
     // Every output is checked before the work starts.
     check_output_path(&output)?;
+    if args.band.is_some() && !args.aov.is_empty() {
+        return Err("--aov is written by a whole render, not with --band".into());
+    }
     for &a in &args.aov {
         check_output_path(&aov_path(&output, a))?;
     }
@@ -136,9 +172,17 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
         .build_splats(&scene.splats)
         .map_err(|e| e.to_string())?;
     let build_seconds = backend.stats().build_seconds;
-    let frame = render(&scene, backend.as_ref(), Some(&progress));
+    let frame = match args.band {
+        Some(b) => render_rows(
+            &scene,
+            backend.as_ref(),
+            band_rows(scene.camera.height, b),
+            Some(&progress),
+        ),
+        None => render(&scene, backend.as_ref(), Some(&progress)),
+    };
     line.finish();
-    if frame.splat.iter().all(|&id| id == u32::MAX) {
+    if args.band.is_none() && frame.splat.iter().all(|&id| id == u32::MAX) {
         warn_nothing_hit(&scene);
     }
     // The image, its AOVs and the report are committed together: a failure
@@ -156,8 +200,12 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
             .map_err(|e| e.to_string())?;
     }
     batch.commit().map_err(|e| e.to_string())?;
+    let band = args.band.map_or(String::new(), |(i, n)| {
+        let r = band_rows(scene.camera.height, (i, n));
+        format!(" (band {i}/{n}: rows {} to {})", r.start, r.end)
+    });
     println!(
-        "{}: {}x{} spp {}, {} splats ({:.2} s to make), {} build {:.3} s, render {:.3} s, {} rays ({:.2} Mrays/s) -> {}",
+        "{}: {}x{}{band} spp {}, {} splats ({:.2} s to make), {} build {:.3} s, render {:.3} s, {} rays ({:.2} Mrays/s) -> {}",
         scene_path.display(),
         frame.width,
         frame.height,

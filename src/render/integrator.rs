@@ -404,6 +404,20 @@ pub fn render(scene: &Scene, backend: &dyn Backend, progress: Option<Progress<'_
     render_surfaces(scene, &SplatSurfaces { scene, backend }, progress)
 }
 
+/// Renders rows `rows` of the scene's camera view: a frame as wide as the
+/// image and `rows.len()` high, whose pixels are those rows of
+/// [`render`]'s frame, bit for bit (every pixel's samples are seeded by its
+/// own coordinates), so bands rendered apart and stacked make the image.
+#[must_use]
+pub fn render_rows(
+    scene: &Scene,
+    backend: &dyn Backend,
+    rows: std::ops::Range<u32>,
+    progress: Option<Progress<'_>>,
+) -> Frame {
+    render_surfaces_rows(scene, &SplatSurfaces { scene, backend }, rows, progress)
+}
+
 /// Renders the scene's camera, lights and materials against any
 /// [`Surfaces`]; reports stage `render` to `progress` as rows are done
 /// (from rayon's threads).
@@ -413,14 +427,26 @@ pub fn render_surfaces(
     surfaces: &dyn Surfaces,
     progress: Option<Progress<'_>>,
 ) -> Frame {
+    render_surfaces_rows(scene, surfaces, 0..scene.camera.height, progress)
+}
+
+/// [`render_surfaces`] for rows `rows` of the image only (see
+/// [`render_rows`]).
+fn render_surfaces_rows(
+    scene: &Scene,
+    surfaces: &dyn Surfaces,
+    rows: std::ops::Range<u32>,
+    progress: Option<Progress<'_>>,
+) -> Frame {
     let cam = &scene.camera;
-    let (w, h) = (cam.width as usize, cam.height as usize);
+    let rows = rows.start.min(cam.height)..rows.end.min(cam.height);
+    let (w, h) = (cam.width as usize, rows.len());
     let tracer = Tracer { scene, surfaces };
     let start = Instant::now();
     let rows_done = AtomicUsize::new(0);
     let k = (cam.spp as f32).sqrt().ceil() as u32;
     let per_pixel = cam.spp;
-    let rows: Vec<Row> = (0..h)
+    let rows: Vec<Row> = (rows.start as usize..rows.end as usize)
         .into_par_iter()
         .map(|y| {
             let mut s = Scratch {
@@ -472,7 +498,7 @@ pub fn render_surfaces(
         .collect();
     let mut frame = Frame {
         width: cam.width,
-        height: cam.height,
+        height: h as u32,
         rgb: Vec::with_capacity(w * h),
         depth: Vec::with_capacity(w * h),
         normal: Vec::with_capacity(w * h),

@@ -223,3 +223,58 @@ pub fn write_aov_into(batch: &mut Batch, frame: &Frame, aov: Aov, path: &Path) -
         ),
     }
 }
+
+/// Stacks images of one width top to bottom into `out`: the bands of one
+/// image that renders with `--band I/N` made apart (8-bit RGB PNG, or
+/// linear float RGB EXR, as [`write_image`] writes them). The result is
+/// the bytes a whole render writes.
+///
+/// # Errors
+/// One line naming the part when a part cannot be read, is of another
+/// kind or width than the first, or `out`'s format differs from the parts'.
+pub fn stitch(parts: &[PathBuf], out: &Path) -> Result<(u32, u32)> {
+    let format = format_of(out)?;
+    let mut width = None;
+    let mut height = 0u32;
+    let mut bytes8: Vec<u8> = Vec::new();
+    let mut floats: Vec<f32> = Vec::new();
+    for p in parts {
+        let img = image::open(p).map_err(|e| Error::invalid(format!("{}: {e}", p.display())))?;
+        let (w, h) = (img.width(), img.height());
+        if *width.get_or_insert(w) != w {
+            return Err(Error::invalid(format!(
+                "{}: {w} pixels wide, the first part {}",
+                p.display(),
+                width.unwrap_or(0)
+            )));
+        }
+        match (format, img) {
+            (ImageFormat::Png, image::DynamicImage::ImageRgb8(b)) => {
+                bytes8.extend_from_slice(b.as_raw());
+            }
+            (ImageFormat::OpenExr, image::DynamicImage::ImageRgb32F(b)) => {
+                floats.extend_from_slice(b.as_raw());
+            }
+            (_, other) => {
+                return Err(Error::invalid(format!(
+                    "{}: {:?} pixels, not what a render writes to {}",
+                    p.display(),
+                    other.color(),
+                    out.display()
+                )));
+            }
+        }
+        height += h;
+    }
+    let width = width.ok_or_else(|| Error::invalid("no parts to stitch"))?;
+    if format == ImageFormat::OpenExr {
+        let img: ImageBuffer<Rgb<f32>, Vec<f32>> = ImageBuffer::from_raw(width, height, floats)
+            .ok_or_else(|| Error::invalid("image size mismatch"))?;
+        save(&img, out, ImageFormat::OpenExr)?;
+    } else {
+        let img: ImageBuffer<Rgb<u8>, Vec<u8>> = ImageBuffer::from_raw(width, height, bytes8)
+            .ok_or_else(|| Error::invalid("image size mismatch"))?;
+        save(&img, out, ImageFormat::Png)?;
+    }
+    Ok((width, height))
+}
