@@ -440,3 +440,55 @@ fn splat_count_does_not_follow_the_density() {
         "{sparse} splats from 20k points, {dense} from 160k"
     );
 }
+
+/// `--thin`: a cloud sampled far more densely than `ϵ` needs keeps one
+/// point per cell half an `ϵ` wide, and the splats still hold every input
+/// point, thinned or not, with about as many splats; 500 km from zero it
+/// thins alike (cells in f64 world coordinates).
+#[test]
+fn thinning_keeps_the_surface_and_every_point_on_it() {
+    let mesh = read_mesh(&data("bunny-mesh.ply")).unwrap();
+    let mut c = sample_mesh(&mesh, 300_000, 0.0002, 21);
+    c.normals = None;
+    let full = generate(&c, &SplatParams::default()).unwrap();
+    let thin = SplatParams {
+        thin: 0.5,
+        ..SplatParams::default()
+    };
+    let (splats, report) = generate(&c, &thin).unwrap();
+    let thinned: usize = report
+        .skipped_points
+        .iter()
+        .filter(|s| s.reason.contains("denser than epsilon"))
+        .map(|s| s.count)
+        .sum();
+    eprintln!(
+        "thinned {thinned} of {} points; {} splats against {} unthinned",
+        c.len(),
+        splats.len(),
+        full.0.len()
+    );
+    assert!(thinned > c.len() / 10, "{thinned} thinned");
+    assert_eq!(report.used_points, c.len() - thinned);
+    let ratio = splats.len() as f64 / full.0.len() as f64;
+    assert!((0.85..=1.05).contains(&ratio), "{ratio}");
+    let on = count_on_splats(&c.positions, &splats, report.epsilon as f32);
+    assert!(
+        on as f64 >= 0.999 * c.len() as f64,
+        "{on} of {} input points on the thinned splats",
+        c.len()
+    );
+    // The same cloud 5e5 units away: the cells fall elsewhere on it, so
+    // other points are kept, about as many.
+    let far = PointCloud {
+        origin: c.origin + DVec3::new(5.0e5, -2.0e5, 1.0e5),
+        ..c.clone()
+    };
+    let (far_splats, far_report) = generate(&far, &thin).unwrap();
+    let used = far_report.used_points as f64 / report.used_points as f64;
+    let count = far_splats.len() as f64 / splats.len() as f64;
+    assert!(
+        (used - 1.0).abs() < 0.02 && (count - 1.0).abs() < 0.03,
+        "{used} {count}"
+    );
+}

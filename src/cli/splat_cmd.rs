@@ -115,6 +115,10 @@ pub struct SplatOptions {
     /// Ignore the cloud's own viewpoint (or its scanners' positions).
     #[arg(long, conflicts_with = "viewpoint")]
     pub no_viewpoint: bool,
+    /// Where the cloud is denser than ϵ needs, keep one point per cell this
+    /// many ϵ wide (default 0.5; 0 keeps every point).
+    #[arg(long)]
+    pub thin: Option<f64>,
 }
 
 impl SplatOptions {
@@ -154,6 +158,7 @@ impl SplatOptions {
             ellipses: self.ellipses,
             viewpoint,
             scan_viewpoints: !self.no_viewpoint,
+            thin: self.thin.unwrap_or(defaults.thin),
             ..defaults
         })
     }
@@ -241,10 +246,13 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
         eprintln!("splatray: warning: {w}");
     }
     for s in &report.skipped_points {
-        eprintln!(
-            "splatray: warning: skipped {} points: {}",
-            s.count, s.reason
-        );
+        // Thinning is asked for (--thin): a note, not a warning.
+        let kind = if s.reason.starts_with("denser than") {
+            "note: thinned"
+        } else {
+            "warning: skipped"
+        };
+        eprintln!("splatray: {kind} {} points: {}", s.count, s.reason);
     }
     eprintln!(
         "splatray: {} points -> {} splats ({} elliptical), coverage {:.4}, mean radius {:.4e}, epsilon {:.3e}, noise {:.3e}, {} flat normal fields, origin [{:?}, {:?}, {:?}], {:.2} s -> {}",
@@ -473,6 +481,7 @@ fn run_tiled(
         density: o.density.unwrap_or(defaults.density),
         ellipses: o.ellipses,
         scan_viewpoints: !o.no_viewpoint,
+        thin: o.thin.unwrap_or(defaults.thin),
         ..defaults
     };
     let line = ProgressLine::new();

@@ -328,6 +328,10 @@ pub struct ModelSpec {
     pub seed: u64,
     /// A procedural shape.
     pub shape: Option<ShapeSpec>,
+    /// The exact surface behind a `points`, `splats` or `gaussians` model
+    /// (a triangle mesh PLY in the model's own coordinates), for
+    /// `compare --truth`: e.g. the mesh a scan was simulated from.
+    pub truth: Option<PathBuf>,
     /// Placement.
     #[serde(default)]
     pub transform: TransformSpec,

@@ -282,6 +282,17 @@ fn model_source<'a>(
             "a model needs exactly one of `points`, `splats`, `gaussians`, `mesh` or `shape`",
         ));
     }
+    if spec.truth.is_some() && (spec.mesh.is_some() || spec.shape.is_some()) {
+        return Err(Error::invalid(
+            "`truth` applies to `points`, `splats` and `gaussians` models: a mesh or shape is its own truth",
+        ));
+    }
+    let given_truth = |what: &'static str| -> Result<PendingTruth<'a>> {
+        match &spec.truth {
+            Some(t) => Ok(PendingTruth::Mesh(crate::io::read_mesh(&base.join(t))?)),
+            None => Ok(PendingTruth::Unknown(what)),
+        }
+    };
     if spec.min_opacity.is_some() && spec.gaussians.is_none() {
         return Err(Error::invalid(
             "`min_opacity` applies to `gaussians` models only",
@@ -299,7 +310,7 @@ fn model_source<'a>(
         return Ok(Source {
             splats: set.splats,
             origin: set.origin,
-            truth: PendingTruth::Unknown("a splat file"),
+            truth: given_truth("a splat file")?,
         });
     }
     if let Some(p) = &spec.gaussians {
@@ -311,7 +322,7 @@ fn model_source<'a>(
         return Ok(Source {
             splats: read.set.splats,
             origin: read.set.origin,
-            truth: PendingTruth::Unknown("a Gaussian splat file"),
+            truth: given_truth("a Gaussian splat file")?,
         });
     }
     if let Some(p) = &spec.points {
@@ -324,7 +335,7 @@ fn model_source<'a>(
         return Ok(Source {
             splats: generate_splats(spec, &cloud, load, progress)?,
             origin: cloud.origin,
-            truth: PendingTruth::Unknown("a point file"),
+            truth: given_truth("a point file")?,
         });
     }
     let Some(p) = &spec.mesh else {

@@ -53,6 +53,10 @@ pub struct SplatParams {
     /// `ϵ` in the cloud's units, in place of `epsilon_rel` times this
     /// cloud's diagonal: the tiles of one cloud share the whole cloud's.
     pub epsilon_abs: Option<f64>,
+    /// Thin the cloud to one point per cell this many `ϵ` wide where it is
+    /// denser (see [`super::thin`]; default [`super::thin::CELL_EPS`]);
+    /// 0 keeps every point.
+    pub thin: f64,
 }
 
 /// Where generation takes `cloud`'s points to have been seen from, indexed
@@ -80,6 +84,7 @@ impl Default for SplatParams {
             scan_viewpoints: true,
             remove_outliers: true,
             epsilon_abs: None,
+            thin: 0.0,
         }
     }
 }
@@ -319,6 +324,7 @@ pub fn generate_with_progress(
 ) -> Result<(Vec<Splat>, SplatReport), GenerateError> {
     let t0 = Instant::now();
     check_params(params)?;
+    let raw = cloud;
     // Growth runs in a unit-scale frame (centred, divided by the diagonal),
     // so no squared distance or threshold overflows or underflows; the
     // splats and the report's lengths are mapped back at the end.
@@ -365,6 +371,27 @@ pub fn generate_with_progress(
             report.skipped_points.push(Skipped {
                 reason: why.into(),
                 count,
+            });
+        }
+    }
+    // --- thinning ------------------------------------------------------------
+    if params.thin > 0.0 && order.len() > 3 {
+        let epsilon = match params.epsilon_abs {
+            Some(e) => e,
+            None => f64::from(params.epsilon_rel) * robust_diagonal(&raw.positions, &order),
+        };
+        let world = |i: u32| raw.origin + raw.positions[i as usize].as_dvec3();
+        if let Some(keep) =
+            super::thin::keep(&order, raw.positions.len(), world, params.thin * epsilon)
+        {
+            let before = order.len();
+            order.retain(|&i| keep[i as usize]);
+            report.skipped_points.push(Skipped {
+                reason: format!(
+                    "denser than epsilon needs: one point kept per cell {} epsilon wide",
+                    params.thin
+                ),
+                count: before - order.len(),
             });
         }
     }
@@ -616,6 +643,27 @@ pub fn generate_with_progress(
     Ok((splats, report))
 }
 
+/// The diagonal of the box holding all but the 0.1 % most extreme of
+/// `order`'s points along each axis: `ϵ`'s scale before outliers are known
+/// (a few far outliers would widen the plain bounding box, and the cells of
+/// [`super::thin`] with it).
+fn robust_diagonal(positions: &[Vec3], order: &[u32]) -> f64 {
+    let n = order.len();
+    let cut = n / 1000;
+    let mut axis: Vec<f32> = Vec::with_capacity(n);
+    let mut d2 = 0.0f64;
+    let coords: [fn(&Vec3) -> f32; 3] = [|p| p.x, |p| p.y, |p| p.z];
+    for coord in coords {
+        axis.clear();
+        axis.extend(order.iter().map(|&i| coord(&positions[i as usize])));
+        let (_, lo, _) = axis.select_nth_unstable_by(cut, f32::total_cmp);
+        let lo = f64::from(*lo);
+        let (_, hi, _) = axis.select_nth_unstable_by(n - 1 - cut, f32::total_cmp);
+        d2 += (f64::from(*hi) - lo).powi(2);
+    }
+    d2.sqrt()
+}
+
 /// Keeps the items of `v` whose flag is false.
 fn retain_unflagged<T>(v: &mut Vec<T>, flagged: &[bool]) {
     let mut it = flagged.iter();
@@ -637,6 +685,9 @@ fn check_params(p: &SplatParams) -> Result<(), GenerateError> {
     }
     if !(p.density > 0.0 && p.density <= 1.0) {
         return bad(format!("density = {} (must be in (0, 1])", p.density));
+    }
+    if !(p.thin >= 0.0 && p.thin <= 4.0) {
+        return bad(format!("thin = {} (must be in [0, 4] epsilon)", p.thin));
     }
     if !(p.field_radius_factor >= 1.0 && p.field_radius_factor <= 10.0) {
         return bad(format!(

@@ -115,6 +115,7 @@ pub mod knn;
 pub mod normals;
 pub mod outliers;
 pub mod standoff;
+pub mod thin;
 
 pub use cloud::{PointCloud, Scans, Viewpoints};
 pub use generate::{

@@ -1,0 +1,141 @@
+//! Thinning a cloud sampled far more densely than `ϵ` needs.
+//!
+//! Splat growth (§2.1) stops a splat where its points leave the `ϵ` slab,
+//! so the splats a surface gets depend on `ϵ`, not on how many points
+//! sample it: 10M and 100M samples of the bunny give about the same splats.
+//! What the extra points cost (neighbour search, normals, growth, each per
+//! point) buys nothing. Space is cut into cubic cells `CELL_EPS` `ϵ` wide,
+//! aligned to the coordinates' zero (so a tile of a cloud and the whole
+//! cloud cut alike), and a cell holding several points keeps one: the point
+//! nearest their centroid (the lowest index on a tie). A cell of one point
+//! keeps it. A kept point is an input point, with its normal, colour and
+//! scanner.
+//!
+//! With `CELL_EPS` = 0.5 a splat of the mean radius (about 3.6 `ϵ` on the
+//! bunny) still takes about 160 points, against the 8 of the bundled
+//! scene's 200k samples.
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// Cell width in `ϵ`.
+pub const CELL_EPS: f64 = 0.5;
+
+/// Bits per axis of a packed cell key.
+const KEY_BITS: u32 = 21;
+
+/// Which of `indices` to keep: `keep[i]` for every `i` in `indices` (the
+/// positions `world(i)` in the cloud's coordinates, f64), cutting space into
+/// cells `cell` wide. `None` when nothing would be thinned, or when the
+/// cloud spans more than 2^21 cells along an axis (too fine to key; it is
+/// then left as it is).
+#[must_use]
+pub fn keep(
+    indices: &[u32],
+    len: usize,
+    world: impl Fn(u32) -> DVec3 + Sync,
+    cell: f64,
+) -> Option<Vec<bool>> {
+    if !(cell.is_finite() && cell > 0.0) || indices.len() < 2 {
+        return None;
+    }
+    let cells: Vec<[i64; 3]> = indices
+        .par_iter()
+        .map(|&i| {
+            let c = (world(i) / cell).floor();
+            [c.x as i64, c.y as i64, c.z as i64]
+        })
+        .collect();
+    let mut lo = [i64::MAX; 3];
+    let mut hi = [i64::MIN; 3];
+    for c in &cells {
+        for a in 0..3 {
+            lo[a] = lo[a].min(c[a]);
+            hi[a] = hi[a].max(c[a]);
+        }
+    }
+    if (0..3).any(|a| hi[a] - lo[a] >= 1 << KEY_BITS) {
+        return None;
+    }
+    let mut keyed: Vec<(u64, u32)> = cells
+        .par_iter()
+        .zip(indices.par_iter())
+        .map(|(c, &i)| {
+            let k = (0..3).fold(0u64, |k, a| k << KEY_BITS | (c[a] - lo[a]) as u64);
+            (k, i)
+        })
+        .collect();
+    drop(cells);
+    keyed.par_sort_unstable();
+    if keyed.windows(2).all(|w| w[0].0 != w[1].0) {
+        return None;
+    }
+    let mut keep = vec![false; len];
+    let mut start = 0;
+    while start < keyed.len() {
+        let key = keyed[start].0;
+        let end = start + keyed[start..].partition_point(|e| e.0 == key);
+        if end - start == 1 {
+            keep[keyed[start].1 as usize] = true;
+        } else {
+            let run = &keyed[start..end];
+            let centroid = run.iter().map(|e| world(e.1)).sum::<DVec3>() / (end - start) as f64;
+            // Sorted by index within the run: `<` keeps the lowest on a tie.
+            let mut best = (f64::INFINITY, run[0].1);
+            for e in run {
+                let d = world(e.1).distance_squared(centroid);
+                if d < best.0 {
+                    best = (d, e.1);
+                }
+            }
+            keep[best.1 as usize] = true;
+        }
+        start = end;
+    }
+    Some(keep)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::keep;
+    use glam::DVec3;
+
+    #[test]
+    fn one_point_a_cell_the_nearest_its_centroid() {
+        // Cell 1 wide. Cell (0,0,0): three points, centroid (0.5, 0.5, 0.5):
+        // index 1 is nearest. Cell (5,0,0): one point. Cell (-1,0,0): two
+        // at the same distance from their centroid: the lower index.
+        let p = [
+            DVec3::new(0.1, 0.1, 0.1),
+            DVec3::new(0.45, 0.5, 0.55),
+            DVec3::new(0.95, 0.9, 0.85),
+            DVec3::new(5.5, 0.5, 0.5),
+            DVec3::new(-0.9, 0.5, 0.5),
+            DVec3::new(-0.1, 0.5, 0.5),
+        ];
+        let idx: Vec<u32> = (0..p.len() as u32).collect();
+        let k = keep(&idx, p.len(), |i| p[i as usize], 1.0).unwrap();
+        assert_eq!(k, [false, true, false, true, true, false]);
+        // Far from zero, the same cells relative to each other.
+        let far: Vec<DVec3> = p
+            .iter()
+            .map(|q| *q + DVec3::new(4.0e6, -3.0e5, 7.0))
+            .collect();
+        let k2 = keep(&idx, p.len(), |i| far[i as usize], 1.0).unwrap();
+        assert_eq!(k, k2);
+    }
+
+    #[test]
+    fn nothing_to_thin_is_none() {
+        let p = [
+            DVec3::ZERO,
+            DVec3::new(2.0, 0.0, 0.0),
+            DVec3::new(0.0, 3.0, 0.0),
+        ];
+        let idx: Vec<u32> = (0..3).collect();
+        assert!(keep(&idx, 3, |i| p[i as usize], 1.0).is_none());
+        // A span of more cells than a key holds: left as it is.
+        let q = [DVec3::ZERO, DVec3::ZERO, DVec3::new(1.0e7, 0.0, 0.0)];
+        assert!(keep(&idx, 3, |i| q[i as usize], 1.0).is_none());
+    }
+}
