@@ -143,3 +143,96 @@ fn compare_report_has_the_documented_keys() {
     let img = image::open(dir.join("d-truth.png")).unwrap();
     assert_eq!((img.width(), img.height()), (3 * 96, 72));
 }
+
+/// A splat file with `truth = "mesh.ply"` is measured against that mesh
+/// by `compare --truth`, as a sampled mesh model is, and moves with the
+/// model's transform; `truth` on a mesh model is refused in one line.
+#[test]
+fn a_models_truth_mesh_is_its_exact_surface() {
+    let dir = common::scratch("validate-truth");
+    let mesh = common::data("bunny-mesh.ply");
+    let points = dir.join("points.ply");
+    let splats = dir.join("splats.ply");
+    let run = |args: &[&std::ffi::OsStr]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+            .args(args)
+            .output()
+            .unwrap();
+        (
+            o.status.success(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let os = |s: &str| std::ffi::OsString::from(s);
+    let (ok, err) = run(&[
+        &os("sample"),
+        mesh.as_os_str(),
+        &os("-n"),
+        &os("60000"),
+        &os("-o"),
+        points.as_os_str(),
+    ]);
+    assert!(ok, "{err}");
+    let (ok, err) = run(&[
+        &os("splat"),
+        points.as_os_str(),
+        &os("-o"),
+        splats.as_os_str(),
+        &os("--holdout"),
+        &os("0"),
+    ]);
+    assert!(ok, "{err}");
+    let measure = |translate: &str| {
+        let scene = dir.join(format!("s{translate}.toml"));
+        std::fs::write(
+            &scene,
+            format!(
+                "[camera]\nfrom = [1.5, 1.1, 4.4]\nat = [0.0, -0.1, 0.0]\nfov = 38\nwidth = 120\nheight = 90\n\
+                 [[model]]\nsplats = {:?}\ntruth = {:?}\ntransform = {{ translate = [0.0, {translate}, 0.0] }}\n\
+                 [[light]]\nkind = \"point\"\nposition = [2.5, 4.0, 3.0]\nintensity = 28.0\n",
+                splats.to_str().unwrap(),
+                mesh.to_str().unwrap()
+            ),
+        )
+        .unwrap();
+        let report = dir.join(format!("r{translate}.json"));
+        let (ok, err) = run(&[
+            &os("compare"),
+            scene.as_os_str(),
+            &os("--truth"),
+            &os("--report"),
+            report.as_os_str(),
+        ]);
+        assert!(ok, "{err}");
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        v["truth"]["backends"][0].clone()
+    };
+    let on = measure("0.0");
+    assert!(on["coverage"].as_f64().unwrap() >= 0.999, "{on}");
+    assert!(on["false_hits"].as_f64().unwrap() <= 0.01, "{on}");
+    assert!(on["normal_deg_mean"].as_f64().unwrap() < 5.0, "{on}");
+    // The truth stays in the model's coordinates and moves with it: the
+    // same figures for the model translated.
+    let moved = measure("0.25");
+    assert_eq!(on["coverage"], moved["coverage"], "{on} {moved}");
+    let scene = dir.join("bad.toml");
+    std::fs::write(
+        &scene,
+        format!(
+            "[camera]\nfrom = [0.0, 0.0, 3.0]\nat = [0.0, 0.0, 0.0]\nwidth = 8\nheight = 8\n\
+             [[model]]\nmesh = {:?}\nsamples = 1000\ntruth = {:?}\n",
+            mesh.to_str().unwrap(),
+            mesh.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let (ok, err) = run(&[
+        &os("render"),
+        scene.as_os_str(),
+        &os("-o"),
+        dir.join("x.png").as_os_str(),
+    ]);
+    assert!(!ok && err.contains("`truth` applies to"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+}
