@@ -419,3 +419,47 @@ fn splat_files_carry_srgb_uchar_colours_other_tools_read() {
     let c = read_splats(&q).unwrap().splats[0].color;
     assert!((c - s.color).abs().max_element() < 1e-4, "{c}");
 }
+
+/// LAS and LAZ stream from disk a batch at a time (tiled generation reads
+/// them so) with the points, georeferenced positions and colours a whole
+/// read gives; a LAZ cut short is one error, not a panic.
+#[test]
+fn las_and_laz_stream_as_they_read() {
+    for name in ["autzen.las", "32-1-472-150-76.laz"] {
+        let path = data(name);
+        let whole = splatray::io::read_points(&path).unwrap();
+        let mut world: Vec<DVec3> = Vec::new();
+        let mut colors: Vec<Vec3> = Vec::new();
+        let info = splatray::io::stream_points(&path, |b| {
+            world.extend_from_slice(b.world);
+            if let Some(c) = b.colors {
+                colors.extend_from_slice(c);
+            }
+            Ok(())
+        })
+        .unwrap();
+        assert!(info.streamed, "{name} was read whole");
+        assert_eq!(world.len(), whole.len(), "{name}");
+        assert_eq!(info.points as usize, whole.len());
+        // The whole read keeps f32 offsets from its origin: equal to their
+        // rounding.
+        let extent = world.iter().fold(0.0f64, |m, p| {
+            m.max((*p - whole.origin).abs().max_element())
+        });
+        let tol = extent * 2.0 * f64::from(f32::EPSILON);
+        for (p, q) in world.iter().zip(&whole.positions) {
+            let d = (*p - (whole.origin + q.as_dvec3())).abs().max_element();
+            assert!(d <= tol, "{name}: {p} against {q} (+origin), {d} > {tol}");
+        }
+        assert_eq!(info.colors, whole.colors.is_some(), "{name}");
+        if let Some(c) = &whole.colors {
+            assert_eq!(&colors, c, "{name}");
+        }
+    }
+    let dir = scratch("las-stream-cut");
+    let bytes = std::fs::read(data("32-1-472-150-76.laz")).unwrap();
+    let cut = write(&dir, "cut.laz", &bytes[..bytes.len() * 2 / 3]);
+    let e = splatray::io::stream_points(&cut, |_| Ok(())).unwrap_err();
+    let msg = e.to_string();
+    assert!(msg.contains("cut.laz") && !msg.contains('\n'), "{msg}");
+}

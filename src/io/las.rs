@@ -15,12 +15,57 @@ const BATCH_BYTES: u64 = 1 << 26;
 /// colour.
 const POINT_BYTES: u64 = 36;
 
+/// Bytes of a file at any offset: the whole file in memory, or the file
+/// on disk (read where asked, so a file is checked without reading it
+/// whole).
+trait Bytes {
+    /// The file's length.
+    fn len(&self) -> usize;
+    /// `n` bytes at `at`, `None` past the end.
+    fn get(&self, at: usize, n: usize) -> Option<Vec<u8>>;
+}
+
+/// A file's bytes in memory as [`Bytes`].
+struct InMemory<'a>(&'a [u8]);
+
+impl Bytes for InMemory<'_> {
+    fn len(&self) -> usize {
+        self.0.len()
+    }
+    fn get(&self, at: usize, n: usize) -> Option<Vec<u8>> {
+        self.0.get(at..at.checked_add(n)?).map(<[u8]>::to_vec)
+    }
+}
+
+/// A file on disk as [`Bytes`].
+struct OnDisk {
+    file: std::cell::RefCell<std::fs::File>,
+    len: usize,
+}
+
+impl Bytes for OnDisk {
+    fn len(&self) -> usize {
+        self.len
+    }
+    fn get(&self, at: usize, n: usize) -> Option<Vec<u8>> {
+        use std::io::{Read, Seek, SeekFrom};
+        if at.checked_add(n)? > self.len {
+            return None;
+        }
+        let mut f = self.file.borrow_mut();
+        f.seek(SeekFrom::Start(at as u64)).ok()?;
+        let mut buf = vec![0u8; n];
+        f.read_exact(&mut buf).ok()?;
+        Some(buf)
+    }
+}
+
 /// Little-endian fields of a LAS file's raw bytes (`None` past its end).
-struct Raw<'a>(&'a [u8]);
+struct Raw<'a>(&'a dyn Bytes);
 
 impl Raw<'_> {
     fn at<const N: usize>(&self, at: usize) -> Option<[u8; N]> {
-        self.0.get(at..at.checked_add(N)?)?.try_into().ok()
+        self.0.get(at, N)?.try_into().ok()
     }
     fn u16(&self, at: usize) -> Option<u16> {
         self.at(at).map(u16::from_le_bytes)
@@ -33,7 +78,7 @@ impl Raw<'_> {
     }
     /// Point data format (byte 104): LASzip sets bit 7 when compressed.
     fn compressed(&self) -> bool {
-        self.0.get(104).is_some_and(|f| f & 0x80 != 0)
+        self.at::<1>(104).is_some_and(|f| f[0] & 0x80 != 0)
     }
 }
 
@@ -102,16 +147,11 @@ fn check_laszip_items(raw: &Raw<'_>) -> Result<(), IoErrorKind> {
     ))
 }
 
-/// Reads a LAS or LAZ cloud. The decoders of the `las` and `laz` crates are
-/// third-party code on hostile input: what the checks above do not catch
-/// and makes them panic becomes an error here, not a crash.
-pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
-    let raw = Raw(bytes);
-    if raw.compressed() {
-        check_chunk_table(&raw)?;
-        check_laszip_items(&raw)?;
-    }
-    std::panic::catch_unwind(|| read_unchecked(bytes)).unwrap_or_else(|e| {
+/// The decoders of the `las` and `laz` crates are third-party code on
+/// hostile input: what the checks above do not catch and makes them panic
+/// becomes an error here, not a crash.
+fn guarded<T>(f: impl FnOnce() -> Result<T, IoErrorKind>) -> Result<T, IoErrorKind> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|e| {
         let why = e
             .downcast_ref::<String>()
             .cloned()
@@ -123,44 +163,112 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
     })
 }
 
-/// [`read_cloud`] without its guard.
-fn read_unchecked(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
-    let mut reader = las::Reader::new(std::io::Cursor::new(bytes.to_vec()))
-        .map_err(|e| IoErrorKind::Header(e.to_string()))?;
+/// The checks a compressed file gets before the decoder sees it.
+fn check(raw: &Raw<'_>) -> Result<(), IoErrorKind> {
+    if raw.compressed() {
+        check_chunk_table(raw)?;
+        check_laszip_items(raw)?;
+    }
+    Ok(())
+}
+
+/// Reads a LAS or LAZ cloud.
+pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
+    check(&Raw(&InMemory(bytes)))?;
+    guarded(|| read_unchecked(bytes))
+}
+
+/// One batch of a LAS stream: positions in the file's coordinates, and
+/// linear colours when the point format has them.
+pub(crate) type Batch<'a> = (&'a [DVec3], Option<&'a [Vec3]>);
+
+/// Reads a LAS or LAZ file from disk a batch at a time into `each`,
+/// without holding the cloud: the same checks, decoder and guard as
+/// [`read_cloud`]. Returns the points read and whether they have colour.
+pub(crate) fn stream_file(
+    path: &std::path::Path,
+    each: &mut dyn FnMut(Batch<'_>) -> Result<(), String>,
+) -> Result<(u64, bool), IoErrorKind> {
+    let file = std::fs::File::open(path).map_err(IoErrorKind::Io)?;
+    let len = file.metadata().map_err(IoErrorKind::Io)?.len();
+    if len == 0 {
+        return Err(IoErrorKind::Empty);
+    }
+    let on_disk = OnDisk {
+        file: std::cell::RefCell::new(file),
+        len: usize::try_from(len).unwrap_or(usize::MAX),
+    };
+    check(&Raw(&on_disk))?;
+    let mut file = on_disk.file.into_inner();
+    std::io::Seek::rewind(&mut file).map_err(IoErrorKind::Io)?;
+    guarded(|| {
+        let reader = las::Reader::new(std::io::BufReader::with_capacity(1 << 20, file))
+            .map_err(|e| IoErrorKind::Header(e.to_string()))?;
+        batches(reader, each)
+    })
+}
+
+/// Reads every point of `reader` in batches into `each`.
+fn batches(
+    mut reader: las::Reader,
+    each: &mut dyn FnMut(Batch<'_>) -> Result<(), String>,
+) -> Result<(u64, bool), IoErrorKind> {
     let header = reader.header();
     let promised = header.number_of_points();
     let with_color = header.point_format().has_color;
     let batch_points = (BATCH_BYTES / u64::from(header.point_format().len()).max(1)).max(1);
-    crate::memory::check("reading the cloud", promised.saturating_mul(POINT_BYTES))
-        .map_err(IoErrorKind::Data)?;
-    let cap = usize::try_from(promised.min(1 << 24)).unwrap_or(0);
+    let cap = usize::try_from(batch_points.min(1 << 20)).unwrap_or(0);
     let mut world: Vec<DVec3> = Vec::with_capacity(cap);
     let mut colors: Vec<Vec3> = Vec::with_capacity(if with_color { cap } else { 0 });
+    let mut read = 0u64;
     loop {
         let batch = reader
             .read_points(batch_points)
-            .map_err(|e| IoErrorKind::Data(format!("after {} points: {e}", world.len())))?;
+            .map_err(|e| IoErrorKind::Data(format!("after {read} points: {e}")))?;
         if batch.is_empty() {
             break;
         }
+        world.clear();
+        colors.clear();
         for p in batch.points() {
-            let p = p.map_err(|e| IoErrorKind::Data(format!("point {}: {e}", world.len())))?;
+            let p = p.map_err(|e| IoErrorKind::Data(format!("point {read}: {e}")))?;
             world.push(DVec3::new(p.x, p.y, p.z));
+            read += 1;
             if with_color {
                 let c = p.color.unwrap_or_default();
                 let lin = |v: u16| srgb_to_linear(f32::from(v) / 65535.0);
                 colors.push(Vec3::new(lin(c.red), lin(c.green), lin(c.blue)));
             }
         }
-        if world.len() as u64 >= promised {
+        each((&world, with_color.then_some(&colors[..]))).map_err(IoErrorKind::Data)?;
+        if read >= promised {
             break;
         }
     }
-    if (world.len() as u64) < promised {
+    if read < promised {
         return Err(IoErrorKind::Truncated(format!(
-            "the header promises {promised} points but the file holds {}",
-            world.len()
+            "the header promises {promised} points but the file holds {read}"
         )));
     }
+    Ok((read, with_color))
+}
+
+/// [`read_cloud`] without its guard.
+fn read_unchecked(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
+    let reader = las::Reader::new(std::io::Cursor::new(bytes.to_vec()))
+        .map_err(|e| IoErrorKind::Header(e.to_string()))?;
+    let promised = reader.header().number_of_points();
+    crate::memory::check("reading the cloud", promised.saturating_mul(POINT_BYTES))
+        .map_err(IoErrorKind::Data)?;
+    let cap = usize::try_from(promised.min(1 << 24)).unwrap_or(0);
+    let mut world: Vec<DVec3> = Vec::with_capacity(cap);
+    let mut colors: Vec<Vec3> = Vec::new();
+    let (_, with_color) = batches(reader, &mut |(w, c)| {
+        world.extend_from_slice(w);
+        if let Some(c) = c {
+            colors.extend_from_slice(c);
+        }
+        Ok(())
+    })?;
     cloud_from_world(world, None, with_color.then_some(colors))
 }

@@ -59,6 +59,9 @@ pub fn stream_points(
     if let Some(layout) = binary_ply_layout(path).map_err(err)? {
         return stream_binary_ply(path, &layout, &mut each).map_err(err);
     }
+    if is_las(path) {
+        return stream_las(path, &mut each).map_err(err);
+    }
     let cloud = read_points(path)?;
     if cloud.scans.as_ref().is_some_and(|s| s.positions.len() > 1) {
         return Err(err(IoErrorKind::Data(
@@ -105,6 +108,61 @@ pub fn stream_points(
         .map_err(|e| err(IoErrorKind::Data(e)))?;
         info.points += (end - start) as u64;
     }
+    Ok(info)
+}
+
+/// A LAS or LAZ file, by its extension or its first bytes.
+fn is_las(path: &Path) -> bool {
+    let sniffed = || {
+        let mut head = [0u8; 4];
+        std::fs::File::open(path)
+            .and_then(|mut f| f.read_exact(&mut head))
+            .is_ok()
+            && Format::sniff(&head) == Some(Format::Las)
+    };
+    match Format::from_extension(path) {
+        Some(f) => f == Format::Las,
+        None => sniffed(),
+    }
+}
+
+/// A LAS or LAZ file streamed from disk (`las::stream_file`): its points
+/// in batches of at most [`BATCH`], non-finite ones left out and counted.
+fn stream_las(
+    path: &Path,
+    each: &mut impl FnMut(&PointBatch<'_>) -> Result<(), String>,
+) -> Result<StreamInfo, IoErrorKind> {
+    let mut info = StreamInfo {
+        streamed: true,
+        ..StreamInfo::default()
+    };
+    let mut world: Vec<DVec3> = Vec::with_capacity(BATCH);
+    let mut colors: Vec<Vec3> = Vec::with_capacity(BATCH);
+    let (_, with_color) = super::las::stream_file(path, &mut |(w, c)| {
+        for start in (0..w.len()).step_by(BATCH) {
+            let end = (start + BATCH).min(w.len());
+            world.clear();
+            colors.clear();
+            for i in start..end {
+                if !w[i].is_finite() {
+                    info.non_finite += 1;
+                    continue;
+                }
+                world.push(w[i]);
+                if let Some(c) = c {
+                    colors.push(c[i]);
+                }
+            }
+            info.points += world.len() as u64;
+            each(&PointBatch {
+                world: &world,
+                normals: None,
+                colors: c.is_some().then_some(&colors[..]),
+            })?;
+        }
+        Ok(())
+    })?;
+    info.colors = with_color;
     Ok(info)
 }
 
