@@ -18,6 +18,7 @@ pub mod rng;
 pub mod scanner;
 pub mod scene;
 pub mod splat;
+pub mod terrain;
 pub mod tiled;
 pub mod validate;
 

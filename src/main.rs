@@ -51,6 +51,11 @@ enum Command {
     /// how many meet the splats at the point, early, late or not at all.
     #[command(allow_negative_numbers = true)]
     ScanCheck(cli::scan_check::ScanCheckArgs),
+    /// Make a synthetic airborne survey: rolling terrain with buildings,
+    /// scanned from above into georeferenced LAZ tiles (DIR/tiles/), with
+    /// the exact surface as DIR/truth.ply; for scale runs.
+    #[command(allow_negative_numbers = true)]
+    Terrain(TerrainArgs),
     /// Join the bands of one image (`render --band I/N`, rendered apart)
     /// top to bottom into the image a whole render writes.
     Stitch(StitchArgs),
@@ -65,6 +70,63 @@ struct StitchArgs {
     /// The image (the parts' format).
     #[arg(short, long)]
     output: std::path::PathBuf,
+}
+
+/// Arguments of `splatray terrain`.
+#[derive(clap::Args)]
+struct TerrainArgs {
+    /// The folder to make (tiles/ and truth.ply in it).
+    #[arg(short, long)]
+    output: std::path::PathBuf,
+    /// Side of the square survey, metres.
+    #[arg(long, default_value_t = 200.0)]
+    size: f64,
+    /// Tiles per side.
+    #[arg(long, default_value_t = 2)]
+    tiles: u32,
+    /// Points per square metre.
+    #[arg(long, default_value_t = 10.0)]
+    density: f64,
+    /// Buildings.
+    #[arg(long, default_value_t = 12)]
+    buildings: u32,
+    /// Range noise (standard deviation), metres.
+    #[arg(long, default_value_t = 0.03)]
+    noise: f64,
+    /// Seed: the same seed makes the same survey.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// The survey's south-west corner, X,Y,Z (e.g. UTM metres).
+    #[arg(long, value_delimiter = ',', default_value = "500000,4000000,100")]
+    origin: Vec<f64>,
+}
+
+fn terrain(a: &TerrainArgs) -> Result<(), String> {
+    let [x, y, z] = a.origin[..] else {
+        return Err("--origin needs three numbers, X,Y,Z".into());
+    };
+    let p = splatray::terrain::TerrainParams {
+        size: a.size,
+        tiles: a.tiles,
+        density: a.density,
+        buildings: a.buildings,
+        noise: a.noise,
+        seed: a.seed,
+        origin: glam::DVec3::new(x, y, z),
+    };
+    let line = cli::progress::ProgressLine::new();
+    let r = splatray::terrain::write_terrain(&p, &a.output, Some(&|s, f| line.update(s, f)));
+    line.finish();
+    let r = r.map_err(|e| e.to_string())?;
+    println!(
+        "{} points in {} LAZ tiles -> {}; truth {} ({} triangles)",
+        r.points,
+        r.tiles.len(),
+        a.output.join("tiles").display(),
+        r.truth.display(),
+        r.triangles
+    );
+    Ok(())
 }
 
 fn stitch(a: &StitchArgs) -> Result<(), String> {
@@ -125,6 +187,7 @@ fn main() -> ExitCode {
         Command::Sweep(a) => cli::sweep::run(&a),
         Command::ScanCheck(a) => cli::scan_check::run(&a),
         Command::Stitch(a) => stitch(&a),
+        Command::Terrain(a) => terrain(&a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -217,3 +217,97 @@ fn stages_run_apart_give_the_same_bytes() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(std::fs::read(&staged).unwrap() == std::fs::read(&whole).unwrap());
 }
+
+/// `splatray terrain` makes a georeferenced airborne survey as LAZ tiles
+/// with its exact surface; the same seed, the same bytes. The folder of
+/// tiles splats in tiles (LAZ streamed) to within 2 % of the splats of the
+/// same points read whole, with every point on a splat.
+#[test]
+fn a_synthetic_airborne_survey_splats_in_tiles() {
+    let dir = scratch("tiled-terrain");
+    let make = |out: &Path| {
+        let o = bin()
+            .arg("terrain")
+            .arg("-o")
+            .arg(out)
+            .args([
+                "--size",
+                "80",
+                "--tiles",
+                "2",
+                "--density",
+                "8",
+                "--buildings",
+                "3",
+            ])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    let (a, b) = (dir.join("a"), dir.join("b"));
+    make(&a);
+    make(&b);
+    let tiles: Vec<PathBuf> = (0..2)
+        .flat_map(|y| (0..2).map(move |x| format!("tiles/tile_{x:03}_{y:03}.laz")))
+        .map(|n| a.join(n))
+        .collect();
+    for t in &tiles {
+        let name = t.strip_prefix(&a).unwrap();
+        assert!(
+            std::fs::read(t).unwrap() == std::fs::read(b.join(name)).unwrap(),
+            "{name:?} differs for the same seed"
+        );
+    }
+    // Georeferenced: the default corner is 500000, 4000000, 100.
+    let first = splatray::io::read_points(&tiles[0]).unwrap();
+    assert!(
+        first.origin.x > 500_000.0 && first.origin.x < 500_080.0,
+        "{}",
+        first.origin
+    );
+    assert!(
+        first.origin.y > 4_000_000.0 && first.origin.y < 4_000_080.0,
+        "{}",
+        first.origin
+    );
+    let out = dir.join("splats.ply");
+    let o = bin()
+        .arg("splat")
+        .arg(a.join("tiles"))
+        .arg("-o")
+        .arg(&out)
+        .args(["--tile-points", "20000"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let tiled = read_splats(&out).unwrap();
+    // The same points as one cloud, generated whole.
+    let mut world: Vec<DVec3> = Vec::new();
+    for t in &tiles {
+        let c = splatray::io::read_points(t).unwrap();
+        world.extend(c.positions.iter().map(|p| c.origin + p.as_dvec3()));
+    }
+    let origin = world.iter().sum::<DVec3>() / world.len() as f64;
+    let whole = splatray::splat::PointCloud {
+        positions: local(&world, origin),
+        origin,
+        ..Default::default()
+    };
+    let (untiled, report) = generate(&whole, &SplatParams::default()).unwrap();
+    let (nu, nt) = (untiled.len() as f64, tiled.splats.len() as f64);
+    eprintln!(
+        "terrain: {} points, {nt} splats tiled, {nu} whole",
+        world.len()
+    );
+    assert!((nt / nu - 1.0).abs() <= 0.02, "{nt} against {nu}");
+    let on = count_on_splats(
+        &local(&world, tiled.origin),
+        &tiled.splats,
+        report.epsilon as f32,
+    );
+    assert!(
+        on as f64 >= 0.999 * world.len() as f64,
+        "{on} of {}",
+        world.len()
+    );
+}
