@@ -7,6 +7,10 @@ use kiddo::immutable::float::kdtree::ImmutableKdTree;
 use rayon::prelude::*;
 use std::num::NonZero;
 
+/// Points searched in order by one task (each bounds its search by the
+/// one before).
+const CHUNK: usize = 1024;
+
 /// The kd-tree over the points (item = point index).
 pub type PointTree = ImmutableKdTree<f32, u32, 3, 32>;
 
@@ -42,33 +46,57 @@ impl Knn {
     #[must_use]
     pub fn build(tree: &PointTree, points: &[Vec3], k: usize) -> Knn {
         let k = k.clamp(1, points.len().saturating_sub(1).max(1));
-        let q = NonZero::new(k + 1).unwrap_or(NonZero::<usize>::MIN);
+        let n = NonZero::new(k + 1).unwrap_or(NonZero::<usize>::MIN);
         let mut idx = vec![0u32; points.len() * k];
         let mut kth_distance = vec![0f32; points.len()];
-        idx.par_chunks_mut(k)
-            .zip(kth_distance.par_iter_mut())
+        // Points come in spatial (Morton) order, so a point's k-th
+        // neighbour lies about as far as its predecessor's: the search is
+        // bounded by 1.3 times that distance (the leaves' candidates beyond
+        // it are never collected), and repeated unbounded when the bound
+        // holds fewer than k + 1 points. The k + 1 nearest within the
+        // bound are the k + 1 nearest. Measured on 1M bunny points
+        // (`splat --holdout 0`, farm-bench --vs, 5 pairs): 0.83 of the CPU
+        // time of the unbounded search (2x the distance: 0.98), same bytes.
+        idx.par_chunks_mut(k * CHUNK)
+            .zip(kth_distance.par_chunks_mut(CHUNK))
             .enumerate()
-            .with_min_len(1024)
-            .for_each(|(i, (row, kth))| {
-                let found = tree.nearest_n::<SquaredEuclidean>(&points[i].to_array(), q);
-                let mut len = 0usize;
-                let mut last = 0f32;
-                for nb in found {
-                    if nb.item as usize == i || len == k {
-                        continue;
+            .for_each(|(c, (rows, kths))| {
+                let mut bound = f32::INFINITY;
+                for (j, (row, kth)) in rows.chunks_mut(k).zip(kths.iter_mut()).enumerate() {
+                    let i = c * CHUNK + j;
+                    let q = points[i].to_array();
+                    let mut found = if bound.is_finite() {
+                        tree.nearest_n_within::<SquaredEuclidean>(&q, bound, n, true)
+                    } else {
+                        Vec::new()
+                    };
+                    if found.len() < n.get() {
+                        found = tree.nearest_n::<SquaredEuclidean>(&q, n);
                     }
-                    row[len] = nb.item;
-                    len += 1;
-                    last = nb.distance;
+                    let mut len = 0usize;
+                    let mut last = 0f32;
+                    for nb in found {
+                        if nb.item as usize == i || len == k {
+                            continue;
+                        }
+                        row[len] = nb.item;
+                        len += 1;
+                        last = nb.distance;
+                    }
+                    // Pad (only with fewer found than asked) with the last one.
+                    let fill = if len > 0 {
+                        row[len - 1]
+                    } else {
+                        u32::from(i == 0)
+                    };
+                    row[len..].fill(fill);
+                    *kth = last.sqrt();
+                    bound = if last > 0.0 {
+                        1.69 * last
+                    } else {
+                        f32::INFINITY
+                    };
                 }
-                // Pad (only with fewer found than asked) with the last one.
-                let fill = if len > 0 {
-                    row[len - 1]
-                } else {
-                    u32::from(i == 0)
-                };
-                row[len..].fill(fill);
-                *kth = last.sqrt();
             });
         Knn {
             k,
