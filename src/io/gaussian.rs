@@ -34,7 +34,7 @@ pub const SH_C0: f32 = 0.282_094_8;
 
 /// A splat's radius along an axis per sigma of its Gaussian along that
 /// axis. Chosen by measurement (`cargo run --release --example
-/// gaussian_factor`, README "Gaussian splat files"): over the splats of
+/// gaussian_factor`, docs/usage.md "Gaussian splat files"): over the splats of
 /// a sampled mesh, a raster scan and a real scan, the region where the
 /// exported Gaussians composite to an opacity of at least one half best
 /// matches the union of the discs at this factor.

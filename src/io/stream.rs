@@ -66,7 +66,7 @@ pub fn stream_points(
     if cloud.scans.as_ref().is_some_and(|s| s.positions.len() > 1) {
         return Err(err(IoErrorKind::Data(
             "a cloud of several scans: tiled generation does not carry each scan's viewpoint \
-             yet; splat it without --max-memory, or pass --no-viewpoint"
+             yet; splat it whole (one input, without --max-memory or --tile-points)"
                 .into(),
         )));
     }

@@ -92,7 +92,7 @@ pub enum Layout {
     /// [`Layout::Copies`] while the copies' packs would take at most this
     /// many bytes, [`Layout::Shared`] beyond: the copies are 10–20 %
     /// faster up to 2M splats, but at 4M the shared layout is within 0–10 %
-    /// of them in a quarter of the memory (the README's benchmark).
+    /// of them in a quarter of the memory (the benchmark in docs/results.md).
     Auto {
         /// Most bytes of packs and ids the copies may take.
         max_copies_bytes: usize,
