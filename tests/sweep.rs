@@ -216,3 +216,79 @@ fn bad_input_fails_in_one_line() {
     .unwrap();
     assert_clean_failure(&[shapes.to_str().unwrap()], "nothing to vary");
 }
+
+/// Issue 24: the normal fields had fallen behind flat splats at coarse
+/// budgets (the bunny at 507 splats: Phong 10.6° against flat 9.1°) and
+/// nothing noticed. A small sweep of the bundled bunny (50,000 samples,
+/// 160×120, ϵ 0.05 … 0.0032, about 450 … 7,100 splats) must keep, at every
+/// budget, Phong below blended below flat in mean normal error against the
+/// mesh, and Phong at most 0.7× flat from 2,000 splats on. Measured with
+/// angle-weighted fields of radius 1.0: phong/flat 0.81, 0.77, 0.68, 0.60,
+/// 0.53; the two coarsest steps do not reach 0.7 yet (issue 24 left open
+/// there), and are held at 0.85 so the regression (1.16) cannot return.
+#[test]
+fn phong_beats_blended_beats_flat_at_every_budget() {
+    let dir = scratch("phong-order");
+    let scene =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/bunny.toml"))
+            .unwrap()
+            .replace(
+                "\"data/bunny-mesh.ply\"",
+                &format!("\"{}\"", mesh().display().to_string().replace('\\', "/")),
+            )
+            .replace("samples = 200000", "samples = 50000");
+    assert!(scene.contains("samples = 50000"), "bunny.toml changed");
+    let path = dir.join("bunny.toml");
+    std::fs::write(&path, scene).unwrap();
+    let csv = dir.join("s.csv");
+    let o = sweep(&[
+        path.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--steps",
+        "5",
+        "--eps-fine",
+        "0.0032",
+    ]);
+    assert!(
+        o.status.success(),
+        "sweep failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |k: &str| header.iter().position(|h| *h == k).unwrap();
+    let (shading, splats, err) = (col("shading"), col("splats"), col("normal_deg_mean"));
+    let mut by_mode: HashMap<String, Vec<(f64, f64)>> = HashMap::new();
+    for l in lines {
+        let c: Vec<&str> = l.split(',').collect();
+        by_mode
+            .entry(c[shading].to_string())
+            .or_default()
+            .push((c[splats].parse().unwrap(), c[err].parse().unwrap()));
+    }
+    let (flat, blended, phong) = (&by_mode["flat"], &by_mode["blended"], &by_mode["phong"]);
+    assert_eq!((flat.len(), blended.len(), phong.len()), (5, 5, 5));
+    for ((f, b), p) in flat.iter().zip(blended).zip(phong) {
+        let (n, ratio) = (f.0, p.1 / f.1);
+        assert!(
+            p.1 < b.1 && b.1 < f.1,
+            "{n} splats: phong {:.3} deg, blended {:.3}, flat {:.3}: not in that order",
+            p.1,
+            b.1,
+            f.1
+        );
+        let bound = if n >= 2000.0 { 0.7 } else { 0.85 };
+        assert!(
+            ratio <= bound,
+            "{n} splats: phong/flat {ratio:.3} above {bound} ({:.3} / {:.3} deg)",
+            p.1,
+            f.1
+        );
+    }
+}

@@ -9,6 +9,10 @@ use rayon::prelude::*;
 /// Fewest same-side normals a field is fitted from.
 pub const MIN_FIELD_POINTS: usize = 6;
 
+/// Each normal `m` enters the fit with weight `(m·n)^ANGLE_WEIGHT_POWER`,
+/// so its residual counts as an angle (see [`fit_field`]).
+pub const ANGLE_WEIGHT_POWER: i32 = 4;
+
 /// A fitted field, and for a circular splat the tangent frame it is
 /// expressed in.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -60,7 +64,16 @@ fn solve3(m: [[f64; 3]; 3], r: [f64; 3]) -> Option<[f64; 3]> {
 /// directions, where the cross terms vanish), and `α`, `β` are its
 /// eigenvalues; an ellipse keeps its axes, with `α = a`, `β = d`. Normals
 /// facing away (`m·n < 0.25`) or points farther from the plane than the
-/// field radius are left out. Returns `None` (the caller falls back to
+/// field radius are left out.
+///
+/// Each normal's row is weighted by `(m·n)⁴` ([`ANGLE_WEIGHT_POWER`]): a
+/// tangent-plane coordinate is `tan θ` of the normal's tilt `θ`, and
+/// `d(tan θ) = dθ / cos² θ`, so unweighted residuals in `x`, `y` count a
+/// steep normal's angle error up to `1/cos⁴ θ` (240× at the `m·n = 0.25`
+/// cut-off) more than a level one's. Unweighted, the few steep normals at
+/// the rim of a large splat over a curved surface decided its field: at
+/// coarse budgets Phong splats shaded worse than flat ones (issue 24,
+/// `docs/development.md`). Returns `None` (the caller falls back to
 /// [`NormalField::FLAT`]) with fewer than [`MIN_FIELD_POINTS`] points, a
 /// singular fit or a non-finite result.
 #[must_use]
@@ -99,24 +112,26 @@ pub fn fit_field(
             continue;
         }
         let (x, y) = (mm.dot(u) / mn, mm.dot(v) / mn);
+        let w = (mn / mm.length()).powi(ANGLE_WEIGHT_POWER);
         let row = [1.0, pu, pv];
         for a in 0..3 {
             for b in 0..3 {
-                m[a][b] += row[a] * row[b];
+                m[a][b] += w * row[a] * row[b];
             }
-            rx[a] += row[a] * x;
-            ry[a] += row[a] * y;
+            rx[a] += w * row[a] * x;
+            ry[a] += w * row[a] * y;
         }
         cnt += 1;
     }
     if cnt < MIN_FIELD_POINTS {
         return None;
     }
-    // Both coordinates must spread: a point set along a line fits nothing.
-    let cntf = cnt as f64;
-    let var_u = m[1][1] - m[0][1] * m[0][1] / cntf;
-    let var_v = m[2][2] - m[0][2] * m[0][2] / cntf;
-    if !(var_u > 1e-3 * cntf && var_v > 1e-3 * cntf) {
+    // Both coordinates must spread: a point set along a line fits nothing
+    // (weighted variances against the total weight).
+    let wsum = m[0][0];
+    let var_u = m[1][1] - m[0][1] * m[0][1] / wsum;
+    let var_v = m[2][2] - m[0][2] * m[0][2] / wsum;
+    if !(var_u > 1e-3 * wsum && var_v > 1e-3 * wsum) {
         return None;
     }
     let [xc, a, b] = solve3(m, rx)?;
