@@ -16,7 +16,8 @@ def _binary(given: str | None) -> str:
     if given:
         return given
     here = os.path.dirname(os.path.abspath(__file__))
-    built = os.path.join(here, "..", "..", "target", "release", "splatray")
+    target = os.environ.get("CARGO_TARGET_DIR", os.path.join(here, "..", "..", "target"))
+    built = os.path.join(target, "release", "splatray")
     if os.path.exists(built):
         return built
     found = shutil.which("splatray")

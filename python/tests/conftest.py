@@ -14,7 +14,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @pytest.fixture(scope="session")
 def binary() -> str:
-    b = ROOT / "target" / "release" / "splatray"
+    target = Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
+    b = target / "release" / "splatray"
     assert b.exists(), f"{b}: build it first (cargo build --release)"
     return str(b)
 
