@@ -62,6 +62,27 @@ def _say(progress: Callable[[str], None] | None, text: str) -> None:
         progress(text)
 
 
+def _one(client: Client, binary: str, args: list[str], key: str) -> str:
+    """Runs one splatray command as a task and returns its last line."""
+    return client.submit(run_binary, binary, args, key=key, pure=False).result()
+
+
+def _fan_out(
+    client: Client,
+    binary: str,
+    jobs: list[tuple[str, list[str]]],
+    progress: Callable[[str], None] | None,
+) -> None:
+    """Runs ``(key, args)`` jobs as tasks (Dask reruns one whose worker
+    died, and retries a failed one twice), saying each as it finishes."""
+    futs = [
+        client.submit(run_binary, binary, args, key=key, pure=False, retries=2)
+        for key, args in jobs
+    ]
+    for done, fut in enumerate(as_completed(futs), 1):
+        _say(progress, f"[{done}/{len(jobs)}] {fut.result()}")
+
+
 def splat(
     client: Client,
     binary: str,
@@ -81,40 +102,20 @@ def splat(
     out = Path(output)
     plan_json = str(out.with_name(f".{out.name}.plan.json"))
     run_id = uuid.uuid4().hex[:8]
-    planned = client.submit(
-        run_binary,
-        binary,
-        [*base, "--plan-only", "--report", plan_json],
-        key=f"splatray-plan-{run_id}",
-        pure=False,
-    )
-    _say(progress, planned.result())
+    plan = [*base, "--plan-only", "--report", plan_json]
+    _say(progress, _one(client, binary, plan, f"splatray-plan-{run_id}"))
     with open(plan_json, encoding="utf-8") as f:
         n = len(json.load(f)["cores"])
     os.remove(plan_json)
-    tiles = [
-        client.submit(
-            run_binary,
-            binary,
-            [*base, "--tile", str(t)],
-            key=f"splatray-tile-{run_id}-{t}",
-            pure=False,
-            retries=2,
-        )
-        for t in range(n)
-    ]
-    for done, fut in enumerate(as_completed(tiles), 1):
-        line = fut.result()
-        _say(progress, f"[{done}/{n}] {line}")
-    merge_json = str(report) if report else str(out.with_name(f".{out.name}.merge.json"))
-    merged = client.submit(
-        run_binary,
+    _fan_out(
+        client,
         binary,
-        [*base, "--merge-only", "--report", merge_json],
-        key=f"splatray-merge-{run_id}",
-        pure=False,
+        [(f"splatray-tile-{run_id}-{t}", [*base, "--tile", str(t)]) for t in range(n)],
+        progress,
     )
-    _say(progress, merged.result())
+    merge_json = str(report) if report else str(out.with_name(f".{out.name}.merge.json"))
+    merge = [*base, "--merge-only", "--report", merge_json]
+    _say(progress, _one(client, binary, merge, f"splatray-merge-{run_id}"))
     with open(merge_json, encoding="utf-8") as f:
         result = json.load(f)
     if not report:
@@ -142,20 +143,15 @@ def render(
     out = Path(output)
     run_id = uuid.uuid4().hex[:8]
     parts = [str(out.with_name(f".{out.stem}.band{i:04}-{run_id}{out.suffix}")) for i in range(bands)]
-    futs = [
-        client.submit(
-            run_binary,
-            binary,
+    jobs = [
+        (
+            f"splatray-band-{run_id}-{i}",
             ["render", _abs(scene), *flags, "--band", f"{i}/{bands}", "-o", parts[i]],
-            key=f"splatray-band-{run_id}-{i}",
-            pure=False,
-            retries=2,
         )
         for i in range(bands)
     ]
     try:
-        for done, fut in enumerate(as_completed(futs), 1):
-            _say(progress, f"[{done}/{bands}] {fut.result()}")
+        _fan_out(client, binary, jobs, progress)
         _say(progress, run_binary(binary, ["stitch", *parts, "-o", output]))
     finally:
         for p in parts:

@@ -104,6 +104,45 @@ impl Viewpoints {
 }
 
 impl PointCloud {
+    /// The points whose `keep` flag is true (one flag per point), with
+    /// their normals, colours and scans when those have one entry per
+    /// point; the origin and viewpoint kept, nothing counted as skipped.
+    #[must_use]
+    pub fn subset(&self, keep: &[bool]) -> PointCloud {
+        let n = self.len();
+        fn pick<T: Copy>(v: &[T], keep: &[bool]) -> Vec<T> {
+            v.iter()
+                .zip(keep)
+                .filter(|(_, k)| **k)
+                .map(|(x, _)| *x)
+                .collect()
+        }
+        PointCloud {
+            positions: pick(&self.positions, keep),
+            origin: self.origin,
+            normals: self
+                .normals
+                .as_ref()
+                .filter(|v| v.len() == n)
+                .map(|v| pick(v, keep)),
+            colors: self
+                .colors
+                .as_ref()
+                .filter(|v| v.len() == n)
+                .map(|v| pick(v, keep)),
+            skipped: Vec::new(),
+            viewpoint: self.viewpoint,
+            scans: self
+                .scans
+                .as_ref()
+                .filter(|s| s.of.len() == n)
+                .map(|s| Scans {
+                    positions: s.positions.clone(),
+                    of: pick(&s.of, keep),
+                }),
+        }
+    }
+
     /// Number of points kept.
     #[must_use]
     pub fn len(&self) -> usize {

@@ -55,34 +55,9 @@ pub fn split(cloud: &PointCloud, params: &SplatParams, fraction: f32, seed: u64)
     } else {
         vec![false; n]
     };
-    let pick = |v: &Vec<Vec3>| -> Vec<Vec3> {
-        v.iter()
-            .zip(&keep)
-            .filter(|(_, k)| **k)
-            .map(|(p, _)| *p)
-            .collect()
-    };
     let train = PointCloud {
-        positions: pick(&cloud.positions),
-        normals: cloud.normals.as_ref().filter(|v| v.len() == n).map(&pick),
-        colors: cloud.colors.as_ref().filter(|v| v.len() == n).map(&pick),
         skipped: cloud.skipped.clone(),
-        viewpoint: cloud.viewpoint,
-        scans: cloud
-            .scans
-            .as_ref()
-            .filter(|s| s.of.len() == n)
-            .map(|s| crate::splat::Scans {
-                positions: s.positions.clone(),
-                of: s
-                    .of
-                    .iter()
-                    .zip(&keep)
-                    .filter(|(_, k)| **k)
-                    .map(|(o, _)| *o)
-                    .collect(),
-            }),
-        origin: cloud.origin,
+        ..cloud.subset(&keep)
     };
     let held: Vec<usize> = (0..n).filter(|&i| !keep[i]).collect();
     let test: Vec<Vec3> = held
@@ -231,32 +206,7 @@ pub fn heldout_coverage_windows(
             .for_each(|(w, p)| *w |= (*p - c).abs().max_element() <= half);
         windows.push((c, core, half));
     }
-    let pick = |v: &Vec<Vec3>| -> Vec<Vec3> {
-        v.iter()
-            .zip(&in_window)
-            .filter(|(_, k)| **k)
-            .map(|(p, _)| *p)
-            .collect()
-    };
-    let scans = cloud.scans.as_ref().filter(|s| s.of.len() == n);
-    let local = PointCloud {
-        positions: pick(pos),
-        normals: cloud.normals.as_ref().filter(|v| v.len() == n).map(&pick),
-        colors: cloud.colors.as_ref().filter(|v| v.len() == n).map(&pick),
-        skipped: Vec::new(),
-        viewpoint: cloud.viewpoint,
-        scans: scans.map(|s| crate::splat::Scans {
-            positions: s.positions.clone(),
-            of: s
-                .of
-                .iter()
-                .zip(&in_window)
-                .filter(|(_, k)| **k)
-                .map(|(o, _)| *o)
-                .collect(),
-        }),
-        origin: cloud.origin,
-    };
+    let local = cloud.subset(&in_window);
     let windowed = SplatParams {
         epsilon_abs: Some(epsilon),
         ..params.clone()
