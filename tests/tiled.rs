@@ -165,8 +165,10 @@ fn tiles_match_the_whole_cloud_and_their_seams_hold() {
     assert!(t_near <= 2.0 * t_else + 1e-3, "{t_near} against {t_else}");
 }
 
+/// One thread generates one tile at a time; two generate two at once
+/// (`TILES_IN_FLIGHT`); three, two at once with more threads each.
 #[test]
-fn same_bytes_for_any_thread_count() {
+fn same_bytes_for_any_thread_count_and_tiles_in_flight() {
     let dir = scratch("tiled-threads");
     let input = cloud(&dir);
     let run = |threads: &str, out: &Path| {
@@ -185,6 +187,8 @@ fn same_bytes_for_any_thread_count() {
     let one = run("1", &dir.join("one.ply"));
     let two = run("2", &dir.join("two.ply"));
     assert!(one == two, "tiled output differs by thread count");
+    let three = run("3", &dir.join("three.ply"));
+    assert!(one == three, "tiled output differs by thread count");
 }
 
 /// A run that fails at the end (the output's folder is missing) keeps its

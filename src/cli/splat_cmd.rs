@@ -116,7 +116,7 @@ pub struct SplatOptions {
     #[arg(long, conflicts_with = "viewpoint")]
     pub no_viewpoint: bool,
     /// Where the cloud is denser than ϵ needs, keep one point per cell this
-    /// many ϵ wide (default 0.5; 0 keeps every point).
+    /// many ϵ wide (default 0: every point is used).
     #[arg(long)]
     pub thin: Option<f64>,
 }
