@@ -208,6 +208,12 @@ struct Survey {
     normals: bool,
     colors: bool,
     viewpoint: Option<[f64; 3]>,
+    /// Where each scan was taken from, when the inputs hold several scans
+    /// (an E57 file of several, or several files each with its scanner's
+    /// position) and every input says where: each point carries its scan.
+    scans: Vec<[f64; 3]>,
+    /// Per input, the index in `scans` of its first scan.
+    scan_offsets: Vec<u32>,
     #[serde(skip)]
     sample: Vec<DVec3>,
 }
@@ -235,6 +241,9 @@ struct Plan {
     tiles: Vec<Box3>,
     origin: [f64; 3],
     viewpoint: Option<[f64; 3]>,
+    /// Each point seen from its own scan's position (the survey's scans,
+    /// neither `--viewpoint` nor `--no-viewpoint` given).
+    per_scan: bool,
 }
 
 /// One tile's figures.
@@ -371,6 +380,10 @@ fn survey(inputs: &[PathBuf], progress: Option<Progress<'_>>) -> Result<Survey, 
     let (mut seen, mut non_finite) = (0u64, 0u64);
     let (mut normals, mut colors) = (false, false);
     let mut viewpoint = None;
+    // Every input's scanner positions (an E57 file's scans, a PCD's
+    // viewpoint); `None` once an input has none.
+    let mut scans: Option<Vec<[f64; 3]>> = Some(Vec::new());
+    let mut scan_offsets = Vec::with_capacity(inputs.len());
     for (k, path) in inputs.iter().enumerate() {
         let info = stream_points(path, |b| {
             for &p in b.world {
@@ -397,6 +410,40 @@ fn survey(inputs: &[PathBuf], progress: Option<Progress<'_>>) -> Result<Survey, 
         if inputs.len() == 1 {
             viewpoint = info.viewpoint.map(|v| v.to_array());
         }
+        let here: Vec<[f64; 3]> = if info.scans.is_empty() {
+            info.viewpoint.map(|v| v.to_array()).into_iter().collect()
+        } else {
+            info.scans.iter().map(|v| v.to_array()).collect()
+        };
+        scan_offsets.push(scans.as_ref().map_or(0, |s| s.len() as u32));
+        if here.is_empty() {
+            scans = None;
+        } else if let Some(s) = scans.as_mut() {
+            s.extend(here);
+        }
+    }
+    let mut scans = scans.unwrap_or_default();
+    if scans.len() > usize::from(u16::MAX) {
+        return Err(data_err(
+            &inputs[0],
+            format!(
+                "{} scans in all, more than the {} a tiled run carries",
+                scans.len(),
+                u16::MAX
+            ),
+        ));
+    }
+    if scans.iter().all(|p| Some(*p) == scans.first().copied()) {
+        // One place for every point: the one viewpoint.
+        if viewpoint.is_none() {
+            viewpoint = scans.first().copied();
+        }
+        scans.clear();
+    }
+    if scans.is_empty() {
+        scan_offsets.clear();
+    } else {
+        viewpoint = None;
     }
     if seen < 3 {
         return Err(data_err(
@@ -414,6 +461,8 @@ fn survey(inputs: &[PathBuf], progress: Option<Progress<'_>>) -> Result<Survey, 
         normals,
         colors,
         viewpoint,
+        scans,
+        scan_offsets,
         sample,
     })
 }
@@ -479,9 +528,11 @@ fn plan_tiles(s: &Survey, halo: f64, target: u64) -> (Node, Vec<Box3>) {
 
 /// The spill record of one point: position offset from the tile's centre
 /// (3 × f32), then the normal and the colour (3 × f32 each) when the
-/// cloud has them.
+/// cloud has them, then its scan (u16) when there are several.
 fn record_bytes(survey: &Survey) -> usize {
-    12 + 12 * usize::from(survey.normals) + 12 * usize::from(survey.colors)
+    12 + 12 * usize::from(survey.normals)
+        + 12 * usize::from(survey.colors)
+        + 2 * usize::from(!survey.scans.is_empty())
 }
 
 fn spill(
@@ -504,7 +555,9 @@ fn spill(
     let mut rec = Vec::with_capacity(36);
     let mut done = 0u64;
     let (with_n, with_c) = (plan.survey.normals, plan.survey.colors);
-    for path in inputs {
+    let with_s = !plan.survey.scans.is_empty();
+    for (k, path) in inputs.iter().enumerate() {
+        let first_scan = plan.survey.scan_offsets.get(k).copied().unwrap_or(0);
         stream_points(path, |b| {
             for (i, &p) in b.world.iter().enumerate() {
                 near.clear();
@@ -529,6 +582,10 @@ fn spill(
                         for c in v.to_array() {
                             rec.extend_from_slice(&c.to_le_bytes());
                         }
+                    }
+                    if with_s {
+                        let scan = first_scan + b.scans.map_or(0, |s| u32::from(s[i]));
+                        rec.extend_from_slice(&(scan as u16).to_le_bytes());
                     }
                     writers[t].write_all(&rec).map_err(|e| e.to_string())?;
                     counts[t].0 += 1;
@@ -579,9 +636,11 @@ fn read_spill(plan: &Plan, work: &Path, t: usize) -> Result<PointCloud, IoError>
         BufReader::with_capacity(1 << 20, std::fs::File::open(&p).map_err(|e| io_err(&p, e))?);
     let n = (bytes / rb as u64) as usize;
     let (with_n, with_c) = (plan.survey.normals, plan.survey.colors);
+    let with_s = !plan.survey.scans.is_empty();
     let mut positions = Vec::with_capacity(n);
     let mut normals = Vec::with_capacity(if with_n { n } else { 0 });
     let mut colors = Vec::with_capacity(if with_c { n } else { 0 });
+    let mut scan_of = Vec::with_capacity(if with_s { n } else { 0 });
     let mut rec = vec![0u8; rb];
     let v3 = |b: &[u8]| {
         let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
@@ -597,15 +656,24 @@ fn read_spill(plan: &Plan, work: &Path, t: usize) -> Result<PointCloud, IoError>
         }
         if with_c {
             colors.push(v3(&rec[at..at + 12]));
+            at += 12;
+        }
+        if with_s {
+            scan_of.push(u16::from_le_bytes([rec[at], rec[at + 1]]));
         }
     }
     let origin = plan.tiles[t].centre();
+    let local = |v: [f64; 3]| (DVec3::from(v) - origin).as_vec3();
     Ok(PointCloud {
         positions,
         origin,
         normals: with_n.then_some(normals),
         colors: with_c.then_some(colors),
-        viewpoint: plan.viewpoint.map(|v| (DVec3::from(v) - origin).as_vec3()),
+        viewpoint: plan.viewpoint.map(local),
+        scans: (with_s && plan.per_scan).then(|| crate::splat::Scans {
+            positions: plan.survey.scans.iter().map(|&v| local(v)).collect(),
+            of: scan_of,
+        }),
         ..PointCloud::default()
     })
 }
@@ -752,6 +820,7 @@ pub fn generate_tiled(
             } else {
                 opts.viewpoint.map(|v| v.to_array()).or(s.viewpoint)
             };
+            let per_scan = !opts.no_viewpoint && opts.viewpoint.is_none() && !s.scans.is_empty();
             Plan {
                 viewpoint,
                 version: env!("CARGO_PKG_VERSION").into(),
@@ -764,6 +833,7 @@ pub fn generate_tiled(
                 tree,
                 tiles,
                 origin,
+                per_scan,
             }
         }
     };

@@ -285,6 +285,61 @@ fn e57_scans_are_placed_by_their_poses_and_seen_from_their_scanners() {
     );
 }
 
+/// The same two scans in tiles (`splat --tile-points`): the E57 file is
+/// streamed, each point carries its scan through the spill, so the splats
+/// face their own scanner on both sides as when the cloud is splatted
+/// whole; with `--viewpoint` at one scanner, the far cap turns inward.
+#[test]
+fn e57_scans_keep_their_scanners_in_tiles() {
+    let dir = scratch("e57-tiles");
+    let (scans, _) = two_scans();
+    let path = dir.join("two.e57");
+    write_e57(&path, &scans);
+    let splat = |out: &str, extra: &[&str]| {
+        let out = dir.join(out);
+        let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+            .arg("splat")
+            .arg(&path)
+            .arg("-o")
+            .arg(&out)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let text = String::from_utf8_lossy(&o.stderr).to_string();
+        let set = splatray::io::read_splats(&out).unwrap();
+        let outward = set
+            .splats
+            .iter()
+            .filter(|s| {
+                s.normal
+                    .as_dvec3()
+                    .dot(set.origin + s.center.as_dvec3() - CENTRE)
+                    > 0.0
+            })
+            .count() as f64
+            / set.splats.len() as f64;
+        (set.splats.len(), outward, text)
+    };
+    let (whole, o_whole, _) = splat("whole.ply", &["--holdout", "0"]);
+    let (tiled, o_tiled, text) = splat("tiled.ply", &["--tile-points", "2000"]);
+    assert!(text.contains(" tiles "), "{text}");
+    assert!(!text.contains("1 tiles"), "{text}");
+    assert!(o_whole > 0.99, "whole: outward {o_whole}");
+    assert!(o_tiled > 0.99, "tiled: outward {o_tiled}");
+    assert!(
+        (tiled as f64 / whole as f64 - 1.0).abs() < 0.1,
+        "{tiled} splats in tiles against {whole} whole"
+    );
+    let at = scans[0].at;
+    let one = format!("{},{},{}", at.x, at.y, at.z);
+    let (_, o_one, _) = splat("one.ply", &["--tile-points", "2000", "--viewpoint", &one]);
+    assert!(
+        (0.3..0.7).contains(&o_one),
+        "one viewpoint: outward {o_one}"
+    );
+}
+
 /// `splatray compare FILE.e57`: both backends bit-identical; `scan-check`
 /// refuses several scanners and a cut file fails, each in one line.
 #[test]

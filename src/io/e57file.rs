@@ -9,11 +9,13 @@
 //! the file's colour limits) are sRGB, made linear, and kept when every
 //! scan has them. A panic inside the decoder becomes an error.
 
+use super::stream::{BATCH, PointBatch, StreamInfo};
 use super::{IoErrorKind, PointCloud, cloud_from_world, srgb_to_linear};
 use crate::splat::Scans;
 use e57::{CartesianCoordinate, E57Reader};
 use glam::{DVec3, Vec3};
-use std::io::Cursor;
+use std::io::{Cursor, Read, Seek};
+use std::path::Path;
 
 /// The first bytes of every E57 file.
 pub(crate) const MAGIC: &[u8] = b"ASTM-E57";
@@ -48,26 +50,7 @@ fn read(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
         ));
     }
     let mut reader = E57Reader::new(Cursor::new(bytes)).map_err(|e| e57_error(&e))?;
-    let scans = reader.pointclouds();
-    if scans.is_empty() {
-        return Err(IoErrorKind::NoPoints("the E57 file holds no scans".into()));
-    }
-    if scans.len() > usize::from(u16::MAX) {
-        return Err(IoErrorKind::Data(format!(
-            "{} scans, more than the {} one cloud holds",
-            scans.len(),
-            u16::MAX
-        )));
-    }
-    // Each record takes at least one bit of the file: a larger claim is
-    // corrupt; the rest is checked against the memory.
-    let claimed: u64 = scans.iter().map(|s| s.records).sum();
-    if claimed > 8 * bytes.len() as u64 {
-        return Err(IoErrorKind::Data(format!(
-            "the scans claim {claimed} points, more than the file's {} bytes can hold",
-            bytes.len()
-        )));
-    }
+    let (scans, claimed) = checked_scans(&reader, bytes.len() as u64)?;
     crate::memory::check(
         &format!("reading {claimed} points"),
         claimed.saturating_mul(BYTES_PER_POINT),
@@ -80,15 +63,7 @@ fn read(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
     let mut positions: Vec<DVec3> = Vec::with_capacity(scans.len());
     let (mut invalid, mut non_finite) = (0usize, 0usize);
     for (k, scan) in scans.iter().enumerate() {
-        let at = scan.transform.as_ref().map_or(DVec3::ZERO, |t| {
-            DVec3::new(t.translation.x, t.translation.y, t.translation.z)
-        });
-        if !at.is_finite() {
-            return Err(IoErrorKind::Data(format!(
-                "scan {k}: its pose's translation {at} is not finite"
-            )));
-        }
-        positions.push(at);
+        positions.push(scan_position(k, scan)?);
         let mut points = reader.pointcloud_simple(scan).map_err(|e| e57_error(&e))?;
         points.intensity_to_color(false);
         for p in points {
@@ -127,4 +102,149 @@ fn read(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
         });
     }
     Ok(cloud)
+}
+
+/// The scans of an E57 file, checked: at least one, at most what a `u16`
+/// counts, and no more points claimed than `file_bytes` can hold (each
+/// record takes at least one bit). With the points they claim.
+fn checked_scans<T: Read + Seek>(
+    reader: &E57Reader<T>,
+    file_bytes: u64,
+) -> Result<(Vec<e57::PointCloud>, u64), IoErrorKind> {
+    let scans = reader.pointclouds();
+    if scans.is_empty() {
+        return Err(IoErrorKind::NoPoints("the E57 file holds no scans".into()));
+    }
+    if scans.len() > usize::from(u16::MAX) {
+        return Err(IoErrorKind::Data(format!(
+            "{} scans, more than the {} one cloud holds",
+            scans.len(),
+            u16::MAX
+        )));
+    }
+    let claimed: u64 = scans.iter().map(|s| s.records).sum();
+    if claimed > 8 * file_bytes {
+        return Err(IoErrorKind::Data(format!(
+            "the scans claim {claimed} points, more than the file's {file_bytes} bytes can hold"
+        )));
+    }
+    Ok((scans, claimed))
+}
+
+/// Where scan `k` was taken from: its pose's translation.
+fn scan_position(k: usize, scan: &e57::PointCloud) -> Result<DVec3, IoErrorKind> {
+    let at = scan.transform.as_ref().map_or(DVec3::ZERO, |t| {
+        DVec3::new(t.translation.x, t.translation.y, t.translation.z)
+    });
+    if at.is_finite() {
+        Ok(at)
+    } else {
+        Err(IoErrorKind::Data(format!(
+            "scan {k}: its pose's translation {at} is not finite"
+        )))
+    }
+}
+
+/// Streams an E57 file from disk, a batch of at most [`BATCH`] points at a
+/// time, each with its scan (when there are several) and colour (when every
+/// scan has one): what [`read_cloud`] reads, in constant memory. A panic
+/// inside the decoder becomes an error.
+pub(crate) fn stream(
+    path: &Path,
+    each: &mut dyn FnMut(&PointBatch<'_>) -> Result<(), String>,
+) -> Result<StreamInfo, IoErrorKind> {
+    let each = std::panic::AssertUnwindSafe(each);
+    std::panic::catch_unwind(move || {
+        let each = each;
+        stream_inner(path, each.0)
+    })
+    .unwrap_or_else(|_| {
+        Err(IoErrorKind::Data(
+            "the E57 decoder failed on this file (corrupt data)".into(),
+        ))
+    })
+}
+
+fn stream_inner(
+    path: &Path,
+    each: &mut dyn FnMut(&PointBatch<'_>) -> Result<(), String>,
+) -> Result<StreamInfo, IoErrorKind> {
+    let io = IoErrorKind::Io;
+    let file_bytes = std::fs::metadata(path).map_err(io)?.len();
+    let mut head = [0u8; 8];
+    std::fs::File::open(path)
+        .and_then(|mut f| f.read_exact(&mut head))
+        .map_err(io)?;
+    if !head.starts_with(MAGIC) {
+        return Err(IoErrorKind::Header(
+            "an E57 file must start with \"ASTM-E57\"".into(),
+        ));
+    }
+    let mut reader = E57Reader::from_file(path).map_err(|e| e57_error(&e))?;
+    let (scans, _) = checked_scans(&reader, file_bytes)?;
+    let colored = scans.iter().all(e57::PointCloud::has_color);
+    let positions = scans
+        .iter()
+        .enumerate()
+        .map(|(k, s)| scan_position(k, s))
+        .collect::<Result<Vec<_>, _>>()?;
+    let several = positions.iter().any(|p| *p != positions[0]);
+    let mut info = StreamInfo {
+        viewpoint: Some(positions[0]),
+        scans: if several { positions } else { Vec::new() },
+        colors: colored,
+        streamed: true,
+        ..StreamInfo::default()
+    };
+    let mut world: Vec<DVec3> = Vec::with_capacity(BATCH);
+    let mut colors: Vec<Vec3> = Vec::with_capacity(BATCH);
+    let mut scan_of: Vec<u16> = Vec::with_capacity(BATCH);
+    let mut flush = |world: &mut Vec<DVec3>,
+                     colors: &mut Vec<Vec3>,
+                     scan_of: &mut Vec<u16>,
+                     info: &mut StreamInfo|
+     -> Result<(), IoErrorKind> {
+        if world.is_empty() {
+            return Ok(());
+        }
+        each(&PointBatch {
+            world,
+            normals: None,
+            colors: colored.then_some(&colors[..]),
+            scans: several.then_some(&scan_of[..]),
+        })
+        .map_err(IoErrorKind::Data)?;
+        info.points += world.len() as u64;
+        world.clear();
+        colors.clear();
+        scan_of.clear();
+        Ok(())
+    };
+    for (k, scan) in scans.iter().enumerate() {
+        let mut points = reader.pointcloud_simple(scan).map_err(|e| e57_error(&e))?;
+        points.intensity_to_color(false);
+        for p in points {
+            let p = p.map_err(|e| e57_error(&e))?;
+            let CartesianCoordinate::Valid { x, y, z } = p.cartesian else {
+                continue;
+            };
+            let w = DVec3::new(x, y, z);
+            if !w.is_finite() {
+                info.non_finite += 1;
+                continue;
+            }
+            world.push(w);
+            scan_of.push(k as u16);
+            if colored {
+                colors.push(p.color.map_or(Vec3::splat(0.2), |c| {
+                    Vec3::new(c.red, c.green, c.blue).map(srgb_to_linear)
+                }));
+            }
+            if world.len() == BATCH {
+                flush(&mut world, &mut colors, &mut scan_of, &mut info)?;
+            }
+        }
+    }
+    flush(&mut world, &mut colors, &mut scan_of, &mut info)?;
+    Ok(info)
 }

@@ -1,9 +1,10 @@
 //! Point clouds read a batch at a time, for work that must not hold a whole
 //! cloud in memory (tiled splat generation). A binary little-endian PLY
 //! whose vertex element comes first with scalar properties, as `sample`
-//! and most converters write it, is streamed from disk; any other file is
-//! read whole by [`super::read_points`] (checked against the memory this
-//! process may use) and handed out in batches from there.
+//! and most converters write it, is streamed from disk, and so are LAS/LAZ
+//! and E57 files; any other file is read whole by [`super::read_points`]
+//! (checked against the memory this process may use) and handed out in
+//! batches from there.
 
 use super::{Format, IoError, IoErrorKind, read_points, srgb_to_linear};
 use glam::{DVec3, Vec3};
@@ -23,6 +24,9 @@ pub struct PointBatch<'a> {
     pub normals: Option<&'a [Vec3]>,
     /// Linear RGB colours in `[0, 1]`, when the file has them.
     pub colors: Option<&'a [Vec3]>,
+    /// Per point, its scan in [`StreamInfo::scans`], when the file holds
+    /// several scans.
+    pub scans: Option<&'a [u16]>,
 }
 
 /// What a stream held.
@@ -37,8 +41,11 @@ pub struct StreamInfo {
     /// See `normals`.
     pub colors: bool,
     /// Where the scanner stood (a PCD's `VIEWPOINT`), in the file's
-    /// coordinates.
+    /// coordinates; the first scan's position for a file of several.
     pub viewpoint: Option<DVec3>,
+    /// Where each scan of a file of several scans (E57) was taken from, in
+    /// the file's coordinates; empty for other files.
+    pub scans: Vec<DVec3>,
     /// True when the file was streamed from disk; false when it was read
     /// whole first.
     pub streamed: bool,
@@ -48,9 +55,7 @@ pub struct StreamInfo {
 ///
 /// # Errors
 /// An [`IoError`] as [`super::read_points`] gives it, a file that ends
-/// before its header's count, `each`'s error (as a data error), or a cloud
-/// of several scans (E57), whose per-scan viewpoints a stream does not
-/// carry.
+/// before its header's count, or `each`'s error (as a data error).
 pub fn stream_points(
     path: &Path,
     mut each: impl FnMut(&PointBatch<'_>) -> Result<(), String>,
@@ -62,15 +67,17 @@ pub fn stream_points(
     if is_las(path) {
         return stream_las(path, &mut each).map_err(err);
     }
-    let cloud = read_points(path)?;
-    if cloud.scans.as_ref().is_some_and(|s| s.positions.len() > 1) {
-        return Err(err(IoErrorKind::Data(
-            "a cloud of several scans: tiled generation does not carry each scan's viewpoint \
-             yet; splat it whole (one input, without --max-memory or --tile-points)"
-                .into(),
-        )));
+    if is_e57(path) {
+        return super::e57file::stream(path, &mut each).map_err(err);
     }
+    let cloud = read_points(path)?;
     let mut info = StreamInfo {
+        scans: cloud.scans.as_ref().map_or_else(Vec::new, |s| {
+            s.positions
+                .iter()
+                .map(|v| cloud.origin + v.as_dvec3())
+                .collect()
+        }),
         normals: cloud.normals.is_some(),
         colors: cloud.colors.is_some(),
         viewpoint: cloud
@@ -104,6 +111,7 @@ pub fn stream_points(
             world: &world,
             normals: cloud.normals.as_ref().map(|n| &n[start..end]),
             colors: cloud.colors.as_ref().map(|c| &c[start..end]),
+            scans: cloud.scans.as_ref().map(|s| &s.of[start..end]),
         })
         .map_err(|e| err(IoErrorKind::Data(e)))?;
         info.points += (end - start) as u64;
@@ -113,15 +121,24 @@ pub fn stream_points(
 
 /// A LAS or LAZ file, by its extension or its first bytes.
 fn is_las(path: &Path) -> bool {
+    is_format(path, Format::Las)
+}
+
+/// An E57 file, by its extension or its first bytes.
+fn is_e57(path: &Path) -> bool {
+    is_format(path, Format::E57)
+}
+
+fn is_format(path: &Path, format: Format) -> bool {
     let sniffed = || {
-        let mut head = [0u8; 4];
+        let mut head = [0u8; 8];
         std::fs::File::open(path)
             .and_then(|mut f| f.read_exact(&mut head))
             .is_ok()
-            && Format::sniff(&head) == Some(Format::Las)
+            && Format::sniff(&head) == Some(format)
     };
     match Format::from_extension(path) {
-        Some(f) => f == Format::Las,
+        Some(f) => f == format,
         None => sniffed(),
     }
 }
@@ -158,6 +175,7 @@ fn stream_las(
                 world: &world,
                 normals: None,
                 colors: c.is_some().then_some(&colors[..]),
+                scans: None,
             })?;
         }
         Ok(())
@@ -374,6 +392,7 @@ fn stream_binary_ply(
             world: &world,
             normals: l.normal.map(|_| &normals[..]),
             colors: l.color.map(|_| &colors[..]),
+            scans: None,
         })
         .map_err(IoErrorKind::Data)?;
         info.points += world.len() as u64;
