@@ -303,6 +303,12 @@ pub struct TiledReport {
     pub cores: Vec<Box3>,
     /// See `cores`.
     pub bounds: Option<Box3>,
+    /// The points the plan expected to spill, from the survey's sample
+    /// (0 when a rerun found the plan).
+    pub spill_estimate: u64,
+    /// What the plan found worth saying (e.g. halos holding more points
+    /// than the cores).
+    pub warnings: Vec<String>,
 }
 
 impl TiledReport {
@@ -524,6 +530,13 @@ fn plan_tiles(s: &Survey, halo: f64, target: u64) -> (Node, Vec<Box3>) {
     let idx: Vec<u32> = (0..s.sample.len() as u32).collect();
     let tree = split(s.bounds, idx, s, halo, target, &estimate, &mut tiles);
     (tree, tiles)
+}
+
+/// Bytes free to this process on the file system holding `dir`, when
+/// the system says.
+fn free_space(dir: &Path) -> Option<u64> {
+    let v = rustix::fs::statvfs(dir).ok()?;
+    Some(v.f_bavail.saturating_mul(v.f_frsize))
 }
 
 /// The spill record of one point: position offset from the tile's centre
@@ -814,6 +827,47 @@ pub fn generate_tiled(
             };
             let halo = HALO_EPS * epsilon;
             let (tree, tiles) = plan_tiles(&s, halo, target);
+            // What the spill will write, from the sample: each sampled
+            // point stands for points / sample of the cloud's, in every
+            // tile whose core or halo holds it.
+            let grown: Vec<Box3> = tiles.iter().map(|b| b.grown(halo)).collect();
+            let mut near = Vec::new();
+            let mut held = 0u64;
+            for &p in &s.sample {
+                near.clear();
+                tree.near(p, halo, &mut near);
+                held += near.iter().filter(|&&t| grown[t].holds(p)).count() as u64;
+            }
+            let factor = held as f64 / s.sample.len().max(1) as f64;
+            report.spill_estimate = (factor * s.points as f64).round() as u64;
+            let bytes = report
+                .spill_estimate
+                .saturating_mul(record_bytes(&s) as u64);
+            if let Some(free) = free_space(work)
+                && bytes > free
+            {
+                return Err(data_err(
+                    work,
+                    format!(
+                        "the spill needs about {:.1} GB ({} points in {} tiles, {factor:.2} times the \
+                         cloud with the halos) and its folder's disk has {:.1} GB free",
+                        bytes as f64 / 1e9,
+                        report.spill_estimate,
+                        tiles.len(),
+                        free as f64 / 1e9
+                    ),
+                ));
+            }
+            if factor > 2.0 {
+                report.warnings.push(format!(
+                    "the tiles' halos ({HALO_EPS} epsilon wide) hold {:.0} % more points than their \
+                     cores: {} tiles of at most {target} points are small against epsilon at this \
+                     density; --thin 0.25 (the cloud is denser than epsilon needs), a finer \
+                     --epsilon or a larger --max-memory would spill less",
+                    100.0 * (factor - 1.0),
+                    tiles.len()
+                ));
+            }
             let origin = s.bounds.centre().to_array();
             let viewpoint = if opts.no_viewpoint {
                 None

@@ -373,3 +373,47 @@ fn a_synthetic_airborne_survey_splats_in_tiles() {
         world.len()
     );
 }
+
+/// The plan foresees what the spill writes (from the survey's sample), and
+/// says so when the halos hold more points than the cores: tiles too small
+/// against `ϵ` at the cloud's density.
+#[test]
+fn the_plan_foresees_the_spill_and_warns_of_wide_halos() {
+    let dir = scratch("tiled-estimate");
+    let input = cloud(&dir);
+    let params = SplatParams::default();
+    let run = |tile_points: u64, name: &str| {
+        let opts = TiledOptions {
+            tile_points: Some(tile_points),
+            ..options(dir.join(format!(".{name}.tiles")))
+        };
+        generate_tiled(&[input.clone()], &params, &opts, &dir.join(name), None).unwrap()
+    };
+    for (tile_points, name, wide) in [(30_000, "some.ply", false), (4_000, "many.ply", true)] {
+        let r = run(tile_points, name);
+        let off = r.spill_estimate as f64 / r.spilled as f64 - 1.0;
+        assert!(
+            off.abs() < 0.05,
+            "{name}: estimated {} against {} spilled",
+            r.spill_estimate,
+            r.spilled
+        );
+        let warned = r.warnings.iter().any(|w| w.contains("halos"));
+        assert_eq!(
+            warned,
+            wide,
+            "{name}: {} tiles, {} spilled of {}: {:?}",
+            r.tiles.len(),
+            r.spilled,
+            r.points,
+            r.warnings
+        );
+        eprintln!(
+            "{name}: {} tiles, spilled {} (estimated {}) of {}",
+            r.tiles.len(),
+            r.spilled,
+            r.spill_estimate,
+            r.points
+        );
+    }
+}

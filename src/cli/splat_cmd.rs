@@ -498,6 +498,9 @@ fn run_tiled(
         let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
         splatray::io::write_text(r, &json).map_err(|e| e.to_string())?;
     }
+    for w in &report.warnings {
+        eprintln!("splatray: warning: {w}");
+    }
     let mut warnings: Vec<&String> = report.tiles.iter().flat_map(|t| &t.warnings).collect();
     warnings.sort();
     warnings.dedup();
