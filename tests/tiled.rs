@@ -387,7 +387,14 @@ fn the_plan_foresees_the_spill_and_warns_of_wide_halos() {
             tile_points: Some(tile_points),
             ..options(dir.join(format!(".{name}.tiles")))
         };
-        generate_tiled(std::slice::from_ref(&input), &params, &opts, &dir.join(name), None).unwrap()
+        generate_tiled(
+            std::slice::from_ref(&input),
+            &params,
+            &opts,
+            &dir.join(name),
+            None,
+        )
+        .unwrap()
     };
     for (tile_points, name, wide) in [(30_000, "some.ply", false), (4_000, "many.ply", true)] {
         let r = run(tile_points, name);

@@ -155,9 +155,17 @@ impl SceneArgs {
         spp: Option<u32>,
         line: &ProgressLine,
     ) -> Result<Scene, String> {
+        line.update("reading the cloud", 0.0);
+        let survey = survey_file(path)?;
+        // An organised cloud renders at its grid's size, registered with
+        // the capture.
+        let size = match &survey.sensor {
+            Some(Ok(s)) if self.up.is_none() => (s.width, s.height),
+            _ => DEFAULT_SIZE,
+        };
         let o = CloudSceneOptions {
-            width: self.width.unwrap_or(DEFAULT_SIZE.0),
-            height: self.height.unwrap_or(DEFAULT_SIZE.1),
+            width: self.width.unwrap_or(size.0),
+            height: self.height.unwrap_or(size.1),
             spp: spp.unwrap_or(1),
             shading: self.shading,
         };
@@ -170,8 +178,6 @@ impl SceneArgs {
         if let Some(s) = &self.save_scene {
             check_folder(s)?;
         }
-        line.update("reading the cloud", 0.0);
-        let survey = survey_file(path)?;
         let view = choose_view(&survey, self.up, f64::from(o.width) / f64::from(o.height));
         let text = scene_text(path, &survey, &view, &o)?;
         let file = parse_scene_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
@@ -188,8 +194,12 @@ impl SceneArgs {
         } else {
             String::new()
         };
+        let unfitted = match &survey.sensor {
+            Some(Err(why)) => format!(" (an organised grid, but {why})"),
+            _ => String::new(),
+        };
         eprintln!(
-            "{}: {} {} without a scene: {}{outliers}",
+            "{}: {} {} without a scene: {}{outliers}{unfitted}",
             path.display(),
             survey.points,
             survey.kind.key(),

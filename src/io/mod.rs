@@ -32,6 +32,7 @@ pub use gaussian::{
     encode_gaussians, file_layout, parse_gaussians, read_gaussians, sniff_layout, write_gaussians,
 };
 pub use lzf::lzf_decompress;
+pub use pcd::{Organised, read_organised};
 pub use sample::{MeshSampler, sample_mesh, write_sample_ply};
 pub use splat_ply::{
     SPLAT_ROW_BYTES, SplatSet, encode_splats, parse_splats, read_splats, splat_header, write_splats,
@@ -156,7 +157,7 @@ pub fn vertex_property_names(head: &[u8]) -> Option<Vec<String>> {
 }
 
 /// Read the whole file, mapping failures to [`IoError`].
-fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
+pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
     if let Ok(meta) = std::fs::metadata(path) {
         crate::memory::check("reading the file whole", meta.len())
             .map_err(|e| IoError::new(path, IoErrorKind::Data(e)))?;

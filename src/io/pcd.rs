@@ -47,6 +47,10 @@ struct PcdHeader {
     /// The sensor origin of `VIEWPOINT tx ty tz qw qx qy qz`, in the file's
     /// coordinates.
     viewpoint: Option<DVec3>,
+    /// The sensor's orientation of `VIEWPOINT` (w, x, y, z).
+    orientation: [f64; 4],
+    /// `WIDTH` and `HEIGHT`, when both are given.
+    grid: Option<(usize, usize)>,
     points: usize,
     data: String,
     /// Offset of the body in the file.
@@ -63,6 +67,7 @@ fn parse_header(bytes: &[u8]) -> Result<PcdHeader, IoErrorKind> {
     let (mut width, mut height, mut points) = (None::<usize>, None::<usize>, None::<usize>);
     let mut data = None;
     let mut viewpoint = None;
+    let mut orientation = [1.0, 0.0, 0.0, 0.0];
     while pos < bytes.len() {
         let end = bytes[pos..]
             .iter()
@@ -91,6 +96,7 @@ fn parse_header(bytes: &[u8]) -> Result<PcdHeader, IoErrorKind> {
                     )));
                 }
                 viewpoint = Some(DVec3::new(v[0], v[1], v[2]));
+                orientation = [v[3], v[4], v[5], v[6]];
             }
             "FIELDS" | "COLUMNS" => names = rest.iter().map(|s| s.to_string()).collect(),
             "SIZE" => sizes = rest.iter().map(|s| num(s)).collect::<Result<_, _>>()?,
@@ -173,6 +179,8 @@ fn parse_header(bytes: &[u8]) -> Result<PcdHeader, IoErrorKind> {
     Ok(PcdHeader {
         fields,
         viewpoint,
+        orientation,
+        grid: width.zip(height),
         points,
         data,
         body: pos,
@@ -215,6 +223,71 @@ const POINT_BYTES: u64 = 48;
 /// Read a PCD cloud (coordinates kept in f64 until the cloud is re-centred,
 /// so `F 8` fields keep their precision).
 pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
+    let (h, cols, world, normals, colors) = decode(bytes)?;
+    let mut cloud = cloud_from_world(
+        world,
+        cols.normal.is_some().then_some(normals),
+        cols.color.is_some().then_some(colors),
+    )?;
+    // In the positions' frame, like them: relative to the origin.
+    cloud.viewpoint = h.viewpoint.map(|v| cloud.local_viewpoint(v));
+    Ok(cloud)
+}
+
+/// An organised cloud (`HEIGHT` > 1): the grid of a depth camera or stereo
+/// rig, a point per pixel, row by row, NaN where nothing was measured.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Organised {
+    /// Pixels per row, and rows.
+    pub width: usize,
+    /// See `width`.
+    pub height: usize,
+    /// The sensor's position (`VIEWPOINT`), in the file's coordinates.
+    pub position: DVec3,
+    /// The sensor's orientation (`VIEWPOINT`'s quaternion, normalised).
+    pub orientation: glam::DQuat,
+    /// Every measured pixel: its index (`row · width + column`) and its
+    /// point, in the file's coordinates.
+    pub pixels: Vec<(u32, DVec3)>,
+    /// Linear colours of `pixels`, when the file has them.
+    pub colors: Option<Vec<Vec3>>,
+}
+
+/// The grid of an organised PCD (`HEIGHT` > 1); `None` for any other.
+///
+/// # Errors
+/// As [`read_cloud`].
+pub fn read_organised(bytes: &[u8]) -> Result<Option<Organised>, IoErrorKind> {
+    let head = parse_header(bytes)?;
+    let Some((width, height)) = head.grid.filter(|&(w, h)| h > 1 && w > 1) else {
+        return Ok(None);
+    };
+    let (h, cols, world, _, colors) = decode(bytes)?;
+    let [w, x, y, z] = h.orientation;
+    let q = glam::DQuat::from_xyzw(x, y, z, w);
+    if q.length().is_nan() || q.length() <= 1e-12 {
+        return Err(IoErrorKind::Header("VIEWPOINT's quaternion is zero".into()));
+    }
+    let orientation = q.normalize();
+    let keep: Vec<usize> = (0..world.len()).filter(|&i| world[i].is_finite()).collect();
+    Ok(Some(Organised {
+        width,
+        height,
+        position: h.viewpoint.unwrap_or(DVec3::ZERO),
+        orientation,
+        pixels: keep.iter().map(|&i| (i as u32, world[i])).collect(),
+        colors: cols
+            .color
+            .is_some()
+            .then(|| keep.iter().map(|&i| colors[i]).collect()),
+    }))
+}
+
+/// The header's columns and every point as stored (NaN included).
+#[allow(clippy::type_complexity)]
+fn decode(
+    bytes: &[u8],
+) -> Result<(PcdHeader, Columns, Vec<DVec3>, Vec<Vec3>, Vec<Vec3>), IoErrorKind> {
     let h = parse_header(bytes)?;
     let cols = columns(&h)?;
     let body = &bytes[h.body.min(bytes.len())..];
@@ -361,14 +434,7 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
             )));
         }
     }
-    let mut cloud = cloud_from_world(
-        world,
-        cols.normal.is_some().then_some(normals),
-        cols.color.is_some().then_some(colors),
-    )?;
-    // In the positions' frame, like them: relative to the origin.
-    cloud.viewpoint = h.viewpoint.map(|v| cloud.local_viewpoint(v));
-    Ok(cloud)
+    Ok((h, cols, world, normals, colors))
 }
 
 /// Encode `cloud` as a binary PCD v0.7 (`x y z`, plus `normal_x normal_y

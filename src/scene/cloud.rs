@@ -46,6 +46,7 @@
 
 use crate::io::{Format, file_head as head, read_points, read_splats};
 use crate::resolve::ShadingMode;
+use crate::scene::model::Intrinsics;
 use crate::{Error, Result};
 use glam::{DVec3, Vec3};
 use std::fmt::Write as _;
@@ -129,6 +130,9 @@ pub struct Survey {
     pub lo: DVec3,
     /// Bounding box of [`Survey::sample`].
     pub hi: DVec3,
+    /// The sensor of an organised cloud (a PCD with `HEIGHT` > 1), or why
+    /// none could be fitted.
+    pub sensor: Option<std::result::Result<super::sensor::Sensor, String>>,
 }
 
 impl Survey {
@@ -188,14 +192,23 @@ fn survey_unchecked(path: &Path) -> Result<Survey> {
         .colors
         .as_ref()
         .is_some_and(|c| c.len() == cloud.len());
-    survey(
+    let mut s = survey(
         CloudKind::Points,
         &cloud.positions,
         cloud.origin,
         cloud.viewpoint,
         colors,
     )
-    .map_err(|e| e.context(path.display()))
+    .map_err(|e| e.context(path.display()))?;
+    let is_pcd = Format::from_extension(path) == Some(Format::Pcd)
+        || head(path).is_some_and(|h| Format::sniff(&h) == Some(Format::Pcd));
+    if is_pcd {
+        let bytes = crate::io::read_file(path)?;
+        let grid =
+            crate::io::read_organised(&bytes).map_err(|k| crate::io::IoError::new(path, k))?;
+        s.sensor = grid.map(|g| super::sensor::recover(&g));
+    }
+    Ok(s)
 }
 
 /// Surveys positions, offsets from `origin` (as the readers give them; the
@@ -244,6 +257,7 @@ pub fn survey(
         outliers,
         lo,
         hi,
+        sensor: None,
     })
 }
 
@@ -290,6 +304,9 @@ pub struct View {
     pub up: DVec3,
     /// Vertical field of view, degrees.
     pub fov: f64,
+    /// A sensor's intrinsics and image size (pixels) instead of `fov`: the
+    /// view of an organised cloud's camera.
+    pub sensor: Option<(Intrinsics, u32, u32)>,
     /// One line: where the camera is and which way is up, and why.
     pub note: String,
 }
@@ -396,6 +413,11 @@ const FRAMING_FOV: f64 = 35.0;
 /// (width / height); `up` replaces the up rule (module documentation).
 #[must_use]
 pub fn choose_view(s: &Survey, up: Option<DVec3>, aspect: f64) -> View {
+    if up.is_none()
+        && let Some(Ok(sensor)) = &s.sensor
+    {
+        return sensor_view(s, sensor);
+    }
     let c = s.center();
     let ext = s.hi - s.lo;
     let flat = flat_axis(ext);
@@ -466,6 +488,7 @@ pub fn choose_view(s: &Survey, up: Option<DVec3>, aspect: f64) -> View {
         at,
         up,
         fov: FRAMING_FOV,
+        sensor: None,
         note: format!(
             "camera framing the cloud {side}, {:.0}° above; up {} ({why})",
             elevation.to_degrees(),
@@ -563,6 +586,7 @@ fn viewpoint_view(
             at: c,
             up,
             fov,
+            sensor: None,
             note: format!(
                 "camera at the cloud's viewpoint, looking at its centre; up {} ({why})",
                 axis_name(up)
@@ -577,11 +601,37 @@ fn viewpoint_view(
         at: c,
         up,
         fov: FRAMING_FOV,
+        sensor: None,
         note: format!(
             "camera on the line of sight from the cloud's viewpoint (moved in: it is far away); up {} ({why})",
             axis_name(up)
         ),
     })
+}
+
+/// The view from an organised cloud's sensor: its pose, its fitted
+/// intrinsics and its grid's size, so that the image registers with the
+/// capture.
+fn sensor_view(s: &Survey, sensor: &super::sensor::Sensor) -> View {
+    let k = sensor.intrinsics;
+    // Any point on the optical axis will do; level with the cloud's centre.
+    let depth = (s.center() - sensor.position)
+        .dot(sensor.forward)
+        .abs()
+        .max(s.radius());
+    let fov = 2.0 * (0.5 * f64::from(sensor.height) / k.fy).atan().to_degrees();
+    View {
+        from: sensor.position,
+        at: sensor.position + sensor.forward * depth,
+        up: sensor.up,
+        fov,
+        sensor: Some((k, sensor.width, sensor.height)),
+        note: format!(
+            "camera at the sensor of the organised {}x{} grid, in {}: fx {:.2}, fy {:.2}, \
+             cx {:.2}, cy {:.2} px fitted to its pixels (residual {:.3} px)",
+            sensor.width, sensor.height, sensor.frame, k.fx, k.fy, k.cx, k.cy, sensor.residual
+        ),
+    }
 }
 
 /// What the scene text holds beyond the view: the image and render
@@ -684,7 +734,27 @@ pub fn scene_text(
     let _ = writeln!(t, "from = {}", vec3(view.from, d));
     let _ = writeln!(t, "at = {}", vec3(view.at, d));
     let _ = writeln!(t, "up = {}", vec3(view.up, 6));
-    let _ = writeln!(t, "fov = {}", num(view.fov, 3));
+    match view.sensor {
+        Some((k, w, h)) => {
+            // The sensor's intrinsics, scaled to the image asked for
+            // (pixel centres at integers, as the intrinsics count them).
+            let (sx, sy) = (
+                f64::from(o.width) / f64::from(w),
+                f64::from(o.height) / f64::from(h),
+            );
+            let _ = writeln!(
+                t,
+                "intrinsics = {{ fx = {}, fy = {}, cx = {}, cy = {} }}",
+                num(k.fx * sx, 6),
+                num(k.fy * sy, 6),
+                num((k.cx + 0.5) * sx - 0.5, 6),
+                num((k.cy + 0.5) * sy - 0.5, 6)
+            );
+        }
+        None => {
+            let _ = writeln!(t, "fov = {}", num(view.fov, 3));
+        }
+    }
     let _ = writeln!(t, "width = {}\nheight = {}", o.width, o.height);
     if o.spp != 1 {
         let _ = writeln!(t, "spp = {}", o.spp);

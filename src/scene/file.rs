@@ -109,6 +109,31 @@ pub struct CameraSpec {
     /// Samples per pixel (stratified when > 1).
     #[serde(default = "one_u32")]
     pub spp: u32,
+    /// A pinhole's intrinsics, pixels, instead of `fov`: the image plane
+    /// of a real camera, its principal point anywhere.
+    #[serde(default)]
+    pub intrinsics: Option<IntrinsicsSpec>,
+}
+
+/// `camera.intrinsics = { fx, fy, cx, cy }`: focal lengths and principal
+/// point in pixels (`u = fx·x/z + cx`, `v = fy·y/z + cy`, `x` right, `y`
+/// down, `z` forward in the camera's frame; pixel centres at integer
+/// `(u, v)`, as calibrations give them).
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct IntrinsicsSpec {
+    /// Focal length along the rows, pixels (positive).
+    #[serde(deserialize_with = "num::positive")]
+    pub fx: f64,
+    /// Focal length along the columns, pixels (positive).
+    #[serde(deserialize_with = "num::positive")]
+    pub fy: f64,
+    /// Principal point from the left edge, pixels.
+    #[serde(deserialize_with = "num::finite")]
+    pub cx: f64,
+    /// Principal point from the top edge, pixels.
+    #[serde(deserialize_with = "num::finite")]
+    pub cy: f64,
 }
 
 /// A model's placement: uniform scale, then rotation (degrees about x, y,

@@ -72,7 +72,23 @@ pub fn build_scene(file: &SceneFile, base: &Path, progress: Option<Progress<'_>>
             (DVec3::from(c.from) - shift).length()
         )));
     }
-    let camera = Camera::look_at(from, at, v3(c.up), c.fov, c.width, c.height, c.spp)?;
+    let camera = match c.intrinsics {
+        None => Camera::look_at(from, at, v3(c.up), c.fov, c.width, c.height, c.spp)?,
+        Some(k) => Camera::look_at_intrinsics(
+            from,
+            at,
+            v3(c.up),
+            super::model::Intrinsics {
+                fx: k.fx,
+                fy: k.fy,
+                cx: k.cx,
+                cy: k.cy,
+            },
+            c.width,
+            c.height,
+            c.spp,
+        )?,
+    };
     let (options, xi_of) = render_options(&file.render, diagonal, &models.standoff)?;
     Ok(Scene {
         splats: models.splats,

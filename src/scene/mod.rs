@@ -14,6 +14,7 @@ pub mod file;
 pub mod load;
 pub mod model;
 pub mod num;
+pub mod sensor;
 pub mod shapes;
 
 pub use file::{

@@ -5,7 +5,7 @@
 use crate::resolve::ShadingMode;
 use crate::splat::Splat;
 use crate::{Error, Result};
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 
 /// A surface material.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -85,6 +85,25 @@ pub struct Camera {
     pub height: u32,
     /// Samples per pixel.
     pub spp: u32,
+    /// The principal point, pixels, when the camera has intrinsics off the
+    /// image's centre; `None`: the centre.
+    pub principal: Option<Vec2>,
+}
+
+/// A pinhole camera's intrinsics, pixels: focal lengths and principal
+/// point (`u = fx·x/z + cx`, `v = fy·y/z + cy` in the camera's frame, `x`
+/// right, `y` down, `z` forward), pixel centres at integer `(u, v)` as in
+/// OpenCV's and ROS's calibrations.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Intrinsics {
+    /// Focal length along the image's rows, pixels.
+    pub fx: f64,
+    /// Focal length along its columns, pixels.
+    pub fy: f64,
+    /// Principal point, pixels from the left edge.
+    pub cx: f64,
+    /// Principal point, pixels from the top edge.
+    pub cy: f64,
 }
 
 impl Camera {
@@ -121,15 +140,56 @@ impl Camera {
             width,
             height,
             spp,
+            principal: None,
         })
+    }
+
+    /// As [`Camera::look_at`], the image plane given by a pinhole's
+    /// intrinsics instead of a field of view: the ray through pixel
+    /// `(cx, cy)` runs along `at - from`, and one through `(cx + fx, cy)`
+    /// 45° to its right.
+    pub fn look_at_intrinsics(
+        from: Vec3,
+        at: Vec3,
+        up: Vec3,
+        k: Intrinsics,
+        width: u32,
+        height: u32,
+        spp: u32,
+    ) -> Result<Camera> {
+        let ok = |v: f64| v.is_finite() && v > 0.0;
+        if !(ok(k.fx) && ok(k.fy) && k.cx.is_finite() && k.cy.is_finite()) {
+            return Err(Error::invalid(format!(
+                "camera: intrinsics fx {}, fy {} must be finite and positive, cx {}, cy {} finite",
+                k.fx, k.fy, k.cx, k.cy
+            )));
+        }
+        let mut c = Camera::look_at(from, at, up, 90.0, width, height, spp)?;
+        let (half_w, half_h) = (
+            0.5 * f64::from(width) / k.fx,
+            0.5 * f64::from(height) / k.fy,
+        );
+        c.right = c.right.normalize() * half_w as f32;
+        c.up = c.up.normalize() * half_h as f32;
+        // Our pixel centres sit at +0.5.
+        c.principal = Some(Vec2::new((k.cx + 0.5) as f32, (k.cy + 0.5) as f32));
+        Ok(c)
     }
 
     /// The primary ray through image position `(px, py)` in pixels (pixel
     /// centres at `+0.5`; `y` down).
     #[must_use]
     pub fn ray(&self, px: f32, py: f32) -> crate::accel::Ray {
-        let sx = 2.0 * px / self.width as f32 - 1.0;
-        let sy = 1.0 - 2.0 * py / self.height as f32;
+        let (sx, sy) = match self.principal {
+            None => (
+                2.0 * px / self.width as f32 - 1.0,
+                1.0 - 2.0 * py / self.height as f32,
+            ),
+            Some(c) => (
+                (px - c.x) / (0.5 * self.width as f32),
+                (c.y - py) / (0.5 * self.height as f32),
+            ),
+        };
         crate::accel::Ray::new(self.origin, self.forward + self.right * sx + self.up * sy)
     }
 }
