@@ -115,6 +115,19 @@ pub struct Scan {
     pub spacing: f32,
     /// The range noise's standard deviation, in the mesh's units.
     pub noise_sigma: f32,
+    /// Per ray, row by row: its point (the mesh's frame, offset from the
+    /// cloud's origin), `None` where it missed or its return went missing.
+    pub grid: Vec<Option<Vec3>>,
+    /// Rays per row, and rows.
+    pub columns: usize,
+    /// See `columns`.
+    pub rows: usize,
+    /// The scanner's axes in the mesh's frame: forward, image right, image
+    /// up (unit).
+    pub axes: [Vec3; 3],
+    /// For a raster: the focal length (pixels) and principal point of the
+    /// pinhole whose pixel grid the rays sample (pixel centres at integers).
+    pub pinhole: Option<(f64, f64, f64)>,
 }
 
 fn check(p: &ScanParams) -> Result<()> {
@@ -203,10 +216,17 @@ pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
     };
     let (cols, rows) = (params.columns as usize, params.rows as usize);
     // Ray direction of sample (c, r), and the larger angular step.
+    let mut pinhole = None;
     let (dir_of, step): (Box<dyn Fn(usize, usize) -> Vec3 + Sync>, f32) = match params.pattern {
         ScanPattern::Raster => {
             let half_h = (0.5 * vfov).tan();
             let half_w = half_h * cols as f32 / rows as f32;
+            // x = (2 (u + 0.5) / cols - 1) half_w: u = f x + (cols - 1) / 2.
+            pinhole = Some((
+                f64::from(rows as f32) / (2.0 * f64::from(half_h)),
+                (cols as f64 - 1.0) / 2.0,
+                (rows as f64 - 1.0) / 2.0,
+            ));
             let f = move |c: usize, r: usize| {
                 let x = ((c as f32 + 0.5) / cols as f32 * 2.0 - 1.0) * half_w;
                 let y = (1.0 - (r as f32 + 0.5) / rows as f32 * 2.0) * half_h;
@@ -288,16 +308,26 @@ pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
         outliers: 0,
         spacing,
         noise_sigma: sigma,
+        grid: Vec::with_capacity(rows * cols),
+        columns: cols,
+        rows,
+        axes: [forward, right, up],
+        pinhole,
     };
-    for (p, kind) in samples.into_iter().flatten() {
-        match kind {
-            1 => scan.missing += 1,
-            2 => {
-                scan.outliers += 1;
-                scan.cloud.positions.push(p);
+    for sample in samples {
+        let point = match sample {
+            None => None,
+            Some((_, 1)) => {
+                scan.missing += 1;
+                None
             }
-            _ => scan.cloud.positions.push(p),
-        }
+            Some((p, kind)) => {
+                scan.outliers += usize::from(kind == 2);
+                scan.cloud.positions.push(p);
+                Some(p)
+            }
+        };
+        scan.grid.push(point);
     }
     if scan.cloud.is_empty() {
         return Err(Error::invalid("every return of the scan went missing"));

@@ -4,6 +4,7 @@
 //! --range-noise-spacing F] [--outliers F] [--missing F]`.
 
 use super::progress::ProgressLine;
+use glam::Vec3;
 use splatray::io::{Format, MeshSampler, read_mesh, sample_mesh, write_points, write_sample_ply};
 use splatray::scanner::{RangeNoise, ScanParams, ScanPattern, scan_mesh};
 use std::path::PathBuf;
@@ -81,6 +82,21 @@ pub struct SampleArgs {
     /// Fraction of returns dropped.
     #[arg(long, default_value_t = 0.0, requires = "scan_from")]
     pub missing: f32,
+    /// Write the raster as an organised PCD, as a depth camera does: the
+    /// grid of rays, NaN where a ray missed, VIEWPOINT the sensor's pose
+    /// from this frame: optical (x right, y down, z forward, as PCL, OpenCV
+    /// and ROS) or gl (y up, looking along -z).
+    #[arg(long, requires = "scan_from")]
+    pub organised: Option<Frame>,
+}
+
+/// The frame of an organised scan's sensor.
+#[derive(Clone, Copy, Debug, PartialEq, clap::ValueEnum)]
+pub enum Frame {
+    /// x right, y down, z forward.
+    Optical,
+    /// x right, y up, looking along -z.
+    Gl,
 }
 
 fn vec3(v: &[f64], what: &str) -> Result<glam::DVec3, String> {
@@ -183,7 +199,46 @@ fn scan(args: &SampleArgs, from: glam::DVec3) -> Result<(), String> {
     };
     let mesh = read_mesh(&args.mesh).map_err(|e| e.to_string())?;
     let scan = scan_mesh(&mesh, &params)?;
-    write_points(&args.output, &scan.cloud).map_err(|e| e.to_string())?;
+    match args.organised {
+        None => write_points(&args.output, &scan.cloud).map_err(|e| e.to_string())?,
+        Some(frame) => {
+            if Format::from_extension(&args.output) != Some(Format::Pcd) {
+                return Err(format!(
+                    "{}: --organised writes a PCD (a name ending in .pcd)",
+                    args.output.display()
+                ));
+            }
+            let Some((f, cx, cy)) = scan.pinhole else {
+                return Err("--organised needs the raster pattern (a camera's pixel grid)".into());
+            };
+            let [forward, right, up] = scan.axes.map(Vec3::as_dvec3);
+            let (y, z) = match frame {
+                Frame::Optical => (-up, forward),
+                Frame::Gl => (up, -forward),
+            };
+            let rotation = glam::DQuat::from_mat3(&glam::DMat3::from_cols(right, y, z));
+            let origin = scan.cloud.origin;
+            let grid: Vec<Option<glam::DVec3>> = scan
+                .grid
+                .iter()
+                .map(|p| p.map(|p| origin + p.as_dvec3()))
+                .collect();
+            let position = origin + scan.cloud.viewpoint.unwrap_or_default().as_dvec3();
+            let bytes =
+                splatray::io::encode_organised(scan.columns, scan.rows, &grid, position, rotation);
+            splatray::io::write_bytes(&args.output, &bytes).map_err(|e| e.to_string())?;
+            eprintln!(
+                "splatray: an organised {}x{} grid in the {} frame, a pinhole of focal length \
+                 {f:.4} px centred at ({cx:.2}, {cy:.2})",
+                scan.columns,
+                scan.rows,
+                match frame {
+                    Frame::Optical => "optical",
+                    Frame::Gl => "-z",
+                }
+            );
+        }
+    }
     eprintln!(
         "splatray: scan of {} rays: {} returns, {} missing, {} outliers, {} points (spacing {:.3e}, range noise {:.3e}) -> {}",
         scan.rays,

@@ -32,7 +32,7 @@ pub use gaussian::{
     encode_gaussians, file_layout, parse_gaussians, read_gaussians, sniff_layout, write_gaussians,
 };
 pub use lzf::lzf_decompress;
-pub use pcd::{Organised, read_organised};
+pub use pcd::{Organised, encode_organised, read_organised};
 pub use sample::{MeshSampler, sample_mesh, write_sample_ply};
 pub use splat_ply::{
     SPLAT_ROW_BYTES, SplatSet, encode_splats, parse_splats, read_splats, splat_header, write_splats,

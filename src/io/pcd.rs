@@ -437,6 +437,43 @@ fn decode(
     Ok((h, cols, world, normals, colors))
 }
 
+/// Encode an organised cloud (a sensor's grid, row by row, NaN where
+/// nothing was measured) as a binary PCD v0.7 with f64 coordinates in the
+/// file's frame and `VIEWPOINT` the sensor's pose (`position`, and the
+/// rotation from its frame to the file's).
+#[must_use]
+pub fn encode_organised(
+    width: usize,
+    height: usize,
+    points: &[Option<DVec3>],
+    position: DVec3,
+    rotation: glam::DQuat,
+) -> Vec<u8> {
+    let q = rotation.normalize();
+    let mut out = format!(
+        "# .PCD v0.7 - Point Cloud Data file format (written by splatray {}, an organised scan)\n\
+         VERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {width}\nHEIGHT {height}\n\
+         VIEWPOINT {} {} {} {} {} {} {}\nPOINTS {}\nDATA binary\n",
+        env!("CARGO_PKG_VERSION"),
+        position.x,
+        position.y,
+        position.z,
+        q.w,
+        q.x,
+        q.y,
+        q.z,
+        width * height
+    )
+    .into_bytes();
+    for p in points {
+        let p = p.unwrap_or(DVec3::NAN);
+        for c in p.to_array() {
+            out.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    out
+}
+
 /// Encode `cloud` as a binary PCD v0.7 (`x y z`, plus `normal_x normal_y
 /// normal_z` when present), with `VIEWPOINT` set to the cloud's viewpoint
 /// (identity orientation) when it has one. Positions and the viewpoint are
