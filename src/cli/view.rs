@@ -182,8 +182,11 @@ impl SceneArgs {
         let text = scene_text(path, &survey, &view, &o)?;
         let file = parse_scene_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
         let progress = |stage: &str, f: f64| line.update(stage, f);
-        let scene = build_scene(&file, Path::new(""), Some(&progress))
+        let mut scene = build_scene(&file, Path::new(""), Some(&progress))
             .map_err(|e| e.context(path.display()))?;
+        // As a scene file is set up (`load`), so that the scene saved
+        // renders these bytes wherever the cloud lies.
+        scene.set_view(None, None, None, None)?;
         line.finish();
         let outliers = if survey.outliers > 0 {
             format!(

@@ -344,7 +344,9 @@ impl Scene {
     }
 
     /// Changes the view after loading: the resolution (keeping the vertical
-    /// field of view, widening or narrowing the horizontal one), the samples
+    /// field of view, widening or narrowing the horizontal one; a camera
+    /// with intrinsics keeps its image plane, its principal point moved
+    /// with the image's size), the samples
     /// per pixel, and the shading mode of the whole scene (which then
     /// replaces every model's own). `None` keeps what the scene file says.
     ///
@@ -370,9 +372,22 @@ impl Scene {
         if spp == 0 || spp > 4096 {
             return Err(Error::invalid(format!("spp {spp} must be in 1..=4096")));
         }
-        let half_h = c.up.length();
-        let half_w = half_h * w as f32 / h as f32;
-        self.camera.right = c.right.normalize() * half_w;
+        match c.principal {
+            // Square pixels, the vertical field of view kept.
+            None => {
+                let half_h = c.up.length();
+                let half_w = half_h * w as f32 / h as f32;
+                self.camera.right = c.right.normalize() * half_w;
+            }
+            // A pinhole's: its focal lengths scale with the image, so the
+            // image plane stays and the principal point moves with it.
+            Some(p) => {
+                self.camera.principal = Some(Vec2::new(
+                    p.x * w as f32 / c.width as f32,
+                    p.y * h as f32 / c.height as f32,
+                ));
+            }
+        }
         self.camera.width = w;
         self.camera.height = h;
         self.camera.spp = spp;
