@@ -65,7 +65,7 @@ pub fn run(args: &ScanCheckArgs) -> Result<(), String> {
     }
     let pct = |f: f64| 100.0 * f;
     println!(
-        "{}: {} points, {} held out ({} of them outliers, not checked), {} splats; lines of sight at tolerance {}: consistent {:.2} %, early {:.2} %, gross early {:.2} %, late {:.2} %, miss {:.2} %; largest splat {:.1}x the median radius",
+        "{}: {} points, {} held out ({} of them outliers, not checked), {} splats; lines of sight at tolerance {}: consistent {:.2} %, early {:.2} %, gross early {:.2} %, late {:.2} %, miss {:.2} %; largest splat {:.1}x its local spacing ({:.1}x the median radius)",
         args.input.display(),
         r.points,
         r.held_out,
@@ -77,6 +77,7 @@ pub fn run(args: &ScanCheckArgs) -> Result<(), String> {
         pct(r.gross_early_fraction),
         pct(r.late_fraction),
         pct(r.miss_fraction),
+        r.generation.largest_over_spacing,
         r.max_over_median_radius
     );
     if !r.viewpoint_is_scanner {

@@ -255,12 +255,13 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
         eprintln!("splatray: {kind} {} points: {}", s.count, s.reason);
     }
     eprintln!(
-        "splatray: {} points -> {} splats ({} elliptical), coverage {:.4}, mean radius {:.4e}, epsilon {:.3e}, noise {:.3e}, {} flat normal fields, origin [{:?}, {:?}, {:?}], {:.2} s -> {}",
+        "splatray: {} points -> {} splats ({} elliptical), coverage {:.4}, mean radius {:.4e}, largest splat {:.1}x its local spacing, epsilon {:.3e}, noise {:.3e}, {} flat normal fields, origin [{:?}, {:?}, {:?}], {:.2} s -> {}",
         report.used_points,
         report.splats,
         report.elliptical_splats,
         report.coverage,
         report.mean_radius,
+        report.largest_over_spacing,
         report.epsilon,
         report.noise,
         report.fallback_normal_fields,

@@ -137,6 +137,12 @@ pub struct SplatReport {
     pub coverage: f64,
     /// Mean splat radius (mean of both radii), in the cloud's units.
     pub mean_radius: f64,
+    /// The largest splat against the sampling where it lies: the most, over
+    /// the splats, of its larger radius over the k-th neighbour distance of
+    /// the point nearest its centre (the local spacing `d_i` of §2; a
+    /// sparse far part of a scan has large splats and a large spacing
+    /// alike, which a median radius would not tell).
+    pub largest_over_spacing: f64,
     /// Splats whose normal field fell back to flat (too few points or a
     /// singular fit).
     pub fallback_normal_fields: usize,
@@ -608,6 +614,14 @@ pub fn generate_with_progress(
     report.coverage = coverage(&points, &grown.covered, &splats, epsilon);
     report.splats = splats.len();
     report.elliptical_splats = grown.elliptical;
+    report.largest_over_spacing = splats
+        .par_iter()
+        .map(|s| {
+            let near = tree.nearest_one::<kiddo::SquaredEuclidean>(&s.center.to_array());
+            let d = knn.kth_distance[near.item as usize];
+            f64::from(s.radii.max_element()) / f64::from(d.max(f32::MIN_POSITIVE))
+        })
+        .reduce(|| 0.0, f64::max);
     report.mean_radius = splats
         .iter()
         .map(|s| 0.5 * f64::from(s.radii.x + s.radii.y))
