@@ -246,6 +246,15 @@ struct Plan {
     per_scan: bool,
 }
 
+impl Plan {
+    /// Whether the tiles orient their pieces by themselves (no input
+    /// normals, no viewpoint, no scans), so that the merge must make their
+    /// orientations agree.
+    fn reconciles(&self) -> bool {
+        !self.survey.normals && self.viewpoint.is_none() && !self.per_scan
+    }
+}
+
 /// One tile's figures.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct TileSummary {
@@ -309,6 +318,11 @@ pub struct TiledReport {
     /// What the plan found worth saying (e.g. halos holding more points
     /// than the cores).
     pub warnings: Vec<String>,
+    /// Tiles whose splats the merge turned over to agree with their
+    /// neighbours (orientation decided per tile), and those splats.
+    pub flipped_tiles: usize,
+    /// See `flipped_tiles`.
+    pub flipped_splats: u64,
 }
 
 impl TiledReport {
@@ -634,6 +648,10 @@ fn tile_path(work: &Path, t: usize) -> PathBuf {
     work.join(format!("tile-{t:05}.ply"))
 }
 
+fn halo_path(work: &Path, t: usize) -> PathBuf {
+    work.join(format!("halo-{t:05}.ply"))
+}
+
 fn tile_report_path(work: &Path, t: usize) -> PathBuf {
     work.join(format!("tile-{t:05}.json"))
 }
@@ -710,6 +728,10 @@ fn generate_tile(
     };
     let origin = DVec3::from(plan.origin);
     let mut kept: Vec<Splat> = Vec::new();
+    // Splats grown in the halo, where a neighbour keeps its own: they tell
+    // whether the two tiles turned the surface the same way.
+    let mut halo: Vec<Splat> = Vec::new();
+    let grown = plan.tiles[t].grown(plan.halo);
     if counts.1 > 0 && cloud.len() >= 3 {
         let tile_params = SplatParams {
             epsilon_abs: Some(plan.epsilon),
@@ -724,6 +746,12 @@ fn generate_tile(
                 for s in splats {
                     let world = cloud.origin + s.center.as_dvec3();
                     if plan.tree.locate(world) != t {
+                        if plan.reconciles() && grown.holds(world) {
+                            halo.push(Splat {
+                                center: (world - origin).as_vec3(),
+                                ..s
+                            });
+                        }
                         continue;
                     }
                     let reach = f64::from(params.field_radius_factor)
@@ -747,6 +775,9 @@ fn generate_tile(
     summary.seconds = t0.elapsed().as_secs_f64();
     let out = tile_path(work, t);
     crate::io::write_splats(&out, &kept, origin)?;
+    if plan.reconciles() {
+        crate::io::write_splats(&halo_path(work, t), &halo, origin)?;
+    }
     let json = serde_json::to_string(&summary).map_err(|e| data_err(&out, e.to_string()))?;
     crate::io::write_text(&tile_report_path(work, t), &json)?;
     let _ = std::fs::remove_file(spill_path(work, t));
@@ -1013,7 +1044,20 @@ pub fn generate_tiled(
     report.seconds.generate = t2.elapsed().as_secs_f64();
     if matches!(opts.stage, Stage::All | Stage::Merge) {
         let t3 = Instant::now();
-        report.splats = merge(&plan, work, output, progress)?;
+        let flips = if plan.reconciles() {
+            let f = reconcile(&plan, work)?;
+            report.flipped_tiles = f.iter().filter(|&&x| x).count();
+            report.flipped_splats = f
+                .iter()
+                .zip(&report.tiles)
+                .filter(|(x, _)| **x)
+                .map(|(_, s)| s.kept as u64)
+                .sum();
+            f
+        } else {
+            vec![false; plan.tiles.len()]
+        };
+        report.splats = merge(&plan, work, output, &flips, progress)?;
         report.seconds.merge = t3.elapsed().as_secs_f64();
         let _ = std::fs::remove_dir_all(work);
     }
@@ -1050,6 +1094,7 @@ fn clear_work(work: &Path) -> Result<(), IoError> {
         let name = e.file_name().to_string_lossy().into_owned();
         if name.starts_with("spill-")
             || name.starts_with("tile-")
+            || name.starts_with("halo-")
             || name == "plan.json"
             || name == "spilled.json"
         {
@@ -1065,6 +1110,7 @@ fn merge(
     plan: &Plan,
     work: &Path,
     output: &Path,
+    flips: &[bool],
     progress: Option<Progress<'_>>,
 ) -> Result<u64, IoError> {
     let n = plan.tiles.len();
@@ -1088,12 +1134,151 @@ fn merge(
         for (t, (p, head)) in bodies.iter().enumerate() {
             let mut f = BufReader::new(std::fs::File::open(p)?);
             std::io::copy(&mut (&mut f).take(*head), &mut std::io::sink())?;
-            std::io::copy(&mut f, &mut out)?;
+            if flips.get(t).copied().unwrap_or(false) {
+                // The normal and the field's four coefficients change sign
+                // (the sign bit of each little-endian f32): the field then
+                // gives the opposite normal everywhere (eq. 4).
+                let mut row = vec![0u8; SPLAT_ROW_BYTES];
+                loop {
+                    match f.read_exact(&mut row) {
+                        Ok(()) => {}
+                        Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => break,
+                        Err(e) => return Err(e),
+                    }
+                    for k in FLIPPED_FLOATS {
+                        row[4 * k + 3] ^= 0x80;
+                    }
+                    out.write_all(&row)?;
+                }
+            } else {
+                std::io::copy(&mut f, &mut out)?;
+            }
             notify(progress, "merging", (t + 1) as f64 / n as f64);
         }
         out.flush()
     })?;
     Ok(total)
+}
+
+/// A tile's splat file (which may hold none).
+fn tile_splats(p: &Path) -> Result<Vec<Splat>, IoError> {
+    let bytes = std::fs::metadata(p).map_err(|e| io_err(p, e))?.len();
+    if bytes == header_len(p)? {
+        return Ok(Vec::new());
+    }
+    Ok(crate::io::read_splats(p)?.splats)
+}
+
+/// The floats of a splat row that change sign when the splat is turned
+/// over: `nx ny nz` and `field_xc field_yc field_alpha field_beta`.
+const FLIPPED_FLOATS: [usize; 7] = [3, 4, 5, 14, 15, 16, 17];
+
+/// Which tiles to turn over so that neighbours agree. Each tile's halo
+/// splats meet the splats its neighbours kept there: a halo splat votes
+/// for "same" or "opposite" with the nearest kept splat of another tile
+/// when it lies within either's radius and their planes agree (|n·m| ≥
+/// 0.5, so a thin sheet's other side does not vote). The tiles are then
+/// joined along their strongest votes first (a spanning tree by vote
+/// margin, ties by tile number), each with its orientation relative to
+/// its neighbour's; of every connected set, the side holding fewer kept
+/// splats is turned over (the tiles whose own rule chose wrong are the
+/// few).
+fn reconcile(plan: &Plan, work: &Path) -> Result<Vec<bool>, IoError> {
+    let n = plan.tiles.len();
+    let mut centres: Vec<[f32; 3]> = Vec::new();
+    let mut kept: Vec<(u32, Vec3, f32)> = Vec::new();
+    let mut sizes = vec![0u64; n];
+    for (t, size) in sizes.iter_mut().enumerate() {
+        let splats = tile_splats(&tile_path(work, t))?;
+        *size = splats.len() as u64;
+        for s in splats {
+            centres.push(s.center.to_array());
+            kept.push((t as u32, s.normal, s.radii.max_element()));
+        }
+    }
+    if kept.is_empty() {
+        return Ok(vec![false; n]);
+    }
+    let tree: kiddo::immutable::float::kdtree::ImmutableKdTree<f32, u32, 3, 32> =
+        kiddo::immutable::float::kdtree::ImmutableKdTree::new_from_slice(&centres);
+    // (same, opposite) votes per pair of tiles (lower number first).
+    let mut votes: std::collections::BTreeMap<(u32, u32), (u64, u64)> =
+        std::collections::BTreeMap::new();
+    for t in 0..n {
+        let p = halo_path(work, t);
+        if !p.exists() {
+            continue;
+        }
+        for h in tile_splats(&p)? {
+            let near = tree.nearest_one::<kiddo::SquaredEuclidean>(&h.center.to_array());
+            let (u, m, r) = kept[near.item as usize];
+            let reach = h.radii.max_element().max(r);
+            let dot = h.normal.dot(m);
+            if u as usize == t || near.distance > reach * reach || dot.abs() < 0.5 {
+                continue;
+            }
+            let key = ((t as u32).min(u), (t as u32).max(u));
+            let v = votes.entry(key).or_default();
+            if dot > 0.0 {
+                v.0 += 1;
+            } else {
+                v.1 += 1;
+            }
+        }
+    }
+    let mut edges: Vec<(u64, u32, u32, bool)> = votes
+        .into_iter()
+        .filter(|(_, (a, b))| a != b)
+        .map(|((t, u), (a, b))| (a.abs_diff(b), t, u, b > a))
+        .collect();
+    edges.sort_by(|x, y| y.0.cmp(&x.0).then((x.1, x.2).cmp(&(y.1, y.2))));
+    // Union-find with each tile's parity against its root.
+    let mut parent: Vec<usize> = (0..n).collect();
+    let mut parity = vec![false; n];
+    fn root(parent: &mut [usize], parity: &mut [bool], x: usize) -> (usize, bool) {
+        let mut path = Vec::new();
+        let mut r = x;
+        while parent[r] != r {
+            path.push(r);
+            r = parent[r];
+        }
+        // Compress, accumulating parities from the top.
+        let mut acc = false;
+        for &y in path.iter().rev() {
+            acc ^= parity[y];
+            parity[y] = acc;
+            parent[y] = r;
+        }
+        (r, if path.is_empty() { false } else { parity[x] })
+    }
+    for (_, t, u, opposite) in edges {
+        let (rt, pt) = root(&mut parent, &mut parity, t as usize);
+        let (ru, pu) = root(&mut parent, &mut parity, u as usize);
+        if rt != ru {
+            parent[ru] = rt;
+            parity[ru] = pt ^ pu ^ opposite;
+        }
+    }
+    let mut flips = vec![false; n];
+    let mut sides: std::collections::BTreeMap<usize, (u64, u64)> =
+        std::collections::BTreeMap::new();
+    let mut of = vec![(0usize, false); n];
+    for t in 0..n {
+        of[t] = root(&mut parent, &mut parity, t);
+        let e = sides.entry(of[t].0).or_default();
+        if of[t].1 {
+            e.1 += sizes[t];
+        } else {
+            e.0 += sizes[t];
+        }
+    }
+    for t in 0..n {
+        let (r, odd) = of[t];
+        let (even, oddsum) = sides[&r];
+        // Turn over the smaller side (the odd one on a tie).
+        flips[t] = if oddsum <= even { odd } else { !odd };
+    }
+    Ok(flips)
 }
 
 /// Bytes of a splat file's header (through `end_header\n`).

@@ -376,9 +376,13 @@ fn a_synthetic_airborne_survey_splats_in_tiles() {
 
 /// The plan foresees what the spill writes (from the survey's sample), and
 /// says so when the halos hold more points than the cores: tiles too small
-/// against `ϵ` at the cloud's density.
+/// against `ϵ` at the cloud's density. And small tiles, each orienting its
+/// own piece of the closed surface (no normals, no viewpoint), agree after
+/// the merge: 132 tiles turned 37 of themselves inward before (PSNR 17.5
+/// against 31.4 dB whole from below); every splat now faces as the whole
+/// cloud's nearest splat does (0.9908 of them), bar a few at creases.
 #[test]
-fn the_plan_foresees_the_spill_and_warns_of_wide_halos() {
+fn small_tiles_foresee_their_spill_warn_and_agree_in_orientation() {
     let dir = scratch("tiled-estimate");
     let input = cloud(&dir);
     let params = SplatParams::default();
@@ -422,5 +426,40 @@ fn the_plan_foresees_the_spill_and_warns_of_wide_halos() {
             r.spill_estimate,
             r.points
         );
+        if wide {
+            // Orientation against the whole cloud's splats.
+            let whole = splatray::io::read_points(&input).unwrap();
+            let (untiled, _) = generate(&whole, &params).unwrap();
+            let tiled = read_splats(&dir.join(name)).unwrap();
+            let centres: Vec<DVec3> = untiled
+                .iter()
+                .map(|s| whole.origin + s.center.as_dvec3())
+                .collect();
+            let agree = tiled
+                .splats
+                .iter()
+                .filter(|t| {
+                    let c = tiled.origin + t.center.as_dvec3();
+                    let k = (0..centres.len())
+                        .min_by(|&a, &b| {
+                            (centres[a] - c)
+                                .length_squared()
+                                .total_cmp(&(centres[b] - c).length_squared())
+                        })
+                        .unwrap();
+                    t.normal.dot(untiled[k].normal) > 0.0
+                })
+                .count() as f64
+                / tiled.splats.len() as f64;
+            eprintln!(
+                "{name}: {} tiles turned over ({} splats); {agree:.4} of the splats face as the whole cloud's",
+                r.flipped_tiles, r.flipped_splats
+            );
+            assert!(r.flipped_tiles > 0, "{r:?}");
+            assert!(
+                agree >= 0.98,
+                "{name}: only {agree} face as the whole cloud's"
+            );
+        }
     }
 }

@@ -546,6 +546,13 @@ fn run_tiled(
         eprintln!("splatray: note: held-out coverage is not measured in tiled generation");
     }
     let resumed = report.tiles.iter().filter(|t| t.resumed).count();
+    if report.flipped_tiles > 0 {
+        eprintln!(
+            "splatray: note: {} tiles had turned their piece of the surface the other way from their \
+             neighbours (no normals or viewpoint to orient by): their {} splats were turned over",
+            report.flipped_tiles, report.flipped_splats
+        );
+    }
     eprintln!(
         "splatray: {} points in {} tiles (at most {} points each with a halo of {:.3e}; {} spilled; {} resumed) -> {} splats, epsilon {:.3e}, {} splats may reach past the halo; survey {:.1} s, spill {:.1} s, generation {:.1} s, merge {:.1} s, total {:.1} s, peak memory {:.2} GB of {:.2} GB -> {}",
         report.points,
