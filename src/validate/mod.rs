@@ -3,6 +3,7 @@
 
 pub mod compare;
 pub mod holdout;
+pub mod photo;
 pub mod scan_check;
 pub mod sweep;
 pub mod truth;

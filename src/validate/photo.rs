@@ -1,0 +1,175 @@
+//! The photo check of an organised colour scan (`scan-check --photo`): the
+//! capture's own colours as the truth. A tenth of the measured pixels is
+//! held out of splat generation; the splats are seen from the sensor (its
+//! pose and fitted intrinsics, `scene::sensor`) through the held-out
+//! pixels' centres, each pixel taking the unlit colour (albedo) of the
+//! nearest splat its ray meets; and those colours are compared with the
+//! captured ones, in sRGB: PSNR at full resolution, and over 2×2 and 4×4
+//! blocks (texture finer than a splat dominates at full resolution), plus
+//! the share of the held-out pixels the splats cover and of the pixels the
+//! capture left empty that they fill.
+
+use crate::accel::CandidateHits;
+use crate::accel::registry;
+use crate::io::{Organised, linear_to_srgb};
+use crate::rng::SplitMix64;
+use crate::scene::model::Camera;
+use crate::scene::sensor::recover;
+use crate::splat::{PointCloud, SplatParams};
+use crate::{Error, Result};
+use glam::Vec3;
+use serde::Serialize;
+
+/// What the photo check measured.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct PhotoReport {
+    /// The grid: pixels per row, and rows.
+    pub width: u32,
+    /// See `width`.
+    pub height: u32,
+    /// Measured pixels (with a point), and of them held out.
+    pub measured: usize,
+    /// See `measured`.
+    pub held_out: usize,
+    /// Splats grown from the rest.
+    pub splats: usize,
+    /// Share of the held-out pixels whose ray meets a splat.
+    pub covered: f64,
+    /// Share of the pixels the capture left empty whose ray meets a splat.
+    pub filled: f64,
+    /// PSNR (dB, sRGB in `[0, 1]`) of the splats' colours against the
+    /// captured ones over the covered held-out pixels: each pixel, and the
+    /// means over 2×2 and 4×4 blocks.
+    pub psnr: [f64; 3],
+    /// The sensor fit's residual, pixels.
+    pub residual: f64,
+}
+
+/// Runs the photo check on an organised capture with colours.
+///
+/// # Errors
+/// One line: no colours, a grid no camera fits, or splat generation's
+/// error.
+pub fn photo_check(
+    grid: &Organised,
+    splat: &SplatParams,
+    holdout: f32,
+    seed: u64,
+) -> Result<PhotoReport> {
+    let colors = grid
+        .colors
+        .as_ref()
+        .ok_or_else(|| Error::invalid("the organised cloud has no colours to compare with"))?;
+    if !(holdout > 0.0 && holdout <= 0.5) {
+        return Err(Error::invalid(format!(
+            "holdout {holdout} must be in (0, 0.5]"
+        )));
+    }
+    let sensor = recover(grid).map_err(Error::invalid)?;
+    let origin = grid.position;
+    let mut rng = SplitMix64::new(seed);
+    let held: Vec<bool> = grid
+        .pixels
+        .iter()
+        .map(|_| rng.next_f32() < holdout)
+        .collect();
+    let (mut positions, mut kept_colors) = (Vec::new(), Vec::new());
+    for ((&(_, p), c), &h) in grid.pixels.iter().zip(colors).zip(&held) {
+        if !h {
+            positions.push((p - origin).as_vec3());
+            kept_colors.push(*c);
+        }
+    }
+    let cloud = PointCloud {
+        positions,
+        origin,
+        colors: Some(kept_colors),
+        viewpoint: Some(Vec3::ZERO),
+        ..PointCloud::default()
+    };
+    let params = SplatParams {
+        viewpoint: Some(Vec3::ZERO),
+        ..splat.clone()
+    };
+    let (splats, _, _) = crate::freespace::generate_trimmed(&cloud, &params, None)?;
+    let backend = registry::renderers()[0].build_splats(&splats)?;
+    let (w, h) = (sensor.width, sensor.height);
+    let camera = Camera::look_at_intrinsics(
+        Vec3::ZERO,
+        sensor.forward.as_vec3(),
+        sensor.up.as_vec3(),
+        sensor.intrinsics,
+        w,
+        h,
+        1,
+    )?;
+    // The albedo each pixel sees (None: its ray meets nothing).
+    let mut hits = CandidateHits::new(0.0);
+    let seen: Vec<Option<Vec3>> = (0..w * h)
+        .map(|i| {
+            let ray = camera.ray((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+            backend.intersect(&ray, 0.0, f32::INFINITY, &mut hits);
+            hits.nearest().map(|c| splats[c.id as usize].color)
+        })
+        .collect();
+    let mut truth: Vec<Option<Vec3>> = vec![None; (w * h) as usize];
+    let mut measured = vec![false; (w * h) as usize];
+    for ((&(i, _), c), &hd) in grid.pixels.iter().zip(colors).zip(&held) {
+        measured[i as usize] = true;
+        if hd {
+            truth[i as usize] = Some(*c);
+        }
+    }
+    let held_out = truth.iter().flatten().count();
+    let covered = truth
+        .iter()
+        .zip(&seen)
+        .filter(|(t, s)| t.is_some() && s.is_some())
+        .count();
+    let empty = measured.iter().filter(|m| !**m).count();
+    let filled = measured
+        .iter()
+        .zip(&seen)
+        .filter(|(m, s)| !**m && s.is_some())
+        .count();
+    let srgb = |c: Vec3| c.map(|x| linear_to_srgb(x.clamp(0.0, 1.0)));
+    let psnr = [1u32, 2, 4].map(|b| {
+        let (mut se, mut n) = (0f64, 0usize);
+        for by in 0..h.div_ceil(b) {
+            for bx in 0..w.div_ceil(b) {
+                let (mut a, mut t, mut k) = (Vec3::ZERO, Vec3::ZERO, 0u32);
+                for y in by * b..((by + 1) * b).min(h) {
+                    for x in bx * b..((bx + 1) * b).min(w) {
+                        let i = (y * w + x) as usize;
+                        if let (Some(tc), Some(sc)) = (truth[i], seen[i]) {
+                            a += srgb(sc);
+                            t += srgb(tc);
+                            k += 1;
+                        }
+                    }
+                }
+                if k > 0 {
+                    let d = (a - t) / k as f32;
+                    se += f64::from(d.length_squared()) / 3.0;
+                    n += 1;
+                }
+            }
+        }
+        if n == 0 {
+            0.0
+        } else {
+            -10.0 * (se / n as f64).max(1e-12).log10()
+        }
+    });
+    Ok(PhotoReport {
+        width: w,
+        height: h,
+        measured: grid.pixels.len(),
+        held_out,
+        splats: splats.len(),
+        covered: covered as f64 / held_out.max(1) as f64,
+        filled: filled as f64 / empty.max(1) as f64,
+        psnr,
+        residual: sensor.residual,
+    })
+}
