@@ -6,6 +6,7 @@
 
 use super::Splat;
 use glam::{DVec3, Vec3};
+use rayon::prelude::*;
 
 /// The largest viewpoint distance kept in the unit frame: a viewpoint only
 /// orients normals, so one further away is pulled in along its direction
@@ -30,16 +31,16 @@ pub(crate) fn robust_centre_size(n: usize, point: impl Fn(usize) -> DVec3) -> Op
     let stride = n.div_ceil(ROBUST_SAMPLE).max(1);
     let mut centre = [0.0; 3];
     let mut size = 0f64;
-    let mut vals: Vec<f64> = Vec::with_capacity(n.min(ROBUST_SAMPLE));
+    // Every `stride`-th finite point, gathered once for the three axes.
+    let sample: Vec<DVec3> = (0..n)
+        .map(&point)
+        .filter(|p| p.is_finite())
+        .step_by(stride)
+        .collect();
+    let mut vals: Vec<f64> = Vec::with_capacity(sample.len());
     for (axis, c) in centre.iter_mut().enumerate() {
         vals.clear();
-        vals.extend(
-            (0..n)
-                .map(&point)
-                .filter(|p| p.is_finite())
-                .step_by(stride)
-                .map(|p| p[axis]),
-        );
+        vals.extend(sample.iter().map(|p| p[axis]));
         if vals.is_empty() {
             return None;
         }
@@ -90,10 +91,10 @@ impl UnitFrame {
             };
         };
         let reach = positions
-            .iter()
+            .par_iter()
             .filter(|p| p.is_finite())
             .map(|p| (p.as_dvec3() - center).abs().max_element())
-            .fold(0f64, f64::max);
+            .reduce(|| 0f64, f64::max);
         let base = if robust > 0.0 { robust } else { reach };
         let scale = base.max(reach / MAX_REACH);
         UnitFrame {

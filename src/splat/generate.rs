@@ -259,17 +259,20 @@ impl std::error::Error for GenerateError {}
 /// indices into the cloud; and the number of duplicates dropped.
 fn clean_order(pos: &[Vec3]) -> (Vec<u32>, usize, usize) {
     let finite: Vec<u32> = (0..pos.len() as u32)
+        .into_par_iter()
         .filter(|&i| pos[i as usize].is_finite())
         .collect();
     let non_finite = pos.len() - finite.len();
     if finite.is_empty() {
         return (finite, non_finite, 0);
     }
-    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-    for &i in &finite {
-        lo = lo.min(pos[i as usize]);
-        hi = hi.max(pos[i as usize]);
-    }
+    let (lo, hi) = finite
+        .par_iter()
+        .map(|&i| (pos[i as usize], pos[i as usize]))
+        .reduce(
+            || (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+            |a, b| (a.0.min(b.0), a.1.max(b.1)),
+        );
     let scale = Vec3::splat((1u32 << 21) as f32 - 1.0) / (hi - lo).max(Vec3::splat(1e-30));
     let spread = |v: u64| {
         let mut x = v & 0x1f_ffff;
@@ -279,22 +282,48 @@ fn clean_order(pos: &[Vec3]) -> (Vec<u32>, usize, usize) {
         x = (x | x << 4) & 0x10c30c30c30c30c3;
         (x | x << 2) & 0x1249249249249249
     };
-    let mut keyed: Vec<(u64, [u32; 3], u32)> = finite
+    let bits = |i: u32| {
+        let p = pos[i as usize];
+        [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
+    };
+    // Sorted by (Morton key, coordinate bits, index): by (key, index) first
+    // (half the bytes to move), then each run of one key by bits.
+    let mut keyed: Vec<(u64, u32)> = finite
         .par_iter()
         .map(|&i| {
             let p = pos[i as usize];
             let q = ((p - lo) * scale).as_uvec3();
             let m =
                 spread(u64::from(q.x)) | spread(u64::from(q.y)) << 1 | spread(u64::from(q.z)) << 2;
-            (m, [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()], i)
+            (m, i)
         })
         .collect();
+    drop(finite);
     keyed.par_sort_unstable();
     let before = keyed.len();
-    // -0.0 and 0.0 differ in bits but not in position: compare values.
-    keyed.dedup_by(|a, b| a.0 == b.0 && a.1.map(f32::from_bits) == b.1.map(f32::from_bits));
-    let dupes = before - keyed.len();
-    (keyed.into_iter().map(|k| k.2).collect(), non_finite, dupes)
+    let mut order: Vec<u32> = Vec::with_capacity(before);
+    let mut run: Vec<([u32; 3], u32)> = Vec::new();
+    let mut start = 0;
+    while start < keyed.len() {
+        let key = keyed[start].0;
+        let mut end = start + 1;
+        while end < keyed.len() && keyed[end].0 == key {
+            end += 1;
+        }
+        if end - start == 1 {
+            order.push(keyed[start].1);
+        } else {
+            run.clear();
+            run.extend(keyed[start..end].iter().map(|&(_, i)| (bits(i), i)));
+            run.sort_unstable();
+            // -0.0 and 0.0 differ in bits but not in position: compare values.
+            run.dedup_by(|a, b| a.0.map(f32::from_bits) == b.0.map(f32::from_bits));
+            order.extend(run.iter().map(|e| e.1));
+        }
+        start = end;
+    }
+    let dupes = before - order.len();
+    (order, non_finite, dupes)
 }
 
 /// Turn a point cloud into splats: neighbourhoods (§2), normals, splat growth
@@ -340,7 +369,7 @@ pub fn generate_with_progress(
     // splats and the report's lengths are mapped back at the end.
     let frame = UnitFrame::of(&cloud.positions);
     let unit_cloud = PointCloud {
-        positions: cloud.positions.iter().map(|&p| frame.unit(p)).collect(),
+        positions: cloud.positions.par_iter().map(|&p| frame.unit(p)).collect(),
         origin: cloud.origin,
         normals: cloud.normals.clone(),
         colors: cloud.colors.clone(),

@@ -3,6 +3,7 @@
 use super::knn::Knn;
 use super::{NormalField, Splat, tangent_frame};
 use glam::{DVec3, Vec2, Vec3};
+use rayon::prelude::*;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
@@ -45,6 +46,8 @@ pub struct Grown {
     pub covered: Vec<bool>,
     /// How many splats are elliptical.
     pub elliptical: usize,
+    /// The point each splat grew from.
+    pub seeds: Vec<u32>,
 }
 
 /// One growth from a seed in a planar metric: projected coordinates
@@ -294,34 +297,176 @@ fn min_curvature(samples: &[(f64, f64, f64)]) -> Option<(f64, f64, f64)> {
     ))
 }
 
-/// Grow splats over the whole cloud, seeds in point order. A point taken
-/// within the projected distance `k·r_j` of splat `j`'s centre seeds no
-/// further splat (§2.2, fig. 6).
+/// One seed's splat and what it marks: every point it covers, and whether
+/// it also deactivates it (takes it within `k·r`, §2.2).
+struct Seeded {
+    splat: Splat,
+    marks: Vec<(u32, bool)>,
+    elliptical: bool,
+}
+
+/// One region's splats, their seeds, its deferred seeds and its count of
+/// elliptical splats.
+type RegionGrown = (Vec<Splat>, Vec<u32>, Vec<u32>, usize);
+
+/// Clouds of at least this many points grow their splats in
+/// [`GROWTH_REGIONS`] regions at once.
+pub const PARALLEL_GROWTH_MIN: usize = 1 << 20;
+
+/// Regions of a large cloud (runs of the point order, which is spatial)
+/// grown at once. A fixed number, so the splats do not depend on the
+/// threads: a region's seeds are taken in order while each splat marks
+/// only points of its region; a seed whose splat would mark a point of
+/// another region is deferred, and the deferred seeds still active are
+/// grown last, in order, over the whole cloud, with the points a deferred
+/// seed would take (they are held back with it rather than grown only to
+/// be deferred in turn). That is the greedy growth of §2.2 with the seeds
+/// in another order (each region's, then the deferred ones): every splat
+/// is seeded by a point no earlier splat took.
+pub const GROWTH_REGIONS: usize = 4;
+
+/// Grow splats over the whole cloud, seeds in point order (by regions of a
+/// large cloud, [`GROWTH_REGIONS`]). A point taken within the projected
+/// distance `k·r_j` of splat `j`'s centre seeds no further splat (§2.2,
+/// fig. 6).
 ///
 /// Each splat: centre by eq. (2), radius by eq. (3) — the projected distance
 /// of the farthest point taken — but at least the projected distance that
 /// covers the seed's `k` nearest (same-facing) neighbours, so neighbouring
 /// splats overlap and leave no holes.
 #[must_use]
-pub fn grow_all(inp: &GrowInput<'_>, mut progress: impl FnMut(usize)) -> Grown {
+pub fn grow_all(inp: &GrowInput<'_>, progress: impl Fn(usize) + Sync) -> Grown {
     let n_pts = inp.points.len();
-    let mut g = Grower {
-        inp,
-        stamp: vec![0; n_pts],
-        round: 0,
-        heap: BinaryHeap::new(),
+    let regions = if n_pts >= PARALLEL_GROWTH_MIN {
+        GROWTH_REGIONS
+    } else {
+        1
     };
+    grow_in_regions(inp, regions, progress)
+}
+
+/// [`grow_all`] with the cloud cut into `regions` runs of its points.
+fn grow_in_regions(inp: &GrowInput<'_>, regions: usize, progress: impl Fn(usize) + Sync) -> Grown {
+    let n_pts = inp.points.len();
+    let regions = regions.clamp(1, n_pts.max(1));
+    let bounds: Vec<usize> = (0..=regions).map(|r| r * n_pts / regions).collect();
     let mut active = vec![true; n_pts];
     let mut covered = vec![false; n_pts];
-    let mut splats = Vec::new();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    // Each region with its own slices of the marks.
+    let mut parts = Vec::with_capacity(regions);
+    {
+        let (mut act, mut cov) = (&mut active[..], &mut covered[..]);
+        for r in 0..regions {
+            let len = bounds[r + 1] - bounds[r];
+            let (a, rest_a) = act.split_at_mut(len);
+            let (c, rest_c) = cov.split_at_mut(len);
+            act = rest_a;
+            cov = rest_c;
+            parts.push((bounds[r], a, c));
+        }
+    }
+    let grown: Vec<RegionGrown> = parts
+        .into_par_iter()
+        .map(|(lo, active, covered)| {
+            let hi = lo + active.len();
+            let mut g = Grower::new(inp);
+            let (mut splats, mut deferred, mut elliptical) = (Vec::new(), Vec::new(), 0usize);
+            let mut held = vec![false; active.len()];
+            let mut seeds = Vec::new();
+            for i in lo..hi {
+                if (i - lo) % 65536 == 65535 {
+                    let d = done.fetch_add(65536, std::sync::atomic::Ordering::Relaxed);
+                    progress(d + 65536);
+                }
+                if !active[i - lo] {
+                    continue;
+                }
+                if held[i - lo] {
+                    deferred.push(i as u32);
+                    continue;
+                }
+                let s = g.seed(i);
+                if s.marks
+                    .iter()
+                    .any(|&(j, _)| !(lo..hi).contains(&(j as usize)))
+                {
+                    // The points it would take wait for it too: they are
+                    // not grown here (each would most likely be deferred
+                    // in turn), only considered again, in order, at the end.
+                    deferred.push(i as u32);
+                    for &(j, off) in &s.marks {
+                        if off && (lo..hi).contains(&(j as usize)) {
+                            held[j as usize - lo] = true;
+                        }
+                    }
+                    continue;
+                }
+                for &(j, off) in &s.marks {
+                    covered[j as usize - lo] = true;
+                    if off {
+                        active[j as usize - lo] = false;
+                    }
+                }
+                active[i - lo] = false;
+                elliptical += usize::from(s.elliptical);
+                splats.push(s.splat);
+                seeds.push(i as u32);
+            }
+            (splats, seeds, deferred, elliptical)
+        })
+        .collect();
+    let (mut splats, mut seeds, mut deferred) = (Vec::new(), Vec::new(), Vec::new());
     let mut elliptical = 0usize;
-    for i in 0..n_pts {
-        if i % 65536 == 0 {
-            progress(i);
+    for (s, i, d, e) in grown {
+        splats.extend(s);
+        seeds.extend(i);
+        deferred.extend(d);
+        elliptical += e;
+    }
+    if !deferred.is_empty() {
+        let mut g = Grower::new(inp);
+        for i in deferred {
+            let i = i as usize;
+            if !active[i] {
+                continue;
+            }
+            let s = g.seed(i);
+            for &(j, off) in &s.marks {
+                covered[j as usize] = true;
+                if off {
+                    active[j as usize] = false;
+                }
+            }
+            active[i] = false;
+            elliptical += usize::from(s.elliptical);
+            splats.push(s.splat);
+            seeds.push(i as u32);
         }
-        if !active[i] {
-            continue;
+    }
+    progress(n_pts);
+    Grown {
+        splats,
+        covered,
+        elliptical,
+        seeds,
+    }
+}
+
+impl<'a> Grower<'a> {
+    fn new(inp: &'a GrowInput<'a>) -> Self {
+        Grower {
+            inp,
+            stamp: vec![0; inp.points.len()],
+            round: 0,
+            heap: BinaryHeap::new(),
         }
+    }
+
+    /// The splat seeded by point `i` and the points it marks.
+    fn seed(&mut self, i: usize) -> Seeded {
+        let inp = self.inp;
+        let g = self;
         let p = inp.points[i];
         let n = inp.normals[i];
         let d_k = inp.knn.kth_distance[i].max(f32::MIN_POSITIVE);
@@ -387,32 +532,25 @@ pub fn grow_all(inp: &GrowInput<'_>, mut progress: impl FnMut(usize)) -> Grown {
         // covered, and seeds nothing within the projected distance k·r.
         let limit2 = (inp.density * r) * (inp.density * r);
         let (r2, hc) = (r * r, 0.5 * (growth.h_min + growth.h_max));
+        let mut marks = Vec::new();
         for &j in &growth.visited {
-            let j = j as usize;
-            let d = inp.points[j] - p;
+            let d = inp.points[j as usize] - p;
             let (x, y) = (a.dot(d) / aspect - shift.x, b.dot(d) - shift.y);
             let d2 = x * x + y * y;
             let on = d2 <= r2
                 && (n.dot(d) - hc).abs() <= inp.epsilon
-                && (j == i || inp.normals[j].dot(n) > 0.0);
+                && (j as usize == i || inp.normals[j as usize].dot(n) > 0.0);
             if on {
-                covered[j] = true;
-                if d2 <= limit2 {
-                    active[j] = false;
-                }
+                marks.push((j, d2 <= limit2));
             }
         }
-        active[i] = false;
         let color = match inp.colors {
             Some(_) if !growth.accepted.is_empty() => {
                 (color / growth.accepted.len() as f64).as_vec3()
             }
             _ => Vec3::ONE,
         };
-        if aspect > 1.0 {
-            elliptical += 1;
-        }
-        splats.push(Splat {
+        let splat = Splat {
             center,
             normal: n,
             u_axis: a,
@@ -420,12 +558,126 @@ pub fn grow_all(inp: &GrowInput<'_>, mut progress: impl FnMut(usize)) -> Grown {
             radii: Vec2::new(aspect * r, r),
             color,
             field: NormalField::FLAT,
-        });
+        };
+        Seeded {
+            splat,
+            marks,
+            elliptical: aspect > 1.0,
+        }
     }
-    progress(n_pts);
-    Grown {
-        splats,
-        covered,
-        elliptical,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::splat::knn::build_tree;
+
+    /// A wavy sheet of `n` jittered points (in row order, so runs of the
+    /// order are strips of the sheet), with its exact normals.
+    fn sheet(n: usize) -> (Vec<Vec3>, Vec<Vec3>) {
+        let side = (n as f64).sqrt() as usize;
+        let mut rng = crate::rng::SplitMix64::new(7);
+        let mut jitter = || (rng.next_u64() % 1000) as f32 / 1000.0 - 0.5;
+        let (mut p, mut nrm) = (Vec::new(), Vec::new());
+        for r in 0..side {
+            for c in 0..side {
+                let x = (c as f32 + 0.4 * jitter()) / side as f32;
+                let y = (r as f32 + 0.4 * jitter()) / side as f32;
+                let z = 0.05 * (6.0 * x).sin() * (5.0 * y).cos();
+                let dzdx = 0.3 * (6.0 * x).cos() * (5.0 * y).cos();
+                let dzdy = -0.25 * (6.0 * x).sin() * (5.0 * y).sin();
+                p.push(Vec3::new(x, y, z));
+                nrm.push(Vec3::new(-dzdx, -dzdy, 1.0).normalize());
+            }
+        }
+        (p, nrm)
+    }
+
+    fn grow(points: &[Vec3], normals: &[Vec3], regions: usize, threads: usize) -> Grown {
+        let tree = build_tree(points);
+        let knn = Knn::build(&tree, points, 12);
+        let inp = GrowInput {
+            points,
+            normals,
+            colors: None,
+            knn: &knn,
+            epsilon: 0.002,
+            density: 0.5,
+            ellipses: true,
+        };
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| grow_in_regions(&inp, regions, |_| {}))
+    }
+
+    fn bits(g: &Grown) -> Vec<u32> {
+        g.splats
+            .iter()
+            .flat_map(|s| {
+                let mut v = s.center.to_array().to_vec();
+                v.extend(s.normal.to_array());
+                v.extend(s.u_axis.to_array());
+                v.extend(s.radii.to_array());
+                v.into_iter().map(f32::to_bits)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn regions_grow_the_same_splats_for_any_thread_count() {
+        let (p, n) = sheet(40_000);
+        let one = grow(&p, &n, 4, 1);
+        let three = grow(&p, &n, 4, 3);
+        assert_eq!(one.seeds, three.seeds);
+        assert_eq!(bits(&one), bits(&three));
+        assert_eq!(one.covered, three.covered);
+    }
+
+    #[test]
+    fn regions_are_a_greedy_growth_in_another_seed_order() {
+        let (p, n) = sheet(40_000);
+        let serial = grow(&p, &n, 1, 2);
+        let split = grow(&p, &n, 4, 2);
+        // Replayed in the output order, every splat grows from a point no
+        // earlier splat took, and every point ends taken or a seed.
+        let tree = build_tree(&p);
+        let knn = Knn::build(&tree, &p, 12);
+        let inp = GrowInput {
+            points: &p,
+            normals: &n,
+            colors: None,
+            knn: &knn,
+            epsilon: 0.002,
+            density: 0.5,
+            ellipses: true,
+        };
+        let mut g = Grower::new(&inp);
+        let mut active = vec![true; p.len()];
+        for &i in &split.seeds {
+            assert!(active[i as usize], "seed {i} was taken by an earlier splat");
+            let s = g.seed(i as usize);
+            for (j, off) in s.marks {
+                if off {
+                    active[j as usize] = false;
+                }
+            }
+            active[i as usize] = false;
+        }
+        assert!(
+            active.iter().all(|&a| !a),
+            "points left unseeded and untaken"
+        );
+        assert!(split.covered.iter().all(|&c| c));
+        // About as many splats as in point order.
+        let (a, b) = (serial.splats.len() as f64, split.splats.len() as f64);
+        assert!(
+            (b / a - 1.0).abs() < 0.03,
+            "{a} splats in order, {b} in regions"
+        );
+        assert!(split.seeds.len() == split.splats.len() && a > 200.0);
+        // Some seeds did wait for the end: the regions changed the order.
+        assert!(split.seeds.windows(2).any(|w| w[0] > w[1]));
     }
 }
