@@ -317,10 +317,9 @@ pub const PARALLEL_GROWTH_MIN: usize = 1 << 20;
 /// grown at once. A fixed number, so the splats do not depend on the
 /// threads: a region's seeds are taken in order while each splat marks
 /// only points of its region; a seed whose splat would mark a point of
-/// another region is deferred, and the deferred seeds still active are
-/// grown last, in order, over the whole cloud, with the points a deferred
-/// seed would take (they are held back with it rather than grown only to
-/// be deferred in turn). That is the greedy growth of §2.2 with the seeds
+/// another region is deferred, with the points it would take (held back
+/// with it rather than grown only to be deferred in turn). The deferred
+/// seeds still active are grown last, in order, over the whole cloud. That is the greedy growth of §2.2 with the seeds
 /// in another order (each region's, then the deferred ones): every splat
 /// is seeded by a point no earlier splat took.
 pub const GROWTH_REGIONS: usize = 4;
@@ -349,36 +348,92 @@ pub fn grow_all(inp: &GrowInput<'_>, progress: impl Fn(usize) + Sync) -> Grown {
 fn grow_in_regions(inp: &GrowInput<'_>, regions: usize, progress: impl Fn(usize) + Sync) -> Grown {
     let n_pts = inp.points.len();
     let regions = regions.clamp(1, n_pts.max(1));
-    let bounds: Vec<usize> = (0..=regions).map(|r| r * n_pts / regions).collect();
     let mut active = vec![true; n_pts];
     let mut covered = vec![false; n_pts];
     let done = std::sync::atomic::AtomicUsize::new(0);
-    // Each region with its own slices of the marks.
-    let mut parts = Vec::with_capacity(regions);
+    let mut out = Grown {
+        splats: Vec::new(),
+        covered: Vec::new(),
+        elliptical: 0,
+        seeds: Vec::new(),
+    };
+    // Every point in `regions` runs, then the deferred ones over the whole
+    // cloud. (A second pass of runs half a run further on, before the last,
+    // took as long as it saved: the runs are Morton-ordered, so a run's
+    // border with the others is spread through it, not at its ends.)
+    let cuts: [Vec<usize>; 2] = [
+        (0..=regions).map(|r| r * n_pts / regions).collect(),
+        vec![0, n_pts],
+    ];
+    let mut candidates: Vec<u32> = (0..n_pts as u32).collect();
+    for (phase, bounds) in cuts.iter().enumerate() {
+        if candidates.is_empty() {
+            break;
+        }
+        let deferred = grow_phase(
+            inp,
+            &candidates,
+            bounds,
+            &mut active,
+            &mut covered,
+            &mut out,
+            &|k| {
+                if phase == 0 {
+                    let d = done.fetch_add(k, std::sync::atomic::Ordering::Relaxed);
+                    progress(d + k);
+                }
+            },
+        );
+        candidates = deferred;
+    }
+    debug_assert!(candidates.is_empty());
+    progress(n_pts);
+    out.covered = covered;
+    out
+}
+
+/// One phase of [`grow_in_regions`]: the `candidates` (ascending) as seeds
+/// in order, each run `bounds[r]..bounds[r + 1]` of the points on its own
+/// and all at once; the splats go to `out` run by run. Returns the seeds
+/// deferred (ascending): those whose splat would mark a point of another
+/// run, and the points such a splat would take.
+fn grow_phase(
+    inp: &GrowInput<'_>,
+    candidates: &[u32],
+    bounds: &[usize],
+    active: &mut [bool],
+    covered: &mut [bool],
+    out: &mut Grown,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Vec<u32> {
+    // Each run with its own slices of the marks and of the candidates.
+    let mut parts = Vec::with_capacity(bounds.len() - 1);
     {
-        let (mut act, mut cov) = (&mut active[..], &mut covered[..]);
-        for r in 0..regions {
-            let len = bounds[r + 1] - bounds[r];
+        let (mut act, mut cov, mut cand) = (active, covered, candidates);
+        for w in bounds.windows(2) {
+            let len = w[1] - w[0];
             let (a, rest_a) = act.split_at_mut(len);
             let (c, rest_c) = cov.split_at_mut(len);
+            let k = cand.partition_point(|&i| (i as usize) < w[1]);
             act = rest_a;
             cov = rest_c;
-            parts.push((bounds[r], a, c));
+            parts.push((w[0], a, c, &cand[..k]));
+            cand = &cand[k..];
         }
     }
     let grown: Vec<RegionGrown> = parts
         .into_par_iter()
-        .map(|(lo, active, covered)| {
+        .map(|(lo, active, covered, cand)| {
             let hi = lo + active.len();
             let mut g = Grower::new(inp);
             let (mut splats, mut deferred, mut elliptical) = (Vec::new(), Vec::new(), 0usize);
             let mut held = vec![false; active.len()];
             let mut seeds = Vec::new();
-            for i in lo..hi {
-                if (i - lo) % 65536 == 65535 {
-                    let d = done.fetch_add(65536, std::sync::atomic::Ordering::Relaxed);
-                    progress(d + 65536);
+            for (k, &i) in cand.iter().enumerate() {
+                if k % 65536 == 65535 {
+                    progress(65536);
                 }
+                let i = i as usize;
                 if !active[i - lo] {
                     continue;
                 }
@@ -393,7 +448,7 @@ fn grow_in_regions(inp: &GrowInput<'_>, regions: usize, progress: impl Fn(usize)
                 {
                     // The points it would take wait for it too: they are
                     // not grown here (each would most likely be deferred
-                    // in turn), only considered again, in order, at the end.
+                    // in turn), only considered again, in order, later.
                     deferred.push(i as u32);
                     for &(j, off) in &s.marks {
                         if off && (lo..hi).contains(&(j as usize)) {
@@ -416,41 +471,14 @@ fn grow_in_regions(inp: &GrowInput<'_>, regions: usize, progress: impl Fn(usize)
             (splats, seeds, deferred, elliptical)
         })
         .collect();
-    let (mut splats, mut seeds, mut deferred) = (Vec::new(), Vec::new(), Vec::new());
-    let mut elliptical = 0usize;
+    let mut deferred = Vec::new();
     for (s, i, d, e) in grown {
-        splats.extend(s);
-        seeds.extend(i);
+        out.splats.extend(s);
+        out.seeds.extend(i);
         deferred.extend(d);
-        elliptical += e;
+        out.elliptical += e;
     }
-    if !deferred.is_empty() {
-        let mut g = Grower::new(inp);
-        for i in deferred {
-            let i = i as usize;
-            if !active[i] {
-                continue;
-            }
-            let s = g.seed(i);
-            for &(j, off) in &s.marks {
-                covered[j as usize] = true;
-                if off {
-                    active[j as usize] = false;
-                }
-            }
-            active[i] = false;
-            elliptical += usize::from(s.elliptical);
-            splats.push(s.splat);
-            seeds.push(i as u32);
-        }
-    }
-    progress(n_pts);
-    Grown {
-        splats,
-        covered,
-        elliptical,
-        seeds,
-    }
+    deferred
 }
 
 impl<'a> Grower<'a> {
