@@ -145,7 +145,7 @@ fn report_and_aovs_are_written() {
             "--backend",
             "embree",
             "--aov",
-            "depth,normal,splat",
+            "depth,normal,splat,albedo",
             "--report",
         ])
         .arg(&report)
@@ -179,6 +179,29 @@ fn report_and_aovs_are_written() {
     assert_eq!(ids.get_pixel(0, 0)[0], -1.0);
     let n = image::open(dir.join("img.normal.exr")).unwrap().to_rgb32f();
     assert!(n.get_pixel(8, 8)[2] > 0.9, "centre normal faces the camera");
+    // The albedo AOV: the unlit colour where a ray hits, zero where none
+    // does, and the same bytes from the octree.
+    let albedo = image::open(dir.join("img.albedo.exr")).unwrap().to_rgb32f();
+    assert!(
+        albedo.get_pixel(8, 8).0.iter().all(|&c| c > 0.1),
+        "centre albedo"
+    );
+    assert_eq!(albedo.get_pixel(0, 0).0, [0.0; 3]);
+    let out2 = dir.join("img2.png");
+    let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+        .arg("render")
+        .arg(&scene_path)
+        .arg("-o")
+        .arg(&out2)
+        .args(["--backend", "octree", "--aov", "albedo"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        std::fs::read(dir.join("img.albedo.exr")).unwrap()
+            == std::fs::read(dir.join("img2.albedo.exr")).unwrap(),
+        "the backends' albedo AOVs differ"
+    );
 }
 
 #[test]

@@ -36,7 +36,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Also write these AOVs as EXR beside the image (comma separated:
-    /// depth,normal,splat).
+    /// depth,normal,splat,albedo).
     #[arg(long, value_delimiter = ',')]
     pub aov: Vec<Aov>,
     /// Render band I of N (I from 0): rows I·H/N to (I+1)·H/N of the image,
@@ -75,7 +75,7 @@ pub fn band_rows(height: u32, (i, n): (u32, u32)) -> std::ops::Range<u32> {
 }
 
 /// The default backend: the registry's first.
-fn default_backend() -> String {
+pub(crate) fn default_backend() -> String {
     registry::names()[0].to_string()
 }
 

@@ -37,6 +37,9 @@ pub struct ScanCheckArgs {
     /// filled).
     #[arg(long)]
     pub photo: bool,
+    /// The backend the photo check renders with.
+    #[arg(long, default_value_t = super::render::default_backend())]
+    pub backend: String,
 }
 
 /// Runs `splatray scan-check`.
@@ -111,8 +114,14 @@ fn photo(args: &ScanCheckArgs, splat: &splatray::splat::SplatParams) -> Result<(
         .ok_or_else(|| {
             format!("{name}: --photo needs an organised cloud (a PCD with HEIGHT > 1 and colours)")
         })?;
-    let r = splatray::validate::photo::photo_check(&grid, splat, args.holdout, args.seed)
-        .map_err(|e| format!("{name}: {e}"))?;
+    let r = splatray::validate::photo::photo_check(
+        &grid,
+        splat,
+        args.holdout,
+        args.seed,
+        &args.backend,
+    )
+    .map_err(|e| format!("{name}: {e}"))?;
     println!(
         "{name}: photo check of the organised {}x{} capture: {} measured pixels, {} held out, {} splats; \
          the splats cover {:.2} % of the held-out pixels and fill {:.2} % of the empty ones; albedo \

@@ -59,6 +59,9 @@ pub struct Frame {
     pub normal: Vec<Vec3>,
     /// Resolved splat id of the primary hit, `u32::MAX` on a miss.
     pub splat: Vec<u32>,
+    /// Unlit colour of the primary hit (the material's colour times the
+    /// splat's, linear), zero on a miss.
+    pub albedo: Vec<Vec3>,
     /// Rays traced.
     pub rays: RayCounts,
     /// Wall seconds spent rendering.
@@ -394,6 +397,7 @@ struct Row {
     depth: Vec<f32>,
     normal: Vec<Vec3>,
     splat: Vec<u32>,
+    albedo: Vec<Vec3>,
     rays: RayCounts,
 }
 
@@ -458,6 +462,7 @@ fn render_surfaces_rows(
             let mut depth = Vec::with_capacity(w);
             let mut normal = Vec::with_capacity(w);
             let mut splat = Vec::with_capacity(w);
+            let mut albedo = Vec::with_capacity(w);
             for x in 0..w {
                 let mut sum = Vec3::ZERO;
                 for i in 0..per_pixel {
@@ -478,6 +483,9 @@ fn render_surfaces_rows(
                         depth.push(hit.map_or(f32::INFINITY, |h| h.t));
                         normal.push(hit.map_or(Vec3::ZERO, |h| h.normal));
                         splat.push(hit.map_or(u32::MAX, |h| h.id));
+                        albedo.push(hit.map_or(Vec3::ZERO, |h| {
+                            scene.materials[h.material as usize].color() * h.color
+                        }));
                     }
                     sum += tracer.shade(&ray, hit, 0, &mut s);
                 }
@@ -492,6 +500,7 @@ fn render_surfaces_rows(
                 depth,
                 normal,
                 splat,
+                albedo,
                 rays: s.rays,
             }
         })
@@ -503,6 +512,7 @@ fn render_surfaces_rows(
         depth: Vec::with_capacity(w * h),
         normal: Vec::with_capacity(w * h),
         splat: Vec::with_capacity(w * h),
+        albedo: Vec::with_capacity(w * h),
         rays: RayCounts::default(),
         seconds: 0.0,
     };
@@ -511,6 +521,7 @@ fn render_surfaces_rows(
         frame.depth.extend(row.depth);
         frame.normal.extend(row.normal);
         frame.splat.extend(row.splat);
+        frame.albedo.extend(row.albedo);
         frame.rays = frame.rays.add(row.rays);
     }
     frame.seconds = start.elapsed().as_secs_f64();

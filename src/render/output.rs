@@ -160,6 +160,8 @@ pub enum Aov {
     Normal,
     /// Resolved splat id (miss: -1).
     Splat,
+    /// Unlit colour, linear (miss: 0).
+    Albedo,
 }
 
 impl std::str::FromStr for Aov {
@@ -169,8 +171,9 @@ impl std::str::FromStr for Aov {
             "depth" => Ok(Aov::Depth),
             "normal" => Ok(Aov::Normal),
             "splat" => Ok(Aov::Splat),
+            "albedo" => Ok(Aov::Albedo),
             _ => Err(Error::invalid(format!(
-                "unknown AOV '{s}' (expected depth, normal or splat)"
+                "unknown AOV '{s}' (expected depth, normal, splat or albedo)"
             ))),
         }
     }
@@ -187,6 +190,7 @@ pub fn aov_path(image: &Path, aov: Aov) -> PathBuf {
         Aov::Depth => "depth",
         Aov::Normal => "normal",
         Aov::Splat => "splat",
+        Aov::Albedo => "albedo",
     };
     image.with_file_name(format!("{stem}.{name}.exr"))
 }
@@ -211,6 +215,7 @@ pub fn write_aov_into(batch: &mut Batch, frame: &Frame, aov: Aov, path: &Path) -
             frame.depth.iter().map(|&d| Vec3::splat(d)),
         ),
         Aov::Normal => write_rgb32f(batch, path, w, h, frame.normal.iter().copied()),
+        Aov::Albedo => write_rgb32f(batch, path, w, h, frame.albedo.iter().copied()),
         Aov::Splat => write_rgb32f(
             batch,
             path,

@@ -106,6 +106,41 @@ pub fn build_scene(file: &SceneFile, base: &Path, progress: Option<Progress<'_>>
     })
 }
 
+/// A scene of one model, `splats` (white and diffuse), seen by `camera`
+/// (placed in the splats' coordinates), with no lights and the render
+/// options a scene file's defaults give: what a check renders unlit AOVs
+/// of.
+///
+/// # Errors
+/// One line when the splats span more than the renderer's f32 geometry
+/// holds.
+pub fn splats_scene(mut splats: Vec<Splat>, camera: Camera) -> Result<Scene> {
+    let standoff = crate::splat::standoff::standoff(&splats);
+    let (offset, diagonal) = recentre(&mut splats);
+    if !diagonal.is_finite() || diagonal > MAX_EXTENT {
+        return Err(Error::invalid(format!(
+            "the splats span {diagonal:e}, beyond the {MAX_EXTENT:e} the renderer's f32 geometry holds"
+        )));
+    }
+    let mut camera = camera;
+    camera.origin -= offset;
+    let (options, xi_of) = render_options(&RenderSpec::default(), diagonal, &[standoff])?;
+    Ok(Scene {
+        material_of: vec![0; splats.len()],
+        splats,
+        materials: vec![Material::Diffuse { color: Vec3::ONE }],
+        shading_of: vec![None],
+        xi_of,
+        camera,
+        lights: Vec::new(),
+        background: Vec3::ZERO,
+        options,
+        offset,
+        shift: DVec3::ZERO,
+        load: LoadReport::default(),
+    })
+}
+
 /// The widest scene the renderer takes, after re-centring: the squared
 /// distances of the ray-disc tests (and a diagonal's worth of `t`) stay
 /// finite in f32.

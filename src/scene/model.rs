@@ -38,6 +38,20 @@ pub enum Material {
     },
 }
 
+impl Material {
+    /// The colour the material multiplies a surface's colour by: the
+    /// albedo of a diffuse or Phong material, the tint of a mirror or glass.
+    #[must_use]
+    pub fn color(&self) -> Vec3 {
+        match *self {
+            Material::Diffuse { color }
+            | Material::Phong { color, .. }
+            | Material::Mirror { color }
+            | Material::Glass { color, .. } => color,
+        }
+    }
+}
+
 /// A light source.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Light {

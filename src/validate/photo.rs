@@ -1,18 +1,20 @@
 //! The photo check of an organised colour scan (`scan-check --photo`): the
 //! capture's own colours as the truth. A tenth of the measured pixels is
 //! held out of splat generation; the splats are seen from the sensor (its
-//! pose and fitted intrinsics, `scene::sensor`) through the held-out
-//! pixels' centres, each pixel taking the unlit colour (albedo) of the
-//! nearest splat its ray meets; and those colours are compared with the
+//! pose and fitted intrinsics, `scene::sensor`) through the pixels'
+//! centres, rendered unlit: the albedo AOV of the renderer (the resolved
+//! surface's colour, through the backend named); and the held-out pixels'
+//! colours are compared with the
 //! captured ones, in sRGB: PSNR at full resolution, and over 2×2 and 4×4
 //! blocks (texture finer than a splat dominates at full resolution), plus
 //! the share of the held-out pixels the splats cover and of the pixels the
 //! capture left empty that they fill.
 
-use crate::accel::CandidateHits;
 use crate::accel::registry;
 use crate::io::{Organised, linear_to_srgb};
+use crate::render::integrator::render;
 use crate::rng::SplitMix64;
+use crate::scene::load::splats_scene;
 use crate::scene::model::Camera;
 use crate::scene::sensor::recover;
 use crate::splat::{PointCloud, SplatParams};
@@ -55,7 +57,9 @@ pub fn photo_check(
     splat: &SplatParams,
     holdout: f32,
     seed: u64,
+    backend: &str,
 ) -> Result<PhotoReport> {
+    let info = registry::find(backend).ok_or_else(|| Error::invalid(registry::unknown(backend)))?;
     let colors = grid
         .colors
         .as_ref()
@@ -92,7 +96,6 @@ pub fn photo_check(
         ..splat.clone()
     };
     let (splats, _, _) = crate::freespace::generate_trimmed(&cloud, &params, None)?;
-    let backend = registry::renderers()[0].build_splats(&splats)?;
     let (w, h) = (sensor.width, sensor.height);
     let camera = Camera::look_at_intrinsics(
         Vec3::ZERO,
@@ -103,14 +106,16 @@ pub fn photo_check(
         h,
         1,
     )?;
+    let n_splats = splats.len();
+    let scene = splats_scene(splats, camera)?;
+    let built = info.build_splats(&scene.splats)?;
+    let frame = render(&scene, built.as_ref(), None);
     // The albedo each pixel sees (None: its ray meets nothing).
-    let mut hits = CandidateHits::new(0.0);
-    let seen: Vec<Option<Vec3>> = (0..w * h)
-        .map(|i| {
-            let ray = camera.ray((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
-            backend.intersect(&ray, 0.0, f32::INFINITY, &mut hits);
-            hits.nearest().map(|c| splats[c.id as usize].color)
-        })
+    let seen: Vec<Option<Vec3>> = frame
+        .splat
+        .iter()
+        .zip(&frame.albedo)
+        .map(|(&id, &a)| (id != u32::MAX).then_some(a))
         .collect();
     let mut truth: Vec<Option<Vec3>> = vec![None; (w * h) as usize];
     let mut measured = vec![false; (w * h) as usize];
@@ -166,7 +171,7 @@ pub fn photo_check(
         height: h,
         measured: grid.pixels.len(),
         held_out,
-        splats: splats.len(),
+        splats: n_splats,
         covered: covered as f64 / held_out.max(1) as f64,
         filled: filled as f64 / empty.max(1) as f64,
         psnr,
