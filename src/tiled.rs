@@ -63,10 +63,11 @@ pub const NORMALS_REACH_EPS: f64 = 2.0;
 pub const BYTES_PER_POINT: u64 = 192;
 
 /// The most tiles generated at once in one process, when they fit the
-/// budget together. The growth of splats runs on one thread (each seed
-/// depends on the splats before it), so a second tile keeps the other
-/// cores busy meanwhile: 10M bunny points in two tiles of 5.5M, 25.3 s one
-/// after the other, 20.3 s at once. Tiles are planned to the whole budget
+/// budget together. The kd-tree's build and the last of the growth (the
+/// seeds deferred across its regions, `splat::grow`) run on one thread,
+/// so a second tile keeps the other cores busy meanwhile: 10M bunny points
+/// in two tiles of 5.5M, 25.3 s one after the other, 20.3 s at once (with
+/// the growth on one thread, before it took four regions at once). Tiles are planned to the whole budget
 /// (halving them to run two at once spilled 170M points of 100M instead of
 /// 134M: more than the overlap gains), and the output does not depend on
 /// how many run at once.

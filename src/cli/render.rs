@@ -192,7 +192,7 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
     for &a in &args.aov {
         write_aov_into(&mut batch, &frame, a, &aov_path(&output, a))?;
     }
-    let report = RenderReport::new(&scene, backend.name(), build_seconds, &frame);
+    let report = RenderReport::new(&scene, info.name, build_seconds, &frame);
     if let Some(r) = &args.report {
         let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
         batch
@@ -212,7 +212,7 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
         scene.camera.spp,
         scene.splats.len(),
         scene.load.splat_seconds,
-        backend.name(),
+        info.name,
         build_seconds,
         frame.seconds,
         frame.rays.total(),
