@@ -6,7 +6,9 @@ use super::progress::ProgressLine;
 use super::view::default_scene;
 use splatray::render::output::check_output_path;
 use splatray::scene::parse_scene_file;
-use splatray::validate::sweep::{MODES, SweepPlan, SweepRow, csv_text, mode_name, run_sweep};
+use splatray::validate::sweep::{
+    MODES, SweepPlan, SweepRow, csv_text, mode_name, pareto, run_sweep,
+};
 use std::path::{Path, PathBuf};
 
 /// Coarsest default `ϵ` (fraction of the bounding-box diagonal, §2.1).
@@ -167,5 +169,25 @@ fn summary(rows: &[SweepRow]) {
                 renders.join(", ")
             );
         }
+    }
+    for b in &first.backends {
+        let front = pareto(rows, b.name);
+        let points: Vec<String> = front
+            .iter()
+            .map(|p| {
+                format!(
+                    "{} {} splats {:.3} s {:.2} dB",
+                    mode_name(p.shading),
+                    p.splats,
+                    p.render_s,
+                    p.psnr_db
+                )
+            })
+            .collect();
+        println!(
+            "  pareto {} (render time against PSNR; nothing else is both faster and closer): {}",
+            b.name,
+            points.join("; ")
+        );
     }
 }

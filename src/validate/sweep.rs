@@ -385,9 +385,111 @@ pub fn run_sweep(
     Ok(rows)
 }
 
+/// One configuration on a Pareto front of render time against image error.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParetoPoint {
+    /// The row's budget step and `ϵ`.
+    pub step: usize,
+    /// See `step`.
+    pub epsilon: f32,
+    /// The row's shading mode.
+    pub shading: ShadingMode,
+    /// Splats of the varied models.
+    pub splats: usize,
+    /// Render seconds.
+    pub render_s: f64,
+    /// PSNR against the exact surface (`f64::INFINITY` when identical).
+    pub psnr_db: f64,
+}
+
+/// The Pareto front of `backend`'s rows (every step and shading mode): the
+/// configurations no other renders both faster and closer to the exact
+/// surface (higher PSNR), fastest first. "Speed against error" in one list:
+/// each is the most accurate of the configurations at least as fast.
+#[must_use]
+pub fn pareto(rows: &[SweepRow], backend: &str) -> Vec<ParetoPoint> {
+    let mut pts: Vec<ParetoPoint> = rows
+        .iter()
+        .filter_map(|r| {
+            let b = r.backends.iter().find(|b| b.name == backend)?;
+            Some(ParetoPoint {
+                step: r.step,
+                epsilon: r.epsilon,
+                shading: r.shading,
+                splats: r.splats,
+                render_s: b.render_s,
+                psnr_db: b.errors.image_psnr_db.unwrap_or(f64::INFINITY),
+            })
+        })
+        .collect();
+    // Fastest first (higher PSNR first among equal times); a point joins
+    // the front when it beats every faster one's PSNR.
+    pts.sort_by(|a, b| {
+        a.render_s
+            .total_cmp(&b.render_s)
+            .then(b.psnr_db.total_cmp(&a.psnr_db))
+    });
+    let mut best = f64::NEG_INFINITY;
+    pts.retain(|p| {
+        let keep = p.psnr_db > best;
+        best = best.max(p.psnr_db);
+        keep
+    });
+    pts
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn row(step: usize, shading: ShadingMode, render_s: f64, psnr: f64) -> SweepRow {
+        SweepRow {
+            step,
+            epsilon: 0.01,
+            shading,
+            splats: 100 * (step + 1),
+            scene_splats: 100 * (step + 1),
+            splat_seconds: 0.0,
+            backends: vec![BackendFigures {
+                name: "octree",
+                build_s: 0.0,
+                render_s,
+                errors: TruthErrors {
+                    coverage: 1.0,
+                    false_hits: 0.0,
+                    depth_rel_p50: 0.0,
+                    depth_rel_p99: 0.0,
+                    normal_deg_mean: 0.0,
+                    normal_deg_p99: 0.0,
+                    image_psnr_db: Some(psnr),
+                },
+            }],
+            backends_identical: true,
+        }
+    }
+
+    #[test]
+    fn the_pareto_front_keeps_what_nothing_faster_beats() {
+        let rows = [
+            row(0, ShadingMode::Flat, 0.10, 20.0),
+            row(0, ShadingMode::Phong, 0.12, 24.0),
+            row(1, ShadingMode::Flat, 0.15, 23.0), // slower than Phong at step 0, worse
+            row(1, ShadingMode::Phong, 0.20, 28.0),
+            row(2, ShadingMode::Blended, 0.20, 27.0), // as fast as the one before, worse
+            row(2, ShadingMode::Phong, 0.30, 28.0),   // slower, no better
+        ];
+        let front = pareto(&rows, "octree");
+        let got: Vec<(usize, ShadingMode)> = front.iter().map(|p| (p.step, p.shading)).collect();
+        assert_eq!(
+            got,
+            [
+                (0, ShadingMode::Flat),
+                (0, ShadingMode::Phong),
+                (1, ShadingMode::Phong)
+            ]
+        );
+        assert!(pareto(&rows, "embree").is_empty());
+    }
 
     #[test]
     fn geometric_plan_spans_the_range_in_order() {
