@@ -434,7 +434,7 @@ pub fn generate_with_progress(
             });
         }
     }
-    let mut n = order.len();
+    let n = order.len();
     report.used_points = n;
     if n < 3 {
         return Err(GenerateError::TooFewPoints {
@@ -442,9 +442,9 @@ pub fn generate_with_progress(
             needed: 3,
         });
     }
-    let mut points: Vec<Vec3> = order.iter().map(|&i| cloud.positions[i as usize]).collect();
-    let mut sights = viewpoints_of(cloud, params).map(|v| v.pick(&order));
-    let mut colors: Option<Vec<Vec3>> = cloud
+    let points: Vec<Vec3> = order.iter().map(|&i| cloud.positions[i as usize]).collect();
+    let sights = viewpoints_of(cloud, params).map(|v| v.pick(&order));
+    let colors: Option<Vec<Vec3>> = cloud
         .colors
         .as_ref()
         .filter(|c| c.len() == cloud.positions.len())
@@ -458,7 +458,7 @@ pub fn generate_with_progress(
             .warnings
             .push("all points are coplanar: normals are oriented by a convention only".into());
     }
-    let mut k = params.k.min(n - 1);
+    let k = params.k.min(n - 1);
     if k < params.k {
         report.warnings.push(format!(
             "only {n} points: using k = {k} neighbours instead of {}",
@@ -466,36 +466,23 @@ pub fn generate_with_progress(
         ));
     }
     report.k = k;
-    let mut tree = build_tree(&points);
-    let mut knn = Knn::build(&tree, &points, k);
+    let tree = build_tree(&points);
+    let knn = Knn::build(&tree, &points, k);
+    let mut w = Work {
+        order,
+        points,
+        sights,
+        colors,
+        k,
+        tree,
+        knn,
+    };
     // --- outliers ------------------------------------------------------------
     if params.remove_outliers {
-        let out = outliers::flag(&points, &knn, sights.as_ref());
-        let count = out.iter().filter(|&&o| o).count();
-        if count > 0 && n - count > k {
-            retain_unflagged(&mut order, &out);
-            retain_unflagged(&mut points, &out);
-            if let Some(s) = sights.as_mut() {
-                s.retain(&out);
-            }
-            if let Some(c) = colors.as_mut() {
-                retain_unflagged(c, &out);
-            }
-            report.skipped_points.push(Skipped {
-                reason: format!(
-                    "statistical outlier (k-th neighbour over {}x its neighbours' or {}x the cloud's 90th percentile)",
-                    outliers::LOCAL_RATIO,
-                    outliers::GLOBAL_RATIO
-                ),
-                count,
-            });
-            n -= count;
-            report.used_points = n;
-            tree = build_tree(&points);
-            knn = Knn::build(&tree, &points, k);
-        }
+        drop_outliers(&mut w, &mut report);
     }
-    let (lo, hi) = points.iter().fold(
+    let n = w.points.len();
+    let (lo, hi) = w.points.iter().fold(
         (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
         |(a, b), p| (a.min(*p), b.max(*p)),
     );
@@ -504,80 +491,14 @@ pub fn generate_with_progress(
     let t1 = Instant::now();
     // --- normals ---------------------------------------------------------------
     notify(progress, "normals", 0.0);
-    let input_normals: Option<Vec<Vec3>> = cloud
-        .normals
-        .as_ref()
-        .filter(|v| v.len() == cloud.positions.len())
-        .map(|v| order.iter().map(|&i| v[i as usize]).collect());
-    let mut fixed = vec![false; n];
-    let mut nrm = vec![Vec3::Z; n];
-    let mut to_estimate = n;
-    if let Some(inp) = &input_normals {
-        to_estimate = 0;
-        for i in 0..n {
-            match inp[i].try_normalize() {
-                Some(m) => {
-                    nrm[i] = m;
-                    fixed[i] = true;
-                }
-                None => to_estimate += 1,
-            }
-        }
-    }
-    if to_estimate > 0 {
-        let normals::Estimated {
-            normals: est,
-            wide,
-            collinear,
-            degenerate,
-            ..
-        } = normals::estimate_multiscale(&points, &tree, &knn, sights.as_ref());
-        if (collinear * 20 > n || wide * 5 > n) && k < params.k * normals::WIDE_FACTOR {
-            // Anisotropic sampling (scan lines) or heavy noise: the k nearest
-            // neighbours of many points lie along one line or do not reach
-            // past the noise, so the neighbourhood graph would not join the
-            // lines. Growth and orientation get a wider graph.
-            let wider = (k * normals::WIDE_FACTOR).min(n - 1).min(256);
-            report.warnings.push(format!(
-                "the {k} nearest neighbours of {:.1} % of the points lie on one line or \
-                 within the noise (scan lines?): growing splats with k = {wider}",
-                100.0 * wide.max(collinear) as f64 / n as f64
-            ));
-            k = wider;
-            report.k = k;
-            knn = Knn::build(&tree, &points, k);
-        }
-        if wide * 100 > n {
-            report.warnings.push(format!(
-                "{wide} normals ({:.1} %) came from a {}x wider neighbourhood: the {k} nearest \
-                 neighbours were too noisy or lay along one scan line",
-                100.0 * wide as f64 / n as f64,
-                normals::WIDE_FACTOR
-            ));
-        }
-        if degenerate > 0 {
-            report.warnings.push(format!(
-                "{degenerate} points have collinear neighbourhoods even with {} neighbours: \
-                 their normals are a guess",
-                normals::WIDE_MAX
-            ));
-        }
-        for i in 0..n {
-            if !fixed[i] {
-                nrm[i] = est[i];
-            }
-        }
-        normals::orient(&points, &knn, &mut nrm, &fixed, sights.as_ref());
-        report.facing_away = sights
-            .as_ref()
-            .map(|vp| facing_away(&points, &nrm, &fixed, vp));
-    }
-    if input_normals.is_some() && to_estimate > 0 {
-        report.warnings.push(format!(
-            "{to_estimate} zero or non-finite input normals were re-estimated"
-        ));
-    }
-    report.estimated_normals = to_estimate;
+    let (nrm, fixed, to_estimate) = normals_of(&mut w, cloud, params, &mut report);
+    let Work {
+        mut points,
+        colors,
+        mut tree,
+        knn,
+        ..
+    } = w;
     // Range noise beyond the growth threshold: each splat would sit at its
     // seed's noisy height (eq. 2 centres it on the span of the points it
     // took), overlapping splats at scattered depths. The points are moved
@@ -688,6 +609,143 @@ pub fn generate_with_progress(
         total: (t4 - t0).as_secs_f64(),
     };
     Ok((splats, report))
+}
+
+/// The cleaned points in Morton order with what the stages read of them.
+struct Work {
+    /// Indices into the cloud.
+    order: Vec<u32>,
+    /// Positions in the unit frame.
+    points: Vec<Vec3>,
+    /// The scanner each point was seen from.
+    sights: Option<Viewpoints>,
+    /// Linear colours.
+    colors: Option<Vec<Vec3>>,
+    /// Neighbours per point.
+    k: usize,
+    /// The kd-tree over `points`.
+    tree: super::knn::PointTree,
+    /// The neighbourhood graph of §2.
+    knn: Knn,
+}
+
+/// Leaves out the statistical outliers (with their colours and scanners)
+/// and counts them; the kd-tree and the graph are rebuilt without them.
+fn drop_outliers(w: &mut Work, report: &mut SplatReport) {
+    let n = w.points.len();
+    let out = outliers::flag(&w.points, &w.knn, w.sights.as_ref());
+    let count = out.iter().filter(|&&o| o).count();
+    if count > 0 && n - count > w.k {
+        retain_unflagged(&mut w.order, &out);
+        retain_unflagged(&mut w.points, &out);
+        if let Some(s) = w.sights.as_mut() {
+            s.retain(&out);
+        }
+        if let Some(c) = w.colors.as_mut() {
+            retain_unflagged(c, &out);
+        }
+        report.skipped_points.push(Skipped {
+            reason: format!(
+                "statistical outlier (k-th neighbour over {}x its neighbours' or {}x the cloud's 90th percentile)",
+                outliers::LOCAL_RATIO,
+                outliers::GLOBAL_RATIO
+            ),
+            count,
+        });
+        report.used_points = n - count;
+        w.tree = build_tree(&w.points);
+        w.knn = Knn::build(&w.tree, &w.points, w.k);
+    }
+}
+
+/// Unit normals: given ones kept, the rest estimated at two scales and
+/// oriented (§2); which are given; and how many were estimated. A cloud
+/// whose nearest neighbours lie along scan lines gets a wider graph.
+fn normals_of(
+    w: &mut Work,
+    cloud: &PointCloud,
+    params: &SplatParams,
+    report: &mut SplatReport,
+) -> (Vec<Vec3>, Vec<bool>, usize) {
+    let n = w.points.len();
+    let input_normals: Option<Vec<Vec3>> = cloud
+        .normals
+        .as_ref()
+        .filter(|v| v.len() == cloud.positions.len())
+        .map(|v| w.order.iter().map(|&i| v[i as usize]).collect());
+    let mut fixed = vec![false; n];
+    let mut nrm = vec![Vec3::Z; n];
+    let mut to_estimate = n;
+    if let Some(inp) = &input_normals {
+        to_estimate = 0;
+        for i in 0..n {
+            match inp[i].try_normalize() {
+                Some(m) => {
+                    nrm[i] = m;
+                    fixed[i] = true;
+                }
+                None => to_estimate += 1,
+            }
+        }
+    }
+    if to_estimate > 0 {
+        let normals::Estimated {
+            normals: est,
+            wide,
+            collinear,
+            degenerate,
+            ..
+        } = normals::estimate_multiscale(&w.points, &w.tree, &w.knn, w.sights.as_ref());
+        if (collinear * 20 > n || wide * 5 > n) && w.k < params.k * normals::WIDE_FACTOR {
+            // Anisotropic sampling (scan lines) or heavy noise: the k nearest
+            // neighbours of many points lie along one line or do not reach
+            // past the noise, so the neighbourhood graph would not join the
+            // lines. Growth and orientation get a wider graph.
+            let wider = (w.k * normals::WIDE_FACTOR).min(n - 1).min(256);
+            report.warnings.push(format!(
+                "the {} nearest neighbours of {:.1} % of the points lie on one line or \
+                 within the noise (scan lines?): growing splats with k = {wider}",
+                w.k,
+                100.0 * wide.max(collinear) as f64 / n as f64
+            ));
+            w.k = wider;
+            report.k = wider;
+            w.knn = Knn::build(&w.tree, &w.points, wider);
+        }
+        if wide * 100 > n {
+            report.warnings.push(format!(
+                "{wide} normals ({:.1} %) came from a {}x wider neighbourhood: the {} nearest \
+                 neighbours were too noisy or lay along one scan line",
+                100.0 * wide as f64 / n as f64,
+                normals::WIDE_FACTOR,
+                w.k
+            ));
+        }
+        if degenerate > 0 {
+            report.warnings.push(format!(
+                "{degenerate} points have collinear neighbourhoods even with {} neighbours: \
+                 their normals are a guess",
+                normals::WIDE_MAX
+            ));
+        }
+        for i in 0..n {
+            if !fixed[i] {
+                nrm[i] = est[i];
+            }
+        }
+        normals::orient(&w.points, &w.knn, &mut nrm, &fixed, w.sights.as_ref());
+        report.facing_away = w
+            .sights
+            .as_ref()
+            .map(|vp| facing_away(&w.points, &nrm, &fixed, vp));
+    }
+    if input_normals.is_some() && to_estimate > 0 {
+        report.warnings.push(format!(
+            "{to_estimate} zero or non-finite input normals were re-estimated"
+        ));
+    }
+    report.estimated_normals = to_estimate;
+    (nrm, fixed, to_estimate)
 }
 
 /// The diagonal of the box holding all but the 0.1 % most extreme of
