@@ -33,6 +33,25 @@ pub struct BackendInfo<P> {
 /// Every backend, for primitives of type `P`: the scene's backends first
 /// (the first one is the default and the reference of `compare`), then the
 /// brute forces (the first of them is the oracle).
+///
+/// # Example
+/// ```
+/// use glam::Vec3;
+/// use splatray::accel::{CandidateHits, registry};
+/// use splatray::geometry::Ray;
+/// use splatray::splat::Splat;
+/// // One disc of radius 1 at the origin, facing +z.
+/// let splats = vec![Splat::disc(Vec3::ZERO, Vec3::Z, 1.0).unwrap()];
+/// let ray = Ray::new(Vec3::new(0.2, 0.0, 5.0), -Vec3::Z);
+/// let mut hits = CandidateHits::new(0.0);
+/// // Every renderer gives the same candidate (the backend contract).
+/// for info in registry::renderers() {
+///     let backend = info.build_splats(&splats).unwrap();
+///     backend.intersect(&ray, 0.0, f32::INFINITY, &mut hits);
+///     let c = hits.nearest().unwrap();
+///     assert_eq!((c.id, c.t), (0, 5.0), "{}", info.name);
+/// }
+/// ```
 #[must_use]
 pub fn backends<P: Primitive>() -> Vec<BackendInfo<P>> {
     vec![

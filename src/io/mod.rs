@@ -180,6 +180,19 @@ pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
 /// An [`IoError`] when the file cannot be read, is empty, has an unknown
 /// format, a malformed header or body, holds no usable point, or its points
 /// span more than single precision holds.
+///
+/// # Example
+/// ```
+/// // Three points far from zero and one NaN, as a text file.
+/// let path = std::env::temp_dir().join(format!("doc-read-{}.xyz", std::process::id()));
+/// std::fs::write(&path, "500000 10 2\n500001 10 2\n500000 11 2\nnan 0 0\n").unwrap();
+/// let cloud = splatray::io::read_points(&path).unwrap();
+/// assert_eq!(cloud.positions.len(), 3);
+/// assert_eq!(cloud.skipped_total(), 1);
+/// // The positions are f32 offsets from an f64 origin (the medians).
+/// assert_eq!(cloud.origin.x, 500000.0);
+/// std::fs::remove_file(&path).unwrap();
+/// ```
 pub fn read_points(path: &Path) -> Result<PointCloud, IoError> {
     let bytes = read_file(path)?;
     let format = Format::from_extension(path)

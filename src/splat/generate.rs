@@ -344,6 +344,24 @@ fn clean_order(pos: &[Vec3]) -> (Vec<u32>, usize, usize) {
 /// [`GenerateError`] when the parameters are out of range, fewer than 3
 /// distinct points remain, all points are collinear, or the splats do not
 /// fit single precision in the cloud's units.
+///
+/// # Example
+/// ```
+/// use glam::Vec3;
+/// use splatray::splat::{PointCloud, SplatParams, generate};
+/// // A 60 x 60 grid on a gently curved sheet.
+/// let positions: Vec<Vec3> = (0..3600)
+///     .map(|i| {
+///         let (x, y) = ((i % 60) as f32 / 59.0, (i / 60) as f32 / 59.0);
+///         Vec3::new(x, y, 0.1 * (x * x + y * y))
+///     })
+///     .collect();
+/// let cloud = PointCloud { positions, ..PointCloud::default() };
+/// let (splats, report) = generate(&cloud, &SplatParams::default()).unwrap();
+/// // Far fewer splats than points, and every point lies on one (§2.2).
+/// assert!(splats.len() > 10 && splats.len() < 1000, "{}", splats.len());
+/// assert_eq!(report.coverage, 1.0);
+/// ```
 pub fn generate(
     cloud: &PointCloud,
     params: &SplatParams,
