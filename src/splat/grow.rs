@@ -319,9 +319,10 @@ pub const PARALLEL_GROWTH_MIN: usize = 1 << 20;
 /// only points of its region; a seed whose splat would mark a point of
 /// another region is deferred, with the points it would take (held back
 /// with it rather than grown only to be deferred in turn). The deferred
-/// seeds still active are grown last, in order, over the whole cloud. That is the greedy growth of §2.2 with the seeds
-/// in another order (each region's, then the deferred ones): every splat
-/// is seeded by a point no earlier splat took.
+/// seeds still active are grown last, in order, over the whole cloud.
+/// That is the greedy growth of §2.2 with the seeds in another order (each
+/// region's, then the deferred ones): every splat is seeded by a point no
+/// earlier splat took.
 pub const GROWTH_REGIONS: usize = 4;
 
 /// Grow splats over the whole cloud, seeds in point order (by regions of a
@@ -358,35 +359,32 @@ fn grow_in_regions(inp: &GrowInput<'_>, regions: usize, progress: impl Fn(usize)
         seeds: Vec::new(),
     };
     // Every point in `regions` runs, then the deferred ones over the whole
-    // cloud. (A second pass of runs half a run further on, before the last,
-    // took as long as it saved: the runs are Morton-ordered, so a run's
-    // border with the others is spread through it, not at its ends.)
-    let cuts: [Vec<usize>; 2] = [
-        (0..=regions).map(|r| r * n_pts / regions).collect(),
-        vec![0, n_pts],
-    ];
-    let mut candidates: Vec<u32> = (0..n_pts as u32).collect();
-    for (phase, bounds) in cuts.iter().enumerate() {
-        if candidates.is_empty() {
-            break;
-        }
-        let deferred = grow_phase(
-            inp,
-            &candidates,
-            bounds,
-            &mut active,
-            &mut covered,
-            &mut out,
-            &|k| {
-                if phase == 0 {
-                    let d = done.fetch_add(k, std::sync::atomic::Ordering::Relaxed);
-                    progress(d + k);
-                }
-            },
-        );
-        candidates = deferred;
-    }
-    debug_assert!(candidates.is_empty());
+    // cloud (one run: nothing is deferred). A second pass of runs half a
+    // run further on, before the last, took as long as it saved: the runs
+    // are Morton-ordered, so a run's border with the others is spread
+    // through it, not at its ends.
+    let all: Vec<u32> = (0..n_pts as u32).collect();
+    let runs: Vec<usize> = (0..=regions).map(|r| r * n_pts / regions).collect();
+    let deferred = grow_phase(
+        inp,
+        &all,
+        &runs,
+        &mut active,
+        &mut covered,
+        &mut out,
+        &|k| progress(done.fetch_add(k, std::sync::atomic::Ordering::Relaxed) + k),
+    );
+    drop(all);
+    let rest = grow_phase(
+        inp,
+        &deferred,
+        &[0, n_pts],
+        &mut active,
+        &mut covered,
+        &mut out,
+        &|_| {},
+    );
+    debug_assert!(rest.is_empty());
     progress(n_pts);
     out.covered = covered;
     out
@@ -406,6 +404,9 @@ fn grow_phase(
     out: &mut Grown,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Vec<u32> {
+    if candidates.is_empty() {
+        return Vec::new();
+    }
     // Each run with its own slices of the marks and of the candidates.
     let mut parts = Vec::with_capacity(bounds.len() - 1);
     {
