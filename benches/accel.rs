@@ -35,7 +35,7 @@ use common::{Query, blobby_splats, camera_queries, diagonal};
 use criterion::{BatchSize, Criterion, SamplingMode, Throughput};
 use glam::Vec3;
 use rayon::prelude::*;
-use splatray::accel::octree::{Layout, Octree, OctreeParams, OverlapTest};
+use splatray::accel::octree::{Octree, OctreeParams};
 use splatray::accel::{Backend, BuildStats, Candidate, CandidateHits, Departure, Ray, backends};
 use splatray::embree::{Device, NativeDiscScene};
 use splatray::primitive::Disc;
@@ -55,20 +55,20 @@ fn sizes() -> Vec<usize> {
         .unwrap_or_else(|| vec![35_000, 1_000_000])
 }
 
-/// Who is benchmarked: every registered backend except the oracle
-/// (quadratic), and the octree with the report's bounding-square overlap
-/// test (§3.1) as a variant.
+/// Who is benchmarked: every registered renderer and variant (the
+/// registry's fast roles; the oracle and slow ones are quadratic), and
+/// Embree's native discs.
 type Build = Box<dyn Fn(&[Disc]) -> Box<dyn Backend>>;
 
 fn builders() -> Vec<(&'static str, Build)> {
     let mut out: Vec<(&'static str, Build)> = backends::<Disc>()
         .into_iter()
-        .filter(|b| !b.oracle)
+        .filter(|b| b.role.is_fast())
         .map(|b| {
-            let build = b.build;
             let name = b.name;
             let f: Build = Box::new(move |d: &[Disc]| {
-                build(d).unwrap_or_else(|e| panic!("building {name}: {e}"))
+                b.build(d)
+                    .unwrap_or_else(|e| panic!("building {name}: {e}"))
             });
             (name, f)
         })
@@ -77,32 +77,6 @@ fn builders() -> Vec<(&'static str, Build)> {
         "embree-native",
         Box::new(|d: &[Disc]| Box::new(Native::new(d)) as Box<dyn Backend>),
     ));
-    let octree = |params: OctreeParams| -> Build {
-        Box::new(move |d: &[Disc]| Box::new(Octree::new(d, &params)) as Box<dyn Backend>)
-    };
-    out.extend([
-        (
-            "octree-copies",
-            octree(OctreeParams {
-                layout: Layout::Copies,
-                ..OctreeParams::default()
-            }),
-        ),
-        (
-            "octree-shared",
-            octree(OctreeParams {
-                layout: Layout::Shared,
-                ..OctreeParams::default()
-            }),
-        ),
-        (
-            "octree-square",
-            octree(OctreeParams {
-                overlap: OverlapTest::BoundingSquare,
-                ..OctreeParams::default()
-            }),
-        ),
-    ]);
     out
 }
 
@@ -131,10 +105,6 @@ impl Native {
 }
 
 impl Backend for Native {
-    fn name(&self) -> &'static str {
-        "embree-native"
-    }
-
     fn intersect_from(
         &self,
         ray: &Ray,

@@ -341,3 +341,55 @@ fn bands_stitch_into_the_whole_render() {
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(!mixed.exists());
 }
+
+#[test]
+fn every_registry_entry_renders_under_its_own_name() {
+    // The octree's layouts and overlap tests are registry entries that
+    // differ from `octree` only in their parameters (one entry each, no type
+    // of their own): each must report its own name, and all of them, being
+    // one contract, the octree's image byte for byte.
+    let dir = scratch("entries");
+    let scene_path = dir.join("scene.toml");
+    std::fs::write(
+        &scene_path,
+        format!("{CAMERA}[[model]]\nshape = {{ kind = \"sphere\", radius = 1.0, splats = 300 }}\n[[light]]\nkind = \"point\"\nposition = [2.0, 2.0, 3.0]\n"),
+    )
+    .unwrap();
+    let mut images = Vec::new();
+    for info in splatray::accel::registry::backends::<splatray::primitive::Disc>() {
+        let out = dir.join(format!("{}.png", info.name));
+        let report = dir.join(format!("{}.json", info.name));
+        let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+            .arg("render")
+            .arg(&scene_path)
+            .arg("-o")
+            .arg(&out)
+            .args(["--backend", info.name, "--report"])
+            .arg(&report)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        assert_eq!(v["backend"], info.name);
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            stdout.contains(info.name),
+            "{} not named in: {stdout}",
+            info.name
+        );
+        images.push((info.name, std::fs::read(&out).unwrap()));
+    }
+    assert!(
+        images.len() >= 5,
+        "{:?}",
+        images.iter().map(|i| i.0).collect::<Vec<_>>()
+    );
+    for (name, bytes) in &images[1..] {
+        assert!(
+            *bytes == images[0].1,
+            "{name}'s image differs from {}'s",
+            images[0].0
+        );
+    }
+}

@@ -48,10 +48,6 @@ impl<P: Primitive> Brute<P> {
 }
 
 impl<P: Primitive> Backend for Brute<P> {
-    fn name(&self) -> &'static str {
-        "brute"
-    }
-
     fn intersect_from(
         &self,
         ray: &Ray,
@@ -93,10 +89,6 @@ impl<P: Primitive> BruteReversed<P> {
 
 #[cfg(feature = "test-backends")]
 impl<P: Primitive> Backend for BruteReversed<P> {
-    fn name(&self) -> &'static str {
-        "brute-reversed"
-    }
-
     fn intersect_from(
         &self,
         ray: &Ray,

@@ -104,10 +104,6 @@ impl<P: Primitive> EmbreeBackend<P> {
 }
 
 impl<P: Primitive> Backend for EmbreeBackend<P> {
-    fn name(&self) -> &'static str {
-        "embree"
-    }
-
     fn intersect_from(
         &self,
         ray: &Ray,

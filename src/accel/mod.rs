@@ -19,7 +19,7 @@ pub use crate::geometry::Ray;
 pub use departure::{
     Departure, NoSkip, SAME_SURFACE_COS, SAME_SURFACE_HEIGHT, SAME_SURFACE_RIM, Skip, WAY_OUT_COS,
 };
-pub use registry::{BackendInfo, backends};
+pub use registry::{BackendInfo, Role, backends};
 pub use window::{Candidate, CandidateHits, MAX_CANDIDATES};
 
 /// Figures about one built acceleration structure.
@@ -38,11 +38,8 @@ pub struct BuildStats {
 }
 
 /// One acceleration backend (`docs/DESIGN.md`, "The backend contract"). Implemented by the brute-force
-/// oracle, the octree and Embree.
+/// oracle, the octree and Embree; its name is its [`registry`] entry's.
 pub trait Backend: Send + Sync {
-    /// Short name: `brute`, `octree`, `embree`.
-    fn name(&self) -> &'static str;
-
     /// Fills `hits` (cleared first) with the candidate hits of `ray` in
     /// `[t_min, t_max]`: the nearest and all within the window of it. With
     /// `from`, a secondary ray leaving that splat: every hit

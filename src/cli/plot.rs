@@ -26,6 +26,10 @@ fn mode_color(i: usize) -> RGBColor {
     ][i % 3]
 }
 
+/// Line patterns by backend, in registry order: (dash, gap) in pixels, 0
+/// for a solid line.
+const DASHES: [(u32, u32); 4] = [(0, 0), (8, 4), (2, 4), (12, 4)];
+
 fn short_count(n: usize) -> String {
     if n >= 10_000 {
         format!("{}k", (n as f64 / 1000.0).round())
@@ -101,8 +105,8 @@ where
         let color = mode_color(mi);
         let count = rows.first().map_or(0, |r| r.backends.len());
         for k in 0..count {
-            // The reference backend (the first) solid with dots and splat
-            // counts, every other one dashed with triangles.
+            // Each backend its own line pattern and marker; the reference
+            // (the first) solid with dots and the splat counts.
             let reference = k == 0;
             let pts: Vec<(f64, f64, usize)> = rows
                 .iter()
@@ -119,32 +123,42 @@ where
                 rows.first().map_or("", |r| r.backends[k].name),
                 mode_name(mode)
             );
-            let xy = pts.iter().map(|&(x, y, _)| (x, y));
-            let line = if reference {
+            let xy: Vec<(f64, f64)> = pts.iter().map(|&(x, y, _)| (x, y)).collect();
+            let stroke = color.stroke_width(2);
+            let (dash, gap) = DASHES[k % DASHES.len()];
+            let line = if dash == 0 {
                 chart
-                    .draw_series(LineSeries::new(xy, color.stroke_width(2)))
+                    .draw_series(LineSeries::new(xy, stroke))
                     .map_err(err)?
             } else {
                 chart
-                    .draw_series(DashedLineSeries::new(xy, 6, 4, color.stroke_width(2)))
+                    .draw_series(DashedLineSeries::new(xy, dash, gap, stroke))
                     .map_err(err)?
             };
             line.label(name).legend(move |(x, y)| {
-                if reference {
-                    PathElement::new(vec![(x, y), (x + 22, y)], color.stroke_width(2))
+                // Three periods of the pattern within 22 pixels (a solid
+                // line: three times the whole length).
+                let (d, p) = if dash == 0 {
+                    (22, 0)
                 } else {
-                    PathElement::new(vec![(x, y), (x + 8, y)], color.stroke_width(2))
-                }
+                    let d = i32::try_from(dash).unwrap_or(8);
+                    (d, d + i32::try_from(gap).unwrap_or(4))
+                };
+                let seg =
+                    |i: i32| PathElement::new(vec![(i * p, 0), ((i * p + d).min(22), 0)], stroke);
+                EmptyElement::at((x, y)) + seg(0) + seg(1) + seg(2)
             });
-            chart
-                .draw_series(pts.iter().map(|&(x, y, _)| {
-                    if reference {
-                        Circle::new((x, y), 4, color.filled()).into_dyn()
-                    } else {
-                        TriangleMarker::new((x, y), 5, color.stroke_width(2)).into_dyn()
-                    }
-                }))
-                .map_err(err)?;
+            // Each backend its own marker: dot, triangle, cross, square.
+            let at = pts.iter().map(|&(x, y, _)| (x, y));
+            match k % 4 {
+                0 => chart.draw_series(at.map(|p| Circle::new(p, 4, color.filled()))),
+                1 => chart.draw_series(at.map(|p| TriangleMarker::new(p, 5, stroke))),
+                2 => chart.draw_series(at.map(|p| Cross::new(p, 4, stroke))),
+                _ => chart.draw_series(
+                    at.map(|p| EmptyElement::at(p) + Rectangle::new([(-4, -4), (4, 4)], stroke)),
+                ),
+            }
+            .map_err(err)?;
             if reference {
                 chart
                     .draw_series(pts.iter().map(|&(x, y, n)| {

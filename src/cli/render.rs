@@ -167,7 +167,7 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
     let scene = args.view.load(args.spp, &line)?;
     args.view
         .check_budget(&scene, splatray::render::budget::Holds::ONE)?;
-    let info = registry::find(&args.backend).ok_or_else(|| registry::unknown(&args.backend))?;
+    let info = registry::lookup(&args.backend)?;
     let backend = info
         .build_splats(&scene.splats)
         .map_err(|e| e.to_string())?;

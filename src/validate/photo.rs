@@ -59,7 +59,7 @@ pub fn photo_check(
     seed: u64,
     backend: &str,
 ) -> Result<PhotoReport> {
-    let info = registry::find(backend).ok_or_else(|| Error::invalid(registry::unknown(backend)))?;
+    let info = registry::lookup(backend)?;
     let colors = grid
         .colors
         .as_ref()

@@ -5,8 +5,8 @@
 #![allow(dead_code)]
 
 use glam::{Vec2, Vec3};
-use splatray::accel::octree::{Layout, Octree, OctreeParams, OverlapTest};
-use splatray::accel::{Backend, BuildStats, CandidateHits, Departure, Ray, backends as registry};
+use splatray::accel::registry::oracle;
+use splatray::accel::{Backend, CandidateHits, Departure, Ray, backends as registry};
 use splatray::primitive::{Disc, Hit, Local, Primitive, Single};
 use splatray::resolve::{ShadingMode, resolve};
 use splatray::splat::{NormalField, Splat};
@@ -262,58 +262,58 @@ impl Primitive for Unpacked {
     }
 }
 
-/// A backend under a label that says which primitive and variant it is
-/// (`octree<unpacked>`), for failure messages.
-struct Labelled {
-    label: &'static str,
-    inner: Box<dyn Backend>,
+/// A built backend under a label that says which registry entry and
+/// primitive it is (`octree<unpacked>`), for failure messages.
+pub struct Named {
+    /// `entry<primitive>`.
+    pub name: String,
+    backend: Box<dyn Backend>,
 }
 
-impl Backend for Labelled {
-    fn name(&self) -> &'static str {
-        self.label
+impl Named {
+    /// Wraps a backend built outside the registry (a deliberately broken one,
+    /// say).
+    pub fn new(name: impl Into<String>, backend: Box<dyn Backend>) -> Named {
+        Named {
+            name: name.into(),
+            backend,
+        }
     }
-    fn intersect_from(
-        &self,
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        from: Option<&Departure>,
-        hits: &mut CandidateHits,
-    ) {
-        self.inner.intersect_from(ray, t_min, t_max, from, hits);
+
+    /// The label.
+    pub fn name(&self) -> &str {
+        &self.name
     }
-    fn occluded_from(&self, ray: &Ray, t_min: f32, t_max: f32, from: Option<&Departure>) -> bool {
-        self.inner.occluded_from(ray, t_min, t_max, from)
-    }
-    fn stats(&self) -> &BuildStats {
-        self.inner.stats()
+
+    /// The backend.
+    pub fn as_ref(&self) -> &dyn Backend {
+        self.backend.as_ref()
     }
 }
 
-fn labelled(label: String, inner: Box<dyn Backend>) -> Box<dyn Backend> {
-    Box::new(Labelled {
-        label: Box::leak(label.into_boxed_str()),
-        inner,
-    })
+impl std::ops::Deref for Named {
+    type Target = dyn Backend;
+    fn deref(&self) -> &Self::Target {
+        self.backend.as_ref()
+    }
 }
 
 /// The oracle plus every backend under test.
 pub struct Backends {
-    /// The brute-force oracle, over discs.
-    pub oracle: Box<dyn Backend>,
-    /// The backends checked against it: every registered backend over
-    /// discs and over [`Unpacked`] discs (the registry's oracle included
-    /// for the latter), and the octree with the report's bounding-square
-    /// overlap test (§3.1), a variant of a registered backend.
-    pub tested: Vec<Box<dyn Backend>>,
+    /// The registry's oracle, over discs.
+    pub oracle: Named,
+    /// The backends checked against it: every registered entry (renderers,
+    /// their variants, the slow ones, the oracle itself over the other
+    /// primitive) over discs and over [`Unpacked`] discs.
+    pub tested: Vec<Named>,
 }
 
-fn build_all<P: Primitive>(prims: &[P], primitive: &str, out: &mut Vec<Box<dyn Backend>>) {
+fn build_all<P: Primitive>(prims: &[P], primitive: &str, out: &mut Vec<Named>) {
     for info in registry::<P>() {
-        let b =
-            (info.build)(prims).unwrap_or_else(|e| panic!("building backend {}: {e}", info.name));
-        out.push(labelled(format!("{}<{primitive}>", info.name), b));
+        let b = info
+            .build(prims)
+            .unwrap_or_else(|e| panic!("building backend {}: {e}", info.name));
+        out.push(Named::new(format!("{}<{primitive}>", info.name), b));
     }
 }
 
@@ -322,33 +322,14 @@ pub fn backends(splats: &[Splat]) -> Backends {
     let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
     let mut all = Vec::new();
     build_all(&discs, "disc", &mut all);
-    let oracle_at = registry::<Disc>()
+    let oracle_name = format!("{}<disc>", oracle::<Disc>().name);
+    let oracle_at = all
         .iter()
-        .position(|b| b.oracle)
-        .expect("the registry lists an oracle");
+        .position(|b| b.name == oracle_name)
+        .expect("the oracle was built");
     let oracle = all.remove(oracle_at);
     let unpacked: Vec<Unpacked> = discs.iter().copied().map(Unpacked).collect();
     build_all(&unpacked, "unpacked", &mut all);
-    let square = OctreeParams {
-        overlap: OverlapTest::BoundingSquare,
-        ..OctreeParams::default()
-    };
-    all.push(labelled(
-        "octree-square<disc>".into(),
-        Box::new(Octree::new(&discs, &square)),
-    ));
-    let shared = OctreeParams {
-        layout: Layout::Shared,
-        ..OctreeParams::default()
-    };
-    all.push(labelled(
-        "octree-shared<disc>".into(),
-        Box::new(Octree::new(&discs, &shared)),
-    ));
-    all.push(labelled(
-        "octree-shared<unpacked>".into(),
-        Box::new(Octree::new(&unpacked, &shared)),
-    ));
     Backends {
         oracle,
         tested: all,
@@ -375,8 +356,8 @@ fn describe(q: &Query, splats: &[Splat], hits: &CandidateHits) -> String {
 /// shading modes. Returns a replayable description of the first
 /// disagreement.
 pub fn agree(
-    oracle: &dyn Backend,
-    backend: &dyn Backend,
+    oracle: &Named,
+    backend: &Named,
     splats: &[Splat],
     queries: &[Query],
     xi: f32,
@@ -445,7 +426,7 @@ pub fn agree(
 /// replayable description of the first disagreement.
 pub fn assert_all_agree(b: &Backends, splats: &[Splat], queries: &[Query], xi: f32, what: &str) {
     for backend in &b.tested {
-        if let Err(e) = agree(b.oracle.as_ref(), backend.as_ref(), splats, queries, xi) {
+        if let Err(e) = agree(&b.oracle, backend, splats, queries, xi) {
             panic!("{what}: {e}\n(replay with SPLATRAY_SEED={:#x})", seed());
         }
     }

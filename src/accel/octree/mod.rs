@@ -104,7 +104,7 @@ pub enum Layout {
 pub const AUTO_MAX_COPIES_BYTES: usize = 512 << 20;
 
 /// Build parameters of the [`Octree`].
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OctreeParams {
     /// A leaf holding more centres than this is split (§3.1).
     pub max_leaf: usize,
@@ -290,10 +290,6 @@ impl<P: Primitive> Octree<P> {
 }
 
 impl<P: Primitive> Backend for Octree<P> {
-    fn name(&self) -> &'static str {
-        "octree"
-    }
-
     /// One traversal per kind of query, monomorphised: primary rays
     /// ([`NoSkip`]) pay nothing for the self-hit rule.
     fn intersect_from(
