@@ -2,7 +2,8 @@
 # The test suite, as CI runs it: every test once with Embree's default
 # kernels (the widest ISA this CPU has), then every test but the fuzzer
 # again with Embree forced to each of its ISAs this CPU runs (sse4.2, avx2,
-# avx512), through SPLATRAY_EMBREE_CONFIG. Floats that Embree computes are
+# avx512), through SPLATRAY_EMBREE_CONFIG, then the octree's render suites
+# on each of its SIMD paths (SPLATRAY_SIMD). Floats that Embree computes are
 # compared with a tolerance; candidate hits must stay identical.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
@@ -21,6 +22,15 @@ for isa in $isas; do
     case "$isa" in sse4.2 | avx2 | avx512) ;; *) continue ;; esac
     echo "== tests again with Embree forced to isa=$isa"
     SPLATRAY_EMBREE_CONFIG="isa=$isa" cargo test --release -q --lib "${targets[@]}"
+done
+
+# The octree's leaf filter on each SIMD path this CPU runs (SPLATRAY_SIMD):
+# the suites whose renders use the default octree (the conformance suite
+# builds every path at once through the registry).
+paths=$(cargo run --release -q -- info | sed -n 's/^simd .*this CPU runs: \([a-z0-9 ]*\);.*/\1/p')
+for path in $paths; do
+    echo "== octree suites again with SPLATRAY_SIMD=$path"
+    SPLATRAY_SIMD="$path" cargo test --release -q --test far --test window --test hard_scenes --test contact --test render
 done
 
 # The Dask driver (python/): its dependencies in a virtual environment of

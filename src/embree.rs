@@ -78,10 +78,10 @@ unsafe extern "C" fn on_error(user: *mut c_void, code: u32, msg: *const c_char) 
             .to_string_lossy()
             .into_owned()
     };
-    if let Ok(mut s) = slot.lock() {
-        if s.is_none() {
-            *s = Some(EmbreeError(format!("{} ({text})", error_name(code))));
-        }
+    if let Ok(mut s) = slot.lock()
+        && s.is_none()
+    {
+        *s = Some(EmbreeError(format!("{} ({text})", error_name(code))));
     }
 }
 

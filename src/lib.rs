@@ -17,6 +17,7 @@ pub mod resolve;
 pub mod rng;
 pub mod scanner;
 pub mod scene;
+pub mod simd;
 pub mod splat;
 pub mod terrain;
 pub mod tiled;

@@ -163,6 +163,16 @@ fn info() -> Result<(), String> {
         println!("config   {config} (from {})", splatray::embree::CONFIG_VAR);
     }
     println!("cpu isas {}", cpu.join(" "));
+    let paths: Vec<&str> = splatray::simd::available()
+        .iter()
+        .map(|i| i.name())
+        .collect();
+    println!(
+        "simd     {} (the octree's leaf filter; this CPU runs: {}; set {} to choose)",
+        splatray::simd::active(),
+        paths.join(" "),
+        splatray::simd::SIMD_VAR
+    );
     match splatray::memory::limit() {
         Some(b) => println!(
             "memory   {:.1} GB may be allocated ({})",
@@ -177,6 +187,10 @@ fn info() -> Result<(), String> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Err(e) = splatray::simd::configured() {
+        eprintln!("splatray: {e}");
+        return ExitCode::FAILURE;
+    }
     let result = match cli.command {
         Command::Info => info(),
         Command::Render(args) => cli::render::run(&args),

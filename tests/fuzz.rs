@@ -114,10 +114,10 @@ fn scene(bytes: &[u8]) {
         return;
     };
     let e = splatray::render::budget::estimate(&scene, splatray::render::budget::Holds::ONE);
-    if e.rays <= 1e5 {
-        if let Ok(backend) = splatray::accel::registry::renderers()[0].build_splats(&scene.splats) {
-            let _ = splatray::render::integrator::render(&scene, backend.as_ref(), None);
-        }
+    if e.rays <= 1e5
+        && let Ok(backend) = splatray::accel::registry::renderers()[0].build_splats(&scene.splats)
+    {
+        let _ = splatray::render::integrator::render(&scene, backend.as_ref(), None);
     }
 }
 

@@ -13,6 +13,7 @@ use super::octree::{Layout, Octree, OctreeParams, OverlapTest};
 use crate::embree::Device;
 use crate::error::Result;
 use crate::primitive::{Disc, Primitive};
+use crate::simd::Isa;
 use crate::splat::Splat;
 
 /// What a registered backend is for: which commands and suites use it.
@@ -125,7 +126,7 @@ fn octree_with(layout: Option<Layout>, overlap: Option<OverlapTest>) -> Params {
 /// ```
 #[must_use]
 pub fn backends<P: Primitive>() -> Vec<BackendInfo<P>> {
-    vec![
+    let mut all = vec![
         BackendInfo {
             name: "octree",
             about: "the octree of §3.1 (default)",
@@ -176,7 +177,44 @@ pub fn backends<P: Primitive>() -> Vec<BackendInfo<P>> {
             params: Params::default(),
             builder: |p, _| Ok(Box::new(super::brute::BruteReversed::new(p))),
         },
-    ]
+    ];
+    // The octree on each SIMD path this CPU runs, after the other variants
+    // (`crate::simd`): the conformance suite checks every path.
+    let at = all
+        .iter()
+        .rposition(|b| b.role == Role::Variant)
+        .map_or(0, |i| i + 1);
+    let paths = crate::simd::available().into_iter().map(|isa| BackendInfo {
+        name: simd_name(isa),
+        about: simd_about(isa),
+        role: Role::Variant,
+        params: Params {
+            octree: OctreeParams {
+                simd: Some(isa),
+                ..OctreeParams::default()
+            },
+        },
+        builder: octree,
+    });
+    all.splice(at..at, paths);
+    all
+}
+
+/// The registry name of the octree forced to the SIMD path `isa`.
+fn simd_name(isa: Isa) -> &'static str {
+    match isa {
+        Isa::Portable => "octree-portable",
+        Isa::Avx2 => "octree-avx2",
+        Isa::Avx512 => "octree-avx512",
+    }
+}
+
+fn simd_about(isa: Isa) -> &'static str {
+    match isa {
+        Isa::Portable => "the octree with its baseline (SSE2) leaf filter",
+        Isa::Avx2 => "the octree with its AVX2 leaf filter (8 discs at once)",
+        Isa::Avx512 => "the octree with its AVX-512 leaf filter (16 discs at once)",
+    }
 }
 
 /// The names of every backend, in registry order.

@@ -60,11 +60,11 @@ impl ProgressLine {
     /// Clear the line, if anything was drawn (before printing other output,
     /// and when the work is done).
     pub fn finish(&self) {
-        if let Ok(mut st) = self.state.lock() {
-            if st.drawn {
-                let _ = write!(std::io::stderr().lock(), "\r\x1b[2K");
-                st.drawn = false;
-            }
+        if let Ok(mut st) = self.state.lock()
+            && st.drawn
+        {
+            let _ = write!(std::io::stderr().lock(), "\r\x1b[2K");
+            st.drawn = false;
         }
     }
 }

@@ -3,7 +3,8 @@
 
 use super::{Hit, Local, Pack, PackRay, Primitive};
 use crate::geometry::Ray;
-use glam::{Vec3, Vec4};
+use crate::simd;
+use glam::Vec3;
 
 /// What the intersection hot loop reads of a splat: 48 contiguous bytes.
 /// The tangent axes are pre-divided by the radii, so the local coordinates
@@ -190,65 +191,42 @@ fn segment_within_unit(p: [f32; 2], q: [f32; 2]) -> bool {
     x * x + y * y <= 1.0
 }
 
-/// Discs per [`DiscPack`].
-const LANES: usize = 4;
+/// Discs per [`DiscPack`]: as many as an AVX2 register holds.
+const LANES: usize = simd::LANES;
 
-/// [`LANES`] discs stored component by component (SoA): one SSE register
-/// per coordinate, so [`DiscPack::may_hit`] tests them together.
-#[derive(Clone, Copy, Debug)]
-#[repr(C, align(64))]
-pub struct DiscPack {
-    center: [Vec4; 3],
-    normal: [Vec4; 3],
-    u_scaled: [Vec4; 3],
-    v_scaled: [Vec4; 3],
-}
+/// [`LANES`] discs stored component by component (SoA,
+/// [`simd::DiscColumns`]), so [`Pack::masks`] tests them together on the
+/// widest path the CPU runs (`crate::simd`).
+pub type DiscPack = simd::DiscColumns;
 
 impl Pack<Disc> for DiscPack {
     const LANES: usize = LANES;
 
     /// All lanes padding: a zero normal, so no ray can hit them (`n·d` is
     /// 0 or NaN, hence `t` is never finite).
-    const EMPTY: DiscPack = DiscPack {
-        center: [Vec4::ZERO; 3],
-        normal: [Vec4::ZERO; 3],
-        u_scaled: [Vec4::ZERO; 3],
-        v_scaled: [Vec4::ZERO; 3],
+    const EMPTY: DiscPack = simd::DiscColumns {
+        cols: [[0.0; LANES]; 12],
     };
 
     fn set(&mut self, lane: usize, d: &Disc) {
+        let c = &mut self.cols;
         for k in 0..3 {
-            self.center[k][lane] = d.center[k];
-            self.normal[k][lane] = d.normal[k];
-            self.u_scaled[k][lane] = d.u_scaled[k];
-            self.v_scaled[k][lane] = d.v_scaled[k];
-        }
-    }
-
-    /// Column by column (one `Vec4` per coordinate), not lane by lane.
-    fn from_fn(lane: impl Fn(usize) -> Option<Disc>) -> Self {
-        let d: [Option<Disc>; LANES] = std::array::from_fn(lane);
-        let col = |f: &dyn Fn(&Disc) -> f32| {
-            Vec4::from_array(std::array::from_fn(|l| d[l].as_ref().map_or(0.0, f)))
-        };
-        let vec =
-            |f: &dyn Fn(&Disc) -> Vec3| [col(&|d| f(d).x), col(&|d| f(d).y), col(&|d| f(d).z)];
-        DiscPack {
-            center: vec(&|d| d.center),
-            normal: vec(&|d| d.normal),
-            u_scaled: vec(&|d| d.u_scaled),
-            v_scaled: vec(&|d| d.v_scaled),
+            c[simd::CENTER + k][lane] = d.center[k];
+            c[simd::NORMAL + k][lane] = d.normal[k];
+            c[simd::U_SCALED + k][lane] = d.u_scaled[k];
+            c[simd::V_SCALED + k][lane] = d.v_scaled[k];
         }
     }
 
     #[inline]
     fn get(&self, lane: usize) -> Disc {
-        let get = |a: &[Vec4; 3]| Vec3::new(a[0][lane], a[1][lane], a[2][lane]);
+        let c = &self.cols;
+        let get = |k: usize| Vec3::new(c[k][lane], c[k + 1][lane], c[k + 2][lane]);
         Disc {
-            center: get(&self.center),
-            normal: get(&self.normal),
-            u_scaled: get(&self.u_scaled),
-            v_scaled: get(&self.v_scaled),
+            center: get(simd::CENTER),
+            normal: get(simd::NORMAL),
+            u_scaled: get(simd::U_SCALED),
+            v_scaled: get(simd::V_SCALED),
         }
     }
 
@@ -257,31 +235,32 @@ impl Pack<Disc> for DiscPack {
     /// operations), so the mask equals "`intersect` hits" except that the
     /// rim test is relaxed by `1e-4` — a conservative filter in any case,
     /// since each set lane is then decided by `intersect` itself.
-    #[inline(always)]
+    #[inline]
     fn may_hit(&self, ray: &PackRay, t_min: f32, t_max: f32) -> u32 {
-        let [ox, oy, oz] = ray.origin.map(Vec4::splat);
-        let [dx, dy, dz] = ray.dir.map(Vec4::splat);
-        let [nx, ny, nz] = self.normal;
-        let [cx, cy, cz] = self.center;
-        let denom = nx * dx + ny * dy + nz * dz;
-        let (ocx, ocy, ocz) = (ox - cx, oy - cy, oz - cz);
-        let num = nx * ocx + ny * ocy + nz * ocz;
-        let t = -num / denom;
-        // Once the window is narrow most planes are crossed outside it.
-        let in_range = (t.cmpge(Vec4::splat(t_min))
-            & t.cmple(Vec4::splat(t_max))
-            & t.abs().cmplt(Vec4::INFINITY))
-        .bitmask();
-        if in_range == 0 {
-            return 0;
-        }
-        let [ux, uy, uz] = self.u_scaled;
-        let [vx, vy, vz] = self.v_scaled;
-        let (px, py, pz) = (ocx + dx * t, ocy + dy * t, ocz + dz * t);
-        let u = px * ux + py * uy + pz * uz;
-        let v = px * vx + py * vy + pz * vz;
-        let r2 = u * u + v * v;
-        r2.cmple(Vec4::splat(1.0001)).bitmask() & in_range
+        let mut m = [0];
+        Self::masks(
+            std::slice::from_ref(self),
+            ray,
+            t_min,
+            t_max,
+            simd::Isa::Portable,
+            &mut m,
+        );
+        m[0]
+    }
+
+    /// [`DiscPack::may_hit`] of every pack on the path `isa`
+    /// ([`simd::disc_masks`]: the same lanes on every path).
+    #[inline]
+    fn masks(
+        packs: &[Self],
+        ray: &PackRay,
+        t_min: f32,
+        t_max: f32,
+        isa: simd::Isa,
+        out: &mut [u32],
+    ) {
+        simd::disc_masks(packs, ray.origin, ray.dir, t_min, t_max, isa, out);
     }
 }
 
@@ -346,7 +325,11 @@ mod tests {
             disc(Vec3::new(1.0, 2.0, 3.0), Vec3::new(0.3, -0.5, 0.8), 0.25),
             disc(Vec3::new(-4.0, 0.5, 1e3), Vec3::Y, 2.0),
         ];
-        let lanes = |l: usize| [Some(discs[0]), None, Some(discs[1]), None][l];
+        let lanes = |l: usize| match l {
+            0 | 7 => Some(discs[0]),
+            2 | 5 => Some(discs[1]),
+            _ => None,
+        };
         let mut by_set = DiscPack::EMPTY;
         for l in 0..LANES {
             if let Some(d) = lanes(l) {

@@ -128,6 +128,23 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
     /// that must pass every lane [`Primitive::intersect`] hits and no padding
     /// lane; each lane passed is then decided by `intersect` itself.
     fn may_hit(&self, ray: &PackRay, t_min: f32, t_max: f32) -> u32;
+    /// [`Pack::may_hit`] of each of `packs` into `out` (at least as long),
+    /// computed on the SIMD path `isa` where the pack has one: every path
+    /// passes the same lanes.
+    #[inline]
+    fn masks(
+        packs: &[Self],
+        ray: &PackRay,
+        t_min: f32,
+        t_max: f32,
+        isa: crate::simd::Isa,
+        out: &mut [u32],
+    ) {
+        let _ = isa;
+        for (p, m) in packs.iter().zip(out.iter_mut()) {
+            *m = p.may_hit(ray, t_min, t_max);
+        }
+    }
 }
 
 /// The pack of a primitive with no SIMD filter: one primitive, tested by

@@ -77,13 +77,13 @@ pub fn check_writable(path: &Path) -> Result<()> {
         )));
     }
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
-    if let Some(d) = dir {
-        if !d.is_dir() {
-            return Err(Error::invalid(format!(
-                "{}: folder does not exist",
-                d.display()
-            )));
-        }
+    if let Some(d) = dir
+        && !d.is_dir()
+    {
+        return Err(Error::invalid(format!(
+            "{}: folder does not exist",
+            d.display()
+        )));
     }
     Ok(())
 }

@@ -422,10 +422,10 @@ pub fn choose_view(s: &Survey, up: Option<DVec3>, aspect: f64) -> View {
     let ext = s.hi - s.lo;
     let flat = flat_axis(ext);
     let given_up = up.and_then(DVec3::try_normalize);
-    if let Some(v) = s.viewpoint {
-        if let Some(view) = viewpoint_view(s, v, given_up, flat, aspect) {
-            return view;
-        }
+    if let Some(v) = s.viewpoint
+        && let Some(view) = viewpoint_view(s, v, given_up, flat, aspect)
+    {
+        return view;
     }
     // Framing: the up axis first, then a three-quarter view around it.
     let (up, why) = match (given_up, flat) {

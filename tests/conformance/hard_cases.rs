@@ -439,7 +439,7 @@ fn coincident_duplicates_are_both_candidates() {
     let twin = |id: u32| {
         if id >= n {
             Some((id - n) * 10)
-        } else if id % 10 == 0 {
+        } else if id.is_multiple_of(10) {
             Some(n + id / 10)
         } else {
             None

@@ -120,6 +120,10 @@ pub(super) fn build<P: Primitive>(
         pack_ids,
         entries,
         shared,
+        isa: match params.simd {
+            Some(isa) if isa.supported() => isa,
+            _ => crate::simd::active(),
+        },
         references,
         root_lo: cube.lo,
         root_size: cube.size,

@@ -40,7 +40,8 @@
 //! footprints clipped to its padded cell) the ray misses within the window
 //! is skipped: on a floor that box is a thin slab, which a shadow ray
 //! leaving the floor or a primary ray skimming it passes over. In a leaf,
-//! [`Pack::may_hit`] filters; every lane it
+//! [`Pack::masks`] filters (on the SIMD path of [`OctreeParams::simd`],
+//! `crate::simd`: the same lanes on every path); every lane it
 //! lets through is decided by [`Primitive::intersect`] and offered to
 //! [`CandidateHits::offer`], so the candidates are bit-identical to those of
 //! the other backends.
@@ -60,6 +61,7 @@ mod traverse;
 use super::{Backend, BuildStats, CandidateHits, Departure, NoSkip};
 use crate::geometry::Ray;
 use crate::primitive::{Pack, Primitive};
+use crate::simd::Isa;
 use glam::Vec3;
 
 /// How a primitive is tested against a leaf cell in step 3 of §3.1.
@@ -115,6 +117,10 @@ pub struct OctreeParams {
     pub overlap: OverlapTest,
     /// How the leaves hold their primitives.
     pub layout: Layout,
+    /// The SIMD path of the leaf filter (`crate::simd`); `None`: the
+    /// process's ([`crate::simd::active`]). A path this CPU does not run is
+    /// replaced by the widest it does.
+    pub simd: Option<Isa>,
 }
 
 impl Default for OctreeParams {
@@ -129,6 +135,7 @@ impl Default for OctreeParams {
             layout: Layout::Auto {
                 max_copies_bytes: AUTO_MAX_COPIES_BYTES,
             },
+            simd: None,
         }
     }
 }
@@ -171,15 +178,15 @@ type LeafBox = [Vec3; 2];
 /// Primitive id of a padding lane.
 const NO_PRIMITIVE: u32 = u32::MAX;
 
-/// Where a leaf entry's lane mask starts (at most 4 lanes per pack).
-const ENTRY_MASK_SHIFT: u32 = 28;
+/// Where a leaf entry's lane mask starts (at most 8 lanes per pack).
+const ENTRY_MASK_SHIFT: u32 = 24;
 
 /// The pack index bits of a leaf entry.
 const ENTRY_PACK: u32 = (1 << ENTRY_MASK_SHIFT) - 1;
 
 const _: () = assert!(
-    <crate::primitive::DiscPack as Pack<crate::primitive::Disc>>::LANES <= 4,
-    "a leaf entry holds a 4-lane mask"
+    <crate::primitive::DiscPack as Pack<crate::primitive::Disc>>::LANES <= 8,
+    "a leaf entry holds an 8-lane mask"
 );
 
 /// One node of the flattened octree: 8 bytes, no bounds (a cell's box is
@@ -232,6 +239,8 @@ pub struct Octree<P: Primitive> {
     entries: Vec<u32>,
     /// The layout built is [`Layout::Shared`].
     shared: bool,
+    /// The SIMD path of the leaf filter.
+    isa: Isa,
     /// The nodes at level [`GRID_LEVEL`] as a uniform grid, walked cell by
     /// cell instead of descending the upper levels for every ray; `None`
     /// when the root is a leaf.
@@ -275,6 +284,12 @@ impl<P: Primitive> Octree<P> {
     #[must_use]
     pub fn references(&self) -> usize {
         self.references
+    }
+
+    /// The SIMD path of the leaf filter.
+    #[must_use]
+    pub fn simd(&self) -> Isa {
+        self.isa
     }
 
     /// The layout built: [`Layout::Copies`] or [`Layout::Shared`] (what

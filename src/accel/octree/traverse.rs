@@ -5,6 +5,7 @@ use super::{ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Octree, child_lo, lanes};
 use crate::accel::{Candidate, CandidateHits, Skip};
 use crate::geometry::Ray;
 use crate::primitive::{Pack, PackRay, Primitive};
+use crate::simd::Isa;
 use glam::{Vec3, Vec3A, Vec4};
 
 impl<P: Primitive> Octree<P> {
@@ -159,14 +160,12 @@ impl<P: Primitive> Octree<P> {
                 return self.entries[range].iter().any(|&e| {
                     let p = (e & ENTRY_PACK) as usize;
                     let ids = &self.pack_ids[p * l..(p + 1) * l];
-                    visitor.pack(&self.packs[p], ids, e >> ENTRY_MASK_SHIFT)
+                    let pack = std::slice::from_ref(&self.packs[p]);
+                    visitor.packs(pack, ids, e >> ENTRY_MASK_SHIFT, self.isa)
                 });
             }
             let ids = &self.pack_ids[range.start * l..range.end * l];
-            return self.packs[range]
-                .iter()
-                .zip(ids.chunks_exact(l))
-                .any(|(pack, ids)| visitor.pack(pack, ids, u32::MAX));
+            return visitor.packs(&self.packs[range], ids, u32::MAX, self.isa);
         }
         let mask = node.meta & 0xff;
         let half = size * 0.5;
@@ -283,9 +282,46 @@ fn min4(t: f32, v: Vec3) -> f32 {
 pub(super) trait Visitor<P: Primitive> {
     /// Cells entered beyond this are skipped.
     fn cutoff(&self) -> f32;
-    /// Tests the lanes of a leaf's pack set in `lanes` (`ids`: the lanes'
-    /// primitive ids); true stops the traversal.
-    fn pack(&mut self, pack: &P::Pack, ids: &[u32], lanes: u32) -> bool;
+    /// Tests the lanes set in `lanes` of each of a leaf's `packs`, filtered
+    /// on the SIMD path `isa` (`ids`: the lanes' primitive ids, pack after
+    /// pack); true stops the traversal.
+    fn packs(&mut self, packs: &[P::Pack], ids: &[u32], lanes: u32, isa: Isa) -> bool;
+}
+
+/// Packs filtered per call of [`Pack::masks`] (a leaf holds a few).
+const CHUNK: usize = 16;
+
+/// Runs `each(pack, ids, mask)` over the lanes of `packs` that the filter
+/// passes in `[t_min, t_max] = span` (and `lanes` allows), [`CHUNK`] packs per
+/// filter call, until it returns true. A window that narrows meanwhile
+/// only makes the filter looser than it could be (it stays conservative:
+/// `each` decides with the exact test).
+#[inline(always)]
+fn filtered<P: Primitive>(
+    packs: &[P::Pack],
+    ids: &[u32],
+    lanes: u32,
+    isa: Isa,
+    ray: &PackRay,
+    span: (f32, f32),
+    mut each: impl FnMut(&P::Pack, &[u32], u32) -> bool,
+) -> bool {
+    let (t_min, t_max) = span;
+    let l = super::lanes::<P>();
+    for (c, chunk) in packs.chunks(CHUNK).enumerate() {
+        let mut masks = [0u32; CHUNK];
+        <P::Pack as Pack<P>>::masks(chunk, ray, t_min, t_max, isa, &mut masks);
+        for (j, pack) in chunk.iter().enumerate() {
+            let mask = masks[j] & lanes;
+            if mask != 0 {
+                let k = c * CHUNK + j;
+                if each(pack, &ids[k * l..(k + 1) * l], mask) {
+                    return true;
+                }
+            }
+        }
+    }
+    false
 }
 
 /// `intersect`: gathers the candidate window, leaving out what `skip`
@@ -329,28 +365,39 @@ impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, S> {
     }
 
     #[inline(always)]
-    fn pack(&mut self, pack: &P::Pack, ids: &[u32], lanes: u32) -> bool {
-        let mut mask = pack.may_hit(&self.lanes, self.t_min, self.cut) & lanes;
-        while mask != 0 {
-            let lane = mask.trailing_zeros() as usize;
-            mask &= mask - 1;
-            // The shared routine decides, with the window's current end,
-            // and the shared rule skips.
-            let prim = pack.get(lane);
-            if let Some(h) = prim.intersect(self.ray, self.t_min, self.cut) {
-                if self.skip.skips(self.ray.dir, ids[lane], &prim) {
-                    continue;
+    fn packs(&mut self, packs: &[P::Pack], ids: &[u32], lanes: u32, isa: Isa) -> bool {
+        let (ray, t_min, t_max) = (self.ray, self.t_min, self.t_max);
+        let (skip, hits, cut) = (&self.skip, &mut *self.hits, &mut self.cut);
+        filtered::<P>(
+            packs,
+            ids,
+            lanes,
+            isa,
+            &self.lanes,
+            (t_min, *cut),
+            |pack, ids, mut mask| {
+                while mask != 0 {
+                    let lane = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    // The shared routine decides, with the window's current end,
+                    // and the shared rule skips.
+                    let prim = pack.get(lane);
+                    if let Some(h) = prim.intersect(ray, t_min, *cut) {
+                        if skip.skips(ray.dir, ids[lane], &prim) {
+                            continue;
+                        }
+                        let c = Candidate {
+                            id: ids[lane],
+                            t: h.t,
+                            u: h.u,
+                            v: h.v,
+                        };
+                        *cut = hits.offer(c).min(t_max);
+                    }
                 }
-                let c = Candidate {
-                    id: ids[lane],
-                    t: h.t,
-                    u: h.u,
-                    v: h.v,
-                };
-                self.cut = self.hits.offer(c).min(self.t_max);
-            }
-        }
-        false
+                false
+            },
+        )
     }
 }
 
@@ -382,18 +429,28 @@ impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, S> {
     }
 
     #[inline(always)]
-    fn pack(&mut self, pack: &P::Pack, ids: &[u32], lanes: u32) -> bool {
-        let mut mask = pack.may_hit(&self.lanes, self.t_min, self.t_max) & lanes;
-        while mask != 0 {
-            let lane = mask.trailing_zeros() as usize;
-            mask &= mask - 1;
-            let prim = pack.get(lane);
-            if prim.intersect(self.ray, self.t_min, self.t_max).is_some()
-                && !self.skip.skips(self.ray.dir, ids[lane], &prim)
-            {
-                return true;
-            }
-        }
-        false
+    fn packs(&mut self, packs: &[P::Pack], ids: &[u32], lanes: u32, isa: Isa) -> bool {
+        let (ray, t_min, t_max, skip) = (self.ray, self.t_min, self.t_max, &self.skip);
+        filtered::<P>(
+            packs,
+            ids,
+            lanes,
+            isa,
+            &self.lanes,
+            (t_min, t_max),
+            |pack, ids, mut mask| {
+                while mask != 0 {
+                    let lane = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    let prim = pack.get(lane);
+                    if prim.intersect(ray, t_min, t_max).is_some()
+                        && !skip.skips(ray.dir, ids[lane], &prim)
+                    {
+                        return true;
+                    }
+                }
+                false
+            },
+        )
     }
 }

@@ -1,0 +1,474 @@
+//! Wide SIMD kernels chosen at run time: the one module besides `embree`
+//! that holds `unsafe` code (`docs/DESIGN.md`, "Wide SIMD").
+//!
+//! The binary is built for baseline x86-64 (SSE2), so it runs on any x86-64
+//! machine; the octree's hottest loop, the disc filter of a leaf
+//! ([`crate::primitive::DiscPack`], eq. (1)'s plane and the disc test of
+//! §2.1), also exists compiled for AVX2 (8 discs at once) and AVX-512
+//! (16 at once), each behind `#[target_feature]` and entered only once
+//! [`Isa::supported`] has seen the CPU run it. Every path does the same IEEE
+//! operations per lane in the same order (no fused multiply-add), so every
+//! path passes exactly the lanes the portable one does and the candidates
+//! stay bit-identical (the conformance suite builds the octree on every
+//! path this CPU runs and compares).
+//!
+//! The path is AVX2 where the CPU runs it ([`default_path`] says why not
+//! AVX-512), or the one named by [`SIMD_VAR`] (`portable`, `avx2`,
+//! `avx512`); an octree can also be built
+//! for a given path ([`crate::accel::octree::OctreeParams::simd`]), which is
+//! how the registry's `octree-<path>` variants force each one.
+
+use std::sync::OnceLock;
+
+/// The environment variable that forces a path for the whole process.
+pub const SIMD_VAR: &str = "SPLATRAY_SIMD";
+
+/// Lanes of one disc pack: eight `f32` per column.
+pub const LANES: usize = 8;
+
+/// A set of kernels, from narrowest to widest.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Isa {
+    /// Baseline: SSE2 on x86-64 (through glam's 4-lane vectors), whatever
+    /// the target has elsewhere (NEON on aarch64, or scalar code).
+    Portable,
+    /// AVX2: a pack's eight lanes in one 256-bit register.
+    Avx2,
+    /// AVX-512 (F): two packs, sixteen lanes, in one 512-bit register.
+    Avx512,
+}
+
+impl Isa {
+    /// Every path, narrowest first.
+    pub const ALL: [Isa; 3] = [Isa::Portable, Isa::Avx2, Isa::Avx512];
+
+    /// The name [`SIMD_VAR`] and reports use.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Isa::Portable => "portable",
+            Isa::Avx2 => "avx2",
+            Isa::Avx512 => "avx512",
+        }
+    }
+
+    /// The path called `name`.
+    #[must_use]
+    pub fn parse(name: &str) -> Option<Isa> {
+        Isa::ALL.into_iter().find(|i| i.name() == name)
+    }
+
+    /// True when this CPU runs the path.
+    #[must_use]
+    pub fn supported(self) -> bool {
+        match self {
+            Isa::Portable => true,
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => std::arch::is_x86_feature_detected!("avx2"),
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => std::arch::is_x86_feature_detected!("avx512f"),
+            #[cfg(not(target_arch = "x86_64"))]
+            Isa::Avx2 | Isa::Avx512 => false,
+        }
+    }
+}
+
+impl std::fmt::Display for Isa {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The paths this CPU runs, narrowest first.
+#[must_use]
+pub fn available() -> Vec<Isa> {
+    Isa::ALL.into_iter().filter(|i| i.supported()).collect()
+}
+
+/// The path taken when [`SIMD_VAR`] is unset: AVX2 where the CPU runs it,
+/// else the portable one. AVX-512 is only taken when asked for: on the
+/// AVX-512 Xeon this was measured on, pairing two packs in a 512-bit
+/// register was slower than AVX2 (the accel benchmark at 35k splats,
+/// primary / shadow rays against Embree: AVX2 1.011 / 1.071, AVX-512
+/// 0.871 / 0.882, portable 0.936 / 0.891; `docs/development.md`).
+#[must_use]
+pub fn default_path() -> Isa {
+    if Isa::Avx2.supported() {
+        Isa::Avx2
+    } else {
+        Isa::Portable
+    }
+}
+
+/// The path [`SIMD_VAR`] asks for, checked against this CPU, or
+/// [`default_path`] when it is unset: a one-line error for a name that is
+/// not a path or a path this CPU cannot run.
+pub fn configured() -> Result<Isa, String> {
+    let Ok(v) = std::env::var(SIMD_VAR) else {
+        return Ok(default_path());
+    };
+    let names = || {
+        available()
+            .iter()
+            .map(|i| i.name())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    match Isa::parse(v.trim()) {
+        Some(i) if i.supported() => Ok(i),
+        Some(i) => Err(format!(
+            "{SIMD_VAR}={v}: this CPU does not run {i} (it runs: {})",
+            names()
+        )),
+        None => Err(format!(
+            "{SIMD_VAR}={v}: not a SIMD path (expected one of: {})",
+            names()
+        )),
+    }
+}
+
+/// The path of this process: [`configured`], read once; an unusable
+/// [`SIMD_VAR`] falls back to [`default_path`] here (the command line
+/// refuses it in one line before any work).
+#[must_use]
+pub fn active() -> Isa {
+    static ACTIVE: OnceLock<Isa> = OnceLock::new();
+    *ACTIVE.get_or_init(|| configured().unwrap_or_else(|_| default_path()))
+}
+
+/// Eight discs stored column by column: centre, normal, `u / r_u`,
+/// `v / r_v`, each as x, y, z columns of [`LANES`] lanes (32-byte aligned,
+/// so a column is one aligned AVX load). Padding lanes have a zero normal.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(64))]
+pub struct DiscColumns {
+    /// Columns 0-2 centre, 3-5 normal, 6-8 `u_scaled`, 9-11 `v_scaled`.
+    pub cols: [[f32; LANES]; 12],
+}
+
+/// Column indices in [`DiscColumns::cols`].
+pub const CENTER: usize = 0;
+/// First normal column.
+pub const NORMAL: usize = 3;
+/// First `u_scaled` column.
+pub const U_SCALED: usize = 6;
+/// First `v_scaled` column.
+pub const V_SCALED: usize = 9;
+
+/// The rim test's bound, relaxed by `1e-4`: the filter is conservative, each lane it passes is decided by the exact disc test.
+const RIM: f32 = 1.0001;
+
+/// Bit `l` of `out[i]` set when lane `l` of `packs[i]` may be hit in
+/// `[t_min, t_max]` by the ray (`origin`, `dir`), with the path `isa`: the
+/// operations of [`crate::primitive::Disc`]'s intersection per lane (plane
+/// parameter `t = -n·(o - c) / n·d`, then `(u, v)` of the hit point),
+/// the rim relaxed by `1e-4`. `out` must be at least as long as `packs`.
+#[inline]
+pub fn disc_masks(
+    packs: &[DiscColumns],
+    origin: [f32; 3],
+    dir: [f32; 3],
+    t_min: f32,
+    t_max: f32,
+    isa: Isa,
+    out: &mut [u32],
+) {
+    let out = &mut out[..packs.len()];
+    match isa {
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx2 => {
+            debug_assert!(Isa::Avx2.supported());
+            // SAFETY: an `Isa::Avx2` reaches here only when the CPU runs
+            // AVX2: `active` and the octree's builder pick from
+            // `available()`, which asks `is_x86_feature_detected!`.
+            unsafe { x86::avx2_masks(packs, origin, dir, t_min, t_max, out) }
+        }
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx512 => {
+            debug_assert!(Isa::Avx512.supported());
+            // SAFETY: as above, for AVX-512 F.
+            unsafe { x86::avx512_masks(packs, origin, dir, t_min, t_max, out) }
+        }
+        _ => {
+            for (p, m) in packs.iter().zip(out.iter_mut()) {
+                *m = portable_mask(p, origin, dir, t_min, t_max);
+            }
+        }
+    }
+}
+
+/// The portable filter: the pack as two halves of four lanes (glam's
+/// `Vec4`, SSE2 on x86-64).
+#[inline]
+fn portable_mask(p: &DiscColumns, origin: [f32; 3], dir: [f32; 3], t_min: f32, t_max: f32) -> u32 {
+    use glam::Vec4;
+    let half = |h: usize| {
+        let col = |k: usize| Vec4::from_slice(&p.cols[k][4 * h..4 * h + 4]);
+        let [ox, oy, oz] = origin.map(Vec4::splat);
+        let [dx, dy, dz] = dir.map(Vec4::splat);
+        let (nx, ny, nz) = (col(NORMAL), col(NORMAL + 1), col(NORMAL + 2));
+        let (cx, cy, cz) = (col(CENTER), col(CENTER + 1), col(CENTER + 2));
+        let denom = nx * dx + ny * dy + nz * dz;
+        let (ocx, ocy, ocz) = (ox - cx, oy - cy, oz - cz);
+        let num = nx * ocx + ny * ocy + nz * ocz;
+        let t = -num / denom;
+        let in_range = (t.cmpge(Vec4::splat(t_min))
+            & t.cmple(Vec4::splat(t_max))
+            & t.abs().cmplt(Vec4::INFINITY))
+        .bitmask();
+        if in_range == 0 {
+            return 0;
+        }
+        let (ux, uy, uz) = (col(U_SCALED), col(U_SCALED + 1), col(U_SCALED + 2));
+        let (vx, vy, vz) = (col(V_SCALED), col(V_SCALED + 1), col(V_SCALED + 2));
+        let (px, py, pz) = (ocx + dx * t, ocy + dy * t, ocz + dz * t);
+        let u = px * ux + py * uy + pz * uz;
+        let v = px * vx + py * vy + pz * vz;
+        let r2 = u * u + v * v;
+        r2.cmple(Vec4::splat(RIM)).bitmask() & in_range
+    };
+    half(0) | half(1) << 4
+}
+
+#[cfg(target_arch = "x86_64")]
+mod x86 {
+    use super::{CENTER, DiscColumns, NORMAL, RIM, U_SCALED, V_SCALED};
+    use std::arch::x86_64::*;
+
+    /// [`super::disc_masks`] with one pack per 256-bit register.
+    ///
+    /// # Safety
+    /// The CPU must run AVX2.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn avx2_masks(
+        packs: &[DiscColumns],
+        origin: [f32; 3],
+        dir: [f32; 3],
+        t_min: f32,
+        t_max: f32,
+        out: &mut [u32],
+    ) {
+        let [ox, oy, oz] = origin.map(|x| _mm256_set1_ps(x));
+        let [dx, dy, dz] = dir.map(|x| _mm256_set1_ps(x));
+        let tmin = _mm256_set1_ps(t_min);
+        let tmax = _mm256_set1_ps(t_max);
+        let inf = _mm256_set1_ps(f32::INFINITY);
+        let rim = _mm256_set1_ps(RIM);
+        let sign = _mm256_set1_ps(-0.0);
+        for (p, m) in packs.iter().zip(out.iter_mut()) {
+            // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
+            // (`DiscColumns` is 64-byte aligned, each column 32 bytes).
+            let col = |k: usize| unsafe { _mm256_load_ps(p.cols[k].as_ptr()) };
+            let (nx, ny, nz) = (col(NORMAL), col(NORMAL + 1), col(NORMAL + 2));
+            let (cx, cy, cz) = (col(CENTER), col(CENTER + 1), col(CENTER + 2));
+            let denom = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(nx, dx), _mm256_mul_ps(ny, dy)),
+                _mm256_mul_ps(nz, dz),
+            );
+            let (ocx, ocy, ocz) = (
+                _mm256_sub_ps(ox, cx),
+                _mm256_sub_ps(oy, cy),
+                _mm256_sub_ps(oz, cz),
+            );
+            let num = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(nx, ocx), _mm256_mul_ps(ny, ocy)),
+                _mm256_mul_ps(nz, ocz),
+            );
+            let t = _mm256_div_ps(_mm256_xor_ps(num, sign), denom);
+            let in_range = _mm256_and_ps(
+                _mm256_and_ps(
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(t, tmin),
+                    _mm256_cmp_ps::<_CMP_LE_OQ>(t, tmax),
+                ),
+                _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_andnot_ps(sign, t), inf),
+            );
+            let in_range = _mm256_movemask_ps(in_range) as u32;
+            if in_range == 0 {
+                *m = 0;
+                continue;
+            }
+            let (ux, uy, uz) = (col(U_SCALED), col(U_SCALED + 1), col(U_SCALED + 2));
+            let (vx, vy, vz) = (col(V_SCALED), col(V_SCALED + 1), col(V_SCALED + 2));
+            let px = _mm256_add_ps(ocx, _mm256_mul_ps(dx, t));
+            let py = _mm256_add_ps(ocy, _mm256_mul_ps(dy, t));
+            let pz = _mm256_add_ps(ocz, _mm256_mul_ps(dz, t));
+            let u = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(px, ux), _mm256_mul_ps(py, uy)),
+                _mm256_mul_ps(pz, uz),
+            );
+            let v = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(px, vx), _mm256_mul_ps(py, vy)),
+                _mm256_mul_ps(pz, vz),
+            );
+            let r2 = _mm256_add_ps(_mm256_mul_ps(u, u), _mm256_mul_ps(v, v));
+            let on = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(r2, rim)) as u32;
+            *m = on & in_range;
+        }
+    }
+
+    /// [`super::disc_masks`] with two packs per 512-bit register (the last
+    /// pack of an odd count alone, its upper half padding).
+    ///
+    /// # Safety
+    /// The CPU must run AVX-512 F.
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn avx512_masks(
+        packs: &[DiscColumns],
+        origin: [f32; 3],
+        dir: [f32; 3],
+        t_min: f32,
+        t_max: f32,
+        out: &mut [u32],
+    ) {
+        let [ox, oy, oz] = origin.map(|x| _mm512_set1_ps(x));
+        let [dx, dy, dz] = dir.map(|x| _mm512_set1_ps(x));
+        let tmin = _mm512_set1_ps(t_min);
+        let tmax = _mm512_set1_ps(t_max);
+        let inf = _mm512_set1_ps(f32::INFINITY);
+        let rim = _mm512_set1_ps(RIM);
+        let sign = _mm512_set1_epi32(i32::MIN);
+        let mut i = 0;
+        while i < packs.len() {
+            let a = &packs[i];
+            let b = packs.get(i + 1);
+            // Column `k` of pack `a` in the lower half, of `b` (or zeros:
+            // a zero normal, never hit) in the upper.
+            let col = |k: usize| {
+                // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
+                // (`DiscColumns` is 64-byte aligned, each column 32 bytes).
+                let lo = unsafe { _mm256_load_ps(a.cols[k].as_ptr()) };
+                let hi = match b {
+                    // SAFETY: as above.
+                    Some(b) => unsafe { _mm256_load_ps(b.cols[k].as_ptr()) },
+                    None => _mm256_setzero_ps(),
+                };
+                _mm512_castpd_ps(_mm512_insertf64x4::<1>(
+                    _mm512_castpd256_pd512(_mm256_castps_pd(lo)),
+                    _mm256_castps_pd(hi),
+                ))
+            };
+            let (nx, ny, nz) = (col(NORMAL), col(NORMAL + 1), col(NORMAL + 2));
+            let (cx, cy, cz) = (col(CENTER), col(CENTER + 1), col(CENTER + 2));
+            let denom = _mm512_add_ps(
+                _mm512_add_ps(_mm512_mul_ps(nx, dx), _mm512_mul_ps(ny, dy)),
+                _mm512_mul_ps(nz, dz),
+            );
+            let (ocx, ocy, ocz) = (
+                _mm512_sub_ps(ox, cx),
+                _mm512_sub_ps(oy, cy),
+                _mm512_sub_ps(oz, cz),
+            );
+            let num = _mm512_add_ps(
+                _mm512_add_ps(_mm512_mul_ps(nx, ocx), _mm512_mul_ps(ny, ocy)),
+                _mm512_mul_ps(nz, ocz),
+            );
+            let neg = _mm512_castsi512_ps(_mm512_xor_si512(_mm512_castps_si512(num), sign));
+            let t = _mm512_div_ps(neg, denom);
+            let in_range = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(t, tmin)
+                & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(t, tmax)
+                & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(_mm512_abs_ps(t), inf);
+            let mask = if in_range == 0 {
+                0
+            } else {
+                let (ux, uy, uz) = (col(U_SCALED), col(U_SCALED + 1), col(U_SCALED + 2));
+                let (vx, vy, vz) = (col(V_SCALED), col(V_SCALED + 1), col(V_SCALED + 2));
+                let px = _mm512_add_ps(ocx, _mm512_mul_ps(dx, t));
+                let py = _mm512_add_ps(ocy, _mm512_mul_ps(dy, t));
+                let pz = _mm512_add_ps(ocz, _mm512_mul_ps(dz, t));
+                let u = _mm512_add_ps(
+                    _mm512_add_ps(_mm512_mul_ps(px, ux), _mm512_mul_ps(py, uy)),
+                    _mm512_mul_ps(pz, uz),
+                );
+                let v = _mm512_add_ps(
+                    _mm512_add_ps(_mm512_mul_ps(px, vx), _mm512_mul_ps(py, vy)),
+                    _mm512_mul_ps(pz, vz),
+                );
+                let r2 = _mm512_add_ps(_mm512_mul_ps(u, u), _mm512_mul_ps(v, v));
+                _mm512_cmp_ps_mask::<_CMP_LE_OQ>(r2, rim) & in_range
+            };
+            out[i] = u32::from(mask & 0xff);
+            if b.is_some() {
+                out[i + 1] = u32::from(mask >> 8);
+            }
+            i += 2;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+
+    /// Packs of random discs (some lanes padding, some normals edge-on to
+    /// the rays, NaN and infinite components) against random rays: every
+    /// path this CPU runs gives the portable path's masks.
+    #[test]
+    fn every_path_gives_the_portable_masks() {
+        let mut rng = SplitMix64::new(7);
+        let mut f = |s: f32| (rng.next_f64() as f32 * 2.0 - 1.0) * s;
+        let mut packs = Vec::new();
+        for p in 0..37 {
+            let mut cols = [[0.0f32; LANES]; 12];
+            for l in 0..LANES {
+                if (p + l) % 7 == 3 {
+                    continue; // padding
+                }
+                for (k, col) in cols.iter_mut().enumerate() {
+                    col[l] = f(if k < 3 { 2.0 } else { 1.5 });
+                }
+                match (p * 5 + l) % 23 {
+                    0 => cols[NORMAL][l] = f32::NAN,
+                    1 => cols[CENTER + 1][l] = f32::INFINITY,
+                    2 => cols[NORMAL + 2][l] = 0.0,
+                    _ => {}
+                }
+            }
+            packs.push(DiscColumns { cols });
+        }
+        let mut total = 0;
+        for r in 0..400 {
+            let origin = [f(3.0), f(3.0), f(3.0)];
+            let mut dir = [f(1.0), f(1.0), f(1.0)];
+            if r % 17 == 0 {
+                dir[r % 3] = 0.0;
+            }
+            let (t_min, t_max) = if r % 3 == 0 {
+                (0.0, f32::INFINITY)
+            } else {
+                (0.1, 2.5)
+            };
+            for n in [1, 2, 5, packs.len()] {
+                let mut want = vec![0; n];
+                disc_masks(
+                    &packs[..n],
+                    origin,
+                    dir,
+                    t_min,
+                    t_max,
+                    Isa::Portable,
+                    &mut want,
+                );
+                total += want.iter().map(|m| m.count_ones()).sum::<u32>();
+                for isa in available() {
+                    let mut got = vec![u32::MAX; n];
+                    disc_masks(&packs[..n], origin, dir, t_min, t_max, isa, &mut got);
+                    assert_eq!(got, want, "{isa}, ray {r}, {n} packs");
+                }
+            }
+        }
+        assert!(
+            total > 1000,
+            "the rays hit too few lanes to test much: {total}"
+        );
+    }
+
+    #[test]
+    fn names_round_trip() {
+        for i in Isa::ALL {
+            assert_eq!(Isa::parse(i.name()), Some(i));
+        }
+        assert_eq!(Isa::parse("sse9"), None);
+        assert!(available().contains(&Isa::Portable));
+    }
+}
