@@ -163,6 +163,7 @@ const RIM: f32 = 1.0001;
 /// operations of [`crate::primitive::Disc`]'s intersection per lane (plane
 /// parameter `t = -n·(o - c) / n·d`, then `(u, v)` of the hit point),
 /// the rim relaxed by `1e-4`. `out` must be at least as long as `packs`.
+/// A path the CPU does not run is replaced by the portable one.
 #[inline]
 pub fn disc_masks(
     packs: &[DiscColumns],
@@ -176,17 +177,13 @@ pub fn disc_masks(
     let out = &mut out[..packs.len()];
     match isa {
         #[cfg(target_arch = "x86_64")]
-        Isa::Avx2 => {
-            debug_assert!(Isa::Avx2.supported());
-            // SAFETY: an `Isa::Avx2` reaches here only when the CPU runs
-            // AVX2: `active` and the octree's builder pick from
-            // `available()`, which asks `is_x86_feature_detected!`.
+        Isa::Avx2 if Isa::Avx2.supported() => {
+            // SAFETY: the guard checked that the CPU runs AVX2.
             unsafe { x86::avx2_masks(packs, origin, dir, t_min, t_max, out) }
         }
         #[cfg(target_arch = "x86_64")]
-        Isa::Avx512 => {
-            debug_assert!(Isa::Avx512.supported());
-            // SAFETY: as above, for AVX-512 F.
+        Isa::Avx512 if Isa::Avx512.supported() => {
+            // SAFETY: the guard checked that the CPU runs AVX-512 F.
             unsafe { x86::avx512_masks(packs, origin, dir, t_min, t_max, out) }
         }
         _ => {
