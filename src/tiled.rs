@@ -27,9 +27,9 @@
 //! circle holding them (eqs. 2-3), so every point it took lies within its
 //! radius of its centre, and the radius is at most `max_d`
 //! (`MAX_RADIUS_EPS` `ϵ` = 8 `ϵ` on a densely sampled surface). Its normal
-//! field reads points within 1.0 radius of the centre (8 `ϵ`; 1.2 radii,
-//! 9.6 `ϵ`, before issue 24), and their normals come from their
-//! neighbourhoods (about `NORMALS_REACH_EPS`, 2 `ϵ`, more): 10 `ϵ`, within
+//! field reads points within at most 1.2 radii of the centre
+//! (`field_radius_factor`; 9.6 `ϵ`), and their normals come from their
+//! neighbourhoods (about `NORMALS_REACH_EPS`, 2 `ϵ`, more): 11.6 `ϵ`, within
 //! the halo of 12 `ϵ`. Splats grown larger than that (sparse regions, where the
 //! neighbour cap `MAX_RADIUS_FACTOR` `d_k` exceeds 8 `ϵ`) are counted in the
 //! report as reaching past the halo. Which points seed splats depends on
@@ -48,9 +48,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// The halo's width in `ϵ` (see the module's text): a splat's normal
-/// field reads points within `field_radius_factor` (1.0; 1.2 before issue
-/// 24) times its radius of its centre, and a radius reaches
-/// `MAX_RADIUS_EPS` (8) `ϵ` on a densely sampled surface: 8 (9.6) `ϵ`, plus [`NORMALS_REACH_EPS`] for the
+/// field reads points within at most `field_radius_factor` (1.2) times its
+/// radius of its centre, and a radius reaches
+/// `MAX_RADIUS_EPS` (8) `ϵ` on a densely sampled surface: 9.6 `ϵ`, plus [`NORMALS_REACH_EPS`] for the
 /// neighbourhoods those points' normals were estimated from.
 pub const HALO_EPS: f64 = 12.0;
 

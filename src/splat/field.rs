@@ -2,7 +2,7 @@
 
 use super::knn::PointTree;
 use super::{NormalField, Splat};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
 
@@ -12,6 +12,26 @@ pub const MIN_FIELD_POINTS: usize = 6;
 /// Each normal `m` enters the fit with weight `(m·n)^ANGLE_WEIGHT_POWER`,
 /// so its residual counts as an angle (see [`fit_field`]).
 pub const ANGLE_WEIGHT_POWER: i32 = 4;
+
+/// About how many normals each field is fitted to: [`fit_all`] picks each
+/// splat's reach so that its field ellipse holds about this many points
+/// (within [`MIN_FIELD_FACTOR`] and the caller's factor, in splat radii).
+pub const FIELD_POINTS: f32 = 60.0;
+
+/// The least reach of a field, in splat radii (see [`FIELD_POINTS`]).
+pub const MIN_FIELD_FACTOR: f32 = 0.6;
+
+/// Fits from at least this many normals are made robust: after the least
+/// squares fit, [`ROBUST_ROUNDS`] rounds of iteratively reweighted least
+/// squares toward the least mean angle (see [`fit_field`]).
+pub const ROBUST_MIN_POINTS: usize = 150;
+
+/// Reweighting rounds of a robust fit (see [`ROBUST_MIN_POINTS`]).
+pub const ROBUST_ROUNDS: usize = 3;
+
+/// Least angle a normal's reweighting divides by (radians, 1°), so that a
+/// normal the field already matches does not take the whole fit.
+const ROBUST_FLOOR: f64 = 0.017_453_292_519_943_295;
 
 /// A fitted field, and for a circular splat the tangent frame it is
 /// expressed in.
@@ -48,6 +68,103 @@ fn solve3(m: [[f64; 3]; 3], r: [f64; 3]) -> Option<[f64; 3]> {
     Some(out)
 }
 
+/// One normal of a fit: normalised local coordinates `(u, v)`, the
+/// tangent-plane form `(x, y)` of fig. 13, its weight and the unit normal.
+struct Row {
+    pu: f64,
+    pv: f64,
+    x: f64,
+    y: f64,
+    w: f64,
+    m: DVec3,
+}
+
+/// Normalised local coordinates `(u, v)` of `p` when it lies within the
+/// normal-field ellipse of `factor` times `splat`'s radii (fig. 15) and no
+/// farther from its plane than the field's reach.
+fn in_field(splat: &Splat, factor: f64, p: Vec3) -> Option<(f64, f64)> {
+    let (ru, rv) = (f64::from(splat.radii.x), f64::from(splat.radii.y));
+    let d = p.as_dvec3() - splat.center.as_dvec3();
+    if d.dot(splat.normal.as_dvec3()).abs() > factor * ru.max(rv) {
+        return None;
+    }
+    let (pu, pv) = (
+        d.dot(splat.u_axis.as_dvec3()) / ru,
+        d.dot(splat.v_axis.as_dvec3()) / rv,
+    );
+    (pu * pu + pv * pv <= factor * factor).then_some((pu, pv))
+}
+
+/// The weighted least-squares field of `rows` (weights `w[i]`), in the
+/// principal frame for a circular splat; `None` when the points do not
+/// spread in both directions or the system is singular.
+fn solve_field(splat: &Splat, rows: &[Row], w: &[f64]) -> Option<(NormalField, DVec3, DVec3)> {
+    let (n, u, v) = (
+        splat.normal.as_dvec3(),
+        splat.u_axis.as_dvec3(),
+        splat.v_axis.as_dvec3(),
+    );
+    // Normal equations of both fits: design rows [1, u, v].
+    let mut m = [[0f64; 3]; 3];
+    let (mut rx, mut ry) = ([0f64; 3], [0f64; 3]);
+    for (r, &w) in rows.iter().zip(w) {
+        let d = [1.0, r.pu, r.pv];
+        for a in 0..3 {
+            for b in 0..3 {
+                m[a][b] += w * d[a] * d[b];
+            }
+            rx[a] += w * d[a] * r.x;
+            ry[a] += w * d[a] * r.y;
+        }
+    }
+    // Both coordinates must spread: a point set along a line fits nothing
+    // (weighted variances against the total weight).
+    let wsum = m[0][0];
+    let var_u = m[1][1] - m[0][1] * m[0][1] / wsum;
+    let var_v = m[2][2] - m[0][2] * m[0][2] / wsum;
+    if !(var_u > 1e-3 * wsum && var_v > 1e-3 * wsum) {
+        return None;
+    }
+    let [xc, a, b] = solve3(m, rx)?;
+    let [yc, cc, d] = solve3(m, ry)?;
+    if splat.radii.x != splat.radii.y {
+        let field = NormalField {
+            xc: xc as f32,
+            yc: yc as f32,
+            alpha: a as f32,
+            beta: d as f32,
+        };
+        return Some((field, u, v));
+    }
+    let (s11, s12, s22) = (a, 0.5 * (b + cc), d);
+    let theta = 0.5 * (2.0 * s12).atan2(s11 - s22);
+    let (sn, cs) = theta.sin_cos();
+    let alpha = s11 * cs * cs + 2.0 * s12 * sn * cs + s22 * sn * sn;
+    let beta = s11 * sn * sn - 2.0 * s12 * sn * cs + s22 * cs * cs;
+    let nu = (u * cs + v * sn).normalize();
+    let nv = n.cross(nu).normalize();
+    let field = NormalField {
+        xc: (xc * cs + yc * sn) as f32,
+        yc: (-xc * sn + yc * cs) as f32,
+        alpha: alpha as f32,
+        beta: beta as f32,
+    };
+    Some((field, nu, nv))
+}
+
+/// The angle (radians) between `row`'s normal and the field of eq. (4) in
+/// the frame `(nu, nv)` of `splat` at the row's point.
+fn angle_off(splat: &Splat, field: &NormalField, nu: DVec3, nv: DVec3, row: &Row) -> f64 {
+    let (ru, rv) = (f64::from(splat.radii.x), f64::from(splat.radii.y));
+    // The point in the frame (u, v) and back in the frame (nu, nv).
+    let p = splat.u_axis.as_dvec3() * (row.pu * ru) + splat.v_axis.as_dvec3() * (row.pv * rv);
+    let (qu, qv) = (p.dot(nu) / ru, p.dot(nv) / rv);
+    let x = f64::from(field.xc) + f64::from(field.alpha) * qu;
+    let y = f64::from(field.yc) + f64::from(field.beta) * qv;
+    let g = nu * x + nv * y + splat.normal.as_dvec3();
+    g.cross(row.m).length().atan2(g.dot(row.m))
+}
+
 /// Fit the linear normal field of `splat` (eq. 4) to the normals of the
 /// points within the normal-field ellipse of `factor` times the splat's radii
 /// (fig. 15).
@@ -73,7 +190,16 @@ fn solve3(m: [[f64; 3]; 3], r: [f64; 3]) -> Option<[f64; 3]> {
 /// cut-off) more than a level one's. Unweighted, the few steep normals at
 /// the rim of a large splat over a curved surface decided its field: at
 /// coarse budgets Phong splats shaded worse than flat ones (issue 24,
-/// `docs/development.md`). Returns `None` (the caller falls back to
+/// `docs/development.md`).
+///
+/// With at least [`ROBUST_MIN_POINTS`] normals (the large splats of coarse
+/// budgets, whose discs span creases and ears), the fit is then reweighted
+/// [`ROBUST_ROUNDS`] times, each normal's weight divided by its angle to
+/// the field of eq. (4) (at least 1°): iteratively reweighted least squares
+/// toward the least *mean* angle, which is what shading is judged by, so
+/// that the normals of the surface across a crease do not pull the field
+/// of the side the splat lies on. A round that cannot be solved keeps the
+/// previous field. Returns `None` (the caller falls back to
 /// [`NormalField::FLAT`]) with fewer than [`MIN_FIELD_POINTS`] points, a
 /// singular fit or a non-finite result.
 #[must_use]
@@ -84,94 +210,78 @@ pub fn fit_field(
     points: &[Vec3],
     normals: &[Vec3],
 ) -> Option<FieldFit> {
-    let (ru, rv) = (f64::from(splat.radii.x), f64::from(splat.radii.y));
-    let reach = f64::from(factor) * ru.max(rv);
-    let f2 = f64::from(factor) * f64::from(factor);
-    let (c, n, u, v) = (
-        splat.center.as_dvec3(),
-        splat.normal.as_dvec3(),
-        splat.u_axis.as_dvec3(),
-        splat.v_axis.as_dvec3(),
-    );
-    // Normal equations of both fits: design rows [1, u, v].
-    let mut m = [[0f64; 3]; 3];
-    let (mut rx, mut ry) = ([0f64; 3], [0f64; 3]);
-    let mut cnt = 0usize;
-    for j in neighbours {
-        let d = points[j].as_dvec3() - c;
-        if d.dot(n).abs() > reach {
-            continue;
-        }
-        let (pu, pv) = (d.dot(u) / ru, d.dot(v) / rv);
-        if pu * pu + pv * pv > f2 {
-            continue;
-        }
-        let mm = normals[j].as_dvec3();
-        let mn = mm.dot(n);
-        if mn.is_nan() || mn < 0.25 {
-            continue;
-        }
-        let (x, y) = (mm.dot(u) / mn, mm.dot(v) / mn);
-        let w = (mn / mm.length()).powi(ANGLE_WEIGHT_POWER);
-        let row = [1.0, pu, pv];
-        for a in 0..3 {
-            for b in 0..3 {
-                m[a][b] += w * row[a] * row[b];
+    let n = splat.normal.as_dvec3();
+    let (u, v) = (splat.u_axis.as_dvec3(), splat.v_axis.as_dvec3());
+    let rows: Vec<Row> = neighbours
+        .filter_map(|j| {
+            let (pu, pv) = in_field(splat, f64::from(factor), points[j])?;
+            let mm = normals[j].as_dvec3();
+            let mn = mm.dot(n);
+            if mn.is_nan() || mn < 0.25 {
+                return None;
             }
-            rx[a] += w * row[a] * x;
-            ry[a] += w * row[a] * y;
+            Some(Row {
+                pu,
+                pv,
+                x: mm.dot(u) / mn,
+                y: mm.dot(v) / mn,
+                w: (mn / mm.length()).powi(ANGLE_WEIGHT_POWER),
+                m: mm.normalize(),
+            })
+        })
+        .collect();
+    if rows.len() < MIN_FIELD_POINTS {
+        return None;
+    }
+    let base: Vec<f64> = rows.iter().map(|r| r.w).collect();
+    let (mut field, mut nu, mut nv) = solve_field(splat, &rows, &base)?;
+    if rows.len() >= ROBUST_MIN_POINTS {
+        for _ in 0..ROBUST_ROUNDS {
+            let w: Vec<f64> = rows
+                .iter()
+                .map(|r| r.w / angle_off(splat, &field, nu, nv, r).max(ROBUST_FLOOR))
+                .collect();
+            match solve_field(splat, &rows, &w) {
+                Some(f) => (field, nu, nv) = f,
+                None => break,
+            }
         }
-        cnt += 1;
     }
-    if cnt < MIN_FIELD_POINTS {
-        return None;
-    }
-    // Both coordinates must spread: a point set along a line fits nothing
-    // (weighted variances against the total weight).
-    let wsum = m[0][0];
-    let var_u = m[1][1] - m[0][1] * m[0][1] / wsum;
-    let var_v = m[2][2] - m[0][2] * m[0][2] / wsum;
-    if !(var_u > 1e-3 * wsum && var_v > 1e-3 * wsum) {
-        return None;
-    }
-    let [xc, a, b] = solve3(m, rx)?;
-    let [yc, cc, d] = solve3(m, ry)?;
-    let (field, axes) = if splat.radii.x == splat.radii.y {
-        let (s11, s12, s22) = (a, 0.5 * (b + cc), d);
-        let theta = 0.5 * (2.0 * s12).atan2(s11 - s22);
-        let (sn, cs) = theta.sin_cos();
-        let alpha = s11 * cs * cs + 2.0 * s12 * sn * cs + s22 * sn * sn;
-        let beta = s11 * sn * sn - 2.0 * s12 * sn * cs + s22 * cs * cs;
-        let nu = (u * cs + v * sn).normalize();
-        let nv = n.cross(nu).normalize();
-        (
-            NormalField {
-                xc: (xc * cs + yc * sn) as f32,
-                yc: (-xc * sn + yc * cs) as f32,
-                alpha: alpha as f32,
-                beta: beta as f32,
-            },
-            Some((nu.as_vec3(), nv.as_vec3())),
-        )
-    } else {
-        (
-            NormalField {
-                xc: xc as f32,
-                yc: yc as f32,
-                alpha: a as f32,
-                beta: d as f32,
-            },
-            None,
-        )
-    };
+    let axes = (splat.radii.x == splat.radii.y).then(|| (nu.as_vec3(), nv.as_vec3()));
     let ok = [field.xc, field.yc, field.alpha, field.beta]
         .iter()
         .all(|x| x.is_finite() && x.abs() < 100.0);
     ok.then_some(FieldFit { field, axes })
 }
 
+/// The factor (in splat radii) of `splat`'s field: the reach whose ellipse
+/// holds about [`FIELD_POINTS`] of the points `near` it (those within
+/// `max_factor` radii), `sqrt(FIELD_POINTS / n₁)` with `n₁` the points within
+/// one radius, clamped to [`MIN_FIELD_FACTOR`] … `max_factor`.
+///
+/// A radius fixed in splat radii cannot suit both ends of the budget: the
+/// large splats of coarse budgets hold hundreds of points over a surface
+/// that curves away within the disc, which a linear field of eq. (4)
+/// cannot follow to the rim, while the few-point splats of fine budgets
+/// need to read past their rims for enough normals to fit (issue 24,
+/// `docs/development.md`).
+#[must_use]
+pub fn field_factor(splat: &Splat, max_factor: f32, near: &[usize], points: &[Vec3]) -> f32 {
+    let inside = near
+        .iter()
+        .filter(|&&j| in_field(splat, 1.0, points[j]).is_some())
+        .count();
+    if inside == 0 {
+        return max_factor;
+    }
+    (FIELD_POINTS / inside as f32)
+        .sqrt()
+        .clamp(MIN_FIELD_FACTOR.min(max_factor), max_factor)
+}
+
 /// Fit every splat's normal field in parallel (neighbours found with the
-/// point kd-tree); returns how many fell back to [`NormalField::FLAT`].
+/// point kd-tree), each within its own factor ([`field_factor`], at most
+/// `factor` radii); returns how many fell back to [`NormalField::FLAT`].
 pub fn fit_all(
     splats: &mut [Splat],
     factor: f32,
@@ -183,15 +293,13 @@ pub fn fit_all(
         .par_iter_mut()
         .map(|s| {
             let reach = factor * s.radii.x.max(s.radii.y);
-            let found =
-                tree.within_unsorted::<SquaredEuclidean>(&s.center.to_array(), reach * reach);
-            match fit_field(
-                s,
-                factor,
-                found.iter().map(|nb| nb.item as usize),
-                points,
-                normals,
-            ) {
+            let near: Vec<usize> = tree
+                .within_unsorted::<SquaredEuclidean>(&s.center.to_array(), reach * reach)
+                .iter()
+                .map(|nb| nb.item as usize)
+                .collect();
+            let own = field_factor(s, factor, &near, points);
+            match fit_field(s, own, near.iter().copied(), points, normals) {
                 Some(f) => {
                     s.field = f.field;
                     if let Some((u, v)) = f.axes {

@@ -31,17 +31,20 @@ pub struct SplatParams {
     pub density: f32,
     /// Grow elliptical splats along the minimum-curvature direction (§2.1).
     pub ellipses: bool,
-    /// Normal-field radius as a multiple of the splat radius (fig. 15;
-    /// default 1.0: §4.3's "slightly larger" 1.2 was measured before the
-    /// growth cap followed `ϵ` and the fit weighted its normals by angle).
-    /// Re-measured with `splatray sweep --width 160 --height 120` on the
-    /// bunny (issue 24), mean normal error of Phong splats at 507, 1,445,
-    /// 4,239, 10,554, 23,469 and 44,603 splats: 0.7 → 7.56, 3.63, 1.88,
-    /// 1.03, 1.02, 1.15°; 0.8 → 7.68, 3.72, 1.96, 1.00, 0.96, 1.08°;
-    /// 1.0 → 7.95, 4.02, 2.19, 1.06, 0.83, 0.83°; 1.2 → 8.22, 4.30, 2.45,
-    /// 1.27, 0.82, 0.71° (flat 9.11 … 1.63°). Below 1 the small splats of
-    /// fine budgets read too few normals; above it the large ones of coarse
-    /// budgets read the surface curving away.
+    /// The largest normal-field radius, as a multiple of the splat radius
+    /// (fig. 15; default 1.2). Each splat's field reads about
+    /// [`field::FIELD_POINTS`] normals, so its own radius lies between
+    /// [`field::MIN_FIELD_FACTOR`] and this ([`field::field_factor`]).
+    /// Fixed factors, re-measured with `splatray sweep --width 160 --height
+    /// 120` on the bunny (issue 24), mean normal error of Phong splats at
+    /// 507, 1,445, 4,239, 10,554, 23,469 and 44,603 splats: 0.7 → 7.56,
+    /// 3.63, 1.88, 1.03, 1.02, 1.15°; 1.0 → 7.95, 4.02, 2.19, 1.06, 0.83,
+    /// 0.83°; 1.2 → 8.22, 4.30, 2.45, 1.27, 0.82, 0.71° (flat 9.11 …
+    /// 1.63°): small factors suit the large splats of coarse budgets, large
+    /// ones the few-point splats of fine budgets; per splat, 0.6 … 1.2 →
+    /// 7.33, 3.57, 1.90, 0.98, 0.79, 0.71° (with the robust fit of
+    /// [`field::fit_field`]; 0.6 … 1.5 → … 0.97, 0.79, 0.67°, but 1.5 radii
+    /// of the largest splats, 8 `ϵ`, reach past a tile's halo).
     pub field_radius_factor: f32,
     /// Where the scanner stood: estimated normals are oriented to face it
     /// (instead of outward from the extreme point of each piece). In the
@@ -83,7 +86,7 @@ impl Default for SplatParams {
             epsilon_rel: 0.002,
             density: 0.7,
             ellipses: false,
-            field_radius_factor: 1.0,
+            field_radius_factor: 1.2,
             viewpoint: None,
             scan_viewpoints: true,
             remove_outliers: true,
