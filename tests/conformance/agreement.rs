@@ -87,9 +87,14 @@ fn wider_window_agrees_on_every_backend() {
 fn octree_reports_its_structure() {
     let splats = blobby_splats(SPLATS, seed());
     let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
-    let t = Octree::new(&discs, &OctreeParams::default());
+    let params = OctreeParams::default();
+    let t = Octree::new(&discs, &params);
     let s = t.stats();
-    assert!(s.nodes > s.leaves && s.leaves > SPLATS / 8, "{s:?}");
+    // A leaf holds at most `max_leaf` centres.
+    assert!(
+        s.nodes > s.leaves && s.leaves >= SPLATS.div_ceil(params.max_leaf),
+        "{s:?}"
+    );
     // Each splat is referenced at least once (its centre's leaf), and
     // overlapping splats span more than one leaf.
     assert!(t.references() > SPLATS, "{} refs", t.references());
@@ -97,7 +102,8 @@ fn octree_reports_its_structure() {
     assert!(s.memory_bytes >= t.references() * 52, "{s:?}");
     assert!(s.build_seconds > 0.0);
     // The shared layout holds every splat once (52 bytes with its id) and
-    // the leaves' entries, far less than the copies.
+    // the leaves' entries, less than the copies (with large leaves a splat
+    // has few copies: 1.7 times the shared layout's bytes here).
     let shared = Octree::new(
         &discs,
         &OctreeParams {
@@ -107,10 +113,7 @@ fn octree_reports_its_structure() {
     );
     let m = shared.stats().memory_bytes;
     assert_eq!(shared.references(), t.references());
-    assert!(
-        m >= SPLATS * 52 && m < s.memory_bytes / 2,
-        "{m} against {s:?}"
-    );
+    assert!(m >= SPLATS * 52 && m < s.memory_bytes, "{m} against {s:?}");
     // The default chooses by the copies' size: copies here, shared when
     // the copies would exceed the bound.
     assert_eq!(t.layout(), Layout::Copies);

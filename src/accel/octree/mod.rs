@@ -101,8 +101,8 @@ pub enum Layout {
     },
 }
 
-/// The default [`Layout::Auto`] bound: copies up to 512 MiB (about 1.5M
-/// splats of the benchmark's surface).
+/// The default [`Layout::Auto`] bound: copies up to 512 MiB (about 4.5M
+/// splats of the benchmark's surface with the default `max_leaf`).
 pub const AUTO_MAX_COPIES_BYTES: usize = 512 << 20;
 
 /// Build parameters of the [`Octree`].
@@ -124,12 +124,21 @@ pub struct OctreeParams {
 }
 
 impl Default for OctreeParams {
-    /// `max_leaf = 8`, `max_depth = 16`, exact overlap test (measured better
-    /// than the bounding square: see `docs/development.md`), copies in the
-    /// leaves up to [`AUTO_MAX_COPIES_BYTES`], shared packs beyond.
+    /// `max_leaf = 96`, `max_depth = 16`, exact overlap test (measured
+    /// better than the bounding square: see `docs/development.md`), copies
+    /// in the leaves up to [`AUTO_MAX_COPIES_BYTES`], shared packs beyond.
+    ///
+    /// 96 centres a leaf: with 8-disc packs filtered a leaf at a time, large
+    /// leaves cost little in the leaf and save descents and copies. The
+    /// accel benchmark (AVX2, primary / shadow rays against Embree, memory
+    /// against Embree's) at 35k, 1M, 4M splats: `max_leaf` 8 gave
+    /// 0.99 / 1.05 (4.6x), 0.94 / 0.98 (4.6x), -; 64 gave 1.08 / 1.34
+    /// (1.48x), 1.20 / 1.31 (1.62x), 1.70 / 1.67 (1.44x); 96 gave
+    /// 1.05 / 1.31 (1.28x), 1.21 / 1.32 (1.38x), 1.73 / 1.83 (1.23x)
+    /// (`docs/development.md`, issue 25).
     fn default() -> Self {
         OctreeParams {
-            max_leaf: 8,
+            max_leaf: 96,
             max_depth: 16,
             overlap: OverlapTest::Exact,
             layout: Layout::Auto {
