@@ -1,0 +1,88 @@
+//! The octree's SIMD paths chosen by `SPLATRAY_SIMD` (`src/simd.rs`): every
+//! path this CPU runs renders the bundled bunny to the same bytes and `info`
+//! names it; a path that is not one, or that this CPU cannot run, is a
+//! one-line error before any work. (The conformance suite checks each
+//! path's candidates through the registry's `octree-<path>` entries.)
+
+mod common;
+
+use common::{bin, scratch};
+use splatray::simd::{Isa, SIMD_VAR, available};
+
+#[test]
+fn every_path_renders_the_bunny_to_the_same_bytes() {
+    let dir = scratch("simd-paths");
+    let mut images = Vec::new();
+    for isa in available() {
+        let info = bin()
+            .env(SIMD_VAR, isa.name())
+            .arg("info")
+            .output()
+            .unwrap();
+        assert!(info.status.success());
+        let text = String::from_utf8_lossy(&info.stdout);
+        assert!(
+            text.lines()
+                .any(|l| l.starts_with(&format!("simd     {isa} "))),
+            "info does not name {isa}: {text}"
+        );
+        let out = dir.join(format!("bunny-{isa}.png"));
+        let o = bin()
+            .env(SIMD_VAR, isa.name())
+            .args([
+                "render",
+                "scenes/bunny.toml",
+                "--width",
+                "160",
+                "--height",
+                "120",
+            ])
+            .args(["--backend", "octree", "-o"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{isa}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        images.push((isa, std::fs::read(&out).unwrap()));
+    }
+    assert!(!images.is_empty());
+    for (isa, bytes) in &images[1..] {
+        assert!(
+            bytes == &images[0].1,
+            "{isa} renders other bytes than {}",
+            images[0].0
+        );
+    }
+}
+
+#[test]
+fn a_path_that_cannot_run_is_a_one_line_error() {
+    let mut names = vec!["sse9".to_string(), "AVX2".to_string()];
+    names.extend(
+        Isa::ALL
+            .into_iter()
+            .filter(|i| !i.supported())
+            .map(|i| i.name().to_string()),
+    );
+    for name in names {
+        let o = bin()
+            .env(SIMD_VAR, &name)
+            .args([
+                "render",
+                "scenes/bunny.toml",
+                "--width",
+                "16",
+                "--height",
+                "12",
+            ])
+            .output()
+            .unwrap();
+        assert!(!o.status.success(), "{name}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(err.trim_end().lines().count(), 1, "{name}: {err}");
+        assert!(err.contains(&format!("{SIMD_VAR}={name}")), "{name}: {err}");
+    }
+}
