@@ -282,47 +282,40 @@ fn min4(t: f32, v: Vec3) -> f32 {
 pub(super) trait Visitor<P: Primitive> {
     /// Cells entered beyond this are skipped.
     fn cutoff(&self) -> f32;
-    /// Tests the lanes set in `lanes` of each of a leaf's `packs`, filtered
-    /// on the SIMD path `isa` (`ids`: the lanes' primitive ids, pack after
-    /// pack); true stops the traversal.
-    fn packs(&mut self, packs: &[P::Pack], ids: &[u32], lanes: u32, isa: Isa) -> bool;
+    /// The ray's lanes and the span `[t_min, t_max]` the filter tests now.
+    fn filter(&self) -> (PackRay, f32, f32);
+    /// Decides the lanes set in `mask` of `pack` with the exact test
+    /// (`ids`: the lanes' primitive ids); true stops the traversal.
+    fn lanes(&mut self, pack: &P::Pack, ids: &[u32], mask: u32) -> bool;
+
+    /// Tests the lanes set in `lanes` of each of a leaf's `packs` (`ids`:
+    /// pack after pack), filtered on the SIMD path `isa`, [`CHUNK`] packs
+    /// per filter call; true stops the traversal. A window that narrows
+    /// meanwhile only makes the filter looser than it could be (it stays
+    /// conservative: [`Visitor::lanes`] decides with the exact test).
+    #[inline(always)]
+    fn packs(&mut self, packs: &[P::Pack], ids: &[u32], lanes: u32, isa: Isa) -> bool {
+        let l = super::lanes::<P>();
+        for (c, chunk) in packs.chunks(CHUNK).enumerate() {
+            let mut masks = [0u32; CHUNK];
+            let (ray, t_min, t_max) = self.filter();
+            <P::Pack as Pack<P>>::masks(chunk, &ray, t_min, t_max, isa, &mut masks);
+            for (j, pack) in chunk.iter().enumerate() {
+                let mask = masks[j] & lanes;
+                if mask != 0 {
+                    let k = c * CHUNK + j;
+                    if self.lanes(pack, &ids[k * l..(k + 1) * l], mask) {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
 }
 
 /// Packs filtered per call of [`Pack::masks`] (a leaf holds a few).
 const CHUNK: usize = 16;
-
-/// Runs `each(pack, ids, mask)` over the lanes of `packs` that the filter
-/// passes in `[t_min, t_max] = span` (and `lanes` allows), [`CHUNK`] packs per
-/// filter call, until it returns true. A window that narrows meanwhile
-/// only makes the filter looser than it could be (it stays conservative:
-/// `each` decides with the exact test).
-#[inline(always)]
-fn filtered<P: Primitive>(
-    packs: &[P::Pack],
-    ids: &[u32],
-    lanes: u32,
-    isa: Isa,
-    ray: &PackRay,
-    span: (f32, f32),
-    mut each: impl FnMut(&P::Pack, &[u32], u32) -> bool,
-) -> bool {
-    let (t_min, t_max) = span;
-    let l = super::lanes::<P>();
-    for (c, chunk) in packs.chunks(CHUNK).enumerate() {
-        let mut masks = [0u32; CHUNK];
-        <P::Pack as Pack<P>>::masks(chunk, ray, t_min, t_max, isa, &mut masks);
-        for (j, pack) in chunk.iter().enumerate() {
-            let mask = masks[j] & lanes;
-            if mask != 0 {
-                let k = c * CHUNK + j;
-                if each(pack, &ids[k * l..(k + 1) * l], mask) {
-                    return true;
-                }
-            }
-        }
-    }
-    false
-}
 
 /// `intersect`: gathers the candidate window, leaving out what `skip`
 /// skips.
@@ -365,39 +358,32 @@ impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, S> {
     }
 
     #[inline(always)]
-    fn packs(&mut self, packs: &[P::Pack], ids: &[u32], lanes: u32, isa: Isa) -> bool {
-        let (ray, t_min, t_max) = (self.ray, self.t_min, self.t_max);
-        let (skip, hits, cut) = (&self.skip, &mut *self.hits, &mut self.cut);
-        filtered::<P>(
-            packs,
-            ids,
-            lanes,
-            isa,
-            &self.lanes,
-            (t_min, *cut),
-            |pack, ids, mut mask| {
-                while mask != 0 {
-                    let lane = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
-                    // The shared routine decides, with the window's current end,
-                    // and the shared rule skips.
-                    let prim = pack.get(lane);
-                    if let Some(h) = prim.intersect(ray, t_min, *cut) {
-                        if skip.skips(ray.dir, ids[lane], &prim) {
-                            continue;
-                        }
-                        let c = Candidate {
-                            id: ids[lane],
-                            t: h.t,
-                            u: h.u,
-                            v: h.v,
-                        };
-                        *cut = hits.offer(c).min(t_max);
-                    }
+    fn filter(&self) -> (PackRay, f32, f32) {
+        (self.lanes, self.t_min, self.cut)
+    }
+
+    #[inline(always)]
+    fn lanes(&mut self, pack: &P::Pack, ids: &[u32], mut mask: u32) -> bool {
+        while mask != 0 {
+            let lane = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            // The shared routine decides, with the window's current end,
+            // and the shared rule skips.
+            let prim = pack.get(lane);
+            if let Some(h) = prim.intersect(self.ray, self.t_min, self.cut) {
+                if self.skip.skips(self.ray.dir, ids[lane], &prim) {
+                    continue;
                 }
-                false
-            },
-        )
+                let c = Candidate {
+                    id: ids[lane],
+                    t: h.t,
+                    u: h.u,
+                    v: h.v,
+                };
+                self.cut = self.hits.offer(c).min(self.t_max);
+            }
+        }
+        false
     }
 }
 
@@ -429,28 +415,22 @@ impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, S> {
     }
 
     #[inline(always)]
-    fn packs(&mut self, packs: &[P::Pack], ids: &[u32], lanes: u32, isa: Isa) -> bool {
-        let (ray, t_min, t_max, skip) = (self.ray, self.t_min, self.t_max, &self.skip);
-        filtered::<P>(
-            packs,
-            ids,
-            lanes,
-            isa,
-            &self.lanes,
-            (t_min, t_max),
-            |pack, ids, mut mask| {
-                while mask != 0 {
-                    let lane = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
-                    let prim = pack.get(lane);
-                    if prim.intersect(ray, t_min, t_max).is_some()
-                        && !skip.skips(ray.dir, ids[lane], &prim)
-                    {
-                        return true;
-                    }
-                }
-                false
-            },
-        )
+    fn filter(&self) -> (PackRay, f32, f32) {
+        (self.lanes, self.t_min, self.t_max)
+    }
+
+    #[inline(always)]
+    fn lanes(&mut self, pack: &P::Pack, ids: &[u32], mut mask: u32) -> bool {
+        while mask != 0 {
+            let lane = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            let prim = pack.get(lane);
+            if prim.intersect(self.ray, self.t_min, self.t_max).is_some()
+                && !self.skip.skips(self.ray.dir, ids[lane], &prim)
+            {
+                return true;
+            }
+        }
+        false
     }
 }
