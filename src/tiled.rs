@@ -663,7 +663,7 @@ fn read_spill(plan: &Plan, work: &Path, t: usize) -> Result<PointCloud, IoError>
     let rb = record_bytes(&plan.survey);
     let bytes = std::fs::metadata(&p).map_err(|e| io_err(&p, e))?.len();
     crate::memory::check(&format!("tile {t}"), bytes / rb as u64 * BYTES_PER_POINT)
-        .map_err(|e| data_err(&p, e))?;
+        .map_err(|e| IoError::new(&p, IoErrorKind::Memory(e)))?;
     let mut r =
         BufReader::with_capacity(1 << 20, std::fs::File::open(&p).map_err(|e| io_err(&p, e))?);
     let n = (bytes / rb as u64) as usize;

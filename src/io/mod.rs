@@ -31,7 +31,7 @@ pub use gaussian::{
     EXPORT_OPACITY, GaussianLayout, GaussianRead, MIN_OPACITY, RADIUS_PER_SIGMA, SH_C0,
     encode_gaussians, file_layout, parse_gaussians, read_gaussians, sniff_layout, write_gaussians,
 };
-pub use lzf::lzf_decompress;
+pub use lzf::{LzfError, lzf_decompress};
 pub use pcd::{Organised, encode_organised, read_organised};
 pub use sample::{MeshSampler, sample_mesh, write_sample_ply};
 pub use splat_ply::{
@@ -160,7 +160,7 @@ pub fn vertex_property_names(head: &[u8]) -> Option<Vec<String>> {
 pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
     if let Ok(meta) = std::fs::metadata(path) {
         crate::memory::check("reading the file whole", meta.len())
-            .map_err(|e| IoError::new(path, IoErrorKind::Data(e)))?;
+            .map_err(|e| IoError::new(path, IoErrorKind::Memory(e)))?;
     }
     let bytes = std::fs::read(path).map_err(|e| IoError::new(path, IoErrorKind::Io(e)))?;
     if bytes.is_empty() {
