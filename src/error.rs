@@ -117,14 +117,6 @@ impl From<&str> for Error {
     }
 }
 
-/// For callers whose errors are still one-line strings: `?` turns an
-/// [`Error`] into its message.
-impl From<Error> for String {
-    fn from(e: Error) -> String {
-        e.to_string()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
