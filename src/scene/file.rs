@@ -439,8 +439,9 @@ pub struct SceneFile {
 /// Reads and parses a scene file. Errors are one line (the TOML parser's
 /// message, which names the key and the line, is folded onto it).
 pub fn parse_scene_file(path: &Path) -> Result<SceneFile> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::invalid(format!("{}: cannot read scene: {e}", path.display())))?;
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        Error::other(e).context(format_args!("{}: cannot read scene", path.display()))
+    })?;
     parse_scene_str(&text).map_err(|e| e.context(path.display()))
 }
 

@@ -432,8 +432,8 @@ fn sample_mesh_model(spec: &ModelSpec, path: &Path) -> Result<(PointCloud, Mesh)
             seed: spec.seed,
         };
         let mesh = crate::io::read_mesh(path)?;
-        let scan = crate::scanner::scan_mesh(&mesh, &params)
-            .map_err(|e| Error::invalid(format!("{}: {e}", path.display())))?;
+        let scan =
+            crate::scanner::scan_mesh(&mesh, &params).map_err(|e| e.context(path.display()))?;
         return Ok((scan.cloud, mesh));
     }
     let samples = spec.samples.ok_or_else(|| {
