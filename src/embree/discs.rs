@@ -2,7 +2,7 @@
 //! would pick instead of user geometry, measured against it by the
 //! benchmark (`benches/accel.rs`).
 
-use super::scene::{SceneHandle, ray_of};
+use super::scene::{SceneHandle, new_buffer, new_geometry, ray_of};
 use super::{Device, EmbreeError};
 use crate::geometry::Ray;
 use embree4_sys as sys;
@@ -73,55 +73,44 @@ impl NativeDiscScene {
         device: &Device,
         discs: &[crate::primitive::Disc],
     ) -> Result<NativeDiscScene, EmbreeError> {
-        let raw = device.inner.raw;
         let before = device.memory();
         let boxed = Box::new(DiscList(discs.to_vec()));
         let scene = SceneHandle::new(device)?;
-        // SAFETY: live device; ORIENTED_DISC_POINT is a valid type.
-        let geom = unsafe { sys::rtcNewGeometry(raw, sys::RTCGeometryType::ORIENTED_DISC_POINT) };
-        device.check()?;
-        if geom.is_null() {
-            return Err(EmbreeError("rtcNewGeometry returned null".into()));
+        let geom = new_geometry(device, sys::RTCGeometryType::ORIENTED_DISC_POINT)?;
+        // SAFETY: `geom` is a fresh disc geometry, written only here; FLOAT4
+        // is four f32, FLOAT3 three; the slices are filled before the
+        // geometry is released.
+        let buffers = unsafe {
+            (
+                new_buffer::<f32, 4>(
+                    geom,
+                    sys::RTCBufferType::VERTEX,
+                    sys::RTCFormat::FLOAT4,
+                    discs.len(),
+                ),
+                new_buffer::<f32, 3>(
+                    geom,
+                    sys::RTCBufferType::NORMAL,
+                    sys::RTCFormat::FLOAT3,
+                    discs.len(),
+                ),
+            )
+        };
+        let (Some(vs), Some(ns)) = buffers else {
+            // SAFETY: our reference to the fresh geometry, released once.
+            unsafe { sys::rtcReleaseGeometry(geom) };
+            device.check()?;
+            return Err(EmbreeError("could not allocate disc buffers".into()));
+        };
+        for ((v, nrm), d) in vs.iter_mut().zip(ns.iter_mut()).zip(discs) {
+            let r = (1.0 / d.u_scaled.length()).max(1.0 / d.v_scaled.length());
+            *v = [d.center.x, d.center.y, d.center.z, r];
+            *nrm = d.normal.to_array();
         }
-        // SAFETY: `geom` is a fresh disc geometry; Embree allocates each
-        // buffer for `len` items of the given stride and returns a pointer
-        // valid until the geometry is released; we check it for null and
-        // fill exactly `len` items. The user pointer is the boxed disc list,
-        // which outlives the scene (dropped after it, field order).
+        // SAFETY: `geom` filled; the user pointer is the boxed disc list,
+        // which outlives the scene (dropped after it, field order); attaching
+        // retains the geometry, so our reference is released right after.
         unsafe {
-            let n = discs.len();
-            let vb = sys::rtcSetNewGeometryBuffer(
-                geom,
-                sys::RTCBufferType::VERTEX,
-                0,
-                sys::RTCFormat::FLOAT4,
-                16,
-                n,
-            ) as *mut f32;
-            let nb = sys::rtcSetNewGeometryBuffer(
-                geom,
-                sys::RTCBufferType::NORMAL,
-                0,
-                sys::RTCFormat::FLOAT3,
-                12,
-                n,
-            ) as *mut f32;
-            if vb.is_null() || nb.is_null() {
-                sys::rtcReleaseGeometry(geom);
-                device.check()?;
-                return Err(EmbreeError("could not allocate disc buffers".into()));
-            }
-            let vs = std::slice::from_raw_parts_mut(vb, n * 4);
-            let ns = std::slice::from_raw_parts_mut(nb, n * 3);
-            for ((v, nrm), d) in vs
-                .chunks_exact_mut(4)
-                .zip(ns.chunks_exact_mut(3))
-                .zip(discs)
-            {
-                let r = (1.0 / d.u_scaled.length()).max(1.0 / d.v_scaled.length());
-                v.copy_from_slice(&[d.center.x, d.center.y, d.center.z, r]);
-                nrm.copy_from_slice(&d.normal.to_array());
-            }
             sys::rtcSetGeometryUserData(geom, (&*boxed as *const DiscList).cast_mut().cast());
             sys::rtcSetGeometryIntersectFilterFunction(geom, Some(native_disc_filter));
             sys::rtcSetGeometryOccludedFilterFunction(geom, Some(native_disc_filter));

@@ -179,3 +179,43 @@ impl Drop for SceneHandle {
         unsafe { sys::rtcReleaseScene(self.raw) };
     }
 }
+
+/// A new geometry of `kind` on `device`: the caller's reference, to fill,
+/// commit, attach and release.
+pub(super) fn new_geometry(
+    device: &Device,
+    kind: sys::RTCGeometryType,
+) -> Result<sys::RTCGeometry, EmbreeError> {
+    // SAFETY: live device; `kind` is one of Embree's geometry types.
+    let geom = unsafe { sys::rtcNewGeometry(device.inner.raw, kind) };
+    device.check()?;
+    if geom.is_null() {
+        return Err(EmbreeError("rtcNewGeometry returned null".into()));
+    }
+    Ok(geom)
+}
+
+/// A new buffer of `geom` holding `len` items of `N` values of `T` each (the
+/// item Embree's `format` names: three `f32` for `FLOAT3`, three `u32` for
+/// `UINT3`), as a slice to fill; `None` when Embree could not allocate it.
+///
+/// # Safety
+/// `geom` is a live geometry, not yet committed, whose buffer of `kind`
+/// nothing else writes; `format` is an item of `N` values of `T`; the slice
+/// is not used after the geometry is released.
+pub(super) unsafe fn new_buffer<'g, T, const N: usize>(
+    geom: sys::RTCGeometry,
+    kind: sys::RTCBufferType,
+    format: sys::RTCFormat,
+    len: usize,
+) -> Option<&'g mut [[T; N]]> {
+    let stride = N * std::mem::size_of::<T>();
+    // SAFETY: `geom` as the caller guarantees; Embree allocates `len` items
+    // of this stride (with its own padding, aligned to 16 bytes) and returns
+    // a pointer valid until the geometry is released, or null.
+    let p = unsafe { sys::rtcSetNewGeometryBuffer(geom, kind, 0, format, stride, len) };
+    let p = p.cast::<[T; N]>();
+    // SAFETY: a non-null `p` holds `len` items of `[T; N]` (the stride is
+    // their size), aligned, and this slice is the only way to them.
+    (!p.is_null()).then(|| unsafe { std::slice::from_raw_parts_mut(p, len) })
+}

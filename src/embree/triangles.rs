@@ -1,7 +1,7 @@
 //! Triangle meshes in Embree's own BVH: the exact surface, for ground
 //! truth and the synthetic scanner.
 
-use super::scene::SceneHandle;
+use super::scene::{SceneHandle, new_buffer, new_geometry};
 use super::{Device, EmbreeError};
 use crate::geometry::Ray;
 use embree4_sys as sys;
@@ -41,7 +41,6 @@ impl TriangleScene {
         device: &Device,
         meshes: &[(&[glam::Vec3], &[[u32; 3]])],
     ) -> Result<TriangleScene, EmbreeError> {
-        let raw = device.inner.raw;
         let out = TriangleScene {
             scene: SceneHandle::new(device)?,
         };
@@ -53,46 +52,39 @@ impl TriangleScene {
                     verts.len()
                 )));
             }
-            // SAFETY: live device; TRIANGLE is a valid type.
-            let geom = unsafe { sys::rtcNewGeometry(raw, sys::RTCGeometryType::TRIANGLE) };
-            device.check()?;
-            if geom.is_null() {
-                return Err(EmbreeError("rtcNewGeometry returned null".into()));
+            let geom = new_geometry(device, sys::RTCGeometryType::TRIANGLE)?;
+            // SAFETY: `geom` is a fresh triangle geometry, written only here;
+            // FLOAT3 is three f32, UINT3 three u32; the slices are filled
+            // before the geometry is released.
+            let buffers = unsafe {
+                (
+                    new_buffer::<f32, 3>(
+                        geom,
+                        sys::RTCBufferType::VERTEX,
+                        sys::RTCFormat::FLOAT3,
+                        verts.len(),
+                    ),
+                    new_buffer::<u32, 3>(
+                        geom,
+                        sys::RTCBufferType::INDEX,
+                        sys::RTCFormat::UINT3,
+                        tris.len(),
+                    ),
+                )
+            };
+            let (Some(vs), Some(is)) = buffers else {
+                // SAFETY: our reference to the fresh geometry, released once.
+                unsafe { sys::rtcReleaseGeometry(geom) };
+                device.check()?;
+                return Err(EmbreeError("could not allocate mesh buffers".into()));
+            };
+            for (dst, v) in vs.iter_mut().zip(verts.iter()) {
+                *dst = v.to_array();
             }
-            // SAFETY: `geom` is a fresh triangle geometry; Embree allocates
-            // each buffer for `len` items of the given stride (with its own
-            // padding) and returns a pointer valid until the geometry is
-            // released; we check it for null and fill exactly `len` items.
+            is.copy_from_slice(tris);
+            // SAFETY: `geom` filled; attaching retains it, so our reference
+            // is released right after.
             unsafe {
-                let vb = sys::rtcSetNewGeometryBuffer(
-                    geom,
-                    sys::RTCBufferType::VERTEX,
-                    0,
-                    sys::RTCFormat::FLOAT3,
-                    12,
-                    verts.len(),
-                ) as *mut f32;
-                let ib = sys::rtcSetNewGeometryBuffer(
-                    geom,
-                    sys::RTCBufferType::INDEX,
-                    0,
-                    sys::RTCFormat::UINT3,
-                    12,
-                    tris.len(),
-                ) as *mut u32;
-                if vb.is_null() || ib.is_null() {
-                    sys::rtcReleaseGeometry(geom);
-                    device.check()?;
-                    return Err(EmbreeError("could not allocate mesh buffers".into()));
-                }
-                let vs = std::slice::from_raw_parts_mut(vb, verts.len() * 3);
-                for (dst, v) in vs.chunks_exact_mut(3).zip(verts.iter()) {
-                    dst.copy_from_slice(&v.to_array());
-                }
-                let is = std::slice::from_raw_parts_mut(ib, tris.len() * 3);
-                for (dst, t) in is.chunks_exact_mut(3).zip(tris.iter()) {
-                    dst.copy_from_slice(t);
-                }
                 sys::rtcCommitGeometry(geom);
                 sys::rtcAttachGeometryByID(scene, geom, i as c_uint);
                 sys::rtcReleaseGeometry(geom);

@@ -2,8 +2,8 @@
 //! callbacks ask a [`UserGeometry`] written in safe code.
 
 use super::scene::{
-    RayHitSlot, RayQueryContext, SceneHandle, embree_rayhit, intersect_arguments, ray_of,
-    ray_query_context,
+    RayHitSlot, RayQueryContext, SceneHandle, embree_rayhit, intersect_arguments, new_geometry,
+    ray_of, ray_query_context,
 };
 use super::{Device, EmbreeError};
 use crate::geometry::Ray;
@@ -158,16 +158,13 @@ impl<G: UserGeometry> UserScene<G> {
     pub fn new(device: &Device, geometry: G) -> Result<UserScene<G>, EmbreeError> {
         let count = c_uint::try_from(geometry.count())
             .map_err(|_| EmbreeError(format!("{} primitives exceed 2^32", geometry.count())))?;
-        let raw = device.inner.raw;
         let out = UserScene {
             scene: SceneHandle::new(device)?,
             geometry: Box::new(geometry),
         };
         let scene = out.scene.raw;
         if count > 0 {
-            // SAFETY: live device; USER is a valid geometry type.
-            let geom = unsafe { sys::rtcNewGeometry(raw, sys::RTCGeometryType::USER) };
-            device.check()?;
+            let geom = new_geometry(device, sys::RTCGeometryType::USER)?;
             let user = &*out.geometry as *const G as *mut c_void;
             // SAFETY: `geom` is a fresh user geometry; the callbacks have the
             // signatures Embree expects and read `user` as a `G`, which stays
