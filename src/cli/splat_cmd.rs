@@ -98,9 +98,10 @@ struct Report<'a> {
 /// The splat generation options `splat` and `scan-check` share.
 #[derive(Clone, Debug, clap::Args)]
 pub struct SplatOptions {
-    /// Error threshold ϵ of §2.1 as a fraction of the bounding-box diagonal.
-    #[arg(long)]
-    pub epsilon: Option<f32>,
+    /// Error threshold ϵ of §2.1 as a fraction of the bounding-box diagonal
+    /// (`SplatParams::epsilon_rel`; the report gives it in the cloud's units).
+    #[arg(long = "epsilon")]
+    pub epsilon_rel: Option<f32>,
     /// Neighbours per point.
     #[arg(long)]
     pub k: Option<usize>,
@@ -148,7 +149,6 @@ impl SplatOptions {
     /// # Errors
     /// A malformed viewpoint.
     pub fn params(&self, cloud: &PointCloud) -> Result<SplatParams> {
-        let defaults = SplatParams::default();
         let viewpoint = if self.no_viewpoint {
             None
         } else {
@@ -157,15 +157,26 @@ impl SplatOptions {
                 .or(cloud.viewpoint)
         };
         Ok(SplatParams {
+            viewpoint,
+            ..self.params_without_viewpoint()
+        })
+    }
+
+    /// The generation parameters the options give before a cloud is read
+    /// (tiled generation finds each tile's viewpoints itself): the options
+    /// given, defaults for the rest.
+    #[must_use]
+    pub fn params_without_viewpoint(&self) -> SplatParams {
+        let defaults = SplatParams::default();
+        SplatParams {
             k: self.k.unwrap_or(defaults.k),
-            epsilon_rel: self.epsilon.unwrap_or(defaults.epsilon_rel),
+            epsilon_rel: self.epsilon_rel.unwrap_or(defaults.epsilon_rel),
             density: self.density.unwrap_or(defaults.density),
             ellipses: self.ellipses,
-            viewpoint,
             scan_viewpoints: !self.no_viewpoint,
             thin: self.thin.unwrap_or(defaults.thin),
             ..defaults
-        })
+        }
     }
 }
 
@@ -326,7 +337,7 @@ struct GaussianReport {
 /// splat file; the point options do not apply.
 fn from_gaussians(args: &SplatArgs, layout: GaussianLayout) -> Result<()> {
     let o = &args.splat;
-    if o.epsilon.is_some() || o.k.is_some() || o.density.is_some() || o.ellipses {
+    if o.epsilon_rel.is_some() || o.k.is_some() || o.density.is_some() || o.ellipses {
         eprintln!(
             "splatray: warning: {} is a {} Gaussian file: its Gaussians become splats as they are, and --epsilon, --k, --density and --ellipses do not apply",
             args.input().display(),
@@ -475,17 +486,7 @@ fn run_tiled(
     inputs: &[PathBuf],
     opts: &splatray::tiled::TiledOptions,
 ) -> Result<()> {
-    let defaults = SplatParams::default();
-    let o = &args.splat;
-    let params = SplatParams {
-        k: o.k.unwrap_or(defaults.k),
-        epsilon_rel: o.epsilon.unwrap_or(defaults.epsilon_rel),
-        density: o.density.unwrap_or(defaults.density),
-        ellipses: o.ellipses,
-        scan_viewpoints: !o.no_viewpoint,
-        thin: o.thin.unwrap_or(defaults.thin),
-        ..defaults
-    };
+    let params = args.splat.params_without_viewpoint();
     let line = ProgressLine::new();
     let report = splatray::tiled::generate_tiled(
         inputs,

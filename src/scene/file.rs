@@ -224,9 +224,10 @@ impl TransformSpec {
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SplatSpec {
-    /// Growth error threshold, fraction of the model's bounding-box diagonal.
-    #[serde(default, deserialize_with = "num::positive")]
-    pub epsilon: Option<f32>,
+    /// Growth error threshold, fraction of the model's bounding-box diagonal
+    /// (`SplatParams::epsilon_rel`; the key is `epsilon`).
+    #[serde(default, rename = "epsilon", deserialize_with = "num::positive")]
+    pub epsilon_rel: Option<f32>,
     /// Neighbourhood size.
     pub k: Option<usize>,
     /// Density factor `k` of §2.2.

@@ -463,7 +463,7 @@ fn generate_splats(
     let d = crate::splat::SplatParams::default();
     let params = crate::splat::SplatParams {
         k: spec.splat.k.unwrap_or(d.k),
-        epsilon_rel: spec.splat.epsilon.unwrap_or(d.epsilon_rel),
+        epsilon_rel: spec.splat.epsilon_rel.unwrap_or(d.epsilon_rel),
         density: spec.splat.density.unwrap_or(d.density),
         ellipses: spec.splat.ellipses,
         viewpoint: spec
