@@ -6,9 +6,11 @@ use super::progress::ProgressLine;
 use glam::DVec3;
 use splatray::resolve::ShadingMode;
 use splatray::scene::cloud::{
-    CloudSceneOptions, DEFAULT_SIZE, choose_view, is_cloud_path, path_from, scene_text, survey_file,
+    CloudSceneOptions, DEFAULT_SIZE, choose_view, is_cloud_path, path_from, read_and_survey,
+    scene_text,
 };
-use splatray::scene::{Scene, build_scene, load_scene, parse_scene_str};
+use splatray::scene::load::build_scene_read;
+use splatray::scene::{Scene, load_scene, parse_scene_str};
 use splatray::{Error, Result};
 use std::path::{Path, PathBuf};
 
@@ -152,7 +154,7 @@ impl SceneArgs {
     /// scene saved renders the same image.
     fn load_cloud(&self, path: &Path, spp: Option<u32>, line: &ProgressLine) -> Result<Scene> {
         line.update("reading the cloud", 0.0);
-        let survey = survey_file(path)?;
+        let (survey, read) = read_and_survey(path)?;
         // An organised cloud renders at its grid's size, registered with
         // the capture.
         let size = match &survey.sensor {
@@ -178,7 +180,8 @@ impl SceneArgs {
         let text = scene_text(path, &survey, &view, &o)?;
         let file = parse_scene_str(&text).map_err(|e| e.context(path.display()))?;
         let progress = |stage: &str, f: f64| line.update(stage, f);
-        let mut scene = build_scene(&file, Path::new(""), Some(&progress))
+        // The scene names the cloud by `path`: it takes what was read.
+        let mut scene = build_scene_read(&file, Path::new(""), Some((path, read)), Some(&progress))
             .map_err(|e| e.context(path.display()))?;
         // As a scene file is set up (`load`), so that the scene saved
         // renders these bytes wherever the cloud lies.
