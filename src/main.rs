@@ -3,6 +3,7 @@
 mod cli;
 
 use clap::{Parser, Subcommand};
+use splatray::Result;
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -101,7 +102,7 @@ struct TerrainArgs {
     origin: Vec<f64>,
 }
 
-fn terrain(a: &TerrainArgs) -> Result<(), String> {
+fn terrain(a: &TerrainArgs) -> Result<()> {
     let [x, y, z] = a.origin[..] else {
         return Err("--origin needs three numbers, X,Y,Z".into());
     };
@@ -117,7 +118,7 @@ fn terrain(a: &TerrainArgs) -> Result<(), String> {
     let line = cli::progress::ProgressLine::new();
     let r = splatray::terrain::write_terrain(&p, &a.output, Some(&|s, f| line.update(s, f)));
     line.finish();
-    let r = r.map_err(|e| e.to_string())?;
+    let r = r?;
     println!(
         "{} points in {} LAZ tiles -> {}; truth {} ({} triangles)",
         r.points,
@@ -129,16 +130,15 @@ fn terrain(a: &TerrainArgs) -> Result<(), String> {
     Ok(())
 }
 
-fn stitch(a: &StitchArgs) -> Result<(), String> {
-    splatray::render::output::check_output_path(&a.output).map_err(|e| e.to_string())?;
-    let (w, h) =
-        splatray::render::output::stitch(&a.parts, &a.output).map_err(|e| e.to_string())?;
+fn stitch(a: &StitchArgs) -> Result<()> {
+    splatray::render::output::check_output_path(&a.output)?;
+    let (w, h) = splatray::render::output::stitch(&a.parts, &a.output)?;
     println!("{} bands -> {w}x{h} {}", a.parts.len(), a.output.display());
     Ok(())
 }
 
-fn info() -> Result<(), String> {
-    let device = splatray::embree::Device::new().map_err(|e| e.to_string())?;
+fn info() -> Result<()> {
+    let device = splatray::embree::Device::new()?;
     let (a, b, c) = device.version();
     println!("splatray {}", env!("CARGO_PKG_VERSION"));
     println!("embree   {a}.{b}.{c} (reported by the device)");

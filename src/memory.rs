@@ -73,19 +73,65 @@ pub fn bounds() -> Vec<Bound> {
     out
 }
 
+/// Work that needs more memory than this process may still allocate:
+/// what the work is, the bytes it needs, the bound it exceeds and, where the
+/// caller knows one, a way around it. Displays as one line.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TooLarge {
+    /// The work (e.g. "reading the cloud").
+    pub what: String,
+    /// Bytes it needs, about.
+    pub bytes: u64,
+    /// The bound it exceeds.
+    pub bound: Bound,
+    /// A way around it, said after the rest (e.g. another output format).
+    pub hint: Option<String>,
+}
+
+impl TooLarge {
+    /// The same error with `hint` said after it.
+    #[must_use]
+    pub fn with_hint(self, hint: impl Into<String>) -> TooLarge {
+        TooLarge {
+            hint: Some(hint.into()),
+            ..self
+        }
+    }
+}
+
+impl std::fmt::Display for TooLarge {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} needs about {:.1} GB, more than the {:.1} GB {} leaves",
+            self.what,
+            self.bytes as f64 / 1e9,
+            self.bound.bytes as f64 / 1e9,
+            self.bound.source
+        )?;
+        match &self.hint {
+            Some(h) => write!(f, ": {h}"),
+            None => Ok(()),
+        }
+    }
+}
+
+impl std::error::Error for TooLarge {}
+
 /// Fails when `bytes` is more than this process may still allocate
 /// ([`limit`]; nothing is checked where the machine states no bound).
 ///
 /// # Errors
-/// One line: what needs how much, against the tightest bound and its name.
-pub fn check(what: &str, bytes: u64) -> Result<(), String> {
+/// [`TooLarge`]: what needs how much, against the tightest bound and its
+/// name.
+pub fn check(what: &str, bytes: u64) -> Result<(), TooLarge> {
     match limit() {
-        Some(b) if bytes > b.bytes => Err(format!(
-            "{what} needs about {:.1} GB, more than the {:.1} GB {} leaves",
-            bytes as f64 / 1e9,
-            b.bytes as f64 / 1e9,
-            b.source
-        )),
+        Some(b) if bytes > b.bytes => Err(TooLarge {
+            what: what.to_string(),
+            bytes,
+            bound: b,
+            hint: None,
+        }),
         _ => Ok(()),
     }
 }
@@ -188,7 +234,7 @@ mod tests {
         let b = limit().expect("a bound");
         assert!(b.bytes > 0, "{b:?}");
         assert!(check("nothing", 0).is_ok());
-        let err = check("everything", u64::MAX).unwrap_err();
+        let err = check("everything", u64::MAX).unwrap_err().to_string();
         assert!(err.contains(b.source), "{err}");
     }
 }

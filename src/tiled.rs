@@ -663,7 +663,7 @@ fn read_spill(plan: &Plan, work: &Path, t: usize) -> Result<PointCloud, IoError>
     let rb = record_bytes(&plan.survey);
     let bytes = std::fs::metadata(&p).map_err(|e| io_err(&p, e))?.len();
     crate::memory::check(&format!("tile {t}"), bytes / rb as u64 * BYTES_PER_POINT)
-        .map_err(|e| data_err(&p, e))?;
+        .map_err(|e| IoError::new(&p, IoErrorKind::Memory(e)))?;
     let mut r =
         BufReader::with_capacity(1 << 20, std::fs::File::open(&p).map_err(|e| io_err(&p, e))?);
     let n = (bytes / rb as u64) as usize;
@@ -850,77 +850,17 @@ pub fn generate_tiled(
         None => {
             // A different plan: nothing in the folder is reusable.
             clear_work(work)?;
-            let s = survey(inputs, progress)?;
-            report.seconds.survey = t0.elapsed().as_secs_f64();
-            let diagonal = (DVec3::from(s.bounds.hi) - DVec3::from(s.bounds.lo)).length();
-            let epsilon = match params.epsilon_abs {
-                Some(e) => e,
-                None => f64::from(params.epsilon_rel) * diagonal,
-            };
-            let halo = HALO_EPS * epsilon;
-            let (tree, tiles) = plan_tiles(&s, halo, target);
-            // What the spill will write, from the sample: each sampled
-            // point stands for points / sample of the cloud's, in every
-            // tile whose core or halo holds it.
-            let grown: Vec<Box3> = tiles.iter().map(|b| b.grown(halo)).collect();
-            let mut near = Vec::new();
-            let mut held = 0u64;
-            for &p in &s.sample {
-                near.clear();
-                tree.near(p, halo, &mut near);
-                held += near.iter().filter(|&&t| grown[t].holds(p)).count() as u64;
-            }
-            let factor = held as f64 / s.sample.len().max(1) as f64;
-            report.spill_estimate = (factor * s.points as f64).round() as u64;
-            let bytes = report
-                .spill_estimate
-                .saturating_mul(record_bytes(&s) as u64);
-            if let Some(free) = free_space(work)
-                && bytes > free
-            {
-                return Err(data_err(
-                    work,
-                    format!(
-                        "the spill needs about {:.1} GB ({} points in {} tiles, {factor:.2} times the \
-                         cloud with the halos) and its folder's disk has {:.1} GB free",
-                        bytes as f64 / 1e9,
-                        report.spill_estimate,
-                        tiles.len(),
-                        free as f64 / 1e9
-                    ),
-                ));
-            }
-            if factor > 2.0 {
-                report.warnings.push(format!(
-                    "the tiles' halos ({HALO_EPS} epsilon wide) hold {:.0} % more points than their \
-                     cores: {} tiles of at most {target} points are small against epsilon at this \
-                     density; --thin 0.25 (the cloud is denser than epsilon needs), a finer \
-                     --epsilon or a larger --max-memory would spill less",
-                    100.0 * (factor - 1.0),
-                    tiles.len()
-                ));
-            }
-            let origin = s.bounds.centre().to_array();
-            let viewpoint = if opts.no_viewpoint {
-                None
-            } else {
-                opts.viewpoint.map(|v| v.to_array()).or(s.viewpoint)
-            };
-            let per_scan = !opts.no_viewpoint && opts.viewpoint.is_none() && !s.scans.is_empty();
-            Plan {
-                viewpoint,
-                version: env!("CARGO_PKG_VERSION").into(),
-                inputs: stamps,
-                params: params_text,
-                survey: s,
-                epsilon,
-                halo,
-                tile_points: target,
-                tree,
-                tiles,
-                origin,
-                per_scan,
-            }
+            new_plan(
+                inputs,
+                params,
+                opts,
+                stamps,
+                params_text,
+                target,
+                progress,
+                t0,
+                &mut report,
+            )?
         }
     };
     let diag = (DVec3::from(plan.survey.bounds.hi) - DVec3::from(plan.survey.bounds.lo)).length();
@@ -967,6 +907,46 @@ pub fn generate_tiled(
             format!("--tile {t}: the plan has tiles 0 to {}", n - 1),
         ));
     }
+    run_tiles(&plan, params, opts, &counts, progress, &mut report)?;
+    report.seconds.generate = t2.elapsed().as_secs_f64();
+    if matches!(opts.stage, Stage::All | Stage::Merge) {
+        let t3 = Instant::now();
+        let flips = if plan.reconciles() {
+            let f = reconcile(&plan, work)?;
+            report.flipped_tiles = f.iter().filter(|&&x| x).count();
+            report.flipped_splats = f
+                .iter()
+                .zip(&report.tiles)
+                .filter(|(x, _)| **x)
+                .map(|(_, s)| s.kept as u64)
+                .sum();
+            f
+        } else {
+            vec![false; plan.tiles.len()]
+        };
+        report.splats = merge(&plan, work, output, &flips, progress)?;
+        report.seconds.merge = t3.elapsed().as_secs_f64();
+        let _ = std::fs::remove_dir_all(work);
+    }
+    report.peak_rss = peak_rss();
+    report.seconds.total = t0.elapsed().as_secs_f64();
+    Ok(report)
+}
+
+/// Generates this run's tiles of `plan` (`counts`: each tile's spilled
+/// points and core points), up to [`TILES_IN_FLIGHT`] at once when the
+/// largest fit the memory budget together, and puts every tile's summary in
+/// `report`: made now, finished before (resumed), or only planned.
+fn run_tiles(
+    plan: &Plan,
+    params: &SplatParams,
+    opts: &TiledOptions,
+    counts: &[(u64, u64)],
+    progress: Option<Progress<'_>>,
+    report: &mut TiledReport,
+) -> Result<(), IoError> {
+    let work = &opts.work;
+    let n = plan.tiles.len();
     // This run's tiles, up to TILES_IN_FLIGHT at a time when the largest
     // of them fit the budget together (each worker takes the next): each
     // tile's bytes are its own, whichever worker made them.
@@ -997,7 +977,7 @@ pub fn generate_tiled(
                     let tile_progress = |stage: &str, f: f64| {
                         notify(progress, &format!("tile {}/{n}: {stage}", t + 1), f);
                     };
-                    let r = generate_tile(&plan, params, work, t, counts[t], Some(&tile_progress));
+                    let r = generate_tile(plan, params, work, t, counts[t], Some(&tile_progress));
                     let failed = r.is_err();
                     if let Ok(mut slot) = made[t].lock() {
                         *slot = Some(r);
@@ -1042,29 +1022,98 @@ pub fn generate_tiled(
         report.past_halo += summary.past_halo;
         report.tiles.push(summary);
     }
-    report.seconds.generate = t2.elapsed().as_secs_f64();
-    if matches!(opts.stage, Stage::All | Stage::Merge) {
-        let t3 = Instant::now();
-        let flips = if plan.reconciles() {
-            let f = reconcile(&plan, work)?;
-            report.flipped_tiles = f.iter().filter(|&&x| x).count();
-            report.flipped_splats = f
-                .iter()
-                .zip(&report.tiles)
-                .filter(|(x, _)| **x)
-                .map(|(_, s)| s.kept as u64)
-                .sum();
-            f
-        } else {
-            vec![false; plan.tiles.len()]
-        };
-        report.splats = merge(&plan, work, output, &flips, progress)?;
-        report.seconds.merge = t3.elapsed().as_secs_f64();
-        let _ = std::fs::remove_dir_all(work);
+    Ok(())
+}
+
+/// A new plan for `inputs`: the survey, the tiles of at most `target`
+/// points with their halos, and the spill it will write, estimated from the
+/// survey's sample and checked against the work folder's free disk; the
+/// survey's seconds (since `t0`), the estimate and its warnings go to
+/// `report`.
+#[allow(clippy::too_many_arguments)]
+fn new_plan(
+    inputs: &[PathBuf],
+    params: &SplatParams,
+    opts: &TiledOptions,
+    stamps: Vec<InputStamp>,
+    params_text: String,
+    target: u64,
+    progress: Option<Progress<'_>>,
+    t0: Instant,
+    report: &mut TiledReport,
+) -> Result<Plan, IoError> {
+    let work = &opts.work;
+    let s = survey(inputs, progress)?;
+    report.seconds.survey = t0.elapsed().as_secs_f64();
+    let diagonal = (DVec3::from(s.bounds.hi) - DVec3::from(s.bounds.lo)).length();
+    let epsilon = match params.epsilon_abs {
+        Some(e) => e,
+        None => f64::from(params.epsilon_rel) * diagonal,
+    };
+    let halo = HALO_EPS * epsilon;
+    let (tree, tiles) = plan_tiles(&s, halo, target);
+    // What the spill will write, from the sample: each sampled
+    // point stands for points / sample of the cloud's, in every
+    // tile whose core or halo holds it.
+    let grown: Vec<Box3> = tiles.iter().map(|b| b.grown(halo)).collect();
+    let mut near = Vec::new();
+    let mut held = 0u64;
+    for &p in &s.sample {
+        near.clear();
+        tree.near(p, halo, &mut near);
+        held += near.iter().filter(|&&t| grown[t].holds(p)).count() as u64;
     }
-    report.peak_rss = peak_rss();
-    report.seconds.total = t0.elapsed().as_secs_f64();
-    Ok(report)
+    let factor = held as f64 / s.sample.len().max(1) as f64;
+    report.spill_estimate = (factor * s.points as f64).round() as u64;
+    let bytes = report
+        .spill_estimate
+        .saturating_mul(record_bytes(&s) as u64);
+    if let Some(free) = free_space(work)
+        && bytes > free
+    {
+        return Err(data_err(
+            work,
+            format!(
+                "the spill needs about {:.1} GB ({} points in {} tiles, {factor:.2} times the \
+                 cloud with the halos) and its folder's disk has {:.1} GB free",
+                bytes as f64 / 1e9,
+                report.spill_estimate,
+                tiles.len(),
+                free as f64 / 1e9
+            ),
+        ));
+    }
+    if factor > 2.0 {
+        report.warnings.push(format!(
+            "the tiles' halos ({HALO_EPS} epsilon wide) hold {:.0} % more points than their \
+             cores: {} tiles of at most {target} points are small against epsilon at this \
+             density; --thin 0.25 (the cloud is denser than epsilon needs), a finer \
+             --epsilon or a larger --max-memory would spill less",
+            100.0 * (factor - 1.0),
+            tiles.len()
+        ));
+    }
+    let origin = s.bounds.centre().to_array();
+    let viewpoint = if opts.no_viewpoint {
+        None
+    } else {
+        opts.viewpoint.map(|v| v.to_array()).or(s.viewpoint)
+    };
+    let per_scan = !opts.no_viewpoint && opts.viewpoint.is_none() && !s.scans.is_empty();
+    Ok(Plan {
+        viewpoint,
+        version: env!("CARGO_PKG_VERSION").into(),
+        inputs: stamps,
+        params: params_text,
+        survey: s,
+        epsilon,
+        halo,
+        tile_points: target,
+        tree,
+        tiles,
+        origin,
+        per_scan,
+    })
 }
 
 /// The error of a stage that needs a plan where there is none (or one made

@@ -4,6 +4,7 @@
 
 use super::progress::ProgressLine;
 use super::view::SceneArgs;
+use super::{json_text, stage_text};
 use splatray::accel::registry;
 use splatray::io::Batch;
 use splatray::render::integrator::{Frame, render};
@@ -12,6 +13,7 @@ use splatray::validate::compare::{
     Agreement, TruthErrors, compare_frames, diff_image, render_truth, truth_errors,
 };
 use splatray::validate::truth::Truth;
+use splatray::{Error, Result};
 use std::path::PathBuf;
 
 /// Options of `splatray compare`.
@@ -113,13 +115,13 @@ fn truth_diff_path(diff: &std::path::Path) -> PathBuf {
 }
 
 /// Runs `splatray compare`.
-pub fn run(args: &CompareArgs) -> Result<(), String> {
+pub fn run(args: &CompareArgs) -> Result<()> {
     let scene_path = args.view.path();
     if args.truth && args.view.is_cloud() {
-        return Err(format!(
+        return Err(Error::invalid(format!(
             "{}: --truth needs exact surfaces, and a point cloud has none (write a scene with a `mesh` model or a `shape`)",
             scene_path.display()
-        ));
+        )));
     }
     if let Some(d) = &args.diff {
         check_output_path(d)?;
@@ -152,9 +154,7 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
     let mut frames: Vec<Frame> = Vec::new();
     let mut backends: Vec<BackendRun> = Vec::new();
     for info in registry::renderers() {
-        let backend = info
-            .build_splats(&scene.splats)
-            .map_err(|e| e.to_string())?;
+        let backend = info.build_splats(&scene.splats)?;
         let frame = render(&scene, backend.as_ref(), Some(&progress));
         let stats = backend.stats();
         let (reference_over_this, agreement) = match frames.first() {
@@ -210,12 +210,9 @@ pub fn run(args: &CompareArgs) -> Result<(), String> {
         )?;
     }
     if let Some(r) = &args.report {
-        let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
-        batch
-            .stage(r, |t| std::fs::write(t, text + "\n"))
-            .map_err(|e| e.to_string())?;
+        stage_text(&mut batch, r, &(json_text(&report)? + "\n"))?;
     }
-    batch.commit().map_err(|e| e.to_string())?;
+    batch.commit()?;
     print_report(&report);
     Ok(())
 }

@@ -6,6 +6,7 @@ use splatray::io::{
     read_splats, write_bytes,
 };
 use splatray::render::output::check_extension;
+use splatray::{Error, Result};
 use std::path::PathBuf;
 
 /// The Gaussian layouts `export` writes.
@@ -46,22 +47,22 @@ pub struct ExportArgs {
 ///
 /// # Errors
 /// When the input cannot be read or the output written.
-pub fn run(args: &ExportArgs) -> Result<(), String> {
-    check_extension(&args.output, &["ply"]).map_err(|e| e.to_string())?;
+pub fn run(args: &ExportArgs) -> Result<()> {
+    check_extension(&args.output, &["ply"])?;
     if !(0.0..=1.0).contains(&args.min_opacity) {
-        return Err(format!(
+        return Err(Error::invalid(format!(
             "--min-opacity {} must be in [0, 1]",
             args.min_opacity
-        ));
+        )));
     }
     let set: SplatSet = if file_layout(&args.input).is_some() {
-        let read = read_gaussians(&args.input, args.min_opacity).map_err(|e| e.to_string())?;
+        let read = read_gaussians(&args.input, args.min_opacity)?;
         for w in read.warnings() {
             eprintln!("splatray: warning: {w}");
         }
         read.set
     } else {
-        read_splats(&args.input).map_err(|e| e.to_string())?
+        read_splats(&args.input)?
     };
     let layout = match args.format {
         ExportFormat::TwoD => GaussianLayout::TwoD,
@@ -73,9 +74,8 @@ pub fn run(args: &ExportArgs) -> Result<(), String> {
         set.origin,
         layout,
         args.sh_degree,
-    )
-    .map_err(|e| e.to_string())?;
-    write_bytes(&args.output, &bytes).map_err(|e| e.to_string())?;
+    )?;
+    write_bytes(&args.output, &bytes)?;
     let curved = set
         .splats
         .iter()

@@ -11,3 +11,24 @@ pub mod scan_check;
 pub mod splat_cmd;
 pub mod sweep;
 pub mod view;
+
+use splatray::io::Batch;
+use splatray::{Error, Result};
+use std::path::Path;
+
+/// `value` as pretty JSON (a report).
+///
+/// # Errors
+/// [`Error::Other`] when `value` does not serialise.
+pub fn json_text<T: serde::Serialize>(value: &T) -> Result<String> {
+    serde_json::to_string_pretty(value).map_err(Error::other)
+}
+
+/// Stages `text` as the file `path`, one output of `batch`.
+///
+/// # Errors
+/// The file cannot be written.
+pub fn stage_text(batch: &mut Batch, path: &Path, text: &str) -> Result<()> {
+    batch.stage(path, |t| std::fs::write(t, text))?;
+    Ok(())
+}

@@ -7,6 +7,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use splatray::validate::compare::TruthErrors;
 use splatray::validate::sweep::{MODES, SweepRow, mode_name};
+use splatray::{Error, Result};
 use std::path::Path;
 
 /// DejaVu Sans (Bitstream Vera licence, see `assets/fonts/README.md`).
@@ -14,8 +15,9 @@ static FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
 const FAMILY: &str = "sans-serif";
 const SIZE: (u32, u32) = (1280, 560);
 
-fn err<E: std::fmt::Display>(e: E) -> String {
-    format!("plot: {e}")
+/// A drawing error, said as the plot's.
+fn err(e: impl std::error::Error + Send + Sync + 'static) -> Error {
+    Error::other(e).context("plot")
 }
 
 fn mode_color(i: usize) -> RGBColor {
@@ -48,7 +50,7 @@ fn panel<DB: DrawingBackend>(
     y_desc: &str,
     y: fn(&TruthErrors) -> Option<f64>,
     legend: bool,
-) -> Result<(), String>
+) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
@@ -182,7 +184,7 @@ where
     Ok(())
 }
 
-fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, rows: &[SweepRow]) -> Result<(), String>
+fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, rows: &[SweepRow]) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
@@ -217,28 +219,21 @@ where
 /// against image PSNR, one curve per backend and shading mode, points
 /// labelled with splat counts) into `png` and into the SVG of the same stem.
 /// Both files are written atomically; errors are one line.
-pub fn plot_sweep(
-    batch: &mut splatray::io::Batch,
-    rows: &[SweepRow],
-    png: &Path,
-) -> Result<(), String> {
+pub fn plot_sweep(batch: &mut splatray::io::Batch, rows: &[SweepRow], png: &Path) -> Result<()> {
     plotters::style::register_font(FAMILY, FontStyle::Normal, FONT)
-        .map_err(|_| "plot: the embedded font is invalid".to_string())?;
+        .map_err(|_| Error::invalid("plot: the embedded font is invalid"))?;
     let mut buf = vec![255u8; (SIZE.0 * SIZE.1 * 3) as usize];
     draw(
         BitMapBackend::with_buffer(&mut buf, SIZE).into_drawing_area(),
         rows,
     )?;
     let img = image::RgbImage::from_raw(SIZE.0, SIZE.1, buf)
-        .ok_or_else(|| "plot: image buffer has the wrong size".to_string())?;
+        .ok_or_else(|| Error::invalid("plot: image buffer has the wrong size"))?;
     let mut svg = String::new();
     draw(
         SVGBackend::with_string(&mut svg, SIZE).into_drawing_area(),
         rows,
     )?;
-    splatray::render::output::save_into(batch, &img, png, image::ImageFormat::Png)
-        .map_err(|e| e.to_string())?;
-    batch
-        .stage(&png.with_extension("svg"), |t| std::fs::write(t, &svg))
-        .map_err(|e| e.to_string())
+    splatray::render::output::save_into(batch, &img, png, image::ImageFormat::Png)?;
+    super::stage_text(batch, &png.with_extension("svg"), &svg)
 }

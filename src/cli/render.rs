@@ -2,6 +2,7 @@
 
 use super::progress::ProgressLine;
 use super::view::SceneArgs;
+use super::{json_text, stage_text};
 use splatray::accel::registry;
 use splatray::io::Batch;
 use splatray::render::integrator::{Frame, RayCounts, render, render_rows};
@@ -9,6 +10,7 @@ use splatray::render::output::{
     Aov, aov_path, check_output_path, check_writable, write_aov_into, write_image_into,
 };
 use splatray::scene::Scene;
+use splatray::{Error, Result};
 use std::path::{Path, PathBuf};
 
 /// Options of `splatray render`.
@@ -124,9 +126,9 @@ impl RenderReport {
 }
 
 /// Writes `value` as pretty JSON to `path`, atomically.
-pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), String> {
-    let text = serde_json::to_string_pretty(value).map_err(|e| e.to_string())?;
-    splatray::io::write_text(path, &(text + "\n")).map_err(|e| e.to_string())
+pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
+    splatray::io::write_text(path, &(super::json_text(value)? + "\n"))?;
+    Ok(())
 }
 
 /// Says where the splats are when no primary ray met any: the usual cause
@@ -143,7 +145,7 @@ fn warn_nothing_hit(scene: &Scene) {
 }
 
 /// Runs `splatray render`.
-pub fn run(args: &RenderArgs) -> Result<(), String> {
+pub fn run(args: &RenderArgs) -> Result<()> {
     let scene_path = args.view.path();
     let output = args.output.clone().unwrap_or_else(|| {
         let stem = scene_path
@@ -154,7 +156,9 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
     // Every output is checked before the work starts.
     check_output_path(&output)?;
     if args.band.is_some() && !args.aov.is_empty() {
-        return Err("--aov is written by a whole render, not with --band".into());
+        return Err(Error::invalid(
+            "--aov is written by a whole render, not with --band",
+        ));
     }
     for &a in &args.aov {
         check_output_path(&aov_path(&output, a))?;
@@ -168,9 +172,7 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
     args.view
         .check_budget(&scene, splatray::render::budget::Holds::ONE)?;
     let info = registry::lookup(&args.backend)?;
-    let backend = info
-        .build_splats(&scene.splats)
-        .map_err(|e| e.to_string())?;
+    let backend = info.build_splats(&scene.splats)?;
     let build_seconds = backend.stats().build_seconds;
     let frame = match args.band {
         Some(b) => render_rows(
@@ -194,12 +196,9 @@ pub fn run(args: &RenderArgs) -> Result<(), String> {
     }
     let report = RenderReport::new(&scene, info.name, build_seconds, &frame);
     if let Some(r) = &args.report {
-        let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
-        batch
-            .stage(r, |t| std::fs::write(t, text + "\n"))
-            .map_err(|e| e.to_string())?;
+        stage_text(&mut batch, r, &(json_text(&report)? + "\n"))?;
     }
-    batch.commit().map_err(|e| e.to_string())?;
+    batch.commit()?;
     let band = args.band.map_or(String::new(), |(i, n)| {
         let r = band_rows(scene.camera.height, (i, n));
         format!(" (band {i}/{n}: rows {} to {})", r.start, r.end)

@@ -7,6 +7,7 @@ use super::progress::ProgressLine;
 use glam::Vec3;
 use splatray::io::{Format, MeshSampler, read_mesh, sample_mesh, write_points, write_sample_ply};
 use splatray::scanner::{RangeNoise, ScanParams, ScanPattern, scan_mesh};
+use splatray::{Error, Result};
 use std::path::PathBuf;
 
 /// The most points `sample` makes: 10^10 (240 GB of binary PLY, written a
@@ -99,10 +100,13 @@ pub enum Frame {
     Gl,
 }
 
-fn vec3(v: &[f64], what: &str) -> Result<glam::DVec3, String> {
+fn vec3(v: &[f64], what: &str) -> Result<glam::DVec3> {
     match v {
         [x, y, z] => Ok(glam::DVec3::new(*x, *y, *z)),
-        _ => Err(format!("{what} needs three numbers X,Y,Z, got {}", v.len())),
+        _ => Err(Error::invalid(format!(
+            "{what} needs three numbers X,Y,Z, got {}",
+            v.len()
+        ))),
     }
 }
 
@@ -111,39 +115,41 @@ fn vec3(v: &[f64], what: &str) -> Result<glam::DVec3, String> {
 /// # Errors
 /// When the mesh cannot be read, has no area, the scan sees nothing, or the
 /// output cannot be written.
-pub fn run(args: &SampleArgs) -> Result<(), String> {
+pub fn run(args: &SampleArgs) -> Result<()> {
     splatray::render::output::check_extension(&args.output, &["ply", "pcd"])?;
     if let Some(from) = &args.scan_from {
         return scan(args, vec3(from, "--scan-from")?);
     }
     let n = args.n.unwrap_or(0);
     if n == 0 || n > MAX_SAMPLES {
-        return Err(format!("-n must be between 1 and {MAX_SAMPLES}"));
+        return Err(Error::invalid(format!(
+            "-n must be between 1 and {MAX_SAMPLES}"
+        )));
     }
     if !(args.noise.is_finite() && args.noise >= 0.0) {
-        return Err(format!(
+        return Err(Error::invalid(format!(
             "--noise {} must be a finite, non-negative number",
             args.noise
-        ));
+        )));
     }
-    let mesh = read_mesh(&args.mesh).map_err(|e| e.to_string())?;
+    let mesh = read_mesh(&args.mesh)?;
     let no_area = || {
-        format!(
+        Error::invalid(format!(
             "{}: the mesh has no triangle with a non-zero area to sample",
             args.mesh.display()
-        )
+        ))
     };
     let made = if Format::from_extension(&args.output) == Some(Format::Pcd) {
         splatray::memory::check(
             &format!("sampling {n} points into a PCD"),
             (n as u64).saturating_mul(PCD_BYTES_PER_POINT),
         )
-        .map_err(|e| format!("{e}: write a .ply instead (written a batch at a time)"))?;
+        .map_err(|e| e.with_hint("write a .ply instead (written a batch at a time)"))?;
         let cloud = sample_mesh(&mesh, n, args.noise, args.seed);
         if cloud.is_empty() {
             return Err(no_area());
         }
-        write_points(&args.output, &cloud).map_err(|e| e.to_string())?;
+        write_points(&args.output, &cloud)?;
         cloud.len()
     } else {
         let sampler = MeshSampler::new(&mesh, n, args.noise, args.seed);
@@ -157,7 +163,7 @@ pub fn run(args: &SampleArgs) -> Result<(), String> {
             Some(&|stage, f| line.update(stage, f)),
         );
         line.finish();
-        written.map_err(|e| e.to_string())?;
+        written?;
         sampler.len()
     };
     eprintln!(
@@ -168,15 +174,15 @@ pub fn run(args: &SampleArgs) -> Result<(), String> {
     Ok(())
 }
 
-fn scan(args: &SampleArgs, from: glam::DVec3) -> Result<(), String> {
+fn scan(args: &SampleArgs, from: glam::DVec3) -> Result<()> {
     if args.n.is_some() {
         return Err("-n and --scan-from exclude each other: a scan's rays set the points".into());
     }
     let [columns, rows] = args.rays[..] else {
-        return Err(format!(
+        return Err(Error::invalid(format!(
             "--rays needs two numbers W,H, got {}",
             args.rays.len()
-        ));
+        )));
     };
     let params = ScanParams {
         from,
@@ -197,16 +203,16 @@ fn scan(args: &SampleArgs, from: glam::DVec3) -> Result<(), String> {
         missing: args.missing,
         seed: args.seed,
     };
-    let mesh = read_mesh(&args.mesh).map_err(|e| e.to_string())?;
+    let mesh = read_mesh(&args.mesh)?;
     let scan = scan_mesh(&mesh, &params)?;
     match args.organised {
-        None => write_points(&args.output, &scan.cloud).map_err(|e| e.to_string())?,
+        None => write_points(&args.output, &scan.cloud)?,
         Some(frame) => {
             if Format::from_extension(&args.output) != Some(Format::Pcd) {
-                return Err(format!(
+                return Err(Error::invalid(format!(
                     "{}: --organised writes a PCD (a name ending in .pcd)",
                     args.output.display()
-                ));
+                )));
             }
             let Some((f, cx, cy)) = scan.pinhole else {
                 return Err("--organised needs the raster pattern (a camera's pixel grid)".into());
@@ -226,7 +232,7 @@ fn scan(args: &SampleArgs, from: glam::DVec3) -> Result<(), String> {
             let position = origin + scan.cloud.viewpoint.unwrap_or_default().as_dvec3();
             let bytes =
                 splatray::io::encode_organised(scan.columns, scan.rows, &grid, position, rotation);
-            splatray::io::write_bytes(&args.output, &bytes).map_err(|e| e.to_string())?;
+            splatray::io::write_bytes(&args.output, &bytes)?;
             eprintln!(
                 "splatray: an organised {}x{} grid in the {} frame, a pinhole of focal length \
                  {f:.4} px centred at ({cx:.2}, {cy:.2})",

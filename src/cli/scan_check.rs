@@ -4,9 +4,10 @@
 use super::progress::ProgressLine;
 use super::render::write_json;
 use super::splat_cmd::SplatOptions;
-use splatray::io::read_points;
+use splatray::io::{IoError, IoErrorKind, read_points};
 use splatray::render::output::check_writable;
 use splatray::validate::scan_check::{ScanCheckParams, scan_check};
+use splatray::{Error, Result};
 use std::path::PathBuf;
 
 /// Arguments of `splatray scan-check`.
@@ -46,11 +47,11 @@ pub struct ScanCheckArgs {
 ///
 /// # Errors
 /// An unreadable cloud, no viewpoint, bad options, an unwritable report.
-pub fn run(args: &ScanCheckArgs) -> Result<(), String> {
+pub fn run(args: &ScanCheckArgs) -> Result<()> {
     if let Some(r) = &args.report {
         check_writable(r)?;
     }
-    let cloud = read_points(&args.input).map_err(|e| e.to_string())?;
+    let cloud = read_points(&args.input)?;
     let splat = args.splat.params(&cloud)?;
     if args.photo {
         return photo(args, &splat);
@@ -71,7 +72,7 @@ pub fn run(args: &ScanCheckArgs) -> Result<(), String> {
         &params,
         Some(&|stage: &str, f: f64| line.update(stage, f)),
     )
-    .map_err(|e| format!("{}: {e}", args.input.display()))?;
+    .map_err(|e| e.context(args.input.display()))?;
     line.finish();
     for w in &r.generation.warnings {
         eprintln!("splatray: warning: {w}");
@@ -106,13 +107,16 @@ pub fn run(args: &ScanCheckArgs) -> Result<(), String> {
 }
 
 /// `scan-check --photo`.
-fn photo(args: &ScanCheckArgs, splat: &splatray::splat::SplatParams) -> Result<(), String> {
+fn photo(args: &ScanCheckArgs, splat: &splatray::splat::SplatParams) -> Result<()> {
     let name = args.input.display();
-    let bytes = std::fs::read(&args.input).map_err(|e| format!("{name}: {e}"))?;
+    let bytes =
+        std::fs::read(&args.input).map_err(|e| IoError::new(&args.input, IoErrorKind::Io(e)))?;
     let grid = splatray::io::read_organised(&bytes)
-        .map_err(|k| splatray::io::IoError::new(&args.input, k).to_string())?
+        .map_err(|k| IoError::new(&args.input, k))?
         .ok_or_else(|| {
-            format!("{name}: --photo needs an organised cloud (a PCD with HEIGHT > 1 and colours)")
+            Error::invalid(format!(
+                "{name}: --photo needs an organised cloud (a PCD with HEIGHT > 1 and colours)"
+            ))
         })?;
     let r = splatray::validate::photo::photo_check(
         &grid,
@@ -121,7 +125,7 @@ fn photo(args: &ScanCheckArgs, splat: &splatray::splat::SplatParams) -> Result<(
         args.seed,
         &args.backend,
     )
-    .map_err(|e| format!("{name}: {e}"))?;
+    .map_err(|e| e.context(&name))?;
     println!(
         "{name}: photo check of the organised {}x{} capture: {} measured pixels, {} held out, {} splats; \
          the splats cover {:.2} % of the held-out pixels and fill {:.2} % of the empty ones; albedo \

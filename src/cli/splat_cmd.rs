@@ -2,16 +2,19 @@
 //! [--ellipses] [--report R.json]`.
 
 use super::progress::ProgressLine;
+use super::{json_text, stage_text};
 use glam::DVec3;
 use splatray::freespace::generate_trimmed;
 use splatray::io::{
-    Batch, GaussianLayout, encode_splats, file_layout, read_gaussians, read_points,
+    Batch, GaussianLayout, IoError, IoErrorKind, encode_splats, file_layout, read_gaussians,
+    read_points,
 };
 use splatray::render::output::{check_extension, check_writable};
 use splatray::splat::{PointCloud, SplatParams};
 use splatray::validate::holdout::{
     HeldOutCoverage, Windows, heldout_coverage, heldout_coverage_windows,
 };
+use splatray::{Error, Result};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -95,9 +98,10 @@ struct Report<'a> {
 /// The splat generation options `splat` and `scan-check` share.
 #[derive(Clone, Debug, clap::Args)]
 pub struct SplatOptions {
-    /// Error threshold ϵ of §2.1 as a fraction of the bounding-box diagonal.
-    #[arg(long)]
-    pub epsilon: Option<f32>,
+    /// Error threshold ϵ of §2.1 as a fraction of the bounding-box diagonal
+    /// (`SplatParams::epsilon_rel`; the report gives it in the cloud's units).
+    #[arg(long = "epsilon")]
+    pub epsilon_rel: Option<f32>,
     /// Neighbours per point.
     #[arg(long)]
     pub k: Option<usize>,
@@ -126,13 +130,15 @@ impl SplatOptions {
     ///
     /// # Errors
     /// Not three finite numbers.
-    pub fn viewpoint(&self) -> Result<Option<DVec3>, String> {
+    pub fn viewpoint(&self) -> Result<Option<DVec3>> {
         match self.viewpoint.as_deref() {
             None => Ok(None),
             Some([x, y, z]) if [x, y, z].iter().all(|v| v.is_finite()) => {
                 Ok(Some(DVec3::new(*x, *y, *z)))
             }
-            Some(v) => Err(format!("--viewpoint needs three finite numbers, got {v:?}")),
+            Some(v) => Err(Error::invalid(format!(
+                "--viewpoint needs three finite numbers, got {v:?}"
+            ))),
         }
     }
 
@@ -142,8 +148,7 @@ impl SplatOptions {
     ///
     /// # Errors
     /// A malformed viewpoint.
-    pub fn params(&self, cloud: &PointCloud) -> Result<SplatParams, String> {
-        let defaults = SplatParams::default();
+    pub fn params(&self, cloud: &PointCloud) -> Result<SplatParams> {
         let viewpoint = if self.no_viewpoint {
             None
         } else {
@@ -152,15 +157,26 @@ impl SplatOptions {
                 .or(cloud.viewpoint)
         };
         Ok(SplatParams {
+            viewpoint,
+            ..self.params_without_viewpoint()
+        })
+    }
+
+    /// The generation parameters the options give before a cloud is read
+    /// (tiled generation finds each tile's viewpoints itself): the options
+    /// given, defaults for the rest.
+    #[must_use]
+    pub fn params_without_viewpoint(&self) -> SplatParams {
+        let defaults = SplatParams::default();
+        SplatParams {
             k: self.k.unwrap_or(defaults.k),
-            epsilon_rel: self.epsilon.unwrap_or(defaults.epsilon_rel),
+            epsilon_rel: self.epsilon_rel.unwrap_or(defaults.epsilon_rel),
             density: self.density.unwrap_or(defaults.density),
             ellipses: self.ellipses,
-            viewpoint,
             scan_viewpoints: !self.no_viewpoint,
             thin: self.thin.unwrap_or(defaults.thin),
             ..defaults
-        })
+        }
     }
 }
 
@@ -169,23 +185,23 @@ impl SplatOptions {
 /// # Errors
 /// When the input cannot be read, no splat can be made, or an output cannot
 /// be written.
-pub fn run(args: &SplatArgs) -> Result<(), String> {
+pub fn run(args: &SplatArgs) -> Result<()> {
     args.splat.viewpoint()?;
     check_extension(&args.output, &["ply"])?;
     if let Some(r) = &args.report {
         check_writable(r)?;
     }
     if !(args.holdout == 0.0 || (args.holdout > 0.0 && args.holdout <= 0.5)) {
-        return Err(format!(
+        return Err(Error::invalid(format!(
             "--holdout {} must be 0 (off) or in (0, 0.5]",
             args.holdout
-        ));
+        )));
     }
     if !(0.0..=1.0).contains(&args.min_opacity) {
-        return Err(format!(
+        return Err(Error::invalid(format!(
             "--min-opacity {} must be in [0, 1]",
             args.min_opacity
-        ));
+        )));
     }
     let inputs = expand_inputs(&args.inputs)?;
     if let Some(tiled) = tiled_options(args, &inputs)? {
@@ -197,12 +213,12 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
     let line = ProgressLine::new();
     line.update("reading", 0.0);
     let t0 = Instant::now();
-    let cloud = read_points(args.input()).map_err(|e| e.to_string())?;
+    let cloud = read_points(args.input())?;
     let read = t0.elapsed().as_secs_f64();
     let params = args.splat.params(&cloud)?;
     let (splats, mut report, trim) =
         generate_trimmed(&cloud, &params, Some(&|stage, f| line.update(stage, f)))
-            .map_err(|e| format!("{}: {e}", args.input().display()))?;
+            .map_err(|e| e.context(args.input().display()))?;
     if let Some(t) = trim.filter(|t| t.shrunk > 0) {
         eprintln!(
             "splatray: {} splats shrunk off {} of {} lines of sight from the viewpoint ({} still blocked)",
@@ -234,7 +250,7 @@ pub fn run(args: &SplatArgs) -> Result<(), String> {
     line.finish();
     report.seconds.read = read;
     report.seconds.total += read;
-    let bytes = encode_splats(&args.output, &splats, cloud.origin).map_err(|e| e.to_string())?;
+    let bytes = encode_splats(&args.output, &splats, cloud.origin)?;
     let out = Report {
         generation: &report,
         heldout_coverage: heldout.clone(),
@@ -319,9 +335,9 @@ struct GaussianReport {
 /// `splat` on a Gaussian file: its Gaussians as splats (frame from the
 /// rotation, radii from the scales, colour from the DC term), written as a
 /// splat file; the point options do not apply.
-fn from_gaussians(args: &SplatArgs, layout: GaussianLayout) -> Result<(), String> {
+fn from_gaussians(args: &SplatArgs, layout: GaussianLayout) -> Result<()> {
     let o = &args.splat;
-    if o.epsilon.is_some() || o.k.is_some() || o.density.is_some() || o.ellipses {
+    if o.epsilon_rel.is_some() || o.k.is_some() || o.density.is_some() || o.ellipses {
         eprintln!(
             "splatray: warning: {} is a {} Gaussian file: its Gaussians become splats as they are, and --epsilon, --k, --density and --ellipses do not apply",
             args.input().display(),
@@ -329,9 +345,9 @@ fn from_gaussians(args: &SplatArgs, layout: GaussianLayout) -> Result<(), String
         );
     }
     let t0 = Instant::now();
-    let read = read_gaussians(args.input(), args.min_opacity).map_err(|e| e.to_string())?;
+    let read = read_gaussians(args.input(), args.min_opacity)?;
     let set = &read.set;
-    let bytes = encode_splats(&args.output, &set.splats, set.origin).map_err(|e| e.to_string())?;
+    let bytes = encode_splats(&args.output, &set.splats, set.origin)?;
     let report = GaussianReport {
         layout: layout.name(),
         gaussians: read.gaussians,
@@ -368,40 +384,32 @@ fn from_gaussians(args: &SplatArgs, layout: GaussianLayout) -> Result<(), String
 
 /// Writes the splat file and, with `--report`, `report` as JSON, as one
 /// batch: a failure in either leaves neither.
-fn commit_outputs(
-    args: &SplatArgs,
-    splats: &[u8],
-    report: &impl serde::Serialize,
-) -> Result<(), String> {
+fn commit_outputs(args: &SplatArgs, splats: &[u8], report: &impl serde::Serialize) -> Result<()> {
     let mut batch = Batch::new();
-    batch
-        .stage(&args.output, |t| std::fs::write(t, splats))
-        .map_err(|e| e.to_string())?;
+    batch.stage(&args.output, |t| std::fs::write(t, splats))?;
     if let Some(path) = &args.report {
-        let json = serde_json::to_string_pretty(report).map_err(|e| e.to_string())?;
-        batch
-            .stage(path, |t| std::fs::write(t, &json))
-            .map_err(|e| e.to_string())?;
+        stage_text(&mut batch, path, &json_text(report)?)?;
     }
-    batch.commit().map_err(|e| e.to_string())
+    batch.commit()?;
+    Ok(())
 }
 
 /// The inputs: files as given, and the point files of a folder (by name).
-fn expand_inputs(given: &[PathBuf]) -> Result<Vec<PathBuf>, String> {
+fn expand_inputs(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
     let mut out = Vec::new();
     for p in given {
         if p.is_dir() {
             let mut found: Vec<PathBuf> = std::fs::read_dir(p)
-                .map_err(|e| format!("{}: {e}", p.display()))?
+                .map_err(|e| IoError::new(p, IoErrorKind::Io(e)))?
                 .filter_map(|e| e.ok().map(|e| e.path()))
                 .filter(|f| f.is_file() && splatray::io::Format::from_extension(f).is_some())
                 .collect();
             found.sort();
             if found.is_empty() {
-                return Err(format!(
+                return Err(Error::invalid(format!(
                     "{}: no point cloud files in the folder",
                     p.display()
-                ));
+                )));
             }
             out.extend(found);
         } else {
@@ -417,11 +425,15 @@ fn expand_inputs(given: &[PathBuf]) -> Result<Vec<PathBuf>, String> {
 fn tiled_options(
     args: &SplatArgs,
     inputs: &[PathBuf],
-) -> Result<Option<splatray::tiled::TiledOptions>, String> {
+) -> Result<Option<splatray::tiled::TiledOptions>> {
     let limit = splatray::memory::available();
     let max_memory = match args.max_memory {
         Some(gb) if gb.is_finite() && gb > 0.0 => (gb * 1e9) as u64,
-        Some(gb) => return Err(format!("--max-memory {gb} must be a positive number of GB")),
+        Some(gb) => {
+            return Err(Error::invalid(format!(
+                "--max-memory {gb} must be a positive number of GB"
+            )));
+        }
         None => limit.unwrap_or(u64::MAX),
     };
     if args.tile_points == Some(0) {
@@ -473,18 +485,8 @@ fn run_tiled(
     args: &SplatArgs,
     inputs: &[PathBuf],
     opts: &splatray::tiled::TiledOptions,
-) -> Result<(), String> {
-    let defaults = SplatParams::default();
-    let o = &args.splat;
-    let params = SplatParams {
-        k: o.k.unwrap_or(defaults.k),
-        epsilon_rel: o.epsilon.unwrap_or(defaults.epsilon_rel),
-        density: o.density.unwrap_or(defaults.density),
-        ellipses: o.ellipses,
-        scan_viewpoints: !o.no_viewpoint,
-        thin: o.thin.unwrap_or(defaults.thin),
-        ..defaults
-    };
+) -> Result<()> {
+    let params = args.splat.params_without_viewpoint();
     let line = ProgressLine::new();
     let report = splatray::tiled::generate_tiled(
         inputs,
@@ -494,10 +496,9 @@ fn run_tiled(
         Some(&|stage, f| line.update(stage, f)),
     );
     line.finish();
-    let report = report.map_err(|e| e.to_string())?;
+    let report = report?;
     if let Some(r) = &args.report {
-        let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
-        splatray::io::write_text(r, &json).map_err(|e| e.to_string())?;
+        splatray::io::write_text(r, &json_text(&report)?)?;
     }
     for w in &report.warnings {
         eprintln!("splatray: warning: {w}");

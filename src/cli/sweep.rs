@@ -9,6 +9,7 @@ use splatray::scene::parse_scene_file;
 use splatray::validate::sweep::{
     MODES, SweepPlan, SweepRow, csv_text, mode_name, pareto, run_sweep,
 };
+use splatray::{Error, Result};
 use std::path::{Path, PathBuf};
 
 /// Coarsest default `ϵ` (fraction of the bounding-box diagonal, §2.1).
@@ -45,27 +46,30 @@ pub struct SweepArgs {
     pub eps_fine: f32,
 }
 
-fn check_csv_path(path: &Path) -> Result<(), String> {
+fn check_csv_path(path: &Path) -> Result<()> {
     if path.extension().and_then(|e| e.to_str()) != Some("csv") {
-        return Err(format!(
+        return Err(Error::invalid(format!(
             "{}: the CSV output must end in .csv",
             path.display()
-        ));
+        )));
     }
-    splatray::render::output::check_writable(path).map_err(|e| e.to_string())
+    splatray::render::output::check_writable(path)
 }
 
 /// Runs `splatray sweep`: checks every output first, then measures (printing
 /// each figure as it is measured), then writes the CSV and the plot.
-pub fn run(args: &SweepArgs) -> Result<(), String> {
+pub fn run(args: &SweepArgs) -> Result<()> {
     if !(5..=64).contains(&args.steps) {
-        return Err(format!("--steps {} must be in 5..=64", args.steps));
+        return Err(Error::invalid(format!(
+            "--steps {} must be in 5..=64",
+            args.steps
+        )));
     }
     if args.width == 0 || args.height == 0 || args.width > 1 << 15 || args.height > 1 << 15 {
-        return Err(format!(
+        return Err(Error::invalid(format!(
             "resolution {}x{} must be in 1..=32768",
             args.width, args.height
-        ));
+        )));
     }
     if let Some(c) = &args.csv {
         check_csv_path(c)?;
@@ -73,7 +77,10 @@ pub fn run(args: &SweepArgs) -> Result<(), String> {
     if let Some(p) = &args.plot {
         check_output_path(p)?;
         if p.extension().and_then(|e| e.to_str()) != Some("png") {
-            return Err(format!("{}: the plot must end in .png", p.display()));
+            return Err(Error::invalid(format!(
+                "{}: the plot must end in .png",
+                p.display()
+            )));
         }
     }
     let plan = SweepPlan::geometric(
@@ -102,21 +109,18 @@ pub fn run(args: &SweepArgs) -> Result<(), String> {
         line.finish();
         println!("{text}");
     })
-    .map_err(|e| format!("{}: {e}", scene_path.display()))?;
+    .map_err(|e| e.context(scene_path.display()))?;
     summary(&rows);
     // The CSV and the plot are committed together: a failure in either
     // leaves neither.
     let mut batch = splatray::io::Batch::new();
     if let Some(c) = &args.csv {
-        let text = csv_text(&rows);
-        batch
-            .stage(c, |t| std::fs::write(t, text))
-            .map_err(|e| e.to_string())?;
+        super::stage_text(&mut batch, c, &csv_text(&rows))?;
     }
     if let Some(p) = &args.plot {
         super::plot::plot_sweep(&mut batch, &rows, p)?;
     }
-    batch.commit().map_err(|e| e.to_string())?;
+    batch.commit()?;
     if let Some(c) = &args.csv {
         println!("wrote {}", c.display());
     }

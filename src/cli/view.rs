@@ -6,9 +6,12 @@ use super::progress::ProgressLine;
 use glam::DVec3;
 use splatray::resolve::ShadingMode;
 use splatray::scene::cloud::{
-    CloudSceneOptions, DEFAULT_SIZE, choose_view, is_cloud_path, path_from, scene_text, survey_file,
+    CloudSceneOptions, DEFAULT_SIZE, choose_view, is_cloud_path, path_from, read_and_survey,
+    scene_text,
 };
-use splatray::scene::{Scene, build_scene, load_scene, parse_scene_str};
+use splatray::scene::load::build_scene_read;
+use splatray::scene::{Scene, load_scene, parse_scene_str};
+use splatray::{Error, Result};
 use std::path::{Path, PathBuf};
 
 /// The scene and its view overrides (flattened into a command's options).
@@ -95,14 +98,14 @@ impl SceneArgs {
         &self,
         scene: &Scene,
         holds: splatray::render::budget::Holds,
-    ) -> Result<(), String> {
+    ) -> Result<()> {
         let limits = splatray::render::budget::Limits {
             max_rays: self.max_rays,
             max_bytes: self.max_memory.map(|gb| (gb * 1e9) as u64),
         };
         splatray::render::budget::check(scene, holds, &limits)
             .map(|_| ())
-            .map_err(|e| format!("{}: {e}", self.path().display()))
+            .map_err(|e| e.context(self.path().display()))
     }
 
     /// The scene file or cloud: the one given, else the bundled default.
@@ -123,16 +126,16 @@ impl SceneArgs {
     ///
     /// # Errors
     /// A scene that does not load or an override out of range, as one line.
-    pub fn load(&self, spp: Option<u32>, line: &ProgressLine) -> Result<Scene, String> {
+    pub fn load(&self, spp: Option<u32>, line: &ProgressLine) -> Result<Scene> {
         let path = self.path();
         let scene = if is_cloud_path(&path) {
             self.load_cloud(&path, spp, line)?
         } else {
             if self.up.is_some() || self.save_scene.is_some() {
-                return Err(format!(
+                return Err(Error::invalid(format!(
                     "{}: --up and --save-scene apply to a point cloud, not to a scene file",
                     path.display()
-                ));
+                )));
             }
             let progress = |stage: &str, f: f64| line.update(stage, f);
             let mut scene = load_scene(&path, Some(&progress))?;
@@ -149,14 +152,9 @@ impl SceneArgs {
     /// A point cloud's scene: surveyed, a camera chosen, written as scene
     /// text (the overrides in it) and built from that text, so that the
     /// scene saved renders the same image.
-    fn load_cloud(
-        &self,
-        path: &Path,
-        spp: Option<u32>,
-        line: &ProgressLine,
-    ) -> Result<Scene, String> {
+    fn load_cloud(&self, path: &Path, spp: Option<u32>, line: &ProgressLine) -> Result<Scene> {
         line.update("reading the cloud", 0.0);
-        let survey = survey_file(path)?;
+        let (survey, read) = read_and_survey(path)?;
         // An organised cloud renders at its grid's size, registered with
         // the capture.
         let size = match &survey.sensor {
@@ -170,19 +168,20 @@ impl SceneArgs {
             shading: self.shading,
         };
         if o.width == 0 || o.height == 0 || o.width > 1 << 15 || o.height > 1 << 15 {
-            return Err(format!(
+            return Err(Error::invalid(format!(
                 "resolution {}x{} must be in 1..=32768",
                 o.width, o.height
-            ));
+            )));
         }
         if let Some(s) = &self.save_scene {
             check_folder(s)?;
         }
         let view = choose_view(&survey, self.up, f64::from(o.width) / f64::from(o.height));
         let text = scene_text(path, &survey, &view, &o)?;
-        let file = parse_scene_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        let file = parse_scene_str(&text).map_err(|e| e.context(path.display()))?;
         let progress = |stage: &str, f: f64| line.update(stage, f);
-        let mut scene = build_scene(&file, Path::new(""), Some(&progress))
+        // The scene names the cloud by `path`: it takes what was read.
+        let mut scene = build_scene_read(&file, Path::new(""), Some((path, read)), Some(&progress))
             .map_err(|e| e.context(path.display()))?;
         // As a scene file is set up (`load`), so that the scene saved
         // renders these bytes wherever the cloud lies.
@@ -211,16 +210,19 @@ impl SceneArgs {
         if let Some(s) = &self.save_scene {
             let folder = s.parent().unwrap_or(Path::new(""));
             let text = scene_text(&path_from(folder, path), &survey, &view, &o)?;
-            splatray::io::write_text(s, &text).map_err(|e| e.to_string())?;
+            splatray::io::write_text(s, &text)?;
         }
         Ok(scene)
     }
 }
 
 /// The folder of an output file exists.
-fn check_folder(path: &Path) -> Result<(), String> {
+fn check_folder(path: &Path) -> Result<()> {
     match path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        Some(d) if !d.is_dir() => Err(format!("{}: folder does not exist", d.display())),
+        Some(d) if !d.is_dir() => Err(Error::invalid(format!(
+            "{}: folder does not exist",
+            d.display()
+        ))),
         _ => Ok(()),
     }
 }

@@ -55,7 +55,7 @@ fn read(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
         &format!("reading {claimed} points"),
         claimed.saturating_mul(BYTES_PER_POINT),
     )
-    .map_err(IoErrorKind::Data)?;
+    .map_err(IoErrorKind::Memory)?;
     let colored = scans.iter().all(e57::PointCloud::has_color);
     let mut world: Vec<DVec3> = Vec::new();
     let mut colors: Vec<Vec3> = Vec::new();

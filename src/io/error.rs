@@ -21,6 +21,10 @@ pub enum IoErrorKind {
     Data(String),
     /// Nothing usable remains after reading.
     NoPoints(String),
+    /// Reading it needs more memory than this process may still allocate.
+    Memory(crate::memory::TooLarge),
+    /// Its LZF-compressed body does not decompress.
+    Lzf(super::LzfError),
 }
 
 /// A failure to read or write one file. `Display` is one line naming the
@@ -72,6 +76,8 @@ impl fmt::Display for IoError {
             IoErrorKind::Truncated(s) => format!("truncated: {}", one_line(s)),
             IoErrorKind::Data(s) => format!("bad data: {}", one_line(s)),
             IoErrorKind::NoPoints(s) => one_line(s),
+            IoErrorKind::Memory(e) => format!("bad data: {e}"),
+            IoErrorKind::Lzf(e) => format!("bad data: {e}"),
         };
         write!(f, "{}: {what}", self.path.display())
     }
@@ -81,6 +87,8 @@ impl std::error::Error for IoError {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match &self.kind {
             IoErrorKind::Io(e) => Some(e),
+            IoErrorKind::Memory(e) => Some(e),
+            IoErrorKind::Lzf(e) => Some(e),
             _ => None,
         }
     }

@@ -259,7 +259,7 @@ fn read_unchecked(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
         .map_err(|e| IoErrorKind::Header(e.to_string()))?;
     let promised = reader.header().number_of_points();
     crate::memory::check("reading the cloud", promised.saturating_mul(POINT_BYTES))
-        .map_err(IoErrorKind::Data)?;
+        .map_err(IoErrorKind::Memory)?;
     let cap = usize::try_from(promised.min(1 << 24)).unwrap_or(0);
     let mut world: Vec<DVec3> = Vec::with_capacity(cap);
     let mut colors: Vec<Vec3> = Vec::new();

@@ -1,6 +1,63 @@
 //! LZF decompression (Marc Lehmann's liblzf format), as used by PCD's
 //! `binary_compressed` bodies.
 
+/// Why LZF data did not decompress. Displays as one line.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum LzfError {
+    /// A literal run, whose control byte is at `at`, runs past the input's
+    /// end.
+    LiteralPastEnd {
+        /// Input byte of the run's control byte.
+        at: usize,
+    },
+    /// A back-reference's length or offset bytes are missing.
+    BackReferenceCut,
+    /// A back-reference points `back` bytes back from output byte `at`,
+    /// before the start.
+    BeforeStart {
+        /// Bytes back.
+        back: usize,
+        /// Output byte it is met at.
+        at: usize,
+    },
+    /// The output would grow past the expected length.
+    TooLong {
+        /// The expected length.
+        expected: usize,
+    },
+    /// The output ends short of the expected length.
+    WrongLength {
+        /// Bytes decompressed.
+        got: usize,
+        /// The expected length.
+        expected: usize,
+    },
+}
+
+impl std::fmt::Display for LzfError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LzfError::LiteralPastEnd { at } => {
+                write!(f, "LZF literal run at byte {at} runs past the end")
+            }
+            LzfError::BackReferenceCut => f.write_str("LZF back-reference cut short"),
+            LzfError::BeforeStart { back, at } => write!(
+                f,
+                "LZF back-reference {back} bytes back at output byte {at} points before the start"
+            ),
+            LzfError::TooLong { expected } => {
+                write!(f, "LZF data decompresses to more than {expected} bytes")
+            }
+            LzfError::WrongLength { got, expected } => write!(
+                f,
+                "LZF data decompresses to {got} bytes, the header says {expected}"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for LzfError {}
+
 /// Decompress LZF `input` into exactly `expected_len` bytes.
 ///
 /// The format is a sequence of runs: a control byte `c < 32` is followed by
@@ -9,9 +66,9 @@
 /// output (overlapping copies allowed).
 ///
 /// # Errors
-/// A one-line description when the input is truncated, refers before the
-/// start of the output, or does not decompress to exactly `expected_len`.
-pub fn lzf_decompress(input: &[u8], expected_len: usize) -> Result<Vec<u8>, String> {
+/// [`LzfError`] when the input is truncated, refers before the start of the
+/// output, or does not decompress to exactly `expected_len`.
+pub fn lzf_decompress(input: &[u8], expected_len: usize) -> Result<Vec<u8>, LzfError> {
     // Each input byte yields at most 264/3 output bytes, so a bogus expected
     // length is never reserved.
     let cap = expected_len.min(input.len().saturating_mul(90));
@@ -24,42 +81,34 @@ pub fn lzf_decompress(input: &[u8], expected_len: usize) -> Result<Vec<u8>, Stri
             let len = ctrl + 1;
             let lit = input
                 .get(ip..ip + len)
-                .ok_or_else(|| format!("LZF literal run at byte {} runs past the end", ip - 1))?;
+                .ok_or(LzfError::LiteralPastEnd { at: ip - 1 })?;
             if out.len() + len > expected_len {
-                return Err(format!(
-                    "LZF data decompresses to more than {expected_len} bytes"
-                ));
+                return Err(LzfError::TooLong {
+                    expected: expected_len,
+                });
             }
             out.extend_from_slice(lit);
             ip += len;
         } else {
             let mut len = ctrl >> 5;
             if len == 7 {
-                len += usize::from(
-                    *input
-                        .get(ip)
-                        .ok_or_else(|| "LZF back-reference cut short".to_string())?,
-                );
+                len += usize::from(*input.get(ip).ok_or(LzfError::BackReferenceCut)?);
                 ip += 1;
             }
-            let low = usize::from(
-                *input
-                    .get(ip)
-                    .ok_or_else(|| "LZF back-reference cut short".to_string())?,
-            );
+            let low = usize::from(*input.get(ip).ok_or(LzfError::BackReferenceCut)?);
             ip += 1;
             let back = ((ctrl & 0x1f) << 8) + low + 1;
             len += 2;
             if back > out.len() {
-                return Err(format!(
-                    "LZF back-reference {back} bytes back at output byte {} points before the start",
-                    out.len()
-                ));
+                return Err(LzfError::BeforeStart {
+                    back,
+                    at: out.len(),
+                });
             }
             if out.len() + len > expected_len {
-                return Err(format!(
-                    "LZF data decompresses to more than {expected_len} bytes"
-                ));
+                return Err(LzfError::TooLong {
+                    expected: expected_len,
+                });
             }
             let start = out.len() - back;
             for k in 0..len {
@@ -69,10 +118,10 @@ pub fn lzf_decompress(input: &[u8], expected_len: usize) -> Result<Vec<u8>, Stri
         }
     }
     if out.len() != expected_len {
-        return Err(format!(
-            "LZF data decompresses to {} bytes, the header says {expected_len}",
-            out.len()
-        ));
+        return Err(LzfError::WrongLength {
+            got: out.len(),
+            expected: expected_len,
+        });
     }
     Ok(out)
 }

@@ -31,7 +31,7 @@ pub use gaussian::{
     EXPORT_OPACITY, GaussianLayout, GaussianRead, MIN_OPACITY, RADIUS_PER_SIGMA, SH_C0,
     encode_gaussians, file_layout, parse_gaussians, read_gaussians, sniff_layout, write_gaussians,
 };
-pub use lzf::lzf_decompress;
+pub use lzf::{LzfError, lzf_decompress};
 pub use pcd::{Organised, encode_organised, read_organised};
 pub use sample::{MeshSampler, sample_mesh, write_sample_ply};
 pub use splat_ply::{
@@ -160,7 +160,7 @@ pub fn vertex_property_names(head: &[u8]) -> Option<Vec<String>> {
 pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
     if let Ok(meta) = std::fs::metadata(path) {
         crate::memory::check("reading the file whole", meta.len())
-            .map_err(|e| IoError::new(path, IoErrorKind::Data(e)))?;
+            .map_err(|e| IoError::new(path, IoErrorKind::Memory(e)))?;
     }
     let bytes = std::fs::read(path).map_err(|e| IoError::new(path, IoErrorKind::Io(e)))?;
     if bytes.is_empty() {
@@ -194,11 +194,22 @@ pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
 /// std::fs::remove_file(&path).unwrap();
 /// ```
 pub fn read_points(path: &Path) -> Result<PointCloud, IoError> {
+    read_points_keeping_bytes(path).map(|(cloud, _, _)| cloud)
+}
+
+/// [`read_points`], also giving the file's bytes and the format they were
+/// read in, for a second look at the same bytes (a PCD's organised grid:
+/// [`read_organised`]) without reading the file again.
+///
+/// # Errors
+/// As [`read_points`].
+pub fn read_points_keeping_bytes(path: &Path) -> Result<(PointCloud, Vec<u8>, Format), IoError> {
     let bytes = read_file(path)?;
     let format = Format::from_extension(path)
         .or_else(|| Format::sniff(&bytes[..bytes.len().min(4096)]))
         .ok_or_else(|| IoError::new(path, IoErrorKind::UnknownFormat))?;
-    parse_points(&bytes, format).map_err(|kind| IoError::new(path, kind))
+    let cloud = parse_points(&bytes, format).map_err(|kind| IoError::new(path, kind))?;
+    Ok((cloud, bytes, format))
 }
 
 /// [`read_points`] on a file's bytes, in a known `format`.

@@ -395,8 +395,8 @@ fn decode(
                     "reading the cloud",
                     (raw as u64).saturating_add((n as u64).saturating_mul(POINT_BYTES)),
                 )
-                .map_err(IoErrorKind::Data)?;
-                decompressed = lzf_decompress(packed, raw).map_err(IoErrorKind::Data)?;
+                .map_err(IoErrorKind::Memory)?;
+                decompressed = lzf_decompress(packed, raw).map_err(IoErrorKind::Lzf)?;
                 (&decompressed[..], true)
             };
             // Field f, element 0 of point i starts at:

@@ -244,7 +244,7 @@ pub fn stitch(parts: &[PathBuf], out: &Path) -> Result<(u32, u32)> {
     let mut bytes8: Vec<u8> = Vec::new();
     let mut floats: Vec<f32> = Vec::new();
     for p in parts {
-        let img = image::open(p).map_err(|e| Error::invalid(format!("{}: {e}", p.display())))?;
+        let img = image::open(p).map_err(|e| Error::other(e).context(p.display()))?;
         let (w, h) = (img.width(), img.height());
         if *width.get_or_insert(w) != w {
             return Err(Error::invalid(format!(

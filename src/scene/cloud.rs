@@ -44,7 +44,10 @@
 //! a dark blue-grey background; splat parameters at their defaults (the
 //! file's viewpoint orients the normals, as in any scene).
 
-use crate::io::{Format, file_head as head, read_points, read_splats};
+use crate::io::{
+    Format, GaussianRead, IoError, PointCloud, SplatSet, file_head as head,
+    read_points_keeping_bytes, read_splats,
+};
 use crate::resolve::ShadingMode;
 use crate::scene::model::Intrinsics;
 use crate::{Error, Result};
@@ -103,7 +106,12 @@ pub fn is_cloud_path(path: &Path) -> bool {
 /// properties `read_splats` needs (`x y z nx ny nz radius`).
 #[must_use]
 pub fn is_splat_ply(path: &Path) -> bool {
-    let Some(found) = head(path).and_then(|h| crate::io::vertex_property_names(&h)) else {
+    head(path).is_some_and(|h| splat_ply_head(&h))
+}
+
+/// [`is_splat_ply`] on a file's first bytes.
+fn splat_ply_head(head: &[u8]) -> bool {
+    let Some(found) = crate::io::vertex_property_names(head) else {
         return false;
     };
     ["x", "y", "z", "nx", "ny", "nz", "radius"]
@@ -149,12 +157,33 @@ impl Survey {
     }
 }
 
+/// A cloud file as [`read_and_survey`] read it: what the scene made for it
+/// takes instead of reading the file again.
+#[derive(Debug)]
+pub enum CloudRead {
+    /// A point cloud.
+    Points(PointCloud),
+    /// A splat file.
+    Splats(SplatSet),
+    /// A Gaussian splat file (read with the default opacity threshold).
+    Gaussians(GaussianRead),
+}
+
 /// Reads a cloud (points or a splat file) and surveys it.
 ///
 /// # Errors
 /// The reader's one-line error (no usable point among them).
 pub fn survey_file(path: &Path) -> Result<Survey> {
-    let s = survey_unchecked(path)?;
+    read_and_survey(path).map(|(s, _)| s)
+}
+
+/// [`survey_file`], and what was read, for the scene built from the survey
+/// (`build_scene_read`): the file is read once.
+///
+/// # Errors
+/// As [`survey_file`].
+pub fn read_and_survey(path: &Path) -> Result<(Survey, CloudRead)> {
+    let (s, read) = survey_unchecked(path)?;
     let span = 2.0 * s.radius();
     if span.is_nan() || span > f64::from(super::load::MAX_EXTENT) {
         return Err(Error::invalid(format!(
@@ -164,30 +193,38 @@ pub fn survey_file(path: &Path) -> Result<Survey> {
             super::load::MAX_EXTENT
         )));
     }
-    Ok(s)
+    Ok((s, read))
 }
 
-/// [`survey_file`] without the extent check.
-fn survey_unchecked(path: &Path) -> Result<Survey> {
-    let is_ply = Format::from_extension(path) == Some(Format::Ply)
-        || head(path).is_some_and(|h| Format::sniff(&h) == Some(Format::Ply));
-    let splat_set = if !is_ply {
+/// [`read_and_survey`] without the extent check. The file's first bytes are
+/// read once to tell its kind, then the whole file once.
+fn survey_unchecked(path: &Path) -> Result<(Survey, CloudRead)> {
+    let first = head(path).unwrap_or_default();
+    let sniffed = Format::sniff(&first);
+    let is_ply = Format::from_extension(path) == Some(Format::Ply) || sniffed == Some(Format::Ply);
+    let read = if !is_ply {
         None
-    } else if crate::io::file_layout(path).is_some() {
+    } else if crate::io::sniff_layout(&first).is_some() {
         let read = crate::io::read_gaussians(path, crate::io::MIN_OPACITY)?;
-        Some((CloudKind::Gaussians, read.set))
-    } else if is_splat_ply(path) {
-        Some((CloudKind::Splats, read_splats(path)?))
+        Some((CloudKind::Gaussians, CloudRead::Gaussians(read)))
+    } else if splat_ply_head(&first) {
+        Some((CloudKind::Splats, CloudRead::Splats(read_splats(path)?)))
     } else {
         None
     };
-    if let Some((kind, set)) = splat_set {
+    if let Some((kind, read)) = read {
+        let set = match &read {
+            CloudRead::Gaussians(g) => &g.set,
+            CloudRead::Splats(s) => s,
+            CloudRead::Points(_) => unreachable!("a splat file"),
+        };
         let centres: Vec<Vec3> = set.splats.iter().map(|s| s.center).collect();
         let colors = set.splats.iter().any(|s| s.color != Vec3::ONE);
-        return survey(kind, &centres, set.origin, None, colors)
-            .map_err(|e| e.context(path.display()));
+        let s = survey(kind, &centres, set.origin, None, colors)
+            .map_err(|e| e.context(path.display()))?;
+        return Ok((s, read));
     }
-    let cloud = read_points(path)?;
+    let (cloud, bytes, format) = read_points_keeping_bytes(path)?;
     let colors = cloud
         .colors
         .as_ref()
@@ -200,15 +237,11 @@ fn survey_unchecked(path: &Path) -> Result<Survey> {
         colors,
     )
     .map_err(|e| e.context(path.display()))?;
-    let is_pcd = Format::from_extension(path) == Some(Format::Pcd)
-        || head(path).is_some_and(|h| Format::sniff(&h) == Some(Format::Pcd));
-    if is_pcd {
-        let bytes = crate::io::read_file(path)?;
-        let grid =
-            crate::io::read_organised(&bytes).map_err(|k| crate::io::IoError::new(path, k))?;
+    if format == Format::Pcd || sniffed == Some(Format::Pcd) {
+        let grid = crate::io::read_organised(&bytes).map_err(|k| IoError::new(path, k))?;
         s.sensor = grid.map(|g| super::sensor::recover(&g));
     }
-    Ok(s)
+    Ok((s, CloudRead::Points(cloud)))
 }
 
 /// Surveys positions, offsets from `origin` (as the readers give them; the

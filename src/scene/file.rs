@@ -224,9 +224,10 @@ impl TransformSpec {
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SplatSpec {
-    /// Growth error threshold, fraction of the model's bounding-box diagonal.
-    #[serde(default, deserialize_with = "num::positive")]
-    pub epsilon: Option<f32>,
+    /// Growth error threshold, fraction of the model's bounding-box diagonal
+    /// (`SplatParams::epsilon_rel`; the key is `epsilon`).
+    #[serde(default, rename = "epsilon", deserialize_with = "num::positive")]
+    pub epsilon_rel: Option<f32>,
     /// Neighbourhood size.
     pub k: Option<usize>,
     /// Density factor `k` of §2.2.
@@ -439,8 +440,9 @@ pub struct SceneFile {
 /// Reads and parses a scene file. Errors are one line (the TOML parser's
 /// message, which names the key and the line, is folded onto it).
 pub fn parse_scene_file(path: &Path) -> Result<SceneFile> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::invalid(format!("{}: cannot read scene: {e}", path.display())))?;
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        Error::other(e).context(format_args!("{}: cannot read scene", path.display()))
+    })?;
     parse_scene_str(&text).map_err(|e| e.context(path.display()))
 }
 

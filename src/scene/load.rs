@@ -2,6 +2,7 @@
 //! sampled mesh, or built procedurally) and its exact surface, the
 //! materials, lights and camera resolved, and everything re-centred.
 
+use super::cloud::CloudRead;
 use super::file::{
     CameraSpec, LightKind, LightSpec, MaterialKind, MaterialSpec, ModelSpec, RenderSpec, SceneFile,
     ShapeKind, ShapeSpec, TransformSpec, parse_scene_file,
@@ -34,6 +35,22 @@ pub fn load_scene(path: &Path, progress: Option<Progress<'_>>) -> Result<Scene> 
 /// # Errors
 /// One line (naming the model where one is at fault).
 pub fn build_scene(file: &SceneFile, base: &Path, progress: Option<Progress<'_>>) -> Result<Scene> {
+    build_scene_read(file, base, None, progress)
+}
+
+/// [`build_scene`] with one model's input already read: `read` is the file
+/// at `path` (as [`super::cloud::read_and_survey`] gives it), which a model
+/// naming that path (joined to `base`) takes instead of reading it again.
+///
+/// # Errors
+/// As [`build_scene`].
+pub fn build_scene_read(
+    file: &SceneFile,
+    base: &Path,
+    read: Option<(&Path, CloudRead)>,
+    progress: Option<Progress<'_>>,
+) -> Result<Scene> {
+    let mut read = read;
     let c = &file.camera;
     check_camera(c)?;
     // Models, camera and lights are first shifted, in f64, by where the
@@ -44,7 +61,7 @@ pub fn build_scene(file: &SceneFile, base: &Path, progress: Option<Progress<'_>>
     if file.models.is_empty() {
         return Err(Error::invalid("the scene has no [[model]]"));
     }
-    let mut models = load_models(&file.models, base, progress)?;
+    let mut models = load_models(&file.models, base, &mut read, progress)?;
     let shift = models.shift;
     let lights = file
         .lights
@@ -202,7 +219,12 @@ struct Models {
 
 /// Loads every model in order; model `i` gets material `i`. The shift is
 /// where the first model's origin lands.
-fn load_models(specs: &[ModelSpec], base: &Path, progress: Option<Progress<'_>>) -> Result<Models> {
+fn load_models(
+    specs: &[ModelSpec],
+    base: &Path,
+    read: &mut Option<(&Path, CloudRead)>,
+    progress: Option<Progress<'_>>,
+) -> Result<Models> {
     let start = std::time::Instant::now();
     let mut shift = None;
     let mut out = Models {
@@ -220,7 +242,7 @@ fn load_models(specs: &[ModelSpec], base: &Path, progress: Option<Progress<'_>>)
         let number = i + 1;
         let in_model = |e: Error| e.context(format_args!("model {number}"));
         let mid = u16::try_from(i).map_err(|_| Error::invalid("more than 65535 models"))?;
-        let mut src = model_source(m, base, &mut out.load, progress).map_err(in_model)?;
+        let mut src = model_source(m, base, read, &mut out.load, progress).map_err(in_model)?;
         if !(m.transform.scale > 0.0 && m.transform.scale.is_finite()) {
             return Err(in_model(Error::invalid(format!(
                 "transform.scale must be positive, got {}",
@@ -318,6 +340,7 @@ fn truth_of(
 fn model_source<'a>(
     spec: &'a ModelSpec,
     base: &Path,
+    read: &mut Option<(&Path, CloudRead)>,
     load: &mut LoadReport,
     progress: Option<Progress<'_>>,
 ) -> Result<Source<'a>> {
@@ -357,7 +380,11 @@ fn model_source<'a>(
         });
     }
     if let Some(p) = &spec.splats {
-        let set = crate::io::read_splats(&base.join(p))?;
+        let path = base.join(p);
+        let set = match take_read(read, &path) {
+            Some(CloudRead::Splats(set)) => set,
+            _ => crate::io::read_splats(&path)?,
+        };
         return Ok(Source {
             splats: set.splats,
             origin: set.origin,
@@ -365,14 +392,16 @@ fn model_source<'a>(
         });
     }
     if let Some(p) = &spec.gaussians {
-        let read = crate::io::read_gaussians(
-            &base.join(p),
-            spec.min_opacity.unwrap_or(crate::io::MIN_OPACITY),
-        )?;
-        load.warnings.extend(read.warnings());
+        let path = base.join(p);
+        let min_opacity = spec.min_opacity.unwrap_or(crate::io::MIN_OPACITY);
+        let gaussians = match take_read(read, &path) {
+            Some(CloudRead::Gaussians(g)) if min_opacity == crate::io::MIN_OPACITY => g,
+            _ => crate::io::read_gaussians(&path, min_opacity)?,
+        };
+        load.warnings.extend(gaussians.warnings());
         return Ok(Source {
-            splats: read.set.splats,
-            origin: read.set.origin,
+            splats: gaussians.set.splats,
+            origin: gaussians.set.origin,
             truth: given_truth("a Gaussian splat file")?,
         });
     }
@@ -382,7 +411,11 @@ fn model_source<'a>(
                 "`samples` and `scan` apply to `mesh` models only",
             ));
         }
-        let cloud = crate::io::read_points(&base.join(p))?;
+        let path = base.join(p);
+        let cloud = match take_read(read, &path) {
+            Some(CloudRead::Points(cloud)) => cloud,
+            _ => crate::io::read_points(&path)?,
+        };
         return Ok(Source {
             splats: generate_splats(spec, &cloud, load, progress)?,
             origin: cloud.origin,
@@ -398,6 +431,16 @@ fn model_source<'a>(
         origin: cloud.origin,
         truth: PendingTruth::Mesh(mesh),
     })
+}
+
+/// What was read of `path` already, taken out of `read` (once): `None`
+/// when `read` holds another file or was taken.
+fn take_read(read: &mut Option<(&Path, CloudRead)>, path: &Path) -> Option<CloudRead> {
+    if read.as_ref().is_some_and(|(p, _)| *p == path) {
+        read.take().map(|(_, r)| r)
+    } else {
+        None
+    }
 }
 
 /// A mesh model's points (sampled by area, or scanned, with the model's
@@ -432,8 +475,8 @@ fn sample_mesh_model(spec: &ModelSpec, path: &Path) -> Result<(PointCloud, Mesh)
             seed: spec.seed,
         };
         let mesh = crate::io::read_mesh(path)?;
-        let scan = crate::scanner::scan_mesh(&mesh, &params)
-            .map_err(|e| Error::invalid(format!("{}: {e}", path.display())))?;
+        let scan =
+            crate::scanner::scan_mesh(&mesh, &params).map_err(|e| e.context(path.display()))?;
         return Ok((scan.cloud, mesh));
     }
     let samples = spec.samples.ok_or_else(|| {
@@ -463,7 +506,7 @@ fn generate_splats(
     let d = crate::splat::SplatParams::default();
     let params = crate::splat::SplatParams {
         k: spec.splat.k.unwrap_or(d.k),
-        epsilon_rel: spec.splat.epsilon.unwrap_or(d.epsilon_rel),
+        epsilon_rel: spec.splat.epsilon_rel.unwrap_or(d.epsilon_rel),
         density: spec.splat.density.unwrap_or(d.density),
         ellipses: spec.splat.ellipses,
         viewpoint: spec

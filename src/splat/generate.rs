@@ -20,6 +20,12 @@ use std::fmt;
 use std::time::Instant;
 
 /// Parameters of splat generation.
+///
+/// The error threshold `ϵ` of §2.1 has one name for each of its two forms,
+/// from the command line to the report: `epsilon_rel` is a fraction of the
+/// bounding-box diagonal (what `--epsilon` and a scene's `epsilon` give),
+/// `epsilon` alone is in the cloud's units (what the reports give, what
+/// growth compares against), and `epsilon_abs` sets the latter directly.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SplatParams {
     /// Neighbours per point in the neighbourhood graph of §2 (default 12).
@@ -158,7 +164,9 @@ pub struct SplatReport {
     /// field (range noise; see [`super::denoise`]), in the cloud's units; 0
     /// when every normal was given.
     pub noise: f64,
-    /// The absolute error threshold `ϵ` used.
+    /// The error threshold `ϵ` used, in the cloud's units
+    /// ([`SplatParams::epsilon_rel`] times the diagonal, or
+    /// [`SplatParams::epsilon_abs`]).
     pub epsilon: f64,
     /// The bounding-box diagonal of the used points.
     pub bbox_diagonal: f64,

@@ -38,7 +38,7 @@ pub fn mode_name(m: ShadingMode) -> &'static str {
 pub struct SweepPlan {
     /// The error thresholds `ϵ` (§2.1, fraction of each model's bounding-box
     /// diagonal), one per budget step, coarse first.
-    pub epsilons: Vec<f32>,
+    pub epsilons_rel: Vec<f32>,
     /// Image width, pixels.
     pub width: u32,
     /// Image height, pixels.
@@ -69,7 +69,7 @@ impl SweepPlan {
             .map(|i| (f64::from(coarse) * ratio.powf(i as f64 / (steps - 1) as f64)) as f32)
             .collect();
         Ok(SweepPlan {
-            epsilons,
+            epsilons_rel: epsilons,
             width,
             height,
         })
@@ -96,7 +96,7 @@ pub struct SweepRow {
     /// Budget step, 0 = coarsest.
     pub step: usize,
     /// `ϵ` of the step (§2.1), fraction of the bounding-box diagonal.
-    pub epsilon: f32,
+    pub epsilon_rel: f32,
     /// Shading mode (§4: flat, blended by eq. 5, Phong fields of eq. 4).
     pub shading: ShadingMode,
     /// Splats of the varied models (points and meshes).
@@ -166,7 +166,7 @@ pub fn csv_line(r: &SweepRow) -> String {
     let o = &r.reference().errors;
     let mut c = vec![
         r.step.to_string(),
-        r.epsilon.to_string(),
+        r.epsilon_rel.to_string(),
         mode_name(r.shading).to_string(),
         r.splats.to_string(),
         r.scene_splats.to_string(),
@@ -268,10 +268,10 @@ pub fn run_sweep(
         .collect();
     let mut reference: Option<(Scene, Frame)> = None;
     let mut rows = Vec::new();
-    for (step, &eps) in plan.epsilons.iter().enumerate() {
+    for (step, &eps) in plan.epsilons_rel.iter().enumerate() {
         let mut f = file.clone();
         for m in f.models.iter_mut().filter(|m| is_generated(m)) {
-            m.splat.epsilon = Some(eps);
+            m.splat.epsilon_rel = Some(eps);
         }
         let mut scene = build_scene(&f, base, progress)?;
         set_view(&mut scene, plan, ShadingMode::Phong)?;
@@ -371,7 +371,7 @@ pub fn run_sweep(
             ));
             let row = SweepRow {
                 step,
-                epsilon: eps,
+                epsilon_rel: eps,
                 shading: mode,
                 splats,
                 scene_splats: scene.splats.len(),
@@ -391,7 +391,7 @@ pub struct ParetoPoint {
     /// The row's budget step and `ϵ`.
     pub step: usize,
     /// See `step`.
-    pub epsilon: f32,
+    pub epsilon_rel: f32,
     /// The row's shading mode.
     pub shading: ShadingMode,
     /// Splats of the varied models.
@@ -414,7 +414,7 @@ pub fn pareto(rows: &[SweepRow], backend: &str) -> Vec<ParetoPoint> {
             let b = r.backends.iter().find(|b| b.name == backend)?;
             Some(ParetoPoint {
                 step: r.step,
-                epsilon: r.epsilon,
+                epsilon_rel: r.epsilon_rel,
                 shading: r.shading,
                 splats: r.splats,
                 render_s: b.render_s,
@@ -445,7 +445,7 @@ mod tests {
     fn row(step: usize, shading: ShadingMode, render_s: f64, psnr: f64) -> SweepRow {
         SweepRow {
             step,
-            epsilon: 0.01,
+            epsilon_rel: 0.01,
             shading,
             splats: 100 * (step + 1),
             scene_splats: 100 * (step + 1),
@@ -494,11 +494,15 @@ mod tests {
     #[test]
     fn geometric_plan_spans_the_range_in_order() {
         let p = SweepPlan::geometric(0.05, 0.0005, 5, 32, 24).unwrap();
-        assert_eq!(p.epsilons.len(), 5);
-        assert!((p.epsilons[0] - 0.05).abs() < 1e-7);
-        assert!((p.epsilons[4] - 0.0005).abs() < 1e-8);
-        assert!((p.epsilons[2] - 0.005).abs() < 1e-6, "{:?}", p.epsilons);
-        assert!(p.epsilons.windows(2).all(|w| w[1] < w[0]));
+        assert_eq!(p.epsilons_rel.len(), 5);
+        assert!((p.epsilons_rel[0] - 0.05).abs() < 1e-7);
+        assert!((p.epsilons_rel[4] - 0.0005).abs() < 1e-8);
+        assert!(
+            (p.epsilons_rel[2] - 0.005).abs() < 1e-6,
+            "{:?}",
+            p.epsilons_rel
+        );
+        assert!(p.epsilons_rel.windows(2).all(|w| w[1] < w[0]));
         for (c, f, n) in [
             (0.001, 0.01, 5),
             (0.01, 0.0, 5),
@@ -522,7 +526,7 @@ mod tests {
         };
         let r = SweepRow {
             step: 2,
-            epsilon: 0.01,
+            epsilon_rel: 0.01,
             shading: ShadingMode::Blended,
             splats: 10,
             scene_splats: 12,

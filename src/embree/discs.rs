@@ -1,0 +1,223 @@
+//! Embree's built-in oriented discs over the project's discs: what a user
+//! would pick instead of user geometry, measured against it by the
+//! benchmark (`benches/accel.rs`).
+
+use super::scene::{SceneHandle, new_buffer, new_geometry, ray_of};
+use super::{Device, EmbreeError};
+use crate::geometry::Ray;
+use embree4_sys as sys;
+
+/// Embree's built-in oriented discs (`RTC_GEOMETRY_TYPE_ORIENTED_DISC_POINT`)
+/// over the bounding circles of [`crate::primitive::Disc`]s, every hit
+/// Embree finds confirmed by the shared [`crate::primitive::Primitive::intersect`]
+/// on the disc itself in an intersection and an occlusion filter: what a
+/// user would pick instead of user geometry, for benchmarks. It returns the
+/// closest confirmed hit, not the candidate window of the backend contract,
+/// and knows no self-hit rule, so it is not a backend.
+pub struct NativeDiscScene {
+    scene: SceneHandle,
+    /// The discs the filters read (the geometry's user pointer): boxed, so
+    /// their address stays put while the scene lives.
+    _discs: Box<DiscList>,
+    memory_bytes: usize,
+}
+
+/// The discs behind a [`NativeDiscScene`]'s user pointer.
+struct DiscList(Vec<crate::primitive::Disc>);
+
+// SAFETY: a committed Embree scene may be queried concurrently; the filters
+// only read the disc list, which is never written after the build.
+unsafe impl Send for NativeDiscScene {}
+// SAFETY: as above.
+unsafe impl Sync for NativeDiscScene {}
+
+/// The filter of [`NativeDiscScene`]: a hit stands only if the disc itself
+/// is hit (at any distance past `tnear`; Embree keeps its own `t`).
+unsafe extern "C" fn native_disc_filter(args: *const sys::RTCFilterFunctionNArguments) {
+    use crate::primitive::Primitive;
+    // SAFETY: Embree passes valid arguments for the duration of the call.
+    let args = unsafe { &*args };
+    // Only the single-ray queries are used: `N == 1`, so `ray` is an
+    // `RTCRay`, `hit` an `RTCHit` and `valid` one lane.
+    if args.N != 1 || args.valid.is_null() {
+        return;
+    }
+    // SAFETY: one valid lane (above); the user pointer is the boxed disc
+    // list of the `NativeDiscScene`, alive while its scene is; `ray` and
+    // `hit` point to one ray and one hit (`N == 1`).
+    let (valid, discs, ray, hit) = unsafe {
+        (
+            &mut *args.valid,
+            &(*(args.geometryUserPtr as *const DiscList)).0,
+            &*(args.ray as *const sys::RTCRay),
+            &*(args.hit as *const sys::RTCHit),
+        )
+    };
+    if *valid == 0 {
+        return;
+    }
+    let confirmed = discs.get(hit.primID as usize).is_some_and(|d| {
+        d.intersect(&ray_of(ray), ray.tnear, f32::INFINITY)
+            .is_some()
+    });
+    if !confirmed {
+        *valid = 0;
+    }
+}
+
+impl NativeDiscScene {
+    /// Builds one oriented-disc geometry over `discs` (each disc's bounding
+    /// circle: centre, normal, larger radius) with the confirming filters,
+    /// and commits the scene.
+    pub fn new(
+        device: &Device,
+        discs: &[crate::primitive::Disc],
+    ) -> Result<NativeDiscScene, EmbreeError> {
+        let before = device.memory();
+        let boxed = Box::new(DiscList(discs.to_vec()));
+        let scene = SceneHandle::new(device)?;
+        let geom = new_geometry(device, sys::RTCGeometryType::ORIENTED_DISC_POINT)?;
+        // SAFETY: `geom` is a fresh disc geometry, written only here; FLOAT4
+        // is four f32, FLOAT3 three; the slices are filled before the
+        // geometry is released.
+        let buffers = unsafe {
+            (
+                new_buffer::<f32, 4>(
+                    geom,
+                    sys::RTCBufferType::VERTEX,
+                    sys::RTCFormat::FLOAT4,
+                    discs.len(),
+                ),
+                new_buffer::<f32, 3>(
+                    geom,
+                    sys::RTCBufferType::NORMAL,
+                    sys::RTCFormat::FLOAT3,
+                    discs.len(),
+                ),
+            )
+        };
+        let (Some(vs), Some(ns)) = buffers else {
+            // SAFETY: our reference to the fresh geometry, released once.
+            unsafe { sys::rtcReleaseGeometry(geom) };
+            device.check()?;
+            return Err(EmbreeError("could not allocate disc buffers".into()));
+        };
+        for ((v, nrm), d) in vs.iter_mut().zip(ns.iter_mut()).zip(discs) {
+            let r = (1.0 / d.u_scaled.length()).max(1.0 / d.v_scaled.length());
+            *v = [d.center.x, d.center.y, d.center.z, r];
+            *nrm = d.normal.to_array();
+        }
+        // SAFETY: `geom` filled; the user pointer is the boxed disc list,
+        // which outlives the scene (dropped after it, field order); attaching
+        // retains the geometry, so our reference is released right after.
+        unsafe {
+            sys::rtcSetGeometryUserData(geom, (&*boxed as *const DiscList).cast_mut().cast());
+            sys::rtcSetGeometryIntersectFilterFunction(geom, Some(native_disc_filter));
+            sys::rtcSetGeometryOccludedFilterFunction(geom, Some(native_disc_filter));
+            sys::rtcCommitGeometry(geom);
+            sys::rtcAttachGeometry(scene.raw, geom);
+            sys::rtcReleaseGeometry(geom);
+        }
+        device.check()?;
+        scene.commit()?;
+        Ok(NativeDiscScene {
+            scene,
+            _discs: boxed,
+            memory_bytes: device.memory().saturating_sub(before),
+        })
+    }
+
+    /// The closest confirmed hit in `[t_min, t_max]`: the disc's index and
+    /// Embree's distance.
+    #[must_use]
+    pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<(u32, f32)> {
+        // The filter reads only the scene's own disc list.
+        let slot = self.scene.intersect1(ray, t_min, t_max);
+        let h = &slot.rayhit.hit;
+        (h.geomID != sys::RTC_INVALID_GEOMETRY_ID).then_some((h.primID, slot.rayhit.ray.tfar))
+    }
+
+    /// True when a confirmed hit lies in `[t_min, t_max]`.
+    #[must_use]
+    pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        // SAFETY: null context: the filters use only the geometry's user
+        // pointer.
+        unsafe { self.scene.occluded(ray, t_min, t_max, std::ptr::null_mut()) }
+    }
+
+    /// Bytes the device's memory monitor saw Embree keep while building.
+    #[must_use]
+    pub fn memory_bytes(&self) -> usize {
+        self.memory_bytes
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    /// Native discs answer with the disc the exact test finds nearest:
+    /// elliptical discs are registered by their bounding circles, and the
+    /// filter rejects hits between the circle and the ellipse.
+    #[test]
+    fn native_discs_confirm_hits_with_the_exact_test() {
+        use crate::primitive::{Disc, Primitive};
+        use crate::splat::Splat;
+        let device = Device::new().unwrap();
+        // An ellipse 2 x 0.5 in the z = 0 plane, and a circle behind it.
+        let mut e = Splat::disc(Vec3::ZERO, Vec3::Z, 1.0).unwrap();
+        e.u_axis = Vec3::X;
+        e.v_axis = Vec3::Y;
+        e.radii = glam::Vec2::new(2.0, 0.5);
+        let c = Splat::disc(Vec3::new(0.0, 0.0, -1.0), Vec3::Z, 1.5).unwrap();
+        let discs: Vec<Disc> = [e, c].iter().map(Splat::disc_geometry).collect();
+        let scene = NativeDiscScene::new(&device, &discs).unwrap();
+        let down = |x: f32, y: f32| Ray::new(Vec3::new(x, y, 5.0), -Vec3::Z);
+        // Inside the ellipse: the ellipse, at distance 5.
+        let (id, t) = scene
+            .intersect(&down(1.5, 0.1), 0.0, f32::INFINITY)
+            .unwrap();
+        assert_eq!(id, 0);
+        assert!((t - 5.0).abs() < 1e-5);
+        // Inside its bounding circle but outside the ellipse: the circle
+        // behind it.
+        assert_eq!(
+            scene
+                .intersect(&down(0.0, 1.2), 0.0, f32::INFINITY)
+                .map(|h| h.0),
+            Some(1)
+        );
+        // Outside both.
+        assert!(
+            scene
+                .intersect(&down(0.0, 1.9), 0.0, f32::INFINITY)
+                .is_none()
+        );
+        assert!(!scene.occluded(&down(0.0, 1.9), 0.0, f32::INFINITY));
+        assert!(scene.occluded(&down(0.0, 1.2), 0.0, f32::INFINITY));
+        // Random rays: the same nearest disc as the exact test.
+        let mut rng = crate::rng::SplitMix64::new(9);
+        for _ in 0..2000 {
+            let o = Vec3::new(rng.range(-3.0, 3.0), rng.range(-3.0, 3.0), 5.0);
+            let ray = Ray::new(
+                o,
+                Vec3::new(rng.range(-0.3, 0.3), rng.range(-0.3, 0.3), -1.0),
+            );
+            let exact = discs
+                .iter()
+                .enumerate()
+                .filter_map(|(i, d)| {
+                    d.intersect(&ray, 0.0, f32::INFINITY)
+                        .map(|h| (i as u32, h.t))
+                })
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|h| h.0);
+            assert_eq!(
+                scene.intersect(&ray, 0.0, f32::INFINITY).map(|h| h.0),
+                exact
+            );
+        }
+        assert!(scene.memory_bytes() > 0);
+    }
+}

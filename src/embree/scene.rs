@@ -1,0 +1,221 @@
+//! What every scene of the module shares: the owned `RTCScene`, and rays,
+//! hits and query contexts as Embree 4.3 and later lay them out.
+
+use super::{Device, EmbreeError};
+use crate::geometry::Ray;
+use embree4_sys as sys;
+use std::ffi::c_uint;
+
+/// `RTCRayQueryContext` as Embree 4.3 and later lay it out: the
+/// `embree4-sys` bindings come from the 4.2 headers, which lack the
+/// `instPrimID` stack that a library built with instance arrays (the
+/// default, and the PyPI build `scripts/setup.sh` installs) reads after
+/// `instID` and copies into every hit. Without this field Embree reads past
+/// the context.
+#[repr(C)]
+pub(super) struct RayQueryContext {
+    base: sys::RTCRayQueryContext,
+    inst_prim_id: [c_uint; 1],
+}
+
+/// `rtcInitRayQueryContext` (inline in `rtcore_ray.h`), for the layout of
+/// [`RayQueryContext`].
+pub(super) fn ray_query_context() -> RayQueryContext {
+    RayQueryContext {
+        base: sys::RTCRayQueryContext {
+            instID: [sys::RTC_INVALID_GEOMETRY_ID; 1],
+        },
+        inst_prim_id: [sys::RTC_INVALID_GEOMETRY_ID; 1],
+    }
+}
+
+/// An `RTCRayHit` with room after it for the fields Embree 4.3 and later
+/// append to `RTCHit` (`instPrimID`, then padding to 16 bytes), which the
+/// 4.2 bindings lack: Embree writes `instPrimID` with every triangle hit, so
+/// a bare `RTCRayHit` would have it overwrite whatever follows on the stack.
+#[repr(C)]
+pub(super) struct RayHitSlot {
+    pub(super) rayhit: sys::RTCRayHit,
+    pub(super) tail: [c_uint; 4],
+}
+
+/// `rtcInitIntersectArguments` (inline in `rtcore_scene.h`), with the
+/// context set.
+pub(super) fn intersect_arguments(ctx: *mut sys::RTCRayQueryContext) -> sys::RTCIntersectArguments {
+    sys::RTCIntersectArguments {
+        flags: sys::RTCRayQueryFlags::INCOHERENT,
+        feature_mask: sys::RTCFeatureFlags::RTC_FEATURE_FLAG_ALL,
+        context: ctx,
+        filter: None,
+        intersect: None,
+    }
+}
+
+/// `rtcInitOccludedArguments` (inline in `rtcore_scene.h`), with the
+/// context set (null: Embree's default).
+pub(super) fn occluded_arguments(ctx: *mut sys::RTCRayQueryContext) -> sys::RTCOccludedArguments {
+    sys::RTCOccludedArguments {
+        flags: sys::RTCRayQueryFlags::INCOHERENT,
+        feature_mask: sys::RTCFeatureFlags::RTC_FEATURE_FLAG_ALL,
+        context: ctx,
+        filter: None,
+        occluded: None,
+    }
+}
+
+pub(super) fn embree_ray(ray: &Ray, t_min: f32, t_max: f32) -> sys::RTCRay {
+    sys::RTCRay {
+        org_x: ray.origin.x,
+        org_y: ray.origin.y,
+        org_z: ray.origin.z,
+        tnear: t_min,
+        dir_x: ray.dir.x,
+        dir_y: ray.dir.y,
+        dir_z: ray.dir.z,
+        time: 0.0,
+        tfar: t_max,
+        mask: u32::MAX,
+        id: 0,
+        flags: 0,
+    }
+}
+
+/// A ray with an empty hit record, as `rtcIntersect1` expects it, in a
+/// [`RayHitSlot`].
+pub(super) fn embree_rayhit(ray: &Ray, t_min: f32, t_max: f32) -> RayHitSlot {
+    RayHitSlot {
+        rayhit: sys::RTCRayHit {
+            ray: embree_ray(ray, t_min, t_max),
+            hit: sys::RTCHit {
+                Ng_x: 0.0,
+                Ng_y: 0.0,
+                Ng_z: 0.0,
+                u: 0.0,
+                v: 0.0,
+                primID: sys::RTC_INVALID_GEOMETRY_ID,
+                geomID: sys::RTC_INVALID_GEOMETRY_ID,
+                instID: [sys::RTC_INVALID_GEOMETRY_ID; 1],
+            },
+        },
+        tail: [sys::RTC_INVALID_GEOMETRY_ID; 4],
+    }
+}
+
+/// The ray of a callback's `RTCRay`.
+pub(super) fn ray_of(r: &sys::RTCRay) -> Ray {
+    Ray {
+        origin: glam::Vec3::new(r.org_x, r.org_y, r.org_z),
+        dir: glam::Vec3::new(r.dir_x, r.dir_y, r.dir_z),
+    }
+}
+
+/// An owned `RTCScene` of a device: released on drop.
+pub(super) struct SceneHandle {
+    pub(super) device: Device,
+    pub(super) raw: sys::RTCScene,
+}
+
+impl SceneHandle {
+    pub(super) fn new(device: &Device) -> Result<SceneHandle, EmbreeError> {
+        // SAFETY: live device.
+        let raw = unsafe { sys::rtcNewScene(device.inner.raw) };
+        device.check()?;
+        if raw.is_null() {
+            return Err(EmbreeError("rtcNewScene returned null".into()));
+        }
+        Ok(SceneHandle {
+            device: device.clone(),
+            raw,
+        })
+    }
+
+    pub(super) fn commit(&self) -> Result<(), EmbreeError> {
+        // SAFETY: live scene, its geometries attached and committed.
+        unsafe { sys::rtcCommitScene(self.raw) };
+        self.device.check()
+    }
+
+    /// The nearest hit in `[t_min, t_max]` with Embree's default context
+    /// (for scenes without user geometry: triangles, native discs).
+    pub(super) fn intersect1(&self, ray: &Ray, t_min: f32, t_max: f32) -> RayHitSlot {
+        let mut ctx = ray_query_context();
+        let mut args = intersect_arguments((&mut ctx as *mut RayQueryContext).cast());
+        let mut slot = embree_rayhit(ray, t_min, t_max);
+        // SAFETY: committed scene (every constructor commits); all pointers
+        // live across the call; the context and the slot have the layout and
+        // room Embree 4.3+ uses; a scene with user callbacks does not come
+        // here (it needs its own context).
+        unsafe {
+            sys::rtcIntersect1(self.raw, (&mut slot as *mut RayHitSlot).cast(), &mut args);
+        };
+        slot
+    }
+
+    /// True when anything is hit in `[t_min, t_max]`; `ctx` is handed to
+    /// the user callbacks (null for Embree's default context).
+    ///
+    /// # Safety
+    /// A non-null `ctx` must point to a live context of the type the
+    /// scene's user callbacks read, valid for the whole call.
+    pub(super) unsafe fn occluded(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        ctx: *mut sys::RTCRayQueryContext,
+    ) -> bool {
+        let mut r = embree_ray(ray, t_min, t_max);
+        let mut args = occluded_arguments(ctx);
+        // SAFETY: committed scene; `r` and `args` live across the call;
+        // `ctx` as the caller guarantees.
+        unsafe { sys::rtcOccluded1(self.raw, &mut r, &mut args) };
+        r.tfar == f32::NEG_INFINITY
+    }
+}
+
+impl Drop for SceneHandle {
+    fn drop(&mut self) {
+        // SAFETY: `raw` came from `rtcNewScene` and is released once.
+        unsafe { sys::rtcReleaseScene(self.raw) };
+    }
+}
+
+/// A new geometry of `kind` on `device`: the caller's reference, to fill,
+/// commit, attach and release.
+pub(super) fn new_geometry(
+    device: &Device,
+    kind: sys::RTCGeometryType,
+) -> Result<sys::RTCGeometry, EmbreeError> {
+    // SAFETY: live device; `kind` is one of Embree's geometry types.
+    let geom = unsafe { sys::rtcNewGeometry(device.inner.raw, kind) };
+    device.check()?;
+    if geom.is_null() {
+        return Err(EmbreeError("rtcNewGeometry returned null".into()));
+    }
+    Ok(geom)
+}
+
+/// A new buffer of `geom` holding `len` items of `N` values of `T` each (the
+/// item Embree's `format` names: three `f32` for `FLOAT3`, three `u32` for
+/// `UINT3`), as a slice to fill; `None` when Embree could not allocate it.
+///
+/// # Safety
+/// `geom` is a live geometry, not yet committed, whose buffer of `kind`
+/// nothing else writes; `format` is an item of `N` values of `T`; the slice
+/// is not used after the geometry is released.
+pub(super) unsafe fn new_buffer<'g, T, const N: usize>(
+    geom: sys::RTCGeometry,
+    kind: sys::RTCBufferType,
+    format: sys::RTCFormat,
+    len: usize,
+) -> Option<&'g mut [[T; N]]> {
+    let stride = N * std::mem::size_of::<T>();
+    // SAFETY: `geom` as the caller guarantees; Embree allocates `len` items
+    // of this stride (with its own padding, aligned to 16 bytes) and returns
+    // a pointer valid until the geometry is released, or null.
+    let p = unsafe { sys::rtcSetNewGeometryBuffer(geom, kind, 0, format, stride, len) };
+    let p = p.cast::<[T; N]>();
+    // SAFETY: a non-null `p` holds `len` items of `[T; N]` (the stride is
+    // their size), aligned, and this slice is the only way to them.
+    (!p.is_null()).then(|| unsafe { std::slice::from_raw_parts_mut(p, len) })
+}
