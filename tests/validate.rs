@@ -9,7 +9,9 @@ use splatray::accel::octree::{Octree, OctreeParams};
 use splatray::primitive::Disc;
 use splatray::render::integrator::render;
 use splatray::scene::{Scene, build_scene, parse_scene_str};
-use splatray::validate::compare::compare_frames;
+use splatray::validate::causes::{Cause, Tolerances, error_budget};
+use splatray::validate::compare::{compare_frames, render_truth};
+use splatray::validate::truth::Truth;
 use std::path::Path;
 use std::process::Command;
 
@@ -62,6 +64,67 @@ fn broken_octree_is_caught_as_holes() {
     assert_eq!(a.only_first, 0, "{a:?}");
     assert!(a.hit_agreement < 1.0);
     assert!(a.image_psnr_db.is_some());
+}
+
+/// The error budget by cause on real renders against the exact sphere and
+/// floor: flat shading (only the normals change) moves error into the
+/// normal-related causes and leaves the coverage ones pixel for pixel as
+/// they were; the broken octree's holes are all found as holes.
+#[test]
+fn error_budget_puts_each_error_where_it_belongs() {
+    let with = |shading: &str| {
+        let text = SCENE.replace(
+            "[camera]",
+            &format!("[render]\nshading = \"{shading}\"\n[camera]"),
+        );
+        build_scene(&parse_scene_str(&text).unwrap(), Path::new("."), None).unwrap()
+    };
+    let (phong, flat) = (with("phong"), with("flat"));
+    let truth = render_truth(&phong, &Truth::new(&phong).unwrap(), None);
+    let diagonal = phong.options.scale.diagonal;
+    let tol = Tolerances::default();
+    let budget = |f: &splatray::render::integrator::Frame| {
+        error_budget(f, &truth, diagonal, &tol, &phong.material_of).0
+    };
+    let (fp, ff) = (render_with(&phong, "embree"), render_with(&flat, "embree"));
+    let (p, f) = (budget(&fp), budget(&ff));
+    eprintln!("phong {p:#?}\nflat {f:#?}");
+    let by = |b: &splatray::validate::causes::ErrorBudget, c: Cause| b.causes[c as usize].clone();
+    for b in [&p, &f] {
+        let shares: f64 = b.causes.iter().map(|c| c.share).sum();
+        assert!((shares - 1.0).abs() < 1e-9, "{b:?}");
+        assert_eq!(b.causes.iter().map(|c| c.pixels).sum::<usize>(), 96 * 72);
+        for c in &b.causes {
+            // Making any cause's pixels exact never lowers the PSNR.
+            assert!(c.psnr_if_exact_db.unwrap_or(f64::INFINITY) >= b.psnr_db.unwrap() - 1e-9);
+        }
+    }
+    // The same discs: the same coverage and the same silhouettes.
+    for c in [
+        Cause::Background,
+        Cause::Hole,
+        Cause::FalseHit,
+        Cause::Silhouette,
+        Cause::Depth,
+    ] {
+        assert_eq!(by(&p, c).pixels, by(&f, c).pixels, "{c:?}");
+    }
+    // Flat normals: the shading error grows and leads among the
+    // normal-related causes.
+    let normal_se =
+        |b| [Cause::Terminator, Cause::Shadow, Cause::Shading].map(|c| by(b, c).squared_error);
+    let (np, nf) = (normal_se(&p), normal_se(&f));
+    assert!(nf[2] > 2.0 * np[2], "shading {np:?} -> {nf:?}");
+    assert!(nf[2] > nf[0] && nf[2] > nf[1], "{nf:?}");
+    // The broken octree (§3.1 step 3 skipped) against the truth: its
+    // extra misses are holes, and the holes cost it PSNR.
+    let discs: Vec<Disc> = phong.splats.iter().map(|s| s.disc_geometry()).collect();
+    let broken = Octree::without_overlap_insertion(&discs, &OctreeParams::default());
+    let bad = render(&phong, &broken, None);
+    let bad = budget(&bad);
+    let gap = by(&bad, Cause::Hole).pixels - by(&p, Cause::Hole).pixels;
+    assert!(gap > 0, "{bad:?}");
+    assert!(by(&bad, Cause::Hole).psnr_if_exact_db.unwrap() > bad.psnr_db.unwrap() + 0.1);
 }
 
 #[test]
@@ -137,11 +200,40 @@ fn compare_report_has_the_documented_keys() {
         .arg("--truth")
         .arg("--diff")
         .arg(&diff)
+        .arg("--report")
+        .arg(&report)
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let img = image::open(dir.join("d-truth.png")).unwrap();
     assert_eq!((img.width(), img.height()), (3 * 96, 72));
+    // The causes of error beside their cost, and the split in the report.
+    let img = image::open(dir.join("d-causes.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (2 * 96, 72));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let causes = v["truth"]["backends"][0]["by_cause"]["causes"]
+        .as_array()
+        .unwrap_or_else(|| panic!("by_cause missing in {v}"));
+    let names: Vec<&str> = causes
+        .iter()
+        .map(|c| c["cause"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "background",
+            "hole",
+            "false_hit",
+            "silhouette",
+            "depth",
+            "terminator",
+            "shadow",
+            "shading"
+        ]
+    );
+    let shares: f64 = causes.iter().map(|c| c["share"].as_f64().unwrap()).sum();
+    assert!((shares - 1.0).abs() < 1e-9, "{v}");
 }
 
 /// A splat file with `truth = "mesh.ply"` is measured against that mesh

@@ -9,6 +9,7 @@ use splatray::accel::registry;
 use splatray::io::Batch;
 use splatray::render::integrator::{Frame, render};
 use splatray::render::output::{check_output_path, check_writable, save_into};
+use splatray::validate::causes::{Cause, ErrorBudget, Tolerances, cause_image, error_budget};
 use splatray::validate::compare::{
     Agreement, TruthErrors, compare_frames, diff_image, render_truth, truth_errors,
 };
@@ -28,7 +29,9 @@ pub struct CompareArgs {
     /// Write a difference heat map here (PNG): the reference backend | the
     /// second backend | difference. With `--truth`, also `D-truth.png`: the
     /// reference backend | the exact surfaces | difference (rays only one
-    /// hit in magenta: holes and overhang).
+    /// hit in magenta: holes and overhang); and `D-causes.png`: each
+    /// pixel's cause of error | the same scaled by its error
+    /// (`validate::causes::cause_image`).
     #[arg(long)]
     pub diff: Option<PathBuf>,
     /// Samples per pixel (default 1: one primary ray per pixel centre).
@@ -99,6 +102,8 @@ pub struct NamedTruthErrors {
     /// Its errors.
     #[serde(flatten)]
     pub errors: TruthErrors,
+    /// Its squared error by cause (`validate::causes`).
+    pub by_cause: ErrorBudget,
 }
 
 fn mrays_per_s(f: &Frame) -> f64 {
@@ -114,6 +119,15 @@ fn truth_diff_path(diff: &std::path::Path) -> PathBuf {
     diff.with_file_name(format!("{stem}-truth.png"))
 }
 
+/// Where `--diff D.png` with `--truth` puts the causes of error:
+/// `D-causes.png`.
+fn causes_diff_path(diff: &std::path::Path) -> PathBuf {
+    let stem = diff
+        .file_stem()
+        .map_or_else(|| "diff".to_string(), |s| s.to_string_lossy().into_owned());
+    diff.with_file_name(format!("{stem}-causes.png"))
+}
+
 /// Runs `splatray compare`.
 pub fn run(args: &CompareArgs) -> Result<()> {
     let scene_path = args.view.path();
@@ -127,6 +141,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         check_output_path(d)?;
         if args.truth {
             check_output_path(&truth_diff_path(d))?;
+            check_output_path(&causes_diff_path(d))?;
         }
     }
     if let Some(r) = &args.report {
@@ -176,14 +191,23 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         frames.push(frame);
     }
     let truth_frame = truth.map(|t| render_truth(&scene, &t, Some(&progress)));
+    let tolerances = Tolerances::default();
+    // The reference backend's cause of every pixel, for `D-causes.png`.
+    let mut reference_causes: Option<Vec<Cause>> = None;
     let truth = truth_frame.as_ref().map(|tf| TruthReport {
         render_seconds: tf.seconds,
         backends: backends
             .iter()
             .zip(&frames)
-            .map(|(b, f)| NamedTruthErrors {
-                name: b.name,
-                errors: truth_errors(f.clone(), tf, &scene.camera, diagonal),
+            .map(|(b, f)| {
+                let (by_cause, causes) =
+                    error_budget(f, tf, diagonal, &tolerances, &scene.material_of);
+                reference_causes.get_or_insert(causes);
+                NamedTruthErrors {
+                    name: b.name,
+                    errors: truth_errors(f.clone(), tf, &scene.camera, diagonal),
+                    by_cause,
+                }
             })
             .collect(),
     });
@@ -208,6 +232,14 @@ pub fn run(args: &CompareArgs) -> Result<()> {
             &truth_diff_path(d),
             image::ImageFormat::Png,
         )?;
+        if let Some(causes) = &reference_causes {
+            save_into(
+                &mut batch,
+                &cause_image(a, tf, causes),
+                &causes_diff_path(d),
+                image::ImageFormat::Png,
+            )?;
+        }
     }
     if let Some(r) = &args.report {
         stage_text(&mut batch, r, &(json_text(&report)? + "\n"))?;
@@ -275,5 +307,59 @@ fn print_report(report: &CompareReport) {
                     .map_or("inf".to_string(), |p| format!("{p:.2} dB"))
             );
         }
+        // The split by cause: the reference's, and any backend's that
+        // differs from it.
+        let first = t.backends.first().map(|b| &b.by_cause);
+        for (k, b) in t.backends.iter().enumerate() {
+            if k > 0 && Some(&b.by_cause) == first {
+                println!("  {}: the same error by cause", b.name);
+            } else {
+                print_budget(b.name, &b.by_cause);
+            }
+        }
+    }
+}
+
+/// One backend's squared error by cause, a line per cause.
+fn print_budget(name: &str, b: &ErrorBudget) {
+    let db = |p: Option<f64>| p.map_or("inf".to_string(), |p| format!("{p:.2}"));
+    println!(
+        "  {name}: squared error by cause (PSNR {} dB; cause, pixels, % of the image, share of the squared error, PSNR if exact):",
+        db(b.psnr_db)
+    );
+    for c in &b.causes {
+        println!(
+            "    {:<11} {:>9} {:>7.2} % {:>9.3} % {:>8} dB",
+            c.cause.name(),
+            c.pixels,
+            100.0 * c.pixels as f64 / b.pixels.max(1) as f64,
+            100.0 * c.share,
+            db(c.psnr_if_exact_db)
+        );
+    }
+    for (what, c, of) in [
+        ("holes", &b.holes, "a pixel the surface misses"),
+        ("false hits", &b.false_hits, "a pixel the surface hits"),
+    ] {
+        println!(
+            "    {what} by distance to {of}: 1 px {}, 2-3 px {}, farther {}",
+            c.at_1px, c.at_2_3px, c.farther
+        );
+    }
+    for m in &b.by_material {
+        let parts: Vec<String> = m
+            .causes
+            .iter()
+            .filter(|c| c.pixels > 0)
+            .map(|c| {
+                format!(
+                    "{} {} px {:.2} %",
+                    c.cause.name(),
+                    c.pixels,
+                    100.0 * c.share
+                )
+            })
+            .collect();
+        println!("    material {}: {}", m.material, parts.join(", "));
     }
 }

@@ -9,7 +9,8 @@ use crate::{Error, Result};
 
 /// Peak bytes per pixel of one rendered frame and its outputs: 64.5
 /// measured (`render scenes/bunny.toml` at 1024² and 4096², PNG or EXR
-/// with every AOV: 92.8 MB and 1,083.8 MB peak resident), rounded up.
+/// with every AOV: 92.8 MB and 1,083.8 MB peak resident), and 8 more for
+/// the two light-share AOVs (`Frame::light_lit`), rounded up.
 pub const BYTES_PER_PIXEL: u64 = 80;
 
 /// Peak bytes per splat of a loaded scene with one accelerator built: 550

@@ -62,6 +62,17 @@ pub struct Frame {
     /// Unlit colour of the primary hit (the material's colour times the
     /// splat's, linear), zero on a miss.
     pub albedo: Vec<Vec3>,
+    /// Of the direct light at the primary hit (every light sample of §1.2,
+    /// weighted by its irradiance `power / d²` summed over the channels),
+    /// the share arriving from in front of the shading normal (`n·l > 0`):
+    /// where this differs between two renders, a shading normal has moved
+    /// a light across the terminator. Zero on a miss and on mirror and
+    /// glass hits (no direct light).
+    pub light_facing: Vec<f32>,
+    /// The share of that light (same weights) that is also unoccluded: its
+    /// shadow ray reaches the light. `light_facing - light_lit` is the
+    /// share shadowed by other surfaces (cast shadows, shadow acne).
+    pub light_lit: Vec<f32>,
     /// Rays traced.
     pub rays: RayCounts,
     /// Wall seconds spent rendering.
@@ -212,6 +223,10 @@ struct Scratch {
     hits: CandidateHits,
     rays: RayCounts,
     rng: Rng,
+    /// The primary hit's light shares (`Frame::light_facing`,
+    /// `Frame::light_lit`): weights of all, facing and lit light samples,
+    /// tallied by `direct` at depth 0.
+    light: [f32; 3],
 }
 
 fn reflect(d: Vec3, n: Vec3) -> Vec3 {
@@ -250,7 +265,8 @@ impl Tracer<'_> {
     }
 
     /// Irradiance-weighted light reaching `p` with facing normal `n`, plus
-    /// the Blinn–Phong highlight toward `-view` when `spec > 0`.
+    /// the Blinn–Phong highlight toward `-view` when `spec > 0`; and the
+    /// weights of all, facing and lit light samples (`Frame::light_lit`).
     fn direct(
         &self,
         hit: &ShadeHit,
@@ -259,9 +275,12 @@ impl Tracer<'_> {
         albedo: Vec3,
         spec: (f32, f32),
         s: &mut Scratch,
-    ) -> Vec3 {
+    ) -> (Vec3, [f32; 3]) {
         let p = hit.point;
         let mut sum = Vec3::ZERO;
+        // Weights of all, facing and lit light samples (`Frame::light_lit`).
+        let mut tally = [0.0f32; 3];
+        let weight = |e: Vec3| e.x + e.y + e.z;
         let mut add = |l: Vec3, e: Vec3| {
             let cos = n.dot(l);
             let mut c = albedo * cos;
@@ -278,14 +297,25 @@ impl Tracer<'_> {
                     let d2 = to.length_squared();
                     let d = d2.sqrt();
                     let l = to / d;
-                    if n.dot(l) > 0.0 && self.visible(hit, l, d, s) {
-                        add(l, power / d2);
+                    let e = power / d2;
+                    tally[0] += weight(e);
+                    if n.dot(l) > 0.0 {
+                        tally[1] += weight(e);
+                        if self.visible(hit, l, d, s) {
+                            tally[2] += weight(e);
+                            add(l, e);
+                        }
                     }
                 }
                 Light::Directional { direction, power } => {
                     let l = -direction;
-                    if n.dot(l) > 0.0 && self.visible(hit, l, f32::INFINITY, s) {
-                        add(l, power);
+                    tally[0] += weight(power);
+                    if n.dot(l) > 0.0 {
+                        tally[1] += weight(power);
+                        if self.visible(hit, l, f32::INFINITY, s) {
+                            tally[2] += weight(power);
+                            add(l, power);
+                        }
                     }
                 }
                 Light::Sphere {
@@ -313,15 +343,21 @@ impl Tracer<'_> {
                             let d2 = to.length_squared();
                             let d = d2.sqrt();
                             let l = to / d;
-                            if n.dot(l) > 0.0 && self.visible(hit, l, d, s) {
-                                add(l, power * (share / d2));
+                            let e = power * (share / d2);
+                            tally[0] += weight(e);
+                            if n.dot(l) > 0.0 {
+                                tally[1] += weight(e);
+                                if self.visible(hit, l, d, s) {
+                                    tally[2] += weight(e);
+                                    add(l, e);
+                                }
                             }
                         }
                     }
                 }
             }
         }
-        sum
+        (sum, tally)
     }
 
     fn shade(&self, ray: &Ray, hit: Option<ShadeHit>, depth: u32, s: &mut Scratch) -> Vec3 {
@@ -335,7 +371,11 @@ impl Tracer<'_> {
         match material {
             Material::Diffuse { color } => {
                 let albedo = color * hit.color;
-                albedo * sc.options.ambient + self.direct(&hit, n, ray.dir, albedo, (0.0, 0.0), s)
+                let (direct, tally) = self.direct(&hit, n, ray.dir, albedo, (0.0, 0.0), s);
+                if depth == 0 {
+                    s.light = tally;
+                }
+                albedo * sc.options.ambient + direct
             }
             Material::Phong {
                 color,
@@ -343,8 +383,12 @@ impl Tracer<'_> {
                 shininess,
             } => {
                 let albedo = color * hit.color;
-                albedo * sc.options.ambient
-                    + self.direct(&hit, n, ray.dir, albedo, (specular, shininess), s)
+                let (direct, tally) =
+                    self.direct(&hit, n, ray.dir, albedo, (specular, shininess), s);
+                if depth == 0 {
+                    s.light = tally;
+                }
+                albedo * sc.options.ambient + direct
             }
             Material::Mirror { color } => {
                 if !deeper {
@@ -398,6 +442,8 @@ struct Row {
     normal: Vec<Vec3>,
     splat: Vec<u32>,
     albedo: Vec<Vec3>,
+    light_facing: Vec<f32>,
+    light_lit: Vec<f32>,
     rays: RayCounts,
 }
 
@@ -457,12 +503,15 @@ fn render_surfaces_rows(
                 hits: CandidateHits::new(scene.options.scale.xi),
                 rays: RayCounts::default(),
                 rng: Rng::new(y as u32, 0, 0),
+                light: [0.0; 3],
             };
             let mut rgb = Vec::with_capacity(w);
             let mut depth = Vec::with_capacity(w);
             let mut normal = Vec::with_capacity(w);
             let mut splat = Vec::with_capacity(w);
             let mut albedo = Vec::with_capacity(w);
+            let mut light_facing = Vec::with_capacity(w);
+            let mut light_lit = Vec::with_capacity(w);
             for x in 0..w {
                 let mut sum = Vec3::ZERO;
                 for i in 0..per_pixel {
@@ -487,7 +536,14 @@ fn render_surfaces_rows(
                             scene.materials[h.material as usize].color() * h.color
                         }));
                     }
+                    s.light = [0.0; 3];
                     sum += tracer.shade(&ray, hit, 0, &mut s);
+                    if i == 0 {
+                        let [all, facing, lit] = s.light;
+                        let share = |x: f32| if all > 0.0 { x / all } else { 0.0 };
+                        light_facing.push(share(facing));
+                        light_lit.push(share(lit));
+                    }
                 }
                 rgb.push(sum / per_pixel as f32);
             }
@@ -501,6 +557,8 @@ fn render_surfaces_rows(
                 normal,
                 splat,
                 albedo,
+                light_facing,
+                light_lit,
                 rays: s.rays,
             }
         })
@@ -513,6 +571,8 @@ fn render_surfaces_rows(
         normal: Vec::with_capacity(w * h),
         splat: Vec::with_capacity(w * h),
         albedo: Vec::with_capacity(w * h),
+        light_facing: Vec::with_capacity(w * h),
+        light_lit: Vec::with_capacity(w * h),
         rays: RayCounts::default(),
         seconds: 0.0,
     };
@@ -522,6 +582,8 @@ fn render_surfaces_rows(
         frame.normal.extend(row.normal);
         frame.splat.extend(row.splat);
         frame.albedo.extend(row.albedo);
+        frame.light_facing.extend(row.light_facing);
+        frame.light_lit.extend(row.light_lit);
         frame.rays = frame.rays.add(row.rays);
     }
     frame.seconds = start.elapsed().as_secs_f64();
