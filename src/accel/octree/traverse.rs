@@ -284,15 +284,15 @@ pub(super) trait Visitor<P: Primitive> {
     fn cutoff(&self) -> f32;
     /// The ray's lanes and the span `[t_min, t_max]` the filter tests now.
     fn filter(&self) -> (PackRay, f32, f32);
-    /// Decides the lanes set in `mask` of `pack` with the exact test
-    /// (`ids`: the lanes' primitive ids); true stops the traversal.
-    fn lanes(&mut self, pack: &P::Pack, ids: &[u32], mask: u32) -> bool;
+    /// Decides one lane the filter passed, primitive `prim` with id `id`,
+    /// with the exact test; true stops the traversal.
+    fn lane(&mut self, prim: P, id: u32) -> bool;
 
     /// Tests the lanes set in `lanes` of each of a leaf's `packs` (`ids`:
     /// pack after pack), filtered on the SIMD path `isa`, [`CHUNK`] packs
     /// per filter call; true stops the traversal. A window that narrows
     /// meanwhile only makes the filter looser than it could be (it stays
-    /// conservative: [`Visitor::lanes`] decides with the exact test).
+    /// conservative: [`Visitor::lane`] decides with the exact test).
     #[inline(always)]
     fn packs(&mut self, packs: &[P::Pack], ids: &[u32], lanes: u32, isa: Isa) -> bool {
         let l = super::lanes::<P>();
@@ -301,10 +301,12 @@ pub(super) trait Visitor<P: Primitive> {
             let (ray, t_min, t_max) = self.filter();
             <P::Pack as Pack<P>>::masks(chunk, &ray, t_min, t_max, isa, &mut masks);
             for (j, pack) in chunk.iter().enumerate() {
-                let mask = masks[j] & lanes;
-                if mask != 0 {
-                    let k = c * CHUNK + j;
-                    if self.lanes(pack, &ids[k * l..(k + 1) * l], mask) {
+                let mut mask = masks[j] & lanes;
+                let ids = &ids[(c * CHUNK + j) * l..];
+                while mask != 0 {
+                    let lane = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    if self.lane(pack.get(lane), ids[lane]) {
                         return true;
                     }
                 }
@@ -363,25 +365,19 @@ impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, S> {
     }
 
     #[inline(always)]
-    fn lanes(&mut self, pack: &P::Pack, ids: &[u32], mut mask: u32) -> bool {
-        while mask != 0 {
-            let lane = mask.trailing_zeros() as usize;
-            mask &= mask - 1;
-            // The shared routine decides, with the window's current end,
-            // and the shared rule skips.
-            let prim = pack.get(lane);
-            if let Some(h) = prim.intersect(self.ray, self.t_min, self.cut) {
-                if self.skip.skips(self.ray.dir, ids[lane], &prim) {
-                    continue;
-                }
-                let c = Candidate {
-                    id: ids[lane],
-                    t: h.t,
-                    u: h.u,
-                    v: h.v,
-                };
-                self.cut = self.hits.offer(c).min(self.t_max);
-            }
+    fn lane(&mut self, prim: P, id: u32) -> bool {
+        // The shared routine decides, with the window's current end, and
+        // the shared rule skips.
+        if let Some(h) = prim.intersect(self.ray, self.t_min, self.cut)
+            && !self.skip.skips(self.ray.dir, id, &prim)
+        {
+            let c = Candidate {
+                id,
+                t: h.t,
+                u: h.u,
+                v: h.v,
+            };
+            self.cut = self.hits.offer(c).min(self.t_max);
         }
         false
     }
@@ -420,17 +416,8 @@ impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, S> {
     }
 
     #[inline(always)]
-    fn lanes(&mut self, pack: &P::Pack, ids: &[u32], mut mask: u32) -> bool {
-        while mask != 0 {
-            let lane = mask.trailing_zeros() as usize;
-            mask &= mask - 1;
-            let prim = pack.get(lane);
-            if prim.intersect(self.ray, self.t_min, self.t_max).is_some()
-                && !self.skip.skips(self.ray.dir, ids[lane], &prim)
-            {
-                return true;
-            }
-        }
-        false
+    fn lane(&mut self, prim: P, id: u32) -> bool {
+        prim.intersect(self.ray, self.t_min, self.t_max).is_some()
+            && !self.skip.skips(self.ray.dir, id, &prim)
     }
 }
