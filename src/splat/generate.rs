@@ -397,6 +397,100 @@ pub fn generate_with_progress(
     // so no squared distance or threshold overflows or underflows; the
     // splats and the report's lengths are mapped back at the end.
     let frame = UnitFrame::of(&cloud.positions);
+    let (unit_cloud, unit_params) = to_unit(&frame, cloud, params);
+    let (cloud, params) = (&unit_cloud, &unit_params);
+    let mut report = start_report(cloud);
+    // --- clean, reorder, kNN -------------------------------------------------
+    notify(progress, "neighbours", 0.0);
+    let order = clean_and_thin(cloud, raw, params, &mut report);
+    let mut w = neighbours(cloud, params, order, &mut report)?;
+    // --- outliers ------------------------------------------------------------
+    if params.remove_outliers {
+        drop_outliers(&mut w, &mut report);
+    }
+    let n = w.points.len();
+    let (lo, hi) = w.points.iter().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(a, b), p| (a.min(*p), b.max(*p)),
+    );
+    let diagonal = f64::from((hi - lo).length());
+    report.bbox_diagonal = diagonal;
+    let t1 = Instant::now();
+    // --- normals ---------------------------------------------------------------
+    notify(progress, "normals", 0.0);
+    let (nrm, fixed, to_estimate) = normals_of(&mut w, cloud, params, &mut report);
+    let epsilon = match params.epsilon_abs {
+        Some(e) => (e / frame.scale) as f32,
+        None => (f64::from(params.epsilon_rel) * diagonal) as f32,
+    };
+    report.epsilon = f64::from(epsilon);
+    let Work {
+        mut points,
+        colors,
+        mut tree,
+        knn,
+        ..
+    } = w;
+    if onto_local_surfaces(&mut points, &nrm, &fixed, to_estimate, &knn, &mut report) {
+        tree = build_tree(&points);
+    }
+    let t2 = Instant::now();
+    // --- growth --------------------------------------------------------------
+    let input = GrowInput {
+        points: &points,
+        normals: &nrm,
+        colors: colors.as_deref(),
+        knn: &knn,
+        epsilon,
+        density: params.density,
+        ellipses: params.ellipses,
+    };
+    let grown = grow_all(&input, |i| {
+        notify(progress, "growing splats", i as f64 / n as f64);
+    });
+    let mut splats = grown.splats;
+    let t3 = Instant::now();
+    // --- fields and coverage ---------------------------------------------------
+    notify(progress, "normal fields", 0.0);
+    report.fallback_normal_fields = field::fit_all(
+        &mut splats,
+        params.field_radius_factor,
+        &tree,
+        &points,
+        &nrm,
+    );
+    report.coverage = coverage(&points, &grown.covered, &splats, epsilon);
+    report.splats = splats.len();
+    report.elliptical_splats = grown.elliptical;
+    report.largest_over_spacing = largest_over_spacing(&splats, &tree, &knn);
+    report.mean_radius = splats
+        .iter()
+        .map(|s| 0.5 * f64::from(s.radii.x + s.radii.y))
+        .sum::<f64>()
+        / splats.len().max(1) as f64;
+    // Back to the cloud's units, and nothing that single precision cannot
+    // hold leaves here.
+    from_unit(&frame, &mut splats, &mut report)?;
+    report.origin = cloud.origin.to_array();
+    let t4 = Instant::now();
+    report.seconds = StageSeconds {
+        read: 0.0,
+        knn: (t1 - t0).as_secs_f64(),
+        normals: (t2 - t1).as_secs_f64(),
+        grow: (t3 - t2).as_secs_f64(),
+        fit: (t4 - t3).as_secs_f64(),
+        total: (t4 - t0).as_secs_f64(),
+    };
+    Ok((splats, report))
+}
+
+/// The cloud and parameters in the unit frame `frame` (positions,
+/// viewpoints and scanners mapped; normals, colours and counts as they are).
+fn to_unit(
+    frame: &UnitFrame,
+    cloud: &PointCloud,
+    params: &SplatParams,
+) -> (PointCloud, SplatParams) {
     let unit_cloud = PointCloud {
         positions: cloud.positions.par_iter().map(|&p| frame.unit(p)).collect(),
         origin: cloud.origin,
@@ -417,7 +511,11 @@ pub fn generate_with_progress(
         viewpoint: params.viewpoint.map(|v| frame.unit_viewpoint(v)),
         ..params.clone()
     };
-    let (cloud, params) = (&unit_cloud, &unit_params);
+    (unit_cloud, unit_params)
+}
+
+/// A report counting the cloud's points and what its reader skipped.
+fn start_report(cloud: &PointCloud) -> SplatReport {
     let mut report = SplatReport {
         input_points: cloud.positions.len() + cloud.skipped_total(),
         ..SplatReport::default()
@@ -428,9 +526,20 @@ pub fn generate_with_progress(
             count: *count,
         });
     }
-    // --- clean, reorder, kNN -------------------------------------------------
-    notify(progress, "neighbours", 0.0);
-    let (mut order, non_finite, dupes) = clean_order(&cloud.positions);
+    report
+}
+
+/// The points of the unit cloud `unit` kept, in the order growth visits
+/// them: finite, not duplicates, and with `params.thin`, one per cell
+/// `thin` ε wide (cells in the cloud's own units, `raw`, so tiles and the
+/// whole cloud cut alike); what was left out is counted in the report.
+fn clean_and_thin(
+    unit: &PointCloud,
+    raw: &PointCloud,
+    params: &SplatParams,
+    report: &mut SplatReport,
+) -> Vec<u32> {
+    let (mut order, non_finite, dupes) = clean_order(&unit.positions);
     for (why, count) in [
         ("non-finite coordinates", non_finite),
         ("duplicate point", dupes),
@@ -442,7 +551,6 @@ pub fn generate_with_progress(
             });
         }
     }
-    // --- thinning ------------------------------------------------------------
     if params.thin > 0.0 && order.len() > 3 {
         let epsilon = match params.epsilon_abs {
             Some(e) => e,
@@ -463,6 +571,18 @@ pub fn generate_with_progress(
             });
         }
     }
+    order
+}
+
+/// The kept points of the (unit) cloud with their viewpoints and colours,
+/// its k-d tree and k nearest neighbours; too few points or collinear ones
+/// are errors, coplanar ones and a reduced `k` warnings.
+fn neighbours(
+    cloud: &PointCloud,
+    params: &SplatParams,
+    order: Vec<u32>,
+    report: &mut SplatReport,
+) -> Result<Work, GenerateError> {
     let n = order.len();
     report.used_points = n;
     if n < 3 {
@@ -497,7 +617,7 @@ pub fn generate_with_progress(
     report.k = k;
     let tree = build_tree(&points);
     let knn = Knn::build(&tree, &points, k);
-    let mut w = Work {
+    Ok(Work {
         order,
         points,
         sights,
@@ -505,113 +625,78 @@ pub fn generate_with_progress(
         k,
         tree,
         knn,
-    };
-    // --- outliers ------------------------------------------------------------
-    if params.remove_outliers {
-        drop_outliers(&mut w, &mut report);
-    }
-    let n = w.points.len();
-    let (lo, hi) = w.points.iter().fold(
-        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
-        |(a, b), p| (a.min(*p), b.max(*p)),
-    );
-    let diagonal = f64::from((hi - lo).length());
-    report.bbox_diagonal = diagonal;
-    let t1 = Instant::now();
-    // --- normals ---------------------------------------------------------------
-    notify(progress, "normals", 0.0);
-    let (nrm, fixed, to_estimate) = normals_of(&mut w, cloud, params, &mut report);
-    let Work {
-        mut points,
-        colors,
-        mut tree,
-        knn,
-        ..
-    } = w;
-    // Range noise beyond the growth threshold: each splat would sit at its
-    // seed's noisy height (eq. 2 centres it on the span of the points it
-    // took), overlapping splats at scattered depths. The points are moved
-    // onto their local quadratic surfaces first. Only where the normals
-    // were estimated here: given normals are kept as they are, and so are
-    // their points.
+    })
+}
+
+/// Range noise beyond the growth threshold: each splat would sit at its
+/// seed's noisy height (eq. 2 centres it on the span of the points it
+/// took), overlapping splats at scattered depths. The points are moved
+/// onto their local quadratic surfaces first. Only where the normals were
+/// estimated here (`fixed` marks given ones, kept as they are with their
+/// points). Sets the report's noise (needs its ε) and returns true when
+/// points moved.
+fn onto_local_surfaces(
+    points: &mut [Vec3],
+    nrm: &[Vec3],
+    fixed: &[bool],
+    to_estimate: usize,
+    knn: &Knn,
+    report: &mut SplatReport,
+) -> bool {
     let local = if to_estimate > 0 {
-        denoise::fit_all(&points, &nrm, &knn)
+        denoise::fit_all(points, nrm, knn)
     } else {
         Vec::new()
     };
     let local: Vec<Option<denoise::Local>> = local
         .into_iter()
-        .zip(&fixed)
+        .zip(fixed)
         .map(|(l, &f)| l.filter(|_| !f))
         .collect();
     report.noise = median(local.iter().flatten().map(|l| l.sd).collect());
-    let epsilon = match params.epsilon_abs {
-        Some(e) => (e / frame.scale) as f32,
-        None => (f64::from(params.epsilon_rel) * diagonal) as f32,
-    };
-    report.epsilon = f64::from(epsilon);
-    if report.moved_onto_surfaces() {
-        let mut moved = 0usize;
-        for ((p, n), l) in points.iter_mut().zip(&nrm).zip(&local) {
-            if let Some(l) = l {
-                *p += *n * l.offset;
-                moved += 1;
-            }
-        }
-        report.warnings.push(format!(
-            "the points scatter {:.2}x epsilon about their local surfaces (range noise?): \
-             {moved} points were moved onto them before growing splats",
-            report.noise / report.epsilon
-        ));
-        tree = build_tree(&points);
+    if !report.moved_onto_surfaces() {
+        return false;
     }
-    let t2 = Instant::now();
-    // --- growth --------------------------------------------------------------
-    let input = GrowInput {
-        points: &points,
-        normals: &nrm,
-        colors: colors.as_deref(),
-        knn: &knn,
-        epsilon,
-        density: params.density,
-        ellipses: params.ellipses,
-    };
-    let grown = grow_all(&input, |i| {
-        notify(progress, "growing splats", i as f64 / n as f64);
-    });
-    let mut splats = grown.splats;
-    let t3 = Instant::now();
-    // --- fields and coverage ---------------------------------------------------
-    notify(progress, "normal fields", 0.0);
-    report.fallback_normal_fields = field::fit_all(
-        &mut splats,
-        params.field_radius_factor,
-        &tree,
-        &points,
-        &nrm,
-    );
-    report.coverage = coverage(&points, &grown.covered, &splats, epsilon);
-    report.splats = splats.len();
-    report.elliptical_splats = grown.elliptical;
-    report.largest_over_spacing = splats
+    let mut moved = 0usize;
+    for ((p, n), l) in points.iter_mut().zip(nrm).zip(&local) {
+        if let Some(l) = l {
+            *p += *n * l.offset;
+            moved += 1;
+        }
+    }
+    report.warnings.push(format!(
+        "the points scatter {:.2}x epsilon about their local surfaces (range noise?): \
+         {moved} points were moved onto them before growing splats",
+        report.noise / report.epsilon
+    ));
+    true
+}
+
+/// The largest splat radius over the local point spacing (the k-th
+/// neighbour distance of the point nearest its centre).
+fn largest_over_spacing(splats: &[Splat], tree: &super::knn::PointTree, knn: &Knn) -> f64 {
+    splats
         .par_iter()
         .map(|s| {
             let near = tree.nearest_one::<kiddo::SquaredEuclidean>(&s.center.to_array());
             let d = knn.kth_distance[near.item as usize];
             f64::from(s.radii.max_element()) / f64::from(d.max(f32::MIN_POSITIVE))
         })
-        .reduce(|| 0.0, f64::max);
-    report.mean_radius = splats
-        .iter()
-        .map(|s| 0.5 * f64::from(s.radii.x + s.radii.y))
-        .sum::<f64>()
-        / splats.len().max(1) as f64;
-    // Back to the cloud's units, and nothing that single precision cannot
-    // hold leaves here.
-    for s in &mut splats {
+        .reduce(|| 0.0, f64::max)
+}
+
+/// The splats and the report's lengths back in the cloud's units; a splat
+/// single precision cannot hold is an error, a cloud below its normal range
+/// a warning.
+fn from_unit(
+    frame: &UnitFrame,
+    splats: &mut [Splat],
+    report: &mut SplatReport,
+) -> Result<(), GenerateError> {
+    for s in splats.iter_mut() {
         *s = frame.splat_from_unit(s);
     }
-    if let Some(why) = first_unusable(&splats) {
+    if let Some(why) = first_unusable(splats) {
         return Err(GenerateError::OutOfRange(format!(
             "the cloud spans {:e} units: {why}",
             frame.scale
@@ -621,23 +706,13 @@ pub fn generate_with_progress(
     report.noise = frame.length_from_unit(report.noise);
     report.bbox_diagonal = frame.length_from_unit(report.bbox_diagonal);
     report.mean_radius = frame.length_from_unit(report.mean_radius);
-    report.origin = cloud.origin.to_array();
     if frame.scale < f64::from(f32::MIN_POSITIVE) {
         report.warnings.push(format!(
             "the cloud spans only {:e} units, below single precision's normal range: its positions are coarsely quantised",
             frame.scale
         ));
     }
-    let t4 = Instant::now();
-    report.seconds = StageSeconds {
-        read: 0.0,
-        knn: (t1 - t0).as_secs_f64(),
-        normals: (t2 - t1).as_secs_f64(),
-        grow: (t3 - t2).as_secs_f64(),
-        fit: (t4 - t3).as_secs_f64(),
-        total: (t4 - t0).as_secs_f64(),
-    };
-    Ok((splats, report))
+    Ok(())
 }
 
 /// The cleaned points in Morton order with what the stages read of them.
