@@ -26,7 +26,7 @@ height = 72
 shape = { kind = "sphere", center = [0.0, 0.3, 0.0], radius = 0.8, splats = 800 }
 material = { kind = "phong" }
 [[model]]
-shape = { kind = "quad", center = [0.0, -0.5, 0.0], size = [4.0, 4.0], splats = 900 }
+shape = { kind = "quad", center = [0.0, -0.5, 0.0], size = [4.0, 4.0], splats = 800 }
 [[light]]
 kind = "point"
 position = [2.0, 3.0, 2.0]
