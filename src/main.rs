@@ -187,11 +187,8 @@ fn info() -> Result<()> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    if let Err(e) = splatray::simd::configured() {
-        eprintln!("splatray: {e}");
-        return ExitCode::FAILURE;
-    }
-    let result = match cli.command {
+    // An unusable SPLATRAY_SIMD is refused before any work.
+    let result = splatray::simd::configured().and_then(|_| match cli.command {
         Command::Info => info(),
         Command::Render(args) => cli::render::run(&args),
         Command::Compare(args) => cli::compare::run(&args),
@@ -202,7 +199,7 @@ fn main() -> ExitCode {
         Command::ScanCheck(a) => cli::scan_check::run(&a),
         Command::Stitch(a) => stitch(&a),
         Command::Terrain(a) => terrain(&a),
-    };
+    });
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -103,7 +103,7 @@ pub fn default_path() -> Isa {
 /// The path [`SIMD_VAR`] asks for, checked against this CPU, or
 /// [`default_path`] when it is unset: a one-line error for a name that is
 /// not a path or a path this CPU cannot run.
-pub fn configured() -> Result<Isa, String> {
+pub fn configured() -> crate::Result<Isa> {
     let Ok(v) = std::env::var(SIMD_VAR) else {
         return Ok(default_path());
     };
@@ -116,14 +116,14 @@ pub fn configured() -> Result<Isa, String> {
     };
     match Isa::parse(v.trim()) {
         Some(i) if i.supported() => Ok(i),
-        Some(i) => Err(format!(
+        Some(i) => Err(crate::Error::invalid(format!(
             "{SIMD_VAR}={v}: this CPU does not run {i} (it runs: {})",
             names()
-        )),
-        None => Err(format!(
+        ))),
+        None => Err(crate::Error::invalid(format!(
             "{SIMD_VAR}={v}: not a SIMD path (expected one of: {})",
             names()
-        )),
+        ))),
     }
 }
 
@@ -155,7 +155,8 @@ pub const U_SCALED: usize = 6;
 /// First `v_scaled` column.
 pub const V_SCALED: usize = 9;
 
-/// The rim test's bound, relaxed by `1e-4`: the filter is conservative, each lane it passes is decided by the exact disc test.
+/// The rim test's bound, relaxed by `1e-4`: the filter is conservative,
+/// each lane it passes is decided by the exact disc test.
 const RIM: f32 = 1.0001;
 
 /// Bit `l` of `out[i]` set when lane `l` of `packs[i]` may be hit in

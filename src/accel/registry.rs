@@ -162,6 +162,27 @@ pub fn backends<P: Primitive>() -> Vec<BackendInfo<P>> {
             params: octree_with(None, Some(OverlapTest::BoundingSquare)),
             builder: octree,
         },
+    ];
+    // The octree on each SIMD path this CPU runs (`crate::simd`): the
+    // conformance suite checks every path.
+    all.extend(
+        SIMD_PATHS
+            .into_iter()
+            .filter(|(isa, ..)| isa.supported())
+            .map(|(isa, name, about)| BackendInfo {
+                name,
+                about,
+                role: Role::Variant,
+                params: Params {
+                    octree: OctreeParams {
+                        simd: Some(isa),
+                        ..OctreeParams::default()
+                    },
+                },
+                builder: octree,
+            }),
+    );
+    all.extend([
         BackendInfo {
             name: "brute",
             about: "every ray against every primitive (the oracle; small scenes only)",
@@ -177,45 +198,29 @@ pub fn backends<P: Primitive>() -> Vec<BackendInfo<P>> {
             params: Params::default(),
             builder: |p, _| Ok(Box::new(super::brute::BruteReversed::new(p))),
         },
-    ];
-    // The octree on each SIMD path this CPU runs, after the other variants
-    // (`crate::simd`): the conformance suite checks every path.
-    let at = all
-        .iter()
-        .rposition(|b| b.role == Role::Variant)
-        .map_or(0, |i| i + 1);
-    let paths = crate::simd::available().into_iter().map(|isa| BackendInfo {
-        name: simd_name(isa),
-        about: simd_about(isa),
-        role: Role::Variant,
-        params: Params {
-            octree: OctreeParams {
-                simd: Some(isa),
-                ..OctreeParams::default()
-            },
-        },
-        builder: octree,
-    });
-    all.splice(at..at, paths);
+    ]);
     all
 }
 
-/// The registry name of the octree forced to the SIMD path `isa`.
-fn simd_name(isa: Isa) -> &'static str {
-    match isa {
-        Isa::Portable => "octree-portable",
-        Isa::Avx2 => "octree-avx2",
-        Isa::Avx512 => "octree-avx512",
-    }
-}
-
-fn simd_about(isa: Isa) -> &'static str {
-    match isa {
-        Isa::Portable => "the octree with its baseline (SSE2) leaf filter",
-        Isa::Avx2 => "the octree with its AVX2 leaf filter (8 discs at once)",
-        Isa::Avx512 => "the octree with its AVX-512 leaf filter (16 discs at once)",
-    }
-}
+/// The octree forced to each SIMD path: the path, the entry's name, its
+/// help line.
+const SIMD_PATHS: [(Isa, &str, &str); 3] = [
+    (
+        Isa::Portable,
+        "octree-portable",
+        "the octree with its baseline (SSE2) leaf filter",
+    ),
+    (
+        Isa::Avx2,
+        "octree-avx2",
+        "the octree with its AVX2 leaf filter (8 discs at once)",
+    ),
+    (
+        Isa::Avx512,
+        "octree-avx512",
+        "the octree with its AVX-512 leaf filter (16 discs at once)",
+    ),
+];
 
 /// The names of every backend, in registry order.
 #[must_use]

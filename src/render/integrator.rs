@@ -281,14 +281,23 @@ impl Tracer<'_> {
         // Weights of all, facing and lit light samples (`Frame::light_lit`).
         let mut tally = [0.0f32; 3];
         let weight = |e: Vec3| e.x + e.y + e.z;
-        let mut add = |l: Vec3, e: Vec3| {
-            let cos = n.dot(l);
-            let mut c = albedo * cos;
-            if spec.0 > 0.0 {
-                let h = (l - view).normalize_or_zero();
-                c += Vec3::splat(spec.0 * n.dot(h).max(0.0).powf(spec.1));
+        // One light sample: direction `l`, distance `d`, irradiance `e`,
+        // counted, and added when it faces `n` and nothing blocks it.
+        let mut sample = |l: Vec3, d: f32, e: Vec3, s: &mut Scratch| {
+            tally[0] += weight(e);
+            if n.dot(l) > 0.0 {
+                tally[1] += weight(e);
+                if self.visible(hit, l, d, s) {
+                    tally[2] += weight(e);
+                    let cos = n.dot(l);
+                    let mut c = albedo * cos;
+                    if spec.0 > 0.0 {
+                        let h = (l - view).normalize_or_zero();
+                        c += Vec3::splat(spec.0 * n.dot(h).max(0.0).powf(spec.1));
+                    }
+                    sum += c * e;
+                }
             }
-            sum += c * e;
         };
         for light in &self.scene.lights {
             match *light {
@@ -296,27 +305,10 @@ impl Tracer<'_> {
                     let to = position - p;
                     let d2 = to.length_squared();
                     let d = d2.sqrt();
-                    let l = to / d;
-                    let e = power / d2;
-                    tally[0] += weight(e);
-                    if n.dot(l) > 0.0 {
-                        tally[1] += weight(e);
-                        if self.visible(hit, l, d, s) {
-                            tally[2] += weight(e);
-                            add(l, e);
-                        }
-                    }
+                    sample(to / d, d, power / d2, s);
                 }
                 Light::Directional { direction, power } => {
-                    let l = -direction;
-                    tally[0] += weight(power);
-                    if n.dot(l) > 0.0 {
-                        tally[1] += weight(power);
-                        if self.visible(hit, l, f32::INFINITY, s) {
-                            tally[2] += weight(power);
-                            add(l, power);
-                        }
-                    }
+                    sample(-direction, f32::INFINITY, power, s);
                 }
                 Light::Sphere {
                     position,
@@ -342,16 +334,7 @@ impl Tracer<'_> {
                             let to = q - p;
                             let d2 = to.length_squared();
                             let d = d2.sqrt();
-                            let l = to / d;
-                            let e = power * (share / d2);
-                            tally[0] += weight(e);
-                            if n.dot(l) > 0.0 {
-                                tally[1] += weight(e);
-                                if self.visible(hit, l, d, s) {
-                                    tally[2] += weight(e);
-                                    add(l, e);
-                                }
-                            }
+                            sample(to / d, d, power * (share / d2), s);
                         }
                     }
                 }

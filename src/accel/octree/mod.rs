@@ -117,9 +117,8 @@ pub struct OctreeParams {
     pub overlap: OverlapTest,
     /// How the leaves hold their primitives.
     pub layout: Layout,
-    /// The SIMD path of the leaf filter (`crate::simd`); `None`: the
-    /// process's ([`crate::simd::active`]). A path this CPU does not run is
-    /// replaced by the widest it does.
+    /// The SIMD path of the leaf filter (`crate::simd`); `None`, or a path
+    /// this CPU does not run: the process's ([`crate::simd::active`]).
     pub simd: Option<Isa>,
 }
 
