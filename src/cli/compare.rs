@@ -11,7 +11,7 @@ use splatray::render::integrator::{Frame, render};
 use splatray::render::output::{check_output_path, check_writable, save_into};
 use splatray::validate::causes::{Cause, ErrorBudget, Tolerances, cause_image, error_budget};
 use splatray::validate::compare::{
-    Agreement, TruthErrors, compare_frames, diff_image, render_truth, truth_errors,
+    Agreement, TruthErrors, compare_frames, diff_image, orient_to_camera, render_truth, truth_errors,
 };
 use splatray::validate::truth::Truth;
 use splatray::{Error, Result};
@@ -200,12 +200,14 @@ pub fn run(args: &CompareArgs) -> Result<()> {
             .iter()
             .zip(&frames)
             .map(|(b, f)| {
+                let mut oriented = f.clone();
+                orient_to_camera(&mut oriented, &scene.camera);
                 let (by_cause, causes) =
-                    error_budget(f, tf, diagonal, &tolerances, &scene.material_of);
+                    error_budget(&oriented, tf, diagonal, &tolerances, &scene.material_of);
                 reference_causes.get_or_insert(causes);
                 NamedTruthErrors {
                     name: b.name,
-                    errors: truth_errors(f.clone(), tf, &scene.camera, diagonal),
+                    errors: truth_errors(oriented, tf, &scene.camera, diagonal),
                     by_cause,
                 }
             })
@@ -324,17 +326,19 @@ fn print_report(report: &CompareReport) {
 fn print_budget(name: &str, b: &ErrorBudget) {
     let db = |p: Option<f64>| p.map_or("inf".to_string(), |p| format!("{p:.2}"));
     println!(
-        "  {name}: squared error by cause (PSNR {} dB; cause, pixels, % of the image, share of the squared error, PSNR if exact):",
+        "  {name}: squared error by cause (PSNR {} dB; cause, pixels, % of the image, share of the squared error, PSNR if exact, mean normal error and its part of the whole mean):",
         db(b.psnr_db)
     );
     for c in &b.causes {
         println!(
-            "    {:<11} {:>9} {:>7.2} % {:>9.3} % {:>8} dB",
+            "    {:<11} {:>9} {:>7.2} % {:>9.3} % {:>8} dB {:>8.3} deg {:>7.3} deg",
             c.cause.name(),
             c.pixels,
             100.0 * c.pixels as f64 / b.pixels.max(1) as f64,
             100.0 * c.share,
-            db(c.psnr_if_exact_db)
+            db(c.psnr_if_exact_db),
+            c.normal_deg_mean,
+            c.normal_deg_part
         );
     }
     for (what, c, of) in [

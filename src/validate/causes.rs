@@ -36,6 +36,7 @@
 //! surface's silhouette ([`Coverage`]): a pixel beside it is a silhouette
 //! that moved, one far from it a gap or a stray disc.
 
+use super::compare::angle_deg;
 use crate::render::integrator::Frame;
 use glam::Vec3;
 use image::{ImageBuffer, Rgb};
@@ -152,6 +153,13 @@ pub struct CauseError {
     /// The PSNR of the image with these pixels made exact, dB (`null`:
     /// infinite, no error left).
     pub psnr_if_exact_db: Option<f64>,
+    /// Mean angle between the two frames' shading normals over these
+    /// pixels, degrees (0 where not both frames hit): the share of
+    /// `compare --truth`'s mean normal error that each cause holds.
+    pub normal_deg_mean: f64,
+    /// This cause's part of the mean normal error over every pixel both
+    /// frames hit, degrees (the parts add up to that mean).
+    pub normal_deg_part: f64,
 }
 
 /// Holes or false hits by their Chebyshev distance in pixels to the exact
@@ -297,13 +305,18 @@ fn psnr(se: f64, pixels: usize) -> Option<f64> {
     (mse > 0.0).then(|| 10.0 * (1.0 / mse).log10())
 }
 
-/// Squared error and pixels per cause.
-type Sums = ([f64; Cause::ALL.len()], [usize; Cause::ALL.len()]);
+/// Squared error, pixels and the sum of normal angles (degrees) per cause.
+type Sums = (
+    [f64; Cause::ALL.len()],
+    [usize; Cause::ALL.len()],
+    [f64; Cause::ALL.len()],
+);
 
 /// The rows of [`ErrorBudget::causes`] for `sums`, shares and PSNRs taken
-/// against the image's `total` squared error over `n` pixels.
-fn rows(sums: &Sums, total: f64, n: usize) -> Vec<CauseError> {
-    let (se, pixels) = sums;
+/// against the image's `total` squared error over `n` pixels, normal error
+/// parts against the `both` pixels both frames hit.
+fn rows(sums: &Sums, total: f64, n: usize, both: usize) -> Vec<CauseError> {
+    let (se, pixels, angles) = sums;
     Cause::ALL
         .iter()
         .map(|&c| {
@@ -314,6 +327,8 @@ fn rows(sums: &Sums, total: f64, n: usize) -> Vec<CauseError> {
                 squared_error: se[k],
                 share: if total > 0.0 { se[k] / total } else { 0.0 },
                 psnr_if_exact_db: psnr((total - se[k]).max(0.0), n),
+                normal_deg_mean: angles[k] / pixels[k].max(1) as f64,
+                normal_deg_part: angles[k] / both.max(1) as f64,
             }
         })
         .collect()
@@ -321,7 +336,12 @@ fn rows(sums: &Sums, total: f64, n: usize) -> Vec<CauseError> {
 
 /// The squared error of `splats` against `truth` split by the causes of
 /// [`classify`] (returned beside it); `material_of` gives each splat's
-/// material for [`ErrorBudget::by_material`] (empty: no such split).
+/// material for [`ErrorBudget::by_material`] (empty: no such split). The
+/// normal figures compare the two frames' normals as they are: turn both
+/// toward the camera first
+/// ([`crate::validate::compare::orient_to_camera`]), as
+/// [`crate::validate::compare::truth_errors`] does, so that their parts add
+/// up to its mean normal error.
 #[must_use]
 pub fn error_budget(
     splats: &Frame,
@@ -334,11 +354,20 @@ pub fn error_budget(
     let mut all: Sums = Default::default();
     let mut per_material: Vec<Sums> = Vec::new();
     let (mut holes, mut false_hits) = (Coverage::default(), Coverage::default());
+    let mut both_hit = 0usize;
     for (i, &c) in causes.iter().enumerate() {
         let k = c as usize;
         let e = pixel_se(splats.rgb[i], truth.rgb[i]);
+        let both = hit(splats, i) && hit(truth, i);
+        let a = if both {
+            angle_deg(splats.normal[i], truth.normal[i])
+        } else {
+            0.0
+        };
+        both_hit += usize::from(both);
         all.0[k] += e;
         all.1[k] += 1;
+        all.2[k] += a;
         if let Some(&m) = material_of.get(splats.splat[i] as usize) {
             let m = m as usize;
             if per_material.len() <= m {
@@ -346,6 +375,7 @@ pub fn error_budget(
             }
             per_material[m].0[k] += e;
             per_material[m].1[k] += 1;
+            per_material[m].2[k] += a;
         }
         match c {
             Cause::Hole => tally_distance(&mut holes, truth, i, false),
@@ -359,7 +389,7 @@ pub fn error_budget(
         tolerances: *tol,
         pixels: n,
         psnr_db: psnr(total, n),
-        causes: rows(&all, total, n),
+        causes: rows(&all, total, n, both_hit),
         holes,
         false_hits,
         by_material: per_material
@@ -368,7 +398,7 @@ pub fn error_budget(
             .filter(|(_, s)| s.1.iter().any(|&p| p > 0))
             .map(|(m, s)| MaterialBudget {
                 material: m as u16,
-                causes: rows(s, total, n),
+                causes: rows(s, total, n, both_hit),
             })
             .collect(),
     };

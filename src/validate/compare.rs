@@ -50,7 +50,7 @@ fn quantile(v: &mut [f64], q: f64) -> f64 {
 /// Angle between two directions in degrees, `atan2(|a×b|, a·b)` in f64:
 /// exact 0 for equal vectors and accurate for tiny angles (acos of a
 /// rounded dot product is not).
-fn angle_deg(a: Vec3, b: Vec3) -> f64 {
+pub(crate) fn angle_deg(a: Vec3, b: Vec3) -> f64 {
     let (a, b) = (a.as_dvec3(), b.as_dvec3());
     a.cross(b).length().atan2(a.dot(b)).to_degrees()
 }
