@@ -33,6 +33,7 @@ fn bunny_splats() -> SplatSet {
     SplatSet {
         splats,
         origin: cloud.origin,
+        color_fields: Vec::new(),
     }
 }
 

@@ -6,9 +6,10 @@ use common::{data, scratch};
 
 use glam::{DVec3, Vec2, Vec3};
 use splatray::io::{
-    IoErrorKind, PointCloud, SplatSet, lzf_decompress, read_mesh, read_points, read_splats,
-    sample_mesh, write_points, write_splats,
+    COLOR_FIELD_PROPS, IoErrorKind, PointCloud, SplatSet, encode_splats_with, lzf_decompress,
+    read_mesh, read_points, read_splats, sample_mesh, write_points, write_splats,
 };
+use splatray::splat::color::ColorField;
 use splatray::splat::{NormalField, Splat};
 use std::path::{Path, PathBuf};
 
@@ -309,7 +310,8 @@ fn splat_files_round_trip_losslessly_and_atomically() {
         read_splats(&p).unwrap(),
         SplatSet {
             splats: splats.clone(),
-            origin
+            origin,
+            color_fields: Vec::new(),
         }
     );
     let leftovers: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
@@ -324,6 +326,34 @@ fn splat_files_round_trip_losslessly_and_atomically() {
     // A point cloud is not a splat file.
     let e = must_fail(read_splats(&data("bunny-scan.ply")));
     assert!(e.to_string().contains("not a splat file"), "{e}");
+    // With linear colour fields: six more float properties, read back bit
+    // for bit; the file without them is unchanged in size and reads none.
+    let fields: Vec<ColorField> = (0..splats.len())
+        .map(|i| ColorField {
+            du: Vec3::new(0.1, -0.2, i as f32 * 1e-3),
+            dv: Vec3::new(-(i as f32) * 0.7e-3, 0.05, 0.0),
+        })
+        .collect();
+    let q = dir.join("fields.ply");
+    let bytes = encode_splats_with(&q, &splats, &fields, origin).unwrap();
+    std::fs::write(&q, &bytes).unwrap();
+    let back = read_splats(&q).unwrap();
+    assert_eq!(
+        (back.splats, back.color_fields),
+        (splats.clone(), fields.clone())
+    );
+    let plain = std::fs::metadata(&p).unwrap().len() as usize;
+    let header: usize = COLOR_FIELD_PROPS
+        .iter()
+        .map(|n| "property float \n".len() + n.len())
+        .sum();
+    assert_eq!(bytes.len(), plain + splats.len() * 24 + header);
+    // Fields that do not match the splats are refused, nothing written.
+    let e = must_fail(encode_splats_with(&q, &splats, &fields[1..], origin));
+    assert!(
+        e.to_string().contains("49 colour fields for 50 splats"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -11,7 +11,8 @@ use splatray::render::integrator::{Frame, render};
 use splatray::render::output::{check_output_path, check_writable, save_into};
 use splatray::validate::causes::{Cause, ErrorBudget, Tolerances, cause_image, error_budget};
 use splatray::validate::compare::{
-    Agreement, TruthErrors, compare_frames, diff_image, orient_to_camera, render_truth, truth_errors,
+    Agreement, TruthErrors, compare_frames, diff_image, orient_to_camera, render_truth,
+    truth_errors,
 };
 use splatray::validate::truth::Truth;
 use splatray::{Error, Result};

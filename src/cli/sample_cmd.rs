@@ -89,6 +89,25 @@ pub struct SampleArgs {
     /// and ROS) or gl (y up, looking along -z).
     #[arg(long, requires = "scan_from")]
     pub organised: Option<Frame>,
+    /// Colour an organised scan's points with a procedural texture, as a
+    /// colour camera would: smooth bands of colour about this many mesh
+    /// units apart (`sample::texture`), to check colour reproduction with
+    /// `scan-check --photo`.
+    #[arg(long, requires = "organised")]
+    pub texture: Option<f64>,
+}
+
+/// The procedural texture of `--texture`: at world point `p`, three
+/// sinusoidal bands of period `period` along different directions, one per
+/// channel (linear RGB in 0.1 … 0.9).
+fn texture(p: glam::DVec3, period: f64) -> Vec3 {
+    let w = std::f64::consts::TAU / period;
+    let band = |x: f64| (0.5 + 0.4 * x.sin()) as f32;
+    Vec3::new(
+        band(w * p.x),
+        band(w * (0.8 * p.y + 0.6 * p.z) + 1.0),
+        band(w * (0.6 * p.x - 0.8 * p.z) + 2.0),
+    )
 }
 
 /// The frame of an organised scan's sensor.
@@ -230,8 +249,27 @@ fn scan(args: &SampleArgs, from: glam::DVec3) -> Result<()> {
                 .map(|p| p.map(|p| origin + p.as_dvec3()))
                 .collect();
             let position = origin + scan.cloud.viewpoint.unwrap_or_default().as_dvec3();
-            let bytes =
-                splatray::io::encode_organised(scan.columns, scan.rows, &grid, position, rotation);
+            let colors = match args.texture {
+                Some(period) if !(period.is_finite() && period > 0.0) => {
+                    return Err(Error::invalid(format!(
+                        "--texture {period} must be a positive period"
+                    )));
+                }
+                Some(period) => Some(
+                    grid.iter()
+                        .map(|p| p.map_or(Vec3::ZERO, |p| texture(p, period)))
+                        .collect::<Vec<_>>(),
+                ),
+                None => None,
+            };
+            let bytes = splatray::io::encode_organised(
+                scan.columns,
+                scan.rows,
+                &grid,
+                position,
+                rotation,
+                colors.as_deref(),
+            );
             splatray::io::write_bytes(&args.output, &bytes)?;
             eprintln!(
                 "splatray: an organised {}x{} grid in the {} frame, a pinhole of focal length \

@@ -127,7 +127,8 @@ fn photo(args: &ScanCheckArgs, splat: &splatray::splat::SplatParams) -> Result<(
     )
     .map_err(|e| e.context(&name))?;
     println!(
-        "{name}: photo check of the organised {}x{} capture: {} measured pixels, {} held out, {} splats; \
+        "{name}: photo check of the organised {}x{} capture: {} measured pixels, {} held out, {} splats \
+         ({} with a linear colour field); \
          the splats cover {:.2} % of the held-out pixels and fill {:.2} % of the empty ones; albedo \
          against the captured colours: PSNR {:.2} dB at full resolution, {:.2} dB at 1/2, {:.2} dB at 1/4 \
          (sensor fit residual {:.3} px)",
@@ -136,6 +137,7 @@ fn photo(args: &ScanCheckArgs, splat: &splatray::splat::SplatParams) -> Result<(
         r.measured,
         r.held_out,
         r.splats,
+        r.color_fields,
         100.0 * r.covered,
         100.0 * r.filled,
         r.psnr[0],

@@ -6,10 +6,11 @@ use super::{json_text, stage_text};
 use glam::DVec3;
 use splatray::freespace::generate_trimmed;
 use splatray::io::{
-    Batch, GaussianLayout, IoError, IoErrorKind, encode_splats, file_layout, read_gaussians,
-    read_points,
+    Batch, GaussianLayout, IoError, IoErrorKind, encode_splats, encode_splats_with, file_layout,
+    read_gaussians, read_points,
 };
 use splatray::render::output::{check_extension, check_writable};
+use splatray::splat::color::fit_cloud;
 use splatray::splat::{PointCloud, SplatParams};
 use splatray::validate::holdout::{
     HeldOutCoverage, Windows, heldout_coverage, heldout_coverage_windows,
@@ -93,6 +94,19 @@ struct Report<'a> {
     heldout_windows: Option<Windows>,
     /// What measuring it took.
     heldout_seconds: Option<f64>,
+    /// The linear colour fields (absent: constant colours).
+    color_fields: Option<ColorFields>,
+}
+
+/// What fitting the colour fields did (`splat::color::fit_cloud`).
+#[derive(serde::Serialize)]
+struct ColorFields {
+    /// Splats whose field was fitted.
+    fitted: usize,
+    /// Splats that kept a constant colour (too few or collinear points).
+    constant: usize,
+    /// Seconds the fit took.
+    seconds: f64,
 }
 
 /// The splat generation options `splat` and `scan-check` share.
@@ -111,6 +125,10 @@ pub struct SplatOptions {
     /// Grow elliptical splats along the minimum-curvature direction.
     #[arg(long)]
     pub ellipses: bool,
+    /// One colour per splat: no linear colour field fitted to a coloured
+    /// cloud's points (`splat::color`; the fields are on by default).
+    #[arg(long)]
+    pub flat_colors: bool,
     /// Where the scanner stood, as X,Y,Z in the input's coordinates:
     /// normals are oriented toward it. Default: the cloud's own (a PCD's
     /// VIEWPOINT).
@@ -173,6 +191,7 @@ impl SplatOptions {
             epsilon_rel: self.epsilon_rel.unwrap_or(defaults.epsilon_rel),
             density: self.density.unwrap_or(defaults.density),
             ellipses: self.ellipses,
+            color_fields: !self.flat_colors,
             scan_viewpoints: !self.no_viewpoint,
             thin: self.thin.unwrap_or(defaults.thin),
             ..defaults
@@ -216,9 +235,13 @@ pub fn run(args: &SplatArgs) -> Result<()> {
     let cloud = read_points(args.input())?;
     let read = t0.elapsed().as_secs_f64();
     let params = args.splat.params(&cloud)?;
-    let (splats, mut report, trim) =
+    let (mut splats, mut report, trim) =
         generate_trimmed(&cloud, &params, Some(&|stage, f| line.update(stage, f)))
             .map_err(|e| e.context(args.input().display()))?;
+    line.update("colour fields", 0.0);
+    let t_colors = Instant::now();
+    let (fields, zero_fields) = fit_cloud(&mut splats, &cloud, &params);
+    let colors_seconds = t_colors.elapsed().as_secs_f64();
     if let Some(t) = trim.filter(|t| t.shrunk > 0) {
         eprintln!(
             "splatray: {} splats shrunk off {} of {} lines of sight from the viewpoint ({} still blocked)",
@@ -250,14 +273,25 @@ pub fn run(args: &SplatArgs) -> Result<()> {
     line.finish();
     report.seconds.read = read;
     report.seconds.total += read;
-    let bytes = encode_splats(&args.output, &splats, cloud.origin)?;
+    let bytes = encode_splats_with(&args.output, &splats, &fields, cloud.origin)?;
     let out = Report {
         generation: &report,
         heldout_coverage: heldout.clone(),
         heldout_windows: windows.clone(),
         heldout_seconds: heldout.is_some().then_some(heldout_seconds),
+        color_fields: (!fields.is_empty()).then_some(ColorFields {
+            fitted: fields.len() - zero_fields,
+            constant: zero_fields,
+            seconds: colors_seconds,
+        }),
     };
     commit_outputs(args, &bytes, &out)?;
+    if let Some(c) = &out.color_fields {
+        eprintln!(
+            "splatray: linear colour fields on {} splats ({} kept one colour: too few points), {:.2} s (--flat-colors: none)",
+            c.fitted, c.constant, c.seconds
+        );
+    }
     for w in &report.warnings {
         eprintln!("splatray: warning: {w}");
     }

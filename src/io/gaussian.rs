@@ -236,6 +236,7 @@ pub fn parse_gaussians(bytes: &[u8], min_opacity: f32) -> Result<GaussianRead, I
         set: SplatSet {
             splats: Vec::with_capacity(rows.len()),
             origin,
+            color_fields: Vec::new(),
         },
         ..GaussianRead::default()
     };

@@ -35,7 +35,8 @@ pub use lzf::{LzfError, lzf_decompress};
 pub use pcd::{Organised, encode_organised, read_organised};
 pub use sample::{MeshSampler, sample_mesh, write_sample_ply};
 pub use splat_ply::{
-    SPLAT_ROW_BYTES, SplatSet, encode_splats, parse_splats, read_splats, splat_header, write_splats,
+    COLOR_FIELD_PROPS, SPLAT_ROW_BYTES, SplatSet, encode_splats, encode_splats_with, parse_splats,
+    read_splats, splat_header, splat_header_with, write_splats,
 };
 pub use stream::{PointBatch, StreamInfo, stream_points};
 

@@ -440,7 +440,8 @@ fn decode(
 /// Encode an organised cloud (a sensor's grid, row by row, NaN where
 /// nothing was measured) as a binary PCD v0.7 with f64 coordinates in the
 /// file's frame and `VIEWPOINT` the sensor's pose (`position`, and the
-/// rotation from its frame to the file's).
+/// rotation from its frame to the file's); with `colors` (linear RGB, one
+/// per grid pixel), a packed 8-bit sRGB `rgb` field too.
 #[must_use]
 pub fn encode_organised(
     width: usize,
@@ -448,11 +449,17 @@ pub fn encode_organised(
     points: &[Option<DVec3>],
     position: DVec3,
     rotation: glam::DQuat,
+    colors: Option<&[Vec3]>,
 ) -> Vec<u8> {
     let q = rotation.normalize();
+    let (fields, size, kind, count) = if colors.is_some() {
+        ("x y z rgb", "8 8 8 4", "F F F U", "1 1 1 1")
+    } else {
+        ("x y z", "8 8 8", "F F F", "1 1 1")
+    };
     let mut out = format!(
         "# .PCD v0.7 - Point Cloud Data file format (written by splatray {}, an organised scan)\n\
-         VERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {width}\nHEIGHT {height}\n\
+         VERSION 0.7\nFIELDS {fields}\nSIZE {size}\nTYPE {kind}\nCOUNT {count}\nWIDTH {width}\nHEIGHT {height}\n\
          VIEWPOINT {} {} {} {} {} {} {}\nPOINTS {}\nDATA binary\n",
         env!("CARGO_PKG_VERSION"),
         position.x,
@@ -465,10 +472,20 @@ pub fn encode_organised(
         width * height
     )
     .into_bytes();
-    for p in points {
+    for (i, p) in points.iter().enumerate() {
         let p = p.unwrap_or(DVec3::NAN);
         for c in p.to_array() {
             out.extend_from_slice(&c.to_le_bytes());
+        }
+        if let Some(c) = colors {
+            let [r, g, b] = c
+                .get(i)
+                .copied()
+                .unwrap_or(Vec3::ZERO)
+                .to_array()
+                .map(super::linear_to_srgb8);
+            let packed = (u32::from(r) << 16) | (u32::from(g) << 8) | u32::from(b);
+            out.extend_from_slice(&packed.to_le_bytes());
         }
     }
     out

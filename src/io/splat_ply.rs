@@ -6,6 +6,10 @@
 //! this reader prefers (files written before the colour was split hold
 //! linear float `red green blue`, still read as such).
 //!
+//! Splats with a linear colour field (`splat::color`) carry it in six more
+//! float properties, [`COLOR_FIELD_PROPS`], after the linear colour; a file
+//! without them holds constant colours.
+//!
 //! Splat centres are float offsets from an origin held in double precision,
 //! written as the header line `comment splatray origin X Y Z` (shortest
 //! round-trip decimals), so a splat file made from a georeferenced cloud
@@ -14,6 +18,7 @@
 
 use super::ply::{PlyFile, scalar};
 use super::{IoError, IoErrorKind, write_bytes};
+use crate::splat::color::ColorField;
 use crate::splat::{NormalField, Splat};
 use glam::{DVec3, Vec2, Vec3};
 use ply_rs_bw::ply::{Property, PropertyAccess};
@@ -47,6 +52,18 @@ pub(crate) const SPLAT_PROPS: [&str; 21] = [
     "lin_blue",
 ];
 
+/// The float32 properties of a linear colour field (`splat::color`): the
+/// change of the linear colour across the disc along `u`, then along `v`;
+/// written after [`SPLAT_PROPS`] when the splats carry fields.
+pub const COLOR_FIELD_PROPS: [&str; 6] = [
+    "lin_red_du",
+    "lin_green_du",
+    "lin_blue_du",
+    "lin_red_dv",
+    "lin_green_dv",
+    "lin_blue_dv",
+];
+
 /// The 8-bit sRGB colour (`uchar`), last in the vertex: what other tools
 /// show. An older splat file holds the linear colour under these names as
 /// floats.
@@ -59,6 +76,8 @@ pub(crate) struct SplatRow {
     /// `red green blue` made linear: from `uchar` sRGB, or taken as they
     /// are when floats (an older file's linear colour).
     pub(crate) rgb: [f32; 3],
+    /// The colour field, by the index of its name in [`COLOR_FIELD_PROPS`].
+    pub(crate) dc: [f32; COLOR_FIELD_PROPS.len()],
 }
 
 impl PropertyAccess for SplatRow {
@@ -66,12 +85,18 @@ impl PropertyAccess for SplatRow {
         SplatRow {
             v: [f32::NAN; SPLAT_PROPS.len()],
             rgb: [f32::NAN; 3],
+            dc: [f32::NAN; COLOR_FIELD_PROPS.len()],
         }
     }
     fn set_property(&mut self, name: &str, p: Property) {
         if let Some(k) = SRGB_PROPS.iter().position(|n| *n == name) {
             self.rgb[k] = match p {
                 Property::UChar(c) => super::srgb_to_linear(f32::from(c) / 255.0),
+                Property::Float(f) => f,
+                other => scalar(&other).map_or(f32::NAN, |d| d as f32),
+            };
+        } else if let Some(k) = COLOR_FIELD_PROPS.iter().position(|n| *n == name) {
+            self.dc[k] = match p {
                 Property::Float(f) => f,
                 other => scalar(&other).map_or(f32::NAN, |d| d as f32),
             };
@@ -93,6 +118,9 @@ pub struct SplatSet {
     pub splats: Vec<Splat>,
     /// Where the centres are measured from (zero when the file says nothing).
     pub origin: DVec3,
+    /// Each splat's linear colour field, or empty when the file holds
+    /// constant colours.
+    pub color_fields: Vec<ColorField>,
 }
 
 /// The header comment that carries the origin.
@@ -128,6 +156,22 @@ pub fn write_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<(), 
 /// # Errors
 /// As [`write_splats`], before anything is written.
 pub fn encode_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<Vec<u8>, IoError> {
+    encode_splats_with(path, splats, &[], origin)
+}
+
+/// [`encode_splats`] with each splat's colour field (`fields` empty: none,
+/// the file [`encode_splats`] writes; else one per splat, written as
+/// [`COLOR_FIELD_PROPS`]).
+///
+/// # Errors
+/// As [`write_splats`]; also when `fields` is neither empty nor one per
+/// splat, or holds a non-finite value.
+pub fn encode_splats_with(
+    path: &Path,
+    splats: &[Splat],
+    fields: &[ColorField],
+    origin: DVec3,
+) -> Result<Vec<u8>, IoError> {
     let bad = |what: String| {
         Err(IoError::new(
             path,
@@ -146,12 +190,32 @@ pub fn encode_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<Vec
             splats[i].center, splats[i].radii
         ));
     }
-    let header = splat_header(splats.len() as u64, origin);
-    let mut out = Vec::with_capacity(header.len() + splats.len() * SPLAT_ROW_BYTES);
+    if !fields.is_empty() && fields.len() != splats.len() {
+        return bad(format!(
+            "{} colour fields for {} splats",
+            fields.len(),
+            splats.len()
+        ));
+    }
+    if let Some(i) = fields
+        .iter()
+        .position(|f| !(f.du.is_finite() && f.dv.is_finite()))
+    {
+        return bad(format!("splat {i} has a non-finite colour field"));
+    }
+    let with = !fields.is_empty();
+    let header = splat_header_with(splats.len() as u64, origin, with);
+    let row = SPLAT_ROW_BYTES + if with { COLOR_FIELD_PROPS.len() * 4 } else { 0 };
+    let mut out = Vec::with_capacity(header.len() + splats.len() * row);
     out.extend_from_slice(header.as_bytes());
-    for s in splats {
+    for (i, s) in splats.iter().enumerate() {
         for v in to_row(s) {
             out.extend_from_slice(&v.to_le_bytes());
+        }
+        if let Some(f) = fields.get(i) {
+            for v in f.du.to_array().into_iter().chain(f.dv.to_array()) {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
         }
         out.extend(s.color.to_array().map(super::linear_to_srgb8));
     }
@@ -168,6 +232,13 @@ pub const SPLAT_ROW_BYTES: usize = SPLAT_PROPS.len() * 4 + SRGB_PROPS.len();
 /// their bodies.
 #[must_use]
 pub fn splat_header(count: u64, origin: DVec3) -> String {
+    splat_header_with(count, origin, false)
+}
+
+/// [`splat_header`], with the [`COLOR_FIELD_PROPS`] after the linear colour
+/// when `color_fields`.
+#[must_use]
+pub fn splat_header_with(count: u64, origin: DVec3, color_fields: bool) -> String {
     let mut header = format!(
         "ply\nformat binary_little_endian 1.0\ncomment splatray {} splats: Linsen et al. 2007 discs with Botsch et al. 2004 normal fields\ncomment {ORIGIN_COMMENT} {:?} {:?} {:?}\nelement vertex {count}\n",
         env!("CARGO_PKG_VERSION"),
@@ -175,7 +246,12 @@ pub fn splat_header(count: u64, origin: DVec3) -> String {
         origin.y,
         origin.z,
     );
-    for p in SPLAT_PROPS {
+    let fields = if color_fields {
+        &COLOR_FIELD_PROPS[..]
+    } else {
+        &[]
+    };
+    for p in SPLAT_PROPS.iter().chain(fields) {
         header.push_str("property float ");
         header.push_str(p);
         header.push('\n');
@@ -193,6 +269,10 @@ pub fn splat_header(count: u64, origin: DVec3) -> String {
 /// in units of the splat's radii; a sphere's splats have `alpha = r/R`,
 /// well below 1).
 const MAX_FIELD: f32 = 1e3;
+
+/// The largest colour-field value read (a change of linear colour across
+/// the disc; the renderer clamps the colour it gives to `[0, 1]`).
+const MAX_COLOR_FIELD: f32 = 1e3;
 
 /// The origin of a `comment splatray origin X Y Z` header line, if any.
 pub(crate) fn origin_of(comments: &[String]) -> Result<Option<DVec3>, IoErrorKind> {
@@ -256,8 +336,10 @@ pub fn parse_splats(bytes: &[u8]) -> Result<SplatSet, IoErrorKind> {
     let linear = SPLAT_PROPS[18..].iter().all(|n| has(n));
     let full =
         SPLAT_PROPS[..18].iter().all(|n| has(n)) && (linear || SRGB_PROPS.iter().all(|n| has(n)));
+    let with_fields = full && COLOR_FIELD_PROPS.iter().all(|n| has(n));
     let rows = file.read_vertices::<SplatRow>()?;
     let mut splats = Vec::with_capacity(rows.len());
+    let mut color_fields = Vec::new();
     for (i, r) in rows.iter().enumerate() {
         let mut v = r.v;
         if !linear {
@@ -295,6 +377,17 @@ pub fn parse_splats(bytes: &[u8]) -> Result<SplatSet, IoErrorKind> {
             }
             if v[18..21].iter().any(|&c| c < 0.0) {
                 return Err(bad("negative colour"));
+            }
+            if with_fields {
+                if let Some(x) = r.dc.iter().find(|x| x.is_nan() || x.abs() > MAX_COLOR_FIELD) {
+                    return Err(bad(&format!(
+                        "colour field value {x:e} not finite or beyond {MAX_COLOR_FIELD:e}"
+                    )));
+                }
+                color_fields.push(ColorField {
+                    du: Vec3::new(r.dc[0], r.dc[1], r.dc[2]),
+                    dv: Vec3::new(r.dc[3], r.dc[4], r.dc[5]),
+                });
             }
             let u = Vec3::new(v[7], v[8], v[9]);
             let u_axis = unit(u)
@@ -338,5 +431,9 @@ pub fn parse_splats(bytes: &[u8]) -> Result<SplatSet, IoErrorKind> {
     if splats.is_empty() {
         return Err(IoErrorKind::NoPoints("the file holds no splats".into()));
     }
-    Ok(SplatSet { splats, origin })
+    Ok(SplatSet {
+        splats,
+        origin,
+        color_fields,
+    })
 }

@@ -168,7 +168,7 @@ impl SplatSurfaces<'_> {
             geometric_normal: h.geometric_normal,
             front: h.front,
             material: sc.material_of[h.id as usize],
-            color: sc.splats[h.id as usize].color,
+            color: sc.color_at(h.id, h.point),
         })
     }
 

@@ -236,6 +236,9 @@ pub struct SplatSpec {
     /// Grow elliptical splats.
     #[serde(default)]
     pub ellipses: bool,
+    /// Fit a linear colour field to each splat of a coloured cloud
+    /// (`SplatParams::color_fields`; default true).
+    pub color_fields: Option<bool>,
     /// Orient estimated normals toward this point (model space: the point
     /// file's coordinates).
     #[serde(default, deserialize_with = "num::finite")]

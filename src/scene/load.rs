@@ -13,6 +13,7 @@ use crate::progress::Progress;
 use crate::resolve::ShadingMode;
 use crate::scene::SceneScale;
 use crate::splat::Splat;
+use crate::splat::color::ColorField;
 use crate::{Error, Result};
 use glam::{DVec3, Vec2, Vec3};
 use std::path::Path;
@@ -109,6 +110,7 @@ pub fn build_scene_read(
     let (options, xi_of) = render_options(&file.render, diagonal, &models.standoff)?;
     Ok(Scene {
         splats: models.splats,
+        color_fields: models.color_fields,
         material_of: models.material_of,
         materials: models.materials,
         shading_of: models.shading_of,
@@ -144,6 +146,7 @@ pub fn splats_scene(mut splats: Vec<Splat>, camera: Camera) -> Result<Scene> {
     let (options, xi_of) = render_options(&RenderSpec::default(), diagonal, &[standoff])?;
     Ok(Scene {
         material_of: vec![0; splats.len()],
+        color_fields: Vec::new(),
         splats,
         materials: vec![Material::Diffuse { color: Vec3::ONE }],
         shading_of: vec![None],
@@ -205,6 +208,9 @@ fn check_camera(c: &CameraSpec) -> Result<()> {
 /// their materials, the shift, and what loading measured.
 struct Models {
     splats: Vec<Splat>,
+    /// One per splat when a model carries colour fields (zero for the
+    /// others), else empty.
+    color_fields: Vec<ColorField>,
     shift: DVec3,
     material_of: Vec<u16>,
     materials: Vec<Material>,
@@ -229,6 +235,7 @@ fn load_models(
     let mut shift = None;
     let mut out = Models {
         splats: Vec::new(),
+        color_fields: Vec::new(),
         shift: DVec3::ZERO,
         material_of: Vec::new(),
         materials: Vec::new(),
@@ -274,6 +281,16 @@ fn load_models(
         out.materials.push(material(&m.material).map_err(in_model)?);
         out.shading_of.push(m.material.shading);
         out.material_of.extend(std::iter::repeat_n(mid, s.len()));
+        if !src.color_fields.is_empty() || !out.color_fields.is_empty() {
+            // Aligned with the splats: zero fields for the models without.
+            out.color_fields.resize(out.splats.len(), ColorField::ZERO);
+            if src.color_fields.is_empty() {
+                out.color_fields
+                    .resize(out.splats.len() + s.len(), ColorField::ZERO);
+            } else {
+                out.color_fields.append(&mut src.color_fields);
+            }
+        }
         out.splats.append(s);
     }
     out.shift = shift.unwrap_or(DVec3::ZERO);
@@ -291,6 +308,8 @@ fn load_models(
 /// meshes and shapes).
 struct Source<'a> {
     splats: Vec<Splat>,
+    /// The splats' colour fields, or empty (constant colours).
+    color_fields: Vec<ColorField>,
     origin: DVec3,
     truth: PendingTruth<'a>,
 }
@@ -375,6 +394,7 @@ fn model_source<'a>(
     if let Some(shape) = &spec.shape {
         return Ok(Source {
             splats: shape_splats(shape)?,
+            color_fields: Vec::new(),
             origin: DVec3::ZERO,
             truth: PendingTruth::Shape(shape),
         });
@@ -387,6 +407,7 @@ fn model_source<'a>(
         };
         return Ok(Source {
             splats: set.splats,
+            color_fields: set.color_fields,
             origin: set.origin,
             truth: given_truth("a splat file")?,
         });
@@ -401,6 +422,7 @@ fn model_source<'a>(
         load.warnings.extend(gaussians.warnings());
         return Ok(Source {
             splats: gaussians.set.splats,
+            color_fields: Vec::new(),
             origin: gaussians.set.origin,
             truth: given_truth("a Gaussian splat file")?,
         });
@@ -416,8 +438,10 @@ fn model_source<'a>(
             Some(CloudRead::Points(cloud)) => cloud,
             _ => crate::io::read_points(&path)?,
         };
+        let (splats, color_fields) = generate_splats(spec, &cloud, load, progress)?;
         return Ok(Source {
-            splats: generate_splats(spec, &cloud, load, progress)?,
+            splats,
+            color_fields,
             origin: cloud.origin,
             truth: given_truth("a point file")?,
         });
@@ -426,8 +450,10 @@ fn model_source<'a>(
         unreachable!("exactly one source is set")
     };
     let (cloud, mesh) = sample_mesh_model(spec, &base.join(p))?;
+    let (splats, color_fields) = generate_splats(spec, &cloud, load, progress)?;
     Ok(Source {
-        splats: generate_splats(spec, &cloud, load, progress)?,
+        splats,
+        color_fields,
         origin: cloud.origin,
         truth: PendingTruth::Mesh(mesh),
     })
@@ -502,13 +528,14 @@ fn generate_splats(
     cloud: &PointCloud,
     load: &mut LoadReport,
     progress: Option<Progress<'_>>,
-) -> Result<Vec<Splat>> {
+) -> Result<(Vec<Splat>, Vec<ColorField>)> {
     let d = crate::splat::SplatParams::default();
     let params = crate::splat::SplatParams {
         k: spec.splat.k.unwrap_or(d.k),
         epsilon_rel: spec.splat.epsilon_rel.unwrap_or(d.epsilon_rel),
         density: spec.splat.density.unwrap_or(d.density),
         ellipses: spec.splat.ellipses,
+        color_fields: spec.splat.color_fields.unwrap_or(d.color_fields),
         viewpoint: spec
             .splat
             .viewpoint
@@ -516,7 +543,8 @@ fn generate_splats(
             .or(cloud.viewpoint),
         ..d
     };
-    let (splats, report, trim) = crate::freespace::generate_trimmed(cloud, &params, progress)?;
+    let (mut splats, report, trim) = crate::freespace::generate_trimmed(cloud, &params, progress)?;
+    let (fields, _) = crate::splat::color::fit_cloud(&mut splats, cloud, &params);
     if let Some(t) = trim.filter(|t| t.shrunk > 0) {
         load.warnings.push(format!(
             "{} splats shrunk off {} blocked lines of sight from the viewpoint",
@@ -530,7 +558,7 @@ fn generate_splats(
     }
     load.warnings.extend(report.warnings.iter().cloned());
     load.coverage.push(report.coverage);
-    Ok(splats)
+    Ok((splats, fields))
 }
 
 /// The splats of a procedural shape, in model space.

@@ -4,6 +4,7 @@
 
 use crate::resolve::ShadingMode;
 use crate::splat::Splat;
+use crate::splat::color::ColorField;
 use crate::{Error, Result};
 use glam::{DVec3, Vec2, Vec3};
 
@@ -301,6 +302,9 @@ pub enum TruthSource {
 pub struct Scene {
     /// All splats of all models.
     pub splats: Vec<Splat>,
+    /// Each splat's linear colour field (`splat::color`), or empty when no
+    /// model carries them (a scene without them pays nothing).
+    pub color_fields: Vec<ColorField>,
     /// Material index of each splat.
     pub material_of: Vec<u16>,
     /// Materials.
@@ -330,6 +334,18 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// The colour of splat `id` at world point `p` on it: its constant
+    /// colour, or with a colour field the field's value there
+    /// ([`ColorField::at`]).
+    #[must_use]
+    pub fn color_at(&self, id: u32, p: Vec3) -> Vec3 {
+        let s = &self.splats[id as usize];
+        match self.color_fields.get(id as usize) {
+            Some(f) => f.at(s, p),
+            None => s.color,
+        }
+    }
+
     /// The splats' bounding box in world coordinates (as the scene file
     /// states them), or `None` without splats.
     #[must_use]

@@ -70,6 +70,11 @@ pub struct SplatParams {
     /// denser (see [`super::thin`]; default [`super::thin::CELL_EPS`]);
     /// 0 keeps every point.
     pub thin: f64,
+    /// Fit a linear colour field to each splat of a coloured cloud
+    /// ([`super::color`], by [`super::color::fit_cloud`], the step after
+    /// generation; default on): texture finer than a splat is kept to
+    /// first order instead of averaged away.
+    pub color_fields: bool,
 }
 
 /// Where generation takes `cloud`'s points to have been seen from, indexed
@@ -98,6 +103,7 @@ impl Default for SplatParams {
             remove_outliers: true,
             epsilon_abs: None,
             thin: 0.0,
+            color_fields: true,
         }
     }
 }

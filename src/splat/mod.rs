@@ -106,6 +106,7 @@ impl Splat {
 }
 
 mod cloud;
+pub mod color;
 pub mod denoise;
 pub mod field;
 pub(crate) mod frame;

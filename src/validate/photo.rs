@@ -45,6 +45,9 @@ pub struct PhotoReport {
     pub psnr: [f64; 3],
     /// The sensor fit's residual, pixels.
     pub residual: f64,
+    /// Splats with a linear colour field (`splat::color`; 0 with
+    /// `SplatParams::color_fields` off).
+    pub color_fields: usize,
 }
 
 /// Runs the photo check on an organised capture with colours.
@@ -95,7 +98,9 @@ pub fn photo_check(
         viewpoint: Some(Vec3::ZERO),
         ..splat.clone()
     };
-    let (splats, _, _) = crate::freespace::generate_trimmed(&cloud, &params, None)?;
+    let (mut splats, _, _) = crate::freespace::generate_trimmed(&cloud, &params, None)?;
+    let (fields, constant) = crate::splat::color::fit_cloud(&mut splats, &cloud, &params);
+    let color_fields = fields.len() - constant;
     let (w, h) = (sensor.width, sensor.height);
     let camera = Camera::look_at_intrinsics(
         Vec3::ZERO,
@@ -107,7 +112,8 @@ pub fn photo_check(
         1,
     )?;
     let n_splats = splats.len();
-    let scene = splats_scene(splats, camera)?;
+    let mut scene = splats_scene(splats, camera)?;
+    scene.color_fields = fields;
     let built = info.build_splats(&scene.splats)?;
     let frame = render(&scene, built.as_ref(), None);
     // The albedo each pixel sees (None: its ray meets nothing).
@@ -176,5 +182,6 @@ pub fn photo_check(
         filled: filled as f64 / empty.max(1) as f64,
         psnr,
         residual: sensor.residual,
+        color_fields,
     })
 }
