@@ -37,9 +37,13 @@
 //! halo bounds only in effect: measured, not proven (`docs/DESIGN.md`).
 
 use crate::freespace::generate_trimmed;
-use crate::io::{IoError, IoErrorKind, SPLAT_ROW_BYTES, splat_header, stream_points, write_atomic};
+use crate::io::{
+    COLOR_FIELD_PROPS, IoError, IoErrorKind, SPLAT_ROW_BYTES, encode_splats_with,
+    splat_header_with, stream_points, write_atomic, write_bytes,
+};
 use crate::progress::{Progress, notify};
 use crate::rng::SplitMix64;
+use crate::splat::color::ColorField;
 use crate::splat::{PointCloud, Splat, SplatParams};
 use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
@@ -729,6 +733,10 @@ fn generate_tile(
     };
     let origin = DVec3::from(plan.origin);
     let mut kept: Vec<Splat> = Vec::new();
+    // The kept splats' colour fields, fitted to the tile's points (its
+    // halo too, so a field at a tile's border reads both sides).
+    let with_fields = color_fields(plan, params);
+    let mut kept_fields: Vec<ColorField> = Vec::new();
     // Splats grown in the halo, where a neighbour keeps its own: they tell
     // whether the two tiles turned the surface the same way.
     let mut halo: Vec<Splat> = Vec::new();
@@ -741,10 +749,16 @@ fn generate_tile(
         };
         let generated = generate_trimmed(&cloud, &tile_params, progress);
         match generated {
-            Ok((splats, report, _)) => {
+            Ok((mut splats, report, _)) => {
                 summary.grown = splats.len();
                 summary.warnings = report.warnings;
-                for s in splats {
+                let mut fields = if with_fields {
+                    crate::splat::color::fit_cloud(&mut splats, &cloud, &tile_params).0
+                } else {
+                    Vec::new()
+                };
+                fields.resize(splats.len(), ColorField::ZERO);
+                for (s, f) in splats.into_iter().zip(fields) {
                     let world = cloud.origin + s.center.as_dvec3();
                     if plan.tree.locate(world) != t {
                         if plan.reconciles() && grown.holds(world) {
@@ -765,6 +779,7 @@ fn generate_tile(
                         center: (world - origin).as_vec3(),
                         ..s
                     });
+                    kept_fields.push(f);
                 }
             }
             // A tile whose points are too few or degenerate (a corner of a
@@ -775,7 +790,15 @@ fn generate_tile(
     summary.kept = kept.len();
     summary.seconds = t0.elapsed().as_secs_f64();
     let out = tile_path(work, t);
-    crate::io::write_splats(&out, &kept, origin)?;
+    let fields = if with_fields { &kept_fields[..] } else { &[] };
+    if with_fields && kept.is_empty() {
+        // An empty tile's file still says it has the fields' layout.
+        write_atomic(&out, |tmp| {
+            std::fs::write(tmp, splat_header_with(0, origin, true))
+        })?;
+    } else {
+        write_bytes(&out, &encode_splats_with(&out, &kept, fields, origin)?)?;
+    }
     if plan.reconciles() {
         crate::io::write_splats(&halo_path(work, t), &halo, origin)?;
     }
@@ -924,7 +947,7 @@ pub fn generate_tiled(
         } else {
             vec![false; plan.tiles.len()]
         };
-        report.splats = merge(&plan, work, output, &flips, progress)?;
+        report.splats = merge(&plan, params, work, output, &flips, progress)?;
         report.seconds.merge = t3.elapsed().as_secs_f64();
         let _ = std::fs::remove_dir_all(work);
     }
@@ -1158,12 +1181,20 @@ fn clear_work(work: &Path) -> Result<(), IoError> {
 /// count, then each tile's records in tile order.
 fn merge(
     plan: &Plan,
+    params: &SplatParams,
     work: &Path,
     output: &Path,
     flips: &[bool],
     progress: Option<Progress<'_>>,
 ) -> Result<u64, IoError> {
     let n = plan.tiles.len();
+    let with_fields = color_fields(plan, params);
+    let row_bytes = SPLAT_ROW_BYTES
+        + if with_fields {
+            4 * COLOR_FIELD_PROPS.len()
+        } else {
+            0
+        };
     let mut bodies = Vec::with_capacity(n);
     let mut total = 0u64;
     for t in 0..n {
@@ -1171,13 +1202,13 @@ fn merge(
         let bytes = std::fs::metadata(&p).map_err(|e| io_err(&p, e))?.len();
         let head = header_len(&p)?;
         let body = bytes - head;
-        if body % SPLAT_ROW_BYTES as u64 != 0 {
+        if body % row_bytes as u64 != 0 {
             return Err(data_err(&p, "a tile's splat file is cut short".into()));
         }
-        total += body / SPLAT_ROW_BYTES as u64;
+        total += body / row_bytes as u64;
         bodies.push((p, head));
     }
-    let header = splat_header(total, DVec3::from(plan.origin));
+    let header = splat_header_with(total, DVec3::from(plan.origin), with_fields);
     write_atomic(output, |tmp| -> std::io::Result<()> {
         let mut out = BufWriter::with_capacity(1 << 20, std::fs::File::create(tmp)?);
         out.write_all(header.as_bytes())?;
@@ -1188,7 +1219,7 @@ fn merge(
                 // The normal and the field's four coefficients change sign
                 // (the sign bit of each little-endian f32): the field then
                 // gives the opposite normal everywhere (eq. 4).
-                let mut row = vec![0u8; SPLAT_ROW_BYTES];
+                let mut row = vec![0u8; row_bytes];
                 loop {
                     match f.read_exact(&mut row) {
                         Ok(()) => {}
@@ -1208,6 +1239,13 @@ fn merge(
         out.flush()
     })?;
     Ok(total)
+}
+
+/// Whether the tiles write colour fields: the survey found colours and the
+/// parameters ask for fields (every tile the same layout, so the merge can
+/// join their records; a tile of one colour writes zero fields).
+fn color_fields(plan: &Plan, params: &SplatParams) -> bool {
+    plan.survey.colors && params.color_fields
 }
 
 /// A tile's splat file (which may hold none).

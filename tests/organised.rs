@@ -452,6 +452,24 @@ fn colour_fields_keep_a_textured_scan_s_colours() {
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     let fitted = r["color_fields"]["fitted"].as_u64().unwrap() as usize;
     assert!(fitted * 10 >= 8 * set.splats.len(), "{r}");
+    // Generated in tiles (out of core), the merged file carries them too.
+    let tiled = dir.join("tiled.ply");
+    let o = common::bin()
+        .arg("splat")
+        .arg(&pcd)
+        .args(["--tile-points", "1000", "-o"])
+        .arg(&tiled)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let t = splatray::io::read_splats(&tiled).unwrap();
+    let zero = splatray::splat::color::ColorField::ZERO;
+    let nonzero = t.color_fields.iter().filter(|f| **f != zero).count();
+    assert!(
+        t.color_fields.len() == t.splats.len() && nonzero * 10 >= 8 * t.splats.len(),
+        "tiled: {nonzero} fields of {} splats",
+        t.splats.len()
+    );
     let photo = |flags: &[&str]| -> Vec<f64> {
         let json = dir.join("photo.json");
         let o = common::bin()

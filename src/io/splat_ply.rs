@@ -379,7 +379,10 @@ pub fn parse_splats(bytes: &[u8]) -> Result<SplatSet, IoErrorKind> {
                 return Err(bad("negative colour"));
             }
             if with_fields {
-                if let Some(x) = r.dc.iter().find(|x| x.is_nan() || x.abs() > MAX_COLOR_FIELD) {
+                if let Some(x) =
+                    r.dc.iter()
+                        .find(|x| x.is_nan() || x.abs() > MAX_COLOR_FIELD)
+                {
                     return Err(bad(&format!(
                         "colour field value {x:e} not finite or beyond {MAX_COLOR_FIELD:e}"
                     )));
