@@ -350,12 +350,19 @@ fn splat_files_round_trip_losslessly_and_atomically() {
     assert_eq!(bytes.len(), plain + splats.len() * 24 + header);
     // A field value that is not finite is refused in one line.
     let mut broken = bytes.clone();
-    let body = broken.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
+    let body = broken
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .unwrap()
+        + 11;
     broken[body + 21 * 4..body + 22 * 4].copy_from_slice(&f32::NAN.to_le_bytes());
     let r = dir.join("broken.ply");
     std::fs::write(&r, &broken).unwrap();
     let e = must_fail(read_splats(&r));
-    assert!(e.to_string().contains("splat 0: colour field value NaN"), "{e}");
+    assert!(
+        e.to_string().contains("splat 0: colour field value NaN"),
+        "{e}"
+    );
     assert_one_line_naming(&e, &r);
     // Fields that do not match the splats are refused, nothing written.
     let e = must_fail(encode_splats_with(&q, &splats, &fields[1..], origin));

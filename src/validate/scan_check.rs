@@ -8,6 +8,7 @@ use super::holdout;
 use crate::accel::CandidateHits;
 use crate::accel::registry;
 use crate::freespace::{TrimReport, generate_trimmed, sight_line};
+use crate::resolve::{ShadingMode, resolve_within};
 use crate::splat::{PointCloud, SplatParams, SplatReport};
 use crate::{Error, Result};
 use glam::Vec3;
@@ -99,10 +100,31 @@ pub struct ScanCheckReport {
     /// position, points behind real surfaces are counted early, and the
     /// lines of sight check nothing.
     pub viewpoint_is_scanner: bool,
+    /// The same lines of sight against the surface a render shows (the
+    /// resolved hit of §3.2 within the model's blending window, as the
+    /// depth AOV gives it) instead of the nearest splat: the nearest of
+    /// several overlapping splats whose planes noise has scattered stands
+    /// in front of the surface they make together.
+    pub surface: SurfaceCounts,
     /// Seconds to generate the splats.
     pub splat_seconds: f64,
     /// Seconds to cast the rays (including the backend build).
     pub check_seconds: f64,
+}
+
+/// The lines of sight judged against the resolved surface
+/// ([`ScanCheckReport::surface`]).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SurfaceCounts {
+    /// The blending window the surface is resolved within (the renderer's
+    /// for these splats: [`crate::scene::load::XI_STANDOFFS`] standoffs).
+    pub window: f64,
+    /// `|t - d| <= tolerance·d`, as a fraction of the rays.
+    pub consistent_fraction: f64,
+    /// `t < d - tolerance·d`.
+    pub early_fraction: f64,
+    /// `t > d + tolerance·d`.
+    pub late_fraction: f64,
 }
 
 /// Runs the check on `cloud`.
@@ -152,18 +174,27 @@ pub fn scan_check(
     let info = &registry::renderers()[0];
     let backend = info.build_splats(&splats)?;
     let tol = params.tolerance;
-    // (consistent, early, gross_early, late, miss)
+    let window = crate::scene::load::XI_STANDOFFS * crate::splat::standoff::standoff(&splats);
+    // (consistent, early, gross_early, late, miss; and of the resolved
+    // surface: consistent, early, late)
     let counts = test
         .par_iter()
         .with_min_len(512)
         .map_init(
-            || CandidateHits::new(0.0),
+            || CandidateHits::new(window),
             |hits, &p| {
-                let mut c = [0usize; 5];
+                let mut c = [0usize; 8];
                 let Some((ray, d)) = sight_line(vp, p) else {
                     return c;
                 };
                 backend.intersect(&ray, 0.0, f32::INFINITY, hits);
+                let surface = resolve_within(hits, &ray, &splats, ShadingMode::Flat, window);
+                match surface {
+                    Some(h) if h.t < d - tol * d => c[6] = 1,
+                    Some(h) if h.t > d + tol * d => c[7] = 1,
+                    Some(_) => c[5] = 1,
+                    None => {}
+                }
                 match hits.nearest() {
                     None => c[4] = 1,
                     Some(h) if h.t < d - tol * d => {
@@ -178,7 +209,7 @@ pub fn scan_check(
                 c
             },
         )
-        .reduce(|| [0usize; 5], |a, b| std::array::from_fn(|k| a[k] + b[k]));
+        .reduce(|| [0usize; 8], |a, b| std::array::from_fn(|k| a[k] + b[k]));
     let t2 = Instant::now();
     let mut radii: Vec<f32> = splats.iter().map(|s| s.radii.max_element()).collect();
     let (median_radius, max_radius) = if radii.is_empty() {
@@ -217,6 +248,12 @@ pub fn scan_check(
         viewpoint_is_scanner: generation
             .facing_away
             .is_none_or(|a| a <= crate::freespace::FACING_AWAY_MAX),
+        surface: SurfaceCounts {
+            window: f64::from(window),
+            consistent_fraction: frac(5),
+            early_fraction: frac(6),
+            late_fraction: frac(7),
+        },
         generation,
         trim,
         splat_seconds: (t1 - t0).as_secs_f64(),
