@@ -111,8 +111,8 @@ fn scan_line_lines_of_sight_are_free() {
 /// samples, range noise 1.9 `ϵ`): the nearest splat stands in front of
 /// the held-out points (the nearest of several overlapping planes the noise
 /// scattered), the surface a render shows does not (measured with seed 7
-/// here: nearest 87.56 % consistent, the resolved surface 95.59 %, 2.69 %
-/// early, 1.72 % late; `sample`'s seed 1 gives 87.97 % and 95.25 %).
+/// here: nearest 88.88 % consistent, the resolved surface 94.95 %, 2.76 %
+/// early, 2.16 % late; `sample`'s seed 1 gives 87.97 % and 95.25 %).
 #[test]
 fn coarse_scan_lines_meet_the_rendered_surface() {
     let scan = bunny_scan(ScanPattern::Lines, 800, 100);
