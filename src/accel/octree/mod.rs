@@ -13,8 +13,8 @@
 //!    it (fig. 8).
 //!
 //! Before step 1 the scene may be split into parts ([`parts`]: a model
-//! standing on a wide floor becomes the model, the floor and the model's
-//! feet), each built as an octree of its own; a ray tests each part's
+//! standing on a wide floor becomes the model and the floor), each built
+//! as an octree of its own; a ray tests each part's
 //! padded content box and walks the parts it meets, nearest first, so a
 //! ray leaving the floor away from the model meets a thin slab and nothing
 //! else, and the model's rays descend from cells sized for the model. Each

@@ -9,7 +9,10 @@
 //! groups whose boxes together take a small fraction of its box's volume
 //! (the floor a thin slab, the model a box of its own); then a ray tests
 //! each part's box and walks only the parts it meets, nearest first. A
-//! compact model (the benchmark's surface, a scan) is not split.
+//! compact model (the benchmark's surface, a scan) is not split. Groups
+//! whose boxes nearly coincide or nest are merged again afterwards (the
+//! model's feet, cut off with the floor by the binning, go back to the
+//! model).
 
 use crate::primitive::Primitive;
 use glam::Vec3;
@@ -50,6 +53,7 @@ pub(super) fn partition<P: Primitive>(prims: &[P], extents: &[Vec3]) -> Vec<Vec<
             done.push(g);
         }
     }
+    merge_overlapping(prims, extents, &mut done);
     // Each group's ids in increasing order, groups by their first id: the
     // same parts whatever order they were split in.
     for g in &mut done {
@@ -58,6 +62,40 @@ pub(super) fn partition<P: Primitive>(prims: &[P], extents: &[Vec3]) -> Vec<Vec<
     done.sort_unstable_by_key(|g| g[0]);
     done
 }
+
+/// Merges two groups while the box around both takes at most
+/// [`MAX_MERGED`] times their two boxes' volumes: a piece the binning cut
+/// off a model (the bunny's feet, whose centres share the floor's bin) goes
+/// back to it, so the floor's box is the floor's alone and the model is
+/// one tree.
+fn merge_overlapping<P: Primitive>(prims: &[P], extents: &[Vec3], groups: &mut Vec<Vec<u32>>) {
+    let mut boxes: Vec<[Vec3; 2]> = groups
+        .iter()
+        .map(|g| {
+            g.par_iter()
+                .map(|&i| prim_box(prims, extents, i))
+                .reduce(|| EMPTY, union)
+        })
+        .collect();
+    'merged: loop {
+        for a in 0..groups.len() {
+            for b in a + 1..groups.len() {
+                let both = volume(union(boxes[a], boxes[b]));
+                if both <= MAX_MERGED * (volume(boxes[a]) + volume(boxes[b])) {
+                    let g = groups.remove(b);
+                    groups[a].extend(g);
+                    boxes[a] = union(boxes[a], boxes.remove(b));
+                    continue 'merged;
+                }
+            }
+        }
+        return;
+    }
+}
+
+/// Two groups whose joint box takes at most this many times their boxes'
+/// volumes are one part.
+const MAX_MERGED: f32 = 1.1;
 
 /// A primitive's box.
 fn prim_box<P: Primitive>(prims: &[P], extents: &[Vec3], i: u32) -> [Vec3; 2] {
