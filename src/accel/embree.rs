@@ -48,6 +48,12 @@ impl<P: Primitive> UserGeometry for Primitives<P> {
         tfar: f32,
         q: &mut Gather<'_>,
     ) -> Option<f32> {
+        // The splat the ray leaves is skipped whatever the test says:
+        // Embree offers it to most secondary rays (its box holds their
+        // origin), so its id is checked before the disc test.
+        if q.from.is_some_and(|d| d.id == prim) {
+            return None;
+        }
         let p = &self.0[prim as usize];
         let h = p.intersect(ray, tnear, tfar)?;
         if q.from.skips(ray.dir, prim, p) {
@@ -71,6 +77,10 @@ impl<P: Primitive> UserGeometry for Primitives<P> {
         tfar: f32,
         from: &Option<&Departure>,
     ) -> bool {
+        // As in `intersect`: the splat left first, by id.
+        if from.is_some_and(|d| d.id == prim) {
+            return false;
+        }
         let p = &self.0[prim as usize];
         p.intersect(ray, tnear, tfar).is_some() && !from.skips(ray.dir, prim, p)
     }

@@ -84,12 +84,49 @@ fn wider_window_agrees_on_every_backend() {
 }
 
 #[test]
+fn a_model_on_a_wide_floor_agrees_on_every_backend() {
+    // The octree gives the floor and the model trees of their own (parts):
+    // rays that meet several parts, nearest first, must still find exactly
+    // the oracle's candidates.
+    let seed = seed();
+    let mut splats = blobby_splats(SPLATS, seed ^ 3);
+    let (lo, _) = bounds(&splats);
+    let floor_y = lo.y + 0.02;
+    splats.extend(splatray::scene::shapes::quad(
+        Vec3::new(0.0, floor_y, 0.0),
+        Vec3::Y,
+        glam::Vec2::splat(12.0),
+        SPLATS,
+    ));
+    let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
+    let parts = Octree::new(&discs, &OctreeParams::default()).parts();
+    assert!(parts >= 2, "{parts} parts");
+    let scale = SceneScale::from_diagonal(diagonal(&splats));
+    let b = backends(&splats);
+    let queries = random_queries(&splats, 2000, seed);
+    assert_all_agree(&b, &splats, &queries, scale.xi, "random rays, floor");
+    let camera = camera_queries(Vec3::new(1.5, 1.1, 4.4), Vec3::new(0.0, -0.3, 0.0), 48, 40);
+    assert_all_agree(&b, &splats, &camera, scale.xi, "camera rays, floor");
+    let secondary = secondary_queries(
+        b.oracle.as_ref(),
+        &splats,
+        &camera,
+        scale.xi,
+        scale.eps_self,
+        Vec3::new(2.5, 4.0, 3.0),
+    );
+    assert_all_agree(&b, &splats, &secondary, scale.xi, "shadow rays, floor");
+}
+
+#[test]
 fn octree_reports_its_structure() {
     let splats = blobby_splats(SPLATS, seed());
     let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
     let params = OctreeParams::default();
     let t = Octree::new(&discs, &params);
     let s = t.stats();
+    // A compact model is one part.
+    assert_eq!(t.parts(), 1);
     // A leaf holds at most `max_leaf` centres.
     assert!(
         s.nodes > s.leaves && s.leaves >= SPLATS.div_ceil(params.max_leaf),

@@ -4,7 +4,7 @@
 
 use super::{
     ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Layout, LeafBox, NO_PRIMITIVE, Node, Octree,
-    OctreeParams, OverlapTest, child_lo, lanes,
+    OctreeParams, OverlapTest, Tree, child_lo, lanes,
 };
 use crate::accel::BuildStats;
 use crate::primitive::{Pack, Primitive};
@@ -29,7 +29,8 @@ pub(super) enum Insertion {
     CentreOnly,
 }
 
-/// Builds the octree: the steps below, in order.
+/// Builds the octree: the scene's parts ([`super::parts`]), then per part
+/// the steps below, in order (the layout chosen once for every part).
 pub(super) fn build<P: Primitive>(
     prims: &[P],
     params: &OctreeParams,
@@ -45,7 +46,96 @@ pub(super) fn build<P: Primitive>(
             OverlapTest::BoundingSquare => p.coarse_half_extent(),
         })
         .collect();
-    let cube = RootCube::around(prims, &extents);
+    let groups = super::parts::partition(prims, &extents);
+    let staged: Vec<Staged<P>> = if groups.len() <= 1 {
+        vec![stage(prims, &extents, None, params, insertion)]
+    } else {
+        groups
+            .into_iter()
+            .map(|ids| {
+                let sub: Vec<P> = ids.par_iter().map(|&i| prims[i as usize]).collect();
+                let ext: Vec<Vec3> = ids.par_iter().map(|&i| extents[i as usize]).collect();
+                stage(&sub, &ext, Some(&ids), params, insertion)
+            })
+            .collect()
+    };
+    drop(extents);
+    let shared = match params.layout {
+        Layout::Copies => false,
+        Layout::Shared => true,
+        Layout::Auto { max_copies_bytes } => {
+            let packs: usize = staged
+                .iter()
+                .flat_map(|s| s.leaf_packs.iter())
+                .map(|&c| c as usize)
+                .sum();
+            let bytes = packs
+                * (std::mem::size_of::<P::Pack>() + lanes::<P>() * std::mem::size_of::<u32>());
+            bytes > max_copies_bytes
+        }
+    };
+    let isa = match params.simd {
+        Some(isa) if isa.supported() => isa,
+        _ => crate::simd::active(),
+    };
+    let mut nonempty = 0;
+    let parts: Vec<Tree<P>> = staged
+        .into_iter()
+        .map(|s| {
+            let (tree, leaves) = finish(s, shared, isa);
+            nonempty += leaves;
+            tree
+        })
+        .collect();
+    let references: usize = parts.iter().map(|t| t.references).sum();
+    assert!(references < INTERIOR as usize, "too many references");
+    let stats = BuildStats {
+        build_seconds: start.elapsed().as_secs_f64(),
+        memory_bytes: parts.iter().map(Tree::bytes).sum(),
+        nodes: parts.iter().map(|t| t.nodes.len()).sum(),
+        leaves: parts
+            .iter()
+            .map(|t| t.nodes.iter().filter(|nd| nd.meta & INTERIOR == 0).count())
+            .sum(),
+        mean_refs_per_leaf: if nonempty == 0 {
+            0.0
+        } else {
+            references as f64 / nonempty as f64
+        },
+    };
+    Octree {
+        parts,
+        references,
+        shared,
+        isa,
+        stats,
+    }
+}
+
+/// One part taken through steps 1-3 (and the references counted per
+/// leaf), waiting for the layout.
+struct Staged<P> {
+    cube: RootCube,
+    root: BuildNode,
+    /// Global primitive id of each key.
+    order: Vec<u32>,
+    leaves: u32,
+    sorted: Vec<(P, Vec3)>,
+    chunks: Vec<Vec<u64>>,
+    leaf_refs: Vec<u32>,
+    leaf_packs: Vec<u32>,
+}
+
+/// Steps 1-3 for the primitives `prims` (half extents `extents`), whose
+/// global ids are `ids` (`None`: their indices).
+fn stage<P: Primitive>(
+    prims: &[P],
+    extents: &[Vec3],
+    ids: Option<&[u32]>,
+    params: &OctreeParams,
+    insertion: Insertion,
+) -> Staged<P> {
+    let cube = RootCube::around(prims, extents);
     let (root, order, leaves) = split_by_centres(prims, &cube, params);
     // The primitives and their extents in Morton order (one parallel
     // gather, so every later step reads memory in order).
@@ -53,25 +143,43 @@ pub(super) fn build<P: Primitive>(
         .par_iter()
         .map(|&i| (prims[i as usize], extents[i as usize]))
         .collect();
-    drop(extents);
+    let order = match ids {
+        None => order,
+        Some(ids) => order.par_iter().map(|&i| ids[i as usize]).collect(),
+    };
     let chunks = insert_references(&sorted, &root, &cube, params, insertion);
     let leaf_refs = count_per_leaf(&chunks, leaves);
-    let references: usize = leaf_refs.iter().map(|&c| c as usize).sum();
-    assert!(references < INTERIOR as usize, "too many references");
     let leaf_packs: Vec<u32> = leaf_refs
         .iter()
         .map(|&c| c.div_ceil(lanes::<P>() as u32))
         .collect();
-    let shared = match params.layout {
-        Layout::Copies => false,
-        Layout::Shared => true,
-        Layout::Auto { max_copies_bytes } => {
-            let packs: usize = leaf_packs.iter().map(|&c| c as usize).sum();
-            let bytes = packs
-                * (std::mem::size_of::<P::Pack>() + lanes::<P>() * std::mem::size_of::<u32>());
-            bytes > max_copies_bytes
-        }
-    };
+    Staged {
+        cube,
+        root,
+        order,
+        leaves,
+        sorted,
+        chunks,
+        leaf_refs,
+        leaf_packs,
+    }
+}
+
+/// Steps 4-5 of a staged part in the layout chosen: the tree, and its
+/// count of non-empty leaves.
+fn finish<P: Primitive>(s: Staged<P>, shared: bool, isa: crate::simd::Isa) -> (Tree<P>, usize) {
+    let Staged {
+        cube,
+        root,
+        order,
+        leaves,
+        sorted,
+        chunks,
+        leaf_refs,
+        leaf_packs,
+    } = s;
+    let references: usize = leaf_refs.iter().map(|&c| c as usize).sum();
+    assert!(references < INTERIOR as usize, "too many references");
     let (packs, pack_ids, entries, leaf_entries) = if shared {
         let (packs, pack_ids) = morton_packs(&sorted, &order);
         let (entries, leaf_entries) = leaf_entries::<P>(&chunks, &leaf_refs);
@@ -87,32 +195,12 @@ pub(super) fn build<P: Primitive>(
     clip_to_cells(&root, cube.lo, cube.size, cube.pad, &mut leaf_boxes);
     let leaf_start = prefix_sums(&leaf_entries);
     let (nodes, boxes) = flatten(root, &leaf_start, &leaf_entries, &leaf_boxes);
-    let leaf_nodes = nodes.iter().filter(|nd| nd.meta & INTERIOR == 0).count();
     let nonempty = nodes
         .iter()
         .filter(|nd| nd.meta & INTERIOR == 0 && nd.meta > 0)
         .count();
     let grid = super::Grid::build(&nodes, cube.lo, cube.size);
-    let grid_bytes = grid
-        .as_ref()
-        .map_or(0, |g| std::mem::size_of_val(g.cells.as_slice()));
-    let stats = BuildStats {
-        build_seconds: start.elapsed().as_secs_f64(),
-        memory_bytes: std::mem::size_of_val(nodes.as_slice())
-            + std::mem::size_of_val(packs.as_slice())
-            + std::mem::size_of_val(pack_ids.as_slice())
-            + std::mem::size_of_val(entries.as_slice())
-            + std::mem::size_of_val(boxes.as_slice())
-            + grid_bytes,
-        nodes: nodes.len(),
-        leaves: leaf_nodes,
-        mean_refs_per_leaf: if nonempty == 0 {
-            0.0
-        } else {
-            references as f64 / nonempty as f64
-        },
-    };
-    Octree {
+    let tree = Tree {
         grid,
         nodes,
         boxes,
@@ -120,10 +208,7 @@ pub(super) fn build<P: Primitive>(
         pack_ids,
         entries,
         shared,
-        isa: match params.simd {
-            Some(isa) if isa.supported() => isa,
-            _ => crate::simd::active(),
-        },
+        isa,
         references,
         root_lo: cube.lo,
         root_size: cube.size,
@@ -132,7 +217,22 @@ pub(super) fn build<P: Primitive>(
             cube.content_hi + Vec3::splat(cube.pad),
         ],
         pad: cube.pad,
-        stats,
+    };
+    (tree, nonempty)
+}
+
+impl<P: Primitive> Tree<P> {
+    /// Bytes held (the primitives' copies in the packs included).
+    fn bytes(&self) -> usize {
+        std::mem::size_of_val(self.nodes.as_slice())
+            + std::mem::size_of_val(self.packs.as_slice())
+            + std::mem::size_of_val(self.pack_ids.as_slice())
+            + std::mem::size_of_val(self.entries.as_slice())
+            + std::mem::size_of_val(self.boxes.as_slice())
+            + self
+                .grid
+                .as_ref()
+                .map_or(0, |g| std::mem::size_of_val(g.cells.as_slice()))
     }
 }
 

@@ -12,6 +12,16 @@
 //!    overlaps ([`OverlapTest`]), so a ray finds it in whichever cell it meets
 //!    it (fig. 8).
 //!
+//! Before step 1 the scene may be split into parts ([`parts`]: a model
+//! standing on a wide floor becomes the model and the floor), each built
+//! as an octree of its own; a ray tests each part's
+//! padded content box and walks the parts it meets, nearest first, so a
+//! ray leaving the floor away from the model meets a thin slab and nothing
+//! else, and the model's rays descend from cells sized for the model. Each
+//! part's candidates are found as in one tree, and the window does not
+//! depend on the order hits are offered in, so the candidates are those of
+//! one tree.
+//!
 //! Steps 1–2 are done as one parallel sort of the centres' Morton codes
 //! followed by a recursive split of the sorted range — the same tree as
 //! inserting one primitive at a time, since a cell is split exactly when it
@@ -56,6 +66,7 @@
 //! hits anything.
 
 mod build;
+mod parts;
 mod traverse;
 
 use super::{Backend, BuildStats, CandidateHits, Departure, NoSkip};
@@ -224,8 +235,23 @@ fn child_lo(lo: Vec3, half: f32, oct: usize) -> Vec3 {
     )
 }
 
-/// The octree of §3.1 over a set of primitives.
+/// The octree of §3.1 over a set of primitives: one [`Tree`] per part of
+/// the scene ([`parts`]: usually one; a model standing on a wide floor
+/// gets a tree of its own), each with its own cube, grid and clip box.
 pub struct Octree<P: Primitive> {
+    /// The parts' trees, each over a group of primitives (ids global).
+    parts: Vec<Tree<P>>,
+    /// References over every part.
+    references: usize,
+    /// The layout built (the same for every part).
+    shared: bool,
+    /// The SIMD path of the leaf filter.
+    isa: Isa,
+    stats: BuildStats,
+}
+
+/// The octree of §3.1 over one part of the primitives.
+struct Tree<P: Primitive> {
     nodes: Vec<Node>,
     /// Per node: for a leaf, the box around its primitives' padded
     /// footprints clipped to its padded cell; for an interior node, the
@@ -265,7 +291,6 @@ pub struct Octree<P: Primitive> {
     bounds: [Vec3; 2],
     /// Padding added to every cell, in world units.
     pad: f32,
-    stats: BuildStats,
 }
 
 impl<P: Primitive> Octree<P> {
@@ -292,6 +317,14 @@ impl<P: Primitive> Octree<P> {
     #[must_use]
     pub fn references(&self) -> usize {
         self.references
+    }
+
+    /// The parts the scene was split into, each with a tree of its own
+    /// (`parts`: 1 unless a small model stands on a wide floor, or the
+    /// like).
+    #[must_use]
+    pub fn parts(&self) -> usize {
+        self.parts.len()
     }
 
     /// The SIMD path of the leaf filter.
@@ -325,25 +358,15 @@ impl<P: Primitive> Backend for Octree<P> {
     ) {
         hits.clear();
         match from {
-            None => {
-                let mut g = traverse::Gather::new(ray, t_min, t_max, NoSkip, hits);
-                self.traverse(ray, t_min, &mut g);
-            }
-            Some(d) => {
-                let mut g = traverse::Gather::new(ray, t_min, t_max, d, hits);
-                self.traverse(ray, t_min, &mut g);
-            }
+            None => self.gather(ray, t_min, t_max, NoSkip, hits),
+            Some(d) => self.gather(ray, t_min, t_max, d, hits),
         }
     }
 
     fn occluded_from(&self, ray: &Ray, t_min: f32, t_max: f32, from: Option<&Departure>) -> bool {
         match from {
-            None => self.traverse(
-                ray,
-                t_min,
-                &mut traverse::AnyHit::new(ray, t_min, t_max, NoSkip),
-            ),
-            Some(d) => self.traverse(ray, t_min, &mut traverse::AnyHit::new(ray, t_min, t_max, d)),
+            None => self.any_hit(ray, t_min, t_max, NoSkip),
+            Some(d) => self.any_hit(ray, t_min, t_max, d),
         }
     }
 

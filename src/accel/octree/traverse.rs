@@ -1,7 +1,7 @@
 //! Front-to-back traversal of the [`Octree`] (§3.2) and what it does in the
 //! leaves: gather the candidate window, or stop at the first hit.
 
-use super::{ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Octree, child_lo, lanes};
+use super::{ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Octree, Tree, child_lo, lanes};
 use crate::accel::{Candidate, CandidateHits, Skip};
 use crate::geometry::Ray;
 use crate::primitive::{Pack, PackRay, Primitive};
@@ -9,38 +9,95 @@ use crate::simd::Isa;
 use glam::{Vec3, Vec3A, Vec4};
 
 impl<P: Primitive> Octree<P> {
-    /// Front-to-back traversal from the root (the ray clipped to the box
-    /// around the content); `visitor` sees the leaves.
-    /// Returns true when the visitor stopped it.
+    /// The candidate window of `ray` over every part, nearest part first,
+    /// into `hits` (not cleared here); a part entered beyond the window's
+    /// far end is skipped, as a cell is.
     #[inline]
-    pub(super) fn traverse<V: Visitor<P>>(&self, ray: &Ray, t_min: f32, visitor: &mut V) -> bool {
+    pub(super) fn gather<S: Skip>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        skip: S,
+        hits: &mut CandidateHits,
+    ) {
+        if self.references == 0 {
+            return;
+        }
+        let ctx = RayCtx::new(ray, t_min);
+        let mut g = Gather::new(ray, t_min, t_max, skip, hits);
+        if let [tree] = self.parts.as_slice() {
+            tree.traverse(ray, &ctx, &mut g);
+            return;
+        }
+        // The parts the ray meets, by entry.
+        let mut order = [(0.0f32, 0usize); super::parts::MAX_PARTS];
+        let mut k = 0;
+        for (i, tree) in self.parts.iter().enumerate() {
+            let (entry, far) = tree.window(&ctx);
+            // NaN compares false: a NaN entry or exit misses the part.
+            if entry <= far && entry <= t_max {
+                order[k] = (entry, i);
+                k += 1;
+            }
+        }
+        let order = &mut order[..k];
+        order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        for &(entry, i) in order.iter() {
+            if entry > Visitor::<P>::cutoff(&g) {
+                break;
+            }
+            self.parts[i].traverse(ray, &ctx, &mut g);
+        }
+    }
+
+    /// True when any part holds a hit `skip` does not skip.
+    #[inline]
+    pub(super) fn any_hit<S: Skip>(&self, ray: &Ray, t_min: f32, t_max: f32, skip: S) -> bool {
         if self.references == 0 {
             return false;
         }
-        let ctx = RayCtx {
-            origin: ray.origin,
-            inv_dir: Vec3::ONE / ray.dir,
-            sign_mask: usize::from(ray.dir.x.is_sign_negative())
-                | usize::from(ray.dir.y.is_sign_negative()) << 1
-                | usize::from(ray.dir.z.is_sign_negative()) << 2,
-            t_min,
-            origin_a: Vec3A::from(ray.origin),
-            inv_dir_a: Vec3A::ONE / Vec3A::from(ray.dir),
-        };
+        let ctx = RayCtx::new(ray, t_min);
+        let mut v = AnyHit::new(ray, t_min, t_max, skip);
+        self.parts
+            .iter()
+            .any(|tree| tree.traverse(ray, &ctx, &mut v))
+    }
+}
+
+impl<P: Primitive> Tree<P> {
+    /// Where the ray enters the box around the content (not before
+    /// `t_min`) and where it leaves it (NaN on a NaN ray).
+    #[inline]
+    fn window(&self, ctx: &RayCtx) -> (f32, f32) {
         let [lo, hi] = self.bounds;
         let a = (lo - ctx.origin) * ctx.inv_dir;
         let b = (hi - ctx.origin) * ctx.inv_dir;
         let (near, far) = slab(a, b);
-        let entry = max4(t_min, near);
-        let exit = min4(visitor.cutoff(), far);
+        let m = if far.x < far.y { far.x } else { far.y };
+        let m = if m < far.z { m } else { far.z };
+        (max4(ctx.t_min, near), m)
+    }
+
+    /// Front-to-back traversal of the tree (the ray clipped to the box
+    /// around the content); `visitor` sees the leaves.
+    /// Returns true when the visitor stopped it.
+    #[inline]
+    fn traverse<V: Visitor<P>>(&self, ray: &Ray, ctx: &RayCtx, visitor: &mut V) -> bool {
+        if self.references == 0 {
+            return false;
+        }
+        let (entry, far) = self.window(ctx);
+        let cut = visitor.cutoff();
+        let exit = if far < cut { far } else { cut };
         // NaN compares false: a NaN entry or exit misses the root.
         let meets_root = entry <= exit;
         if !meets_root {
             return false;
         }
         match &self.grid {
-            Some(g) => self.walk_grid(g, ray, entry, exit, &ctx, visitor),
-            None => self.visit(0, self.root_lo, self.root_size, &ctx, visitor),
+            Some(g) => self.walk_grid(g, ray, entry, exit, ctx, visitor),
+            None => self.visit(0, self.root_lo, self.root_size, ctx, visitor),
         }
     }
 
@@ -235,6 +292,24 @@ struct RayCtx {
     /// `origin` and `inv_dir` in SIMD lanes.
     origin_a: Vec3A,
     inv_dir_a: Vec3A,
+}
+
+impl RayCtx {
+    #[inline]
+    fn new(ray: &Ray, t_min: f32) -> RayCtx {
+        // One division (IEEE: each lane as the scalar's).
+        let inv_dir_a = Vec3A::ONE / Vec3A::from(ray.dir);
+        RayCtx {
+            origin: ray.origin,
+            inv_dir: Vec3::from(inv_dir_a),
+            sign_mask: usize::from(ray.dir.x.is_sign_negative())
+                | usize::from(ray.dir.y.is_sign_negative()) << 1
+                | usize::from(ray.dir.z.is_sign_negative()) << 2,
+            t_min,
+            origin_a: Vec3A::from(ray.origin),
+            inv_dir_a,
+        }
+    }
 }
 
 /// Per-axis (near, far) of a slab from the parameters of its two planes.
