@@ -58,8 +58,7 @@
 mod build;
 mod traverse;
 
-use super::{Backend, BuildStats, CandidateHits, Departure, NoSkip};
-use crate::geometry::Ray;
+use super::{Backend, BuildStats, CandidateHits, NoSkip, Query};
 use crate::primitive::{Pack, Primitive};
 use crate::simd::Isa;
 use glam::Vec3;
@@ -315,16 +314,10 @@ impl<P: Primitive> Octree<P> {
 impl<P: Primitive> Backend for Octree<P> {
     /// One traversal per kind of query, monomorphised: primary rays
     /// ([`NoSkip`]) pay nothing for the self-hit rule.
-    fn intersect_from(
-        &self,
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        from: Option<&Departure>,
-        hits: &mut CandidateHits,
-    ) {
+    fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
         hits.clear();
-        match from {
+        let (ray, t_min, t_max) = (&q.ray, q.t_min, q.t_max);
+        match &q.from {
             None => {
                 let mut g = traverse::Gather::new(ray, t_min, t_max, NoSkip, hits);
                 self.traverse(ray, t_min, &mut g);
@@ -336,8 +329,9 @@ impl<P: Primitive> Backend for Octree<P> {
         }
     }
 
-    fn occluded_from(&self, ray: &Ray, t_min: f32, t_max: f32, from: Option<&Departure>) -> bool {
-        match from {
+    fn occluded_from(&self, q: &Query) -> bool {
+        let (ray, t_min, t_max) = (&q.ray, q.t_min, q.t_max);
+        match &q.from {
             None => self.traverse(
                 ray,
                 t_min,
