@@ -2,13 +2,14 @@
 //! sampled mesh, or built procedurally) and its exact surface, the
 //! materials, lights and camera resolved, and everything re-centred.
 
-use super::cloud::CloudRead;
 use super::file::{
     CameraSpec, LightKind, LightSpec, MaterialKind, MaterialSpec, ModelSpec, RenderSpec, SceneFile,
     ShapeKind, ShapeSpec, TransformSpec, parse_scene_file,
 };
-use super::model::{Camera, Light, LoadReport, Material, RenderOptions, Scene, TruthSource};
-use crate::io::{Mesh, PointCloud};
+use super::model::{
+    Camera, Light, LoadReport, MAX_EXTENT, Material, RenderOptions, Scene, TruthSource,
+};
+use crate::io::{CloudRead, Mesh, PointCloud};
 use crate::progress::Progress;
 use crate::resolve::ShadingMode;
 use crate::scene::SceneScale;
@@ -39,7 +40,7 @@ pub fn build_scene(file: &SceneFile, base: &Path, progress: Option<Progress<'_>>
 }
 
 /// [`build_scene`] with one model's input already read: `read` is the file
-/// at `path` (as [`super::cloud::read_and_survey`] gives it), which a model
+/// at `path` (as [`crate::io::read_any`] gives it), which a model
 /// naming that path (joined to `base`) takes instead of reading it again.
 ///
 /// # Errors
@@ -157,11 +158,6 @@ pub fn splats_scene(mut splats: Vec<Splat>, camera: Camera) -> Result<Scene> {
         load: LoadReport::default(),
     })
 }
-
-/// The widest scene the renderer takes, after re-centring: the squared
-/// distances of the ray-disc tests (and a diagonal's worth of `t`) stay
-/// finite in f32.
-pub const MAX_EXTENT: f32 = 1e18;
 
 /// A camera point (f64, in the file) shifted and re-centred into the f32
 /// frame of the splats; an error if f32 cannot hold it.
