@@ -538,14 +538,7 @@ fn shape_splats(shape: &ShapeSpec) -> Result<Vec<Splat>> {
     finite("shape.center", &shape.center)?;
     match shape.kind {
         ShapeKind::Sphere => {
-            let r = shape
-                .radius
-                .ok_or_else(|| Error::invalid("a sphere shape needs `radius`"))?;
-            if !(r > 0.0 && r.is_finite()) {
-                return Err(Error::invalid(format!(
-                    "shape.radius must be positive, got {r}"
-                )));
-            }
+            let r = required_positive(shape.radius, "a sphere shape", "shape", "radius")?;
             Ok(super::shapes::sphere(center, r, shape.splats))
         }
         ShapeKind::Quad => {
@@ -618,6 +611,19 @@ fn v3(a: [f32; 3]) -> Vec3 {
     Vec3::from(a)
 }
 
+/// The value of `table.key`, which `what` needs: given, finite and
+/// above zero.
+fn required_positive(value: Option<f32>, what: &str, table: &str, key: &str) -> Result<f32> {
+    let v = value.ok_or_else(|| Error::invalid(format!("{what} needs `{key}`")))?;
+    if v > 0.0 && v.is_finite() {
+        Ok(v)
+    } else {
+        Err(Error::invalid(format!(
+            "{table}.{key} must be positive, got {v}"
+        )))
+    }
+}
+
 fn finite(name: &str, v: &[f32]) -> Result<()> {
     if v.iter().all(|x| x.is_finite()) {
         Ok(())
@@ -686,14 +692,7 @@ fn light(spec: &LightSpec, shift: DVec3) -> Result<Light> {
             power,
         },
         LightKind::Sphere => {
-            let radius = spec
-                .radius
-                .ok_or_else(|| Error::invalid("a sphere light needs `radius`"))?;
-            if !(radius > 0.0 && radius.is_finite()) {
-                return Err(Error::invalid(format!(
-                    "light.radius must be positive, got {radius}"
-                )));
-            }
+            let radius = required_positive(spec.radius, "a sphere light", "light", "radius")?;
             Light::Sphere {
                 position: position()?,
                 radius,

@@ -28,6 +28,11 @@ fn box_points(c: Vec3, size: Vec3, n: usize) -> Vec<Vec3> {
     out
 }
 
+/// [`survey`] of points offset from the origin, without colours.
+fn points_survey(points: &[Vec3], viewpoint: Option<Vec3>) -> Survey {
+    survey(CloudKind::Points, points, DVec3::ZERO, viewpoint, false).unwrap()
+}
+
 /// Projects `p` with the camera of `v`; true when inside the frame.
 fn in_frame(v: &View, p: DVec3, aspect: f64) -> bool {
     let f = (v.at - v.from).normalize();
@@ -41,13 +46,13 @@ fn in_frame(v: &View, p: DVec3, aspect: f64) -> bool {
 #[test]
 fn outliers_are_left_out_of_the_framing() {
     let mut pts = box_points(Vec3::new(10.0, 0.0, 0.0), Vec3::ONE, 30);
-    let clean = survey(CloudKind::Points, &pts, DVec3::ZERO, None, false).unwrap();
+    let clean = points_survey(&pts, None);
     assert_eq!(clean.outliers, 0);
     // A few stray points far out.
     for k in 0..5 {
         pts.push(Vec3::new(10.0 + 20.0 * k as f32, 15.0, -9.0));
     }
-    let s = survey(CloudKind::Points, &pts, DVec3::ZERO, None, false).unwrap();
+    let s = points_survey(&pts, None);
     assert_eq!(s.outliers, 5);
     assert!((s.hi - s.lo - DVec3::ONE).abs().max_element() < 1e-5);
 }
@@ -60,7 +65,7 @@ fn framing_shows_every_point_and_fills_the_frame() {
         (Vec3::new(0.01, 0.02, 0.015), 0.5),
     ] {
         let pts = box_points(Vec3::new(3.0, -1.0, 100.0), size, 10);
-        let s = survey(CloudKind::Points, &pts, DVec3::ZERO, None, false).unwrap();
+        let s = points_survey(&pts, None);
         let v = choose_view(&s, None, aspect);
         assert!(s.sample.iter().all(|p| in_frame(&v, *p, aspect)), "{v:?}");
         // Not too small: a narrower frame cuts points off.
@@ -83,14 +88,7 @@ fn up_axis_rules() {
             ground.push(Vec3::new(i as f32, j as f32, h));
         }
     }
-    let s = survey(
-        CloudKind::Points,
-        &ground,
-        DVec3::ZERO,
-        Some(Vec3::new(20.0, 20.0, 2.0)),
-        false,
-    )
-    .unwrap();
+    let s = points_survey(&ground, Some(Vec3::new(20.0, 20.0, 2.0)));
     let v = choose_view(&s, None, 1.0);
     assert_eq!(v.up, DVec3::Z, "{}", v.note);
     // The same terrain seen from below: the other side is up.
@@ -102,14 +100,7 @@ fn up_axis_rules() {
     // A pole along z, scanned from 10 units away along x, looked down on:
     // z is up (the lamppost).
     let pole = box_points(Vec3::new(-10.0, 0.0, -2.5), Vec3::new(1.0, 0.8, 6.0), 12);
-    let s = survey(
-        CloudKind::Points,
-        &pole,
-        DVec3::ZERO,
-        Some(Vec3::ZERO),
-        false,
-    )
-    .unwrap();
+    let s = points_survey(&pole, Some(Vec3::ZERO));
     let v = choose_view(&s, None, 4.0 / 3.0);
     assert_eq!(v.from, DVec3::ZERO, "{}", v.note);
     assert_eq!(v.up, DVec3::Z, "{}", v.note);
@@ -122,14 +113,7 @@ fn up_axis_rules() {
     // A viewpoint looking along -z at an object: +z is along the line
     // of sight, +y is up (the milk carton, the synthetic scans).
     let obj = box_points(Vec3::new(0.25, -0.1, -0.7), Vec3::splat(0.15), 10);
-    let s = survey(
-        CloudKind::Points,
-        &obj,
-        DVec3::ZERO,
-        Some(Vec3::ZERO),
-        false,
-    )
-    .unwrap();
+    let s = points_survey(&obj, Some(Vec3::ZERO));
     let v = choose_view(&s, None, 1.0);
     assert_eq!((v.from, v.up), (DVec3::ZERO, DVec3::Y), "{}", v.note);
     assert!(s.sample.iter().all(|p| in_frame(&v, *p, 1.0)));
@@ -146,7 +130,7 @@ fn up_axis_rules() {
                 pts.push(Vec3::new(r * a.cos(), y, r * a.sin()));
             }
         }
-        survey(CloudKind::Points, &pts, DVec3::ZERO, None, false).unwrap()
+        points_survey(&pts, None)
     };
     assert_eq!(choose_view(&cone(false), None, 1.0).up, DVec3::Y);
     let v = choose_view(&cone(true), None, 1.0);
@@ -158,14 +142,7 @@ fn up_axis_rules() {
 fn viewpoints_that_are_not_sensible() {
     let obj = box_points(Vec3::ZERO, Vec3::ONE, 10);
     // Inside the cloud: framing instead.
-    let s = survey(
-        CloudKind::Points,
-        &obj,
-        DVec3::ZERO,
-        Some(Vec3::new(0.1, 0.0, 0.0)),
-        false,
-    )
-    .unwrap();
+    let s = points_survey(&obj, Some(Vec3::new(0.1, 0.0, 0.0)));
     let v = choose_view(&s, None, 1.0);
     assert_ne!(v.from, DVec3::new(0.1, 0.0, 0.0));
     assert!(v.note.contains("framing"), "{}", v.note);
