@@ -17,14 +17,38 @@
 use super::survey::Survey;
 use glam::DVec3;
 
+/// The up axes the rules give a surveyed cloud, decided before any camera
+/// is placed: the view ([`super::view::choose_view`]) takes the one of the
+/// camera it places.
+pub(super) struct Ups {
+    /// The thinnest axis of a flat cloud (rule 1).
+    pub flat: Option<DVec3>,
+    /// The up of the camera at the viewpoint, and why (`None` without a
+    /// viewpoint, or one at the cloud's centre).
+    pub at_viewpoint: Option<(DVec3, String)>,
+    /// The up of a framing camera, and why.
+    pub framing: (DVec3, String),
+}
+
+/// [`Ups`] of `s`; `given_up` (unit), when there is one, wins everywhere.
+pub(super) fn ups(s: &Survey, given_up: Option<DVec3>) -> Ups {
+    let flat = flat_axis(s.hi - s.lo);
+    let c = s.center();
+    let at_viewpoint = s.viewpoint.and_then(|v| {
+        let f = (c - v).try_normalize()?;
+        Some(viewpoint_up(v, c, f, given_up, flat))
+    });
+    Ups {
+        flat,
+        at_viewpoint,
+        framing: framing_up(s, given_up, flat),
+    }
+}
+
 /// The up axis of a framing camera (rules 1 and 3), and why: `given_up`, else
 /// the thinnest side of a `flat` cloud (toward the viewpoint), else `+y`
 /// or `-y`.
-pub(super) fn framing_up(
-    s: &Survey,
-    given_up: Option<DVec3>,
-    flat: Option<DVec3>,
-) -> (DVec3, String) {
+fn framing_up(s: &Survey, given_up: Option<DVec3>, flat: Option<DVec3>) -> (DVec3, String) {
     let c = s.center();
     match (given_up, flat) {
         (Some(u), _) => (u, "given".to_string()),
@@ -52,7 +76,7 @@ pub(super) fn framing_up(
 /// The up axis of the camera at the viewpoint `v` looking along `f` at the
 /// cloud's centre `c` (rules 1 and 2), and why: `given_up`, else the thinnest
 /// side of a `flat` cloud, else `+z`, `+y` or `+x`.
-pub(super) fn viewpoint_up(
+fn viewpoint_up(
     v: DVec3,
     c: DVec3,
     f: DVec3,
@@ -120,7 +144,7 @@ fn base_area(s: &Survey, up: DVec3) -> f64 {
 
 /// The thinnest axis of a flat box (thinnest side under a quarter of the
 /// middle one), as a unit axis.
-pub(super) fn flat_axis(ext: DVec3) -> Option<DVec3> {
+fn flat_axis(ext: DVec3) -> Option<DVec3> {
     let mut sides = [(ext.x, DVec3::X), (ext.y, DVec3::Y), (ext.z, DVec3::Z)];
     sides.sort_by(|a, b| a.0.total_cmp(&b.0));
     (sides[0].0 < 0.25 * sides[1].0).then_some(sides[0].1)

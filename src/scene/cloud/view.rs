@@ -19,7 +19,7 @@
 //! follows the rules of [`super::up`].
 
 use super::survey::Survey;
-use super::up::{flat_axis, framing_up, viewpoint_up};
+use super::up::ups;
 use crate::scene::model::Intrinsics;
 use crate::scene::sensor::Sensor;
 use glam::DVec3;
@@ -151,16 +151,15 @@ pub fn choose_view(s: &Survey, up: Option<DVec3>, aspect: f64) -> View {
         return sensor_view(s, sensor);
     }
     let c = s.center();
-    let ext = s.hi - s.lo;
-    let flat = flat_axis(ext);
-    let given_up = up.and_then(DVec3::try_normalize);
-    if let Some(v) = s.viewpoint
-        && let Some(view) = viewpoint_view(s, v, given_up, flat, aspect)
+    let ups = ups(s, up.and_then(DVec3::try_normalize));
+    if let (Some(v), Some(up)) = (s.viewpoint, &ups.at_viewpoint)
+        && let Some(view) = viewpoint_view(s, v, up, aspect)
     {
         return view;
     }
-    // Framing: the up axis first, then a three-quarter view around it.
-    let (up, why) = framing_up(s, given_up, flat);
+    // Framing: a three-quarter view around the up axis.
+    let (up, why) = ups.framing;
+    let flat = ups.flat;
     // Front: +z for a y axis, -y for a z axis, +z for an x axis, whatever
     // the sign of up; made perpendicular to up.
     let a = up.abs();
@@ -209,19 +208,13 @@ pub fn choose_view(s: &Survey, up: Option<DVec3>, aspect: f64) -> View {
     }
 }
 
-/// The camera at the viewpoint, or `None` when the viewpoint is not
-/// sensible (a point behind it or beside it: inside the cloud; the cloud
-/// wider than 100° from there).
-fn viewpoint_view(
-    s: &Survey,
-    v: DVec3,
-    given_up: Option<DVec3>,
-    flat: Option<DVec3>,
-    aspect: f64,
-) -> Option<View> {
+/// The camera at the viewpoint with `up` (and why), or `None` when the
+/// viewpoint is not sensible (a point behind it or beside it: inside the
+/// cloud; the cloud wider than 100° from there).
+fn viewpoint_view(s: &Survey, v: DVec3, up: &(DVec3, String), aspect: f64) -> Option<View> {
     let c = s.center();
     let f = (c - v).try_normalize()?;
-    let (up, why) = viewpoint_up(v, c, f, given_up, flat);
+    let (up, why) = (up.0, &up.1);
     let (ty, tx) = needed_tangents(&s.sample, v, f, up)?;
     let t = ty.max(tx / aspect) / MARGIN;
     let fov = 2.0 * t.atan().to_degrees();
