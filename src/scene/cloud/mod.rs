@@ -6,7 +6,7 @@
 //! [`make_scene`] takes the steps in order, each from what the one before
 //! gave (`docs/DESIGN.md`, "A point cloud without a scene"):
 //!
-//! 1. [`survey`]: the file read once; a sample of its points, their box,
+//! 1. [`mod@survey`]: the file read once; a sample of its points, their box,
 //!    the viewpoint, colours, an organised cloud's sensor;
 //! 2. [`view`]: the camera, its up vector by the rules of [`up`];
 //! 3. [`text`]: the scene as TOML;
