@@ -163,7 +163,8 @@ impl SceneArgs {
         line.finish();
         eprintln!("{}: {}", path.display(), made.note());
         if let Some(s) = &self.save_scene {
-            splatray::io::write_text(s, &made.saved_text(path, s)?)?;
+            let text = made.saved_text(path, s)?;
+            splatray::io::write_text(s, &text)?;
         }
         Ok(made.scene)
     }
