@@ -97,14 +97,6 @@ pub fn scene_text(
     })?;
     let quoted = toml::Value::String(p.to_string()).to_string();
     let d = decimals(s.radius());
-    let dist = (view.from - view.at).length();
-    // The headlight gives irradiance 0.25 at the centre; the key light 0.85.
-    let head = 0.25 * dist * dist;
-    let fwd = (view.at - view.from).normalize();
-    let (r, u) = frame(fwd, view.up).unwrap_or((DVec3::X, DVec3::Y));
-    // From the upper left, a little in front: the direction it travels.
-    let key = -(u * 1.0 - r * 0.7 - fwd * 0.5).normalize();
-    let splat = crate::splat::SplatParams::default();
     let mut t = String::new();
     let _ = writeln!(
         t,
@@ -115,6 +107,25 @@ pub fn scene_text(
         view.note
     );
     let _ = writeln!(t, "background = {}\n", vec3(DVec3::from(BACKGROUND), 3));
+    camera_text(&mut t, view, o, d);
+    let _ = writeln!(t, "\n[[model]]\n{} = {quoted}", s.kind.key());
+    model_text(&mut t, s);
+    lights_text(&mut t, view, d);
+    let _ = writeln!(t, "\n[render]\nambient = 0.05");
+    if let Some(m) = o.shading {
+        let name = match m {
+            ShadingMode::Flat => "flat",
+            ShadingMode::Blended => "blended",
+            ShadingMode::Phong => "phong",
+        };
+        let _ = writeln!(t, "shading = \"{name}\"");
+    }
+    Ok(t)
+}
+
+/// `[camera]`: the view, its intrinsics scaled to the image (a sensor's) or
+/// its field of view, and the image; coordinates to `d` decimals.
+fn camera_text(t: &mut String, view: &View, o: &CloudSceneOptions, d: usize) {
     let _ = writeln!(t, "[camera]");
     let _ = writeln!(t, "from = {}", vec3(view.from, d));
     let _ = writeln!(t, "at = {}", vec3(view.at, d));
@@ -144,7 +155,12 @@ pub fn scene_text(
     if o.spp != 1 {
         let _ = writeln!(t, "spp = {}", o.spp);
     }
-    let _ = writeln!(t, "\n[[model]]\n{} = {quoted}", s.kind.key());
+}
+
+/// The model's settings beyond its file: the splat defaults (points) or
+/// the opacity threshold (Gaussians) as comments, and the material.
+fn model_text(t: &mut String, s: &Survey) {
+    let splat = crate::splat::SplatParams::default();
     if s.kind == CloudKind::Points {
         let _ = writeln!(
             t,
@@ -177,6 +193,18 @@ pub fn scene_text(
             "material = {{ kind = \"phong\", color = [0.78, 0.76, 0.72], specular = 0.15, shininess = 30 }}"
         );
     }
+}
+
+/// The two lights: a headlight at the camera (irradiance 0.25 at the point
+/// looked at) and a directional key light from the upper left, a little in
+/// front (0.85).
+fn lights_text(t: &mut String, view: &View, d: usize) {
+    let dist = (view.from - view.at).length();
+    let head = 0.25 * dist * dist;
+    let fwd = (view.at - view.from).normalize();
+    let (r, u) = frame(fwd, view.up).unwrap_or((DVec3::X, DVec3::Y));
+    // From the upper left, a little in front: the direction it travels.
+    let key = -(u * 1.0 - r * 0.7 - fwd * 0.5).normalize();
     let _ = writeln!(
         t,
         "\n[[light]]  # a headlight, at the camera\nkind = \"point\"\nposition = {}\nintensity = {}",
@@ -188,16 +216,6 @@ pub fn scene_text(
         "\n[[light]]  # the key light, from the upper left\nkind = \"directional\"\ndirection = {}\nintensity = 0.85",
         vec3(key, 4)
     );
-    let _ = writeln!(t, "\n[render]\nambient = 0.05");
-    if let Some(m) = o.shading {
-        let name = match m {
-            ShadingMode::Flat => "flat",
-            ShadingMode::Blended => "blended",
-            ShadingMode::Phong => "phong",
-        };
-        let _ = writeln!(t, "shading = \"{name}\"");
-    }
-    Ok(t)
 }
 
 /// `target` as seen from `folder`: relative (with `..` where needed) when
