@@ -36,7 +36,7 @@ use criterion::{BatchSize, Criterion, SamplingMode, Throughput};
 use glam::Vec3;
 use rayon::prelude::*;
 use splatray::accel::octree::{Octree, OctreeParams};
-use splatray::accel::{Backend, BuildStats, Candidate, CandidateHits, Departure, Ray, backends};
+use splatray::accel::{Backend, BuildStats, Candidate, CandidateHits, Departure, backends};
 use splatray::embree::{Device, NativeDiscScene};
 use splatray::primitive::Disc;
 use splatray::resolve::{ShadingMode, resolve};
@@ -105,16 +105,9 @@ impl Native {
 }
 
 impl Backend for Native {
-    fn intersect_from(
-        &self,
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        _from: Option<&Departure>,
-        hits: &mut CandidateHits,
-    ) {
+    fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
         hits.clear();
-        if let Some((id, t)) = self.scene.intersect(ray, t_min, t_max) {
+        if let Some((id, t)) = self.scene.intersect(&q.ray, q.t_min, q.t_max) {
             hits.offer(Candidate {
                 id,
                 t,
@@ -124,8 +117,8 @@ impl Backend for Native {
         }
     }
 
-    fn occluded_from(&self, ray: &Ray, t_min: f32, t_max: f32, _from: Option<&Departure>) -> bool {
-        self.scene.occluded(ray, t_min, t_max)
+    fn occluded_from(&self, q: &Query) -> bool {
+        self.scene.occluded(&q.ray, q.t_min, q.t_max)
     }
 
     fn stats(&self) -> &BuildStats {
@@ -153,11 +146,7 @@ fn trace(backend: &dyn Backend, queries: &[Query], xi: f32) -> usize {
 fn shadow(backend: &dyn Backend, queries: &[Query]) -> usize {
     queries
         .par_chunks(W)
-        .map(|row| {
-            row.iter()
-                .filter(|q| backend.occluded_from(&q.ray, q.t_min, q.t_max, q.from.as_ref()))
-                .count()
-        })
+        .map(|row| row.iter().filter(|q| backend.occluded_from(q)).count())
         .sum()
 }
 

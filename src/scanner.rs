@@ -169,13 +169,22 @@ fn check(p: &ScanParams) -> Result<()> {
     Ok(())
 }
 
-/// Scans `mesh` from `params.from`.
-///
-/// # Errors
-/// Parameters out of range, a target at the scanner's position, a mesh
-/// Embree cannot build, or a scan that sees nothing.
-pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
-    check(params)?;
+/// Where the scanner stands and looks, in the mesh's frame (offsets from
+/// its origin), and its vertical field of view (radians).
+#[derive(Clone, Copy)]
+struct Aim {
+    from: Vec3,
+    forward: Vec3,
+    right: Vec3,
+    up: Vec3,
+    vfov: f32,
+}
+
+/// The scanner of `params` placed on `mesh`: looking at `params.at` (else
+/// the mesh's centre), up as near `+y` as the view allows (`+z` looking
+/// along y), the field of view given or the mesh's bounding sphere's
+/// (widened 5 %, 90° from inside it, at most 170°).
+fn aim(mesh: &Mesh, params: &ScanParams) -> Result<Aim> {
     let (lo, hi) = mesh.positions.iter().fold(
         (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
         |(a, b), p| (a.min(*p), b.max(*p)),
@@ -214,15 +223,36 @@ pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
             }
         }
     };
+    Ok(Aim {
+        from,
+        forward,
+        right,
+        up,
+        vfov,
+    })
+}
+
+/// The ray direction of sample (column, row).
+type DirOf = Box<dyn Fn(usize, usize) -> Vec3 + Sync>;
+
+/// The ray direction of sample (column, row) of `params.pattern`, the
+/// larger angular step between samples, and for a raster its pinhole
+/// (focal length and principal point, pixels).
+fn pattern(params: &ScanParams, aim: &Aim) -> (DirOf, f32, Option<(f64, f64, f64)>) {
+    let Aim {
+        forward,
+        right,
+        up,
+        vfov,
+        ..
+    } = *aim;
     let (cols, rows) = (params.columns as usize, params.rows as usize);
-    // Ray direction of sample (c, r), and the larger angular step.
-    let mut pinhole = None;
-    let (dir_of, step): (Box<dyn Fn(usize, usize) -> Vec3 + Sync>, f32) = match params.pattern {
+    match params.pattern {
         ScanPattern::Raster => {
             let half_h = (0.5 * vfov).tan();
             let half_w = half_h * cols as f32 / rows as f32;
             // x = (2 (u + 0.5) / cols - 1) half_w: u = f x + (cols - 1) / 2.
-            pinhole = Some((
+            let pinhole = Some((
                 f64::from(rows as f32) / (2.0 * f64::from(half_h)),
                 (cols as f64 - 1.0) / 2.0,
                 (rows as f64 - 1.0) / 2.0,
@@ -232,7 +262,7 @@ pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
                 let y = (1.0 - (r as f32 + 0.5) / rows as f32 * 2.0) * half_h;
                 (forward + right * x + up * y).normalize()
             };
-            (Box::new(f), 2.0 * half_h / rows as f32)
+            (Box::new(f), 2.0 * half_h / rows as f32, pinhole)
         }
         ScanPattern::Lines => {
             let f = move |c: usize, r: usize| {
@@ -241,9 +271,28 @@ pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
                 (forward * (el.cos() * az.cos()) + right * (el.cos() * az.sin()) + up * el.sin())
                     .normalize()
             };
-            (Box::new(f), vfov / cols.min(rows) as f32)
+            (Box::new(f), vfov / cols.min(rows) as f32, None)
         }
-    };
+    }
+}
+
+/// Scans `mesh` from `params.from`.
+///
+/// # Errors
+/// Parameters out of range, a target at the scanner's position, a mesh
+/// Embree cannot build, or a scan that sees nothing.
+pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
+    check(params)?;
+    let aim = aim(mesh, params)?;
+    let Aim {
+        from,
+        forward,
+        right,
+        up,
+        ..
+    } = aim;
+    let (cols, rows) = (params.columns as usize, params.rows as usize);
+    let (dir_of, step, pinhole) = pattern(params, &aim);
     let device = Device::new()?;
     let tris = TriangleScene::new(&device, &[(&mesh.positions, &mesh.triangles)])?;
     // Exact ranges first (the noise may be relative to the spacing).

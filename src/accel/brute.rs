@@ -1,7 +1,6 @@
 //! The brute-force oracle: every ray against every primitive.
 
-use super::{Backend, BuildStats, Candidate, CandidateHits, Departure, Skip};
-use crate::geometry::Ray;
+use super::{Backend, BuildStats, Candidate, CandidateHits, Query, Skip};
 use crate::primitive::Primitive;
 use std::time::Instant;
 
@@ -27,17 +26,11 @@ impl<P: Primitive> Brute<P> {
     }
 
     /// Every hit that counts, in primitive order.
-    fn hits<'a>(
-        &'a self,
-        ray: &'a Ray,
-        t_min: f32,
-        t_max: f32,
-        from: Option<&'a Departure>,
-    ) -> impl Iterator<Item = Candidate> + 'a {
+    fn hits<'a>(&'a self, q: &'a Query) -> impl Iterator<Item = Candidate> + 'a {
         self.prims.iter().enumerate().filter_map(move |(id, p)| {
-            let h = p.intersect(ray, t_min, t_max)?;
+            let h = p.intersect(&q.ray, q.t_min, q.t_max)?;
             let id = id as u32;
-            (!from.skips(ray.dir, id, p)).then_some(Candidate {
+            (!q.from.as_ref().skips(q.ray.dir, id, p)).then_some(Candidate {
                 id,
                 t: h.t,
                 u: h.u,
@@ -48,22 +41,15 @@ impl<P: Primitive> Brute<P> {
 }
 
 impl<P: Primitive> Backend for Brute<P> {
-    fn intersect_from(
-        &self,
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        from: Option<&Departure>,
-        hits: &mut CandidateHits,
-    ) {
+    fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
         hits.clear();
-        for c in self.hits(ray, t_min, t_max, from) {
+        for c in self.hits(q) {
             hits.offer(c);
         }
     }
 
-    fn occluded_from(&self, ray: &Ray, t_min: f32, t_max: f32, from: Option<&Departure>) -> bool {
-        self.hits(ray, t_min, t_max, from).next().is_some()
+    fn occluded_from(&self, q: &Query) -> bool {
+        self.hits(q).next().is_some()
     }
 
     fn stats(&self) -> &BuildStats {
@@ -89,23 +75,16 @@ impl<P: Primitive> BruteReversed<P> {
 
 #[cfg(feature = "test-backends")]
 impl<P: Primitive> Backend for BruteReversed<P> {
-    fn intersect_from(
-        &self,
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        from: Option<&Departure>,
-        hits: &mut CandidateHits,
-    ) {
+    fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
         hits.clear();
-        let all: Vec<Candidate> = self.0.hits(ray, t_min, t_max, from).collect();
+        let all: Vec<Candidate> = self.0.hits(q).collect();
         for c in all.into_iter().rev() {
             hits.offer(c);
         }
     }
 
-    fn occluded_from(&self, ray: &Ray, t_min: f32, t_max: f32, from: Option<&Departure>) -> bool {
-        self.0.occluded_from(ray, t_min, t_max, from)
+    fn occluded_from(&self, q: &Query) -> bool {
+        self.0.occluded_from(q)
     }
 
     fn stats(&self) -> &BuildStats {

@@ -2,7 +2,7 @@
 //! (below, in safe code) gather the candidate window of §4.3 into the query
 //! of each ray; the FFI is in [`crate::embree`].
 
-use super::{Backend, BuildStats, Candidate, CandidateHits, Departure, Skip};
+use super::{Backend, BuildStats, Candidate, CandidateHits, Departure, Query, Skip};
 use crate::embree::{Device, EmbreeError, UserGeometry, UserScene};
 use crate::geometry::Ray;
 use crate::primitive::Primitive;
@@ -114,21 +114,16 @@ impl<P: Primitive> EmbreeBackend<P> {
 }
 
 impl<P: Primitive> Backend for EmbreeBackend<P> {
-    fn intersect_from(
-        &self,
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        from: Option<&Departure>,
-        hits: &mut CandidateHits,
-    ) {
+    fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
         hits.clear();
+        let (t_max, from) = (q.t_max, q.from.as_ref());
         self.scene
-            .intersect(ray, t_min, t_max, &mut Gather { hits, t_max, from });
+            .intersect(&q.ray, q.t_min, t_max, &mut Gather { hits, t_max, from });
     }
 
-    fn occluded_from(&self, ray: &Ray, t_min: f32, t_max: f32, from: Option<&Departure>) -> bool {
-        self.scene.occluded(ray, t_min, t_max, &from)
+    fn occluded_from(&self, q: &Query) -> bool {
+        self.scene
+            .occluded(&q.ray, q.t_min, q.t_max, &q.from.as_ref())
     }
 
     fn stats(&self) -> &BuildStats {

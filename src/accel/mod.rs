@@ -37,36 +37,57 @@ pub struct BuildStats {
     pub mean_refs_per_leaf: f64,
 }
 
+/// One ray query of the backend contract: the ray, its interval
+/// `[t_min, t_max]`, and for a secondary ray the splat it leaves (whose
+/// surface every backend skips alike, [`Departure::skips`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Query {
+    /// The ray.
+    pub ray: Ray,
+    /// Lower end of the interval (0, or `eps_self` for a secondary ray).
+    pub t_min: f32,
+    /// Upper end of the interval.
+    pub t_max: f32,
+    /// The splat a secondary ray leaves, `None` for a primary ray.
+    pub from: Option<Departure>,
+}
+
+impl Query {
+    /// A primary-ray query: nothing skipped.
+    #[must_use]
+    pub fn new(ray: Ray, t_min: f32, t_max: f32) -> Query {
+        Query {
+            ray,
+            t_min,
+            t_max,
+            from: None,
+        }
+    }
+}
+
 /// One acceleration backend (`docs/DESIGN.md`, "The backend contract"). Implemented by the brute-force
 /// oracle, the octree and Embree; its name is its [`registry`] entry's.
 pub trait Backend: Send + Sync {
-    /// Fills `hits` (cleared first) with the candidate hits of `ray` in
-    /// `[t_min, t_max]`: the nearest and all within the window of it. With
-    /// `from`, a secondary ray leaving that splat: every hit
+    /// Fills `hits` (cleared first) with the candidate hits of `q.ray` in
+    /// `[q.t_min, q.t_max]`: the nearest and all within the window of it.
+    /// With `q.from`, a secondary ray leaving that splat: every hit
     /// [`Departure::skips`] is left out before it counts (as if absent).
-    fn intersect_from(
-        &self,
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        from: Option<&Departure>,
-        hits: &mut CandidateHits,
-    );
+    fn intersect_from(&self, q: &Query, hits: &mut CandidateHits);
 
-    /// True when any splat is hit with `t` in `[t_min, t_max]`, leaving out
-    /// the hits `from` skips (as [`Backend::intersect_from`]).
-    fn occluded_from(&self, ray: &Ray, t_min: f32, t_max: f32, from: Option<&Departure>) -> bool;
+    /// True when any splat is hit with `t` in `[q.t_min, q.t_max]`, leaving
+    /// out the hits `q.from` skips (as [`Backend::intersect_from`]).
+    fn occluded_from(&self, q: &Query) -> bool;
 
     /// Build figures.
     fn stats(&self) -> &BuildStats;
 
     /// [`Backend::intersect_from`] for a primary ray: nothing skipped.
     fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, hits: &mut CandidateHits) {
-        self.intersect_from(ray, t_min, t_max, None, hits);
+        self.intersect_from(&Query::new(*ray, t_min, t_max), hits);
     }
 
     /// [`Backend::occluded_from`] with nothing skipped.
     fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        self.occluded_from(ray, t_min, t_max, None)
+        self.occluded_from(&Query::new(*ray, t_min, t_max))
     }
 }

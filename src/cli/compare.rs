@@ -7,8 +7,10 @@ use super::view::SceneArgs;
 use super::{json_text, stage_text};
 use splatray::accel::registry;
 use splatray::io::Batch;
+use splatray::progress::Progress;
 use splatray::render::integrator::{Frame, render};
 use splatray::render::output::{check_output_path, check_writable, save_into};
+use splatray::scene::Scene;
 use splatray::validate::causes::{Cause, ErrorBudget, Tolerances, cause_image, error_budget};
 use splatray::validate::compare::{
     Agreement, TruthErrors, compare_frames, diff_image, orient_to_camera, render_truth,
@@ -138,16 +140,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
             scene_path.display()
         )));
     }
-    if let Some(d) = &args.diff {
-        check_output_path(d)?;
-        if args.truth {
-            check_output_path(&truth_diff_path(d))?;
-            check_output_path(&causes_diff_path(d))?;
-        }
-    }
-    if let Some(r) = &args.report {
-        check_writable(r)?;
-    }
+    check_outputs(args)?;
     let line = ProgressLine::new();
     let progress = |stage: &str, f: f64| line.update(stage, f);
     let scene = args.view.load(Some(args.spp), &line)?;
@@ -167,30 +160,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         None
     };
     let diagonal = scene.options.scale.diagonal;
-    let mut frames: Vec<Frame> = Vec::new();
-    let mut backends: Vec<BackendRun> = Vec::new();
-    for info in registry::renderers() {
-        let backend = info.build_splats(&scene.splats)?;
-        let frame = render(&scene, backend.as_ref(), Some(&progress));
-        let stats = backend.stats();
-        let (reference_over_this, agreement) = match frames.first() {
-            Some(reference) => (
-                Some(mrays_per_s(reference) / mrays_per_s(&frame).max(1e-12)),
-                Some(compare_frames(reference, &frame, diagonal)),
-            ),
-            None => (None, None),
-        };
-        backends.push(BackendRun {
-            name: info.name,
-            build_seconds: stats.build_seconds,
-            memory_bytes: stats.memory_bytes,
-            render_seconds: frame.seconds,
-            mrays_per_s: mrays_per_s(&frame),
-            reference_over_this,
-            agreement,
-        });
-        frames.push(frame);
-    }
+    let (frames, backends) = render_every_backend(&scene, Some(&progress))?;
     let truth_frame = truth.map(|t| render_truth(&scene, &t, Some(&progress)));
     let tolerances = Tolerances::default();
     // The reference backend's cause of every pixel, for `D-causes.png`.
@@ -222,20 +192,90 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         backends,
         truth,
     };
-    // The diff images and the report are committed together: a failure in
-    // any leaves none.
+    write_outputs(
+        args,
+        &frames,
+        truth_frame.as_ref(),
+        reference_causes.as_deref(),
+        &report,
+    )?;
+    print_report(&report);
+    Ok(())
+}
+
+/// The output paths `--diff` (with `--truth`, its truth and causes images
+/// too) and `--report` will write can be written.
+fn check_outputs(args: &CompareArgs) -> Result<()> {
+    if let Some(d) = &args.diff {
+        check_output_path(d)?;
+        if args.truth {
+            check_output_path(&truth_diff_path(d))?;
+            check_output_path(&causes_diff_path(d))?;
+        }
+    }
+    if let Some(r) = &args.report {
+        check_writable(r)?;
+    }
+    Ok(())
+}
+
+/// Every rendering backend of the registry built (one at a time) and
+/// rendering `scene`, the first the reference: each one's frame and run,
+/// with its speed ratio to the reference and their agreement.
+fn render_every_backend(
+    scene: &Scene,
+    progress: Option<Progress<'_>>,
+) -> Result<(Vec<Frame>, Vec<BackendRun>)> {
+    let diagonal = scene.options.scale.diagonal;
+    let mut frames: Vec<Frame> = Vec::new();
+    let mut backends: Vec<BackendRun> = Vec::new();
+    for info in registry::renderers() {
+        let backend = info.build_splats(&scene.splats)?;
+        let frame = render(scene, backend.as_ref(), progress);
+        let stats = backend.stats();
+        let (reference_over_this, agreement) = match frames.first() {
+            Some(reference) => (
+                Some(mrays_per_s(reference) / mrays_per_s(&frame).max(1e-12)),
+                Some(compare_frames(reference, &frame, diagonal)),
+            ),
+            None => (None, None),
+        };
+        backends.push(BackendRun {
+            name: info.name,
+            build_seconds: stats.build_seconds,
+            memory_bytes: stats.memory_bytes,
+            render_seconds: frame.seconds,
+            mrays_per_s: mrays_per_s(&frame),
+            reference_over_this,
+            agreement,
+        });
+        frames.push(frame);
+    }
+    Ok((frames, backends))
+}
+
+/// The diff images (`--diff`: reference against the second backend; with
+/// the truth, reference against it and the causes) and the report,
+/// committed together: a failure in any leaves none.
+fn write_outputs(
+    args: &CompareArgs,
+    frames: &[Frame],
+    truth_frame: Option<&Frame>,
+    reference_causes: Option<&[Cause]>,
+    report: &CompareReport,
+) -> Result<()> {
     let mut batch = Batch::new();
-    if let (Some(d), [a, b, ..]) = (&args.diff, frames.as_slice()) {
+    if let (Some(d), [a, b, ..]) = (&args.diff, frames) {
         save_into(&mut batch, &diff_image(a, b), d, image::ImageFormat::Png)?;
     }
-    if let (Some(d), Some(tf), Some(a)) = (&args.diff, &truth_frame, frames.first()) {
+    if let (Some(d), Some(tf), Some(a)) = (&args.diff, truth_frame, frames.first()) {
         save_into(
             &mut batch,
             &diff_image(a, tf),
             &truth_diff_path(d),
             image::ImageFormat::Png,
         )?;
-        if let Some(causes) = &reference_causes {
+        if let Some(causes) = reference_causes {
             save_into(
                 &mut batch,
                 &cause_image(a, tf, causes),
@@ -245,10 +285,9 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         }
     }
     if let Some(r) = &args.report {
-        stage_text(&mut batch, r, &(json_text(&report)? + "\n"))?;
+        stage_text(&mut batch, r, &(json_text(report)? + "\n"))?;
     }
     batch.commit()?;
-    print_report(&report);
     Ok(())
 }
 

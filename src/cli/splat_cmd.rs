@@ -205,23 +205,7 @@ impl SplatOptions {
 /// When the input cannot be read, no splat can be made, or an output cannot
 /// be written.
 pub fn run(args: &SplatArgs) -> Result<()> {
-    args.splat.viewpoint()?;
-    check_extension(&args.output, &["ply"])?;
-    if let Some(r) = &args.report {
-        check_writable(r)?;
-    }
-    if !(args.holdout == 0.0 || (args.holdout > 0.0 && args.holdout <= 0.5)) {
-        return Err(Error::invalid(format!(
-            "--holdout {} must be 0 (off) or in (0, 0.5]",
-            args.holdout
-        )));
-    }
-    if !(0.0..=1.0).contains(&args.min_opacity) {
-        return Err(Error::invalid(format!(
-            "--min-opacity {} must be in [0, 1]",
-            args.min_opacity
-        )));
-    }
+    check_args(args)?;
     let inputs = expand_inputs(&args.inputs)?;
     if let Some(tiled) = tiled_options(args, &inputs)? {
         return run_tiled(args, &inputs, &tiled);
@@ -248,37 +232,16 @@ pub fn run(args: &SplatArgs) -> Result<()> {
             t.shrunk, t.blocked, t.rays, t.still_blocked
         );
     }
-    let mut heldout_failed = None;
-    let mut windows = None;
-    let t_heldout = Instant::now();
-    let heldout = if args.holdout > 0.0 {
-        line.update("held-out coverage", 0.0);
-        let measured = if args.holdout_full {
-            heldout_coverage(&cloud, &params, args.holdout, 1)
-        } else {
-            heldout_coverage_windows(&cloud, &params, args.holdout, 1, report.epsilon).map(
-                |(h, w)| {
-                    windows = Some(w);
-                    h
-                },
-            )
-        };
-        measured
-            .map_err(|e| heldout_failed = Some(e.to_string()))
-            .ok()
-    } else {
-        None
-    };
-    let heldout_seconds = t_heldout.elapsed().as_secs_f64();
+    let heldout = HeldOut::measure(args, &cloud, &params, report.epsilon, &line);
     line.finish();
     report.seconds.read = read;
     report.seconds.total += read;
     let bytes = encode_splats_with(&args.output, &splats, &fields, cloud.origin)?;
     let out = Report {
         generation: &report,
-        heldout_coverage: heldout.clone(),
-        heldout_windows: windows.clone(),
-        heldout_seconds: heldout.is_some().then_some(heldout_seconds),
+        heldout_coverage: heldout.coverage.clone(),
+        heldout_windows: heldout.windows.clone(),
+        heldout_seconds: heldout.coverage.is_some().then_some(heldout.seconds),
         color_fields: (!fields.is_empty()).then_some(ColorFields {
             fitted: fields.len() - zero_fields,
             constant: zero_fields,
@@ -292,6 +255,116 @@ pub fn run(args: &SplatArgs) -> Result<()> {
             c.fitted, c.constant, c.seconds
         );
     }
+    print_generated(args, &cloud, &report);
+    heldout.print(report.seconds.total);
+    Ok(())
+}
+
+/// The options `run` checks before reading anything.
+fn check_args(args: &SplatArgs) -> Result<()> {
+    args.splat.viewpoint()?;
+    check_extension(&args.output, &["ply"])?;
+    if let Some(r) = &args.report {
+        check_writable(r)?;
+    }
+    if !(args.holdout == 0.0 || (args.holdout > 0.0 && args.holdout <= 0.5)) {
+        return Err(Error::invalid(format!(
+            "--holdout {} must be 0 (off) or in (0, 0.5]",
+            args.holdout
+        )));
+    }
+    if !(0.0..=1.0).contains(&args.min_opacity) {
+        return Err(Error::invalid(format!(
+            "--min-opacity {} must be in [0, 1]",
+            args.min_opacity
+        )));
+    }
+    Ok(())
+}
+
+/// The held-out coverage `--holdout` asks for: measured, or why not.
+struct HeldOut {
+    coverage: Option<HeldOutCoverage>,
+    /// Where it was measured (`None` over the whole cloud).
+    windows: Option<Windows>,
+    /// Why it could not be measured.
+    failed: Option<String>,
+    /// What measuring it took.
+    seconds: f64,
+}
+
+impl HeldOut {
+    /// Measures it (nothing with `--holdout 0`): over the whole cloud with
+    /// `--holdout-full`, else in windows; `epsilon` is the generation's, in
+    /// the cloud's units.
+    fn measure(
+        args: &SplatArgs,
+        cloud: &PointCloud,
+        params: &SplatParams,
+        epsilon: f64,
+        line: &ProgressLine,
+    ) -> HeldOut {
+        let mut out = HeldOut {
+            coverage: None,
+            windows: None,
+            failed: None,
+            seconds: 0.0,
+        };
+        let t = Instant::now();
+        if args.holdout > 0.0 {
+            line.update("held-out coverage", 0.0);
+            let measured = if args.holdout_full {
+                heldout_coverage(cloud, params, args.holdout, 1)
+            } else {
+                heldout_coverage_windows(cloud, params, args.holdout, 1, epsilon).map(|(h, w)| {
+                    out.windows = Some(w);
+                    h
+                })
+            };
+            out.coverage = measured.map_err(|e| out.failed = Some(e.to_string())).ok();
+        }
+        out.seconds = t.elapsed().as_secs_f64();
+        out
+    }
+
+    /// Its line (or a warning why there is none), against generation's
+    /// `total` seconds.
+    fn print(&self, total: f64) {
+        if let Some(h) = self.coverage.as_ref().filter(|h| h.tested == 0) {
+            eprintln!(
+                "splatray: warning: held-out coverage not measured: none of the {:.0} % of the points held out could be tested ({} held-out outliers)",
+                100.0 * h.fraction,
+                h.outliers
+            );
+        } else if let Some(h) = &self.coverage {
+            let whre = match self.windows.as_ref().filter(|w| w.windows > 0) {
+                Some(w) => format!(
+                    "in {} windows holding {:.1} % of the cloud",
+                    w.windows,
+                    100.0 * w.share
+                ),
+                None => "over the whole cloud".into(),
+            };
+            eprintln!(
+                "splatray: held-out coverage {:.4}: splats grown without {:.0} % of the points hold {} of the {} tested (within {:.3e} of a splat's plane; {} held-out outliers not tested), {whre}: {:.2} s, {:.0} % of generation",
+                h.coverage,
+                100.0 * h.fraction,
+                h.found,
+                h.tested,
+                h.tolerance,
+                h.outliers,
+                self.seconds,
+                100.0 * self.seconds / total.max(1e-9)
+            );
+        }
+        if let Some(e) = &self.failed {
+            eprintln!("splatray: warning: held-out coverage not measured: {e}");
+        }
+    }
+}
+
+/// Generation's warnings and notes, and its one-line summary.
+fn print_generated(args: &SplatArgs, cloud: &PointCloud, report: &splatray::splat::SplatReport) {
     for w in &report.warnings {
         eprintln!("splatray: warning: {w}");
     }
@@ -321,37 +394,6 @@ pub fn run(args: &SplatArgs) -> Result<()> {
         report.seconds.total,
         args.output.display()
     );
-    if let Some(h) = heldout.as_ref().filter(|h| h.tested == 0) {
-        eprintln!(
-            "splatray: warning: held-out coverage not measured: none of the {:.0} % of the points held out could be tested ({} held-out outliers)",
-            100.0 * h.fraction,
-            h.outliers
-        );
-    } else if let Some(h) = &heldout {
-        let whre = match windows.as_ref().filter(|w| w.windows > 0) {
-            Some(w) => format!(
-                "in {} windows holding {:.1} % of the cloud",
-                w.windows,
-                100.0 * w.share
-            ),
-            None => "over the whole cloud".into(),
-        };
-        eprintln!(
-            "splatray: held-out coverage {:.4}: splats grown without {:.0} % of the points hold {} of the {} tested (within {:.3e} of a splat's plane; {} held-out outliers not tested), {whre}: {:.2} s, {:.0} % of generation",
-            h.coverage,
-            100.0 * h.fraction,
-            h.found,
-            h.tested,
-            h.tolerance,
-            h.outliers,
-            heldout_seconds,
-            100.0 * heldout_seconds / report.seconds.total.max(1e-9)
-        );
-    }
-    if let Some(e) = heldout_failed {
-        eprintln!("splatray: warning: held-out coverage not measured: {e}");
-    }
-    Ok(())
 }
 
 /// What `--report` writes for a Gaussian input.

@@ -5,12 +5,8 @@
 use super::progress::ProgressLine;
 use glam::DVec3;
 use splatray::resolve::ShadingMode;
-use splatray::scene::cloud::{
-    CloudSceneOptions, DEFAULT_SIZE, choose_view, is_cloud_path, path_from, read_and_survey,
-    scene_text,
-};
-use splatray::scene::load::build_scene_read;
-use splatray::scene::{Scene, load_scene, parse_scene_str};
+use splatray::scene::cloud::{CloudRequest, is_cloud_path, make_scene};
+use splatray::scene::{Scene, load_scene};
 use splatray::{Error, Result};
 use std::path::{Path, PathBuf};
 
@@ -149,81 +145,28 @@ impl SceneArgs {
         Ok(scene)
     }
 
-    /// A point cloud's scene: surveyed, a camera chosen, written as scene
-    /// text (the overrides in it) and built from that text, so that the
-    /// scene saved renders the same image.
+    /// A point cloud's scene (`scene::cloud::make_scene`: surveyed, a
+    /// camera chosen, written as scene text with the overrides in it and
+    /// built from that text), and with `--save-scene` that text saved, so
+    /// that the scene saved renders the same image.
     fn load_cloud(&self, path: &Path, spp: Option<u32>, line: &ProgressLine) -> Result<Scene> {
-        line.update("reading the cloud", 0.0);
-        let (survey, read) = read_and_survey(path)?;
-        // An organised cloud renders at its grid's size, registered with
-        // the capture.
-        let size = match &survey.sensor {
-            Some(Ok(s)) if self.up.is_none() => (s.width, s.height),
-            _ => DEFAULT_SIZE,
-        };
-        let o = CloudSceneOptions {
-            width: self.width.unwrap_or(size.0),
-            height: self.height.unwrap_or(size.1),
-            spp: spp.unwrap_or(1),
+        let request = CloudRequest {
+            width: self.width,
+            height: self.height,
+            spp,
             shading: self.shading,
+            up: self.up,
+            save: self.save_scene.clone(),
         };
-        if o.width == 0 || o.height == 0 || o.width > 1 << 15 || o.height > 1 << 15 {
-            return Err(Error::invalid(format!(
-                "resolution {}x{} must be in 1..=32768",
-                o.width, o.height
-            )));
-        }
-        if let Some(s) = &self.save_scene {
-            check_folder(s)?;
-        }
-        let view = choose_view(&survey, self.up, f64::from(o.width) / f64::from(o.height));
-        let text = scene_text(path, &survey, &view, &o)?;
-        let file = parse_scene_str(&text).map_err(|e| e.context(path.display()))?;
         let progress = |stage: &str, f: f64| line.update(stage, f);
-        // The scene names the cloud by `path`: it takes what was read.
-        let mut scene = build_scene_read(&file, Path::new(""), Some((path, read)), Some(&progress))
-            .map_err(|e| e.context(path.display()))?;
-        // As a scene file is set up (`load`), so that the scene saved
-        // renders these bytes wherever the cloud lies.
-        scene.set_view(None, None, None, None)?;
+        let made = make_scene(path, &request, Some(&progress))?;
         line.finish();
-        let outliers = if survey.outliers > 0 {
-            format!(
-                " ({} outliers of a {}-point sample left out of the framing)",
-                survey.outliers,
-                survey.sample.len() + survey.outliers
-            )
-        } else {
-            String::new()
-        };
-        let unfitted = match &survey.sensor {
-            Some(Err(why)) => format!(" (an organised grid, but {why})"),
-            _ => String::new(),
-        };
-        eprintln!(
-            "{}: {} {} without a scene: {}{outliers}{unfitted}",
-            path.display(),
-            survey.points,
-            survey.kind.key(),
-            view.note
-        );
+        eprintln!("{}: {}", path.display(), made.note());
         if let Some(s) = &self.save_scene {
-            let folder = s.parent().unwrap_or(Path::new(""));
-            let text = scene_text(&path_from(folder, path), &survey, &view, &o)?;
+            let text = made.saved_text(path, s)?;
             splatray::io::write_text(s, &text)?;
         }
-        Ok(scene)
-    }
-}
-
-/// The folder of an output file exists.
-fn check_folder(path: &Path) -> Result<()> {
-    match path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        Some(d) if !d.is_dir() => Err(Error::invalid(format!(
-            "{}: folder does not exist",
-            d.display()
-        ))),
-        _ => Ok(()),
+        Ok(made.scene)
     }
 }
 

@@ -57,9 +57,7 @@ fn read(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
     )
     .map_err(IoErrorKind::Memory)?;
     let colored = scans.iter().all(e57::PointCloud::has_color);
-    let mut world: Vec<DVec3> = Vec::new();
-    let mut colors: Vec<Vec3> = Vec::new();
-    let mut scan_of: Vec<u16> = Vec::new();
+    let mut taken = Taken::default();
     let mut positions: Vec<DVec3> = Vec::with_capacity(scans.len());
     let (mut invalid, mut non_finite) = (0usize, 0usize);
     for (k, scan) in scans.iter().enumerate() {
@@ -67,25 +65,18 @@ fn read(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
         let mut points = reader.pointcloud_simple(scan).map_err(|e| e57_error(&e))?;
         points.intensity_to_color(false);
         for p in points {
-            let p = p.map_err(|e| e57_error(&e))?;
-            let CartesianCoordinate::Valid { x, y, z } = p.cartesian else {
-                invalid += 1;
-                continue;
-            };
-            let w = DVec3::new(x, y, z);
-            if !w.is_finite() {
-                non_finite += 1;
-                continue;
-            }
-            world.push(w);
-            scan_of.push(k as u16);
-            if colored {
-                colors.push(p.color.map_or(Vec3::splat(0.2), |c| {
-                    Vec3::new(c.red, c.green, c.blue).map(srgb_to_linear)
-                }));
+            match taken.take(k, &p.map_err(|e| e57_error(&e))?, colored) {
+                Ok(()) => {}
+                Err(Skipped::Invalid) => invalid += 1,
+                Err(Skipped::NonFinite) => non_finite += 1,
             }
         }
     }
+    let Taken {
+        world,
+        colors,
+        scan_of,
+    } = taken;
     let mut cloud = cloud_from_world(world, None, colored.then_some(colors))?;
     cloud.add_skipped("flagged invalid in the E57 file", invalid);
     cloud.add_skipped("non-finite coordinates", non_finite);
@@ -196,55 +187,80 @@ fn stream_inner(
         streamed: true,
         ..StreamInfo::default()
     };
-    let mut world: Vec<DVec3> = Vec::with_capacity(BATCH);
-    let mut colors: Vec<Vec3> = Vec::with_capacity(BATCH);
-    let mut scan_of: Vec<u16> = Vec::with_capacity(BATCH);
-    let mut flush = |world: &mut Vec<DVec3>,
-                     colors: &mut Vec<Vec3>,
-                     scan_of: &mut Vec<u16>,
-                     info: &mut StreamInfo|
-     -> Result<(), IoErrorKind> {
-        if world.is_empty() {
+    let mut batch = Taken {
+        world: Vec::with_capacity(BATCH),
+        colors: Vec::with_capacity(BATCH),
+        scan_of: Vec::with_capacity(BATCH),
+    };
+    let mut flush = |b: &mut Taken, info: &mut StreamInfo| -> Result<(), IoErrorKind> {
+        if b.world.is_empty() {
             return Ok(());
         }
         each(&PointBatch {
-            world,
+            world: &b.world,
             normals: None,
-            colors: colored.then_some(&colors[..]),
-            scans: several.then_some(&scan_of[..]),
+            colors: colored.then_some(&b.colors[..]),
+            scans: several.then_some(&b.scan_of[..]),
         })
         .map_err(IoErrorKind::Data)?;
-        info.points += world.len() as u64;
-        world.clear();
-        colors.clear();
-        scan_of.clear();
+        info.points += b.world.len() as u64;
+        b.world.clear();
+        b.colors.clear();
+        b.scan_of.clear();
         Ok(())
     };
     for (k, scan) in scans.iter().enumerate() {
         let mut points = reader.pointcloud_simple(scan).map_err(|e| e57_error(&e))?;
         points.intensity_to_color(false);
         for p in points {
-            let p = p.map_err(|e| e57_error(&e))?;
-            let CartesianCoordinate::Valid { x, y, z } = p.cartesian else {
-                continue;
-            };
-            let w = DVec3::new(x, y, z);
-            if !w.is_finite() {
-                info.non_finite += 1;
-                continue;
-            }
-            world.push(w);
-            scan_of.push(k as u16);
-            if colored {
-                colors.push(p.color.map_or(Vec3::splat(0.2), |c| {
-                    Vec3::new(c.red, c.green, c.blue).map(srgb_to_linear)
-                }));
-            }
-            if world.len() == BATCH {
-                flush(&mut world, &mut colors, &mut scan_of, &mut info)?;
+            match batch.take(k, &p.map_err(|e| e57_error(&e))?, colored) {
+                Ok(()) if batch.world.len() == BATCH => flush(&mut batch, &mut info)?,
+                Ok(()) | Err(Skipped::Invalid) => {}
+                Err(Skipped::NonFinite) => info.non_finite += 1,
             }
         }
     }
-    flush(&mut world, &mut colors, &mut scan_of, &mut info)?;
+    flush(&mut batch, &mut info)?;
     Ok(info)
+}
+
+/// The points taken from the scans, in f64 world coordinates, each with
+/// its scan and (when every scan has one) its colour: what [`read_cloud`]
+/// reads whole and [`stream`] a batch at a time.
+#[derive(Default)]
+struct Taken {
+    world: Vec<DVec3>,
+    colors: Vec<Vec3>,
+    scan_of: Vec<u16>,
+}
+
+/// Why a point of a scan was not taken.
+enum Skipped {
+    /// Flagged invalid in the file.
+    Invalid,
+    /// A coordinate is NaN or infinite.
+    NonFinite,
+}
+
+impl Taken {
+    /// Takes point `p` of scan `k` (its colour too when `colored`: sRGB
+    /// made linear, grey where a point has none), or says why not.
+    fn take(&mut self, k: usize, p: &e57::Point, colored: bool) -> Result<(), Skipped> {
+        let CartesianCoordinate::Valid { x, y, z } = p.cartesian else {
+            return Err(Skipped::Invalid);
+        };
+        let w = DVec3::new(x, y, z);
+        if !w.is_finite() {
+            return Err(Skipped::NonFinite);
+        }
+        self.world.push(w);
+        self.scan_of.push(k as u16);
+        if colored {
+            self.colors
+                .push(p.color.as_ref().map_or(Vec3::splat(0.2), |c| {
+                    Vec3::new(c.red, c.green, c.blue).map(srgb_to_linear)
+                }));
+        }
+        Ok(())
+    }
 }

@@ -11,6 +11,7 @@
 //! cloud's per-axis medians before they become single-precision offsets
 //! from [`PointCloud::origin`] (`docs/DESIGN.md`, "Precision").
 
+mod any;
 mod atomic;
 mod e57file;
 mod error;
@@ -25,6 +26,7 @@ mod stream;
 mod xyz;
 
 pub use crate::splat::PointCloud;
+pub use any::{CloudRead, is_splat_ply, read_any};
 pub use atomic::{Batch, write_atomic, write_bytes};
 pub use error::{IoError, IoErrorKind};
 pub use gaussian::{
@@ -195,22 +197,11 @@ pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
 /// std::fs::remove_file(&path).unwrap();
 /// ```
 pub fn read_points(path: &Path) -> Result<PointCloud, IoError> {
-    read_points_keeping_bytes(path).map(|(cloud, _, _)| cloud)
-}
-
-/// [`read_points`], also giving the file's bytes and the format they were
-/// read in, for a second look at the same bytes (a PCD's organised grid:
-/// [`read_organised`]) without reading the file again.
-///
-/// # Errors
-/// As [`read_points`].
-pub fn read_points_keeping_bytes(path: &Path) -> Result<(PointCloud, Vec<u8>, Format), IoError> {
     let bytes = read_file(path)?;
     let format = Format::from_extension(path)
         .or_else(|| Format::sniff(&bytes[..bytes.len().min(4096)]))
         .ok_or_else(|| IoError::new(path, IoErrorKind::UnknownFormat))?;
-    let cloud = parse_points(&bytes, format).map_err(|kind| IoError::new(path, kind))?;
-    Ok((cloud, bytes, format))
+    parse_points(&bytes, format).map_err(|kind| IoError::new(path, kind))
 }
 
 /// [`read_points`] on a file's bytes, in a known `format`.

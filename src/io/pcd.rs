@@ -5,6 +5,7 @@
 use super::lzf::lzf_decompress;
 use super::{IoErrorKind, PointCloud, cloud_from_world, srgb_to_linear};
 use glam::{DVec3, Vec3};
+use std::borrow::Cow;
 
 #[derive(Clone, Debug)]
 struct Field {
@@ -283,6 +284,15 @@ pub fn read_organised(bytes: &[u8]) -> Result<Option<Organised>, IoErrorKind> {
     }))
 }
 
+/// Every point's position, normal and colour as a PCD body stores them
+/// (NaN included; normals and colours when the header has them).
+#[derive(Default)]
+struct Stored {
+    world: Vec<DVec3>,
+    normals: Vec<Vec3>,
+    colors: Vec<Vec3>,
+}
+
 /// The header's columns and every point as stored (NaN included).
 #[allow(clippy::type_complexity)]
 fn decode(
@@ -291,150 +301,168 @@ fn decode(
     let h = parse_header(bytes)?;
     let cols = columns(&h)?;
     let body = &bytes[h.body.min(bytes.len())..];
-    let n = h.points;
-    let mut world: Vec<DVec3> = Vec::new();
-    let mut normals = Vec::new();
-    let mut colors = Vec::new();
-    match h.data.as_str() {
-        "ascii" => {
-            let text = String::from_utf8_lossy(body);
-            // A token takes at least two bytes, so the body bounds the count.
-            let cap = n.min(body.len() / (2 * h.fields.len()).max(1));
-            world.reserve(cap);
-            let mut firsts = Vec::with_capacity(h.fields.len());
-            let mut acc = 0usize;
-            for f in &h.fields {
-                firsts.push(acc);
-                acc += f.count;
-            }
-            let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-            let mut toks: Vec<&str> = Vec::with_capacity(acc);
-            for i in 0..n {
-                let Some(line) = lines.next() else {
-                    return Err(IoErrorKind::Truncated(format!(
-                        "the header promises {n} points but the body ends after {i}"
-                    )));
-                };
-                toks.clear();
-                toks.extend(line.split_whitespace());
-                if toks.len() < acc {
-                    return Err(IoErrorKind::Data(format!(
-                        "point {i}: {} values, the header asks for {acc}",
-                        toks.len()
-                    )));
-                }
-                let val = |fi: usize| -> Result<f64, IoErrorKind> {
-                    let t = toks[firsts[fi]];
-                    t.parse::<f64>().map_err(|_| {
-                        IoErrorKind::Data(format!("point {i}: \"{t}\" is not a number"))
-                    })
-                };
-                let v3 = |f: [usize; 3]| -> Result<DVec3, IoErrorKind> {
-                    Ok(DVec3::new(val(f[0])?, val(f[1])?, val(f[2])?))
-                };
-                world.push(v3(cols.xyz)?);
-                if let Some(nf) = cols.normal {
-                    normals.push(v3(nf)?.as_vec3());
-                }
-                if let Some(cf) = cols.color {
-                    let t = toks[firsts[cf]];
-                    let bits = if h.fields[cf].kind == b'F' {
-                        t.parse::<f32>().map(f32::to_bits).ok()
-                    } else {
-                        t.parse::<u32>().ok()
-                    }
-                    .ok_or_else(|| {
-                        IoErrorKind::Data(format!("point {i}: colour \"{t}\" is not a number"))
-                    })?;
-                    colors.push(unpack_color(bits));
-                }
-            }
-        }
+    let s = match h.data.as_str() {
+        "ascii" => decode_ascii(&h, &cols, body)?,
         "binary" | "binary_compressed" => {
-            let need = (n as u128) * (h.record as u128);
-            let decompressed;
-            // (data, stride between points, byte offset of field f's element 0)
-            let (data, soa): (&[u8], bool) = if h.data == "binary" {
-                if need > body.len() as u128 {
-                    return Err(IoErrorKind::Truncated(format!(
-                        "the header promises {n} points ({need} bytes) but only {} bytes follow it",
-                        body.len()
-                    )));
-                }
-                (body, false)
-            } else {
-                if body.len() < 8 {
-                    return Err(IoErrorKind::Truncated(
-                        "the compressed body lacks its 8-byte size header".into(),
-                    ));
-                }
-                let comp = u32::from_le_bytes([body[0], body[1], body[2], body[3]]) as usize;
-                let raw = u32::from_le_bytes([body[4], body[5], body[6], body[7]]) as usize;
-                if raw as u128 != need {
-                    return Err(IoErrorKind::Data(format!(
-                        "uncompressed size {raw} bytes does not match {n} points of {} bytes",
-                        h.record
-                    )));
-                }
-                let Some(packed) = body.get(8..8 + comp) else {
-                    return Err(IoErrorKind::Truncated(format!(
-                        "the compressed body should be {comp} bytes, only {} follow",
-                        body.len() - 8
-                    )));
-                };
-                // LZF expands at most 88 times (a 3-byte back reference
-                // copies 264 bytes): a size beyond that is a lie, and one
-                // the memory cannot hold fails before decompressing.
-                if raw as u128 > comp as u128 * 88 + 32 {
-                    return Err(IoErrorKind::Data(format!(
-                        "the header claims {raw} bytes from {comp} compressed, more than LZF can \
-                         expand to"
-                    )));
-                }
-                crate::memory::check(
-                    "reading the cloud",
-                    (raw as u64).saturating_add((n as u64).saturating_mul(POINT_BYTES)),
-                )
-                .map_err(IoErrorKind::Memory)?;
-                decompressed = lzf_decompress(packed, raw).map_err(IoErrorKind::Lzf)?;
-                (&decompressed[..], true)
-            };
-            // Field f, element 0 of point i starts at:
-            let at = |f: usize, i: usize| -> usize {
-                let fd = &h.fields[f];
-                if soa {
-                    // Fields one after another, each for all points.
-                    n * fd.offset + i * fd.size * fd.count
-                } else {
-                    i * h.record + fd.offset
-                }
-            };
-            world.reserve(n);
-            for i in 0..n {
-                let v3 = |f: [usize; 3]| {
-                    let g = |k: usize| {
-                        let o = at(f[k], i);
-                        h.fields[f[k]].decode(&data[o..o + h.fields[f[k]].size])
-                    };
-                    DVec3::new(g(0), g(1), g(2))
-                };
-                world.push(v3(cols.xyz));
-                if let Some(nf) = cols.normal {
-                    normals.push(v3(nf).as_vec3());
-                }
-                if let Some(cf) = cols.color {
-                    let o = at(cf, i);
-                    colors.push(unpack_color(h.fields[cf].color_bits(&data[o..o + 4])));
-                }
-            }
+            let (data, soa) = binary_data(&h, body)?;
+            decode_binary(&h, &cols, &data, soa)
         }
         other => {
             return Err(IoErrorKind::Header(format!(
                 "DATA \"{other}\" (expected ascii, binary or binary_compressed)"
             )));
         }
+    };
+    Ok((h, cols, s.world, s.normals, s.colors))
+}
+
+/// The points of an `ascii` body: one line each, the fields' first
+/// elements parsed as f64 (a colour as the float or integer it packs).
+fn decode_ascii(h: &PcdHeader, cols: &Columns, body: &[u8]) -> Result<Stored, IoErrorKind> {
+    let n = h.points;
+    let mut s = Stored::default();
+    let text = String::from_utf8_lossy(body);
+    // A token takes at least two bytes, so the body bounds the count.
+    let cap = n.min(body.len() / (2 * h.fields.len()).max(1));
+    s.world.reserve(cap);
+    let mut firsts = Vec::with_capacity(h.fields.len());
+    let mut acc = 0usize;
+    for f in &h.fields {
+        firsts.push(acc);
+        acc += f.count;
     }
-    Ok((h, cols, world, normals, colors))
+    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
+    let mut toks: Vec<&str> = Vec::with_capacity(acc);
+    for i in 0..n {
+        let Some(line) = lines.next() else {
+            return Err(IoErrorKind::Truncated(format!(
+                "the header promises {n} points but the body ends after {i}"
+            )));
+        };
+        toks.clear();
+        toks.extend(line.split_whitespace());
+        if toks.len() < acc {
+            return Err(IoErrorKind::Data(format!(
+                "point {i}: {} values, the header asks for {acc}",
+                toks.len()
+            )));
+        }
+        let val = |fi: usize| -> Result<f64, IoErrorKind> {
+            let t = toks[firsts[fi]];
+            t.parse::<f64>()
+                .map_err(|_| IoErrorKind::Data(format!("point {i}: \"{t}\" is not a number")))
+        };
+        let v3 = |f: [usize; 3]| -> Result<DVec3, IoErrorKind> {
+            Ok(DVec3::new(val(f[0])?, val(f[1])?, val(f[2])?))
+        };
+        s.world.push(v3(cols.xyz)?);
+        if let Some(nf) = cols.normal {
+            s.normals.push(v3(nf)?.as_vec3());
+        }
+        if let Some(cf) = cols.color {
+            let t = toks[firsts[cf]];
+            let bits = if h.fields[cf].kind == b'F' {
+                t.parse::<f32>().map(f32::to_bits).ok()
+            } else {
+                t.parse::<u32>().ok()
+            }
+            .ok_or_else(|| {
+                IoErrorKind::Data(format!("point {i}: colour \"{t}\" is not a number"))
+            })?;
+            s.colors.push(unpack_color(bits));
+        }
+    }
+    Ok(s)
+}
+
+/// A `binary` body as it is, or a `binary_compressed` one decompressed
+/// (LZF, its sizes checked first), and whether its fields lie one after
+/// another for all points (compressed) rather than point by point.
+fn binary_data<'a>(h: &PcdHeader, body: &'a [u8]) -> Result<(Cow<'a, [u8]>, bool), IoErrorKind> {
+    let n = h.points;
+    let need = (n as u128) * (h.record as u128);
+    Ok(if h.data == "binary" {
+        if need > body.len() as u128 {
+            return Err(IoErrorKind::Truncated(format!(
+                "the header promises {n} points ({need} bytes) but only {} bytes follow it",
+                body.len()
+            )));
+        }
+        (Cow::Borrowed(body), false)
+    } else {
+        if body.len() < 8 {
+            return Err(IoErrorKind::Truncated(
+                "the compressed body lacks its 8-byte size header".into(),
+            ));
+        }
+        let comp = u32::from_le_bytes([body[0], body[1], body[2], body[3]]) as usize;
+        let raw = u32::from_le_bytes([body[4], body[5], body[6], body[7]]) as usize;
+        if raw as u128 != need {
+            return Err(IoErrorKind::Data(format!(
+                "uncompressed size {raw} bytes does not match {n} points of {} bytes",
+                h.record
+            )));
+        }
+        let Some(packed) = body.get(8..8 + comp) else {
+            return Err(IoErrorKind::Truncated(format!(
+                "the compressed body should be {comp} bytes, only {} follow",
+                body.len() - 8
+            )));
+        };
+        // LZF expands at most 88 times (a 3-byte back reference
+        // copies 264 bytes): a size beyond that is a lie, and one
+        // the memory cannot hold fails before decompressing.
+        if raw as u128 > comp as u128 * 88 + 32 {
+            return Err(IoErrorKind::Data(format!(
+                "the header claims {raw} bytes from {comp} compressed, more than LZF can \
+                 expand to"
+            )));
+        }
+        crate::memory::check(
+            "reading the cloud",
+            (raw as u64).saturating_add((n as u64).saturating_mul(POINT_BYTES)),
+        )
+        .map_err(IoErrorKind::Memory)?;
+        let decompressed = lzf_decompress(packed, raw).map_err(IoErrorKind::Lzf)?;
+        (Cow::Owned(decompressed), true)
+    })
+}
+
+/// The points of binary `data` (`soa`: fields one after another, each for
+/// all points), every field decoded as its type.
+fn decode_binary(h: &PcdHeader, cols: &Columns, data: &[u8], soa: bool) -> Stored {
+    let n = h.points;
+    let mut s = Stored::default();
+    // Field f, element 0 of point i starts at:
+    let at = |f: usize, i: usize| -> usize {
+        let fd = &h.fields[f];
+        if soa {
+            // Fields one after another, each for all points.
+            n * fd.offset + i * fd.size * fd.count
+        } else {
+            i * h.record + fd.offset
+        }
+    };
+    s.world.reserve(n);
+    for i in 0..n {
+        let v3 = |f: [usize; 3]| {
+            let g = |k: usize| {
+                let o = at(f[k], i);
+                h.fields[f[k]].decode(&data[o..o + h.fields[f[k]].size])
+            };
+            DVec3::new(g(0), g(1), g(2))
+        };
+        s.world.push(v3(cols.xyz));
+        if let Some(nf) = cols.normal {
+            s.normals.push(v3(nf).as_vec3());
+        }
+        if let Some(cf) = cols.color {
+            let o = at(cf, i);
+            s.colors
+                .push(unpack_color(h.fields[cf].color_bits(&data[o..o + 4])));
+        }
+    }
+    s
 }
 
 /// Encode an organised cloud (a sensor's grid, row by row, NaN where

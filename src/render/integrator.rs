@@ -4,7 +4,7 @@
 //! maximum depth. It sees only the [`Backend`] trait and the shared
 //! resolver, so every backend renders with identical shading.
 
-use crate::accel::{Backend, CandidateHits, Departure, Ray};
+use crate::accel::{Backend, CandidateHits, Departure, Query, Ray};
 use crate::progress::{Progress, notify};
 use crate::resolve::{SurfaceHit, resolve_within};
 use crate::scene::{Light, Material, Scene};
@@ -172,14 +172,20 @@ impl SplatSurfaces<'_> {
         })
     }
 
-    /// The splat a secondary ray leaving `from` starts on: the shared
-    /// self-hit rule of every backend skips it and its overlapping,
-    /// similarly oriented neighbours (`accel::Departure`).
-    fn departure(from: &ShadeHit) -> Departure {
-        Departure {
-            id: from.id,
-            point: from.point,
-            normal: from.geometric_normal,
+    /// The query of a secondary ray leaving `from`, from `eps_self` to
+    /// `t_max`: the shared self-hit rule of every backend skips the splat
+    /// it starts on and its overlapping, similarly oriented neighbours
+    /// (`accel::Departure`).
+    fn leaving(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> Query {
+        Query {
+            ray: *ray,
+            t_min: self.eps_self(),
+            t_max,
+            from: Some(Departure {
+                id: from.id,
+                point: from.point,
+                normal: from.geometric_normal,
+            }),
         }
     }
 }
@@ -193,20 +199,15 @@ impl Surfaces for SplatSurfaces<'_> {
     ) -> Option<ShadeHit> {
         match from {
             None => self.backend.intersect(ray, 0.0, f32::INFINITY, hits),
-            Some(f) => self.backend.intersect_from(
-                ray,
-                self.eps_self(),
-                f32::INFINITY,
-                Some(&Self::departure(f)),
-                hits,
-            ),
+            Some(f) => self
+                .backend
+                .intersect_from(&self.leaving(ray, f, f32::INFINITY), hits),
         }
         self.resolve(hits, ray)
     }
 
     fn occluded(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> bool {
-        self.backend
-            .occluded_from(ray, self.eps_self(), t_max, Some(&Self::departure(from)))
+        self.backend.occluded_from(&self.leaving(ray, from, t_max))
     }
 
     fn eps_self(&self) -> f32 {

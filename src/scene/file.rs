@@ -9,9 +9,7 @@
 
 use super::num;
 use crate::resolve::ShadingMode;
-use crate::splat::Splat;
 use crate::{Error, Result};
-use glam::{DMat3, DVec3, Mat3, Vec3};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -160,62 +158,6 @@ impl Default for TransformSpec {
             scale: 1.0,
             rotate: [0.0; 3],
             translate: [0.0; 3],
-        }
-    }
-}
-
-impl TransformSpec {
-    fn rotation(&self) -> Mat3 {
-        let [x, y, z] = self.rotate.map(f32::to_radians);
-        Mat3::from_rotation_z(z) * Mat3::from_rotation_y(y) * Mat3::from_rotation_x(x)
-    }
-
-    fn rotation_f64(&self) -> DMat3 {
-        let [x, y, z] = self.rotate.map(|a| f64::from(a).to_radians());
-        DMat3::from_rotation_z(z) * DMat3::from_rotation_y(y) * DMat3::from_rotation_x(x)
-    }
-
-    /// Where the model-space point `p` lands, all in f64 (a far point
-    /// cloud's origin, see [`crate::splat::PointCloud::origin`]).
-    #[must_use]
-    pub fn world_of(&self, p: DVec3) -> DVec3 {
-        self.rotation_f64() * (p * f64::from(self.scale)) + DVec3::from(self.translate)
-    }
-
-    /// Applies the transform to a point, then subtracts `shift`; the
-    /// translation and the shift are applied in f64, so a model placed far
-    /// from the origin and shifted back keeps f32 precision (`docs/DESIGN.md`, "Precision").
-    #[must_use]
-    pub fn point(&self, p: Vec3, shift: DVec3) -> Vec3 {
-        self.point_from(DVec3::ZERO, p, shift)
-    }
-
-    /// [`TransformSpec::point`] for the model-space point `origin + p`: the
-    /// origin is placed and shifted in f64 before the small offset `p` is
-    /// added, so a cloud far from zero lands where it is with the precision
-    /// of its size.
-    #[must_use]
-    pub fn point_from(&self, origin: DVec3, p: Vec3, shift: DVec3) -> Vec3 {
-        self.point_at(self.world_of(origin) - shift, self.rotation(), p)
-    }
-
-    /// `base + R (s p)`, the f32 part rotated in f32 and added in f64.
-    fn point_at(&self, base: DVec3, rot: Mat3, p: Vec3) -> Vec3 {
-        ((rot * (p * self.scale)).as_dvec3() + base).as_vec3()
-    }
-
-    /// Applies the transform to every splat, whose centres are offsets from
-    /// the model-space point `origin`, then subtracts `shift` (in f64, as
-    /// [`TransformSpec::point_from`]).
-    pub fn apply(&self, splats: &mut [Splat], origin: DVec3, shift: DVec3) {
-        let rot = self.rotation();
-        let base = self.world_of(origin) - shift;
-        for s in splats {
-            s.center = self.point_at(base, rot, s.center);
-            s.normal = (rot * s.normal).normalize();
-            s.u_axis = (rot * s.u_axis).normalize();
-            s.v_axis = (rot * s.v_axis).normalize();
-            s.radii *= self.scale;
         }
     }
 }

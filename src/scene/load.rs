@@ -2,20 +2,21 @@
 //! sampled mesh, or built procedurally) and its exact surface, the
 //! materials, lights and camera resolved, and everything re-centred.
 
-use super::cloud::CloudRead;
 use super::file::{
     CameraSpec, LightKind, LightSpec, MaterialKind, MaterialSpec, ModelSpec, RenderSpec, SceneFile,
     ShapeKind, ShapeSpec, TransformSpec, parse_scene_file,
 };
-use super::model::{Camera, Light, LoadReport, Material, RenderOptions, Scene, TruthSource};
-use crate::io::{Mesh, PointCloud};
+use super::model::{
+    Camera, Light, LoadReport, MAX_EXTENT, Material, RenderOptions, Scene, TruthSource,
+};
+use crate::io::{CloudRead, Mesh, PointCloud};
 use crate::progress::Progress;
 use crate::resolve::ShadingMode;
 use crate::scene::SceneScale;
 use crate::splat::Splat;
 use crate::splat::color::ColorField;
 use crate::{Error, Result};
-use glam::{DVec3, Vec2, Vec3};
+use glam::{DMat3, DVec3, Mat3, Vec2, Vec3};
 use std::path::Path;
 
 /// Loads a scene file: parses it, builds every model's splats, resolves
@@ -40,7 +41,7 @@ pub fn build_scene(file: &SceneFile, base: &Path, progress: Option<Progress<'_>>
 }
 
 /// [`build_scene`] with one model's input already read: `read` is the file
-/// at `path` (as [`super::cloud::read_and_survey`] gives it), which a model
+/// at `path` (as [`crate::io::read_any`] gives it), which a model
 /// naming that path (joined to `base`) takes instead of reading it again.
 ///
 /// # Errors
@@ -160,11 +161,6 @@ pub fn splats_scene(mut splats: Vec<Splat>, camera: Camera) -> Result<Scene> {
         load: LoadReport::default(),
     })
 }
-
-/// The widest scene the renderer takes, after re-centring: the squared
-/// distances of the ray-disc tests (and a diagonal's worth of `t`) stay
-/// finite in f32.
-pub const MAX_EXTENT: f32 = 1e18;
 
 /// A camera point (f64, in the file) shifted and re-centred into the f32
 /// frame of the splats; an error if f32 cannot hold it.
@@ -570,14 +566,7 @@ fn shape_splats(shape: &ShapeSpec) -> Result<Vec<Splat>> {
     finite("shape.center", &shape.center)?;
     match shape.kind {
         ShapeKind::Sphere => {
-            let r = shape
-                .radius
-                .ok_or_else(|| Error::invalid("a sphere shape needs `radius`"))?;
-            if !(r > 0.0 && r.is_finite()) {
-                return Err(Error::invalid(format!(
-                    "shape.radius must be positive, got {r}"
-                )));
-            }
+            let r = required_positive(shape.radius, "a sphere shape", "shape", "radius")?;
             Ok(super::shapes::sphere(center, r, shape.splats))
         }
         ShapeKind::Quad => {
@@ -650,6 +639,19 @@ fn v3(a: [f32; 3]) -> Vec3 {
     Vec3::from(a)
 }
 
+/// The value of `table.key`, which `what` needs: given, finite and
+/// above zero.
+fn required_positive(value: Option<f32>, what: &str, table: &str, key: &str) -> Result<f32> {
+    let v = value.ok_or_else(|| Error::invalid(format!("{what} needs `{key}`")))?;
+    if v > 0.0 && v.is_finite() {
+        Ok(v)
+    } else {
+        Err(Error::invalid(format!(
+            "{table}.{key} must be positive, got {v}"
+        )))
+    }
+}
+
 fn finite(name: &str, v: &[f32]) -> Result<()> {
     if v.iter().all(|x| x.is_finite()) {
         Ok(())
@@ -718,14 +720,7 @@ fn light(spec: &LightSpec, shift: DVec3) -> Result<Light> {
             power,
         },
         LightKind::Sphere => {
-            let radius = spec
-                .radius
-                .ok_or_else(|| Error::invalid("a sphere light needs `radius`"))?;
-            if !(radius > 0.0 && radius.is_finite()) {
-                return Err(Error::invalid(format!(
-                    "light.radius must be positive, got {radius}"
-                )));
-            }
+            let radius = required_positive(spec.radius, "a sphere light", "light", "radius")?;
             Light::Sphere {
                 position: position()?,
                 radius,
@@ -734,6 +729,64 @@ fn light(spec: &LightSpec, shift: DVec3) -> Result<Light> {
             }
         }
     })
+}
+
+/// Placing a model (`docs/DESIGN.md`, "Precision"): its transform in f64,
+/// what lands far from the origin shifted back before it becomes f32.
+impl TransformSpec {
+    fn rotation(&self) -> Mat3 {
+        let [x, y, z] = self.rotate.map(f32::to_radians);
+        Mat3::from_rotation_z(z) * Mat3::from_rotation_y(y) * Mat3::from_rotation_x(x)
+    }
+
+    fn rotation_f64(&self) -> DMat3 {
+        let [x, y, z] = self.rotate.map(|a| f64::from(a).to_radians());
+        DMat3::from_rotation_z(z) * DMat3::from_rotation_y(y) * DMat3::from_rotation_x(x)
+    }
+
+    /// Where the model-space point `p` lands, all in f64 (a far point
+    /// cloud's origin, see [`crate::splat::PointCloud::origin`]).
+    #[must_use]
+    pub fn world_of(&self, p: DVec3) -> DVec3 {
+        self.rotation_f64() * (p * f64::from(self.scale)) + DVec3::from(self.translate)
+    }
+
+    /// Applies the transform to a point, then subtracts `shift`; the
+    /// translation and the shift are applied in f64, so a model placed far
+    /// from the origin and shifted back keeps f32 precision (`docs/DESIGN.md`, "Precision").
+    #[must_use]
+    pub fn point(&self, p: Vec3, shift: DVec3) -> Vec3 {
+        self.point_from(DVec3::ZERO, p, shift)
+    }
+
+    /// [`TransformSpec::point`] for the model-space point `origin + p`: the
+    /// origin is placed and shifted in f64 before the small offset `p` is
+    /// added, so a cloud far from zero lands where it is with the precision
+    /// of its size.
+    #[must_use]
+    pub fn point_from(&self, origin: DVec3, p: Vec3, shift: DVec3) -> Vec3 {
+        self.point_at(self.world_of(origin) - shift, self.rotation(), p)
+    }
+
+    /// `base + R (s p)`, the f32 part rotated in f32 and added in f64.
+    fn point_at(&self, base: DVec3, rot: Mat3, p: Vec3) -> Vec3 {
+        ((rot * (p * self.scale)).as_dvec3() + base).as_vec3()
+    }
+
+    /// Applies the transform to every splat, whose centres are offsets from
+    /// the model-space point `origin`, then subtracts `shift` (in f64, as
+    /// [`TransformSpec::point_from`]).
+    pub fn apply(&self, splats: &mut [Splat], origin: DVec3, shift: DVec3) {
+        let rot = self.rotation();
+        let base = self.world_of(origin) - shift;
+        for s in splats {
+            s.center = self.point_at(base, rot, s.center);
+            s.normal = (rot * s.normal).normalize();
+            s.u_axis = (rot * s.u_axis).normalize();
+            s.v_axis = (rot * s.v_axis).normalize();
+            s.radii *= self.scale;
+        }
+    }
 }
 
 /// Re-centres the splats on their bounding box (`docs/DESIGN.md`, "Precision": far-from-origin

@@ -8,6 +8,11 @@ use crate::splat::color::ColorField;
 use crate::{Error, Result};
 use glam::{DVec3, Vec2, Vec3};
 
+/// The widest scene the renderer takes, after re-centring: the squared
+/// distances of the ray-disc tests (and a diagonal's worth of `t`) stay
+/// finite in f32.
+pub const MAX_EXTENT: f32 = 1e18;
+
 /// A surface material.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Material {

@@ -261,95 +261,15 @@ pub fn orient(
     if n == 0 {
         return;
     }
-    let k = knn.k;
     let sheets = own_sheets(points, knn, normals);
     let across = |i: usize, j: usize| {
         sheets[i].across(points[j] - points[i]) && sheets[j].across(points[i] - points[j])
     };
-    // Bucket sort of the directed edges by weight.
-    const BUCKETS: usize = 4096;
-    const NO_EDGE: u16 = u16::MAX;
-    let bucket_of: Vec<u16> = (0..n * k)
-        .into_par_iter()
-        .with_min_len(4096)
-        .map(|e| {
-            let (i, j) = (e / k, knn.idx[e] as usize);
-            // A mutual pair is one undirected edge: keep it once.
-            if j < i && knn.of(j).contains(&(i as u32)) || i == j {
-                return NO_EDGE;
-            }
-            let w = edge_weight(normals[i], normals[j], points[j] - points[i], across(i, j));
-            ((w * (BUCKETS - 1) as f32 / 2.0) as usize).min(BUCKETS - 1) as u16
-        })
-        .collect();
-    let mut start = vec![0usize; BUCKETS + 1];
-    for &b in &bucket_of {
-        if b != NO_EDGE {
-            start[b as usize + 1] += 1;
-        }
-    }
-    for b in 0..BUCKETS {
-        start[b + 1] += start[b];
-    }
-    let mut sorted = vec![0u32; start[BUCKETS]];
-    let mut fill = start.clone();
-    for (e, &b) in bucket_of.iter().enumerate() {
-        if b == NO_EDGE {
-            continue;
-        }
-        sorted[fill[b as usize]] = e as u32;
-        fill[b as usize] += 1;
-    }
-    drop(bucket_of);
-    // Kruskal with union-find.
+    let sorted = edges_by_weight(points, knn, normals, &across);
     let mut parent: Vec<u32> = (0..n as u32).collect();
-    let mut size = vec![1u32; n];
-    fn find(parent: &mut [u32], mut x: u32) -> u32 {
-        while parent[x as usize] != x {
-            let g = parent[parent[x as usize] as usize];
-            parent[x as usize] = g;
-            x = g;
-        }
-        x
-    }
-    // (i, j, whether they lie on two sheets facing apart).
-    let mut tree_edges: Vec<(u32, u32, bool)> = Vec::with_capacity(n);
-    for &e in &sorted {
-        let (i, j) = ((e as usize / k) as u32, knn.idx[e as usize]);
-        let (ri, rj) = (find(&mut parent, i), find(&mut parent, j));
-        if ri == rj {
-            continue;
-        }
-        let (big, small) = if size[ri as usize] >= size[rj as usize] {
-            (ri, rj)
-        } else {
-            (rj, ri)
-        };
-        parent[small as usize] = big;
-        size[big as usize] += size[small as usize];
-        tree_edges.push((i, j, across(i as usize, j as usize)));
-        if tree_edges.len() == n - 1 {
-            break;
-        }
-    }
+    let tree_edges = spanning_forest(&sorted, knn, &mut parent, &across);
     drop(sorted);
-    // Forest adjacency (CSR).
-    let mut deg = vec![0u32; n + 1];
-    for &(i, j, _) in &tree_edges {
-        deg[i as usize + 1] += 1;
-        deg[j as usize + 1] += 1;
-    }
-    for i in 0..n {
-        deg[i + 1] += deg[i];
-    }
-    let mut adj = vec![(0u32, false); 2 * tree_edges.len()];
-    let mut pos: Vec<u32> = deg[..n].to_vec();
-    for &(i, j, cross) in &tree_edges {
-        adj[pos[i as usize] as usize] = (j, cross);
-        pos[i as usize] += 1;
-        adj[pos[j as usize] as usize] = (i, cross);
-        pos[j as usize] += 1;
-    }
+    let (deg, adj) = adjacency(n, &tree_edges);
     // Roots: one per tree.
     let axis = root_axis(points, normals);
     let mut root_of_set: Vec<u32> = vec![u32::MAX; n];
@@ -398,24 +318,147 @@ pub fn orient(
         }
     }
     if let Some(vp) = viewpoint {
-        // Votes per tree: +1 for a normal facing the viewpoint, -1 against;
-        // a tree holding a fixed normal is never turned.
-        let mut votes = vec![0i64; n];
-        let mut has_fixed = vec![false; n];
-        for i in 0..n {
-            let r = find(&mut parent, i as u32) as usize;
-            votes[r] += if normals[i].dot(vp.at(i) - points[i]) >= 0.0 {
-                1
-            } else {
-                -1
-            };
-            has_fixed[r] |= fixed[i];
-        }
-        for (i, nrm) in normals.iter_mut().enumerate() {
-            let r = find(&mut parent, i as u32) as usize;
-            if votes[r] < 0 && !has_fixed[r] {
-                *nrm = -*nrm;
+        face_viewpoint(points, normals, fixed, vp, &mut parent);
+    }
+}
+
+/// The undirected edges of the kNN graph (a mutual pair once, as the
+/// directed edge `i * k + slot` from the lower index), bucket-sorted by
+/// [`edge_weight`] in 4096 buckets.
+fn edges_by_weight(
+    points: &[Vec3],
+    knn: &Knn,
+    normals: &[Vec3],
+    across: &(impl Fn(usize, usize) -> bool + Sync),
+) -> Vec<u32> {
+    const BUCKETS: usize = 4096;
+    const NO_EDGE: u16 = u16::MAX;
+    let (n, k) = (points.len(), knn.k);
+    let bucket_of: Vec<u16> = (0..n * k)
+        .into_par_iter()
+        .with_min_len(4096)
+        .map(|e| {
+            let (i, j) = (e / k, knn.idx[e] as usize);
+            // A mutual pair is one undirected edge: keep it once.
+            if j < i && knn.of(j).contains(&(i as u32)) || i == j {
+                return NO_EDGE;
             }
+            let w = edge_weight(normals[i], normals[j], points[j] - points[i], across(i, j));
+            ((w * (BUCKETS - 1) as f32 / 2.0) as usize).min(BUCKETS - 1) as u16
+        })
+        .collect();
+    let mut start = vec![0usize; BUCKETS + 1];
+    for &b in &bucket_of {
+        if b != NO_EDGE {
+            start[b as usize + 1] += 1;
+        }
+    }
+    for b in 0..BUCKETS {
+        start[b + 1] += start[b];
+    }
+    let mut sorted = vec![0u32; start[BUCKETS]];
+    let mut fill = start.clone();
+    for (e, &b) in bucket_of.iter().enumerate() {
+        if b == NO_EDGE {
+            continue;
+        }
+        sorted[fill[b as usize]] = e as u32;
+        fill[b as usize] += 1;
+    }
+    sorted
+}
+
+/// The root of `x`'s set in the union-find forest `parent` (path halving).
+fn find(parent: &mut [u32], mut x: u32) -> u32 {
+    while parent[x as usize] != x {
+        let g = parent[parent[x as usize] as usize];
+        parent[x as usize] = g;
+        x = g;
+    }
+    x
+}
+
+/// Kruskal over the `sorted` edges: the minimum spanning forest's edges
+/// `(i, j, whether they lie on two sheets facing apart)`, with `parent`
+/// (every point its own set on entry) left as the union-find of its trees.
+fn spanning_forest(
+    sorted: &[u32],
+    knn: &Knn,
+    parent: &mut [u32],
+    across: &impl Fn(usize, usize) -> bool,
+) -> Vec<(u32, u32, bool)> {
+    let (n, k) = (parent.len(), knn.k);
+    let mut size = vec![1u32; n];
+    let mut tree_edges: Vec<(u32, u32, bool)> = Vec::with_capacity(n);
+    for &e in sorted {
+        let (i, j) = ((e as usize / k) as u32, knn.idx[e as usize]);
+        let (ri, rj) = (find(parent, i), find(parent, j));
+        if ri == rj {
+            continue;
+        }
+        let (big, small) = if size[ri as usize] >= size[rj as usize] {
+            (ri, rj)
+        } else {
+            (rj, ri)
+        };
+        parent[small as usize] = big;
+        size[big as usize] += size[small as usize];
+        tree_edges.push((i, j, across(i as usize, j as usize)));
+        if tree_edges.len() == n - 1 {
+            break;
+        }
+    }
+    tree_edges
+}
+
+/// The forest's adjacency (CSR): point `x`'s neighbours, each with its
+/// edge's `across`, are `adj[deg[x]..deg[x + 1]]`.
+fn adjacency(n: usize, tree_edges: &[(u32, u32, bool)]) -> (Vec<u32>, Vec<(u32, bool)>) {
+    let mut deg = vec![0u32; n + 1];
+    for &(i, j, _) in tree_edges {
+        deg[i as usize + 1] += 1;
+        deg[j as usize + 1] += 1;
+    }
+    for i in 0..n {
+        deg[i + 1] += deg[i];
+    }
+    let mut adj = vec![(0u32, false); 2 * tree_edges.len()];
+    let mut pos: Vec<u32> = deg[..n].to_vec();
+    for &(i, j, cross) in tree_edges {
+        adj[pos[i as usize] as usize] = (j, cross);
+        pos[i as usize] += 1;
+        adj[pos[j as usize] as usize] = (i, cross);
+        pos[j as usize] += 1;
+    }
+    (deg, adj)
+}
+
+/// Turns each tree of the forest `parent` whose normals mostly face away
+/// from the viewpoint as a whole: votes per tree, +1 for a normal facing
+/// it, -1 against; a tree holding a fixed normal is never turned.
+fn face_viewpoint(
+    points: &[Vec3],
+    normals: &mut [Vec3],
+    fixed: &[bool],
+    vp: &super::Viewpoints,
+    parent: &mut [u32],
+) {
+    let n = points.len();
+    let mut votes = vec![0i64; n];
+    let mut has_fixed = vec![false; n];
+    for i in 0..n {
+        let r = find(parent, i as u32) as usize;
+        votes[r] += if normals[i].dot(vp.at(i) - points[i]) >= 0.0 {
+            1
+        } else {
+            -1
+        };
+        has_fixed[r] |= fixed[i];
+    }
+    for (i, nrm) in normals.iter_mut().enumerate() {
+        let r = find(parent, i as u32) as usize;
+        if votes[r] < 0 && !has_fixed[r] {
+            *nrm = -*nrm;
         }
     }
 }

@@ -5,6 +5,7 @@
 #![allow(dead_code)]
 
 use glam::{Vec2, Vec3};
+pub use splatray::accel::Query;
 use splatray::accel::registry::oracle;
 use splatray::accel::{Backend, CandidateHits, Departure, Ray, backends as registry};
 use splatray::primitive::{Disc, Hit, Local, Primitive, Single};
@@ -124,37 +125,6 @@ pub fn blobby_splats(n: usize, seed: u64) -> Vec<Splat> {
             s
         })
         .collect()
-}
-
-/// A ray query: the ray, its `[t_min, t_max]`, and for a secondary ray the
-/// splat it leaves (whose surface the backends skip).
-#[derive(Clone, Copy, Debug)]
-pub struct Query {
-    /// The ray.
-    pub ray: Ray,
-    /// Lower end of the interval (0 or `eps_self`).
-    pub t_min: f32,
-    /// Upper end of the interval.
-    pub t_max: f32,
-    /// The splat a secondary ray leaves, `None` for a primary ray.
-    pub from: Option<Departure>,
-}
-
-impl Query {
-    /// A primary-ray query: nothing skipped.
-    pub fn new(ray: Ray, t_min: f32, t_max: f32) -> Query {
-        Query {
-            ray,
-            t_min,
-            t_max,
-            from: None,
-        }
-    }
-
-    /// The same ray and interval with nothing skipped.
-    pub fn without_departure(self) -> Query {
-        Query { from: None, ..self }
-    }
 }
 
 /// Seeded random rays around `splats` (bounding box centre `c`, size `s`):
@@ -365,9 +335,8 @@ pub fn agree(
     let mut want = CandidateHits::new(xi);
     let mut got = CandidateHits::new(xi);
     for (i, q) in queries.iter().enumerate() {
-        let from = q.from.as_ref();
-        oracle.intersect_from(&q.ray, q.t_min, q.t_max, from, &mut want);
-        backend.intersect_from(&q.ray, q.t_min, q.t_max, from, &mut got);
+        oracle.intersect_from(q, &mut want);
+        backend.intersect_from(q, &mut got);
         let bits = |h: &CandidateHits| {
             h.as_slice()
                 .iter()
@@ -404,8 +373,8 @@ pub fn agree(
                 ));
             }
         }
-        let occ_want = oracle.occluded_from(&q.ray, q.t_min, q.t_max, from);
-        let occ_got = backend.occluded_from(&q.ray, q.t_min, q.t_max, from);
+        let occ_want = oracle.occluded_from(q);
+        let occ_got = backend.occluded_from(q);
         if occ_want != occ_got || occ_want == want.is_empty() {
             return Err(format!(
                 "{}: occluded {} ({}) vs {} ({}), window empty: {}\n  {}",
@@ -443,13 +412,7 @@ pub fn windows(
 ) -> CandidateHits {
     assert_all_agree(b, splats, std::slice::from_ref(query), xi, what);
     let mut h = CandidateHits::new(xi);
-    b.oracle.intersect_from(
-        &query.ray,
-        query.t_min,
-        query.t_max,
-        query.from.as_ref(),
-        &mut h,
-    );
+    b.oracle.intersect_from(query, &mut h);
     h
 }
 
@@ -459,7 +422,7 @@ pub fn count_hits(oracle: &dyn Backend, queries: &[Query], xi: f32) -> usize {
     queries
         .iter()
         .filter(|q| {
-            oracle.intersect_from(&q.ray, q.t_min, q.t_max, q.from.as_ref(), &mut h);
+            oracle.intersect_from(q, &mut h);
             !h.is_empty()
         })
         .count()
@@ -474,7 +437,7 @@ pub fn count_skipping(oracle: &dyn Backend, queries: &[Query], xi: f32) -> usize
     queries
         .iter()
         .filter(|q| {
-            oracle.intersect_from(&q.ray, q.t_min, q.t_max, q.from.as_ref(), &mut with);
+            oracle.intersect_from(q, &mut with);
             oracle.intersect(&q.ray, q.t_min, q.t_max, &mut without);
             with.as_slice() != without.as_slice()
         })

@@ -103,12 +103,10 @@ fn leaving(from: Departure, dir: Vec3, eps_self: f32) -> Query {
 }
 
 fn occluded_everywhere(b: &Backends, q: &Query) -> bool {
-    let want = b
-        .oracle
-        .occluded_from(&q.ray, q.t_min, q.t_max, q.from.as_ref());
+    let want = b.oracle.occluded_from(q);
     for backend in &b.tested {
         assert_eq!(
-            backend.occluded_from(&q.ray, q.t_min, q.t_max, q.from.as_ref()),
+            backend.occluded_from(q),
             want,
             "{} occluded: {q:?}",
             backend.name()

@@ -69,8 +69,7 @@ mod build;
 mod parts;
 mod traverse;
 
-use super::{Backend, BuildStats, CandidateHits, Departure, NoSkip};
-use crate::geometry::Ray;
+use super::{Backend, BuildStats, CandidateHits, NoSkip, Query};
 use crate::primitive::{Pack, Primitive};
 use crate::simd::Isa;
 use glam::Vec3;
@@ -348,23 +347,18 @@ impl<P: Primitive> Octree<P> {
 impl<P: Primitive> Backend for Octree<P> {
     /// One traversal per kind of query, monomorphised: primary rays
     /// ([`NoSkip`]) pay nothing for the self-hit rule.
-    fn intersect_from(
-        &self,
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        from: Option<&Departure>,
-        hits: &mut CandidateHits,
-    ) {
+    fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
         hits.clear();
-        match from {
+        let (ray, t_min, t_max) = (&q.ray, q.t_min, q.t_max);
+        match &q.from {
             None => self.gather(ray, t_min, t_max, NoSkip, hits),
             Some(d) => self.gather(ray, t_min, t_max, d, hits),
         }
     }
 
-    fn occluded_from(&self, ray: &Ray, t_min: f32, t_max: f32, from: Option<&Departure>) -> bool {
-        match from {
+    fn occluded_from(&self, q: &Query) -> bool {
+        let (ray, t_min, t_max) = (&q.ray, q.t_min, q.t_max);
+        match &q.from {
             None => self.any_hit(ray, t_min, t_max, NoSkip),
             Some(d) => self.any_hit(ray, t_min, t_max, d),
         }
