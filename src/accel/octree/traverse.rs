@@ -68,7 +68,7 @@ impl<P: Primitive> Octree<P> {
 impl<P: Primitive> Tree<P> {
     /// Where the ray enters the box around the content (not before
     /// `t_min`) and where it leaves it (NaN on a NaN ray).
-    #[inline]
+    #[inline(always)]
     fn window(&self, ctx: &RayCtx) -> (f32, f32) {
         let [lo, hi] = self.bounds;
         let a = (lo - ctx.origin) * ctx.inv_dir;
@@ -82,7 +82,7 @@ impl<P: Primitive> Tree<P> {
     /// Front-to-back traversal of the tree (the ray clipped to the box
     /// around the content); `visitor` sees the leaves.
     /// Returns true when the visitor stopped it.
-    #[inline]
+    #[inline(always)]
     fn traverse<V: Visitor<P>>(&self, ray: &Ray, ctx: &RayCtx, visitor: &mut V) -> bool {
         if self.references == 0 {
             return false;
@@ -107,6 +107,7 @@ impl<P: Primitive> Tree<P> {
     /// visit it once). A crossing misjudged by rounding skips at most a
     /// sliver of a cell thinner than the padding, whose primitives the
     /// neighbouring cells' padded leaves also hold.
+    #[inline(always)]
     fn walk_grid<V: Visitor<P>>(
         &self,
         g: &super::Grid,
