@@ -790,15 +790,8 @@ fn generate_tile(
     summary.kept = kept.len();
     summary.seconds = t0.elapsed().as_secs_f64();
     let out = tile_path(work, t);
-    let fields = if with_fields { &kept_fields[..] } else { &[] };
-    if with_fields && kept.is_empty() {
-        // An empty tile's file still says it has the fields' layout.
-        write_atomic(&out, |tmp| {
-            std::fs::write(tmp, splat_header_with(0, origin, true))
-        })?;
-    } else {
-        write_bytes(&out, &encode_splats_with(&out, &kept, fields, origin)?)?;
-    }
+    let fields = with_fields.then_some(&kept_fields[..]);
+    write_bytes(&out, &encode_splats_with(&out, &kept, fields, origin)?)?;
     if plan.reconciles() {
         crate::io::write_splats(&halo_path(work, t), &halo, origin)?;
     }

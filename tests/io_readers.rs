@@ -335,7 +335,7 @@ fn splat_files_round_trip_losslessly_and_atomically() {
         })
         .collect();
     let q = dir.join("fields.ply");
-    let bytes = encode_splats_with(&q, &splats, &fields, origin).unwrap();
+    let bytes = encode_splats_with(&q, &splats, Some(&fields), origin).unwrap();
     std::fs::write(&q, &bytes).unwrap();
     let back = read_splats(&q).unwrap();
     assert_eq!(
@@ -365,7 +365,7 @@ fn splat_files_round_trip_losslessly_and_atomically() {
     );
     assert_one_line_naming(&e, &r);
     // Fields that do not match the splats are refused, nothing written.
-    let e = must_fail(encode_splats_with(&q, &splats, &fields[1..], origin));
+    let e = must_fail(encode_splats_with(&q, &splats, Some(&fields[1..]), origin));
     assert!(
         e.to_string().contains("49 colour fields for 50 splats"),
         "{e}"

@@ -197,6 +197,11 @@ fn scan(args: &SampleArgs, from: glam::DVec3) -> Result<()> {
     if args.n.is_some() {
         return Err("-n and --scan-from exclude each other: a scan's rays set the points".into());
     }
+    if let Some(period) = args.texture.filter(|p| !(p.is_finite() && *p > 0.0)) {
+        return Err(Error::invalid(format!(
+            "--texture {period} must be a positive period"
+        )));
+    }
     let [columns, rows] = args.rays[..] else {
         return Err(Error::invalid(format!(
             "--rays needs two numbers W,H, got {}",
@@ -249,19 +254,11 @@ fn scan(args: &SampleArgs, from: glam::DVec3) -> Result<()> {
                 .map(|p| p.map(|p| origin + p.as_dvec3()))
                 .collect();
             let position = origin + scan.cloud.viewpoint.unwrap_or_default().as_dvec3();
-            let colors = match args.texture {
-                Some(period) if !(period.is_finite() && period > 0.0) => {
-                    return Err(Error::invalid(format!(
-                        "--texture {period} must be a positive period"
-                    )));
-                }
-                Some(period) => Some(
-                    grid.iter()
-                        .map(|p| p.map_or(Vec3::ZERO, |p| texture(p, period)))
-                        .collect::<Vec<_>>(),
-                ),
-                None => None,
-            };
+            let colors: Option<Vec<Vec3>> = args.texture.map(|period| {
+                grid.iter()
+                    .map(|p| p.map_or(Vec3::ZERO, |p| texture(p, period)))
+                    .collect()
+            });
             let bytes = splatray::io::encode_organised(
                 scan.columns,
                 scan.rows,

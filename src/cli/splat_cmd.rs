@@ -236,7 +236,12 @@ pub fn run(args: &SplatArgs) -> Result<()> {
     line.finish();
     report.seconds.read = read;
     report.seconds.total += read;
-    let bytes = encode_splats_with(&args.output, &splats, &fields, cloud.origin)?;
+    let bytes = encode_splats_with(
+        &args.output,
+        &splats,
+        (!fields.is_empty()).then_some(&fields[..]),
+        cloud.origin,
+    )?;
     let out = Report {
         generation: &report,
         heldout_coverage: heldout.coverage.clone(),

@@ -89,23 +89,20 @@ impl PropertyAccess for SplatRow {
         }
     }
     fn set_property(&mut self, name: &str, p: Property) {
+        // Lossless for the float32 properties the writer produces.
+        let float = |p: Property| match p {
+            Property::Float(f) => f,
+            other => scalar(&other).map_or(f32::NAN, |d| d as f32),
+        };
         if let Some(k) = SRGB_PROPS.iter().position(|n| *n == name) {
             self.rgb[k] = match p {
                 Property::UChar(c) => super::srgb_to_linear(f32::from(c) / 255.0),
-                Property::Float(f) => f,
-                other => scalar(&other).map_or(f32::NAN, |d| d as f32),
+                other => float(other),
             };
         } else if let Some(k) = COLOR_FIELD_PROPS.iter().position(|n| *n == name) {
-            self.dc[k] = match p {
-                Property::Float(f) => f,
-                other => scalar(&other).map_or(f32::NAN, |d| d as f32),
-            };
+            self.dc[k] = float(p);
         } else if let Some(i) = SPLAT_PROPS.iter().position(|n| *n == name) {
-            // Lossless for the float32 properties the writer produces.
-            self.v[i] = match p {
-                Property::Float(f) => f,
-                other => scalar(&other).map_or(f32::NAN, |d| d as f32),
-            };
+            self.v[i] = float(p);
         }
     }
 }
@@ -156,20 +153,20 @@ pub fn write_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<(), 
 /// # Errors
 /// As [`write_splats`], before anything is written.
 pub fn encode_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<Vec<u8>, IoError> {
-    encode_splats_with(path, splats, &[], origin)
+    encode_splats_with(path, splats, None, origin)
 }
 
-/// [`encode_splats`] with each splat's colour field (`fields` empty: none,
-/// the file [`encode_splats`] writes; else one per splat, written as
-/// [`COLOR_FIELD_PROPS`]).
+/// [`encode_splats`] with each splat's colour field (`fields` `None`: the
+/// file [`encode_splats`] writes; else one per splat, written as
+/// [`COLOR_FIELD_PROPS`], and the header has them even with no splats).
 ///
 /// # Errors
-/// As [`write_splats`]; also when `fields` is neither empty nor one per
-/// splat, or holds a non-finite value.
+/// As [`write_splats`]; also when `fields` is not one per splat, or holds
+/// a non-finite value.
 pub fn encode_splats_with(
     path: &Path,
     splats: &[Splat],
-    fields: &[ColorField],
+    fields: Option<&[ColorField]>,
     origin: DVec3,
 ) -> Result<Vec<u8>, IoError> {
     let bad = |what: String| {
@@ -190,20 +187,21 @@ pub fn encode_splats_with(
             splats[i].center, splats[i].radii
         ));
     }
-    if !fields.is_empty() && fields.len() != splats.len() {
+    if let Some(f) = fields.filter(|f| f.len() != splats.len()) {
         return bad(format!(
             "{} colour fields for {} splats",
-            fields.len(),
+            f.len(),
             splats.len()
         ));
     }
     if let Some(i) = fields
+        .unwrap_or_default()
         .iter()
         .position(|f| !(f.du.is_finite() && f.dv.is_finite()))
     {
         return bad(format!("splat {i} has a non-finite colour field"));
     }
-    let with = !fields.is_empty();
+    let with = fields.is_some();
     let header = splat_header_with(splats.len() as u64, origin, with);
     let row = SPLAT_ROW_BYTES + if with { COLOR_FIELD_PROPS.len() * 4 } else { 0 };
     let mut out = Vec::with_capacity(header.len() + splats.len() * row);
@@ -212,7 +210,7 @@ pub fn encode_splats_with(
         for v in to_row(s) {
             out.extend_from_slice(&v.to_le_bytes());
         }
-        if let Some(f) = fields.get(i) {
+        if let Some(f) = fields.and_then(|f| f.get(i)) {
             for v in f.du.to_array().into_iter().chain(f.dv.to_array()) {
                 out.extend_from_slice(&v.to_le_bytes());
             }
