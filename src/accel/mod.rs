@@ -90,4 +90,36 @@ pub trait Backend: Send + Sync {
     fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
         self.occluded_from(&Query::new(*ray, t_min, t_max))
     }
+
+    /// A batch of queries traced together (a packet: e.g. the primary rays
+    /// of a small screen tile, or the shadow rays of one hit): `hits[i]`
+    /// gets exactly what [`Backend::intersect_from`] gives `qs[i]`, the
+    /// same candidates bit for bit, whatever else the batch holds. Backends
+    /// that trace coherent rays together (the octree, Embree's
+    /// `rtcIntersect8`) override it; this default traces one at a time.
+    ///
+    /// # Panics
+    /// If `hits` is shorter than `qs`.
+    fn intersect_packet(&self, qs: &[Query], hits: &mut [CandidateHits]) {
+        assert!(hits.len() >= qs.len(), "a window per query");
+        for (q, h) in qs.iter().zip(hits.iter_mut()) {
+            self.intersect_from(q, h);
+        }
+    }
+
+    /// [`Backend::occluded_from`] for a batch: `out[i]` is its answer for
+    /// `qs[i]`. The default asks one query at a time.
+    ///
+    /// # Panics
+    /// If `out` is shorter than `qs`.
+    fn occluded_packet(&self, qs: &[Query], out: &mut [bool]) {
+        assert!(out.len() >= qs.len(), "an answer per query");
+        for (q, o) in qs.iter().zip(out.iter_mut()) {
+            *o = self.occluded_from(q);
+        }
+    }
 }
+
+/// Most queries a backend traces together in one packet (the octree's
+/// active mask, Embree's `rtcIntersect8`); longer batches are split.
+pub const PACKET: usize = 8;
