@@ -2,7 +2,7 @@
 //! (below, in safe code) gather the candidate window of §4.3 into the query
 //! of each ray; the FFI is in [`crate::embree`].
 
-use super::{Backend, BuildStats, Candidate, CandidateHits, Departure, Query, Skip};
+use super::{Backend, BuildStats, Candidate, CandidateHits, Departure, PACKET, Query, Skip};
 use crate::embree::{Device, EmbreeError, UserGeometry, UserScene};
 use crate::geometry::Ray;
 use crate::primitive::Primitive;
@@ -124,6 +124,45 @@ impl<P: Primitive> Backend for EmbreeBackend<P> {
     fn occluded_from(&self, q: &Query) -> bool {
         self.scene
             .occluded(&q.ray, q.t_min, q.t_max, &q.from.as_ref())
+    }
+
+    /// Packets of up to eight rays through `rtcIntersect8`, each lane with
+    /// its own window (the same callbacks: the same candidates as one ray
+    /// at a time).
+    fn intersect_packet(&self, qs: &[Query], hits: &mut [CandidateHits]) {
+        assert!(hits.len() >= qs.len(), "a window per query");
+        for (qs, hits) in qs.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
+            let rays: [(Ray, f32, f32); PACKET] = std::array::from_fn(|k| {
+                qs.get(k)
+                    .map_or((qs[0].ray, 0.0, 0.0), |q| (q.ray, q.t_min, q.t_max))
+            });
+            let mut it = qs.iter().zip(hits.iter_mut());
+            let mut gathers: [Option<Gather<'_>>; PACKET] = std::array::from_fn(|_| {
+                it.next().map(|(q, hits)| {
+                    hits.clear();
+                    Gather {
+                        hits,
+                        t_max: q.t_max,
+                        from: q.from.as_ref(),
+                    }
+                })
+            });
+            self.scene.intersect8(&rays[..qs.len()], &mut gathers);
+        }
+    }
+
+    /// Packets of up to eight rays through `rtcOccluded8`.
+    fn occluded_packet(&self, qs: &[Query], out: &mut [bool]) {
+        assert!(out.len() >= qs.len(), "an answer per query");
+        for (qs, out) in qs.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
+            let rays: [(Ray, f32, f32); PACKET] = std::array::from_fn(|k| {
+                qs.get(k)
+                    .map_or((qs[0].ray, 0.0, 0.0), |q| (q.ray, q.t_min, q.t_max))
+            });
+            let from: [Option<&Departure>; PACKET] =
+                std::array::from_fn(|k| qs.get(k).and_then(|q| q.from.as_ref()));
+            self.scene.occluded8(&rays[..qs.len()], &from, out);
+        }
     }
 
     fn stats(&self) -> &BuildStats {

@@ -2,8 +2,8 @@
 //! callbacks ask a [`UserGeometry`] written in safe code.
 
 use super::scene::{
-    RayHitSlot, RayQueryContext, SceneHandle, embree_rayhit, intersect_arguments, new_geometry,
-    ray_of, ray_query_context,
+    LANES8, RayHit8Slot, RayHitSlot, RayQueryContext, SceneHandle, embree_ray8, embree_rayhit,
+    embree_rayhit8, intersect_arguments, new_geometry, occluded_arguments, ray_query_context,
 };
 use super::{Device, EmbreeError};
 use crate::geometry::Ray;
@@ -54,20 +54,22 @@ pub trait UserGeometry: Send + Sync + 'static {
     ) -> bool;
 }
 
-/// The per-ray query context: begins with `RTCRayQueryContext` so Embree can
-/// hand it back to the callbacks, followed by where the candidates go.
+/// The query context: begins with `RTCRayQueryContext` so Embree can hand
+/// it back to the callbacks, followed by where each ray's candidates go:
+/// the query of the ray whose `id` is `k` at `query[k]` (one ray: `id` 0;
+/// a packet: lane `k` has `id` `k`).
 #[repr(C)]
 struct QueryContext<'q, G: UserGeometry> {
     base: RayQueryContext,
-    query: *mut G::Query<'q>,
+    query: [*mut G::Query<'q>; LANES8],
 }
 
-/// The per-ray context of an occlusion query, laid out like
-/// [`QueryContext`]: Embree's context first, then the shadow query.
+/// The context of an occlusion query, laid out like [`QueryContext`]:
+/// Embree's context first, then each ray's shadow query by its `id`.
 #[repr(C)]
 struct ShadowContext<'q, G: UserGeometry> {
     base: RayQueryContext,
-    query: *const G::ShadowQuery<'q>,
+    query: [*const G::ShadowQuery<'q>; LANES8],
 }
 
 /// Bounds callback: the box [`UserGeometry::bounds`] gives.
@@ -84,55 +86,115 @@ unsafe extern "C" fn user_bounds<G: UserGeometry>(args: *const sys::RTCBoundsFun
     [out.upper_x, out.upper_y, out.upper_z] = hi;
 }
 
-/// Intersect callback: [`UserGeometry::intersect`] decides; an accepted hit
-/// moves `tfar` and records the primitive in the hit. The same primitive
-/// may be offered twice; the query must cope (the candidate window dedupes
-/// by id).
+/// Field `f` of lane `i` of an `RTCRayN` / `RTCRayHitN` of `n` lanes, as
+/// `rtcore_ray.h`'s `RTCRayN_*` and `RTCHitN_*` accessors lay them out
+/// (ray fields 0–11: origin, `tnear`, direction, time, `tfar`, mask, `id`,
+/// flags; then the hit's from 12: normal, `u`, `v`, `primID` at 17,
+/// `geomID` at 18).
+///
+/// # Safety
+/// `base` points to a live ray (and hit, for `f >= 12`) record of `n`
+/// lanes, `i < n`.
+#[inline(always)]
+unsafe fn lane(base: *mut u32, n: usize, f: usize, i: usize) -> *mut u32 {
+    // SAFETY: within the record, as the caller guarantees.
+    unsafe { base.add(f * n + i) }
+}
+
+/// The ray, `tnear`, `tfar` and `id` of lane `i` of a record of `n` lanes.
+///
+/// # Safety
+/// As [`lane`].
+#[inline(always)]
+unsafe fn read_lane(base: *mut u32, n: usize, i: usize) -> (Ray, f32, f32, usize) {
+    // SAFETY: as the caller guarantees; every field is 4 bytes.
+    let f = |field: usize| f32::from_bits(unsafe { *lane(base, n, field, i) });
+    let ray = Ray {
+        origin: glam::Vec3::new(f(0), f(1), f(2)),
+        dir: glam::Vec3::new(f(4), f(5), f(6)),
+    };
+    // SAFETY: as above.
+    let id = unsafe { *lane(base, n, 10, i) } as usize;
+    (ray, f(3), f(8), id)
+}
+
+/// Intersect callback: for each valid lane, [`UserGeometry::intersect`]
+/// decides with that ray's query; an accepted hit moves the lane's `tfar`
+/// and records the primitive in its hit. The same primitive may be offered
+/// twice; the query must cope (the candidate window dedupes by id).
 unsafe extern "C" fn user_intersect<G: UserGeometry>(
     args: *const sys::RTCIntersectFunctionNArguments,
 ) {
-    // SAFETY: valid for the call; `N == 1` since only `rtcIntersect1` is used
-    // (checked), so `rayhit` is an `RTCRayHit` and `valid` has one lane.
+    // SAFETY: valid for the call: `valid` has `N` lanes and `rayhit` is an
+    // `RTCRayHitN` of `N` lanes (`rtcIntersect1`: one, `rtcIntersect8`:
+    // eight, or one ray of the packet on its own).
     let args = unsafe { &*args };
-    if args.N != 1 || unsafe { *args.valid } == 0 {
-        return;
-    }
+    let n = args.N as usize;
     // SAFETY: user pointer as in `user_bounds`; the context is the
-    // `QueryContext<G>` passed by `UserScene::intersect` (it begins with
-    // `RTCRayQueryContext`, repr(C)), whose `query` is a live `&mut` for
-    // this call.
+    // `QueryContext<G>` passed by `UserScene::intersect` or
+    // `UserScene::intersect8` (it begins with `RTCRayQueryContext`,
+    // repr(C)), whose `query` entries for the ids of the rays traced are
+    // live `&mut` for this call, one per ray.
     let geom = unsafe { &*(args.geometryUserPtr as *const G) };
-    let ctx = unsafe { &mut *(args.context as *mut QueryContext<'_, G>) };
-    let query = unsafe { &mut *ctx.query };
-    let rayhit = unsafe { &mut *(args.rayhit as *mut sys::RTCRayHit) };
-    let r = &mut rayhit.ray;
-    if let Some(tfar) = geom.intersect(args.primID, &ray_of(r), r.tnear, r.tfar, query) {
-        r.tfar = tfar;
-        rayhit.hit.primID = args.primID;
-        rayhit.hit.geomID = args.geomID;
+    let ctx = unsafe { &*(args.context as *const QueryContext<'_, G>) };
+    let base = args.rayhit.cast::<u32>();
+    for i in 0..n {
+        // SAFETY: `i < N`, the lanes of `valid` and of the record.
+        if unsafe { *args.valid.add(i) } == 0 {
+            continue;
+        }
+        // SAFETY: as above.
+        let (ray, tnear, tfar, id) = unsafe { read_lane(base, n, i) };
+        let Some(&q) = ctx.query.get(id) else {
+            continue;
+        };
+        // SAFETY: the query of ray `id`, live and not otherwise borrowed
+        // during the call (each ray has its own).
+        let query = unsafe { &mut *q };
+        if let Some(t) = geom.intersect(args.primID, &ray, tnear, tfar, query) {
+            // SAFETY: lane `i` of the ray's `tfar` and of the hit's
+            // `primID`, `geomID`.
+            unsafe {
+                *lane(base, n, 8, i) = t.to_bits();
+                *lane(base, n, 17, i) = args.primID;
+                *lane(base, n, 18, i) = args.geomID;
+            }
+        }
     }
 }
 
-/// Occluded callback: any hit in `[tnear, tfar]` ends the query, signalled
-/// by setting `tfar = -inf` as Embree requires.
+/// Occluded callback: any hit in `[tnear, tfar]` ends the lane's query,
+/// signalled by setting its `tfar = -inf` as Embree requires.
 unsafe extern "C" fn user_occluded<G: UserGeometry>(
     args: *const sys::RTCOccludedFunctionNArguments,
 ) {
-    // SAFETY: as in `user_intersect`; `ray` is an `RTCRay` for `N == 1`.
+    // SAFETY: as in `user_intersect`; `ray` is an `RTCRayN` of `N` lanes.
     let args = unsafe { &*args };
-    if args.N != 1 || unsafe { *args.valid } == 0 {
-        return;
-    }
+    let n = args.N as usize;
     // SAFETY: user pointer as in `user_bounds`; the context is the
-    // `ShadowContext<G>` passed by `UserScene::occluded` (it begins with
-    // `RTCRayQueryContext`, repr(C)), whose `query` is a live shared
-    // reference for this call.
+    // `ShadowContext<G>` passed by `UserScene::occluded` or
+    // `UserScene::occluded8` (it begins with `RTCRayQueryContext`,
+    // repr(C)), whose `query` entries for the ids of the rays traced are
+    // live shared references for this call.
     let geom = unsafe { &*(args.geometryUserPtr as *const G) };
     let ctx = unsafe { &*(args.context as *const ShadowContext<'_, G>) };
-    let query = unsafe { &*ctx.query };
-    let r = unsafe { &mut *(args.ray as *mut sys::RTCRay) };
-    if geom.occluded(args.primID, &ray_of(r), r.tnear, r.tfar, query) {
-        r.tfar = f32::NEG_INFINITY;
+    let base = args.ray.cast::<u32>();
+    for i in 0..n {
+        // SAFETY: `i < N`.
+        if unsafe { *args.valid.add(i) } == 0 {
+            continue;
+        }
+        // SAFETY: as above.
+        let (ray, tnear, tfar, id) = unsafe { read_lane(base, n, i) };
+        let Some(&q) = ctx.query.get(id) else {
+            continue;
+        };
+        // SAFETY: a live shared reference for the call.
+        let query = unsafe { &*q };
+        if geom.occluded(args.primID, &ray, tnear, tfar, query) {
+            // SAFETY: lane `i` of the ray's `tfar`.
+            unsafe { *lane(base, n, 8, i) = f32::NEG_INFINITY.to_bits() };
+        }
     }
 }
 
@@ -201,7 +263,7 @@ impl<G: UserGeometry> UserScene<G> {
     pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32, query: &mut G::Query<'_>) {
         let mut ctx = QueryContext::<G> {
             base: ray_query_context(),
-            query: query as *mut G::Query<'_>,
+            query: [query as *mut G::Query<'_>; LANES8],
         };
         let mut args = intersect_arguments((&mut ctx as *mut QueryContext<'_, G>).cast());
         let mut slot = embree_rayhit(ray, t_min, t_max);
@@ -225,7 +287,7 @@ impl<G: UserGeometry> UserScene<G> {
     pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32, query: &G::ShadowQuery<'_>) -> bool {
         let mut ctx = ShadowContext::<G> {
             base: ray_query_context(),
-            query: query as *const G::ShadowQuery<'_>,
+            query: [query as *const G::ShadowQuery<'_>; LANES8],
         };
         // SAFETY: the repr(C) `ShadowContext<G>` begins with the context
         // Embree reads, and its `query` borrows `query` for the call,
@@ -237,6 +299,82 @@ impl<G: UserGeometry> UserScene<G> {
                 t_max,
                 (&mut ctx as *mut ShadowContext<'_, G>).cast(),
             )
+        }
+    }
+
+    /// Traces up to eight rays `(ray, t_min, t_max)` as one packet
+    /// (`rtcIntersect8`), handing the query in `queries[k]` to every
+    /// [`UserGeometry::intersect`] call about ray `k`; rays past the eighth
+    /// are not traced.
+    ///
+    /// # Panics
+    /// If a ray has no query (`queries[k]` missing or `None`).
+    pub fn intersect8(&self, rays: &[(Ray, f32, f32)], queries: &mut [Option<G::Query<'_>>]) {
+        let mut ptrs = [std::ptr::null_mut(); LANES8];
+        for (k, p) in ptrs.iter_mut().enumerate().take(rays.len()) {
+            let q = queries.get_mut(k).and_then(Option::as_mut);
+            *p = q.expect("a query per ray") as *mut G::Query<'_>;
+        }
+        let mut ctx = QueryContext::<G> {
+            base: ray_query_context(),
+            query: ptrs,
+        };
+        let mut args = intersect_arguments((&mut ctx as *mut QueryContext<'_, G>).cast());
+        args.flags = sys::RTCRayQueryFlags::COHERENT;
+        let (mut slot, valid) = embree_rayhit8(rays);
+        // SAFETY: committed scene; `valid`, `slot` and `args` live across
+        // the call, the mask and the slot aligned to 32 bytes, the slot
+        // with room for the hits Embree 4.3+ writes; `args.context` points
+        // at the repr(C) `QueryContext<G>` whose `query[k]` borrows
+        // `queries[k]` mutably for the call for each valid lane `k` (ray
+        // id `k`; the other entries are null and no valid ray has their
+        // id), matching the type `user_intersect::<G>` reads.
+        unsafe {
+            sys::rtcIntersect8(
+                valid.0.as_ptr(),
+                self.scene.raw,
+                (&mut slot as *mut RayHit8Slot).cast(),
+                &mut args,
+            );
+        };
+    }
+
+    /// For up to eight rays `(ray, t_min, t_max)` traced as one packet
+    /// (`rtcOccluded8`): `out[k]` true when any primitive is hit in ray
+    /// `k`'s interval, handing `queries[k]` to every
+    /// [`UserGeometry::occluded`] call about it.
+    ///
+    /// # Panics
+    /// If `queries` or `out` is shorter than `rays`.
+    pub fn occluded8(
+        &self,
+        rays: &[(Ray, f32, f32)],
+        queries: &[G::ShadowQuery<'_>],
+        out: &mut [bool],
+    ) {
+        assert!(
+            queries.len() >= rays.len() && out.len() >= rays.len(),
+            "a query and an answer per ray"
+        );
+        let mut ptrs = [std::ptr::null(); LANES8];
+        for (p, q) in ptrs.iter_mut().zip(queries.iter()) {
+            *p = q as *const G::ShadowQuery<'_>;
+        }
+        let mut ctx = ShadowContext::<G> {
+            base: ray_query_context(),
+            query: ptrs,
+        };
+        let mut args = occluded_arguments((&mut ctx as *mut ShadowContext<'_, G>).cast());
+        args.flags = sys::RTCRayQueryFlags::COHERENT;
+        let (mut r, valid) = embree_ray8(rays);
+        // SAFETY: committed scene; `valid`, `r` and `args` live across the
+        // call, the mask and the rays aligned to 32 bytes; `args.context`
+        // points at the repr(C) `ShadowContext<G>` whose `query[k]`
+        // borrows `queries[k]` for the call for each valid lane `k` (ray id
+        // `k`), matching the type `user_occluded::<G>` reads.
+        unsafe { sys::rtcOccluded8(valid.0.as_ptr(), self.scene.raw, &mut r, &mut args) };
+        for (k, o) in out.iter_mut().take(rays.len().min(LANES8)).enumerate() {
+            *o = r.tfar[k] == f32::NEG_INFINITY;
         }
     }
 
