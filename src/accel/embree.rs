@@ -126,6 +126,16 @@ impl<P: Primitive> Backend for EmbreeBackend<P> {
             .occluded(&q.ray, q.t_min, q.t_max, &q.from.as_ref())
     }
 
+    /// True: `rtcIntersect8` traces the primary rays of 8×1 pixel tiles
+    /// 1.67 times and the shadow rays of neighbouring hits 1.52 times as
+    /// fast as `rtcIntersect1` (`SPLATRAY_BENCH_SIZES=35000
+    /// SPLATRAY_BENCH_PAIRS=3 SPLATRAY_BENCH_ONLY=octree,embree cargo
+    /// bench --bench accel`, `docs/development.md`, "Issue 25: ray
+    /// packets").
+    fn prefers_packets(&self) -> bool {
+        true
+    }
+
     /// Packets of up to eight rays through `rtcIntersect8`, each lane with
     /// its own window (the same callbacks: the same candidates as one ray
     /// at a time).

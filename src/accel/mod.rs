@@ -91,6 +91,14 @@ pub trait Backend: Send + Sync {
         self.occluded_from(&Query::new(*ray, t_min, t_max))
     }
 
+    /// True when [`Backend::intersect_packet`] and
+    /// [`Backend::occluded_packet`] trace a coherent batch faster than one
+    /// query at a time, so the integrator hands this backend batches (the
+    /// answers are the same either way). False by default.
+    fn prefers_packets(&self) -> bool {
+        false
+    }
+
     /// A batch of queries traced together (a packet: e.g. the primary rays
     /// of a small screen tile, or the shadow rays of one hit): `hits[i]`
     /// gets exactly what [`Backend::intersect_from`] gives `qs[i]`, the
@@ -118,6 +126,37 @@ pub trait Backend: Send + Sync {
             *o = self.occluded_from(q);
         }
     }
+}
+
+/// The environment variable that forces the integrator's batches on
+/// (`on`) or off (`off`) whatever the backend prefers
+/// ([`Backend::prefers_packets`]); unset: the backend's preference.
+pub const PACKETS_VAR: &str = "SPLATRAY_PACKETS";
+
+/// What [`PACKETS_VAR`] asks for: `Some(true)` for `on`, `Some(false)` for
+/// `off`, `None` when unset; a one-line error for any other value.
+pub fn packets_configured() -> crate::Result<Option<bool>> {
+    match std::env::var(PACKETS_VAR) {
+        Err(_) => Ok(None),
+        Ok(v) => match v.trim() {
+            "on" => Ok(Some(true)),
+            "off" => Ok(Some(false)),
+            _ => Err(crate::Error::invalid(format!(
+                "{PACKETS_VAR}={v}: expected on or off"
+            ))),
+        },
+    }
+}
+
+/// Whether the integrator hands `backend` coherent batches: [`PACKETS_VAR`]
+/// when set (an unusable value is refused by the command line before any
+/// work, and means unset here), else [`Backend::prefers_packets`].
+#[must_use]
+pub fn use_packets(backend: &dyn Backend) -> bool {
+    packets_configured()
+        .ok()
+        .flatten()
+        .unwrap_or_else(|| backend.prefers_packets())
 }
 
 /// Most queries a backend traces together in one packet (the octree's

@@ -4,7 +4,7 @@
 //! maximum depth. It sees only the [`Backend`] trait and the shared
 //! resolver, so every backend renders with identical shading.
 
-use crate::accel::{Backend, CandidateHits, Departure, Query, Ray};
+use crate::accel::{Backend, CandidateHits, Departure, PACKET, Query, Ray};
 use crate::progress::{Progress, notify};
 use crate::resolve::{SurfaceHit, resolve_within};
 use crate::scene::{Light, Material, Scene};
@@ -140,6 +140,31 @@ pub trait Surfaces: Sync {
     fn occluded(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> bool;
     /// `eps_self` (§3.2): secondary rays start this far from their origin.
     fn eps_self(&self) -> f32;
+
+    /// True when the integrator should hand coherent batches to
+    /// [`Surfaces::hits`] and [`Surfaces::occluded_batch`] (the answers
+    /// are the same either way). False by default.
+    fn packets(&self) -> bool {
+        false
+    }
+
+    /// [`Surfaces::hit`] of each camera ray of a batch (the primary rays of
+    /// a small screen tile) into `out`; `hits` holds a window per ray
+    /// (scratch). The default traces one at a time.
+    fn hits(&self, rays: &[Ray], hits: &mut [CandidateHits], out: &mut [Option<ShadeHit>]) {
+        for ((ray, h), o) in rays.iter().zip(hits.iter_mut()).zip(out.iter_mut()) {
+            *o = self.hit(ray, None, h);
+        }
+    }
+
+    /// [`Surfaces::occluded`] of shadow rays `(ray, t_max)` all leaving the
+    /// hit `from` (toward the samples of one sphere light), into `out`.
+    /// The default asks one at a time.
+    fn occluded_batch(&self, rays: &[(Ray, f32)], from: &ShadeHit, out: &mut [bool]) {
+        for ((ray, t_max), o) in rays.iter().zip(out.iter_mut()) {
+            *o = self.occluded(ray, from, *t_max);
+        }
+    }
 }
 
 /// The splats of a scene through one backend and the shared resolver.
@@ -213,11 +238,46 @@ impl Surfaces for SplatSurfaces<'_> {
     fn eps_self(&self) -> f32 {
         self.scene.options.scale.eps_self
     }
+
+    fn packets(&self) -> bool {
+        crate::accel::use_packets(self.backend)
+    }
+
+    /// One [`Backend::intersect_packet`] call per [`PACKET`] rays, each
+    /// window then resolved as [`Surfaces::hit`] resolves it.
+    fn hits(&self, rays: &[Ray], hits: &mut [CandidateHits], out: &mut [Option<ShadeHit>]) {
+        for ((rays, hits), out) in rays
+            .chunks(PACKET)
+            .zip(hits.chunks_mut(PACKET))
+            .zip(out.chunks_mut(PACKET))
+        {
+            let qs: [Query; PACKET] = std::array::from_fn(|k| {
+                Query::new(rays[k.min(rays.len() - 1)], 0.0, f32::INFINITY)
+            });
+            self.backend.intersect_packet(&qs[..rays.len()], hits);
+            for ((ray, h), o) in rays.iter().zip(hits.iter()).zip(out.iter_mut()) {
+                *o = self.resolve(h, ray);
+            }
+        }
+    }
+
+    /// One [`Backend::occluded_packet`] call per [`PACKET`] rays.
+    fn occluded_batch(&self, rays: &[(Ray, f32)], from: &ShadeHit, out: &mut [bool]) {
+        for (rays, out) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
+            let qs: [Query; PACKET] = std::array::from_fn(|k| {
+                let (ray, t_max) = rays[k.min(rays.len() - 1)];
+                self.leaving(&ray, from, t_max)
+            });
+            self.backend.occluded_packet(&qs[..rays.len()], out);
+        }
+    }
 }
 
 struct Tracer<'a> {
     scene: &'a Scene,
     surfaces: &'a dyn Surfaces,
+    /// Hand the surfaces coherent batches ([`Surfaces::packets`]).
+    packets: bool,
 }
 
 struct Scratch {
@@ -265,6 +325,47 @@ impl Tracer<'_> {
             .occluded(&ray, from, dist - self.surfaces.eps_self())
     }
 
+    /// The light samples `(l, d, e)` of one hit (see [`Tracer::direct`]):
+    /// the shadow rays of those facing `n` traced as one batch
+    /// ([`Surfaces::occluded_batch`]), then every sample handed to `add`
+    /// in order, as one at a time would.
+    fn shadow_batch(
+        &self,
+        from: &ShadeHit,
+        n: Vec3,
+        batch: &[(Vec3, f32, Vec3)],
+        s: &mut Scratch,
+        add: &mut dyn FnMut(Vec3, Vec3, bool),
+    ) {
+        let eps = self.surfaces.eps_self();
+        let mut rays = [(Ray::new(from.point, Vec3::Z), 0.0f32); PACKET];
+        let mut traced = 0;
+        for &(l, d, _) in batch {
+            if n.dot(l) > 0.0 {
+                rays[traced] = (
+                    Ray {
+                        origin: from.point,
+                        dir: l,
+                    },
+                    d - eps,
+                );
+                traced += 1;
+            }
+        }
+        let mut occluded = [false; PACKET];
+        self.surfaces
+            .occluded_batch(&rays[..traced], from, &mut occluded[..traced]);
+        s.rays.shadow += traced as u64;
+        let mut next = 0;
+        for &(l, _, e) in batch {
+            let visible = n.dot(l) > 0.0 && {
+                next += 1;
+                !occluded[next - 1]
+            };
+            add(l, e, visible);
+        }
+    }
+
     /// Irradiance-weighted light reaching `p` with facing normal `n`, plus
     /// the Blinn–Phong highlight toward `-view` when `spec > 0`; and the
     /// weights of all, facing and lit light samples (`Frame::light_lit`).
@@ -282,13 +383,14 @@ impl Tracer<'_> {
         // Weights of all, facing and lit light samples (`Frame::light_lit`).
         let mut tally = [0.0f32; 3];
         let weight = |e: Vec3| e.x + e.y + e.z;
-        // One light sample: direction `l`, distance `d`, irradiance `e`,
-        // counted, and added when it faces `n` and nothing blocks it.
-        let mut sample = |l: Vec3, d: f32, e: Vec3, s: &mut Scratch| {
+        // One light sample, direction `l`, irradiance `e`, whose shadow ray
+        // (traced only when it faces `n`) found it `visible`: counted, and
+        // added when it faces `n` and nothing blocks it.
+        let mut add = |l: Vec3, e: Vec3, visible: bool| {
             tally[0] += weight(e);
             if n.dot(l) > 0.0 {
                 tally[1] += weight(e);
-                if self.visible(hit, l, d, s) {
+                if visible {
                     tally[2] += weight(e);
                     let cos = n.dot(l);
                     let mut c = albedo * cos;
@@ -300,16 +402,22 @@ impl Tracer<'_> {
                 }
             }
         };
+        // One light sample at distance `d`, its shadow ray traced alone.
+        let sample =
+            |l: Vec3, d: f32, e: Vec3, s: &mut Scratch, add: &mut dyn FnMut(Vec3, Vec3, bool)| {
+                let visible = n.dot(l) > 0.0 && self.visible(hit, l, d, s);
+                add(l, e, visible);
+            };
         for light in &self.scene.lights {
             match *light {
                 Light::Point { position, power } => {
                     let to = position - p;
                     let d2 = to.length_squared();
                     let d = d2.sqrt();
-                    sample(to / d, d, power / d2, s);
+                    sample(to / d, d, power / d2, s, &mut add);
                 }
                 Light::Directional { direction, power } => {
-                    sample(-direction, f32::INFINITY, power, s);
+                    sample(-direction, f32::INFINITY, power, s, &mut add);
                 }
                 Light::Sphere {
                     position,
@@ -326,6 +434,12 @@ impl Tracer<'_> {
                     });
                     let k = (samples as f32).sqrt().ceil() as u32;
                     let share = 1.0 / (k * k) as f32;
+                    // With packets, up to `PACKET` samples are drawn (the
+                    // same draws in the same order), their shadow rays
+                    // traced as one batch from the one hit, then added in
+                    // order: the same sums as one at a time.
+                    let mut batch = [(Vec3::ZERO, 0.0f32, Vec3::ZERO); PACKET];
+                    let mut len = 0;
                     for i in 0..k {
                         for j in 0..k {
                             let r = radius * ((i as f32 + s.rng.next_f32()) / k as f32).sqrt();
@@ -335,9 +449,19 @@ impl Tracer<'_> {
                             let to = q - p;
                             let d2 = to.length_squared();
                             let d = d2.sqrt();
-                            sample(to / d, d, power * (share / d2), s);
+                            if !self.packets {
+                                sample(to / d, d, power * (share / d2), s, &mut add);
+                                continue;
+                            }
+                            batch[len] = (to / d, d, power * (share / d2));
+                            len += 1;
+                            if len == PACKET {
+                                self.shadow_batch(hit, n, &batch[..len], s, &mut add);
+                                len = 0;
+                            }
                         }
                     }
+                    self.shadow_batch(hit, n, &batch[..len], s, &mut add);
                 }
             }
         }
@@ -475,7 +599,11 @@ fn render_surfaces_rows(
     let cam = &scene.camera;
     let rows = rows.start.min(cam.height)..rows.end.min(cam.height);
     let (w, h) = (cam.width as usize, rows.len());
-    let tracer = Tracer { scene, surfaces };
+    let tracer = Tracer {
+        scene,
+        surfaces,
+        packets: surfaces.packets(),
+    };
     let start = Instant::now();
     let rows_done = AtomicUsize::new(0);
     let k = (cam.spp as f32).sqrt().ceil() as u32;
@@ -496,40 +624,63 @@ fn render_surfaces_rows(
             let mut albedo = Vec::with_capacity(w);
             let mut light_facing = Vec::with_capacity(w);
             let mut light_lit = Vec::with_capacity(w);
-            for x in 0..w {
-                let mut sum = Vec3::ZERO;
+            // Pixels in groups of `group` (8×1 tiles with packets: their
+            // primary rays traced as one batch, then each shaded in order
+            // with its own generator, as one at a time would).
+            let group = if tracer.packets { PACKET } else { 1 };
+            let mut batch_hits = vec![CandidateHits::new(scene.options.scale.xi); group];
+            for x0 in (0..w).step_by(group) {
+                let xs = x0..(x0 + group).min(w);
+                let np = xs.len();
+                let mut sums = [Vec3::ZERO; PACKET];
                 for i in 0..per_pixel {
-                    s.rng = Rng::new(x as u32, y as u32, i);
-                    let (ox, oy) = if per_pixel == 1 {
-                        (0.5, 0.5)
-                    } else {
-                        let (cx, cy) = (i % k, i / k % k);
-                        (
-                            (cx as f32 + s.rng.next_f32()) / k as f32,
-                            (cy as f32 + s.rng.next_f32()) / k as f32,
-                        )
-                    };
-                    let ray = cam.ray(x as f32 + ox, y as f32 + oy);
-                    s.rays.primary += 1;
-                    let hit = tracer.intersect(&ray, None, &mut s);
-                    if i == 0 {
-                        depth.push(hit.map_or(f32::INFINITY, |h| h.t));
-                        normal.push(hit.map_or(Vec3::ZERO, |h| h.normal));
-                        splat.push(hit.map_or(u32::MAX, |h| h.id));
-                        albedo.push(hit.map_or(Vec3::ZERO, |h| {
-                            scene.materials[h.material as usize].color() * h.color
-                        }));
+                    let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); PACKET];
+                    let mut rngs = [Rng(0); PACKET];
+                    for (p, x) in xs.clone().enumerate() {
+                        let mut rng = Rng::new(x as u32, y as u32, i);
+                        let (ox, oy) = if per_pixel == 1 {
+                            (0.5, 0.5)
+                        } else {
+                            let (cx, cy) = (i % k, i / k % k);
+                            (
+                                (cx as f32 + rng.next_f32()) / k as f32,
+                                (cy as f32 + rng.next_f32()) / k as f32,
+                            )
+                        };
+                        rays[p] = cam.ray(x as f32 + ox, y as f32 + oy);
+                        rngs[p] = rng;
                     }
-                    s.light = [0.0; 3];
-                    sum += tracer.shade(&ray, hit, 0, &mut s);
-                    if i == 0 {
-                        let [all, facing, lit] = s.light;
-                        let share = |x: f32| if all > 0.0 { x / all } else { 0.0 };
-                        light_facing.push(share(facing));
-                        light_lit.push(share(lit));
+                    let mut hits = [None; PACKET];
+                    if tracer.packets {
+                        surfaces.hits(&rays[..np], &mut batch_hits, &mut hits[..np]);
+                    } else {
+                        hits[0] = tracer.intersect(&rays[0], None, &mut s);
+                    }
+                    for p in 0..np {
+                        let (ray, hit) = (&rays[p], hits[p]);
+                        s.rng = rngs[p];
+                        s.rays.primary += 1;
+                        if i == 0 {
+                            depth.push(hit.map_or(f32::INFINITY, |h| h.t));
+                            normal.push(hit.map_or(Vec3::ZERO, |h| h.normal));
+                            splat.push(hit.map_or(u32::MAX, |h| h.id));
+                            albedo.push(hit.map_or(Vec3::ZERO, |h| {
+                                scene.materials[h.material as usize].color() * h.color
+                            }));
+                        }
+                        s.light = [0.0; 3];
+                        sums[p] += tracer.shade(ray, hit, 0, &mut s);
+                        if i == 0 {
+                            let [all, facing, lit] = s.light;
+                            let share = |x: f32| if all > 0.0 { x / all } else { 0.0 };
+                            light_facing.push(share(facing));
+                            light_lit.push(share(lit));
+                        }
                     }
                 }
-                rgb.push(sum / per_pixel as f32);
+                for sum in &sums[..np] {
+                    rgb.push(*sum / per_pixel as f32);
+                }
             }
             if progress.is_some() {
                 let done = rows_done.fetch_add(1, Ordering::Relaxed) + 1;
