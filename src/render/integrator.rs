@@ -543,6 +543,80 @@ impl Tracer<'_> {
     }
 }
 
+impl Tracer<'_> {
+    /// Renders image row `y` into `row`, pixels in tiles of `N` (the
+    /// primary rays of a tile traced as one batch, [`Surfaces::hits`],
+    /// when `N > 1`), then each pixel's samples shaded in order, every
+    /// sample with its own generator seeded by its pixel and index: the
+    /// same rays, draws and sums whatever `N`.
+    fn row<const N: usize>(&self, y: usize, s: &mut Scratch, row: &mut Row) {
+        let scene = self.scene;
+        let cam = &scene.camera;
+        let w = cam.width as usize;
+        let k = (cam.spp as f32).sqrt().ceil() as u32;
+        let per_pixel = cam.spp;
+        let mut batch_hits: [CandidateHits; N] =
+            std::array::from_fn(|_| CandidateHits::new(scene.options.scale.xi));
+        for x0 in (0..w).step_by(N) {
+            let xs = x0..(x0 + N).min(w);
+            let np = xs.len();
+            let mut sums = [Vec3::ZERO; N];
+            for i in 0..per_pixel {
+                let mut rays = [Ray {
+                    origin: Vec3::ZERO,
+                    dir: Vec3::Z,
+                }; N];
+                let mut rngs = [Rng(0); N];
+                for (p, x) in xs.clone().enumerate() {
+                    let mut rng = Rng::new(x as u32, y as u32, i);
+                    let (ox, oy) = if per_pixel == 1 {
+                        (0.5, 0.5)
+                    } else {
+                        let (cx, cy) = (i % k, i / k % k);
+                        (
+                            (cx as f32 + rng.next_f32()) / k as f32,
+                            (cy as f32 + rng.next_f32()) / k as f32,
+                        )
+                    };
+                    rays[p] = cam.ray(x as f32 + ox, y as f32 + oy);
+                    rngs[p] = rng;
+                }
+                let mut hits = [None; N];
+                if N > 1 {
+                    self.surfaces
+                        .hits(&rays[..np], &mut batch_hits, &mut hits[..np]);
+                } else {
+                    hits[0] = self.intersect(&rays[0], None, s);
+                }
+                for p in 0..np {
+                    let (ray, hit) = (&rays[p], hits[p]);
+                    s.rng = rngs[p];
+                    s.rays.primary += 1;
+                    if i == 0 {
+                        row.depth.push(hit.map_or(f32::INFINITY, |h| h.t));
+                        row.normal.push(hit.map_or(Vec3::ZERO, |h| h.normal));
+                        row.splat.push(hit.map_or(u32::MAX, |h| h.id));
+                        row.albedo.push(hit.map_or(Vec3::ZERO, |h| {
+                            scene.materials[h.material as usize].color() * h.color
+                        }));
+                    }
+                    s.light = [0.0; 3];
+                    sums[p] += self.shade(ray, hit, 0, s);
+                    if i == 0 {
+                        let [all, facing, lit] = s.light;
+                        let share = |x: f32| if all > 0.0 { x / all } else { 0.0 };
+                        row.light_facing.push(share(facing));
+                        row.light_lit.push(share(lit));
+                    }
+                }
+            }
+            for sum in &sums[..np] {
+                row.rgb.push(*sum / per_pixel as f32);
+            }
+        }
+    }
+}
+
 /// One rendered image row and what it traced.
 struct Row {
     rgb: Vec<Vec3>,
@@ -606,8 +680,6 @@ fn render_surfaces_rows(
     };
     let start = Instant::now();
     let rows_done = AtomicUsize::new(0);
-    let k = (cam.spp as f32).sqrt().ceil() as u32;
-    let per_pixel = cam.spp;
     let rows: Vec<Row> = (rows.start as usize..rows.end as usize)
         .into_par_iter()
         .map(|y| {
@@ -617,85 +689,29 @@ fn render_surfaces_rows(
                 rng: Rng::new(y as u32, 0, 0),
                 light: [0.0; 3],
             };
-            let mut rgb = Vec::with_capacity(w);
-            let mut depth = Vec::with_capacity(w);
-            let mut normal = Vec::with_capacity(w);
-            let mut splat = Vec::with_capacity(w);
-            let mut albedo = Vec::with_capacity(w);
-            let mut light_facing = Vec::with_capacity(w);
-            let mut light_lit = Vec::with_capacity(w);
-            // Pixels in groups of `group` (8×1 tiles with packets: their
-            // primary rays traced as one batch, then each shaded in order
-            // with its own generator, as one at a time would).
-            let group = if tracer.packets { PACKET } else { 1 };
-            let mut batch_hits = vec![CandidateHits::new(scene.options.scale.xi); group];
-            for x0 in (0..w).step_by(group) {
-                let xs = x0..(x0 + group).min(w);
-                let np = xs.len();
-                let mut sums = [Vec3::ZERO; PACKET];
-                for i in 0..per_pixel {
-                    let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); PACKET];
-                    let mut rngs = [Rng(0); PACKET];
-                    for (p, x) in xs.clone().enumerate() {
-                        let mut rng = Rng::new(x as u32, y as u32, i);
-                        let (ox, oy) = if per_pixel == 1 {
-                            (0.5, 0.5)
-                        } else {
-                            let (cx, cy) = (i % k, i / k % k);
-                            (
-                                (cx as f32 + rng.next_f32()) / k as f32,
-                                (cy as f32 + rng.next_f32()) / k as f32,
-                            )
-                        };
-                        rays[p] = cam.ray(x as f32 + ox, y as f32 + oy);
-                        rngs[p] = rng;
-                    }
-                    let mut hits = [None; PACKET];
-                    if tracer.packets {
-                        surfaces.hits(&rays[..np], &mut batch_hits, &mut hits[..np]);
-                    } else {
-                        hits[0] = tracer.intersect(&rays[0], None, &mut s);
-                    }
-                    for p in 0..np {
-                        let (ray, hit) = (&rays[p], hits[p]);
-                        s.rng = rngs[p];
-                        s.rays.primary += 1;
-                        if i == 0 {
-                            depth.push(hit.map_or(f32::INFINITY, |h| h.t));
-                            normal.push(hit.map_or(Vec3::ZERO, |h| h.normal));
-                            splat.push(hit.map_or(u32::MAX, |h| h.id));
-                            albedo.push(hit.map_or(Vec3::ZERO, |h| {
-                                scene.materials[h.material as usize].color() * h.color
-                            }));
-                        }
-                        s.light = [0.0; 3];
-                        sums[p] += tracer.shade(ray, hit, 0, &mut s);
-                        if i == 0 {
-                            let [all, facing, lit] = s.light;
-                            let share = |x: f32| if all > 0.0 { x / all } else { 0.0 };
-                            light_facing.push(share(facing));
-                            light_lit.push(share(lit));
-                        }
-                    }
-                }
-                for sum in &sums[..np] {
-                    rgb.push(*sum / per_pixel as f32);
-                }
+            let mut row = Row {
+                rgb: Vec::with_capacity(w),
+                depth: Vec::with_capacity(w),
+                normal: Vec::with_capacity(w),
+                splat: Vec::with_capacity(w),
+                albedo: Vec::with_capacity(w),
+                light_facing: Vec::with_capacity(w),
+                light_lit: Vec::with_capacity(w),
+                rays: RayCounts::default(),
+            };
+            // Pixels in tiles of 8×1 with packets (their primary rays
+            // traced as one batch), else one by one.
+            if tracer.packets {
+                tracer.row::<PACKET>(y, &mut s, &mut row);
+            } else {
+                tracer.row::<1>(y, &mut s, &mut row);
             }
             if progress.is_some() {
                 let done = rows_done.fetch_add(1, Ordering::Relaxed) + 1;
                 notify(progress, "render", done as f64 / h as f64);
             }
-            Row {
-                rgb,
-                depth,
-                normal,
-                splat,
-                albedo,
-                light_facing,
-                light_lit,
-                rays: s.rays,
-            }
+            row.rays = s.rays;
+            row
         })
         .collect();
     let mut frame = Frame {
