@@ -335,10 +335,14 @@ impl Tracer<'_> {
         n: Vec3,
         batch: &[(Vec3, f32, Vec3)],
         s: &mut Scratch,
-        add: &mut dyn FnMut(Vec3, Vec3, bool),
+        mut add: impl FnMut(Vec3, Vec3, bool),
     ) {
         let eps = self.surfaces.eps_self();
-        let mut rays = [(Ray::new(from.point, Vec3::Z), 0.0f32); PACKET];
+        let none = Ray {
+            origin: from.point,
+            dir: Vec3::Z,
+        };
+        let mut rays = [(none, 0.0f32); PACKET];
         let mut traced = 0;
         for &(l, d, _) in batch {
             if n.dot(l) > 0.0 {
@@ -402,22 +406,19 @@ impl Tracer<'_> {
                 }
             }
         };
-        // One light sample at distance `d`, its shadow ray traced alone.
-        let sample =
-            |l: Vec3, d: f32, e: Vec3, s: &mut Scratch, add: &mut dyn FnMut(Vec3, Vec3, bool)| {
-                let visible = n.dot(l) > 0.0 && self.visible(hit, l, d, s);
-                add(l, e, visible);
-            };
+        // Whether the light at distance `d` along `l` is seen from the hit:
+        // its shadow ray, traced alone, only when it faces `n`.
+        let seen = |l: Vec3, d: f32, s: &mut Scratch| n.dot(l) > 0.0 && self.visible(hit, l, d, s);
         for light in &self.scene.lights {
             match *light {
                 Light::Point { position, power } => {
                     let to = position - p;
                     let d2 = to.length_squared();
                     let d = d2.sqrt();
-                    sample(to / d, d, power / d2, s, &mut add);
+                    add(to / d, power / d2, seen(to / d, d, s));
                 }
                 Light::Directional { direction, power } => {
-                    sample(-direction, f32::INFINITY, power, s, &mut add);
+                    add(-direction, power, seen(-direction, f32::INFINITY, s));
                 }
                 Light::Sphere {
                     position,
@@ -450,7 +451,7 @@ impl Tracer<'_> {
                             let d2 = to.length_squared();
                             let d = d2.sqrt();
                             if !self.packets {
-                                sample(to / d, d, power * (share / d2), s, &mut add);
+                                add(to / d, power * (share / d2), seen(to / d, d, s));
                                 continue;
                             }
                             batch[len] = (to / d, d, power * (share / d2));
@@ -461,7 +462,9 @@ impl Tracer<'_> {
                             }
                         }
                     }
-                    self.shadow_batch(hit, n, &batch[..len], s, &mut add);
+                    if len > 0 {
+                        self.shadow_batch(hit, n, &batch[..len], s, &mut add);
+                    }
                 }
             }
         }
