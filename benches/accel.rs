@@ -11,7 +11,11 @@
 //! over rows; shadow rays go from each primary hit toward a point light with
 //! `t_min = eps_self`, leaving the splat they start on (the self-hit rule
 //! of `accel::Departure`, as the integrator traces them). Throughput is
-//! reported as rays per second.
+//! reported as rays per second. Each backend traces the same rays one at a
+//! time and, in the "packets" rows, in packets of `accel::PACKET` (8×1
+//! pixel tiles; 8 neighbouring hits' shadow rays) through
+//! `Backend::intersect_packet` / `occluded_packet` (Embree:
+//! `rtcIntersect8` / `rtcOccluded8`).
 //!
 //! ```sh
 //! cargo bench --bench accel -- --sample-size 10

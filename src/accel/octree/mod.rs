@@ -375,6 +375,14 @@ impl<P: Primitive> Backend for Octree<P> {
         self.any_hit_packets(qs, out);
     }
 
+    /// False: the octree's packets trace the bench's primary and shadow
+    /// rays at 0.90 / 0.74 (35k splats) and 0.92 / 0.89 (1M) of its single
+    /// rays, and render the bunny 1.10 times slower (`docs/development.md`,
+    /// "Issue 25: ray packets", with the commands).
+    fn prefers_packets(&self) -> bool {
+        false
+    }
+
     fn stats(&self) -> &BuildStats {
         &self.stats
     }
