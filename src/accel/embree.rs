@@ -86,6 +86,15 @@ impl<P: Primitive> UserGeometry for Primitives<P> {
     }
 }
 
+/// The rays `(ray, t_min, t_max)` of up to [`PACKET`] queries (lanes past
+/// them repeat the first ray; the packet calls leave them out).
+fn packet_rays(qs: &[Query]) -> [(Ray, f32, f32); PACKET] {
+    std::array::from_fn(|k| {
+        qs.get(k)
+            .map_or((qs[0].ray, 0.0, 0.0), |q| (q.ray, q.t_min, q.t_max))
+    })
+}
+
 /// Embree's BVH over user-geometry primitives.
 pub struct EmbreeBackend<P: Primitive> {
     scene: UserScene<Primitives<P>>,
@@ -142,10 +151,7 @@ impl<P: Primitive> Backend for EmbreeBackend<P> {
     fn intersect_packet(&self, qs: &[Query], hits: &mut [CandidateHits]) {
         assert!(hits.len() >= qs.len(), "a window per query");
         for (qs, hits) in qs.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
-            let rays: [(Ray, f32, f32); PACKET] = std::array::from_fn(|k| {
-                qs.get(k)
-                    .map_or((qs[0].ray, 0.0, 0.0), |q| (q.ray, q.t_min, q.t_max))
-            });
+            let rays = packet_rays(qs);
             let mut it = qs.iter().zip(hits.iter_mut());
             let mut gathers: [Option<Gather<'_>>; PACKET] = std::array::from_fn(|_| {
                 it.next().map(|(q, hits)| {
@@ -165,10 +171,7 @@ impl<P: Primitive> Backend for EmbreeBackend<P> {
     fn occluded_packet(&self, qs: &[Query], out: &mut [bool]) {
         assert!(out.len() >= qs.len(), "an answer per query");
         for (qs, out) in qs.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
-            let rays: [(Ray, f32, f32); PACKET] = std::array::from_fn(|k| {
-                qs.get(k)
-                    .map_or((qs[0].ray, 0.0, 0.0), |q| (q.ray, q.t_min, q.t_max))
-            });
+            let rays = packet_rays(qs);
             let from: [Option<&Departure>; PACKET] =
                 std::array::from_fn(|k| qs.get(k).and_then(|q| q.from.as_ref()));
             self.scene.occluded8(&rays[..qs.len()], &from, out);

@@ -118,6 +118,34 @@ unsafe fn read_lane(base: *mut u32, n: usize, i: usize) -> (Ray, f32, f32, usize
     (ray, f(3), f(8), id)
 }
 
+/// Calls `f(i, ray, tnear, tfar, query)` for each valid lane `i` of a
+/// callback's record of `n` lanes, with the query of its ray (`queries`
+/// indexed by the ray's `id`; a lane whose id names none is left alone).
+///
+/// # Safety
+/// `valid` has `n` lanes and `base` points to a live ray record of `n`
+/// lanes.
+#[inline(always)]
+unsafe fn each_lane<Q: Copy>(
+    valid: *const i32,
+    base: *mut u32,
+    n: usize,
+    queries: &[Q; LANES8],
+    mut f: impl FnMut(usize, Ray, f32, f32, Q),
+) {
+    for i in 0..n {
+        // SAFETY: `i < n`, a lane of `valid` and of the record.
+        if unsafe { *valid.add(i) } == 0 {
+            continue;
+        }
+        // SAFETY: as above.
+        let (ray, tnear, tfar, id) = unsafe { read_lane(base, n, i) };
+        if let Some(&q) = queries.get(id) {
+            f(i, ray, tnear, tfar, q);
+        }
+    }
+}
+
 /// Intersect callback: for each valid lane, [`UserGeometry::intersect`]
 /// decides with that ray's query; an accepted hit moves the lane's `tfar`
 /// and records the primitive in its hit. The same primitive may be offered
@@ -138,18 +166,9 @@ unsafe extern "C" fn user_intersect<G: UserGeometry>(
     let geom = unsafe { &*(args.geometryUserPtr as *const G) };
     let ctx = unsafe { &*(args.context as *const QueryContext<'_, G>) };
     let base = args.rayhit.cast::<u32>();
-    for i in 0..n {
-        // SAFETY: `i < N`, the lanes of `valid` and of the record.
-        if unsafe { *args.valid.add(i) } == 0 {
-            continue;
-        }
-        // SAFETY: as above.
-        let (ray, tnear, tfar, id) = unsafe { read_lane(base, n, i) };
-        let Some(&q) = ctx.query.get(id) else {
-            continue;
-        };
-        // SAFETY: the query of ray `id`, live and not otherwise borrowed
-        // during the call (each ray has its own).
+    let visit = |i: usize, ray: Ray, tnear: f32, tfar: f32, q: *mut G::Query<'_>| {
+        // SAFETY: the query of this ray, live and not otherwise
+        // borrowed during the call (each ray has its own).
         let query = unsafe { &mut *q };
         if let Some(t) = geom.intersect(args.primID, &ray, tnear, tfar, query) {
             // SAFETY: lane `i` of the ray's `tfar` and of the hit's
@@ -160,7 +179,10 @@ unsafe extern "C" fn user_intersect<G: UserGeometry>(
                 *lane(base, n, 18, i) = args.geomID;
             }
         }
-    }
+    };
+    // SAFETY: `valid` and the record have `N` lanes (the call's
+    // arguments).
+    unsafe { each_lane(args.valid, base, n, &ctx.query, visit) };
 }
 
 /// Occluded callback: any hit in `[tnear, tfar]` ends the lane's query,
@@ -179,23 +201,17 @@ unsafe extern "C" fn user_occluded<G: UserGeometry>(
     let geom = unsafe { &*(args.geometryUserPtr as *const G) };
     let ctx = unsafe { &*(args.context as *const ShadowContext<'_, G>) };
     let base = args.ray.cast::<u32>();
-    for i in 0..n {
-        // SAFETY: `i < N`.
-        if unsafe { *args.valid.add(i) } == 0 {
-            continue;
-        }
-        // SAFETY: as above.
-        let (ray, tnear, tfar, id) = unsafe { read_lane(base, n, i) };
-        let Some(&q) = ctx.query.get(id) else {
-            continue;
-        };
+    let visit = |i: usize, ray: Ray, tnear: f32, tfar: f32, q: *const G::ShadowQuery<'_>| {
         // SAFETY: a live shared reference for the call.
         let query = unsafe { &*q };
         if geom.occluded(args.primID, &ray, tnear, tfar, query) {
             // SAFETY: lane `i` of the ray's `tfar`.
             unsafe { *lane(base, n, 8, i) = f32::NEG_INFINITY.to_bits() };
         }
-    }
+    };
+    // SAFETY: `valid` and the record have `N` lanes (the call's
+    // arguments).
+    unsafe { each_lane(args.valid, base, n, &ctx.query, visit) };
 }
 
 /// A committed scene of one user geometry `G`, ready to query from any
