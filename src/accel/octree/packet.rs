@@ -28,7 +28,7 @@ use super::traverse::{AnyHit, Gather, RayCtx, Visitor};
 use super::{INTERIOR, Octree, Tree, child_lo};
 use crate::accel::{CandidateHits, NoSkip, PACKET, Query, Skip};
 use crate::primitive::Primitive;
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
 /// Fewest rays traced as a packet; smaller batches go one at a time.
 const MIN_PACKET: usize = 2;
@@ -40,13 +40,25 @@ const LONE: u32 = 2;
 /// Lane mask type: bit `k` for ray `k` of the packet.
 type Mask = u32;
 
+/// Eight lanes as two SIMD registers (lanes 0–3, 4–7).
+type Wide = [Vec4; 2];
+
+/// `a` as two registers.
+#[inline(always)]
+fn wide(a: &[f32; PACKET]) -> Wide {
+    [
+        Vec4::new(a[0], a[1], a[2], a[3]),
+        Vec4::new(a[4], a[5], a[6], a[7]),
+    ]
+}
+
 /// The packet's rays, lane by lane (structure of arrays).
 struct Lanes {
     /// Origins, per axis.
-    o: [[f32; PACKET]; 3],
+    o: [Wide; 3],
     /// `1 / dir`, per axis (IEEE: `±inf` on zero components).
-    inv: [[f32; PACKET]; 3],
-    t_min: [f32; PACKET],
+    inv: [Wide; 3],
+    t_min: Wide,
     /// Each ray's own constants, for the single-ray descent of a lone ray.
     ctx: [RayCtx; PACKET],
     /// The direction signs every ray of the packet shares.
@@ -65,74 +77,68 @@ impl Lanes {
         if ctx[..qs.len()].iter().any(|c| c.sign_mask != sign_mask) {
             return None;
         }
-        let axis = |a: usize, f: &dyn Fn(&RayCtx) -> Vec3| std::array::from_fn(|k| f(&ctx[k])[a]);
+        let axis = |f: &dyn Fn(&RayCtx) -> Vec3| {
+            [0, 1, 2].map(|a| wide(&std::array::from_fn(|k| f(&ctx[k])[a])))
+        };
         Some(Lanes {
-            o: [
-                axis(0, &|c| c.origin),
-                axis(1, &|c| c.origin),
-                axis(2, &|c| c.origin),
-            ],
-            inv: [
-                axis(0, &|c| c.inv_dir),
-                axis(1, &|c| c.inv_dir),
-                axis(2, &|c| c.inv_dir),
-            ],
-            t_min: std::array::from_fn(|k| ctx[k].t_min),
+            o: axis(&|c| c.origin),
+            inv: axis(&|c| c.inv_dir),
+            t_min: wide(&std::array::from_fn(|k| ctx[k].t_min)),
             ctx,
             sign_mask,
         })
     }
 }
 
-/// `slab` of the single ray: `(near, far)` of the planes at parameters
-/// `a` and `b`, with its NaN rule (`a < b` false: the other value).
+/// `slab` of the single ray on four lanes: `(near, far)` of the planes at
+/// parameters `a` and `b`, with its NaN rule (`a < b` false: the other
+/// value).
 #[inline(always)]
-fn slab(a: f32, b: f32) -> (f32, f32) {
-    (if a < b { a } else { b }, if a > b { a } else { b })
+fn slab(a: Vec4, b: Vec4) -> (Vec4, Vec4) {
+    (
+        Vec4::select(a.cmplt(b), a, b),
+        Vec4::select(a.cmpgt(b), a, b),
+    )
 }
 
-/// `a > b ? a : b`, the rule of `maxps` and of the single ray's `max4`.
+/// The lanes whose `entry <= exit`, entry the largest of `near` (x, y, z)
+/// and `t_min`, exit the smallest of `far` and `cut`: `maxps` / `minps`
+/// (`a > b ? a : b`), the single ray's comparisons and NaN rule.
 #[inline(always)]
-fn max(a: f32, b: f32) -> f32 {
-    if a > b { a } else { b }
-}
-
-/// `a < b ? a : b`, the rule of `minps` and of the single ray's `min4`.
-#[inline(always)]
-fn min(a: f32, b: f32) -> f32 {
-    if a < b { a } else { b }
+fn open(near: [Vec4; 3], far: [Vec4; 3], t_min: Vec4, cut: Vec4) -> Mask {
+    let entry = near[0].max(near[1]).max(near[2]).max(t_min);
+    let exit = far[0].min(far[1]).min(far[2]).min(cut);
+    entry.cmple(exit).bitmask()
 }
 
 /// Each active ray's cutoff (`-inf` on lanes without a ray).
 #[inline(always)]
-fn cutoffs<P: Primitive, V: Visitor<P>>(vis: &[Option<V>; PACKET]) -> [f32; PACKET] {
-    std::array::from_fn(|k| vis[k].as_ref().map_or(f32::NEG_INFINITY, V::cutoff))
+fn cutoffs<P: Primitive, V: Visitor<P>>(vis: &[Option<V>; PACKET]) -> Wide {
+    wide(&std::array::from_fn(|k| {
+        vis[k].as_ref().map_or(f32::NEG_INFINITY, V::cutoff)
+    }))
 }
 
 impl<P: Primitive> Tree<P> {
     /// The rays of `active` that meet the node's content box `[lo, hi]`
-    /// within `[t_min, cutoff]`: [`Tree::visit`]'s test, lane by lane.
-    // The lanes of several arrays in lockstep: indexed, to vectorise.
+    /// within `[t_min, cutoff]`: [`Tree::visit`]'s test, four lanes at a
+    /// time.
+    // The halves of several arrays in lockstep.
     #[allow(clippy::needless_range_loop)]
     #[inline(always)]
-    fn meets_box(l: &Lanes, [lo, hi]: [Vec3; 2], cut: &[f32; PACKET], active: Mask) -> Mask {
+    fn meets_box(l: &Lanes, [lo, hi]: [Vec3; 2], cut: &Wide, active: Mask) -> Mask {
         let mut m = 0;
-        for k in 0..PACKET {
-            let (nx, fx) = slab(
-                (lo.x - l.o[0][k]) * l.inv[0][k],
-                (hi.x - l.o[0][k]) * l.inv[0][k],
-            );
-            let (ny, fy) = slab(
-                (lo.y - l.o[1][k]) * l.inv[1][k],
-                (hi.y - l.o[1][k]) * l.inv[1][k],
-            );
-            let (nz, fz) = slab(
-                (lo.z - l.o[2][k]) * l.inv[2][k],
-                (hi.z - l.o[2][k]) * l.inv[2][k],
-            );
-            let entry = max(max(max(nx, ny), nz), l.t_min[k]);
-            let exit = min(min(min(fx, fy), fz), cut[k]);
-            m |= Mask::from(entry <= exit) << k;
+        for h in 0..2 {
+            let mut near = [Vec4::ZERO; 3];
+            let mut far = [Vec4::ZERO; 3];
+            for a in 0..3 {
+                let (o, inv) = (l.o[a][h], l.inv[a][h]);
+                (near[a], far[a]) = slab(
+                    (Vec4::splat(lo[a]) - o) * inv,
+                    (Vec4::splat(hi[a]) - o) * inv,
+                );
+            }
+            m |= open(near, far, l.t_min[h], cut[h]) << (4 * h);
         }
         m & active
     }
@@ -140,7 +146,6 @@ impl<P: Primitive> Tree<P> {
     /// The subtree of node `index` (cell `lo`, edge `size`) for the rays of
     /// `active`, front to back in the packet's order; returns the rays
     /// whose visitor stopped (any-hit queries that found a hit).
-    #[allow(clippy::needless_range_loop)]
     fn visit_packet<V: Visitor<P>>(
         &self,
         index: usize,
@@ -184,21 +189,20 @@ impl<P: Primitive> Tree<P> {
             return stopped;
         }
         // Slab parameters of the padded lower and upper halves on each
-        // axis, for every ray: the single ray's arithmetic.
+        // axis, for every ray: the single ray's arithmetic. Per half and
+        // axis: (near, far) of the lower half, of the upper.
         let mask = node.meta & 0xff;
         let half = size * 0.5;
         let pad = self.pad;
-        let (lo_a, mid, hi) = (lo, lo + Vec3::splat(half), lo + Vec3::splat(size));
-        // Per axis and ray: near and far of the lower half, of the upper.
-        let mut ln = [[0.0f32; PACKET]; 3];
-        let mut lf = [[0.0f32; PACKET]; 3];
-        let mut un = [[0.0f32; PACKET]; 3];
-        let mut uf = [[0.0f32; PACKET]; 3];
-        for a in 0..3 {
-            for k in 0..PACKET {
-                let (o, inv) = (l.o[a][k], l.inv[a][k]);
-                (ln[a][k], lf[a][k]) = slab((lo_a[a] - pad - o) * inv, (mid[a] + pad - o) * inv);
-                (un[a][k], uf[a][k]) = slab((mid[a] - pad - o) * inv, (hi[a] + pad - o) * inv);
+        let (mid, hi) = (lo + Vec3::splat(half), lo + Vec3::splat(size));
+        let mut lower = [[(Vec4::ZERO, Vec4::ZERO); 3]; 2];
+        let mut upper = [[(Vec4::ZERO, Vec4::ZERO); 3]; 2];
+        for h in 0..2 {
+            for a in 0..3 {
+                let (o, inv) = (l.o[a][h], l.inv[a][h]);
+                let t = |x: f32| (Vec4::splat(x) - o) * inv;
+                lower[h][a] = slab(t(lo[a] - pad), t(mid[a] + pad));
+                upper[h][a] = slab(t(mid[a] - pad), t(hi[a] + pad));
             }
         }
         for i in 0..8 {
@@ -207,19 +211,17 @@ impl<P: Primitive> Tree<P> {
                 continue;
             }
             let cut = cutoffs(vis);
-            let side = |a: usize| {
-                if oct & (1 << a) != 0 {
-                    (&un[a], &uf[a])
-                } else {
-                    (&ln[a], &lf[a])
-                }
-            };
-            let ((nx, fx), (ny, fy), (nz, fz)) = (side(0), side(1), side(2));
             let mut m = 0;
-            for k in 0..PACKET {
-                let entry = max(max(max(nx[k], ny[k]), nz[k]), l.t_min[k]);
-                let exit = min(min(min(fx[k], fy[k]), fz[k]), cut[k]);
-                m |= Mask::from(entry <= exit) << k;
+            for h in 0..2 {
+                let side = |a: usize| {
+                    if oct & (1 << a) != 0 {
+                        upper[h][a]
+                    } else {
+                        lower[h][a]
+                    }
+                };
+                let (x, y, z) = (side(0), side(1), side(2));
+                m |= open([x.0, y.0, z.0], [x.1, y.1, z.1], l.t_min[h], cut[h]) << (4 * h);
             }
             let m = m & active;
             if m == 0 {
