@@ -376,8 +376,8 @@ impl<P: Primitive> Backend for Octree<P> {
     }
 
     /// False: the octree's packets trace the bench's primary and shadow
-    /// rays at 0.90 / 0.74 (35k splats) and 0.92 / 0.89 (1M) of its single
-    /// rays, and render the bunny 1.10 times slower (`docs/development.md`,
+    /// rays at 0.99 / 0.82 (35k splats) and 1.07 / 1.02 (1M) of its single
+    /// rays, and render the bunny 1.09 times slower (`docs/development.md`,
     /// "Issue 25: ray packets", with the commands).
     fn prefers_packets(&self) -> bool {
         false
