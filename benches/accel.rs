@@ -11,7 +11,11 @@
 //! over rows; shadow rays go from each primary hit toward a point light with
 //! `t_min = eps_self`, leaving the splat they start on (the self-hit rule
 //! of `accel::Departure`, as the integrator traces them). Throughput is
-//! reported as rays per second.
+//! reported as rays per second. Each backend traces the same rays one at a
+//! time and, in the "packets" rows, in packets of `accel::PACKET` (8×1
+//! pixel tiles; 8 neighbouring hits' shadow rays) through
+//! `Backend::intersect_packet` / `occluded_packet` (Embree:
+//! `rtcIntersect8` / `rtcOccluded8`).
 //!
 //! ```sh
 //! cargo bench --bench accel -- --sample-size 10
@@ -36,7 +40,7 @@ use criterion::{BatchSize, Criterion, SamplingMode, Throughput};
 use glam::Vec3;
 use rayon::prelude::*;
 use splatray::accel::octree::{Octree, OctreeParams};
-use splatray::accel::{Backend, BuildStats, Candidate, CandidateHits, Departure, backends};
+use splatray::accel::{Backend, BuildStats, Candidate, CandidateHits, Departure, PACKET, backends};
 use splatray::embree::{Device, NativeDiscScene};
 use splatray::primitive::Disc;
 use splatray::resolve::{ShadingMode, resolve};
@@ -150,6 +154,41 @@ fn shadow(backend: &dyn Backend, queries: &[Query]) -> usize {
         .sum()
 }
 
+/// [`trace`] with the rays of each row handed over in packets of
+/// [`PACKET`] (8×1 pixel tiles), through `Backend::intersect_packet`.
+fn trace_packets(backend: &dyn Backend, queries: &[Query], xi: f32) -> usize {
+    queries
+        .par_chunks(W)
+        .map(|row| {
+            let mut hits = vec![CandidateHits::new(xi); PACKET];
+            row.chunks(PACKET)
+                .map(|qs| {
+                    backend.intersect_packet(qs, &mut hits);
+                    hits[..qs.len()].iter().filter(|h| !h.is_empty()).count()
+                })
+                .sum::<usize>()
+        })
+        .sum()
+}
+
+/// [`shadow`] in packets of [`PACKET`] consecutive shadow rays (the hits
+/// of neighbouring pixels toward the one light), through
+/// `Backend::occluded_packet`.
+fn shadow_packets(backend: &dyn Backend, queries: &[Query]) -> usize {
+    queries
+        .par_chunks(W)
+        .map(|row| {
+            let mut out = [false; PACKET];
+            row.chunks(PACKET)
+                .map(|qs| {
+                    backend.occluded_packet(qs, &mut out);
+                    out[..qs.len()].iter().filter(|&&o| o).count()
+                })
+                .sum::<usize>()
+        })
+        .sum()
+}
+
 struct Scene {
     discs: Vec<Disc>,
     scale: SceneScale,
@@ -213,14 +252,20 @@ fn seconds(f: &mut dyn FnMut()) -> f64 {
 }
 
 /// The one-pass table: per backend, the median of 3 builds, then `rounds`
-/// passes of the primary and the shadow rays, the backends taking turns
-/// pass by pass so that all see the same load on a shared machine. Rays/s
-/// are medians over the passes; "vs embree" is the median over the passes
-/// of the row's speed / Embree user geometry's speed in the same pass.
-/// With `only` set, just the backends of those names.
+/// passes of the primary and the shadow rays, one ray at a time and in
+/// packets (`Backend::intersect_packet`, `occluded_packet`: [`PACKET`]
+/// rays, 8×1 pixel tiles and the shadow rays of neighbouring hits), the
+/// backends taking turns pass by pass so that all see the same load on a
+/// shared machine. Rays/s are medians over the passes; "vs embree" is the
+/// median over the passes of the row's speed / Embree user geometry's in
+/// the same pass and the same mode (a packet row against Embree's packet
+/// row, `rtcIntersect8` / `rtcOccluded8`); "vs 1 ray" of a packet row is
+/// its speed over the same backend's one ray at a time, in the same pass.
+/// With `only` set, just the backends of those names (Embree's native
+/// discs have no packet row).
 fn summary(scenes: &[(usize, Scene)], rounds: usize, only: Option<&[String]>) {
     eprintln!(
-        "\n{:>9} {:>14} {:>8} {:>9} {:>8} {:>10} {:>9} {:>11} {:>11} {:>8} {:>8}",
+        "\n{:>9} {:>17} {:>8} {:>9} {:>8} {:>10} {:>9} {:>11} {:>11} {:>8} {:>8} {:>8} {:>8}",
         "splats",
         "backend",
         "build s",
@@ -231,6 +276,8 @@ fn summary(scenes: &[(usize, Scene)], rounds: usize, only: Option<&[String]>) {
         "primary/s",
         "shadow/s",
         "vs embree",
+        "(shadow)",
+        "vs 1 ray",
         "(shadow)"
     );
     for (n, sc) in scenes {
@@ -244,46 +291,79 @@ fn summary(scenes: &[(usize, Scene)], rounds: usize, only: Option<&[String]>) {
                 (name, build_s, b)
             })
             .collect();
-        let mut prim = vec![Vec::new(); built.len()];
-        let mut shad = vec![Vec::new(); built.len()];
+        let packets = |name: &str| name != "embree-native";
+        // Per backend and mode (0: one ray at a time, 1: packets), the
+        // seconds of each pass.
+        let mut prim = vec![[Vec::new(), Vec::new()]; built.len()];
+        let mut shad = vec![[Vec::new(), Vec::new()]; built.len()];
         for _ in 0..rounds {
-            for (i, (_, _, b)) in built.iter().enumerate() {
-                prim[i].push(seconds(&mut || {
+            for (i, (name, _, b)) in built.iter().enumerate() {
+                prim[i][0].push(seconds(&mut || {
                     black_box(trace(b.as_ref(), &sc.primary, sc.scale.xi));
                 }));
-                shad[i].push(seconds(&mut || {
+                shad[i][0].push(seconds(&mut || {
                     black_box(shadow(b.as_ref(), &sc.shadow));
                 }));
+                if packets(name) {
+                    prim[i][1].push(seconds(&mut || {
+                        black_box(trace_packets(b.as_ref(), &sc.primary, sc.scale.xi));
+                    }));
+                    shad[i][1].push(seconds(&mut || {
+                        black_box(shadow_packets(b.as_ref(), &sc.shadow));
+                    }));
+                }
             }
         }
         let embree = built.iter().position(|b| b.0 == "embree");
-        let vs = |times: &[Vec<f64>], i: usize| {
-            embree.map_or(f64::NAN, |e| {
-                median((0..rounds).map(|r| times[e][r] / times[i][r]).collect())
-            })
+        // Median over the passes of `a`'s seconds over `b`'s.
+        let ratio = |a: &[f64], b: &[f64]| median((0..rounds).map(|r| a[r] / b[r]).collect());
+        let vs = |times: &[[Vec<f64>; 2]], i: usize, m: usize| {
+            embree.map_or(f64::NAN, |e| ratio(&times[e][m], &times[i][m]))
         };
-        for (i, (name, build_s, b)) in built.iter().enumerate() {
-            let s = b.stats();
-            eprintln!(
-                "{:>9} {:>14} {:>8.3} {:>9} {:>8} {:>10.2} {:>9.1} {:>11.3e} {:>11.3e} {:>8.3} {:>8.3}",
-                n,
-                name,
-                build_s,
-                s.nodes,
-                s.leaves,
-                s.mean_refs_per_leaf,
-                s.memory_bytes as f64 / 1e6,
-                sc.primary.len() as f64 / median(prim[i].clone()),
-                sc.shadow.len() as f64 / median(shad[i].clone()),
-                vs(&prim, i),
-                vs(&shad, i),
-            );
+        for m in 0..2 {
+            for (i, (name, build_s, b)) in built.iter().enumerate() {
+                if m == 1 && !packets(name) {
+                    continue;
+                }
+                let s = b.stats();
+                let (one, one_s) = if m == 1 {
+                    (
+                        ratio(&prim[i][0], &prim[i][1]),
+                        ratio(&shad[i][0], &shad[i][1]),
+                    )
+                } else {
+                    (f64::NAN, f64::NAN)
+                };
+                let label = if m == 1 {
+                    format!("{name} packets")
+                } else {
+                    (*name).to_string()
+                };
+                eprintln!(
+                    "{:>9} {:>17} {:>8.3} {:>9} {:>8} {:>10.2} {:>9.1} {:>11.3e} {:>11.3e} {:>8.3} {:>8.3} {:>8.3} {:>8.3}",
+                    n,
+                    label,
+                    build_s,
+                    s.nodes,
+                    s.leaves,
+                    s.mean_refs_per_leaf,
+                    s.memory_bytes as f64 / 1e6,
+                    sc.primary.len() as f64 / median(prim[i][m].clone()),
+                    sc.shadow.len() as f64 / median(shad[i][m].clone()),
+                    vs(&prim, i, m),
+                    vs(&shad, i, m),
+                    one,
+                    one_s,
+                );
+            }
         }
     }
     eprintln!(
         "(build s: median of 3; rays/s: median of {rounds} passes of {W}x{H} primary rays and of the shadow rays of \
-         their hits, the backends taking turns pass by pass; 'vs embree': median over the passes of the row's speed / \
-         Embree user geometry's in the same pass, primary and (shadow) rays; {} threads)\n",
+         their hits, the backends taking turns pass by pass, one ray at a time, then in packets of {PACKET} \
+         (8x1 pixel tiles; the shadow rays of 8 neighbouring hits); 'vs embree': median over the passes of the \
+         row's speed / Embree user geometry's in the same pass and mode, primary and (shadow) rays; 'vs 1 ray': \
+         a packet row's speed / the same backend's one ray at a time in the same pass; {} threads)\n",
         rayon::current_num_threads()
     );
 }

@@ -188,18 +188,20 @@ fn info() -> Result<()> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     // An unusable SPLATRAY_SIMD is refused before any work.
-    let result = splatray::simd::configured().and_then(|_| match cli.command {
-        Command::Info => info(),
-        Command::Render(args) => cli::render::run(&args),
-        Command::Compare(args) => cli::compare::run(&args),
-        Command::Sample(a) => cli::sample_cmd::run(&a),
-        Command::Splat(a) => cli::splat_cmd::run(&a),
-        Command::Export(a) => cli::export::run(&a),
-        Command::Sweep(a) => cli::sweep::run(&a),
-        Command::ScanCheck(a) => cli::scan_check::run(&a),
-        Command::Stitch(a) => stitch(&a),
-        Command::Terrain(a) => terrain(&a),
-    });
+    let result = splatray::simd::configured()
+        .and_then(|_| splatray::accel::packets_configured())
+        .and_then(|_| match cli.command {
+            Command::Info => info(),
+            Command::Render(args) => cli::render::run(&args),
+            Command::Compare(args) => cli::compare::run(&args),
+            Command::Sample(a) => cli::sample_cmd::run(&a),
+            Command::Splat(a) => cli::splat_cmd::run(&a),
+            Command::Export(a) => cli::export::run(&a),
+            Command::Sweep(a) => cli::sweep::run(&a),
+            Command::ScanCheck(a) => cli::scan_check::run(&a),
+            Command::Stitch(a) => stitch(&a),
+            Command::Terrain(a) => terrain(&a),
+        });
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

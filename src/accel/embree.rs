@@ -2,7 +2,7 @@
 //! (below, in safe code) gather the candidate window of §4.3 into the query
 //! of each ray; the FFI is in [`crate::embree`].
 
-use super::{Backend, BuildStats, Candidate, CandidateHits, Departure, Query, Skip};
+use super::{Backend, BuildStats, Candidate, CandidateHits, Departure, PACKET, Query, Skip};
 use crate::embree::{Device, EmbreeError, UserGeometry, UserScene};
 use crate::geometry::Ray;
 use crate::primitive::Primitive;
@@ -86,6 +86,15 @@ impl<P: Primitive> UserGeometry for Primitives<P> {
     }
 }
 
+/// The rays `(ray, t_min, t_max)` of up to [`PACKET`] queries (lanes past
+/// them repeat the first ray; the packet calls leave them out).
+fn packet_rays(qs: &[Query]) -> [(Ray, f32, f32); PACKET] {
+    std::array::from_fn(|k| {
+        qs.get(k)
+            .map_or((qs[0].ray, 0.0, 0.0), |q| (q.ray, q.t_min, q.t_max))
+    })
+}
+
 /// Embree's BVH over user-geometry primitives.
 pub struct EmbreeBackend<P: Primitive> {
     scene: UserScene<Primitives<P>>,
@@ -124,6 +133,48 @@ impl<P: Primitive> Backend for EmbreeBackend<P> {
     fn occluded_from(&self, q: &Query) -> bool {
         self.scene
             .occluded(&q.ray, q.t_min, q.t_max, &q.from.as_ref())
+    }
+
+    /// True: `rtcIntersect8` traces the primary rays of 8×1 pixel tiles
+    /// 1.69 times and the shadow rays of neighbouring hits 1.58 times as
+    /// fast as `rtcIntersect1` at 35k splats (1.02 / 0.75 at 1M), and
+    /// renders the bunny in 0.89 of the time (`docs/development.md`,
+    /// "Issue 25: ray packets", with the commands).
+    fn prefers_packets(&self) -> bool {
+        true
+    }
+
+    /// Packets of up to eight rays through `rtcIntersect8`, each lane with
+    /// its own window (the same callbacks: the same candidates as one ray
+    /// at a time).
+    fn intersect_packet(&self, qs: &[Query], hits: &mut [CandidateHits]) {
+        assert!(hits.len() >= qs.len(), "a window per query");
+        for (qs, hits) in qs.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
+            let rays = packet_rays(qs);
+            let mut it = qs.iter().zip(hits.iter_mut());
+            let mut gathers: [Option<Gather<'_>>; PACKET] = std::array::from_fn(|_| {
+                it.next().map(|(q, hits)| {
+                    hits.clear();
+                    Gather {
+                        hits,
+                        t_max: q.t_max,
+                        from: q.from.as_ref(),
+                    }
+                })
+            });
+            self.scene.intersect8(&rays[..qs.len()], &mut gathers);
+        }
+    }
+
+    /// Packets of up to eight rays through `rtcOccluded8`.
+    fn occluded_packet(&self, qs: &[Query], out: &mut [bool]) {
+        assert!(out.len() >= qs.len(), "an answer per query");
+        for (qs, out) in qs.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
+            let rays = packet_rays(qs);
+            let from: [Option<&Departure>; PACKET] =
+                std::array::from_fn(|k| qs.get(k).and_then(|q| q.from.as_ref()));
+            self.scene.occluded8(&rays[..qs.len()], &from, out);
+        }
     }
 
     fn stats(&self) -> &BuildStats {

@@ -90,4 +90,75 @@ pub trait Backend: Send + Sync {
     fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
         self.occluded_from(&Query::new(*ray, t_min, t_max))
     }
+
+    /// True when [`Backend::intersect_packet`] and
+    /// [`Backend::occluded_packet`] trace a coherent batch faster than one
+    /// query at a time, so the integrator hands this backend batches (the
+    /// answers are the same either way). False by default.
+    fn prefers_packets(&self) -> bool {
+        false
+    }
+
+    /// A batch of queries traced together (a packet: e.g. the primary rays
+    /// of a small screen tile, or the shadow rays of one hit): `hits[i]`
+    /// gets exactly what [`Backend::intersect_from`] gives `qs[i]`, the
+    /// same candidates bit for bit, whatever else the batch holds. Backends
+    /// that trace coherent rays together (the octree, Embree's
+    /// `rtcIntersect8`) override it; this default traces one at a time.
+    ///
+    /// # Panics
+    /// If `hits` is shorter than `qs`.
+    fn intersect_packet(&self, qs: &[Query], hits: &mut [CandidateHits]) {
+        assert!(hits.len() >= qs.len(), "a window per query");
+        for (q, h) in qs.iter().zip(hits.iter_mut()) {
+            self.intersect_from(q, h);
+        }
+    }
+
+    /// [`Backend::occluded_from`] for a batch: `out[i]` is its answer for
+    /// `qs[i]`. The default asks one query at a time.
+    ///
+    /// # Panics
+    /// If `out` is shorter than `qs`.
+    fn occluded_packet(&self, qs: &[Query], out: &mut [bool]) {
+        assert!(out.len() >= qs.len(), "an answer per query");
+        for (q, o) in qs.iter().zip(out.iter_mut()) {
+            *o = self.occluded_from(q);
+        }
+    }
 }
+
+/// The environment variable that forces the integrator's batches on
+/// (`on`) or off (`off`) whatever the backend prefers
+/// ([`Backend::prefers_packets`]); unset: the backend's preference.
+pub const PACKETS_VAR: &str = "SPLATRAY_PACKETS";
+
+/// What [`PACKETS_VAR`] asks for: `Some(true)` for `on`, `Some(false)` for
+/// `off`, `None` when unset; a one-line error for any other value.
+pub fn packets_configured() -> crate::Result<Option<bool>> {
+    match std::env::var(PACKETS_VAR) {
+        Err(_) => Ok(None),
+        Ok(v) => match v.trim() {
+            "on" => Ok(Some(true)),
+            "off" => Ok(Some(false)),
+            _ => Err(crate::Error::invalid(format!(
+                "{PACKETS_VAR}={v}: expected on or off"
+            ))),
+        },
+    }
+}
+
+/// Whether the integrator hands `backend` coherent batches: [`PACKETS_VAR`]
+/// when set (an unusable value is refused by the command line before any
+/// work, and means unset here), else [`Backend::prefers_packets`].
+#[must_use]
+pub fn use_packets(backend: &dyn Backend) -> bool {
+    packets_configured()
+        .ok()
+        .flatten()
+        .unwrap_or_else(|| backend.prefers_packets())
+}
+
+/// Most queries a backend traces together in one packet (the octree's
+/// active mask, Embree's `rtcIntersect8`); longer batches are split.
+pub const PACKET: usize = 8;

@@ -101,7 +101,82 @@ pub(super) fn embree_rayhit(ray: &Ray, t_min: f32, t_max: f32) -> RayHitSlot {
     }
 }
 
-/// The ray of a callback's `RTCRay`.
+/// Rays in one packet of `rtcIntersect8` / `rtcOccluded8`.
+pub(super) const LANES8: usize = 8;
+
+/// An `RTCRayHit8` with room after it for the `instPrimID` lanes Embree
+/// 4.3 and later append to `RTCHit8` (as [`RayHitSlot`] for one ray).
+#[repr(C, align(32))]
+pub(super) struct RayHit8Slot {
+    pub(super) rayhit: sys::RTCRayHit8,
+    pub(super) tail: [c_uint; LANES8],
+}
+
+/// The valid mask of a packet as Embree reads it: `-1` on active lanes,
+/// `0` elsewhere, aligned to 32 bytes.
+#[repr(C, align(32))]
+pub(super) struct Valid8(pub(super) [i32; LANES8]);
+
+/// The rays `(ray, t_min, t_max)` (at most 8) as an `RTCRay8` and its
+/// valid mask; lane `k` carries `id = k`, which the callbacks read to find
+/// the lane's query whether Embree hands them the packet or one ray of it.
+pub(super) fn embree_ray8(rays: &[(Ray, f32, f32)]) -> (sys::RTCRay8, Valid8) {
+    let mut r = sys::RTCRay8 {
+        org_x: [0.0; LANES8],
+        org_y: [0.0; LANES8],
+        org_z: [0.0; LANES8],
+        tnear: [0.0; LANES8],
+        dir_x: [0.0; LANES8],
+        dir_y: [0.0; LANES8],
+        dir_z: [1.0; LANES8],
+        time: [0.0; LANES8],
+        tfar: [f32::NEG_INFINITY; LANES8],
+        mask: [u32::MAX; LANES8],
+        id: [0; LANES8],
+        flags: [0; LANES8],
+    };
+    let mut valid = Valid8([0; LANES8]);
+    for (k, (ray, t_min, t_max)) in rays.iter().enumerate().take(LANES8) {
+        r.org_x[k] = ray.origin.x;
+        r.org_y[k] = ray.origin.y;
+        r.org_z[k] = ray.origin.z;
+        r.tnear[k] = *t_min;
+        r.dir_x[k] = ray.dir.x;
+        r.dir_y[k] = ray.dir.y;
+        r.dir_z[k] = ray.dir.z;
+        r.tfar[k] = *t_max;
+        r.id[k] = k as c_uint;
+        valid.0[k] = -1;
+    }
+    (r, valid)
+}
+
+/// [`embree_ray8`] with empty hit records, as `rtcIntersect8` expects
+/// them, in a [`RayHit8Slot`].
+pub(super) fn embree_rayhit8(rays: &[(Ray, f32, f32)]) -> (RayHit8Slot, Valid8) {
+    let (ray, valid) = embree_ray8(rays);
+    let none = [sys::RTC_INVALID_GEOMETRY_ID; LANES8];
+    let slot = RayHit8Slot {
+        rayhit: sys::RTCRayHit8 {
+            ray,
+            hit: sys::RTCHit8 {
+                Ng_x: [0.0; LANES8],
+                Ng_y: [0.0; LANES8],
+                Ng_z: [0.0; LANES8],
+                u: [0.0; LANES8],
+                v: [0.0; LANES8],
+                primID: none,
+                geomID: none,
+                instID: [none; 1],
+            },
+        },
+        tail: none,
+    };
+    (slot, valid)
+}
+
+/// The ray of a callback's `RTCRay` (the native discs' filter).
+#[cfg(any(test, feature = "native-discs"))]
 pub(super) fn ray_of(r: &sys::RTCRay) -> Ray {
     Ray {
         origin: glam::Vec3::new(r.org_x, r.org_y, r.org_z),

@@ -4,7 +4,7 @@
 //! maximum depth. It sees only the [`Backend`] trait and the shared
 //! resolver, so every backend renders with identical shading.
 
-use crate::accel::{Backend, CandidateHits, Departure, Query, Ray};
+use crate::accel::{Backend, CandidateHits, Departure, PACKET, Query, Ray};
 use crate::progress::{Progress, notify};
 use crate::resolve::{SurfaceHit, resolve_within};
 use crate::scene::{Light, Material, Scene};
@@ -140,6 +140,31 @@ pub trait Surfaces: Sync {
     fn occluded(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> bool;
     /// `eps_self` (§3.2): secondary rays start this far from their origin.
     fn eps_self(&self) -> f32;
+
+    /// True when the integrator should hand coherent batches to
+    /// [`Surfaces::hits`] and [`Surfaces::occluded_batch`] (the answers
+    /// are the same either way). False by default.
+    fn packets(&self) -> bool {
+        false
+    }
+
+    /// [`Surfaces::hit`] of each camera ray of a batch (the primary rays of
+    /// a small screen tile) into `out`; `hits` holds a window per ray
+    /// (scratch). The default traces one at a time.
+    fn hits(&self, rays: &[Ray], hits: &mut [CandidateHits], out: &mut [Option<ShadeHit>]) {
+        for ((ray, h), o) in rays.iter().zip(hits.iter_mut()).zip(out.iter_mut()) {
+            *o = self.hit(ray, None, h);
+        }
+    }
+
+    /// [`Surfaces::occluded`] of shadow rays `(ray, t_max)` all leaving the
+    /// hit `from` (toward the samples of one sphere light), into `out`.
+    /// The default asks one at a time.
+    fn occluded_batch(&self, rays: &[(Ray, f32)], from: &ShadeHit, out: &mut [bool]) {
+        for ((ray, t_max), o) in rays.iter().zip(out.iter_mut()) {
+            *o = self.occluded(ray, from, *t_max);
+        }
+    }
 }
 
 /// The splats of a scene through one backend and the shared resolver.
@@ -213,11 +238,46 @@ impl Surfaces for SplatSurfaces<'_> {
     fn eps_self(&self) -> f32 {
         self.scene.options.scale.eps_self
     }
+
+    fn packets(&self) -> bool {
+        crate::accel::use_packets(self.backend)
+    }
+
+    /// One [`Backend::intersect_packet`] call per [`PACKET`] rays, each
+    /// window then resolved as [`Surfaces::hit`] resolves it.
+    fn hits(&self, rays: &[Ray], hits: &mut [CandidateHits], out: &mut [Option<ShadeHit>]) {
+        for ((rays, hits), out) in rays
+            .chunks(PACKET)
+            .zip(hits.chunks_mut(PACKET))
+            .zip(out.chunks_mut(PACKET))
+        {
+            let qs: [Query; PACKET] = std::array::from_fn(|k| {
+                Query::new(rays[k.min(rays.len() - 1)], 0.0, f32::INFINITY)
+            });
+            self.backend.intersect_packet(&qs[..rays.len()], hits);
+            for ((ray, h), o) in rays.iter().zip(hits.iter()).zip(out.iter_mut()) {
+                *o = self.resolve(h, ray);
+            }
+        }
+    }
+
+    /// One [`Backend::occluded_packet`] call per [`PACKET`] rays.
+    fn occluded_batch(&self, rays: &[(Ray, f32)], from: &ShadeHit, out: &mut [bool]) {
+        for (rays, out) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
+            let qs: [Query; PACKET] = std::array::from_fn(|k| {
+                let (ray, t_max) = rays[k.min(rays.len() - 1)];
+                self.leaving(&ray, from, t_max)
+            });
+            self.backend.occluded_packet(&qs[..rays.len()], out);
+        }
+    }
 }
 
 struct Tracer<'a> {
     scene: &'a Scene,
     surfaces: &'a dyn Surfaces,
+    /// Hand the surfaces coherent batches ([`Surfaces::packets`]).
+    packets: bool,
 }
 
 struct Scratch {
@@ -265,6 +325,51 @@ impl Tracer<'_> {
             .occluded(&ray, from, dist - self.surfaces.eps_self())
     }
 
+    /// The light samples `(l, d, e)` of one hit (see [`Tracer::direct`]):
+    /// the shadow rays of those facing `n` traced as one batch
+    /// ([`Surfaces::occluded_batch`]), then every sample handed to `add`
+    /// in order, as one at a time would.
+    fn shadow_batch(
+        &self,
+        from: &ShadeHit,
+        n: Vec3,
+        batch: &[(Vec3, f32, Vec3)],
+        s: &mut Scratch,
+        mut add: impl FnMut(Vec3, Vec3, bool),
+    ) {
+        let eps = self.surfaces.eps_self();
+        let none = Ray {
+            origin: from.point,
+            dir: Vec3::Z,
+        };
+        let mut rays = [(none, 0.0f32); PACKET];
+        let mut traced = 0;
+        for &(l, d, _) in batch {
+            if n.dot(l) > 0.0 {
+                rays[traced] = (
+                    Ray {
+                        origin: from.point,
+                        dir: l,
+                    },
+                    d - eps,
+                );
+                traced += 1;
+            }
+        }
+        let mut occluded = [false; PACKET];
+        self.surfaces
+            .occluded_batch(&rays[..traced], from, &mut occluded[..traced]);
+        s.rays.shadow += traced as u64;
+        let mut next = 0;
+        for &(l, _, e) in batch {
+            let visible = n.dot(l) > 0.0 && {
+                next += 1;
+                !occluded[next - 1]
+            };
+            add(l, e, visible);
+        }
+    }
+
     /// Irradiance-weighted light reaching `p` with facing normal `n`, plus
     /// the Blinn–Phong highlight toward `-view` when `spec > 0`; and the
     /// weights of all, facing and lit light samples (`Frame::light_lit`).
@@ -282,13 +387,14 @@ impl Tracer<'_> {
         // Weights of all, facing and lit light samples (`Frame::light_lit`).
         let mut tally = [0.0f32; 3];
         let weight = |e: Vec3| e.x + e.y + e.z;
-        // One light sample: direction `l`, distance `d`, irradiance `e`,
-        // counted, and added when it faces `n` and nothing blocks it.
-        let mut sample = |l: Vec3, d: f32, e: Vec3, s: &mut Scratch| {
+        // One light sample, direction `l`, irradiance `e`, whose shadow ray
+        // (traced only when it faces `n`) found it `visible`: counted, and
+        // added when it faces `n` and nothing blocks it.
+        let mut add = |l: Vec3, e: Vec3, visible: bool| {
             tally[0] += weight(e);
             if n.dot(l) > 0.0 {
                 tally[1] += weight(e);
-                if self.visible(hit, l, d, s) {
+                if visible {
                     tally[2] += weight(e);
                     let cos = n.dot(l);
                     let mut c = albedo * cos;
@@ -300,16 +406,19 @@ impl Tracer<'_> {
                 }
             }
         };
+        // Whether the light at distance `d` along `l` is seen from the hit:
+        // its shadow ray, traced alone, only when it faces `n`.
+        let seen = |l: Vec3, d: f32, s: &mut Scratch| n.dot(l) > 0.0 && self.visible(hit, l, d, s);
         for light in &self.scene.lights {
             match *light {
                 Light::Point { position, power } => {
                     let to = position - p;
                     let d2 = to.length_squared();
                     let d = d2.sqrt();
-                    sample(to / d, d, power / d2, s);
+                    add(to / d, power / d2, seen(to / d, d, s));
                 }
                 Light::Directional { direction, power } => {
-                    sample(-direction, f32::INFINITY, power, s);
+                    add(-direction, power, seen(-direction, f32::INFINITY, s));
                 }
                 Light::Sphere {
                     position,
@@ -326,6 +435,12 @@ impl Tracer<'_> {
                     });
                     let k = (samples as f32).sqrt().ceil() as u32;
                     let share = 1.0 / (k * k) as f32;
+                    // With packets, up to `PACKET` samples are drawn (the
+                    // same draws in the same order), their shadow rays
+                    // traced as one batch from the one hit, then added in
+                    // order: the same sums as one at a time.
+                    let mut batch = [(Vec3::ZERO, 0.0f32, Vec3::ZERO); PACKET];
+                    let mut len = 0;
                     for i in 0..k {
                         for j in 0..k {
                             let r = radius * ((i as f32 + s.rng.next_f32()) / k as f32).sqrt();
@@ -335,8 +450,20 @@ impl Tracer<'_> {
                             let to = q - p;
                             let d2 = to.length_squared();
                             let d = d2.sqrt();
-                            sample(to / d, d, power * (share / d2), s);
+                            if !self.packets {
+                                add(to / d, power * (share / d2), seen(to / d, d, s));
+                                continue;
+                            }
+                            batch[len] = (to / d, d, power * (share / d2));
+                            len += 1;
+                            if len == PACKET {
+                                self.shadow_batch(hit, n, &batch[..len], s, &mut add);
+                                len = 0;
+                            }
                         }
+                    }
+                    if len > 0 {
+                        self.shadow_batch(hit, n, &batch[..len], s, &mut add);
                     }
                 }
             }
@@ -419,6 +546,80 @@ impl Tracer<'_> {
     }
 }
 
+impl Tracer<'_> {
+    /// Renders image row `y` into `row`, pixels in tiles of `N` (the
+    /// primary rays of a tile traced as one batch, [`Surfaces::hits`],
+    /// when `N > 1`), then each pixel's samples shaded in order, every
+    /// sample with its own generator seeded by its pixel and index: the
+    /// same rays, draws and sums whatever `N`.
+    fn row<const N: usize>(&self, y: usize, s: &mut Scratch, row: &mut Row) {
+        let scene = self.scene;
+        let cam = &scene.camera;
+        let w = cam.width as usize;
+        let k = (cam.spp as f32).sqrt().ceil() as u32;
+        let per_pixel = cam.spp;
+        let mut batch_hits: [CandidateHits; N] =
+            std::array::from_fn(|_| CandidateHits::new(scene.options.scale.xi));
+        for x0 in (0..w).step_by(N) {
+            let xs = x0..(x0 + N).min(w);
+            let np = xs.len();
+            let mut sums = [Vec3::ZERO; N];
+            for i in 0..per_pixel {
+                let mut rays = [Ray {
+                    origin: Vec3::ZERO,
+                    dir: Vec3::Z,
+                }; N];
+                let mut rngs = [Rng(0); N];
+                for (p, x) in xs.clone().enumerate() {
+                    let mut rng = Rng::new(x as u32, y as u32, i);
+                    let (ox, oy) = if per_pixel == 1 {
+                        (0.5, 0.5)
+                    } else {
+                        let (cx, cy) = (i % k, i / k % k);
+                        (
+                            (cx as f32 + rng.next_f32()) / k as f32,
+                            (cy as f32 + rng.next_f32()) / k as f32,
+                        )
+                    };
+                    rays[p] = cam.ray(x as f32 + ox, y as f32 + oy);
+                    rngs[p] = rng;
+                }
+                let mut hits = [None; N];
+                if N > 1 {
+                    self.surfaces
+                        .hits(&rays[..np], &mut batch_hits, &mut hits[..np]);
+                } else {
+                    hits[0] = self.intersect(&rays[0], None, s);
+                }
+                for p in 0..np {
+                    let (ray, hit) = (&rays[p], hits[p]);
+                    s.rng = rngs[p];
+                    s.rays.primary += 1;
+                    if i == 0 {
+                        row.depth.push(hit.map_or(f32::INFINITY, |h| h.t));
+                        row.normal.push(hit.map_or(Vec3::ZERO, |h| h.normal));
+                        row.splat.push(hit.map_or(u32::MAX, |h| h.id));
+                        row.albedo.push(hit.map_or(Vec3::ZERO, |h| {
+                            scene.materials[h.material as usize].color() * h.color
+                        }));
+                    }
+                    s.light = [0.0; 3];
+                    sums[p] += self.shade(ray, hit, 0, s);
+                    if i == 0 {
+                        let [all, facing, lit] = s.light;
+                        let share = |x: f32| if all > 0.0 { x / all } else { 0.0 };
+                        row.light_facing.push(share(facing));
+                        row.light_lit.push(share(lit));
+                    }
+                }
+            }
+            for sum in &sums[..np] {
+                row.rgb.push(*sum / per_pixel as f32);
+            }
+        }
+    }
+}
+
 /// One rendered image row and what it traced.
 struct Row {
     rgb: Vec<Vec3>,
@@ -475,11 +676,13 @@ fn render_surfaces_rows(
     let cam = &scene.camera;
     let rows = rows.start.min(cam.height)..rows.end.min(cam.height);
     let (w, h) = (cam.width as usize, rows.len());
-    let tracer = Tracer { scene, surfaces };
+    let tracer = Tracer {
+        scene,
+        surfaces,
+        packets: surfaces.packets(),
+    };
     let start = Instant::now();
     let rows_done = AtomicUsize::new(0);
-    let k = (cam.spp as f32).sqrt().ceil() as u32;
-    let per_pixel = cam.spp;
     let rows: Vec<Row> = (rows.start as usize..rows.end as usize)
         .into_par_iter()
         .map(|y| {
@@ -489,62 +692,29 @@ fn render_surfaces_rows(
                 rng: Rng::new(y as u32, 0, 0),
                 light: [0.0; 3],
             };
-            let mut rgb = Vec::with_capacity(w);
-            let mut depth = Vec::with_capacity(w);
-            let mut normal = Vec::with_capacity(w);
-            let mut splat = Vec::with_capacity(w);
-            let mut albedo = Vec::with_capacity(w);
-            let mut light_facing = Vec::with_capacity(w);
-            let mut light_lit = Vec::with_capacity(w);
-            for x in 0..w {
-                let mut sum = Vec3::ZERO;
-                for i in 0..per_pixel {
-                    s.rng = Rng::new(x as u32, y as u32, i);
-                    let (ox, oy) = if per_pixel == 1 {
-                        (0.5, 0.5)
-                    } else {
-                        let (cx, cy) = (i % k, i / k % k);
-                        (
-                            (cx as f32 + s.rng.next_f32()) / k as f32,
-                            (cy as f32 + s.rng.next_f32()) / k as f32,
-                        )
-                    };
-                    let ray = cam.ray(x as f32 + ox, y as f32 + oy);
-                    s.rays.primary += 1;
-                    let hit = tracer.intersect(&ray, None, &mut s);
-                    if i == 0 {
-                        depth.push(hit.map_or(f32::INFINITY, |h| h.t));
-                        normal.push(hit.map_or(Vec3::ZERO, |h| h.normal));
-                        splat.push(hit.map_or(u32::MAX, |h| h.id));
-                        albedo.push(hit.map_or(Vec3::ZERO, |h| {
-                            scene.materials[h.material as usize].color() * h.color
-                        }));
-                    }
-                    s.light = [0.0; 3];
-                    sum += tracer.shade(&ray, hit, 0, &mut s);
-                    if i == 0 {
-                        let [all, facing, lit] = s.light;
-                        let share = |x: f32| if all > 0.0 { x / all } else { 0.0 };
-                        light_facing.push(share(facing));
-                        light_lit.push(share(lit));
-                    }
-                }
-                rgb.push(sum / per_pixel as f32);
+            let mut row = Row {
+                rgb: Vec::with_capacity(w),
+                depth: Vec::with_capacity(w),
+                normal: Vec::with_capacity(w),
+                splat: Vec::with_capacity(w),
+                albedo: Vec::with_capacity(w),
+                light_facing: Vec::with_capacity(w),
+                light_lit: Vec::with_capacity(w),
+                rays: RayCounts::default(),
+            };
+            // Pixels in tiles of 8×1 with packets (their primary rays
+            // traced as one batch), else one by one.
+            if tracer.packets {
+                tracer.row::<PACKET>(y, &mut s, &mut row);
+            } else {
+                tracer.row::<1>(y, &mut s, &mut row);
             }
             if progress.is_some() {
                 let done = rows_done.fetch_add(1, Ordering::Relaxed) + 1;
                 notify(progress, "render", done as f64 / h as f64);
             }
-            Row {
-                rgb,
-                depth,
-                normal,
-                splat,
-                albedo,
-                light_facing,
-                light_lit,
-                rays: s.rays,
-            }
+            row.rays = s.rays;
+            row
         })
         .collect();
     let mut frame = Frame {

@@ -391,11 +391,102 @@ pub fn agree(
     Ok(())
 }
 
+/// The batches [`packets_agree`] traces: the queries in order in packets
+/// of 8 (coherent where the queries are, e.g. a camera's rows), in
+/// batches of uneven lengths (packets with lanes left empty, and single
+/// rays), and interleaved from the two halves (divergent packets).
+fn packet_orders(n: usize) -> Vec<(&'static str, Vec<usize>, Vec<usize>)> {
+    let in_order: Vec<usize> = (0..n).collect();
+    let eights: Vec<usize> = (0..n).step_by(8).map(|i| 8.min(n - i)).collect();
+    let mut uneven = Vec::new();
+    let mut left = n;
+    for &len in [8usize, 3, 5, 1, 7, 2, 6, 4].iter().cycle() {
+        if left == 0 {
+            break;
+        }
+        uneven.push(len.min(left));
+        left -= len.min(left);
+    }
+    let half = n.div_ceil(2);
+    let mut mixed: Vec<usize> = (0..half)
+        .flat_map(|i| [i, i + half])
+        .filter(|&i| i < n)
+        .collect();
+    mixed.reverse();
+    vec![
+        ("packets of 8", in_order.clone(), eights.clone()),
+        ("uneven batches", in_order, uneven),
+        ("divergent packets", mixed, eights),
+    ]
+}
+
+/// Checks `backend`'s packet queries (`Backend::intersect_packet`,
+/// `Backend::occluded_packet`) against its own single-ray answers on
+/// every query, in every order of [`packet_orders`]: identical candidate
+/// windows bit for bit, overflow flags and any-hit answers (the backend
+/// contract: a ray's candidates do not depend on the batch it is traced
+/// in).
+pub fn packets_agree(backend: &Named, queries: &[Query], xi: f32) -> Result<(), String> {
+    let bits = |h: &CandidateHits| {
+        let c: Vec<_> = h
+            .as_slice()
+            .iter()
+            .map(|c| (c.id, c.t.to_bits(), c.u.to_bits(), c.v.to_bits()))
+            .collect();
+        (c, h.overflowed())
+    };
+    let mut one = CandidateHits::new(xi);
+    let single: Vec<_> = queries
+        .iter()
+        .map(|q| {
+            backend.intersect_from(q, &mut one);
+            (bits(&one), backend.occluded_from(q))
+        })
+        .collect();
+    for (what, order, lens) in packet_orders(queries.len()) {
+        let mut at = 0;
+        for len in lens {
+            let idx = &order[at..at + len];
+            at += len;
+            let qs: Vec<Query> = idx.iter().map(|&i| queries[i]).collect();
+            // Stale windows and answers: the packet calls must clear them.
+            let mut hits = vec![CandidateHits::new(xi); len + 1];
+            for h in &mut hits {
+                h.offer(splatray::accel::Candidate {
+                    id: 7,
+                    t: 0.5,
+                    u: 0.0,
+                    v: 0.0,
+                });
+            }
+            let mut occ = vec![true; len + 1];
+            backend.intersect_packet(&qs, &mut hits);
+            backend.occluded_packet(&qs, &mut occ);
+            for (j, &i) in idx.iter().enumerate() {
+                if bits(&hits[j]) != single[i].0 || occ[j] != single[i].1 {
+                    return Err(format!(
+                        "{}: {what}: query {i} (lane {j} of {len}) traced in a packet differs from                          the same query alone: {:?} / {} vs {:?} / {}\n  {:?}",
+                        backend.name(),
+                        bits(&hits[j]),
+                        occ[j],
+                        single[i].0,
+                        single[i].1,
+                        queries[i]
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Runs [`agree`] for every tested backend; panics with the seed and the
 /// replayable description of the first disagreement.
 pub fn assert_all_agree(b: &Backends, splats: &[Splat], queries: &[Query], xi: f32, what: &str) {
     for backend in &b.tested {
-        if let Err(e) = agree(&b.oracle, backend, splats, queries, xi) {
+        if let Err(e) = agree(&b.oracle, backend, splats, queries, xi)
+            .and_then(|()| packets_agree(backend, queries, xi))
+        {
             panic!("{what}: {e}\n(replay with SPLATRAY_SEED={:#x})", seed());
         }
     }

@@ -66,6 +66,7 @@
 //! hits anything.
 
 mod build;
+mod packet;
 mod parts;
 mod traverse;
 
@@ -362,6 +363,24 @@ impl<P: Primitive> Backend for Octree<P> {
             None => self.any_hit(ray, t_min, t_max, NoSkip),
             Some(d) => self.any_hit(ray, t_min, t_max, d),
         }
+    }
+
+    /// Packets of up to [`crate::accel::PACKET`] rays descending together
+    /// (`packet`): the same candidates as one ray at a time.
+    fn intersect_packet(&self, qs: &[Query], hits: &mut [CandidateHits]) {
+        self.gather_packets(qs, hits);
+    }
+
+    fn occluded_packet(&self, qs: &[Query], out: &mut [bool]) {
+        self.any_hit_packets(qs, out);
+    }
+
+    /// False: the octree's packets trace the bench's primary and shadow
+    /// rays at 0.99 / 0.82 (35k splats) and 1.07 / 1.02 (1M) of its single
+    /// rays, and render the bunny 1.09 times slower (`docs/development.md`,
+    /// "Issue 25: ray packets", with the commands).
+    fn prefers_packets(&self) -> bool {
+        false
     }
 
     fn stats(&self) -> &BuildStats {

@@ -69,7 +69,7 @@ impl<P: Primitive> Tree<P> {
     /// Where the ray enters the box around the content (not before
     /// `t_min`) and where it leaves it (NaN on a NaN ray).
     #[inline(always)]
-    fn window(&self, ctx: &RayCtx) -> (f32, f32) {
+    pub(super) fn window(&self, ctx: &RayCtx) -> (f32, f32) {
         let [lo, hi] = self.bounds;
         let a = (lo - ctx.origin) * ctx.inv_dir;
         let b = (hi - ctx.origin) * ctx.inv_dir;
@@ -190,7 +190,28 @@ impl<P: Primitive> Tree<P> {
         }
     }
 
-    fn visit<V: Visitor<P>>(
+    /// The leaf `node`'s primitives to `visitor` (its lanes filtered on
+    /// the tree's SIMD path); true when the visitor stopped.
+    #[inline(always)]
+    pub(super) fn leaf<V: Visitor<P>>(&self, node: super::Node, visitor: &mut V) -> bool {
+        let range = node.first as usize..(node.first + node.meta) as usize;
+        let l = lanes::<P>();
+        if self.shared {
+            // One branch, the same for every leaf of the tree.
+            return self.entries[range].iter().any(|&e| {
+                let p = (e & ENTRY_PACK) as usize;
+                let ids = &self.pack_ids[p * l..(p + 1) * l];
+                let pack = std::slice::from_ref(&self.packs[p]);
+                visitor.packs(pack, ids, e >> ENTRY_MASK_SHIFT, self.isa)
+            });
+        }
+        let ids = &self.pack_ids[range.start * l..range.end * l];
+        visitor.packs(&self.packs[range], ids, u32::MAX, self.isa)
+    }
+
+    /// The subtree of node `index` (cell `lo`, edge `size`), front to back;
+    /// true when the visitor stopped.
+    pub(super) fn visit<V: Visitor<P>>(
         &self,
         index: usize,
         lo: Vec3,
@@ -211,19 +232,7 @@ impl<P: Primitive> Tree<P> {
             return false;
         }
         if node.meta & INTERIOR == 0 {
-            let range = node.first as usize..(node.first + node.meta) as usize;
-            let l = lanes::<P>();
-            if self.shared {
-                // One branch, the same for every leaf of the tree.
-                return self.entries[range].iter().any(|&e| {
-                    let p = (e & ENTRY_PACK) as usize;
-                    let ids = &self.pack_ids[p * l..(p + 1) * l];
-                    let pack = std::slice::from_ref(&self.packs[p]);
-                    visitor.packs(pack, ids, e >> ENTRY_MASK_SHIFT, self.isa)
-                });
-            }
-            let ids = &self.pack_ids[range.start * l..range.end * l];
-            return visitor.packs(&self.packs[range], ids, u32::MAX, self.isa);
+            return self.leaf(node, visitor);
         }
         let mask = node.meta & 0xff;
         let half = size * 0.5;
@@ -283,13 +292,13 @@ impl<P: Primitive> Tree<P> {
 }
 
 /// Per-ray constants of the traversal.
-struct RayCtx {
-    origin: Vec3,
+pub(super) struct RayCtx {
+    pub(super) origin: Vec3,
     /// `1 / dir`, `±inf` on zero components.
-    inv_dir: Vec3,
+    pub(super) inv_dir: Vec3,
     /// Bit `k` set when `dir[k]` is negative (sign bit, so `-0.0` counts).
-    sign_mask: usize,
-    t_min: f32,
+    pub(super) sign_mask: usize,
+    pub(super) t_min: f32,
     /// `origin` and `inv_dir` in SIMD lanes.
     origin_a: Vec3A,
     inv_dir_a: Vec3A,
@@ -297,7 +306,7 @@ struct RayCtx {
 
 impl RayCtx {
     #[inline]
-    fn new(ray: &Ray, t_min: f32) -> RayCtx {
+    pub(super) fn new(ray: &Ray, t_min: f32) -> RayCtx {
         // One division (IEEE: each lane as the scalar's).
         let inv_dir_a = Vec3A::ONE / Vec3A::from(ray.dir);
         RayCtx {

@@ -1,0 +1,371 @@
+//! Ray packets through the [`Octree`] (issue 25): up to [`PACKET`] rays of
+//! one batch descend the tree together, each node's content box and each
+//! child cell tested for every ray of the packet at once (the interval
+//! test of §3.2 lane by lane, the same IEEE operations as the single ray's,
+//! so a ray takes part in a node exactly when its own traversal would let
+//! it in with the same window), with a mask of the rays still active; in a
+//! leaf every active ray runs the single ray's leaf code (the SIMD filter of
+//! its path, then [`crate::primitive::Primitive::intersect`] and the
+//! self-hit rule per lane).
+//!
+//! Why the candidates are those of one ray at a time (`docs/DESIGN.md`,
+//! "The backend contract", rules 1 and 2): each ray keeps its own window
+//! ([`CandidateHits`]) and its own cutoff; a ray meets a cell when its
+//! padded slab interval there is non-empty within `[t_min, cutoff]`, as in
+//! [`Tree::visit`]; the order cells are visited in (the packet's, not the
+//! ray's own, and from the root rather than along the top-level grid) only
+//! changes which hits are offered before the window narrows, never the
+//! final window, which does not depend on arrival order. A cell is skipped
+//! for a ray only when it is entered beyond the ray's current cutoff,
+//! which is never nearer than the final window's far end.
+//!
+//! A packet whose rays' direction signs differ (no common front-to-back
+//! order) is traced one ray at a time, and so is a batch of fewer than
+//! [`MIN_PACKET`] rays; a packet that thins out to one active ray hands it
+//! to the single ray's descent at that node.
+
+use super::traverse::{AnyHit, Gather, RayCtx, Visitor};
+use super::{INTERIOR, Octree, Tree, child_lo};
+use crate::accel::{CandidateHits, NoSkip, PACKET, Query, Skip};
+use crate::primitive::Primitive;
+use glam::{Vec3, Vec4};
+
+/// Fewest rays traced as a packet; smaller batches go one at a time.
+const MIN_PACKET: usize = 2;
+
+/// A packet that thins out to this many active rays hands each to the
+/// single ray's descent.
+const LONE: u32 = 2;
+
+/// Lane mask type: bit `k` for ray `k` of the packet.
+type Mask = u32;
+
+/// Eight lanes as two SIMD registers (lanes 0–3, 4–7).
+type Wide = [Vec4; 2];
+
+/// `a` as two registers.
+#[inline(always)]
+fn wide(a: &[f32; PACKET]) -> Wide {
+    [
+        Vec4::new(a[0], a[1], a[2], a[3]),
+        Vec4::new(a[4], a[5], a[6], a[7]),
+    ]
+}
+
+/// The packet's rays, lane by lane (structure of arrays).
+struct Lanes {
+    /// Origins, per axis.
+    o: [Wide; 3],
+    /// `1 / dir`, per axis (IEEE: `±inf` on zero components).
+    inv: [Wide; 3],
+    t_min: Wide,
+    /// Each ray's own constants, for the single-ray descent of a lone ray.
+    ctx: [RayCtx; PACKET],
+    /// The direction signs every ray of the packet shares.
+    sign_mask: usize,
+}
+
+impl Lanes {
+    /// The lanes of `qs` (at most [`PACKET`]), or `None` when their
+    /// direction signs differ.
+    fn new(qs: &[Query]) -> Option<Lanes> {
+        let ctx: [RayCtx; PACKET] = std::array::from_fn(|k| {
+            let q = &qs[k.min(qs.len() - 1)];
+            RayCtx::new(&q.ray, q.t_min)
+        });
+        let sign_mask = ctx[0].sign_mask;
+        if ctx[..qs.len()].iter().any(|c| c.sign_mask != sign_mask) {
+            return None;
+        }
+        let axis = |f: &dyn Fn(&RayCtx) -> Vec3| {
+            [0, 1, 2].map(|a| wide(&std::array::from_fn(|k| f(&ctx[k])[a])))
+        };
+        Some(Lanes {
+            o: axis(&|c| c.origin),
+            inv: axis(&|c| c.inv_dir),
+            t_min: wide(&std::array::from_fn(|k| ctx[k].t_min)),
+            ctx,
+            sign_mask,
+        })
+    }
+}
+
+/// `slab` of the single ray on four lanes: `(near, far)` of the planes at
+/// parameters `a` and `b`, with its NaN rule (`a < b` false: the other
+/// value).
+#[inline(always)]
+fn slab(a: Vec4, b: Vec4) -> (Vec4, Vec4) {
+    (
+        Vec4::select(a.cmplt(b), a, b),
+        Vec4::select(a.cmpgt(b), a, b),
+    )
+}
+
+/// The lanes whose `entry <= exit`, entry the largest of `near` (x, y, z)
+/// and `t_min`, exit the smallest of `far` and `cut`: `maxps` / `minps`
+/// (`a > b ? a : b`), the single ray's comparisons and NaN rule.
+#[inline(always)]
+fn open(near: [Vec4; 3], far: [Vec4; 3], t_min: Vec4, cut: Vec4) -> Mask {
+    let entry = near[0].max(near[1]).max(near[2]).max(t_min);
+    let exit = far[0].min(far[1]).min(far[2]).min(cut);
+    entry.cmple(exit).bitmask()
+}
+
+/// Each active ray's cutoff (`-inf` on lanes without a ray).
+#[inline(always)]
+fn cutoffs<P: Primitive, V: Visitor<P>>(vis: &[Option<V>; PACKET]) -> Wide {
+    wide(&std::array::from_fn(|k| {
+        vis[k].as_ref().map_or(f32::NEG_INFINITY, V::cutoff)
+    }))
+}
+
+impl<P: Primitive> Tree<P> {
+    /// The rays of `active` that meet the node's content box `[lo, hi]`
+    /// within `[t_min, cutoff]`: [`Tree::visit`]'s test, four lanes at a
+    /// time.
+    // The halves of several arrays in lockstep.
+    #[allow(clippy::needless_range_loop)]
+    #[inline(always)]
+    fn meets_box(l: &Lanes, [lo, hi]: [Vec3; 2], cut: &Wide, active: Mask) -> Mask {
+        let mut m = 0;
+        for h in 0..2 {
+            let mut near = [Vec4::ZERO; 3];
+            let mut far = [Vec4::ZERO; 3];
+            for a in 0..3 {
+                let (o, inv) = (l.o[a][h], l.inv[a][h]);
+                (near[a], far[a]) = slab(
+                    (Vec4::splat(lo[a]) - o) * inv,
+                    (Vec4::splat(hi[a]) - o) * inv,
+                );
+            }
+            m |= open(near, far, l.t_min[h], cut[h]) << (4 * h);
+        }
+        m & active
+    }
+
+    /// The subtree of node `index` (cell `lo`, edge `size`) for the rays of
+    /// `active`, front to back in the packet's order; returns the rays
+    /// whose visitor stopped (any-hit queries that found a hit).
+    fn visit_packet<V: Visitor<P>>(
+        &self,
+        index: usize,
+        lo: Vec3,
+        size: f32,
+        l: &Lanes,
+        vis: &mut [Option<V>; PACKET],
+        active: Mask,
+    ) -> Mask {
+        if active.count_ones() <= LONE {
+            // Few rays left: each its own descent, with its own constants.
+            let mut stopped = 0;
+            let mut left = active;
+            while left != 0 {
+                let k = left.trailing_zeros() as usize;
+                left &= left - 1;
+                if let Some(v) = vis[k].as_mut()
+                    && self.visit(index, lo, size, &l.ctx[k], v)
+                {
+                    stopped |= 1 << k;
+                }
+            }
+            return stopped;
+        }
+        let node = self.nodes[index];
+        let mut active = Self::meets_box(l, self.boxes[index], &cutoffs(vis), active);
+        if active == 0 {
+            return 0;
+        }
+        let mut stopped = 0;
+        if node.meta & INTERIOR == 0 {
+            while active != 0 {
+                let k = active.trailing_zeros() as usize;
+                active &= active - 1;
+                if let Some(v) = vis[k].as_mut()
+                    && self.leaf(node, v)
+                {
+                    stopped |= 1 << k;
+                }
+            }
+            return stopped;
+        }
+        // Slab parameters of the padded lower and upper halves on each
+        // axis, for every ray: the single ray's arithmetic. Per half and
+        // axis: (near, far) of the lower half, of the upper.
+        let mask = node.meta & 0xff;
+        let half = size * 0.5;
+        let pad = self.pad;
+        let (mid, hi) = (lo + Vec3::splat(half), lo + Vec3::splat(size));
+        let mut lower = [[(Vec4::ZERO, Vec4::ZERO); 3]; 2];
+        let mut upper = [[(Vec4::ZERO, Vec4::ZERO); 3]; 2];
+        for h in 0..2 {
+            for a in 0..3 {
+                let (o, inv) = (l.o[a][h], l.inv[a][h]);
+                let t = |x: f32| (Vec4::splat(x) - o) * inv;
+                lower[h][a] = slab(t(lo[a] - pad), t(mid[a] + pad));
+                upper[h][a] = slab(t(mid[a] - pad), t(hi[a] + pad));
+            }
+        }
+        for i in 0..8 {
+            let oct = i ^ l.sign_mask;
+            if mask & (1 << oct) == 0 {
+                continue;
+            }
+            let cut = cutoffs(vis);
+            let mut m = 0;
+            for h in 0..2 {
+                let side = |a: usize| {
+                    if oct & (1 << a) != 0 {
+                        upper[h][a]
+                    } else {
+                        lower[h][a]
+                    }
+                };
+                let (x, y, z) = (side(0), side(1), side(2));
+                m |= open([x.0, y.0, z.0], [x.1, y.1, z.1], l.t_min[h], cut[h]) << (4 * h);
+            }
+            let m = m & active;
+            if m == 0 {
+                continue;
+            }
+            let child = node.first as usize + (mask & ((1 << oct) - 1)).count_ones() as usize;
+            let s = self.visit_packet(child, child_lo(lo, half, oct), half, l, vis, m);
+            stopped |= s;
+            active &= !s;
+            if active == 0 {
+                break;
+            }
+        }
+        stopped
+    }
+}
+
+impl<P: Primitive> Octree<P> {
+    /// The parts in the order the packet visits them: by the first ray's
+    /// entry (rays for which a part lies elsewhere cull it at its root).
+    fn part_order(&self, l: &Lanes) -> ([usize; super::parts::MAX_PARTS], usize) {
+        let mut order = [(0.0f32, 0usize); super::parts::MAX_PARTS];
+        let n = self.parts.len().min(super::parts::MAX_PARTS);
+        for (i, tree) in self.parts.iter().enumerate().take(n) {
+            order[i] = (tree.window(&l.ctx[0]).0, i);
+        }
+        order[..n].sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        (order.map(|(_, i)| i), n)
+    }
+
+    /// Every part for the rays of `active`; the rays that stopped.
+    fn walk_parts<V: Visitor<P>>(
+        &self,
+        l: &Lanes,
+        vis: &mut [Option<V>; PACKET],
+        mut active: Mask,
+    ) -> Mask {
+        let (order, n) = self.part_order(l);
+        let mut stopped = 0;
+        for &i in &order[..n] {
+            let tree = &self.parts[i];
+            if tree.references == 0 || tree.nodes.is_empty() {
+                continue;
+            }
+            let s = tree.visit_packet(0, tree.root_lo, tree.root_size, l, vis, active);
+            stopped |= s;
+            active &= !s;
+            if active == 0 {
+                break;
+            }
+        }
+        stopped
+    }
+
+    /// [`crate::accel::Backend::intersect_packet`] for at most [`PACKET`]
+    /// queries with skip rule `skip` (one type for the packet).
+    fn gather_chunk<'q, S: Skip>(
+        &self,
+        qs: &'q [Query],
+        hits: &mut [CandidateHits],
+        skip: impl Fn(&'q Query) -> S,
+    ) {
+        for h in hits.iter_mut().take(qs.len()) {
+            h.clear();
+        }
+        if self.references == 0 {
+            return;
+        }
+        let Some(l) = Lanes::new(qs) else {
+            for (q, h) in qs.iter().zip(hits.iter_mut()) {
+                self.gather(&q.ray, q.t_min, q.t_max, skip(q), h);
+            }
+            return;
+        };
+        let mut it = qs.iter().zip(hits.iter_mut());
+        let mut vis: [Option<Gather<'_, S>>; PACKET] = std::array::from_fn(|_| {
+            it.next()
+                .map(|(q, h)| Gather::new(&q.ray, q.t_min, q.t_max, skip(q), h))
+        });
+        let active = (1 << qs.len()) - 1;
+        self.walk_parts(&l, &mut vis, active);
+    }
+
+    /// [`crate::accel::Backend::occluded_packet`] for at most [`PACKET`]
+    /// queries with skip rule `skip`.
+    fn any_hit_chunk<'q, S: Skip>(
+        &self,
+        qs: &'q [Query],
+        out: &mut [bool],
+        skip: impl Fn(&'q Query) -> S,
+    ) {
+        if self.references == 0 {
+            out.iter_mut().take(qs.len()).for_each(|o| *o = false);
+            return;
+        }
+        let Some(l) = Lanes::new(qs) else {
+            for (q, o) in qs.iter().zip(out.iter_mut()) {
+                *o = self.any_hit(&q.ray, q.t_min, q.t_max, skip(q));
+            }
+            return;
+        };
+        let mut it = qs.iter();
+        let mut vis: [Option<AnyHit<'_, S>>; PACKET] = std::array::from_fn(|_| {
+            it.next()
+                .map(|q| AnyHit::new(&q.ray, q.t_min, q.t_max, skip(q)))
+        });
+        let active = (1 << qs.len()) - 1;
+        let stopped = self.walk_parts(&l, &mut vis, active);
+        for (k, o) in out.iter_mut().take(qs.len()).enumerate() {
+            *o = stopped & (1 << k) != 0;
+        }
+    }
+
+    /// Candidate windows of a batch: packets of [`PACKET`] rays (one
+    /// monomorphised descent for primary rays, [`NoSkip`], another for
+    /// batches holding a secondary ray).
+    pub(super) fn gather_packets(&self, qs: &[Query], hits: &mut [CandidateHits]) {
+        assert!(hits.len() >= qs.len(), "a window per query");
+        for (qs, hits) in qs.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
+            if qs.len() < MIN_PACKET {
+                for (q, h) in qs.iter().zip(hits.iter_mut()) {
+                    crate::accel::Backend::intersect_from(self, q, h);
+                }
+            } else if qs.iter().all(|q| q.from.is_none()) {
+                self.gather_chunk(qs, hits, |_| NoSkip);
+            } else {
+                self.gather_chunk(qs, hits, |q| q.from.as_ref());
+            }
+        }
+    }
+
+    /// Any-hit answers of a batch, in packets as [`Octree::gather_packets`].
+    pub(super) fn any_hit_packets(&self, qs: &[Query], out: &mut [bool]) {
+        assert!(out.len() >= qs.len(), "an answer per query");
+        for (qs, out) in qs.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
+            if qs.len() < MIN_PACKET {
+                for (q, o) in qs.iter().zip(out.iter_mut()) {
+                    *o = crate::accel::Backend::occluded_from(self, q);
+                }
+            } else if qs.iter().all(|q| q.from.is_none()) {
+                self.any_hit_chunk(qs, out, |_| NoSkip);
+            } else {
+                self.any_hit_chunk(qs, out, |q| q.from.as_ref());
+            }
+        }
+    }
+}
