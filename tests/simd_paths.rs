@@ -9,6 +9,27 @@ mod common;
 use common::{bin, scratch};
 use splatray::accel::PACKETS_VAR;
 use splatray::simd::{Isa, SIMD_VAR, available};
+use std::path::Path;
+
+/// Renders the bundled bunny at `size` with `backend` and the environment
+/// variable `env` set, to `out`; the image's bytes (the run must succeed).
+fn render_bunny(env: (&str, &str), size: (&str, &str), backend: &str, out: &Path) -> Vec<u8> {
+    let o = bin()
+        .env(env.0, env.1)
+        .args(["render", "scenes/bunny.toml", "--width", size.0])
+        .args(["--height", size.1, "--backend", backend, "-o"])
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "{}={} {backend}: {}",
+        env.0,
+        env.1,
+        String::from_utf8_lossy(&o.stderr)
+    );
+    std::fs::read(out).unwrap()
+}
 
 #[test]
 fn every_path_renders_the_bunny_to_the_same_bytes() {
@@ -28,26 +49,8 @@ fn every_path_renders_the_bunny_to_the_same_bytes() {
             "info does not name {isa}: {text}"
         );
         let out = dir.join(format!("bunny-{isa}.png"));
-        let o = bin()
-            .env(SIMD_VAR, isa.name())
-            .args([
-                "render",
-                "scenes/bunny.toml",
-                "--width",
-                "160",
-                "--height",
-                "120",
-            ])
-            .args(["--backend", "octree", "-o"])
-            .arg(&out)
-            .output()
-            .unwrap();
-        assert!(
-            o.status.success(),
-            "{isa}: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        images.push((isa, std::fs::read(&out).unwrap()));
+        let bytes = render_bunny((SIMD_VAR, isa.name()), ("160", "120"), "octree", &out);
+        images.push((isa, bytes));
     }
     assert!(!images.is_empty());
     for (isa, bytes) in &images[1..] {
@@ -99,27 +102,12 @@ fn packets_on_and_off_render_the_bunny_to_the_same_bytes() {
         let mut images = Vec::new();
         for mode in ["on", "off"] {
             let out = dir.join(format!("bunny-{backend}-{mode}.png"));
-            let o = bin()
-                .env(PACKETS_VAR, mode)
-                .args(["render", "scenes/bunny.toml"])
-                .args([
-                    "--width",
-                    "96",
-                    "--height",
-                    "72",
-                    "--backend",
-                    backend,
-                    "-o",
-                ])
-                .arg(&out)
-                .output()
-                .unwrap();
-            assert!(
-                o.status.success(),
-                "{backend} {mode}: {}",
-                String::from_utf8_lossy(&o.stderr)
-            );
-            images.push(std::fs::read(&out).unwrap());
+            images.push(render_bunny(
+                (PACKETS_VAR, mode),
+                ("96", "72"),
+                backend,
+                &out,
+            ));
         }
         assert!(
             images[0] == images[1],

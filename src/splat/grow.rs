@@ -59,6 +59,8 @@ struct Growth {
     visited: Vec<u32>,
     h_min: f32,
     h_max: f32,
+    /// Sum of the accepted points' heights `h_j` (eq. 1), for their mean.
+    h_sum: f64,
 }
 
 struct Grower<'a> {
@@ -94,6 +96,7 @@ impl Grower<'_> {
             visited: vec![i as u32],
             h_min: 0.0,
             h_max: 0.0,
+            h_sum: 0.0,
         };
         while let Some(Reverse(key)) = self.heap.pop() {
             let j = (key & 0xffff_ffff) as usize;
@@ -111,6 +114,7 @@ impl Grower<'_> {
             }
             g.h_min = lo;
             g.h_max = hi;
+            g.h_sum += f64::from(h);
             g.accepted.push((j as u32, d2));
             for &q in inp.knn.of(j) {
                 let q = q as usize;
@@ -206,18 +210,12 @@ impl Grower<'_> {
 /// bunny (issue 24, `docs/development.md`): Phong/flat mean normal error at
 /// 507 splats 0.803 → 0.786, `compare --truth` 33.98 → 34.06 dB; the mean
 /// alone, raised too, gave 0.769 at 507 splats but 33.75 dB.
-fn plane_height(inp: &GrowInput<'_>, i: usize, growth: &Growth) -> f32 {
+fn plane_height(growth: &Growth) -> f32 {
     let mid = 0.5 * (growth.h_min + growth.h_max);
     if growth.accepted.is_empty() {
         return mid;
     }
-    let (p, n) = (inp.points[i], inp.normals[i]);
-    let sum: f64 = growth
-        .accepted
-        .iter()
-        .map(|&(j, _)| f64::from(n.dot(inp.points[j as usize] - p))) // eq. (1)
-        .sum();
-    let mean = (sum / growth.accepted.len() as f64) as f32;
+    let mean = (growth.h_sum / growth.accepted.len() as f64) as f32;
     mean.clamp(growth.h_min, mid)
 }
 
@@ -577,7 +575,7 @@ impl<'a> Grower<'a> {
         // eq. (3); at a border, where all of them lie on one side, it moves
         // inward and shrinks instead of overhanging the border by its radius.
         let (shift, r) = g.enclosing(i, &growth, a, b, aspect, r);
-        let hc = plane_height(inp, i, &growth);
+        let hc = plane_height(&growth);
         let center = p
             + n * hc // eq. (2), lowered to the points' mean height
 

@@ -21,8 +21,8 @@
 //!
 //! A packet whose rays' direction signs differ (no common front-to-back
 //! order) is traced one ray at a time, and so is a batch of fewer than
-//! [`MIN_PACKET`] rays; a packet that thins out to one active ray hands it
-//! to the single ray's descent at that node.
+//! [`MIN_PACKET`] rays; a packet that thins out to [`LONE`] active rays
+//! or fewer hands each to the single ray's descent at that node.
 
 use super::traverse::{AnyHit, Gather, RayCtx, Visitor};
 use super::{INTERIOR, Octree, Tree, child_lo};
