@@ -210,7 +210,7 @@ fn scene(n: usize) -> Scene {
         .filter_map(|q| {
             let mut h = CandidateHits::new(scale.xi);
             probe.intersect(&q.ray, q.t_min, q.t_max, &mut h);
-            let hit = resolve(&h, &q.ray, &splats, ShadingMode::Flat)?;
+            let hit = resolve(&h, &q.ray, &splats, ShadingMode::Flat)?.hit()?;
             let to_light = light - hit.point;
             Some(Query {
                 ray: splatray::accel::Ray {

@@ -60,32 +60,56 @@ fn faces_front(s: &Splat, ray: &Ray) -> bool {
     s.normal.dot(ray.dir) < 0.0
 }
 
-/// Resolves the candidate window into one surface hit, or `None` when empty:
-/// [`resolve_within`] over the whole window (`hits.xi()`).
+/// True when `c` lies beyond the silhouette of its splat's Phong field:
+/// the field of eq. (4) at `(u, v)` has turned past edge-on, facing the
+/// other side of the ray than the splat's plane does. The smooth surface
+/// the field describes is not seen there (a disc tangent to a curved
+/// surface overhangs its silhouette, and there the field faces away), so
+/// a Phong splat is not hit there. The sign of the unnormalised field
+/// decides.
+fn beyond_silhouette(c: &Candidate, s: &Splat, ray: &Ray) -> bool {
+    let f = &s.field;
+    let n = s.u_axis * (f.xc + f.alpha * c.u) + s.v_axis * (f.yc + f.beta * c.v) + s.normal;
+    (n.dot(ray.dir) < 0.0) != faces_front(s, ray)
+}
+
+/// What a window of candidate hits resolves to.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Resolved {
+    /// The surface hit.
+    Hit(SurfaceHit),
+    /// The window's nearest candidates lie beyond their Phong fields'
+    /// silhouettes ([`ShadingMode::Phong`]): the ray passes them, and the
+    /// window must be gathered again from this ray parameter (the nearest
+    /// candidate that is not beyond, or just past the last one).
+    Beyond(f32),
+}
+
+impl Resolved {
+    /// The hit, or `None` for [`Resolved::Beyond`].
+    #[must_use]
+    pub fn hit(self) -> Option<SurfaceHit> {
+        match self {
+            Resolved::Hit(h) => Some(h),
+            Resolved::Beyond(_) => None,
+        }
+    }
+}
+
+/// Resolves the candidate window with one shading mode over the whole
+/// window (`hits.xi()`): [`resolve_within`].
 #[must_use]
 pub fn resolve(
     hits: &CandidateHits,
     ray: &Ray,
     splats: &[Splat],
     mode: ShadingMode,
-) -> Option<SurfaceHit> {
+) -> Option<Resolved> {
     resolve_within(hits, ray, splats, mode, hits.xi())
 }
 
-/// Resolves the candidates within `window` of the nearest (at most the
-/// window the backend gathered, `hits.xi()`) into one surface hit, or
-/// `None` when empty. The window is the nearest splat's model's `xi`
-/// ([`crate::scene::Scene::xi_for`]): a backend gathers the widest of the
-/// scene's windows, and each surface blends over its own depth.
-///
-/// Among candidates facing the same side as the nearest, the winner is the
-/// one whose hit lies closest to its splat's centre (smallest `|(u,v)|`,
-/// ties by `(t, id)`). The shading normal is eq. (5):
-/// `n = Σ (1 - |(u_i,v_i)|) n_i / Σ (1 - |(u_i,v_i)|)` over those same-side
-/// candidates, with `n_i` the constant normal (`Blended`) or the Phong field
-/// of eq. (4) (`Phong`). Front- and back-facing splats are never blended
-/// (thin sheets). When every weight is zero (all hits on rims) or the sum
-/// cancels, the winner's own normal is used.
+/// [`resolve_models`] with one shading mode and blending window for
+/// every splat.
 #[must_use]
 pub fn resolve_within(
     hits: &CandidateHits,
@@ -93,15 +117,58 @@ pub fn resolve_within(
     splats: &[Splat],
     mode: ShadingMode,
     window: f32,
-) -> Option<SurfaceHit> {
-    let nearest = hits.nearest()?;
-    let front = faces_front(&splats[nearest.id as usize], ray);
-    let far = nearest.t + window.min(hits.xi());
-    let same_side = hits
-        .as_slice()
+) -> Option<Resolved> {
+    resolve_models(hits, ray, splats, |_| (mode, window))
+}
+
+/// Resolves the candidate window into one surface hit, or `None` when
+/// empty. `model(id)` gives splat `id`'s shading mode and blending window
+/// (its model's `xi`, [`crate::scene::Scene::xi_for`]): a backend gathers
+/// the widest of the scene's windows (`hits.xi()`), and each surface
+/// blends over its own depth, never wider than what was gathered.
+///
+/// A candidate of a [`ShadingMode::Phong`] splat beyond its field's
+/// silhouette is passed over (the ray goes on). When the first candidate
+/// that is not lies farther than the window's nearest, or none is left,
+/// the answer is [`Resolved::Beyond`]: gather again from there, so that
+/// the window starts at the surface the ray meets.
+///
+/// Among candidates within that surface's window and facing the same
+/// side as its nearest, the winner is the one whose hit lies closest to
+/// its splat's centre (smallest `|(u,v)|`, ties by `(t, id)`). The shading
+/// normal is eq. (5): `n = Σ (1 - |(u_i,v_i)|) n_i / Σ (1 - |(u_i,v_i)|)`
+/// over those same-side candidates, with `n_i` the constant normal
+/// (`Blended`) or the Phong field of eq. (4) (`Phong`). Front- and
+/// back-facing splats are never blended (thin sheets). When every weight
+/// is zero (all hits on rims) or the sum cancels, the winner's own normal
+/// is used.
+#[must_use]
+pub fn resolve_models(
+    hits: &CandidateHits,
+    ray: &Ray,
+    splats: &[Splat],
+    model: impl Fn(u32) -> (ShadingMode, f32),
+) -> Option<Resolved> {
+    let all = hits.as_slice();
+    let nearest = all.first()?;
+    let passes = |c: &Candidate| {
+        let s = &splats[c.id as usize];
+        model(c.id).0 == ShadingMode::Phong && beyond_silhouette(c, s, ray)
+    };
+    let Some(k) = all.iter().position(|c| !passes(c)) else {
+        return Some(Resolved::Beyond(all.last()?.t.next_up()));
+    };
+    let first = &all[k];
+    if first.t > nearest.t {
+        return Some(Resolved::Beyond(first.t));
+    }
+    let (mode, window) = model(first.id);
+    let front = faces_front(&splats[first.id as usize], ray);
+    let far = first.t + window.min(hits.xi());
+    let same_side = all[k..]
         .iter()
         .take_while(|c| c.t <= far)
-        .filter(|c| faces_front(&splats[c.id as usize], ray) == front);
+        .filter(|c| !passes(c) && faces_front(&splats[c.id as usize], ray) == front);
     let key = |c: &Candidate| (c.radial(), c.t, c.id);
     let winner = *same_side.clone().min_by(|a, b| {
         key(a)
@@ -131,7 +198,7 @@ pub fn resolve_within(
         }
         sum.try_normalize().unwrap_or(own)
     };
-    Some(SurfaceHit {
+    Some(Resolved::Hit(SurfaceHit {
         id: winner.id,
         t: winner.t,
         point: ray.at(winner.t),
@@ -139,7 +206,7 @@ pub fn resolve_within(
         geometric_normal: ws.normal,
         front,
         blended,
-    })
+    }))
 }
 
 #[cfg(test)]
@@ -166,19 +233,100 @@ mod tests {
     fn the_window_decides_which_candidates_compete() {
         let (splats, hits, ray) = two_layers();
         // The whole gathered window: the hit nearer its centre wins.
-        let all = resolve(&hits, &ray, &splats, ShadingMode::Flat).unwrap();
+        let all = resolve(&hits, &ray, &splats, ShadingMode::Flat)
+            .unwrap()
+            .hit()
+            .unwrap();
         assert_eq!((all.id, all.blended), (1, 1));
-        let wide = resolve_within(&hits, &ray, &splats, ShadingMode::Blended, 0.06).unwrap();
+        let wide = resolve_within(&hits, &ray, &splats, ShadingMode::Blended, 0.06)
+            .unwrap()
+            .hit()
+            .unwrap();
         assert_eq!((wide.id, wide.blended), (1, 2));
         // A window narrower than the layers' distance: only the nearest.
-        let narrow = resolve_within(&hits, &ray, &splats, ShadingMode::Blended, 0.01).unwrap();
+        let narrow = resolve_within(&hits, &ray, &splats, ShadingMode::Blended, 0.01)
+            .unwrap()
+            .hit()
+            .unwrap();
         assert_eq!((narrow.id, narrow.blended), (0, 1));
         // Never wider than what was gathered.
         let mut few = CandidateHits::new(0.01);
         for c in hits.as_slice() {
             few.offer(*c);
         }
-        let capped = resolve_within(&few, &ray, &splats, ShadingMode::Blended, 1.0).unwrap();
+        let capped = resolve_within(&few, &ray, &splats, ShadingMode::Blended, 1.0)
+            .unwrap()
+            .hit()
+            .unwrap();
         assert_eq!(capped.id, 0);
+    }
+
+    /// A Phong splat whose field turns past edge-on toward its rim, seen
+    /// at a slant, in front of a flat one: a hit near the rim lies beyond
+    /// the field's silhouette and is passed over; near the centre it is
+    /// not; in flat and blended shading nothing is passed over.
+    #[test]
+    fn hits_beyond_a_fields_silhouette_are_passed_over() {
+        let mut curved = Splat::disc(Vec3::ZERO, Vec3::Z, 1.0).unwrap();
+        // Eq. (4): the normal tilts along u by up to 2 at the rim (63°).
+        curved.field.alpha = 2.0;
+        let behind = Splat::disc(Vec3::new(0.0, 0.0, -1.0), Vec3::Z, 4.0).unwrap();
+        let splats = vec![curved, behind];
+        let u = curved.u_axis;
+        // Along +u and down at 30° from the plane: the field at u,
+        // `z + 2u u_axis`, faces the ray's way (n · d > 0) where
+        // `2u √3 > 1`, u > 0.29.
+        let dir = (u * 3f32.sqrt() - Vec3::Z).normalize();
+        let window = |u0: f32| {
+            let p = curved.center + u * u0;
+            let ray = Ray::new(p - dir * 2.0, dir);
+            let mut hits = CandidateHits::new(0.1);
+            hits.offer(Candidate {
+                id: 0,
+                t: 2.0,
+                u: u0,
+                v: 0.0,
+            });
+            (hits, ray)
+        };
+        let (rim, ray) = window(0.95);
+        assert_eq!(
+            resolve(&rim, &ray, &splats, ShadingMode::Phong),
+            Some(Resolved::Beyond(2.0f32.next_up())),
+            "the only candidate is beyond: gather again past it"
+        );
+        for mode in [ShadingMode::Flat, ShadingMode::Blended] {
+            let h = resolve(&rim, &ray, &splats, mode).unwrap().hit().unwrap();
+            assert_eq!(h.id, 0, "{mode:?}");
+        }
+        let (centre, ray) = window(0.2);
+        let h = resolve(&centre, &ray, &splats, ShadingMode::Phong);
+        assert!(matches!(h, Some(Resolved::Hit(h)) if h.id == 0), "{h:?}");
+        assert!(h.unwrap().hit().unwrap().normal.dot(dir) < 0.0);
+        // The flat splat behind, farther than the window: gather again
+        // from it; within the window, it is the surface.
+        let (mut rim, ray) = window(0.95);
+        rim.offer(Candidate {
+            id: 1,
+            t: 2.05,
+            u: 0.1,
+            v: 0.0,
+        });
+        assert_eq!(
+            resolve(&rim, &ray, &splats, ShadingMode::Phong),
+            Some(Resolved::Beyond(2.05))
+        );
+        let mut again = CandidateHits::new(0.1);
+        again.offer(Candidate {
+            id: 1,
+            t: 2.05,
+            u: 0.1,
+            v: 0.0,
+        });
+        let h = resolve(&again, &ray, &splats, ShadingMode::Phong).unwrap();
+        assert!(
+            matches!(h, Resolved::Hit(h) if h.id == 1 && h.front),
+            "{h:?}"
+        );
     }
 }

@@ -7,7 +7,7 @@ mod common;
 
 use common::{Rng, render_with};
 use glam::{Vec2, Vec3};
-use splatray::accel::{Backend, CandidateHits, Ray};
+use splatray::accel::{Backend, CandidateHits, Query, Ray};
 use splatray::render::integrator::{Frame, ShadeHit, SplatSurfaces, Surfaces, render_surfaces};
 use splatray::scene::{Light, Scene, build_scene, parse_scene_file, parse_scene_str};
 use splatray::splat::{PointCloud, SplatParams, generate};
@@ -258,9 +258,7 @@ impl Surfaces for Guard<'_> {
     ) -> Option<ShadeHit> {
         let t_min = from.map_or(0.0, |f| self.t_min(f));
         self.splats
-            .backend
-            .intersect(ray, t_min, f32::INFINITY, hits);
-        self.splats.resolve(hits, ray)
+            .surface(Query::new(*ray, t_min, f32::INFINITY), hits)
     }
 
     fn occluded(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> bool {

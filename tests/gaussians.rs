@@ -355,14 +355,22 @@ fn an_exported_2dgs_file_renders_like_the_original() {
         let a = render_all(&original);
         let b = render_all(&gauss);
         let agree = splatray::validate::compare::compare_frames(&a, &b, 1.0);
-        assert_eq!(agree.hit_agreement, 1.0, "{shading}: {agree:?}");
+        if shading == "flat" {
+            assert_eq!(agree.hit_agreement, 1.0, "{shading}: {agree:?}");
+        } else {
+            // Phong splats are not hit beyond their fields' silhouettes,
+            // and the export has no fields: the original misses a few
+            // rays at its outline (measured 33 of 19,200), never more.
+            assert_eq!(agree.only_first, 0, "{shading}: {agree:?}");
+            assert!(agree.hit_agreement >= 0.995, "{shading}: {agree:?}");
+        }
         psnr.push(agree.image_psnr_db);
     }
     // Flat shading uses no normal field: the same image but for the
     // rounding of frames through quaternions (measured 146 dB).
     assert!(psnr[0].is_none_or(|p| p > 100.0), "flat: {:?}", psnr[0]);
     // Phong shading loses the fields: close, not the same (measured
-    // 27.3 dB; the surfels shade faceted where the fields curved).
+    // 27.96 dB; the surfels shade faceted where the fields curved).
     let p = psnr[1].expect("phong renders differ");
     assert!(p > 22.0, "phong: PSNR {p:.1} dB");
     eprintln!("2DGS export vs original, phong shading: PSNR {p:.2} dB");

@@ -228,8 +228,11 @@ fn bad_input_fails_in_one_line() {
 /// 0.7 (issue 24 left open there) and is held at 0.8. With each disc's
 /// plane lowered to the mean height of its points where that is below eq.
 /// (2)'s mid-span (`splat::grow`): 0.787, 0.681, 0.613, 0.580, 0.575, and
-/// at 454 splats Phong 6.87° and flat 8.74° (7.16° and 9.06° at mid-span),
-/// held at 7.0° and 8.9°.
+/// at 454 splats Phong 6.87° and flat 8.74° (7.16° and 9.06° at mid-span).
+/// With hits beyond a Phong field's silhouette passed over
+/// (`resolve::resolve_models`): 0.718, 0.654, 0.574, 0.571, 0.555, and at
+/// 454 splats Phong 6.28°: held at 6.4° (flat at 8.9°) and the ratio at
+/// 0.75.
 #[test]
 fn phong_beats_blended_beats_flat_at_every_budget() {
     let dir = scratch("phong-order");
@@ -289,14 +292,14 @@ fn phong_beats_blended_beats_flat_at_every_budget() {
         );
         if n < 900.0 {
             assert!(
-                p.1 <= 7.0 && f.1 <= 8.9,
-                "{n} splats: phong {:.3} deg above 7.0 or flat {:.3} above 8.9: \
-                 the planes' placement regressed",
+                p.1 <= 6.4 && f.1 <= 8.9,
+                "{n} splats: phong {:.3} deg above 6.4 or flat {:.3} above 8.9: \
+                 the planes' placement or the fields' silhouettes regressed",
                 p.1,
                 f.1
             );
         }
-        let bound = if n >= 900.0 { 0.7 } else { 0.8 };
+        let bound = if n >= 900.0 { 0.7 } else { 0.75 };
         assert!(
             ratio <= bound,
             "{n} splats: phong/flat {ratio:.3} above {bound} ({:.3} / {:.3} deg)",

@@ -6,7 +6,7 @@
 
 use crate::accel::{Backend, CandidateHits, Departure, PACKET, Query, Ray};
 use crate::progress::{Progress, notify};
-use crate::resolve::{SurfaceHit, resolve_within};
+use crate::resolve::{Resolved, SurfaceHit, resolve_models};
 use crate::scene::{Light, Material, Scene};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -176,16 +176,37 @@ pub struct SplatSurfaces<'a> {
 }
 
 impl SplatSurfaces<'_> {
-    /// The surface `ray` meets among the candidate `hits` a backend
-    /// gathered for it (§3.2, eq. 5, within the nearest splat's model's
-    /// window), with its material and colour.
+    /// What the candidate `hits` a backend gathered for `ray` resolve to
+    /// (§3.2, eq. 5; each splat with its model's shading mode and window).
     #[must_use]
-    pub fn resolve(&self, hits: &CandidateHits, ray: &Ray) -> Option<ShadeHit> {
+    pub fn resolve(&self, hits: &CandidateHits, ray: &Ray) -> Option<Resolved> {
         let sc = self.scene;
-        let nearest = hits.nearest()?.id;
-        let mode = sc.shading_for(nearest);
-        let h: SurfaceHit = resolve_within(hits, ray, &sc.splats, mode, sc.xi_for(nearest))?;
-        Some(ShadeHit {
+        resolve_models(hits, ray, &sc.splats, |id| {
+            (sc.shading_for(id), sc.xi_for(id))
+        })
+    }
+
+    /// The surface the query's ray meets, with its material and colour:
+    /// its window gathered (into `hits`) and resolved, and gathered again
+    /// past candidates beyond their Phong fields' silhouettes
+    /// ([`Resolved::Beyond`]) until a surface or nothing is left.
+    #[must_use]
+    pub fn surface(&self, mut q: Query, hits: &mut CandidateHits) -> Option<ShadeHit> {
+        loop {
+            self.backend.intersect_from(&q, hits);
+            match self.resolve(hits, &q.ray)? {
+                Resolved::Hit(h) => return Some(self.shade_hit(h)),
+                // Beyond every candidate gathered: strictly farther, so
+                // the loop ends.
+                Resolved::Beyond(t) => q.t_min = t,
+            }
+        }
+    }
+
+    /// The resolved hit `h` with its material and colour.
+    fn shade_hit(&self, h: SurfaceHit) -> ShadeHit {
+        let sc = self.scene;
+        ShadeHit {
             id: h.id,
             t: h.t,
             point: h.point,
@@ -194,7 +215,7 @@ impl SplatSurfaces<'_> {
             front: h.front,
             material: sc.material_of[h.id as usize],
             color: sc.color_at(h.id, h.point),
-        })
+        }
     }
 
     /// The query of a secondary ray leaving `from`, from `eps_self` to
@@ -222,13 +243,11 @@ impl Surfaces for SplatSurfaces<'_> {
         from: Option<&ShadeHit>,
         hits: &mut CandidateHits,
     ) -> Option<ShadeHit> {
-        match from {
-            None => self.backend.intersect(ray, 0.0, f32::INFINITY, hits),
-            Some(f) => self
-                .backend
-                .intersect_from(&self.leaving(ray, f, f32::INFINITY), hits),
-        }
-        self.resolve(hits, ray)
+        let q = match from {
+            None => Query::new(*ray, 0.0, f32::INFINITY),
+            Some(f) => self.leaving(ray, f, f32::INFINITY),
+        };
+        self.surface(q, hits)
     }
 
     fn occluded(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> bool {
@@ -255,8 +274,12 @@ impl Surfaces for SplatSurfaces<'_> {
                 Query::new(rays[k.min(rays.len() - 1)], 0.0, f32::INFINITY)
             });
             self.backend.intersect_packet(&qs[..rays.len()], hits);
-            for ((ray, h), o) in rays.iter().zip(hits.iter()).zip(out.iter_mut()) {
-                *o = self.resolve(h, ray);
+            for ((q, h), o) in qs.iter().zip(hits.iter_mut()).zip(out.iter_mut()) {
+                *o = match self.resolve(h, &q.ray) {
+                    None => None,
+                    Some(Resolved::Hit(s)) => Some(self.shade_hit(s)),
+                    Some(Resolved::Beyond(t)) => self.surface(Query { t_min: t, ..*q }, h),
+                };
             }
         }
     }

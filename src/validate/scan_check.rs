@@ -8,7 +8,7 @@ use super::holdout;
 use crate::accel::CandidateHits;
 use crate::accel::registry;
 use crate::freespace::{TrimReport, generate_trimmed, sight_line};
-use crate::resolve::{ShadingMode, resolve_within};
+use crate::resolve::{Resolved, ShadingMode, resolve_within};
 use crate::splat::{PointCloud, SplatParams, SplatReport};
 use crate::{Error, Result};
 use glam::Vec3;
@@ -188,7 +188,8 @@ pub fn scan_check(
                     return c;
                 };
                 backend.intersect(&ray, 0.0, f32::INFINITY, hits);
-                let surface = resolve_within(hits, &ray, &splats, ShadingMode::Flat, window);
+                let surface = resolve_within(hits, &ray, &splats, ShadingMode::Flat, window)
+                    .and_then(Resolved::hit);
                 match surface {
                     Some(h) if h.t < d - tol * d => c[6] = 1,
                     Some(h) if h.t > d + tol * d => c[7] = 1,

@@ -9,7 +9,7 @@ pub use splatray::accel::Query;
 use splatray::accel::registry::oracle;
 use splatray::accel::{Backend, CandidateHits, Departure, Ray, backends as registry};
 use splatray::primitive::{Disc, Hit, Local, Primitive, Single};
-use splatray::resolve::{ShadingMode, resolve};
+use splatray::resolve::{Resolved, ShadingMode, resolve};
 use splatray::splat::{NormalField, Splat};
 use std::path::{Path, PathBuf};
 
@@ -550,8 +550,17 @@ pub fn secondary_queries(
     let mut h = CandidateHits::new(xi);
     let mut out = Vec::new();
     for q in primaries {
-        oracle.intersect(&q.ray, q.t_min, q.t_max, &mut h);
-        if let Some(hit) = resolve(&h, &q.ray, splats, ShadingMode::Phong) {
+        // Gathered again past candidates beyond their fields' silhouettes,
+        // as the integrator does.
+        let mut t_min = q.t_min;
+        let hit = loop {
+            oracle.intersect(&q.ray, t_min, q.t_max, &mut h);
+            match resolve(&h, &q.ray, splats, ShadingMode::Phong) {
+                Some(Resolved::Beyond(t)) => t_min = t,
+                r => break r.and_then(Resolved::hit),
+            }
+        };
+        if let Some(hit) = hit {
             let from = Some(Departure {
                 id: hit.id,
                 point: hit.point,

@@ -8,7 +8,7 @@
 use crate::common::*;
 use glam::Vec3;
 use splatray::accel::{CandidateHits, Departure, Ray};
-use splatray::resolve::{ShadingMode, resolve};
+use splatray::resolve::{Resolved, ShadingMode, resolve};
 use splatray::scene::SceneScale;
 use splatray::scene::shapes;
 use splatray::splat::Splat;
@@ -59,6 +59,7 @@ fn depart(b: &Backends, set: &Set, eye: Vec3, target: Vec3, xi: f32) -> (Departu
     let mut h = CandidateHits::new(xi);
     b.oracle.intersect(&ray, 0.0, f32::INFINITY, &mut h);
     let hit = resolve(&h, &ray, &set.splats, ShadingMode::Phong)
+        .and_then(Resolved::hit)
         .unwrap_or_else(|| panic!("set-up: {ray:?} must hit"));
     (
         Departure {

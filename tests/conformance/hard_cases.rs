@@ -7,7 +7,7 @@ use crate::common::*;
 use glam::{DVec3, Vec2, Vec3};
 use splatray::accel::{CandidateHits, MAX_CANDIDATES, Ray};
 use splatray::primitive::Primitive;
-use splatray::resolve::{ShadingMode, resolve};
+use splatray::resolve::{Resolved, ShadingMode, resolve};
 use splatray::scene::SceneScale;
 use splatray::splat::{NormalField, Splat};
 
@@ -350,7 +350,9 @@ fn thin_sheet_sides_are_never_blended() {
             mixed += 1;
         }
         for mode in [ShadingMode::Flat, ShadingMode::Blended, ShadingMode::Phong] {
-            let hit = resolve(&h, &query.ray, &splats, mode).unwrap();
+            let hit = resolve(&h, &query.ray, &splats, mode)
+                .and_then(Resolved::hit)
+                .unwrap();
             assert!(
                 hit.front && hit.normal.dot(dir) < 0.0,
                 "{mode:?}: ray {:?} got normal {} (front {}) on the far side; window {:?}",
@@ -390,6 +392,7 @@ fn reflection_rays_off_a_mirror_plane_do_not_hit_it_again() {
         let primary = q(target - dir * 2.0, dir);
         let h = windows(&b, &splats, &primary, scale.xi, "mirror primary");
         let hit = resolve(&h, &primary.ray, &splats, ShadingMode::Flat)
+            .and_then(Resolved::hit)
             .unwrap_or_else(|| panic!("ray {:?} must hit the mirror", primary.ray));
         let n = hit.geometric_normal;
         let r = (dir - 2.0 * dir.dot(n) * n).normalize();
