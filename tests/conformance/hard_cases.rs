@@ -7,7 +7,7 @@ use crate::common::*;
 use glam::{DVec3, Vec2, Vec3};
 use splatray::accel::{CandidateHits, MAX_CANDIDATES, Ray};
 use splatray::primitive::Primitive;
-use splatray::resolve::{Resolved, ShadingMode, resolve};
+use splatray::resolve::{Resolved, ShadingMode, beyond_silhouette, resolve};
 use splatray::scene::SceneScale;
 use splatray::splat::{NormalField, Splat};
 
@@ -333,7 +333,7 @@ fn thin_sheet_sides_are_never_blended() {
     }
     let b = backends(&splats);
     let mut rng = Rng::new(seed());
-    let mut mixed = 0;
+    let (mut mixed, mut passed) = (0, 0);
     for k in 0..200 {
         let from_above = k % 2 == 0;
         let target = Vec3::new(rng.range(-0.7, 0.7), rng.range(-0.7, 0.7), 0.0);
@@ -350,9 +350,14 @@ fn thin_sheet_sides_are_never_blended() {
             mixed += 1;
         }
         for mode in [ShadingMode::Flat, ShadingMode::Blended, ShadingMode::Phong] {
-            let hit = resolve(&h, &query.ray, &splats, mode)
-                .and_then(Resolved::hit)
-                .unwrap();
+            let Some(hit) = resolve(&h, &query.ray, &splats, mode).and_then(Resolved::hit) else {
+                // The window's nearest Phong splats passed over, beyond
+                // their fields' silhouettes (the integrator gathers again
+                // past them): nothing to check here.
+                assert_eq!(mode, ShadingMode::Phong, "ray {:?} must hit", query.ray);
+                passed += 1;
+                continue;
+            };
             assert!(
                 hit.front && hit.normal.dot(dir) < 0.0,
                 "{mode:?}: ray {:?} got normal {} (front {}) on the far side; window {:?}",
@@ -362,7 +367,18 @@ fn thin_sheet_sides_are_never_blended() {
                 h.as_slice()
             );
             if mode != ShadingMode::Flat {
-                assert_eq!(hit.blended as usize, front, "only same-side splats blended");
+                // Phong splats are passed over beyond their fields'
+                // silhouettes (these fields curve): they are not blended.
+                let kept = h
+                    .as_slice()
+                    .iter()
+                    .filter(|c| {
+                        facing(c)
+                            && !(mode == ShadingMode::Phong
+                                && beyond_silhouette(c, &splats[c.id as usize], &query.ray))
+                    })
+                    .count();
+                assert_eq!(hit.blended as usize, kept, "only same-side splats blended");
             }
         }
     }
@@ -370,6 +386,7 @@ fn thin_sheet_sides_are_never_blended() {
         mixed > 50,
         "the test needs windows holding both sides: {mixed}"
     );
+    assert!(passed < 20, "{passed} of 200 Phong windows passed over");
 }
 
 #[test]
