@@ -25,10 +25,12 @@
 //! or fewer hands each to the single ray's descent at that node.
 
 use super::traverse::{AnyHit, Gather, RayCtx, Visitor};
-use super::{INTERIOR, Octree, Tree, child_lo};
+use super::{ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Node, Octree, Tree, child_lo, lanes};
 use crate::accel::{CandidateHits, NoSkip, PACKET, Query, Skip};
-use crate::primitive::Primitive;
+use crate::primitive::{Pack, PackRays, Primitive};
+use crate::simd::Cone;
 use glam::{Vec3, Vec4};
+use std::cell::OnceCell;
 
 /// Fewest rays traced as a packet; smaller batches go one at a time.
 const MIN_PACKET: usize = 2;
@@ -63,6 +65,26 @@ struct Lanes {
     ctx: [RayCtx; PACKET],
     /// The direction signs every ray of the packet shares.
     sign_mask: usize,
+    /// The origin, when every ray of the packet has the same one (bit for
+    /// bit): the leaves then test each pack once for all the rays
+    /// ([`Pack::masks_rays`]).
+    origin: Option<[f32; 3]>,
+    /// The rays' directions.
+    dirs: [[f32; 3]; PACKET],
+    /// Rays in the packet.
+    len: usize,
+    /// With a shared origin and every `t_min >= 0`: a cone from it holding
+    /// every ray, computed when the packet first reaches a leaf.
+    cone: OnceCell<Option<Cone>>,
+}
+
+impl Lanes {
+    /// The cone of [`Lanes::cone`], once.
+    fn cone(&self) -> Option<Cone> {
+        *self
+            .cone
+            .get_or_init(|| Cone::around(&self.dirs[..self.len]))
+    }
 }
 
 impl Lanes {
@@ -80,7 +102,20 @@ impl Lanes {
         let axis = |f: &dyn Fn(&RayCtx) -> Vec3| {
             [0, 1, 2].map(|a| wide(&std::array::from_fn(|k| f(&ctx[k])[a])))
         };
+        let bits = |o: Vec3| o.to_array().map(f32::to_bits);
+        let shared = qs
+            .iter()
+            .all(|q| bits(q.ray.origin) == bits(qs[0].ray.origin));
+        let forward = qs.iter().all(|q| q.t_min >= 0.0);
+        let cone = OnceCell::new();
+        if !(shared && forward) {
+            let _ = cone.set(None);
+        }
         Some(Lanes {
+            origin: shared.then(|| qs[0].ray.origin.to_array()),
+            dirs: std::array::from_fn(|k| qs[k.min(qs.len() - 1)].ray.dir.to_array()),
+            len: qs.len(),
+            cone,
             o: axis(&|c| c.origin),
             inv: axis(&|c| c.inv_dir),
             t_min: wide(&std::array::from_fn(|k| ctx[k].t_min)),
@@ -143,6 +178,89 @@ impl<P: Primitive> Tree<P> {
         m & active
     }
 
+    /// The leaf `node` for the rays of `active`, which share `origin`: each
+    /// pack filtered once for all of them ([`Pack::masks_rays`], the lanes
+    /// each ray's own filter passes), then each ray's lanes decided by its
+    /// visitor, pack after pack and lane after lane as in
+    /// [`Tree::leaf`]; returns the rays whose visitor stopped.
+    fn leaf_packet<V: Visitor<P>>(
+        &self,
+        node: Node,
+        origin: [f32; 3],
+        cone: Option<Cone>,
+        vis: &mut [Option<V>; PACKET],
+        mut active: Mask,
+    ) -> Mask {
+        let mut rays = PackRays {
+            origin,
+            cone,
+            dir: [[0.0; 3]; PACKET],
+            t_min: [0.0; PACKET],
+            t_max: [0.0; PACKET],
+        };
+        let mut left = active;
+        while left != 0 {
+            let k = left.trailing_zeros() as usize;
+            left &= left - 1;
+            if let Some(v) = vis[k].as_ref() {
+                let (r, t_min, t_max) = v.filter();
+                rays.dir[k] = r.dir;
+                rays.t_min[k] = t_min;
+                rays.t_max[k] = t_max;
+            }
+        }
+        let range = node.first as usize..(node.first + node.meta) as usize;
+        let l = lanes::<P>();
+        let mut stopped = 0;
+        // One pack (lanes `lanes` of it, ids `ids`) for every active ray;
+        // false once no ray is left.
+        let mut pack = |pack: &P::Pack, ids: &[u32], lanes: u32| {
+            let mut masks = [0; PACKET];
+            pack.masks_rays(&rays, active, self.isa, &mut masks);
+            let mut left = active;
+            while left != 0 {
+                let k = left.trailing_zeros() as usize;
+                left &= left - 1;
+                let mut m = masks[k] & lanes;
+                if m == 0 {
+                    continue;
+                }
+                let Some(v) = vis[k].as_mut() else { continue };
+                while m != 0 {
+                    let lane = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    if v.lane(pack.get(lane), ids[lane]) {
+                        stopped |= 1 << k;
+                        active &= !(1 << k);
+                        break;
+                    }
+                }
+                rays.t_max[k] = v.filter().2;
+            }
+            active != 0
+        };
+        if self.shared {
+            for &e in &self.entries[range] {
+                let p = (e & ENTRY_PACK) as usize;
+                if !pack(
+                    &self.packs[p],
+                    &self.pack_ids[p * l..(p + 1) * l],
+                    e >> ENTRY_MASK_SHIFT,
+                ) {
+                    break;
+                }
+            }
+        } else {
+            for (j, p) in self.packs[range.clone()].iter().enumerate() {
+                let i = range.start + j;
+                if !pack(p, &self.pack_ids[i * l..(i + 1) * l], u32::MAX) {
+                    break;
+                }
+            }
+        }
+        stopped
+    }
+
     /// The subtree of node `index` (cell `lo`, edge `size`) for the rays of
     /// `active`, front to back in the packet's order; returns the rays
     /// whose visitor stopped (any-hit queries that found a hit).
@@ -177,6 +295,9 @@ impl<P: Primitive> Tree<P> {
         }
         let mut stopped = 0;
         if node.meta & INTERIOR == 0 {
+            if let Some(origin) = l.origin {
+                return self.leaf_packet(node, origin, l.cone(), vis, active);
+            }
             while active != 0 {
                 let k = active.trailing_zeros() as usize;
                 active &= active - 1;
