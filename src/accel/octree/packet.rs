@@ -262,8 +262,11 @@ impl<P: Primitive> Tree<P> {
     }
 
     /// The subtree of node `index` (cell `lo`, edge `size`) for the rays of
-    /// `active`, front to back in the packet's order; returns the rays
-    /// whose visitor stopped (any-hit queries that found a hit).
+    /// `active`, whose cutoffs are `cut` now, front to back in the
+    /// packet's order; returns the rays whose visitor stopped (any-hit
+    /// queries that found a hit).
+    // The node, the packet and its state.
+    #[allow(clippy::too_many_arguments)]
     fn visit_packet<V: Visitor<P>>(
         &self,
         index: usize,
@@ -272,6 +275,7 @@ impl<P: Primitive> Tree<P> {
         l: &Lanes,
         vis: &mut [Option<V>; PACKET],
         active: Mask,
+        mut cut: Wide,
     ) -> Mask {
         if active.count_ones() <= LONE {
             // Few rays left: each its own descent, with its own constants.
@@ -289,7 +293,7 @@ impl<P: Primitive> Tree<P> {
             return stopped;
         }
         let node = self.nodes[index];
-        let mut active = Self::meets_box(l, self.boxes[index], &cutoffs(vis), active);
+        let mut active = Self::meets_box(l, self.boxes[index], &cut, active);
         if active == 0 {
             return 0;
         }
@@ -331,7 +335,6 @@ impl<P: Primitive> Tree<P> {
             if mask & (1 << oct) == 0 {
                 continue;
             }
-            let cut = cutoffs(vis);
             let mut m = 0;
             for h in 0..2 {
                 let side = |a: usize| {
@@ -349,11 +352,15 @@ impl<P: Primitive> Tree<P> {
                 continue;
             }
             let child = node.first as usize + (mask & ((1 << oct) - 1)).count_ones() as usize;
-            let s = self.visit_packet(child, child_lo(lo, half, oct), half, l, vis, m);
+            let s = self.visit_packet(child, child_lo(lo, half, oct), half, l, vis, m, cut);
             stopped |= s;
             active &= !s;
             if active == 0 {
                 break;
+            }
+            // Only a visit moves a cutoff.
+            if !V::FIXED_CUTOFF {
+                cut = cutoffs(vis);
             }
         }
         stopped
@@ -387,7 +394,8 @@ impl<P: Primitive> Octree<P> {
             if tree.references == 0 || tree.nodes.is_empty() {
                 continue;
             }
-            let s = tree.visit_packet(0, tree.root_lo, tree.root_size, l, vis, active);
+            let cut = cutoffs(vis);
+            let s = tree.visit_packet(0, tree.root_lo, tree.root_size, l, vis, active, cut);
             stopped |= s;
             active &= !s;
             if active == 0 {
