@@ -54,73 +54,74 @@ fn wide(a: &[f32; PACKET]) -> Wide {
     ]
 }
 
-/// The packet's rays, lane by lane (structure of arrays).
-struct Lanes {
+/// The packet's rays, lane by lane (structure of arrays); a lane past the
+/// last ray repeats it.
+struct Lanes<'q> {
     /// Origins, per axis.
     o: [Wide; 3],
     /// `1 / dir`, per axis (IEEE: `±inf` on zero components).
     inv: [Wide; 3],
     t_min: Wide,
-    /// Each ray's own constants, for the single-ray descent of a lone ray.
-    ctx: [RayCtx; PACKET],
+    /// The queries, for the single-ray descent of a lone ray.
+    qs: &'q [Query],
     /// The direction signs every ray of the packet shares.
     sign_mask: usize,
     /// The origin, when every ray of the packet has the same one (bit for
     /// bit): the leaves then test each pack once for all the rays
     /// ([`Pack::masks_rays`]).
     origin: Option<[f32; 3]>,
-    /// The rays' directions.
-    dirs: [[f32; 3]; PACKET],
-    /// Rays in the packet.
-    len: usize,
     /// With a shared origin and every `t_min >= 0`: a cone from it holding
     /// every ray, computed when the packet first reaches a leaf.
     cone: OnceCell<Option<Cone>>,
 }
 
-impl Lanes {
-    /// The cone of [`Lanes::cone`], once.
-    fn cone(&self) -> Option<Cone> {
-        *self
-            .cone
-            .get_or_init(|| Cone::around(&self.dirs[..self.len]))
-    }
-}
-
-impl Lanes {
+impl<'q> Lanes<'q> {
     /// The lanes of `qs` (at most [`PACKET`]), or `None` when their
     /// direction signs differ.
-    fn new(qs: &[Query]) -> Option<Lanes> {
-        let ctx: [RayCtx; PACKET] = std::array::from_fn(|k| {
-            let q = &qs[k.min(qs.len() - 1)];
-            RayCtx::new(&q.ray, q.t_min)
-        });
-        let sign_mask = ctx[0].sign_mask;
-        if ctx[..qs.len()].iter().any(|c| c.sign_mask != sign_mask) {
-            return None;
+    fn new(qs: &'q [Query]) -> Option<Lanes<'q>> {
+        let q = |k: usize| &qs[k.min(qs.len() - 1)];
+        let dir: [Wide; 3] = [0, 1, 2].map(|a| wide(&std::array::from_fn(|k| q(k).ray.dir[a])));
+        // The sign bits of every lane (`RayCtx::sign_mask`'s, per axis):
+        // all set or all clear.
+        let mut sign_mask = 0;
+        for (a, d) in dir.iter().enumerate() {
+            match d[0].is_negative_bitmask() | d[1].is_negative_bitmask() << 4 {
+                0 => {}
+                0xff => sign_mask |= 1 << a,
+                _ => return None,
+            }
         }
-        let axis = |f: &dyn Fn(&RayCtx) -> Vec3| {
-            [0, 1, 2].map(|a| wide(&std::array::from_fn(|k| f(&ctx[k])[a])))
-        };
-        let bits = |o: Vec3| o.to_array().map(f32::to_bits);
-        let shared = qs
-            .iter()
-            .all(|q| bits(q.ray.origin) == bits(qs[0].ray.origin));
+        let bits = |k: usize| q(k).ray.origin.to_array().map(f32::to_bits);
+        let shared = (1..qs.len()).all(|k| bits(k) == bits(0));
         let forward = qs.iter().all(|q| q.t_min >= 0.0);
         let cone = OnceCell::new();
         if !(shared && forward) {
             let _ = cone.set(None);
         }
         Some(Lanes {
-            origin: shared.then(|| qs[0].ray.origin.to_array()),
-            dirs: std::array::from_fn(|k| qs[k.min(qs.len() - 1)].ray.dir.to_array()),
-            len: qs.len(),
-            cone,
-            o: axis(&|c| c.origin),
-            inv: axis(&|c| c.inv_dir),
-            t_min: wide(&std::array::from_fn(|k| ctx[k].t_min)),
-            ctx,
+            o: [0, 1, 2].map(|a| wide(&std::array::from_fn(|k| q(k).ray.origin[a]))),
+            // One division per lane, as `RayCtx::new`'s.
+            inv: dir.map(|d| d.map(|v| Vec4::ONE / v)),
+            t_min: wide(&std::array::from_fn(|k| q(k).t_min)),
+            qs,
             sign_mask,
+            origin: shared.then(|| qs[0].ray.origin.to_array()),
+            cone,
+        })
+    }
+
+    /// Ray `k`'s own constants ([`RayCtx`]).
+    fn ctx(&self, k: usize) -> RayCtx {
+        let q = &self.qs[k];
+        RayCtx::new(&q.ray, q.t_min)
+    }
+
+    /// The cone of [`Lanes::cone`], once.
+    fn cone(&self) -> Option<Cone> {
+        *self.cone.get_or_init(|| {
+            let dirs: [[f32; 3]; PACKET] =
+                std::array::from_fn(|k| self.qs[k.min(self.qs.len() - 1)].ray.dir.to_array());
+            Cone::around(&dirs[..self.qs.len()])
         })
     }
 }
@@ -285,7 +286,7 @@ impl<P: Primitive> Tree<P> {
                 let k = left.trailing_zeros() as usize;
                 left &= left - 1;
                 if let Some(v) = vis[k].as_mut()
-                    && self.visit(index, lo, size, &l.ctx[k], v)
+                    && self.visit(index, lo, size, &l.ctx(k), v)
                 {
                     stopped |= 1 << k;
                 }
@@ -373,8 +374,9 @@ impl<P: Primitive> Octree<P> {
     fn part_order(&self, l: &Lanes) -> ([usize; super::parts::MAX_PARTS], usize) {
         let mut order = [(0.0f32, 0usize); super::parts::MAX_PARTS];
         let n = self.parts.len().min(super::parts::MAX_PARTS);
+        let first = l.ctx(0);
         for (i, tree) in self.parts.iter().enumerate().take(n) {
-            order[i] = (tree.window(&l.ctx[0]).0, i);
+            order[i] = (tree.window(&first).0, i);
         }
         order[..n].sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         (order.map(|(_, i)| i), n)
