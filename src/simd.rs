@@ -218,33 +218,33 @@ pub struct Cone {
 const CONE_SLACK: f32 = 1e-5;
 
 impl Cone {
-    /// The cone around `dirs` (at most [`RAYS`], finite, non-zero), or
-    /// `None` when it would be 60° wide or more (too wide to drop
-    /// anything) or a direction is not finite and non-zero.
+    /// The cone around the directions `dirs` (per axis, one lane per ray;
+    /// repeat a ray to fill the lanes), or `None` when it would be 60°
+    /// wide or more (too wide to drop anything) or a direction is not
+    /// finite and non-zero.
     #[must_use]
-    pub fn around(dirs: &[[f32; 3]]) -> Option<Cone> {
-        use glam::Vec3A;
-        let mut unit = [Vec3A::ZERO; RAYS];
-        let mut sum = Vec3A::ZERO;
-        for (u, d) in unit.iter_mut().zip(dirs) {
-            let d = Vec3A::from(*d);
-            let len2 = d.length_squared();
-            // NaN compares false; a finite square means finite components.
-            if !(len2 > 0.0 && len2 < f32::INFINITY) {
-                return None;
-            }
-            *u = d / len2.sqrt();
-            sum += *u;
+    pub fn around(dirs: &[[f32; RAYS]; 3]) -> Option<Cone> {
+        use glam::{Vec3, Vec4};
+        let half = |a: usize, h: usize| Vec4::from_slice(&dirs[a][4 * h..4 * h + 4]);
+        let [x, y, z] = [0, 1, 2].map(|a| [half(a, 0), half(a, 1)]);
+        let len2 = [0, 1].map(|h| x[h] * x[h] + y[h] * y[h] + z[h] * z[h]);
+        // NaN compares false; a finite square means finite components.
+        let ok = |v: Vec4| (v.cmpgt(Vec4::ZERO) & v.cmplt(Vec4::INFINITY)).all();
+        if !(ok(len2[0]) && ok(len2[1])) {
+            return None;
         }
-        let axis = sum.normalize_or_zero();
-        // The narrowest cosine, then a little less: the unit vectors and
-        // their cosines are off by a few ulps, the margin holds each ray
-        // strictly inside.
-        let mut cos = 1.0f32;
-        for u in &unit[..dirs.len().min(RAYS)] {
-            cos = cos.min(u.dot(axis));
+        let sum = |v: [Vec4; 2]| (v[0] + v[1]).element_sum();
+        let axis = Vec3::new(sum(x), sum(y), sum(z)).normalize_or_zero();
+        // The narrowest cosine (by its square, from the dot products), then
+        // a little less: the cosines are off by a few ulps, the margin
+        // holds each ray strictly inside.
+        let [ax, ay, az] = axis.to_array().map(Vec4::splat);
+        let dot = [0, 1].map(|h| x[h] * ax + y[h] * ay + z[h] * az);
+        if !(dot[0].cmpgt(Vec4::ZERO).all() && dot[1].cmpgt(Vec4::ZERO).all()) {
+            return None;
         }
-        let cos = cos - 1e-6;
+        let cos2 = (dot[0] * dot[0] / len2[0]).min(dot[1] * dot[1] / len2[1]);
+        let cos = cos2.min_element().min(1.0).sqrt() - 1e-6;
         if cos.is_nan() || cos < 0.5 {
             return None;
         }
@@ -792,7 +792,7 @@ mod tests {
                     1.0 + f(0.5)
                 }
             });
-            let cone = Cone::around(&dirs);
+            let cone = Cone::around(&std::array::from_fn(|a| dirs.map(|d| d[a])));
             if spread < 0.1 {
                 assert!(cone.is_some(), "ray {r}: a narrow packet has a cone");
             }

@@ -119,9 +119,10 @@ impl<'q> Lanes<'q> {
     /// The cone of [`Lanes::cone`], once.
     fn cone(&self) -> Option<Cone> {
         *self.cone.get_or_init(|| {
-            let dirs: [[f32; 3]; PACKET] =
-                std::array::from_fn(|k| self.qs[k.min(self.qs.len() - 1)].ray.dir.to_array());
-            Cone::around(&dirs[..self.qs.len()])
+            let q = |k: usize| &self.qs[k.min(self.qs.len() - 1)];
+            Cone::around(&std::array::from_fn(|a| {
+                std::array::from_fn(|k| q(k).ray.dir[a])
+            }))
         })
     }
 }
@@ -382,14 +383,20 @@ impl<P: Primitive> Octree<P> {
         (order.map(|(_, i)| i), n)
     }
 
-    /// Every part for the rays of `active`; the rays that stopped.
+    /// Every part for the rays of `active`; the rays that stopped. Any-hit
+    /// rays take the parts in their order, as [`Octree::any_hit`] does.
     fn walk_parts<V: Visitor<P>>(
         &self,
         l: &Lanes,
         vis: &mut [Option<V>; PACKET],
         mut active: Mask,
     ) -> Mask {
-        let (order, n) = self.part_order(l);
+        let (order, n) = if V::FIXED_CUTOFF {
+            let n = self.parts.len().min(super::parts::MAX_PARTS);
+            (std::array::from_fn(|i| i), n)
+        } else {
+            self.part_order(l)
+        };
         let mut stopped = 0;
         for &i in &order[..n] {
             let tree = &self.parts[i];
