@@ -8,6 +8,18 @@
 //! its path, then [`crate::primitive::Primitive::intersect`] and the
 //! self-hit rule per lane).
 //!
+//! Rays sharing an origin (a shadow batch leaving one hit toward a sphere
+//! light's samples, the primary rays of one eye; the integrator's batches)
+//! take a leaf together instead ([`Tree::leaf_packet`]): each pack is read
+//! once for all of them ([`Pack::masks_rays`], the filter's lanes for each
+//! ray, computed with its operations), after a test dropping the discs
+//! that lie farther than their largest radius from a cone around the
+//! packet's rays ([`Cone`]), which no ray of the packet can hit; each
+//! ray's lanes are then decided in the single ray's order, pack after pack
+//! and lane after lane. Any-hit packets walk the parts in index order, as
+//! [`Octree::any_hit`] does (closest-hit packets by the first ray's
+//! entry).
+//!
 //! Why the candidates are those of one ray at a time (`docs/DESIGN.md`,
 //! "The backend contract", rules 1 and 2): each ray keeps its own window
 //! ([`CandidateHits`]) and its own cutoff; a ray meets a cell when its
