@@ -377,8 +377,8 @@ impl<P: Primitive> Backend for Octree<P> {
 
     /// True: with a leaf taken once for the rays of a packet that share an
     /// origin (the integrator's batches), the octree renders the bunny in
-    /// 0.90-0.94 of the CPU time of its single rays, and the glass,
-    /// contact, scan and shading scenes in 0.86-0.90
+    /// 0.92-0.93 of the CPU time of its single rays, and the glass,
+    /// contact, scan and shading scenes in 0.85-0.90
     /// (`docs/development.md`, "Issue 25: octree packets, round 2", with
     /// the commands; before it, packets rendered the bunny 1.09 times
     /// slower, "Issue 25: ray packets").
