@@ -195,6 +195,152 @@ pub fn disc_masks(
     }
 }
 
+/// Rays per call of [`disc_masks_rays`] (a packet, `crate::accel::PACKET`).
+pub const RAYS: usize = 8;
+
+/// A cone from the rays' shared origin holding every ray's half-line
+/// (`t >= 0`): unit `axis`, and the cosine and sine of a half-angle a
+/// little wider than the widest ray's, below 90°.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cone {
+    /// Unit axis.
+    pub axis: [f32; 3],
+    /// Cosine of the half-angle.
+    pub cos: f32,
+    /// Sine of the half-angle.
+    pub sin: f32,
+}
+
+/// Relative slack of [`Cone`]'s lane test: a lane is dropped only when
+/// its disc lies farther from the cone than its largest radius plus this
+/// fraction of `|c - o|_1 + r`; rounding in the test, in the cone and in
+/// [`crate::primitive::Disc`]'s own hit point is below `1e-6` of that.
+const CONE_SLACK: f32 = 1e-5;
+
+impl Cone {
+    /// The cone around the directions `dirs` (per axis, one lane per ray;
+    /// repeat a ray to fill the lanes), or `None` when it would be 60°
+    /// wide or more (too wide to drop anything) or a direction is not
+    /// finite and non-zero.
+    #[must_use]
+    pub fn around(dirs: &[[f32; RAYS]; 3]) -> Option<Cone> {
+        use glam::{Vec3, Vec4};
+        let half = |a: usize, h: usize| Vec4::from_slice(&dirs[a][4 * h..4 * h + 4]);
+        let [x, y, z] = [0, 1, 2].map(|a| [half(a, 0), half(a, 1)]);
+        let len2 = [0, 1].map(|h| x[h] * x[h] + y[h] * y[h] + z[h] * z[h]);
+        // NaN compares false; a finite square means finite components.
+        let ok = |v: Vec4| (v.cmpgt(Vec4::ZERO) & v.cmplt(Vec4::INFINITY)).all();
+        if !(ok(len2[0]) && ok(len2[1])) {
+            return None;
+        }
+        let sum = |v: [Vec4; 2]| (v[0] + v[1]).element_sum();
+        let axis = Vec3::new(sum(x), sum(y), sum(z)).normalize_or_zero();
+        // The narrowest cosine (by its square, from the dot products), then
+        // a little less: the cosines are off by a few ulps, the margin
+        // holds each ray strictly inside.
+        let [ax, ay, az] = axis.to_array().map(Vec4::splat);
+        let dot = [0, 1].map(|h| x[h] * ax + y[h] * ay + z[h] * az);
+        if !(dot[0].cmpgt(Vec4::ZERO).all() && dot[1].cmpgt(Vec4::ZERO).all()) {
+            return None;
+        }
+        let cos2 = (dot[0] * dot[0] / len2[0]).min(dot[1] * dot[1] / len2[1]);
+        let cos = cos2.min_element().min(1.0).sqrt() - 1e-6;
+        if cos.is_nan() || cos < 0.5 {
+            return None;
+        }
+        Some(Cone {
+            axis: axis.to_array(),
+            cos,
+            sin: (1.0 - cos * cos).max(0.0).sqrt(),
+        })
+    }
+}
+
+/// Bit `l` of `out[k]`, for each ray `k` set in `active`, set when lane `l`
+/// of `pack` may be hit in `[t_min[k], t_max[k]]` by the ray (`origin`,
+/// `dirs[k]`), for rays sharing one origin (issue 25: a shadow batch
+/// leaves one hit, primary rays one eye), on the path `isa`. The pack is
+/// read once for all of them, and what depends only on the origin
+/// (`o - c`, `n·(o - c)` of eq. (1)'s plane parameter) is computed once,
+/// with the same IEEE operations as for one ray, so each ray's lanes are
+/// those of [`disc_masks`] for it; with a `cone` holding every ray, first
+/// the lanes whose disc lies farther from the cone than its largest radius
+/// (plus [`CONE_SLACK`]) are dropped for all the rays at once, and the
+/// rays are tested only when a lane is left: no ray of the cone can hit
+/// such a disc, so a lane is still passed whenever
+/// [`crate::primitive::Disc::intersect`] hits it. `out[k]` of a ray not in
+/// `active` is left as it is. AVX-512 runs the AVX2 kernel (one pack fills
+/// a 256-bit register); a path the CPU does not run is replaced by the
+/// portable one, which gives the same lanes.
+// The packet's fields as the kernels take them.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+pub fn disc_masks_rays(
+    pack: &DiscColumns,
+    origin: [f32; 3],
+    dirs: &[[f32; 3]; RAYS],
+    t_min: &[f32; RAYS],
+    t_max: &[f32; RAYS],
+    cone: Option<&Cone>,
+    active: u32,
+    isa: Isa,
+    out: &mut [u32; RAYS],
+) {
+    let active = active & ((1 << RAYS) - 1);
+    match isa {
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx2 | Isa::Avx512 if Isa::Avx2.supported() => {
+            // SAFETY: the guard checked that the CPU runs AVX2.
+            unsafe { x86::avx2_masks_rays(pack, origin, dirs, t_min, t_max, cone, active, out) }
+        }
+        _ => {
+            let near = cone.map_or(u32::MAX, |c| portable_cone(pack, origin, c));
+            let mut left = active;
+            while left != 0 {
+                let k = left.trailing_zeros() as usize;
+                left &= left - 1;
+                out[k] = if near == 0 {
+                    0
+                } else {
+                    portable_mask(pack, origin, dirs[k], t_min[k], t_max[k]) & near
+                };
+            }
+        }
+    }
+}
+
+/// The lanes of `p` not dropped by the cone test of [`disc_masks_rays`]:
+/// with `w = c - o`, `h = |w × a|` and `s = w·a`, `h cos - s sin` is at
+/// most the distance from the centre to the cone (that of the half-space
+/// bounding the cone along the generator nearest `c`), and a disc hit by a
+/// ray of the cone has its centre within its largest radius
+/// `r = 1 / min(|u_scaled|, |v_scaled|)` of the hit; a lane is dropped
+/// when `h cos - s sin > r + slack` (NaN: kept).
+#[inline]
+fn portable_cone(p: &DiscColumns, origin: [f32; 3], cone: &Cone) -> u32 {
+    use glam::Vec4;
+    let half = |h: usize| {
+        let col = |k: usize| Vec4::from_slice(&p.cols[k][4 * h..4 * h + 4]);
+        let [ax, ay, az] = cone.axis.map(Vec4::splat);
+        let wx = col(CENTER) - Vec4::splat(origin[0]);
+        let wy = col(CENTER + 1) - Vec4::splat(origin[1]);
+        let wz = col(CENTER + 2) - Vec4::splat(origin[2]);
+        let (qx, qy, qz) = (wy * az - wz * ay, wz * ax - wx * az, wx * ay - wy * ax);
+        let h = (qx * qx + qy * qy + qz * qz).sqrt();
+        let s = wx * ax + wy * ay + wz * az;
+        let dist = h * Vec4::splat(cone.cos) - s * Vec4::splat(cone.sin);
+        let sq = |x: Vec4, y: Vec4, z: Vec4| x * x + y * y + z * z;
+        let us = sq(col(U_SCALED), col(U_SCALED + 1), col(U_SCALED + 2));
+        let vs = sq(col(V_SCALED), col(V_SCALED + 1), col(V_SCALED + 2));
+        let r = Vec4::ONE / us.min(vs).sqrt();
+        let l1 = wx.abs() + wy.abs() + wz.abs();
+        let bound = r + (l1 + r) * Vec4::splat(CONE_SLACK);
+        // Kept unless `dist > bound` (false on NaN).
+        !dist.cmpgt(bound).bitmask() & 0xf
+    };
+    half(0) | half(1) << 4
+}
+
 /// The portable filter: the pack as two halves of four lanes (glam's
 /// `Vec4`, SSE2 on x86-64).
 #[inline]
@@ -230,7 +376,7 @@ fn portable_mask(p: &DiscColumns, origin: [f32; 3], dir: [f32; 3], t_min: f32, t
 
 #[cfg(target_arch = "x86_64")]
 mod x86 {
-    use super::{CENTER, DiscColumns, NORMAL, RIM, U_SCALED, V_SCALED};
+    use super::{CENTER, CONE_SLACK, Cone, DiscColumns, NORMAL, RAYS, RIM, U_SCALED, V_SCALED};
     use std::arch::x86_64::*;
 
     /// [`super::disc_masks`] with one pack per 256-bit register.
@@ -301,6 +447,136 @@ mod x86 {
             let r2 = _mm256_add_ps(_mm256_mul_ps(u, u), _mm256_mul_ps(v, v));
             let on = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(r2, rim)) as u32;
             *m = on & in_range;
+        }
+    }
+
+    /// [`super::disc_masks_rays`]: the pack's columns and `n·(o - c)` once,
+    /// then each ray of `active` as in [`avx2_masks`].
+    ///
+    /// # Safety
+    /// The CPU must run AVX2.
+    #[target_feature(enable = "avx2")]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) unsafe fn avx2_masks_rays(
+        p: &DiscColumns,
+        origin: [f32; 3],
+        dirs: &[[f32; 3]; RAYS],
+        t_min: &[f32; RAYS],
+        t_max: &[f32; RAYS],
+        cone: Option<&Cone>,
+        active: u32,
+        out: &mut [u32; RAYS],
+    ) {
+        let [ox, oy, oz] = origin.map(|x| _mm256_set1_ps(x));
+        let inf = _mm256_set1_ps(f32::INFINITY);
+        let rim = _mm256_set1_ps(RIM);
+        let sign = _mm256_set1_ps(-0.0);
+        // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
+        // (`DiscColumns` is 64-byte aligned, each column 32 bytes).
+        let col = |k: usize| unsafe { _mm256_load_ps(p.cols[k].as_ptr()) };
+        let (cx, cy, cz) = (col(CENTER), col(CENTER + 1), col(CENTER + 2));
+        // The cone test of `portable_cone`, the same operations.
+        let near = match cone {
+            None => _mm256_castsi256_ps(_mm256_set1_epi32(-1)),
+            Some(cone) => {
+                let [ax, ay, az] = cone.axis.map(|x| _mm256_set1_ps(x));
+                let (wx, wy, wz) = (
+                    _mm256_sub_ps(cx, ox),
+                    _mm256_sub_ps(cy, oy),
+                    _mm256_sub_ps(cz, oz),
+                );
+                let cross = |a: __m256, b: __m256, c: __m256, d: __m256| {
+                    _mm256_sub_ps(_mm256_mul_ps(a, b), _mm256_mul_ps(c, d))
+                };
+                let (qx, qy, qz) = (
+                    cross(wy, az, wz, ay),
+                    cross(wz, ax, wx, az),
+                    cross(wx, ay, wy, ax),
+                );
+                let dot = |a: [__m256; 3], b: [__m256; 3]| {
+                    _mm256_add_ps(
+                        _mm256_add_ps(_mm256_mul_ps(a[0], b[0]), _mm256_mul_ps(a[1], b[1])),
+                        _mm256_mul_ps(a[2], b[2]),
+                    )
+                };
+                let h = _mm256_sqrt_ps(dot([qx, qy, qz], [qx, qy, qz]));
+                let s = dot([wx, wy, wz], [ax, ay, az]);
+                let dist = _mm256_sub_ps(
+                    _mm256_mul_ps(h, _mm256_set1_ps(cone.cos)),
+                    _mm256_mul_ps(s, _mm256_set1_ps(cone.sin)),
+                );
+                let u = [col(U_SCALED), col(U_SCALED + 1), col(U_SCALED + 2)];
+                let v = [col(V_SCALED), col(V_SCALED + 1), col(V_SCALED + 2)];
+                let m = _mm256_min_ps(dot(u, u), dot(v, v));
+                let r = _mm256_div_ps(_mm256_set1_ps(1.0), _mm256_sqrt_ps(m));
+                let l1 = _mm256_add_ps(
+                    _mm256_add_ps(_mm256_andnot_ps(sign, wx), _mm256_andnot_ps(sign, wy)),
+                    _mm256_andnot_ps(sign, wz),
+                );
+                let bound = _mm256_add_ps(
+                    r,
+                    _mm256_mul_ps(_mm256_add_ps(l1, r), _mm256_set1_ps(CONE_SLACK)),
+                );
+                let near = _mm256_cmp_ps::<_CMP_NGT_UQ>(dist, bound);
+                if _mm256_movemask_ps(near) == 0 {
+                    let mut left = active;
+                    while left != 0 {
+                        let k = left.trailing_zeros() as usize;
+                        left &= left - 1;
+                        out[k] = 0;
+                    }
+                    return;
+                }
+                near
+            }
+        };
+        let (nx, ny, nz) = (col(NORMAL), col(NORMAL + 1), col(NORMAL + 2));
+        let (ocx, ocy, ocz) = (
+            _mm256_sub_ps(ox, cx),
+            _mm256_sub_ps(oy, cy),
+            _mm256_sub_ps(oz, cz),
+        );
+        let num = _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(nx, ocx), _mm256_mul_ps(ny, ocy)),
+            _mm256_mul_ps(nz, ocz),
+        );
+        let neg = _mm256_xor_ps(num, sign);
+        let mut left = active;
+        while left != 0 {
+            let k = left.trailing_zeros() as usize;
+            left &= left - 1;
+            let [dx, dy, dz] = dirs[k].map(|x| _mm256_set1_ps(x));
+            let denom = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(nx, dx), _mm256_mul_ps(ny, dy)),
+                _mm256_mul_ps(nz, dz),
+            );
+            let t = _mm256_div_ps(neg, denom);
+            let in_range = _mm256_and_ps(
+                _mm256_and_ps(
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(t, _mm256_set1_ps(t_min[k])),
+                    _mm256_cmp_ps::<_CMP_LE_OQ>(t, _mm256_set1_ps(t_max[k])),
+                ),
+                _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_andnot_ps(sign, t), inf),
+            );
+            // No early exit on an empty range here: most packs have lanes
+            // in range, and a branch per ray keeps the rays' chains from
+            // overlapping.
+            let (ux, uy, uz) = (col(U_SCALED), col(U_SCALED + 1), col(U_SCALED + 2));
+            let (vx, vy, vz) = (col(V_SCALED), col(V_SCALED + 1), col(V_SCALED + 2));
+            let px = _mm256_add_ps(ocx, _mm256_mul_ps(dx, t));
+            let py = _mm256_add_ps(ocy, _mm256_mul_ps(dy, t));
+            let pz = _mm256_add_ps(ocz, _mm256_mul_ps(dz, t));
+            let u = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(px, ux), _mm256_mul_ps(py, uy)),
+                _mm256_mul_ps(pz, uz),
+            );
+            let v = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(px, vx), _mm256_mul_ps(py, vy)),
+                _mm256_mul_ps(pz, vz),
+            );
+            let r2 = _mm256_add_ps(_mm256_mul_ps(u, u), _mm256_mul_ps(v, v));
+            let on = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(r2, rim), in_range);
+            out[k] = _mm256_movemask_ps(_mm256_and_ps(on, near)) as u32;
         }
     }
 
@@ -458,6 +734,140 @@ mod tests {
         assert!(
             total > 1000,
             "the rays hit too few lanes to test much: {total}"
+        );
+    }
+
+    /// Packets of rays sharing an origin (narrow and wide cones, zero and
+    /// positive `t_min`, finite and infinite `t_max`) against packs of
+    /// random discs: [`disc_masks_rays`] without a cone gives each ray the
+    /// lanes of [`disc_masks`]; with the rays' cone, a subset of them that
+    /// still holds every lane the exact disc test hits; every path the
+    /// same lanes as the portable one, and the cone drops most lanes.
+    #[test]
+    fn shared_origin_rays_get_their_own_lanes() {
+        use crate::primitive::{Disc, Pack, Primitive};
+        use glam::Vec3;
+        let mut rng = SplitMix64::new(11);
+        let mut f = |s: f32| (rng.next_f64() as f32 * 2.0 - 1.0) * s;
+        let mut packs = Vec::new();
+        for _ in 0..64 {
+            let mut pack = DiscColumns::EMPTY;
+            for l in 0..LANES - 1 {
+                let n = Vec3::new(f(1.0), f(1.0), f(1.0)).normalize();
+                let u = n.any_orthonormal_vector();
+                let v = n.cross(u);
+                let (ru, rv) = (0.05 + f(0.04).abs(), 0.05 + f(0.04).abs());
+                let d = Disc {
+                    center: Vec3::new(f(1.0), f(1.0), f(1.0)),
+                    normal: n,
+                    u_scaled: u / ru,
+                    v_scaled: v / rv,
+                };
+                pack.set(l, &d);
+            }
+            packs.push(pack);
+        }
+        let (mut hits, mut dropped) = (0, 0);
+        for r in 0..300 {
+            let origin = [f(1.2), f(1.2), f(1.2)];
+            // Aimed at a disc centre, spread by 0.02 or 0.3.
+            let p = &packs[r % packs.len()];
+            let aim = Vec3::new(
+                p.cols[CENTER][r % 7],
+                p.cols[CENTER + 1][r % 7],
+                p.cols[CENTER + 2][r % 7],
+            );
+            let spread = if r % 2 == 0 { 0.02 } else { 0.3 };
+            let base = aim - Vec3::from(origin);
+            let dirs: [[f32; 3]; RAYS] = std::array::from_fn(|_| {
+                (base + Vec3::new(f(spread), f(spread), f(spread)) * base.length())
+                    .normalize()
+                    .to_array()
+            });
+            let t_min = [if r % 3 == 0 { 0.0 } else { 1e-3 }; RAYS];
+            let t_max: [f32; RAYS] = std::array::from_fn(|k| {
+                if k % 2 == 0 {
+                    f32::INFINITY
+                } else {
+                    1.0 + f(0.5)
+                }
+            });
+            let cone = Cone::around(&std::array::from_fn(|a| dirs.map(|d| d[a])));
+            if spread < 0.1 {
+                assert!(cone.is_some(), "ray {r}: a narrow packet has a cone");
+            }
+            let active = if r % 5 == 0 { 0b1011_0110 } else { 0xff };
+            for pack in &packs {
+                let mut want = [u32::MAX; RAYS];
+                for k in 0..RAYS {
+                    let mut m = [0];
+                    disc_masks(
+                        std::slice::from_ref(pack),
+                        origin,
+                        dirs[k],
+                        t_min[k],
+                        t_max[k],
+                        Isa::Portable,
+                        &mut m,
+                    );
+                    if active & (1 << k) != 0 {
+                        want[k] = m[0];
+                    }
+                }
+                for isa in available() {
+                    let mut got = [u32::MAX; RAYS];
+                    disc_masks_rays(
+                        pack, origin, &dirs, &t_min, &t_max, None, active, isa, &mut got,
+                    );
+                    assert_eq!(got, want, "{isa}, ray {r}, no cone");
+                }
+                let mut coned = [u32::MAX; RAYS];
+                let c = cone.as_ref();
+                if let Some(c) = c {
+                    dropped += LANES as u32 - portable_cone(pack, origin, c).count_ones();
+                }
+                disc_masks_rays(
+                    pack,
+                    origin,
+                    &dirs,
+                    &t_min,
+                    &t_max,
+                    c,
+                    active,
+                    Isa::Portable,
+                    &mut coned,
+                );
+                for isa in available() {
+                    let mut got = [u32::MAX; RAYS];
+                    disc_masks_rays(
+                        pack, origin, &dirs, &t_min, &t_max, c, active, isa, &mut got,
+                    );
+                    assert_eq!(got, coned, "{isa}, ray {r}, cone");
+                }
+                for k in 0..RAYS {
+                    if active & (1 << k) == 0 {
+                        continue;
+                    }
+                    assert_eq!(coned[k] & !want[k], 0, "ray {r}/{k}: the cone adds lanes");
+                    let ray = crate::geometry::Ray {
+                        origin: origin.into(),
+                        dir: dirs[k].into(),
+                    };
+                    for l in 0..LANES {
+                        if pack.get(l).intersect(&ray, t_min[k], t_max[k]).is_some() {
+                            hits += 1;
+                            assert!(
+                                coned[k] & (1 << l) != 0,
+                                "ray {r}/{k}: lane {l} hit but dropped"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            hits > 200 && dropped > 50_000,
+            "too little tested: {hits} hits, {dropped} dropped"
         );
     }
 

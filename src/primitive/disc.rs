@@ -1,7 +1,7 @@
 //! The oriented elliptical disc of a splat (§2.1, fig. 3): the primitive of
 //! every scene today.
 
-use super::{Hit, Local, Pack, PackRay, Primitive};
+use super::{Hit, Local, Pack, PackRay, PackRays, Primitive};
 use crate::geometry::Ray;
 use crate::simd;
 use glam::Vec3;
@@ -261,6 +261,30 @@ impl Pack<Disc> for DiscPack {
         out: &mut [u32],
     ) {
         simd::disc_masks(packs, ray.origin, ray.dir, t_min, t_max, isa, out);
+    }
+
+    /// [`simd::disc_masks_rays`]: the pack and `n·(o - c)` once for all
+    /// the rays (the lanes of [`DiscPack::masks`] per ray, less those
+    /// whose disc lies beyond its radius from the rays' cone).
+    #[inline]
+    fn masks_rays(
+        &self,
+        rays: &PackRays,
+        active: u32,
+        isa: simd::Isa,
+        out: &mut [u32; simd::RAYS],
+    ) {
+        simd::disc_masks_rays(
+            self,
+            rays.origin,
+            &rays.dir,
+            &rays.t_min,
+            &rays.t_max,
+            rays.cone.as_ref(),
+            active,
+            isa,
+            out,
+        );
     }
 }
 

@@ -104,6 +104,25 @@ impl PackRay {
     }
 }
 
+/// Rays of a packet sharing one origin (a shadow batch leaving one hit, the
+/// primary rays of one eye), each with its own direction and span, for
+/// [`Pack::masks_rays`]; slot `k` is ray `k` of the packet.
+#[derive(Clone, Copy, Debug)]
+pub struct PackRays {
+    /// The origin every ray shares.
+    pub origin: [f32; 3],
+    /// Each ray's direction.
+    pub dir: [[f32; 3]; crate::simd::RAYS],
+    /// Each ray's `t_min`.
+    pub t_min: [f32; crate::simd::RAYS],
+    /// Each ray's `t_max`.
+    pub t_max: [f32; crate::simd::RAYS],
+    /// A cone from `origin` holding every ray's half-line, when the rays
+    /// start at `t_min >= 0`: a pack may drop, for all the rays at once,
+    /// the primitives no ray of the cone can hit.
+    pub cone: Option<crate::simd::Cone>,
+}
+
 /// [`Pack::LANES`] primitives stored together (SoA for a SIMD filter).
 pub trait Pack<P>: Copy + Send + Sync + 'static {
     /// Primitives per pack.
@@ -143,6 +162,31 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
         let _ = isa;
         for (p, m) in packs.iter().zip(out.iter_mut()) {
             *m = p.may_hit(ray, t_min, t_max);
+        }
+    }
+
+    /// [`Pack::may_hit`] of this pack for each ray `k` set in `active`
+    /// into `out[k]` (the others left as they are), on the SIMD path `isa`
+    /// where the pack has one: every ray's lanes exactly those
+    /// [`Pack::masks`] gives it alone.
+    #[inline]
+    fn masks_rays(
+        &self,
+        rays: &PackRays,
+        active: u32,
+        isa: crate::simd::Isa,
+        out: &mut [u32; crate::simd::RAYS],
+    ) {
+        let _ = isa;
+        let mut left = active & ((1 << crate::simd::RAYS) - 1);
+        while left != 0 {
+            let k = left.trailing_zeros() as usize;
+            left &= left - 1;
+            let ray = PackRay {
+                origin: rays.origin,
+                dir: rays.dir[k],
+            };
+            out[k] = self.may_hit(&ray, rays.t_min[k], rays.t_max[k]);
         }
     }
 }

@@ -535,6 +535,65 @@ pub fn count_skipping(oracle: &dyn Backend, queries: &[Query], xi: f32) -> usize
         .count()
 }
 
+/// The surface `q`'s ray meets with Phong splats, as the integrator finds
+/// it: the window gathered (into `h`) and resolved, and gathered again past
+/// candidates beyond their fields' silhouettes.
+fn phong_hit(
+    oracle: &dyn Backend,
+    splats: &[Splat],
+    q: &Query,
+    h: &mut CandidateHits,
+) -> Option<splatray::resolve::SurfaceHit> {
+    let mut t_min = q.t_min;
+    loop {
+        oracle.intersect(&q.ray, t_min, q.t_max, h);
+        match resolve(h, &q.ray, splats, ShadingMode::Phong)? {
+            Resolved::Beyond(t) => t_min = t,
+            Resolved::Hit(hit) => return Some(hit),
+        }
+    }
+}
+
+/// Shadow rays from each resolved primary hit toward 8 random points of a
+/// sphere light (centre `light`, radius `radius`), leaving the winning
+/// splat with `t_min = eps_self`, 8 in a row from one hit: the batches
+/// the integrator hands a backend (sharing an origin, so the octree's
+/// packets test each leaf's packs once for all of them).
+pub fn light_batches(
+    oracle: &dyn Backend,
+    splats: &[Splat],
+    primaries: &[Query],
+    xi: f32,
+    eps_self: f32,
+    (light, radius): (Vec3, f32),
+) -> Vec<Query> {
+    let mut rng = Rng::new(seed() ^ 0x5eed);
+    let mut h = CandidateHits::new(xi);
+    let mut out = Vec::new();
+    for q in primaries {
+        if let Some(hit) = phong_hit(oracle, splats, q, &mut h) {
+            let from = Some(Departure {
+                id: hit.id,
+                point: hit.point,
+                normal: hit.geometric_normal,
+            });
+            for _ in 0..8 {
+                let to = light + rng.unit() * radius - hit.point;
+                out.push(Query {
+                    ray: Ray {
+                        origin: hit.point,
+                        dir: to / to.length(),
+                    },
+                    t_min: eps_self,
+                    t_max: to.length() - eps_self,
+                    from,
+                });
+            }
+        }
+    }
+    out
+}
+
 /// Secondary rays from each resolved primary hit: the mirror reflection and
 /// a shadow ray toward `light`, both starting at the hit with
 /// `t_min = eps_self` (§3.2, fig. 9 right) and leaving the winning splat
@@ -550,17 +609,7 @@ pub fn secondary_queries(
     let mut h = CandidateHits::new(xi);
     let mut out = Vec::new();
     for q in primaries {
-        // Gathered again past candidates beyond their fields' silhouettes,
-        // as the integrator does.
-        let mut t_min = q.t_min;
-        let hit = loop {
-            oracle.intersect(&q.ray, t_min, q.t_max, &mut h);
-            match resolve(&h, &q.ray, splats, ShadingMode::Phong) {
-                Some(Resolved::Beyond(t)) => t_min = t,
-                r => break r.and_then(Resolved::hit),
-            }
-        };
-        if let Some(hit) = hit {
+        if let Some(hit) = phong_hit(oracle, splats, q, &mut h) {
             let from = Some(Departure {
                 id: hit.id,
                 point: hit.point,

@@ -70,6 +70,24 @@ fn camera_and_secondary_rays_agree_on_every_backend() {
         scale.xi,
         "reflection and shadow rays leaving their splat",
     );
+    // Batches toward a sphere light from one hit (a shared origin), the
+    // light small and near (a narrow cone) or large (a wide one).
+    for light in [
+        (Vec3::new(5.0, 6.0, 3.0), 0.4),
+        (Vec3::new(1.0, 2.0, 1.0), 1.5),
+    ] {
+        let batches = light_batches(
+            b.oracle.as_ref(),
+            &splats,
+            &camera,
+            scale.xi,
+            scale.eps_self,
+            light,
+        );
+        // Eight per primary hit that resolves to a surface (as above).
+        assert!(batches.len() >= 8 * hits * 9 / 10);
+        assert_all_agree(&b, &splats, &batches, scale.xi, "sphere light batches");
+    }
     // The same rays with nothing skipped.
     let plain: Vec<Query> = secondary
         .iter()
@@ -123,6 +141,21 @@ fn a_model_on_a_wide_floor_agrees_on_every_backend() {
         Vec3::new(2.5, 4.0, 3.0),
     );
     assert_all_agree(&b, &splats, &secondary, scale.xi, "shadow rays, floor");
+    let batches = light_batches(
+        b.oracle.as_ref(),
+        &splats,
+        &camera,
+        scale.xi,
+        scale.eps_self,
+        (Vec3::new(2.5, 4.0, 3.0), 0.4),
+    );
+    assert_all_agree(
+        &b,
+        &splats,
+        &batches,
+        scale.xi,
+        "sphere light batches, floor",
+    );
 }
 
 #[test]

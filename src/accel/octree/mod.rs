@@ -375,12 +375,15 @@ impl<P: Primitive> Backend for Octree<P> {
         self.any_hit_packets(qs, out);
     }
 
-    /// False: the octree's packets trace the bench's primary and shadow
-    /// rays at 0.99 / 0.82 (35k splats) and 1.07 / 1.02 (1M) of its single
-    /// rays, and render the bunny 1.09 times slower (`docs/development.md`,
-    /// "Issue 25: ray packets", with the commands).
+    /// True: with a leaf taken once for the rays of a packet that share an
+    /// origin (the integrator's batches), the octree renders the bunny in
+    /// 0.92-0.93 of the CPU time of its single rays, and the glass,
+    /// contact, scan and shading scenes in 0.85-0.90
+    /// (`docs/development.md`, "Issue 25: octree packets, round 2", with
+    /// the commands; before it, packets rendered the bunny 1.09 times
+    /// slower, "Issue 25: ray packets").
     fn prefers_packets(&self) -> bool {
-        false
+        true
     }
 
     fn stats(&self) -> &BuildStats {

@@ -8,6 +8,18 @@
 //! its path, then [`crate::primitive::Primitive::intersect`] and the
 //! self-hit rule per lane).
 //!
+//! Rays sharing an origin (a shadow batch leaving one hit toward a sphere
+//! light's samples, the primary rays of one eye; the integrator's batches)
+//! take a leaf together instead ([`Tree::leaf_packet`]): each pack is read
+//! once for all of them ([`Pack::masks_rays`], the filter's lanes for each
+//! ray, computed with its operations), after a test dropping the discs
+//! that lie farther than their largest radius from a cone around the
+//! packet's rays ([`Cone`]), which no ray of the packet can hit; each
+//! ray's lanes are then decided in the single ray's order, pack after pack
+//! and lane after lane. Any-hit packets walk the parts in index order, as
+//! [`Octree::any_hit`] does (closest-hit packets by the first ray's
+//! entry).
+//!
 //! Why the candidates are those of one ray at a time (`docs/DESIGN.md`,
 //! "The backend contract", rules 1 and 2): each ray keeps its own window
 //! ([`CandidateHits`]) and its own cutoff; a ray meets a cell when its
@@ -25,10 +37,12 @@
 //! or fewer hands each to the single ray's descent at that node.
 
 use super::traverse::{AnyHit, Gather, RayCtx, Visitor};
-use super::{INTERIOR, Octree, Tree, child_lo};
+use super::{ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Node, Octree, Tree, child_lo, lanes};
 use crate::accel::{CandidateHits, NoSkip, PACKET, Query, Skip};
-use crate::primitive::Primitive;
+use crate::primitive::{Pack, PackRays, Primitive};
+use crate::simd::Cone;
 use glam::{Vec3, Vec4};
+use std::cell::OnceCell;
 
 /// Fewest rays traced as a packet; smaller batches go one at a time.
 const MIN_PACKET: usize = 2;
@@ -52,40 +66,75 @@ fn wide(a: &[f32; PACKET]) -> Wide {
     ]
 }
 
-/// The packet's rays, lane by lane (structure of arrays).
-struct Lanes {
+/// The packet's rays, lane by lane (structure of arrays); a lane past the
+/// last ray repeats it.
+struct Lanes<'q> {
     /// Origins, per axis.
     o: [Wide; 3],
     /// `1 / dir`, per axis (IEEE: `±inf` on zero components).
     inv: [Wide; 3],
     t_min: Wide,
-    /// Each ray's own constants, for the single-ray descent of a lone ray.
-    ctx: [RayCtx; PACKET],
+    /// The queries, for the single-ray descent of a lone ray.
+    qs: &'q [Query],
     /// The direction signs every ray of the packet shares.
     sign_mask: usize,
+    /// The origin, when every ray of the packet has the same one (bit for
+    /// bit): the leaves then test each pack once for all the rays
+    /// ([`Pack::masks_rays`]).
+    origin: Option<[f32; 3]>,
+    /// With a shared origin and every `t_min >= 0`: a cone from it holding
+    /// every ray, computed when the packet first reaches a leaf.
+    cone: OnceCell<Option<Cone>>,
 }
 
-impl Lanes {
+impl<'q> Lanes<'q> {
     /// The lanes of `qs` (at most [`PACKET`]), or `None` when their
     /// direction signs differ.
-    fn new(qs: &[Query]) -> Option<Lanes> {
-        let ctx: [RayCtx; PACKET] = std::array::from_fn(|k| {
-            let q = &qs[k.min(qs.len() - 1)];
-            RayCtx::new(&q.ray, q.t_min)
-        });
-        let sign_mask = ctx[0].sign_mask;
-        if ctx[..qs.len()].iter().any(|c| c.sign_mask != sign_mask) {
-            return None;
+    fn new(qs: &'q [Query]) -> Option<Lanes<'q>> {
+        let q = |k: usize| &qs[k.min(qs.len() - 1)];
+        let dir: [Wide; 3] = [0, 1, 2].map(|a| wide(&std::array::from_fn(|k| q(k).ray.dir[a])));
+        // The sign bits of every lane (`RayCtx::sign_mask`'s, per axis):
+        // all set or all clear.
+        let mut sign_mask = 0;
+        for (a, d) in dir.iter().enumerate() {
+            match d[0].is_negative_bitmask() | d[1].is_negative_bitmask() << 4 {
+                0 => {}
+                0xff => sign_mask |= 1 << a,
+                _ => return None,
+            }
         }
-        let axis = |f: &dyn Fn(&RayCtx) -> Vec3| {
-            [0, 1, 2].map(|a| wide(&std::array::from_fn(|k| f(&ctx[k])[a])))
-        };
+        let bits = |k: usize| q(k).ray.origin.to_array().map(f32::to_bits);
+        let shared = (1..qs.len()).all(|k| bits(k) == bits(0));
+        let forward = qs.iter().all(|q| q.t_min >= 0.0);
+        let cone = OnceCell::new();
+        if !(shared && forward) {
+            let _ = cone.set(None);
+        }
         Some(Lanes {
-            o: axis(&|c| c.origin),
-            inv: axis(&|c| c.inv_dir),
-            t_min: wide(&std::array::from_fn(|k| ctx[k].t_min)),
-            ctx,
+            o: [0, 1, 2].map(|a| wide(&std::array::from_fn(|k| q(k).ray.origin[a]))),
+            // One division per lane, as `RayCtx::new`'s.
+            inv: dir.map(|d| d.map(|v| Vec4::ONE / v)),
+            t_min: wide(&std::array::from_fn(|k| q(k).t_min)),
+            qs,
             sign_mask,
+            origin: shared.then(|| qs[0].ray.origin.to_array()),
+            cone,
+        })
+    }
+
+    /// Ray `k`'s own constants ([`RayCtx`]).
+    fn ctx(&self, k: usize) -> RayCtx {
+        let q = &self.qs[k];
+        RayCtx::new(&q.ray, q.t_min)
+    }
+
+    /// The cone of [`Lanes::cone`], once.
+    fn cone(&self) -> Option<Cone> {
+        *self.cone.get_or_init(|| {
+            let q = |k: usize| &self.qs[k.min(self.qs.len() - 1)];
+            Cone::around(&std::array::from_fn(|a| {
+                std::array::from_fn(|k| q(k).ray.dir[a])
+            }))
         })
     }
 }
@@ -143,9 +192,95 @@ impl<P: Primitive> Tree<P> {
         m & active
     }
 
+    /// The leaf `node` for the rays of `active`, which share `origin`: each
+    /// pack filtered once for all of them ([`Pack::masks_rays`], the lanes
+    /// each ray's own filter passes), then each ray's lanes decided by its
+    /// visitor, pack after pack and lane after lane as in
+    /// [`Tree::leaf`]; returns the rays whose visitor stopped.
+    fn leaf_packet<V: Visitor<P>>(
+        &self,
+        node: Node,
+        origin: [f32; 3],
+        cone: Option<Cone>,
+        vis: &mut [Option<V>; PACKET],
+        mut active: Mask,
+    ) -> Mask {
+        let mut rays = PackRays {
+            origin,
+            cone,
+            dir: [[0.0; 3]; PACKET],
+            t_min: [0.0; PACKET],
+            t_max: [0.0; PACKET],
+        };
+        let mut left = active;
+        while left != 0 {
+            let k = left.trailing_zeros() as usize;
+            left &= left - 1;
+            if let Some(v) = vis[k].as_ref() {
+                let (r, t_min, t_max) = v.filter();
+                rays.dir[k] = r.dir;
+                rays.t_min[k] = t_min;
+                rays.t_max[k] = t_max;
+            }
+        }
+        let range = node.first as usize..(node.first + node.meta) as usize;
+        let l = lanes::<P>();
+        let mut stopped = 0;
+        // One pack (lanes `lanes` of it, ids `ids`) for every active ray;
+        // false once no ray is left.
+        let mut pack = |pack: &P::Pack, ids: &[u32], lanes: u32| {
+            let mut masks = [0; PACKET];
+            pack.masks_rays(&rays, active, self.isa, &mut masks);
+            let mut left = active;
+            while left != 0 {
+                let k = left.trailing_zeros() as usize;
+                left &= left - 1;
+                let mut m = masks[k] & lanes;
+                if m == 0 {
+                    continue;
+                }
+                let Some(v) = vis[k].as_mut() else { continue };
+                while m != 0 {
+                    let lane = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    if v.lane(pack.get(lane), ids[lane]) {
+                        stopped |= 1 << k;
+                        active &= !(1 << k);
+                        break;
+                    }
+                }
+                rays.t_max[k] = v.filter().2;
+            }
+            active != 0
+        };
+        if self.shared {
+            for &e in &self.entries[range] {
+                let p = (e & ENTRY_PACK) as usize;
+                if !pack(
+                    &self.packs[p],
+                    &self.pack_ids[p * l..(p + 1) * l],
+                    e >> ENTRY_MASK_SHIFT,
+                ) {
+                    break;
+                }
+            }
+        } else {
+            for (j, p) in self.packs[range.clone()].iter().enumerate() {
+                let i = range.start + j;
+                if !pack(p, &self.pack_ids[i * l..(i + 1) * l], u32::MAX) {
+                    break;
+                }
+            }
+        }
+        stopped
+    }
+
     /// The subtree of node `index` (cell `lo`, edge `size`) for the rays of
-    /// `active`, front to back in the packet's order; returns the rays
-    /// whose visitor stopped (any-hit queries that found a hit).
+    /// `active`, whose cutoffs are `cut` now, front to back in the
+    /// packet's order; returns the rays whose visitor stopped (any-hit
+    /// queries that found a hit).
+    // The node, the packet and its state.
+    #[allow(clippy::too_many_arguments)]
     fn visit_packet<V: Visitor<P>>(
         &self,
         index: usize,
@@ -154,6 +289,7 @@ impl<P: Primitive> Tree<P> {
         l: &Lanes,
         vis: &mut [Option<V>; PACKET],
         active: Mask,
+        mut cut: Wide,
     ) -> Mask {
         if active.count_ones() <= LONE {
             // Few rays left: each its own descent, with its own constants.
@@ -163,7 +299,7 @@ impl<P: Primitive> Tree<P> {
                 let k = left.trailing_zeros() as usize;
                 left &= left - 1;
                 if let Some(v) = vis[k].as_mut()
-                    && self.visit(index, lo, size, &l.ctx[k], v)
+                    && self.visit(index, lo, size, &l.ctx(k), v)
                 {
                     stopped |= 1 << k;
                 }
@@ -171,12 +307,15 @@ impl<P: Primitive> Tree<P> {
             return stopped;
         }
         let node = self.nodes[index];
-        let mut active = Self::meets_box(l, self.boxes[index], &cutoffs(vis), active);
+        let mut active = Self::meets_box(l, self.boxes[index], &cut, active);
         if active == 0 {
             return 0;
         }
         let mut stopped = 0;
         if node.meta & INTERIOR == 0 {
+            if let Some(origin) = l.origin {
+                return self.leaf_packet(node, origin, l.cone(), vis, active);
+            }
             while active != 0 {
                 let k = active.trailing_zeros() as usize;
                 active &= active - 1;
@@ -210,7 +349,6 @@ impl<P: Primitive> Tree<P> {
             if mask & (1 << oct) == 0 {
                 continue;
             }
-            let cut = cutoffs(vis);
             let mut m = 0;
             for h in 0..2 {
                 let side = |a: usize| {
@@ -228,11 +366,15 @@ impl<P: Primitive> Tree<P> {
                 continue;
             }
             let child = node.first as usize + (mask & ((1 << oct) - 1)).count_ones() as usize;
-            let s = self.visit_packet(child, child_lo(lo, half, oct), half, l, vis, m);
+            let s = self.visit_packet(child, child_lo(lo, half, oct), half, l, vis, m, cut);
             stopped |= s;
             active &= !s;
             if active == 0 {
                 break;
+            }
+            // Only a visit moves a cutoff.
+            if !V::FIXED_CUTOFF {
+                cut = cutoffs(vis);
             }
         }
         stopped
@@ -245,28 +387,36 @@ impl<P: Primitive> Octree<P> {
     fn part_order(&self, l: &Lanes) -> ([usize; super::parts::MAX_PARTS], usize) {
         let mut order = [(0.0f32, 0usize); super::parts::MAX_PARTS];
         let n = self.parts.len().min(super::parts::MAX_PARTS);
+        let first = l.ctx(0);
         for (i, tree) in self.parts.iter().enumerate().take(n) {
-            order[i] = (tree.window(&l.ctx[0]).0, i);
+            order[i] = (tree.window(&first).0, i);
         }
         order[..n].sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         (order.map(|(_, i)| i), n)
     }
 
-    /// Every part for the rays of `active`; the rays that stopped.
+    /// Every part for the rays of `active`; the rays that stopped. Any-hit
+    /// rays take the parts in their order, as [`Octree::any_hit`] does.
     fn walk_parts<V: Visitor<P>>(
         &self,
         l: &Lanes,
         vis: &mut [Option<V>; PACKET],
         mut active: Mask,
     ) -> Mask {
-        let (order, n) = self.part_order(l);
+        let (order, n) = if V::FIXED_CUTOFF {
+            let n = self.parts.len().min(super::parts::MAX_PARTS);
+            (std::array::from_fn(|i| i), n)
+        } else {
+            self.part_order(l)
+        };
         let mut stopped = 0;
         for &i in &order[..n] {
             let tree = &self.parts[i];
             if tree.references == 0 || tree.nodes.is_empty() {
                 continue;
             }
-            let s = tree.visit_packet(0, tree.root_lo, tree.root_size, l, vis, active);
+            let cut = cutoffs(vis);
+            let s = tree.visit_packet(0, tree.root_lo, tree.root_size, l, vis, active, cut);
             stopped |= s;
             active &= !s;
             if active == 0 {

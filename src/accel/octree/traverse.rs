@@ -365,6 +365,8 @@ fn min4(t: f32, v: Vec3) -> f32 {
 
 /// What a traversal does in the leaves.
 pub(super) trait Visitor<P: Primitive> {
+    /// True when [`Visitor::cutoff`] never changes (any-hit queries).
+    const FIXED_CUTOFF: bool = false;
     /// Cells entered beyond this are skipped.
     fn cutoff(&self) -> f32;
     /// The ray's lanes and the span `[t_min, t_max]` the filter tests now.
@@ -490,6 +492,8 @@ impl<'a, S: Skip> AnyHit<'a, S> {
 }
 
 impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, S> {
+    const FIXED_CUTOFF: bool = true;
+
     #[inline]
     fn cutoff(&self) -> f32 {
         self.t_max
