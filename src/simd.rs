@@ -379,6 +379,57 @@ mod x86 {
     use super::{CENTER, CONE_SLACK, Cone, DiscColumns, NORMAL, RAYS, RIM, U_SCALED, V_SCALED};
     use std::arch::x86_64::*;
 
+    /// `a · b` lane by lane, `(a_x b_x + a_y b_y) + a_z b_z` as the portable
+    /// filter adds.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn avx2_dot(a: [__m256; 3], b: [__m256; 3]) -> __m256 {
+        _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(a[0], b[0]), _mm256_mul_ps(a[1], b[1])),
+            _mm256_mul_ps(a[2], b[2]),
+        )
+    }
+
+    /// The lanes whose plane parameter `t` is finite and within
+    /// `[t_min, t_max]` (all ones), as the portable filter's `in_range`.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn avx2_in_range(t: __m256, t_min: __m256, t_max: __m256) -> __m256 {
+        let sign = _mm256_set1_ps(-0.0);
+        _mm256_and_ps(
+            _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_GE_OQ>(t, t_min),
+                _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max),
+            ),
+            _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_andnot_ps(sign, t), _mm256_set1_ps(f32::INFINITY)),
+        )
+    }
+
+    /// `u² + v²` of the points `(o - c) + d t` in each disc's scaled axes
+    /// (the rim test of the disc filter), the operations in the portable
+    /// filter's order.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn avx2_rim2(p: &DiscColumns, oc: [__m256; 3], d: [__m256; 3], t: __m256) -> __m256 {
+        // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
+        // (`DiscColumns` is 64-byte aligned, each column 32 bytes).
+        let col = |k: usize| unsafe { _mm256_load_ps(p.cols[k].as_ptr()) };
+        let (ux, uy, uz) = (col(U_SCALED), col(U_SCALED + 1), col(U_SCALED + 2));
+        let (vx, vy, vz) = (col(V_SCALED), col(V_SCALED + 1), col(V_SCALED + 2));
+        let px = _mm256_add_ps(oc[0], _mm256_mul_ps(d[0], t));
+        let py = _mm256_add_ps(oc[1], _mm256_mul_ps(d[1], t));
+        let pz = _mm256_add_ps(oc[2], _mm256_mul_ps(d[2], t));
+        let u = _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(px, ux), _mm256_mul_ps(py, uy)),
+            _mm256_mul_ps(pz, uz),
+        );
+        let v = _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(px, vx), _mm256_mul_ps(py, vy)),
+            _mm256_mul_ps(pz, vz),
+        );
+        _mm256_add_ps(_mm256_mul_ps(u, u), _mm256_mul_ps(v, v))
+    }
+
     /// [`super::disc_masks`] with one pack per 256-bit register.
     ///
     /// # Safety
@@ -396,7 +447,6 @@ mod x86 {
         let [dx, dy, dz] = dir.map(|x| _mm256_set1_ps(x));
         let tmin = _mm256_set1_ps(t_min);
         let tmax = _mm256_set1_ps(t_max);
-        let inf = _mm256_set1_ps(f32::INFINITY);
         let rim = _mm256_set1_ps(RIM);
         let sign = _mm256_set1_ps(-0.0);
         for (p, m) in packs.iter().zip(out.iter_mut()) {
@@ -405,46 +455,21 @@ mod x86 {
             let col = |k: usize| unsafe { _mm256_load_ps(p.cols[k].as_ptr()) };
             let (nx, ny, nz) = (col(NORMAL), col(NORMAL + 1), col(NORMAL + 2));
             let (cx, cy, cz) = (col(CENTER), col(CENTER + 1), col(CENTER + 2));
-            let denom = _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(nx, dx), _mm256_mul_ps(ny, dy)),
-                _mm256_mul_ps(nz, dz),
-            );
+            let denom = avx2_dot([nx, ny, nz], [dx, dy, dz]);
             let (ocx, ocy, ocz) = (
                 _mm256_sub_ps(ox, cx),
                 _mm256_sub_ps(oy, cy),
                 _mm256_sub_ps(oz, cz),
             );
-            let num = _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(nx, ocx), _mm256_mul_ps(ny, ocy)),
-                _mm256_mul_ps(nz, ocz),
-            );
+            let num = avx2_dot([nx, ny, nz], [ocx, ocy, ocz]);
             let t = _mm256_div_ps(_mm256_xor_ps(num, sign), denom);
-            let in_range = _mm256_and_ps(
-                _mm256_and_ps(
-                    _mm256_cmp_ps::<_CMP_GE_OQ>(t, tmin),
-                    _mm256_cmp_ps::<_CMP_LE_OQ>(t, tmax),
-                ),
-                _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_andnot_ps(sign, t), inf),
-            );
+            let in_range = avx2_in_range(t, tmin, tmax);
             let in_range = _mm256_movemask_ps(in_range) as u32;
             if in_range == 0 {
                 *m = 0;
                 continue;
             }
-            let (ux, uy, uz) = (col(U_SCALED), col(U_SCALED + 1), col(U_SCALED + 2));
-            let (vx, vy, vz) = (col(V_SCALED), col(V_SCALED + 1), col(V_SCALED + 2));
-            let px = _mm256_add_ps(ocx, _mm256_mul_ps(dx, t));
-            let py = _mm256_add_ps(ocy, _mm256_mul_ps(dy, t));
-            let pz = _mm256_add_ps(ocz, _mm256_mul_ps(dz, t));
-            let u = _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(px, ux), _mm256_mul_ps(py, uy)),
-                _mm256_mul_ps(pz, uz),
-            );
-            let v = _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(px, vx), _mm256_mul_ps(py, vy)),
-                _mm256_mul_ps(pz, vz),
-            );
-            let r2 = _mm256_add_ps(_mm256_mul_ps(u, u), _mm256_mul_ps(v, v));
+            let r2 = avx2_rim2(p, [ocx, ocy, ocz], [dx, dy, dz], t);
             let on = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(r2, rim)) as u32;
             *m = on & in_range;
         }
@@ -468,7 +493,6 @@ mod x86 {
         out: &mut [u32; RAYS],
     ) {
         let [ox, oy, oz] = origin.map(|x| _mm256_set1_ps(x));
-        let inf = _mm256_set1_ps(f32::INFINITY);
         let rim = _mm256_set1_ps(RIM);
         let sign = _mm256_set1_ps(-0.0);
         // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
@@ -536,45 +560,20 @@ mod x86 {
             _mm256_sub_ps(oy, cy),
             _mm256_sub_ps(oz, cz),
         );
-        let num = _mm256_add_ps(
-            _mm256_add_ps(_mm256_mul_ps(nx, ocx), _mm256_mul_ps(ny, ocy)),
-            _mm256_mul_ps(nz, ocz),
-        );
+        let num = avx2_dot([nx, ny, nz], [ocx, ocy, ocz]);
         let neg = _mm256_xor_ps(num, sign);
         let mut left = active;
         while left != 0 {
             let k = left.trailing_zeros() as usize;
             left &= left - 1;
             let [dx, dy, dz] = dirs[k].map(|x| _mm256_set1_ps(x));
-            let denom = _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(nx, dx), _mm256_mul_ps(ny, dy)),
-                _mm256_mul_ps(nz, dz),
-            );
+            let denom = avx2_dot([nx, ny, nz], [dx, dy, dz]);
             let t = _mm256_div_ps(neg, denom);
-            let in_range = _mm256_and_ps(
-                _mm256_and_ps(
-                    _mm256_cmp_ps::<_CMP_GE_OQ>(t, _mm256_set1_ps(t_min[k])),
-                    _mm256_cmp_ps::<_CMP_LE_OQ>(t, _mm256_set1_ps(t_max[k])),
-                ),
-                _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_andnot_ps(sign, t), inf),
-            );
+            let in_range = avx2_in_range(t, _mm256_set1_ps(t_min[k]), _mm256_set1_ps(t_max[k]));
             // No early exit on an empty range here: most packs have lanes
             // in range, and a branch per ray keeps the rays' chains from
             // overlapping.
-            let (ux, uy, uz) = (col(U_SCALED), col(U_SCALED + 1), col(U_SCALED + 2));
-            let (vx, vy, vz) = (col(V_SCALED), col(V_SCALED + 1), col(V_SCALED + 2));
-            let px = _mm256_add_ps(ocx, _mm256_mul_ps(dx, t));
-            let py = _mm256_add_ps(ocy, _mm256_mul_ps(dy, t));
-            let pz = _mm256_add_ps(ocz, _mm256_mul_ps(dz, t));
-            let u = _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(px, ux), _mm256_mul_ps(py, uy)),
-                _mm256_mul_ps(pz, uz),
-            );
-            let v = _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(px, vx), _mm256_mul_ps(py, vy)),
-                _mm256_mul_ps(pz, vz),
-            );
-            let r2 = _mm256_add_ps(_mm256_mul_ps(u, u), _mm256_mul_ps(v, v));
+            let r2 = avx2_rim2(p, [ocx, ocy, ocz], [dx, dy, dz], t);
             let on = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(r2, rim), in_range);
             out[k] = _mm256_movemask_ps(_mm256_and_ps(on, near)) as u32;
         }
