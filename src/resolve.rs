@@ -115,6 +115,9 @@ pub fn beyond_silhouette(c: &Candidate, s: &Splat, ray: &Ray) -> bool {
     !(within((-qb - sq) / (2.0 * qa)) || within((-qb + sq) / (2.0 * qa)))
 }
 
+/// A window's candidates fit the pass-over mask of [`resolve_models`].
+const _: () = assert!(crate::accel::MAX_CANDIDATES <= 32);
+
 /// What a window of candidate hits resolves to.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Resolved {
@@ -193,24 +196,30 @@ pub fn resolve_models(
 ) -> Option<Resolved> {
     let all = hits.as_slice();
     let nearest = all.first()?;
-    let passes = |c: &Candidate| {
+    // Bit `i` set when candidate `i` is passed over: decided once each
+    // (a window holds at most `MAX_CANDIDATES`, 32).
+    let passed = all.iter().enumerate().fold(0u32, |m, (i, c)| {
         let s = &splats[c.id as usize];
-        model(c.id).0 == ShadingMode::Phong && beyond_silhouette(c, s, ray)
-    };
-    let Some(k) = all.iter().position(|c| !passes(c)) else {
+        let over = model(c.id).0 == ShadingMode::Phong && beyond_silhouette(c, s, ray);
+        m | u32::from(over) << i
+    });
+    let k = (!passed).trailing_zeros() as usize;
+    let Some(first) = all.get(k) else {
         return Some(Resolved::Beyond(all.last()?.t.next_up()));
     };
-    let first = &all[k];
     if first.t > nearest.t {
         return Some(Resolved::Beyond(first.t));
     }
     let (mode, window) = model(first.id);
     let front = faces_front(&splats[first.id as usize], ray);
     let far = first.t + window.min(hits.xi());
-    let same_side = all[k..]
+    let same_side = all
         .iter()
-        .take_while(|c| c.t <= far)
-        .filter(|c| !passes(c) && faces_front(&splats[c.id as usize], ray) == front);
+        .enumerate()
+        .skip(k)
+        .take_while(|(_, c)| c.t <= far)
+        .filter(|&(i, c)| passed & 1 << i == 0 && faces_front(&splats[c.id as usize], ray) == front)
+        .map(|(_, c)| c);
     let key = |c: &Candidate| (c.radial(), c.t, c.id);
     let winner = *same_side.clone().min_by(|a, b| {
         key(a)

@@ -393,3 +393,19 @@ fn every_registry_entry_renders_under_its_own_name() {
         );
     }
 }
+
+/// CI (`.ci/run`) runs README's test command as README writes it: its last
+/// line is README's "the test suite" line without the comment.
+#[test]
+fn ci_runs_readmes_test_command() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let line = readme
+        .lines()
+        .find(|l| l.contains("# the test suite"))
+        .expect("README names the test suite's command");
+    let command = line.split('#').next().unwrap().trim();
+    let ci = std::fs::read_to_string(root.join(".ci/run")).unwrap();
+    let last = ci.lines().rev().find(|l| !l.trim().is_empty()).unwrap();
+    assert_eq!(last.trim(), command, "README: {line}");
+}

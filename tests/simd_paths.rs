@@ -71,22 +71,9 @@ fn a_path_that_cannot_run_is_a_one_line_error() {
             .filter(|i| !i.supported())
             .map(|i| i.name().to_string()),
     );
+    let dir = scratch("refused-path");
     for name in names {
-        let o = bin()
-            .env(SIMD_VAR, &name)
-            .args([
-                "render",
-                "scenes/bunny.toml",
-                "--width",
-                "16",
-                "--height",
-                "12",
-            ])
-            .output()
-            .unwrap();
-        assert!(!o.status.success(), "{name}");
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert_eq!(err.trim_end().lines().count(), 1, "{name}: {err}");
+        let err = refused((SIMD_VAR, &name), &dir.join("never.png"));
         assert!(err.contains(&format!("{SIMD_VAR}={name}")), "{name}: {err}");
     }
 }
@@ -114,8 +101,15 @@ fn packets_on_and_off_render_the_bunny_to_the_same_bytes() {
             "{backend}: packets change the image"
         );
     }
+    let err = refused((PACKETS_VAR, "maybe"), &dir.join("never.png"));
+    assert!(err.contains(PACKETS_VAR), "{err}");
+}
+
+/// Renders a small bunny to `out` with `var` set to a value the program
+/// refuses: it must fail with one line (returned) and write nothing.
+fn refused((var, value): (&str, &str), out: &Path) -> String {
     let o = bin()
-        .env(PACKETS_VAR, "maybe")
+        .env(var, value)
         .args([
             "render",
             "scenes/bunny.toml",
@@ -125,12 +119,12 @@ fn packets_on_and_off_render_the_bunny_to_the_same_bytes() {
             "12",
         ])
         .arg("-o")
-        .arg(dir.join("never.png"))
+        .arg(out)
         .output()
         .unwrap();
-    assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(err.trim().lines().count(), 1, "{err}");
-    assert!(err.contains(PACKETS_VAR), "{err}");
-    assert!(!dir.join("never.png").exists());
+    assert!(!o.status.success(), "{var}={value}");
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(err.trim_end().lines().count(), 1, "{var}={value}: {err}");
+    assert!(!out.exists(), "{var}={value}: {} written", out.display());
+    err
 }

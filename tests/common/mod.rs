@@ -554,6 +554,16 @@ fn phong_hit(
     }
 }
 
+/// What a secondary ray from `hit` leaves: its winning splat, as the
+/// integrator's queries say.
+fn leaving(hit: &splatray::resolve::SurfaceHit) -> Departure {
+    Departure {
+        id: hit.id,
+        point: hit.point,
+        normal: hit.geometric_normal,
+    }
+}
+
 /// Shadow rays from each resolved primary hit toward 8 random points of a
 /// sphere light (centre `light`, radius `radius`), leaving the winning
 /// splat with `t_min = eps_self`, 8 in a row from one hit: the batches
@@ -572,11 +582,7 @@ pub fn light_batches(
     let mut out = Vec::new();
     for q in primaries {
         if let Some(hit) = phong_hit(oracle, splats, q, &mut h) {
-            let from = Some(Departure {
-                id: hit.id,
-                point: hit.point,
-                normal: hit.geometric_normal,
-            });
+            let from = Some(leaving(&hit));
             for _ in 0..8 {
                 let to = light + rng.unit() * radius - hit.point;
                 out.push(Query {
@@ -610,11 +616,7 @@ pub fn secondary_queries(
     let mut out = Vec::new();
     for q in primaries {
         if let Some(hit) = phong_hit(oracle, splats, q, &mut h) {
-            let from = Some(Departure {
-                id: hit.id,
-                point: hit.point,
-                normal: hit.geometric_normal,
-            });
+            let from = Some(leaving(&hit));
             let n = if hit.front { hit.normal } else { -hit.normal };
             let d = q.ray.dir - 2.0 * q.ray.dir.dot(n) * n;
             out.push(Query {
