@@ -236,6 +236,60 @@ fn compare_report_has_the_documented_keys() {
     assert!((shares - 1.0).abs() < 1e-9, "{v}");
 }
 
+/// `compare --rounds 3`: every backend renders three times in turns; the
+/// report gives the rounds, each backend's median speed, and the median of
+/// the rounds' ratios inside their range; the images are the same as with
+/// one round (renders repeat bit for bit). `--rounds 0` is refused.
+#[test]
+fn compare_rounds_take_turns() {
+    let dir = std::env::temp_dir().join(format!("splatray-rounds-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = dir.join("s.toml");
+    std::fs::write(&scene, SCENE).unwrap();
+    let run = |rounds: &str, tag: &str| {
+        let report = dir.join(format!("r{tag}.json"));
+        let diff = dir.join(format!("d{tag}.png"));
+        let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+            .args(["compare", scene.to_str().unwrap(), "--rounds", rounds])
+            .arg("--report")
+            .arg(&report)
+            .arg("--diff")
+            .arg(&diff)
+            .output()
+            .unwrap();
+        let v: Option<serde_json::Value> = o
+            .status
+            .success()
+            .then(|| serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap());
+        (o, v, diff)
+    };
+    let (o, v, diff3) = run("3", "3");
+    let v = v.unwrap_or_else(|| panic!("{}", String::from_utf8_lossy(&o.stderr)));
+    assert_eq!(v["rounds"], 3, "{v}");
+    let embree = &v["backends"][1];
+    let ratio = embree["reference_over_this"].as_f64().unwrap();
+    let range = embree["reference_over_this_range"].as_array().unwrap();
+    let (lo, hi) = (range[0].as_f64().unwrap(), range[1].as_f64().unwrap());
+    assert!(lo > 0.0 && lo <= ratio && ratio <= hi, "{v}");
+    assert!(
+        v["backends"][0].get("reference_over_this_range").is_none(),
+        "{v}"
+    );
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("median of 3 rounds taken in turns"), "{out}");
+    let (o, v, diff1) = run("1", "1");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(v.unwrap()["rounds"], 1);
+    assert_eq!(
+        std::fs::read(&diff1).unwrap(),
+        std::fs::read(&diff3).unwrap()
+    );
+    let (o, _, _) = run("0", "0");
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--rounds"), "{err}");
+}
+
 /// A splat file with `truth = "mesh.ply"` is measured against that mesh
 /// by `compare --truth`, as a sampled mesh model is, and moves with the
 /// model's transform; `truth` on a mesh model is refused in one line.

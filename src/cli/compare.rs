@@ -44,6 +44,13 @@ pub struct CompareArgs {
     /// shapes) and report each backend's errors against them.
     #[arg(long)]
     pub truth: bool,
+    /// Render with every backend this many times, taking turns (the
+    /// reference, the second, the reference, ...), and report each
+    /// backend's median speed and the median of the rounds' speed ratios
+    /// with their range: a ratio that one slow or lucky render cannot move
+    /// on a busy machine. Every backend stays built meanwhile. Default 1.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub rounds: u32,
 }
 
 /// One backend in the comparison run: its speed and memory, and (except
@@ -57,14 +64,20 @@ pub struct BackendRun {
     /// Bytes the structure holds (for Embree, what its memory monitor
     /// counted).
     pub memory_bytes: usize,
-    /// Seconds to render.
+    /// Seconds to render (the median over the rounds).
     pub render_seconds: f64,
-    /// Millions of rays (all kinds) per second.
+    /// Millions of rays (all kinds) per second (the median over the
+    /// rounds).
     pub mrays_per_s: f64,
     /// The reference's rays per second over this backend's, measured in
-    /// this run (absent for the reference).
+    /// this run: the median over the rounds of the ratio within each round
+    /// (absent for the reference).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reference_over_this: Option<f64>,
+    /// The smallest and largest of the rounds' ratios (absent for the
+    /// reference).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference_over_this_range: Option<[f64; 2]>,
     /// Agreement of the reference (first) with this backend, primary ray
     /// for primary ray (absent for the reference).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -80,6 +93,8 @@ pub struct CompareReport {
     pub splats: usize,
     /// Primary rays compared (one per pixel).
     pub rays: usize,
+    /// Renders per backend, taken in turns (`--rounds`).
+    pub rounds: u32,
     /// Every rendering backend of the registry, the reference first.
     pub backends: Vec<BackendRun>,
     /// Errors against the exact surfaces (with `--truth`).
@@ -144,13 +159,20 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     let line = ProgressLine::new();
     let progress = |stage: &str, f: f64| line.update(stage, f);
     let scene = args.view.load(Some(args.spp), &line)?;
-    // One frame per backend, and the truth's; one backend built at a time.
-    let frames = registry::renderers().len() + usize::from(args.truth);
+    // One frame per backend, and the truth's (and a round's frame when
+    // taking turns); one backend built at a time, or all of them when
+    // taking turns.
+    let renderers = registry::renderers().len();
+    let frames = renderers + usize::from(args.truth) + usize::from(args.rounds > 1);
     args.view.check_budget(
         &scene,
         splatray::render::budget::Holds {
             frames: u32::try_from(frames).unwrap_or(u32::MAX),
-            accelerators: 1,
+            accelerators: if args.rounds > 1 {
+                u32::try_from(renderers).unwrap_or(u32::MAX)
+            } else {
+                1
+            },
         },
     )?;
     // Fail before any rendering when there is no exact surface.
@@ -160,7 +182,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         None
     };
     let diagonal = scene.options.scale.diagonal;
-    let (frames, backends) = render_every_backend(&scene, Some(&progress))?;
+    let (frames, backends) = render_every_backend(&scene, args.rounds, Some(&progress))?;
     let truth_frame = truth.map(|t| render_truth(&scene, &t, Some(&progress)));
     let tolerances = Tolerances::default();
     // The reference backend's cause of every pixel, for `D-causes.png`.
@@ -189,6 +211,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         scene: scene_path.display().to_string(),
         splats: scene.splats.len(),
         rays: frames.first().map_or(0, |f| f.depth.len()),
+        rounds: args.rounds,
         backends,
         truth,
     };
@@ -219,39 +242,116 @@ fn check_outputs(args: &CompareArgs) -> Result<()> {
     Ok(())
 }
 
-/// Every rendering backend of the registry built (one at a time) and
-/// rendering `scene`, the first the reference: each one's frame and run,
-/// with its speed ratio to the reference and their agreement.
+/// Every rendering backend of the registry built and rendering `scene`,
+/// the first the reference: each one's frame and run, with its speed ratio
+/// to the reference and their agreement. With one round, one backend is
+/// built at a time; with more, every backend is built first and they take
+/// turns, `rounds` times, each round's speed ratios taken within the round
+/// (a render repeats the first bit for bit: the frames kept are the first
+/// round's, and a later one that differs is an error).
 fn render_every_backend(
     scene: &Scene,
+    rounds: u32,
     progress: Option<Progress<'_>>,
 ) -> Result<(Vec<Frame>, Vec<BackendRun>)> {
     let diagonal = scene.options.scale.diagonal;
+    let infos = registry::renderers();
     let mut frames: Vec<Frame> = Vec::new();
-    let mut backends: Vec<BackendRun> = Vec::new();
-    for info in registry::renderers() {
-        let backend = info.build_splats(&scene.splats)?;
-        let frame = render(scene, backend.as_ref(), progress);
-        let stats = backend.stats();
-        let (reference_over_this, agreement) = match frames.first() {
-            Some(reference) => (
-                Some(mrays_per_s(reference) / mrays_per_s(&frame).max(1e-12)),
-                Some(compare_frames(reference, &frame, diagonal)),
-            ),
-            None => (None, None),
-        };
-        backends.push(BackendRun {
-            name: info.name,
-            build_seconds: stats.build_seconds,
-            memory_bytes: stats.memory_bytes,
-            render_seconds: frame.seconds,
-            mrays_per_s: mrays_per_s(&frame),
-            reference_over_this,
-            agreement,
-        });
-        frames.push(frame);
+    // Per backend: its build figures, and its rays per second per round.
+    let mut built = Vec::new();
+    let mut speeds: Vec<Vec<f64>> = vec![Vec::new(); infos.len()];
+    let mut seconds: Vec<Vec<f64>> = vec![Vec::new(); infos.len()];
+    let mut render_one = |i: usize, backend: &dyn splatray::accel::Backend| -> Result<()> {
+        let frame = render(scene, backend, progress);
+        speeds[i].push(mrays_per_s(&frame));
+        seconds[i].push(frame.seconds);
+        match frames.get(i) {
+            None => frames.push(frame),
+            Some(first) if same_image(first, &frame) => {}
+            Some(_) => {
+                return Err(Error::invalid(format!(
+                    "{}: a repeated render differs from the first (the comparison needs renders that repeat)",
+                    infos[i].name
+                )));
+            }
+        }
+        Ok(())
+    };
+    if rounds <= 1 {
+        for (i, info) in infos.iter().enumerate() {
+            let backend = info.build_splats(&scene.splats)?;
+            render_one(i, backend.as_ref())?;
+            built.push((backend.stats().build_seconds, backend.stats().memory_bytes));
+        }
+    } else {
+        let backends = infos
+            .iter()
+            .map(|info| info.build_splats(&scene.splats))
+            .collect::<Result<Vec<_>>>()?;
+        for _ in 0..rounds {
+            for (i, backend) in backends.iter().enumerate() {
+                render_one(i, backend.as_ref())?;
+            }
+        }
+        built.extend(
+            backends
+                .iter()
+                .map(|b| (b.stats().build_seconds, b.stats().memory_bytes)),
+        );
     }
-    Ok((frames, backends))
+    let runs = infos
+        .iter()
+        .enumerate()
+        .map(|(i, info)| {
+            let (ratio, range) = if i == 0 {
+                (None, None)
+            } else {
+                let ratios: Vec<f64> = speeds[0]
+                    .iter()
+                    .zip(&speeds[i])
+                    .map(|(r, s)| r / s.max(1e-12))
+                    .collect();
+                let lo = ratios.iter().copied().fold(f64::INFINITY, f64::min);
+                let hi = ratios.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                (Some(median(ratios)), Some([lo, hi]))
+            };
+            BackendRun {
+                name: info.name,
+                build_seconds: built[i].0,
+                memory_bytes: built[i].1,
+                render_seconds: median(seconds[i].clone()),
+                mrays_per_s: median(speeds[i].clone()),
+                reference_over_this: ratio,
+                reference_over_this_range: range,
+                agreement: (i > 0).then(|| compare_frames(&frames[0], &frames[i], diagonal)),
+            }
+        })
+        .collect();
+    Ok((frames, runs))
+}
+
+/// The median of `v` (the mean of the middle two for an even count; 0 for
+/// none).
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    match v.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => v[n / 2],
+        n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+    }
+}
+
+/// True when two renders of one scene give the same image, depths and
+/// splats, bit for bit.
+fn same_image(a: &Frame, b: &Frame) -> bool {
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    a.rgb.len() == b.rgb.len()
+        && a.rgb
+            .iter()
+            .zip(&b.rgb)
+            .all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits))
+        && bits(&a.depth) == bits(&b.depth)
+        && a.splat == b.splat
 }
 
 /// The diff images (`--diff`: reference against the second backend; with
@@ -327,7 +427,13 @@ fn print_report(report: &CompareReport) {
                 .map_or("inf (identical)".to_string(), |p| format!("{p:.2}")),
             a.image_max_abs
         );
-        println!("    {x}/{y} throughput ratio {ratio:.2} (same run)");
+        match (report.rounds, r.reference_over_this_range) {
+            (2.., Some([lo, hi])) => println!(
+                "    {x}/{y} throughput ratio {ratio:.2} (same run: median of {} rounds taken in turns, {lo:.2}-{hi:.2})",
+                report.rounds
+            ),
+            _ => println!("    {x}/{y} throughput ratio {ratio:.2} (same run)"),
+        }
     }
     if let Some(t) = &report.truth {
         println!(
