@@ -80,21 +80,29 @@ fn faces_front(s: &Splat, ray: &Ray) -> bool {
 /// the ellipse (`|(u, v)| ≤ 1`).
 #[must_use]
 pub fn beyond_silhouette(c: &Candidate, s: &Splat, ray: &Ray) -> bool {
+    beyond_silhouette_at(s, c.u, c.v, ray.dir)
+}
+
+/// [`beyond_silhouette`] of a ray along `d` meeting splat `s`'s plane at
+/// normalised local coordinates `(u, v)`: the one definition the resolver
+/// uses for a window's candidates and the backends, through
+/// [`crate::accel::PassOver`], for the hits of shadow rays.
+#[must_use]
+pub fn beyond_silhouette_at(s: &Splat, u: f32, v: f32, d: Vec3) -> bool {
     let f = &s.field;
     if *f == NormalField::FLAT {
         // The plane itself: every disc hit is on it.
         return false;
     }
-    let d = ray.dir;
     // The field at the plane hit, by the sign of the unnormalised normal.
-    let n = s.u_axis * (f.xc + f.alpha * c.u) + s.v_axis * (f.yc + f.beta * c.v) + s.normal;
-    if (n.dot(d) < 0.0) != faces_front(s, ray) {
+    let n = s.u_axis * (f.xc + f.alpha * u) + s.v_axis * (f.yc + f.beta * v) + s.normal;
+    if (n.dot(d) < 0.0) != (s.normal.dot(d) < 0.0) {
         return true;
     }
     let (ru, rv) = (s.radii.x, s.radii.y);
     let (a, b) = (f.alpha / (2.0 * ru), f.beta / (2.0 * rv));
     let h0 = (f.alpha * ru + f.beta * rv) / 8.0;
-    let (x, y) = (c.u * ru, c.v * rv);
+    let (x, y) = (u * ru, v * rv);
     let (du, dv, dn) = (d.dot(s.u_axis), d.dot(s.v_axis), d.dot(s.normal));
     let qa = a * du * du + b * dv * dv;
     let qb = dn + f.xc * du + f.yc * dv + 2.0 * (a * x * du + b * y * dv);

@@ -222,7 +222,7 @@ impl SplatSurfaces<'_> {
     /// `t_max`: the shared self-hit rule of every backend skips the splat
     /// it starts on and its overlapping, similarly oriented neighbours
     /// (`accel::Departure`).
-    fn leaving(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> Query {
+    fn leaving(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> Query<'_> {
         Query {
             ray: *ray,
             t_min: self.eps_self(),
@@ -232,6 +232,19 @@ impl SplatSurfaces<'_> {
                 point: from.point,
                 normal: from.geometric_normal,
             }),
+            pass: None,
+        }
+    }
+
+    /// The query of a shadow ray leaving `from` ([`SplatSurfaces::leaving`]),
+    /// which also passes the hits on Phong splats' discs beyond their curved
+    /// surfaces' silhouettes (the scene's [`crate::accel::PassOver`]): a
+    /// shadow ray sees the surface the resolver shows a camera ray, in every
+    /// backend alike.
+    fn shadow(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> Query<'_> {
+        Query {
+            pass: Some(self.scene),
+            ..self.leaving(ray, from, t_max)
         }
     }
 }
@@ -251,7 +264,7 @@ impl Surfaces for SplatSurfaces<'_> {
     }
 
     fn occluded(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> bool {
-        self.backend.occluded_from(&self.leaving(ray, from, t_max))
+        self.backend.occluded_from(&self.shadow(ray, from, t_max))
     }
 
     fn eps_self(&self) -> f32 {
@@ -289,7 +302,7 @@ impl Surfaces for SplatSurfaces<'_> {
         for (rays, out) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
             let qs: [Query; PACKET] = std::array::from_fn(|k| {
                 let (ray, t_max) = rays[k.min(rays.len() - 1)];
-                self.leaving(&ray, from, t_max)
+                self.shadow(&ray, from, t_max)
             });
             self.backend.occluded_packet(&qs[..rays.len()], out);
         }
