@@ -54,6 +54,11 @@ pub struct SurfaceHit {
     pub front: bool,
     /// How many candidates were blended (same side as the nearest).
     pub blended: u32,
+    /// Where shadow rays leave the surface: the nearest kept candidate's
+    /// plane hit, the front of the window on the viewer's side (at most
+    /// `point`, and `point` itself when the window's splats agree). See
+    /// [`resolve_models`].
+    pub shadow_origin: Vec3,
 }
 
 fn faces_front(s: &Splat, ray: &Ray) -> bool {
@@ -195,6 +200,18 @@ pub fn resolve_within(
 /// back-facing splats are never blended (thin sheets). When every weight
 /// is zero (all hits on rims) or the sum cancels, the winner's own normal
 /// is used.
+///
+/// Shadow rays leave from the front of the window
+/// ([`SurfaceHit::shadow_origin`]): the nearest kept candidate's hit. The
+/// window's candidates are one surface whose splats scatter over up to
+/// its `xi` along the ray (on a noisy scan, about the noise); a shadow ray
+/// leaving the winner's plane deep in that scatter meets the splats
+/// standing in front of it, and the surface shadows itself in isolated
+/// pixels (acne) where the exact surface is lit. A light a shadow ray is
+/// traced to lies on the side the shading normal faces, the viewer's, so
+/// the nearest candidate's hit is the window's point on the lights' side.
+/// Where the splats agree (a plane, a smooth dense model) the two points
+/// coincide, so contact shadows keep their reach.
 #[must_use]
 pub fn resolve_models(
     hits: &CandidateHits,
@@ -265,6 +282,7 @@ pub fn resolve_models(
         geometric_normal: ws.normal,
         front,
         blended,
+        shadow_origin: ray.at(first.t),
     }))
 }
 
