@@ -90,9 +90,9 @@ pub fn sight_line(viewpoint: Vec3, point: Vec3) -> Option<(Ray, f32)> {
 /// `margin` of the point on that line (its own surface, which the blocking
 /// splat hides). Without one, the splat in front is the point's surface
 /// itself, standing in front of it by the noise of a coarse scan, and it
-/// is kept: shrinking it opened holes through that surface where the
-/// scanner's line of sight and a camera near the scanner look through it
-/// (`scenes/scan-lines.toml`: rays through the bunny to the floor behind;
+/// is kept: shrinking it would open a hole through that surface along the
+/// line, which a camera near the scanner looks through (on
+/// `scenes/scan-lines.toml` such holes show the floor through the bunny;
 /// `docs/development.md`, "Issue 23: the specks' causes, and shadow rays
 /// that see the surface").
 fn blocked(

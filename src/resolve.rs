@@ -55,9 +55,9 @@ pub struct SurfaceHit {
     /// How many candidates were blended (same side as the nearest).
     pub blended: u32,
     /// Where shadow rays leave the surface: the nearest kept candidate's
-    /// plane hit, the front of the window on the viewer's side (at most
-    /// `point`, and `point` itself when the window's splats agree). See
-    /// [`resolve_models`].
+    /// plane hit, the front of the window on the viewer's side (never
+    /// farther along the ray than `point`, and `point` itself when the
+    /// window's splats agree). See [`resolve_models`].
     pub shadow_origin: Vec3,
 }
 
