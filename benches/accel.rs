@@ -192,8 +192,8 @@ fn shadow_packets(backend: &dyn Backend, queries: &[Query]) -> usize {
 struct Scene {
     discs: Vec<Disc>,
     scale: SceneScale,
-    primary: Vec<Query>,
-    shadow: Vec<Query>,
+    primary: Vec<Query<'static>>,
+    shadow: Vec<Query<'static>>,
 }
 
 fn scene(n: usize) -> Scene {
@@ -205,7 +205,7 @@ fn scene(n: usize) -> Scene {
     let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
     let probe = Octree::new(&discs, &OctreeParams::default());
     let light = Vec3::new(5.0, 6.0, 3.0);
-    let shadow: Vec<Query> = primary
+    let shadow: Vec<Query<'static>> = primary
         .par_iter()
         .filter_map(|q| {
             let mut h = CandidateHits::new(scale.xi);
@@ -224,6 +224,7 @@ fn scene(n: usize) -> Scene {
                     point: hit.point,
                     normal: hit.geometric_normal,
                 }),
+                pass: None,
             })
         })
         .collect();

@@ -3,7 +3,10 @@
 //! from the viewpoint to a point short of that point. Splats at a
 //! foreground edge overhang the silhouette by up to their radius and would
 //! hide the background the scanner saw just beyond it; they are shrunk
-//! away from the lines of sight they block.
+//! away from the lines of sight they block. A line of sight on which no
+//! splat stands near its point (within the margin) is not blocked: the
+//! splat in front is then the point's own surface, which range noise left
+//! in front of it, and shrinking it would open a hole in that surface.
 
 use crate::accel::octree::{Octree, OctreeParams};
 use crate::accel::{Backend, CandidateHits, Ray};
@@ -83,7 +86,15 @@ pub fn sight_line(viewpoint: Vec3, point: Vec3) -> Option<(Ray, f32)> {
 
 /// For every point, the first splat blocking its line of sight (more than
 /// `margin` in front of it, see [`MARGIN_ALONG`]), with the hit's
-/// normalised disc coordinates.
+/// normalised disc coordinates; only when some splat stands within
+/// `margin` of the point on that line (its own surface, which the blocking
+/// splat hides). Without one, the splat in front is the point's surface
+/// itself, standing in front of it by the noise of a coarse scan, and it
+/// is kept: shrinking it would open a hole through that surface along the
+/// line, which a camera near the scanner looks through (on
+/// `scenes/scan-lines.toml` such holes show the floor through the bunny;
+/// `docs/development.md`, "Issue 23: the specks' causes, and shadow rays
+/// that see the surface").
 fn blocked(
     splats: &[Splat],
     points: &[Vec3],
@@ -110,7 +121,12 @@ fn blocked(
                 let cos = splats[h.id as usize].normal.dot(ray.dir).abs();
                 let blocks =
                     depth > margin && (depth * cos > margin || depth > MARGIN_ALONG * margin);
-                blocks.then_some((h.id, Vec2::new(h.u, h.v)))
+                if !blocks {
+                    return None;
+                }
+                let q = (h.id, Vec2::new(h.u, h.v));
+                octree.intersect(&ray, d - margin, d + margin, hits);
+                (!hits.is_empty()).then_some(q)
             },
         )
         .collect()

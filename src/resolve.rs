@@ -54,6 +54,11 @@ pub struct SurfaceHit {
     pub front: bool,
     /// How many candidates were blended (same side as the nearest).
     pub blended: u32,
+    /// Where shadow rays leave the surface: the nearest kept candidate's
+    /// plane hit, the front of the window on the viewer's side (never
+    /// farther along the ray than `point`, and `point` itself when the
+    /// window's splats agree). See [`resolve_models`].
+    pub shadow_origin: Vec3,
 }
 
 fn faces_front(s: &Splat, ray: &Ray) -> bool {
@@ -80,21 +85,29 @@ fn faces_front(s: &Splat, ray: &Ray) -> bool {
 /// the ellipse (`|(u, v)| ≤ 1`).
 #[must_use]
 pub fn beyond_silhouette(c: &Candidate, s: &Splat, ray: &Ray) -> bool {
+    beyond_silhouette_at(s, c.u, c.v, ray.dir)
+}
+
+/// [`beyond_silhouette`] of a ray along `d` meeting splat `s`'s plane at
+/// normalised local coordinates `(u, v)`: the one definition the resolver
+/// uses for a window's candidates and the backends, through
+/// [`crate::accel::PassOver`], for the hits of shadow rays.
+#[must_use]
+pub fn beyond_silhouette_at(s: &Splat, u: f32, v: f32, d: Vec3) -> bool {
     let f = &s.field;
     if *f == NormalField::FLAT {
         // The plane itself: every disc hit is on it.
         return false;
     }
-    let d = ray.dir;
     // The field at the plane hit, by the sign of the unnormalised normal.
-    let n = s.u_axis * (f.xc + f.alpha * c.u) + s.v_axis * (f.yc + f.beta * c.v) + s.normal;
-    if (n.dot(d) < 0.0) != faces_front(s, ray) {
+    let n = s.u_axis * (f.xc + f.alpha * u) + s.v_axis * (f.yc + f.beta * v) + s.normal;
+    if (n.dot(d) < 0.0) != (s.normal.dot(d) < 0.0) {
         return true;
     }
     let (ru, rv) = (s.radii.x, s.radii.y);
     let (a, b) = (f.alpha / (2.0 * ru), f.beta / (2.0 * rv));
     let h0 = (f.alpha * ru + f.beta * rv) / 8.0;
-    let (x, y) = (c.u * ru, c.v * rv);
+    let (x, y) = (u * ru, v * rv);
     let (du, dv, dn) = (d.dot(s.u_axis), d.dot(s.v_axis), d.dot(s.normal));
     let qa = a * du * du + b * dv * dv;
     let qb = dn + f.xc * du + f.yc * dv + 2.0 * (a * x * du + b * y * dv);
@@ -187,6 +200,18 @@ pub fn resolve_within(
 /// back-facing splats are never blended (thin sheets). When every weight
 /// is zero (all hits on rims) or the sum cancels, the winner's own normal
 /// is used.
+///
+/// Shadow rays leave from the front of the window
+/// ([`SurfaceHit::shadow_origin`]): the nearest kept candidate's hit. The
+/// window's candidates are one surface whose splats scatter over up to
+/// its `xi` along the ray (on a noisy scan, about the noise); a shadow ray
+/// leaving the winner's plane deep in that scatter meets the splats
+/// standing in front of it, and the surface shadows itself in isolated
+/// pixels (acne) where the exact surface is lit. A light a shadow ray is
+/// traced to lies on the side the shading normal faces, the viewer's, so
+/// the nearest candidate's hit is the window's point on the lights' side.
+/// Where the splats agree (a plane, a smooth dense model) the two points
+/// coincide, so contact shadows keep their reach.
 #[must_use]
 pub fn resolve_models(
     hits: &CandidateHits,
@@ -257,6 +282,7 @@ pub fn resolve_models(
         geometric_normal: ws.normal,
         front,
         blended,
+        shadow_origin: ray.at(first.t),
     }))
 }
 

@@ -30,7 +30,7 @@ impl<P: Primitive> Brute<P> {
         self.prims.iter().enumerate().filter_map(move |(id, p)| {
             let h = p.intersect(&q.ray, q.t_min, q.t_max)?;
             let id = id as u32;
-            (!q.from.as_ref().skips(q.ray.dir, id, p)).then_some(Candidate {
+            (!q.secondary().skips(q.ray.dir, id, p, &h)).then_some(Candidate {
                 id,
                 t: h.t,
                 u: h.u,

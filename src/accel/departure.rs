@@ -12,7 +12,7 @@
 //! projection on them, their plane passing close to it) or the way out of a
 //! surface the ray entered ([`Departure::skips`]).
 
-use crate::primitive::Primitive;
+use crate::primitive::{Hit, Primitive};
 use glam::Vec3;
 
 /// Cosine of the largest angle between the normal of a candidate *beside
@@ -106,11 +106,14 @@ impl Departure {
 
 /// Which hits a query skips, as backends see it: [`NoSkip`] for primary
 /// rays (compiled away in monomorphised traversals), a [`Departure`] for
-/// secondary rays. Every backend asks it about each hit that
-/// [`Primitive::intersect`] accepts, before the hit counts.
+/// secondary rays, and [`crate::accel::Secondary`] for a query that also
+/// passes some hits ([`crate::accel::PassOver`]). Every backend asks it
+/// about each hit that [`Primitive::intersect`] accepts, before the hit
+/// counts.
 pub trait Skip: Copy {
-    /// True when the hit of a ray along `dir` on primitive `id` is skipped.
-    fn skips<P: Primitive>(self, dir: Vec3, id: u32, prim: &P) -> bool;
+    /// True when the hit `hit` of a ray along `dir` on primitive `id` is
+    /// skipped.
+    fn skips<P: Primitive>(self, dir: Vec3, id: u32, prim: &P, hit: &Hit) -> bool;
 }
 
 /// Skips nothing.
@@ -119,21 +122,21 @@ pub struct NoSkip;
 
 impl Skip for NoSkip {
     #[inline(always)]
-    fn skips<P: Primitive>(self, _dir: Vec3, _id: u32, _prim: &P) -> bool {
+    fn skips<P: Primitive>(self, _dir: Vec3, _id: u32, _prim: &P, _hit: &Hit) -> bool {
         false
     }
 }
 
 impl Skip for &Departure {
     #[inline(always)]
-    fn skips<P: Primitive>(self, dir: Vec3, id: u32, prim: &P) -> bool {
+    fn skips<P: Primitive>(self, dir: Vec3, id: u32, prim: &P, _hit: &Hit) -> bool {
         Departure::skips(self, dir, id, prim)
     }
 }
 
 impl Skip for Option<&Departure> {
     #[inline(always)]
-    fn skips<P: Primitive>(self, dir: Vec3, id: u32, prim: &P) -> bool {
+    fn skips<P: Primitive>(self, dir: Vec3, id: u32, prim: &P, _hit: &Hit) -> bool {
         self.is_some_and(|d| d.skips(dir, id, prim))
     }
 }

@@ -2,7 +2,7 @@
 //! (below, in safe code) gather the candidate window of §4.3 into the query
 //! of each ray; the FFI is in [`crate::embree`].
 
-use super::{Backend, BuildStats, Candidate, CandidateHits, Departure, PACKET, Query, Skip};
+use super::{Backend, BuildStats, Candidate, CandidateHits, PACKET, Query, Secondary, Skip};
 use crate::embree::{Device, EmbreeError, UserGeometry, UserScene};
 use crate::geometry::Ray;
 use crate::primitive::Primitive;
@@ -15,13 +15,14 @@ struct Primitives<P>(Vec<P>);
 struct Gather<'q> {
     hits: &'q mut CandidateHits,
     t_max: f32,
-    /// The splat a secondary ray leaves (hits it skips are not offered).
-    from: Option<&'q Departure>,
+    /// What a secondary ray skips (the splat it leaves, hits it passes):
+    /// such hits are not offered.
+    skip: Secondary<'q>,
 }
 
 impl<P: Primitive> UserGeometry for Primitives<P> {
     type Query<'q> = Gather<'q>;
-    type ShadowQuery<'q> = Option<&'q Departure>;
+    type ShadowQuery<'q> = Secondary<'q>;
 
     fn count(&self) -> usize {
         self.0.len()
@@ -51,12 +52,12 @@ impl<P: Primitive> UserGeometry for Primitives<P> {
         // The splat the ray leaves is skipped whatever the test says:
         // Embree offers it to most secondary rays (its box holds their
         // origin), so its id is checked before the disc test.
-        if q.from.is_some_and(|d| d.id == prim) {
+        if q.skip.from.is_some_and(|d| d.id == prim) {
             return None;
         }
         let p = &self.0[prim as usize];
         let h = p.intersect(ray, tnear, tfar)?;
-        if q.from.skips(ray.dir, prim, p) {
+        if q.skip.skips(ray.dir, prim, p, &h) {
             return None;
         }
         let far = q.hits.offer(Candidate {
@@ -69,20 +70,14 @@ impl<P: Primitive> UserGeometry for Primitives<P> {
     }
 
     #[inline]
-    fn occluded(
-        &self,
-        prim: u32,
-        ray: &Ray,
-        tnear: f32,
-        tfar: f32,
-        from: &Option<&Departure>,
-    ) -> bool {
+    fn occluded(&self, prim: u32, ray: &Ray, tnear: f32, tfar: f32, skip: &Secondary<'_>) -> bool {
         // As in `intersect`: the splat left first, by id.
-        if from.is_some_and(|d| d.id == prim) {
+        if skip.from.is_some_and(|d| d.id == prim) {
             return false;
         }
         let p = &self.0[prim as usize];
-        p.intersect(ray, tnear, tfar).is_some() && !from.skips(ray.dir, prim, p)
+        p.intersect(ray, tnear, tfar)
+            .is_some_and(|h| !skip.skips(ray.dir, prim, p, &h))
     }
 }
 
@@ -125,14 +120,14 @@ impl<P: Primitive> EmbreeBackend<P> {
 impl<P: Primitive> Backend for EmbreeBackend<P> {
     fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
         hits.clear();
-        let (t_max, from) = (q.t_max, q.from.as_ref());
+        let (t_max, skip) = (q.t_max, q.secondary());
         self.scene
-            .intersect(&q.ray, q.t_min, t_max, &mut Gather { hits, t_max, from });
+            .intersect(&q.ray, q.t_min, t_max, &mut Gather { hits, t_max, skip });
     }
 
     fn occluded_from(&self, q: &Query) -> bool {
         self.scene
-            .occluded(&q.ray, q.t_min, q.t_max, &q.from.as_ref())
+            .occluded(&q.ray, q.t_min, q.t_max, &q.secondary())
     }
 
     /// True: `rtcIntersect8` traces the primary rays of 8×1 pixel tiles
@@ -158,7 +153,7 @@ impl<P: Primitive> Backend for EmbreeBackend<P> {
                     Gather {
                         hits,
                         t_max: q.t_max,
-                        from: q.from.as_ref(),
+                        skip: q.secondary(),
                     }
                 })
             });
@@ -171,9 +166,16 @@ impl<P: Primitive> Backend for EmbreeBackend<P> {
         assert!(out.len() >= qs.len(), "an answer per query");
         for (qs, out) in qs.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
             let rays = packet_rays(qs);
-            let from: [Option<&Departure>; PACKET] =
-                std::array::from_fn(|k| qs.get(k).and_then(|q| q.from.as_ref()));
-            self.scene.occluded8(&rays[..qs.len()], &from, out);
+            let skip: [Secondary<'_>; PACKET] = std::array::from_fn(|k| {
+                qs.get(k).map_or(
+                    Secondary {
+                        from: None,
+                        pass: None,
+                    },
+                    Query::secondary,
+                )
+            });
+            self.scene.occluded8(&rays[..qs.len()], &skip, out);
         }
     }
 

@@ -12,6 +12,7 @@ pub mod brute;
 mod departure;
 pub mod embree;
 pub mod octree;
+mod pass;
 pub mod registry;
 mod window;
 
@@ -19,6 +20,7 @@ pub use crate::geometry::Ray;
 pub use departure::{
     Departure, NoSkip, SAME_SURFACE_COS, SAME_SURFACE_HEIGHT, SAME_SURFACE_RIM, Skip, WAY_OUT_COS,
 };
+pub use pass::{PassOver, Secondary};
 pub use registry::{BackendInfo, Role, backends};
 pub use window::{Candidate, CandidateHits, MAX_CANDIDATES};
 
@@ -38,10 +40,12 @@ pub struct BuildStats {
 }
 
 /// One ray query of the backend contract: the ray, its interval
-/// `[t_min, t_max]`, and for a secondary ray the splat it leaves (whose
-/// surface every backend skips alike, [`Departure::skips`]).
-#[derive(Clone, Copy, Debug)]
-pub struct Query {
+/// `[t_min, t_max]`, for a secondary ray the splat it leaves (whose
+/// surface every backend skips alike, [`Departure::skips`]), and the hits
+/// the ray passes ([`PassOver`]: a shadow ray sees Phong splats as the
+/// curved surfaces the resolver shows).
+#[derive(Clone, Copy)]
+pub struct Query<'a> {
     /// The ray.
     pub ray: Ray,
     /// Lower end of the interval (0, or `eps_self` for a secondary ray).
@@ -50,17 +54,43 @@ pub struct Query {
     pub t_max: f32,
     /// The splat a secondary ray leaves, `None` for a primary ray.
     pub from: Option<Departure>,
+    /// The hits the ray passes, left out as if absent (`None`: every hit
+    /// counts). The integrator gives it to shadow rays.
+    pub pass: Option<&'a dyn PassOver>,
 }
 
-impl Query {
+impl std::fmt::Debug for Query<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Query")
+            .field("ray", &self.ray)
+            .field("t_min", &self.t_min)
+            .field("t_max", &self.t_max)
+            .field("from", &self.from)
+            .field("pass", &self.pass.is_some())
+            .finish()
+    }
+}
+
+impl<'a> Query<'a> {
     /// A primary-ray query: nothing skipped.
     #[must_use]
-    pub fn new(ray: Ray, t_min: f32, t_max: f32) -> Query {
+    pub fn new(ray: Ray, t_min: f32, t_max: f32) -> Query<'a> {
         Query {
             ray,
             t_min,
             t_max,
             from: None,
+            pass: None,
+        }
+    }
+
+    /// What the query skips as one type for every secondary query: its
+    /// departure's self-hit rule and its pass-over rule ([`Secondary`]).
+    #[must_use]
+    pub fn secondary(&self) -> Secondary<'_> {
+        Secondary {
+            from: self.from.as_ref(),
+            pass: self.pass,
         }
     }
 }

@@ -124,6 +124,9 @@ pub struct ShadeHit {
     pub material: u16,
     /// Colour of the surface data (multiplies the material's albedo).
     pub color: Vec3,
+    /// Where shadow rays leave the surface (`SurfaceHit::shadow_origin`:
+    /// the front of the splats' window; `point` on an exact surface).
+    pub shadow_origin: Vec3,
 }
 
 /// What the integrator traces against (`docs/DESIGN.md`, "The backend contract": nothing above the backend
@@ -215,23 +218,38 @@ impl SplatSurfaces<'_> {
             front: h.front,
             material: sc.material_of[h.id as usize],
             color: sc.color_at(h.id, h.point),
+            shadow_origin: h.shadow_origin,
         }
     }
 
-    /// The query of a secondary ray leaving `from`, from `eps_self` to
-    /// `t_max`: the shared self-hit rule of every backend skips the splat
-    /// it starts on and its overlapping, similarly oriented neighbours
-    /// (`accel::Departure`).
-    fn leaving(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> Query {
+    /// The query of a secondary ray leaving `from` (starting at
+    /// `ray.origin`, the hit's point or its shadow origin), from `eps_self`
+    /// to `t_max`: the shared self-hit rule of every backend skips the
+    /// splat it starts on and its overlapping, similarly oriented
+    /// neighbours (`accel::Departure`), measured from where the ray starts.
+    fn leaving(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> Query<'_> {
         Query {
             ray: *ray,
             t_min: self.eps_self(),
             t_max,
             from: Some(Departure {
                 id: from.id,
-                point: from.point,
+                point: ray.origin,
                 normal: from.geometric_normal,
             }),
+            pass: None,
+        }
+    }
+
+    /// The query of a shadow ray leaving `from` ([`SplatSurfaces::leaving`]),
+    /// which also passes the hits on Phong splats' discs beyond their curved
+    /// surfaces' silhouettes (the scene's [`crate::accel::PassOver`]): a
+    /// shadow ray sees the surface the resolver shows a camera ray, in every
+    /// backend alike.
+    fn shadow(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> Query<'_> {
+        Query {
+            pass: Some(self.scene),
+            ..self.leaving(ray, from, t_max)
         }
     }
 }
@@ -251,7 +269,7 @@ impl Surfaces for SplatSurfaces<'_> {
     }
 
     fn occluded(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> bool {
-        self.backend.occluded_from(&self.leaving(ray, from, t_max))
+        self.backend.occluded_from(&self.shadow(ray, from, t_max))
     }
 
     fn eps_self(&self) -> f32 {
@@ -289,7 +307,7 @@ impl Surfaces for SplatSurfaces<'_> {
         for (rays, out) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
             let qs: [Query; PACKET] = std::array::from_fn(|k| {
                 let (ray, t_max) = rays[k.min(rays.len() - 1)];
-                self.leaving(&ray, from, t_max)
+                self.shadow(&ray, from, t_max)
             });
             self.backend.occluded_packet(&qs[..rays.len()], out);
         }
@@ -311,6 +329,26 @@ struct Scratch {
     /// `Frame::light_lit`): weights of all, facing and lit light samples,
     /// tallied by `direct` at depth 0.
     light: [f32; 3],
+}
+
+/// The shadow ray from the hit `from` to the light at distance `dist`
+/// along `dir` from its point (`inf`: a directional light), and that
+/// light's distance from where the ray starts: the hit's shadow origin
+/// (`ShadeHit::shadow_origin`), aimed at the light itself.
+fn shadow_ray(from: &ShadeHit, dir: Vec3, dist: f32) -> (Ray, f32) {
+    let origin = from.shadow_origin;
+    if !dist.is_finite() || origin == from.point {
+        return (Ray { origin, dir }, dist);
+    }
+    let to = from.point + dir * dist - origin;
+    let d = to.length();
+    (
+        Ray {
+            origin,
+            dir: to / d,
+        },
+        d,
+    )
 }
 
 fn reflect(d: Vec3, n: Vec3) -> Vec3 {
@@ -339,13 +377,10 @@ impl Tracer<'_> {
     /// Is the light at distance `dist` along `dir` visible from the hit?
     fn visible(&self, from: &ShadeHit, dir: Vec3, dist: f32, s: &mut Scratch) -> bool {
         s.rays.shadow += 1;
-        let ray = Ray {
-            origin: from.point,
-            dir,
-        };
+        let (ray, d) = shadow_ray(from, dir, dist);
         !self
             .surfaces
-            .occluded(&ray, from, dist - self.surfaces.eps_self())
+            .occluded(&ray, from, d - self.surfaces.eps_self())
     }
 
     /// The light samples `(l, d, e)` of one hit (see [`Tracer::direct`]):
@@ -362,20 +397,15 @@ impl Tracer<'_> {
     ) {
         let eps = self.surfaces.eps_self();
         let none = Ray {
-            origin: from.point,
+            origin: from.shadow_origin,
             dir: Vec3::Z,
         };
         let mut rays = [(none, 0.0f32); PACKET];
         let mut traced = 0;
         for &(l, d, _) in batch {
             if n.dot(l) > 0.0 {
-                rays[traced] = (
-                    Ray {
-                        origin: from.point,
-                        dir: l,
-                    },
-                    d - eps,
-                );
+                let (ray, d) = shadow_ray(from, l, d);
+                rays[traced] = (ray, d - eps);
                 traced += 1;
             }
         }

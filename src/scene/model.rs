@@ -433,3 +433,17 @@ impl Scene {
         Ok(())
     }
 }
+
+/// Shadow rays see Phong splats as the curved surfaces the resolver shows
+/// (`docs/DESIGN.md`, "The backend contract", rule 5): a hit on the disc of
+/// a splat shaded [`ShadingMode::Phong`] beyond its field's silhouette
+/// (eq. 4; [`crate::resolve::beyond_silhouette_at`]) is passed, as the
+/// resolver passes it over in a window; the discs of splats shaded flat or
+/// blended are their surfaces.
+impl crate::accel::PassOver for Scene {
+    #[inline]
+    fn passes(&self, id: u32, hit: &crate::primitive::Hit, dir: Vec3) -> bool {
+        self.shading_for(id) == ShadingMode::Phong
+            && crate::resolve::beyond_silhouette_at(&self.splats[id as usize], hit.u, hit.v, dir)
+    }
+}

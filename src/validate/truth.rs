@@ -126,6 +126,7 @@ impl Surfaces for Truth {
                 front: n.dot(ray.dir) < 0.0,
                 material,
                 color: Vec3::ONE,
+                shadow_origin: point,
             });
         }
         let h = tri?;
@@ -143,15 +144,17 @@ impl Surfaces for Truth {
             .try_normalize()
             .unwrap_or(ng);
         let ns = if ns.dot(ng) < 0.0 { -ns } else { ns };
+        let point = ray.at(h.t);
         Some(ShadeHit {
             id: h.triangle,
             t: h.t,
-            point: ray.at(h.t),
+            point,
             normal: ns,
             geometric_normal: ng,
             front: ng.dot(ray.dir) < 0.0,
             material: m.material,
             color: Vec3::ONE,
+            shadow_origin: point,
         })
     }
 

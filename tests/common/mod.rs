@@ -130,7 +130,7 @@ pub fn blobby_splats(n: usize, seed: u64) -> Vec<Splat> {
 /// Seeded random rays around `splats` (bounding box centre `c`, size `s`):
 /// most aimed at a jittered splat centre (so they hit), some in random
 /// directions, some with a finite `t_max`.
-pub fn random_queries(splats: &[Splat], count: usize, seed: u64) -> Vec<Query> {
+pub fn random_queries(splats: &[Splat], count: usize, seed: u64) -> Vec<Query<'static>> {
     let mut rng = Rng::new(seed ^ 0xa5a5_a5a5);
     let (lo, hi) = bounds(splats);
     let c = (lo + hi) * 0.5;
@@ -160,7 +160,7 @@ pub fn random_queries(splats: &[Splat], count: usize, seed: u64) -> Vec<Query> {
 
 /// Pinhole camera rays, `w × h`, from `eye` looking at `at` with a vertical
 /// field of view of 40°.
-pub fn camera_queries(eye: Vec3, at: Vec3, w: usize, h: usize) -> Vec<Query> {
+pub fn camera_queries(eye: Vec3, at: Vec3, w: usize, h: usize) -> Vec<Query<'static>> {
     let fwd = (at - eye).normalize();
     let right = fwd.cross(Vec3::Y).normalize();
     let up = right.cross(fwd);
@@ -564,19 +564,32 @@ fn leaving(hit: &splatray::resolve::SurfaceHit) -> Departure {
     }
 }
 
+/// The splats as Phong splats, for shadow queries: a hit on a disc beyond
+/// its field's curved silhouette is passed (`resolve::beyond_silhouette_at`),
+/// as the integrator's shadow rays pass it.
+pub struct Curved<'a>(pub &'a [Splat]);
+
+impl splatray::accel::PassOver for Curved<'_> {
+    fn passes(&self, id: u32, hit: &splatray::primitive::Hit, dir: Vec3) -> bool {
+        splatray::resolve::beyond_silhouette_at(&self.0[id as usize], hit.u, hit.v, dir)
+    }
+}
+
 /// Shadow rays from each resolved primary hit toward 8 random points of a
 /// sphere light (centre `light`, radius `radius`), leaving the winning
-/// splat with `t_min = eps_self`, 8 in a row from one hit: the batches
-/// the integrator hands a backend (sharing an origin, so the octree's
-/// packets test each leaf's packs once for all of them).
-pub fn light_batches(
+/// splat with `t_min = eps_self` and passing what `pass` passes, 8 in a
+/// row from one hit: the batches the integrator hands a backend (sharing
+/// an origin, so the octree's packets test each leaf's packs once for all
+/// of them).
+pub fn light_batches<'a>(
     oracle: &dyn Backend,
     splats: &[Splat],
     primaries: &[Query],
     xi: f32,
     eps_self: f32,
     (light, radius): (Vec3, f32),
-) -> Vec<Query> {
+    pass: &'a dyn splatray::accel::PassOver,
+) -> Vec<Query<'a>> {
     let mut rng = Rng::new(seed() ^ 0x5eed);
     let mut h = CandidateHits::new(xi);
     let mut out = Vec::new();
@@ -593,6 +606,7 @@ pub fn light_batches(
                     t_min: eps_self,
                     t_max: to.length() - eps_self,
                     from,
+                    pass: Some(pass),
                 });
             }
         }
@@ -603,15 +617,17 @@ pub fn light_batches(
 /// Secondary rays from each resolved primary hit: the mirror reflection and
 /// a shadow ray toward `light`, both starting at the hit with
 /// `t_min = eps_self` (§3.2, fig. 9 right) and leaving the winning splat
-/// (`from`), as the integrator traces them.
-pub fn secondary_queries(
+/// (`from`), the shadow ray passing what `pass` passes, as the integrator
+/// traces them.
+pub fn secondary_queries<'a>(
     oracle: &dyn Backend,
     splats: &[Splat],
     primaries: &[Query],
     xi: f32,
     eps_self: f32,
     light: Vec3,
-) -> Vec<Query> {
+    pass: &'a dyn splatray::accel::PassOver,
+) -> Vec<Query<'a>> {
     let mut h = CandidateHits::new(xi);
     let mut out = Vec::new();
     for q in primaries {
@@ -627,6 +643,7 @@ pub fn secondary_queries(
                 t_min: eps_self,
                 t_max: f32::INFINITY,
                 from,
+                pass: None,
             });
             let to_light = light - hit.point;
             out.push(Query {
@@ -637,6 +654,7 @@ pub fn secondary_queries(
                 t_min: eps_self,
                 t_max: to_light.length(),
                 from,
+                pass: Some(pass),
             });
         }
     }

@@ -37,6 +37,7 @@ fn camera_and_secondary_rays_agree_on_every_backend() {
     let splats = blobby_splats(SPLATS, seed);
     let scale = SceneScale::from_diagonal(diagonal(&splats));
     let b = backends(&splats);
+    let curved = Curved(&splats);
     let camera = camera_queries(Vec3::new(0.7, 1.1, 4.0), Vec3::ZERO, 48, 40);
     let hits = count_hits(b.oracle.as_ref(), &camera, scale.xi);
     assert!(hits > camera.len() / 4, "camera sees the model: {hits}");
@@ -48,6 +49,7 @@ fn camera_and_secondary_rays_agree_on_every_backend() {
         scale.xi,
         scale.eps_self,
         Vec3::new(5.0, 6.0, 3.0),
+        &curved,
     );
     // Two per primary hit that resolves to a surface: not every gathered
     // window does (Phong splats are passed over beyond their fields'
@@ -63,6 +65,19 @@ fn camera_and_secondary_rays_agree_on_every_backend() {
         "the self-hit rule changes only {skipping} of {} windows",
         secondary.len()
     );
+    // The shadow rays pass Phong splats beyond their curved silhouettes
+    // (`accel::PassOver`): that must unblock some of them (here and in the
+    // light batches below), or the rule is not tested.
+    let unblocked = |qs: &[Query]| {
+        qs.iter()
+            .filter(|q| {
+                q.pass.is_some()
+                    && b.oracle.occluded_from(q)
+                        != b.oracle.occluded_from(&Query { pass: None, ..**q })
+            })
+            .count()
+    };
+    let mut passing = unblocked(&secondary);
     assert_all_agree(
         &b,
         &splats,
@@ -83,15 +98,23 @@ fn camera_and_secondary_rays_agree_on_every_backend() {
             scale.xi,
             scale.eps_self,
             light,
+            &curved,
         );
         // Eight per primary hit that resolves to a surface (as above).
         assert!(batches.len() >= 8 * hits * 9 / 10);
+        passing += unblocked(&batches);
         assert_all_agree(&b, &splats, &batches, scale.xi, "sphere light batches");
     }
+    eprintln!("the pass-over rule unblocks {passing} shadow rays");
+    assert!(passing > 0, "the pass-over rule unblocks no shadow ray");
     // The same rays with nothing skipped.
     let plain: Vec<Query> = secondary
         .iter()
-        .map(|q| Query { from: None, ..*q })
+        .map(|q| Query {
+            from: None,
+            pass: None,
+            ..*q
+        })
         .collect();
     assert_all_agree(&b, &splats, &plain, scale.xi, "reflection and shadow rays");
 }
@@ -128,6 +151,7 @@ fn a_model_on_a_wide_floor_agrees_on_every_backend() {
     assert!(parts >= 2, "{parts} parts");
     let scale = SceneScale::from_diagonal(diagonal(&splats));
     let b = backends(&splats);
+    let curved = Curved(&splats);
     let queries = random_queries(&splats, 2000, seed);
     assert_all_agree(&b, &splats, &queries, scale.xi, "random rays, floor");
     let camera = camera_queries(Vec3::new(1.5, 1.1, 4.4), Vec3::new(0.0, -0.3, 0.0), 48, 40);
@@ -139,6 +163,7 @@ fn a_model_on_a_wide_floor_agrees_on_every_backend() {
         scale.xi,
         scale.eps_self,
         Vec3::new(2.5, 4.0, 3.0),
+        &curved,
     );
     assert_all_agree(&b, &splats, &secondary, scale.xi, "shadow rays, floor");
     let batches = light_batches(
@@ -148,6 +173,7 @@ fn a_model_on_a_wide_floor_agrees_on_every_backend() {
         scale.xi,
         scale.eps_self,
         (Vec3::new(2.5, 4.0, 3.0), 0.4),
+        &curved,
     );
     assert_all_agree(
         &b,

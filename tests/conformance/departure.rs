@@ -91,7 +91,7 @@ fn on_floor(set: &Set, target: Vec3) -> Departure {
     }
 }
 
-fn leaving(from: Departure, dir: Vec3, eps_self: f32) -> Query {
+fn leaving(from: Departure, dir: Vec3, eps_self: f32) -> Query<'static> {
     Query {
         ray: Ray {
             origin: from.point,
@@ -100,6 +100,7 @@ fn leaving(from: Departure, dir: Vec3, eps_self: f32) -> Query {
         t_min: eps_self,
         t_max: f32::INFINITY,
         from: Some(from),
+        pass: None,
     }
 }
 

@@ -11,7 +11,7 @@ use splatray::resolve::{Resolved, ShadingMode, beyond_silhouette, resolve};
 use splatray::scene::SceneScale;
 use splatray::splat::{NormalField, Splat};
 
-fn q(origin: Vec3, dir: Vec3) -> Query {
+fn q(origin: Vec3, dir: Vec3) -> Query<'static> {
     Query::new(Ray { origin, dir }, 0.0, f32::INFINITY)
 }
 

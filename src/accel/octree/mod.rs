@@ -347,21 +347,24 @@ impl<P: Primitive> Octree<P> {
 
 impl<P: Primitive> Backend for Octree<P> {
     /// One traversal per kind of query, monomorphised: primary rays
-    /// ([`NoSkip`]) pay nothing for the self-hit rule.
+    /// ([`NoSkip`]) pay nothing for the self-hit rule, and secondary rays
+    /// without a pass-over rule nothing for that.
     fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
         hits.clear();
         let (ray, t_min, t_max) = (&q.ray, q.t_min, q.t_max);
-        match &q.from {
-            None => self.gather(ray, t_min, t_max, NoSkip, hits),
-            Some(d) => self.gather(ray, t_min, t_max, d, hits),
+        match (&q.from, q.pass) {
+            (None, None) => self.gather(ray, t_min, t_max, NoSkip, hits),
+            (Some(d), None) => self.gather(ray, t_min, t_max, d, hits),
+            _ => self.gather(ray, t_min, t_max, q.secondary(), hits),
         }
     }
 
     fn occluded_from(&self, q: &Query) -> bool {
         let (ray, t_min, t_max) = (&q.ray, q.t_min, q.t_max);
-        match &q.from {
-            None => self.any_hit(ray, t_min, t_max, NoSkip),
-            Some(d) => self.any_hit(ray, t_min, t_max, d),
+        match (&q.from, q.pass) {
+            (None, None) => self.any_hit(ray, t_min, t_max, NoSkip),
+            (Some(d), None) => self.any_hit(ray, t_min, t_max, d),
+            _ => self.any_hit(ray, t_min, t_max, q.secondary()),
         }
     }
 

@@ -75,7 +75,7 @@ struct Lanes<'q> {
     inv: [Wide; 3],
     t_min: Wide,
     /// The queries, for the single-ray descent of a lone ray.
-    qs: &'q [Query],
+    qs: &'q [Query<'q>],
     /// The direction signs every ray of the packet shares.
     sign_mask: usize,
     /// The origin, when every ray of the packet has the same one (bit for
@@ -90,7 +90,7 @@ struct Lanes<'q> {
 impl<'q> Lanes<'q> {
     /// The lanes of `qs` (at most [`PACKET`]), or `None` when their
     /// direction signs differ.
-    fn new(qs: &'q [Query]) -> Option<Lanes<'q>> {
+    fn new(qs: &'q [Query<'q>]) -> Option<Lanes<'q>> {
         let q = |k: usize| &qs[k.min(qs.len() - 1)];
         let dir: [Wide; 3] = [0, 1, 2].map(|a| wide(&std::array::from_fn(|k| q(k).ray.dir[a])));
         // The sign bits of every lane (`RayCtx::sign_mask`'s, per axis):
@@ -430,9 +430,9 @@ impl<P: Primitive> Octree<P> {
     /// queries with skip rule `skip` (one type for the packet).
     fn gather_chunk<'q, S: Skip>(
         &self,
-        qs: &'q [Query],
+        qs: &'q [Query<'q>],
         hits: &mut [CandidateHits],
-        skip: impl Fn(&'q Query) -> S,
+        skip: impl Fn(&'q Query<'q>) -> S,
     ) {
         for h in hits.iter_mut().take(qs.len()) {
             h.clear();
@@ -459,9 +459,9 @@ impl<P: Primitive> Octree<P> {
     /// queries with skip rule `skip`.
     fn any_hit_chunk<'q, S: Skip>(
         &self,
-        qs: &'q [Query],
+        qs: &'q [Query<'q>],
         out: &mut [bool],
-        skip: impl Fn(&'q Query) -> S,
+        skip: impl Fn(&'q Query<'q>) -> S,
     ) {
         if self.references == 0 {
             out.iter_mut().take(qs.len()).for_each(|o| *o = false);
@@ -495,10 +495,10 @@ impl<P: Primitive> Octree<P> {
                 for (q, h) in qs.iter().zip(hits.iter_mut()) {
                     crate::accel::Backend::intersect_from(self, q, h);
                 }
-            } else if qs.iter().all(|q| q.from.is_none()) {
+            } else if qs.iter().all(|q| q.from.is_none() && q.pass.is_none()) {
                 self.gather_chunk(qs, hits, |_| NoSkip);
             } else {
-                self.gather_chunk(qs, hits, |q| q.from.as_ref());
+                self.gather_chunk(qs, hits, Query::secondary);
             }
         }
     }
@@ -511,10 +511,10 @@ impl<P: Primitive> Octree<P> {
                 for (q, o) in qs.iter().zip(out.iter_mut()) {
                     *o = crate::accel::Backend::occluded_from(self, q);
                 }
-            } else if qs.iter().all(|q| q.from.is_none()) {
+            } else if qs.iter().all(|q| q.from.is_none() && q.pass.is_none()) {
                 self.any_hit_chunk(qs, out, |_| NoSkip);
             } else {
-                self.any_hit_chunk(qs, out, |q| q.from.as_ref());
+                self.any_hit_chunk(qs, out, Query::secondary);
             }
         }
     }

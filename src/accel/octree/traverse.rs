@@ -456,7 +456,7 @@ impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, S> {
         // The shared routine decides, with the window's current end, and
         // the shared rule skips.
         if let Some(h) = prim.intersect(self.ray, self.t_min, self.cut)
-            && !self.skip.skips(self.ray.dir, id, &prim)
+            && !self.skip.skips(self.ray.dir, id, &prim, &h)
         {
             let c = Candidate {
                 id,
@@ -506,7 +506,7 @@ impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, S> {
 
     #[inline(always)]
     fn lane(&mut self, prim: P, id: u32) -> bool {
-        prim.intersect(self.ray, self.t_min, self.t_max).is_some()
-            && !self.skip.skips(self.ray.dir, id, &prim)
+        prim.intersect(self.ray, self.t_min, self.t_max)
+            .is_some_and(|h| !self.skip.skips(self.ray.dir, id, &prim, &h))
     }
 }

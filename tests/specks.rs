@@ -1,0 +1,103 @@
+//! The scan-line render without dark specks (issue 23): `scenes/scan-lines.toml`
+//! (the bunny scanned in 200 noisy lines, on a floor) against its exact
+//! surfaces. A speck is a pixel at least 0.6 darker (the sum of its sRGB
+//! channels) than the exact surface's, none of its four neighbours so;
+//! one within 2 pixels of a step of 0.6 in the exact image lies on an
+//! outline or a shadow's edge that moved, the others on the surface.
+//! Measured (800×600, `docs/development.md`, "Issue 23: the specks'
+//! causes, and shadow rays that see the surface"): 188 specks, 60 on the
+//! surface, 4,840 pixels whose error is a shadow before; shadow rays that
+//! pass Phong splats beyond their curved silhouettes 154 / 51 / 2,940;
+//! leaving from the front of the window 140 / 47 / 2,841; free-space
+//! trimming that keeps the point's own surface 109 / 13 / 2,777.
+
+mod common;
+
+use common::render_with;
+use splatray::render::integrator::Frame;
+use splatray::render::output::to_srgb8;
+use splatray::scene::{Scene, build_scene, parse_scene_file};
+use splatray::validate::causes::{Cause, Tolerances, error_budget};
+use splatray::validate::compare::{orient_to_camera, render_truth};
+use splatray::validate::truth::Truth;
+use std::path::Path;
+
+const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/scan-lines.toml");
+
+fn scan_lines() -> Scene {
+    let path = Path::new(SCENE);
+    let file = parse_scene_file(path).unwrap();
+    build_scene(&file, path.parent().unwrap(), None).unwrap()
+}
+
+/// Each pixel's sum of sRGB channels (0 to 3), as the PNG holds it.
+fn brightness(frame: &Frame) -> Vec<f64> {
+    to_srgb8(frame)
+        .pixels()
+        .map(|p| p.0.iter().map(|&c| f64::from(c) / 255.0).sum())
+        .collect()
+}
+
+/// The specks of `splats` against `truth` (module docs): (on an outline
+/// or a shadow's edge, on the surface).
+fn specks(splats: &Frame, truth: &Frame) -> (usize, usize) {
+    let (w, h) = (splats.width as usize, splats.height as usize);
+    let (a, b) = (brightness(splats), brightness(truth));
+    let dark = |x: usize, y: usize| a[y * w + x] - b[y * w + x] <= -0.6;
+    let (mut edge, mut surface) = (0, 0);
+    for y in 1..h - 1 {
+        for x in 1..w - 1 {
+            let alone = !(dark(x + 1, y) || dark(x - 1, y) || dark(x, y + 1) || dark(x, y - 1));
+            if !(dark(x, y) && alone) {
+                continue;
+            }
+            let t = b[y * w + x];
+            let step = (y.saturating_sub(2)..=(y + 2).min(h - 1)).any(|yy| {
+                (x.saturating_sub(2)..=(x + 2).min(w - 1))
+                    .any(|xx| (b[yy * w + xx] - t).abs() >= 0.6)
+            });
+            if step {
+                edge += 1;
+            } else {
+                surface += 1;
+            }
+        }
+    }
+    (edge, surface)
+}
+
+#[test]
+fn the_scan_line_render_has_few_dark_specks() {
+    let scene = scan_lines();
+    let truth = render_truth(&scene, &Truth::new(&scene).unwrap(), None);
+    let diagonal = scene.options.scale.diagonal;
+    let mut first: Option<Frame> = None;
+    for name in ["octree", "embree"] {
+        let frame = render_with(&scene, name);
+        let (edge, surface) = specks(&frame, &truth);
+        let mut oriented = frame.clone();
+        orient_to_camera(&mut oriented, &scene.camera);
+        let (budget, _) = error_budget(
+            &oriented,
+            &truth,
+            diagonal,
+            &Tolerances::default(),
+            &scene.material_of,
+        );
+        let shadow = budget.causes[Cause::Shadow as usize].pixels;
+        eprintln!(
+            "{name}: {} specks ({edge} on outlines and shadow edges, {surface} on the surface), \
+             {shadow} shadow pixels",
+            edge + surface
+        );
+        // 109, 13 and 2,777 measured; each step of the fix undone fails
+        // one of these (module docs).
+        assert!(edge + surface <= 120, "{name}: {} specks", edge + surface);
+        assert!(surface <= 16, "{name}: {surface} specks on the surface");
+        assert!(shadow <= 3_300, "{name}: {shadow} shadow pixels");
+        if let Some(f) = &first {
+            assert_eq!(f.rgb, frame.rgb, "octree and Embree differ");
+        }
+        first = Some(frame);
+    }
+}
