@@ -243,12 +243,15 @@ impl SplatSurfaces<'_> {
 
     /// The query of a shadow ray leaving `from` ([`SplatSurfaces::leaving`]),
     /// which also passes the hits on Phong splats' discs beyond their curved
-    /// surfaces' silhouettes (the scene's [`crate::accel::PassOver`]): a
-    /// shadow ray sees the surface the resolver shows a camera ray, in every
-    /// backend alike.
+    /// surfaces' silhouettes (the scene's [`crate::accel::PassOver`], when
+    /// it has Phong splats): a shadow ray sees the surface the resolver
+    /// shows a camera ray, in every backend alike.
     fn shadow(&self, ray: &Ray, from: &ShadeHit, t_max: f32) -> Query<'_> {
         Query {
-            pass: Some(self.scene),
+            pass: self
+                .scene
+                .has_phong()
+                .then_some(self.scene as &dyn crate::accel::PassOver),
             ..self.leaving(ray, from, t_max)
         }
     }

@@ -920,4 +920,23 @@ mod tests {
             .collect();
         assert_eq!(materials, [("sphere", 0), ("mesh", 1), ("mesh", 2)]);
     }
+
+    /// Shadow rays get the pass-over rule only in scenes with Phong
+    /// splats: a scene whose materials all shade flat has none.
+    #[test]
+    fn phong_splats_are_known_per_scene() {
+        let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+        let scene = |shading: &str| {
+            let text = format!(
+                "[camera]\nfrom = [0.0, 0.0, 3.0]\nat = [0.0, 0.0, 0.0]\n\
+                 [[model]]\nshape = {{ kind = \"sphere\", radius = 1.0, splats = 50 }}\n\
+                 material = {{ kind = \"phong\", color = [0.5, 0.5, 0.5]{shading} }}\n\
+                 [[model]]\nshape = {{ kind = \"quad\", size = [1.0, 1.0], splats = 20 }}\n\
+                 material = {{ kind = \"diffuse\", color = [0.5, 0.5, 0.5], shading = \"flat\" }}\n"
+            );
+            build_scene(&parse_scene_str(&text).unwrap(), &base, None).unwrap()
+        };
+        assert!(scene("").has_phong());
+        assert!(!scene(", shading = \"flat\"").has_phong());
+    }
 }

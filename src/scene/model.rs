@@ -363,6 +363,16 @@ impl Scene {
         (lo.x <= hi.x).then(|| (to_world(lo), to_world(hi)))
     }
 
+    /// True when some material shades its splats with Phong fields (the
+    /// only splats a shadow ray can pass, [`crate::accel::PassOver`]): a
+    /// scene without them gives its shadow rays no pass-over rule.
+    #[must_use]
+    pub fn has_phong(&self) -> bool {
+        self.shading_of
+            .iter()
+            .any(|s| s.unwrap_or(self.options.shading) == ShadingMode::Phong)
+    }
+
     /// The shading mode for a window whose nearest hit is splat `id`: the
     /// model's override, else the scene's.
     #[must_use]
