@@ -127,12 +127,18 @@ fn error_budget_puts_each_error_where_it_belongs() {
     assert!(by(&bad, Cause::Hole).psnr_if_exact_db.unwrap() > bad.psnr_db.unwrap() + 0.1);
 }
 
-#[test]
-fn compare_report_has_the_documented_keys() {
-    let dir = std::env::temp_dir().join(format!("splatray-validate-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+/// A scratch folder for test `name` holding [`SCENE`] as `s.toml`: the
+/// folder and the scene's path.
+fn scene_in_scratch(name: &str) -> (std::path::PathBuf, std::path::PathBuf) {
+    let dir = common::scratch(name);
     let scene = dir.join("s.toml");
     std::fs::write(&scene, SCENE).unwrap();
+    (dir, scene)
+}
+
+#[test]
+fn compare_report_has_the_documented_keys() {
+    let (dir, scene) = scene_in_scratch("validate");
     let report = dir.join("r.json");
     let diff = dir.join("d.png");
     let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
@@ -242,14 +248,11 @@ fn compare_report_has_the_documented_keys() {
 /// one round (renders repeat bit for bit). `--rounds 0` is refused.
 #[test]
 fn compare_rounds_take_turns() {
-    let dir = std::env::temp_dir().join(format!("splatray-rounds-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let scene = dir.join("s.toml");
-    std::fs::write(&scene, SCENE).unwrap();
+    let (dir, scene) = scene_in_scratch("rounds");
     let run = |rounds: &str, tag: &str| {
         let report = dir.join(format!("r{tag}.json"));
         let diff = dir.join(format!("d{tag}.png"));
-        let o = Command::new(env!("CARGO_BIN_EXE_splatray"))
+        let o = common::bin()
             .args(["compare", scene.to_str().unwrap(), "--rounds", rounds])
             .arg("--report")
             .arg(&report)

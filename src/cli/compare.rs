@@ -344,13 +344,10 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// True when two renders of one scene give the same image, depths and
 /// splats, bit for bit.
 fn same_image(a: &Frame, b: &Frame) -> bool {
-    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-    a.rgb.len() == b.rgb.len()
-        && a.rgb
-            .iter()
-            .zip(&b.rgb)
-            .all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits))
-        && bits(&a.depth) == bits(&b.depth)
+    let bits = |x: &f32| x.to_bits();
+    let rgb = |c: &glam::Vec3| c.to_array().map(f32::to_bits);
+    a.rgb.iter().map(rgb).eq(b.rgb.iter().map(rgb))
+        && a.depth.iter().map(bits).eq(b.depth.iter().map(bits))
         && a.splat == b.splat
 }
 
