@@ -395,7 +395,7 @@ fn every_registry_entry_renders_under_its_own_name() {
 }
 
 /// CI (`.ci/run`) runs README's test command as README writes it: its last
-/// line is README's "the test suite" line without the comment.
+/// line is README's "the test suite" line, as README writes it.
 #[test]
 fn ci_runs_readmes_test_command() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
