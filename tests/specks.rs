@@ -10,7 +10,9 @@
 //! pass Phong splats beyond their curved silhouettes 154 / 51 / 2,940;
 //! leaving from the front of the window 140 / 47 / 2,841; free-space
 //! trimming that keeps the point's own surface 109 / 13 / 2,777; and that
-//! undoes a shrink opening a hole among the scanned points 108 / 6 / 2,764.
+//! undoes a shrink opening a hole among the scanned points 108 / 6 / 2,764;
+//! shadow rays passing a neighbour rising over their point
+//! (`accel::departure::RISING_HEIGHT`) 105 / 5 / 2,698.
 
 mod common;
 
@@ -91,11 +93,11 @@ fn the_scan_line_render_has_few_dark_specks() {
              {shadow} shadow pixels",
             edge + surface
         );
-        // 108, 6 and 2,764 measured; each step of the fix undone fails one of
-        // these (module docs).
+        // 105, 5 and 2,698 measured; each step of the fix undone fails one
+        // of these (module docs).
         assert!(edge + surface <= 120, "{name}: {} specks", edge + surface);
         assert!(surface <= 8, "{name}: {surface} specks on the surface");
-        assert!(shadow <= 3_300, "{name}: {shadow} shadow pixels");
+        assert!(shadow <= 2_750, "{name}: {shadow} shadow pixels");
         if let Some(f) = &first {
             assert_eq!(f.rgb, frame.rgb, "octree and Embree differ");
         }
