@@ -314,6 +314,11 @@ pub fn trim(
                 shrink_away(s, q);
             }
         }
+        if cut.is_empty() {
+            // Every line left is blocked by a splat kept whole.
+            report.still_blocked = count;
+            return report;
+        }
         let holes = opened_holes(splats, &cut, points, &tree, viewpoint, margin);
         for (&(id, before, _), hole) in cut.iter().zip(holes) {
             if hole {
