@@ -67,6 +67,10 @@ pub struct TrimReport {
     pub rays: usize,
     /// Lines blocked in the first pass.
     pub blocked: usize,
+    /// Rays that met nothing cast per pass ([`PointCloud::misses`]).
+    pub misses: usize,
+    /// Of those, rays meeting a splat in the first pass.
+    pub misses_blocked: usize,
     /// Splats shrunk (over all passes).
     pub shrunk: usize,
     /// Lines still blocked after the last pass.
@@ -103,15 +107,19 @@ pub fn sight_line(viewpoint: Vec3, point: Vec3) -> Option<(Ray, f32)> {
 /// `scenes/scan-lines.toml` such holes show the floor through the bunny;
 /// `docs/development.md`, "Issue 23: the specks' causes, and shadow rays
 /// that see the surface").
+///
+/// Then, for every miss of `misses` (a ray from their one viewpoint that
+/// met nothing), the first splat it meets, if any.
 fn blocked(
     splats: &[Splat],
     points: &[Vec3],
     vp: &Viewpoints,
+    misses: &Misses,
     margin: f32,
 ) -> Vec<Option<(u32, Vec2)>> {
     let discs: Vec<_> = splats.iter().map(Splat::disc_geometry).collect();
     let octree = Octree::new(&discs, &OctreeParams::default());
-    points
+    let mut lines: Vec<_> = points
         .par_iter()
         .enumerate()
         .with_min_len(512)
@@ -137,7 +145,29 @@ fn blocked(
                 (!hits.is_empty()).then_some(q)
             },
         )
-        .collect()
+        .collect();
+    lines.par_extend(misses.dirs.par_iter().with_min_len(512).map_init(
+        || CandidateHits::new(0.0),
+        |hits, &dir| {
+            let ray = Ray {
+                origin: misses.from,
+                dir,
+            };
+            octree.intersect(&ray, 0.0, f32::INFINITY, hits);
+            hits.nearest().map(|h| (h.id, Vec2::new(h.u, h.v)))
+        },
+    ));
+    lines
+}
+
+/// The scanner's rays that met nothing ([`PointCloud::misses`]), from its
+/// one viewpoint.
+#[derive(Clone, Debug, Default)]
+pub struct Misses {
+    /// The viewpoint.
+    pub from: Vec3,
+    /// Unit directions.
+    pub dirs: Vec<Vec3>,
 }
 
 /// Shrinks splat `s` so the normalised disc point `q` (|q| ≤ 1) falls just
@@ -192,6 +222,7 @@ fn opened_holes(
     points: &[Vec3],
     tree: &PointTree,
     vp: &Viewpoints,
+    misses: &Misses,
     margin: f32,
 ) -> Vec<bool> {
     if cut.is_empty() {
@@ -203,15 +234,24 @@ fn opened_holes(
         .map_init(
             || (CandidateHits::new(0.0), Vec::new()),
             |(hits, near), &(id, old, i)| {
-                let eye = vp.at(i);
+                // A miss (past the points) is checked for holes like any
+                // line: a cluster of dropped returns inside the surface
+                // looks like one.
+                let eye = if i < points.len() {
+                    vp.at(i)
+                } else {
+                    misses.from
+                };
                 // The line it blocked: through to a point far behind, the
                 // scanner saw a real gap, and opening it is the point.
-                let Some((line, d)) = sight_line(eye, points[i]) else {
-                    return false;
-                };
-                let behind = d - old.normal.dot(old.center - eye) / old.normal.dot(line.dir);
-                if behind.is_nan() || behind > HOLE_DEPTH * margin {
-                    return false;
+                if i < points.len() {
+                    let Some((line, d)) = sight_line(eye, points[i]) else {
+                        return false;
+                    };
+                    let behind = d - old.normal.dot(old.center - eye) / old.normal.dot(line.dir);
+                    if behind.is_nan() || behind > HOLE_DEPTH * margin {
+                        return false;
+                    }
                 }
                 let new = &splats[id];
                 let reach = old.radii.max_element();
@@ -269,10 +309,12 @@ pub fn trim(
     splats: &mut [Splat],
     points: &[Vec3],
     viewpoint: &Viewpoints,
+    misses: &Misses,
     margin: f32,
 ) -> TrimReport {
     let mut report = TrimReport {
         rays: points.len(),
+        misses: misses.dirs.len(),
         ..TrimReport::default()
     };
     if splats.is_empty() || points.is_empty() {
@@ -283,11 +325,12 @@ pub fn trim(
     // never shrunk again.
     let mut kept = vec![false; splats.len()];
     for pass in 0..PASSES {
-        let b = blocked(splats, points, viewpoint, margin);
+        let b = blocked(splats, points, viewpoint, misses, margin);
         let count = b.iter().flatten().count();
         if pass == 0 {
-            report.blocked = count;
-            if count as f64 > IMPLAUSIBLE * points.len() as f64 {
+            report.misses_blocked = b[points.len()..].iter().flatten().count();
+            report.blocked = count - report.misses_blocked;
+            if report.blocked as f64 > IMPLAUSIBLE * points.len() as f64 {
                 report.skipped = true;
                 report.still_blocked = count;
                 return report;
@@ -319,7 +362,7 @@ pub fn trim(
             report.still_blocked = count;
             return report;
         }
-        let holes = opened_holes(splats, &cut, points, &tree, viewpoint, margin);
+        let holes = opened_holes(splats, &cut, points, &tree, viewpoint, misses, margin);
         for (&(id, before, _), hole) in cut.iter().zip(holes) {
             if hole {
                 splats[id] = before;
@@ -330,7 +373,7 @@ pub fn trim(
             }
         }
     }
-    report.still_blocked = blocked(splats, points, viewpoint, margin)
+    report.still_blocked = blocked(splats, points, viewpoint, misses, margin)
         .iter()
         .flatten()
         .count();
@@ -393,7 +436,16 @@ pub fn generate_trimmed(
     let mut vp = vp;
     vp.retain(&drop);
     let margin = (MARGIN_EPS * report.epsilon as f32).max(MARGIN_NOISE * report.noise as f32);
-    let t = trim(&mut splats, &points, &vp, margin);
+    // Misses are the cloud's own scanner's, usable when trimming looks from
+    // it alone.
+    let misses = match (&vp, &cloud.misses, cloud.viewpoint) {
+        (Viewpoints::One(v), Some(dirs), Some(own)) if *v == own => Misses {
+            from: own,
+            dirs: dirs.clone(),
+        },
+        _ => Misses::default(),
+    };
+    let t = trim(&mut splats, &points, &vp, &misses, margin);
     if t.skipped {
         report.warnings.push(format!(
             "{:.1} % of the lines of sight from the viewpoint are blocked: it does not look like \
@@ -462,10 +514,47 @@ mod tests {
     fn noise_under_a_surface_opens_no_hole() {
         let (mut splats, points) = scene(Vec3::new(0.03, 0.02, -0.03));
         assert_eq!(holes(&splats), 0);
-        let r = trim(&mut splats, &points, &Viewpoints::One(EYE), MARGIN);
+        let r = trim(
+            &mut splats,
+            &points,
+            &Viewpoints::One(EYE),
+            &Misses::default(),
+            MARGIN,
+        );
         assert!(r.blocked == 1 && r.kept_whole >= 1, "{r:?}");
         assert_eq!(r.still_blocked, 1, "{r:?}");
         assert_eq!(holes(&splats), 0, "{r:?}");
+    }
+
+    /// Rays that met nothing: one just past the square's edge meets the
+    /// overhang of its last discs, which are shrunk off it; one through
+    /// the square's inside (dropped returns side by side) would open a
+    /// hole there, and the disc is kept whole.
+    #[test]
+    fn misses_trim_overhangs_but_open_no_hole() {
+        let (mut splats, points) = scene(Vec3::new(0.0, 0.0, -0.03));
+        let past = Vec3::new(1.1, 0.02, 0.0);
+        let inside = Vec3::new(0.31, -0.27, 0.0);
+        let misses = Misses {
+            from: EYE,
+            dirs: vec![(past - EYE).normalize(), (inside - EYE).normalize()],
+        };
+        let r = trim(&mut splats, &points, &Viewpoints::One(EYE), &misses, MARGIN);
+        assert_eq!((r.misses, r.misses_blocked), (2, 2), "{r:?}");
+        assert!(r.shrunk >= 1 && r.kept_whole >= 1, "{r:?}");
+        // The miss inside, and the point just under the centre (as in
+        // `noise_under_a_surface_opens_no_hole`).
+        assert_eq!(r.still_blocked, 2, "{r:?}");
+        assert_eq!(holes(&splats), 0, "{r:?}");
+        let discs: Vec<_> = splats.iter().map(Splat::disc_geometry).collect();
+        let octree = Octree::new(&discs, &OctreeParams::default());
+        let mut hits = CandidateHits::new(0.0);
+        let ray = Ray {
+            origin: EYE,
+            dir: misses.dirs[0],
+        };
+        octree.intersect(&ray, 0.0, f32::INFINITY, &mut hits);
+        assert!(hits.is_empty());
     }
 
     /// The same line to a point far under the surface: the scanner saw
@@ -473,7 +562,13 @@ mod tests {
     #[test]
     fn a_line_far_through_a_surface_is_freed() {
         let (mut splats, points) = scene(Vec3::new(0.03, 0.02, -0.5));
-        let r = trim(&mut splats, &points, &Viewpoints::One(EYE), MARGIN);
+        let r = trim(
+            &mut splats,
+            &points,
+            &Viewpoints::One(EYE),
+            &Misses::default(),
+            MARGIN,
+        );
         assert!(
             r.blocked == 1 && r.kept_whole == 0 && r.shrunk >= 1,
             "{r:?}"

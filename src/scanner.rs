@@ -130,6 +130,32 @@ pub struct Scan {
     pub pinhole: Option<(f64, f64, f64)>,
 }
 
+/// The cells of a scan's grid (`cols` × `rows`, row by row) that hold no
+/// point and have at least two empty cells among their four neighbours:
+/// rays that met nothing, as an organised capture shows them. A lone empty
+/// cell is more likely a return that went missing (a dropout) than a ray
+/// past everything, and is left out, as is one with a single empty
+/// neighbour (two dropouts side by side).
+#[must_use]
+pub fn grid_misses<T>(grid: &[Option<T>], cols: usize, rows: usize) -> Vec<usize> {
+    let empty = |c: usize, r: usize| grid.get(r * cols + c).is_some_and(Option::is_none);
+    (0..grid.len().min(cols * rows))
+        .filter(|&k| {
+            let (c, r) = (k % cols, k / cols);
+            if !empty(c, r) {
+                return false;
+            }
+            let near = [
+                c > 0 && empty(c - 1, r),
+                c + 1 < cols && empty(c + 1, r),
+                r > 0 && empty(c, r - 1),
+                r + 1 < rows && empty(c, r + 1),
+            ];
+            near.iter().filter(|&&e| e).count() >= 2
+        })
+        .collect()
+}
+
 fn check(p: &ScanParams) -> Result<()> {
     let bad = |s: String| Err(Error::invalid(s));
     if !p.from.is_finite() || p.at.is_some_and(|a| !a.is_finite()) {
@@ -381,5 +407,32 @@ pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
     if scan.cloud.is_empty() {
         return Err(Error::invalid("every return of the scan went missing"));
     }
+    let misses = grid_misses(&scan.grid, cols, rows);
+    scan.cloud.misses = Some(
+        misses
+            .into_iter()
+            .map(|k| dir_of(k % cols, k / cols))
+            .collect(),
+    );
     Ok(scan)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::grid_misses;
+
+    /// A 5 × 4 grid: the right two columns empty (past an edge), one lone
+    /// empty cell and a pair side by side inside (dropped returns).
+    #[test]
+    fn misses_are_empty_cells_beside_empty_cells() {
+        let o = Some(());
+        let grid = [
+            o, o, o, None, None, //
+            o, None, o, None, None, //
+            o, o, o, None, None, //
+            None, None, o, None, None,
+        ];
+        let m = grid_misses(&grid, 5, 4);
+        assert_eq!(m, vec![3, 4, 8, 9, 13, 14, 18, 19]);
+    }
 }

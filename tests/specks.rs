@@ -13,6 +13,17 @@
 //! undoes a shrink opening a hole among the scanned points 108 / 6 / 2,764;
 //! shadow rays passing a neighbour rising over their point
 //! (`accel::departure::RISING_HEIGHT`) 105 / 5 / 2,698.
+//!
+//! A dark pixel where the exact image shows no surface at all (a false
+//! hit: the splats overhang the outline, against the sky) is an outline
+//! error, not a speck: those are counted by their pixels, every one, not
+//! only the isolated ones. Split so, the figures above end at 70 specks on
+//! the surfaces the exact image shows (3 off outlines and shadow edges),
+//! 35 isolated false hits and 855 false-hit pixels. Trimming along the
+//! scanner's rays that met nothing (`PointCloud::misses`) then halves the
+//! false hits, which breaks the band of dark pixels along the ears' rims
+//! into isolated ones: 75 specks (5 off the edges), 51 isolated false hits,
+//! 444 false-hit pixels, 2,630 shadow pixels.
 
 mod common;
 
@@ -42,16 +53,20 @@ fn brightness(frame: &Frame) -> Vec<f64> {
 }
 
 /// The specks of `splats` against `truth` (module docs): (on an outline
-/// or a shadow's edge, on the surface).
-fn specks(splats: &Frame, truth: &Frame) -> (usize, usize) {
+/// or a shadow's edge, on the surface, isolated false hits where `past`).
+fn specks(splats: &Frame, truth: &Frame, past: &[bool]) -> (usize, usize, usize) {
     let (w, h) = (splats.width as usize, splats.height as usize);
     let (a, b) = (brightness(splats), brightness(truth));
     let dark = |x: usize, y: usize| a[y * w + x] - b[y * w + x] <= -0.6;
-    let (mut edge, mut surface) = (0, 0);
+    let (mut edge, mut surface, mut beyond) = (0, 0, 0);
     for y in 1..h - 1 {
         for x in 1..w - 1 {
             let alone = !(dark(x + 1, y) || dark(x - 1, y) || dark(x, y + 1) || dark(x, y - 1));
             if !(dark(x, y) && alone) {
+                continue;
+            }
+            if past[y * w + x] {
+                beyond += 1;
                 continue;
             }
             let t = b[y * w + x];
@@ -66,7 +81,7 @@ fn specks(splats: &Frame, truth: &Frame) -> (usize, usize) {
             }
         }
     }
-    (edge, surface)
+    (edge, surface, beyond)
 }
 
 #[test]
@@ -77,26 +92,30 @@ fn the_scan_line_render_has_few_dark_specks() {
     let mut first: Option<Frame> = None;
     for name in ["octree", "embree"] {
         let frame = render_with(&scene, name);
-        let (edge, surface) = specks(&frame, &truth);
         let mut oriented = frame.clone();
         orient_to_camera(&mut oriented, &scene.camera);
-        let (budget, _) = error_budget(
+        let (budget, causes) = error_budget(
             &oriented,
             &truth,
             diagonal,
             &Tolerances::default(),
             &scene.material_of,
         );
+        let past: Vec<bool> = causes.iter().map(|&c| c == Cause::FalseHit).collect();
+        let (edge, surface, beyond) = specks(&frame, &truth, &past);
+        let false_hits = budget.causes[Cause::FalseHit as usize].pixels;
+        eprintln!("{name}: {beyond} isolated past the outline, {false_hits} false-hit pixels");
         let shadow = budget.causes[Cause::Shadow as usize].pixels;
         eprintln!(
             "{name}: {} specks ({edge} on outlines and shadow edges, {surface} on the surface), \
              {shadow} shadow pixels",
             edge + surface
         );
-        // 105, 5 and 2,698 measured; each step of the fix undone fails one
-        // of these (module docs).
-        assert!(edge + surface <= 120, "{name}: {} specks", edge + surface);
+        // 75, 5, 444 and 2,630 measured; each step of the fix undone fails
+        // one of these (module docs).
+        assert!(edge + surface <= 80, "{name}: {} specks", edge + surface);
         assert!(surface <= 8, "{name}: {surface} specks on the surface");
+        assert!(false_hits <= 500, "{name}: {false_hits} false-hit pixels");
         assert!(shadow <= 2_750, "{name}: {shadow} shadow pixels");
         if let Some(f) = &first {
             assert_eq!(f.rgb, frame.rgb, "octree and Embree differ");

@@ -32,6 +32,10 @@ pub struct PointCloud {
     /// stood and which scan each point came from. Splat generation uses a
     /// point's own scanner where [`PointCloud::viewpoint`] would be used.
     pub scans: Option<Scans>,
+    /// Unit directions, from [`PointCloud::viewpoint`], of the scanner's
+    /// rays that met nothing (an organised scan's empty cells beside other
+    /// empty cells, not a lone dropped return): free space to infinity.
+    pub misses: Option<Vec<Vec3>>,
 }
 
 /// Several scans in one cloud.
@@ -132,6 +136,7 @@ impl PointCloud {
                 .map(|v| pick(v, keep)),
             skipped: Vec::new(),
             viewpoint: self.viewpoint,
+            misses: self.misses.clone(),
             scans: self
                 .scans
                 .as_ref()

@@ -512,6 +512,9 @@ fn to_unit(
                 .collect(),
             of: s.of.clone(),
         }),
+        // Free-space trimming, the one user of misses, runs in the cloud's
+        // own frame.
+        misses: None,
     };
     let unit_params = SplatParams {
         viewpoint: params.viewpoint.map(|v| frame.unit_viewpoint(v)),
