@@ -447,6 +447,9 @@ pub fn generate_with_progress(
         normals: &nrm,
         colors: colors.as_deref(),
         knn: &knn,
+        // The requested k: a graph widened for scan lines is for joining
+        // the lines, not for the no-holes radius.
+        cover: params.k.min(knn.k),
         epsilon,
         density: params.density,
         ellipses: params.ellipses,

@@ -29,6 +29,14 @@ pub struct GrowInput<'a> {
     pub colors: Option<&'a [Vec3]>,
     /// The neighbourhood graph.
     pub knn: &'a Knn,
+    /// How many of a seed's nearest graph neighbours its splat covers at
+    /// least (the no-holes radius of [`grow_all`]): the graph's `k`, or
+    /// fewer where the graph was widened past the requested `k` to join
+    /// scan lines. The widened graph's `k` nearest reach far along the
+    /// lines, and a radius covering them all makes splats several times
+    /// larger than growth would (`docs/development.md`, "Issue 23: the
+    /// coarse case against the exact surface").
+    pub cover: usize,
     /// Error threshold `ϵ` on the span of eq. (1), absolute.
     pub epsilon: f32,
     /// Density factor `k ∈ (0, 1]` of §2.2.
@@ -176,12 +184,14 @@ impl Grower<'_> {
         (c, rad * (1.0 + 1e-4) + 1e-7 * r)
     }
 
-    /// The metric radius that covers the seed's same-facing `k` neighbours.
+    /// The metric radius that covers the seed's same-facing nearest
+    /// neighbours (the first [`GrowInput::cover`] of its graph's).
     fn cover_radius(&self, i: usize, a: Vec3, b: Vec3, aspect: f32) -> f32 {
         let inp = self.inp;
         let (p, n) = (inp.points[i], inp.normals[i]);
         let mut r2 = 0f32;
-        for &q in inp.knn.of(i) {
+        let nb = inp.knn.of(i);
+        for &q in &nb[..inp.cover.min(nb.len())] {
             let q = q as usize;
             if inp.normals[q].dot(n) <= 0.0 {
                 continue;
@@ -361,8 +371,8 @@ pub const GROWTH_REGIONS: usize = 4;
 ///
 /// Each splat: centre by eq. (2), radius by eq. (3) — the projected distance
 /// of the farthest point taken — but at least the projected distance that
-/// covers the seed's `k` nearest (same-facing) neighbours, so neighbouring
-/// splats overlap and leave no holes.
+/// covers the seed's `k` nearest (same-facing) neighbours ([`GrowInput::cover`]
+/// of them), so neighbouring splats overlap and leave no holes.
 #[must_use]
 pub fn grow_all(inp: &GrowInput<'_>, progress: impl Fn(usize) + Sync) -> Grown {
     let n_pts = inp.points.len();
@@ -661,6 +671,7 @@ mod tests {
             normals,
             colors: None,
             knn: &knn,
+            cover: knn.k,
             epsilon: 0.002,
             density: 0.5,
             ellipses: true,
@@ -709,6 +720,7 @@ mod tests {
             normals: &n,
             colors: None,
             knn: &knn,
+            cover: knn.k,
             epsilon: 0.002,
             density: 0.5,
             ellipses: true,
