@@ -111,10 +111,11 @@ fn scan_line_lines_of_sight_are_free() {
 /// samples, range noise 1.9 `ϵ`): the nearest splat stands in front of
 /// the held-out points (the nearest of several overlapping planes the noise
 /// scattered), the surface a render shows does not (measured with seed 7
-/// here: nearest 93.57 % consistent, the resolved surface 95.73 %, 1.98 %
-/// early, 2.28 % late; `sample`'s seed 1 gives 93.57 % and 95.49 %). Before
+/// here: nearest 95.13 % consistent, the resolved surface 95.79 %, 2.10 %
+/// early, 1.98 % late; `sample`'s seed 1 gives 95.97 % and 96.51 %). Before
 /// splats covered only the requested `k` neighbours rather than the
-/// widened graph's (issue 23, `docs/development.md`): 88.88 % and 94.95 %.
+/// widened graph's, and before the normals were fitted again to the
+/// projected points (issue 23, `docs/development.md`): 88.88 % and 94.95 %.
 #[test]
 fn coarse_scan_lines_meet_the_rendered_surface() {
     let scan = bunny_scan(ScanPattern::Lines, 800, 100);
@@ -125,8 +126,8 @@ fn coarse_scan_lines_meet_the_rendered_surface() {
         r.consistent_fraction
     );
     assert!(r.rays > 1500, "{r:?}");
-    assert!(s.consistent_fraction >= 0.955, "{s:?}");
-    assert!(r.consistent_fraction >= 0.93, "{r:?}");
+    assert!(s.consistent_fraction >= 0.957, "{s:?}");
+    assert!(r.consistent_fraction >= 0.95, "{r:?}");
     assert!(s.early_fraction <= 0.04 && s.late_fraction <= 0.03, "{s:?}");
     // The nearest splat is the stricter figure: it is what shadow rays meet.
     assert!(r.consistent_fraction < s.consistent_fraction, "{r:?}");

@@ -4,9 +4,12 @@
 //! `h(x, y) = a + b x + c y + d x² + e xy + f y²`; the fit follows the
 //! surface's curvature, so what is left is noise. The noise of the cloud is
 //! the median scatter; a noisy cloud has its points moved to `h(0, 0)`
-//! along their normals (a moving-least-squares projection of degree two).
+//! along their normals (a moving-least-squares projection of degree two),
+//! and their normals are then fitted again to the moved points
+//! ([`normals_after`]).
 
 use super::knn::Knn;
+use super::normals::{COLLINEAR, plane_fit};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
@@ -90,6 +93,43 @@ fn fit(points: &[Vec3], n: Vec3, i: usize, nb: &[u32]) -> Option<Local> {
         sd: ((ssr / dof).sqrt() * scale) as f32,
     };
     (local.offset.is_finite() && local.sd.is_finite()).then_some(local)
+}
+
+/// The normal of every point's fitted surface after the projection: the
+/// least-squares plane of the projected point and its graph neighbours
+/// facing the same way (the set [`fit_all`] fits), turned to the side of
+/// `normals`; `None` where that set is too small or collinear
+/// ([`COLLINEAR`]).
+///
+/// The normals the points were moved along were estimated from the noisy
+/// points, whose scatter across a scan line tilts the plane of a
+/// neighbourhood that spans two or three lines. The same neighbourhood
+/// fitted again after the projection gives the surface's tilt: on the
+/// coarse scan-line bunny of issue 23 the median angle to the exact mesh's
+/// normal falls from 11.8° to 7.1° (5.3° for the same fit to the
+/// noise-free scan).
+#[must_use]
+pub fn normals_after(points: &[Vec3], normals: &[Vec3], knn: &Knn) -> Vec<Option<Vec3>> {
+    (0..points.len())
+        .into_par_iter()
+        .with_min_len(1024)
+        .map(|i| {
+            let n = normals[i];
+            let nb = knn
+                .of(i)
+                .iter()
+                .filter(|&&j| normals[j as usize].dot(n) > 0.0)
+                .map(|&j| points[j as usize]);
+            if nb.clone().count() + 1 < MIN_POINTS {
+                return None;
+            }
+            let (_, vals, vecs) = plane_fit(std::iter::once(points[i]).chain(nb));
+            let m = vecs[0].as_vec3();
+            let m = if m.dot(n) < 0.0 { -m } else { m };
+            (m.is_finite() && m.length_squared() > 0.5 && vals[1] > COLLINEAR * vals[2])
+                .then_some(m)
+        })
+        .collect()
 }
 
 /// Solves the 6×6 normal equations by Gaussian elimination with partial
@@ -177,6 +217,33 @@ mod tests {
                 assert!(after < 1e-3 * pts.len() as f32 * 1e-3, "{after}");
             }
         }
+    }
+
+    #[test]
+    fn normals_after_the_projection_are_nearer_the_surface() {
+        let (pts, _) = cap(0.004);
+        // Normals as a noisy neighbourhood gives them: tilted by the noise.
+        let knn = Knn::build(&build_tree(&pts), &pts, 24);
+        let nrm: Vec<Vec3> = crate::splat::normals::estimate(&pts, &knn)
+            .into_iter()
+            .map(|n| if n.z < 0.0 { -n } else { n })
+            .collect();
+        let moved: Vec<Vec3> = pts
+            .iter()
+            .zip(&nrm)
+            .zip(fit_all(&pts, &nrm, &knn))
+            .map(|((p, n), f)| *p + *n * f.map_or(0.0, |f| f.offset))
+            .collect();
+        let after = normals_after(&moved, &nrm, &knn);
+        let angle = |n: Vec3, p: Vec3| n.dot(p.normalize()).clamp(-1.0, 1.0).acos();
+        let (mut before, mut now) = (0f32, 0f32);
+        for ((p, n), a) in moved.iter().zip(&nrm).zip(&after) {
+            let a = a.expect("a cap's neighbourhoods are planar enough");
+            assert!(a.dot(*n) > 0.0, "turned to the other side");
+            before += angle(*n, *p);
+            now += angle(a, *p);
+        }
+        assert!(now < 0.7 * before, "{now} vs {before}");
     }
 
     #[test]

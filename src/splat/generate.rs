@@ -437,7 +437,15 @@ pub fn generate_with_progress(
         knn,
         ..
     } = w;
-    if onto_local_surfaces(&mut points, &nrm, &fixed, to_estimate, &knn, &mut report) {
+    let mut nrm = nrm;
+    if onto_local_surfaces(
+        &mut points,
+        &mut nrm,
+        &fixed,
+        to_estimate,
+        &knn,
+        &mut report,
+    ) {
         tree = build_tree(&points);
     }
     let t2 = Instant::now();
@@ -643,13 +651,14 @@ fn neighbours(
 /// Range noise beyond the growth threshold: each splat would sit at its
 /// seed's noisy height (eq. 2 centres it on the span of the points it
 /// took), overlapping splats at scattered depths. The points are moved
-/// onto their local quadratic surfaces first. Only where the normals were
-/// estimated here (`fixed` marks given ones, kept as they are with their
-/// points). Sets the report's noise (needs its ε) and returns true when
-/// points moved.
+/// onto their local quadratic surfaces first, and their normals are fitted
+/// again to the moved points ([`denoise::normals_after`]). Only where the
+/// normals were estimated here (`fixed` marks given ones, kept as they are
+/// with their points). Sets the report's noise (needs its ε) and returns
+/// true when points moved.
 fn onto_local_surfaces(
     points: &mut [Vec3],
-    nrm: &[Vec3],
+    nrm: &mut [Vec3],
     fixed: &[bool],
     to_estimate: usize,
     knn: &Knn,
@@ -670,10 +679,16 @@ fn onto_local_surfaces(
         return false;
     }
     let mut moved = 0usize;
-    for ((p, n), l) in points.iter_mut().zip(nrm).zip(&local) {
+    for ((p, n), l) in points.iter_mut().zip(nrm.iter()).zip(&local) {
         if let Some(l) = l {
             *p += *n * l.offset;
             moved += 1;
+        }
+    }
+    let after = denoise::normals_after(points, nrm, knn);
+    for ((n, m), l) in nrm.iter_mut().zip(after).zip(&local) {
+        if let (Some(m), Some(_)) = (m, l) {
+            *n = m;
         }
     }
     report.warnings.push(format!(
