@@ -506,6 +506,17 @@ mod tests {
         n
     }
 
+    /// [`trim`] of `points`' lines from [`EYE`], without misses.
+    fn trim_lines(splats: &mut [Splat], points: &[Vec3]) -> TrimReport {
+        trim(
+            splats,
+            points,
+            &Viewpoints::One(EYE),
+            &Misses::default(),
+            MARGIN,
+        )
+    }
+
     /// A point a few margins under the surface (range noise) is seen
     /// through it: shrinking the surface's discs off its line of sight
     /// would open a hole with points all round it, so the last disc
@@ -514,13 +525,7 @@ mod tests {
     fn noise_under_a_surface_opens_no_hole() {
         let (mut splats, points) = scene(Vec3::new(0.03, 0.02, -0.03));
         assert_eq!(holes(&splats), 0);
-        let r = trim(
-            &mut splats,
-            &points,
-            &Viewpoints::One(EYE),
-            &Misses::default(),
-            MARGIN,
-        );
+        let r = trim_lines(&mut splats, &points);
         assert!(r.blocked == 1 && r.kept_whole >= 1, "{r:?}");
         assert_eq!(r.still_blocked, 1, "{r:?}");
         assert_eq!(holes(&splats), 0, "{r:?}");
@@ -562,13 +567,7 @@ mod tests {
     #[test]
     fn a_line_far_through_a_surface_is_freed() {
         let (mut splats, points) = scene(Vec3::new(0.03, 0.02, -0.5));
-        let r = trim(
-            &mut splats,
-            &points,
-            &Viewpoints::One(EYE),
-            &Misses::default(),
-            MARGIN,
-        );
+        let r = trim_lines(&mut splats, &points);
         assert!(
             r.blocked == 1 && r.kept_whole == 0 && r.shrunk >= 1,
             "{r:?}"

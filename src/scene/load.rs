@@ -543,8 +543,9 @@ fn generate_splats(
     let (fields, _) = crate::splat::color::fit_cloud(&mut splats, cloud, &params);
     if let Some(t) = trim.filter(|t| t.shrunk > 0) {
         load.warnings.push(format!(
-            "{} splats shrunk off {} blocked lines of sight from the viewpoint",
-            t.shrunk, t.blocked
+            "{} splats shrunk off {} blocked lines of sight from the viewpoint and {} of the \
+             scanner's rays that met nothing",
+            t.shrunk, t.blocked, t.misses_blocked
         ));
     }
     load.input_points += report.input_points;
