@@ -13,6 +13,7 @@
 
 use crate::accel::octree::{Octree, OctreeParams};
 use crate::accel::{Backend, CandidateHits, Ray};
+use crate::primitive::{Disc, Primitive};
 use crate::splat::knn::{PointTree, build_tree};
 use crate::splat::{
     PointCloud, Splat, SplatParams, SplatReport, Viewpoints, generate_with_progress, outliers,
@@ -117,8 +118,7 @@ fn blocked(
     misses: &Misses,
     margin: f32,
 ) -> Vec<Option<(u32, Vec2)>> {
-    let discs: Vec<_> = splats.iter().map(Splat::disc_geometry).collect();
-    let octree = Octree::new(&discs, &OctreeParams::default());
+    let octree = octree_of(splats);
     let mut lines: Vec<_> = points
         .par_iter()
         .enumerate()
@@ -158,6 +158,13 @@ fn blocked(
         },
     ));
     lines
+}
+
+/// The octree over `splats`' discs that trimming casts lines of sight
+/// through.
+fn octree_of(splats: &[Splat]) -> Octree<Disc> {
+    let discs: Vec<_> = splats.iter().map(Splat::disc_geometry).collect();
+    Octree::new(&discs, &OctreeParams::default())
 }
 
 /// The scanner's rays that met nothing ([`PointCloud::misses`]), from its
@@ -228,8 +235,7 @@ fn opened_holes(
     if cut.is_empty() {
         return Vec::new();
     }
-    let discs: Vec<_> = splats.iter().map(Splat::disc_geometry).collect();
-    let octree = Octree::new(&discs, &OctreeParams::default());
+    let octree = octree_of(splats);
     cut.par_iter()
         .map_init(
             || (CandidateHits::new(0.0), Vec::new()),
@@ -237,23 +243,23 @@ fn opened_holes(
                 // A miss (past the points) is checked for holes like any
                 // line: a cluster of dropped returns inside the surface
                 // looks like one.
-                let eye = if i < points.len() {
-                    vp.at(i)
-                } else {
-                    misses.from
-                };
-                // The line it blocked: through to a point far behind, the
-                // scanner saw a real gap, and opening it is the point.
-                if i < points.len() {
-                    let Some((line, d)) = sight_line(eye, points[i]) else {
+                let eye = if let Some(&p) = points.get(i) {
+                    let eye = vp.at(i);
+                    // The line it blocked: through to a point far behind,
+                    // the scanner saw a real gap, and opening it is the
+                    // point.
+                    let Some((line, d)) = sight_line(eye, p) else {
                         return false;
                     };
                     let behind = d - old.normal.dot(old.center - eye) / old.normal.dot(line.dir);
                     if behind.is_nan() || behind > HOLE_DEPTH * margin {
                         return false;
                     }
-                }
-                let new = &splats[id];
+                    eye
+                } else {
+                    misses.from
+                };
+                let new = splats[id].disc_geometry();
                 let reach = old.radii.max_element();
                 let (c, n, u, v) = (old.center, old.normal, old.u_axis, old.v_axis);
                 // The points on the old disc's plane within its reach of
@@ -272,11 +278,7 @@ fn opened_holes(
                         let a = std::f32::consts::TAU * k as f32 / HOLE_SPOKES as f32;
                         let xy = Vec2::new(a.cos() * old.radii.x, a.sin() * old.radii.y) * ring;
                         let x = c + u * xy.x + v * xy.y;
-                        let rel = x - new.center;
-                        let inside = (rel.dot(new.u_axis) / new.radii.x).powi(2)
-                            + (rel.dot(new.v_axis) / new.radii.y).powi(2)
-                            <= 1.0;
-                        if inside {
+                        if new.locate(x).radial2 <= 1.0 {
                             return false;
                         }
                         let mut quadrants = 0u8;
@@ -489,8 +491,7 @@ mod tests {
     /// Lines of sight to the square's inner points (spacing 0.02) that meet
     /// no splat within `MARGIN` of the plane.
     fn holes(splats: &[Splat]) -> usize {
-        let discs: Vec<_> = splats.iter().map(Splat::disc_geometry).collect();
-        let octree = Octree::new(&discs, &OctreeParams::default());
+        let octree = octree_of(splats);
         let mut hits = CandidateHits::new(0.0);
         let mut n = 0;
         for i in -40..=40 {
@@ -551,8 +552,7 @@ mod tests {
         // `noise_under_a_surface_opens_no_hole`).
         assert_eq!(r.still_blocked, 2, "{r:?}");
         assert_eq!(holes(&splats), 0, "{r:?}");
-        let discs: Vec<_> = splats.iter().map(Splat::disc_geometry).collect();
-        let octree = Octree::new(&discs, &OctreeParams::default());
+        let octree = octree_of(&splats);
         let mut hits = CandidateHits::new(0.0);
         let ray = Ray {
             origin: EYE,

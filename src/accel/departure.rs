@@ -116,16 +116,20 @@ impl Departure {
         }
         let l = prim.locate(self.point);
         let cos = l.normal.dot(self.normal);
-        let beside = cos >= SAME_SURFACE_COS
+        let leaving = self.normal.dot(dir);
+        let from_behind = l.normal.dot(dir) > 0.0;
+        // Beside the point; rising over it (met from behind by a ray
+        // leaving the front) within wider limits.
+        let (least_cos, most_height) = if leaving > 0.0 && from_behind {
+            (0.0, RISING_HEIGHT)
+        } else {
+            (SAME_SURFACE_COS, SAME_SURFACE_HEIGHT)
+        };
+        let beside = cos >= least_cos
             && l.radial2 <= SAME_SURFACE_RIM * SAME_SURFACE_RIM
-            && l.height.abs() <= SAME_SURFACE_HEIGHT;
-        let way_out = cos >= WAY_OUT_COS && self.normal.dot(dir) < 0.0 && l.normal.dot(dir) > 0.0;
-        let rising = cos >= 0.0
-            && self.normal.dot(dir) > 0.0
-            && l.normal.dot(dir) > 0.0
-            && l.radial2 <= SAME_SURFACE_RIM * SAME_SURFACE_RIM
-            && l.height.abs() <= RISING_HEIGHT;
-        beside || way_out || rising
+            && l.height.abs() <= most_height;
+        let way_out = cos >= WAY_OUT_COS && leaving < 0.0 && from_behind;
+        beside || way_out
     }
 }
 

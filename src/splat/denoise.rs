@@ -40,14 +40,23 @@ pub fn fit_all(points: &[Vec3], normals: &[Vec3], knn: &Knn) -> Vec<Option<Local
             // The point's own side only: the far face of a thin plate has
             // its normals turned the other way.
             nb.clear();
-            nb.extend(
-                knn.of(i)
-                    .iter()
-                    .filter(|&&j| normals[j as usize].dot(normals[i]) > 0.0),
-            );
+            nb.extend(same_facing(knn, normals, i));
             fit(points, normals[i], i, nb)
         })
         .collect()
+}
+
+/// Point `i`'s graph neighbours whose normals face its way: a surface's
+/// own side, not the far face of a thin plate.
+fn same_facing<'a>(
+    knn: &'a Knn,
+    normals: &'a [Vec3],
+    i: usize,
+) -> impl Iterator<Item = u32> + Clone + 'a {
+    knn.of(i)
+        .iter()
+        .copied()
+        .filter(move |&j| normals[j as usize].dot(normals[i]) > 0.0)
 }
 
 fn fit(points: &[Vec3], n: Vec3, i: usize, nb: &[u32]) -> Option<Local> {
@@ -115,11 +124,7 @@ pub fn normals_after(points: &[Vec3], normals: &[Vec3], knn: &Knn) -> Vec<Option
         .with_min_len(1024)
         .map(|i| {
             let n = normals[i];
-            let nb = knn
-                .of(i)
-                .iter()
-                .filter(|&&j| normals[j as usize].dot(n) > 0.0)
-                .map(|&j| points[j as usize]);
+            let nb = same_facing(knn, normals, i).map(|j| points[j as usize]);
             if nb.clone().count() + 1 < MIN_POINTS {
                 return None;
             }
