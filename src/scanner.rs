@@ -6,7 +6,7 @@
 
 use crate::embree::{Device, TriangleScene};
 use crate::geometry::Ray;
-use crate::io::Mesh;
+use crate::io::{Mesh, grid_misses};
 use crate::rng::SplitMix64;
 use crate::splat::PointCloud;
 use crate::{Error, Result};
@@ -128,32 +128,6 @@ pub struct Scan {
     /// For a raster: the focal length (pixels) and principal point of the
     /// pinhole whose pixel grid the rays sample (pixel centres at integers).
     pub pinhole: Option<(f64, f64, f64)>,
-}
-
-/// The cells of a scan's grid (`cols` × `rows`, row by row) that hold no
-/// point and have at least two empty cells among their four neighbours:
-/// rays that met nothing, as an organised capture shows them. A lone empty
-/// cell is more likely a return that went missing (a dropout) than a ray
-/// past everything, and is left out, as is one with a single empty
-/// neighbour (two dropouts side by side).
-#[must_use]
-pub fn grid_misses<T>(grid: &[Option<T>], cols: usize, rows: usize) -> Vec<usize> {
-    let empty = |c: usize, r: usize| grid.get(r * cols + c).is_some_and(Option::is_none);
-    (0..grid.len().min(cols * rows))
-        .filter(|&k| {
-            let (c, r) = (k % cols, k / cols);
-            if !empty(c, r) {
-                return false;
-            }
-            let near = [
-                c > 0 && empty(c - 1, r),
-                c + 1 < cols && empty(c + 1, r),
-                r > 0 && empty(c, r - 1),
-                r + 1 < rows && empty(c, r + 1),
-            ];
-            near.iter().filter(|&&e| e).count() >= 2
-        })
-        .collect()
 }
 
 fn check(p: &ScanParams) -> Result<()> {
@@ -415,24 +389,4 @@ pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
             .collect(),
     );
     Ok(scan)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::grid_misses;
-
-    /// A 5 × 4 grid: the right two columns empty (past an edge), one lone
-    /// empty cell and a pair side by side inside (dropped returns).
-    #[test]
-    fn misses_are_empty_cells_beside_empty_cells() {
-        let o = Some(());
-        let grid = [
-            o, o, o, None, None, //
-            o, None, o, None, None, //
-            o, o, o, None, None, //
-            None, None, o, None, None,
-        ];
-        let m = grid_misses(&grid, 5, 4);
-        assert_eq!(m, vec![3, 4, 8, 9, 13, 14, 18, 19]);
-    }
 }

@@ -132,7 +132,7 @@ fn photo(args: &ScanCheckArgs, splat: &splatray::splat::SplatParams) -> Result<(
     println!(
         "{name}: photo check of the organised {}x{} capture: {} measured pixels, {} held out, {} splats \
          ({} with a linear colour field); \
-         the splats cover {:.2} % of the held-out pixels and fill {:.2} % of the empty ones; albedo \
+         the splats cover {:.2} % of the held-out pixels and fill {:.2} % of the held-out empty ones; albedo \
          against the captured colours: PSNR {:.2} dB at full resolution, {:.2} dB at 1/2, {:.2} dB at 1/4 \
          (sensor fit residual {:.3} px)",
         r.width,

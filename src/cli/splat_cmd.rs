@@ -228,9 +228,10 @@ pub fn run(args: &SplatArgs) -> Result<()> {
     let colors_seconds = t_colors.elapsed().as_secs_f64();
     if let Some(t) = trim.filter(|t| t.shrunk > 0) {
         eprintln!(
-            "splatray: {} splats shrunk off {} of {} lines of sight from the viewpoint ({} still \
-             blocked; {} kept whole where shrinking would open a hole in the scanned surface)",
-            t.shrunk, t.blocked, t.rays, t.still_blocked, t.kept_whole
+            "splatray: {} splats shrunk off {} of {} lines of sight from the viewpoint and {} of \
+             the scanner's {} rays that met nothing ({} still blocked; {} kept whole where \
+             shrinking would open a hole in the scanned surface)",
+            t.shrunk, t.blocked, t.rays, t.misses_blocked, t.misses, t.still_blocked, t.kept_whole
         );
     }
     let heldout = HeldOut::measure(args, &cloud, &params, report.epsilon, &line);

@@ -18,6 +18,7 @@ mod error;
 mod gaussian;
 mod las;
 mod lzf;
+mod organised;
 mod pcd;
 mod ply;
 mod sample;
@@ -34,7 +35,8 @@ pub use gaussian::{
     encode_gaussians, file_layout, parse_gaussians, read_gaussians, sniff_layout, write_gaussians,
 };
 pub use lzf::{LzfError, lzf_decompress};
-pub use pcd::{Organised, encode_organised, read_organised};
+pub use organised::{Organised, Pinhole, grid_misses};
+pub use pcd::{encode_organised, read_organised};
 pub use sample::{MeshSampler, sample_mesh, write_sample_ply};
 pub use splat_ply::{
     COLOR_FIELD_PROPS, SPLAT_ROW_BYTES, SplatSet, encode_splats, encode_splats_with, parse_splats,

@@ -3,7 +3,7 @@
 //! `normal_x normal_y normal_z`, and `rgb` or `rgba` (packed `0xAARRGGBB`).
 
 use super::lzf::lzf_decompress;
-use super::{IoErrorKind, PointCloud, cloud_from_world, srgb_to_linear};
+use super::{IoErrorKind, Organised, PointCloud, cloud_from_world, srgb_to_linear};
 use glam::{DVec3, Vec3};
 use std::borrow::Cow;
 
@@ -225,6 +225,16 @@ const POINT_BYTES: u64 = 48;
 /// so `F 8` fields keep their precision).
 pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
     let (h, cols, world, normals, colors) = decode(bytes)?;
+    // An organised grid's empty cells are rays from its viewpoint that met
+    // nothing, cast through the pinhole fitted to its measured pixels (none
+    // when no pinhole fits).
+    let misses = match h.viewpoint {
+        Some(_) => organised(&h, &cols, &world, &colors)
+            .ok()
+            .flatten()
+            .and_then(|o| o.pinhole().ok().map(|p| o.misses(&p))),
+        None => None,
+    };
     let mut cloud = cloud_from_world(
         world,
         cols.normal.is_some().then_some(normals),
@@ -232,26 +242,8 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
     )?;
     // In the positions' frame, like them: relative to the origin.
     cloud.viewpoint = h.viewpoint.map(|v| cloud.local_viewpoint(v));
+    cloud.misses = misses;
     Ok(cloud)
-}
-
-/// An organised cloud (`HEIGHT` > 1): the grid of a depth camera or stereo
-/// rig, a point per pixel, row by row, NaN where nothing was measured.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Organised {
-    /// Pixels per row, and rows.
-    pub width: usize,
-    /// See `width`.
-    pub height: usize,
-    /// The sensor's position (`VIEWPOINT`), in the file's coordinates.
-    pub position: DVec3,
-    /// The sensor's orientation (`VIEWPOINT`'s quaternion, normalised).
-    pub orientation: glam::DQuat,
-    /// Every measured pixel: its index (`row · width + column`) and its
-    /// point, in the file's coordinates.
-    pub pixels: Vec<(u32, DVec3)>,
-    /// Linear colours of `pixels`, when the file has them.
-    pub colors: Option<Vec<Vec3>>,
 }
 
 /// The grid of an organised PCD (`HEIGHT` > 1); `None` for any other.
@@ -259,11 +251,20 @@ pub struct Organised {
 /// # Errors
 /// As [`read_cloud`].
 pub fn read_organised(bytes: &[u8]) -> Result<Option<Organised>, IoErrorKind> {
-    let head = parse_header(bytes)?;
-    let Some((width, height)) = head.grid.filter(|&(w, h)| h > 1 && w > 1) else {
+    let (h, cols, world, _, colors) = decode(bytes)?;
+    organised(&h, &cols, &world, &colors)
+}
+
+/// The grid of a decoded PCD (`HEIGHT` > 1); `None` for any other.
+fn organised(
+    h: &PcdHeader,
+    cols: &Columns,
+    world: &[DVec3],
+    colors: &[Vec3],
+) -> Result<Option<Organised>, IoErrorKind> {
+    let Some((width, height)) = h.grid.filter(|&(w, h)| h > 1 && w > 1) else {
         return Ok(None);
     };
-    let (h, cols, world, _, colors) = decode(bytes)?;
     let [w, x, y, z] = h.orientation;
     let q = glam::DQuat::from_xyzw(x, y, z, w);
     if q.length().is_nan() || q.length() <= 1e-12 {

@@ -1,14 +1,14 @@
 //! The photo check of an organised colour scan (`scan-check --photo`): the
 //! capture's own colours as the truth. A tenth of the measured pixels is
-//! held out of splat generation; the splats are seen from the sensor (its
-//! pose and fitted intrinsics, `scene::sensor`) through the pixels'
-//! centres, rendered unlit: the albedo AOV of the renderer (the resolved
-//! surface's colour, through the backend named); and the held-out pixels'
-//! colours are compared with the
-//! captured ones, in sRGB: PSNR at full resolution, and over 2×2 and 4×4
-//! blocks (texture finer than a splat dominates at full resolution), plus
-//! the share of the held-out pixels the splats cover and of the pixels the
-//! capture left empty that they fill.
+//! held out of splat generation, and a tenth of the empty ones out of the
+//! scanner's misses that trimming uses; the splats are seen from the
+//! sensor (its pose and fitted intrinsics, `scene::sensor`) through the
+//! pixels' centres, rendered unlit: the albedo AOV of the renderer (the
+//! resolved surface's colour, through the backend named); and the held-out
+//! pixels' colours are compared with the captured ones, in sRGB: PSNR at
+//! full resolution, and over 2×2 and 4×4 blocks (texture finer than a
+//! splat dominates at full resolution), plus the share of the held-out
+//! pixels the splats cover and of the held-out empty ones they fill.
 
 use crate::accel::registry;
 use crate::io::{Organised, linear_to_srgb};
@@ -37,7 +37,9 @@ pub struct PhotoReport {
     pub splats: usize,
     /// Share of the held-out pixels whose ray meets a splat.
     pub covered: f64,
-    /// Share of the pixels the capture left empty whose ray meets a splat.
+    /// Share of the held-out pixels the capture left empty (a share of
+    /// them, left out of the scanner's misses that trimming uses) whose ray
+    /// meets a splat.
     pub filled: f64,
     /// PSNR (dB, sRGB in `[0, 1]`) of the splats' colours against the
     /// captured ones over the covered held-out pixels: each pixel, and the
@@ -87,11 +89,32 @@ pub fn photo_check(
             kept_colors.push(*c);
         }
     }
+    // The capture's empty cells are held out at the same rate (their own
+    // draws, so the measured pixels held out do not depend on them); the
+    // rest are the scanner's misses trimming uses, as a file's are.
+    let (w, h) = (sensor.width, sensor.height);
+    let mut measured = vec![false; (w * h) as usize];
+    for &(i, _) in &grid.pixels {
+        measured[i as usize] = true;
+    }
+    let mut rng = SplitMix64::new(seed ^ 0x9e37_79b9_7f4a_7c15);
+    let empty_held: Vec<bool> = measured
+        .iter()
+        .map(|&m| !m && rng.next_f32() < holdout)
+        .collect();
+    let pinhole = grid.pinhole().map_err(Error::invalid)?;
+    let misses = grid
+        .miss_cells()
+        .into_iter()
+        .filter(|&k| !empty_held[k])
+        .map(|k| grid.cell_ray(&pinhole, k))
+        .collect();
     let cloud = PointCloud {
         positions,
         origin,
         colors: Some(kept_colors),
         viewpoint: Some(Vec3::ZERO),
+        misses: Some(misses),
         ..PointCloud::default()
     };
     let params = SplatParams {
@@ -101,7 +124,6 @@ pub fn photo_check(
     let (mut splats, _, _) = crate::freespace::generate_trimmed(&cloud, &params, None)?;
     let (fields, constant) = crate::splat::color::fit_cloud(&mut splats, &cloud, &params);
     let color_fields = fields.len() - constant;
-    let (w, h) = (sensor.width, sensor.height);
     let camera = Camera::look_at_intrinsics(
         Vec3::ZERO,
         sensor.forward.as_vec3(),
@@ -124,9 +146,7 @@ pub fn photo_check(
         .map(|(&id, &a)| (id != u32::MAX).then_some(a))
         .collect();
     let mut truth: Vec<Option<Vec3>> = vec![None; (w * h) as usize];
-    let mut measured = vec![false; (w * h) as usize];
     for ((&(i, _), c), &hd) in grid.pixels.iter().zip(colors).zip(&held) {
-        measured[i as usize] = true;
         if hd {
             truth[i as usize] = Some(*c);
         }
@@ -137,11 +157,11 @@ pub fn photo_check(
         .zip(&seen)
         .filter(|(t, s)| t.is_some() && s.is_some())
         .count();
-    let empty = measured.iter().filter(|m| !**m).count();
-    let filled = measured
+    let empty = empty_held.iter().filter(|e| **e).count();
+    let filled = empty_held
         .iter()
         .zip(&seen)
-        .filter(|(m, s)| !**m && s.is_some())
+        .filter(|(e, s)| **e && s.is_some())
         .count();
     let srgb = |c: Vec3| c.map(|x| linear_to_srgb(x.clamp(0.0, 1.0)));
     let psnr = [1u32, 2, 4].map(|b| {
