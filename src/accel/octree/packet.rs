@@ -16,9 +16,14 @@
 //! that lie farther than their largest radius from a cone around the
 //! packet's rays ([`Cone`]), which no ray of the packet can hit; each
 //! ray's lanes are then decided in the single ray's order, pack after pack
-//! and lane after lane. Any-hit packets walk the parts in index order, as
-//! [`Octree::any_hit`] does (closest-hit packets by the first ray's
-//! entry).
+//! and lane after lane, the packs of a leaf filtered in runs of
+//! [`LEAF_CHUNK`] per call. Above the leaves such a packet (with a finite
+//! origin and finite `1 / dir`) descends by its [`Spread`]
+//! ([`Tree::visit_spread`]): each interior node's box and child cells
+//! tested once for the whole packet with an interval holding every ray's
+//! own, each ray's own interval tested only at a leaf. Any-hit packets
+//! walk the parts in index order, as [`Octree::any_hit`] does
+//! (closest-hit packets by the first ray's entry).
 //!
 //! Why the candidates are those of one ray at a time (`docs/DESIGN.md`,
 //! "The backend contract", rules 1 and 2): each ray keeps its own window
@@ -29,7 +34,10 @@
 //! changes which hits are offered before the window narrows, never the
 //! final window, which does not depend on arrival order. A cell is skipped
 //! for a ray only when it is entered beyond the ray's current cutoff,
-//! which is never nearer than the final window's far end.
+//! which is never nearer than the final window's far end. A ray taken
+//! into a cell its own descent would skip (the [`Spread`] descent, where
+//! another ray of the packet meets the cell) offers only true hits of its
+//! own, which leave that final window as it is.
 //!
 //! A packet whose rays' direction signs differ (no common front-to-back
 //! order) is traced one ray at a time, and so is a batch of fewer than
