@@ -467,8 +467,9 @@ fn reach(cut: &Wide, active: Mask) -> f32 {
     let c = [cut[0].to_array(), cut[1].to_array()];
     let mut r = f32::NEG_INFINITY;
     for k in 0..PACKET {
-        if active & (1 << k) != 0 {
-            r = r.max(c[k >> 2][k & 3]);
+        // NaN compares false: passed over.
+        if active & (1 << k) != 0 && c[k >> 2][k & 3] > r {
+            r = c[k >> 2][k & 3];
         }
     }
     r
@@ -513,8 +514,8 @@ impl<P: Primitive> Tree<P> {
         let [blo, bhi] = self.boxes[index];
         let (near, exit) = sp.slab(Vec3A::from(blo), Vec3A::from(bhi));
         // NaN compares false (none is expected: finite origin and `inv`).
-        let entry = near.max_element().max(sp.t_min);
-        let meets = entry <= exit.min_element().min(far);
+        let entry = super::traverse::max4(sp.t_min, near.into());
+        let meets = entry <= super::traverse::min4(far, exit.into());
         if !meets {
             return 0;
         }
