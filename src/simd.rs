@@ -256,27 +256,29 @@ impl Cone {
     }
 }
 
-/// Bit `l` of `out[k]`, for each ray `k` set in `active`, set when lane `l`
-/// of `pack` may be hit in `[t_min[k], t_max[k]]` by the ray (`origin`,
-/// `dirs[k]`), for rays sharing one origin (issue 25: a shadow batch
-/// leaves one hit, primary rays one eye), on the path `isa`. The pack is
-/// read once for all of them, and what depends only on the origin
-/// (`o - c`, `n·(o - c)` of eq. (1)'s plane parameter) is computed once,
-/// with the same IEEE operations as for one ray, so each ray's lanes are
-/// those of [`disc_masks`] for it; with a `cone` holding every ray, first
-/// the lanes whose disc lies farther from the cone than its largest radius
-/// (plus [`CONE_SLACK`]) are dropped for all the rays at once, and the
-/// rays are tested only when a lane is left: no ray of the cone can hit
-/// such a disc, so a lane is still passed whenever
-/// [`crate::primitive::Disc::intersect`] hits it. `out[k]` of a ray not in
-/// `active` is left as it is. AVX-512 runs the AVX2 kernel (one pack fills
-/// a 256-bit register); a path the CPU does not run is replaced by the
-/// portable one, which gives the same lanes.
+/// Bit `l` of `out[j][k]`, for each ray `k` set in `active`, set when lane
+/// `l` of `packs[j]` may be hit in `[t_min[k], t_max[k]]` by the ray
+/// (`origin`, `dirs[k]`), for rays sharing one origin (issue 25: a shadow
+/// batch leaves one hit, primary rays one eye), on the path `isa`; bit `k`
+/// of `rays[j]` set when `out[j][k]` is not zero (the rays a pack passes
+/// a lane to). Each pack is read once for all the rays, and what depends
+/// only on the origin (`o - c`, `n·(o - c)` of eq. (1)'s plane parameter)
+/// is computed once, with the same IEEE operations as for one ray, so each
+/// ray's lanes are those of [`disc_masks`] for it; with a `cone` holding
+/// every ray, first the lanes whose disc lies farther from the cone than
+/// its largest radius (plus [`CONE_SLACK`]) are dropped for all the rays
+/// at once, and the rays are tested only when a lane is left: no ray of
+/// the cone can hit such a disc, so a lane is still passed whenever
+/// [`crate::primitive::Disc::intersect`] hits it. `out[j][k]` of a ray not
+/// in `active` is 0. `out` and `rays` must be at least as long as `packs`.
+/// AVX-512 runs the AVX2 kernel (one pack fills a 256-bit register); a
+/// path the CPU does not run is replaced by the portable one, which gives
+/// the same lanes.
 // The packet's fields as the kernels take them.
 #[allow(clippy::too_many_arguments)]
 #[inline]
 pub fn disc_masks_rays(
-    pack: &DiscColumns,
+    packs: &[DiscColumns],
     origin: [f32; 3],
     dirs: &[[f32; 3]; RAYS],
     t_min: &[f32; RAYS],
@@ -284,26 +286,35 @@ pub fn disc_masks_rays(
     cone: Option<&Cone>,
     active: u32,
     isa: Isa,
-    out: &mut [u32; RAYS],
+    out: &mut [[u32; RAYS]],
+    rays: &mut [u32],
 ) {
     let active = active & ((1 << RAYS) - 1);
+    let out = &mut out[..packs.len()];
+    let rays = &mut rays[..packs.len()];
     match isa {
         #[cfg(target_arch = "x86_64")]
         Isa::Avx2 | Isa::Avx512 if Isa::Avx2.supported() => {
             // SAFETY: the guard checked that the CPU runs AVX2.
-            unsafe { x86::avx2_masks_rays(pack, origin, dirs, t_min, t_max, cone, active, out) }
+            unsafe {
+                x86::avx2_masks_rays(packs, origin, dirs, t_min, t_max, cone, active, out, rays);
+            }
         }
         _ => {
-            let near = cone.map_or(u32::MAX, |c| portable_cone(pack, origin, c));
-            let mut left = active;
-            while left != 0 {
-                let k = left.trailing_zeros() as usize;
-                left &= left - 1;
-                out[k] = if near == 0 {
-                    0
-                } else {
-                    portable_mask(pack, origin, dirs[k], t_min[k], t_max[k]) & near
-                };
+            for ((pack, out), any) in packs.iter().zip(out.iter_mut()).zip(rays.iter_mut()) {
+                let near = cone.map_or(u32::MAX, |c| portable_cone(pack, origin, c));
+                *out = [0; RAYS];
+                *any = 0;
+                if near == 0 {
+                    continue;
+                }
+                let mut left = active;
+                while left != 0 {
+                    let k = left.trailing_zeros() as usize;
+                    left &= left - 1;
+                    out[k] = portable_mask(pack, origin, dirs[k], t_min[k], t_max[k]) & near;
+                    *any |= u32::from(out[k] != 0) << k;
+                }
             }
         }
     }
@@ -475,107 +486,102 @@ mod x86 {
         }
     }
 
-    /// [`super::disc_masks_rays`]: the pack's columns and `n·(o - c)` once,
-    /// then each ray of `active` as in [`avx2_masks`].
+    /// [`super::disc_masks_rays`]: per pack, its columns and `n·(o - c)`
+    /// once, then each ray of `active` as in [`avx2_masks`].
     ///
     /// # Safety
     /// The CPU must run AVX2.
     #[target_feature(enable = "avx2")]
     #[allow(clippy::too_many_arguments)]
     pub(super) unsafe fn avx2_masks_rays(
-        p: &DiscColumns,
+        packs: &[DiscColumns],
         origin: [f32; 3],
         dirs: &[[f32; 3]; RAYS],
         t_min: &[f32; RAYS],
         t_max: &[f32; RAYS],
         cone: Option<&Cone>,
         active: u32,
-        out: &mut [u32; RAYS],
+        out: &mut [[u32; RAYS]],
+        rays: &mut [u32],
     ) {
         let [ox, oy, oz] = origin.map(|x| _mm256_set1_ps(x));
         let rim = _mm256_set1_ps(RIM);
         let sign = _mm256_set1_ps(-0.0);
-        // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
-        // (`DiscColumns` is 64-byte aligned, each column 32 bytes).
-        let col = |k: usize| unsafe { _mm256_load_ps(p.cols[k].as_ptr()) };
-        let (cx, cy, cz) = (col(CENTER), col(CENTER + 1), col(CENTER + 2));
-        // The cone test of `portable_cone`, the same operations.
-        let near = match cone {
-            None => _mm256_castsi256_ps(_mm256_set1_epi32(-1)),
-            Some(cone) => {
-                let [ax, ay, az] = cone.axis.map(|x| _mm256_set1_ps(x));
-                let (wx, wy, wz) = (
-                    _mm256_sub_ps(cx, ox),
-                    _mm256_sub_ps(cy, oy),
-                    _mm256_sub_ps(cz, oz),
-                );
-                let cross = |a: __m256, b: __m256, c: __m256, d: __m256| {
-                    _mm256_sub_ps(_mm256_mul_ps(a, b), _mm256_mul_ps(c, d))
-                };
-                let (qx, qy, qz) = (
-                    cross(wy, az, wz, ay),
-                    cross(wz, ax, wx, az),
-                    cross(wx, ay, wy, ax),
-                );
-                let dot = |a: [__m256; 3], b: [__m256; 3]| {
-                    _mm256_add_ps(
-                        _mm256_add_ps(_mm256_mul_ps(a[0], b[0]), _mm256_mul_ps(a[1], b[1])),
-                        _mm256_mul_ps(a[2], b[2]),
-                    )
-                };
-                let h = _mm256_sqrt_ps(dot([qx, qy, qz], [qx, qy, qz]));
-                let s = dot([wx, wy, wz], [ax, ay, az]);
-                let dist = _mm256_sub_ps(
-                    _mm256_mul_ps(h, _mm256_set1_ps(cone.cos)),
-                    _mm256_mul_ps(s, _mm256_set1_ps(cone.sin)),
-                );
-                let u = [col(U_SCALED), col(U_SCALED + 1), col(U_SCALED + 2)];
-                let v = [col(V_SCALED), col(V_SCALED + 1), col(V_SCALED + 2)];
-                let m = _mm256_min_ps(dot(u, u), dot(v, v));
-                let r = _mm256_div_ps(_mm256_set1_ps(1.0), _mm256_sqrt_ps(m));
-                let l1 = _mm256_add_ps(
-                    _mm256_add_ps(_mm256_andnot_ps(sign, wx), _mm256_andnot_ps(sign, wy)),
-                    _mm256_andnot_ps(sign, wz),
-                );
-                let bound = _mm256_add_ps(
-                    r,
-                    _mm256_mul_ps(_mm256_add_ps(l1, r), _mm256_set1_ps(CONE_SLACK)),
-                );
-                let near = _mm256_cmp_ps::<_CMP_NGT_UQ>(dist, bound);
-                if _mm256_movemask_ps(near) == 0 {
-                    let mut left = active;
-                    while left != 0 {
-                        let k = left.trailing_zeros() as usize;
-                        left &= left - 1;
-                        out[k] = 0;
+        for ((p, out), any) in packs.iter().zip(out.iter_mut()).zip(rays.iter_mut()) {
+            *out = [0; RAYS];
+            *any = 0;
+            // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
+            // (`DiscColumns` is 64-byte aligned, each column 32 bytes).
+            let col = |k: usize| unsafe { _mm256_load_ps(p.cols[k].as_ptr()) };
+            let (cx, cy, cz) = (col(CENTER), col(CENTER + 1), col(CENTER + 2));
+            // The cone test of `portable_cone`, the same operations.
+            let near = match cone {
+                None => _mm256_castsi256_ps(_mm256_set1_epi32(-1)),
+                Some(cone) => {
+                    let [ax, ay, az] = cone.axis.map(|x| _mm256_set1_ps(x));
+                    let (wx, wy, wz) = (
+                        _mm256_sub_ps(cx, ox),
+                        _mm256_sub_ps(cy, oy),
+                        _mm256_sub_ps(cz, oz),
+                    );
+                    let cross = |a: __m256, b: __m256, c: __m256, d: __m256| {
+                        _mm256_sub_ps(_mm256_mul_ps(a, b), _mm256_mul_ps(c, d))
+                    };
+                    let (qx, qy, qz) = (
+                        cross(wy, az, wz, ay),
+                        cross(wz, ax, wx, az),
+                        cross(wx, ay, wy, ax),
+                    );
+                    let h = _mm256_sqrt_ps(avx2_dot([qx, qy, qz], [qx, qy, qz]));
+                    let s = avx2_dot([wx, wy, wz], [ax, ay, az]);
+                    let dist = _mm256_sub_ps(
+                        _mm256_mul_ps(h, _mm256_set1_ps(cone.cos)),
+                        _mm256_mul_ps(s, _mm256_set1_ps(cone.sin)),
+                    );
+                    let u = [col(U_SCALED), col(U_SCALED + 1), col(U_SCALED + 2)];
+                    let v = [col(V_SCALED), col(V_SCALED + 1), col(V_SCALED + 2)];
+                    let m = _mm256_min_ps(avx2_dot(u, u), avx2_dot(v, v));
+                    let r = _mm256_div_ps(_mm256_set1_ps(1.0), _mm256_sqrt_ps(m));
+                    let l1 = _mm256_add_ps(
+                        _mm256_add_ps(_mm256_andnot_ps(sign, wx), _mm256_andnot_ps(sign, wy)),
+                        _mm256_andnot_ps(sign, wz),
+                    );
+                    let bound = _mm256_add_ps(
+                        r,
+                        _mm256_mul_ps(_mm256_add_ps(l1, r), _mm256_set1_ps(CONE_SLACK)),
+                    );
+                    let near = _mm256_cmp_ps::<_CMP_NGT_UQ>(dist, bound);
+                    if _mm256_movemask_ps(near) == 0 {
+                        continue;
                     }
-                    return;
+                    near
                 }
-                near
+            };
+            let (nx, ny, nz) = (col(NORMAL), col(NORMAL + 1), col(NORMAL + 2));
+            let (ocx, ocy, ocz) = (
+                _mm256_sub_ps(ox, cx),
+                _mm256_sub_ps(oy, cy),
+                _mm256_sub_ps(oz, cz),
+            );
+            let num = avx2_dot([nx, ny, nz], [ocx, ocy, ocz]);
+            let neg = _mm256_xor_ps(num, sign);
+            let mut left = active;
+            while left != 0 {
+                let k = left.trailing_zeros() as usize;
+                left &= left - 1;
+                let [dx, dy, dz] = dirs[k].map(|x| _mm256_set1_ps(x));
+                let denom = avx2_dot([nx, ny, nz], [dx, dy, dz]);
+                let t = _mm256_div_ps(neg, denom);
+                let in_range = avx2_in_range(t, _mm256_set1_ps(t_min[k]), _mm256_set1_ps(t_max[k]));
+                // No early exit on an empty range here: most packs have
+                // lanes in range, and a branch per ray keeps the rays'
+                // chains from overlapping.
+                let r2 = avx2_rim2(p, [ocx, ocy, ocz], [dx, dy, dz], t);
+                let on = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(r2, rim), in_range);
+                let m = _mm256_movemask_ps(_mm256_and_ps(on, near)) as u32;
+                out[k] = m;
+                *any |= u32::from(m != 0) << k;
             }
-        };
-        let (nx, ny, nz) = (col(NORMAL), col(NORMAL + 1), col(NORMAL + 2));
-        let (ocx, ocy, ocz) = (
-            _mm256_sub_ps(ox, cx),
-            _mm256_sub_ps(oy, cy),
-            _mm256_sub_ps(oz, cz),
-        );
-        let num = avx2_dot([nx, ny, nz], [ocx, ocy, ocz]);
-        let neg = _mm256_xor_ps(num, sign);
-        let mut left = active;
-        while left != 0 {
-            let k = left.trailing_zeros() as usize;
-            left &= left - 1;
-            let [dx, dy, dz] = dirs[k].map(|x| _mm256_set1_ps(x));
-            let denom = avx2_dot([nx, ny, nz], [dx, dy, dz]);
-            let t = _mm256_div_ps(neg, denom);
-            let in_range = avx2_in_range(t, _mm256_set1_ps(t_min[k]), _mm256_set1_ps(t_max[k]));
-            // No early exit on an empty range here: most packs have lanes
-            // in range, and a branch per ray keeps the rays' chains from
-            // overlapping.
-            let r2 = avx2_rim2(p, [ocx, ocy, ocz], [dx, dy, dz], t);
-            let on = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(r2, rim), in_range);
-            out[k] = _mm256_movemask_ps(_mm256_and_ps(on, near)) as u32;
         }
     }
 
@@ -797,7 +803,7 @@ mod tests {
             }
             let active = if r % 5 == 0 { 0b1011_0110 } else { 0xff };
             for pack in &packs {
-                let mut want = [u32::MAX; RAYS];
+                let mut want = [0; RAYS];
                 for k in 0..RAYS {
                     let mut m = [0];
                     disc_masks(
@@ -813,35 +819,37 @@ mod tests {
                         want[k] = m[0];
                     }
                 }
-                for isa in available() {
-                    let mut got = [u32::MAX; RAYS];
+                // One pack alone, and the pack after two others in one call.
+                let three = [
+                    packs[(r + 1) % packs.len()],
+                    packs[(r + 5) % packs.len()],
+                    *pack,
+                ];
+                let masks = |packs: &[DiscColumns], c: Option<&Cone>, isa: Isa| {
+                    let mut out = [[u32::MAX; RAYS]; 3];
+                    let mut rays = [u32::MAX; 3];
                     disc_masks_rays(
-                        pack, origin, &dirs, &t_min, &t_max, None, active, isa, &mut got,
+                        packs, origin, &dirs, &t_min, &t_max, c, active, isa, &mut out, &mut rays,
                     );
-                    assert_eq!(got, want, "{isa}, ray {r}, no cone");
+                    let j = packs.len() - 1;
+                    let any = (0..RAYS).fold(0, |a, k| a | u32::from(out[j][k] != 0) << k);
+                    assert_eq!(rays[j], any, "{isa}, ray {r}: the rays a pack passes");
+                    out[j]
+                };
+                for isa in available() {
+                    for ps in [std::slice::from_ref(pack), &three[..]] {
+                        assert_eq!(masks(ps, None, isa), want, "{isa}, ray {r}, no cone");
+                    }
                 }
-                let mut coned = [u32::MAX; RAYS];
                 let c = cone.as_ref();
                 if let Some(c) = c {
                     dropped += LANES as u32 - portable_cone(pack, origin, c).count_ones();
                 }
-                disc_masks_rays(
-                    pack,
-                    origin,
-                    &dirs,
-                    &t_min,
-                    &t_max,
-                    c,
-                    active,
-                    Isa::Portable,
-                    &mut coned,
-                );
+                let coned = masks(std::slice::from_ref(pack), c, Isa::Portable);
                 for isa in available() {
-                    let mut got = [u32::MAX; RAYS];
-                    disc_masks_rays(
-                        pack, origin, &dirs, &t_min, &t_max, c, active, isa, &mut got,
-                    );
-                    assert_eq!(got, coned, "{isa}, ray {r}, cone");
+                    for ps in [std::slice::from_ref(pack), &three[..]] {
+                        assert_eq!(masks(ps, c, isa), coned, "{isa}, ray {r}, cone");
+                    }
                 }
                 for k in 0..RAYS {
                     if active & (1 << k) == 0 {

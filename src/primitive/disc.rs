@@ -263,19 +263,20 @@ impl Pack<Disc> for DiscPack {
         simd::disc_masks(packs, ray.origin, ray.dir, t_min, t_max, isa, out);
     }
 
-    /// [`simd::disc_masks_rays`]: the pack and `n·(o - c)` once for all
-    /// the rays (the lanes of [`DiscPack::masks`] per ray, less those
+    /// [`simd::disc_masks_rays`]: each pack and its `n·(o - c)` once for
+    /// all the rays (the lanes of [`DiscPack::masks`] per ray, less those
     /// whose disc lies beyond its radius from the rays' cone).
     #[inline]
     fn masks_rays(
-        &self,
+        packs: &[Self],
         rays: &PackRays,
         active: u32,
         isa: simd::Isa,
-        out: &mut [u32; simd::RAYS],
+        out: &mut [[u32; simd::RAYS]],
+        any: &mut [u32],
     ) {
         simd::disc_masks_rays(
-            self,
+            packs,
             rays.origin,
             &rays.dir,
             &rays.t_min,
@@ -284,6 +285,7 @@ impl Pack<Disc> for DiscPack {
             active,
             isa,
             out,
+            any,
         );
     }
 }

@@ -165,28 +165,35 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
         }
     }
 
-    /// [`Pack::may_hit`] of this pack for each ray `k` set in `active`
-    /// into `out[k]` (the others left as they are), on the SIMD path `isa`
-    /// where the pack has one: every ray's lanes exactly those
-    /// [`Pack::masks`] gives it alone.
+    /// [`Pack::may_hit`] of each of `packs` for each ray `k` set in
+    /// `active` into `out[j][k]` (0 for the other rays), and the rays whose
+    /// mask is not zero into `rays[j]` (bit `k`; `out` and `rays` at least
+    /// as long as `packs`), on the SIMD path `isa` where the pack has one:
+    /// every ray's lanes exactly those [`Pack::masks`] gives it alone.
     #[inline]
     fn masks_rays(
-        &self,
+        packs: &[Self],
         rays: &PackRays,
         active: u32,
         isa: crate::simd::Isa,
-        out: &mut [u32; crate::simd::RAYS],
+        out: &mut [[u32; crate::simd::RAYS]],
+        any: &mut [u32],
     ) {
         let _ = isa;
-        let mut left = active & ((1 << crate::simd::RAYS) - 1);
-        while left != 0 {
-            let k = left.trailing_zeros() as usize;
-            left &= left - 1;
-            let ray = PackRay {
-                origin: rays.origin,
-                dir: rays.dir[k],
-            };
-            out[k] = self.may_hit(&ray, rays.t_min[k], rays.t_max[k]);
+        for ((p, out), any) in packs.iter().zip(out.iter_mut()).zip(any.iter_mut()) {
+            *out = [0; crate::simd::RAYS];
+            *any = 0;
+            let mut left = active & ((1 << crate::simd::RAYS) - 1);
+            while left != 0 {
+                let k = left.trailing_zeros() as usize;
+                left &= left - 1;
+                let ray = PackRay {
+                    origin: rays.origin,
+                    dir: rays.dir[k],
+                };
+                out[k] = p.may_hit(&ray, rays.t_min[k], rays.t_max[k]);
+                *any |= u32::from(out[k] != 0) << k;
+            }
         }
     }
 }

@@ -676,6 +676,86 @@ impl Tracer<'_> {
     }
 }
 
+impl Tracer<'_> {
+    /// Renders image rows `y` and `y + 1` into `rows[0]` and `rows[1]` in
+    /// tiles of `W`×2 pixels (`2 W <= PACKET`): the primary rays of a tile
+    /// traced as one batch ([`Surfaces::hits`]; a square-ish tile is more
+    /// coherent than a row of `2 W`), then each pixel's samples shaded in
+    /// order, the upper row's pixels first, every sample with its own
+    /// generator seeded by its pixel and index: the same rays, draws and
+    /// sums as [`Tracer::row`], so the same pixels.
+    fn row_pair<const W: usize>(&self, y: usize, s: &mut Scratch, rows: &mut [Row; 2]) {
+        const { assert!(2 * W <= PACKET) };
+        let scene = self.scene;
+        let cam = &scene.camera;
+        let w = cam.width as usize;
+        let k = (cam.spp as f32).sqrt().ceil() as u32;
+        let per_pixel = cam.spp;
+        let mut batch_hits: [CandidateHits; PACKET] =
+            std::array::from_fn(|_| CandidateHits::new(scene.options.scale.xi));
+        for x0 in (0..w).step_by(W) {
+            let xs = x0..(x0 + W).min(w);
+            let np = xs.len();
+            let mut sums = [[Vec3::ZERO; W]; 2];
+            for i in 0..per_pixel {
+                let mut rays = [Ray {
+                    origin: Vec3::ZERO,
+                    dir: Vec3::Z,
+                }; PACKET];
+                let mut rngs = [Rng(0); PACKET];
+                for r in 0..2 {
+                    let yr = y + r;
+                    for (p, x) in xs.clone().enumerate() {
+                        let mut rng = Rng::new(x as u32, yr as u32, i);
+                        let (ox, oy) = if per_pixel == 1 {
+                            (0.5, 0.5)
+                        } else {
+                            let (cx, cy) = (i % k, i / k % k);
+                            (
+                                (cx as f32 + rng.next_f32()) / k as f32,
+                                (cy as f32 + rng.next_f32()) / k as f32,
+                            )
+                        };
+                        rays[r * np + p] = cam.ray(x as f32 + ox, yr as f32 + oy);
+                        rngs[r * np + p] = rng;
+                    }
+                }
+                let mut hits = [None; PACKET];
+                self.surfaces
+                    .hits(&rays[..2 * np], &mut batch_hits, &mut hits[..2 * np]);
+                for (r, row) in rows.iter_mut().enumerate() {
+                    for p in 0..np {
+                        let (ray, hit) = (&rays[r * np + p], hits[r * np + p]);
+                        s.rng = rngs[r * np + p];
+                        s.rays.primary += 1;
+                        if i == 0 {
+                            row.depth.push(hit.map_or(f32::INFINITY, |h| h.t));
+                            row.normal.push(hit.map_or(Vec3::ZERO, |h| h.normal));
+                            row.splat.push(hit.map_or(u32::MAX, |h| h.id));
+                            row.albedo.push(hit.map_or(Vec3::ZERO, |h| {
+                                scene.materials[h.material as usize].color() * h.color
+                            }));
+                        }
+                        s.light = [0.0; 3];
+                        sums[r][p] += self.shade(ray, hit, 0, s);
+                        if i == 0 {
+                            let [all, facing, lit] = s.light;
+                            let share = |x: f32| if all > 0.0 { x / all } else { 0.0 };
+                            row.light_facing.push(share(facing));
+                            row.light_lit.push(share(lit));
+                        }
+                    }
+                }
+            }
+            for (row, sums) in rows.iter_mut().zip(&sums) {
+                for sum in &sums[..np] {
+                    row.rgb.push(*sum / per_pixel as f32);
+                }
+            }
+        }
+    }
+}
+
 /// One rendered image row and what it traced.
 struct Row {
     rgb: Vec<Vec3>,
@@ -739,38 +819,48 @@ fn render_surfaces_rows(
     };
     let start = Instant::now();
     let rows_done = AtomicUsize::new(0);
+    let new_row = || Row {
+        rgb: Vec::with_capacity(w),
+        depth: Vec::with_capacity(w),
+        normal: Vec::with_capacity(w),
+        splat: Vec::with_capacity(w),
+        albedo: Vec::with_capacity(w),
+        light_facing: Vec::with_capacity(w),
+        light_lit: Vec::with_capacity(w),
+        rays: RayCounts::default(),
+    };
+    // With packets, rows in pairs (their pixels in 4×2 tiles, each tile's
+    // primary rays traced as one batch; a last odd row in 8×1 tiles), else
+    // one by one, pixel by pixel.
+    let step = if tracer.packets { 2 } else { 1 };
     let rows: Vec<Row> = (rows.start as usize..rows.end as usize)
+        .step_by(step)
+        .collect::<Vec<_>>()
         .into_par_iter()
-        .map(|y| {
+        .flat_map_iter(|y| {
             let mut s = Scratch {
                 hits: CandidateHits::new(scene.options.scale.xi),
                 rays: RayCounts::default(),
                 rng: Rng::new(y as u32, 0, 0),
                 light: [0.0; 3],
             };
-            let mut row = Row {
-                rgb: Vec::with_capacity(w),
-                depth: Vec::with_capacity(w),
-                normal: Vec::with_capacity(w),
-                splat: Vec::with_capacity(w),
-                albedo: Vec::with_capacity(w),
-                light_facing: Vec::with_capacity(w),
-                light_lit: Vec::with_capacity(w),
-                rays: RayCounts::default(),
-            };
-            // Pixels in tiles of 8×1 with packets (their primary rays
-            // traced as one batch), else one by one.
-            if tracer.packets {
-                tracer.row::<PACKET>(y, &mut s, &mut row);
+            let mut pair = [new_row(), new_row()];
+            let n = if !tracer.packets {
+                tracer.row::<1>(y, &mut s, &mut pair[0]);
+                1
+            } else if y + 1 < rows.end as usize {
+                tracer.row_pair::<{ PACKET / 2 }>(y, &mut s, &mut pair);
+                2
             } else {
-                tracer.row::<1>(y, &mut s, &mut row);
-            }
+                tracer.row::<PACKET>(y, &mut s, &mut pair[0]);
+                1
+            };
             if progress.is_some() {
-                let done = rows_done.fetch_add(1, Ordering::Relaxed) + 1;
+                let done = rows_done.fetch_add(n, Ordering::Relaxed) + n;
                 notify(progress, "render", done as f64 / h as f64);
             }
-            row.rays = s.rays;
-            row
+            pair[0].rays = s.rays;
+            pair.into_iter().take(n)
         })
         .collect();
     let mut frame = Frame {

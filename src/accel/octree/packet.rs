@@ -16,9 +16,14 @@
 //! that lie farther than their largest radius from a cone around the
 //! packet's rays ([`Cone`]), which no ray of the packet can hit; each
 //! ray's lanes are then decided in the single ray's order, pack after pack
-//! and lane after lane. Any-hit packets walk the parts in index order, as
-//! [`Octree::any_hit`] does (closest-hit packets by the first ray's
-//! entry).
+//! and lane after lane, the packs of a leaf filtered in runs of
+//! [`LEAF_CHUNK`] per call. Above the leaves such a packet (with a finite
+//! origin and finite `1 / dir`) descends by its [`Spread`]
+//! ([`Tree::visit_spread`]): each interior node's box and child cells
+//! tested once for the whole packet with an interval holding every ray's
+//! own, each ray's own interval tested only at a leaf. Any-hit packets
+//! walk the parts in index order, as [`Octree::any_hit`] does
+//! (closest-hit packets by the first ray's entry).
 //!
 //! Why the candidates are those of one ray at a time (`docs/DESIGN.md`,
 //! "The backend contract", rules 1 and 2): each ray keeps its own window
@@ -29,7 +34,10 @@
 //! changes which hits are offered before the window narrows, never the
 //! final window, which does not depend on arrival order. A cell is skipped
 //! for a ray only when it is entered beyond the ray's current cutoff,
-//! which is never nearer than the final window's far end.
+//! which is never nearer than the final window's far end. A ray taken
+//! into a cell its own descent would skip (the [`Spread`] descent, where
+//! another ray of the packet meets the cell) offers only true hits of its
+//! own, which leave that final window as it is.
 //!
 //! A packet whose rays' direction signs differ (no common front-to-back
 //! order) is traced one ray at a time, and so is a batch of fewer than
@@ -41,7 +49,7 @@ use super::{ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Node, Octree, Tree, child_lo
 use crate::accel::{CandidateHits, NoSkip, PACKET, Query, Skip};
 use crate::primitive::{Pack, PackRays, Primitive};
 use crate::simd::Cone;
-use glam::{Vec3, Vec4};
+use glam::{Vec3, Vec3A, Vec4};
 use std::cell::OnceCell;
 
 /// Fewest rays traced as a packet; smaller batches go one at a time.
@@ -50,6 +58,9 @@ const MIN_PACKET: usize = 2;
 /// A packet that thins out to this many active rays hands each to the
 /// single ray's descent.
 const LONE: u32 = 2;
+
+/// Packs of a leaf filtered per call of [`Pack::masks_rays`].
+const LEAF_CHUNK: usize = 16;
 
 /// Lane mask type: bit `k` for ray `k` of the packet.
 type Mask = u32;
@@ -85,6 +96,46 @@ struct Lanes<'q> {
     /// With a shared origin and every `t_min >= 0`: a cone from it holding
     /// every ray, computed when the packet first reaches a leaf.
     cone: OnceCell<Option<Cone>>,
+    /// With a shared finite origin and finite `1 / dir` on every lane: the
+    /// bounds of the packet's slab parameters ([`Spread`]).
+    spread: Option<Spread>,
+}
+
+/// The extremes of a packet's rays sharing a finite origin `o` whose
+/// `1 / dir` are finite, per axis: the rays' slab parameter at a plane `x`
+/// is `(x - o) inv_k`, monotone in `inv_k` for a fixed `x - o` (rounding is
+/// monotone), so its least and greatest over the rays are those of the
+/// least and greatest `inv_k`. A cell's interval for the packet, from the
+/// least near and the greatest far parameter, holds every ray's own: the
+/// packet meets the cell whenever one of its rays does.
+#[derive(Clone, Copy, Debug)]
+struct Spread {
+    o: Vec3A,
+    inv_lo: Vec3A,
+    inv_hi: Vec3A,
+    /// The least `t_min`.
+    t_min: f32,
+}
+
+impl Spread {
+    /// The least and greatest slab parameters of the rays at the planes
+    /// `x` (per axis).
+    #[inline(always)]
+    fn at(&self, x: Vec3A) -> (Vec3A, Vec3A) {
+        let d = x - self.o;
+        let (a, b) = (d * self.inv_lo, d * self.inv_hi);
+        let up = d.cmpge(Vec3A::ZERO);
+        (Vec3A::select(up, a, b), Vec3A::select(up, b, a))
+    }
+
+    /// The least near and the greatest far parameter of the slabs between
+    /// the planes `a` and `b` (per axis).
+    #[inline(always)]
+    fn slab(&self, a: Vec3A, b: Vec3A) -> (Vec3A, Vec3A) {
+        let (a_lo, a_hi) = self.at(a);
+        let (b_lo, b_hi) = self.at(b);
+        (a_lo.min(b_lo), a_hi.max(b_hi))
+    }
 }
 
 impl<'q> Lanes<'q> {
@@ -110,15 +161,30 @@ impl<'q> Lanes<'q> {
         if !(shared && forward) {
             let _ = cone.set(None);
         }
+        // One division per lane, as `RayCtx::new`'s.
+        let inv = dir.map(|d| d.map(|v| Vec4::ONE / v));
+        let t_min = wide(&std::array::from_fn(|k| q(k).t_min));
+        let finite = |v: Vec4| v.abs().cmplt(Vec4::INFINITY).all();
+        let origin = qs[0].ray.origin;
+        let spread = (shared
+            && origin.is_finite()
+            && t_min.iter().all(|w| !w.is_nan_mask().any())
+            && inv.iter().all(|w| finite(w[0]) && finite(w[1])))
+        .then(|| Spread {
+            o: origin.into(),
+            inv_lo: Vec3A::from_array(inv.map(|w| w[0].min(w[1]).min_element())),
+            inv_hi: Vec3A::from_array(inv.map(|w| w[0].max(w[1]).max_element())),
+            t_min: t_min[0].min(t_min[1]).min_element(),
+        });
         Some(Lanes {
             o: [0, 1, 2].map(|a| wide(&std::array::from_fn(|k| q(k).ray.origin[a]))),
-            // One division per lane, as `RayCtx::new`'s.
-            inv: dir.map(|d| d.map(|v| Vec4::ONE / v)),
-            t_min: wide(&std::array::from_fn(|k| q(k).t_min)),
+            inv,
+            t_min,
             qs,
             sign_mask,
-            origin: shared.then(|| qs[0].ray.origin.to_array()),
+            origin: shared.then(|| origin.to_array()),
             cone,
+            spread,
         })
     }
 
@@ -226,38 +292,47 @@ impl<P: Primitive> Tree<P> {
         let range = node.first as usize..(node.first + node.meta) as usize;
         let l = lanes::<P>();
         let mut stopped = 0;
-        // One pack (lanes `lanes` of it, ids `ids`) for every active ray;
-        // false once no ray is left.
-        let mut pack = |pack: &P::Pack, ids: &[u32], lanes: u32| {
-            let mut masks = [0; PACKET];
-            pack.masks_rays(&rays, active, self.isa, &mut masks);
-            let mut left = active;
-            while left != 0 {
-                let k = left.trailing_zeros() as usize;
-                left &= left - 1;
-                let mut m = masks[k] & lanes;
-                if m == 0 {
-                    continue;
-                }
-                let Some(v) = vis[k].as_mut() else { continue };
-                while m != 0 {
-                    let lane = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    if v.lane(pack.get(lane), ids[lane]) {
-                        stopped |= 1 << k;
-                        active &= !(1 << k);
-                        break;
+        // Consecutive packs (lanes `lanes` of each, ids `ids`, pack after
+        // pack) for every active ray, filtered in one call; false once no
+        // ray is left. A window narrowed within the call only leaves the
+        // filter looser (each lane is decided by the visitor).
+        let mut chunk = |packs: &[P::Pack], ids: &[u32], lanes: u32| {
+            let mut masks = [[0; PACKET]; LEAF_CHUNK];
+            let mut passed = [0; LEAF_CHUNK];
+            P::Pack::masks_rays(packs, &rays, active, self.isa, &mut masks, &mut passed);
+            for (j, pack) in packs.iter().enumerate() {
+                let mut left = passed[j] & active;
+                while left != 0 {
+                    let k = left.trailing_zeros() as usize;
+                    left &= left - 1;
+                    let mut m = masks[j][k] & lanes;
+                    if m == 0 {
+                        continue;
                     }
+                    let Some(v) = vis[k].as_mut() else { continue };
+                    let ids = &ids[j * l..(j + 1) * l];
+                    while m != 0 {
+                        let lane = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        if v.lane(pack.get(lane), ids[lane]) {
+                            stopped |= 1 << k;
+                            active &= !(1 << k);
+                            break;
+                        }
+                    }
+                    rays.t_max[k] = v.filter().2;
                 }
-                rays.t_max[k] = v.filter().2;
+                if active == 0 {
+                    return false;
+                }
             }
-            active != 0
+            true
         };
         if self.shared {
             for &e in &self.entries[range] {
                 let p = (e & ENTRY_PACK) as usize;
-                if !pack(
-                    &self.packs[p],
+                if !chunk(
+                    std::slice::from_ref(&self.packs[p]),
                     &self.pack_ids[p * l..(p + 1) * l],
                     e >> ENTRY_MASK_SHIFT,
                 ) {
@@ -265,9 +340,13 @@ impl<P: Primitive> Tree<P> {
                 }
             }
         } else {
-            for (j, p) in self.packs[range.clone()].iter().enumerate() {
-                let i = range.start + j;
-                if !pack(p, &self.pack_ids[i * l..(i + 1) * l], u32::MAX) {
+            for start in range.clone().step_by(LEAF_CHUNK) {
+                let end = (start + LEAF_CHUNK).min(range.end);
+                if !chunk(
+                    &self.packs[start..end],
+                    &self.pack_ids[start * l..end * l],
+                    u32::MAX,
+                ) {
                     break;
                 }
             }
@@ -381,6 +460,133 @@ impl<P: Primitive> Tree<P> {
     }
 }
 
+/// The greatest cutoff of the rays of `active` (`-inf` for none; a NaN
+/// cutoff, which lets its ray into no cell, is passed over).
+#[inline(always)]
+fn reach(cut: &Wide, active: Mask) -> f32 {
+    let c = [cut[0].to_array(), cut[1].to_array()];
+    let mut r = f32::NEG_INFINITY;
+    for k in 0..PACKET {
+        // NaN compares false: passed over.
+        if active & (1 << k) != 0 && c[k >> 2][k & 3] > r {
+            r = c[k >> 2][k & 3];
+        }
+    }
+    r
+}
+
+impl<P: Primitive> Tree<P> {
+    /// [`Tree::visit_packet`] for a packet with a [`Spread`]: each interior
+    /// node's content box and child cells tested once for the whole packet
+    /// (the interval of [`Spread`], holding every ray's own, against the
+    /// least `t_min` and the greatest cutoff), the eight children at once
+    /// as in [`Tree::visit`] (`far`: the greatest cutoff of the rays of
+    /// `active`, or more); only a leaf tests each ray's own interval
+    /// ([`Tree::meets_box`]) before [`Tree::leaf_packet`]. A ray is taken
+    /// into a cell it does not meet only where another ray of the packet
+    /// meets it; there it meets no leaf, or the leaf's own test drops it.
+    // The node, the packet and its state.
+    #[allow(clippy::too_many_arguments)]
+    fn visit_spread<V: Visitor<P>>(
+        &self,
+        index: usize,
+        lo: Vec3,
+        size: f32,
+        l: &Lanes,
+        sp: &Spread,
+        vis: &mut [Option<V>; PACKET],
+        active: Mask,
+        mut cut: Wide,
+        mut far: f32,
+    ) -> Mask {
+        if active.count_ones() <= LONE {
+            return self.visit_packet(index, lo, size, l, vis, active, cut);
+        }
+        let node = self.nodes[index];
+        if node.meta & INTERIOR == 0 {
+            let active = Self::meets_box(l, self.boxes[index], &cut, active);
+            if active == 0 {
+                return 0;
+            }
+            let origin = l.origin.expect("a spread has a shared origin");
+            return self.leaf_packet(node, origin, l.cone(), vis, active);
+        }
+        let [blo, bhi] = self.boxes[index];
+        let (near, exit) = sp.slab(Vec3A::from(blo), Vec3A::from(bhi));
+        // NaN compares false (none is expected: finite origin and `inv`).
+        let entry = super::traverse::max4(sp.t_min, near.into());
+        let meets = entry <= super::traverse::min4(far, exit.into());
+        if !meets {
+            return 0;
+        }
+        let mask = node.meta & 0xff;
+        let half = size * 0.5;
+        let lo_a = Vec3A::from(lo);
+        let pad = Vec3A::splat(self.pad);
+        let mid = lo_a + Vec3A::splat(half);
+        let hi = lo_a + Vec3A::splat(size);
+        let (lower_near, lower_far) = sp.slab(lo_a - pad, mid + pad);
+        let (upper_near, upper_far) = sp.slab(mid - pad, hi + pad);
+        // The eight children's intervals at once, as in `Tree::visit`.
+        let pick = |lower: f32, upper: f32, mixed_x: bool| {
+            if mixed_x {
+                Vec4::new(lower, upper, lower, upper)
+            } else {
+                Vec4::new(lower, lower, upper, upper)
+            }
+        };
+        let near_xy =
+            pick(lower_near.x, upper_near.x, true).max(pick(lower_near.y, upper_near.y, false));
+        let far_xy =
+            pick(lower_far.x, upper_far.x, true).min(pick(lower_far.y, upper_far.y, false));
+        let t_min = Vec4::splat(sp.t_min);
+        let far4 = Vec4::splat(far);
+        let entry_lo = near_xy.max(Vec4::splat(lower_near.z)).max(t_min);
+        let entry_hi = near_xy.max(Vec4::splat(upper_near.z)).max(t_min);
+        let exit_lo = far_xy.min(Vec4::splat(lower_far.z)).min(far4);
+        let exit_hi = far_xy.min(Vec4::splat(upper_far.z)).min(far4);
+        let open =
+            (entry_lo.cmple(exit_lo).bitmask() | entry_hi.cmple(exit_hi).bitmask() << 4) & mask;
+        if open == 0 {
+            return 0;
+        }
+        let entries = [entry_lo.to_array(), entry_hi.to_array()];
+        let mut active = active;
+        let mut stopped = 0;
+        for i in 0..8 {
+            let oct = i ^ l.sign_mask;
+            // The rays' windows may have shrunk since `far` was taken.
+            let within = entries[oct >> 2][oct & 3] <= far;
+            if open & (1 << oct) == 0 || !within {
+                continue;
+            }
+            let child = node.first as usize + (mask & ((1 << oct) - 1)).count_ones() as usize;
+            let s = self.visit_spread(
+                child,
+                child_lo(lo, half, oct),
+                half,
+                l,
+                sp,
+                vis,
+                active,
+                cut,
+                far,
+            );
+            stopped |= s;
+            active &= !s;
+            if active == 0 {
+                break;
+            }
+            // Only a visit moves a cutoff.
+            if !V::FIXED_CUTOFF {
+                cut = cutoffs(vis);
+                far = reach(&cut, active);
+            }
+        }
+        stopped
+    }
+}
+
 impl<P: Primitive> Octree<P> {
     /// The parts in the order the packet visits them: by the first ray's
     /// entry (rays for which a part lies elsewhere cull it at its root).
@@ -416,7 +622,23 @@ impl<P: Primitive> Octree<P> {
                 continue;
             }
             let cut = cutoffs(vis);
-            let s = tree.visit_packet(0, tree.root_lo, tree.root_size, l, vis, active, cut);
+            let s = match &l.spread {
+                Some(sp) => {
+                    let far = reach(&cut, active);
+                    tree.visit_spread(
+                        0,
+                        tree.root_lo,
+                        tree.root_size,
+                        l,
+                        sp,
+                        vis,
+                        active,
+                        cut,
+                        far,
+                    )
+                }
+                None => tree.visit_packet(0, tree.root_lo, tree.root_size, l, vis, active, cut),
+            };
             stopped |= s;
             active &= !s;
             if active == 0 {

@@ -350,14 +350,14 @@ fn slab_a(a: Vec3A, b: Vec3A) -> (Vec3, Vec3) {
 }
 
 #[inline]
-fn max4(t: f32, v: Vec3) -> f32 {
+pub(super) fn max4(t: f32, v: Vec3) -> f32 {
     let m = if v.x > v.y { v.x } else { v.y };
     let m = if m > v.z { m } else { v.z };
     if m > t { m } else { t }
 }
 
 #[inline]
-fn min4(t: f32, v: Vec3) -> f32 {
+pub(super) fn min4(t: f32, v: Vec3) -> f32 {
     let m = if v.x < v.y { v.x } else { v.y };
     let m = if m < v.z { m } else { v.z };
     if m < t { m } else { t }
