@@ -603,89 +603,21 @@ impl Tracer<'_> {
 }
 
 impl Tracer<'_> {
-    /// Renders image row `y` into `row`, pixels in tiles of `N` (the
-    /// primary rays of a tile traced as one batch, [`Surfaces::hits`],
-    /// when `N > 1`), then each pixel's samples shaded in order, every
-    /// sample with its own generator seeded by its pixel and index: the
-    /// same rays, draws and sums whatever `N`.
-    fn row<const N: usize>(&self, y: usize, s: &mut Scratch, row: &mut Row) {
-        let scene = self.scene;
-        let cam = &scene.camera;
-        let w = cam.width as usize;
-        let k = (cam.spp as f32).sqrt().ceil() as u32;
-        let per_pixel = cam.spp;
-        let mut batch_hits: [CandidateHits; N] =
-            std::array::from_fn(|_| CandidateHits::new(scene.options.scale.xi));
-        for x0 in (0..w).step_by(N) {
-            let xs = x0..(x0 + N).min(w);
-            let np = xs.len();
-            let mut sums = [Vec3::ZERO; N];
-            for i in 0..per_pixel {
-                let mut rays = [Ray {
-                    origin: Vec3::ZERO,
-                    dir: Vec3::Z,
-                }; N];
-                let mut rngs = [Rng(0); N];
-                for (p, x) in xs.clone().enumerate() {
-                    let mut rng = Rng::new(x as u32, y as u32, i);
-                    let (ox, oy) = if per_pixel == 1 {
-                        (0.5, 0.5)
-                    } else {
-                        let (cx, cy) = (i % k, i / k % k);
-                        (
-                            (cx as f32 + rng.next_f32()) / k as f32,
-                            (cy as f32 + rng.next_f32()) / k as f32,
-                        )
-                    };
-                    rays[p] = cam.ray(x as f32 + ox, y as f32 + oy);
-                    rngs[p] = rng;
-                }
-                let mut hits = [None; N];
-                if N > 1 {
-                    self.surfaces
-                        .hits(&rays[..np], &mut batch_hits, &mut hits[..np]);
-                } else {
-                    hits[0] = self.intersect(&rays[0], None, s);
-                }
-                for p in 0..np {
-                    let (ray, hit) = (&rays[p], hits[p]);
-                    s.rng = rngs[p];
-                    s.rays.primary += 1;
-                    if i == 0 {
-                        row.depth.push(hit.map_or(f32::INFINITY, |h| h.t));
-                        row.normal.push(hit.map_or(Vec3::ZERO, |h| h.normal));
-                        row.splat.push(hit.map_or(u32::MAX, |h| h.id));
-                        row.albedo.push(hit.map_or(Vec3::ZERO, |h| {
-                            scene.materials[h.material as usize].color() * h.color
-                        }));
-                    }
-                    s.light = [0.0; 3];
-                    sums[p] += self.shade(ray, hit, 0, s);
-                    if i == 0 {
-                        let [all, facing, lit] = s.light;
-                        let share = |x: f32| if all > 0.0 { x / all } else { 0.0 };
-                        row.light_facing.push(share(facing));
-                        row.light_lit.push(share(lit));
-                    }
-                }
-            }
-            for sum in &sums[..np] {
-                row.rgb.push(*sum / per_pixel as f32);
-            }
-        }
-    }
-}
-
-impl Tracer<'_> {
-    /// Renders image rows `y` and `y + 1` into `rows[0]` and `rows[1]` in
-    /// tiles of `W`×2 pixels (`2 W <= PACKET`): the primary rays of a tile
-    /// traced as one batch ([`Surfaces::hits`]; a square-ish tile is more
-    /// coherent than a row of `2 W`), then each pixel's samples shaded in
-    /// order, the upper row's pixels first, every sample with its own
-    /// generator seeded by its pixel and index: the same rays, draws and
-    /// sums as [`Tracer::row`], so the same pixels.
-    fn row_pair<const W: usize>(&self, y: usize, s: &mut Scratch, rows: &mut [Row; 2]) {
-        const { assert!(2 * W <= PACKET) };
+    /// Renders image rows `y .. y + R` into `rows`, pixels in tiles of
+    /// `W`×`R` (`W R <= PACKET`; a square-ish tile is more coherent than a
+    /// row): the primary rays of a tile traced as one batch
+    /// ([`Surfaces::hits`]) when it holds more than one pixel, then each
+    /// pixel's samples shaded in order, the upper row's pixels first, every
+    /// sample with its own generator seeded by its pixel and index: the same
+    /// rays, draws and sums whatever the tile, so the same pixels.
+    fn tile_rows<const W: usize, const R: usize>(
+        &self,
+        y: usize,
+        s: &mut Scratch,
+        rows: &mut [Row; R],
+    ) {
+        const { assert!(W * R <= PACKET) };
+        let batched = W * R > 1;
         let scene = self.scene;
         let cam = &scene.camera;
         let w = cam.width as usize;
@@ -696,14 +628,14 @@ impl Tracer<'_> {
         for x0 in (0..w).step_by(W) {
             let xs = x0..(x0 + W).min(w);
             let np = xs.len();
-            let mut sums = [[Vec3::ZERO; W]; 2];
+            let mut sums = [[Vec3::ZERO; W]; R];
             for i in 0..per_pixel {
                 let mut rays = [Ray {
                     origin: Vec3::ZERO,
                     dir: Vec3::Z,
                 }; PACKET];
                 let mut rngs = [Rng(0); PACKET];
-                for r in 0..2 {
+                for r in 0..R {
                     let yr = y + r;
                     for (p, x) in xs.clone().enumerate() {
                         let mut rng = Rng::new(x as u32, yr as u32, i);
@@ -721,8 +653,12 @@ impl Tracer<'_> {
                     }
                 }
                 let mut hits = [None; PACKET];
-                self.surfaces
-                    .hits(&rays[..2 * np], &mut batch_hits, &mut hits[..2 * np]);
+                if batched {
+                    self.surfaces
+                        .hits(&rays[..R * np], &mut batch_hits, &mut hits[..R * np]);
+                } else {
+                    hits[0] = self.intersect(&rays[0], None, s);
+                }
                 for (r, row) in rows.iter_mut().enumerate() {
                     for p in 0..np {
                         let (ray, hit) = (&rays[r * np + p], hits[r * np + p]);
@@ -846,13 +782,13 @@ fn render_surfaces_rows(
             };
             let mut pair = [new_row(), new_row()];
             let n = if !tracer.packets {
-                tracer.row::<1>(y, &mut s, &mut pair[0]);
+                tracer.tile_rows::<1, 1>(y, &mut s, std::array::from_mut(&mut pair[0]));
                 1
             } else if y + 1 < rows.end as usize {
-                tracer.row_pair::<{ PACKET / 2 }>(y, &mut s, &mut pair);
+                tracer.tile_rows::<{ PACKET / 2 }, 2>(y, &mut s, &mut pair);
                 2
             } else {
-                tracer.row::<PACKET>(y, &mut s, &mut pair[0]);
+                tracer.tile_rows::<PACKET, 1>(y, &mut s, std::array::from_mut(&mut pair[0]));
                 1
             };
             if progress.is_some() {

@@ -528,29 +528,16 @@ impl<P: Primitive> Tree<P> {
         let (lower_near, lower_far) = sp.slab(lo_a - pad, mid + pad);
         let (upper_near, upper_far) = sp.slab(mid - pad, hi + pad);
         // The eight children's intervals at once, as in `Tree::visit`.
-        let pick = |lower: f32, upper: f32, mixed_x: bool| {
-            if mixed_x {
-                Vec4::new(lower, upper, lower, upper)
-            } else {
-                Vec4::new(lower, lower, upper, upper)
-            }
-        };
-        let near_xy =
-            pick(lower_near.x, upper_near.x, true).max(pick(lower_near.y, upper_near.y, false));
-        let far_xy =
-            pick(lower_far.x, upper_far.x, true).min(pick(lower_far.y, upper_far.y, false));
-        let t_min = Vec4::splat(sp.t_min);
-        let far4 = Vec4::splat(far);
-        let entry_lo = near_xy.max(Vec4::splat(lower_near.z)).max(t_min);
-        let entry_hi = near_xy.max(Vec4::splat(upper_near.z)).max(t_min);
-        let exit_lo = far_xy.min(Vec4::splat(lower_far.z)).min(far4);
-        let exit_hi = far_xy.min(Vec4::splat(upper_far.z)).min(far4);
-        let open =
-            (entry_lo.cmple(exit_lo).bitmask() | entry_hi.cmple(exit_hi).bitmask() << 4) & mask;
+        let (open, entries) = super::traverse::children(
+            (lower_near.into(), lower_far.into()),
+            (upper_near.into(), upper_far.into()),
+            sp.t_min,
+            far,
+            mask,
+        );
         if open == 0 {
             return 0;
         }
-        let entries = [entry_lo.to_array(), entry_hi.to_array()];
         let mut active = active;
         let mut stopped = 0;
         for i in 0..8 {

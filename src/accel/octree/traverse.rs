@@ -246,36 +246,16 @@ impl<P: Primitive> Tree<P> {
         // Slab parameters of the padded lower and upper halves on each axis.
         let (lower_near, lower_far) = slab_a((lo_a - pad - o) * inv, (mid + pad - o) * inv);
         let (upper_near, upper_far) = slab_a((mid - pad - o) * inv, (hi + pad - o) * inv);
-        // Entry and exit of all eight children at once, branch free, four
-        // children (one half along z) to a register: lane `l` of a half is
-        // child `l | z << 2`, so its x slab is that of bit 0 and its y slab
-        // that of bit 1. `max`/`min` are `maxps`/`minps` (`a > b ? a : b`),
-        // the scalar comparisons' NaN rule; only the children whose
-        // interval is non-empty are visited.
-        let cut = visitor.cutoff();
-        let pick = |lower: f32, upper: f32, mixed_x: bool| {
-            if mixed_x {
-                Vec4::new(lower, upper, lower, upper)
-            } else {
-                Vec4::new(lower, lower, upper, upper)
-            }
-        };
-        let near_xy =
-            pick(lower_near.x, upper_near.x, true).max(pick(lower_near.y, upper_near.y, false));
-        let far_xy =
-            pick(lower_far.x, upper_far.x, true).min(pick(lower_far.y, upper_far.y, false));
-        let t_min = Vec4::splat(ctx.t_min);
-        let cut4 = Vec4::splat(cut);
-        let entry_lo = near_xy.max(Vec4::splat(lower_near.z)).max(t_min);
-        let entry_hi = near_xy.max(Vec4::splat(upper_near.z)).max(t_min);
-        let exit_lo = far_xy.min(Vec4::splat(lower_far.z)).min(cut4);
-        let exit_hi = far_xy.min(Vec4::splat(upper_far.z)).min(cut4);
-        let open =
-            (entry_lo.cmple(exit_lo).bitmask() | entry_hi.cmple(exit_hi).bitmask() << 4) & mask;
+        let (open, entry) = children(
+            (lower_near, lower_far),
+            (upper_near, upper_far),
+            ctx.t_min,
+            visitor.cutoff(),
+            mask,
+        );
         if open == 0 {
             return false;
         }
-        let entry = [entry_lo.to_array(), entry_hi.to_array()];
         for i in 0..8 {
             let oct = i ^ ctx.sign_mask;
             // The window may have shrunk since `exit` was computed.
@@ -338,6 +318,42 @@ fn slab(a: Vec3, b: Vec3) -> (Vec3, Vec3) {
         if a.z > b.z { a.z } else { b.z },
     );
     (near, far)
+}
+
+/// Entry and exit of a node's eight children at once, from the slab
+/// parameters (near, far) of its padded lower and upper halves on each
+/// axis, clipped to `[t_min, cut]`: the children of `mask` whose interval
+/// is non-empty, and each child's entry (`[child >> 2][child & 3]`).
+/// Branch free, four children (one half along z) to a register: lane `l`
+/// of a half is child `l | z << 2`, so its x slab is that of bit 0 and its
+/// y slab that of bit 1. `max`/`min` are `maxps`/`minps`
+/// (`a > b ? a : b`), the scalar comparisons' NaN rule.
+#[inline(always)]
+pub(super) fn children(
+    (lower_near, lower_far): (Vec3, Vec3),
+    (upper_near, upper_far): (Vec3, Vec3),
+    t_min: f32,
+    cut: f32,
+    mask: u32,
+) -> (u32, [[f32; 4]; 2]) {
+    let pick = |lower: f32, upper: f32, mixed_x: bool| {
+        if mixed_x {
+            Vec4::new(lower, upper, lower, upper)
+        } else {
+            Vec4::new(lower, lower, upper, upper)
+        }
+    };
+    let near_xy =
+        pick(lower_near.x, upper_near.x, true).max(pick(lower_near.y, upper_near.y, false));
+    let far_xy = pick(lower_far.x, upper_far.x, true).min(pick(lower_far.y, upper_far.y, false));
+    let t_min = Vec4::splat(t_min);
+    let cut4 = Vec4::splat(cut);
+    let entry_lo = near_xy.max(Vec4::splat(lower_near.z)).max(t_min);
+    let entry_hi = near_xy.max(Vec4::splat(upper_near.z)).max(t_min);
+    let exit_lo = far_xy.min(Vec4::splat(lower_far.z)).min(cut4);
+    let exit_hi = far_xy.min(Vec4::splat(upper_far.z)).min(cut4);
+    let open = (entry_lo.cmple(exit_lo).bitmask() | entry_hi.cmple(exit_hi).bitmask() << 4) & mask;
+    (open, [entry_lo.to_array(), entry_hi.to_array()])
 }
 
 /// [`slab`] on SIMD lanes, with the same NaN rule (`a < b` false: the
