@@ -535,6 +535,16 @@ fn an_organised_capture_s_empty_pixels_trim_the_overhang() {
     let grid = splatray::io::read_organised(&std::fs::read(&pcd).unwrap())
         .unwrap()
         .expect("organised");
+    // Its NaN points are counted as the grid's empty pixels.
+    let empty = grid.width * grid.height - grid.pixels.len();
+    assert!(
+        cloud
+            .skipped
+            .iter()
+            .any(|(r, n)| r.starts_with("empty pixels") && *n == empty),
+        "{:?}",
+        cloud.skipped
+    );
     let cells = grid.miss_cells();
     let misses = cloud.misses.as_ref().expect("the empty pixels' rays");
     assert!(

@@ -47,6 +47,10 @@ pub use stream::{PointBatch, StreamInfo, stream_points};
 use glam::{DVec3, Vec3};
 use std::path::Path;
 
+/// The reason points with a NaN or infinite coordinate are skipped for
+/// ([`PointCloud::skipped`]).
+pub(crate) const NON_FINITE: &str = "non-finite coordinates";
+
 /// A triangle mesh.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Mesh {
@@ -428,7 +432,7 @@ pub(crate) fn cloud_from_world(
         colors,
         ..PointCloud::default()
     };
-    cloud.add_skipped("non-finite coordinates", dropped);
+    cloud.add_skipped(NON_FINITE, dropped);
     Ok(cloud)
 }
 

@@ -221,6 +221,9 @@ fn unpack_color(bits: u32) -> Vec3 {
 /// f32 colour.
 const POINT_BYTES: u64 = 48;
 
+/// The reason an organised grid's skipped (NaN) points are given.
+pub(crate) const EMPTY_PIXELS: &str = "empty pixels of the organised grid (NaN: nothing measured)";
+
 /// Read a PCD cloud (coordinates kept in f64 until the cloud is re-centred,
 /// so `F 8` fields keep their precision).
 pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
@@ -243,6 +246,15 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
     // In the positions' frame, like them: relative to the origin.
     cloud.viewpoint = h.viewpoint.map(|v| cloud.local_viewpoint(v));
     cloud.misses = misses;
+    // An organised grid's NaN points are its empty pixels, as expected of a
+    // depth camera: said so, not as bad coordinates.
+    if h.grid.is_some_and(|(w, h)| h > 1 && w > 1) {
+        for (reason, _) in &mut cloud.skipped {
+            if reason == super::NON_FINITE {
+                *reason = EMPTY_PIXELS.into();
+            }
+        }
+    }
     Ok(cloud)
 }
 

@@ -93,7 +93,7 @@ pub fn stream_points(
         non_finite: cloud
             .skipped
             .iter()
-            .filter(|(r, _)| r == "non-finite coordinates")
+            .filter(|(r, _)| r == super::NON_FINITE || r == super::pcd::EMPTY_PIXELS)
             .map(|(_, c)| *c as u64)
             .sum(),
         ..StreamInfo::default()
