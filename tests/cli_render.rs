@@ -394,18 +394,29 @@ fn every_registry_entry_renders_under_its_own_name() {
     }
 }
 
-/// CI (`.ci/run`) runs README's test command as README writes it: its last
-/// line is README's test-suite command line (the one running
-/// `scripts/test.sh`, outside inline code), as README writes it.
+/// CI (`.ci/run`) runs README's test command as README writes it: README
+/// gives it alone in its own code block (the one running
+/// `scripts/test.sh`), and that block's one line is `.ci/run`'s last.
 #[test]
 fn ci_runs_readmes_test_command() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
-    let line = readme
-        .lines()
-        .find(|l| l.contains("scripts/test.sh") && !l.contains('`'))
+    let blocks: Vec<&str> = readme.split("```").skip(1).step_by(2).collect();
+    let block = blocks
+        .iter()
+        .find(|b| b.contains("scripts/test.sh"))
         .expect("README names the test suite's command");
+    let lines: Vec<&str> = block
+        .lines()
+        .skip(1)
+        .filter(|l| !l.trim().is_empty())
+        .collect();
+    assert_eq!(
+        lines.len(),
+        1,
+        "README's test command stands alone: {block}"
+    );
     let ci = std::fs::read_to_string(root.join(".ci/run")).unwrap();
     let last = ci.lines().rev().find(|l| !l.trim().is_empty()).unwrap();
-    assert_eq!(last, line, "README's test command and .ci/run's differ");
+    assert_eq!(last, lines[0], "README's test command and .ci/run's differ");
 }
