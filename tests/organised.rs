@@ -407,6 +407,23 @@ fn the_photo_check_compares_splat_colours_with_the_capture() {
     );
 }
 
+/// The bunny scanned at 160×120 as a depth camera would, with bands of
+/// colour a quarter unit apart (`sample --scan-from 0.3,0.4,3 --organised
+/// optical --texture 0.25 --rays 160,120`), written into `dir`.
+fn textured_bunny(dir: &Path) -> std::path::PathBuf {
+    let pcd = dir.join("textured.pcd");
+    let o = common::bin()
+        .args(["sample", "--scan-from", "0.3,0.4,3"])
+        .args(["--organised", "optical", "--texture", "0.25"])
+        .args(["--rays", "160,120", "-o"])
+        .arg(&pcd)
+        .arg(common::data("bunny-mesh.ply"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    pcd
+}
+
 /// A textured synthetic capture made as a user would (`sample --scan-from
 /// … --organised optical --texture 0.25`: the bunny scanned at 160×120
 /// with bands of colour a quarter unit apart): `splat` writes each splat's
@@ -416,21 +433,7 @@ fn the_photo_check_compares_splat_colours_with_the_capture() {
 #[test]
 fn colour_fields_keep_a_textured_scan_s_colours() {
     let dir = scratch("organised-texture");
-    let pcd = dir.join("textured.pcd");
-    let o = common::bin()
-        .args([
-            "sample",
-            "--scan-from",
-            "0.3,0.4,3",
-            "--organised",
-            "optical",
-        ])
-        .args(["--texture", "0.25", "--rays", "160,120", "-o"])
-        .arg(&pcd)
-        .arg(common::data("bunny-mesh.ply"))
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let pcd = textured_bunny(&dir);
     let ply = dir.join("s.ply");
     let report = dir.join("s.json");
     let o = common::bin()
@@ -516,21 +519,7 @@ fn colour_fields_keep_a_textured_scan_s_colours() {
 #[test]
 fn an_organised_capture_s_empty_pixels_trim_the_overhang() {
     let dir = scratch("organised-misses");
-    let pcd = dir.join("bunny.pcd");
-    let o = common::bin()
-        .args([
-            "sample",
-            "--scan-from",
-            "0.3,0.4,3",
-            "--organised",
-            "optical",
-        ])
-        .args(["--texture", "0.25", "--rays", "160,120", "-o"])
-        .arg(&pcd)
-        .arg(common::data("bunny-mesh.ply"))
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let pcd = textured_bunny(&dir);
     let cloud = splatray::io::read_points(&pcd).unwrap();
     let grid = splatray::io::read_organised(&std::fs::read(&pcd).unwrap())
         .unwrap()

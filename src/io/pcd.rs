@@ -231,13 +231,10 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
     // An organised grid's empty cells are rays from its viewpoint that met
     // nothing, cast through the pinhole fitted to its measured pixels (none
     // when no pinhole fits).
-    let misses = match h.viewpoint {
-        Some(_) => organised(&h, &cols, &world, &colors)
-            .ok()
-            .flatten()
-            .and_then(|o| o.pinhole().ok().map(|p| o.misses(&p))),
-        None => None,
-    };
+    let misses = h
+        .viewpoint
+        .and_then(|_| organised(&h, &cols, &world, &colors).ok().flatten())
+        .and_then(|o| o.pinhole().ok().map(|p| o.misses(&p)));
     let mut cloud = cloud_from_world(
         world,
         cols.normal.is_some().then_some(normals),
@@ -248,7 +245,7 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
     cloud.misses = misses;
     // An organised grid's NaN points are its empty pixels, as expected of a
     // depth camera: said so, not as bad coordinates.
-    if h.grid.is_some_and(|(w, h)| h > 1 && w > 1) {
+    if grid_size(&h).is_some() {
         for (reason, _) in &mut cloud.skipped {
             if reason == super::NON_FINITE {
                 *reason = EMPTY_PIXELS.into();
@@ -263,8 +260,18 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
 /// # Errors
 /// As [`read_cloud`].
 pub fn read_organised(bytes: &[u8]) -> Result<Option<Organised>, IoErrorKind> {
+    // Any other cloud's body is not decoded.
+    if grid_size(&parse_header(bytes)?).is_none() {
+        return Ok(None);
+    }
     let (h, cols, world, _, colors) = decode(bytes)?;
     organised(&h, &cols, &world, &colors)
+}
+
+/// The grid's `WIDTH` × `HEIGHT` when the header describes one (`HEIGHT`
+/// > 1).
+fn grid_size(h: &PcdHeader) -> Option<(usize, usize)> {
+    h.grid.filter(|&(w, h)| h > 1 && w > 1)
 }
 
 /// The grid of a decoded PCD (`HEIGHT` > 1); `None` for any other.
@@ -274,7 +281,7 @@ fn organised(
     world: &[DVec3],
     colors: &[Vec3],
 ) -> Result<Option<Organised>, IoErrorKind> {
-    let Some((width, height)) = h.grid.filter(|&(w, h)| h > 1 && w > 1) else {
+    let Some((width, height)) = grid_size(h) else {
         return Ok(None);
     };
     let [w, x, y, z] = h.orientation;
