@@ -23,7 +23,7 @@
 use super::ply::{PlyFile, require_scalars, scalar};
 use super::splat_ply::SplatSet;
 use super::{IoError, IoErrorKind, linear_to_srgb, srgb_to_linear};
-use crate::splat::{NormalField, Splat};
+use crate::splat::{Clip, NormalField, Splat};
 use glam::{DVec3, Mat3, Quat, Vec2, Vec3};
 use ply_rs_bw::ply::{Header, Property, PropertyAccess};
 use std::path::Path;
@@ -313,6 +313,7 @@ pub fn parse_gaussians(bytes: &[u8], min_opacity: f32) -> Result<GaussianRead, I
             radii: Vec2::new(sigma[major], sigma[minor]) * RADIUS_PER_SIGMA,
             color,
             field: NormalField::FLAT,
+            clip: Clip::NONE,
         });
     }
     if out.set.splats.is_empty() {

@@ -19,7 +19,7 @@
 use super::ply::{PlyFile, scalar};
 use super::{IoError, IoErrorKind, write_bytes};
 use crate::splat::color::ColorField;
-use crate::splat::{NormalField, Splat};
+use crate::splat::{Clip, NormalField, Splat};
 use glam::{DVec3, Vec2, Vec3};
 use ply_rs_bw::ply::{Property, PropertyAccess};
 use std::path::Path;
@@ -418,6 +418,7 @@ pub fn parse_splats(bytes: &[u8]) -> Result<SplatSet, IoErrorKind> {
                     beta: v[17],
                 },
                 color: Vec3::new(v[18], v[19], v[20]),
+                clip: Clip::NONE,
             }
         } else {
             let mut d = Splat::disc(center, normal, v[6]).ok_or_else(|| bad("zero normal"))?;

@@ -2,7 +2,7 @@
 //! Their splats are built directly (no point cloud), so a scene can control
 //! the splat count exactly and the exact surface is known for tests.
 
-use crate::splat::{NormalField, Splat, tangent_frame};
+use crate::splat::{Clip, NormalField, Splat, tangent_frame};
 use glam::{Vec2, Vec3};
 
 /// Splat cover factor over the equal-area radius: discs of the equal-area
@@ -48,6 +48,7 @@ pub fn sphere(center: Vec3, radius: f32, n: usize) -> Vec<Splat> {
                     alpha: r / radius,
                     beta: r / radius,
                 },
+                clip: Clip::NONE,
             }
         })
         .collect()
@@ -99,6 +100,7 @@ pub fn quad(center: Vec3, normal: Vec3, size: Vec2, n: usize) -> Vec<Splat> {
                 radii,
                 color: Vec3::ONE,
                 field: NormalField::FLAT,
+                clip: Clip::NONE,
             });
         }
     }

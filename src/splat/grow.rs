@@ -1,7 +1,7 @@
 //! Splat growth (§2.1, eqs. 1–3) with density control (§2.2).
 
 use super::knn::Knn;
-use super::{NormalField, Splat, tangent_frame};
+use super::{Clip, NormalField, Splat, tangent_frame};
 use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use std::cmp::Reverse;
@@ -628,6 +628,7 @@ impl<'a> Grower<'a> {
             radii: Vec2::new(aspect * r, r),
             color,
             field: NormalField::FLAT,
+            clip: Clip::NONE,
         };
         Seeded {
             splat,

@@ -54,6 +54,8 @@ pub struct Splat {
     pub color: Vec3,
     /// Phong normal field, eq. (4).
     pub field: NormalField,
+    /// Clip lines at a sharp feature; `Clip::NONE` for a whole disc.
+    pub clip: Clip,
 }
 
 impl Splat {
@@ -71,6 +73,7 @@ impl Splat {
             radii: Vec2::splat(radius),
             color: Vec3::ONE,
             field: NormalField::FLAT,
+            clip: Clip::NONE,
         })
     }
 
@@ -105,6 +108,7 @@ impl Splat {
     }
 }
 
+pub mod clip;
 mod cloud;
 pub mod color;
 pub mod denoise;
@@ -118,6 +122,7 @@ pub mod outliers;
 pub mod standoff;
 pub mod thin;
 
+pub use clip::{Clip, ClipLine};
 pub use cloud::{PointCloud, Scans, Viewpoints};
 pub use generate::{
     GenerateError, NOISE_PROJECT, Skipped, SplatParams, SplatReport, StageSeconds, count_on_splats,
