@@ -6,8 +6,7 @@ use super::{json_text, stage_text};
 use glam::DVec3;
 use splatray::freespace::generate_trimmed;
 use splatray::io::{
-    Batch, GaussianLayout, IoError, IoErrorKind, encode_splats, encode_splats_with, file_layout,
-    read_gaussians, read_points,
+    Batch, Format, GaussianLayout, Source, encode_splats, encode_splats_with, file_layout, is_piped,
 };
 use splatray::render::output::{check_extension, check_writable};
 use splatray::splat::color::fit_cloud;
@@ -23,10 +22,16 @@ use std::time::Instant;
 #[derive(Clone, Debug, clap::Args)]
 pub struct SplatArgs {
     /// Input point cloud (.ply, .pcd, .xyz/.txt, .las/.laz, .e57, or
-    /// recognised by content); a folder, or several files (e.g. a shell
-    /// glob of LAZ tiles), are read as one cloud in tiles.
+    /// recognised by content; `-` for standard input, or a pipe such as
+    /// `<(zcat pts.xyz.gz)`, read once); a folder, or several files (e.g.
+    /// a shell glob of LAZ tiles), are read as one cloud in tiles.
     #[arg(required = true, num_args = 1..)]
     pub inputs: Vec<PathBuf>,
+    /// The input's format, for a name that says nothing (standard input, a
+    /// pipe): ply, pcd, xyz (or txt), las (or laz), e57. Default: the
+    /// extension, else the first bytes.
+    #[arg(long, value_parser = parse_format)]
+    pub format: Option<Format>,
     /// Output splat file (binary PLY).
     #[arg(short = 'o', long = "output")]
     pub output: PathBuf,
@@ -210,13 +215,14 @@ pub fn run(args: &SplatArgs) -> Result<()> {
     if let Some(tiled) = tiled_options(args, &inputs)? {
         return run_tiled(args, &inputs, &tiled);
     }
-    if let Some(layout) = file_layout(args.input()) {
-        return from_gaussians(args, layout);
+    let source = Source::open(args.input(), args.format)?;
+    if let Some(layout) = source.gaussian_layout() {
+        return from_gaussians(args, &source, layout);
     }
     let line = ProgressLine::new();
     line.update("reading", 0.0);
     let t0 = Instant::now();
-    let cloud = read_points(args.input())?;
+    let cloud = source.read_points()?;
     let read = t0.elapsed().as_secs_f64();
     let params = args.splat.params(&cloud)?;
     let (mut splats, mut report, trim) =
@@ -418,7 +424,7 @@ struct GaussianReport {
 /// `splat` on a Gaussian file: its Gaussians as splats (frame from the
 /// rotation, radii from the scales, colour from the DC term), written as a
 /// splat file; the point options do not apply.
-fn from_gaussians(args: &SplatArgs, layout: GaussianLayout) -> Result<()> {
+fn from_gaussians(args: &SplatArgs, source: &Source, layout: GaussianLayout) -> Result<()> {
     let o = &args.splat;
     if o.epsilon_rel.is_some() || o.k.is_some() || o.density.is_some() || o.ellipses {
         eprintln!(
@@ -428,7 +434,7 @@ fn from_gaussians(args: &SplatArgs, layout: GaussianLayout) -> Result<()> {
         );
     }
     let t0 = Instant::now();
-    let read = read_gaussians(args.input(), args.min_opacity)?;
+    let read = source.read_gaussians(args.min_opacity)?;
     let set = &read.set;
     let bytes = encode_splats(&args.output, &set.splats, set.origin)?;
     let report = GaussianReport {
@@ -482,24 +488,20 @@ fn expand_inputs(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
     let mut out = Vec::new();
     for p in given {
         if p.is_dir() {
-            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
-                .map_err(|e| IoError::new(p, IoErrorKind::Io(e)))?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|f| f.is_file() && splatray::io::Format::from_extension(f).is_some())
-                .collect();
-            found.sort();
-            if found.is_empty() {
-                return Err(Error::invalid(format!(
-                    "{}: no point cloud files in the folder",
-                    p.display()
-                )));
-            }
-            out.extend(found);
+            out.extend(splatray::io::cloud_files(p)?);
         } else {
             out.push(p.clone());
         }
     }
     Ok(out)
+}
+
+/// A `--format` name.
+fn parse_format(s: &str) -> std::result::Result<Format, String> {
+    Format::parse(s).ok_or_else(|| {
+        let names: Vec<&str> = Format::ALL.iter().map(|f| f.name()).collect();
+        format!("'{s}': expected one of {}", names.join(", "))
+    })
 }
 
 /// Tiled generation's options when this run takes it: `--max-memory` or
@@ -543,6 +545,17 @@ fn tiled_options(
         || stage != splatray::tiled::Stage::All;
     if !tiled {
         return Ok(None);
+    }
+    if let Some(p) = inputs.iter().find(|p| is_piped(p)) {
+        return Err(Error::invalid(format!(
+            "{}: standard input or a pipe is read whole, once: tiled generation reads its inputs twice (write the cloud to a file)",
+            p.display()
+        )));
+    }
+    if args.format.is_some() {
+        return Err(
+            "--format names the format of one cloud read whole: tiled generation takes files named by their format".into(),
+        );
     }
     if inputs.iter().any(|p| file_layout(p).is_some()) {
         return Err(
