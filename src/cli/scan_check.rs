@@ -1,9 +1,8 @@
 //! `splatray scan-check CLOUD [--viewpoint X,Y,Z] [--tolerance 0.01]
 //! [--holdout 0.1] [--report R.json]`: the scan as its own ground truth.
 
+use super::common::{SplatOptions, default_backend, write_json};
 use super::progress::ProgressLine;
-use super::render::write_json;
-use super::splat_cmd::SplatOptions;
 use splatray::io::{IoError, IoErrorKind, read_points};
 use splatray::render::output::check_writable;
 use splatray::validate::scan_check::{ScanCheckParams, scan_check};
@@ -39,7 +38,7 @@ pub struct ScanCheckArgs {
     #[arg(long)]
     pub photo: bool,
     /// The backend the photo check renders with.
-    #[arg(long, default_value_t = super::render::default_backend())]
+    #[arg(long, default_value_t = default_backend())]
     pub backend: String,
 }
 
