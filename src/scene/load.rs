@@ -17,7 +17,7 @@ use crate::splat::Splat;
 use crate::splat::color::ColorField;
 use crate::{Error, Result};
 use glam::{DMat3, DVec3, Mat3, Vec2, Vec3};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Loads a scene file: parses it, builds every model's splats, resolves
 /// materials, lights and camera, and re-centres everything. Splat
@@ -52,7 +52,27 @@ pub fn build_scene_read(
     read: Option<(&Path, CloudRead)>,
     progress: Option<Progress<'_>>,
 ) -> Result<Scene> {
-    let mut read = read;
+    let reads = read
+        .map(|(p, r)| (p.to_path_buf(), r))
+        .into_iter()
+        .collect();
+    build_scene_reads(file, base, reads, progress)
+}
+
+/// [`build_scene`] with several models' inputs already read (or made in
+/// memory, as the Python package's scenes have them): a model naming the
+/// path of one of `reads` (joined to `base`) takes that input instead of
+/// reading a file, once.
+///
+/// # Errors
+/// As [`build_scene`].
+pub fn build_scene_reads(
+    file: &SceneFile,
+    base: &Path,
+    reads: Vec<(PathBuf, CloudRead)>,
+    progress: Option<Progress<'_>>,
+) -> Result<Scene> {
+    let mut read = reads;
     let c = &file.camera;
     check_camera(c)?;
     // Models, camera and lights are first shifted, in f64, by where the
@@ -224,7 +244,7 @@ struct Models {
 fn load_models(
     specs: &[ModelSpec],
     base: &Path,
-    read: &mut Option<(&Path, CloudRead)>,
+    read: &mut Vec<(PathBuf, CloudRead)>,
     progress: Option<Progress<'_>>,
 ) -> Result<Models> {
     let start = std::time::Instant::now();
@@ -355,7 +375,7 @@ fn truth_of(
 fn model_source<'a>(
     spec: &'a ModelSpec,
     base: &Path,
-    read: &mut Option<(&Path, CloudRead)>,
+    read: &mut Vec<(PathBuf, CloudRead)>,
     load: &mut LoadReport,
     progress: Option<Progress<'_>>,
 ) -> Result<Source<'a>> {
@@ -456,13 +476,10 @@ fn model_source<'a>(
 }
 
 /// What was read of `path` already, taken out of `read` (once): `None`
-/// when `read` holds another file or was taken.
-fn take_read(read: &mut Option<(&Path, CloudRead)>, path: &Path) -> Option<CloudRead> {
-    if read.as_ref().is_some_and(|(p, _)| *p == path) {
-        read.take().map(|(_, r)| r)
-    } else {
-        None
-    }
+/// when `read` holds no such file or it was taken.
+fn take_read(read: &mut Vec<(PathBuf, CloudRead)>, path: &Path) -> Option<CloudRead> {
+    let at = read.iter().position(|(p, _)| p == path)?;
+    Some(read.swap_remove(at).1)
 }
 
 /// A mesh model's points (sampled by area, or scanned, with the model's

@@ -140,6 +140,9 @@ pub mod thin;
 
 pub use clip::{Clip, ClipLine};
 pub use cloud::{PointCloud, Scans, Viewpoints};
+/// The robust centre (per-axis medians) the readers put a cloud's origin at,
+/// for clouds made in memory (the Python package's arrays).
+pub use frame::robust_centre_size;
 pub use generate::{
     GenerateError, NOISE_PROJECT, Skipped, SplatParams, SplatReport, StageSeconds, count_on_splats,
     coverage, generate, generate_with_progress, on_splat, viewpoints_of,
