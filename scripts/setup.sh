@@ -6,7 +6,9 @@
 #      provides it; otherwise the system's package when the distribution has
 #      one; otherwise the libraries of the PyPI wheel embreex==4.4.0.post1,
 #      downloaded with pip (nothing is installed into Python) and extracted into
-#      the project's git-ignored .embree/lib.
+#      the project's git-ignored .embree/lib;
+#   3. (before 2, which may end the script) Debian's chromium, the headless
+#      browser tests/viewer.rs drives `splatray view` with.
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -43,6 +45,14 @@ if have_libclang; then
 else
   say "libclang: installing libclang-dev"
   apt_install libclang-dev
+fi
+
+# --- 3. chromium (tests/viewer.rs) ------------------------------------------
+if [ -x /usr/bin/chromium ]; then
+  say "chromium: present"
+else
+  say "chromium: installing Debian's chromium (the viewer's browser test)"
+  apt_install chromium
 fi
 
 # --- 2. Embree 4 -------------------------------------------------------------
