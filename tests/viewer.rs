@@ -320,3 +320,153 @@ fn an_oversized_request_is_refused() {
     let m = ws.read().unwrap();
     assert!(m.is_binary(), "{m:?}");
 }
+
+/// A WebSocket session without a browser: the hello, then messages.
+struct Session(tungstenite::WebSocket<std::net::TcpStream>);
+
+impl Session {
+    fn open(server: &Server) -> (Session, Value) {
+        let s = std::net::TcpStream::connect(server.authority()).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+        let (mut ws, _) =
+            tungstenite::client(format!("ws://{}/ws", server.authority()), s).expect("handshake");
+        let hello: Value = serde_json::from_str(ws.read().unwrap().to_text().unwrap()).unwrap();
+        assert_eq!(hello["type"], "hello");
+        (Session(ws), hello)
+    }
+
+    fn send(&mut self, v: Value) {
+        self.0
+            .send(tungstenite::Message::text(v.to_string()))
+            .unwrap();
+    }
+
+    /// The next frame (header and PNG) whose stage is `stage`.
+    fn frame(&mut self, stage: &str) -> (Value, Vec<u8>) {
+        loop {
+            let m = self.0.read().unwrap();
+            if let tungstenite::Message::Binary(b) = m {
+                let n = u32::from_le_bytes(b[..4].try_into().unwrap()) as usize;
+                let header: Value = serde_json::from_slice(&b[4..4 + n]).unwrap();
+                if header["stage"] == stage {
+                    return (header, b[4 + n..].to_vec());
+                }
+            }
+        }
+    }
+
+    /// The next JSON message of type `kind`.
+    fn text(&mut self, kind: &str) -> Value {
+        loop {
+            if let tungstenite::Message::Text(t) = self.0.read().unwrap() {
+                let v: Value = serde_json::from_str(t.as_str()).unwrap();
+                if v["type"] == kind {
+                    return v;
+                }
+            }
+        }
+    }
+}
+
+/// Point clouds get the scene `render CLOUD` makes, and "save scene" then
+/// `splatray render` gives the full frame byte for byte: a coloured PCD, a
+/// lidar tile far from the origin (its coordinates near 326417, 6724193:
+/// the camera read back from the text keeps its f64 precision), and an
+/// organised scan (`sample --organised`), which opens at its sensor's view
+/// and returns to it; each from its own view and from a camera the page
+/// moved.
+#[test]
+fn clouds_save_the_scene_of_their_frames() {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data");
+    let dir = TempDir::new("viewer-clouds");
+    let scan = dir.0.join("scan.pcd");
+    let o = Command::new(BIN)
+        .arg("sample")
+        .arg(data.join("bunny-mesh.ply"))
+        .args([
+            "--scan-from",
+            "0.6,0.5,2.2",
+            "--rays",
+            "64,48",
+            "--fov",
+            "9",
+        ])
+        .args(["--organised", "optical", "-o"])
+        .arg(&scan)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let clouds = [
+        data.join("milk.pcd"),
+        data.join("32-1-472-150-76.laz"),
+        scan.clone(),
+    ];
+    for (k, path) in clouds.iter().enumerate() {
+        let cloud = path.display().to_string();
+        let server = Server::start(
+            Path::new(BIN),
+            &[
+                &cloud,
+                "--width",
+                "64",
+                "--height",
+                "48",
+                "--refine-spp",
+                "1",
+            ],
+        );
+        let (mut s, hello) = Session::open(&server);
+        let organised = *path == scan;
+        assert_eq!(hello["sensor"].is_object(), organised, "{hello}");
+        assert_eq!(hello["camera"]["sensor"], organised, "{hello}");
+        let (h, full) = s.frame("full");
+        assert_eq!(h["width"], 64);
+        s.send(serde_json::json!({"type": "save_scene"}));
+        let text = s.text("scene")["text"].as_str().unwrap().to_string();
+        assert_eq!(text.contains("intrinsics"), organised, "{text}");
+        assert!(
+            render_saved(&dir.0, &format!("c{k}a"), &text) == full,
+            "{cloud}: the saved scene renders another image:\n{text}"
+        );
+        // Moved: half-way to the point looked at, a little to the side.
+        let mut cam = hello["camera"].clone();
+        let (from, at) = (&cam["from"], &cam["at"]);
+        let mid: Vec<f64> = (0..3)
+            .map(|i| {
+                let (f, a) = (from[i].as_f64().unwrap(), at[i].as_f64().unwrap());
+                0.5 * (f + a) + if i == 0 { 0.1 * (f - a).abs() } else { 0.0 }
+            })
+            .collect();
+        cam["from"] = serde_json::json!(mid);
+        cam["sensor"] = serde_json::json!(false);
+        s.send(serde_json::json!({"type": "camera", "id": 7, "camera": cam}));
+        let moved = loop {
+            let (h, png) = s.frame("full");
+            if h["camera"] == 7 {
+                break png;
+            }
+        };
+        assert!(
+            moved != full,
+            "{cloud}: the moved camera shows the same image"
+        );
+        s.send(serde_json::json!({"type": "save_scene"}));
+        let text = s.text("scene")["text"].as_str().unwrap().to_string();
+        assert!(!text.contains("intrinsics"), "{text}");
+        assert!(
+            render_saved(&dir.0, &format!("c{k}b"), &text) == moved,
+            "{cloud}: the moved view's saved scene renders another image:\n{text}"
+        );
+        if organised {
+            // The sensor view again: the first frame's bytes.
+            s.send(serde_json::json!({"type": "camera", "id": 8, "camera": hello["sensor"]}));
+            let back = loop {
+                let (h, png) = s.frame("full");
+                if h["camera"] == 8 {
+                    break png;
+                }
+            };
+            assert!(back == full, "the sensor view shows another image");
+        }
+    }
+}

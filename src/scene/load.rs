@@ -98,6 +98,20 @@ pub fn build_scene_read(
     })
 }
 
+/// The lights of a scene file's `[[light]]` tables, placed as
+/// [`build_scene`] places them (shifted by `shift`, re-centred by
+/// `offset`): what a view that moves a scene's lights with its camera (a
+/// cloud's headlight) reads back from its text.
+///
+/// # Errors
+/// A light without what its kind needs, or out of range (one line).
+pub fn scene_lights(specs: &[LightSpec], shift: DVec3, offset: Vec3) -> Result<Vec<Light>> {
+    specs
+        .iter()
+        .map(|l| light(l, shift).map(|l| moved(l, offset)))
+        .collect()
+}
+
 /// The camera of a scene file's `[camera]` table, placed as
 /// [`build_scene`] places it: shifted by `shift` and re-centred by `offset`
 /// (a built scene's [`Scene::shift`] and [`Scene::offset`]), so that a

@@ -9,7 +9,7 @@ use crate::accel::{Backend, CandidateHits, Query, registry};
 use crate::render::integrator::{Frame, RayCounts, SplatSurfaces, render_rows};
 use crate::render::output::{png_bytes, rgb8_png};
 use crate::resolve::ShadingMode;
-use crate::scene::{Camera, parse_scene_str, scene_camera};
+use crate::scene::{Camera, parse_scene_str, scene_camera, scene_lights};
 use crate::{Error, Result};
 use image::{ImageBuffer, Rgb};
 use serde::Serialize;
@@ -222,11 +222,13 @@ impl Worker {
         Ok(self.backends[name].as_ref())
     }
 
-    /// The full-quality camera of `req` (read back from its scene text),
-    /// with the shading asked for applied to the scene.
+    /// The full-quality camera of `req` read back from its scene text, the
+    /// scene's lights read back too, and the shading asked for applied.
     fn setup(&mut self, req: &RenderRequest) -> Result<Camera> {
         let file = parse_scene_str(&req.text)?;
         let cam = scene_camera(&file.camera, self.scene.shift, self.scene.offset)?;
+        // A cloud's headlight and key light follow its camera.
+        self.scene.lights = scene_lights(&file.lights, self.scene.shift, self.scene.offset)?;
         if self.shading != req.shading {
             let (mode, of) = &self.source.shading;
             self.scene.options.shading = *mode;
