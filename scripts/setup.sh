@@ -8,7 +8,9 @@
 #      downloaded with pip (nothing is installed into Python) and extracted into
 #      the project's git-ignored .embree/lib;
 #   3. python/.venv (python3-venv from apt when Python lacks it) with
-#      python/requirements.txt, and the Python package built into it.
+#      python/requirements.txt, and the Python package built into it;
+#   4. Debian's chromium, the headless browser tests/viewer.rs drives
+#      `splatray view` with.
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -45,6 +47,14 @@ if have_libclang; then
 else
   say "libclang: installing libclang-dev"
   apt_install libclang-dev
+fi
+
+# --- 4. chromium (tests/viewer.rs) ------------------------------------------
+if [ -x /usr/bin/chromium ]; then
+  say "chromium: present"
+else
+  say "chromium: installing Debian's chromium (the viewer's browser test)"
+  apt_install chromium
 fi
 
 # --- 2. Embree 4 -------------------------------------------------------------

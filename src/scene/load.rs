@@ -99,35 +99,7 @@ pub fn build_scene_reads(
         )));
     }
     let lights = lights.into_iter().map(|l| moved(l, offset)).collect();
-    let (from, at) = (
-        camera_point("from", c.from, shift, offset)?,
-        camera_point("at", c.at, shift, offset)?,
-    );
-    if from == at && c.from != c.at {
-        return Err(Error::invalid(format!(
-            "camera: `from` and `at` are {:.2e} apart, too close to tell apart {:.2e} from the \
-             models in f32",
-            (DVec3::from(c.from) - DVec3::from(c.at)).length(),
-            (DVec3::from(c.from) - shift).length()
-        )));
-    }
-    let camera = match c.intrinsics {
-        None => Camera::look_at(from, at, v3(c.up), c.fov, c.width, c.height, c.spp)?,
-        Some(k) => Camera::look_at_intrinsics(
-            from,
-            at,
-            v3(c.up),
-            super::model::Intrinsics {
-                fx: k.fx,
-                fy: k.fy,
-                cx: k.cx,
-                cy: k.cy,
-            },
-            c.width,
-            c.height,
-            c.spp,
-        )?,
-    };
+    let camera = scene_camera(c, shift, offset)?;
     let (options, xi_of) = render_options(&file.render, diagonal, &models.standoff)?;
     Ok(Scene {
         splats: models.splats,
@@ -144,6 +116,63 @@ pub fn build_scene_reads(
         shift,
         load: models.load,
     })
+}
+
+/// The lights of a scene file's `[[light]]` tables, placed as
+/// [`build_scene`] places them (shifted by `shift`, re-centred by
+/// `offset`): what a view that moves a scene's lights with its camera (a
+/// cloud's headlight) reads back from its text.
+///
+/// # Errors
+/// A light without what its kind needs, or out of range (one line).
+pub fn scene_lights(specs: &[LightSpec], shift: DVec3, offset: Vec3) -> Result<Vec<Light>> {
+    specs
+        .iter()
+        .map(|l| light(l, shift).map(|l| moved(l, offset)))
+        .collect()
+}
+
+/// The camera of a scene file's `[camera]` table, placed as
+/// [`build_scene`] places it: shifted by `shift` and re-centred by `offset`
+/// (a built scene's [`Scene::shift`] and [`Scene::offset`]), so that a
+/// camera written to scene text and read back gives the camera a render of
+/// that text uses.
+///
+/// # Errors
+/// One line: a resolution or `spp` out of range, `from` and `at` that
+/// coincide in f32, an `up` along the view, a field of view or intrinsics
+/// out of range.
+pub fn scene_camera(c: &CameraSpec, shift: DVec3, offset: Vec3) -> Result<Camera> {
+    check_camera(c)?;
+    let (from, at) = (
+        camera_point("from", c.from, shift, offset)?,
+        camera_point("at", c.at, shift, offset)?,
+    );
+    if from == at && c.from != c.at {
+        return Err(Error::invalid(format!(
+            "camera: `from` and `at` are {:.2e} apart, too close to tell apart {:.2e} from the \
+             models in f32",
+            (DVec3::from(c.from) - DVec3::from(c.at)).length(),
+            (DVec3::from(c.from) - shift).length()
+        )));
+    }
+    match c.intrinsics {
+        None => Camera::look_at(from, at, v3(c.up), c.fov, c.width, c.height, c.spp),
+        Some(k) => Camera::look_at_intrinsics(
+            from,
+            at,
+            v3(c.up),
+            super::model::Intrinsics {
+                fx: k.fx,
+                fy: k.fy,
+                cx: k.cx,
+                cy: k.cy,
+            },
+            c.width,
+            c.height,
+            c.spp,
+        ),
+    }
 }
 
 /// A scene of one model, `splats` (white and diffuse), seen by `camera`
