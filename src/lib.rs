@@ -23,5 +23,6 @@ pub mod splat;
 pub mod terrain;
 pub mod tiled;
 pub mod validate;
+pub mod workflow;
 
 pub use error::{Error, Result};
