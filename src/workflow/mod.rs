@@ -3,4 +3,5 @@
 //! doing the reading, the work and the committing of outputs; the front
 //! end only parses, calls, prints and writes what it is asked to.
 
+pub mod compare;
 pub mod splat;
