@@ -3,7 +3,6 @@
 
 use glam::DVec3;
 use splatray::accel::registry;
-use splatray::splat::{PointCloud, SplatParams};
 use splatray::workflow::splat::GenerationOptions;
 use splatray::{Error, Result};
 use std::path::Path;
@@ -74,15 +73,6 @@ impl SplatOptions {
             no_viewpoint: self.no_viewpoint,
             thin: self.thin,
         })
-    }
-
-    /// The generation parameters for `cloud`
-    /// ([`GenerationOptions::params`]).
-    ///
-    /// # Errors
-    /// A malformed viewpoint.
-    pub fn params(&self, cloud: &PointCloud) -> Result<SplatParams> {
-        Ok(self.generation()?.params(cloud))
     }
 }
 

@@ -4,4 +4,6 @@
 //! end only parses, calls, prints and writes what it is asked to.
 
 pub mod compare;
+pub mod scan_check;
 pub mod splat;
+pub mod sweep;
