@@ -24,5 +24,6 @@ pub mod terrain;
 pub mod tiled;
 pub mod validate;
 pub mod viewer;
+pub mod workflow;
 
 pub use error::{Error, Result};

@@ -3,7 +3,7 @@
 
 use glam::DVec3;
 use splatray::accel::registry;
-use splatray::splat::{PointCloud, SplatParams};
+use splatray::workflow::splat::GenerationOptions;
 use splatray::{Error, Result};
 use std::path::Path;
 
@@ -58,42 +58,21 @@ impl SplatOptions {
         }
     }
 
-    /// The generation parameters for `cloud`: the options given, defaults
-    /// for the rest, the viewpoint given (made relative to the cloud's
-    /// origin, in f64) or else the cloud's own.
+    /// The library's generation options: these, the viewpoint checked.
     ///
     /// # Errors
     /// A malformed viewpoint.
-    pub fn params(&self, cloud: &PointCloud) -> Result<SplatParams> {
-        let viewpoint = if self.no_viewpoint {
-            None
-        } else {
-            self.viewpoint()?
-                .map(|v| cloud.local_viewpoint(v))
-                .or(cloud.viewpoint)
-        };
-        Ok(SplatParams {
-            viewpoint,
-            ..self.params_without_viewpoint()
-        })
-    }
-
-    /// The generation parameters the options give before a cloud is read
-    /// (tiled generation finds each tile's viewpoints itself): the options
-    /// given, defaults for the rest.
-    #[must_use]
-    pub fn params_without_viewpoint(&self) -> SplatParams {
-        let defaults = SplatParams::default();
-        SplatParams {
-            k: self.k.unwrap_or(defaults.k),
-            epsilon_rel: self.epsilon_rel.unwrap_or(defaults.epsilon_rel),
-            density: self.density.unwrap_or(defaults.density),
+    pub fn generation(&self) -> Result<GenerationOptions> {
+        Ok(GenerationOptions {
+            epsilon_rel: self.epsilon_rel,
+            k: self.k,
+            density: self.density,
             ellipses: self.ellipses,
-            color_fields: !self.flat_colors,
-            scan_viewpoints: !self.no_viewpoint,
-            thin: self.thin.unwrap_or(defaults.thin),
-            ..defaults
-        }
+            flat_colors: self.flat_colors,
+            viewpoint: self.viewpoint()?,
+            no_viewpoint: self.no_viewpoint,
+            thin: self.thin,
+        })
     }
 }
 
