@@ -90,25 +90,35 @@ impl Clip {
     }
 
     /// The same lines, in the normalised coordinates of the same splat
-    /// with its radii changed from `old` to `new` (`(r_u, r_v)`; e.g.
-    /// freespace shrinking a splat): the lines stay where they are on the
-    /// surface. A line `a u + b v <= d` is `a x / r_u + b y / r_v <= d` in
-    /// the plane; with `x = u' r_u'` it becomes `(a r_u'/r_u) u' +
-    /// (b r_v'/r_v) v' <= d`, renormalised to a unit `(a, b)`. A line the
-    /// change would make degenerate (zero or non-finite radii) is kept as
-    /// it was.
+    /// with its radii changed from `old` to `new` (`(r_u, r_v)`, the centre
+    /// kept): [`Clip::reframed`] with no shift and the radii's ratios.
     #[must_use]
     pub fn rescaled(&self, old: [f32; 2], new: [f32; 2]) -> Clip {
+        self.reframed([0.0, 0.0], [new[0] / old[0], new[1] / old[1]])
+    }
+
+    /// The same lines, in the normalised coordinates of the splat moved and
+    /// resized within its plane so that the old coordinates of a point are
+    /// `shift + scale * (u', v')` in the new ones (e.g. freespace shrinking
+    /// a splat away from a line of sight, which reframes its normal field
+    /// of eq. (4) the same way): the lines stay where they are on the
+    /// surface. `a u + b v <= d` becomes `(a s_u) u' + (b s_v) v' <= d - a
+    /// t_u - b t_v`, renormalised to a unit `(a, b)`. A line the change
+    /// would make degenerate (a zero or non-finite scale) is kept as it
+    /// was.
+    #[must_use]
+    pub fn reframed(&self, shift: [f32; 2], scale: [f32; 2]) -> Clip {
         let mut out = *self;
         for line in &mut out.lines[..usize::from(self.count)] {
-            let a = line.a * (new[0] / old[0]);
-            let b = line.b * (new[1] / old[1]);
+            let a = line.a * scale[0];
+            let b = line.b * scale[1];
+            let d = line.d - line.a * shift[0] - line.b * shift[1];
             let len = a.hypot(b);
-            if len > 0.0 && len.is_finite() {
+            if len > 0.0 && len.is_finite() && d.is_finite() {
                 *line = ClipLine {
                     a: a / len,
                     b: b / len,
-                    d: line.d / len,
+                    d: d / len,
                 };
             }
         }
@@ -179,5 +189,18 @@ mod tests {
         assert!((l.a * u2 + l.b * v2 - l.d).abs() < 1e-6);
         assert!((l.a.hypot(l.b) - 1.0).abs() < 1e-6);
         assert_eq!(Clip::NONE.rescaled(old, new), Clip::NONE);
+        // Moved and shrunk (as freespace does): old (u, v) = shift + 0.6 (u', v').
+        let (shift, k) = ([-0.3f32, 0.1f32], 0.6f32);
+        let moved = diag.reframed(shift, [k, k]).lines()[0];
+        for (u2, v2) in [(0.2f32, -0.4f32), (-0.5, 0.5), (0.9, 0.1)] {
+            let (u, v) = (shift[0] + k * u2, shift[1] + k * v2);
+            let before = diag.lines()[0];
+            let old_side = before.a * u + before.b * v - before.d;
+            let new_side = moved.a * u2 + moved.b * v2 - moved.d;
+            assert!(
+                (old_side - new_side * k).abs() < 1e-6,
+                "{old_side} {new_side}"
+            );
+        }
     }
 }
