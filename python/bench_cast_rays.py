@@ -8,7 +8,8 @@ needs the splatray wheel (scripts/python-package.sh) and the release
 binary (for `splatray sample`); Open3D is optional (a separate venv:
 `pip install open3d`), its row is left out when it does not import.
 Speeds are the best of --repeat runs, measured in one process; the
-overhead is the median ratio of Python and Rust calls made in turns.
+overhead is the median ratio of Python and Rust calls made in turns, in
+wall seconds and in the process's CPU seconds.
 """
 
 from __future__ import annotations
@@ -68,18 +69,23 @@ def main() -> None:
         ss = splatray.SplatScene(splats, backend)
         hits = np.isfinite(ss.cast_rays(rays)["t_hit"]).mean()
         # The Python call and the bare Rust call in turns: the overhead is
-        # the median of the pairs' ratios (a shared machine's load moves
-        # both alike within a pair).
-        pys, rusts = [], []
+        # the median of the pairs' ratios, of wall seconds and of the
+        # process's CPU seconds (which a shared machine's load moves less).
+        wall, cpu = [], []
         for _ in range(a.repeat):
-            pys.append(best(lambda: ss.cast_rays(rays), 1))
-            rusts.append(ss._cast_seconds(rays))
-        ratio = float(np.median(np.array(pys) / np.array(rusts)))
-        py, rust = min(pys), min(rusts)
-        print(f"splatray {backend:7s}: {a.rays / py / 1e6:6.2f} Mrays/s from Python, "
-              f"{a.rays / rust / 1e6:6.2f} Mrays/s in Rust (best of {a.repeat}); Python call overhead "
-              f"{100 * (ratio - 1):+.1f} % (median of {a.repeat} pairs: "
-              f"{', '.join(f'{p / r:.3f}' for p, r in zip(pys, rusts))}; hits {100 * hits:.1f} %)")
+            t0, c0 = time.perf_counter(), time.process_time()
+            ss.cast_rays(rays)
+            py = (time.perf_counter() - t0, time.process_time() - c0)
+            rust = ss._cast_seconds(rays)
+            wall.append((py[0], rust[0]))
+            cpu.append((py[1], rust[1]))
+        best_py, best_rust = min(p for p, _ in wall), min(r for _, r in wall)
+        print(f"splatray {backend:7s}: {a.rays / best_py / 1e6:6.2f} Mrays/s from Python, "
+              f"{a.rays / best_rust / 1e6:6.2f} Mrays/s in Rust (best of {a.repeat}; hits {100 * hits:.1f} %)")
+        for name, pairs in (("wall", wall), ("cpu", cpu)):
+            ratios = [p / r for p, r in pairs]
+            print(f"    Python call overhead, {name} seconds: {100 * (float(np.median(ratios)) - 1):+.1f} % "
+                  f"(median of {a.repeat} pairs: {', '.join(f'{x:.3f}' for x in ratios)})")
     try:
         import open3d as o3d
     except ImportError:
