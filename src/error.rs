@@ -105,6 +105,13 @@ macro_rules! wrap {
 
 wrap!(IoError => Io, EmbreeError => Embree, GenerateError => Generate, TooLarge => Memory);
 
+/// An unusable environment variable is invalid input, its line unchanged.
+impl From<crate::config::ConfigError> for Error {
+    fn from(e: crate::config::ConfigError) -> Error {
+        Error::Invalid(e.0)
+    }
+}
+
 impl From<String> for Error {
     fn from(s: String) -> Error {
         Error::Invalid(s)

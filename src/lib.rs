@@ -4,6 +4,7 @@
 //! octree and Embree 4 user-geometry discs — feeding one shading path.
 
 pub mod accel;
+pub mod config;
 pub mod embree;
 pub mod error;
 pub mod freespace;
@@ -22,5 +23,6 @@ pub mod splat;
 pub mod terrain;
 pub mod tiled;
 pub mod validate;
+pub mod workflow;
 
 pub use error::{Error, Result};

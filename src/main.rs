@@ -169,7 +169,7 @@ fn info() -> Result<()> {
         .collect();
     println!(
         "simd     {} (the octree's leaf filter; this CPU runs: {}; set {} to choose)",
-        splatray::simd::active(),
+        splatray::config::current().simd,
         paths.join(" "),
         splatray::simd::SIMD_VAR
     );
@@ -187,10 +187,12 @@ fn info() -> Result<()> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    // An unusable SPLATRAY_SIMD is refused before any work.
-    let result = splatray::simd::configured()
-        .and_then(|_| splatray::accel::packets_configured())
-        .and_then(|_| match cli.command {
+    // The environment is read once, here: an unusable SPLATRAY_SIMD or
+    // SPLATRAY_PACKETS is refused before any work.
+    let result = splatray::config::Config::from_env()
+        .and_then(splatray::config::Config::install)
+        .map_err(splatray::Error::from)
+        .and_then(|()| match cli.command {
             Command::Info => info(),
             Command::Render(args) => cli::render::run(&args),
             Command::Compare(args) => cli::compare::run(&args),

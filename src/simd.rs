@@ -14,13 +14,14 @@
 //!
 //! The path is AVX2 where the CPU runs it ([`default_path`] says why not
 //! AVX-512), or the one named by [`SIMD_VAR`] (`portable`, `avx2`,
-//! `avx512`); an octree can also be built
+//! `avx512`), read once with the rest of the process's configuration by
+//! `crate::config` (this module reads no environment); an octree can also
+//! be built
 //! for a given path ([`crate::accel::octree::OctreeParams::simd`]), which is
 //! how the registry's `octree-<path>` variants force each one.
 
-use std::sync::OnceLock;
-
-/// The environment variable that forces a path for the whole process.
+/// The environment variable that forces a path for the whole process
+/// (read by `crate::config`).
 pub const SIMD_VAR: &str = "SPLATRAY_SIMD";
 
 /// Lanes of one disc pack: eight `f32` per column.
@@ -98,42 +99,6 @@ pub fn default_path() -> Isa {
     } else {
         Isa::Portable
     }
-}
-
-/// The path [`SIMD_VAR`] asks for, checked against this CPU, or
-/// [`default_path`] when it is unset: a one-line error for a name that is
-/// not a path or a path this CPU cannot run.
-pub fn configured() -> crate::Result<Isa> {
-    let Ok(v) = std::env::var(SIMD_VAR) else {
-        return Ok(default_path());
-    };
-    let names = || {
-        available()
-            .iter()
-            .map(|i| i.name())
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
-    match Isa::parse(v.trim()) {
-        Some(i) if i.supported() => Ok(i),
-        Some(i) => Err(crate::Error::invalid(format!(
-            "{SIMD_VAR}={v}: this CPU does not run {i} (it runs: {})",
-            names()
-        ))),
-        None => Err(crate::Error::invalid(format!(
-            "{SIMD_VAR}={v}: not a SIMD path (expected one of: {})",
-            names()
-        ))),
-    }
-}
-
-/// The path of this process: [`configured`], read once; an unusable
-/// [`SIMD_VAR`] falls back to [`default_path`] here (the command line
-/// refuses it in one line before any work).
-#[must_use]
-pub fn active() -> Isa {
-    static ACTIVE: OnceLock<Isa> = OnceLock::new();
-    *ACTIVE.get_or_init(|| configured().unwrap_or_else(|_| default_path()))
 }
 
 /// Eight discs stored column by column: centre, normal, `u / r_u`,

@@ -158,34 +158,15 @@ pub trait Backend: Send + Sync {
     }
 }
 
-/// The environment variable that forces the integrator's batches on
-/// (`on`) or off (`off`) whatever the backend prefers
-/// ([`Backend::prefers_packets`]); unset: the backend's preference.
-pub const PACKETS_VAR: &str = "SPLATRAY_PACKETS";
-
-/// What [`PACKETS_VAR`] asks for: `Some(true)` for `on`, `Some(false)` for
-/// `off`, `None` when unset; a one-line error for any other value.
-pub fn packets_configured() -> crate::Result<Option<bool>> {
-    match std::env::var(PACKETS_VAR) {
-        Err(_) => Ok(None),
-        Ok(v) => match v.trim() {
-            "on" => Ok(Some(true)),
-            "off" => Ok(Some(false)),
-            _ => Err(crate::Error::invalid(format!(
-                "{PACKETS_VAR}={v}: expected on or off"
-            ))),
-        },
-    }
-}
+pub use crate::config::PACKETS_VAR;
 
 /// Whether the integrator hands `backend` coherent batches: [`PACKETS_VAR`]
-/// when set (an unusable value is refused by the command line before any
-/// work, and means unset here), else [`Backend::prefers_packets`].
+/// when set (`crate::config::current`; an unusable value is refused by
+/// the command line before any work), else [`Backend::prefers_packets`].
 #[must_use]
 pub fn use_packets(backend: &dyn Backend) -> bool {
-    packets_configured()
-        .ok()
-        .flatten()
+    crate::config::current()
+        .packets
         .unwrap_or_else(|| backend.prefers_packets())
 }
 

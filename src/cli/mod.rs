@@ -1,6 +1,7 @@
 //! Subcommands of the `splatray` binary (a module of the binary: the
 //! library does not depend on it).
 
+pub mod common;
 pub mod compare;
 pub mod export;
 pub mod plot;

@@ -1,5 +1,6 @@
 //! `splatray render`.
 
+use super::common::default_backend;
 use super::progress::ProgressLine;
 use super::view::SceneArgs;
 use super::{json_text, stage_text};
@@ -11,7 +12,7 @@ use splatray::render::output::{
 };
 use splatray::scene::Scene;
 use splatray::{Error, Result};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Options of `splatray render`.
 #[derive(Clone, Debug, clap::Args)]
@@ -76,11 +77,6 @@ pub fn band_rows(height: u32, (i, n): (u32, u32)) -> std::ops::Range<u32> {
     at(i)..at(i + 1)
 }
 
-/// The default backend: the registry's first.
-pub(crate) fn default_backend() -> String {
-    registry::names()[0].to_string()
-}
-
 /// The render report (JSON).
 #[derive(Debug, serde::Serialize)]
 pub struct RenderReport {
@@ -123,12 +119,6 @@ impl RenderReport {
             mrays_per_s: frame.rays.total() as f64 / frame.seconds.max(1e-9) / 1e6,
         }
     }
-}
-
-/// Writes `value` as pretty JSON to `path`, atomically.
-pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
-    splatray::io::write_text(path, &(super::json_text(value)? + "\n"))?;
-    Ok(())
 }
 
 /// Says where the splats are when no primary ray met any: the usual cause

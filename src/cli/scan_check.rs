@@ -1,13 +1,13 @@
 //! `splatray scan-check CLOUD [--viewpoint X,Y,Z] [--tolerance 0.01]
 //! [--holdout 0.1] [--report R.json]`: the scan as its own ground truth.
 
+use super::common::{SplatOptions, default_backend, write_json};
 use super::progress::ProgressLine;
-use super::render::write_json;
-use super::splat_cmd::SplatOptions;
-use splatray::io::{IoError, IoErrorKind, read_points};
+use splatray::Result;
 use splatray::render::output::check_writable;
-use splatray::validate::scan_check::{ScanCheckParams, scan_check};
-use splatray::{Error, Result};
+use splatray::validate::photo::PhotoReport;
+use splatray::validate::scan_check::ScanCheckReport;
+use splatray::workflow::scan_check::{ScanCheckOutcome, ScanCheckRequest, scan_check};
 use std::path::PathBuf;
 
 /// Arguments of `splatray scan-check`.
@@ -39,7 +39,7 @@ pub struct ScanCheckArgs {
     #[arg(long)]
     pub photo: bool,
     /// The backend the photo check renders with.
-    #[arg(long, default_value_t = super::render::default_backend())]
+    #[arg(long, default_value_t = default_backend())]
     pub backend: String,
 }
 
@@ -51,29 +51,31 @@ pub fn run(args: &ScanCheckArgs) -> Result<()> {
     if let Some(r) = &args.report {
         check_writable(r)?;
     }
-    let cloud = read_points(&args.input)?;
-    let splat = args.splat.params(&cloud)?;
-    if args.photo {
-        return photo(args, &splat);
-    }
-    if args.splat.no_viewpoint {
-        return Err("scan-check needs the scanner's viewpoint: drop --no-viewpoint".into());
-    }
-    let params = ScanCheckParams {
-        viewpoint: splat.viewpoint,
-        splat,
+    let req = ScanCheckRequest {
+        input: args.input.clone(),
+        generation: args.splat.generation()?,
         tolerance: args.tolerance,
         holdout: args.holdout,
         seed: args.seed,
+        photo: args.photo,
+        backend: args.backend.clone(),
     };
     let line = ProgressLine::new();
-    let r = scan_check(
-        &cloud,
-        &params,
-        Some(&|stage: &str, f: f64| line.update(stage, f)),
-    )
-    .map_err(|e| e.context(args.input.display()))?;
+    let outcome = scan_check(&req, Some(&|stage: &str, f: f64| line.update(stage, f)));
     line.finish();
+    let outcome = outcome?;
+    match &outcome {
+        ScanCheckOutcome::Lines(r) => print_lines(args, r),
+        ScanCheckOutcome::Photo(r) => print_photo(args, r),
+    }
+    if let Some(path) = &args.report {
+        write_json(path, &outcome)?;
+    }
+    Ok(())
+}
+
+/// The lines of sight's line, and the warnings.
+fn print_lines(args: &ScanCheckArgs, r: &ScanCheckReport) {
     for w in &r.generation.warnings {
         eprintln!("splatray: warning: {w}");
     }
@@ -103,38 +105,17 @@ pub fn run(args: &ScanCheckArgs) -> Result<()> {
              check nothing: give the scanner's position with --viewpoint X,Y,Z"
         );
     }
-    if let Some(path) = &args.report {
-        write_json(path, &r)?;
-    }
-    Ok(())
 }
 
-/// `scan-check --photo`.
-fn photo(args: &ScanCheckArgs, splat: &splatray::splat::SplatParams) -> Result<()> {
-    let name = args.input.display();
-    let bytes =
-        std::fs::read(&args.input).map_err(|e| IoError::new(&args.input, IoErrorKind::Io(e)))?;
-    let grid = splatray::io::read_organised(&bytes)
-        .map_err(|k| IoError::new(&args.input, k))?
-        .ok_or_else(|| {
-            Error::invalid(format!(
-                "{name}: --photo needs an organised cloud (a PCD with HEIGHT > 1 and colours)"
-            ))
-        })?;
-    let r = splatray::validate::photo::photo_check(
-        &grid,
-        splat,
-        args.holdout,
-        args.seed,
-        &args.backend,
-    )
-    .map_err(|e| e.context(&name))?;
+/// `scan-check --photo`'s line.
+fn print_photo(args: &ScanCheckArgs, r: &PhotoReport) {
     println!(
-        "{name}: photo check of the organised {}x{} capture: {} measured pixels, {} held out, {} splats \
+        "{}: photo check of the organised {}x{} capture: {} measured pixels, {} held out, {} splats \
          ({} with a linear colour field); \
          the splats cover {:.2} % of the held-out pixels and fill {:.2} % of the held-out empty ones; albedo \
          against the captured colours: PSNR {:.2} dB at full resolution, {:.2} dB at 1/2, {:.2} dB at 1/4 \
          (sensor fit residual {:.3} px)",
+        args.input.display(),
         r.width,
         r.height,
         r.measured,
@@ -148,8 +129,4 @@ fn photo(args: &ScanCheckArgs, splat: &splatray::splat::SplatParams) -> Result<(
         r.psnr[2],
         r.residual
     );
-    if let Some(p) = &args.report {
-        write_json(p, &r)?;
-    }
-    Ok(())
 }

@@ -5,10 +5,8 @@
 use super::progress::ProgressLine;
 use super::view::default_scene;
 use splatray::render::output::check_output_path;
-use splatray::scene::parse_scene_file;
-use splatray::validate::sweep::{
-    MODES, SweepPlan, SweepRow, csv_text, mode_name, pareto, run_sweep,
-};
+use splatray::validate::sweep::{MODES, SweepRow, csv_text, mode_name, pareto};
+use splatray::workflow::sweep::SweepRequest;
 use splatray::{Error, Result};
 use std::path::{Path, PathBuf};
 
@@ -59,18 +57,39 @@ fn check_csv_path(path: &Path) -> Result<()> {
 /// Runs `splatray sweep`: checks every output first, then measures (printing
 /// each figure as it is measured), then writes the CSV and the plot.
 pub fn run(args: &SweepArgs) -> Result<()> {
-    if !(5..=64).contains(&args.steps) {
-        return Err(Error::invalid(format!(
-            "--steps {} must be in 5..=64",
-            args.steps
-        )));
-    }
-    if args.width == 0 || args.height == 0 || args.width > 1 << 15 || args.height > 1 << 15 {
-        return Err(Error::invalid(format!(
-            "resolution {}x{} must be in 1..=32768",
-            args.width, args.height
-        )));
-    }
+    let req = SweepRequest {
+        scene: args.scene.clone().unwrap_or_else(default_scene),
+        width: args.width,
+        height: args.height,
+        steps: args.steps,
+        eps_coarse: args.eps_coarse,
+        eps_fine: args.eps_fine,
+    };
+    req.check()?;
+    check_outputs(args)?;
+    let prepared = req.prepare()?;
+    println!(
+        "{}: sweeping epsilon {} .. {} in {} steps, {}x{} pixels, shading {}",
+        req.scene.display(),
+        args.eps_coarse,
+        args.eps_fine,
+        args.steps,
+        args.width,
+        args.height,
+        MODES.map(mode_name).join(", ")
+    );
+    let line = ProgressLine::new();
+    let progress = |stage: &str, f: f64| line.update(stage, f);
+    let rows = prepared.run(Some(&progress), &mut |text| {
+        line.finish();
+        println!("{text}");
+    })?;
+    summary(&rows);
+    write_outputs(args, &rows)
+}
+
+/// The CSV and the plot can be written where asked.
+fn check_outputs(args: &SweepArgs) -> Result<()> {
     if let Some(c) = &args.csv {
         check_csv_path(c)?;
     }
@@ -83,42 +102,18 @@ pub fn run(args: &SweepArgs) -> Result<()> {
             )));
         }
     }
-    let plan = SweepPlan::geometric(
-        args.eps_coarse,
-        args.eps_fine,
-        args.steps,
-        args.width,
-        args.height,
-    )?;
-    let scene_path = args.scene.clone().unwrap_or_else(default_scene);
-    let file = parse_scene_file(&scene_path)?;
-    let base = scene_path.parent().unwrap_or(Path::new("."));
-    println!(
-        "{}: sweeping epsilon {} .. {} in {} steps, {}x{} pixels, shading {}",
-        scene_path.display(),
-        args.eps_coarse,
-        args.eps_fine,
-        args.steps,
-        args.width,
-        args.height,
-        MODES.map(mode_name).join(", ")
-    );
-    let line = ProgressLine::new();
-    let progress = |stage: &str, f: f64| line.update(stage, f);
-    let rows = run_sweep(&file, base, &plan, Some(&progress), &mut |text| {
-        line.finish();
-        println!("{text}");
-    })
-    .map_err(|e| e.context(scene_path.display()))?;
-    summary(&rows);
-    // The CSV and the plot are committed together: a failure in either
-    // leaves neither.
+    Ok(())
+}
+
+/// The CSV and the plot, committed together: a failure in either leaves
+/// neither.
+fn write_outputs(args: &SweepArgs, rows: &[SweepRow]) -> Result<()> {
     let mut batch = splatray::io::Batch::new();
     if let Some(c) = &args.csv {
-        super::stage_text(&mut batch, c, &csv_text(&rows))?;
+        super::stage_text(&mut batch, c, &csv_text(rows))?;
     }
     if let Some(p) = &args.plot {
-        super::plot::plot_sweep(&mut batch, &rows, p)?;
+        super::plot::plot_sweep(&mut batch, rows, p)?;
     }
     batch.commit()?;
     if let Some(c) = &args.csv {

@@ -157,17 +157,15 @@ impl fmt::Debug for Device {
 }
 
 /// The environment variable whose value, when set, is the configuration
-/// [`Device::new`] hands to `rtcNewDevice`: e.g. `isa=sse4.2`, `isa=avx2`,
-/// `isa=avx512` to force the kernels Embree runs (it otherwise picks the
-/// widest the CPU has, so float results of its native primitives differ in
-/// the last bits from machine to machine), or `threads=2`.
-pub const CONFIG_VAR: &str = "SPLATRAY_EMBREE_CONFIG";
+/// [`Device::new`] hands to `rtcNewDevice` (`crate::config::EMBREE_VAR`).
+pub use crate::config::EMBREE_VAR as CONFIG_VAR;
 
-/// The configuration [`Device::new`] uses: the value of [`CONFIG_VAR`], or
-/// the empty string (Embree's defaults) when it is unset or not UTF-8.
+/// The configuration [`Device::new`] uses: that of
+/// `crate::config::current` (the value of [`CONFIG_VAR`], read once), or
+/// the empty string (Embree's defaults) when it is unset.
 #[must_use]
 pub fn config_in_force() -> String {
-    std::env::var(CONFIG_VAR).unwrap_or_default()
+    crate::config::current().embree.clone()
 }
 
 /// The ISAs of Embree's kernels (the names its `isa=` option takes) that

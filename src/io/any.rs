@@ -25,11 +25,15 @@ pub enum CloudRead {
 /// a Gaussian layout is a Gaussian splat file, one with the splat
 /// properties a splat file ([`is_splat_ply`]); anything else is read as
 /// points ([`super::read_points`]). A PCD's organised grid (`HEIGHT` > 1)
-/// is parsed from the same bytes and given beside it.
+/// is parsed from the same bytes and given beside it. A folder is read as
+/// one cloud from its point files ([`super::read_folder`]).
 ///
 /// # Errors
 /// The reader's [`IoError`], naming the file.
 pub fn read_any(path: &Path) -> Result<(CloudRead, Option<Organised>), IoError> {
+    if path.is_dir() {
+        return Ok((CloudRead::Points(super::read_folder(path)?), None));
+    }
     let bytes = read_file(path)?;
     let first = &bytes[..bytes.len().min(4096)];
     let named = Format::from_extension(path);

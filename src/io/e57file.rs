@@ -9,7 +9,7 @@
 //! the file's colour limits) are sRGB, made linear, and kept when every
 //! scan has them. A panic inside the decoder becomes an error.
 
-use super::stream::{BATCH, PointBatch, StreamInfo};
+use super::batch::{BATCH, PointBatch, StreamInfo};
 use super::{IoErrorKind, PointCloud, cloud_from_world, srgb_to_linear};
 use crate::splat::Scans;
 use e57::{CartesianCoordinate, E57Reader};

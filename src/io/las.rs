@@ -3,6 +3,7 @@
 //! offset in f64 (georeferenced lidar keeps its precision until the cloud is
 //! re-centred), 16-bit colours where the point format has them.
 
+use super::batch::{BATCH, PointBatch, StreamInfo};
 use super::{IoErrorKind, PointCloud, cloud_from_world, srgb_to_linear};
 use glam::{DVec3, Vec3};
 
@@ -271,4 +272,45 @@ fn read_unchecked(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
         Ok(())
     })?;
     cloud_from_world(world, None, with_color.then_some(colors))
+}
+
+/// A LAS or LAZ file streamed from disk ([`stream_file`]): its points
+/// in batches of at most [`BATCH`], non-finite ones left out and counted.
+pub(crate) fn stream(
+    path: &std::path::Path,
+    each: &mut dyn FnMut(&PointBatch<'_>) -> Result<(), String>,
+) -> Result<StreamInfo, IoErrorKind> {
+    let mut info = StreamInfo {
+        streamed: true,
+        ..StreamInfo::default()
+    };
+    let mut world: Vec<DVec3> = Vec::with_capacity(BATCH);
+    let mut colors: Vec<Vec3> = Vec::with_capacity(BATCH);
+    let (_, with_color) = stream_file(path, &mut |(w, c)| {
+        for start in (0..w.len()).step_by(BATCH) {
+            let end = (start + BATCH).min(w.len());
+            world.clear();
+            colors.clear();
+            for i in start..end {
+                if !w[i].is_finite() {
+                    info.non_finite += 1;
+                    continue;
+                }
+                world.push(w[i]);
+                if let Some(c) = c {
+                    colors.push(c[i]);
+                }
+            }
+            info.points += world.len() as u64;
+            each(&PointBatch {
+                world: &world,
+                normals: None,
+                colors: c.is_some().then_some(&colors[..]),
+                scans: None,
+            })?;
+        }
+        Ok(())
+    })?;
+    info.colors = with_color;
+    Ok(info)
 }

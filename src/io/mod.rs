@@ -13,8 +13,11 @@
 
 mod any;
 mod atomic;
+mod batch;
 mod e57file;
 mod error;
+mod folder;
+mod format;
 mod gaussian;
 mod las;
 mod lzf;
@@ -22,6 +25,7 @@ mod organised;
 mod pcd;
 mod ply;
 mod sample;
+mod source;
 mod splat_ply;
 mod stream;
 mod xyz;
@@ -29,7 +33,10 @@ mod xyz;
 pub use crate::splat::PointCloud;
 pub use any::{CloudRead, is_splat_ply, read_any};
 pub use atomic::{Batch, write_atomic, write_bytes};
+pub use batch::{PointBatch, StreamInfo};
 pub use error::{IoError, IoErrorKind};
+pub use folder::{cloud_files, read_folder};
+pub use format::Format;
 pub use gaussian::{
     EXPORT_OPACITY, GaussianLayout, GaussianRead, MIN_OPACITY, RADIUS_PER_SIGMA, SH_C0,
     encode_gaussians, file_layout, parse_gaussians, read_gaussians, sniff_layout, write_gaussians,
@@ -38,11 +45,12 @@ pub use lzf::{LzfError, lzf_decompress};
 pub use organised::{Organised, Pinhole, grid_misses};
 pub use pcd::{encode_organised, read_organised};
 pub use sample::{MeshSampler, sample_mesh, write_sample_ply};
+pub use source::{STDIN, Source, is_piped};
 pub use splat_ply::{
     COLOR_FIELD_PROPS, SPLAT_ROW_BYTES, SplatSet, encode_splats, encode_splats_with, parse_splats,
     read_splats, splat_header, splat_header_with, write_splats,
 };
-pub use stream::{PointBatch, StreamInfo, stream_points};
+pub use stream::stream_points;
 
 use glam::{DVec3, Vec3};
 use std::path::Path;
@@ -61,70 +69,6 @@ pub struct Mesh {
     /// The positions are offsets from this point (read in f64 and
     /// re-centred, as a point cloud's: [`PointCloud::origin`]).
     pub origin: DVec3,
-}
-
-/// The point file formats understood by [`read_points`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Format {
-    /// Stanford PLY (ascii, binary little or big endian).
-    Ply,
-    /// PCL's PCD v0.7 (ascii, binary, binary_compressed).
-    Pcd,
-    /// Whitespace separated `x y z [nx ny nz]` text.
-    Xyz,
-    /// ASPRS LAS, or LAZ (LASzip-compressed LAS).
-    Las,
-    /// ASTM E57: several scans, each placed by its pose.
-    E57,
-}
-
-impl Format {
-    /// The format from the file extension (`.ply`, `.pcd`, `.xyz`, `.txt`,
-    /// `.las`, `.laz`, `.e57`, case-insensitive), or `None`.
-    #[must_use]
-    pub fn from_extension(path: &Path) -> Option<Format> {
-        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
-        match ext.as_str() {
-            "ply" => Some(Format::Ply),
-            "pcd" => Some(Format::Pcd),
-            "xyz" | "txt" => Some(Format::Xyz),
-            "las" | "laz" => Some(Format::Las),
-            "e57" => Some(Format::E57),
-            _ => None,
-        }
-    }
-
-    /// The format guessed from a file's first bytes, or `None`.
-    #[must_use]
-    pub fn sniff(head: &[u8]) -> Option<Format> {
-        if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
-            return Some(Format::Ply);
-        }
-        if head.starts_with(b"LASF") {
-            return Some(Format::Las);
-        }
-        if head.starts_with(e57file::MAGIC) {
-            return Some(Format::E57);
-        }
-        let text = String::from_utf8_lossy(head);
-        let first = text
-            .lines()
-            .map(str::trim)
-            .find(|l| !l.is_empty() && (!l.starts_with('#') || l.contains(".PCD")));
-        match first {
-            Some(l)
-                if l.contains(".PCD") || l.starts_with("VERSION") || l.starts_with("FIELDS") =>
-            {
-                Some(Format::Pcd)
-            }
-            Some(l) => {
-                let n = xyz::split_fields(l).count();
-                let numeric = xyz::split_fields(l).all(|t| t.parse::<f64>().is_ok());
-                (numeric && (n == 3 || n == 6)).then_some(Format::Xyz)
-            }
-            None => None,
-        }
-    }
 }
 
 /// The first 4 KiB of a file (to sniff its format), or `None` when it
@@ -179,7 +123,8 @@ pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
 }
 
 /// Read a point cloud from a `.ply`, `.pcd`, `.xyz`, `.txt`, `.las`, `.laz` or `.e57` file; files
-/// with another extension are recognised by their first bytes.
+/// with another extension are recognised by their first bytes; a folder is
+/// read as one cloud from its point files ([`read_folder`]).
 ///
 /// Points with a NaN or infinite coordinate are skipped and counted in
 /// [`PointCloud::skipped`]. The positions are offsets from the points'
@@ -203,6 +148,9 @@ pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
 /// std::fs::remove_file(&path).unwrap();
 /// ```
 pub fn read_points(path: &Path) -> Result<PointCloud, IoError> {
+    if path.is_dir() {
+        return read_folder(path);
+    }
     let bytes = read_file(path)?;
     let format = Format::from_extension(path)
         .or_else(|| Format::sniff(&bytes[..bytes.len().min(4096)]))
@@ -215,13 +163,7 @@ pub fn read_points(path: &Path) -> Result<PointCloud, IoError> {
 /// # Errors
 /// As [`read_points`], without the file's name.
 pub fn parse_points(bytes: &[u8], format: Format) -> Result<PointCloud, IoErrorKind> {
-    let cloud = match format {
-        Format::Ply => ply::read_cloud(bytes),
-        Format::Pcd => pcd::read_cloud(bytes),
-        Format::Xyz => xyz::read_cloud(bytes),
-        Format::Las => las::read_cloud(bytes),
-        Format::E57 => e57file::read_cloud(bytes),
-    }?;
+    let cloud = format.read_cloud(bytes)?;
     if cloud.is_empty() {
         let why = if cloud.skipped.is_empty() {
             "the file holds no points".to_string()

@@ -77,7 +77,7 @@ impl SweepPlan {
 }
 
 /// One backend's figures in one row of the sweep.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct BackendFigures {
     /// The backend's registry name.
     pub name: &'static str,
@@ -91,13 +91,15 @@ pub struct BackendFigures {
 
 /// One row of the sweep: one budget step in one shading mode, every figure
 /// measured in this run.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct SweepRow {
     /// Budget step, 0 = coarsest.
     pub step: usize,
     /// `ϵ` of the step (§2.1), fraction of the bounding-box diagonal.
     pub epsilon_rel: f32,
-    /// Shading mode (§4: flat, blended by eq. 5, Phong fields of eq. 4).
+    /// Shading mode (§4: flat, blended by eq. 5, Phong fields of eq. 4),
+    /// serialised by its name ([`mode_name`]).
+    #[serde(serialize_with = "serialize_mode")]
     pub shading: ShadingMode,
     /// Splats of the varied models (points and meshes).
     pub splats: usize,
@@ -118,6 +120,11 @@ impl SweepRow {
     pub fn reference(&self) -> &BackendFigures {
         &self.backends[0]
     }
+}
+
+/// A shading mode as its name, for a serialised [`SweepRow`].
+fn serialize_mode<S: serde::Serializer>(mode: &ShadingMode, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(mode_name(*mode))
 }
 
 fn psnr(p: Option<f64>) -> String {

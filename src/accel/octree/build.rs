@@ -76,7 +76,7 @@ pub(super) fn build<P: Primitive>(
     };
     let isa = match params.simd {
         Some(isa) if isa.supported() => isa,
-        _ => crate::simd::active(),
+        _ => crate::config::current().simd,
     };
     let mut nonempty = 0;
     let parts: Vec<Tree<P>> = staged

@@ -40,9 +40,13 @@ use std::path::{Path, PathBuf};
 
 /// Whether `path` names a point cloud rather than a scene file: a `.ply`,
 /// `.pcd`, `.xyz` or `.txt` extension, or (any extension but `.toml`) a file
-/// whose first bytes are PLY, PCD or XYZ.
+/// whose first bytes are PLY, PCD or XYZ; or a folder (of point files, read
+/// as one cloud: `crate::io::read_folder`).
 #[must_use]
 pub fn is_cloud_path(path: &Path) -> bool {
+    if path.is_dir() {
+        return true;
+    }
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
