@@ -7,11 +7,12 @@ use crate::arrays::{matrix, rows_f64, vector};
 use crate::err;
 use crate::splats::Splats;
 use glam::{DVec3, Vec3};
+use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use rayon::prelude::*;
 use splatray::accel::{Backend, CandidateHits, PACKET, Query, Ray};
-use splatray::render::integrator::{ShadeHit, SplatSurfaces, Surfaces};
+use splatray::render::integrator::{SplatSurfaces, Surfaces};
 use splatray::scene::Scene;
 use std::time::Instant;
 
@@ -50,50 +51,116 @@ impl SplatScene {
     }
 
     /// Checked rays in the scene's frame, and each direction's length
-    /// (`t` is reported in units of it, as Open3D does).
+    /// (`t` is reported in units of it, as Open3D does); converted in
+    /// parallel, straight from the array's memory when it is contiguous.
     fn rays(&self, rays: &Bound<'_, PyAny>) -> PyResult<(Vec<Ray>, Vec<f32>)> {
-        let v = rows_f64(rays, "rays", 6, true)?;
-        let o = self.to_internal;
-        let mut out = Vec::with_capacity(v.len() / 6);
-        let mut lens = Vec::with_capacity(v.len() / 6);
-        for (i, r) in v.chunks_exact(6).enumerate() {
-            let d = Vec3::new(r[3] as f32, r[4] as f32, r[5] as f32);
-            let len = d.length();
-            if !(len > 0.0 && len.is_finite()) {
-                return Err(PyValueError::new_err(format!(
-                    "rays: row {i} has a zero (or too small or large) direction"
-                )));
-            }
-            let origin = (DVec3::new(r[0], r[1], r[2]) - o).as_vec3();
-            if !origin.is_finite() {
-                return Err(PyValueError::new_err(format!(
-                    "rays: row {i}'s origin lies beyond single precision from the splats"
-                )));
-            }
-            out.push(Ray::new(origin, d));
-            lens.push(len);
+        if let Ok(a) = rays.extract::<PyReadonlyArray2<'_, f32>>()
+            && a.shape()[1] == 6
+            && let Ok(v) = a.as_slice()
+        {
+            return self.convert(v);
         }
-        Ok((out, lens))
+        if let Ok(a) = rays.extract::<PyReadonlyArray2<'_, f64>>()
+            && a.shape()[1] == 6
+            && let Ok(v) = a.as_slice()
+        {
+            return self.convert(v);
+        }
+        // Anything else: checked (and its error said) as any array.
+        self.convert(&rows_f64(rays, "rays", 6, true)?)
+    }
+
+    fn convert<T: Copy + Into<f64> + Sync>(&self, v: &[T]) -> PyResult<(Vec<Ray>, Vec<f32>)> {
+        let o = self.to_internal;
+        let out: Result<Vec<(Ray, f32)>, String> = v
+            .par_chunks_exact(6)
+            .enumerate()
+            .map(|(i, r)| {
+                let r: [f64; 6] = std::array::from_fn(|k| r[k].into());
+                if r.iter().any(|x| !x.is_finite()) {
+                    return Err(format!("rays: row {i} holds a NaN or infinite value"));
+                }
+                let d = Vec3::new(r[3] as f32, r[4] as f32, r[5] as f32);
+                let len = d.length();
+                if !(len > 0.0 && len.is_finite()) {
+                    return Err(format!(
+                        "rays: row {i} has a zero (or too small or large) direction"
+                    ));
+                }
+                let origin = (DVec3::new(r[0], r[1], r[2]) - o).as_vec3();
+                if !origin.is_finite() {
+                    return Err(format!(
+                        "rays: row {i}'s origin lies beyond single precision from the splats"
+                    ));
+                }
+                Ok((Ray::new(origin, d), len))
+            })
+            .collect();
+        Ok(out.map_err(PyValueError::new_err)?.into_iter().unzip())
     }
 }
 
-/// The resolved hit of every ray (`None`: a miss), as the renderer's
-/// camera rays are resolved: in packets of [`PACKET`] when the backend
-/// prefers them (the same hits either way), in parallel.
-pub fn cast(surfaces: &SplatSurfaces<'_>, rays: &[Ray], out: &mut [Option<ShadeHit>]) {
+/// What `cast_rays` returns, filled by [`cast`].
+pub struct Hits {
+    /// Distance in units of the direction's length (inf: a miss).
+    pub t: Vec<f32>,
+    /// Splat id (`u32::MAX`: a miss).
+    pub ids: Vec<u32>,
+    /// Shading normal, 3 per ray (0: a miss).
+    pub normals: Vec<f32>,
+}
+
+impl Hits {
+    /// Room for `n` rays.
+    pub fn new(n: usize) -> Hits {
+        Hits {
+            t: vec![0.0; n],
+            ids: vec![0; n],
+            normals: vec![0.0; 3 * n],
+        }
+    }
+}
+
+/// The resolved hit of every ray, as the renderer's camera rays are
+/// resolved: in packets of [`PACKET`] when the backend prefers them (the
+/// same hits either way), in parallel; `lens` are the directions' lengths
+/// `t` is divided by.
+pub fn cast(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: &mut Hits) {
     let xi = surfaces.scene.options.scale.xi;
     let packets = surfaces.packets();
     rays.par_chunks(CHUNK)
-        .zip(out.par_chunks_mut(CHUNK))
-        .for_each(|(rays, out)| {
+        .zip(lens.par_chunks(CHUNK))
+        .zip(out.t.par_chunks_mut(CHUNK))
+        .zip(out.ids.par_chunks_mut(CHUNK))
+        .zip(out.normals.par_chunks_mut(3 * CHUNK))
+        .for_each(|((((rays, lens), t), ids), normals)| {
             let mut hits: [CandidateHits; PACKET] = std::array::from_fn(|_| CandidateHits::new(xi));
-            if packets {
-                for (r, o) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
-                    surfaces.hits(r, &mut hits, o);
+            let mut found = [None; PACKET];
+            for (k, r) in rays.chunks(PACKET).enumerate() {
+                let found = &mut found[..r.len()];
+                if packets {
+                    surfaces.hits(r, &mut hits, found);
+                } else {
+                    for (ray, f) in r.iter().zip(found.iter_mut()) {
+                        *f = surfaces.hit(ray, None, &mut hits[0]);
+                    }
                 }
-            } else {
-                for (r, o) in rays.iter().zip(out.iter_mut()) {
-                    *o = surfaces.hit(r, None, &mut hits[0]);
+                for (j, f) in found.iter().enumerate() {
+                    let i = k * PACKET + j;
+                    let (tt, id, n) = match f {
+                        None => (f32::INFINITY, u32::MAX, [0.0; 3]),
+                        Some(h) => {
+                            let l = lens[i];
+                            (
+                                if l == 1.0 { h.t } else { h.t / l },
+                                h.id,
+                                h.normal.to_array(),
+                            )
+                        }
+                    };
+                    t[i] = tt;
+                    ids[i] = id;
+                    normals[3 * i..3 * i + 3].copy_from_slice(&n);
                 }
             }
         });
@@ -152,25 +219,15 @@ impl SplatScene {
         rays: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let (rays, lens) = self.rays(rays)?;
-        let (t, ids, normals) = py.detach(|| {
-            let mut out = vec![None; rays.len()];
-            cast(&self.surfaces(), &rays, &mut out);
-            let t: Vec<f32> = out
-                .iter()
-                .zip(&lens)
-                .map(|(h, l)| h.map_or(f32::INFINITY, |h| if *l == 1.0 { h.t } else { h.t / l }))
-                .collect();
-            let ids: Vec<u32> = out.iter().map(|h| h.map_or(u32::MAX, |h| h.id)).collect();
-            let normals: Vec<f32> = out
-                .iter()
-                .flat_map(|h| h.map_or([0.0; 3], |h| h.normal.to_array()))
-                .collect();
-            (t, ids, normals)
+        let out = py.detach(|| {
+            let mut out = Hits::new(rays.len());
+            cast(&self.surfaces(), &rays, &lens, &mut out);
+            out
         });
         let d = pyo3::types::PyDict::new(py);
-        d.set_item("t_hit", vector(py, t))?;
-        d.set_item("splat_ids", vector(py, ids))?;
-        d.set_item("normals", matrix(py, 3, normals))?;
+        d.set_item("t_hit", vector(py, out.t))?;
+        d.set_item("splat_ids", vector(py, out.ids))?;
+        d.set_item("normals", matrix(py, 3, out.normals))?;
         Ok(d.into_any())
     }
 
@@ -252,14 +309,21 @@ impl SplatScene {
     }
 
     /// Seconds the Rust call of `cast_rays` takes on `rays`, without the
-    /// conversion of arrays in and out (the benchmark's reference).
-    fn _cast_seconds(&self, py: Python<'_>, rays: &Bound<'_, PyAny>) -> PyResult<f64> {
-        let (rays, _) = self.rays(rays)?;
+    /// conversion of arrays in and out (the benchmark's reference): wall
+    /// seconds and the process's CPU seconds.
+    fn _cast_seconds(&self, py: Python<'_>, rays: &Bound<'_, PyAny>) -> PyResult<(f64, f64)> {
+        let (rays, lens) = self.rays(rays)?;
         Ok(py.detach(|| {
-            let mut out = vec![None; rays.len()];
-            let t0 = Instant::now();
-            cast(&self.surfaces(), &rays, &mut out);
-            t0.elapsed().as_secs_f64()
+            let mut out = Hits::new(rays.len());
+            let (t0, c0) = (Instant::now(), process_cpu());
+            cast(&self.surfaces(), &rays, &lens, &mut out);
+            (t0.elapsed().as_secs_f64(), process_cpu() - c0)
         }))
     }
+}
+
+/// The process's CPU seconds (all threads).
+fn process_cpu() -> f64 {
+    let t = rustix::time::clock_gettime(rustix::time::ClockId::ProcessCPUTime);
+    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
 }
