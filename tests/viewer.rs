@@ -42,6 +42,11 @@ fn settle(b: &mut Browser, what: &str) {
 /// `splatray render SCENE -o OUT` of the page's saved scene `text`: the
 /// PNG's bytes.
 fn render_saved(dir: &Path, name: &str, text: &str) -> Vec<u8> {
+    render_saved_with(dir, name, text, "octree")
+}
+
+/// [`render_saved`] with `--backend backend`.
+fn render_saved_with(dir: &Path, name: &str, text: &str, backend: &str) -> Vec<u8> {
     let scene = dir.join(format!("{name}.toml"));
     let out = dir.join(format!("{name}.png"));
     std::fs::write(&scene, text).unwrap();
@@ -50,6 +55,7 @@ fn render_saved(dir: &Path, name: &str, text: &str) -> Vec<u8> {
         .arg(&scene)
         .arg("-o")
         .arg(&out)
+        .args(["--backend", backend])
         .output()
         .unwrap();
     assert!(
@@ -176,13 +182,42 @@ fn the_viewer_in_chromium() {
     assert_eq!(hits.len(), 2);
     assert_eq!(hits[0]["hit"]["splat"], hits[1]["hit"]["splat"], "{pick}");
 
+    // The key light (the bunny's directional light) aimed from the page:
+    // new frames, another image.
+    let n = frames(&mut b);
+    b.eval(
+        "(() => { const a = document.getElementById('laz'); a.value = 60; \
+         a.dispatchEvent(new Event('input')); })()",
+    );
+    b.wait_for(
+        &format!("viewer.frames.length > {n} && viewer.frames.at(-1).stage === 'refined'"),
+        T,
+        "the frames with the key light aimed",
+    );
+    assert!(
+        bytes_of(&mut b, "viewer.lastRefined.bytes") != octree_refined,
+        "the key light moved, the image did not"
+    );
+
     // Save scene, then `splatray render`: the page's frames byte for byte
-    // (the refined frame, which the page shows, and the full one).
+    // (the refined frame, which the page shows, and the full one), the
+    // key light aimed as the page aimed it.
     let dir = TempDir::new("viewer");
     b.eval("viewer.sceneText = null; document.getElementById('savescene').click()");
     b.wait_for("viewer.sceneText !== null", T, "the saved scene");
     let text = b.eval("viewer.sceneText").as_str().unwrap().to_string();
     assert!(text.contains("spp = 16"), "{text}");
+    let key = b.eval("viewer.frames.length && keyDirection(60, 45)");
+    let key: Vec<String> = key
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.to_string())
+        .collect();
+    assert!(
+        text.contains(&format!("direction = [{}]", key.join(", "))),
+        "the key light {key:?} is not in the saved scene:\n{text}"
+    );
     assert!(
         render_saved(&dir.0, "refined", &text) == bytes_of(&mut b, "viewer.lastRefined.bytes"),
         "`splatray render` of the saved scene differs from the page's refined frame:\n{text}"
@@ -449,6 +484,14 @@ fn clouds_save_the_scene_of_their_frames() {
         assert!(
             moved != full,
             "{cloud}: the moved camera shows the same image"
+        );
+        // A bad key light is refused and the view kept.
+        s.send(serde_json::json!({"type": "light", "direction": [0, 0, 0]}));
+        assert!(
+            s.text("error")["message"]
+                .as_str()
+                .unwrap()
+                .contains("non-zero")
         );
         s.send(serde_json::json!({"type": "save_scene"}));
         let text = s.text("scene")["text"].as_str().unwrap().to_string();

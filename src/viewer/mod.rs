@@ -3,8 +3,8 @@
 //!
 //! An HTTP server on tokio (axum) serves one page (plain HTML and
 //! JavaScript, [`page`]) and a WebSocket per page. The page sends JSON
-//! requests (a camera, a backend, a shading mode, an AOV, a pick, a diff,
-//! "save scene"); the server answers with frames — a binary message: a
+//! requests (a camera, a backend, a shading mode, an AOV, the key light, a
+//! pick, a diff, "save scene"); the server answers with frames — a binary message: a
 //! little-endian `u32` header length, a JSON header, PNG bytes — and JSON
 //! messages. Each camera is rendered as a preview (a quarter of the
 //! resolution, one sample), then the full-quality frame (the bytes
@@ -84,6 +84,8 @@ enum Request {
     Shading { mode: String },
     /// What to show: rgb, depth, normal, splat, albedo.
     Show { show: Show },
+    /// The key light's direction of travel (`null`: the scene's own).
+    Light { direction: Option<[f64; 3]> },
     /// The backends' full frames compared.
     Diff,
     /// One pixel of the full frame.
@@ -100,6 +102,7 @@ struct ViewState {
     camera: ViewCamera,
     backend: String,
     shading: Option<ShadingMode>,
+    key: Option<[f64; 3]>,
     show: Show,
 }
 
@@ -247,6 +250,7 @@ async fn session(mut socket: WebSocket, app: Arc<App>) {
         camera: src.initial,
         backend: registry_default(),
         shading: None,
+        key: None,
         show: Show::Rgb,
     };
     let names: Vec<&str> = crate::accel::registry::renderers()
@@ -357,7 +361,7 @@ fn request(app: &App, s: &ViewState) -> Result<RenderRequest> {
     let spp = app.source.spp();
     Ok(RenderRequest {
         camera_id: s.camera_id,
-        text: app.source.text(&s.camera, spp, s.shading)?,
+        text: app.source.text(&s.camera, spp, s.shading, s.key)?,
         backend: s.backend.clone(),
         shading: s.shading,
         show: s.show,
@@ -399,6 +403,12 @@ fn handle(
             };
         }
         Request::Show { show } => state.show = show,
+        Request::Light { direction } => {
+            // Checked before it is kept: a bad one leaves the view as it was.
+            app.source
+                .text(&state.camera, app.source.spp(), state.shading, direction)?;
+            state.key = direction;
+        }
         Request::Diff => {
             queue_render(app, sess, state, Kind::Diff);
             return Ok(None);
@@ -412,7 +422,9 @@ fn handle(
             if spp == 0 || spp > 4096 {
                 return Err(Error::invalid(format!("spp {spp} must be in 1..=4096")));
             }
-            let text = app.source.text(&state.camera, spp, state.shading)?;
+            let text = app
+                .source
+                .text(&state.camera, spp, state.shading, state.key)?;
             return Ok(Some(
                 json!({"type": "scene", "camera": state.camera_id, "text": text}).to_string(),
             ));

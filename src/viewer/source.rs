@@ -298,13 +298,65 @@ impl Source {
         }
     }
 
-    /// The scene text of `cam` rendered with `spp` samples and `shading`
-    /// (`None`: the input's own): the text "save scene" gives, and the one
-    /// the viewer reads its camera from.
+    /// The scene text of `cam` rendered with `spp` samples, `shading`
+    /// (`None`: the input's own) and the key light (the first directional
+    /// light) travelling along `key` (`None`: as the input has it): the
+    /// text "save scene" gives, and the one the viewer reads its camera and
+    /// lights from.
     ///
     /// # Errors
-    /// A camera that fails [`ViewCamera::check`]; a path not UTF-8.
-    pub fn text(&self, cam: &ViewCamera, spp: u32, shading: Option<ShadingMode>) -> Result<String> {
+    /// A camera that fails [`ViewCamera::check`]; a `key` that is not a
+    /// finite non-zero vector, or a scene without a directional light; a
+    /// path not UTF-8.
+    pub fn text(
+        &self,
+        cam: &ViewCamera,
+        spp: u32,
+        shading: Option<ShadingMode>,
+        key: Option<[f64; 3]>,
+    ) -> Result<String> {
+        let text = self.view_text(cam, spp, shading)?;
+        let Some(dir) = key else {
+            return Ok(text);
+        };
+        let d = DVec3::from(dir);
+        if !d.is_finite() || d.length() == 0.0 {
+            return Err(Error::invalid(
+                "light: the direction must be a finite, non-zero vector",
+            ));
+        }
+        // The text's leading comments kept, its tables re-written with the
+        // key light aimed.
+        let head: String = text
+            .lines()
+            .take_while(|l| l.starts_with('#') || l.is_empty())
+            .map(|l| format!("{l}\n"))
+            .collect();
+        let mut t: toml::Table = text.parse().map_err(|e: toml::de::Error| Error::other(e))?;
+        let light = t
+            .get_mut("light")
+            .and_then(toml::Value::as_array_mut)
+            .and_then(|ls| {
+                ls.iter_mut()
+                    .filter_map(toml::Value::as_table_mut)
+                    .find(|l| l.get("kind").and_then(toml::Value::as_str) == Some("directional"))
+            })
+            .ok_or_else(|| Error::invalid("light: the scene has no directional light to aim"))?;
+        let round = |x: f64| (x * 1e4).round() / 1e4;
+        let d = d.normalize();
+        light.insert(
+            "direction".into(),
+            toml::Value::Array([d.x, d.y, d.z].map(|x| round(x).into()).to_vec()),
+        );
+        Ok(head + &toml::to_string(&t).map_err(Error::other)?)
+    }
+
+    fn view_text(
+        &self,
+        cam: &ViewCamera,
+        spp: u32,
+        shading: Option<ShadingMode>,
+    ) -> Result<String> {
         cam.check()?;
         match &self.kind {
             Kind::Cloud {

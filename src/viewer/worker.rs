@@ -226,7 +226,11 @@ impl Worker {
     /// scene's lights read back too, and the shading asked for applied.
     fn setup(&mut self, req: &RenderRequest) -> Result<Camera> {
         let file = parse_scene_str(&req.text)?;
-        let cam = scene_camera(&file.camera, self.scene.shift, self.scene.offset)?;
+        // As `render` sets a scene up (`Scene::set_view` after the load, which
+        // re-forms the image plane): the same camera to the last bit.
+        self.scene.camera = scene_camera(&file.camera, self.scene.shift, self.scene.offset)?;
+        self.scene.set_view(None, None, None, None)?;
+        let cam = self.scene.camera;
         // A cloud's headlight and key light follow its camera.
         self.scene.lights = scene_lights(&file.lights, self.scene.shift, self.scene.offset)?;
         if self.shading != req.shading {
@@ -324,10 +328,13 @@ impl Worker {
         let preview = self.scene.camera;
         let mut stages = vec![("preview", preview), ("full", full)];
         if req.refine_spp > full.spp {
-            self.scene.camera = full;
-            self.scene
-                .set_view(None, None, Some(req.refine_spp), None)?;
-            stages.push(("refined", self.scene.camera));
+            // Only the samples change (`set_view` would re-form the image
+            // plane a second time, which `render` of the text does not).
+            let refined = Camera {
+                spp: req.refine_spp,
+                ..full
+            };
+            stages.push(("refined", refined));
         }
         for (stage, cam) in stages {
             match self.frame(job, cam, &req.backend)? {

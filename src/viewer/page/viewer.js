@@ -112,6 +112,25 @@ function setFov(f) {
   setCamera(c);
 }
 
+// The key light's direction of travel for azimuth `az` and elevation `el`
+// (degrees) about the first view's up axis, azimuth 0 from the side the
+// first view looks from.
+function keyDirection(az, el) {
+  const c = V.hello.camera;
+  const u = norm(c.up);
+  const f = sub(c.at, c.from);
+  const fp = norm(sub(f, mul(u, dot(f, u))));
+  const s = cross(fp, u);
+  const a = (az * Math.PI) / 180, e = (el * Math.PI) / 180;
+  const from = add(mul(add(mul(fp, -Math.cos(a)), mul(s, Math.sin(a))), Math.cos(e)), mul(u, Math.sin(e)));
+  return from.map((x) => -Math.round(x * 1e4) / 1e4);
+}
+
+function aimLight() {
+  send({ type: "light", direction: keyDirection(Number($("laz").value), Number($("lel").value)) });
+}
+V.aimLight = aimLight;
+
 function sensorView() {
   if (V.hello.sensor) setCamera(Object.assign({}, V.hello.sensor));
 }
@@ -201,9 +220,14 @@ function connect() {
   const ws = new WebSocket(`ws://${location.host}/ws`);
   ws.binaryType = "arraybuffer";
   V.ws = ws;
+  // Messages are handled one after the other, in the order they came: a
+  // frame's decoding is asynchronous, and a later frame must not be drawn
+  // (or kept) before an earlier one.
+  let chain = Promise.resolve();
   ws.onmessage = (e) => {
-    if (typeof e.data === "string") onText(JSON.parse(e.data));
-    else onFrame(e.data);
+    chain = chain
+      .then(() => (typeof e.data === "string" ? onText(JSON.parse(e.data)) : onFrame(e.data)))
+      .catch((err) => { V.errors.push(String(err)); $("err").textContent = "page error: " + err; });
   };
   ws.onclose = () => { $("err").textContent = "disconnected from the server"; };
 }
@@ -280,6 +304,9 @@ $("shading").addEventListener("change", (e) => send({ type: "shading", mode: e.t
 $("show").addEventListener("change", (e) => send({ type: "show", show: e.target.value }));
 $("fov").addEventListener("input", (e) => setFov(Number(e.target.value)));
 $("fit").addEventListener("click", fit);
+$("laz").addEventListener("input", aimLight);
+$("lel").addEventListener("input", aimLight);
+$("lreset").addEventListener("click", () => send({ type: "light", direction: null }));
 $("sensor").addEventListener("click", sensorView);
 $("diff").addEventListener("click", () => send({ type: "diff" }));
 $("savescene").addEventListener("click", () => {
