@@ -319,6 +319,20 @@ fn backends_over<P: Primitive>(prims: &[P], label: &str, unpacked_label: &str) -
     }
 }
 
+/// The clip line of splat `s` at the line through `p0` in its plane that
+/// keeps the side away from `m` (a unit direction in the plane, pointing
+/// off the face): `(p - p0) · m <= 0`, in the splat's normalised
+/// coordinates (`p = c + r_u u U + r_v v V`).
+pub fn clip_at(s: &Splat, p0: Vec3, m: Vec3) -> ClipLine {
+    let (a, b) = (s.u_axis.dot(m) * s.radii.x, s.v_axis.dot(m) * s.radii.y);
+    let len = a.hypot(b);
+    ClipLine {
+        a: a / len,
+        b: b / len,
+        d: -(s.center - p0).dot(m) / len,
+    }
+}
+
 /// Clips about a third of `splats` with one line and a sixth with two
 /// (a corner), each line at a random angle in the splat's plane and a
 /// random offset in `[-0.4, 0.6]` of the radii, so rays meet the

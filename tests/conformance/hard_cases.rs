@@ -522,3 +522,222 @@ fn empty_scene_is_never_hit() {
         }
     }
 }
+
+/// A clipped splat, a corner splat and neighbours so the trees have
+/// cells: rays through the clipped-away part miss, rays within 1e-5 of a
+/// clip line hit on its kept side only (the side decided in f64), rays
+/// exactly at the line agree on every backend, and at a corner only the
+/// quadrant both lines keep is hit.
+#[test]
+fn clipped_away_parts_lines_and_corners() {
+    let n = Vec3::new(0.2, -0.3, 1.0).normalize();
+    let edge = Splat::disc(Vec3::new(0.3, 0.1, -0.2), n, 0.8).unwrap();
+    let s = std::f32::consts::FRAC_1_SQRT_2;
+    let line = splatray::splat::ClipLine {
+        a: s,
+        b: s,
+        d: 0.25,
+    };
+    let edge = Splat {
+        clip: splatray::splat::Clip::one(line),
+        radii: Vec2::new(0.8, 0.5),
+        ..edge
+    };
+    let corner = Splat {
+        center: Vec3::new(3.0, 0.2, 0.1),
+        clip: splatray::splat::Clip::two(
+            splatray::splat::ClipLine {
+                a: 1.0,
+                b: 0.0,
+                d: 0.1,
+            },
+            splatray::splat::ClipLine {
+                a: 0.0,
+                b: -1.0,
+                d: 0.2,
+            },
+        ),
+        ..edge
+    };
+    let mut splats = vec![edge, corner];
+    splats.extend(blobby_splats(400, 5).into_iter().map(|mut s| {
+        s.center += Vec3::new(0.0, 0.0, 5.0);
+        s
+    }));
+    let b = backends(&splats);
+    let xi = SceneScale::from_diagonal(diagonal(&splats)).xi;
+    let f64v = |v: Vec3| DVec3::new(v.x.into(), v.y.into(), v.z.into());
+    // A ray at normalised (u, v) of splat `id`, tilted, and where the f32
+    // ray meets the f32 disc in f64.
+    let ray_at = |id: usize, u: f64, v: f64, k: usize| {
+        let sp = &splats[id];
+        let p = f64v(sp.center)
+            + f64v(sp.u_axis) * (u * f64::from(sp.radii.x))
+            + f64v(sp.v_axis) * (v * f64::from(sp.radii.y));
+        let phi = k as f64 * 0.7;
+        let tilt = f64v(sp.u_axis) * phi.cos() + f64v(sp.v_axis) * phi.sin();
+        let dir = (-f64v(sp.normal) * 0.8 + tilt * 0.6).normalize();
+        let o = p - dir * 1.5;
+        let ray = Ray {
+            origin: o.as_vec3(),
+            dir: dir.as_vec3(),
+        };
+        let d = sp.disc_geometry();
+        let (ro, rd) = (f64v(ray.origin), f64v(ray.dir));
+        let t = f64v(d.normal).dot(f64v(d.center) - ro) / f64v(d.normal).dot(rd);
+        let rel = ro + rd * t - f64v(d.center);
+        (ray, rel.dot(f64v(d.u_scaled)), rel.dot(f64v(d.v_scaled)))
+    };
+    let hits_splat = |ray: &Ray, id: u32, what: &str| {
+        let h = windows(&b, &splats, &q(ray.origin, ray.dir), xi, what);
+        let hit = h.as_slice().iter().any(|c| c.id == id);
+        for backend in &b.tested {
+            assert_eq!(
+                backend.occluded(ray, 0.0, 3.0),
+                hit,
+                "{} occluded, {what}, ray {ray:?}",
+                backend.name()
+            );
+        }
+        hit
+    };
+    let (l, ld) = (f64::from(line.a), f64::from(line.d));
+    let mut near_line = 0;
+    for k in 0..24 {
+        // Along the line (its direction (-b, a)), at offsets across it.
+        let along = (k as f64 / 23.0 - 0.5) * 1.0;
+        let foot = (l * ld - l * along, l * ld + l * along);
+        // Clipped away, well past the line but on the disc.
+        let (ray, u, v) = ray_at(0, foot.0 + 0.3 * l, foot.1 + 0.3 * l, k);
+        assert!(u * u + v * v < 1.0, "set-up: on the disc");
+        assert!(
+            !hits_splat(&ray, 0, "clipped-away part"),
+            "ray {ray:?} at ({u}, {v})"
+        );
+        // Kept, well inside.
+        let (ray, u, v) = ray_at(0, foot.0 - 0.3 * l, foot.1 - 0.3 * l, k);
+        assert!(
+            hits_splat(&ray, 0, "kept part"),
+            "ray {ray:?} at ({u}, {v})"
+        );
+        // Grazing the line: 1e-5 either side, decided in f64.
+        for off in [-1e-5f64, 1e-5] {
+            let (ray, u, v) = ray_at(0, foot.0 + off * l, foot.1 + off * l, k);
+            let side = l * u + l * v - ld;
+            if side.abs() < 3e-6 || u * u + v * v > 0.999 {
+                continue;
+            }
+            assert_eq!(
+                hits_splat(&ray, 0, "grazing the clip line"),
+                side < 0.0,
+                "ray {ray:?} at ({u}, {v}), side {side:e}"
+            );
+            near_line += 1;
+        }
+        // On the line itself: whatever f32 decides, every backend agrees
+        // (checked by `windows`).
+        let (ray, ..) = ray_at(0, foot.0, foot.1, k);
+        hits_splat(&ray, 0, "on the clip line");
+    }
+    assert!(near_line >= 30, "{near_line} rays beside the line");
+    // The corner keeps u <= 0.1 and v >= -0.2: one quadrant of four.
+    let mut quadrants = [0; 4];
+    for k in 0..8 {
+        for (i, (du, dv)) in [(-1.0, 1.0), (1.0, 1.0), (-1.0, -1.0), (1.0, -1.0)]
+            .into_iter()
+            .enumerate()
+        {
+            let (ray, ..) = ray_at(1, 0.1 + du * 0.2, -0.2 + dv * 0.2, k);
+            quadrants[i] += usize::from(hits_splat(&ray, 1, "corner"));
+        }
+    }
+    assert_eq!(quadrants, [8, 0, 0, 0]);
+}
+
+/// A valley whose faces meet at 50° (within the 75° the self-hit rule
+/// takes for one surface): shadow rays leaving the floor near the crease
+/// toward a low light across the valley meet the slope. Whole discs let
+/// the self-hit rule skip the slope as the surface the ray leaves (light
+/// leaks into the valley); clipped at the crease, the slope's splats do
+/// not hold the departure point and every backend keeps them.
+#[test]
+fn shadow_rays_leaving_a_clipped_splat_at_a_crease() {
+    let (step, r) = (0.05f32, 0.09f32);
+    let slope_n = Vec3::new(-(50f32.to_radians().sin()), 0.0, 50f32.to_radians().cos());
+    let up_slope = Vec3::new(50f32.to_radians().cos(), 0.0, 50f32.to_radians().sin());
+    let mut splats = Vec::new();
+    for i in 0..12 {
+        for j in 0..12 {
+            let y = (j as f32 - 5.5) * step;
+            // The floor, x in (-0.6, 0), clipped at x = 0; the slope up
+            // from the crease, clipped there.
+            let x = -(i as f32 + 0.5) * step;
+            let mut f = Splat::disc(Vec3::new(x, y, 0.0), Vec3::Z, r).unwrap();
+            f.clip = splatray::splat::Clip::one(clip_at(&f, Vec3::ZERO, Vec3::X));
+            let mut w = Splat::disc(
+                up_slope * ((i as f32 + 0.5) * step) + Vec3::Y * y,
+                slope_n,
+                r,
+            )
+            .unwrap();
+            w.clip = splatray::splat::Clip::one(clip_at(&w, Vec3::ZERO, -up_slope));
+            splats.push(f);
+            splats.push(w);
+        }
+    }
+    let whole: Vec<Splat> = splats
+        .iter()
+        .map(|s| Splat {
+            clip: splatray::splat::Clip::NONE,
+            ..*s
+        })
+        .collect();
+    let scale = SceneScale::from_diagonal(diagonal(&splats));
+    let light = Vec3::new(20f32.to_radians().cos(), 0.0, 20f32.to_radians().sin());
+    let mut blocked = [0usize; 2];
+    let mut total = 0;
+    for (k, set) in [&splats, &whole].into_iter().enumerate() {
+        let b = backends(set);
+        let mut queries = Vec::new();
+        for i in 0..6 {
+            for j in 0..5 {
+                let target = Vec3::new(-0.01 - 0.015 * i as f32, (j as f32 - 2.0) * 0.04, 0.0);
+                let primary = q(target + Vec3::new(0.3, 0.1, 1.0), -Vec3::new(0.3, 0.1, 1.0));
+                let h = windows(&b, set, &primary, scale.xi, "primary onto the floor");
+                let hit = resolve(&h, &primary.ray, set, ShadingMode::Flat)
+                    .and_then(Resolved::hit)
+                    .expect("the floor is hit");
+                queries.push(Query {
+                    ray: Ray {
+                        origin: hit.point,
+                        dir: light,
+                    },
+                    t_min: scale.eps_self,
+                    t_max: f32::INFINITY,
+                    from: Some(splatray::accel::Departure {
+                        id: hit.id,
+                        point: hit.point,
+                        normal: set[hit.id as usize].normal,
+                    }),
+                    pass: None,
+                });
+            }
+        }
+        assert_all_agree(&b, set, &queries, scale.xi, "shadow rays at a crease");
+        blocked[k] = queries.iter().filter(|q| b.oracle.occluded_from(q)).count();
+        total = queries.len();
+    }
+    eprintln!(
+        "shadow rays blocked by the slope: clipped {} whole {} of {total}",
+        blocked[0], blocked[1]
+    );
+    assert_eq!(
+        blocked[0], total,
+        "clipped: every shadow ray meets the slope"
+    );
+    assert!(
+        blocked[1] < total / 2,
+        "whole discs: the self-hit rule skips the slope ({} of {total})",
+        blocked[1]
+    );
+}
