@@ -6,13 +6,13 @@ use super::view::SceneArgs;
 use super::{json_text, stage_text};
 use splatray::accel::registry;
 use splatray::io::Batch;
-use splatray::render::integrator::{Frame, RayCounts, render, render_rows};
 use splatray::render::output::{
     Aov, aov_path, check_output_path, check_writable, write_aov_into, write_image_into,
 };
 use splatray::scene::Scene;
+use splatray::workflow::render::{Rendered, band_rows, render_scene};
 use splatray::{Error, Result};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Options of `splatray render`.
 #[derive(Clone, Debug, clap::Args)]
@@ -70,57 +70,6 @@ fn parse_band(s: &str) -> Result<(u32, u32), String> {
     Ok((i, n))
 }
 
-/// The rows of band `i` of `n` in an image `height` rows high.
-#[must_use]
-pub fn band_rows(height: u32, (i, n): (u32, u32)) -> std::ops::Range<u32> {
-    let at = |k: u32| (u64::from(height) * u64::from(k) / u64::from(n)) as u32;
-    at(i)..at(i + 1)
-}
-
-/// The render report (JSON).
-#[derive(Debug, serde::Serialize)]
-pub struct RenderReport {
-    /// Backend name.
-    pub backend: String,
-    /// Image width.
-    pub width: u32,
-    /// Image height.
-    pub height: u32,
-    /// Samples per pixel.
-    pub spp: u32,
-    /// Splats in the scene.
-    pub splats: usize,
-    /// Seconds to read points and generate splats.
-    pub splat_seconds: f64,
-    /// Seconds to build the acceleration structure.
-    pub build_seconds: f64,
-    /// Seconds to render.
-    pub render_seconds: f64,
-    /// Rays by kind.
-    pub rays: RayCounts,
-    /// Millions of rays (all kinds) per second of render time.
-    pub mrays_per_s: f64,
-}
-
-impl RenderReport {
-    /// The report of one render.
-    #[must_use]
-    pub fn new(scene: &Scene, backend: &str, build_seconds: f64, frame: &Frame) -> RenderReport {
-        RenderReport {
-            backend: backend.to_string(),
-            width: frame.width,
-            height: frame.height,
-            spp: scene.camera.spp,
-            splats: scene.splats.len(),
-            splat_seconds: scene.load.splat_seconds,
-            build_seconds,
-            render_seconds: frame.seconds,
-            rays: frame.rays,
-            mrays_per_s: frame.rays.total() as f64 / frame.seconds.max(1e-9) / 1e6,
-        }
-    }
-}
-
 /// Says where the splats are when no primary ray met any: the usual cause
 /// is a camera placed for another model's coordinates.
 fn warn_nothing_hit(scene: &Scene) {
@@ -134,16 +83,15 @@ fn warn_nothing_hit(scene: &Scene) {
     }
 }
 
-/// Runs `splatray render`.
-pub fn run(args: &RenderArgs) -> Result<()> {
-    let scene_path = args.view.path();
+/// The image's path (default: the scene's name with .png, in the current
+/// folder), every output checked before the work starts.
+fn checked_outputs(args: &RenderArgs, scene_path: &Path) -> Result<PathBuf> {
     let output = args.output.clone().unwrap_or_else(|| {
         let stem = scene_path
             .file_stem()
             .map_or("render".into(), |s| s.to_string_lossy().into_owned());
         PathBuf::from(format!("{stem}.png"))
     });
-    // Every output is checked before the work starts.
     check_output_path(&output)?;
     if args.band.is_some() && !args.aov.is_empty() {
         return Err(Error::invalid(
@@ -156,24 +104,21 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if let Some(r) = &args.report {
         check_writable(r)?;
     }
+    Ok(output)
+}
+
+/// Runs `splatray render`.
+pub fn run(args: &RenderArgs) -> Result<()> {
+    let scene_path = args.view.path();
+    let output = checked_outputs(args, &scene_path)?;
     let line = ProgressLine::new();
     let progress = |stage: &str, f: f64| line.update(stage, f);
     let scene = args.view.load(args.spp, &line)?;
     args.view
         .check_budget(&scene, splatray::render::budget::Holds::ONE)?;
-    let info = registry::lookup(&args.backend)?;
-    let backend = info.build_splats(&scene.splats)?;
-    let build_seconds = backend.stats().build_seconds;
-    let frame = match args.band {
-        Some(b) => render_rows(
-            &scene,
-            backend.as_ref(),
-            band_rows(scene.camera.height, b),
-            Some(&progress),
-        ),
-        None => render(&scene, backend.as_ref(), Some(&progress)),
-    };
+    let rendered = render_scene(&scene, &args.backend, args.band, Some(&progress));
     line.finish();
+    let Rendered { frame, report } = rendered?;
     if args.band.is_none() && frame.splat.iter().all(|&id| id == u32::MAX) {
         warn_nothing_hit(&scene);
     }
@@ -184,7 +129,6 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     for &a in &args.aov {
         write_aov_into(&mut batch, &frame, a, &aov_path(&output, a))?;
     }
-    let report = RenderReport::new(&scene, info.name, build_seconds, &frame);
     if let Some(r) = &args.report {
         stage_text(&mut batch, r, &(json_text(&report)? + "\n"))?;
     }
@@ -201,8 +145,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         scene.camera.spp,
         scene.splats.len(),
         scene.load.splat_seconds,
-        info.name,
-        build_seconds,
+        report.backend,
+        report.build_seconds,
         frame.seconds,
         frame.rays.total(),
         report.mrays_per_s,

@@ -4,6 +4,7 @@
 //! end only parses, calls, prints and writes what it is asked to.
 
 pub mod compare;
+pub mod render;
 pub mod scan_check;
 pub mod splat;
 pub mod sweep;
