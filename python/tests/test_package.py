@@ -184,3 +184,19 @@ def test_the_gil_is_released_during_a_render(points):
     # threads on the shared cores.
     assert seconds > 0.1, seconds
     assert during > 0.1 * rate * seconds, (during, rate, seconds)
+
+
+def test_compare_reports_what_the_cli_reports(binary, cli, tmp_path):
+    run(binary, "compare", str(cli / "scene.toml"), "--width", "32", "--height", "24",
+        "--report", str(tmp_path / "r.json"))
+    import json
+
+    want = json.loads((tmp_path / "r.json").read_text())
+    got = splatray.Scene.from_toml(cli / "scene.toml").compare(width=32, height=24)
+    assert [b["name"] for b in got["backends"]] == [b["name"] for b in want["backends"]]
+    assert got["splats"] == want["splats"] and got["rays"] == want["rays"] == 32 * 24
+    # The agreement is measured from the frames, the same in both runs (the
+    # timings are not).
+    for g, w in zip(got["backends"][1:], want["backends"][1:]):
+        assert g["agreement"] == w["agreement"]
+        assert g["agreement"]["same_splat"] == 1.0

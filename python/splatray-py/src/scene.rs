@@ -249,6 +249,45 @@ impl Scene {
         })
     }
 
+    /// Renders the view with every renderer backend of the registry in one
+    /// run (`rounds` renders each, in turns) and returns the report of
+    /// `splatray compare` as a dict: each backend's speed and memory and
+    /// its agreement with the first ray for ray; with `truth`, each one's
+    /// errors against the exact surfaces.
+    #[pyo3(signature = (rounds=1, truth=false, width=None, height=None, spp=None, progress=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn compare<'py>(
+        &self,
+        py: Python<'py>,
+        rounds: u32,
+        truth: bool,
+        width: Option<u32>,
+        height: Option<u32>,
+        spp: Option<u32>,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        if rounds == 0 {
+            return Err(PyValueError::new_err("rounds must be at least 1"));
+        }
+        let cb = Callback::new(progress);
+        let scene = match self.view(py, width, height, spp, None, &cb) {
+            Ok(s) => s,
+            Err(e) => {
+                cb.finish()?;
+                return Err(e);
+            }
+        };
+        let out = py.detach(|| {
+            let report = |s: &str, f: f64| cb.report(s, f);
+            let options = splatray::workflow::compare::CompareOptions { rounds, truth };
+            splatray::workflow::compare::compare(&scene, "python", &options, Some(&report))
+                .and_then(|c| serde_json::to_string(&c.report).map_err(splatray::Error::other))
+        });
+        cb.finish()?;
+        let text = out.map_err(err)?;
+        py.import("json")?.call_method1("loads", (text,))
+    }
+
     /// The camera's rays through the pixel centres ((H·W, 6) float64, row
     /// by row from the top; origin and direction, not unit: the direction
     /// the camera normalises), in the models' coordinates (the first

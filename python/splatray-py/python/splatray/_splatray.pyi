@@ -157,6 +157,17 @@ class Scene:
         aov: Optional[Sequence[str]] = None,
         progress: Optional[Progress] = None,
     ) -> Image: ...
+    def compare(
+        self,
+        rounds: int = 1,
+        truth: bool = False,
+        width: Optional[int] = None,
+        height: Optional[int] = None,
+        spp: Optional[int] = None,
+        progress: Optional[Progress] = None,
+    ) -> dict:
+        """`splatray compare`'s report: every renderer backend's speed,
+        memory and agreement with the first; with truth, the errors."""
     def camera_rays(self, width: Optional[int] = None, height: Optional[int] = None) -> npt.NDArray[np.float64]:
         """(H*W, 6) rays through the pixel centres, for splat_scene().cast_rays."""
     def splat_scene(self, backend: Optional[str] = None) -> SplatScene: ...
