@@ -129,6 +129,10 @@ pub struct SplatOptions {
     /// cloud's points (`splat::color`; the fields are on by default).
     #[arg(long)]
     pub flat_colors: bool,
+    /// Whole discs only: no crease detection, no clip lines (splats grow
+    /// across creases and overhang them, as before issue 39).
+    #[arg(long)]
+    pub no_creases: bool,
     /// Where the scanner stood, as X,Y,Z in the input's coordinates:
     /// normals are oriented toward it. Default: the cloud's own (a PCD's
     /// VIEWPOINT).
@@ -192,6 +196,7 @@ impl SplatOptions {
             density: self.density.unwrap_or(defaults.density),
             ellipses: self.ellipses,
             color_fields: !self.flat_colors,
+            creases: !self.no_creases,
             scan_viewpoints: !self.no_viewpoint,
             thin: self.thin.unwrap_or(defaults.thin),
             ..defaults
@@ -385,10 +390,11 @@ fn print_generated(args: &SplatArgs, cloud: &PointCloud, report: &splatray::spla
         eprintln!("splatray: {kind} {} points: {}", s.count, s.reason);
     }
     eprintln!(
-        "splatray: {} points -> {} splats ({} elliptical), coverage {:.4}, mean radius {:.4e}, largest splat {:.1}x its local spacing, epsilon {:.3e}, noise {:.3e}, {} flat normal fields, origin [{:?}, {:?}, {:?}], {:.2} s -> {}",
+        "splatray: {} points -> {} splats ({} elliptical, {} clipped), coverage {:.4}, mean radius {:.4e}, largest splat {:.1}x its local spacing, epsilon {:.3e}, noise {:.3e}, {} flat normal fields, origin [{:?}, {:?}, {:?}], {:.2} s -> {}",
         report.used_points,
         report.splats,
         report.elliptical_splats,
+        report.clipped_splats,
         report.coverage,
         report.mean_radius,
         report.largest_over_spacing,
@@ -400,6 +406,11 @@ fn print_generated(args: &SplatArgs, cloud: &PointCloud, report: &splatray::spla
         cloud.origin.z,
         report.seconds.total,
         args.output.display()
+    );
+    eprintln!(
+        "splatray: largest splats (> {}x median radius) whose centre is farther than half a radius from their points: {}",
+        splatray::splat::HOLLOW_LARGE,
+        report.hollow_large_splats
     );
 }
 

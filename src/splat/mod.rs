@@ -125,6 +125,7 @@ pub mod thin;
 pub use clip::{Clip, ClipLine};
 pub use cloud::{PointCloud, Scans, Viewpoints};
 pub use generate::{
-    GenerateError, NOISE_PROJECT, Skipped, SplatParams, SplatReport, StageSeconds, count_on_splats,
-    coverage, generate, generate_with_progress, on_splat, viewpoints_of,
+    GenerateError, HOLLOW_LARGE, NOISE_PROJECT, Skipped, SplatParams, SplatReport, StageSeconds,
+    count_on_splats, coverage, generate, generate_with_progress, hollow_large, on_splat,
+    viewpoints_of,
 };
