@@ -394,7 +394,7 @@ fn print_generated(args: &SplatArgs, cloud: &PointCloud, report: &splatray::spla
         report.used_points,
         report.splats,
         report.elliptical_splats,
-        report.clipped_splats,
+        report.clipped,
         report.coverage,
         report.mean_radius,
         report.largest_over_spacing,

@@ -75,10 +75,10 @@ pub struct SplatParams {
     /// generation; default on): texture finer than a splat is kept to
     /// first order instead of averaged away.
     pub color_fields: bool,
-    /// Find creases, corners and borders while growing: each splat grows
-    /// along its own face only and is clipped where the face's points end
-    /// (`grow::CREASE_DEG`, `grow::clip_lines`; default on, `--no-creases`
-    /// turns it off).
+    /// Find creases, corners and borders while growing: each splat is
+    /// clipped where its own face's points end (`grow::CREASE_DEG`,
+    /// `Grower::clip_lines` in `grow.rs`; default on, `--no-creases` turns
+    /// it off).
     pub creases: bool,
 }
 
@@ -153,6 +153,9 @@ pub struct SplatReport {
     pub splats: usize,
     /// How many of them are elliptical.
     pub elliptical_splats: usize,
+    /// How many of them carry clip lines (`splat::clip`: a splat cut at a
+    /// crease or a corner).
+    pub clipped: usize,
     /// Fraction of the used points lying on at least one splat: within `ϵ`
     /// of its plane and inside its disc.
     pub coverage: f64,
@@ -164,9 +167,6 @@ pub struct SplatReport {
     /// sparse far part of a scan has large splats and a large spacing
     /// alike, which a median radius would not tell).
     pub largest_over_spacing: f64,
-    /// Splats with clip lines (at a crease, corner or border; see
-    /// [`SplatParams::creases`]).
-    pub clipped_splats: usize,
     /// Large splats over a hole: of the splats larger than
     /// [`HOLLOW_LARGE`] times the median radius, those whose centre lies
     /// farther than half their radius from every point (issue 39's "no disc
@@ -494,8 +494,8 @@ pub fn generate_with_progress(
     report.coverage = coverage(&points, &grown.covered, &splats, epsilon);
     report.splats = splats.len();
     report.elliptical_splats = grown.elliptical;
+    report.clipped = splats.iter().filter(|s| s.is_clipped()).count();
     report.largest_over_spacing = largest_over_spacing(&splats, &tree, &knn);
-    report.clipped_splats = splats.iter().filter(|s| !s.clip.is_none()).count();
     report.hollow_large_splats = hollow_large(&splats, &tree);
     report.mean_radius = splats
         .iter()

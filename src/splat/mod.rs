@@ -2,7 +2,7 @@
 //! field (report §2.1 and §4.1).
 
 pub use crate::geometry::tangent_frame;
-pub use crate::primitive::Disc;
+pub use crate::primitive::{ClippedDisc, Disc};
 use glam::{Vec2, Vec3};
 
 /// The linear normal field of a Phong splat, eq. (4) of §4.1–4.2.
@@ -86,6 +86,22 @@ impl Splat {
             u_scaled: self.u_axis / self.radii.x,
             v_scaled: self.v_axis / self.radii.y,
         }
+    }
+
+    /// The clipped primitive of this splat: its disc and its clip lines
+    /// (used for every splat of a scene where some splat is clipped).
+    #[must_use]
+    pub fn clipped_geometry(&self) -> ClippedDisc {
+        ClippedDisc {
+            disc: self.disc_geometry(),
+            clip: self.clip,
+        }
+    }
+
+    /// Whether this splat carries a clip line.
+    #[must_use]
+    pub fn is_clipped(&self) -> bool {
+        !self.clip.is_none()
     }
 
     /// Half extents of the tight axis-aligned box around the (elliptical) disc:
