@@ -219,6 +219,11 @@ fn print_generated(args: &SplatArgs, p: &PointsOutcome) {
         report.seconds.total,
         args.output.display()
     );
+    eprintln!(
+        "splatray: largest splats (> {}x median radius) whose centre is farther than half a radius from their points: {}",
+        splatray::splat::HOLLOW_LARGE,
+        report.hollow_large_splats
+    );
 }
 
 /// A Gaussian file's lines.

@@ -181,6 +181,9 @@ pub struct SplatSpec {
     /// Fit a linear colour field to each splat of a coloured cloud
     /// (`SplatParams::color_fields`; default true).
     pub color_fields: Option<bool>,
+    /// Find creases and clip splats at them (`SplatParams::creases`;
+    /// default true).
+    pub creases: Option<bool>,
     /// Orient estimated normals toward this point (model space: the point
     /// file's coordinates).
     #[serde(default, deserialize_with = "num::finite")]

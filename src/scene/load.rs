@@ -578,6 +578,7 @@ fn generate_splats(
         density: spec.splat.density.unwrap_or(d.density),
         ellipses: spec.splat.ellipses,
         color_fields: spec.splat.color_fields.unwrap_or(d.color_fields),
+        creases: spec.splat.creases.unwrap_or(d.creases),
         viewpoint: spec
             .splat
             .viewpoint

@@ -1,7 +1,7 @@
 //! Phong normal fields (§4.1–4.2, eq. 4), fitted by least squares.
 
 use super::knn::PointTree;
-use super::{NormalField, Splat};
+use super::{Clip, ClipLine, NormalField, Splat};
 use glam::{DVec3, Vec3};
 use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
@@ -215,6 +215,11 @@ pub fn fit_field(
     let rows: Vec<Row> = neighbours
         .filter_map(|j| {
             let (pu, pv) = in_field(splat, f64::from(factor), points[j])?;
+            // A clipped splat's field is its own face's: the points beyond
+            // its clip lines lie on the face across the crease.
+            if !splat.clip.keeps(pu as f32, pv as f32) {
+                return None;
+            }
             let mm = normals[j].as_dvec3();
             let mn = mm.dot(n);
             if mn.is_nan() || mn < 0.25 {
@@ -279,6 +284,27 @@ pub fn field_factor(splat: &Splat, max_factor: f32, near: &[usize], points: &[Ve
         .clamp(MIN_FIELD_FACTOR.min(max_factor), max_factor)
 }
 
+/// The clip lines of the circular `splat` in the turned frame `(u, v)`: each
+/// line's direction, a vector in the plane, re-expressed in the new axes
+/// (the radii are equal, so the normalised coordinates turn with them).
+fn turn_clip(splat: &Splat, u: Vec3, v: Vec3) -> Clip {
+    let turn = |l: &ClipLine| {
+        let w = splat.u_axis * l.a + splat.v_axis * l.b;
+        let (a, b) = (w.dot(u), w.dot(v));
+        let len = (a * a + b * b).sqrt();
+        ClipLine {
+            a: a / len,
+            b: b / len,
+            d: l.d,
+        }
+    };
+    match splat.clip.lines() {
+        [one] => Clip::one(turn(one)),
+        [first, second] => Clip::two(turn(first), turn(second)),
+        _ => splat.clip,
+    }
+}
+
 /// Fit every splat's normal field in parallel (neighbours found with the
 /// point kd-tree), each within its own factor ([`field_factor`], at most
 /// `factor` radii); returns how many fell back to [`NormalField::FLAT`].
@@ -303,6 +329,7 @@ pub fn fit_all(
                 Some(f) => {
                     s.field = f.field;
                     if let Some((u, v)) = f.axes {
+                        s.clip = turn_clip(s, u, v);
                         s.u_axis = u;
                         s.v_axis = v;
                     }

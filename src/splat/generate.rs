@@ -75,6 +75,11 @@ pub struct SplatParams {
     /// generation; default on): texture finer than a splat is kept to
     /// first order instead of averaged away.
     pub color_fields: bool,
+    /// Find creases, corners and borders while growing: each splat is
+    /// clipped where its own face's points end (`grow::CREASE_DEG`,
+    /// `Grower::clip_lines` in `grow.rs`; default on, `--no-creases` turns
+    /// it off).
+    pub creases: bool,
 }
 
 /// Where generation takes `cloud`'s points to have been seen from, indexed
@@ -104,6 +109,7 @@ impl Default for SplatParams {
             epsilon_abs: None,
             thin: 0.0,
             color_fields: true,
+            creases: true,
         }
     }
 }
@@ -161,6 +167,11 @@ pub struct SplatReport {
     /// sparse far part of a scan has large splats and a large spacing
     /// alike, which a median radius would not tell).
     pub largest_over_spacing: f64,
+    /// Large splats over a hole: of the splats larger than
+    /// [`HOLLOW_LARGE`] times the median radius, those whose centre lies
+    /// farther than half their radius from every point (issue 39's "no disc
+    /// over a hole"; growth shrinks such splats, so this is 0).
+    pub hollow_large_splats: usize,
     /// Splats whose normal field fell back to flat (too few points or a
     /// singular fit).
     pub fallback_normal_fields: usize,
@@ -464,6 +475,7 @@ pub fn generate_with_progress(
         epsilon,
         density: params.density,
         ellipses: params.ellipses,
+        creases: params.creases,
     };
     let grown = grow_all(&input, |i| {
         notify(progress, "growing splats", i as f64 / n as f64);
@@ -484,6 +496,7 @@ pub fn generate_with_progress(
     report.elliptical_splats = grown.elliptical;
     report.clipped = splats.iter().filter(|s| s.is_clipped()).count();
     report.largest_over_spacing = largest_over_spacing(&splats, &tree, &knn);
+    report.hollow_large_splats = hollow_large(&splats, &tree);
     report.mean_radius = splats
         .iter()
         .map(|s| 0.5 * f64::from(s.radii.x + s.radii.y))
@@ -716,6 +729,32 @@ fn largest_over_spacing(splats: &[Splat], tree: &super::knn::PointTree, knn: &Kn
         .reduce(|| 0.0, f64::max)
 }
 
+/// A splat counts as large for [`SplatReport::hollow_large_splats`] above
+/// this many times the median radius.
+pub const HOLLOW_LARGE: f32 = 10.0;
+
+/// How many splats larger than [`HOLLOW_LARGE`] times the median radius
+/// have no point within half their (larger) radius of their centre.
+#[must_use]
+pub fn hollow_large(splats: &[Splat], tree: &super::knn::PointTree) -> usize {
+    let mut radii: Vec<f32> = splats.iter().map(|s| s.radii.max_element()).collect();
+    if radii.is_empty() {
+        return 0;
+    }
+    let mid = radii.len() / 2;
+    let median = *radii.select_nth_unstable_by(mid, f32::total_cmp).1;
+    splats
+        .par_iter()
+        .filter(|s| {
+            let r = s.radii.max_element();
+            r > HOLLOW_LARGE * median && {
+                let near = tree.nearest_one::<kiddo::SquaredEuclidean>(&s.center.to_array());
+                near.distance > (0.5 * r) * (0.5 * r)
+            }
+        })
+        .count()
+}
+
 /// The splats and the report's lengths back in the cloud's units; a splat
 /// single precision cannot hold is an error, a cloud below its normal range
 /// a warning.
@@ -938,7 +977,8 @@ fn check_params(p: &SplatParams) -> Result<(), GenerateError> {
     Ok(())
 }
 
-/// Does `p` lie on `s`: within `epsilon` of its plane and inside its disc?
+/// Does `p` lie on `s`: within `epsilon` of its plane, inside its disc and
+/// on the kept side of its clip lines?
 #[must_use]
 pub fn on_splat(s: &Splat, p: Vec3, epsilon: f32) -> bool {
     let d = p - s.center;
@@ -946,7 +986,7 @@ pub fn on_splat(s: &Splat, p: Vec3, epsilon: f32) -> bool {
         return false;
     }
     let (u, v) = (d.dot(s.u_axis) / s.radii.x, d.dot(s.v_axis) / s.radii.y);
-    u * u + v * v <= 1.0
+    u * u + v * v <= 1.0 && s.clip.keeps(u, v)
 }
 
 /// Fraction of `points` lying on at least one splat. Points marked `covered`

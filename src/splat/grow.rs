@@ -1,7 +1,7 @@
 //! Splat growth (§2.1, eqs. 1–3) with density control (§2.2).
 
 use super::knn::Knn;
-use super::{Clip, NormalField, Splat, tangent_frame};
+use super::{Clip, ClipLine, NormalField, Splat, tangent_frame};
 use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use std::cmp::Reverse;
@@ -43,7 +43,60 @@ pub struct GrowInput<'a> {
     pub density: f32,
     /// Continue into the minimum-curvature direction for elliptical splats.
     pub ellipses: bool,
+    /// Clip each splat where its own face's points end (a crease, a
+    /// corner, a border): see [`Grower::clip_lines`].
+    pub creases: bool,
 }
+
+/// With [`GrowInput::creases`], a point whose normal turns from the seed's
+/// by more than this many degrees lies on another face
+/// ([`Grower::clip_lines`]). The faces of boxes and roofs meet at 40–90°.
+/// Growth itself still stops at the first point past `ϵ` (eq. 1): letting
+/// it pass over the points of other faces, to grow along its own face past
+/// a crease, cost the bunny 2.6 dB (splats over the facets of its scanned
+/// mesh) and gained the solids nothing (`docs/development.md`, "Issue 39").
+pub const CREASE_DEG: f32 = 30.0;
+
+/// Directions tried for a clip line (evenly spaced over the full turn).
+pub const CLIP_DIRECTIONS: usize = 96;
+
+/// A crease needs at least this many points of the other face past the
+/// own face's last points ([`Grower::clip_lines`]).
+pub const CREASE_MIN_POINTS: usize = 3;
+
+/// ... and a jump of at least this many degrees between the mean normals
+/// of the own face's points along the line and of those points.
+pub const CREASE_JUMP_DEG: f32 = 30.0;
+
+/// ... and the normals on either side each agree, the length of their
+/// mean at least this (a plane each; about 26° of spread): the noise of
+/// estimated normals makes no crease.
+pub const CREASE_COHERENCE: f32 = 0.9;
+
+/// ... and both run along the line over at least this share of its chord
+/// across the disc: a crease crosses the splat, the facet of a fine mesh
+/// or a lump of noise does not.
+pub const CREASE_LENGTH: f32 = 0.4;
+
+/// ... and only where the face across leaves the splat's plane by more
+/// than this many `ϵ` at the disc's rim: a gentler crease, or one near the
+/// rim, the whole disc stands close enough to. On the bunny (a scanned
+/// mesh whose facets meet at over 30° along 1.4 % of its edges) 1 `ϵ` cost
+/// 0.8 dB, 2 `ϵ` 0.03 dB (`docs/development.md`, "Issue 39").
+pub const CREASE_RISE_EPS: f32 = 2.0;
+
+/// A border (no point past the face's last) needs an empty band at least
+/// this many point spacings wide: sampling leaves smaller gaps.
+pub const BORDER_SPACINGS: f32 = 2.0;
+
+/// A border's clip line stands this many point spacings past the last of
+/// the face's points (where the surface ends between them is not known).
+pub const CLIP_GAP_SPACINGS: f32 = 0.15;
+
+/// A splat whose nearest own point lies farther than this share of its
+/// radius from its centre spans a hole (a ring of points round an empty
+/// middle): it is shrunk to its seed's neighbourhood instead.
+pub const HOLLOW_SHARE: f32 = 0.5;
 
 /// The result of growing splats over the whole cloud.
 pub struct Grown {
@@ -76,6 +129,9 @@ struct Grower<'a> {
     stamp: Vec<u32>,
     round: u32,
     heap: BinaryHeap<Reverse<u64>>,
+    /// Neighbours whose normal's cosine to the seed's is at most this lie
+    /// on another face (0: facing away; see [`CREASE_DEG`]).
+    face_cos: f32,
 }
 
 impl Grower<'_> {
@@ -201,6 +257,263 @@ impl Grower<'_> {
             r2 = r2.max(x * x + y * y);
         }
         r2.sqrt()
+    }
+}
+
+/// Whether the splat at `shift` (metric offset from the seed `p`) of metric
+/// radius `r` has no point it took nearer its centre than [`HOLLOW_SHARE`]
+/// of `r` (the seed counts).
+#[allow(clippy::too_many_arguments)]
+fn hollow(
+    growth: &Growth,
+    inp: &GrowInput<'_>,
+    p: Vec3,
+    a: Vec3,
+    b: Vec3,
+    aspect: f32,
+    shift: Vec2,
+    r: f32,
+) -> bool {
+    let near2 = (HOLLOW_SHARE * r) * (HOLLOW_SHARE * r);
+    if shift.length_squared() <= near2 {
+        return false;
+    }
+    !growth.accepted.iter().any(|&(j, _)| {
+        let d = inp.points[j as usize] - p;
+        let q = Vec2::new(a.dot(d) / aspect, b.dot(d)) - shift;
+        q.length_squared() <= near2
+    })
+}
+
+/// A point met while gathering a splat's own face ([`Grower::clip_lines`]):
+/// its position in the splat's normalised coordinates, its height over the
+/// plane (in radii) and its index.
+#[derive(Clone, Copy)]
+struct Near {
+    q: Vec2,
+    h: f32,
+    j: u32,
+}
+
+/// Where along `w` (normalised splat coordinates) the face across a crease
+/// meets the splat's plane: the offset `s = w·q` of the points of `across`
+/// regressed on their height `h` by least squares, and the offset at
+/// `h = 0` taken (the two planes' line of intersection, where Zwicker et
+/// al.'s clip lines and the 2012 clipping method put it), kept within
+/// `[ext, ext + spacing]` (`ext`: the own face's farthest point along `w`).
+fn crease_at(across: &[Near], w: Vec2, ext: f32, spacing: f32) -> (f32, f32) {
+    let n = across.len() as f32;
+    let (mut sh, mut ss, mut shh, mut ssh) = (0f32, 0f32, 0f32, 0f32);
+    for p in across {
+        let s = w.dot(p.q);
+        sh += p.h;
+        ss += s;
+        shh += p.h * p.h;
+        ssh += s * p.h;
+    }
+    let (mh, ms) = (sh / n, ss / n);
+    let var_h = shh / n - mh * mh;
+    let slope = if var_h > 1e-12 {
+        (ssh / n - ms * mh) / var_h
+    } else {
+        0.0
+    };
+    let c = ms - slope * mh;
+    if c.is_finite() {
+        (c.clamp(ext, ext + spacing), slope)
+    } else {
+        (ext + CLIP_GAP_SPACINGS * spacing, 0.0)
+    }
+}
+
+/// The unit mean of the normals of `pts`, and their coherence: the length
+/// of their mean (1 when they agree, smaller the more they spread).
+fn mean_normal(pts: &[Near], normals: &[Vec3]) -> (Vec3, f32) {
+    let sum = pts.iter().map(|p| normals[p.j as usize]).sum::<Vec3>();
+    (
+        sum.normalize_or_zero(),
+        sum.length() / pts.len().max(1) as f32,
+    )
+}
+
+/// Points of a grid over the unit disc, for the share of a disc a clip line
+/// cuts away.
+fn disc_grid() -> &'static [Vec2] {
+    static GRID: std::sync::OnceLock<Vec<Vec2>> = std::sync::OnceLock::new();
+    GRID.get_or_init(|| {
+        const N: i32 = 10;
+        let mut g = Vec::new();
+        for y in -N..=N {
+            for x in -N..=N {
+                let q = Vec2::new(x as f32, y as f32) / N as f32;
+                if q.length_squared() <= 1.0 {
+                    g.push(q);
+                }
+            }
+        }
+        g
+    })
+}
+
+impl Grower<'_> {
+    /// The clip lines (none, one or two) of the splat grown from seed `i`:
+    /// its centre at metric offset `shift` from the seed, metric radius `r`
+    /// in the frame `(a, b, aspect)`, its plane at height `hc` along the
+    /// seed's normal.
+    ///
+    /// The points of the splat's own face inside its disc (normals within
+    /// [`CREASE_DEG`] of the seed's) are gathered by a traversal of the
+    /// neighbourhood graph from the seed through that face, with the points
+    /// of other faces it meets on the way. For each of [`CLIP_DIRECTIONS`]
+    /// directions `w` in the splat's normalised coordinates, the part of the
+    /// disc past the own face's farthest point along `w` holds none of the
+    /// face's points. It is cut away when the face ends there:
+    /// - at a crease: at least [`CREASE_MIN_POINTS`] points of other faces
+    ///   lie there, and their mean normal turns from the mean normal of the
+    ///   own face's points along that rim by at least [`CREASE_JUMP_DEG`] (a
+    ///   jump, where a smooth surface bending past [`CREASE_DEG`] turns by
+    ///   a little from one point to the next), each side's normals agree
+    ///   ([`CREASE_COHERENCE`]), both run along [`CREASE_LENGTH`] of the
+    ///   chord, and the face across leaves the plane by over
+    ///   [`CREASE_RISE_EPS`] `ϵ` at the rim; the line is the two faces'
+    ///   line of intersection ([`crease_at`]);
+    /// - at a border (a free edge, a hole): no point at all lies there, over
+    ///   a band at least [`BORDER_SPACINGS`] point spacings wide; the line
+    ///   stands [`CLIP_GAP_SPACINGS`] spacings past the last point.
+    ///
+    /// The candidate cutting away the largest share of the disc is the
+    /// first line, and the one cutting away the most of what the first
+    /// keeps the second (a corner).
+    #[allow(clippy::too_many_arguments)]
+    fn clip_lines(
+        &mut self,
+        i: usize,
+        a: Vec3,
+        b: Vec3,
+        aspect: f32,
+        shift: Vec2,
+        r: f32,
+        hc: f32,
+    ) -> Clip {
+        let inp = self.inp;
+        let (p, n) = (inp.points[i], inp.normals[i]);
+        if r.is_nan() || r <= 0.0 {
+            return Clip::NONE;
+        }
+        let near = |q: usize| {
+            let d = inp.points[q] - p;
+            Near {
+                q: (Vec2::new(a.dot(d) / aspect, b.dot(d)) - shift) / r,
+                h: (n.dot(d) - hc) / r,
+                j: q as u32,
+            }
+        };
+        self.round = self.round.wrapping_add(1);
+        if self.round == 0 {
+            self.stamp.fill(0);
+            self.round = 1;
+        }
+        let round = self.round;
+        let mut own: Vec<Near> = vec![near(i)];
+        let mut other: Vec<Near> = Vec::new();
+        let mut stack = vec![i as u32];
+        self.stamp[i] = round;
+        while let Some(j) = stack.pop() {
+            for &q in inp.knn.of(j as usize) {
+                let qi = q as usize;
+                if self.stamp[qi] == round {
+                    continue;
+                }
+                self.stamp[qi] = round;
+                let m = near(qi);
+                if inp.normals[qi].dot(n) <= self.face_cos {
+                    other.push(m);
+                } else if m.q.length_squared() <= 1.0 {
+                    own.push(m);
+                    stack.push(q);
+                }
+            }
+        }
+        let d_k = inp.knn.kth_distance[i].max(f32::MIN_POSITIVE);
+        let spacing = d_k * (std::f32::consts::PI / inp.knn.k.max(1) as f32).sqrt() / r;
+        let jump_cos = CREASE_JUMP_DEG.to_radians().cos();
+        let mut rim: Vec<Near> = Vec::new();
+        let mut across: Vec<Near> = Vec::new();
+        let candidates: Vec<ClipLine> = (0..CLIP_DIRECTIONS)
+            .filter_map(|k| {
+                let t = std::f32::consts::TAU * k as f32 / CLIP_DIRECTIONS as f32;
+                let w = Vec2::new(t.cos(), t.sin());
+                let ext = own.iter().map(|m| w.dot(m.q)).fold(f32::MIN, f32::max);
+                across.clear();
+                across.extend(other.iter().filter(|m| {
+                    let s = w.dot(m.q);
+                    s >= ext - spacing
+                        && s <= ext + 2.0 * spacing
+                        && (m.q - w * s).length_squared() <= 1.0
+                }));
+                let d = if across.is_empty() {
+                    (ext + BORDER_SPACINGS * spacing < 1.0)
+                        .then_some(ext + CLIP_GAP_SPACINGS * spacing)?
+                } else if across.len() >= CREASE_MIN_POINTS {
+                    rim.clear();
+                    rim.extend(own.iter().filter(|m| w.dot(m.q) >= ext - 1.5 * spacing));
+                    let (m_rim, c_rim) = mean_normal(&rim, inp.normals);
+                    let (m_across, c_across) = mean_normal(&across, inp.normals);
+                    // Both sides run along the line over most of its chord.
+                    let chord = 2.0 * (1.0 - ext * ext).max(0.0).sqrt();
+                    let along = |pts: &[Near]| {
+                        let (lo, hi) = pts
+                            .iter()
+                            .map(|m| w.perp_dot(m.q))
+                            .fold((f32::MAX, f32::MIN), |(lo, hi), x| (lo.min(x), hi.max(x)));
+                        hi - lo
+                    };
+                    if m_rim.dot(m_across) > jump_cos
+                        || c_rim < CREASE_COHERENCE
+                        || c_across < CREASE_COHERENCE
+                        || along(&across) < CREASE_LENGTH * chord
+                        || along(&rim) < CREASE_LENGTH * chord
+                    {
+                        return None;
+                    }
+                    // Only where the face across leaves the disc's plane
+                    // by more than ϵ at its rim: a gentler crease, or one
+                    // near the rim, the whole disc stands within ϵ of.
+                    let (c, slope) = crease_at(&across, w, ext, spacing);
+                    if ((1.0 - c) * r).abs() < slope.abs() * CREASE_RISE_EPS * inp.epsilon {
+                        return None;
+                    }
+                    c
+                } else {
+                    return None;
+                };
+                (d > -1.0 && d < 1.0).then_some(ClipLine { a: w.x, b: w.y, d })
+            })
+            .collect();
+        let grid = disc_grid();
+        let cut_by = |l: &ClipLine, kept: &dyn Fn(Vec2) -> bool| {
+            grid.iter()
+                .filter(|q| kept(**q) && !l.keeps(q.x, q.y))
+                .count()
+        };
+        let Some((first, cut)) = candidates
+            .iter()
+            .map(|l| (*l, cut_by(l, &|_| true)))
+            .max_by_key(|c| c.1)
+        else {
+            return Clip::NONE;
+        };
+        if cut == 0 {
+            return Clip::NONE;
+        }
+        let second = candidates
+            .iter()
+            .map(|l| (*l, cut_by(l, &|q| first.keeps(q.x, q.y))))
+            .max_by_key(|c| c.1);
+        match second {
+            Some((s, c)) if c > 0 => Clip::two(first, s),
+            _ => Clip::one(first),
+        }
     }
 }
 
@@ -528,6 +841,11 @@ impl<'a> Grower<'a> {
             stamp: vec![0; inp.points.len()],
             round: 0,
             heap: BinaryHeap::new(),
+            face_cos: if inp.creases {
+                CREASE_DEG.to_radians().cos()
+            } else {
+                0.0
+            },
         }
     }
 
@@ -584,8 +902,24 @@ impl<'a> Grower<'a> {
         // radius was widened to cover. Inside a surface it is the disc of
         // eq. (3); at a border, where all of them lie on one side, it moves
         // inward and shrinks instead of overhanging the border by its radius.
-        let (shift, r) = g.enclosing(i, &growth, a, b, aspect, r);
+        let (mut shift, mut r) = g.enclosing(i, &growth, a, b, aspect, r);
+        if hollow(&growth, inp, p, a, b, aspect, shift, r) {
+            // No disc over a hole: a ring of points round an empty middle
+            // makes its enclosing circle span the middle. The splat keeps
+            // to the seed's own neighbourhood instead; the ring's other
+            // points seed splats of their own.
+            shift = Vec2::ZERO;
+            r = g.cover_radius(i, a, b, aspect);
+            if r.is_nan() || r <= 0.0 {
+                r = 0.5 * d_k;
+            }
+        }
         let hc = plane_height(&growth);
+        let clip = if inp.creases {
+            g.clip_lines(i, a, b, aspect, shift, r, hc)
+        } else {
+            Clip::NONE
+        };
         let center = p
             + n * hc // eq. (2), lowered to the points' mean height
 
@@ -609,7 +943,8 @@ impl<'a> Grower<'a> {
             let d2 = x * x + y * y;
             let on = d2 <= r2
                 && (n.dot(d) - hc).abs() <= inp.epsilon
-                && (j as usize == i || inp.normals[j as usize].dot(n) > 0.0);
+                && (j as usize == i || inp.normals[j as usize].dot(n) > 0.0)
+                && clip.keeps(x / r, y / r);
             if on {
                 marks.push((j, d2 <= limit2));
             }
@@ -628,7 +963,7 @@ impl<'a> Grower<'a> {
             radii: Vec2::new(aspect * r, r),
             color,
             field: NormalField::FLAT,
-            clip: Clip::NONE,
+            clip,
         };
         Seeded {
             splat,
@@ -676,6 +1011,7 @@ mod tests {
             epsilon: 0.002,
             density: 0.5,
             ellipses: true,
+            creases: true,
         };
         rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -725,6 +1061,7 @@ mod tests {
             epsilon: 0.002,
             density: 0.5,
             ellipses: true,
+            creases: true,
         };
         let mut g = Grower::new(&inp);
         let mut active = vec![true; p.len()];

@@ -41,6 +41,8 @@ pub struct GenerationOptions {
     pub ellipses: bool,
     /// One colour per splat: no linear colour fields.
     pub flat_colors: bool,
+    /// Whole discs only: no crease detection, no clip lines.
+    pub no_creases: bool,
     /// Where the scanner stood, in the input's coordinates (default: the
     /// cloud's own).
     pub viewpoint: Option<DVec3>,
@@ -80,6 +82,7 @@ impl GenerationOptions {
             density: self.density.unwrap_or(defaults.density),
             ellipses: self.ellipses,
             color_fields: !self.flat_colors,
+            creases: !self.no_creases,
             scan_viewpoints: !self.no_viewpoint,
             thin: self.thin.unwrap_or(defaults.thin),
             ..defaults
@@ -89,7 +92,7 @@ impl GenerationOptions {
     /// Whether an option of point clouds was given (they do not apply to a
     /// Gaussian splat file).
     fn point_options_given(&self) -> bool {
-        self.epsilon_rel.is_some() || self.k.is_some() || self.density.is_some() || self.ellipses
+        self.epsilon_rel.is_some() || self.k.is_some() || self.density.is_some() || self.ellipses || self.no_creases
     }
 }
 
