@@ -3,12 +3,40 @@
 # kernels (the widest ISA this CPU has), then every test but the fuzzer
 # again with Embree forced to each of its ISAs this CPU runs (sse4.2, avx2,
 # avx512), through SPLATRAY_EMBREE_CONFIG, then the octree's render suites
-# on each of its SIMD paths (SPLATRAY_SIMD). Floats that Embree computes are
+# on each of its SIMD paths (SPLATRAY_SIMD), then the conformance suite and
+# the fuzzer with a fresh seed (SPLATRAY_SEED), printed to replay. Floats that Embree computes are
 # compared with a tolerance; candidate hits must stay identical.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
 cargo test --release
+
+# Every benchmark compiles (`cargo test` never builds benches/).
+echo "== cargo bench --no-run"
+cargo bench --no-run -q
+
+# What this CPU runs, from `splatray info`'s machine-readable lines: a line
+# missing, empty or naming something unknown stops the run here (no pass
+# silently runs zero times).
+info=$(cargo run --release -q -- info)
+info_line() {
+    local v
+    v=$(printf '%s\n' "$info" | sed -n "s/^$1: //p")
+    if [ -z "$v" ]; then
+        echo "test.sh: 'splatray info' printed no '$1:' line (or an empty one):" >&2
+        printf '%s\n' "$info" >&2
+        exit 1
+    fi
+    printf '%s' "$v"
+}
+isas=$(info_line embree-isas)
+paths=$(info_line simd-paths)
+for isa in $isas; do
+    case "$isa" in sse4.2 | avx2 | avx512) ;; *) echo "test.sh: unknown Embree ISA '$isa' in info" >&2; exit 1 ;; esac
+done
+for path in $paths; do
+    case "$path" in portable | avx2 | avx512) ;; *) echo "test.sh: unknown SIMD path '$path' in info" >&2; exit 1 ;; esac
+done
 
 targets=()
 for f in tests/*.rs tests/*/main.rs; do
@@ -17,9 +45,8 @@ for f in tests/*.rs tests/*/main.rs; do
     [ "$name" = fuzz ] && continue
     targets+=(--test "$name")
 done
-isas=$(cargo run --release -q -- info | sed -n 's/^cpu isas //p')
+[ "${#targets[@]}" -gt 10 ] || { echo "test.sh: found only ${#targets[@]} test targets" >&2; exit 1; }
 for isa in $isas; do
-    case "$isa" in sse4.2 | avx2 | avx512) ;; *) continue ;; esac
     echo "== tests again with Embree forced to isa=$isa"
     SPLATRAY_EMBREE_CONFIG="isa=$isa" cargo test --release -q --lib "${targets[@]}"
 done
@@ -27,11 +54,31 @@ done
 # The octree's leaf filter on each SIMD path this CPU runs (SPLATRAY_SIMD):
 # the suites whose renders use the default octree (the conformance suite
 # builds every path at once through the registry).
-paths=$(cargo run --release -q -- info | sed -n 's/^simd .*this CPU runs: \([a-z0-9 ]*\);.*/\1/p')
 for path in $paths; do
     echo "== octree suites again with SPLATRAY_SIMD=$path"
     SPLATRAY_SIMD="$path" cargo test --release -q --test far --test window --test hard_scenes --test contact --test render
 done
+
+# The randomised suites again with a fresh seed (the first pass ran their
+# default seeds): the conformance rays and scenes, and the fuzzer's mutation
+# stream. SPLATRAY_SEED set by the caller replays a run.
+seed=${SPLATRAY_SEED:-$(printf '0x%016x' "$(od -An -N8 -tu8 /dev/urandom | tr -d ' ')")}
+echo "== conformance and fuzz again with SPLATRAY_SEED=$seed"
+echo "   (replay: SPLATRAY_SEED=$seed cargo test --release --test conformance --test fuzz)"
+SPLATRAY_SEED="$seed" cargo test --release -q --test conformance --test fuzz
+
+# What this run covered (a path or ISA this CPU lacks is named, not skipped
+# in silence).
+untested() {
+    local want=$1 have=$2 w missing=""
+    for w in $want; do
+        case " $have " in *" $w "*) ;; *) missing="$missing $w" ;; esac
+    done
+    printf '%s' "${missing:- none}"
+}
+echo "== covered: Embree ISAs (default, then forced): $isas; not tested on this CPU:$(untested "sse4.2 avx2 avx512" "$isas")"
+echo "== covered: octree SIMD paths: $paths; not tested on this CPU:$(untested "portable avx2 avx512" "$paths")"
+echo "== covered: seeds: the suites' defaults, then SPLATRAY_SEED=$seed"
 
 # The Python package and the Dask driver (python/): the wheel built from
 # this clone into python/.venv (scripts/python-package.sh; setup made the

@@ -186,6 +186,17 @@ fn info() -> Result<()> {
         None => println!("memory   no bound stated by this machine"),
     }
     println!("threads  {}", rayon::current_num_threads());
+    // Stable, machine-readable lines (`key: a b c`) for scripts/test.sh,
+    // which runs the suites again on each: Embree's kernel sets this CPU
+    // runs that SPLATRAY_EMBREE_CONFIG can force, and the octree's SIMD
+    // paths. tests/embree_isa.rs and tests/simd_paths.rs check them.
+    let forcible: Vec<&str> = cpu
+        .iter()
+        .copied()
+        .filter(|i| splatray::embree::FORCIBLE_ISAS.contains(i))
+        .collect();
+    println!("embree-isas: {}", forcible.join(" "));
+    println!("simd-paths: {}", paths.join(" "));
     Ok(())
 }
 

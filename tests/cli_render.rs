@@ -143,7 +143,7 @@ fn report_and_aovs_are_written() {
         .arg(&out)
         .args([
             "--backend",
-            "embree",
+            common::other_renderer(),
             "--aov",
             "depth,normal,splat,albedo",
             "--report",
@@ -154,7 +154,7 @@ fn report_and_aovs_are_written() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-    assert_eq!(v["backend"], "embree");
+    assert_eq!(v["backend"], common::other_renderer());
     assert_eq!(v["width"], 16);
     assert_eq!(v["rays"]["primary"], 256);
     assert!(v["rays"]["shadow"].as_u64().unwrap() > 0);
@@ -193,7 +193,7 @@ fn report_and_aovs_are_written() {
         .arg(&scene_path)
         .arg("-o")
         .arg(&out2)
-        .args(["--backend", "octree", "--aov", "albedo"])
+        .args(["--backend", common::default_renderer(), "--aov", "albedo"])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -297,7 +297,7 @@ fn bands_stitch_into_the_whole_render() {
         let mut parts = Vec::new();
         for i in 0..3 {
             let p = dir.join(format!("band{i}.{ext}"));
-            let backend = if i == 1 { "embree" } else { "octree" };
+            let backend = common::renderers()[usize::from(i == 1)];
             let band = format!("{i}/3");
             let o = run(&[
                 "render",

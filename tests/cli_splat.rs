@@ -50,19 +50,25 @@ fn sample_then_splat_with_report() {
     assert_eq!(json["splats"].as_u64().unwrap() as usize, read.len());
     assert_eq!(json["origin"][1].as_f64(), Some(cloud.origin.y));
     assert!(read.len() < 5000);
-    assert!(json["coverage"].as_f64().unwrap() >= 0.99);
+    // (The grown-from `coverage` is 1 by construction: the held-out one is
+    // checked.)
+    assert!(json["coverage"].is_number());
     // The held-out coverage (10 % by default), printed and in the report.
     // Not 1 by construction: 5,000 points on the bunny leave some held-out
     // points (in the ears) off the splats grown without them (0.96 here).
     let h = &json["heldout_coverage"];
     let hc = h["coverage"].as_f64().unwrap();
-    assert!((0.9..=1.0).contains(&hc), "{h}");
+    // Measured 0.9602 (seed fixed by the flags): within 0.02 of it.
+    assert!((0.94..=0.98).contains(&hc), "{h}");
     let tested = h["tested"].as_u64().unwrap();
     assert!((350..650).contains(&tested), "{h}");
     assert!(String::from_utf8_lossy(&out.stderr).contains("held-out coverage"));
     assert_eq!(json["k"].as_u64(), Some(10));
     for key in ["read", "knn", "normals", "grow", "fit", "total"] {
-        assert!(json["seconds"][key].as_f64().is_some(), "{key}");
+        // A timing, positive and below a sane ceiling (measured: 0.5 s in
+        // all on 2 busy cores).
+        let t = json["seconds"][key].as_f64().unwrap_or(f64::NAN);
+        assert!(t > 0.0 && t < 60.0, "{key}: {t} s");
     }
 }
 

@@ -56,7 +56,7 @@ fn a_coarse_floor_renders_as_well_as_a_fine_one() {
         "set-up: the coarse floor's splats ({coarse_floor}) are larger than the sphere"
     );
     let mut fine_psnr = f64::NAN;
-    for name in ["octree", "embree"] {
+    for name in common::renderers() {
         let a = psnr_against_truth(&coarse, &render_with(&coarse, name));
         let b = psnr_against_truth(&fine, &render_with(&fine, name));
         fine_psnr = b;
@@ -70,7 +70,7 @@ fn a_coarse_floor_renders_as_well_as_a_fine_one() {
     }
     // The guard before the rule (every hit within the radius of the splat a
     // ray leaves skipped) fails the measure.
-    let backend = splatray::accel::registry::find("octree")
+    let backend = splatray::accel::registry::find(common::default_renderer())
         .unwrap()
         .build_splats(&coarse.splats)
         .unwrap();
@@ -170,7 +170,7 @@ fn the_shadow_reaches_the_contact() {
         |frame: &Frame, p: &FloorPixel| frame.rgb[p.index].x < 0.5 * (ambient_only + p.lit);
     // The guard before the rule (skip every hit within the radius of the
     // splat a ray leaves) left a lit gap: the measure can fail.
-    let octree = splatray::accel::registry::find("octree").unwrap();
+    let octree = splatray::accel::registry::find(common::default_renderer()).unwrap();
     let backend = octree.build_splats(&scene.splats).unwrap();
     let old = render_surfaces(
         &scene,
@@ -193,7 +193,7 @@ fn the_shadow_reaches_the_contact() {
         "set-up: the radius guard lit only {old_gap} of {} shadowed pixels next to the sphere",
         touching.len()
     );
-    for name in ["octree", "embree"] {
+    for name in common::renderers() {
         let frame = render_with(&scene, name);
         let dark = |p: &FloorPixel| dark_in(&frame, p);
         let lit = shadowed.iter().filter(|p| !dark(p)).count();

@@ -11,6 +11,8 @@
 //! A panicking input is written to `target/fuzz-crashes/` and fails the
 //! run; copy it to `tests/fuzz/crashes/` once fixed.
 
+mod common;
+
 use splatray::io::{Format, parse_gaussians, parse_mesh, parse_points, parse_splats};
 use splatray::scene::{build_scene, parse_scene_str};
 use splatray::splat::{SplatParams, generate};
@@ -427,10 +429,10 @@ fn mutated_inputs_never_panic() {
     let pool: Vec<Vec<u8>> = seeds.iter().map(|(_, b)| b.clone()).collect();
     // Quiet: panics are collected, not printed.
     std::panic::set_hook(Box::new(|_| {}));
-    let mut rng = Rng(std::env::var("FUZZ_SEED")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(0x5eed_1234_abcd_ef01));
+    // The mutation stream's seed: SPLATRAY_SEED when set (scripts/test.sh's
+    // second pass sets a fresh one), printed below so a run can be replayed.
+    let seed = common::env_seed().unwrap_or(0x5eed_1234_abcd_ef01);
+    let mut rng = Rng(seed);
     let deadline = Instant::now() + Duration::from_secs_f64(seconds);
     let (mut execs, mut slowest) = (0u64, (Duration::ZERO, String::new()));
     let mut found: Vec<(String, PathBuf)> = Vec::new();
@@ -457,7 +459,7 @@ fn mutated_inputs_never_panic() {
     }
     let _ = std::panic::take_hook();
     println!(
-        "fuzz: {execs} executions in {seconds} s over {} seeds, {} panics; slowest input {:.3} s ({})",
+        "fuzz: SPLATRAY_SEED={seed:#x}: {execs} executions in {seconds} s over {} seeds, {} panics; slowest input {:.3} s ({})",
         seeds.len(),
         found.len(),
         slowest.0.as_secs_f64(),
@@ -466,7 +468,7 @@ fn mutated_inputs_never_panic() {
     assert!(execs > 100, "only {execs} executions");
     assert!(
         found.is_empty(),
-        "inputs that panicked:\n{}",
+        "inputs that panicked (mutation stream SPLATRAY_SEED={seed:#x}):\n{}",
         found
             .iter()
             .map(|(m, p)| format!("{}: {m}", p.display()))

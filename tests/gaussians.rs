@@ -360,7 +360,9 @@ fn an_exported_2dgs_file_renders_like_the_original() {
         } else {
             // Phong splats are not hit beyond their fields' silhouettes,
             // and the export has no fields: the original misses a few
-            // rays at its outline (measured 165 of 19,200), never more.
+            // rays at its outline (measured 165 of 19,200: agreement
+            // 0.99141), never more. (The bound was 1.0 until Phong splats
+            // stopped being hit beyond their silhouettes, 087a1aa.)
             assert_eq!(agree.only_first, 0, "{shading}: {agree:?}");
             assert!(agree.hit_agreement >= 0.99, "{shading}: {agree:?}");
         }

@@ -6,8 +6,61 @@
 mod common;
 
 use common::scratch;
+use std::io::Read;
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+/// The time any one run below may take: each fails (or, for the few that
+/// must succeed, renders a tiny image) in well under a second (measured:
+/// 0.01-0.4 s each, release build, 2 busy cores); one still running after
+/// this is killed and fails its test, so "bounded time" is checked.
+const RUN_LIMIT: Duration = Duration::from_secs(30);
+
+/// Runs a command to its end, killed and failing the test when it takes
+/// longer than [`RUN_LIMIT`].
+trait BoundedOutput {
+    fn bounded_output(&mut self) -> Output;
+}
+
+impl BoundedOutput for Command {
+    fn bounded_output(&mut self) -> Output {
+        let started = Instant::now();
+        let mut child = self
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Drained meanwhile so that a chatty child never blocks on a pipe.
+        let mut out = child.stdout.take().unwrap();
+        let mut err = child.stderr.take().unwrap();
+        let out = std::thread::spawn(move || {
+            let mut b = Vec::new();
+            out.read_to_end(&mut b).map(|_| b)
+        });
+        let err = std::thread::spawn(move || {
+            let mut b = Vec::new();
+            err.read_to_end(&mut b).map(|_| b)
+        });
+        let status = loop {
+            if let Some(status) = child.try_wait().unwrap() {
+                break status;
+            }
+            if started.elapsed() > RUN_LIMIT {
+                let _ = child.kill();
+                let _ = child.wait();
+                panic!("{self:?} still running after {RUN_LIMIT:?}: killed");
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        };
+        Output {
+            status,
+            stdout: out.join().unwrap().unwrap(),
+            stderr: err.join().unwrap().unwrap(),
+        }
+    }
+}
 
 /// What a run did.
 struct Run {
@@ -28,7 +81,7 @@ fn run(name: &str, cmd: &str, scene: &str, args: &[&str]) -> Run {
     if cmd == "render" {
         c.arg("-o").arg(dir.join("out.png"));
     }
-    let o = c.args(args).output().unwrap();
+    let o = c.args(args).bounded_output();
     Run {
         ok: o.status.success(),
         stderr: String::from_utf8_lossy(&o.stderr).into_owned(),
@@ -102,8 +155,7 @@ fn recursion_depth_is_capped_below_a_stack_overflow() {
         .arg(dir.join("m.png"))
         .arg("--report")
         .arg(dir.join("m.json"))
-        .output()
-        .unwrap();
+        .bounded_output();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("m.json")).unwrap()).unwrap();
@@ -423,8 +475,7 @@ fn reader_messages_name_the_real_fault() {
         .arg(&nan_path)
         .args(["--epsilon", "-0.1", "-o"])
         .arg(nan_path.with_file_name("out.ply"))
-        .output()
-        .unwrap();
+        .bounded_output();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
         !o.status.success() && err.contains("epsilon = -0.1"),
@@ -516,8 +567,7 @@ fn splat_file_values_are_checked() {
         .arg(&path)
         .arg("-o")
         .arg(path.with_file_name("out.png"))
-        .output()
-        .unwrap();
+        .bounded_output();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("span"), "{err}");
     assert!(!leftovers(path.parent().unwrap()));
@@ -549,8 +599,7 @@ fn loose_file_checks() {
             .arg(cmd)
             .arg(&cloud)
             .args(args)
-            .output()
-            .unwrap();
+            .bounded_output();
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!o.status.success() && err.contains(expect), "{cmd}: {err}");
         assert!(!leftovers(dir), "{cmd} left an output");
@@ -576,8 +625,7 @@ fn compare_and_sweep_outputs_are_one_batch() {
         .arg(dir.join("out-diff.png"))
         .arg("--report")
         .arg(dir.join("out-report.json"))
-        .output()
-        .unwrap();
+        .bounded_output();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("is a folder"), "{err}");
     assert!(!dir.join("out-diff.png").exists());
@@ -588,8 +636,7 @@ fn compare_and_sweep_outputs_are_one_batch() {
         .arg(dir.join("out.csv"))
         .arg("--plot")
         .arg(dir.join("out-plot.png"))
-        .output()
-        .unwrap();
+        .bounded_output();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("is a folder"), "{err}");
     assert!(!dir.join("out-plot.png").exists() && !dir.join("out-plot.svg").exists());

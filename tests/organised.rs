@@ -135,7 +135,7 @@ fn organised_scans_render_from_their_sensor() {
         let text = scene_text(path, &s, &view, &o).unwrap();
         assert!(text.contains("intrinsics = {"), "{text}");
         let scene = build_scene(&parse_scene_str(&text).unwrap(), Path::new(""), None).unwrap();
-        let f = render_with(&scene, "octree");
+        let f = render_with(&scene, common::default_renderer());
         let (mut valid, mut close) = (0usize, 0usize);
         for (i, p) in grid.iter().enumerate() {
             if let Some(p) = p {
@@ -226,7 +226,7 @@ fn sample_writes_organised_scans_that_render_from_their_sensor() {
         };
         let text = scene_text(&path, &s, &view, &o).unwrap();
         let scene = build_scene(&parse_scene_str(&text).unwrap(), Path::new(""), None).unwrap();
-        let f = render_with(&scene, "embree");
+        let f = render_with(&scene, common::other_renderer());
         let close = grid
             .pixels
             .iter()
@@ -342,13 +342,13 @@ fn the_photo_check_compares_splat_colours_with_the_capture() {
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap()
     };
     let run_with = |path: &Path, backend: &str| run_flags(path, backend, &[]);
-    let run = |path: &Path| run_with(path, "octree");
+    let run = |path: &Path| run_with(path, common::default_renderer());
     let textured = dir.join("textured.pcd");
     write(&textured, &|_, p| texture(p));
     let r = run(&textured);
     assert_eq!(
         r,
-        run_with(&textured, "embree"),
+        run_with(&textured, common::other_renderer()),
         "the backends' albedo differs"
     );
     let psnr: Vec<f64> = r["psnr"]
@@ -358,14 +358,17 @@ fn the_photo_check_compares_splat_colours_with_the_capture() {
         .map(|v| v.as_f64().unwrap())
         .collect();
     assert!(r["covered"].as_f64().unwrap() >= 0.98, "{r}");
-    assert!(psnr[2] >= psnr[0] && psnr[0] >= 15.0, "{r}");
+    // Measured 26.92 / 27.14 / 27.16 dB (below): held within 0.5 dB, so a
+    // loss of the colour fields (22.1 dB) or a 1 dB regression fails.
+    eprintln!("photo check PSNR {psnr:?}, covered {}", r["covered"]);
+    assert!(psnr[2] >= psnr[0] && psnr[0] >= 26.4, "{r}");
     // One colour per splat (`--flat-colors`): the stripes' change across a
     // splat is the error, at every resolution down to 1/4 (measured 22.14
     // / 22.26 / 22.51 dB; 18.5 / 18.6 / 18.8 dB with the nearest splat's
     // colour before the albedo AOV). The linear colour fields keep it to
     // first order: 26.92 / 27.14 / 27.16 dB, the same splats (25.18 /
     // 25.30 / 25.26 dB before trimming took the empty pixels' rays).
-    let flat = run_flags(&textured, "octree", &["--flat-colors"]);
+    let flat = run_flags(&textured, common::default_renderer(), &["--flat-colors"]);
     assert_eq!(
         (flat["splats"].clone(), flat["color_fields"].as_u64()),
         (r["splats"].clone(), Some(0)),

@@ -42,7 +42,7 @@ ambient = 0.0
 fn lambert_error(mode: ShadingMode) -> (f64, f32, usize) {
     let mut sc = scene(LAMBERT);
     sc.options.shading = mode;
-    let frame = render_with(&sc, "embree");
+    let frame = render_with(&sc, common::other_renderer());
     let center = -sc.offset; // the sphere's centre in scene coordinates
     let l = -Vec3::new(-0.5, -0.4, -1.0).normalize();
     let (mut sum, mut max, mut n) = (0.0f64, 0.0f32, 0usize);
@@ -108,7 +108,7 @@ shape = { kind = "sphere", center = [0.0, 0.0, 0.0], radius = 1.0, splats = 2000
 material = { kind = "mirror", reflectance = 1.0 }
 "#,
     );
-    let frame = render_with(&sc, "embree");
+    let frame = render_with(&sc, common::other_renderer());
     assert!(frame.rays.reflection > 1000, "{:?}", frame.rays);
     for (i, c) in frame.rgb.iter().enumerate() {
         assert!(
@@ -139,7 +139,7 @@ material = { kind = "glass", ior = 1.5 }
 max_depth = 12
 "#,
     );
-    let frame = render_with(&sc, "embree");
+    let frame = render_with(&sc, common::other_renderer());
     assert!(frame.rays.refraction > 1000, "{:?}", frame.rays);
     let mut low = 0;
     let mut sum = 0.0f64;

@@ -93,7 +93,7 @@ fn the_scan_line_render_has_few_dark_specks() {
     let truth = render_truth(&scene, &Truth::new(&scene).unwrap(), None);
     let diagonal = scene.options.scale.diagonal;
     let mut first: Option<Frame> = None;
-    for name in ["octree", "embree"] {
+    for name in common::renderers() {
         let frame = render_with(&scene, name);
         let mut oriented = frame.clone();
         orient_to_camera(&mut oriented, &scene.camera);
@@ -118,6 +118,8 @@ fn the_scan_line_render_has_few_dark_specks() {
         // the false hits fail, without the refitted normals the specks.
         assert!(edge + surface <= 55, "{name}: {} specks", edge + surface);
         assert!(surface <= 3, "{name}: {surface} specks on the surface");
+        // (Raised from 500 to 560 in 5c465df, when 501 were measured after
+        // the cover and refitted-normal changes: a 12 % margin.)
         assert!(false_hits <= 560, "{name}: {false_hits} false-hit pixels");
         assert!(shadow <= 2_750, "{name}: {shadow} shadow pixels");
         if let Some(f) = &first {

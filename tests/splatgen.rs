@@ -56,9 +56,11 @@ fn sphere_normals_end_up_outward() {
         .filter(|(p, n)| n.dot(**p - c) > 0.0)
         .count();
     assert_eq!(outward, pts.len(), "every normal must point outward");
-    let (splats, rep) = generate(&cloud(pts), &SplatParams::default()).unwrap();
+    let (splats, _) = generate(&cloud(pts.clone()), &SplatParams::default()).unwrap();
     assert!(splats.iter().all(|s| s.normal.dot(s.center - c) > 0.0));
-    assert!(rep.coverage >= 0.99, "{}", rep.coverage);
+    // Held out (the coverage of the points the splats grew from holds by
+    // construction, `held_out_coverage_can_fail`): measured 1.0 of 399.
+    heldout_at_least(&cloud(pts), &SplatParams::default(), 0.99, "sphere");
 }
 
 #[test]
@@ -167,7 +169,16 @@ fn real_scans_give_fewer_splats_than_points_and_full_coverage() {
             "{f}: {} splats",
             splats.len()
         );
-        assert!(rep.coverage >= 0.99, "{f}: coverage {}", rep.coverage);
+        // Held out, not the grown-from coverage (1 by construction):
+        // measured 0.98446 of 193, 0.96736 of 674, 0.99531 of 1,279, 1.0
+        // of 180; each held within about 0.015 (3 of the bunny's points).
+        let min = match f {
+            "bunny-scan.ply" => 0.97,
+            "parasaurolophus_6700.ply" => 0.95,
+            "milk.pcd" => 0.98,
+            _ => 0.985,
+        };
+        heldout_at_least(&c, &SplatParams::default(), min, f);
         assert!(
             splats
                 .iter()
@@ -278,7 +289,8 @@ fn tiny_collinear_and_coplanar_clouds() {
             .iter()
             .all(|s| s.normal.z.abs() > 0.999 && (s.center.z - 2.0).abs() < 1e-4)
     );
-    assert!(rep.coverage >= 0.99);
+    // Held out (measured 1.0 of 96).
+    heldout_at_least(&cloud(grid.clone()), &SplatParams::default(), 0.99, "grid");
     // Bad parameters.
     let bad = SplatParams {
         density: 0.0,
@@ -316,7 +328,8 @@ fn ellipses_stretch_along_a_cylinder() {
         "{along} of {}",
         rep.elliptical_splats
     );
-    assert!(rep.coverage >= 0.99);
+    // Held out (measured 1.0 of 720).
+    heldout_at_least(&cloud(pts.clone()), &params, 0.99, "cylinder");
     let (circles, _) = generate(&cloud(pts), &SplatParams::default()).unwrap();
     assert!(
         splats.len() < circles.len(),
@@ -429,8 +442,9 @@ fn splat_count_does_not_follow_the_density() {
         ..SplatParams::default()
     };
     let count = |n: usize| {
-        let (splats, rep) = generate(&cloud(sphere(n, Vec3::ZERO, 1.0, 0.0)), &params).unwrap();
-        assert!(rep.coverage >= 0.99, "{n}: coverage {}", rep.coverage);
+        // (The grown-from coverage, 1 by construction, is not checked:
+        // held-out coverage is, in the tests above.)
+        let (splats, _) = generate(&cloud(sphere(n, Vec3::ZERO, 1.0, 0.0)), &params).unwrap();
         splats.len()
     };
     let (sparse, dense) = (count(20_000), count(160_000));
@@ -490,5 +504,21 @@ fn thinning_keeps_the_surface_and_every_point_on_it() {
     assert!(
         (used - 1.0).abs() < 0.02 && (count - 1.0).abs() < 0.03,
         "{used} {count}"
+    );
+}
+
+/// The held-out coverage of `c` (10 % held out, seed 1: splats regrown
+/// from the rest, and the share of held-out points lying on one), checked
+/// to be at least `min`; printed.
+fn heldout_at_least(c: &PointCloud, params: &SplatParams, min: f64, what: &str) {
+    let h = splatray::validate::holdout::heldout_coverage(c, params, 0.1, 1).unwrap();
+    eprintln!(
+        "{what}: held-out coverage {:.5} of {}",
+        h.coverage, h.tested
+    );
+    assert!(h.tested > 50, "{what}: {h:?}");
+    assert!(
+        h.coverage >= min,
+        "{what}: held-out coverage {h:?} below {min}"
     );
 }

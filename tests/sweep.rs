@@ -144,9 +144,13 @@ fn sweep_measures_budget_against_error() {
     for r in &rows {
         assert_eq!(num(r, "scene_splats") - num(r, "splats"), 400.0);
         assert_eq!(r["backends_identical"], "true", "backends differ: {r:?}");
-        assert!(num(r, "coverage") > 0.9, "coverage {r:?}");
+        // Measured 0.98712 at the coarsest row, 1 at most (0.987 when
+        // the bound was 0.9): a margin of about 0.007.
+        assert!(num(r, "coverage") > 0.98, "coverage {r:?}");
+        // Timings: positive and below a sane ceiling (measured well under
+        // a second each on these small inputs).
         for k in ["splat_seconds", "octree_build_s", "embree_build_s"] {
-            assert!(num(r, k) > 0.0, "{k} not measured");
+            assert!(num(r, k) > 0.0 && num(r, k) < 60.0, "{k}: {}", num(r, k));
         }
     }
     let span = num(flat[4], "splats") / num(flat[0], "splats");

@@ -131,7 +131,7 @@ fn tiles_match_the_whole_cloud_and_their_seams_hold() {
         );
         let scene = build_scene(&parse_scene_str(&scene_text).unwrap(), &dir, None).unwrap();
         assert_eq!(scene.splats.len(), set.splats.len());
-        let frame = render_with(&scene, "octree");
+        let frame = render_with(&scene, common::default_renderer());
         let exact = render_truth(&scene, &Truth::new(&scene).unwrap(), None);
         let (mut hits, mut false_hits) = ([0usize; 2], [0usize; 2]);
         for (px, &id) in frame.splat.iter().enumerate() {

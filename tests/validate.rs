@@ -40,8 +40,8 @@ fn scene() -> Scene {
 #[test]
 fn correct_backends_agree_completely() {
     let sc = scene();
-    let o = render_with(&sc, "octree");
-    let e = render_with(&sc, "embree");
+    let o = render_with(&sc, common::default_renderer());
+    let e = render_with(&sc, common::other_renderer());
     let a = compare_frames(&o, &e, sc.options.scale.diagonal);
     assert_eq!(a.hit_agreement, 1.0, "{a:?}");
     assert_eq!(a.same_splat, 1.0, "{a:?}");
@@ -56,7 +56,7 @@ fn broken_octree_is_caught_as_holes() {
     let discs: Vec<Disc> = sc.splats.iter().map(|s| s.disc_geometry()).collect();
     let broken = Octree::without_overlap_insertion(&discs, &OctreeParams::default());
     let bad = render(&sc, &broken, None);
-    let good = render_with(&sc, "embree");
+    let good = render_with(&sc, common::other_renderer());
     let a = compare_frames(&bad, &good, sc.options.scale.diagonal);
     eprintln!("broken octree vs embree: {a:?}");
     // Holes: rays the broken tree misses that Embree hits; never the reverse.
@@ -86,7 +86,10 @@ fn error_budget_puts_each_error_where_it_belongs() {
     let budget = |f: &splatray::render::integrator::Frame| {
         error_budget(f, &truth, diagonal, &tol, &phong.material_of).0
     };
-    let (fp, ff) = (render_with(&phong, "embree"), render_with(&flat, "embree"));
+    let (fp, ff) = (
+        render_with(&phong, common::other_renderer()),
+        render_with(&flat, common::other_renderer()),
+    );
     let (p, f) = (budget(&fp), budget(&ff));
     eprintln!("phong {p:#?}\nflat {f:#?}");
     let by = |b: &splatray::validate::causes::ErrorBudget, c: Cause| b.causes[c as usize].clone();
@@ -162,8 +165,8 @@ fn compare_report_has_the_documented_keys() {
             .unwrap_or_else(|| panic!("backend {name} missing in {v}"))
             .clone()
     };
-    assert_eq!(v["backends"][0]["name"], "octree", "{v}");
-    let agreement = &by_name("embree")["agreement"];
+    assert_eq!(v["backends"][0]["name"], common::default_renderer(), "{v}");
+    let agreement = &by_name(common::other_renderer())["agreement"];
     for k in [
         "rays",
         "hit_agreement",
@@ -185,10 +188,15 @@ fn compare_report_has_the_documented_keys() {
     );
     assert_eq!(v["rays"], 96 * 72);
     assert_eq!(agreement["rays"], 96 * 72);
-    for b in ["octree", "embree"] {
+    for b in common::renderers() {
         for k in ["build_seconds", "mrays_per_s"] {
             let x = &by_name(b)[k];
-            assert!(x.as_f64().is_some_and(|x| x >= 0.0), "{b}.{k} in {v}");
+            // Positive and below a sane ceiling (a 96 x 72 render of a
+            // small scene: milliseconds to build, 1-20 Mrays/s measured).
+            assert!(
+                x.as_f64().is_some_and(|x| x > 0.0 && x < 1e4),
+                "{b}.{k} in {v}"
+            );
         }
         assert!(
             by_name(b)["memory_bytes"].as_u64().is_some_and(|m| m > 0),
@@ -359,7 +367,9 @@ fn a_models_truth_mesh_is_its_exact_surface() {
     };
     let on = measure("0.0");
     // Holes only at the outline, where Phong splats are not hit beyond
-    // their fields' silhouettes (measured: 3 pixels, coverage 0.99853).
+    // their fields' silhouettes (measured: 3 pixels, coverage 0.99853; the
+    // bound was 0.999 until Phong splats became the curved surfaces their
+    // fields describe, b0b7697, and is 0.998 since: a few outline pixels).
     assert!(on["coverage"].as_f64().unwrap() >= 0.998, "{on}");
     let holes = &on["by_cause"]["holes"];
     assert_eq!(
@@ -368,7 +378,8 @@ fn a_models_truth_mesh_is_its_exact_surface() {
         "{on}"
     );
     assert!(on["false_hits"].as_f64().unwrap() <= 0.01, "{on}");
-    assert!(on["normal_deg_mean"].as_f64().unwrap() < 5.0, "{on}");
+    // Measured 2.65 degrees (p99 12.5; false hits 0.00065): within 0.5.
+    assert!(on["normal_deg_mean"].as_f64().unwrap() < 3.15, "{on}");
     // The truth stays in the model's coordinates and moves with it: the
     // model translated (seen a little from above) is covered as well
     // (measured 0.99952; a truth left behind would cover a fraction).

@@ -73,8 +73,8 @@ fn a_model_keeps_its_window_beside_a_large_floor() {
     assert_eq!(beside.xi_of[1], beside.options.scale.eps_self);
     assert_eq!(beside.options.scale.xi, beside.xi_of[0]);
     let (a, b) = (
-        render_with(&alone, "octree"),
-        render_with(&beside, "octree"),
+        render_with(&alone, common::default_renderer()),
+        render_with(&beside, common::default_renderer()),
     );
     let (both, differ) = sphere_normals_differ(&a, &b);
     eprintln!("per-model windows: sphere normals differ on {differ} of {both} pixels");
@@ -83,8 +83,8 @@ fn a_model_keeps_its_window_beside_a_large_floor() {
     // A window as a fraction of the scene diagonal (the former default)
     // changes with the floor: the measure can fail.
     let (a, b) = (
-        render_with(&scene(false, Some(1e-3)), "octree"),
-        render_with(&scene(true, Some(1e-3)), "octree"),
+        render_with(&scene(false, Some(1e-3)), common::default_renderer()),
+        render_with(&scene(true, Some(1e-3)), common::default_renderer()),
     );
     let (both, differ) = sphere_normals_differ(&a, &b);
     eprintln!("xi = 1e-3 of the diagonal: sphere normals differ on {differ} of {both} pixels");
@@ -97,7 +97,7 @@ fn a_model_keeps_its_window_beside_a_large_floor() {
 /// Mean angle between the resolved and the exact normals, degrees.
 fn normal_error(sc: &Scene) -> f64 {
     let truth = render_truth(sc, &Truth::new(sc).unwrap(), None);
-    let mut frame = render_with(sc, "embree");
+    let mut frame = render_with(sc, common::other_renderer());
     orient_to_camera(&mut frame, &sc.camera);
     truth_errors(frame, &truth, &sc.camera, sc.options.scale.diagonal).normal_deg_mean
 }

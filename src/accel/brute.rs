@@ -43,13 +43,16 @@ impl<P: Primitive> Brute<P> {
 impl<P: Primitive> Backend for Brute<P> {
     fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
         hits.clear();
+        if q.meets_nothing() {
+            return;
+        }
         for c in self.hits(q) {
             hits.offer(c);
         }
     }
 
     fn occluded_from(&self, q: &Query) -> bool {
-        self.hits(q).next().is_some()
+        !q.meets_nothing() && self.hits(q).next().is_some()
     }
 
     fn stats(&self) -> &BuildStats {
@@ -77,6 +80,9 @@ impl<P: Primitive> BruteReversed<P> {
 impl<P: Primitive> Backend for BruteReversed<P> {
     fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
         hits.clear();
+        if q.meets_nothing() {
+            return;
+        }
         let all: Vec<Candidate> = self.0.hits(q).collect();
         for c in all.into_iter().rev() {
             hits.offer(c);

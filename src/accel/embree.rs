@@ -120,12 +120,18 @@ impl<P: Primitive> EmbreeBackend<P> {
 impl<P: Primitive> Backend for EmbreeBackend<P> {
     fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
         hits.clear();
+        if q.meets_nothing() {
+            return;
+        }
         let (t_max, skip) = (q.t_max, q.secondary());
         self.scene
             .intersect(&q.ray, q.t_min, t_max, &mut Gather { hits, t_max, skip });
     }
 
     fn occluded_from(&self, q: &Query) -> bool {
+        if q.meets_nothing() {
+            return false;
+        }
         self.scene
             .occluded(&q.ray, q.t_min, q.t_max, &q.secondary())
     }

@@ -72,6 +72,15 @@ impl std::fmt::Debug for Query<'_> {
 }
 
 impl<'a> Query<'a> {
+    /// True when the interval is empty or undefined (a NaN end, or
+    /// `t_min > t_max`): the query meets nothing, on every backend
+    /// (tests/conformance/hostile_rays.rs).
+    #[inline]
+    #[must_use]
+    pub fn meets_nothing(&self) -> bool {
+        self.t_min.is_nan() || self.t_max.is_nan() || self.t_min > self.t_max
+    }
+
     /// A primary-ray query: nothing skipped.
     #[must_use]
     pub fn new(ray: Ray, t_min: f32, t_max: f32) -> Query<'a> {
@@ -102,6 +111,8 @@ pub trait Backend: Send + Sync {
     /// `[q.t_min, q.t_max]`: the nearest and all within the window of it.
     /// With `q.from`, a secondary ray leaving that splat: every hit
     /// [`Departure::skips`] is left out before it counts (as if absent).
+    /// An interval with a NaN end, or with `t_min > t_max`, meets nothing
+    /// ([`Query::meets_nothing`]): the same miss on every backend.
     fn intersect_from(&self, q: &Query, hits: &mut CandidateHits);
 
     /// True when any splat is hit with `t` in `[q.t_min, q.t_max]`, leaving

@@ -168,6 +168,11 @@ pub fn config_in_force() -> String {
     crate::config::current().embree.clone()
 }
 
+/// Embree's main kernel sets, the ones the test suite forces one by one
+/// through `isa=` in [`CONFIG_VAR`] where the CPU runs them (`splatray
+/// info` prints those as its `embree-isas:` line).
+pub const FORCIBLE_ISAS: [&str; 3] = ["sse4.2", "avx2", "avx512"];
+
 /// The ISAs of Embree's kernels (the names its `isa=` option takes) that
 /// this CPU can run, narrowest first. Embree's own grouping: `avx2` needs
 /// FMA, BMI1/2, LZCNT and F16C besides AVX2; `avx512` the SKX set (F, CD,

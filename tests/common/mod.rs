@@ -45,6 +45,29 @@ pub fn render_with(
     splatray::render::integrator::render(scene, b.as_ref(), None)
 }
 
+/// The registry's renderers (`accel::registry::renderers`), by name: the
+/// backends a scene-level test renders with. Panics when there are fewer
+/// than two (every cross-check between renderers would compare nothing).
+pub fn renderers() -> Vec<&'static str> {
+    let names: Vec<&'static str> = splatray::accel::registry::renderers()
+        .iter()
+        .map(|b| b.name)
+        .collect();
+    assert!(names.len() >= 2, "the registry lists renderers {names:?}");
+    names
+}
+
+/// The default renderer: the registry's first (the reference of `compare`).
+pub fn default_renderer() -> &'static str {
+    renderers()[0]
+}
+
+/// A renderer other than the default (the registry's second): where a test
+/// renders with the other backend, or compares against it.
+pub fn other_renderer() -> &'static str {
+    renderers()[1]
+}
+
 /// The default seed; `SPLATRAY_SEED` overrides it so a failure can be
 /// replayed.
 pub const DEFAULT_SEED: u64 = 0x5eed_2007;
@@ -52,17 +75,22 @@ pub const DEFAULT_SEED: u64 = 0x5eed_2007;
 /// The seed of this run: `SPLATRAY_SEED` (decimal or `0x` hex) or
 /// [`DEFAULT_SEED`].
 pub fn seed() -> u64 {
-    match std::env::var("SPLATRAY_SEED") {
-        Ok(s) => {
-            let s = s.trim();
-            let parsed = match s.strip_prefix("0x") {
-                Some(h) => u64::from_str_radix(h, 16),
-                None => s.parse(),
-            };
-            parsed.unwrap_or_else(|_| panic!("SPLATRAY_SEED={s} is not a number"))
-        }
-        Err(_) => DEFAULT_SEED,
-    }
+    env_seed().unwrap_or(DEFAULT_SEED)
+}
+
+/// `SPLATRAY_SEED` (decimal or `0x` hex), if set; scripts/test.sh sets a
+/// fresh one for its second pass of the conformance suite and the fuzzer.
+///
+/// # Panics
+/// If it is set to something that is not a number.
+pub fn env_seed() -> Option<u64> {
+    let s = std::env::var("SPLATRAY_SEED").ok()?;
+    let s = s.trim();
+    let parsed = match s.strip_prefix("0x") {
+        Some(h) => u64::from_str_radix(h, 16),
+        None => s.parse(),
+    };
+    Some(parsed.unwrap_or_else(|_| panic!("SPLATRAY_SEED={s} is not a number")))
 }
 
 /// The seeded generator of every test: the library's SplitMix64.
@@ -589,7 +617,7 @@ pub fn count_skipping(oracle: &dyn Backend, queries: &[Query], xi: f32) -> usize
 /// The surface `q`'s ray meets with Phong splats, as the integrator finds
 /// it: the window gathered (into `h`) and resolved, and gathered again past
 /// candidates beyond their fields' silhouettes.
-fn phong_hit(
+pub fn phong_hit(
     oracle: &dyn Backend,
     splats: &[Splat],
     q: &Query,
@@ -607,7 +635,7 @@ fn phong_hit(
 
 /// What a secondary ray from `hit` leaves: its winning splat, as the
 /// integrator's queries say.
-fn leaving(hit: &splatray::resolve::SurfaceHit) -> Departure {
+pub fn leaving(hit: &splatray::resolve::SurfaceHit) -> Departure {
     Departure {
         id: hit.id,
         point: hit.point,

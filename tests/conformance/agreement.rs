@@ -349,3 +349,63 @@ fn every_registered_backend_is_under_test() {
         }
     }
 }
+
+/// The seed moves the cases: `SPLATRAY_SEED`, when set (scripts/test.sh's
+/// second pass sets a fresh one and prints it), is the seed in use, and
+/// another seed gives other splats and other rays. Broken by a `seed()`
+/// that ignores the variable, or a generator that ignores its seed.
+#[test]
+fn the_seed_of_the_run_moves_the_cases() {
+    let s = seed();
+    eprintln!("conformance: SPLATRAY_SEED={s:#x}");
+    if let Ok(v) = std::env::var("SPLATRAY_SEED") {
+        let v = v.trim();
+        let want = v.strip_prefix("0x").map_or_else(
+            || v.parse::<u64>().ok(),
+            |h| u64::from_str_radix(h, 16).ok(),
+        );
+        assert_eq!(Some(s), want, "SPLATRAY_SEED={v} is not the seed in use");
+    } else {
+        assert_eq!(s, DEFAULT_SEED);
+    }
+    let other = s ^ 0x9e37_79b9_7f4a_7c15;
+    let (a, b) = (blobby_splats(50, s), blobby_splats(50, other));
+    assert!(
+        a.iter().zip(&b).all(|(x, y)| x.center != y.center),
+        "seeds {s:#x} and {other:#x} give the same splats"
+    );
+    let (qa, qb) = (random_queries(&a, 50, s), random_queries(&a, 50, other));
+    let same = qa
+        .iter()
+        .zip(&qb)
+        .filter(|(x, y)| x.ray.origin == y.ray.origin && x.ray.dir == y.ray.dir)
+        .count();
+    assert_eq!(same, 0, "seeds {s:#x} and {other:#x}: {same} rays alike");
+}
+
+/// The registry builds the octree on every SIMD path this CPU runs (so the
+/// suite above checks each against the oracle), and names the paths it
+/// covers; a path this CPU lacks is said to be untested, not passed over.
+#[test]
+fn every_simd_path_this_cpu_runs_is_a_tested_backend() {
+    use splatray::simd::{Isa, available};
+    let names = splatray::accel::registry::names();
+    let paths = available();
+    assert!(!paths.is_empty(), "no SIMD path at all");
+    assert!(paths.contains(&Isa::Portable), "{paths:?}");
+    for p in &paths {
+        let entry = format!("octree-{}", p.name());
+        assert!(names.contains(&entry.as_str()), "{entry} not in {names:?}");
+    }
+    for p in Isa::ALL {
+        if !paths.contains(&p) {
+            let entry = format!("octree-{}", p.name());
+            assert!(
+                !names.contains(&entry.as_str()),
+                "{entry} listed: {names:?}"
+            );
+            eprintln!("conformance: {entry} not tested (this CPU lacks it)");
+        }
+    }
+    eprintln!("conformance: backends tested: {}", names.join(" "));
+}

@@ -351,6 +351,9 @@ impl<P: Primitive> Backend for Octree<P> {
     /// without a pass-over rule nothing for that.
     fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
         hits.clear();
+        if q.meets_nothing() {
+            return;
+        }
         let (ray, t_min, t_max) = (&q.ray, q.t_min, q.t_max);
         match (&q.from, q.pass) {
             (None, None) => self.gather(ray, t_min, t_max, NoSkip, hits),
@@ -360,6 +363,9 @@ impl<P: Primitive> Backend for Octree<P> {
     }
 
     fn occluded_from(&self, q: &Query) -> bool {
+        if q.meets_nothing() {
+            return false;
+        }
         let (ray, t_min, t_max) = (&q.ray, q.t_min, q.t_max);
         match (&q.from, q.pass) {
             (None, None) => self.any_hit(ray, t_min, t_max, NoSkip),
