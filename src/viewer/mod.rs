@@ -137,9 +137,10 @@ pub fn serve(source: Source, scene: crate::scene::Scene, opts: &ServeOptions) ->
         .name("splatray-view-render".into())
         .spawn(move || w.run(&q))
         .map_err(Error::other)?;
-    let addr = format!("{}:{}", opts.host, opts.port);
+    let (host_name, port) = (opts.host.clone(), opts.port);
+    let addr = format!("{host_name} port {port}");
     let result = rt.block_on(async move {
-        let listener = tokio::net::TcpListener::bind(&addr)
+        let listener = tokio::net::TcpListener::bind((host_name.as_str(), port))
             .await
             .map_err(|e| Error::other(e).context(format_args!("cannot listen on {addr}")))?;
         let local: SocketAddr = listener.local_addr().map_err(Error::other)?;
