@@ -6,7 +6,11 @@
 #      provides it; otherwise the system's package when the distribution has
 #      one; otherwise the libraries of the PyPI wheel embreex==4.4.0.post1,
 #      downloaded with pip (nothing is installed into Python) and extracted into
-#      the project's git-ignored .embree/lib.
+#      the project's git-ignored .embree/lib;
+#   3. python/.venv (python3-venv from apt when Python lacks it) with
+#      python/requirements.txt, and the Python package built into it;
+#   4. Debian's chromium, the headless browser tests/viewer.rs drives
+#      `splatray view` with.
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -45,52 +49,69 @@ else
   apt_install libclang-dev
 fi
 
-# --- 2. Embree 4 -------------------------------------------------------------
-local_dir="$root/.embree/lib"
-if [ -n "${EMBREE_DIR:-}" ]; then
-  say "embree4: using EMBREE_DIR=$EMBREE_DIR"
-  exit 0
-fi
-if command -v pkg-config >/dev/null 2>&1 && pkg-config --exists embree4 2>/dev/null; then
-  say "embree4: system $(pkg-config --modversion embree4) (pkg-config)"
-  exit 0
-fi
-if [ -e "$local_dir/libembree4.so" ]; then
-  say "embree4: present in .embree/lib"
-  exit 0
-fi
-# A distribution that packages Embree 4 (Debian 13 and later) gets it from apt.
-if command -v apt-cache >/dev/null 2>&1; then
-  cand=$(apt-cache policy libembree-dev 2>/dev/null | awk '/Candidate:/ {print $2}')
-  case "$cand" in
-    4.*) say "embree4: installing the system's libembree-dev $cand"
-         apt_install libembree-dev pkg-config
-         exit 0 ;;
-  esac
+# --- 4. chromium (tests/viewer.rs) ------------------------------------------
+if [ -x /usr/bin/chromium ]; then
+  say "chromium: present"
+else
+  say "chromium: installing Debian's chromium (the viewer's browser test)"
+  apt_install chromium
 fi
 
-say "embree4: fetching the libraries of the PyPI wheel embreex==4.4.0.post1"
-py=$(command -v python3 || true)
-[ -n "$py" ] || { say "python3 with pip is needed to fetch Embree 4"; exit 1; }
-tmp=$(mktemp -d)
-trap 'rm -rf "$tmp"' EXIT
-"$py" -m pip download --quiet --no-deps --only-binary=:all: \
-  --python-version 3.11 --implementation cp --abi cp311 \
-  --platform manylinux_2_28_x86_64 \
-  embreex==4.4.0.post1 -d "$tmp" >&2
-whl=$(ls "$tmp"/embreex-*.whl)
-"$py" - "$whl" "$tmp/x" <<'PY'
+# --- 2. Embree 4 -------------------------------------------------------------
+embree() {
+  local_dir="$root/.embree/lib"
+  if [ -n "${EMBREE_DIR:-}" ]; then
+    say "embree4: using EMBREE_DIR=$EMBREE_DIR"
+    return 0
+  fi
+  if command -v pkg-config >/dev/null 2>&1 && pkg-config --exists embree4 2>/dev/null; then
+    say "embree4: system $(pkg-config --modversion embree4) (pkg-config)"
+    return 0
+  fi
+  if [ -e "$local_dir/libembree4.so" ]; then
+    say "embree4: present in .embree/lib"
+    return 0
+  fi
+  # A distribution that packages Embree 4 (Debian 13 and later) gets it from apt.
+  if command -v apt-cache >/dev/null 2>&1; then
+    cand=$(apt-cache policy libembree-dev 2>/dev/null | awk '/Candidate:/ {print $2}')
+    case "$cand" in
+      4.*) say "embree4: installing the system's libembree-dev $cand"
+           apt_install libembree-dev pkg-config
+           return 0 ;;
+    esac
+  fi
+
+  say "embree4: fetching the libraries of the PyPI wheel embreex==4.4.0.post1"
+  py=$(command -v python3 || true)
+  [ -n "$py" ] || { say "python3 with pip is needed to fetch Embree 4"; exit 1; }
+  tmp=$(mktemp -d)
+  trap 'rm -rf "$tmp"' EXIT
+  "$py" -m pip download --quiet --no-deps --only-binary=:all: \
+    --python-version 3.11 --implementation cp --abi cp311 \
+    --platform manylinux_2_28_x86_64 \
+    embreex==4.4.0.post1 -d "$tmp" >&2
+  whl=$(ls "$tmp"/embreex-*.whl)
+  "$py" - "$whl" "$tmp/x" <<'PY'
 import sys, zipfile
 with zipfile.ZipFile(sys.argv[1]) as z:
     for n in z.namelist():
         if n.startswith("embreex.libs/"):
             z.extract(n, sys.argv[2])
 PY
-mkdir -p "$local_dir.partial"
-cp "$tmp"/x/embreex.libs/* "$local_dir.partial/"
-lib=$(cd "$local_dir.partial" && ls libembree4-*.so.4 | head -n1)
-ln -sf "$lib" "$local_dir.partial/libembree4.so"
-rm -rf "$local_dir"
-mkdir -p "$(dirname "$local_dir")"
-mv "$local_dir.partial" "$local_dir"
-say "embree4: installed $lib into .embree/lib"
+  mkdir -p "$local_dir.partial"
+  cp "$tmp"/x/embreex.libs/* "$local_dir.partial/"
+  lib=$(cd "$local_dir.partial" && ls libembree4-*.so.4 | head -n1)
+  ln -sf "$lib" "$local_dir.partial/libembree4.so"
+  rm -rf "$local_dir"
+  mkdir -p "$(dirname "$local_dir")"
+  mv "$local_dir.partial" "$local_dir"
+  say "embree4: installed $lib into .embree/lib"
+}
+embree
+
+# --- 3. The Python package -----------------------------------------------------
+# python/.venv with python/requirements.txt (maturin, numpy, pytest, Dask),
+# then the package (python/splatray-py) built from the clone by maturin and
+# installed into it: scripts/python-package.sh.
+"$root/scripts/python-package.sh"

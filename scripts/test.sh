@@ -33,15 +33,11 @@ for path in $paths; do
     SPLATRAY_SIMD="$path" cargo test --release -q --test far --test window --test hard_scenes --test contact --test render
 done
 
-# The Dask driver (python/): its dependencies in a virtual environment of
-# its own, then its tests against the release binary built above.
-venv=python/.venv
-if [ ! -x "$venv/bin/python" ] || ! cmp -s python/requirements.txt "$venv/requirements.txt"; then
-    echo "== python/.venv: installing python/requirements.txt"
-    rm -rf "$venv"
-    python3 -m venv "$venv"
-    "$venv/bin/pip" install -q --disable-pip-version-check -r python/requirements.txt
-    cp python/requirements.txt "$venv/requirements.txt"
-fi
-echo "== the Dask driver's tests (LocalCluster of 2 worker processes)"
+# The Python package and the Dask driver (python/): the wheel built from
+# this clone into python/.venv (scripts/python-package.sh; setup made the
+# environment), then their tests against the package and the release
+# binary built above, from python/ (which holds no package source, so the
+# installed package is the one tested).
+scripts/python-package.sh
+echo "== the Python package's and the Dask driver's tests"
 (cd python && .venv/bin/python -m pytest -q -p no:cacheprovider tests)

@@ -13,7 +13,7 @@
 
 use crate::accel::octree::{Octree, OctreeParams};
 use crate::accel::{Backend, CandidateHits, Ray};
-use crate::primitive::{Disc, Primitive};
+use crate::primitive::{ClippedDisc, Disc, Primitive};
 use crate::splat::knn::{PointTree, build_tree};
 use crate::splat::{
     PointCloud, Splat, SplatParams, SplatReport, Viewpoints, generate_with_progress, outliers,
@@ -161,10 +161,15 @@ fn blocked(
 }
 
 /// The octree over `splats`' discs that trimming casts lines of sight
-/// through.
-fn octree_of(splats: &[Splat]) -> Octree<Disc> {
-    let discs: Vec<_> = splats.iter().map(Splat::disc_geometry).collect();
-    Octree::new(&discs, &OctreeParams::default())
+/// through: over clipped discs when some splat is clipped (the lines of
+/// sight pass the clipped-away parts), else over discs.
+fn octree_of(splats: &[Splat]) -> Box<dyn Backend> {
+    if splats.iter().any(Splat::is_clipped) {
+        let prims: Vec<ClippedDisc> = splats.iter().map(Splat::clipped_geometry).collect();
+        return Box::new(Octree::new(&prims, &OctreeParams::default()));
+    }
+    let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
+    Box::new(Octree::new(&discs, &OctreeParams::default()))
 }
 
 /// The scanner's rays that met nothing ([`PointCloud::misses`]), from its
@@ -189,6 +194,8 @@ fn shrink_away(s: &mut Splat, q: Vec2) {
     let shift = -a * dir;
     s.center += s.u_axis * (shift.x * s.radii.x) + s.v_axis * (shift.y * s.radii.y);
     s.radii *= 1.0 - a;
+    // The clip lines stay where they are on the surface.
+    s.clip = s.clip.reframed([shift.x, shift.y], [1.0 - a, 1.0 - a]);
     // The same field over the smaller disc: old (u, v) = shift + (1-a)(u', v')
     // in eq. (4)'s normalised coordinates.
     let f = &mut s.field;
@@ -259,7 +266,7 @@ fn opened_holes(
                 } else {
                     misses.from
                 };
-                let new = splats[id].disc_geometry();
+                let new = splats[id].clipped_geometry();
                 let reach = old.radii.max_element();
                 let (c, n, u, v) = (old.center, old.normal, old.u_axis, old.v_axis);
                 // The points on the old disc's plane within its reach of

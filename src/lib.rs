@@ -23,6 +23,7 @@ pub mod splat;
 pub mod terrain;
 pub mod tiled;
 pub mod validate;
+pub mod viewer;
 pub mod workflow;
 
 pub use error::{Error, Result};

@@ -57,6 +57,10 @@ enum Command {
     /// the exact surface as DIR/truth.ply; for scale runs.
     #[command(allow_negative_numbers = true)]
     Terrain(TerrainArgs),
+    /// Open a scene or point cloud in the browser, ray traced progressively
+    /// as you orbit, pan and zoom (a local web server; prints its URL).
+    #[command(allow_negative_numbers = true)]
+    View(cli::viewer::ViewerArgs),
     /// Join the bands of one image (`render --band I/N`, rendered apart)
     /// top to bottom into the image a whole render writes.
     Stitch(StitchArgs),
@@ -202,6 +206,7 @@ fn main() -> ExitCode {
             Command::Sweep(a) => cli::sweep::run(&a),
             Command::ScanCheck(a) => cli::scan_check::run(&a),
             Command::Stitch(a) => stitch(&a),
+            Command::View(a) => cli::viewer::run(&a),
             Command::Terrain(a) => terrain(&a),
         });
     match result {

@@ -61,6 +61,25 @@ pub struct SurfaceHit {
     pub shadow_origin: Vec3,
 }
 
+/// Cosine of the largest angle between the normals of two candidates that
+/// blend when either is clipped (45°): a clipped splat stops at a crease
+/// or a corner (`splat::clip`), and the splats met with it in a window
+/// whose normals turn by more than this lie across that crease (the other
+/// face of a box's edge, 90° away; a gable roof's other side, 60° or
+/// more), so eq. (5) does not blend them, nor do they compete for the
+/// winner. Splats of one face, and of a curved surface fitted closely
+/// enough to be clipped, turn by far less between neighbours. Windows of
+/// unclipped splats never ask: a scene without clipped splats resolves as
+/// before, bit for bit.
+pub const CREASE_COS: f32 = std::f32::consts::FRAC_1_SQRT_2;
+
+/// Whether candidate splat `s` lies on the same side of a crease as the
+/// window's first kept splat `first`: always when neither is clipped, else
+/// when their normals are within [`CREASE_COS`].
+fn same_face(first: &Splat, s: &Splat) -> bool {
+    !(first.is_clipped() || s.is_clipped()) || first.normal.dot(s.normal) >= CREASE_COS
+}
+
 fn faces_front(s: &Splat, ray: &Ray) -> bool {
     s.normal.dot(ray.dir) < 0.0
 }
@@ -197,7 +216,9 @@ pub fn resolve_within(
 /// normal is eq. (5): `n = Σ (1 - |(u_i,v_i)|) n_i / Σ (1 - |(u_i,v_i)|)`
 /// over those same-side candidates, with `n_i` the constant normal
 /// (`Blended`) or the Phong field of eq. (4) (`Phong`). Front- and
-/// back-facing splats are never blended (thin sheets). When every weight
+/// back-facing splats are never blended (thin sheets), nor, when either
+/// is clipped, splats across a crease from the first ([`CREASE_COS`]).
+/// When every weight
 /// is zero (all hits on rims) or the sum cancels, the winner's own normal
 /// is used.
 ///
@@ -236,14 +257,18 @@ pub fn resolve_models(
         return Some(Resolved::Beyond(first.t));
     }
     let (mode, window) = model(first.id);
-    let front = faces_front(&splats[first.id as usize], ray);
+    let first_splat = &splats[first.id as usize];
+    let front = faces_front(first_splat, ray);
     let far = first.t + window.min(hits.xi());
     let same_side = all
         .iter()
         .enumerate()
         .skip(k)
         .take_while(|(_, c)| c.t <= far)
-        .filter(|&(i, c)| passed & 1 << i == 0 && faces_front(&splats[c.id as usize], ray) == front)
+        .filter(|&(i, c)| {
+            let s = &splats[c.id as usize];
+            passed & 1 << i == 0 && faces_front(s, ray) == front && same_face(first_splat, s)
+        })
         .map(|(_, c)| c);
     let key = |c: &Candidate| (c.radial(), c.t, c.id);
     let winner = *same_side.clone().min_by(|a, b| {
@@ -405,5 +430,74 @@ mod tests {
             matches!(h, Resolved::Hit(h) if h.id == 1 && h.front),
             "{h:?}"
         );
+    }
+
+    #[test]
+    fn clipped_splats_across_a_crease_do_not_blend() {
+        use crate::splat::{Clip, ClipLine};
+        // A box edge seen along its diagonal: the top face (normal +z)
+        // nearest, the side face (normal +x) just behind within the
+        // window, its hit nearer its centre.
+        let top = Splat::disc(Vec3::ZERO, Vec3::Z, 1.0).unwrap();
+        let side = Splat::disc(Vec3::new(0.0, 0.0, -0.02), Vec3::X, 1.0).unwrap();
+        let ray = Ray::new(Vec3::new(3.0, 0.0, 3.0), Vec3::new(-1.0, 0.0, -1.0));
+        let mut hits = CandidateHits::new(0.1);
+        hits.offer(Candidate {
+            id: 0,
+            t: 4.2,
+            u: 0.8,
+            v: 0.0,
+        });
+        hits.offer(Candidate {
+            id: 1,
+            t: 4.22,
+            u: 0.1,
+            v: 0.0,
+        });
+        let edge = Clip::one(ClipLine {
+            a: 1.0,
+            b: 0.0,
+            d: 0.9,
+        });
+        let whole = vec![top, side];
+        let clipped = vec![Splat { clip: edge, ..top }, Splat { clip: edge, ..side }];
+        // Whole discs blend across the edge (and the side wins, nearer its
+        // centre); clipped ones keep to the nearest's face.
+        let h = resolve(&hits, &ray, &whole, ShadingMode::Blended)
+            .unwrap()
+            .hit()
+            .unwrap();
+        assert_eq!((h.id, h.blended), (1, 2));
+        let h = resolve(&hits, &ray, &clipped, ShadingMode::Blended)
+            .unwrap()
+            .hit()
+            .unwrap();
+        assert_eq!((h.id, h.blended, h.normal), (0, 1, Vec3::Z));
+        // One clipped splat of the two is enough.
+        let one = vec![Splat { clip: edge, ..top }, side];
+        let h = resolve(&hits, &ray, &one, ShadingMode::Blended)
+            .unwrap()
+            .hit()
+            .unwrap();
+        assert_eq!((h.id, h.blended), (0, 1));
+        // Within the crease angle (30° apart) clipped splats still blend.
+        let tilted = Splat::disc(
+            Vec3::new(0.0, 0.0, -0.02),
+            Vec3::new(0.5, 0.0, 0.75f32.sqrt()),
+            1.0,
+        )
+        .unwrap();
+        let near = vec![
+            Splat { clip: edge, ..top },
+            Splat {
+                clip: edge,
+                ..tilted
+            },
+        ];
+        let h = resolve(&hits, &ray, &near, ShadingMode::Blended)
+            .unwrap()
+            .hit()
+            .unwrap();
+        assert_eq!(h.blended, 2);
     }
 }

@@ -381,7 +381,15 @@ fn an_exported_2dgs_file_renders_like_the_original() {
 #[test]
 fn cli_exports_and_reads_gaussian_files() {
     let dir = scratch("gauss-cli");
-    let set = bunny_splats();
+    let mut set = bunny_splats();
+    // Seven clipped splats: the export says it drops their clip lines.
+    for s in set.splats.iter_mut().step_by(100).take(7) {
+        s.clip = splatray::splat::Clip::one(splatray::splat::ClipLine {
+            a: 1.0,
+            b: 0.0,
+            d: 0.2,
+        });
+    }
     let splats = dir.join("s.ply");
     write_splats(&splats, &set.splats, set.origin).unwrap();
     let g = dir.join("g.ply");
@@ -396,6 +404,13 @@ fn cli_exports_and_reads_gaussian_files() {
     assert!(o.status.success(), "{err}");
     assert!(
         err.contains("3dgs") && err.contains("written flat"),
+        "{err}"
+    );
+    assert!(
+        err.contains(&format!(
+            "warning: 7 of {} splats have clip lines",
+            set.splats.len()
+        )) && err.contains("written as whole discs"),
         "{err}"
     );
     let back = dir.join("back.ply");

@@ -280,6 +280,94 @@ fn lzf_rejects_corrupt_streams() {
 }
 
 #[test]
+fn clipped_splats_round_trip_bit_for_bit_and_only_they_add_properties() {
+    use splatray::splat::{Clip, ClipLine};
+    let dir = scratch("clipped-splats");
+    let line = |t: f32, d: f32| ClipLine {
+        a: t.cos(),
+        b: t.sin(),
+        d,
+    };
+    let mut splats: Vec<Splat> = (0..30)
+        .map(|i| {
+            let t = i as f32 * 0.61;
+            let mut s =
+                Splat::disc(Vec3::new(t, t.sin(), 1.0), Vec3::new(t, 1.0, 0.3), 0.2).unwrap();
+            s.radii = Vec2::new(0.2, 0.1 + t * 0.01);
+            s
+        })
+        .collect();
+    let origin = DVec3::new(1e6 + 0.25, -3.5, 7.0);
+    let whole = dir.join("whole.ply");
+    write_splats(&whole, &splats, origin).unwrap();
+    let whole_bytes = std::fs::read(&whole).unwrap();
+    // No clipped splat: no clip property, the record size of before.
+    assert!(!String::from_utf8_lossy(&whole_bytes).contains("clip_"));
+    for (i, s) in splats.iter_mut().enumerate() {
+        let t = i as f32 * 0.9;
+        s.clip = match i % 3 {
+            0 => Clip::NONE,
+            1 => Clip::one(line(t, 0.1 * t.sin())),
+            _ => Clip::two(line(t, -0.3), line(t + 1.7, 1e-7 * t)),
+        };
+    }
+    let p = dir.join("clipped.ply");
+    write_splats(&p, &splats, origin).unwrap();
+    let back = read_splats(&p).unwrap();
+    assert_eq!(back.splats, splats);
+    let bytes = std::fs::read(&p).unwrap();
+    let header: usize = splatray::io::CLIP_PROPS
+        .iter()
+        .map(|n| "property float \n".len() + n.len())
+        .sum();
+    assert_eq!(bytes.len(), whole_bytes.len() + 30 * 24 + header);
+    // With colour fields too: both read back.
+    let fields: Vec<ColorField> = (0..30)
+        .map(|i| ColorField {
+            du: Vec3::new(0.1, i as f32 * 1e-3, 0.0),
+            dv: Vec3::splat(-0.01),
+        })
+        .collect();
+    let q = dir.join("both.ply");
+    std::fs::write(
+        &q,
+        encode_splats_with(&q, &splats, Some(&fields), origin).unwrap(),
+    )
+    .unwrap();
+    let back = read_splats(&q).unwrap();
+    assert_eq!((back.splats, back.color_fields), (splats.clone(), fields));
+    // A second line without a first, and a non-finite line, are one-line
+    // errors naming the file.
+    let body = bytes
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .unwrap()
+        + 11;
+    let rec = splatray::io::splat_row_bytes(false, true);
+    let at = |k: usize| body + 21 * 4 + 4 * k; // splat 0, clip value k
+    let mut lone = bytes.clone();
+    lone[at(3)..at(4)].copy_from_slice(&1.0f32.to_le_bytes());
+    let r = dir.join("lone.ply");
+    std::fs::write(&r, &lone).unwrap();
+    let e = must_fail(read_splats(&r));
+    assert!(e.to_string().contains("splat 0: clip line"), "{e}");
+    assert_one_line_naming(&e, &r);
+    let mut nan = bytes.clone();
+    nan[rec + at(2)..rec + at(3)].copy_from_slice(&f32::NAN.to_le_bytes());
+    std::fs::write(&r, &nan).unwrap();
+    let e = must_fail(read_splats(&r));
+    assert!(
+        e.to_string().contains("splat 1: non-finite clip line"),
+        "{e}"
+    );
+    // A clip line the writer cannot store is refused, nothing written.
+    splats[4].clip = Clip::one(line(0.0, f32::INFINITY));
+    let e = must_fail(write_splats(&dir.join("bad.ply"), &splats, origin));
+    assert!(e.to_string().contains("splat 4 has a clip line"), "{e}");
+    assert!(!dir.join("bad.ply").exists());
+}
+
+#[test]
 fn splat_files_round_trip_losslessly_and_atomically() {
     let dir = scratch("splats");
     let mut splats = Vec::new();

@@ -12,7 +12,7 @@ use super::embree::EmbreeBackend;
 use super::octree::{Layout, Octree, OctreeParams, OverlapTest};
 use crate::embree::Device;
 use crate::error::Result;
-use crate::primitive::{Disc, Primitive};
+use crate::primitive::{ClippedDisc, Disc, Primitive};
 use crate::simd::Isa;
 use crate::splat::Splat;
 
@@ -274,8 +274,16 @@ pub fn oracle<P: Primitive>() -> BackendInfo<P> {
 }
 
 impl BackendInfo<Disc> {
-    /// Builds this backend over the discs of `splats`.
+    /// Builds this backend over the discs of `splats`: [`Disc`]s when no
+    /// splat is clipped (the scene pays nothing for clipping), else every
+    /// splat as a [`ClippedDisc`], built by the same-named entry's builder
+    /// for that primitive with this entry's parameters (`docs/DESIGN.md`, "The primitive contract").
     pub fn build_splats(&self, splats: &[Splat]) -> Result<Box<dyn Backend>> {
+        if splats.iter().any(Splat::is_clipped) {
+            let prims: Vec<ClippedDisc> = splats.iter().map(Splat::clipped_geometry).collect();
+            let clipped = lookup::<ClippedDisc>(self.name)?;
+            return (clipped.builder)(&prims, &self.params);
+        }
         let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
         self.build(&discs)
     }

@@ -87,6 +87,13 @@ pub fn run(args: &ExportArgs) -> Result<()> {
             set.splats.len()
         );
     }
+    let clipped = set.splats.iter().filter(|s| s.is_clipped()).count();
+    if clipped > 0 {
+        eprintln!(
+            "splatray: warning: {clipped} of {} splats have clip lines (a crease or a corner) the Gaussian layout cannot hold: they were written as whole discs",
+            set.splats.len()
+        );
+    }
     eprintln!(
         "splatray: {} splats -> {} Gaussians ({}, sigma = radius / {RADIUS_PER_SIGMA}, opacity {}, SH degree {}), {} bytes -> {}",
         set.splats.len(),

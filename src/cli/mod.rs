@@ -12,6 +12,7 @@ pub mod scan_check;
 pub mod splat_cmd;
 pub mod sweep;
 pub mod view;
+pub mod viewer;
 
 use splatray::io::Batch;
 use splatray::{Error, Result};

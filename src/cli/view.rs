@@ -55,7 +55,7 @@ fn positive(s: &str) -> Result<f64, String> {
 }
 
 /// `--up`: an axis name or three numbers.
-fn parse_up(s: &str) -> Result<DVec3, String> {
+pub fn parse_up(s: &str) -> Result<DVec3, String> {
     let axis = match s.trim() {
         "x" | "+x" => Some(DVec3::X),
         "y" | "+y" => Some(DVec3::Y),

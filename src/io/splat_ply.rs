@@ -10,6 +10,11 @@
 //! float properties, [`COLOR_FIELD_PROPS`], after the linear colour; a file
 //! without them holds constant colours.
 //!
+//! Clipped splats (a splat at a crease or a corner, `splat::clip`) carry
+//! their clip lines in six more float properties, [`CLIP_PROPS`], after
+//! the colour field if any: written only when some splat is clipped, so a
+//! file of whole discs is what it was.
+//!
 //! Splat centres are float offsets from an origin held in double precision,
 //! written as the header line `comment splatray origin X Y Z` (shortest
 //! round-trip decimals), so a splat file made from a georeferenced cloud
@@ -19,7 +24,7 @@
 use super::ply::{PlyFile, scalar};
 use super::{IoError, IoErrorKind, write_bytes};
 use crate::splat::color::ColorField;
-use crate::splat::{Clip, NormalField, Splat};
+use crate::splat::{Clip, ClipLine, NormalField, Splat};
 use glam::{DVec3, Vec2, Vec3};
 use ply_rs_bw::ply::{Property, PropertyAccess};
 use std::path::Path;
@@ -64,6 +69,14 @@ pub const COLOR_FIELD_PROPS: [&str; 6] = [
     "lin_blue_dv",
 ];
 
+/// The float32 properties of the clip lines (`splat::clip`): line `k`'s
+/// `a u + b v <= d` in the splat's normalised coordinates, `(a, b) = (0,
+/// 0)` where the splat carries fewer lines; written after the colour field
+/// (or [`SPLAT_PROPS`]) when some splat of the file is clipped.
+pub const CLIP_PROPS: [&str; 6] = [
+    "clip_a0", "clip_b0", "clip_d0", "clip_a1", "clip_b1", "clip_d1",
+];
+
 /// The 8-bit sRGB colour (`uchar`), last in the vertex: what other tools
 /// show. An older splat file holds the linear colour under these names as
 /// floats.
@@ -78,6 +91,8 @@ pub(crate) struct SplatRow {
     pub(crate) rgb: [f32; 3],
     /// The colour field, by the index of its name in [`COLOR_FIELD_PROPS`].
     pub(crate) dc: [f32; COLOR_FIELD_PROPS.len()],
+    /// The clip lines, by the index of their names in [`CLIP_PROPS`].
+    pub(crate) clip: [f32; CLIP_PROPS.len()],
 }
 
 impl PropertyAccess for SplatRow {
@@ -86,6 +101,7 @@ impl PropertyAccess for SplatRow {
             v: [f32::NAN; SPLAT_PROPS.len()],
             rgb: [f32::NAN; 3],
             dc: [f32::NAN; COLOR_FIELD_PROPS.len()],
+            clip: [f32::NAN; CLIP_PROPS.len()],
         }
     }
     fn set_property(&mut self, name: &str, p: Property) {
@@ -101,6 +117,8 @@ impl PropertyAccess for SplatRow {
             };
         } else if let Some(k) = COLOR_FIELD_PROPS.iter().position(|n| *n == name) {
             self.dc[k] = float(p);
+        } else if let Some(k) = CLIP_PROPS.iter().position(|n| *n == name) {
+            self.clip[k] = float(p);
         } else if let Some(i) = SPLAT_PROPS.iter().position(|n| *n == name) {
             self.v[i] = float(p);
         }
@@ -132,6 +150,37 @@ fn to_row(s: &Splat) -> [f32; 21] {
     ]
 }
 
+/// The [`CLIP_PROPS`] values of a splat's clip lines (zeros where absent).
+fn clip_row(s: &Splat) -> [f32; 6] {
+    let mut row = [0.0; 6];
+    for (k, l) in s.clip.lines().iter().enumerate() {
+        row[3 * k..3 * k + 3].copy_from_slice(&[l.a, l.b, l.d]);
+    }
+    row
+}
+
+/// The clip of [`CLIP_PROPS`] values: a line where `(a, b)` is not zero,
+/// the first before the second.
+fn clip_of(v: &[f32; 6]) -> Result<Clip, &'static str> {
+    if v.iter().any(|x| !x.is_finite()) {
+        return Err("non-finite clip line");
+    }
+    let line = |k: usize| {
+        (v[3 * k] != 0.0 || v[3 * k + 1] != 0.0).then_some(ClipLine {
+            a: v[3 * k],
+            b: v[3 * k + 1],
+            d: v[3 * k + 2],
+        })
+    };
+    let blank = |k: usize| v[3 * k + 2] == 0.0;
+    match (line(0), line(1)) {
+        (None, None) if blank(0) && blank(1) => Ok(Clip::NONE),
+        (Some(a), None) if blank(1) => Ok(Clip::one(a)),
+        (Some(a), Some(b)) => Ok(Clip::two(a, b)),
+        _ => Err("clip line with a zero normal, or a second line without a first"),
+    }
+}
+
 /// Write `splats`, whose centres are offsets from `origin`, to `path` as a
 /// binary little-endian float32 PLY (see [`SPLAT_PROPS`] for the vertex
 /// properties; colours are stored linear as floats and as 8-bit sRGB; the origin
@@ -159,6 +208,7 @@ pub fn encode_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<Vec
 /// [`encode_splats`] with each splat's colour field (`fields` `None`: the
 /// file [`encode_splats`] writes; else one per splat, written as
 /// [`COLOR_FIELD_PROPS`], and the header has them even with no splats).
+/// The clip lines ([`CLIP_PROPS`]) are written when some splat is clipped.
 ///
 /// # Errors
 /// As [`write_splats`]; also when `fields` is not one per splat, or holds
@@ -167,6 +217,25 @@ pub fn encode_splats_with(
     path: &Path,
     splats: &[Splat],
     fields: Option<&[ColorField]>,
+    origin: DVec3,
+) -> Result<Vec<u8>, IoError> {
+    let clips = splats.iter().any(Splat::is_clipped);
+    encode_splats_layout(path, splats, fields, clips, origin)
+}
+
+/// [`encode_splats_with`] with the [`CLIP_PROPS`] written when `clips`
+/// (whether or not a splat is clipped: files to be joined record by
+/// record, like the tiles of `tiled`, must share one layout; see
+/// [`splat_row_bytes`]). A clipped splat with `clips` false is an error.
+///
+/// # Errors
+/// As [`encode_splats_with`]; also when a splat is clipped and `clips` is
+/// false, or a clip line is not finite or has a zero normal.
+pub fn encode_splats_layout(
+    path: &Path,
+    splats: &[Splat],
+    fields: Option<&[ColorField]>,
+    clips: bool,
     origin: DVec3,
 ) -> Result<Vec<u8>, IoError> {
     let bad = |what: String| {
@@ -201,9 +270,22 @@ pub fn encode_splats_with(
     {
         return bad(format!("splat {i} has a non-finite colour field"));
     }
+    if let Some(i) = splats.iter().position(|s| {
+        s.is_clipped()
+            && (!clips
+                || s.clip.lines().iter().any(|l| {
+                    !(l.a.is_finite() && l.b.is_finite() && l.d.is_finite())
+                        || (l.a == 0.0 && l.b == 0.0)
+                }))
+    }) {
+        return bad(format!(
+            "splat {i} has a clip line that is not finite, has a zero normal, or is not written ({:?})",
+            splats[i].clip
+        ));
+    }
     let with = fields.is_some();
-    let header = splat_header_with(splats.len() as u64, origin, with);
-    let row = SPLAT_ROW_BYTES + if with { COLOR_FIELD_PROPS.len() * 4 } else { 0 };
+    let header = splat_header_layout(splats.len() as u64, origin, with, clips);
+    let row = splat_row_bytes(with, clips);
     let mut out = Vec::with_capacity(header.len() + splats.len() * row);
     out.extend_from_slice(header.as_bytes());
     for (i, s) in splats.iter().enumerate() {
@@ -212,6 +294,11 @@ pub fn encode_splats_with(
         }
         if let Some(f) = fields.and_then(|f| f.get(i)) {
             for v in f.du.to_array().into_iter().chain(f.dv.to_array()) {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        if clips {
+            for v in clip_row(s) {
                 out.extend_from_slice(&v.to_le_bytes());
             }
         }
@@ -233,10 +320,30 @@ pub fn splat_header(count: u64, origin: DVec3) -> String {
     splat_header_with(count, origin, false)
 }
 
+/// Bytes of one splat record in a splat file with colour fields and clip
+/// lines as given.
+#[must_use]
+pub fn splat_row_bytes(color_fields: bool, clips: bool) -> usize {
+    SPLAT_ROW_BYTES
+        + if color_fields {
+            4 * COLOR_FIELD_PROPS.len()
+        } else {
+            0
+        }
+        + if clips { 4 * CLIP_PROPS.len() } else { 0 }
+}
+
 /// [`splat_header`], with the [`COLOR_FIELD_PROPS`] after the linear colour
 /// when `color_fields`.
 #[must_use]
 pub fn splat_header_with(count: u64, origin: DVec3, color_fields: bool) -> String {
+    splat_header_layout(count, origin, color_fields, false)
+}
+
+/// [`splat_header_with`], with the [`CLIP_PROPS`] after the colour field
+/// when `clips`.
+#[must_use]
+pub fn splat_header_layout(count: u64, origin: DVec3, color_fields: bool, clips: bool) -> String {
     let mut header = format!(
         "ply\nformat binary_little_endian 1.0\ncomment splatray {} splats: Linsen et al. 2007 discs with Botsch et al. 2004 normal fields\ncomment {ORIGIN_COMMENT} {:?} {:?} {:?}\nelement vertex {count}\n",
         env!("CARGO_PKG_VERSION"),
@@ -249,7 +356,8 @@ pub fn splat_header_with(count: u64, origin: DVec3, color_fields: bool) -> Strin
     } else {
         &[]
     };
-    for p in SPLAT_PROPS.iter().chain(fields) {
+    let clip: &[&str] = if clips { &CLIP_PROPS[..] } else { &[] };
+    for p in SPLAT_PROPS.iter().chain(fields).chain(clip) {
         header.push_str("property float ");
         header.push_str(p);
         header.push('\n');
@@ -335,6 +443,7 @@ pub fn parse_splats(bytes: &[u8]) -> Result<SplatSet, IoErrorKind> {
     let full =
         SPLAT_PROPS[..18].iter().all(|n| has(n)) && (linear || SRGB_PROPS.iter().all(|n| has(n)));
     let with_fields = full && COLOR_FIELD_PROPS.iter().all(|n| has(n));
+    let with_clips = full && CLIP_PROPS.iter().all(|n| has(n));
     let rows = file.read_vertices::<SplatRow>()?;
     let mut splats = Vec::with_capacity(rows.len());
     let mut color_fields = Vec::new();
@@ -418,7 +527,11 @@ pub fn parse_splats(bytes: &[u8]) -> Result<SplatSet, IoErrorKind> {
                     beta: v[17],
                 },
                 color: Vec3::new(v[18], v[19], v[20]),
-                clip: Clip::NONE,
+                clip: if with_clips {
+                    clip_of(&r.clip).map_err(bad)?
+                } else {
+                    Clip::NONE
+                },
             }
         } else {
             let mut d = Splat::disc(center, normal, v[6]).ok_or_else(|| bad("zero normal"))?;

@@ -5,11 +5,16 @@
 //! loop is monomorphised per primitive; see `docs/DESIGN.md`, "The primitive
 //! contract", for what an implementation must guarantee.
 //!
-//! Today there is one: [`Disc`], the oriented elliptical disc of a splat
-//! (circles are the case `r_u = r_v`).
+//! Two today: [`Disc`], the oriented elliptical disc of a splat (circles
+//! are the case `r_u = r_v`), and [`ClippedDisc`], a disc cut by one or two
+//! clip lines ([`Clip`]), built only for scenes holding clipped splats.
 
+pub mod clip;
+mod clipped;
 mod disc;
 
+pub use clip::{Clip, ClipLine};
+pub use clipped::{ClippedDisc, ClippedPack};
 pub use disc::{Disc, DiscPack};
 
 use glam::Vec3;

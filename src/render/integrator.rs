@@ -33,7 +33,9 @@ impl RayCounts {
         self.primary + self.shadow + self.reflection + self.refraction
     }
 
-    fn add(self, o: RayCounts) -> RayCounts {
+    /// The counts of two renders added (of bands rendered apart).
+    #[must_use]
+    pub fn plus(self, o: RayCounts) -> RayCounts {
         RayCounts {
             primary: self.primary + o.primary,
             shadow: self.shadow + o.shadow,
@@ -820,7 +822,7 @@ fn render_surfaces_rows(
         frame.albedo.extend(row.albedo);
         frame.light_facing.extend(row.light_facing);
         frame.light_lit.extend(row.light_lit);
-        frame.rays = frame.rays.add(row.rays);
+        frame.rays = frame.rays.plus(row.rays);
     }
     frame.seconds = start.elapsed().as_secs_f64();
     frame

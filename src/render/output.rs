@@ -130,6 +130,27 @@ fn write_rgb32f(
     save_into(batch, &img, path, ImageFormat::OpenExr)
 }
 
+/// The frame's radiance as the bytes of the PNG file [`write_image`]
+/// writes (the same encoder and settings), for a frame that is sent
+/// rather than saved (`splatray view`).
+///
+/// # Errors
+/// The encoder fails.
+pub fn png_bytes(frame: &Frame) -> Result<Vec<u8>> {
+    rgb8_png(&to_srgb8(frame))
+}
+
+/// An 8-bit RGB image as PNG bytes, with [`save`]'s encoder and settings.
+///
+/// # Errors
+/// The encoder fails.
+pub fn rgb8_png(img: &ImageBuffer<Rgb<u8>, Vec<u8>>) -> Result<Vec<u8>> {
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, ImageFormat::Png)
+        .map_err(Error::other)?;
+    Ok(out.into_inner())
+}
+
 /// Writes the frame: PNG (sRGB, 8 bit) or EXR (linear float) by extension.
 pub fn write_image(frame: &Frame, path: &Path) -> Result<()> {
     let mut batch = Batch::new();

@@ -17,7 +17,7 @@ use crate::splat::Splat;
 use crate::splat::color::ColorField;
 use crate::{Error, Result};
 use glam::{DMat3, DVec3, Mat3, Vec2, Vec3};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Loads a scene file: parses it, builds every model's splats, resolves
 /// materials, lights and camera, and re-centres everything. Splat
@@ -52,7 +52,27 @@ pub fn build_scene_read(
     read: Option<(&Path, CloudRead)>,
     progress: Option<Progress<'_>>,
 ) -> Result<Scene> {
-    let mut read = read;
+    let reads = read
+        .map(|(p, r)| (p.to_path_buf(), r))
+        .into_iter()
+        .collect();
+    build_scene_reads(file, base, reads, progress)
+}
+
+/// [`build_scene`] with several models' inputs already read (or made in
+/// memory, as the Python package's scenes have them): a model naming the
+/// path of one of `reads` (joined to `base`) takes that input instead of
+/// reading a file, once.
+///
+/// # Errors
+/// As [`build_scene`].
+pub fn build_scene_reads(
+    file: &SceneFile,
+    base: &Path,
+    reads: Vec<(PathBuf, CloudRead)>,
+    progress: Option<Progress<'_>>,
+) -> Result<Scene> {
+    let mut read = reads;
     let c = &file.camera;
     check_camera(c)?;
     // Models, camera and lights are first shifted, in f64, by where the
@@ -79,35 +99,7 @@ pub fn build_scene_read(
         )));
     }
     let lights = lights.into_iter().map(|l| moved(l, offset)).collect();
-    let (from, at) = (
-        camera_point("from", c.from, shift, offset)?,
-        camera_point("at", c.at, shift, offset)?,
-    );
-    if from == at && c.from != c.at {
-        return Err(Error::invalid(format!(
-            "camera: `from` and `at` are {:.2e} apart, too close to tell apart {:.2e} from the \
-             models in f32",
-            (DVec3::from(c.from) - DVec3::from(c.at)).length(),
-            (DVec3::from(c.from) - shift).length()
-        )));
-    }
-    let camera = match c.intrinsics {
-        None => Camera::look_at(from, at, v3(c.up), c.fov, c.width, c.height, c.spp)?,
-        Some(k) => Camera::look_at_intrinsics(
-            from,
-            at,
-            v3(c.up),
-            super::model::Intrinsics {
-                fx: k.fx,
-                fy: k.fy,
-                cx: k.cx,
-                cy: k.cy,
-            },
-            c.width,
-            c.height,
-            c.spp,
-        )?,
-    };
+    let camera = scene_camera(c, shift, offset)?;
     let (options, xi_of) = render_options(&file.render, diagonal, &models.standoff)?;
     Ok(Scene {
         splats: models.splats,
@@ -124,6 +116,63 @@ pub fn build_scene_read(
         shift,
         load: models.load,
     })
+}
+
+/// The lights of a scene file's `[[light]]` tables, placed as
+/// [`build_scene`] places them (shifted by `shift`, re-centred by
+/// `offset`): what a view that moves a scene's lights with its camera (a
+/// cloud's headlight) reads back from its text.
+///
+/// # Errors
+/// A light without what its kind needs, or out of range (one line).
+pub fn scene_lights(specs: &[LightSpec], shift: DVec3, offset: Vec3) -> Result<Vec<Light>> {
+    specs
+        .iter()
+        .map(|l| light(l, shift).map(|l| moved(l, offset)))
+        .collect()
+}
+
+/// The camera of a scene file's `[camera]` table, placed as
+/// [`build_scene`] places it: shifted by `shift` and re-centred by `offset`
+/// (a built scene's [`Scene::shift`] and [`Scene::offset`]), so that a
+/// camera written to scene text and read back gives the camera a render of
+/// that text uses.
+///
+/// # Errors
+/// One line: a resolution or `spp` out of range, `from` and `at` that
+/// coincide in f32, an `up` along the view, a field of view or intrinsics
+/// out of range.
+pub fn scene_camera(c: &CameraSpec, shift: DVec3, offset: Vec3) -> Result<Camera> {
+    check_camera(c)?;
+    let (from, at) = (
+        camera_point("from", c.from, shift, offset)?,
+        camera_point("at", c.at, shift, offset)?,
+    );
+    if from == at && c.from != c.at {
+        return Err(Error::invalid(format!(
+            "camera: `from` and `at` are {:.2e} apart, too close to tell apart {:.2e} from the \
+             models in f32",
+            (DVec3::from(c.from) - DVec3::from(c.at)).length(),
+            (DVec3::from(c.from) - shift).length()
+        )));
+    }
+    match c.intrinsics {
+        None => Camera::look_at(from, at, v3(c.up), c.fov, c.width, c.height, c.spp),
+        Some(k) => Camera::look_at_intrinsics(
+            from,
+            at,
+            v3(c.up),
+            super::model::Intrinsics {
+                fx: k.fx,
+                fy: k.fy,
+                cx: k.cx,
+                cy: k.cy,
+            },
+            c.width,
+            c.height,
+            c.spp,
+        ),
+    }
 }
 
 /// A scene of one model, `splats` (white and diffuse), seen by `camera`
@@ -224,7 +273,7 @@ struct Models {
 fn load_models(
     specs: &[ModelSpec],
     base: &Path,
-    read: &mut Option<(&Path, CloudRead)>,
+    read: &mut Vec<(PathBuf, CloudRead)>,
     progress: Option<Progress<'_>>,
 ) -> Result<Models> {
     let start = std::time::Instant::now();
@@ -355,7 +404,7 @@ fn truth_of(
 fn model_source<'a>(
     spec: &'a ModelSpec,
     base: &Path,
-    read: &mut Option<(&Path, CloudRead)>,
+    read: &mut Vec<(PathBuf, CloudRead)>,
     load: &mut LoadReport,
     progress: Option<Progress<'_>>,
 ) -> Result<Source<'a>> {
@@ -456,13 +505,10 @@ fn model_source<'a>(
 }
 
 /// What was read of `path` already, taken out of `read` (once): `None`
-/// when `read` holds another file or was taken.
-fn take_read(read: &mut Option<(&Path, CloudRead)>, path: &Path) -> Option<CloudRead> {
-    if read.as_ref().is_some_and(|(p, _)| *p == path) {
-        read.take().map(|(_, r)| r)
-    } else {
-        None
-    }
+/// when `read` holds no such file or it was taken.
+fn take_read(read: &mut Vec<(PathBuf, CloudRead)>, path: &Path) -> Option<CloudRead> {
+    let at = read.iter().position(|(p, _)| p == path)?;
+    Some(read.swap_remove(at).1)
 }
 
 /// A mesh model's points (sampled by area, or scanned, with the model's

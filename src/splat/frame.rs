@@ -27,7 +27,7 @@ const MAX_REACH: f64 = 1e12;
 /// [`ROBUST_SAMPLE`] points), the size being the largest range. `point(i)`
 /// gives point `i` of `n`; non-finite ones are left out. `None` when no
 /// point is finite.
-pub(crate) fn robust_centre_size(n: usize, point: impl Fn(usize) -> DVec3) -> Option<(DVec3, f64)> {
+pub fn robust_centre_size(n: usize, point: impl Fn(usize) -> DVec3) -> Option<(DVec3, f64)> {
     let stride = n.div_ceil(ROBUST_SAMPLE).max(1);
     let mut centre = [0.0; 3];
     let mut size = 0f64;

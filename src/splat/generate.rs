@@ -147,6 +147,9 @@ pub struct SplatReport {
     pub splats: usize,
     /// How many of them are elliptical.
     pub elliptical_splats: usize,
+    /// How many of them carry clip lines (`splat::clip`: a splat cut at a
+    /// crease or a corner).
+    pub clipped: usize,
     /// Fraction of the used points lying on at least one splat: within `ϵ`
     /// of its plane and inside its disc.
     pub coverage: f64,
@@ -479,6 +482,7 @@ pub fn generate_with_progress(
     report.coverage = coverage(&points, &grown.covered, &splats, epsilon);
     report.splats = splats.len();
     report.elliptical_splats = grown.elliptical;
+    report.clipped = splats.iter().filter(|s| s.is_clipped()).count();
     report.largest_over_spacing = largest_over_spacing(&splats, &tree, &knn);
     report.mean_radius = splats
         .iter()

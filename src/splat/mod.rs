@@ -2,7 +2,7 @@
 //! field (report §2.1 and §4.1).
 
 pub use crate::geometry::tangent_frame;
-pub use crate::primitive::Disc;
+pub use crate::primitive::{ClippedDisc, Disc};
 use glam::{Vec2, Vec3};
 
 /// The linear normal field of a Phong splat, eq. (4) of §4.1–4.2.
@@ -88,6 +88,22 @@ impl Splat {
         }
     }
 
+    /// The clipped primitive of this splat: its disc and its clip lines
+    /// (used for every splat of a scene where some splat is clipped).
+    #[must_use]
+    pub fn clipped_geometry(&self) -> ClippedDisc {
+        ClippedDisc {
+            disc: self.disc_geometry(),
+            clip: self.clip,
+        }
+    }
+
+    /// Whether this splat carries a clip line.
+    #[must_use]
+    pub fn is_clipped(&self) -> bool {
+        !self.clip.is_none()
+    }
+
     /// Half extents of the tight axis-aligned box around the (elliptical) disc:
     /// along world axis `i`, `sqrt((r_u u_i)^2 + (r_v v_i)^2)`.
     #[must_use]
@@ -124,6 +140,9 @@ pub mod thin;
 
 pub use clip::{Clip, ClipLine};
 pub use cloud::{PointCloud, Scans, Viewpoints};
+/// The robust centre (per-axis medians) the readers put a cloud's origin at,
+/// for clouds made in memory (the Python package's arrays).
+pub use frame::robust_centre_size;
 pub use generate::{
     GenerateError, NOISE_PROJECT, Skipped, SplatParams, SplatReport, StageSeconds, count_on_splats,
     coverage, generate, generate_with_progress, on_splat, viewpoints_of,

@@ -8,7 +8,7 @@ use glam::{Vec2, Vec3};
 pub use splatray::accel::Query;
 use splatray::accel::registry::oracle;
 use splatray::accel::{Backend, CandidateHits, Departure, Ray, backends as registry};
-use splatray::primitive::{Disc, Hit, Local, Primitive, Single};
+use splatray::primitive::{Clip, ClipLine, ClippedDisc, Disc, Hit, Local, Primitive, Single};
 use splatray::resolve::{Resolved, ShadingMode, resolve};
 use splatray::splat::{NormalField, Splat};
 use std::path::{Path, PathBuf};
@@ -203,15 +203,16 @@ pub fn diagonal(splats: &[Splat]) -> f32 {
     (hi - lo).length()
 }
 
-/// A second primitive, defined outside the library as a user would: the
-/// disc without its SIMD pack ([`Single`]), every method delegated. Its
-/// hits are the disc's bit for bit, so backends built over it must agree
-/// with the oracle built over discs.
+/// A second primitive, defined outside the library as a user would: a
+/// library primitive (the disc by default, or the clipped disc) without
+/// its SIMD pack ([`Single`]), every method delegated. Its hits are the
+/// wrapped primitive's bit for bit, so backends built over it must agree
+/// with the oracle built over that primitive.
 #[derive(Clone, Copy, Debug)]
-pub struct Unpacked(pub Disc);
+pub struct Unpacked<P = Disc>(pub P);
 
-impl Primitive for Unpacked {
-    type Pack = Single<Unpacked>;
+impl<P: Primitive> Primitive for Unpacked<P> {
+    type Pack = Single<Unpacked<P>>;
     fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit> {
         self.0.intersect(ray, t_min, t_max)
     }
@@ -287,22 +288,58 @@ fn build_all<P: Primitive>(prims: &[P], primitive: &str, out: &mut Vec<Named>) {
     }
 }
 
-/// Builds the oracle and every tested backend over the splats.
+/// Builds the oracle and every tested backend over the splats: over
+/// discs (`<disc>`, `<unpacked>`), or, when some splat is clipped, over
+/// clipped discs (`<clipped>`, `<clipped-unpacked>`), as
+/// `BackendInfo::build_splats` chooses for a scene.
 pub fn backends(splats: &[Splat]) -> Backends {
-    let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
+    if splats.iter().any(Splat::is_clipped) {
+        let prims: Vec<ClippedDisc> = splats.iter().map(Splat::clipped_geometry).collect();
+        backends_over(&prims, "clipped", "clipped-unpacked")
+    } else {
+        let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
+        backends_over(&discs, "disc", "unpacked")
+    }
+}
+
+fn backends_over<P: Primitive>(prims: &[P], label: &str, unpacked_label: &str) -> Backends {
     let mut all = Vec::new();
-    build_all(&discs, "disc", &mut all);
-    let oracle_name = format!("{}<disc>", oracle::<Disc>().name);
+    build_all(prims, label, &mut all);
+    let oracle_name = format!("{}<{label}>", oracle::<P>().name);
     let oracle_at = all
         .iter()
         .position(|b| b.name == oracle_name)
         .expect("the oracle was built");
     let oracle = all.remove(oracle_at);
-    let unpacked: Vec<Unpacked> = discs.iter().copied().map(Unpacked).collect();
-    build_all(&unpacked, "unpacked", &mut all);
+    let unpacked: Vec<Unpacked<P>> = prims.iter().copied().map(Unpacked).collect();
+    build_all(&unpacked, unpacked_label, &mut all);
     Backends {
         oracle,
         tested: all,
+    }
+}
+
+/// Clips about a third of `splats` with one line and a sixth with two
+/// (a corner), each line at a random angle in the splat's plane and a
+/// random offset in `[-0.4, 0.6]` of the radii, so rays meet the
+/// clipped-away parts, the lines and the kept parts alike. Seeded.
+pub fn clip_some(splats: &mut [Splat], seed: u64) {
+    let mut rng = Rng::new(seed ^ 0x00c1_1900);
+    let line = |rng: &mut Rng| {
+        let (s, c) = rng.range(0.0, std::f32::consts::TAU).sin_cos();
+        ClipLine {
+            a: c,
+            b: s,
+            d: rng.range(-0.4, 0.6),
+        }
+    };
+    for s in splats.iter_mut() {
+        let k = rng.next_f32();
+        if k < 1.0 / 6.0 {
+            s.clip = Clip::two(line(&mut rng), line(&mut rng));
+        } else if k < 0.5 {
+            s.clip = Clip::one(line(&mut rng));
+        }
     }
 }
 

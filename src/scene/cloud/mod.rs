@@ -24,7 +24,9 @@ mod tests;
 
 pub use crate::io::is_splat_ply;
 pub use survey::{CloudKind, SURVEY_SAMPLE, Survey, read_and_survey, survey, survey_file};
-pub use text::{BACKGROUND, CloudSceneOptions, DEFAULT_SIZE, path_from, scene_text};
+pub use text::{
+    BACKGROUND, CloudSceneOptions, DEFAULT_SIZE, camera_text, decimals, path_from, scene_text,
+};
 pub use up::UPRIGHT_RATIO;
 pub use view::{View, choose_view};
 

@@ -64,7 +64,8 @@ fn num(x: f64, digits: usize) -> String {
 }
 
 /// Decimals that keep a coordinate to 1e-6 of `scale`.
-fn decimals(scale: f64) -> usize {
+#[must_use]
+pub fn decimals(scale: f64) -> usize {
     let e = (scale.max(1e-30)).log10().floor() as i64;
     usize::try_from(6 - e).unwrap_or(0).min(12)
 }
@@ -124,8 +125,9 @@ pub fn scene_text(
 }
 
 /// `[camera]`: the view, its intrinsics scaled to the image (a sensor's) or
-/// its field of view, and the image; coordinates to `d` decimals.
-fn camera_text(t: &mut String, view: &View, o: &CloudSceneOptions, d: usize) {
+/// its field of view, and the image; coordinates to `d` decimals (the
+/// table `splatray view` writes into a scene file it saves, too).
+pub fn camera_text(t: &mut String, view: &View, o: &CloudSceneOptions, d: usize) {
     let _ = writeln!(t, "[camera]");
     let _ = writeln!(t, "from = {}", vec3(view.from, d));
     let _ = writeln!(t, "at = {}", vec3(view.at, d));

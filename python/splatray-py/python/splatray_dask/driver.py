@@ -53,6 +53,38 @@ def run_binary(binary: str, args: Sequence[str]) -> str:
     return said[-1] if said else ""
 
 
+#: The options of ``splat`` by the Python package's names (those of
+#: ``splatray.splat``, and the tiling's), each a ``splatray splat`` flag.
+SPLAT_OPTIONS = (
+    "epsilon", "k", "density", "ellipses", "flat_colors", "viewpoint",
+    "no_viewpoint", "thin", "tile_points", "max_memory",
+)
+#: The options of ``render`` by the Python package's names (those of
+#: ``splatray.Scene.render``), each a ``splatray render`` flag.
+RENDER_OPTIONS = ("backend", "width", "height", "spp", "shading")
+
+
+def options_flags(options: dict, allowed: Sequence[str], what: str) -> list[str]:
+    """Keyword options as command-line flags: ``tile_points=30000`` ->
+    ``--tile-points 30000``, ``ellipses=True`` -> ``--ellipses``,
+    ``viewpoint=(x, y, z)`` -> ``--viewpoint x,y,z``; ``None`` and
+    ``False`` give nothing."""
+    flags: list[str] = []
+    for name, value in options.items():
+        if name not in allowed:
+            raise TypeError(f"{what}: unknown option {name!r} (options: {', '.join(allowed)})")
+        if value is None or value is False:
+            continue
+        flag = "--" + name.replace("_", "-")
+        if value is True:
+            flags.append(flag)
+        elif isinstance(value, (list, tuple)):
+            flags += [flag, ",".join(repr(float(v)) for v in value)]
+        else:
+            flags += [flag, str(value)]
+    return flags
+
+
 def _abs(p: str | os.PathLike) -> str:
     return str(Path(p).resolve())
 
@@ -91,13 +123,17 @@ def splat(
     flags: Sequence[str] = (),
     progress: Callable[[str], None] | None = print,
     report: str | os.PathLike | None = None,
+    **options,
 ) -> dict:
     """Generates splats from ``inputs`` into ``output`` in tiles on the
-    cluster behind ``client``; ``flags`` are ``splatray splat`` options
-    (``--tile-points``, ``--max-memory``, ``--epsilon``, ...), the same for
-    every stage. Returns the merge's report (splatray's JSON)."""
+    cluster behind ``client``; ``options`` are ``splatray.splat``'s
+    (``epsilon``, ``k``, ...) and the tiling's (``tile_points``,
+    ``max_memory``), :data:`SPLAT_OPTIONS`; ``flags`` more ``splatray
+    splat`` flags; the same for every stage. Returns the merge's report
+    (splatray's JSON)."""
     binary = _abs(binary)
     output = _abs(output)
+    flags = [*flags, *options_flags(options, SPLAT_OPTIONS, "splat")]
     base = ["splat", *[_abs(p) for p in inputs], "-o", output, *flags]
     out = Path(output)
     plan_json = str(out.with_name(f".{out.name}.plan.json"))
@@ -131,12 +167,15 @@ def render(
     flags: Sequence[str] = (),
     bands: int | None = None,
     progress: Callable[[str], None] | None = print,
+    **options,
 ) -> None:
     """Renders ``scene`` (a scene file or a point cloud) into ``output``
     (.png or .exr) as ``bands`` horizontal bands on the cluster (default:
-    one per worker), then stitches them; ``flags`` are ``splatray render``
-    options (``--width``, ``--height``, ``--spp``, ``--backend``, ...)."""
+    one per worker), then stitches them; ``options`` are
+    ``splatray.Scene.render``'s (``backend``, ``width``, ``height``,
+    ``spp``, ``shading``), ``flags`` more ``splatray render`` flags."""
     binary = _abs(binary)
+    flags = [*flags, *options_flags(options, RENDER_OPTIONS, "render")]
     output = _abs(output)
     if bands is None:
         bands = max(1, len(client.scheduler_info()["workers"]))

@@ -15,15 +15,13 @@ from .driver import SplatrayError, render, splat
 def _binary(given: str | None) -> str:
     if given:
         return given
-    here = os.path.dirname(os.path.abspath(__file__))
-    target = os.environ.get("CARGO_TARGET_DIR", os.path.join(here, "..", "..", "target"))
-    built = os.path.join(target, "release", "splatray")
-    if os.path.exists(built):
-        return built
+    target = os.environ.get("CARGO_TARGET_DIR")
+    if target and os.path.exists(os.path.join(target, "release", "splatray")):
+        return os.path.join(target, "release", "splatray")
     found = shutil.which("splatray")
     if found:
         return found
-    sys.exit("splatray-dask: no splatray binary: give --binary, or build it (cargo build --release)")
+    sys.exit("splatray-dask: no splatray binary: give --binary (the clone's target/release/splatray)")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -11,10 +11,11 @@ The binary does the work; this package plans, submits and merges:
   by default one band per worker, so each worker loads the splats once),
   then ``splatray stitch`` joins the bands into the image.
 
-Workers must see the same paths (a shared filesystem) and run the same
-splatray binary. The output is byte-identical to a one-machine run.
+Workers must see the same paths (a shared filesystem), run the same
+splatray binary, and have this package installed (it ships in the
+``splatray`` wheel: the scheduler and the workers unpickle its tasks). The output is byte-identical to a one-machine run.
 """
 
-from .driver import SplatrayError, render, run_binary, splat
+from .driver import RENDER_OPTIONS, SPLAT_OPTIONS, SplatrayError, render, run_binary, splat
 
-__all__ = ["SplatrayError", "render", "run_binary", "splat"]
+__all__ = ["RENDER_OPTIONS", "SPLAT_OPTIONS", "SplatrayError", "render", "run_binary", "splat"]

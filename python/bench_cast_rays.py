@@ -1,0 +1,105 @@
+"""Benchmark (not a test): SplatScene.cast_rays throughput on both backends
+against Open3D's RaycastingScene on the bunny mesh the splats were sampled
+from, and the Python call's overhead against the Rust call at 1M rays.
+
+    python python/bench_cast_rays.py [--rays 1000000] [--points 200000]
+
+needs the splatray wheel (scripts/python-package.sh) and the release
+binary (for `splatray sample`); Open3D is optional (a separate venv:
+`pip install open3d`), its row is left out when it does not import.
+Speeds are the best of --repeat runs, measured in one process; the
+overhead is the median ratio of Python and Rust calls made in turns, in
+wall seconds and in the process's CPU seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import splatray
+
+ROOT = Path(__file__).resolve().parents[1]
+MESH = ROOT / "scenes" / "data" / "bunny-mesh.ply"
+
+
+def best(f, repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        f()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def rays_around(centre: np.ndarray, radius: float, n: int, seed: int = 1) -> np.ndarray:
+    """n rays from a sphere around the model, each aimed at a point near
+    its centre (about half of them hit)."""
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(n, 3))
+    o = centre + radius * d / np.linalg.norm(d, axis=1, keepdims=True)
+    target = centre + rng.uniform(-0.6, 0.6, size=(n, 3)) * radius / 3
+    return np.hstack([o, target - o]).astype(np.float32)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--rays", type=int, default=1_000_000)
+    ap.add_argument("--points", type=int, default=200_000)
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--binary", default=str(ROOT / "target" / "release" / "splatray"))
+    a = ap.parse_args()
+    with tempfile.TemporaryDirectory() as d:
+        pts = Path(d) / "pts.ply"
+        subprocess.run([a.binary, "sample", str(MESH), "-n", str(a.points), "--seed", "1", "-o", str(pts)],
+                       check=True, capture_output=True)
+        cloud = splatray.read_points(pts)
+    splats = splatray.splat(cloud)
+    c = splats.centers
+    centre = (c.min(0) + c.max(0)) / 2
+    radius = float(np.linalg.norm(c.max(0) - c.min(0)))
+    rays = rays_around(centre, radius, a.rays)
+    print(f"{len(cloud)} points -> {len(splats)} splats; {a.rays} rays")
+    for backend in ("octree", "embree"):
+        ss = splatray.SplatScene(splats, backend)
+        hits = np.isfinite(ss.cast_rays(rays)["t_hit"]).mean()
+        # The Python call and the bare Rust call in turns: the overhead is
+        # the median of the pairs' ratios, of wall seconds and of the
+        # process's CPU seconds (which a shared machine's load moves less).
+        wall, cpu = [], []
+        for _ in range(a.repeat):
+            t0, c0 = time.perf_counter(), time.process_time()
+            ss.cast_rays(rays)
+            py = (time.perf_counter() - t0, time.process_time() - c0)
+            rust = ss._cast_seconds(rays)
+            wall.append((py[0], rust[0]))
+            cpu.append((py[1], rust[1]))
+        best_py, best_rust = min(p for p, _ in wall), min(r for _, r in wall)
+        print(f"splatray {backend:7s}: {a.rays / best_py / 1e6:6.2f} Mrays/s from Python, "
+              f"{a.rays / best_rust / 1e6:6.2f} Mrays/s in Rust (best of {a.repeat}; hits {100 * hits:.1f} %)")
+        for name, pairs in (("wall", wall), ("cpu", cpu)):
+            ratios = [p / r for p, r in pairs]
+            print(f"    Python call overhead, {name} seconds: {100 * (float(np.median(ratios)) - 1):+.1f} % "
+                  f"(median of {a.repeat} pairs: {', '.join(f'{x:.3f}' for x in ratios)})")
+    try:
+        import open3d as o3d
+    except ImportError:
+        print("open3d: not installed here (pip install open3d in a separate venv): no Open3D row")
+        return
+    mesh = o3d.io.read_triangle_mesh(str(MESH))
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
+    t = o3d.core.Tensor(rays)
+    hits = np.isfinite(scene.cast_rays(t)["t_hit"].numpy()).mean()
+    o3 = best(lambda: scene.cast_rays(t), a.repeat)
+    print(f"open3d {o3d.__version__} RaycastingScene: {len(mesh.triangles)} triangles, "
+          f"{a.rays / o3 / 1e6:6.2f} Mrays/s (hits {100 * hits:.1f} %)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,165 @@
+"""Type stubs of splatray's native module (python/splatray-py/src)."""
+
+from os import PathLike
+from typing import Callable, Optional, Sequence, TypedDict, Union
+
+import numpy as np
+import numpy.typing as npt
+
+Path = Union[str, PathLike[str]]
+Progress = Callable[[str, float], object]
+ArrayF = npt.NDArray[np.floating]
+
+BACKENDS: list[str]
+"""Every backend name; the first is the default."""
+INVALID_ID: int
+"""The splat id of a miss (2**32 - 1)."""
+
+class SplatrayError(RuntimeError):
+    """An error of the splatray library, with its one-line message."""
+
+class PointCloud:
+    """Points in the file's coordinates (float64), with optional normals,
+    colours (linear RGB in [0, 1]), viewpoint and organised grid."""
+    def __init__(
+        self,
+        positions: ArrayF,
+        normals: Optional[ArrayF] = None,
+        colors: Optional[ArrayF] = None,
+        viewpoint: Optional[Sequence[float]] = None,
+    ) -> None: ...
+    def __len__(self) -> int: ...
+    @property
+    def positions(self) -> npt.NDArray[np.float64]:
+        """(N, 3) float64."""
+    @property
+    def origin(self) -> tuple[float, float, float]: ...
+    @property
+    def normals(self) -> Optional[npt.NDArray[np.float32]]: ...
+    @property
+    def colors(self) -> Optional[npt.NDArray[np.float32]]: ...
+    @property
+    def viewpoint(self) -> Optional[tuple[float, float, float]]: ...
+    @property
+    def grid(self) -> Optional[tuple[int, int]]:
+        """(rows, columns) of an organised scan."""
+    @property
+    def skipped(self) -> list[tuple[str, int]]: ...
+
+def read_points(path: Path) -> PointCloud:
+    """Reads .ply, .pcd, .xyz/.txt, .las/.laz or .e57 (or known by its first bytes)."""
+
+class Splats:
+    """Oriented splats with linear (Phong) normal fields, eq. (4); centres
+    are float32 offsets from a float64 origin, as the splat PLY holds them."""
+    @staticmethod
+    def load(path: Path) -> Splats: ...
+    def save(self, path: Path) -> None:
+        """The splat PLY `splatray splat` writes, atomically."""
+    def __len__(self) -> int: ...
+    @property
+    def centers(self) -> npt.NDArray[np.float64]:
+        """(N, 3) float64, in the cloud's coordinates."""
+    @property
+    def origin(self) -> tuple[float, float, float]: ...
+    @property
+    def normals(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def u_axes(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def v_axes(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def radii(self) -> npt.NDArray[np.float32]:
+        """(N, 2) radii along u and v."""
+    @property
+    def normal_fields(self) -> npt.NDArray[np.float32]:
+        """(N, 4): x_c, y_c, alpha, beta of eq. (4)."""
+    @property
+    def colors(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def color_fields(self) -> Optional[npt.NDArray[np.float32]]:
+        """(N, 6): du, dv, or None."""
+    @property
+    def report(self) -> Optional[dict]:
+        """`splat`'s generation and trimming report."""
+
+def splat(
+    points: Union[PointCloud, ArrayF],
+    normals: Optional[ArrayF] = None,
+    colors: Optional[ArrayF] = None,
+    viewpoint: Optional[Sequence[float]] = None,
+    *,
+    epsilon: Optional[float] = None,
+    k: Optional[int] = None,
+    density: Optional[float] = None,
+    ellipses: bool = False,
+    flat_colors: bool = False,
+    no_viewpoint: bool = False,
+    thin: Optional[float] = None,
+    progress: Optional[Progress] = None,
+) -> Splats:
+    """Splats from points as `splatray splat` makes them; the options are
+    its flags (epsilon: fraction of the bounding-box diagonal)."""
+
+class CastResult(TypedDict):
+    t_hit: npt.NDArray[np.float32]
+    splat_ids: npt.NDArray[np.uint32]
+    normals: npt.NDArray[np.float32]
+
+class SplatScene:
+    """Splats in one backend, for ray casting (cf. Open3D's RaycastingScene)."""
+    def __init__(self, splats: Splats, backend: Optional[str] = None) -> None: ...
+    @property
+    def backend(self) -> str: ...
+    def cast_rays(self, rays: ArrayF) -> CastResult:
+        """rays (N, 6) float32/float64: origin, direction (any length), in
+        the splats' coordinates. t_hit in units of the direction's length
+        (inf: miss), splat_ids (INVALID_ID: miss), resolved shading normals."""
+    def count_intersections(self, rays: ArrayF, limit: int = 1024) -> npt.NDArray[np.int32]: ...
+    def occluded(self, rays: ArrayF, tnear: float = 0.0, tfar: float = ...) -> npt.NDArray[np.bool_]: ...
+
+class Image:
+    """A render: linear RGB and AOVs; `_repr_png_` shows it in a notebook."""
+    @property
+    def rgb(self) -> npt.NDArray[np.float32]:
+        """(H, W, 3) linear radiance."""
+    @property
+    def aov(self) -> dict[str, np.ndarray]:
+        """depth (H, W) float32, normal/albedo (H, W, 3) float32, splat (H, W) uint32."""
+    @property
+    def shape(self) -> tuple[int, int]: ...
+    @property
+    def report(self) -> dict: ...
+    def save(self, path: Path) -> None:
+        """.png (8-bit sRGB) or .exr (linear), as `splatray render` writes."""
+    def save_aov(self, name: str, path: Path) -> None: ...
+    def _repr_png_(self) -> bytes: ...
+
+class Scene:
+    """A scene: camera, lights, materials, models (a scene file's tables)."""
+    def __init__(
+        self,
+        camera: dict,
+        models: list[dict],
+        lights: Optional[list[dict]] = None,
+        render: Optional[dict] = None,
+        background: Optional[Sequence[float]] = None,
+    ) -> None: ...
+    @staticmethod
+    def from_toml(path: Path) -> Scene: ...
+    def render(
+        self,
+        backend: Optional[str] = None,
+        width: Optional[int] = None,
+        height: Optional[int] = None,
+        spp: Optional[int] = None,
+        shading: Optional[str] = None,
+        aov: Optional[Sequence[str]] = None,
+        progress: Optional[Progress] = None,
+    ) -> Image: ...
+    def camera_rays(self, width: Optional[int] = None, height: Optional[int] = None) -> npt.NDArray[np.float64]:
+        """(H*W, 6) rays through the pixel centres, for splat_scene().cast_rays."""
+    def splat_scene(self, backend: Optional[str] = None) -> SplatScene: ...
+
+def read_image(path: Path) -> npt.NDArray[np.float32]:
+    """(H, W, 3) float32 of an EXR (linear) or PNG (scaled to [0, 1])."""

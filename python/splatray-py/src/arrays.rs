@@ -1,0 +1,185 @@
+//! numpy arrays in, checked before any work: the dtype and shape asked
+//! for, every value finite, at least one row; each failure a `TypeError`
+//! or `ValueError` naming the argument. Arrays out: owned copies.
+
+use numpy::ndarray::{Array1, Array2, Array3};
+use numpy::{IntoPyArray, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+
+/// What `obj` is, for a message: `float32 array of shape (5, 2)`, or its
+/// Python type.
+fn describe(obj: &Bound<'_, PyAny>) -> String {
+    if let Ok(a) = obj.cast::<numpy::PyUntypedArray>() {
+        let shape: Vec<String> = a.shape().iter().map(|d| d.to_string()).collect();
+        let shape = if shape.len() == 1 {
+            format!("({},)", shape[0])
+        } else {
+            format!("({})", shape.join(", "))
+        };
+        format!(
+            "{} array of shape {shape}",
+            a.dtype()
+                .str()
+                .map_or_else(|_| "?".into(), |s| s.to_string())
+        )
+    } else {
+        obj.get_type()
+            .name()
+            .map_or_else(|_| "an object".into(), |n| format!("a {n}"))
+    }
+}
+
+/// The rows of an (N, `cols`) float64 or float32 array as f64, row-major.
+/// `empty_ok`: zero rows allowed.
+pub fn rows_f64(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    cols: usize,
+    empty_ok: bool,
+) -> PyResult<Vec<f64>> {
+    let v: Vec<f64> = if let Ok(a) = obj.extract::<PyReadonlyArray2<'_, f64>>() {
+        check_cols(&a, obj, name, cols, "float64 or float32")?;
+        match a.as_slice() {
+            Ok(s) => s.to_vec(),
+            Err(_) => a.as_array().iter().copied().collect(),
+        }
+    } else if let Ok(a) = obj.extract::<PyReadonlyArray2<'_, f32>>() {
+        check_cols(&a, obj, name, cols, "float64 or float32")?;
+        a.as_array().iter().map(|&x| f64::from(x)).collect()
+    } else {
+        return Err(PyTypeError::new_err(format!(
+            "{name} must be a float64 or float32 numpy array of shape (N, {cols}), got {}",
+            describe(obj)
+        )));
+    };
+    finish(v, name, cols, empty_ok, |x| x.is_finite())
+}
+
+/// The rows of an (N, `cols`) float32 (or float64, rounded) array as f32.
+pub fn rows_f32(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    cols: usize,
+    empty_ok: bool,
+) -> PyResult<Vec<f32>> {
+    let v: Vec<f32> = if let Ok(a) = obj.extract::<PyReadonlyArray2<'_, f32>>() {
+        check_cols(&a, obj, name, cols, "float32 or float64")?;
+        match a.as_slice() {
+            Ok(s) => s.to_vec(),
+            Err(_) => a.as_array().iter().copied().collect(),
+        }
+    } else if let Ok(a) = obj.extract::<PyReadonlyArray2<'_, f64>>() {
+        check_cols(&a, obj, name, cols, "float32 or float64")?;
+        a.as_array().iter().map(|&x| x as f32).collect()
+    } else {
+        return Err(PyTypeError::new_err(format!(
+            "{name} must be a float32 or float64 numpy array of shape (N, {cols}), got {}",
+            describe(obj)
+        )));
+    };
+    finish(v, name, cols, empty_ok, |x| x.is_finite())
+}
+
+fn check_cols<T: numpy::Element>(
+    a: &PyReadonlyArray2<'_, T>,
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    cols: usize,
+    dtypes: &str,
+) -> PyResult<()> {
+    if a.shape()[1] != cols {
+        return Err(PyValueError::new_err(format!(
+            "{name} must be a {dtypes} array of shape (N, {cols}), got {}",
+            describe(obj)
+        )));
+    }
+    Ok(())
+}
+
+fn finish<T: Copy>(
+    v: Vec<T>,
+    name: &str,
+    cols: usize,
+    empty_ok: bool,
+    ok: impl Fn(T) -> bool,
+) -> PyResult<Vec<T>> {
+    if v.is_empty() && !empty_ok {
+        return Err(PyValueError::new_err(format!("{name} is empty: no rows")));
+    }
+    if let Some(i) = v.iter().position(|&x| !ok(x)) {
+        return Err(PyValueError::new_err(format!(
+            "{name}: row {} holds a NaN or infinite value",
+            i / cols
+        )));
+    }
+    Ok(v)
+}
+
+/// An (N, 3) array of vectors.
+pub fn vec3s<'py>(
+    py: Python<'py>,
+    v: impl ExactSizeIterator<Item = [f32; 3]>,
+) -> Bound<'py, PyAny> {
+    let n = v.len();
+    let flat: Vec<f32> = v.flatten().collect();
+    Array2::from_shape_vec((n, 3), flat)
+        .expect("n rows of 3")
+        .into_pyarray(py)
+        .into_any()
+}
+
+/// An (N, C) array.
+pub fn matrix<'py, T: numpy::Element>(
+    py: Python<'py>,
+    cols: usize,
+    flat: Vec<T>,
+) -> Bound<'py, PyAny> {
+    let n = flat.len() / cols.max(1);
+    Array2::from_shape_vec((n, cols), flat)
+        .expect("whole rows")
+        .into_pyarray(py)
+        .into_any()
+}
+
+/// An (H, W) image plane.
+pub fn plane<'py, T: numpy::Element>(
+    py: Python<'py>,
+    h: usize,
+    w: usize,
+    flat: Vec<T>,
+) -> Bound<'py, PyAny> {
+    Array2::from_shape_vec((h, w), flat)
+        .expect("h rows of w")
+        .into_pyarray(py)
+        .into_any()
+}
+
+/// An (H, W, 3) image.
+pub fn image<'py>(py: Python<'py>, h: usize, w: usize, flat: Vec<f32>) -> Bound<'py, PyAny> {
+    Array3::from_shape_vec((h, w, 3), flat)
+        .expect("h rows of w pixels of 3")
+        .into_pyarray(py)
+        .into_any()
+}
+
+/// An (N,) array.
+pub fn vector<'py, T: numpy::Element>(py: Python<'py>, v: Vec<T>) -> Bound<'py, PyAny> {
+    Array1::from_vec(v).into_pyarray(py).into_any()
+}
+
+/// Three finite numbers (a viewpoint, a point), from any sequence.
+pub fn point3(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; 3]> {
+    let v: Vec<f64> = obj.extract().map_err(|_| {
+        PyTypeError::new_err(format!(
+            "{name} must be three numbers, got {}",
+            describe(obj)
+        ))
+    })?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => Err(PyValueError::new_err(format!(
+            "{name} must be three finite numbers, got {v:?}"
+        ))),
+    }
+}

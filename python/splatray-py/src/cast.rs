@@ -1,0 +1,329 @@
+//! `SplatScene`: rays in, resolved hits out, as the renderer resolves its
+//! camera rays (the point-cloud counterpart of Open3D's
+//! `RaycastingScene`). One backend and the shared resolver
+//! (`SplatSurfaces`), so the octree and Embree give the same answers.
+
+use crate::arrays::{matrix, rows_f64, vector};
+use crate::err;
+use crate::splats::Splats;
+use glam::{DVec3, Vec3};
+use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use rayon::prelude::*;
+use splatray::accel::{Backend, CandidateHits, PACKET, Query, Ray};
+use splatray::render::integrator::{SplatSurfaces, Surfaces};
+use splatray::scene::Scene;
+use std::time::Instant;
+
+/// Rays per rayon task.
+const CHUNK: usize = 512;
+
+/// Splats in one acceleration backend, for ray casting.
+#[pyclass(module = "splatray", frozen)]
+pub struct SplatScene {
+    scene: Scene,
+    backend: Box<dyn Backend>,
+    /// The scene's frame: world = scene + `to_internal`, subtracted in f64.
+    to_internal: DVec3,
+    name: &'static str,
+}
+
+impl SplatScene {
+    /// `scene` (its splats, shading modes and windows) in `backend` (a
+    /// registry name); its world frame is its own plus `to_internal`.
+    pub fn build(scene: Scene, to_internal: DVec3, backend: &str) -> splatray::Result<SplatScene> {
+        let info = splatray::accel::registry::lookup(backend)?;
+        let built = info.build_splats(&scene.splats)?;
+        Ok(SplatScene {
+            scene,
+            backend: built,
+            to_internal,
+            name: info.name,
+        })
+    }
+
+    fn surfaces(&self) -> SplatSurfaces<'_> {
+        SplatSurfaces {
+            scene: &self.scene,
+            backend: self.backend.as_ref(),
+        }
+    }
+
+    /// Checked rays in the scene's frame, and each direction's length
+    /// (`t` is reported in units of it, as Open3D does); converted in
+    /// parallel, straight from the array's memory when it is contiguous.
+    fn rays(&self, rays: &Bound<'_, PyAny>) -> PyResult<(Vec<Ray>, Vec<f32>)> {
+        if let Ok(a) = rays.extract::<PyReadonlyArray2<'_, f32>>()
+            && a.shape()[1] == 6
+            && let Ok(v) = a.as_slice()
+        {
+            return self.convert(v);
+        }
+        if let Ok(a) = rays.extract::<PyReadonlyArray2<'_, f64>>()
+            && a.shape()[1] == 6
+            && let Ok(v) = a.as_slice()
+        {
+            return self.convert(v);
+        }
+        // Anything else: checked (and its error said) as any array.
+        self.convert(&rows_f64(rays, "rays", 6, true)?)
+    }
+
+    fn convert<T: Copy + Into<f64> + Sync>(&self, v: &[T]) -> PyResult<(Vec<Ray>, Vec<f32>)> {
+        let o = self.to_internal;
+        let out: Result<Vec<(Ray, f32)>, String> = v
+            .par_chunks_exact(6)
+            .enumerate()
+            .map(|(i, r)| {
+                let r: [f64; 6] = std::array::from_fn(|k| r[k].into());
+                if r.iter().any(|x| !x.is_finite()) {
+                    return Err(format!("rays: row {i} holds a NaN or infinite value"));
+                }
+                let d = Vec3::new(r[3] as f32, r[4] as f32, r[5] as f32);
+                let len = d.length();
+                if !(len > 0.0 && len.is_finite()) {
+                    return Err(format!(
+                        "rays: row {i} has a zero (or too small or large) direction"
+                    ));
+                }
+                let origin = (DVec3::new(r[0], r[1], r[2]) - o).as_vec3();
+                if !origin.is_finite() {
+                    return Err(format!(
+                        "rays: row {i}'s origin lies beyond single precision from the splats"
+                    ));
+                }
+                Ok((Ray::new(origin, d), len))
+            })
+            .collect();
+        Ok(out.map_err(PyValueError::new_err)?.into_iter().unzip())
+    }
+}
+
+/// What `cast_rays` returns, filled by [`cast`].
+pub struct Hits {
+    /// Distance in units of the direction's length (inf: a miss).
+    pub t: Vec<f32>,
+    /// Splat id (`u32::MAX`: a miss).
+    pub ids: Vec<u32>,
+    /// Shading normal, 3 per ray (0: a miss).
+    pub normals: Vec<f32>,
+}
+
+impl Hits {
+    /// Room for `n` rays.
+    pub fn new(n: usize) -> Hits {
+        Hits {
+            t: vec![0.0; n],
+            ids: vec![0; n],
+            normals: vec![0.0; 3 * n],
+        }
+    }
+}
+
+/// The resolved hit of every ray, as the renderer's camera rays are
+/// resolved: in packets of [`PACKET`] when the backend prefers them (the
+/// same hits either way), in parallel; `lens` are the directions' lengths
+/// `t` is divided by.
+pub fn cast(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: &mut Hits) {
+    let xi = surfaces.scene.options.scale.xi;
+    let packets = surfaces.packets();
+    rays.par_chunks(CHUNK)
+        .zip(lens.par_chunks(CHUNK))
+        .zip(out.t.par_chunks_mut(CHUNK))
+        .zip(out.ids.par_chunks_mut(CHUNK))
+        .zip(out.normals.par_chunks_mut(3 * CHUNK))
+        .for_each(|((((rays, lens), t), ids), normals)| {
+            let mut hits: [CandidateHits; PACKET] = std::array::from_fn(|_| CandidateHits::new(xi));
+            let mut found = [None; PACKET];
+            for (k, r) in rays.chunks(PACKET).enumerate() {
+                let found = &mut found[..r.len()];
+                if packets {
+                    surfaces.hits(r, &mut hits, found);
+                } else {
+                    for (ray, f) in r.iter().zip(found.iter_mut()) {
+                        *f = surfaces.hit(ray, None, &mut hits[0]);
+                    }
+                }
+                for (j, f) in found.iter().enumerate() {
+                    let i = k * PACKET + j;
+                    let (tt, id, n) = match f {
+                        None => (f32::INFINITY, u32::MAX, [0.0; 3]),
+                        Some(h) => {
+                            let l = lens[i];
+                            (
+                                if l == 1.0 { h.t } else { h.t / l },
+                                h.id,
+                                h.normal.to_array(),
+                            )
+                        }
+                    };
+                    t[i] = tt;
+                    ids[i] = id;
+                    normals[3 * i..3 * i + 3].copy_from_slice(&n);
+                }
+            }
+        });
+}
+
+#[pymethods]
+impl SplatScene {
+    /// `splats` in the backend `backend` (`splatray.BACKENDS`; the first
+    /// is the default), resolved with the defaults of a scene file (Phong
+    /// shading, each model's measured window).
+    #[new]
+    #[pyo3(signature = (splats, backend=None))]
+    fn new(
+        py: Python<'_>,
+        splats: &Bound<'_, Splats>,
+        backend: Option<&str>,
+    ) -> PyResult<SplatScene> {
+        let set = &splats.get().set;
+        let backend = backend.unwrap_or(splatray::accel::registry::names()[0]);
+        if set.splats.is_empty() {
+            return Err(PyValueError::new_err("splats: no splats"));
+        }
+        py.detach(|| {
+            let camera =
+                splatray::scene::Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 40.0, 1, 1, 1)?;
+            let mut scene = splatray::scene::load::splats_scene(set.splats.clone(), camera)?;
+            scene.color_fields = set.color_fields.clone();
+            let to_internal = set.origin + scene.offset.as_dvec3();
+            SplatScene::build(scene, to_internal, backend)
+        })
+        .map_err(err)
+    }
+
+    /// The backend's name.
+    #[getter]
+    fn backend(&self) -> &'static str {
+        self.name
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "SplatScene({} splats, backend {:?})",
+            self.scene.splats.len(),
+            self.name
+        )
+    }
+
+    /// Casts `rays` ((N, 6) float32 or float64: origin, direction, in the
+    /// splats' coordinates; directions need not be unit) and returns a dict
+    /// of `t_hit` (N,) float32 (in units of each direction's length; inf on
+    /// a miss), `splat_ids` (N,) uint32 (`INVALID_ID` on a miss) and
+    /// `normals` (N, 3) float32 (the resolved shading normal; 0 on a miss).
+    fn cast_rays<'py>(
+        &self,
+        py: Python<'py>,
+        rays: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (rays, lens) = self.rays(rays)?;
+        let out = py.detach(|| {
+            let mut out = Hits::new(rays.len());
+            cast(&self.surfaces(), &rays, &lens, &mut out);
+            out
+        });
+        let d = pyo3::types::PyDict::new(py);
+        d.set_item("t_hit", vector(py, out.t))?;
+        d.set_item("splat_ids", vector(py, out.ids))?;
+        d.set_item("normals", matrix(py, 3, out.normals))?;
+        Ok(d.into_any())
+    }
+
+    /// How many surfaces each ray passes through (N,) int32: the resolved
+    /// surface it meets, then the next one beyond it (leaving each surface
+    /// as a refracted ray leaves it), and so on (at most `limit`).
+    #[pyo3(signature = (rays, limit=1024))]
+    fn count_intersections<'py>(
+        &self,
+        py: Python<'py>,
+        rays: &Bound<'py, PyAny>,
+        limit: u32,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (rays, _) = self.rays(rays)?;
+        let counts = py.detach(|| {
+            let s = self.surfaces();
+            let xi = self.scene.options.scale.xi;
+            rays.par_iter()
+                .map_init(
+                    || CandidateHits::new(xi),
+                    |hits, ray| {
+                        let mut n = 0i32;
+                        let mut at = s.hit(ray, None, hits);
+                        while let Some(h) = at {
+                            n += 1;
+                            if n as u32 >= limit {
+                                break;
+                            }
+                            let next = Ray {
+                                origin: h.point,
+                                dir: ray.dir,
+                            };
+                            at = s.hit(&next, Some(&h), hits);
+                        }
+                        n
+                    },
+                )
+                .collect::<Vec<i32>>()
+        });
+        Ok(vector(py, counts))
+    }
+
+    /// Whether each ray meets a surface with `t` in `[tnear, tfar]` (in
+    /// units of its direction's length), (N,) bool: what a shadow ray asks
+    /// (Phong splats seen as the curved surfaces the resolver shows).
+    #[pyo3(signature = (rays, tnear=0.0, tfar=f32::INFINITY))]
+    fn occluded<'py>(
+        &self,
+        py: Python<'py>,
+        rays: &Bound<'py, PyAny>,
+        tnear: f32,
+        tfar: f32,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        if !(tnear >= 0.0 && tfar >= tnear) {
+            return Err(PyValueError::new_err(format!(
+                "tnear {tnear} and tfar {tfar} must satisfy 0 <= tnear <= tfar"
+            )));
+        }
+        let (rays, lens) = self.rays(rays)?;
+        let out = py.detach(|| {
+            let pass = self
+                .scene
+                .has_phong()
+                .then_some(&self.scene as &dyn splatray::accel::PassOver);
+            rays.par_iter()
+                .zip(&lens)
+                .map(|(ray, l)| {
+                    self.backend.occluded_from(&Query {
+                        ray: *ray,
+                        t_min: tnear * l,
+                        t_max: tfar * l,
+                        from: None,
+                        pass,
+                    })
+                })
+                .collect::<Vec<bool>>()
+        });
+        Ok(vector(py, out))
+    }
+
+    /// Seconds the Rust call of `cast_rays` takes on `rays`, without the
+    /// conversion of arrays in and out (the benchmark's reference): wall
+    /// seconds and the process's CPU seconds.
+    fn _cast_seconds(&self, py: Python<'_>, rays: &Bound<'_, PyAny>) -> PyResult<(f64, f64)> {
+        let (rays, lens) = self.rays(rays)?;
+        Ok(py.detach(|| {
+            let mut out = Hits::new(rays.len());
+            let (t0, c0) = (Instant::now(), process_cpu());
+            cast(&self.surfaces(), &rays, &lens, &mut out);
+            (t0.elapsed().as_secs_f64(), process_cpu() - c0)
+        }))
+    }
+}
+
+/// The process's CPU seconds (all threads).
+fn process_cpu() -> f64 {
+    let t = rustix::time::clock_gettime(rustix::time::ClockId::ProcessCPUTime);
+    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
+}

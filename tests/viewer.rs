@@ -1,0 +1,515 @@
+//! `splatray view` in a real headless Chromium (Debian's package, which
+//! scripts/setup.sh installs; without it this test fails and says so): the
+//! page loads, the first bunny frame arrives, a drag changes the view and
+//! a new frame follows, the backends give identical pixels, "save scene"
+//! then `splatray render` gives the page's frames byte for byte, a garbage
+//! message is answered with an error and the next frame still comes,
+//! closing the tab stops the render in flight, Ctrl-C stops the server.
+
+mod cdp;
+
+use cdp::{Browser, Server, TempDir, bytes_of};
+use serde_json::Value;
+use std::path::Path;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_splatray");
+const T: Duration = Duration::from_secs(60);
+
+fn bunny() -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes/bunny.toml")
+        .display()
+        .to_string()
+}
+
+/// The number of frames the page has, and of them for camera `id`.
+fn frames(b: &mut Browser) -> u64 {
+    b.eval("viewer.frames.length").as_u64().unwrap()
+}
+
+/// Waits until the page shows the refined frame of its newest camera.
+fn settle(b: &mut Browser, what: &str) {
+    b.wait_for(
+        "(() => { const f = viewer.lastRefined; return !!f && f.header.camera === viewer.frames.at(-1).camera \
+         && viewer.frames.at(-1).stage === 'refined'; })()",
+        T,
+        what,
+    );
+}
+
+/// `splatray render SCENE -o OUT` of the page's saved scene `text`: the
+/// PNG's bytes.
+fn render_saved(dir: &Path, name: &str, text: &str) -> Vec<u8> {
+    render_saved_with(dir, name, text, "octree")
+}
+
+/// [`render_saved`] with `--backend backend`.
+fn render_saved_with(dir: &Path, name: &str, text: &str, backend: &str) -> Vec<u8> {
+    let scene = dir.join(format!("{name}.toml"));
+    let out = dir.join(format!("{name}.png"));
+    std::fs::write(&scene, text).unwrap();
+    let r = Command::new(BIN)
+        .arg("render")
+        .arg(&scene)
+        .arg("-o")
+        .arg(&out)
+        .args(["--backend", backend])
+        .output()
+        .unwrap();
+    assert!(
+        r.status.success(),
+        "render {}: {}",
+        scene.display(),
+        String::from_utf8_lossy(&r.stderr)
+    );
+    std::fs::read(&out).unwrap()
+}
+
+#[test]
+fn the_viewer_in_chromium() {
+    // Small frames keep it quick: 160x120, refined at 16 samples (slow
+    // enough, about 0.3 s, for the tab to close while it renders).
+    let mut server = Server::start(
+        Path::new(BIN),
+        &[
+            &bunny(),
+            "--width",
+            "160",
+            "--height",
+            "120",
+            "--refine-spp",
+            "16",
+        ],
+    );
+    let mut b = Browser::start(400, 320);
+    b.open(&server.url);
+
+    // The page loads and says hello.
+    b.wait_for("!!(window.viewer && viewer.hello)", T, "the page's hello");
+    assert_eq!(b.eval("document.title"), "splatray view");
+    assert_eq!(b.eval("viewer.hello.width"), 160);
+    let names = b.eval("viewer.hello.backends");
+    assert_eq!(
+        names,
+        serde_json::json!(["octree", "embree"]),
+        "the renderers offered"
+    );
+
+    // The first frame of the bunny arrives (unasked), then its full and
+    // refined frames.
+    b.wait_for("viewer.frames.length > 0", T, "the first frame");
+    assert_eq!(b.eval("viewer.frames[0].stage"), "preview");
+    assert_eq!(b.eval("viewer.frames[0].width"), 40);
+    settle(&mut b, "the first view's refined frame");
+    let first_full = bytes_of(&mut b, "viewer.lastFull.bytes");
+    let cam0 = b.eval("JSON.stringify(viewer.cam)");
+
+    // A drag changes the view and a new frame follows.
+    let r = b.eval(
+        "(() => { const r = document.getElementById('view').getBoundingClientRect(); \
+         return [r.left + r.width / 2, r.top + r.height / 2]; })()",
+    );
+    let (x, y) = (r[0].as_f64().unwrap(), r[1].as_f64().unwrap());
+    let n = frames(&mut b);
+    b.mouse("mousePressed", x, y, 1);
+    for k in 1..=5 {
+        b.mouse(
+            "mouseMoved",
+            x + 12.0 * f64::from(k),
+            y + 3.0 * f64::from(k),
+            1,
+        );
+    }
+    b.mouse("mouseReleased", x + 60.0, y + 15.0, 0);
+    assert_ne!(
+        b.eval("JSON.stringify(viewer.cam)"),
+        cam0,
+        "the drag moved the camera"
+    );
+    b.wait_for(
+        &format!("viewer.frames.length > {n} && viewer.frames.at(-1).camera > 0"),
+        T,
+        "a frame after the drag",
+    );
+    settle(&mut b, "the dragged view's refined frame");
+    let octree_full = bytes_of(&mut b, "viewer.lastFull.bytes");
+    let octree_refined = bytes_of(&mut b, "viewer.lastRefined.bytes");
+    assert_ne!(
+        octree_full, first_full,
+        "the dragged view shows another image"
+    );
+    assert_eq!(b.eval("viewer.lastFull.header.backend"), "octree");
+
+    // Switching the backend gives identical pixels (PNG bytes alike), and
+    // the difference overlay counts no pixel that differs.
+    b.eval(
+        "(() => { const s = document.getElementById('backend'); s.value = 'embree'; \
+         s.dispatchEvent(new Event('change')); })()",
+    );
+    b.wait_for(
+        "viewer.lastRefined.header.backend === 'embree'",
+        T,
+        "embree's frames",
+    );
+    assert_eq!(b.eval("viewer.lastFull.header.backend"), "embree");
+    assert!(
+        bytes_of(&mut b, "viewer.lastFull.bytes") == octree_full,
+        "embree's full frame differs from the octree's"
+    );
+    assert!(
+        bytes_of(&mut b, "viewer.lastRefined.bytes") == octree_refined,
+        "embree's refined frame differs from the octree's"
+    );
+    b.eval("document.getElementById('diff').click()");
+    b.wait_for(
+        "viewer.frames.at(-1).stage === 'diff'",
+        T,
+        "the difference overlay",
+    );
+    assert_eq!(
+        b.eval("viewer.frames.at(-1).differing"),
+        serde_json::json!([0])
+    );
+
+    // A click on the bunny picks its hit with both backends.
+    b.mouse("mousePressed", x, y, 1);
+    b.mouse("mouseReleased", x, y, 0);
+    b.wait_for("viewer.picks.length > 0", T, "the pick");
+    let pick = b.eval("viewer.picks[0]");
+    let hits: Vec<&Value> = pick["backends"].as_array().unwrap().iter().collect();
+    assert_eq!(hits.len(), 2);
+    assert_eq!(hits[0]["hit"]["splat"], hits[1]["hit"]["splat"], "{pick}");
+
+    // The key light (the bunny's directional light) aimed from the page:
+    // new frames, another image.
+    let n = frames(&mut b);
+    b.eval(
+        "(() => { const a = document.getElementById('laz'); a.value = 60; \
+         a.dispatchEvent(new Event('input')); })()",
+    );
+    b.wait_for(
+        &format!("viewer.frames.length > {n} && viewer.frames.at(-1).stage === 'refined'"),
+        T,
+        "the frames with the key light aimed",
+    );
+    assert!(
+        bytes_of(&mut b, "viewer.lastRefined.bytes") != octree_refined,
+        "the key light moved, the image did not"
+    );
+
+    // Save scene, then `splatray render`: the page's frames byte for byte
+    // (the refined frame, which the page shows, and the full one), the
+    // key light aimed as the page aimed it.
+    let dir = TempDir::new("viewer");
+    b.eval("viewer.sceneText = null; document.getElementById('savescene').click()");
+    b.wait_for("viewer.sceneText !== null", T, "the saved scene");
+    let text = b.eval("viewer.sceneText").as_str().unwrap().to_string();
+    assert!(text.contains("spp = 16"), "{text}");
+    let key = b.eval("viewer.frames.length && keyDirection(60, 45)");
+    let key: Vec<String> = key
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.to_string())
+        .collect();
+    assert!(
+        text.contains(&format!("direction = [{}]", key.join(", "))),
+        "the key light {key:?} is not in the saved scene:\n{text}"
+    );
+    assert!(
+        render_saved(&dir.0, "refined", &text) == bytes_of(&mut b, "viewer.lastRefined.bytes"),
+        "`splatray render` of the saved scene differs from the page's refined frame:\n{text}"
+    );
+    b.eval("viewer.sceneText = null; viewer.send({type: 'save_scene', spp: 1})");
+    b.wait_for("viewer.sceneText !== null", T, "the saved scene at 1 spp");
+    let text = b.eval("viewer.sceneText").as_str().unwrap().to_string();
+    assert!(
+        render_saved(&dir.0, "full", &text) == bytes_of(&mut b, "viewer.lastFull.bytes"),
+        "`splatray render` of the saved scene differs from the page's full frame:\n{text}"
+    );
+
+    // A garbage message gets an error, and the next frame still comes.
+    let n = frames(&mut b);
+    b.eval("viewer.ws.send('{ this is not a request')");
+    b.wait_for("viewer.errors.length === 1", T, "the error for garbage");
+    let err = b.eval("viewer.errors[0]");
+    assert!(err.as_str().unwrap().contains("bad request"), "{err}");
+    b.eval("viewer.ws.send(JSON.stringify({type: 'camera', id: 99, camera: {from: [0,0,0], at: [0,0,0], up: [0,1,0], fov: 40}}))");
+    b.wait_for(
+        "viewer.errors.length === 2",
+        T,
+        "the error for a degenerate camera",
+    );
+    b.key("ArrowLeft", 37);
+    b.wait_for(
+        &format!("viewer.frames.length > {n}"),
+        T,
+        "a frame after the errors",
+    );
+    settle(&mut b, "the view after the errors");
+    assert_eq!(
+        b.eval("viewer.ws.readyState"),
+        1,
+        "the socket is still open"
+    );
+
+    // Closing the tab stops the render in flight: a new view, its preview
+    // arrived, the tab closed while the refined frame renders.
+    let before = server.stats();
+    let n = frames(&mut b);
+    b.key("ArrowRight", 39);
+    b.wait_for(
+        &format!("viewer.frames.length > {n}"),
+        T,
+        "the preview before closing",
+    );
+    let t_close = Instant::now();
+    b.close_page();
+    let mut after = server.stats();
+    while after["sessions"] != 0 || after["busy"] != false {
+        assert!(
+            t_close.elapsed() < T,
+            "the server still works for a closed tab: {after}"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+        after = server.stats();
+    }
+    let idle = t_close.elapsed();
+    assert!(
+        after["cancelled"].as_u64() > before["cancelled"].as_u64(),
+        "the render in flight was finished, not dropped ({before} -> {after}; idle after {idle:?})"
+    );
+    std::thread::sleep(Duration::from_millis(300));
+    let later = server.stats();
+    assert_eq!(
+        later["bands"], after["bands"],
+        "bands rendered after the tab closed"
+    );
+
+    // No path from the page reaches a file.
+    for p in [
+        "/../Cargo.toml",
+        "/scenes/bunny.toml",
+        "/viewer.js/../../Cargo.toml",
+    ] {
+        assert_eq!(server.get(p).0, 404, "{p}");
+    }
+    assert_eq!(server.get("/viewer.js").0, 200);
+
+    // Ctrl-C stops the server cleanly.
+    let status = server
+        .interrupt(Duration::from_secs(10))
+        .expect("the server stops within 10 s of Ctrl-C");
+    assert!(status.success(), "{status:?}");
+    assert!(
+        server.stderr.lock().unwrap().contains("stopped"),
+        "{}",
+        server.stderr.lock().unwrap()
+    );
+}
+
+/// A request over the size bound closes that socket; the server serves the
+/// next page (no browser needed).
+#[test]
+fn an_oversized_request_is_refused() {
+    let server = Server::start(
+        Path::new(BIN),
+        &[
+            &bunny(),
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--refine-spp",
+            "1",
+        ],
+    );
+    let connect = || {
+        let s = std::net::TcpStream::connect(server.authority()).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+        let (ws, _) =
+            tungstenite::client(format!("ws://{}/ws", server.authority()), s).expect("handshake");
+        ws
+    };
+    let mut ws = connect();
+    let hello = ws.read().unwrap();
+    assert!(hello.to_text().unwrap().contains("\"hello\""));
+    let big = format!("{{\"type\":\"diff\",\"pad\":\"{}\"}}", "x".repeat(20_000));
+    let _ = ws.send(tungstenite::Message::text(big));
+    let mut closed = false;
+    for _ in 0..100 {
+        match ws.read() {
+            Ok(tungstenite::Message::Close(_)) | Err(_) => {
+                closed = true;
+                break;
+            }
+            Ok(_) => {}
+        }
+    }
+    assert!(closed, "a 20 kB request was not refused");
+    // The next page gets its hello and a frame.
+    let mut ws = connect();
+    assert!(ws.read().unwrap().to_text().unwrap().contains("\"hello\""));
+    let m = ws.read().unwrap();
+    assert!(m.is_binary(), "{m:?}");
+}
+
+/// A WebSocket session without a browser: the hello, then messages.
+struct Session(tungstenite::WebSocket<std::net::TcpStream>);
+
+impl Session {
+    fn open(server: &Server) -> (Session, Value) {
+        let s = std::net::TcpStream::connect(server.authority()).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+        let (mut ws, _) =
+            tungstenite::client(format!("ws://{}/ws", server.authority()), s).expect("handshake");
+        let hello: Value = serde_json::from_str(ws.read().unwrap().to_text().unwrap()).unwrap();
+        assert_eq!(hello["type"], "hello");
+        (Session(ws), hello)
+    }
+
+    fn send(&mut self, v: Value) {
+        self.0
+            .send(tungstenite::Message::text(v.to_string()))
+            .unwrap();
+    }
+
+    /// The next frame (header and PNG) whose stage is `stage`.
+    fn frame(&mut self, stage: &str) -> (Value, Vec<u8>) {
+        loop {
+            let m = self.0.read().unwrap();
+            if let tungstenite::Message::Binary(b) = m {
+                let n = u32::from_le_bytes(b[..4].try_into().unwrap()) as usize;
+                let header: Value = serde_json::from_slice(&b[4..4 + n]).unwrap();
+                if header["stage"] == stage {
+                    return (header, b[4 + n..].to_vec());
+                }
+            }
+        }
+    }
+
+    /// The next JSON message of type `kind`.
+    fn text(&mut self, kind: &str) -> Value {
+        loop {
+            if let tungstenite::Message::Text(t) = self.0.read().unwrap() {
+                let v: Value = serde_json::from_str(t.as_str()).unwrap();
+                if v["type"] == kind {
+                    return v;
+                }
+            }
+        }
+    }
+}
+
+/// Point clouds get the scene `render CLOUD` makes, and "save scene" then
+/// `splatray render` gives the full frame byte for byte: a coloured PCD, a
+/// lidar tile far from the origin (its coordinates near 326417, 6724193:
+/// the camera read back from the text keeps its f64 precision), and an
+/// organised scan (`sample --organised`), which opens at its sensor's view
+/// and returns to it; each from its own view and from a camera the page
+/// moved.
+#[test]
+fn clouds_save_the_scene_of_their_frames() {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data");
+    let dir = TempDir::new("viewer-clouds");
+    let scan = dir.0.join("scan.pcd");
+    let o = Command::new(BIN)
+        .arg("sample")
+        .arg(data.join("bunny-mesh.ply"))
+        .args([
+            "--scan-from",
+            "0.6,0.5,2.2",
+            "--rays",
+            "64,48",
+            "--fov",
+            "9",
+        ])
+        .args(["--organised", "optical", "-o"])
+        .arg(&scan)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let clouds = [
+        data.join("milk.pcd"),
+        data.join("32-1-472-150-76.laz"),
+        scan.clone(),
+    ];
+    for (k, path) in clouds.iter().enumerate() {
+        let cloud = path.display().to_string();
+        let server = Server::start(
+            Path::new(BIN),
+            &[
+                &cloud,
+                "--width",
+                "64",
+                "--height",
+                "48",
+                "--refine-spp",
+                "1",
+            ],
+        );
+        let (mut s, hello) = Session::open(&server);
+        let organised = *path == scan;
+        assert_eq!(hello["sensor"].is_object(), organised, "{hello}");
+        assert_eq!(hello["camera"]["sensor"], organised, "{hello}");
+        let (h, full) = s.frame("full");
+        assert_eq!(h["width"], 64);
+        s.send(serde_json::json!({"type": "save_scene"}));
+        let text = s.text("scene")["text"].as_str().unwrap().to_string();
+        assert_eq!(text.contains("intrinsics"), organised, "{text}");
+        assert!(
+            render_saved(&dir.0, &format!("c{k}a"), &text) == full,
+            "{cloud}: the saved scene renders another image:\n{text}"
+        );
+        // Moved: half-way to the point looked at, a little to the side.
+        let mut cam = hello["camera"].clone();
+        let (from, at) = (&cam["from"], &cam["at"]);
+        let mid: Vec<f64> = (0..3)
+            .map(|i| {
+                let (f, a) = (from[i].as_f64().unwrap(), at[i].as_f64().unwrap());
+                0.5 * (f + a) + if i == 0 { 0.1 * (f - a).abs() } else { 0.0 }
+            })
+            .collect();
+        cam["from"] = serde_json::json!(mid);
+        cam["sensor"] = serde_json::json!(false);
+        s.send(serde_json::json!({"type": "camera", "id": 7, "camera": cam}));
+        let moved = loop {
+            let (h, png) = s.frame("full");
+            if h["camera"] == 7 {
+                break png;
+            }
+        };
+        assert!(
+            moved != full,
+            "{cloud}: the moved camera shows the same image"
+        );
+        // A bad key light is refused and the view kept.
+        s.send(serde_json::json!({"type": "light", "direction": [0, 0, 0]}));
+        assert!(
+            s.text("error")["message"]
+                .as_str()
+                .unwrap()
+                .contains("non-zero")
+        );
+        s.send(serde_json::json!({"type": "save_scene"}));
+        let text = s.text("scene")["text"].as_str().unwrap().to_string();
+        assert!(!text.contains("intrinsics"), "{text}");
+        assert!(
+            render_saved(&dir.0, &format!("c{k}b"), &text) == moved,
+            "{cloud}: the moved view's saved scene renders another image:\n{text}"
+        );
+        if organised {
+            // The sensor view again: the first frame's bytes.
+            s.send(serde_json::json!({"type": "camera", "id": 8, "camera": hello["sensor"]}));
+            let back = loop {
+                let (h, png) = s.frame("full");
+                if h["camera"] == 8 {
+                    break png;
+                }
+            };
+            assert!(back == full, "the sensor view shows another image");
+        }
+    }
+}
