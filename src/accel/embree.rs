@@ -165,10 +165,10 @@ impl<P: Primitive> Backend for EmbreeBackend<P> {
             });
             self.scene.intersect8(&rays[..qs.len()], &mut gathers);
             for (q, g) in qs.iter().zip(gathers.iter_mut()) {
-                if q.meets_nothing() {
-                    if let Some(g) = g {
-                        g.hits.clear();
-                    }
+                if q.meets_nothing()
+                    && let Some(g) = g
+                {
+                    g.hits.clear();
                 }
             }
         }
