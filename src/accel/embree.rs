@@ -164,6 +164,13 @@ impl<P: Primitive> Backend for EmbreeBackend<P> {
                 })
             });
             self.scene.intersect8(&rays[..qs.len()], &mut gathers);
+            for (q, g) in qs.iter().zip(gathers.iter_mut()) {
+                if q.meets_nothing()
+                    && let Some(g) = g
+                {
+                    g.hits.clear();
+                }
+            }
         }
     }
 
@@ -182,6 +189,12 @@ impl<P: Primitive> Backend for EmbreeBackend<P> {
                 )
             });
             self.scene.occluded8(&rays[..qs.len()], &skip, out);
+            // An empty or undefined interval meets nothing, as one ray at a
+            // time (Embree marks an occluded lane by tfar = -inf, so a
+            // t_max of -inf alone would read as occluded).
+            for (q, o) in qs.iter().zip(out.iter_mut()) {
+                *o &= !q.meets_nothing();
+            }
         }
     }
 

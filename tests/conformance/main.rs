@@ -10,4 +10,5 @@ mod common;
 mod agreement;
 mod departure;
 mod hard_cases;
+mod hostile_rays;
 mod window;
