@@ -71,7 +71,11 @@ fn a_smooth_surface_has_no_crease() {
         positions,
         ..PointCloud::default()
     };
-    let (splats, report) = generate(&cloud, &SplatParams::default()).unwrap();
+    let on = SplatParams {
+        creases: true,
+        ..SplatParams::default()
+    };
+    let (splats, report) = generate(&cloud, &on).unwrap();
     let o = cloud.origin.as_vec3();
     let inner = splats
         .iter()

@@ -27,10 +27,10 @@ pub struct SplatOptions {
     /// cloud's points (`splat::color`; the fields are on by default).
     #[arg(long)]
     pub flat_colors: bool,
-    /// Whole discs only: no crease detection, no clip lines (splats grow
-    /// across creases and overhang them, as before issue 39).
+    /// Find creases, corners and borders and clip splats at them (issue
+    /// 39; off by default: whole discs). Not with tiled generation yet.
     #[arg(long)]
-    pub no_creases: bool,
+    pub creases: bool,
     /// Where the scanner stood, as X,Y,Z in the input's coordinates:
     /// normals are oriented toward it. Default: the cloud's own (a PCD's
     /// VIEWPOINT).
@@ -73,7 +73,7 @@ impl SplatOptions {
             density: self.density,
             ellipses: self.ellipses,
             flat_colors: self.flat_colors,
-            no_creases: self.no_creases,
+            creases: self.creases,
             viewpoint: self.viewpoint()?,
             no_viewpoint: self.no_viewpoint,
             thin: self.thin,
