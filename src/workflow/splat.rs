@@ -266,7 +266,7 @@ pub fn splat(req: &SplatRequest, progress: Option<Progress<'_>>) -> Result<Splat
         let params = req.generation.params_without_viewpoint();
         if params.creases {
             return Err(Error::invalid(
-                "--creases is not supported with tiled generation yet (tile files do not carry clip lines through the merge): splat the cloud whole (without --max-memory / --tile-points)",
+                "--creases is not supported with tiled generation yet (tile files do not carry clip lines through the merge): splat one file whole (one input, no --max-memory / --tile-points / --stage)",
             ));
         }
         let report = generate_tiled(&inputs, &params, &tiled, &req.output, progress)?;
