@@ -106,11 +106,14 @@ fn a_solid_renders_as_itself_with_creases() {
         .replace("samples = 300000", "samples = 60000")
         .replace("width = 800", "width = 200")
         .replace("height = 600", "height = 150");
+    // The scene turns creases on; each run below says on or off.
+    let key = "splat = { creases = true }";
+    assert!(
+        text.contains(key),
+        "scenes/solids.toml no longer says `{key}`"
+    );
     let figures = |creases: bool| {
-        let t = text.replace(
-            "seed = 1",
-            &format!("seed = 1\nsplat = {{ creases = {creases} }}"),
-        );
+        let t = text.replace(key, &format!("splat = {{ creases = {creases} }}"));
         let scene = build_scene(&parse_scene_str(&t).unwrap(), &root, None).unwrap();
         let truth = render_truth(&scene, &Truth::new(&scene).unwrap(), None);
         let frame = common::render_with(&scene, "octree");
