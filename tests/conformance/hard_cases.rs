@@ -486,8 +486,13 @@ fn coincident_duplicates_are_both_candidates() {
         sorted.dedup();
         assert_eq!(sorted.len(), ids.len(), "ids repeated: {ids:?}");
     }
+    // Set-up adequacy, not a tolerance on the backends: how many aimed
+    // rays meet their pair depends on the seed's blobs. Measured (ids with
+    // their twin in the window, 100 rays): the default seed >= 100;
+    // SPLATRAY_SEED 0x5722fc2e65adfbd2: 78, 0x1234: 72, 0xdeadbeef: 96,
+    // 0x77: 94. Half the rays' worth still exercises the pair check above.
     assert!(
-        with_pairs >= dup.len(),
+        with_pairs >= dup.len() / 2,
         "set-up: the rays aimed at duplicated splats found only {with_pairs} of them"
     );
     // 300 copies of one splat: the octree's depth limit copes, and the
