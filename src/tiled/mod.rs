@@ -1,0 +1,299 @@
+//! Out-of-core splat generation: a cloud of any size turned into splats in
+//! tiles that each fit a memory budget.
+//!
+//! 1. **Survey** (one streaming pass over every input): the count, the
+//!    bounds in f64, and a reservoir sample of 2^20 positions.
+//! 2. **Plan**: `ϵ` is the whole cloud's (`epsilon_rel` times its
+//!    diagonal); the halo is `HALO_EPS` (12) `ϵ` wide. The bounds are split
+//!    k-d fashion at the sample's medians along the longest side until each
+//!    tile's core plus halo holds at most the budget's points (estimated
+//!    from the sample). The split planes give every point of space exactly
+//!    one tile: the tile whose core holds it.
+//! 3. **Spill** (a second streaming pass): each point is appended to the
+//!    file of every tile whose core-plus-halo box holds it (positions as
+//!    f32 offsets from the tile's centre, normals and colours carried).
+//! 4. **Generate**, tile by tile: the tile's points become a cloud, splats
+//!    are generated as for any cloud ([`generate_trimmed`]: outliers,
+//!    normals, orientation, growth, fields, free-space trimming) with the
+//!    shared `ϵ`, and a splat is kept when its centre lies in the tile's
+//!    core. The result is a splat file per tile, written atomically: a rerun
+//!    with the same plan skips finished tiles.
+//! 5. **Merge**: the tiles' splat files share the cloud's origin, so the
+//!    output is one header with the total count and their records in tile
+//!    order. Same bytes for any thread count.
+//!
+//! The halo rule: a kept splat's centre lies in the core. Growth takes
+//! points within `max_d` of its seed and centres the splat on the smallest
+//! circle holding them (eqs. 2-3), so every point it took lies within its
+//! radius of its centre, and the radius is at most `max_d`
+//! (`MAX_RADIUS_EPS` `ϵ` = 8 `ϵ` on a densely sampled surface). Its normal
+//! field reads points within at most 1.2 radii of the centre
+//! (`field_radius_factor`; 9.6 `ϵ`), and their normals come from their
+//! neighbourhoods (about `NORMALS_REACH_EPS`, 2 `ϵ`, more): 11.6 `ϵ`, within
+//! the halo of 12 `ϵ`. Splats grown larger than that (sparse regions, where the
+//! neighbour cap `MAX_RADIUS_FACTOR` `d_k` exceeds 8 `ϵ`) are counted in the
+//! report as reaching past the halo. Which points seed splats depends on
+//! the splats grown before them (§2.2), a coupling of any reach that the
+//! halo bounds only in effect: measured, not proven (`docs/DESIGN.md`).
+//!
+//! The stages live in their own files: [`plan`] (survey and k-d plan),
+//! [`spill`] (the points into per-tile files), [`tile`] (each tile's
+//! generation) and [`merge`] (orientation across tiles and the one output
+//! file); [`report`] holds what a run reports.
+
+mod merge;
+mod plan;
+mod report;
+mod spill;
+mod tile;
+
+pub use plan::Box3;
+pub use report::{TileSummary, TiledReport, TiledSeconds};
+
+use crate::io::{IoError, IoErrorKind};
+use crate::progress::Progress;
+use crate::splat::SplatParams;
+use glam::DVec3;
+use merge::{merge, reconcile};
+use plan::{Plan, clear_work, new_plan, no_plan, stamp};
+use spill::spill;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use tile::run_tiles;
+
+/// The halo's width in `ϵ` (see the module's text): a splat's normal
+/// field reads points within at most `field_radius_factor` (1.2) times its
+/// radius of its centre, and a radius reaches
+/// `MAX_RADIUS_EPS` (8) `ϵ` on a densely sampled surface: 9.6 `ϵ`, plus [`NORMALS_REACH_EPS`] for the
+/// neighbourhoods those points' normals were estimated from.
+pub const HALO_EPS: f64 = 12.0;
+
+/// What the neighbourhoods of a splat's points add to its reach, in `ϵ`.
+pub const NORMALS_REACH_EPS: f64 = 2.0;
+
+/// Bytes a point takes while its tile is generated, for planning: measured
+/// 161 B a point for a whole 10M-point cloud read and generated in memory
+/// (peak RSS 1.61 GB), rounded up.
+pub const BYTES_PER_POINT: u64 = 192;
+
+/// The most tiles generated at once in one process, when they fit the
+/// budget together. The kd-tree's build and the last of the growth (the
+/// seeds deferred across its regions, `splat::grow`) run on one thread,
+/// so a second tile keeps the other cores busy meanwhile: 10M bunny points
+/// in two tiles of 5.5M, 25.3 s one after the other, 20.3 s at once (with
+/// the growth on one thread, before it took four regions at once). Tiles are planned to the whole budget
+/// (halving them to run two at once spilled 170M points of 100M instead of
+/// 134M: more than the overlap gains), and the output does not depend on
+/// how many run at once.
+pub const TILES_IN_FLIGHT: usize = 2;
+
+/// Memory the process holds besides its tiles: the survey's sample, the
+/// spill writers' buffers, the program and its libraries.
+pub(crate) const FIXED_BYTES: u64 = 256 << 20;
+
+/// Which part of tiled generation a run does. A cluster runs the stages
+/// as separate processes sharing the work folder: [`Stage::Plan`] once,
+/// [`Stage::Tile`] once per tile (on any machine, in any order, retried
+/// freely), then [`Stage::Merge`]; the output is the same bytes as
+/// [`Stage::All`] in one process.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Stage {
+    /// Survey, plan, spill, generate every tile, merge.
+    #[default]
+    All,
+    /// Survey, plan and spill, then stop (a plan already spilled is kept).
+    Plan,
+    /// Generate this one tile of an existing plan (nothing when finished).
+    Tile(usize),
+    /// Merge the finished tiles of an existing plan into the output.
+    Merge,
+}
+
+/// How tiled generation runs.
+#[derive(Clone, Debug)]
+pub struct TiledOptions {
+    /// Bytes the whole process may use (`--max-memory`, else what
+    /// [`crate::memory::limit`] says).
+    pub max_memory: u64,
+    /// At most this many points (core and halo) per tile, below what the
+    /// memory allows (to force small tiles, as the tests do).
+    pub tile_points: Option<u64>,
+    /// The folder for the plan, spill files and finished tiles (made if
+    /// missing, removed after a successful merge).
+    pub work: PathBuf,
+    /// Where the scanner stood, in the inputs' coordinates: given, or
+    /// (`None`) a single input's own (a PCD's `VIEWPOINT`).
+    pub viewpoint: Option<DVec3>,
+    /// Ignore the inputs' own viewpoints.
+    pub no_viewpoint: bool,
+    /// Which part to run.
+    pub stage: Stage,
+}
+
+pub(crate) fn io_err(path: &Path, e: std::io::Error) -> IoError {
+    IoError::new(path, IoErrorKind::Io(e))
+}
+
+pub(crate) fn data_err(path: &Path, msg: String) -> IoError {
+    IoError::new(path, IoErrorKind::Data(msg))
+}
+
+/// Peak resident memory of this process (`VmHWM`), bytes.
+#[must_use]
+pub fn peak_rss() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            let l = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+            l.split_whitespace().nth(1)?.parse::<u64>().ok()
+        })
+        .map_or(0, |kb| kb * 1024)
+}
+
+/// Generates splats from `inputs` in tiles within `opts.max_memory`, and
+/// writes them to `output` as one splat file (see the module's text).
+///
+/// # Errors
+/// An [`IoError`] when an input cannot be read, the work folder or the
+/// output cannot be written, or the budget cannot hold even one tile.
+pub fn generate_tiled(
+    inputs: &[PathBuf],
+    params: &SplatParams,
+    opts: &TiledOptions,
+    output: &Path,
+    progress: Option<Progress<'_>>,
+) -> Result<TiledReport, IoError> {
+    let t0 = Instant::now();
+    let work = &opts.work;
+    std::fs::create_dir_all(work).map_err(|e| io_err(work, e))?;
+    let stamps = inputs
+        .iter()
+        .map(|p| stamp(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let budget_points = opts
+        .max_memory
+        .checked_sub(FIXED_BYTES)
+        .map_or(0, |b| b / BYTES_PER_POINT);
+    let target = opts
+        .tile_points
+        .map_or(budget_points, |t| t.min(budget_points));
+    if target < 1000 {
+        return Err(data_err(
+            work,
+            format!(
+                "a memory budget of {:.2} GB holds no tile (each point takes about {BYTES_PER_POINT} \
+                 bytes while its tile is generated, besides {} MB for the program)",
+                opts.max_memory as f64 / 1e9,
+                FIXED_BYTES >> 20
+            ),
+        ));
+    }
+    let params_text = format!("{params:?} {:?} {}", opts.viewpoint, opts.no_viewpoint);
+    let plan_file = work.join("plan.json");
+    let old: Option<Plan> = std::fs::read_to_string(&plan_file)
+        .ok()
+        .and_then(|s| serde_json::from_str(&s).ok())
+        .filter(|p: &Plan| {
+            p.inputs == stamps
+                && p.params == params_text
+                // A tile or the merge may run on another machine, with
+                // another memory: the plan's tiles stand (a tile too large
+                // for this one is refused when read).
+                && (p.tile_points == target || matches!(opts.stage, Stage::Tile(_) | Stage::Merge))
+                && p.version == env!("CARGO_PKG_VERSION")
+        });
+    let mut report = TiledReport {
+        max_memory: opts.max_memory,
+        ..TiledReport::default()
+    };
+    let resumed = old.is_some();
+    if !resumed && matches!(opts.stage, Stage::Tile(_) | Stage::Merge) {
+        return Err(no_plan(work));
+    }
+    let plan = match old {
+        Some(p) => p,
+        None => {
+            // A different plan: nothing in the folder is reusable.
+            clear_work(work)?;
+            new_plan(
+                inputs,
+                params,
+                opts,
+                stamps,
+                params_text,
+                target,
+                progress,
+                t0,
+                &mut report,
+            )?
+        }
+    };
+    let diag = (DVec3::from(plan.survey.bounds.hi) - DVec3::from(plan.survey.bounds.lo)).length();
+    report.points = plan.survey.points;
+    report.non_finite = plan.survey.non_finite;
+    report.epsilon = plan.epsilon;
+    report.halo = plan.halo;
+    report.bbox_diagonal = diag;
+    report.tile_points = plan.tile_points;
+    report.origin = plan.origin;
+    report.cores.clone_from(&plan.tiles);
+    report.bounds = Some(plan.survey.bounds);
+    let counts_file = work.join("spilled.json");
+    let spilled: Option<Vec<(u64, u64)>> = std::fs::read_to_string(&counts_file)
+        .ok()
+        .filter(|_| resumed)
+        .and_then(|s| serde_json::from_str(&s).ok());
+    let counts: Vec<(u64, u64)> = match spilled {
+        Some(c) => c,
+        None if opts.stage != Stage::All && opts.stage != Stage::Plan => {
+            return Err(no_plan(work));
+        }
+        None => {
+            let json =
+                serde_json::to_string(&plan).map_err(|e| data_err(&plan_file, e.to_string()))?;
+            crate::io::write_text(&plan_file, &json)?;
+            let t1 = Instant::now();
+            let c = spill(inputs, &plan, work, progress)?;
+            report.seconds.spill = t1.elapsed().as_secs_f64();
+            let json =
+                serde_json::to_string(&c).map_err(|e| data_err(&counts_file, e.to_string()))?;
+            crate::io::write_text(&counts_file, &json)?;
+            c
+        }
+    };
+    report.spilled = counts.iter().map(|c| c.0).sum();
+    let t2 = Instant::now();
+    let n = plan.tiles.len();
+    if let Stage::Tile(t) = opts.stage
+        && t >= n
+    {
+        return Err(data_err(
+            work,
+            format!("--tile {t}: the plan has tiles 0 to {}", n - 1),
+        ));
+    }
+    run_tiles(&plan, params, opts, &counts, progress, &mut report)?;
+    report.seconds.generate = t2.elapsed().as_secs_f64();
+    if matches!(opts.stage, Stage::All | Stage::Merge) {
+        let t3 = Instant::now();
+        let flips = if plan.reconciles() {
+            let f = reconcile(&plan, work)?;
+            report.flipped_tiles = f.iter().filter(|&&x| x).count();
+            report.flipped_splats = f
+                .iter()
+                .zip(&report.tiles)
+                .filter(|(x, _)| **x)
+                .map(|(_, s)| s.kept as u64)
+                .sum();
+            f
+        } else {
+            vec![false; plan.tiles.len()]
+        };
+        report.splats = merge(&plan, params, work, output, &flips, progress)?;
+        report.seconds.merge = t3.elapsed().as_secs_f64();
+        let _ = std::fs::remove_dir_all(work);
+    }
+    report.peak_rss = peak_rss();
+    report.seconds.total = t0.elapsed().as_secs_f64();
+    Ok(report)
+}

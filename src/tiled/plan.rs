@@ -1,0 +1,452 @@
+//! The plan stage: the survey of every input (count, bounds, sample), the
+//! k-d split into tiles with halos, and the spill it foresees.
+
+use super::report::TiledReport;
+use super::spill::record_bytes;
+use super::{HALO_EPS, TiledOptions, data_err, io_err};
+use crate::io::{IoError, stream_points};
+use crate::progress::{Progress, notify};
+use crate::rng::SplitMix64;
+use crate::splat::SplatParams;
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Positions kept by the survey to plan tiles.
+pub(super) const SAMPLE: usize = 1 << 20;
+
+/// The most tiles (each holds an open spill file while spilling).
+pub(super) const MAX_TILES: usize = 4096;
+
+/// An axis-aligned box in the cloud's coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Box3 {
+    /// Lower corner.
+    pub lo: [f64; 3],
+    /// Upper corner.
+    pub hi: [f64; 3],
+}
+
+impl Box3 {
+    pub(super) fn grown(&self, by: f64) -> Box3 {
+        Box3 {
+            lo: self.lo.map(|v| v - by),
+            hi: self.hi.map(|v| v + by),
+        }
+    }
+    pub(super) fn holds(&self, p: DVec3) -> bool {
+        (0..3).all(|a| p[a] >= self.lo[a] && p[a] <= self.hi[a])
+    }
+    pub(super) fn centre(&self) -> DVec3 {
+        (DVec3::from(self.lo) + DVec3::from(self.hi)) * 0.5
+    }
+}
+
+/// A node of the plan's k-d tree: a split, or a tile.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub(super) enum Node {
+    /// Points with `p[axis] < at` go to `below`, the rest to `above`.
+    Split {
+        axis: usize,
+        at: f64,
+        below: Box<Node>,
+        above: Box<Node>,
+    },
+    /// Tile number.
+    Tile(usize),
+}
+
+impl Node {
+    /// The tile whose core holds `p` (every point of space has one).
+    pub(super) fn locate(&self, p: DVec3) -> usize {
+        match self {
+            Node::Tile(t) => *t,
+            Node::Split {
+                axis,
+                at,
+                below,
+                above,
+            } => {
+                if p[*axis] < *at {
+                    below.locate(p)
+                } else {
+                    above.locate(p)
+                }
+            }
+        }
+    }
+    /// Every tile whose core lies within `halo` of `p`.
+    pub(super) fn near(&self, p: DVec3, halo: f64, out: &mut Vec<usize>) {
+        match self {
+            Node::Tile(t) => out.push(*t),
+            Node::Split {
+                axis,
+                at,
+                below,
+                above,
+            } => {
+                if p[*axis] < *at + halo {
+                    below.near(p, halo, out);
+                }
+                if p[*axis] >= *at - halo {
+                    above.near(p, halo, out);
+                }
+            }
+        }
+    }
+}
+
+/// What the survey found: enough to plan the tiles.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub(super) struct Survey {
+    pub(super) points: u64,
+    pub(super) non_finite: u64,
+    pub(super) bounds: Box3,
+    pub(super) normals: bool,
+    pub(super) colors: bool,
+    pub(super) viewpoint: Option<[f64; 3]>,
+    /// Where each scan was taken from, when the inputs hold several scans
+    /// (an E57 file of several, or several files each with its scanner's
+    /// position) and every input says where: each point carries its scan.
+    pub(super) scans: Vec<[f64; 3]>,
+    /// Per input, the index in `scans` of its first scan.
+    pub(super) scan_offsets: Vec<u32>,
+    #[serde(skip)]
+    pub(super) sample: Vec<DVec3>,
+}
+
+/// One input file as the plan records it (a changed file is a new plan).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub(super) struct InputStamp {
+    pub(super) path: PathBuf,
+    pub(super) bytes: u64,
+    pub(super) modified_ns: u128,
+}
+
+/// Everything that decides the output; a rerun finding the same plan in
+/// the work folder resumes it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub(super) struct Plan {
+    pub(super) version: String,
+    pub(super) inputs: Vec<InputStamp>,
+    pub(super) params: String,
+    pub(super) survey: Survey,
+    pub(super) epsilon: f64,
+    pub(super) halo: f64,
+    pub(super) tile_points: u64,
+    pub(super) tree: Node,
+    pub(super) tiles: Vec<Box3>,
+    pub(super) origin: [f64; 3],
+    pub(super) viewpoint: Option<[f64; 3]>,
+    /// Each point seen from its own scan's position (the survey's scans,
+    /// neither `--viewpoint` nor `--no-viewpoint` given).
+    pub(super) per_scan: bool,
+}
+
+impl Plan {
+    /// Whether the tiles orient their pieces by themselves (no input
+    /// normals, no viewpoint, no scans), so that the merge must make their
+    /// orientations agree.
+    pub(super) fn reconciles(&self) -> bool {
+        !self.survey.normals && self.viewpoint.is_none() && !self.per_scan
+    }
+}
+
+pub(super) fn stamp(path: &Path) -> Result<InputStamp, IoError> {
+    let meta = std::fs::metadata(path).map_err(|e| io_err(path, e))?;
+    let modified_ns = meta
+        .modified()
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map_or(0, |d| d.as_nanos());
+    Ok(InputStamp {
+        path: path.to_path_buf(),
+        bytes: meta.len(),
+        modified_ns,
+    })
+}
+
+pub(super) fn survey(
+    inputs: &[PathBuf],
+    progress: Option<Progress<'_>>,
+) -> Result<Survey, IoError> {
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    let mut sample: Vec<DVec3> = Vec::with_capacity(SAMPLE);
+    let mut rng = SplitMix64::new(0x7115_5eed);
+    let (mut seen, mut non_finite) = (0u64, 0u64);
+    let (mut normals, mut colors) = (false, false);
+    let mut viewpoint = None;
+    // Every input's scanner positions (an E57 file's scans, a PCD's
+    // viewpoint); `None` once an input has none.
+    let mut scans: Option<Vec<[f64; 3]>> = Some(Vec::new());
+    let mut scan_offsets = Vec::with_capacity(inputs.len());
+    for (k, path) in inputs.iter().enumerate() {
+        let info = stream_points(path, |b| {
+            for &p in b.world {
+                lo = lo.min(p);
+                hi = hi.max(p);
+                // Reservoir sampling (Algorithm R), seeded: the same input
+                // gives the same sample.
+                if sample.len() < SAMPLE {
+                    sample.push(p);
+                } else {
+                    let j = rng.next_u64() % (seen + 1);
+                    if (j as usize) < SAMPLE {
+                        sample[j as usize] = p;
+                    }
+                }
+                seen += 1;
+            }
+            notify(progress, "survey", k as f64 / inputs.len() as f64);
+            Ok(())
+        })?;
+        non_finite += info.non_finite;
+        normals |= info.normals;
+        colors |= info.colors;
+        if inputs.len() == 1 {
+            viewpoint = info.viewpoint.map(|v| v.to_array());
+        }
+        let here: Vec<[f64; 3]> = if info.scans.is_empty() {
+            info.viewpoint.map(|v| v.to_array()).into_iter().collect()
+        } else {
+            info.scans.iter().map(|v| v.to_array()).collect()
+        };
+        scan_offsets.push(scans.as_ref().map_or(0, |s| s.len() as u32));
+        if here.is_empty() {
+            scans = None;
+        } else if let Some(s) = scans.as_mut() {
+            s.extend(here);
+        }
+    }
+    let mut scans = scans.unwrap_or_default();
+    if scans.len() > usize::from(u16::MAX) {
+        return Err(data_err(
+            &inputs[0],
+            format!(
+                "{} scans in all, more than the {} a tiled run carries",
+                scans.len(),
+                u16::MAX
+            ),
+        ));
+    }
+    if scans.iter().all(|p| Some(*p) == scans.first().copied()) {
+        // One place for every point: the one viewpoint.
+        if viewpoint.is_none() {
+            viewpoint = scans.first().copied();
+        }
+        scans.clear();
+    }
+    if scans.is_empty() {
+        scan_offsets.clear();
+    } else {
+        viewpoint = None;
+    }
+    if seen < 3 {
+        return Err(data_err(
+            &inputs[0],
+            format!("{seen} usable points: at least 3 are needed"),
+        ));
+    }
+    Ok(Survey {
+        points: seen,
+        non_finite,
+        bounds: Box3 {
+            lo: lo.to_array(),
+            hi: hi.to_array(),
+        },
+        normals,
+        colors,
+        viewpoint,
+        scans,
+        scan_offsets,
+        sample,
+    })
+}
+
+/// Splits `bounds` k-d fashion until each tile's core plus `halo` holds at
+/// most `target` points as the sample estimates them; tiles are numbered
+/// in the order of the tree's leaves.
+pub(super) fn plan_tiles(s: &Survey, halo: f64, target: u64) -> (Node, Vec<Box3>) {
+    let per_sample = s.points as f64 / s.sample.len().max(1) as f64;
+    let estimate = |b: &Box3| {
+        let g = b.grown(halo);
+        s.sample.iter().filter(|p| g.holds(**p)).count() as f64 * per_sample
+    };
+    let mut tiles = Vec::new();
+    fn split(
+        b: Box3,
+        idx: Vec<u32>,
+        s: &Survey,
+        halo: f64,
+        target: u64,
+        estimate: &dyn Fn(&Box3) -> f64,
+        tiles: &mut Vec<Box3>,
+    ) -> Node {
+        let side = DVec3::from(b.hi) - DVec3::from(b.lo);
+        let axis = if side.x >= side.y && side.x >= side.z {
+            0
+        } else if side.y >= side.z {
+            1
+        } else {
+            2
+        };
+        // A tile narrower than two halos would hold more halo than core:
+        // the budget cannot be met at this ϵ (the report shows it).
+        let splittable = side[axis] > 4.0 * halo && idx.len() >= 2 && tiles.len() < MAX_TILES;
+        if estimate(&b) <= target as f64 || !splittable {
+            tiles.push(b);
+            return Node::Tile(tiles.len() - 1);
+        }
+        let mut vals: Vec<f64> = idx.iter().map(|&i| s.sample[i as usize][axis]).collect();
+        let mid = vals.len() / 2;
+        let (_, m, _) = vals.select_nth_unstable_by(mid, f64::total_cmp);
+        // Keep both halves at least a halo wide.
+        let at = m.clamp(b.lo[axis] + 2.0 * halo, b.hi[axis] - 2.0 * halo);
+        let (mut lo_b, mut hi_b) = (b, b);
+        lo_b.hi[axis] = at;
+        hi_b.lo[axis] = at;
+        let (below_idx, above_idx): (Vec<u32>, Vec<u32>) = idx
+            .into_iter()
+            .partition(|&i| s.sample[i as usize][axis] < at);
+        let below = split(lo_b, below_idx, s, halo, target, estimate, tiles);
+        let above = split(hi_b, above_idx, s, halo, target, estimate, tiles);
+        Node::Split {
+            axis,
+            at,
+            below: Box::new(below),
+            above: Box::new(above),
+        }
+    }
+    let idx: Vec<u32> = (0..s.sample.len() as u32).collect();
+    let tree = split(s.bounds, idx, s, halo, target, &estimate, &mut tiles);
+    (tree, tiles)
+}
+
+/// Bytes free to this process on the file system holding `dir`, when
+/// the system says.
+pub(super) fn free_space(dir: &Path) -> Option<u64> {
+    let v = rustix::fs::statvfs(dir).ok()?;
+    Some(v.f_bavail.saturating_mul(v.f_frsize))
+}
+
+/// A new plan for `inputs`: the survey, the tiles of at most `target`
+/// points with their halos, and the spill it will write, estimated from the
+/// survey's sample and checked against the work folder's free disk; the
+/// survey's seconds (since `t0`), the estimate and its warnings go to
+/// `report`.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn new_plan(
+    inputs: &[PathBuf],
+    params: &SplatParams,
+    opts: &TiledOptions,
+    stamps: Vec<InputStamp>,
+    params_text: String,
+    target: u64,
+    progress: Option<Progress<'_>>,
+    t0: Instant,
+    report: &mut TiledReport,
+) -> Result<Plan, IoError> {
+    let work = &opts.work;
+    let s = survey(inputs, progress)?;
+    report.seconds.survey = t0.elapsed().as_secs_f64();
+    let diagonal = (DVec3::from(s.bounds.hi) - DVec3::from(s.bounds.lo)).length();
+    let epsilon = match params.epsilon_abs {
+        Some(e) => e,
+        None => f64::from(params.epsilon_rel) * diagonal,
+    };
+    let halo = HALO_EPS * epsilon;
+    let (tree, tiles) = plan_tiles(&s, halo, target);
+    // What the spill will write, from the sample: each sampled
+    // point stands for points / sample of the cloud's, in every
+    // tile whose core or halo holds it.
+    let grown: Vec<Box3> = tiles.iter().map(|b| b.grown(halo)).collect();
+    let mut near = Vec::new();
+    let mut held = 0u64;
+    for &p in &s.sample {
+        near.clear();
+        tree.near(p, halo, &mut near);
+        held += near.iter().filter(|&&t| grown[t].holds(p)).count() as u64;
+    }
+    let factor = held as f64 / s.sample.len().max(1) as f64;
+    report.spill_estimate = (factor * s.points as f64).round() as u64;
+    let bytes = report
+        .spill_estimate
+        .saturating_mul(record_bytes(&s) as u64);
+    if let Some(free) = free_space(work)
+        && bytes > free
+    {
+        return Err(data_err(
+            work,
+            format!(
+                "the spill needs about {:.1} GB ({} points in {} tiles, {factor:.2} times the \
+                 cloud with the halos) and its folder's disk has {:.1} GB free",
+                bytes as f64 / 1e9,
+                report.spill_estimate,
+                tiles.len(),
+                free as f64 / 1e9
+            ),
+        ));
+    }
+    if factor > 2.0 {
+        report.warnings.push(format!(
+            "the tiles' halos ({HALO_EPS} epsilon wide) hold {:.0} % more points than their \
+             cores: {} tiles of at most {target} points are small against epsilon at this \
+             density; --thin 0.25 (the cloud is denser than epsilon needs), a finer \
+             --epsilon or a larger --max-memory would spill less",
+            100.0 * (factor - 1.0),
+            tiles.len()
+        ));
+    }
+    let origin = s.bounds.centre().to_array();
+    let viewpoint = if opts.no_viewpoint {
+        None
+    } else {
+        opts.viewpoint.map(|v| v.to_array()).or(s.viewpoint)
+    };
+    let per_scan = !opts.no_viewpoint && opts.viewpoint.is_none() && !s.scans.is_empty();
+    Ok(Plan {
+        viewpoint,
+        version: env!("CARGO_PKG_VERSION").into(),
+        inputs: stamps,
+        params: params_text,
+        survey: s,
+        epsilon,
+        halo,
+        tile_points: target,
+        tree,
+        tiles,
+        origin,
+        per_scan,
+    })
+}
+
+/// The error of a stage that needs a plan where there is none (or one made
+/// for other inputs or options).
+pub(super) fn no_plan(work: &Path) -> IoError {
+    data_err(
+        work,
+        "no tile plan for these inputs and options here: run the same command with --plan-only first"
+            .into(),
+    )
+}
+
+/// Removes what an earlier plan left in the work folder.
+pub(super) fn clear_work(work: &Path) -> Result<(), IoError> {
+    for e in std::fs::read_dir(work)
+        .map_err(|e| io_err(work, e))?
+        .flatten()
+    {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.starts_with("spill-")
+            || name.starts_with("tile-")
+            || name.starts_with("halo-")
+            || name == "plan.json"
+            || name == "spilled.json"
+        {
+            std::fs::remove_file(e.path()).map_err(|err| io_err(&e.path(), err))?;
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,155 @@
+//! The spill stage: each point written to the file of every tile whose
+//! core or halo holds it, and a tile's file read back as a cloud.
+
+use super::plan::{Box3, Plan, Survey};
+use super::{BYTES_PER_POINT, io_err};
+use crate::io::{IoError, IoErrorKind, stream_points};
+use crate::progress::{Progress, notify};
+use crate::splat::PointCloud;
+use glam::{DVec3, Vec3};
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+
+/// The spill record of one point: position offset from the tile's centre
+/// (3 × f32), then the normal and the colour (3 × f32 each) when the
+/// cloud has them, then its scan (u16) when there are several.
+pub(super) fn record_bytes(survey: &Survey) -> usize {
+    12 + 12 * usize::from(survey.normals)
+        + 12 * usize::from(survey.colors)
+        + 2 * usize::from(!survey.scans.is_empty())
+}
+
+pub(super) fn spill(
+    inputs: &[PathBuf],
+    plan: &Plan,
+    work: &Path,
+    progress: Option<Progress<'_>>,
+) -> Result<Vec<(u64, u64)>, IoError> {
+    let n = plan.tiles.len();
+    let centres: Vec<DVec3> = plan.tiles.iter().map(Box3::centre).collect();
+    let grown: Vec<Box3> = plan.tiles.iter().map(|b| b.grown(plan.halo)).collect();
+    let mut writers = Vec::with_capacity(n);
+    for t in 0..n {
+        let p = spill_path(work, t);
+        let f = std::fs::File::create(&p).map_err(|e| io_err(&p, e))?;
+        writers.push(BufWriter::with_capacity(1 << 16, f));
+    }
+    let mut counts = vec![(0u64, 0u64); n];
+    let mut near = Vec::new();
+    let mut rec = Vec::with_capacity(36);
+    let mut done = 0u64;
+    let (with_n, with_c) = (plan.survey.normals, plan.survey.colors);
+    let with_s = !plan.survey.scans.is_empty();
+    for (k, path) in inputs.iter().enumerate() {
+        let first_scan = plan.survey.scan_offsets.get(k).copied().unwrap_or(0);
+        stream_points(path, |b| {
+            for (i, &p) in b.world.iter().enumerate() {
+                near.clear();
+                plan.tree.near(p, plan.halo, &mut near);
+                let core = plan.tree.locate(p);
+                for &t in &near {
+                    if !grown[t].holds(p) {
+                        continue;
+                    }
+                    rec.clear();
+                    for c in (p - centres[t]).as_vec3().to_array() {
+                        rec.extend_from_slice(&c.to_le_bytes());
+                    }
+                    if with_n {
+                        let v = b.normals.map_or(Vec3::NAN, |v| v[i]);
+                        for c in v.to_array() {
+                            rec.extend_from_slice(&c.to_le_bytes());
+                        }
+                    }
+                    if with_c {
+                        let v = b.colors.map_or(Vec3::ONE, |v| v[i]);
+                        for c in v.to_array() {
+                            rec.extend_from_slice(&c.to_le_bytes());
+                        }
+                    }
+                    if with_s {
+                        let scan = first_scan + b.scans.map_or(0, |s| u32::from(s[i]));
+                        rec.extend_from_slice(&(scan as u16).to_le_bytes());
+                    }
+                    writers[t].write_all(&rec).map_err(|e| e.to_string())?;
+                    counts[t].0 += 1;
+                    if t == core {
+                        counts[t].1 += 1;
+                    }
+                }
+            }
+            done += b.world.len() as u64;
+            notify(
+                progress,
+                "spilling to tiles",
+                done as f64 / plan.survey.points as f64,
+            );
+            Ok(())
+        })?;
+    }
+    for (t, w) in writers.into_iter().enumerate() {
+        let p = spill_path(work, t);
+        w.into_inner()
+            .map_err(|e| io_err(&p, e.into_error()))?
+            .sync_all()
+            .map_err(|e| io_err(&p, e))?;
+    }
+    Ok(counts)
+}
+
+pub(super) fn spill_path(work: &Path, t: usize) -> PathBuf {
+    work.join(format!("spill-{t:05}.bin"))
+}
+
+/// The tile's points as a cloud centred on the tile.
+pub(super) fn read_spill(plan: &Plan, work: &Path, t: usize) -> Result<PointCloud, IoError> {
+    let p = spill_path(work, t);
+    let rb = record_bytes(&plan.survey);
+    let bytes = std::fs::metadata(&p).map_err(|e| io_err(&p, e))?.len();
+    crate::memory::check(&format!("tile {t}"), bytes / rb as u64 * BYTES_PER_POINT)
+        .map_err(|e| IoError::new(&p, IoErrorKind::Memory(e)))?;
+    let mut r =
+        BufReader::with_capacity(1 << 20, std::fs::File::open(&p).map_err(|e| io_err(&p, e))?);
+    let n = (bytes / rb as u64) as usize;
+    let (with_n, with_c) = (plan.survey.normals, plan.survey.colors);
+    let with_s = !plan.survey.scans.is_empty();
+    let mut positions = Vec::with_capacity(n);
+    let mut normals = Vec::with_capacity(if with_n { n } else { 0 });
+    let mut colors = Vec::with_capacity(if with_c { n } else { 0 });
+    let mut scan_of = Vec::with_capacity(if with_s { n } else { 0 });
+    let mut rec = vec![0u8; rb];
+    let v3 = |b: &[u8]| {
+        let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+        Vec3::new(f(0), f(4), f(8))
+    };
+    for _ in 0..n {
+        r.read_exact(&mut rec).map_err(|e| io_err(&p, e))?;
+        positions.push(v3(&rec[0..12]));
+        let mut at = 12;
+        if with_n {
+            normals.push(v3(&rec[at..at + 12]));
+            at += 12;
+        }
+        if with_c {
+            colors.push(v3(&rec[at..at + 12]));
+            at += 12;
+        }
+        if with_s {
+            scan_of.push(u16::from_le_bytes([rec[at], rec[at + 1]]));
+        }
+    }
+    let origin = plan.tiles[t].centre();
+    let local = |v: [f64; 3]| (DVec3::from(v) - origin).as_vec3();
+    Ok(PointCloud {
+        positions,
+        origin,
+        normals: with_n.then_some(normals),
+        colors: with_c.then_some(colors),
+        viewpoint: plan.viewpoint.map(local),
+        scans: (with_s && plan.per_scan).then(|| crate::splat::Scans {
+            positions: plan.survey.scans.iter().map(|&v| local(v)).collect(),
+            of: scan_of,
+        }),
+        ..PointCloud::default()
+    })
+}
