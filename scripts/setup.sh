@@ -2,7 +2,8 @@
 # Set-up for splatray on a fresh Debian/Ubuntu machine. Idempotent, and fast
 # when everything is already present. It installs what is missing:
 #   1. libclang, which bindgen (inside embree4-sys) needs at build time, and
-#      prlimit (util-linux), which tests/limits.rs runs the binary under;
+#      prlimit and unshare (util-linux), which tests/limits.rs and
+#      tests/tiled_disk.rs run the binary under;
 #   2. Embree 4: nothing to do when EMBREE_DIR or `pkg-config embree4` already
 #      provides it; otherwise the system's package when the distribution has
 #      one; otherwise the libraries of the PyPI wheel embreex==4.4.0.post1,
@@ -50,11 +51,11 @@ else
   apt_install libclang-dev
 fi
 
-# --- 1b. prlimit (util-linux): tests/limits.rs runs the binary under it -----
-if command -v prlimit >/dev/null 2>&1; then
-  say "prlimit: present"
+# --- 1b. prlimit, unshare (util-linux): tests/limits.rs, tests/tiled_disk.rs -
+if command -v prlimit >/dev/null 2>&1 && command -v unshare >/dev/null 2>&1; then
+  say "prlimit, unshare: present"
 else
-  say "prlimit: installing util-linux"
+  say "prlimit, unshare: installing util-linux"
   apt_install util-linux
 fi
 

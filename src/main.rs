@@ -200,8 +200,34 @@ fn info() -> Result<()> {
     Ok(())
 }
 
+/// A file-size limit (`ulimit -f`, `RLIMIT_FSIZE`) passed by a write sends
+/// SIGXFSZ, whose default action kills the process without a word and
+/// leaves the temporary file of the atomic writer behind. With a handler
+/// installed the write fails with EFBIG instead, and the error path runs:
+/// one line naming the file, the temporary removed. Tokio's signal
+/// registry installs that handler in safe code (no `unsafe` outside the
+/// Embree and SIMD modules) and keeps it for the life of the process; the
+/// signal, once caught, is ignored. SIGXFSZ is 25 on Linux but for MIPS.
+fn catch_file_size_signal() {
+    #[cfg(all(
+        target_os = "linux",
+        not(any(target_arch = "mips", target_arch = "mips64"))
+    ))]
+    {
+        const SIGXFSZ: i32 = 25;
+        if let Ok(rt) = tokio::runtime::Builder::new_current_thread()
+            .enable_io()
+            .build()
+        {
+            let _entered = rt.enter();
+            let _ = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::from_raw(SIGXFSZ));
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    catch_file_size_signal();
     // The environment is read once, here: an unusable SPLATRAY_SIMD or
     // SPLATRAY_PACKETS is refused before any work.
     let result = splatray::config::Config::from_env()

@@ -73,6 +73,11 @@ pub struct SplatArgs {
     /// Merge the finished tiles of that plan into the output.
     #[arg(long)]
     pub merge_only: bool,
+    /// Carry a tiled run on from its work folder (after a full disk, say):
+    /// refused in one line when there is no plan there or it was made for
+    /// other inputs or options.
+    #[arg(long)]
+    pub resume: bool,
 }
 
 impl SplatArgs {}
@@ -108,6 +113,7 @@ impl SplatArgs {
             max_memory,
             tile_points: self.tile_points,
             stage,
+            resume: self.resume,
             ..SplatRequest::new(self.inputs.clone(), self.output.clone())
         })
     }

@@ -2,13 +2,13 @@
 //! splat files joined into the one output.
 
 use super::plan::Plan;
-use super::tile::{color_fields, halo_path, tile_path};
+use super::tile::{clip_lines, color_fields, halo_path, tile_path};
 use super::{data_err, io_err};
-use crate::io::{COLOR_FIELD_PROPS, IoError, SPLAT_ROW_BYTES, splat_header_with, write_atomic};
+use crate::io::{IoError, splat_header_layout, splat_row_bytes, write_atomic};
 use crate::progress::{Progress, notify};
 use crate::splat::{Splat, SplatParams};
 use glam::{DVec3, Vec3};
-use std::io::{BufReader, BufWriter, Read, Write};
+use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::Path;
 
 /// Joins the tiles' splat files into `output`: one header with the total
@@ -23,12 +23,8 @@ pub(super) fn merge(
 ) -> Result<u64, IoError> {
     let n = plan.tiles.len();
     let with_fields = color_fields(plan, params);
-    let row_bytes = SPLAT_ROW_BYTES
-        + if with_fields {
-            4 * COLOR_FIELD_PROPS.len()
-        } else {
-            0
-        };
+    let clips = clip_lines(params);
+    let row_bytes = splat_row_bytes(with_fields, clips);
     let mut bodies = Vec::with_capacity(n);
     let mut total = 0u64;
     for t in 0..n {
@@ -42,37 +38,78 @@ pub(super) fn merge(
         total += body / row_bytes as u64;
         bodies.push((p, head));
     }
-    let header = splat_header_with(total, DVec3::from(plan.origin), with_fields);
-    write_atomic(output, |tmp| -> std::io::Result<()> {
+    let header = splat_header_layout(total, DVec3::from(plan.origin), with_fields, clips);
+    // A tile that does not read is named as itself, not as the output.
+    let mut read_failed: Option<IoError> = None;
+    let written = write_atomic(output, |tmp| -> std::io::Result<()> {
         let mut out = BufWriter::with_capacity(1 << 20, std::fs::File::create(tmp)?);
         out.write_all(header.as_bytes())?;
+        let mut buf = vec![0u8; row_bytes * 4096];
         for (t, (p, head)) in bodies.iter().enumerate() {
-            let mut f = BufReader::new(std::fs::File::open(p)?);
-            std::io::copy(&mut (&mut f).take(*head), &mut std::io::sink())?;
-            if flips.get(t).copied().unwrap_or(false) {
-                // The normal and the field's four coefficients change sign
-                // (the sign bit of each little-endian f32): the field then
-                // gives the opposite normal everywhere (eq. 4).
-                let mut row = vec![0u8; row_bytes];
-                loop {
-                    match f.read_exact(&mut row) {
-                        Ok(()) => {}
-                        Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => break,
-                        Err(e) => return Err(e),
-                    }
-                    for k in FLIPPED_FLOATS {
-                        row[4 * k + 3] ^= 0x80;
-                    }
-                    out.write_all(&row)?;
+            let flip = flips.get(t).copied().unwrap_or(false);
+            match copy_tile(p, *head, flip, &mut buf, &mut out) {
+                Ok(()) => {}
+                Err(Fail::Write(e)) => return Err(e),
+                Err(Fail::Read(e)) => {
+                    read_failed = Some(io_err(p, e));
+                    return Err(std::io::Error::other("a tile did not read"));
                 }
-            } else {
-                std::io::copy(&mut f, &mut out)?;
             }
             notify(progress, "merging", (t + 1) as f64 / n as f64);
         }
         out.flush()
-    })?;
+    });
+    if let Some(e) = read_failed {
+        return Err(e);
+    }
+    written?;
     Ok(total)
+}
+
+/// Which side of a copy failed.
+enum Fail {
+    Read(std::io::Error),
+    Write(std::io::Error),
+}
+
+/// Appends the records of the tile file `p` (after its `head` bytes of
+/// header) to `out`, turned over when `flip`: the normal and the field's
+/// four coefficients change sign (the sign bit of each little-endian f32),
+/// so the field gives the opposite normal everywhere (eq. 4). `buf` holds
+/// a whole number of records.
+fn copy_tile(
+    p: &Path,
+    head: u64,
+    flip: bool,
+    buf: &mut [u8],
+    out: &mut impl Write,
+) -> Result<(), Fail> {
+    let row_bytes = buf.len() / 4096;
+    let mut f = std::fs::File::open(p).map_err(Fail::Read)?;
+    f.seek(SeekFrom::Start(head)).map_err(Fail::Read)?;
+    loop {
+        // Fill the buffer (a short read is not the end).
+        let mut got = 0;
+        while got < buf.len() {
+            match f.read(&mut buf[got..]) {
+                Ok(0) => break,
+                Ok(k) => got += k,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(Fail::Read(e)),
+            }
+        }
+        if got == 0 {
+            return Ok(());
+        }
+        if flip {
+            for row in buf[..got].chunks_exact_mut(row_bytes) {
+                for k in FLIPPED_FLOATS {
+                    row[4 * k + 3] ^= 0x80;
+                }
+            }
+        }
+        out.write_all(&buf[..got]).map_err(Fail::Write)?;
+    }
 }
 
 /// A tile's splat file (which may hold none).

@@ -55,8 +55,8 @@ use crate::progress::Progress;
 use crate::splat::SplatParams;
 use glam::DVec3;
 use merge::{merge, reconcile};
-use plan::{Plan, clear_work, new_plan, no_plan, stamp};
-use spill::spill;
+use plan::{check_space, clear_work, found_plan, new_plan, no_plan, stamp};
+use spill::{remove_spills, spill, spills_whole};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use tile::run_tiles;
@@ -128,6 +128,10 @@ pub struct TiledOptions {
     pub no_viewpoint: bool,
     /// Which part to run.
     pub stage: Stage,
+    /// Carry on from the work folder's plan, or refuse in one line (no
+    /// plan there, or one made for other inputs or options); `false`: the
+    /// plan is resumed when it matches and made anew when it does not.
+    pub resume: bool,
 }
 
 pub(crate) fn io_err(path: &Path, e: std::io::Error) -> IoError {
@@ -165,6 +169,15 @@ pub fn generate_tiled(
 ) -> Result<TiledReport, IoError> {
     let t0 = Instant::now();
     let work = &opts.work;
+    if opts.resume && !work.join("plan.json").exists() {
+        return Err(io_err(
+            work,
+            std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                "nothing to resume: no tile plan here (run without --resume)",
+            ),
+        ));
+    }
     std::fs::create_dir_all(work).map_err(|e| io_err(work, e))?;
     let stamps = inputs
         .iter()
@@ -190,18 +203,7 @@ pub fn generate_tiled(
     }
     let params_text = format!("{params:?} {:?} {}", opts.viewpoint, opts.no_viewpoint);
     let plan_file = work.join("plan.json");
-    let old: Option<Plan> = std::fs::read_to_string(&plan_file)
-        .ok()
-        .and_then(|s| serde_json::from_str(&s).ok())
-        .filter(|p: &Plan| {
-            p.inputs == stamps
-                && p.params == params_text
-                // A tile or the merge may run on another machine, with
-                // another memory: the plan's tiles stand (a tile too large
-                // for this one is refused when read).
-                && (p.tile_points == target || matches!(opts.stage, Stage::Tile(_) | Stage::Merge))
-                && p.version == env!("CARGO_PKG_VERSION")
-        });
+    let old = found_plan(&plan_file, opts, &stamps, &params_text, target)?;
     let mut report = TiledReport {
         max_memory: opts.max_memory,
         ..TiledReport::default()
@@ -242,7 +244,12 @@ pub fn generate_tiled(
     let spilled: Option<Vec<(u64, u64)>> = std::fs::read_to_string(&counts_file)
         .ok()
         .filter(|_| resumed)
-        .and_then(|s| serde_json::from_str(&s).ok());
+        .and_then(|s| serde_json::from_str(&s).ok())
+        // A spill file cut short or gone (its tile unfinished): spill again
+        // when this stage may.
+        .filter(|c: &Vec<(u64, u64)>| {
+            !matches!(opts.stage, Stage::All | Stage::Plan) || spills_whole(&plan, work, c)
+        });
     let counts: Vec<(u64, u64)> = match spilled {
         Some(c) => c,
         None if opts.stage != Stage::All && opts.stage != Stage::Plan => {
@@ -252,6 +259,16 @@ pub fn generate_tiled(
             let json =
                 serde_json::to_string(&plan).map_err(|e| data_err(&plan_file, e.to_string()))?;
             crate::io::write_text(&plan_file, &json)?;
+            if resumed {
+                // What an interrupted spill left, then the disk checked
+                // again for the whole spill (a new plan was checked).
+                remove_spills(work, plan.tiles.len());
+                check_space(
+                    work,
+                    plan.spill_bytes,
+                    &format!("the plan's {} tiles", plan.tiles.len()),
+                )?;
+            }
             let t1 = Instant::now();
             let c = spill(inputs, &plan, work, progress)?;
             report.seconds.spill = t1.elapsed().as_secs_f64();

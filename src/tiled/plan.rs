@@ -142,6 +142,10 @@ pub(super) struct Plan {
     /// Each point seen from its own scan's position (the survey's scans,
     /// neither `--viewpoint` nor `--no-viewpoint` given).
     pub(super) per_scan: bool,
+    /// The bytes the spill was foreseen to write (checked again against
+    /// the free disk before a resumed run spills).
+    #[serde(default)]
+    pub(super) spill_bytes: u64,
 }
 
 impl Plan {
@@ -374,21 +378,16 @@ pub(super) fn new_plan(
     let bytes = report
         .spill_estimate
         .saturating_mul(record_bytes(&s) as u64);
-    if let Some(free) = free_space(work)
-        && bytes > free
-    {
-        return Err(data_err(
-            work,
-            format!(
-                "the spill needs about {:.1} GB ({} points in {} tiles, {factor:.2} times the \
-                 cloud with the halos) and its folder's disk has {:.1} GB free",
-                bytes as f64 / 1e9,
-                report.spill_estimate,
-                tiles.len(),
-                free as f64 / 1e9
-            ),
-        ));
-    }
+    let spill_bytes = bytes;
+    check_space(
+        work,
+        bytes,
+        &format!(
+            "{} points in {} tiles, {factor:.2} times the cloud with the halos",
+            report.spill_estimate,
+            tiles.len()
+        ),
+    )?;
     if factor > 2.0 {
         report.warnings.push(format!(
             "the tiles' halos ({HALO_EPS} epsilon wide) hold {:.0} % more points than their \
@@ -419,7 +418,141 @@ pub(super) fn new_plan(
         tiles,
         origin,
         per_scan,
+        spill_bytes,
     })
+}
+
+/// A byte count for people: bytes, kB, MB or GB with one decimal (not
+/// "0.0 GB" for a small spill).
+pub(super) fn size_text(bytes: u64) -> String {
+    let b = bytes as f64;
+    if bytes < 1000 {
+        format!("{bytes} bytes")
+    } else if b < 1e6 {
+        format!("{:.1} kB", b / 1e3)
+    } else if b < 1e9 {
+        format!("{:.1} MB", b / 1e6)
+    } else {
+        format!("{:.1} GB", b / 1e9)
+    }
+}
+
+/// Refuses, before anything is written, a spill of `bytes` larger than
+/// the free space of `work`'s disk: an I/O error (storage full) on the
+/// work folder, `what` saying where the figure comes from.
+///
+/// # Errors
+/// As above.
+pub(super) fn check_space(work: &Path, bytes: u64, what: &str) -> Result<(), IoError> {
+    match free_space(work) {
+        Some(free) if bytes > free => Err(io_err(
+            work,
+            std::io::Error::new(
+                std::io::ErrorKind::StorageFull,
+                format!(
+                    "the spill needs about {} ({what}) and its folder's disk has {} free",
+                    size_text(bytes),
+                    size_text(free)
+                ),
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// Why `plan` cannot be resumed for `stamps` and `params` with tiles of
+/// `target` points (`None`: it can). A tile or the merge may run on
+/// another machine, with another memory: there the plan's tiles stand (a
+/// tile too large for that machine is refused when read).
+pub(super) fn mismatch(
+    plan: &Plan,
+    stamps: &[InputStamp],
+    params: &str,
+    target: u64,
+    stage: super::Stage,
+) -> Option<String> {
+    use super::Stage;
+    if plan.version != env!("CARGO_PKG_VERSION") {
+        return Some(format!(
+            "the plan was made by splatray {}, this is {}",
+            plan.version,
+            env!("CARGO_PKG_VERSION")
+        ));
+    }
+    if plan.inputs.len() != stamps.len() {
+        return Some(format!(
+            "the plan was made for {} inputs, this run has {}",
+            plan.inputs.len(),
+            stamps.len()
+        ));
+    }
+    for (a, b) in plan.inputs.iter().zip(stamps) {
+        if a.path != b.path {
+            return Some(format!(
+                "the plan was made for {}, not {}",
+                a.path.display(),
+                b.path.display()
+            ));
+        }
+        if a != b {
+            return Some(format!(
+                "{} changed since the plan was made ({} bytes then, {} now, or a new modification time)",
+                b.path.display(),
+                a.bytes,
+                b.bytes
+            ));
+        }
+    }
+    if plan.params != params {
+        return Some("the splat options differ from the plan's".into());
+    }
+    if plan.tile_points != target && !matches!(stage, Stage::Tile(_) | Stage::Merge) {
+        return Some(format!(
+            "the plan's tiles hold at most {} points, this run's {target} (--max-memory or --tile-points changed)",
+            plan.tile_points
+        ));
+    }
+    None
+}
+
+/// The plan in `plan_file` when this run carries it on: it matches the
+/// inputs (`stamps`), the options (`params`) and the tile size (`target`).
+/// One that does not match (or does not read) is `None`, a fresh start,
+/// unless `opts.resume` asks to carry on: then it is refused in one line
+/// saying what changed.
+///
+/// # Errors
+/// With `opts.resume`: a plan that does not read or does not match.
+pub(super) fn found_plan(
+    plan_file: &Path,
+    opts: &TiledOptions,
+    stamps: &[InputStamp],
+    params: &str,
+    target: u64,
+) -> Result<Option<Plan>, IoError> {
+    let refuse = |why: String| {
+        io_err(
+            plan_file,
+            std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                format!("cannot resume: {why} (run without --resume to start over)"),
+            ),
+        )
+    };
+    let plan = match std::fs::read_to_string(plan_file) {
+        Ok(text) => match serde_json::from_str::<Plan>(&text) {
+            Ok(p) => p,
+            Err(e) if opts.resume => return Err(refuse(format!("the plan does not read ({e})"))),
+            Err(_) => return Ok(None),
+        },
+        Err(e) if opts.resume => return Err(io_err(plan_file, e)),
+        Err(_) => return Ok(None),
+    };
+    match mismatch(&plan, stamps, params, target, opts.stage) {
+        None => Ok(Some(plan)),
+        Some(why) if opts.resume => Err(refuse(why)),
+        Some(_) => Ok(None),
+    }
 }
 
 /// The error of a stage that needs a plan where there is none (or one made
@@ -449,4 +582,17 @@ pub(super) fn clear_work(work: &Path) -> Result<(), IoError> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::size_text;
+
+    #[test]
+    fn sizes_read_as_people_write_them() {
+        assert_eq!(size_text(612), "612 bytes");
+        assert_eq!(size_text(1_440_000), "1.4 MB");
+        assert_eq!(size_text(48_300), "48.3 kB");
+        assert_eq!(size_text(42_000_000_000), "42.0 GB");
+    }
 }

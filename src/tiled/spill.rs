@@ -19,7 +19,54 @@ pub(super) fn record_bytes(survey: &Survey) -> usize {
         + 2 * usize::from(!survey.scans.is_empty())
 }
 
+/// Writes every tile's spill file from `inputs` and returns each tile's
+/// (points, core points). On any failure the spill files are removed (a
+/// spill is whole or absent: the rerun spills again) and the error names
+/// the file at fault: the input that did not read, or the spill file that
+/// could not be written (a full disk, a file-size limit), as an I/O error.
+///
+/// # Errors
+/// As above.
 pub(super) fn spill(
+    inputs: &[PathBuf],
+    plan: &Plan,
+    work: &Path,
+    progress: Option<Progress<'_>>,
+) -> Result<Vec<(u64, u64)>, IoError> {
+    let r = spill_files(inputs, plan, work, progress);
+    if r.is_err() {
+        remove_spills(work, plan.tiles.len());
+    }
+    r
+}
+
+/// Whether every unfinished tile's spill file holds the records `counts`
+/// says the spill wrote (files are synced before `spilled.json` is written,
+/// so only something outside the run makes this false).
+pub(super) fn spills_whole(plan: &Plan, work: &Path, counts: &[(u64, u64)]) -> bool {
+    let rb = record_bytes(&plan.survey) as u64;
+    counts.iter().enumerate().all(|(t, c)| {
+        super::tile::finished_tile(work, t).is_some()
+            || std::fs::metadata(spill_path(work, t)).is_ok_and(|m| m.len() == c.0 * rb)
+    })
+}
+
+/// Removes tiles `0..n`'s spill files (those there).
+pub(super) fn remove_spills(work: &Path, n: usize) {
+    for t in 0..n {
+        let _ = std::fs::remove_file(spill_path(work, t));
+    }
+}
+
+/// The error of a spill file that could not be written: an I/O error on
+/// that file, saying what was being written.
+fn spill_write_err(work: &Path, t: usize, e: &std::io::Error) -> IoError {
+    let p = spill_path(work, t);
+    let what = format!("writing tile {t}'s spill file: {e}");
+    io_err(&p, std::io::Error::new(e.kind(), what))
+}
+
+fn spill_files(
     inputs: &[PathBuf],
     plan: &Plan,
     work: &Path,
@@ -40,9 +87,12 @@ pub(super) fn spill(
     let mut done = 0u64;
     let (with_n, with_c) = (plan.survey.normals, plan.survey.colors);
     let with_s = !plan.survey.scans.is_empty();
+    // A spill write that fails stops the stream; its error (on the spill
+    // file, not the input) is kept here.
+    let mut failed: Option<IoError> = None;
     for (k, path) in inputs.iter().enumerate() {
         let first_scan = plan.survey.scan_offsets.get(k).copied().unwrap_or(0);
-        stream_points(path, |b| {
+        let streamed = stream_points(path, |b| {
             for (i, &p) in b.world.iter().enumerate() {
                 near.clear();
                 plan.tree.near(p, plan.halo, &mut near);
@@ -71,7 +121,10 @@ pub(super) fn spill(
                         let scan = first_scan + b.scans.map_or(0, |s| u32::from(s[i]));
                         rec.extend_from_slice(&(scan as u16).to_le_bytes());
                     }
-                    writers[t].write_all(&rec).map_err(|e| e.to_string())?;
+                    if let Err(e) = writers[t].write_all(&rec) {
+                        failed = Some(spill_write_err(work, t, &e));
+                        return Err(e.to_string());
+                    }
                     counts[t].0 += 1;
                     if t == core {
                         counts[t].1 += 1;
@@ -85,14 +138,17 @@ pub(super) fn spill(
                 done as f64 / plan.survey.points as f64,
             );
             Ok(())
-        })?;
+        });
+        if let Some(e) = failed.take() {
+            return Err(e);
+        }
+        streamed?;
     }
     for (t, w) in writers.into_iter().enumerate() {
-        let p = spill_path(work, t);
         w.into_inner()
-            .map_err(|e| io_err(&p, e.into_error()))?
+            .map_err(|e| spill_write_err(work, t, e.error()))?
             .sync_all()
-            .map_err(|e| io_err(&p, e))?;
+            .map_err(|e| spill_write_err(work, t, &e))?;
     }
     Ok(counts)
 }

@@ -8,7 +8,7 @@ use super::{
     BYTES_PER_POINT, FIXED_BYTES, NORMALS_REACH_EPS, Stage, TILES_IN_FLIGHT, TiledOptions, data_err,
 };
 use crate::freespace::generate_trimmed;
-use crate::io::{IoError, encode_splats_with, write_bytes};
+use crate::io::{IoError, encode_splats_layout, write_bytes};
 use crate::progress::{Progress, notify};
 use crate::splat::color::ColorField;
 use crate::splat::{Splat, SplatParams};
@@ -105,7 +105,10 @@ pub(super) fn generate_tile(
     summary.seconds = t0.elapsed().as_secs_f64();
     let out = tile_path(work, t);
     let fields = with_fields.then_some(&kept_fields[..]);
-    write_bytes(&out, &encode_splats_with(&out, &kept, fields, origin)?)?;
+    write_bytes(
+        &out,
+        &encode_splats_layout(&out, &kept, fields, clip_lines(params), origin)?,
+    )?;
     if plan.reconciles() {
         crate::io::write_splats(&halo_path(work, t), &halo, origin)?;
     }
@@ -214,6 +217,12 @@ pub(super) fn finished_tile(work: &Path, t: usize) -> Option<TileSummary> {
         .ok()
         .and_then(|s| serde_json::from_str::<TileSummary>(&s).ok())
         .filter(|_| tile_path(work, t).exists())
+}
+
+/// Whether the tiles write clip lines: every tile of a run with creases
+/// does, clipped splats or not, so the merge joins records of one size.
+pub(super) fn clip_lines(params: &SplatParams) -> bool {
+    params.creases
 }
 
 /// Whether the tiles write colour fields: the survey found colours and the

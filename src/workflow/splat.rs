@@ -127,6 +127,9 @@ pub struct SplatRequest {
     pub tile_points: Option<u64>,
     /// The stage of tiled generation to run.
     pub stage: Stage,
+    /// Carry tiled generation on from the work folder, or refuse in one
+    /// line (given: tiled; [`TiledOptions::resume`]).
+    pub resume: bool,
 }
 
 impl SplatRequest {
@@ -146,6 +149,7 @@ impl SplatRequest {
             max_memory: None,
             tile_points: None,
             stage: Stage::All,
+            resume: false,
         }
     }
 }
@@ -264,11 +268,6 @@ pub fn splat(req: &SplatRequest, progress: Option<Progress<'_>>) -> Result<Splat
     let inputs = expand_inputs(&req.inputs)?;
     if let Some(tiled) = tiled_options(req, &inputs)? {
         let params = req.generation.params_without_viewpoint();
-        if params.creases {
-            return Err(Error::invalid(
-                "--creases is not supported with tiled generation yet (tile files do not carry clip lines through the merge): splat one file whole (one input, no --max-memory / --tile-points / --stage)",
-            ));
-        }
         let report = generate_tiled(&inputs, &params, &tiled, &req.output, progress)?;
         if let Some(r) = &req.report {
             crate::io::write_text(r, &json_text(&report)?)?;
@@ -491,7 +490,8 @@ fn tiled_options(req: &SplatRequest, inputs: &[PathBuf]) -> Result<Option<TiledO
         || req.tile_points.is_some()
         || inputs.len() > 1
         || too_big
-        || req.stage != Stage::All;
+        || req.stage != Stage::All
+        || req.resume;
     if !tiled {
         return Ok(None);
     }
@@ -518,6 +518,7 @@ fn tiled_options(req: &SplatRequest, inputs: &[PathBuf]) -> Result<Option<TiledO
         viewpoint: req.generation.viewpoint,
         no_viewpoint: req.generation.no_viewpoint,
         stage: req.stage,
+        resume: req.resume,
     }))
 }
 
