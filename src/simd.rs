@@ -111,6 +111,12 @@ pub struct DiscColumns {
     pub cols: [[f32; LANES]; 12],
 }
 
+impl AsRef<DiscColumns> for DiscColumns {
+    fn as_ref(&self) -> &DiscColumns {
+        self
+    }
+}
+
 /// Column indices in [`DiscColumns::cols`].
 pub const CENTER: usize = 0;
 /// First normal column.
@@ -131,8 +137,8 @@ const RIM: f32 = 1.0001;
 /// the rim relaxed by `1e-4`. `out` must be at least as long as `packs`.
 /// A path the CPU does not run is replaced by the portable one.
 #[inline]
-pub fn disc_masks(
-    packs: &[DiscColumns],
+pub fn disc_masks<C: AsRef<DiscColumns>>(
+    packs: &[C],
     origin: [f32; 3],
     dir: [f32; 3],
     t_min: f32,
@@ -154,7 +160,7 @@ pub fn disc_masks(
         }
         _ => {
             for (p, m) in packs.iter().zip(out.iter_mut()) {
-                *m = portable_mask(p, origin, dir, t_min, t_max);
+                *m = portable_mask(p.as_ref(), origin, dir, t_min, t_max);
             }
         }
     }
@@ -242,8 +248,8 @@ impl Cone {
 // The packet's fields as the kernels take them.
 #[allow(clippy::too_many_arguments)]
 #[inline]
-pub fn disc_masks_rays(
-    packs: &[DiscColumns],
+pub fn disc_masks_rays<C: AsRef<DiscColumns>>(
+    packs: &[C],
     origin: [f32; 3],
     dirs: &[[f32; 3]; RAYS],
     t_min: &[f32; RAYS],
@@ -267,6 +273,7 @@ pub fn disc_masks_rays(
         }
         _ => {
             for ((pack, out), any) in packs.iter().zip(out.iter_mut()).zip(rays.iter_mut()) {
+                let pack = pack.as_ref();
                 let near = cone.map_or(u32::MAX, |c| portable_cone(pack, origin, c));
                 *out = [0; RAYS];
                 *any = 0;
@@ -411,8 +418,8 @@ mod x86 {
     /// # Safety
     /// The CPU must run AVX2.
     #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn avx2_masks(
-        packs: &[DiscColumns],
+    pub(super) unsafe fn avx2_masks<C: AsRef<DiscColumns>>(
+        packs: &[C],
         origin: [f32; 3],
         dir: [f32; 3],
         t_min: f32,
@@ -426,6 +433,7 @@ mod x86 {
         let rim = _mm256_set1_ps(RIM);
         let sign = _mm256_set1_ps(-0.0);
         for (p, m) in packs.iter().zip(out.iter_mut()) {
+            let p = p.as_ref();
             // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
             // (`DiscColumns` is 64-byte aligned, each column 32 bytes).
             let col = |k: usize| unsafe { _mm256_load_ps(p.cols[k].as_ptr()) };
@@ -458,8 +466,8 @@ mod x86 {
     /// The CPU must run AVX2.
     #[target_feature(enable = "avx2")]
     #[allow(clippy::too_many_arguments)]
-    pub(super) unsafe fn avx2_masks_rays(
-        packs: &[DiscColumns],
+    pub(super) unsafe fn avx2_masks_rays<C: AsRef<DiscColumns>>(
+        packs: &[C],
         origin: [f32; 3],
         dirs: &[[f32; 3]; RAYS],
         t_min: &[f32; RAYS],
@@ -473,6 +481,7 @@ mod x86 {
         let rim = _mm256_set1_ps(RIM);
         let sign = _mm256_set1_ps(-0.0);
         for ((p, out), any) in packs.iter().zip(out.iter_mut()).zip(rays.iter_mut()) {
+            let p = p.as_ref();
             *out = [0; RAYS];
             *any = 0;
             // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
@@ -556,8 +565,8 @@ mod x86 {
     /// # Safety
     /// The CPU must run AVX-512 F.
     #[target_feature(enable = "avx512f")]
-    pub(super) unsafe fn avx512_masks(
-        packs: &[DiscColumns],
+    pub(super) unsafe fn avx512_masks<C: AsRef<DiscColumns>>(
+        packs: &[C],
         origin: [f32; 3],
         dir: [f32; 3],
         t_min: f32,
@@ -573,8 +582,8 @@ mod x86 {
         let sign = _mm512_set1_epi32(i32::MIN);
         let mut i = 0;
         while i < packs.len() {
-            let a = &packs[i];
-            let b = packs.get(i + 1);
+            let a = packs[i].as_ref();
+            let b = packs.get(i + 1).map(AsRef::as_ref);
             // Column `k` of pack `a` in the lower half, of `b` (or zeros:
             // a zero normal, never hit) in the upper.
             let col = |k: usize| {

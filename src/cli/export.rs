@@ -1,12 +1,10 @@
 //! `splatray export SPLATS.ply --format 2dgs|3dgs -o OUT.ply`: splats as a
 //! Gaussian splat file other splat renderers and trainers read.
 
-use splatray::io::{
-    GaussianLayout, RADIUS_PER_SIGMA, SplatSet, encode_gaussians, file_layout, read_gaussians,
-    read_splats, write_bytes,
-};
+use splatray::Result;
+use splatray::io::{GaussianLayout, RADIUS_PER_SIGMA};
 use splatray::render::output::check_extension;
-use splatray::{Error, Result};
+use splatray::workflow::export::export;
 use std::path::PathBuf;
 
 /// The Gaussian layouts `export` writes.
@@ -49,59 +47,39 @@ pub struct ExportArgs {
 /// When the input cannot be read or the output written.
 pub fn run(args: &ExportArgs) -> Result<()> {
     check_extension(&args.output, &["ply"])?;
-    if !(0.0..=1.0).contains(&args.min_opacity) {
-        return Err(Error::invalid(format!(
-            "--min-opacity {} must be in [0, 1]",
-            args.min_opacity
-        )));
-    }
-    let set: SplatSet = if file_layout(&args.input).is_some() {
-        let read = read_gaussians(&args.input, args.min_opacity)?;
-        for w in read.warnings() {
-            eprintln!("splatray: warning: {w}");
-        }
-        read.set
-    } else {
-        read_splats(&args.input)?
-    };
     let layout = match args.format {
         ExportFormat::TwoD => GaussianLayout::TwoD,
         ExportFormat::ThreeD => GaussianLayout::ThreeD,
     };
-    let bytes = encode_gaussians(
+    let done = export(
+        &args.input,
         &args.output,
-        &set.splats,
-        set.origin,
         layout,
         args.sh_degree,
+        args.min_opacity,
     )?;
-    write_bytes(&args.output, &bytes)?;
-    let curved = set
-        .splats
-        .iter()
-        .filter(|s| s.field != splatray::splat::NormalField::FLAT)
-        .count();
-    if curved > 0 {
+    for w in &done.warnings {
+        eprintln!("splatray: warning: {w}");
+    }
+    let n = done.splats;
+    if done.curved > 0 {
         eprintln!(
-            "splatray: warning: {curved} of {} splats have a normal field (eq. 4) the Gaussian layout cannot hold: they were written flat",
-            set.splats.len()
+            "splatray: warning: {} of {n} splats have a normal field (eq. 4) the Gaussian layout cannot hold: they were written flat",
+            done.curved
         );
     }
-    let clipped = set.splats.iter().filter(|s| s.is_clipped()).count();
-    if clipped > 0 {
+    if done.clipped > 0 {
         eprintln!(
-            "splatray: warning: {clipped} of {} splats have clip lines (a crease or a corner) the Gaussian layout cannot hold: they were written as whole discs",
-            set.splats.len()
+            "splatray: warning: {} of {n} splats have clip lines (a crease or a corner) the Gaussian layout cannot hold: they were written as whole discs",
+            done.clipped
         );
     }
     eprintln!(
-        "splatray: {} splats -> {} Gaussians ({}, sigma = radius / {RADIUS_PER_SIGMA}, opacity {}, SH degree {}), {} bytes -> {}",
-        set.splats.len(),
-        set.splats.len(),
+        "splatray: {n} splats -> {n} Gaussians ({}, sigma = radius / {RADIUS_PER_SIGMA}, opacity {}, SH degree {}), {} bytes -> {}",
         layout.name(),
         splatray::io::EXPORT_OPACITY,
         args.sh_degree,
-        bytes.len(),
+        done.bytes,
         args.output.display()
     );
     Ok(())

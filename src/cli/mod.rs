@@ -4,7 +4,6 @@
 pub mod common;
 pub mod compare;
 pub mod export;
-pub mod plot;
 pub mod progress;
 pub mod render;
 pub mod sample_cmd;

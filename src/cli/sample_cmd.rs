@@ -4,20 +4,10 @@
 //! --range-noise-spacing F] [--outliers F] [--missing F]`.
 
 use super::progress::ProgressLine;
-use glam::Vec3;
-use splatray::io::{Format, MeshSampler, read_mesh, sample_mesh, write_points, write_sample_ply};
-use splatray::scanner::{RangeNoise, ScanParams, ScanPattern, scan_mesh};
+use splatray::scanner::{RangeNoise, ScanParams, ScanPattern};
+use splatray::workflow::sample::{AreaSampling, ScanOutput, SensorFrame, sample_area, sample_scan};
 use splatray::{Error, Result};
 use std::path::PathBuf;
-
-/// The most points `sample` makes: 10^10 (240 GB of binary PLY, written a
-/// batch at a time; a PCD is made in memory and checked against it first).
-pub const MAX_SAMPLES: usize = 10_000_000_000;
-
-/// Bytes a point takes while a PCD is made in memory: the positions and
-/// normals (24 B), the encoded records (24 B) and their copy in the file
-/// buffer.
-const PCD_BYTES_PER_POINT: u64 = 72;
 
 /// Arguments of `splatray sample`.
 #[derive(Clone, Debug, clap::Args)]
@@ -97,19 +87,6 @@ pub struct SampleArgs {
     pub texture: Option<f64>,
 }
 
-/// The procedural texture of `--texture`: at world point `p`, three
-/// sinusoidal bands of period `period` along different directions, one per
-/// channel (linear RGB in 0.1 … 0.9).
-fn texture(p: glam::DVec3, period: f64) -> Vec3 {
-    let w = std::f64::consts::TAU / period;
-    let band = |x: f64| (0.5 + 0.4 * x.sin()) as f32;
-    Vec3::new(
-        band(w * p.x),
-        band(w * (0.8 * p.y + 0.6 * p.z) + 1.0),
-        band(w * (0.6 * p.x - 0.8 * p.z) + 2.0),
-    )
-}
-
 /// The frame of an organised scan's sensor.
 #[derive(Clone, Copy, Debug, PartialEq, clap::ValueEnum)]
 pub enum Frame {
@@ -129,6 +106,15 @@ fn vec3(v: &[f64], what: &str) -> Result<glam::DVec3> {
     }
 }
 
+impl From<Frame> for SensorFrame {
+    fn from(f: Frame) -> Self {
+        match f {
+            Frame::Optical => SensorFrame::Optical,
+            Frame::Gl => SensorFrame::Gl,
+        }
+    }
+}
+
 /// Run `splatray sample`; the message of an error is one line.
 ///
 /// # Errors
@@ -139,76 +125,35 @@ pub fn run(args: &SampleArgs) -> Result<()> {
     if let Some(from) = &args.scan_from {
         return scan(args, vec3(from, "--scan-from")?);
     }
-    let n = args.n.unwrap_or(0);
-    if n == 0 || n > MAX_SAMPLES {
-        return Err(Error::invalid(format!(
-            "-n must be between 1 and {MAX_SAMPLES}"
-        )));
-    }
-    if !(args.noise.is_finite() && args.noise >= 0.0) {
-        return Err(Error::invalid(format!(
-            "--noise {} must be a finite, non-negative number",
-            args.noise
-        )));
-    }
-    let mesh = read_mesh(&args.mesh)?;
-    let no_area = || {
-        Error::invalid(format!(
-            "{}: the mesh has no triangle with a non-zero area to sample",
-            args.mesh.display()
-        ))
+    let req = AreaSampling {
+        mesh: args.mesh.clone(),
+        output: args.output.clone(),
+        points: args.n.unwrap_or(0),
+        noise: args.noise,
+        seed: args.seed,
     };
-    let made = if Format::from_extension(&args.output) == Some(Format::Pcd) {
-        splatray::memory::check(
-            &format!("sampling {n} points into a PCD"),
-            (n as u64).saturating_mul(PCD_BYTES_PER_POINT),
-        )
-        .map_err(|e| e.with_hint("write a .ply instead (written a batch at a time)"))?;
-        let cloud = sample_mesh(&mesh, n, args.noise, args.seed);
-        if cloud.is_empty() {
-            return Err(no_area());
-        }
-        write_points(&args.output, &cloud)?;
-        cloud.len()
-    } else {
-        let sampler = MeshSampler::new(&mesh, n, args.noise, args.seed);
-        if sampler.is_empty() {
-            return Err(no_area());
-        }
-        let line = ProgressLine::new();
-        let written = write_sample_ply(
-            &args.output,
-            &sampler,
-            Some(&|stage, f| line.update(stage, f)),
-        );
-        line.finish();
-        written?;
-        sampler.len()
-    };
+    let line = ProgressLine::new();
+    let made = sample_area(&req, Some(&|stage, f| line.update(stage, f)));
+    line.finish();
+    let made = made?;
     eprintln!(
-        "splatray: {made} points from {} triangles -> {}",
-        mesh.triangles.len(),
+        "splatray: {} points from {} triangles -> {}",
+        made.points,
+        made.triangles,
         args.output.display()
     );
     Ok(())
 }
 
-fn scan(args: &SampleArgs, from: glam::DVec3) -> Result<()> {
-    if args.n.is_some() {
-        return Err("-n and --scan-from exclude each other: a scan's rays set the points".into());
-    }
-    if let Some(period) = args.texture.filter(|p| !(p.is_finite() && *p > 0.0)) {
-        return Err(Error::invalid(format!(
-            "--texture {period} must be a positive period"
-        )));
-    }
+/// The scan's parameters from the arguments.
+fn scan_params(args: &SampleArgs, from: glam::DVec3) -> Result<ScanParams> {
     let [columns, rows] = args.rays[..] else {
         return Err(Error::invalid(format!(
             "--rays needs two numbers W,H, got {}",
             args.rays.len()
         )));
     };
-    let params = ScanParams {
+    Ok(ScanParams {
         from,
         at: args
             .scan_at
@@ -226,59 +171,26 @@ fn scan(args: &SampleArgs, from: glam::DVec3) -> Result<()> {
         outliers: args.outliers,
         missing: args.missing,
         seed: args.seed,
+    })
+}
+
+fn scan(args: &SampleArgs, from: glam::DVec3) -> Result<()> {
+    if args.n.is_some() {
+        return Err("-n and --scan-from exclude each other: a scan's rays set the points".into());
+    }
+    let how = match args.organised {
+        None => ScanOutput::Points,
+        Some(frame) => ScanOutput::Organised(frame.into(), args.texture),
     };
-    let mesh = read_mesh(&args.mesh)?;
-    let scan = scan_mesh(&mesh, &params)?;
-    match args.organised {
-        None => write_points(&args.output, &scan.cloud)?,
-        Some(frame) => {
-            if Format::from_extension(&args.output) != Some(Format::Pcd) {
-                return Err(Error::invalid(format!(
-                    "{}: --organised writes a PCD (a name ending in .pcd)",
-                    args.output.display()
-                )));
-            }
-            let Some((f, cx, cy)) = scan.pinhole else {
-                return Err("--organised needs the raster pattern (a camera's pixel grid)".into());
-            };
-            let [forward, right, up] = scan.axes.map(Vec3::as_dvec3);
-            let (y, z) = match frame {
-                Frame::Optical => (-up, forward),
-                Frame::Gl => (up, -forward),
-            };
-            let rotation = glam::DQuat::from_mat3(&glam::DMat3::from_cols(right, y, z));
-            let origin = scan.cloud.origin;
-            let grid: Vec<Option<glam::DVec3>> = scan
-                .grid
-                .iter()
-                .map(|p| p.map(|p| origin + p.as_dvec3()))
-                .collect();
-            let position = origin + scan.cloud.viewpoint.unwrap_or_default().as_dvec3();
-            let colors: Option<Vec<Vec3>> = args.texture.map(|period| {
-                grid.iter()
-                    .map(|p| p.map_or(Vec3::ZERO, |p| texture(p, period)))
-                    .collect()
-            });
-            let bytes = splatray::io::encode_organised(
-                scan.columns,
-                scan.rows,
-                &grid,
-                position,
-                rotation,
-                colors.as_deref(),
-            );
-            splatray::io::write_bytes(&args.output, &bytes)?;
-            eprintln!(
-                "splatray: an organised {}x{} grid in the {} frame, a pinhole of focal length \
-                 {f:.4} px centred at ({cx:.2}, {cy:.2})",
-                scan.columns,
-                scan.rows,
-                match frame {
-                    Frame::Optical => "optical",
-                    Frame::Gl => "-z",
-                }
-            );
-        }
+    let scan = sample_scan(&args.mesh, &scan_params(args, from)?, &args.output, how)?;
+    if let (ScanOutput::Organised(frame, _), Some((f, cx, cy))) = (how, scan.pinhole) {
+        eprintln!(
+            "splatray: an organised {}x{} grid in the {} frame, a pinhole of focal length \
+             {f:.4} px centred at ({cx:.2}, {cy:.2})",
+            scan.columns,
+            scan.rows,
+            frame.describe()
+        );
     }
     eprintln!(
         "splatray: scan of {} rays: {} returns, {} missing, {} outliers, {} points (spacing {:.3e}, range noise {:.3e}) -> {}",

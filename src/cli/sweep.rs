@@ -113,7 +113,7 @@ fn write_outputs(args: &SweepArgs, rows: &[SweepRow]) -> Result<()> {
         super::stage_text(&mut batch, c, &csv_text(rows))?;
     }
     if let Some(p) = &args.plot {
-        super::plot::plot_sweep(&mut batch, rows, p)?;
+        splatray::workflow::plot::plot_sweep(&mut batch, rows, p)?;
     }
     batch.commit()?;
     if let Some(c) = &args.csv {
@@ -143,6 +143,14 @@ fn summary(rows: &[SweepRow]) {
         rows.iter().filter(|r| r.backends_identical).count(),
         rows.len()
     );
+    summary_modes(rows);
+    for b in &first.backends {
+        summary_pareto(rows, b.name);
+    }
+}
+
+/// Per mode, the normal error and PSNR at the coarsest and finest steps.
+fn summary_modes(rows: &[SweepRow]) {
     for mode in MODES {
         let of: Vec<&SweepRow> = rows.iter().filter(|r| r.shading == mode).collect();
         if let (Some(a), Some(b)) = (of.first(), of.last()) {
@@ -169,24 +177,26 @@ fn summary(rows: &[SweepRow]) {
             );
         }
     }
-    for b in &first.backends {
-        let front = pareto(rows, b.name);
-        let points: Vec<String> = front
-            .iter()
-            .map(|p| {
-                format!(
-                    "{} {} splats {:.3} s {:.2} dB",
-                    mode_name(p.shading),
-                    p.splats,
-                    p.render_s,
-                    p.psnr_db
-                )
-            })
-            .collect();
-        println!(
-            "  pareto {} (render time against PSNR; nothing else is both faster and closer): {}",
-            b.name,
-            points.join("; ")
-        );
-    }
+}
+
+/// Backend `name`'s Pareto front of render time against PSNR.
+fn summary_pareto(rows: &[SweepRow], name: &str) {
+    let front = pareto(rows, name);
+    let points: Vec<String> = front
+        .iter()
+        .map(|p| {
+            format!(
+                "{} {} splats {:.3} s {:.2} dB",
+                mode_name(p.shading),
+                p.splats,
+                p.render_s,
+                p.psnr_db
+            )
+        })
+        .collect();
+    println!(
+        "  pareto {} (render time against PSNR; nothing else is both faster and closer): {}",
+        name,
+        points.join("; ")
+    );
 }

@@ -2,7 +2,7 @@
 //! would pick instead of user geometry, measured against it by the
 //! benchmark (`benches/accel.rs`).
 
-use super::scene::{SceneHandle, new_buffer, new_geometry, ray_of};
+use super::scene::{SceneHandle, new_buffers, new_geometry, ray_of};
 use super::{Device, EmbreeError};
 use crate::geometry::Ray;
 use embree4_sys as sys;
@@ -80,27 +80,22 @@ impl NativeDiscScene {
         // SAFETY: `geom` is a fresh disc geometry, written only here; FLOAT4
         // is four f32, FLOAT3 three; the slices are filled before the
         // geometry is released.
-        let buffers = unsafe {
-            (
-                new_buffer::<f32, 4>(
-                    geom,
+        let (vs, ns) = unsafe {
+            new_buffers::<f32, 4, f32, 3>(
+                device,
+                geom,
+                (
                     sys::RTCBufferType::VERTEX,
                     sys::RTCFormat::FLOAT4,
                     discs.len(),
                 ),
-                new_buffer::<f32, 3>(
-                    geom,
+                (
                     sys::RTCBufferType::NORMAL,
                     sys::RTCFormat::FLOAT3,
                     discs.len(),
                 ),
-            )
-        };
-        let (Some(vs), Some(ns)) = buffers else {
-            // SAFETY: our reference to the fresh geometry, released once.
-            unsafe { sys::rtcReleaseGeometry(geom) };
-            device.check()?;
-            return Err(EmbreeError("could not allocate disc buffers".into()));
+                "disc",
+            )?
         };
         for ((v, nrm), d) in vs.iter_mut().zip(ns.iter_mut()).zip(discs) {
             let r = (1.0 / d.u_scaled.length()).max(1.0 / d.v_scaled.length());

@@ -294,3 +294,43 @@ pub(super) unsafe fn new_buffer<'g, T, const N: usize>(
     // their size), aligned, and this slice is the only way to them.
     (!p.is_null()).then(|| unsafe { std::slice::from_raw_parts_mut(p, len) })
 }
+
+/// One buffer [`new_buffers`] makes: its kind, its format and how many
+/// items.
+pub(super) type BufferSpec = (sys::RTCBufferType, sys::RTCFormat, usize);
+
+/// Two buffers of a geometry, to fill.
+pub(super) type Buffers<'g, A, const N: usize, B, const M: usize> =
+    (&'g mut [[A; N]], &'g mut [[B; M]]);
+
+/// The two buffers `a` and `b` of `geom` ([`new_buffer`]) as slices to
+/// fill; when Embree could not allocate either, `geom` is released (the
+/// caller's reference to it is gone) and the error says which geometry's
+/// (`what`) buffers failed.
+///
+/// # Safety
+/// As [`new_buffer`], for both; `geom` is the caller's fresh geometry,
+/// not used again after an error.
+pub(super) unsafe fn new_buffers<'g, A, const N: usize, B, const M: usize>(
+    device: &Device,
+    geom: sys::RTCGeometry,
+    a: BufferSpec,
+    b: BufferSpec,
+    what: &str,
+) -> Result<Buffers<'g, A, N, B, M>, EmbreeError> {
+    // SAFETY: as the caller guarantees.
+    let buffers = unsafe {
+        (
+            new_buffer::<A, N>(geom, a.0, a.1, a.2),
+            new_buffer::<B, M>(geom, b.0, b.1, b.2),
+        )
+    };
+    let (Some(x), Some(y)) = buffers else {
+        // SAFETY: the caller's reference to the fresh geometry, released
+        // once (the caller uses it no more).
+        unsafe { sys::rtcReleaseGeometry(geom) };
+        device.check()?;
+        return Err(EmbreeError(format!("could not allocate {what} buffers")));
+    };
+    Ok((x, y))
+}

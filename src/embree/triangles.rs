@@ -1,7 +1,7 @@
 //! Triangle meshes in Embree's own BVH: the exact surface, for ground
 //! truth and the synthetic scanner.
 
-use super::scene::{SceneHandle, new_buffer, new_geometry};
+use super::scene::{SceneHandle, new_buffers, new_geometry};
 use super::{Device, EmbreeError};
 use crate::geometry::Ray;
 use embree4_sys as sys;
@@ -56,27 +56,18 @@ impl TriangleScene {
             // SAFETY: `geom` is a fresh triangle geometry, written only here;
             // FLOAT3 is three f32, UINT3 three u32; the slices are filled
             // before the geometry is released.
-            let buffers = unsafe {
-                (
-                    new_buffer::<f32, 3>(
-                        geom,
+            let (vs, is) = unsafe {
+                new_buffers::<f32, 3, u32, 3>(
+                    device,
+                    geom,
+                    (
                         sys::RTCBufferType::VERTEX,
                         sys::RTCFormat::FLOAT3,
                         verts.len(),
                     ),
-                    new_buffer::<u32, 3>(
-                        geom,
-                        sys::RTCBufferType::INDEX,
-                        sys::RTCFormat::UINT3,
-                        tris.len(),
-                    ),
-                )
-            };
-            let (Some(vs), Some(is)) = buffers else {
-                // SAFETY: our reference to the fresh geometry, released once.
-                unsafe { sys::rtcReleaseGeometry(geom) };
-                device.check()?;
-                return Err(EmbreeError("could not allocate mesh buffers".into()));
+                    (sys::RTCBufferType::INDEX, sys::RTCFormat::UINT3, tris.len()),
+                    "mesh",
+                )?
             };
             for (dst, v) in vs.iter_mut().zip(verts.iter()) {
                 *dst = v.to_array();

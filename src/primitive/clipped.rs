@@ -107,7 +107,8 @@ impl Pack<ClippedDisc> for ClippedPack {
         self.discs.may_hit(ray, t_min, t_max)
     }
 
-    /// [`DiscPack`]'s masks on the path `isa`, a pack at a time.
+    /// [`DiscPack`]'s masks on the path `isa`: one call of
+    /// [`simd::disc_masks`] over the packs' discs, read in place.
     #[inline]
     fn masks(
         packs: &[Self],
@@ -117,19 +118,11 @@ impl Pack<ClippedDisc> for ClippedPack {
         isa: simd::Isa,
         out: &mut [u32],
     ) {
-        for (p, m) in packs.iter().zip(out.iter_mut()) {
-            <DiscPack as Pack<Disc>>::masks(
-                std::slice::from_ref(&p.discs),
-                ray,
-                t_min,
-                t_max,
-                isa,
-                std::slice::from_mut(m),
-            );
-        }
+        super::disc::pack_masks(packs, ray, t_min, t_max, isa, out);
     }
 
-    /// [`DiscPack`]'s per-ray masks on the path `isa`, a pack at a time.
+    /// [`DiscPack`]'s per-ray masks on the path `isa`:
+    /// [`simd::disc_masks_rays`] over the packs' discs in one call.
     #[inline]
     fn masks_rays(
         packs: &[Self],
@@ -139,16 +132,13 @@ impl Pack<ClippedDisc> for ClippedPack {
         out: &mut [[u32; simd::RAYS]],
         any: &mut [u32],
     ) {
-        for ((p, o), a) in packs.iter().zip(out.iter_mut()).zip(any.iter_mut()) {
-            <DiscPack as Pack<Disc>>::masks_rays(
-                std::slice::from_ref(&p.discs),
-                rays,
-                active,
-                isa,
-                std::slice::from_mut(o),
-                std::slice::from_mut(a),
-            );
-        }
+        super::disc::pack_masks_rays(packs, rays, active, isa, out, any);
+    }
+}
+
+impl AsRef<DiscPack> for ClippedPack {
+    fn as_ref(&self) -> &DiscPack {
+        &self.discs
     }
 }
 

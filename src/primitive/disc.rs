@@ -260,7 +260,7 @@ impl Pack<Disc> for DiscPack {
         isa: simd::Isa,
         out: &mut [u32],
     ) {
-        simd::disc_masks(packs, ray.origin, ray.dir, t_min, t_max, isa, out);
+        pack_masks(packs, ray, t_min, t_max, isa, out);
     }
 
     /// [`simd::disc_masks_rays`]: each pack and its `n·(o - c)` once for
@@ -275,19 +275,50 @@ impl Pack<Disc> for DiscPack {
         out: &mut [[u32; simd::RAYS]],
         any: &mut [u32],
     ) {
-        simd::disc_masks_rays(
-            packs,
-            rays.origin,
-            &rays.dir,
-            &rays.t_min,
-            &rays.t_max,
-            rays.cone.as_ref(),
-            active,
-            isa,
-            out,
-            any,
-        );
+        pack_masks_rays(packs, rays, active, isa, out, any);
     }
+}
+
+/// [`simd::disc_masks`] of the disc packs `packs` hold (a [`DiscPack`]
+/// itself, or a pack of a primitive built on discs that holds one), read
+/// in place: [`Pack::masks`] of [`DiscPack`] and of packs that filter by
+/// their discs.
+#[inline]
+pub(super) fn pack_masks<C: AsRef<DiscPack>>(
+    packs: &[C],
+    ray: &PackRay,
+    t_min: f32,
+    t_max: f32,
+    isa: simd::Isa,
+    out: &mut [u32],
+) {
+    simd::disc_masks(packs, ray.origin, ray.dir, t_min, t_max, isa, out);
+}
+
+/// [`simd::disc_masks_rays`] of the disc packs `packs` hold, as
+/// [`pack_masks`]: [`Pack::masks_rays`] of [`DiscPack`] and of packs that
+/// filter by their discs.
+#[inline]
+pub(super) fn pack_masks_rays<C: AsRef<DiscPack>>(
+    packs: &[C],
+    rays: &PackRays,
+    active: u32,
+    isa: simd::Isa,
+    out: &mut [[u32; simd::RAYS]],
+    any: &mut [u32],
+) {
+    simd::disc_masks_rays(
+        packs,
+        rays.origin,
+        &rays.dir,
+        &rays.t_min,
+        &rays.t_max,
+        rays.cone.as_ref(),
+        active,
+        isa,
+        out,
+        any,
+    );
 }
 
 #[cfg(test)]

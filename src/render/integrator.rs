@@ -81,6 +81,41 @@ pub struct Frame {
     pub seconds: f64,
 }
 
+impl Frame {
+    /// An empty `width` × `height` frame with room for its pixels, no rays
+    /// counted yet.
+    #[must_use]
+    pub fn with_capacity(width: u32, height: u32) -> Frame {
+        let n = width as usize * height as usize;
+        Frame {
+            width,
+            height,
+            rgb: Vec::with_capacity(n),
+            depth: Vec::with_capacity(n),
+            normal: Vec::with_capacity(n),
+            splat: Vec::with_capacity(n),
+            albedo: Vec::with_capacity(n),
+            light_facing: Vec::with_capacity(n),
+            light_lit: Vec::with_capacity(n),
+            rays: RayCounts::default(),
+            seconds: 0.0,
+        }
+    }
+
+    /// Appends the pixels of `rows` (as wide as this frame) after this
+    /// frame's, adding its rays; this frame's size and seconds stay.
+    pub fn append(&mut self, rows: Frame) {
+        self.rgb.extend(rows.rgb);
+        self.depth.extend(rows.depth);
+        self.normal.extend(rows.normal);
+        self.splat.extend(rows.splat);
+        self.albedo.extend(rows.albedo);
+        self.light_facing.extend(rows.light_facing);
+        self.light_lit.extend(rows.light_lit);
+        self.rays = self.rays.plus(rows.rays);
+    }
+}
+
 /// A small counter-based generator (PCG-style hash), deterministic per
 /// pixel and sample, so renders are reproducible and backends see the same
 /// sample positions.
@@ -616,7 +651,7 @@ impl Tracer<'_> {
         &self,
         y: usize,
         s: &mut Scratch,
-        rows: &mut [Row; R],
+        rows: &mut [Frame; R],
     ) {
         const { assert!(W * R <= PACKET) };
         let batched = W * R > 1;
@@ -694,18 +729,6 @@ impl Tracer<'_> {
     }
 }
 
-/// One rendered image row and what it traced.
-struct Row {
-    rgb: Vec<Vec3>,
-    depth: Vec<f32>,
-    normal: Vec<Vec3>,
-    splat: Vec<u32>,
-    albedo: Vec<Vec3>,
-    light_facing: Vec<f32>,
-    light_lit: Vec<f32>,
-    rays: RayCounts,
-}
-
 /// Renders the scene's camera view with `backend`. Parallel over rows with
 /// rayon; reports stage `render` to `progress` as rows are done.
 #[must_use]
@@ -749,7 +772,7 @@ fn render_surfaces_rows(
 ) -> Frame {
     let cam = &scene.camera;
     let rows = rows.start.min(cam.height)..rows.end.min(cam.height);
-    let (w, h) = (cam.width as usize, rows.len());
+    let h = rows.len();
     let tracer = Tracer {
         scene,
         surfaces,
@@ -757,21 +780,12 @@ fn render_surfaces_rows(
     };
     let start = Instant::now();
     let rows_done = AtomicUsize::new(0);
-    let new_row = || Row {
-        rgb: Vec::with_capacity(w),
-        depth: Vec::with_capacity(w),
-        normal: Vec::with_capacity(w),
-        splat: Vec::with_capacity(w),
-        albedo: Vec::with_capacity(w),
-        light_facing: Vec::with_capacity(w),
-        light_lit: Vec::with_capacity(w),
-        rays: RayCounts::default(),
-    };
+    let new_row = || Frame::with_capacity(cam.width, 1);
     // With packets, rows in pairs (their pixels in 4×2 tiles, each tile's
     // primary rays traced as one batch; a last odd row in 8×1 tiles), else
     // one by one, pixel by pixel.
     let step = if tracer.packets { 2 } else { 1 };
-    let rows: Vec<Row> = (rows.start as usize..rows.end as usize)
+    let rows: Vec<Frame> = (rows.start as usize..rows.end as usize)
         .step_by(step)
         .collect::<Vec<_>>()
         .into_par_iter()
@@ -801,28 +815,9 @@ fn render_surfaces_rows(
             pair.into_iter().take(n)
         })
         .collect();
-    let mut frame = Frame {
-        width: cam.width,
-        height: h as u32,
-        rgb: Vec::with_capacity(w * h),
-        depth: Vec::with_capacity(w * h),
-        normal: Vec::with_capacity(w * h),
-        splat: Vec::with_capacity(w * h),
-        albedo: Vec::with_capacity(w * h),
-        light_facing: Vec::with_capacity(w * h),
-        light_lit: Vec::with_capacity(w * h),
-        rays: RayCounts::default(),
-        seconds: 0.0,
-    };
+    let mut frame = Frame::with_capacity(cam.width, h as u32);
     for row in rows {
-        frame.rgb.extend(row.rgb);
-        frame.depth.extend(row.depth);
-        frame.normal.extend(row.normal);
-        frame.splat.extend(row.splat);
-        frame.albedo.extend(row.albedo);
-        frame.light_facing.extend(row.light_facing);
-        frame.light_lit.extend(row.light_lit);
-        frame.rays = frame.rays.plus(row.rays);
+        frame.append(row);
     }
     frame.seconds = start.elapsed().as_secs_f64();
     frame

@@ -134,6 +134,17 @@ pub struct IntrinsicsSpec {
     pub cy: f64,
 }
 
+impl From<IntrinsicsSpec> for super::model::Intrinsics {
+    fn from(k: IntrinsicsSpec) -> Self {
+        super::model::Intrinsics {
+            fx: k.fx,
+            fy: k.fy,
+            cx: k.cx,
+            cy: k.cy,
+        }
+    }
+}
+
 /// A model's placement: uniform scale, then rotation (degrees about x, y,
 /// z, applied in that order), then translation. Uniform so discs stay discs.
 #[derive(Clone, Debug, Deserialize)]

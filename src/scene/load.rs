@@ -158,20 +158,9 @@ pub fn scene_camera(c: &CameraSpec, shift: DVec3, offset: Vec3) -> Result<Camera
     }
     match c.intrinsics {
         None => Camera::look_at(from, at, v3(c.up), c.fov, c.width, c.height, c.spp),
-        Some(k) => Camera::look_at_intrinsics(
-            from,
-            at,
-            v3(c.up),
-            super::model::Intrinsics {
-                fx: k.fx,
-                fy: k.fy,
-                cx: k.cx,
-                cy: k.cy,
-            },
-            c.width,
-            c.height,
-            c.spp,
-        ),
+        Some(k) => {
+            Camera::look_at_intrinsics(from, at, v3(c.up), k.into(), c.width, c.height, c.spp)
+        }
     }
 }
 

@@ -242,18 +242,9 @@ impl Source {
             }
         }
         let c = &file.camera;
-        let intrinsics = c.intrinsics.map(|k| {
-            (
-                Intrinsics {
-                    fx: k.fx,
-                    fy: k.fy,
-                    cx: k.cx,
-                    cy: k.cy,
-                },
-                c.width,
-                c.height,
-            )
-        });
+        let intrinsics = c
+            .intrinsics
+            .map(|k| (Intrinsics::from(k), c.width, c.height));
         let fov = match c.intrinsics {
             Some(k) => 2.0 * (0.5 * f64::from(c.height) / k.fy).atan().to_degrees(),
             None => f64::from(c.fov),

@@ -6,7 +6,7 @@
 
 use super::source::{Source, ViewCamera};
 use crate::accel::{Backend, CandidateHits, Query, registry};
-use crate::render::integrator::{Frame, RayCounts, SplatSurfaces, render_rows};
+use crate::render::integrator::{Frame, SplatSurfaces, render_rows};
 use crate::render::output::{png_bytes, rgb8_png};
 use crate::resolve::ShadingMode;
 use crate::scene::{Camera, parse_scene_str, scene_camera, scene_lights};
@@ -253,20 +253,7 @@ impl Worker {
         let b = self.backends[backend].as_ref();
         let start = Instant::now();
         let (w, h) = (cam.width, cam.height);
-        let n = (w * h) as usize;
-        let mut f = Frame {
-            width: w,
-            height: h,
-            rgb: Vec::with_capacity(n),
-            depth: Vec::with_capacity(n),
-            normal: Vec::with_capacity(n),
-            splat: Vec::with_capacity(n),
-            albedo: Vec::with_capacity(n),
-            light_facing: Vec::with_capacity(n),
-            light_lit: Vec::with_capacity(n),
-            rays: RayCounts::default(),
-            seconds: 0.0,
-        };
+        let mut f = Frame::with_capacity(w, h);
         let mut y = 0;
         while y < h {
             if !job.live() {
@@ -275,14 +262,7 @@ impl Worker {
             }
             let band = render_rows(&self.scene, b, y..(y + BAND_ROWS).min(h), None);
             self.stats.bands.fetch_add(1, Ordering::Relaxed);
-            f.rgb.extend(band.rgb);
-            f.depth.extend(band.depth);
-            f.normal.extend(band.normal);
-            f.splat.extend(band.splat);
-            f.albedo.extend(band.albedo);
-            f.light_facing.extend(band.light_facing);
-            f.light_lit.extend(band.light_lit);
-            f.rays = f.rays.plus(band.rays);
+            f.append(band);
             y += BAND_ROWS;
         }
         f.seconds = start.elapsed().as_secs_f64();

@@ -4,7 +4,10 @@
 //! end only parses, calls, prints and writes what it is asked to.
 
 pub mod compare;
+pub mod export;
+pub mod plot;
 pub mod render;
+pub mod sample;
 pub mod scan_check;
 pub mod splat;
 pub mod sweep;

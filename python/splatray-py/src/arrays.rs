@@ -30,55 +30,66 @@ fn describe(obj: &Bound<'_, PyAny>) -> String {
     }
 }
 
-/// The rows of an (N, `cols`) float64 or float32 array as f64, row-major.
-/// `empty_ok`: zero rows allowed.
-pub fn rows_f64(
-    obj: &Bound<'_, PyAny>,
-    name: &str,
-    cols: usize,
-    empty_ok: bool,
-) -> PyResult<Vec<f64>> {
-    let v: Vec<f64> = if let Ok(a) = obj.extract::<PyReadonlyArray2<'_, f64>>() {
-        check_cols(&a, obj, name, cols, "float64 or float32")?;
-        match a.as_slice() {
-            Ok(s) => s.to_vec(),
-            Err(_) => a.as_array().iter().copied().collect(),
-        }
-    } else if let Ok(a) = obj.extract::<PyReadonlyArray2<'_, f32>>() {
-        check_cols(&a, obj, name, cols, "float64 or float32")?;
-        a.as_array().iter().map(|&x| f64::from(x)).collect()
-    } else {
-        return Err(PyTypeError::new_err(format!(
-            "{name} must be a float64 or float32 numpy array of shape (N, {cols}), got {}",
-            describe(obj)
-        )));
-    };
-    finish(v, name, cols, empty_ok, |x| x.is_finite())
+/// A float dtype rows are read as; the other float dtype is converted.
+pub trait Real: numpy::Element + Copy {
+    /// The dtypes taken, this one first, for messages.
+    const DTYPES: &'static str;
+    /// The other float dtype.
+    type Other: numpy::Element + Copy;
+    /// `x` of the other dtype as this one.
+    fn from_other(x: Self::Other) -> Self;
+    /// Neither NaN nor infinite.
+    fn finite(self) -> bool;
 }
 
-/// The rows of an (N, `cols`) float32 (or float64, rounded) array as f32.
-pub fn rows_f32(
+impl Real for f64 {
+    const DTYPES: &'static str = "float64 or float32";
+    type Other = f32;
+    fn from_other(x: f32) -> f64 {
+        f64::from(x)
+    }
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+}
+
+impl Real for f32 {
+    const DTYPES: &'static str = "float32 or float64";
+    type Other = f64;
+    #[allow(clippy::cast_possible_truncation)]
+    fn from_other(x: f64) -> f32 {
+        x as f32
+    }
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+}
+
+/// The rows of an (N, `cols`) float64 or float32 array as `T`, row-major.
+/// `empty_ok`: zero rows allowed.
+pub fn rows<T: Real>(
     obj: &Bound<'_, PyAny>,
     name: &str,
     cols: usize,
     empty_ok: bool,
-) -> PyResult<Vec<f32>> {
-    let v: Vec<f32> = if let Ok(a) = obj.extract::<PyReadonlyArray2<'_, f32>>() {
-        check_cols(&a, obj, name, cols, "float32 or float64")?;
+) -> PyResult<Vec<T>> {
+    let v: Vec<T> = if let Ok(a) = obj.extract::<PyReadonlyArray2<'_, T>>() {
+        check_cols(&a, obj, name, cols, T::DTYPES)?;
         match a.as_slice() {
             Ok(s) => s.to_vec(),
             Err(_) => a.as_array().iter().copied().collect(),
         }
-    } else if let Ok(a) = obj.extract::<PyReadonlyArray2<'_, f64>>() {
-        check_cols(&a, obj, name, cols, "float32 or float64")?;
-        a.as_array().iter().map(|&x| x as f32).collect()
+    } else if let Ok(a) = obj.extract::<PyReadonlyArray2<'_, T::Other>>() {
+        check_cols(&a, obj, name, cols, T::DTYPES)?;
+        a.as_array().iter().map(|&x| T::from_other(x)).collect()
     } else {
         return Err(PyTypeError::new_err(format!(
-            "{name} must be a float32 or float64 numpy array of shape (N, {cols}), got {}",
+            "{name} must be a {} numpy array of shape (N, {cols}), got {}",
+            T::DTYPES,
             describe(obj)
         )));
     };
-    finish(v, name, cols, empty_ok, |x| x.is_finite())
+    finish(v, name, cols, empty_ok, T::finite)
 }
 
 fn check_cols<T: numpy::Element>(

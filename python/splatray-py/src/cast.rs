@@ -3,7 +3,7 @@
 //! `RaycastingScene`). One backend and the shared resolver
 //! (`SplatSurfaces`), so the octree and Embree give the same answers.
 
-use crate::arrays::{matrix, rows_f64, vector};
+use crate::arrays::{matrix, rows, vector};
 use crate::err;
 use crate::splats::Splats;
 use glam::{DVec3, Vec3};
@@ -67,7 +67,7 @@ impl SplatScene {
             return self.convert(v);
         }
         // Anything else: checked (and its error said) as any array.
-        self.convert(&rows_f64(rays, "rays", 6, true)?)
+        self.convert(&rows::<f64>(rays, "rays", 6, true)?)
     }
 
     fn convert<T: Copy + Into<f64> + Sync>(&self, v: &[T]) -> PyResult<(Vec<Ray>, Vec<f32>)> {

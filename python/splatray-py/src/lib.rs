@@ -10,6 +10,7 @@ mod cast;
 mod progress;
 mod scene;
 mod splats;
+mod workflows;
 
 use pyo3::prelude::*;
 
@@ -39,5 +40,7 @@ fn _splatray(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(splats::read_points, m)?)?;
     m.add_function(wrap_pyfunction!(splats::splat, m)?)?;
     m.add_function(wrap_pyfunction!(scene::read_image, m)?)?;
+    m.add_function(wrap_pyfunction!(workflows::scan_check, m)?)?;
+    m.add_function(wrap_pyfunction!(workflows::sweep, m)?)?;
     Ok(())
 }

@@ -1,14 +1,15 @@
 //! Point clouds and splats: `read_points`, `splat`, `PointCloud`, `Splats`.
 
-use crate::arrays::{matrix, point3, rows_f32, rows_f64, vec3s};
+use crate::arrays::{matrix, point3, rows, vec3s};
 use crate::err;
 use crate::progress::Callback;
 use glam::{DVec3, Vec3};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use splatray::io::{CloudRead, SplatSet};
+use splatray::splat::Splat;
 use splatray::splat::color::ColorField;
-use splatray::splat::{Splat, SplatParams};
+use splatray::workflow::splat::GenerationOptions;
 use std::path::PathBuf;
 
 /// A point cloud: positions in the file's coordinates (f64), held as the
@@ -129,14 +130,14 @@ fn cloud_from_arrays(
     colors: Option<&Bound<'_, PyAny>>,
     viewpoint: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<splatray::splat::PointCloud> {
-    let p = rows_f64(positions, "positions", 3, false)?;
+    let p = rows::<f64>(positions, "positions", 3, false)?;
     let n = p.len() / 3;
     let world: Vec<DVec3> = p.chunks_exact(3).map(DVec3::from_slice).collect();
     let per_point = |a: Option<&Bound<'_, PyAny>>, name: &str| -> PyResult<Option<Vec<Vec3>>> {
         let Some(a) = a.filter(|a| !a.is_none()) else {
             return Ok(None);
         };
-        let v = rows_f32(a, name, 3, false)?;
+        let v = rows::<f32>(a, name, 3, false)?;
         if v.len() != 3 * n {
             return Err(PyValueError::new_err(format!(
                 "{name} has {} rows, positions {n}",
@@ -330,40 +331,6 @@ impl Splats {
     }
 }
 
-/// Splat generation's options, by the command line's names.
-#[allow(clippy::too_many_arguments)]
-fn params(
-    cloud: &splatray::splat::PointCloud,
-    epsilon: Option<f32>,
-    k: Option<usize>,
-    density: Option<f32>,
-    ellipses: bool,
-    flat_colors: bool,
-    viewpoint: Option<[f64; 3]>,
-    no_viewpoint: bool,
-    thin: Option<f64>,
-) -> SplatParams {
-    let d = SplatParams::default();
-    let viewpoint = if no_viewpoint {
-        None
-    } else {
-        viewpoint
-            .map(|v| cloud.local_viewpoint(DVec3::from_array(v)))
-            .or(cloud.viewpoint)
-    };
-    SplatParams {
-        k: k.unwrap_or(d.k),
-        epsilon_rel: epsilon.unwrap_or(d.epsilon_rel),
-        density: density.unwrap_or(d.density),
-        ellipses,
-        color_fields: !flat_colors,
-        scan_viewpoints: !no_viewpoint,
-        thin: thin.unwrap_or(d.thin),
-        viewpoint,
-        ..d
-    }
-}
-
 /// Splats from a point cloud, as `splatray splat` makes them (read, clean,
 /// normals, grow, fields, free-space trimming with a viewpoint, colour
 /// fields); the options are the command's.
@@ -406,20 +373,21 @@ pub fn splat(
         }
     };
     let vp = match viewpoint.filter(|v| !v.is_none()) {
-        Some(v) => Some(point3(v, "viewpoint")?),
+        Some(v) => Some(DVec3::from_array(point3(v, "viewpoint")?)),
         None => None,
     };
-    let p = params(
-        cloud,
-        epsilon,
+    let p = GenerationOptions {
+        epsilon_rel: epsilon,
         k,
         density,
         ellipses,
         flat_colors,
-        vp,
+        creases: false,
+        viewpoint: vp,
         no_viewpoint,
         thin,
-    );
+    }
+    .params(cloud);
     let cb = Callback::new(progress);
     let out = py.detach(|| {
         let report_to = |s: &str, f: f64| cb.report(s, f);

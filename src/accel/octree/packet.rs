@@ -521,12 +521,9 @@ impl<P: Primitive> Tree<P> {
         }
         let mask = node.meta & 0xff;
         let half = size * 0.5;
-        let lo_a = Vec3A::from(lo);
-        let pad = Vec3A::splat(self.pad);
-        let mid = lo_a + Vec3A::splat(half);
-        let hi = lo_a + Vec3A::splat(size);
-        let (lower_near, lower_far) = sp.slab(lo_a - pad, mid + pad);
-        let (upper_near, upper_far) = sp.slab(mid - pad, hi + pad);
+        let [(l0, l1), (u0, u1)] = super::traverse::halves(lo, size, self.pad);
+        let (lower_near, lower_far) = sp.slab(l0, l1);
+        let (upper_near, upper_far) = sp.slab(u0, u1);
         // The eight children's intervals at once, as in `Tree::visit`.
         let (open, entries) = super::traverse::children(
             (lower_near.into(), lower_far.into()),

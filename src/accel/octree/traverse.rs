@@ -236,16 +236,12 @@ impl<P: Primitive> Tree<P> {
         }
         let mask = node.meta & 0xff;
         let half = size * 0.5;
-        // The same IEEE operations as on `Vec3`, four lanes at a time.
-        let lo_a = Vec3A::from(lo);
-        let pad = Vec3A::splat(self.pad);
-        let mid = lo_a + Vec3A::splat(half);
-        let hi = lo_a + Vec3A::splat(size);
         let o = ctx.origin_a;
         let inv = ctx.inv_dir_a;
         // Slab parameters of the padded lower and upper halves on each axis.
-        let (lower_near, lower_far) = slab_a((lo_a - pad - o) * inv, (mid + pad - o) * inv);
-        let (upper_near, upper_far) = slab_a((mid - pad - o) * inv, (hi + pad - o) * inv);
+        let [(l0, l1), (u0, u1)] = halves(lo, size, self.pad);
+        let (lower_near, lower_far) = slab_a((l0 - o) * inv, (l1 - o) * inv);
+        let (upper_near, upper_far) = slab_a((u0 - o) * inv, (u1 - o) * inv);
         let (open, entry) = children(
             (lower_near, lower_far),
             (upper_near, upper_far),
@@ -318,6 +314,19 @@ fn slab(a: Vec3, b: Vec3) -> (Vec3, Vec3) {
         if a.z > b.z { a.z } else { b.z },
     );
     (near, far)
+}
+
+/// The padded lower and upper halves of the cell of side `size` at `lo`
+/// on each axis, `[(lower_lo, lower_hi), (upper_lo, upper_hi)]`: the same
+/// IEEE operations as on `Vec3`, four lanes at a time (what `Tree::visit`
+/// and the packet traversal slab against).
+#[inline(always)]
+pub(super) fn halves(lo: Vec3, size: f32, pad: f32) -> [(Vec3A, Vec3A); 2] {
+    let lo_a = Vec3A::from(lo);
+    let pad = Vec3A::splat(pad);
+    let mid = lo_a + Vec3A::splat(size * 0.5);
+    let hi = lo_a + Vec3A::splat(size);
+    [(lo_a - pad, mid + pad), (mid - pad, hi + pad)]
 }
 
 /// Entry and exit of a node's eight children at once, from the slab

@@ -8,7 +8,9 @@
   resolves its camera rays, with either backend of :data:`BACKENDS`;
 * :class:`Scene` (from TOML, or built here from ``Splats`` and
   ``PointCloud`` models) renders an :class:`Image` (linear float32 RGB
-  and AOVs; shown as an image in a notebook).
+  and AOVs; shown as an image in a notebook);
+* :func:`scan_check` and :func:`sweep` return the reports of
+  ``splatray scan-check`` and ``splatray sweep`` as dicts.
 
 The work runs with the GIL released; ``progress`` callbacks get
 ``(stage, fraction)``; the library's errors are raised as
@@ -27,7 +29,9 @@ from ._splatray import (
     Splats,
     read_image,
     read_points,
+    scan_check,
     splat,
+    sweep,
 )
 
 __all__ = [
@@ -41,5 +45,7 @@ __all__ = [
     "Splats",
     "read_image",
     "read_points",
+    "scan_check",
     "splat",
+    "sweep",
 ]

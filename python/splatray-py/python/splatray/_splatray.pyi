@@ -174,3 +174,45 @@ class Scene:
 
 def read_image(path: Path) -> npt.NDArray[np.float32]:
     """(H, W, 3) float32 of an EXR (linear) or PNG (scaled to [0, 1])."""
+
+def scan_check(
+    path: Path,
+    *,
+    tolerance: float = 0.01,
+    holdout: float = 0.1,
+    seed: int = 1,
+    photo: bool = False,
+    backend: Optional[str] = None,
+    epsilon: Optional[float] = None,
+    k: Optional[int] = None,
+    density: Optional[float] = None,
+    ellipses: bool = False,
+    flat_colors: bool = False,
+    creases: bool = False,
+    viewpoint: Optional[Sequence[float]] = None,
+    no_viewpoint: bool = False,
+    thin: Optional[float] = None,
+    progress: Optional[Progress] = None,
+) -> dict:
+    """`splatray scan-check`'s JSON report as a dict: `holdout` of the
+    points held out, splats grown from the rest (the options are `splat`'s)
+    and a line of sight cast from the scanner to each held-out point, a hit
+    within `tolerance` of its distance consistent; with `photo`, the photo
+    check of an organised colour capture, rendered with `backend`."""
+
+def sweep(
+    scene: Path,
+    *,
+    width: int = 320,
+    height: int = 240,
+    steps: int = 6,
+    eps_coarse: float = 0.05,
+    eps_fine: float = 0.0005,
+    progress: Optional[Progress] = None,
+) -> list[dict]:
+    """`splatray sweep` as one dict per (budget step, shading mode), the
+    rows its CSV holds: splat counts, each backend's build and render
+    seconds and errors against the exact surface (report §4.4, fig. 16),
+    and whether the backends agree bit for bit. `steps` (5 to 64) epsilons
+    from `eps_coarse` to `eps_fine`, fractions of the bounding-box
+    diagonal; bad options raise ValueError before any work."""
