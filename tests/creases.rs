@@ -166,11 +166,12 @@ fn a_noisy_scan_of_a_solid_renders_with_creases() {
     };
     let (psnr_on, false_on) = figures(true);
     let (psnr_off, false_off) = figures(false);
-    // Measured: on 27.31 dB, 0.30 % false hits (the exact samples above:
-    // 27.32 dB); off 26.91 dB, 0.45 % (a scan's splats are small where it
-    // is noisy, so whole discs overhang less than on exact samples).
-    assert!(psnr_on > 26.8, "{psnr_on}");
-    assert!(false_on < 0.0036, "{false_on}");
+    // Measured: on 27.53 dB, 0.12 % false hits (the exact samples above:
+    // 27.32 dB; 27.31 dB, 0.30 % before grow::BORDER_DEEP); off 26.91 dB,
+    // 0.45 % (a scan's splats are small where it is noisy, so whole discs
+    // overhang less than on exact samples).
+    assert!(psnr_on > 27.0, "{psnr_on}");
+    assert!(false_on < 0.0016, "{false_on}");
     assert!(psnr_on > psnr_off + 0.2, "on {psnr_on} off {psnr_off}");
     assert!(false_on < false_off, "on {false_on} off {false_off}");
 }

@@ -97,6 +97,10 @@ pub const BORDER_SPACINGS: f32 = 2.0;
 /// the face's points (where the surface ends between them is not known).
 pub const CLIP_GAP_SPACINGS: f32 = 0.15;
 
+/// ... or, past a last point at most this far out (in radii), no point of
+/// the face just outside the rim in that band.
+pub const BORDER_DEEP: f32 = 0.8;
+
 /// A splat whose nearest own point lies farther than this share of its
 /// radius from its centre spans a hole (a ring of points round an empty
 /// middle): it is shrunk to its seed's neighbourhood instead.
@@ -420,6 +424,10 @@ impl Grower<'_> {
         let round = self.round;
         let mut own: Vec<Near> = vec![near(i)];
         let mut other: Vec<Near> = Vec::new();
+        // The own face's points just outside the disc (neighbours of its
+        // points inside): where one lies just past the last inside point
+        // along a direction, the face goes on past the rim there.
+        let mut beyond: Vec<Near> = Vec::new();
         let mut stack = vec![i as u32];
         self.stamp[i] = round;
         while let Some(j) = stack.pop() {
@@ -435,6 +443,8 @@ impl Grower<'_> {
                 } else if m.q.length_squared() <= 1.0 {
                     own.push(m);
                     stack.push(q);
+                } else {
+                    beyond.push(m);
                 }
             }
         }
@@ -454,7 +464,19 @@ impl Grower<'_> {
                     && (m.q - w * s).length_squared() <= 1.0
             }));
             let d = if across.is_empty() {
-                (ext + BORDER_SPACINGS * spacing < 1.0)
+                // A band wide enough inside the disc; or, for a deep cut
+                // (a large splat whose last point is near the rim in
+                // noise), none of the face's points past the rim there.
+                let band = ext + BORDER_SPACINGS * spacing;
+                let open = band < 1.0
+                    || (ext < BORDER_DEEP && {
+                        let half = (1.0 - ext * ext).max(0.0).sqrt();
+                        !beyond.iter().any(|m| {
+                            let s = w.dot(m.q);
+                            s > ext && s <= band && w.perp_dot(m.q).abs() <= half
+                        })
+                    });
+                (open && ext + CLIP_GAP_SPACINGS * spacing < 1.0)
                     .then_some(ext + CLIP_GAP_SPACINGS * spacing)?
             } else if across.len() >= CREASE_MIN_POINTS {
                 rim.clear();
