@@ -60,6 +60,10 @@ pub const CREASE_DEG: f32 = 30.0;
 /// Directions tried for a clip line (evenly spaced over the full turn).
 pub const CLIP_DIRECTIONS: usize = 96;
 
+/// A clip line's direction is refined between the coarse directions in
+/// this many steps each way, over half a coarse step.
+pub const REFINE_STEPS: i32 = 4;
+
 /// A crease needs at least this many points of the other face past the
 /// own face's last points ([`Grower::clip_lines`]).
 pub const CREASE_MIN_POINTS: usize = 3;
@@ -92,6 +96,10 @@ pub const BORDER_SPACINGS: f32 = 2.0;
 /// A border's clip line stands this many point spacings past the last of
 /// the face's points (where the surface ends between them is not known).
 pub const CLIP_GAP_SPACINGS: f32 = 0.15;
+
+/// ... or, past a last point at most this far out (in radii), no point of
+/// the face just outside the rim in that band.
+pub const BORDER_DEEP: f32 = 0.8;
 
 /// A splat whose nearest own point lies farther than this share of its
 /// radius from its centre spans a hole (a ring of points round an empty
@@ -416,6 +424,10 @@ impl Grower<'_> {
         let round = self.round;
         let mut own: Vec<Near> = vec![near(i)];
         let mut other: Vec<Near> = Vec::new();
+        // The own face's points just outside the disc (neighbours of its
+        // points inside): where one lies just past the last inside point
+        // along a direction, the face goes on past the rim there.
+        let mut beyond: Vec<Near> = Vec::new();
         let mut stack = vec![i as u32];
         self.stamp[i] = round;
         while let Some(j) = stack.pop() {
@@ -431,6 +443,8 @@ impl Grower<'_> {
                 } else if m.q.length_squared() <= 1.0 {
                     own.push(m);
                     stack.push(q);
+                } else {
+                    beyond.push(m);
                 }
             }
         }
@@ -439,55 +453,71 @@ impl Grower<'_> {
         let jump_cos = CREASE_JUMP_DEG.to_radians().cos();
         let mut rim: Vec<Near> = Vec::new();
         let mut across: Vec<Near> = Vec::new();
-        let candidates: Vec<ClipLine> = (0..CLIP_DIRECTIONS)
-            .filter_map(|k| {
-                let t = std::f32::consts::TAU * k as f32 / CLIP_DIRECTIONS as f32;
-                let w = Vec2::new(t.cos(), t.sin());
-                let ext = own.iter().map(|m| w.dot(m.q)).fold(f32::MIN, f32::max);
-                across.clear();
-                across.extend(other.iter().filter(|m| {
-                    let s = w.dot(m.q);
-                    s >= ext - spacing
-                        && s <= ext + 2.0 * spacing
-                        && (m.q - w * s).length_squared() <= 1.0
-                }));
-                let d = if across.is_empty() {
-                    (ext + BORDER_SPACINGS * spacing < 1.0)
-                        .then_some(ext + CLIP_GAP_SPACINGS * spacing)?
-                } else if across.len() >= CREASE_MIN_POINTS {
-                    rim.clear();
-                    rim.extend(own.iter().filter(|m| w.dot(m.q) >= ext - 1.5 * spacing));
-                    let (m_rim, c_rim) = mean_normal(&rim, inp.normals);
-                    let (m_across, c_across) = mean_normal(&across, inp.normals);
-                    // Both sides run along the line over most of its chord.
-                    let chord = 2.0 * (1.0 - ext * ext).max(0.0).sqrt();
-                    let along = |pts: &[Near]| {
-                        let (lo, hi) = pts
-                            .iter()
-                            .map(|m| w.perp_dot(m.q))
-                            .fold((f32::MAX, f32::MIN), |(lo, hi), x| (lo.min(x), hi.max(x)));
-                        hi - lo
-                    };
-                    if m_rim.dot(m_across) > jump_cos
-                        || c_rim < CREASE_COHERENCE
-                        || c_across < CREASE_COHERENCE
-                        || along(&across) < CREASE_LENGTH * chord
-                        || along(&rim) < CREASE_LENGTH * chord
-                    {
-                        return None;
-                    }
-                    // Only where the face across leaves the disc's plane
-                    // by more than ϵ at its rim: a gentler crease, or one
-                    // near the rim, the whole disc stands within ϵ of.
-                    let (c, slope) = crease_at(&across, w, ext, spacing);
-                    if ((1.0 - c) * r).abs() < slope.abs() * CREASE_RISE_EPS * inp.epsilon {
-                        return None;
-                    }
-                    c
-                } else {
-                    return None;
+        let mut line_at = |t: f32| -> Option<ClipLine> {
+            let w = Vec2::new(t.cos(), t.sin());
+            let ext = own.iter().map(|m| w.dot(m.q)).fold(f32::MIN, f32::max);
+            across.clear();
+            across.extend(other.iter().filter(|m| {
+                let s = w.dot(m.q);
+                s >= ext - spacing
+                    && s <= ext + 2.0 * spacing
+                    && (m.q - w * s).length_squared() <= 1.0
+            }));
+            let d = if across.is_empty() {
+                // A band wide enough inside the disc; or, for a deep cut
+                // (a large splat whose last point is near the rim in
+                // noise), none of the face's points past the rim there.
+                let band = ext + BORDER_SPACINGS * spacing;
+                let open = band < 1.0
+                    || (ext < BORDER_DEEP && {
+                        let half = (1.0 - ext * ext).max(0.0).sqrt();
+                        !beyond.iter().any(|m| {
+                            let s = w.dot(m.q);
+                            s > ext && s <= band && w.perp_dot(m.q).abs() <= half
+                        })
+                    });
+                (open && ext + CLIP_GAP_SPACINGS * spacing < 1.0)
+                    .then_some(ext + CLIP_GAP_SPACINGS * spacing)?
+            } else if across.len() >= CREASE_MIN_POINTS {
+                rim.clear();
+                rim.extend(own.iter().filter(|m| w.dot(m.q) >= ext - 1.5 * spacing));
+                let (m_rim, c_rim) = mean_normal(&rim, inp.normals);
+                let (m_across, c_across) = mean_normal(&across, inp.normals);
+                // Both sides run along the line over most of its chord.
+                let chord = 2.0 * (1.0 - ext * ext).max(0.0).sqrt();
+                let along = |pts: &[Near]| {
+                    let (lo, hi) = pts
+                        .iter()
+                        .map(|m| w.perp_dot(m.q))
+                        .fold((f32::MAX, f32::MIN), |(lo, hi), x| (lo.min(x), hi.max(x)));
+                    hi - lo
                 };
-                (d > -1.0 && d < 1.0).then_some(ClipLine { a: w.x, b: w.y, d })
+                if m_rim.dot(m_across) > jump_cos
+                    || c_rim < CREASE_COHERENCE
+                    || c_across < CREASE_COHERENCE
+                    || along(&across) < CREASE_LENGTH * chord
+                    || along(&rim) < CREASE_LENGTH * chord
+                {
+                    return None;
+                }
+                // Only where the face across leaves the disc's plane
+                // by more than ϵ at its rim: a gentler crease, or one
+                // near the rim, the whole disc stands within ϵ of.
+                let (c, slope) = crease_at(&across, w, ext, spacing);
+                if ((1.0 - c) * r).abs() < slope.abs() * CREASE_RISE_EPS * inp.epsilon {
+                    return None;
+                }
+                c
+            } else {
+                return None;
+            };
+            (d > -1.0 && d < 1.0).then_some(ClipLine { a: w.x, b: w.y, d })
+        };
+        let step = std::f32::consts::TAU / CLIP_DIRECTIONS as f32;
+        let candidates: Vec<(f32, ClipLine)> = (0..CLIP_DIRECTIONS)
+            .filter_map(|k| {
+                let t = step * k as f32;
+                line_at(t).map(|l| (t, l))
             })
             .collect();
         let grid = disc_grid();
@@ -496,20 +526,39 @@ impl Grower<'_> {
                 .filter(|q| kept(**q) && !l.keeps(q.x, q.y))
                 .count()
         };
-        let Some((first, cut)) = candidates
-            .iter()
-            .map(|l| (*l, cut_by(l, &|_| true)))
-            .max_by_key(|c| c.1)
-        else {
+        // The best of the coarse directions, then turned by up to half a
+        // step either way to the line cutting the most: a straight border
+        // or crease between two coarse directions is met along its length,
+        // not touched at one end and overhung at the other. "Most" is the
+        // grid's count first, then the line nearer the centre (which cuts
+        // more of the disc than the grid can tell).
+        let more = |x: &(ClipLine, usize), y: &(ClipLine, usize)| {
+            x.1.cmp(&y.1).then(y.0.d.total_cmp(&x.0.d))
+        };
+        let mut best = |lines: &[(f32, ClipLine)], kept: &dyn Fn(Vec2) -> bool| {
+            let (t, coarse) = lines
+                .iter()
+                .map(|(t, l)| (*t, (*l, cut_by(l, kept))))
+                .max_by(|x, y| more(&x.1, &y.1))?;
+            let fine = (-REFINE_STEPS..=REFINE_STEPS)
+                .filter(|&j| j != 0)
+                .filter_map(|j| {
+                    let l = line_at(t + step * j as f32 / (2 * REFINE_STEPS) as f32)?;
+                    Some((l, cut_by(&l, kept)))
+                })
+                .max_by(more);
+            Some(match fine {
+                Some(f) if more(&f, &coarse).is_gt() => f,
+                _ => coarse,
+            })
+        };
+        let Some((first, cut)) = best(&candidates, &|_| true) else {
             return Clip::NONE;
         };
         if cut == 0 {
             return Clip::NONE;
         }
-        let second = candidates
-            .iter()
-            .map(|l| (*l, cut_by(l, &|q| first.keeps(q.x, q.y))))
-            .max_by_key(|c| c.1);
+        let second = best(&candidates, &|q| first.keeps(q.x, q.y));
         match second {
             Some((s, c)) if c > 0 => Clip::two(first, s),
             _ => Clip::one(first),
