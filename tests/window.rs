@@ -115,3 +115,88 @@ fn a_coarse_model_alone_blends_its_oblique_neighbours() {
         "per-model window {own}° not clearly below the diagonal-relative one {diagonal}°"
     );
 }
+
+/// Two overlapping splats facing a camera 0.01 apart, the farther tilted
+/// 20° (within the resolver's crease limit, so only its clip decides) and,
+/// when `clipped`, cut along the line `x = 0` of its plane, keeping `x < 0`.
+fn clipped_pair(clipped: bool) -> Vec<splatray::splat::Splat> {
+    use glam::Vec3;
+    use splatray::primitive::Clip;
+    use splatray::splat::Splat;
+    let near = Splat::disc(Vec3::ZERO, Vec3::Z, 1.0).unwrap();
+    let (s, c) = 20f32.to_radians().sin_cos();
+    let mut far = Splat::disc(Vec3::new(0.0, 0.0, -0.01), Vec3::new(0.0, s, c), 1.0).unwrap();
+    if clipped {
+        far.clip = Clip::one(common::clip_at(&far, far.center, Vec3::X));
+    }
+    vec![near, far]
+}
+
+#[test]
+fn a_candidate_across_a_clip_line_is_not_blended() {
+    use common::{Query, backends, windows};
+    use glam::Vec3;
+    use splatray::accel::Ray;
+    use splatray::resolve::{ShadingMode, resolve};
+    // Rays straight down -z through x = ±0.05..0.5 (y within ±0.02, where
+    // the far splat's plane lies 0.003-0.017 behind the near one), gathered
+    // with a window of 0.05: without the clip both splats are candidates
+    // and blend on both sides; with it, on the cut side (x > 0) the far
+    // splat is no candidate and the near splat's normal is the answer,
+    // while on the kept side both still blend. Every registry backend
+    // (over clipped discs, packed and unpacked) agrees with the oracle on
+    // every window and resolved hit (`windows`).
+    let xi = 0.05;
+    for clipped in [false, true] {
+        let splats = clipped_pair(clipped);
+        let b = backends(&splats);
+        assert!(
+            b.tested.len() >= 4,
+            "set-up: only {} backends under test",
+            b.tested.len()
+        );
+        let mut checked = [0usize; 2];
+        let mut blended_tilt = (f32::INFINITY, 0f32);
+        for i in 1..=10 {
+            for side in [-1.0f32, 1.0] {
+                let x = side * 0.05 * i as f32;
+                let y = 0.004 * (i as f32 - 5.5);
+                let ray = Ray::new(Vec3::new(x, y, 5.0), -Vec3::Z);
+                let q = Query::new(ray, 0.0, f32::INFINITY);
+                let what = format!("clipped {clipped}, ray at x = {x}");
+                let w = windows(&b, &splats, &q, xi, &what);
+                let ids: Vec<u32> = w.as_slice().iter().map(|c| c.id).collect();
+                let cut = clipped && side > 0.0;
+                assert_eq!(ids, if cut { vec![0] } else { vec![0, 1] }, "{what}");
+                for mode in [ShadingMode::Blended, ShadingMode::Phong] {
+                    let hit = resolve(&w, &ray, &splats, mode)
+                        .and_then(|r| r.hit())
+                        .unwrap_or_else(|| panic!("{what}: no hit"));
+                    let tilt = hit.normal.angle_between(Vec3::Z).to_degrees();
+                    if cut {
+                        assert_eq!(hit.blended, 1, "{what}, {mode:?}");
+                        // The near splat's own normal (to rounding).
+                        assert!(tilt < 1e-3, "{what}, {mode:?}: normal tilted {tilt}°");
+                    } else {
+                        // Blended, the normal turns toward the far splat's
+                        // (10.00° measured: near-equal weights, half the
+                        // 20° between them).
+                        assert_eq!(hit.blended, 2, "{what}, {mode:?}");
+                        assert!(tilt > 0.5, "{what}, {mode:?}: normal tilted {tilt}°");
+                        blended_tilt = (blended_tilt.0.min(tilt), blended_tilt.1.max(tilt));
+                    }
+                }
+                checked[usize::from(cut)] += 1;
+            }
+        }
+        assert_eq!(checked, if clipped { [10, 10] } else { [20, 0] });
+        eprintln!(
+            "clipped {clipped}: {} rays blend both splats (normal tilted {:.2}°-{:.2}°), {} only the near one, on {} backends",
+            checked[0],
+            blended_tilt.0,
+            blended_tilt.1,
+            checked[1],
+            b.tested.len() + 1
+        );
+    }
+}

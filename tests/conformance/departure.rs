@@ -219,40 +219,123 @@ fn grazing_rays_do_not_hit_the_surface_they_leave() {
     assert_all_agree(&b, &set.splats, &queries, scale.xi, "grazing rays");
 }
 
-#[test]
-fn rays_into_the_sphere_reach_its_far_side() {
-    // Refraction-like rays, 25° to 60° into the surface: they leave the
-    // sphere where its normal has turned by twice that, beyond the 45° of
-    // the same surface, so the far side is never skipped.
-    let set = floor_and_sphere(seed() ^ 5);
+/// Where a ray from `o` along unit `d`, inside the exact sphere the splats
+/// sample, leaves it (`t` of the far root).
+fn exact_exit(set: &Set, o: Vec3, d: Vec3) -> f32 {
+    let oc = o - set.center;
+    let b = d.dot(oc);
+    let c = oc.length_squared() - SPHERE_RADIUS * SPHERE_RADIUS;
+    -b + (b * b - c).max(0.0).sqrt()
+}
+
+/// The highest point any floor splat reaches.
+fn floor_top(set: &Set) -> f32 {
+    set.splats[..set.floor]
+        .iter()
+        .map(|s| s.center.y + s.radii.max_element() * (1.0 - s.normal.y * s.normal.y).sqrt())
+        .fold(f32::NEG_INFINITY, f32::max)
+}
+
+/// How far a window's nearest hit may lie beyond the exact sphere's exit
+/// along the ray. Every splat plane is tangent to the sphere, so outside
+/// it: the hit is never nearer than the exit, and farther by the planes'
+/// standoff over the sphere (`R (1 - cos θ)`, θ up to a splat radius over
+/// R, 0.07) over the exit's obliquity (the sine of at least 27°): 0.0027
+/// at most. Measured over 100 fresh seeds (`SPLATRAY_SEED`, with the
+/// regression seeds below 400 runs, 80,000 rays): at most 0.00196. A
+/// far-side splat skipped by the way-out rule puts the hit at least a
+/// splat farther (0.03); with rays 20°-25° into the surface it passes
+/// the whole far side and hits the floor (6 seeds of 6).
+const EXIT_SLACK: f32 = 0.003;
+
+/// Refraction-like rays into the sphere of `floor_and_sphere(seed)`: the
+/// nearest hit must be the sphere's far side, where the exact sphere says
+/// the ray leaves it. Returns the largest `t - exit` seen, the smallest
+/// angle (degrees) between a departure splat's normal and the far-side
+/// splat's, and how many drawn rays were set aside because they leave the
+/// sphere at the floor.
+fn far_side(seed: u64) -> (f32, f32, usize) {
+    let set = floor_and_sphere(seed ^ 5);
     let scale = SceneScale::from_diagonal(diagonal(&set.splats));
     let b = backends(&set.splats);
-    let mut rng = Rng::new(seed() ^ 9);
+    let top = floor_top(&set);
+    let mut rng = Rng::new(seed ^ 9);
     let mut queries = Vec::new();
-    for _ in 0..200 {
+    let (mut slack, mut least_turn, mut at_floor) = (0f32, 180f32, 0);
+    while queries.len() < 200 {
+        assert!(
+            at_floor < 200,
+            "set-up: {at_floor} rays drawn leave at the floor"
+        );
         let d = rng.unit();
         let d = Vec3::new(d.x, d.y.abs() * 0.8 + 0.2, d.z).normalize();
         let target = set.center + d * SPHERE_RADIUS;
         let (from, _) = depart(&b, &set, set.center + d * 3.0, target, scale.xi);
         let t = from.normal.cross(rng.unit()).normalize();
-        let angle = rng.range(25.0, 60.0).to_radians();
+        let angle = rng.range(30.0, 60.0).to_radians();
         let q = leaving(
             from,
             t * angle.cos() - from.normal * angle.sin(),
             scale.eps_self,
         );
+        // A ray leaving the sphere within the floor's reach meets the floor
+        // splats where they overlap the sphere's underside (tilted up to
+        // 1.2° and raised up to 0.004, they reach about 0.013 above the
+        // contact): which comes first there is not the rule's to say. Such
+        // rays are drawn again (0-10 of 200 per seed over 100 seeds; the
+        // former set-up failed for 20 of 30 fresh seeds, here on the floor
+        // or, with 0x0badc0ffee, on the chord below).
+        let exit = exact_exit(&set, q.ray.origin, q.ray.dir);
+        if q.ray.at(exit).y < top + 0.01 {
+            at_floor += 1;
+            continue;
+        }
         let w = windows(&b, &set.splats, &q, scale.xi, "ray into the sphere");
         let far = w
             .nearest()
             .unwrap_or_else(|| panic!("{q:?} must reach the far side"));
         let n = set.splats[far.id as usize].normal;
-        let chord = 2.0 * SPHERE_RADIUS * angle.sin();
+        // The far side's distance from the exact sphere, not from the
+        // departure splat's normal: that normal is a few degrees off the
+        // sphere's, and at 25° a chord of `2 R sin(angle)` is up to 12 %
+        // off (0.430 for 0.384 with 0x0badc0ffee).
         assert!(
-            far.id as usize >= set.floor && n.dot(q.ray.dir) > 0.0 && far.t > 0.9 * chord,
-            "{q:?} must leave the sphere through its far side ({chord} away) first, got {far:?}"
+            far.id as usize >= set.floor
+                && n.dot(q.ray.dir) > 0.0
+                && far.t >= exit - 1e-5
+                && far.t <= exit + EXIT_SLACK,
+            "{q:?} must leave the sphere through its far side ({exit} away) first, got {far:?}\n(replay with SPLATRAY_SEED={seed:#x})"
         );
+        slack = slack.max(far.t - exit);
+        least_turn = least_turn.min(n.angle_between(from.normal).to_degrees());
         assert!(occluded_everywhere(&b, &q));
         queries.push(q);
     }
     assert_all_agree(&b, &set.splats, &queries, scale.xi, "rays into the sphere");
+    (slack, least_turn, at_floor)
+}
+
+#[test]
+fn rays_into_the_sphere_reach_its_far_side() {
+    // Refraction-like rays, 30° to 60° into the surface: they leave the
+    // sphere where its normal has turned by twice that, beyond the 45° of
+    // `WAY_OUT_COS`, so the far side is never skipped (refraction from air
+    // into an index of 1.5 enters at least 48° in, of 1.33 at least 41°).
+    // The departure and far-side splats' normals are each up to about 3°
+    // off the sphere's, so the turn the rule sees is `2 α ± 6°`: with 25°
+    // (as this test had) the least turn measured was 46.1° over 60 seeds,
+    // at the rule's edge, and with 20°-25° the far side is skipped; with
+    // 30°, 54.9° over 100 seeds. The run's seed,
+    // then seeds the former set-up failed with (kept as regression cases).
+    for s in [
+        seed(),
+        0x0bad_c0ffee,
+        0x5607_f1e8_fdac_f125,
+        0x15c1_58e7_b6ad_9d5e,
+    ] {
+        let (slack, turn, at_floor) = far_side(s);
+        eprintln!(
+            "rays into the sphere, seed {s:#x}: far side at most {slack} beyond the exact exit, normals turned at least {turn:.1}°, {at_floor} rays drawn again (they leave at the floor)"
+        );
+    }
 }
