@@ -239,7 +239,7 @@ impl Guard<'_> {
         let eps = self.splats.eps_self();
         if self.radius {
             eps.max(
-                self.splats.scene.splats[from.id as usize]
+                self.splats.scene.splats[from.surface.id as usize]
                     .radii
                     .max_element(),
             )

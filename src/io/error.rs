@@ -45,6 +45,12 @@ impl IoError {
         }
     }
 
+    /// Bad data refused before writing `path`: "`what`, nothing written".
+    #[must_use]
+    pub fn not_written(path: &Path, what: &str) -> IoError {
+        IoError::new(path, IoErrorKind::Data(format!("{what}, nothing written")))
+    }
+
     /// The file concerned.
     #[must_use]
     pub fn path(&self) -> &Path {

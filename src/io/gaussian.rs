@@ -356,12 +356,7 @@ pub fn encode_gaussians(
     layout: GaussianLayout,
     sh_degree: u32,
 ) -> Result<Vec<u8>, IoError> {
-    let bad = |what: String| {
-        Err(IoError::new(
-            path,
-            IoErrorKind::Data(format!("{what}, nothing written")),
-        ))
-    };
+    let bad = |what: String| Err(IoError::not_written(path, &what));
     if sh_degree > MAX_SH_DEGREE {
         return bad(format!(
             "spherical-harmonic degree {sh_degree} is above {MAX_SH_DEGREE}"

@@ -220,13 +220,8 @@ pub fn parse_mesh(bytes: &[u8]) -> Result<Mesh, IoErrorKind> {
 pub fn write_points(path: &Path, cloud: &PointCloud) -> Result<(), IoError> {
     let n = cloud.len();
     if let Some(i) = (0..n).find(|&i| !cloud.world(i).is_finite()) {
-        return Err(IoError::new(
-            path,
-            IoErrorKind::Data(format!(
-                "point {i} is not finite ({}), nothing written",
-                cloud.world(i)
-            )),
-        ));
+        let what = format!("point {i} is not finite ({})", cloud.world(i));
+        return Err(IoError::not_written(path, &what));
     }
     if Format::from_extension(path) == Some(Format::Pcd) {
         return write_bytes(path, &pcd::encode(cloud));

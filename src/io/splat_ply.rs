@@ -238,12 +238,7 @@ pub fn encode_splats_layout(
     clips: bool,
     origin: DVec3,
 ) -> Result<Vec<u8>, IoError> {
-    let bad = |what: String| {
-        Err(IoError::new(
-            path,
-            IoErrorKind::Data(format!("{what}, nothing written")),
-        ))
-    };
+    let bad = |what: String| Err(IoError::not_written(path, &what));
     if !origin.is_finite() {
         return bad(format!("the splats' origin {origin} is not finite"));
     }

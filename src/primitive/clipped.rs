@@ -148,6 +148,11 @@ mod tests {
     use crate::primitive::clip::ClipLine;
     use crate::splat::Splat;
 
+    /// The line `a u + b v <= d`.
+    fn line(a: f32, b: f32, d: f32) -> ClipLine {
+        ClipLine { a, b, d }
+    }
+
     fn clipped(clip: Clip) -> ClippedDisc {
         let s = Splat::disc(Vec3::ZERO, Vec3::Z, 1.0).unwrap();
         ClippedDisc {
@@ -160,11 +165,7 @@ mod tests {
     fn the_clipped_away_part_is_missed_and_the_rest_is_the_disc_bit_for_bit() {
         let s = Splat::disc(Vec3::ZERO, Vec3::Z, 1.0).unwrap();
         // Keep u <= 0.25 (u along the splat's own u axis).
-        let c = clipped(Clip::one(ClipLine {
-            a: 1.0,
-            b: 0.0,
-            d: 0.25,
-        }));
+        let c = clipped(Clip::one(line(1.0, 0.0, 0.25)));
         let mut kept = 0;
         let mut cut = 0;
         for i in 0..41 {
@@ -194,19 +195,7 @@ mod tests {
 
     #[test]
     fn pack_lanes_round_trip_and_filter_conservatively() {
-        let line = ClipLine {
-            a: 0.6,
-            b: -0.8,
-            d: -0.1,
-        };
-        let c = clipped(Clip::two(
-            line,
-            ClipLine {
-                a: -1.0,
-                b: 0.0,
-                d: 0.5,
-            },
-        ));
+        let c = clipped(Clip::two(line(0.6, -0.8, -0.1), line(-1.0, 0.0, 0.5)));
         let pack = ClippedPack::from_fn(|l| (l % 3 == 0).then_some(c));
         for l in 0..ClippedPack::LANES {
             if l % 3 == 0 {
@@ -221,11 +210,7 @@ mod tests {
     #[test]
     fn locate_puts_the_clipped_away_side_out_of_reach() {
         let s = Splat::disc(Vec3::ZERO, Vec3::Z, 1.0).unwrap();
-        let c = clipped(Clip::one(ClipLine {
-            a: 1.0,
-            b: 0.0,
-            d: 0.0,
-        }));
+        let c = clipped(Clip::one(line(1.0, 0.0, 0.0)));
         let kept = c.locate(s.u_axis * -0.3);
         assert_eq!(kept, c.disc.locate(s.u_axis * -0.3));
         assert!(c.locate(s.u_axis * 0.3).radial2.is_infinite());

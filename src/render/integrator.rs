@@ -143,27 +143,14 @@ impl Rng {
 /// splats through a backend and the resolver, or an exact surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShadeHit {
-    /// Splat (or primitive) id, for the splat-id AOV.
-    pub id: u32,
-    /// Ray parameter.
-    pub t: f32,
-    /// Hit point.
-    pub point: Vec3,
-    /// Unit shading normal on the surface's own side (not flipped).
-    pub normal: Vec3,
-    /// Unit plane normal of the winning splat (or the exact surface's
-    /// normal), on its own side: the orientation secondary rays leaving
-    /// this hit compare neighbours against.
-    pub geometric_normal: Vec3,
-    /// True when the ray meets the front side.
-    pub front: bool,
+    /// Where and how the ray meets the surface (for an exact surface:
+    /// `normal`, `geometric_normal` its own, `shadow_origin` the point,
+    /// `blended` 1).
+    pub surface: SurfaceHit,
     /// Material index into the scene's materials.
     pub material: u16,
     /// Colour of the surface data (multiplies the material's albedo).
     pub color: Vec3,
-    /// Where shadow rays leave the surface (`SurfaceHit::shadow_origin`:
-    /// the front of the splats' window; `point` on an exact surface).
-    pub shadow_origin: Vec3,
 }
 
 /// What the integrator traces against (`docs/DESIGN.md`, "The backend contract": nothing above the backend
@@ -247,15 +234,9 @@ impl SplatSurfaces<'_> {
     fn shade_hit(&self, h: SurfaceHit) -> ShadeHit {
         let sc = self.scene;
         ShadeHit {
-            id: h.id,
-            t: h.t,
-            point: h.point,
-            normal: h.normal,
-            geometric_normal: h.geometric_normal,
-            front: h.front,
+            surface: h,
             material: sc.material_of[h.id as usize],
             color: sc.color_at(h.id, h.point),
-            shadow_origin: h.shadow_origin,
         }
     }
 
@@ -270,9 +251,9 @@ impl SplatSurfaces<'_> {
             t_min: self.eps_self(),
             t_max,
             from: Some(Departure {
-                id: from.id,
+                id: from.surface.id,
                 point: ray.origin,
-                normal: from.geometric_normal,
+                normal: from.surface.geometric_normal,
             }),
             pass: None,
         }
@@ -376,11 +357,11 @@ struct Scratch {
 /// light's distance from where the ray starts: the hit's shadow origin
 /// (`ShadeHit::shadow_origin`), aimed at the light itself.
 fn shadow_ray(from: &ShadeHit, dir: Vec3, dist: f32) -> (Ray, f32) {
-    let origin = from.shadow_origin;
-    if !dist.is_finite() || origin == from.point {
+    let origin = from.surface.shadow_origin;
+    if !dist.is_finite() || origin == from.surface.point {
         return (Ray { origin, dir }, dist);
     }
-    let to = from.point + dir * dist - origin;
+    let to = from.surface.point + dir * dist - origin;
     let d = to.length();
     (
         Ray {
@@ -437,7 +418,7 @@ impl Tracer<'_> {
     ) {
         let eps = self.surfaces.eps_self();
         let none = Ray {
-            origin: from.shadow_origin,
+            origin: from.surface.shadow_origin,
             dir: Vec3::Z,
         };
         let mut rays = [(none, 0.0f32); PACKET];
@@ -475,7 +456,7 @@ impl Tracer<'_> {
         spec: (f32, f32),
         s: &mut Scratch,
     ) -> (Vec3, [f32; 3]) {
-        let p = hit.point;
+        let p = hit.surface.point;
         let mut sum = Vec3::ZERO;
         // Weights of all, facing and lit light samples (`Frame::light_lit`).
         let mut tally = [0.0f32; 3];
@@ -569,7 +550,11 @@ impl Tracer<'_> {
             return self.scene.background;
         };
         let sc = self.scene;
-        let n = if hit.front { hit.normal } else { -hit.normal };
+        let n = if hit.surface.front {
+            hit.surface.normal
+        } else {
+            -hit.surface.normal
+        };
         let material = sc.materials[hit.material as usize];
         let deeper = depth + 1 < sc.options.max_depth;
         match material {
@@ -598,7 +583,7 @@ impl Tracer<'_> {
                 if !deeper {
                     return Vec3::ZERO;
                 }
-                let r = Ray::new(hit.point, reflect(ray.dir, n));
+                let r = Ray::new(hit.surface.point, reflect(ray.dir, n));
                 color * self.trace(&r, &hit, depth + 1, s, false)
             }
             Material::Glass { color, ior } => {
@@ -606,14 +591,14 @@ impl Tracer<'_> {
                     return Vec3::ZERO;
                 }
                 let cos_i = (-ray.dir.dot(n)).clamp(0.0, 1.0);
-                let eta = if hit.front { 1.0 / ior } else { ior };
+                let eta = if hit.surface.front { 1.0 / ior } else { ior };
                 let f = fresnel(cos_i, eta);
-                let refl = Ray::new(hit.point, reflect(ray.dir, n));
+                let refl = Ray::new(hit.surface.point, reflect(ray.dir, n));
                 let mut out = f * self.trace(&refl, &hit, depth + 1, s, false);
                 if f < 1.0 {
                     let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
                     let dir = eta * ray.dir + (eta * cos_i - k.max(0.0).sqrt()) * n;
-                    let refr = Ray::new(hit.point, dir);
+                    let refr = Ray::new(hit.surface.point, dir);
                     out += (1.0 - f) * color * self.trace(&refr, &hit, depth + 1, s, true);
                 }
                 out
@@ -702,9 +687,10 @@ impl Tracer<'_> {
                         s.rng = rngs[r * np + p];
                         s.rays.primary += 1;
                         if i == 0 {
-                            row.depth.push(hit.map_or(f32::INFINITY, |h| h.t));
-                            row.normal.push(hit.map_or(Vec3::ZERO, |h| h.normal));
-                            row.splat.push(hit.map_or(u32::MAX, |h| h.id));
+                            row.depth.push(hit.map_or(f32::INFINITY, |h| h.surface.t));
+                            row.normal
+                                .push(hit.map_or(Vec3::ZERO, |h| h.surface.normal));
+                            row.splat.push(hit.map_or(u32::MAX, |h| h.surface.id));
                             row.albedo.push(hit.map_or(Vec3::ZERO, |h| {
                                 scene.materials[h.material as usize].color() * h.color
                             }));

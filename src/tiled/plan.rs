@@ -46,33 +46,31 @@ impl Box3 {
 /// A node of the plan's k-d tree: a split, or a tile.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub(super) enum Node {
-    /// Points with `p[axis] < at` go to `below`, the rest to `above`.
-    Split {
-        axis: usize,
-        at: f64,
-        below: Box<Node>,
-        above: Box<Node>,
-    },
+    /// Two halves.
+    Split(Split),
     /// Tile number.
     Tile(usize),
+}
+
+/// A split of the plan's k-d tree: points with `p[axis] < at` go to
+/// `below`, the rest to `above`. (Serialised as the struct variant it
+/// once was: a plan written before reads the same.)
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub(super) struct Split {
+    axis: usize,
+    at: f64,
+    below: Box<Node>,
+    above: Box<Node>,
 }
 
 impl Node {
     /// The tile whose core holds `p` (every point of space has one).
     pub(super) fn locate(&self, p: DVec3) -> usize {
-        match self {
-            Node::Tile(t) => *t,
-            Node::Split {
-                axis,
-                at,
-                below,
-                above,
-            } => {
-                if p[*axis] < *at {
-                    below.locate(p)
-                } else {
-                    above.locate(p)
-                }
+        let mut node = self;
+        loop {
+            match node {
+                Node::Tile(t) => return *t,
+                Node::Split(s) => node = if p[s.axis] < s.at { &s.below } else { &s.above },
             }
         }
     }
@@ -80,17 +78,12 @@ impl Node {
     pub(super) fn near(&self, p: DVec3, halo: f64, out: &mut Vec<usize>) {
         match self {
             Node::Tile(t) => out.push(*t),
-            Node::Split {
-                axis,
-                at,
-                below,
-                above,
-            } => {
-                if p[*axis] < *at + halo {
-                    below.near(p, halo, out);
+            Node::Split(s) => {
+                if p[s.axis] < s.at + halo {
+                    s.below.near(p, halo, out);
                 }
-                if p[*axis] >= *at - halo {
-                    above.near(p, halo, out);
+                if p[s.axis] >= s.at - halo {
+                    s.above.near(p, halo, out);
                 }
             }
         }
@@ -316,12 +309,12 @@ pub(super) fn plan_tiles(s: &Survey, halo: f64, target: u64) -> (Node, Vec<Box3>
             .partition(|&i| s.sample[i as usize][axis] < at);
         let below = split(lo_b, below_idx, s, halo, target, estimate, tiles);
         let above = split(hi_b, above_idx, s, halo, target, estimate, tiles);
-        Node::Split {
+        Node::Split(Split {
             axis,
             at,
             below: Box::new(below),
             above: Box::new(above),
-        }
+        })
     }
     let idx: Vec<u32> = (0..s.sample.len() as u32).collect();
     let tree = split(s.bounds, idx, s, halo, target, &estimate, &mut tiles);

@@ -5,6 +5,7 @@
 use crate::accel::{CandidateHits, Ray};
 use crate::embree::{Device, TriangleScene};
 use crate::render::integrator::{ShadeHit, Surfaces};
+use crate::resolve::SurfaceHit;
 use crate::scene::{Scene, TruthSource};
 use crate::{Error, Result};
 use glam::Vec3;
@@ -103,6 +104,22 @@ impl Truth {
     }
 }
 
+/// The hit of an exact surface at `t` (`point`), shading normal `normal`,
+/// face normal `geometric`: nothing blended, shadow rays leave from the
+/// point itself.
+fn exact_hit(id: u32, t: f32, point: Vec3, normal: Vec3, geometric: Vec3, ray: &Ray) -> SurfaceHit {
+    SurfaceHit {
+        id,
+        t,
+        point,
+        normal,
+        geometric_normal: geometric,
+        front: geometric.dot(ray.dir) < 0.0,
+        blended: 1,
+        shadow_origin: point,
+    }
+}
+
 impl Surfaces for Truth {
     fn hit(
         &self,
@@ -118,15 +135,9 @@ impl Surfaces for Truth {
             let point = ray.at(t);
             let n = (point - c).normalize();
             return Some(ShadeHit {
-                id: i as u32,
-                t,
-                point,
-                normal: n,
-                geometric_normal: n,
-                front: n.dot(ray.dir) < 0.0,
+                surface: exact_hit(i as u32, t, point, n, n, ray),
                 material,
                 color: Vec3::ONE,
-                shadow_origin: point,
             });
         }
         let h = tri?;
@@ -146,15 +157,9 @@ impl Surfaces for Truth {
         let ns = if ns.dot(ng) < 0.0 { -ns } else { ns };
         let point = ray.at(h.t);
         Some(ShadeHit {
-            id: h.triangle,
-            t: h.t,
-            point,
-            normal: ns,
-            geometric_normal: ng,
-            front: ng.dot(ray.dir) < 0.0,
+            surface: exact_hit(h.triangle, h.t, point, ns, ng, ray),
             material: m.material,
             color: Vec3::ONE,
-            shadow_origin: point,
         })
     }
 

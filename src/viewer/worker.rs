@@ -406,6 +406,7 @@ impl Worker {
             let mut h2 = CandidateHits::new(self.scene.options.scale.xi);
             let hit = surf
                 .surface(Query::new(ray, 0.0, f32::INFINITY), &mut h2)
+                .map(|h| h.surface)
                 .map(|h| json!({"splat": h.id, "t": h.t, "normal": h.normal.to_array()}));
             out.push(json!({"backend": name, "hit": hit, "candidates": candidates}));
         }

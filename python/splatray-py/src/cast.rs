@@ -150,7 +150,7 @@ pub fn cast(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: &mut 
                     let (tt, id, n) = match f {
                         None => (f32::INFINITY, u32::MAX, [0.0; 3]),
                         Some(h) => {
-                            let l = lens[i];
+                            let (l, h) = (lens[i], &h.surface);
                             (
                                 if l == 1.0 { h.t } else { h.t / l },
                                 h.id,
@@ -257,7 +257,7 @@ impl SplatScene {
                                 break;
                             }
                             let next = Ray {
-                                origin: h.point,
+                                origin: h.surface.point,
                                 dir: ray.dir,
                             };
                             at = s.hit(&next, Some(&h), hits);

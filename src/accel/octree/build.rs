@@ -168,33 +168,24 @@ fn stage<P: Primitive>(
 /// Steps 4-5 of a staged part in the layout chosen: the tree, and its
 /// count of non-empty leaves.
 fn finish<P: Primitive>(s: Staged<P>, shared: bool, isa: crate::simd::Isa) -> (Tree<P>, usize) {
-    let Staged {
-        cube,
-        root,
-        order,
-        leaves,
-        sorted,
-        chunks,
-        leaf_refs,
-        leaf_packs,
-    } = s;
-    let references: usize = leaf_refs.iter().map(|&c| c as usize).sum();
+    let cube = &s.cube;
+    let references: usize = s.leaf_refs.iter().map(|&c| c as usize).sum();
     assert!(references < INTERIOR as usize, "too many references");
     let (packs, pack_ids, entries, leaf_entries) = if shared {
-        let (packs, pack_ids) = morton_packs(&sorted, &order);
-        let (entries, leaf_entries) = leaf_entries::<P>(&chunks, &leaf_refs);
+        let (packs, pack_ids) = morton_packs(&s.sorted, &s.order);
+        let (entries, leaf_entries) = leaf_entries::<P>(&s.chunks, &s.leaf_refs);
         (packs, pack_ids, entries, leaf_entries)
     } else {
-        let (packs, pack_ids) = fill_packs(&sorted, &order, &chunks, &leaf_packs);
+        let (packs, pack_ids) = fill_packs(&s.sorted, &s.order, &s.chunks, &s.leaf_packs);
         // A leaf's packs are contiguous: no entries.
-        (packs, pack_ids, Vec::new(), leaf_packs)
+        (packs, pack_ids, Vec::new(), s.leaf_packs)
     };
-    let mut leaf_boxes = content_boxes(&sorted, &chunks, leaves, cube.pad);
-    drop(sorted);
-    drop(chunks);
-    clip_to_cells(&root, cube.lo, cube.size, cube.pad, &mut leaf_boxes);
+    let mut leaf_boxes = content_boxes(&s.sorted, &s.chunks, s.leaves, cube.pad);
+    drop(s.sorted);
+    drop(s.chunks);
+    clip_to_cells(&s.root, cube.lo, cube.size, cube.pad, &mut leaf_boxes);
     let leaf_start = prefix_sums(&leaf_entries);
-    let (nodes, boxes) = flatten(root, &leaf_start, &leaf_entries, &leaf_boxes);
+    let (nodes, boxes) = flatten(s.root, &leaf_start, &leaf_entries, &leaf_boxes);
     let nonempty = nodes
         .iter()
         .filter(|nd| nd.meta & INTERIOR == 0 && nd.meta > 0)

@@ -234,6 +234,29 @@ fn cutoffs<P: Primitive, V: Visitor<P>>(vis: &[Option<V>; PACKET]) -> Wide {
     }))
 }
 
+/// After a child's visit stopped the rays `s` (of a packet or a spread):
+/// they join `stopped` and leave `active`, and, rays being left, the
+/// cutoffs are read anew (only a visit moves a cutoff). True when no ray
+/// is left.
+#[inline(always)]
+fn settle<P: Primitive, V: Visitor<P>>(
+    s: Mask,
+    stopped: &mut Mask,
+    active: &mut Mask,
+    cut: &mut Wide,
+    vis: &[Option<V>; PACKET],
+) -> bool {
+    *stopped |= s;
+    *active &= !s;
+    if *active == 0 {
+        return true;
+    }
+    if !V::FIXED_CUTOFF {
+        *cut = cutoffs(vis);
+    }
+    false
+}
+
 impl<P: Primitive> Tree<P> {
     /// The rays of `active` that meet the node's content box `[lo, hi]`
     /// within `[t_min, cutoff]`: [`Tree::visit`]'s test, four lanes at a
@@ -446,14 +469,8 @@ impl<P: Primitive> Tree<P> {
             }
             let child = node.first as usize + (mask & ((1 << oct) - 1)).count_ones() as usize;
             let s = self.visit_packet(child, child_lo(lo, half, oct), half, l, vis, m, cut);
-            stopped |= s;
-            active &= !s;
-            if active == 0 {
+            if settle(s, &mut stopped, &mut active, &mut cut, vis) {
                 break;
-            }
-            // Only a visit moves a cutoff.
-            if !V::FIXED_CUTOFF {
-                cut = cutoffs(vis);
             }
         }
         stopped
@@ -556,14 +573,10 @@ impl<P: Primitive> Tree<P> {
                 cut,
                 far,
             );
-            stopped |= s;
-            active &= !s;
-            if active == 0 {
+            if settle(s, &mut stopped, &mut active, &mut cut, vis) {
                 break;
             }
-            // Only a visit moves a cutoff.
             if !V::FIXED_CUTOFF {
-                cut = cutoffs(vis);
                 far = reach(&cut, active);
             }
         }
