@@ -47,8 +47,7 @@ mod report;
 mod spill;
 mod tile;
 
-pub use plan::Box3;
-pub use report::{TileSummary, TiledReport, TiledSeconds};
+pub use report::{Box3, TileSummary, TiledReport, TiledSeconds};
 
 use crate::io::{IoError, IoErrorKind};
 use crate::progress::Progress;
@@ -248,7 +247,8 @@ pub fn generate_tiled(
         // A spill file cut short or gone (its tile unfinished): spill again
         // when this stage may.
         .filter(|c: &Vec<(u64, u64)>| {
-            !matches!(opts.stage, Stage::All | Stage::Plan) || spills_whole(&plan, work, c)
+            !matches!(opts.stage, Stage::All | Stage::Plan)
+                || spills_whole(&plan, work, c, |t| tile::finished_tile(work, t).is_some())
         });
     let counts: Vec<(u64, u64)> = match spilled {
         Some(c) => c,

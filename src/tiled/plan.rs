@@ -1,8 +1,7 @@
 //! The plan stage: the survey of every input (count, bounds, sample), the
 //! k-d split into tiles with halos, and the spill it foresees.
 
-use super::report::TiledReport;
-use super::spill::record_bytes;
+use super::report::{Box3, TiledReport};
 use super::{HALO_EPS, TiledOptions, data_err, io_err};
 use crate::io::{IoError, stream_points};
 use crate::progress::{Progress, notify};
@@ -18,30 +17,6 @@ pub(super) const SAMPLE: usize = 1 << 20;
 
 /// The most tiles (each holds an open spill file while spilling).
 pub(super) const MAX_TILES: usize = 4096;
-
-/// An axis-aligned box in the cloud's coordinates.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Box3 {
-    /// Lower corner.
-    pub lo: [f64; 3],
-    /// Upper corner.
-    pub hi: [f64; 3],
-}
-
-impl Box3 {
-    pub(super) fn grown(&self, by: f64) -> Box3 {
-        Box3 {
-            lo: self.lo.map(|v| v - by),
-            hi: self.hi.map(|v| v + by),
-        }
-    }
-    pub(super) fn holds(&self, p: DVec3) -> bool {
-        (0..3).all(|a| p[a] >= self.lo[a] && p[a] <= self.hi[a])
-    }
-    pub(super) fn centre(&self) -> DVec3 {
-        (DVec3::from(self.lo) + DVec3::from(self.hi)) * 0.5
-    }
-}
 
 /// A node of the plan's k-d tree: a split, or a tile.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -575,6 +550,15 @@ pub(super) fn clear_work(work: &Path) -> Result<(), IoError> {
         }
     }
     Ok(())
+}
+
+/// The spill record of one point: position offset from the tile's centre
+/// (3 × f32), then the normal and the colour (3 × f32 each) when the
+/// cloud has them, then its scan (u16) when there are several.
+pub(super) fn record_bytes(survey: &Survey) -> usize {
+    12 + 12 * usize::from(survey.normals)
+        + 12 * usize::from(survey.colors)
+        + 2 * usize::from(!survey.scans.is_empty())
 }
 
 #[cfg(test)]

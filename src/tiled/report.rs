@@ -1,8 +1,31 @@
 //! What tiled generation reports: per tile, and for the whole run.
 
-use super::plan::Box3;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
+
+/// An axis-aligned box in the cloud's coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Box3 {
+    /// Lower corner.
+    pub lo: [f64; 3],
+    /// Upper corner.
+    pub hi: [f64; 3],
+}
+
+impl Box3 {
+    pub(super) fn grown(&self, by: f64) -> Box3 {
+        Box3 {
+            lo: self.lo.map(|v| v - by),
+            hi: self.hi.map(|v| v + by),
+        }
+    }
+    pub(super) fn holds(&self, p: DVec3) -> bool {
+        (0..3).all(|a| p[a] >= self.lo[a] && p[a] <= self.hi[a])
+    }
+    pub(super) fn centre(&self) -> DVec3 {
+        (DVec3::from(self.lo) + DVec3::from(self.hi)) * 0.5
+    }
+}
 
 /// One tile's figures.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]

@@ -1,7 +1,8 @@
 //! The spill stage: each point written to the file of every tile whose
 //! core or halo holds it, and a tile's file read back as a cloud.
 
-use super::plan::{Box3, Plan, Survey};
+use super::plan::{Plan, record_bytes};
+use super::report::Box3;
 use super::{BYTES_PER_POINT, io_err};
 use crate::io::{IoError, IoErrorKind, stream_points};
 use crate::progress::{Progress, notify};
@@ -9,15 +10,6 @@ use crate::splat::PointCloud;
 use glam::{DVec3, Vec3};
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
-
-/// The spill record of one point: position offset from the tile's centre
-/// (3 × f32), then the normal and the colour (3 × f32 each) when the
-/// cloud has them, then its scan (u16) when there are several.
-pub(super) fn record_bytes(survey: &Survey) -> usize {
-    12 + 12 * usize::from(survey.normals)
-        + 12 * usize::from(survey.colors)
-        + 2 * usize::from(!survey.scans.is_empty())
-}
 
 /// Writes every tile's spill file from `inputs` and returns each tile's
 /// (points, core points). On any failure the spill files are removed (a
@@ -40,14 +32,18 @@ pub(super) fn spill(
     r
 }
 
-/// Whether every unfinished tile's spill file holds the records `counts`
+/// Whether every unfinished tile's (`finished` says which are) spill file holds the records `counts`
 /// says the spill wrote (files are synced before `spilled.json` is written,
 /// so only something outside the run makes this false).
-pub(super) fn spills_whole(plan: &Plan, work: &Path, counts: &[(u64, u64)]) -> bool {
+pub(super) fn spills_whole(
+    plan: &Plan,
+    work: &Path,
+    counts: &[(u64, u64)],
+    finished: impl Fn(usize) -> bool,
+) -> bool {
     let rb = record_bytes(&plan.survey) as u64;
     counts.iter().enumerate().all(|(t, c)| {
-        super::tile::finished_tile(work, t).is_some()
-            || std::fs::metadata(spill_path(work, t)).is_ok_and(|m| m.len() == c.0 * rb)
+        finished(t) || std::fs::metadata(spill_path(work, t)).is_ok_and(|m| m.len() == c.0 * rb)
     })
 }
 
