@@ -59,6 +59,14 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// The stderr of a run that must have failed in one line.
+fn failed_in_one_line(o: &Output, why: &str) -> String {
+    let err = stderr(o);
+    assert!(!o.status.success(), "{why}: {err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    err
+}
+
 /// Every file under `dir`, recursively.
 fn files(dir: &Path) -> Vec<PathBuf> {
     let mut out = Vec::new();
@@ -102,9 +110,7 @@ fn a_full_disk_while_spilling_names_the_spill_file_and_resumes() {
     let out = dir.join("out.ply");
     let work = dir.join(".out.ply.tiles");
     let o = run(&input, &out, Some(100_000), &[]);
-    let err = stderr(&o);
-    assert!(!o.status.success(), "the limit did not stop the run: {err}");
-    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    let err = failed_in_one_line(&o, "the limit did not stop the run");
     assert!(
         err.contains(&*work.to_string_lossy())
             && err.contains("spill-")
@@ -133,9 +139,7 @@ fn a_full_disk_while_spilling_names_the_spill_file_and_resumes() {
     };
     touch(stamp + std::time::Duration::from_secs(60));
     let o = run(&input, &out, None, &["--resume"]);
-    let err = stderr(&o);
-    assert!(!o.status.success(), "{err}");
-    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    let err = failed_in_one_line(&o, "refused");
     assert!(
         err.contains("cannot resume") && err.contains("changed since the plan"),
         "{err}"
@@ -173,9 +177,7 @@ fn a_full_disk_while_writing_the_output_names_it_and_resumes() {
     let out = dir.join("out.ply");
     let work = dir.join(".out.ply.tiles");
     let o = run(&input, &out, Some(400_000), &[]);
-    let err = stderr(&o);
-    assert!(!o.status.success(), "the limit did not stop the run: {err}");
-    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    let err = failed_in_one_line(&o, "the limit did not stop the run");
     assert!(
         err.contains(&format!("{}: File too large", out.display())),
         "{err}"
@@ -190,9 +192,7 @@ fn a_full_disk_while_writing_the_output_names_it_and_resumes() {
 
     // Other options than the plan's: refused in one line.
     let o = run(&input, &out, None, &["--resume", "--epsilon", "0.02"]);
-    let err = stderr(&o);
-    assert!(!o.status.success(), "{err}");
-    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    let err = failed_in_one_line(&o, "refused");
     assert!(
         err.contains("cannot resume: the splat options differ"),
         "{err}"
