@@ -440,9 +440,8 @@ impl Image {
 
     /// Writes one AOV as `render --aov` does (EXR).
     fn save_aov(&self, py: Python<'_>, name: &str, path: PathBuf) -> PyResult<()> {
-        let a: Aov = name
-            .parse()
-            .map_err(|e: splatray::Error| PyValueError::new_err(e.to_string()))?;
+        let a = splatray::names::parse::<Aov>(name)
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
         py.detach(|| splatray::render::output::write_aov(&self.frame, a, &path))
             .map_err(err)
     }
