@@ -4,7 +4,7 @@
 use super::{ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Octree, Tree, child_lo, lanes};
 use crate::accel::{Candidate, CandidateHits, Skip};
 use crate::geometry::Ray;
-use crate::primitive::{Pack, PackRay, Primitive};
+use crate::primitive::{Hit, Pack, PackRay, Primitive};
 use crate::simd::Isa;
 use glam::{Vec3, Vec3A, Vec4};
 
@@ -431,14 +431,40 @@ pub(super) trait Visitor<P: Primitive> {
 /// Packs filtered per call of [`Pack::masks`] (a leaf holds a few).
 const CHUNK: usize = 16;
 
-/// `intersect`: gathers the candidate window, leaving out what `skip`
-/// skips.
-pub(super) struct Gather<'a, S> {
+/// What both queries test a lane against: the ray (and its lanes for the
+/// filter), its span `[t_min, t_max]` and the rule that skips hits.
+struct Query<'a, S> {
     ray: &'a Ray,
     lanes: PackRay,
     t_min: f32,
     t_max: f32,
     skip: S,
+}
+
+impl<'a, S: Skip> Query<'a, S> {
+    fn new(ray: &'a Ray, t_min: f32, t_max: f32, skip: S) -> Self {
+        Query {
+            ray,
+            lanes: PackRay::new(ray),
+            t_min,
+            t_max,
+            skip,
+        }
+    }
+
+    /// The exact test of `prim` (id `id`) in `[t_min, cut]`, its hit kept
+    /// unless `skip` skips it.
+    #[inline(always)]
+    fn hit<P: Primitive>(&self, prim: &P, id: u32, cut: f32) -> Option<Hit> {
+        prim.intersect(self.ray, self.t_min, cut)
+            .filter(|h| !self.skip.skips(self.ray.dir, id, prim, h))
+    }
+}
+
+/// `intersect`: gathers the candidate window, leaving out what `skip`
+/// skips.
+pub(super) struct Gather<'a, S> {
+    query: Query<'a, S>,
     hits: &'a mut CandidateHits,
     /// `t_max` or the window's far end, whichever is nearer: kept up to
     /// date as candidates are offered.
@@ -454,12 +480,8 @@ impl<'a, S: Skip> Gather<'a, S> {
         hits: &'a mut CandidateHits,
     ) -> Self {
         Gather {
-            ray,
-            lanes: PackRay::new(ray),
-            t_min,
-            t_max,
+            query: Query::new(ray, t_min, t_max, skip),
             cut: t_max.min(hits.far()),
-            skip,
             hits,
         }
     }
@@ -473,46 +495,32 @@ impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, S> {
 
     #[inline(always)]
     fn filter(&self) -> (PackRay, f32, f32) {
-        (self.lanes, self.t_min, self.cut)
+        (self.query.lanes, self.query.t_min, self.cut)
     }
 
     #[inline(always)]
     fn lane(&mut self, prim: P, id: u32) -> bool {
         // The shared routine decides, with the window's current end, and
         // the shared rule skips.
-        if let Some(h) = prim.intersect(self.ray, self.t_min, self.cut)
-            && !self.skip.skips(self.ray.dir, id, &prim, &h)
-        {
+        if let Some(h) = self.query.hit(&prim, id, self.cut) {
             let c = Candidate {
                 id,
                 t: h.t,
                 u: h.u,
                 v: h.v,
             };
-            self.cut = self.hits.offer(c).min(self.t_max);
+            self.cut = self.hits.offer(c).min(self.query.t_max);
         }
         false
     }
 }
 
 /// `occluded`: stops at the first hit that `skip` does not skip.
-pub(super) struct AnyHit<'a, S> {
-    ray: &'a Ray,
-    lanes: PackRay,
-    t_min: f32,
-    t_max: f32,
-    skip: S,
-}
+pub(super) struct AnyHit<'a, S>(Query<'a, S>);
 
 impl<'a, S: Skip> AnyHit<'a, S> {
     pub(super) fn new(ray: &'a Ray, t_min: f32, t_max: f32, skip: S) -> Self {
-        AnyHit {
-            ray,
-            lanes: PackRay::new(ray),
-            t_min,
-            t_max,
-            skip,
-        }
+        AnyHit(Query::new(ray, t_min, t_max, skip))
     }
 }
 
@@ -521,17 +529,16 @@ impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, S> {
 
     #[inline]
     fn cutoff(&self) -> f32 {
-        self.t_max
+        self.0.t_max
     }
 
     #[inline(always)]
     fn filter(&self) -> (PackRay, f32, f32) {
-        (self.lanes, self.t_min, self.t_max)
+        (self.0.lanes, self.0.t_min, self.0.t_max)
     }
 
     #[inline(always)]
     fn lane(&mut self, prim: P, id: u32) -> bool {
-        prim.intersect(self.ray, self.t_min, self.t_max)
-            .is_some_and(|h| !self.skip.skips(self.ray.dir, id, &prim, &h))
+        self.0.hit(&prim, id, self.0.t_max).is_some()
     }
 }
