@@ -81,7 +81,7 @@ fn tiles_match_the_whole_cloud_and_their_seams_hold() {
         .collect();
     let eps = report.epsilon as f32;
     let seam_width = 2.0 * ureport.mean_radius;
-    let near_seam = |p: DVec3| report.seams_within(p, seam_width);
+    let near_seam = |p: DVec3| report.layout.seams_within(p, seam_width);
     let (seam, rest): (Vec<DVec3>, Vec<DVec3>) = world.iter().partition(|p| near_seam(**p));
     let share = |pts: &[DVec3], s: &[Splat], origin: DVec3| {
         count_on_splats(&local(pts, origin), s, eps) as f64 / pts.len() as f64

@@ -47,7 +47,7 @@ mod report;
 mod spill;
 mod tile;
 
-pub use report::{Box3, TileSummary, TiledReport, TiledSeconds};
+pub use report::{Box3, TileLayout, TileSummary, TiledReport, TiledSeconds};
 
 use crate::io::{IoError, IoErrorKind};
 use crate::progress::Progress;
@@ -247,8 +247,8 @@ pub fn generate_tiled(
     report.bbox_diagonal = diag;
     report.tile_points = plan.tile_points;
     report.origin = plan.origin;
-    report.cores.clone_from(&plan.tiles);
-    report.bounds = Some(plan.survey.bounds);
+    report.layout.cores.clone_from(&plan.tiles);
+    report.layout.bounds = Some(plan.survey.bounds);
     let counts_file = work.join("spilled.json");
     let spilled: Option<Vec<(u64, u64)>> = std::fs::read_to_string(&counts_file)
         .ok()
