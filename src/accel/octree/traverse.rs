@@ -394,8 +394,8 @@ pub(super) trait Visitor<P: Primitive> {
     const FIXED_CUTOFF: bool = false;
     /// Cells entered beyond this are skipped.
     fn cutoff(&self) -> f32;
-    /// The ray's lanes and the span `[t_min, t_max]` the filter tests now.
-    fn filter(&self) -> (PackRay, f32, f32);
+    /// The ray's lanes with the span `[t_min, t_max]` the filter tests now.
+    fn filter(&self) -> PackRay;
     /// Decides one lane the filter passed, primitive `prim` with id `id`,
     /// with the exact test; true stops the traversal.
     fn lane(&mut self, prim: P, id: u32) -> bool;
@@ -410,8 +410,8 @@ pub(super) trait Visitor<P: Primitive> {
         let l = super::lanes::<P>();
         for (c, chunk) in packs.chunks(CHUNK).enumerate() {
             let mut masks = [0u32; CHUNK];
-            let (ray, t_min, t_max) = self.filter();
-            <P::Pack as Pack<P>>::masks(chunk, &ray, t_min, t_max, isa, &mut masks);
+            let ray = self.filter();
+            <P::Pack as Pack<P>>::masks(chunk, &ray, isa, &mut masks);
             for (j, pack) in chunk.iter().enumerate() {
                 let mut mask = masks[j] & lanes;
                 let ids = &ids[(c * CHUNK + j) * l..];
@@ -431,13 +431,11 @@ pub(super) trait Visitor<P: Primitive> {
 /// Packs filtered per call of [`Pack::masks`] (a leaf holds a few).
 const CHUNK: usize = 16;
 
-/// What both queries test a lane against: the ray (and its lanes for the
-/// filter), its span `[t_min, t_max]` and the rule that skips hits.
+/// What both queries test a lane against: the ray, its lanes for the
+/// filter with its span `[t_min, t_max]`, and the rule that skips hits.
 struct Query<'a, S> {
     ray: &'a Ray,
     lanes: PackRay,
-    t_min: f32,
-    t_max: f32,
     skip: S,
 }
 
@@ -445,9 +443,7 @@ impl<'a, S: Skip> Query<'a, S> {
     fn new(ray: &'a Ray, t_min: f32, t_max: f32, skip: S) -> Self {
         Query {
             ray,
-            lanes: PackRay::new(ray),
-            t_min,
-            t_max,
+            lanes: PackRay::new(ray, t_min, t_max),
             skip,
         }
     }
@@ -456,7 +452,7 @@ impl<'a, S: Skip> Query<'a, S> {
     /// unless `skip` skips it.
     #[inline(always)]
     fn hit<P: Primitive>(&self, prim: &P, id: u32, cut: f32) -> Option<Hit> {
-        prim.intersect(self.ray, self.t_min, cut)
+        prim.intersect(self.ray, self.lanes.t_min, cut)
             .filter(|h| !self.skip.skips(self.ray.dir, id, prim, h))
     }
 }
@@ -494,8 +490,11 @@ impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, S> {
     }
 
     #[inline(always)]
-    fn filter(&self) -> (PackRay, f32, f32) {
-        (self.query.lanes, self.query.t_min, self.cut)
+    fn filter(&self) -> PackRay {
+        PackRay {
+            t_max: self.cut,
+            ..self.query.lanes
+        }
     }
 
     #[inline(always)]
@@ -509,7 +508,7 @@ impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, S> {
                 u: h.u,
                 v: h.v,
             };
-            self.cut = self.hits.offer(c).min(self.query.t_max);
+            self.cut = self.hits.offer(c).min(self.query.lanes.t_max);
         }
         false
     }
@@ -529,16 +528,16 @@ impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, S> {
 
     #[inline]
     fn cutoff(&self) -> f32 {
-        self.0.t_max
+        self.0.lanes.t_max
     }
 
     #[inline(always)]
-    fn filter(&self) -> (PackRay, f32, f32) {
-        (self.0.lanes, self.0.t_min, self.0.t_max)
+    fn filter(&self) -> PackRay {
+        self.0.lanes
     }
 
     #[inline(always)]
     fn lane(&mut self, prim: P, id: u32) -> bool {
-        self.0.hit(&prim, id, self.0.t_max).is_some()
+        self.0.hit(&prim, id, self.0.lanes.t_max).is_some()
     }
 }
