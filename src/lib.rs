@@ -11,6 +11,7 @@ pub mod freespace;
 pub mod geometry;
 pub mod io;
 pub mod memory;
+pub mod names;
 pub mod primitive;
 pub mod progress;
 pub mod render;

@@ -2,7 +2,7 @@
 
 mod cli;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use splatray::Result;
 use std::process::ExitCode;
 
@@ -24,19 +24,15 @@ enum Command {
     Info,
     /// Render a scene (default: the bundled scenes/bunny.toml), or a point
     /// cloud with a scene made for it, to an image.
-    #[command(allow_negative_numbers = true)]
     Render(cli::render::RenderArgs),
     /// Render a scene with every registered backend in one run and report
     /// each one's agreement with the first ray for ray, image for image,
     /// and their speeds and memory.
-    #[command(allow_negative_numbers = true)]
     Compare(cli::compare::CompareArgs),
     /// Sample points from a triangle mesh (PLY): uniformly by area, or as a
     /// range scanner sees it from a viewpoint (--scan-from).
-    #[command(allow_negative_numbers = true)]
     Sample(cli::sample_cmd::SampleArgs),
     /// Turn a point cloud into splats with Phong normal fields.
-    #[command(allow_negative_numbers = true)]
     Splat(cli::splat_cmd::SplatArgs),
     /// Write splats as a Gaussian splat file (2DGS or 3DGS layout) that
     /// Gaussian renderers and trainers read.
@@ -45,21 +41,17 @@ enum Command {
     /// generation, build and render seconds of every backend and the errors
     /// against the exact surface; write a CSV and a time-against-error plot
     /// (report §4.4, fig. 16).
-    #[command(allow_negative_numbers = true)]
     Sweep(cli::sweep::SweepArgs),
     /// Check splats against the scan itself: hold out some points, splat the
     /// rest, and cast a ray from the scanner to every held-out point; report
     /// how many meet the splats at the point, early, late or not at all.
-    #[command(allow_negative_numbers = true)]
     ScanCheck(cli::scan_check::ScanCheckArgs),
     /// Make a synthetic airborne survey: rolling terrain with buildings,
     /// scanned from above into georeferenced LAZ tiles (DIR/tiles/), with
     /// the exact surface as DIR/truth.ply; for scale runs.
-    #[command(allow_negative_numbers = true)]
     Terrain(TerrainArgs),
     /// Open a scene or point cloud in the browser, ray traced progressively
     /// as you orbit, pan and zoom (a local web server; prints its URL).
-    #[command(allow_negative_numbers = true)]
     View(cli::viewer::ViewerArgs),
     /// Join the bands of one image (`render --band I/N`, rendered apart)
     /// top to bottom into the image a whole render writes.
@@ -226,7 +218,12 @@ fn catch_file_size_signal() {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    // Every command reads a word starting with `-` and a digit as a
+    // number (`--origin -3,0,0`, `--scan-from -1,2,3`), not as a flag.
+    let matches = Cli::command()
+        .mut_subcommands(|c| c.allow_negative_numbers(true))
+        .get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     catch_file_size_signal();
     // The environment is read once, here: an unusable SPLATRAY_SIMD or
     // SPLATRAY_PACKETS is refused before any work.

@@ -4,8 +4,8 @@
 
 use crate::accel::{Candidate, CandidateHits};
 use crate::geometry::Ray;
+use crate::names::Named;
 use crate::splat::{NormalField, Splat};
-use crate::{Error, Result};
 use glam::Vec3;
 
 /// How the shading normal is formed (report §4).
@@ -21,18 +21,10 @@ pub enum ShadingMode {
     Phong,
 }
 
-impl std::str::FromStr for ShadingMode {
-    type Err = Error;
-    fn from_str(s: &str) -> Result<Self> {
-        match s {
-            "flat" => Ok(ShadingMode::Flat),
-            "blended" => Ok(ShadingMode::Blended),
-            "phong" => Ok(ShadingMode::Phong),
-            _ => Err(Error::invalid(format!(
-                "unknown shading mode '{s}' (expected flat, blended or phong)"
-            ))),
-        }
-    }
+impl Named for ShadingMode {
+    const WHAT: &'static str = "shading mode";
+    const ALL: &'static [Self] = &[Self::Flat, Self::Blended, Self::Phong];
+    const NAMES: &'static [&'static str] = &["flat", "blended", "phong"];
 }
 
 /// The resolved surface hit: the full description, built only for the

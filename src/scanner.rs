@@ -7,6 +7,7 @@
 use crate::embree::{Device, TriangleScene};
 use crate::geometry::Ray;
 use crate::io::{Mesh, grid_misses};
+use crate::names::Named;
 use crate::rng::SplitMix64;
 use crate::splat::PointCloud;
 use crate::{Error, Result};
@@ -27,17 +28,10 @@ pub enum ScanPattern {
     Lines,
 }
 
-impl std::str::FromStr for ScanPattern {
-    type Err = Error;
-    fn from_str(s: &str) -> Result<Self> {
-        match s {
-            "raster" => Ok(ScanPattern::Raster),
-            "lines" => Ok(ScanPattern::Lines),
-            _ => Err(Error::invalid(format!(
-                "unknown scan pattern '{s}' (expected raster or lines)"
-            ))),
-        }
-    }
+impl Named for ScanPattern {
+    const WHAT: &'static str = "scan pattern";
+    const ALL: &'static [Self] = &[Self::Raster, Self::Lines];
+    const NAMES: &'static [&'static str] = &["raster", "lines"];
 }
 
 /// Range noise: absolute, or relative to the scan's own point spacing.

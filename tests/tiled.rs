@@ -10,7 +10,7 @@ use glam::{DVec3, Vec3};
 use splatray::io::{read_mesh, read_splats, sample_mesh, write_points};
 use splatray::scene::{build_scene, parse_scene_str};
 use splatray::splat::{Splat, SplatParams, count_on_splats, generate};
-use splatray::tiled::{Stage, TiledOptions, generate_tiled};
+use splatray::tiled::{Stage, TiledOptions, Tiling, generate_tiled};
 use splatray::validate::compare::render_truth;
 use splatray::validate::truth::Truth;
 use std::path::{Path, PathBuf};
@@ -30,12 +30,14 @@ fn cloud(dir: &Path) -> PathBuf {
 fn options(work: PathBuf) -> TiledOptions {
     TiledOptions {
         max_memory: 8_000_000_000,
-        tile_points: Some(30_000),
         work,
         viewpoint: None,
         no_viewpoint: false,
-        stage: Stage::All,
-        resume: false,
+        tiling: Tiling {
+            tile_points: Some(30_000),
+            stage: Stage::All,
+            resume: false,
+        },
     }
 }
 
@@ -79,7 +81,7 @@ fn tiles_match_the_whole_cloud_and_their_seams_hold() {
         .collect();
     let eps = report.epsilon as f32;
     let seam_width = 2.0 * ureport.mean_radius;
-    let near_seam = |p: DVec3| report.seams_within(p, seam_width);
+    let near_seam = |p: DVec3| report.layout.seams_within(p, seam_width);
     let (seam, rest): (Vec<DVec3>, Vec<DVec3>) = world.iter().partition(|p| near_seam(**p));
     let share = |pts: &[DVec3], s: &[Splat], origin: DVec3| {
         count_on_splats(&local(pts, origin), s, eps) as f64 / pts.len() as f64
@@ -394,10 +396,8 @@ fn small_tiles_foresee_their_spill_warn_and_agree_in_orientation() {
     let input = cloud(&dir);
     let params = SplatParams::default();
     let run = |tile_points: u64, name: &str| {
-        let opts = TiledOptions {
-            tile_points: Some(tile_points),
-            ..options(dir.join(format!(".{name}.tiles")))
-        };
+        let mut opts = options(dir.join(format!(".{name}.tiles")));
+        opts.tiling.tile_points = Some(tile_points);
         generate_tiled(
             std::slice::from_ref(&input),
             &params,

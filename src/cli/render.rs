@@ -40,7 +40,7 @@ pub struct RenderArgs {
     pub report: Option<PathBuf>,
     /// Also write these AOVs as EXR beside the image (comma separated:
     /// depth,normal,splat,albedo).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', value_parser = splatray::names::parse::<Aov>)]
     pub aov: Vec<Aov>,
     /// Render band I of N (I from 0): rows I·H/N to (I+1)·H/N of the image,
     /// the same pixels a whole render gives them; `splatray stitch` joins

@@ -48,7 +48,7 @@ pub struct SampleArgs {
     pub scan_at: Option<Vec<f64>>,
     /// raster (a camera's pixel grid) or lines (equal angular steps, the
     /// lines `W/H` times farther apart than the samples along them).
-    #[arg(long, default_value = "raster", requires = "scan_from")]
+    #[arg(long, default_value = "raster", requires = "scan_from", value_parser = splatray::names::parse::<ScanPattern>)]
     pub pattern: ScanPattern,
     /// Rays per row and rows, as W,H.
     #[arg(

@@ -5,7 +5,7 @@
 use super::common::SplatOptions;
 use super::progress::ProgressLine;
 use splatray::io::Format;
-use splatray::tiled::{Stage, TiledReport};
+use splatray::tiled::{Stage, TiledReport, Tiling};
 use splatray::workflow::splat::{
     GaussiansOutcome, PointsOutcome, SplatOutcome, SplatRequest, TiledOutcome, splat,
 };
@@ -111,9 +111,11 @@ impl SplatArgs {
             holdout_full: self.holdout_full,
             min_opacity: self.min_opacity,
             max_memory,
-            tile_points: self.tile_points,
-            stage,
-            resume: self.resume,
+            tiling: Tiling {
+                tile_points: self.tile_points,
+                stage,
+                resume: self.resume,
+            },
             ..SplatRequest::new(self.inputs.clone(), self.output.clone())
         })
     }

@@ -4,8 +4,9 @@
 
 use super::progress::ProgressLine;
 use super::view::default_scene;
+use splatray::names::Named;
 use splatray::render::output::check_output_path;
-use splatray::validate::sweep::{MODES, SweepRow, csv_text, mode_name, pareto};
+use splatray::validate::sweep::{MODES, SweepRow, csv_text, pareto};
 use splatray::workflow::sweep::SweepRequest;
 use splatray::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -76,7 +77,7 @@ pub fn run(args: &SweepArgs) -> Result<()> {
         args.steps,
         args.width,
         args.height,
-        MODES.map(mode_name).join(", ")
+        MODES.map(Named::name).join(", ")
     );
     let line = ProgressLine::new();
     let progress = |stage: &str, f: f64| line.update(stage, f);
@@ -168,7 +169,7 @@ fn summary_modes(rows: &[SweepRow]) {
                 .collect();
             println!(
                 "  {:<7} normal deg mean {:.3} -> {:.3}, PSNR {} -> {} dB, {}",
-                mode_name(mode),
+                mode.name(),
                 a.reference().errors.normal_deg_mean,
                 b.reference().errors.normal_deg_mean,
                 p(a),
@@ -187,7 +188,7 @@ fn summary_pareto(rows: &[SweepRow], name: &str) {
         .map(|p| {
             format!(
                 "{} {} splats {:.3} s {:.2} dB",
-                mode_name(p.shading),
+                p.shading.name(),
                 p.splats,
                 p.render_s,
                 p.psnr_db

@@ -25,7 +25,7 @@ pub struct SceneArgs {
     #[arg(long)]
     pub height: Option<u32>,
     /// Override the shading mode: flat, blended or phong.
-    #[arg(long)]
+    #[arg(long, value_parser = splatray::names::parse::<ShadingMode>)]
     pub shading: Option<ShadingMode>,
     /// A point cloud's up axis: x, y, z, -x, -y, -z or X,Y,Z. Default: a
     /// flat cloud's thinnest side; +z when the cloud's viewpoint looks down

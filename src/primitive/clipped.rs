@@ -103,22 +103,15 @@ impl Pack<ClippedDisc> for ClippedPack {
     }
 
     #[inline]
-    fn may_hit(&self, ray: &PackRay, t_min: f32, t_max: f32) -> u32 {
-        self.discs.may_hit(ray, t_min, t_max)
+    fn may_hit(&self, ray: &PackRay) -> u32 {
+        self.discs.may_hit(ray)
     }
 
     /// [`DiscPack`]'s masks on the path `isa`: one call of
     /// [`simd::disc_masks`] over the packs' discs, read in place.
     #[inline]
-    fn masks(
-        packs: &[Self],
-        ray: &PackRay,
-        t_min: f32,
-        t_max: f32,
-        isa: simd::Isa,
-        out: &mut [u32],
-    ) {
-        super::disc::pack_masks(packs, ray, t_min, t_max, isa, out);
+    fn masks(packs: &[Self], ray: &PackRay, isa: simd::Isa, out: &mut [u32]) {
+        super::disc::pack_masks(packs, ray, isa, out);
     }
 
     /// [`DiscPack`]'s per-ray masks on the path `isa`:
@@ -203,7 +196,7 @@ mod tests {
             }
         }
         let ray = Ray::new(Vec3::new(0.0, 0.0, 2.0), -Vec3::Z);
-        let m = pack.may_hit(&PackRay::new(&ray), 0.0, f32::INFINITY);
+        let m = pack.may_hit(&PackRay::new(&ray, 0.0, f32::INFINITY));
         assert_eq!(m, 0b100_1001 & ((1 << ClippedPack::LANES) - 1));
     }
 

@@ -236,31 +236,17 @@ impl Pack<Disc> for DiscPack {
     /// rim test is relaxed by `1e-4` — a conservative filter in any case,
     /// since each set lane is then decided by `intersect` itself.
     #[inline]
-    fn may_hit(&self, ray: &PackRay, t_min: f32, t_max: f32) -> u32 {
+    fn may_hit(&self, ray: &PackRay) -> u32 {
         let mut m = [0];
-        Self::masks(
-            std::slice::from_ref(self),
-            ray,
-            t_min,
-            t_max,
-            simd::Isa::Portable,
-            &mut m,
-        );
+        Self::masks(std::slice::from_ref(self), ray, simd::Isa::Portable, &mut m);
         m[0]
     }
 
     /// [`DiscPack::may_hit`] of every pack on the path `isa`
     /// ([`simd::disc_masks`]: the same lanes on every path).
     #[inline]
-    fn masks(
-        packs: &[Self],
-        ray: &PackRay,
-        t_min: f32,
-        t_max: f32,
-        isa: simd::Isa,
-        out: &mut [u32],
-    ) {
-        pack_masks(packs, ray, t_min, t_max, isa, out);
+    fn masks(packs: &[Self], ray: &PackRay, isa: simd::Isa, out: &mut [u32]) {
+        pack_masks(packs, ray, isa, out);
     }
 
     /// [`simd::disc_masks_rays`]: each pack and its `n·(o - c)` once for
@@ -287,12 +273,10 @@ impl Pack<Disc> for DiscPack {
 pub(super) fn pack_masks<C: AsRef<DiscPack>>(
     packs: &[C],
     ray: &PackRay,
-    t_min: f32,
-    t_max: f32,
     isa: simd::Isa,
     out: &mut [u32],
 ) {
-    simd::disc_masks(packs, ray.origin, ray.dir, t_min, t_max, isa, out);
+    simd::disc_masks(packs, ray.origin, ray.dir, ray.t_min, ray.t_max, isa, out);
 }
 
 /// [`simd::disc_masks_rays`] of the disc packs `packs` hold, as
@@ -361,7 +345,7 @@ mod tests {
             } else {
                 4.0 + rnd()
             };
-            let mask = pack.may_hit(&PackRay::new(&ray), 0.0, t_max);
+            let mask = pack.may_hit(&PackRay::new(&ray, 0.0, t_max));
             for (lane, d) in discs.iter().enumerate() {
                 let hit = d.is_some_and(|d| d.intersect(&ray, 0.0, t_max).is_some());
                 hits += usize::from(hit);

@@ -88,23 +88,30 @@ pub trait Primitive: Copy + Send + Sync + 'static {
     fn locate(&self, p: Vec3) -> Local;
 }
 
-/// A ray's origin and direction as plain arrays, broadcast to every lane of
-/// a [`Pack`] test.
+/// A ray as a [`Pack`] test takes it: origin and direction as plain
+/// arrays, broadcast to every lane, and the span `[t_min, t_max]` tested
+/// (one slot of [`PackRays`]).
 #[derive(Clone, Copy, Debug)]
 pub struct PackRay {
     /// Origin.
     pub origin: [f32; 3],
     /// Direction.
     pub dir: [f32; 3],
+    /// Near end of the span.
+    pub t_min: f32,
+    /// Far end of the span.
+    pub t_max: f32,
 }
 
 impl PackRay {
-    /// The ray's components.
+    /// The ray's components, with the span `[t_min, t_max]`.
     #[must_use]
-    pub fn new(ray: &Ray) -> PackRay {
+    pub fn new(ray: &Ray, t_min: f32, t_max: f32) -> PackRay {
         PackRay {
             origin: ray.origin.to_array(),
             dir: ray.dir.to_array(),
+            t_min,
+            t_max,
         }
     }
 }
@@ -148,25 +155,18 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
         }
         pack
     }
-    /// Bit `l` set when lane `l` may be hit in `[t_min, t_max]`: a filter
+    /// Bit `l` set when lane `l` may be hit in the ray's span: a filter
     /// that must pass every lane [`Primitive::intersect`] hits and no padding
     /// lane; each lane passed is then decided by `intersect` itself.
-    fn may_hit(&self, ray: &PackRay, t_min: f32, t_max: f32) -> u32;
+    fn may_hit(&self, ray: &PackRay) -> u32;
     /// [`Pack::may_hit`] of each of `packs` into `out` (at least as long),
     /// computed on the SIMD path `isa` where the pack has one: every path
     /// passes the same lanes.
     #[inline]
-    fn masks(
-        packs: &[Self],
-        ray: &PackRay,
-        t_min: f32,
-        t_max: f32,
-        isa: crate::simd::Isa,
-        out: &mut [u32],
-    ) {
+    fn masks(packs: &[Self], ray: &PackRay, isa: crate::simd::Isa, out: &mut [u32]) {
         let _ = isa;
         for (p, m) in packs.iter().zip(out.iter_mut()) {
-            *m = p.may_hit(ray, t_min, t_max);
+            *m = p.may_hit(ray);
         }
     }
 
@@ -195,8 +195,10 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
                 let ray = PackRay {
                     origin: rays.origin,
                     dir: rays.dir[k],
+                    t_min: rays.t_min[k],
+                    t_max: rays.t_max[k],
                 };
-                out[k] = p.may_hit(&ray, rays.t_min[k], rays.t_max[k]);
+                out[k] = p.may_hit(&ray);
                 *any |= u32::from(out[k] != 0) << k;
             }
         }
@@ -223,11 +225,12 @@ impl<P: Primitive> Pack<P> for Single<P> {
         }
     }
 
-    fn may_hit(&self, ray: &PackRay, t_min: f32, t_max: f32) -> u32 {
+    fn may_hit(&self, lanes: &PackRay) -> u32 {
         let ray = Ray {
-            origin: ray.origin.into(),
-            dir: ray.dir.into(),
+            origin: lanes.origin.into(),
+            dir: lanes.dir.into(),
         };
+        let (t_min, t_max) = (lanes.t_min, lanes.t_max);
         u32::from(
             self.0
                 .is_some_and(|p| p.intersect(&ray, t_min, t_max).is_some()),

@@ -5,6 +5,7 @@
 
 use super::integrator::Frame;
 use crate::io::Batch;
+use crate::names::Named;
 use crate::{Error, Result};
 use glam::Vec3;
 use image::{ImageBuffer, ImageFormat, Rgb};
@@ -185,19 +186,10 @@ pub enum Aov {
     Albedo,
 }
 
-impl std::str::FromStr for Aov {
-    type Err = Error;
-    fn from_str(s: &str) -> Result<Aov> {
-        match s {
-            "depth" => Ok(Aov::Depth),
-            "normal" => Ok(Aov::Normal),
-            "splat" => Ok(Aov::Splat),
-            "albedo" => Ok(Aov::Albedo),
-            _ => Err(Error::invalid(format!(
-                "unknown AOV '{s}' (expected depth, normal, splat or albedo)"
-            ))),
-        }
-    }
+impl Named for Aov {
+    const WHAT: &'static str = "AOV";
+    const ALL: &'static [Self] = &[Self::Depth, Self::Normal, Self::Splat, Self::Albedo];
+    const NAMES: &'static [&'static str] = &["depth", "normal", "splat", "albedo"];
 }
 
 /// Where an AOV of `image` goes: `out.png` → `out.depth.exr`.
@@ -207,13 +199,7 @@ pub fn aov_path(image: &Path, aov: Aov) -> PathBuf {
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let name = match aov {
-        Aov::Depth => "depth",
-        Aov::Normal => "normal",
-        Aov::Splat => "splat",
-        Aov::Albedo => "albedo",
-    };
-    image.with_file_name(format!("{stem}.{name}.exr"))
+    image.with_file_name(format!("{stem}.{}.exr", aov.name()))
 }
 
 /// Writes one AOV as a linear EXR (the value in all three channels for

@@ -47,7 +47,7 @@ mod report;
 mod spill;
 mod tile;
 
-pub use report::{Box3, TileSummary, TiledReport, TiledSeconds};
+pub use report::{Box3, TileLayout, TileSummary, TiledReport, TiledSeconds};
 
 use crate::io::{IoError, IoErrorKind};
 use crate::progress::Progress;
@@ -114,9 +114,6 @@ pub struct TiledOptions {
     /// Bytes the whole process may use (`--max-memory`, else what
     /// [`crate::memory::limit`] says).
     pub max_memory: u64,
-    /// At most this many points (core and halo) per tile, below what the
-    /// memory allows (to force small tiles, as the tests do).
-    pub tile_points: Option<u64>,
     /// The folder for the plan, spill files and finished tiles (made if
     /// missing, removed after a successful merge).
     pub work: PathBuf,
@@ -125,6 +122,18 @@ pub struct TiledOptions {
     pub viewpoint: Option<DVec3>,
     /// Ignore the inputs' own viewpoints.
     pub no_viewpoint: bool,
+    /// Tile size, stage and resuming.
+    pub tiling: Tiling,
+}
+
+/// What is asked of tiled generation beyond its memory: the tiles' size,
+/// the stage, resuming (`splat --tile-points`, `--plan-only`, `--tile`,
+/// `--merge-only`, `--resume`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Tiling {
+    /// At most this many points (core and halo) per tile, below what the
+    /// memory allows (to force small tiles, as the tests do).
+    pub tile_points: Option<u64>,
     /// Which part to run.
     pub stage: Stage,
     /// Carry on from the work folder's plan, or refuse in one line (no
@@ -168,7 +177,7 @@ pub fn generate_tiled(
 ) -> Result<TiledReport, IoError> {
     let t0 = Instant::now();
     let work = &opts.work;
-    if opts.resume && !work.join("plan.json").exists() {
+    if opts.tiling.resume && !work.join("plan.json").exists() {
         return Err(io_err(
             work,
             std::io::Error::new(
@@ -187,6 +196,7 @@ pub fn generate_tiled(
         .checked_sub(FIXED_BYTES)
         .map_or(0, |b| b / BYTES_PER_POINT);
     let target = opts
+        .tiling
         .tile_points
         .map_or(budget_points, |t| t.min(budget_points));
     if target < 1000 {
@@ -208,7 +218,7 @@ pub fn generate_tiled(
         ..TiledReport::default()
     };
     let resumed = old.is_some();
-    if !resumed && matches!(opts.stage, Stage::Tile(_) | Stage::Merge) {
+    if !resumed && matches!(opts.tiling.stage, Stage::Tile(_) | Stage::Merge) {
         return Err(no_plan(work));
     }
     let plan = match old {
@@ -237,8 +247,8 @@ pub fn generate_tiled(
     report.bbox_diagonal = diag;
     report.tile_points = plan.tile_points;
     report.origin = plan.origin;
-    report.cores.clone_from(&plan.tiles);
-    report.bounds = Some(plan.survey.bounds);
+    report.layout.cores.clone_from(&plan.tiles);
+    report.layout.bounds = Some(plan.survey.bounds);
     let counts_file = work.join("spilled.json");
     let spilled: Option<Vec<(u64, u64)>> = std::fs::read_to_string(&counts_file)
         .ok()
@@ -247,12 +257,12 @@ pub fn generate_tiled(
         // A spill file cut short or gone (its tile unfinished): spill again
         // when this stage may.
         .filter(|c: &Vec<(u64, u64)>| {
-            !matches!(opts.stage, Stage::All | Stage::Plan)
+            !matches!(opts.tiling.stage, Stage::All | Stage::Plan)
                 || spills_whole(&plan, work, c, |t| tile::finished_tile(work, t).is_some())
         });
     let counts: Vec<(u64, u64)> = match spilled {
         Some(c) => c,
-        None if opts.stage != Stage::All && opts.stage != Stage::Plan => {
+        None if opts.tiling.stage != Stage::All && opts.tiling.stage != Stage::Plan => {
             return Err(no_plan(work));
         }
         None => {
@@ -281,7 +291,7 @@ pub fn generate_tiled(
     report.spilled = counts.iter().map(|c| c.0).sum();
     let t2 = Instant::now();
     let n = plan.tiles.len();
-    if let Stage::Tile(t) = opts.stage
+    if let Stage::Tile(t) = opts.tiling.stage
         && t >= n
     {
         return Err(data_err(
@@ -291,7 +301,7 @@ pub fn generate_tiled(
     }
     run_tiles(&plan, params, opts, &counts, progress, &mut report)?;
     report.seconds.generate = t2.elapsed().as_secs_f64();
-    if matches!(opts.stage, Stage::All | Stage::Merge) {
+    if matches!(opts.tiling.stage, Stage::All | Stage::Merge) {
         let t3 = Instant::now();
         let flips = if plan.reconciles() {
             let f = reconcile(&plan, work)?;

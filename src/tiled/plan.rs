@@ -486,11 +486,11 @@ pub(super) fn mismatch(
 /// The plan in `plan_file` when this run carries it on: it matches the
 /// inputs (`stamps`), the options (`params`) and the tile size (`target`).
 /// One that does not match (or does not read) is `None`, a fresh start,
-/// unless `opts.resume` asks to carry on: then it is refused in one line
+/// unless `opts.tiling.resume` asks to carry on: then it is refused in one line
 /// saying what changed.
 ///
 /// # Errors
-/// With `opts.resume`: a plan that does not read or does not match.
+/// With `opts.tiling.resume`: a plan that does not read or does not match.
 pub(super) fn found_plan(
     plan_file: &Path,
     opts: &TiledOptions,
@@ -510,15 +510,17 @@ pub(super) fn found_plan(
     let plan = match std::fs::read_to_string(plan_file) {
         Ok(text) => match serde_json::from_str::<Plan>(&text) {
             Ok(p) => p,
-            Err(e) if opts.resume => return Err(refuse(format!("the plan does not read ({e})"))),
+            Err(e) if opts.tiling.resume => {
+                return Err(refuse(format!("the plan does not read ({e})")));
+            }
             Err(_) => return Ok(None),
         },
-        Err(e) if opts.resume => return Err(io_err(plan_file, e)),
+        Err(e) if opts.tiling.resume => return Err(io_err(plan_file, e)),
         Err(_) => return Ok(None),
     };
-    match mismatch(&plan, stamps, params, target, opts.stage) {
+    match mismatch(&plan, stamps, params, target, opts.tiling.stage) {
         None => Ok(Some(plan)),
-        Some(why) if opts.resume => Err(refuse(why)),
+        Some(why) if opts.tiling.resume => Err(refuse(why)),
         Some(_) => Ok(None),
     }
 }

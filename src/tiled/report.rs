@@ -80,10 +80,9 @@ pub struct TiledReport {
     pub seconds: TiledSeconds,
     /// Per tile, in order.
     pub tiles: Vec<TileSummary>,
-    /// The tiles' cores, in order, and the bounds they split.
-    pub cores: Vec<Box3>,
-    /// See `cores`.
-    pub bounds: Option<Box3>,
+    /// The tiles' cores and the bounds they split.
+    #[serde(flatten)]
+    pub layout: TileLayout,
     /// The points the plan expected to spill, from the survey's sample
     /// (0 when a rerun found the plan).
     pub spill_estimate: u64,
@@ -97,7 +96,17 @@ pub struct TiledReport {
     pub flipped_splats: u64,
 }
 
-impl TiledReport {
+/// The tiles' cores, in order, and the bounds they split (where the seams
+/// between tiles lie).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct TileLayout {
+    /// Each tile's core, in order.
+    pub cores: Vec<Box3>,
+    /// The bounds the cores split.
+    pub bounds: Option<Box3>,
+}
+
+impl TileLayout {
     /// Whether `p` lies within `width` of a seam: a face of its tile's core
     /// that another tile shares (not the cloud's bounds).
     #[must_use]

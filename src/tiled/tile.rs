@@ -137,7 +137,7 @@ pub(super) fn run_tiles(
     // tile's bytes are its own, whichever worker made them.
     let mine: Vec<usize> = (0..n)
         .filter(|&t| {
-            (opts.stage == Stage::All || opts.stage == Stage::Tile(t))
+            (opts.tiling.stage == Stage::All || opts.tiling.stage == Stage::Tile(t))
                 && finished_tile(work, t).is_none()
         })
         .collect();
@@ -187,13 +187,15 @@ pub(super) fn run_tiles(
                 s.resumed = true;
                 s
             }
-            (None, None) if opts.stage == Stage::Merge => {
+            (None, None) if opts.tiling.stage == Stage::Merge => {
                 return Err(data_err(
                     work,
                     format!("tile {t} of {n} is not finished: run it with --tile {t}"),
                 ));
             }
-            (None, None) if opts.stage == Stage::All || opts.stage == Stage::Tile(t) => {
+            (None, None)
+                if opts.tiling.stage == Stage::All || opts.tiling.stage == Stage::Tile(t) =>
+            {
                 // A tile after one that failed.
                 return Err(data_err(work, format!("tile {t} of {n} was not generated")));
             }

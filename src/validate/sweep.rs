@@ -12,6 +12,7 @@
 
 use crate::accel::registry::renderers;
 use crate::error::{Error, Result};
+use crate::names::Named;
 use crate::progress::Progress;
 use crate::render::integrator::{Frame, render};
 use crate::resolve::ShadingMode;
@@ -22,16 +23,6 @@ use std::path::Path;
 
 /// The shading modes of a sweep, in CSV and plot order.
 pub const MODES: [ShadingMode; 3] = [ShadingMode::Flat, ShadingMode::Blended, ShadingMode::Phong];
-
-/// The name of a shading mode as the scene files and `--shading` spell it.
-#[must_use]
-pub fn mode_name(m: ShadingMode) -> &'static str {
-    match m {
-        ShadingMode::Flat => "flat",
-        ShadingMode::Blended => "blended",
-        ShadingMode::Phong => "phong",
-    }
-}
 
 /// What a sweep varies and how it renders.
 #[derive(Clone, Debug, PartialEq)]
@@ -98,7 +89,7 @@ pub struct SweepRow {
     /// `ϵ` of the step (§2.1), fraction of the bounding-box diagonal.
     pub epsilon_rel: f32,
     /// Shading mode (§4: flat, blended by eq. 5, Phong fields of eq. 4),
-    /// serialised by its name ([`mode_name`]).
+    /// serialised by its name ([`Named::name`]).
     #[serde(serialize_with = "serialize_mode")]
     pub shading: ShadingMode,
     /// Splats of the varied models (points and meshes).
@@ -124,7 +115,7 @@ impl SweepRow {
 
 /// A shading mode as its name, for a serialised [`SweepRow`].
 fn serialize_mode<S: serde::Serializer>(mode: &ShadingMode, s: S) -> Result<S::Ok, S::Error> {
-    s.serialize_str(mode_name(*mode))
+    s.serialize_str(mode.name())
 }
 
 fn psnr(p: Option<f64>) -> String {
@@ -174,7 +165,7 @@ pub fn csv_line(r: &SweepRow) -> String {
     let mut c = vec![
         r.step.to_string(),
         r.epsilon_rel.to_string(),
-        mode_name(r.shading).to_string(),
+        r.shading.name().to_string(),
         r.splats.to_string(),
         r.scene_splats.to_string(),
         r.splat_seconds.to_string(),
@@ -366,7 +357,7 @@ pub fn run_sweep(
             };
             log(&format!(
                 "  {:<7} render {}; coverage {:.5}, false hits {:.5}, depth/diag p50 {:.2e} p99 {:.2e}, normal deg mean {:.3} p99 {:.3}, PSNR {}{differences}",
-                mode_name(mode),
+                mode.name(),
                 renders.join(", "),
                 o.coverage,
                 o.false_hits,

@@ -22,8 +22,9 @@
 pub mod source;
 pub mod worker;
 
-pub use source::{Overrides, Source, ViewCamera, shading_name};
+pub use source::{Overrides, Source, ViewCamera};
 
+use crate::names::Named;
 use crate::resolve::ShadingMode;
 use crate::{Error, Result};
 use axum::Router;
@@ -272,7 +273,7 @@ async fn session(mut socket: WebSocket, app: Arc<App>) {
         "sensor": src.sensor.as_ref().map(worker::camera_json),
         "backends": names,
         "backend": state.backend,
-        "shading": shading_name(src.shading.0),
+        "shading": src.shading.0.name(),
         "bounds": bounds,
         "max_message": MAX_MESSAGE,
     });
@@ -398,7 +399,7 @@ fn handle(
             state.shading = match mode.as_str() {
                 "scene" => None,
                 m => Some(
-                    m.parse::<ShadingMode>()
+                    crate::names::parse::<ShadingMode>(m)
                         .map_err(|e| Error::invalid(format!("shading '{m}': {e}")))?,
                 ),
             };

@@ -5,6 +5,7 @@
 //! [`camera_text`] for a scene file's camera), so that the text the page
 //! saves renders the page's full-quality frame byte for byte.
 
+use crate::names::Named;
 use crate::progress::Progress;
 use crate::resolve::ShadingMode;
 use crate::scene::cloud::{
@@ -124,16 +125,6 @@ pub struct Overrides {
     pub height: Option<u32>,
     /// A point cloud's up axis.
     pub up: Option<DVec3>,
-}
-
-/// A shading mode's name in scene files.
-#[must_use]
-pub fn shading_name(m: ShadingMode) -> &'static str {
-    match m {
-        ShadingMode::Flat => "flat",
-        ShadingMode::Blended => "blended",
-        ShadingMode::Phong => "phong",
-    }
 }
 
 /// The model keys that hold paths, relative to the scene file's folder.
@@ -426,7 +417,7 @@ fn set_shading(t: &mut toml::Table, m: ShadingMode) {
         .entry("render")
         .or_insert_with(|| toml::Value::Table(toml::Table::new()));
     if let Some(r) = render.as_table_mut() {
-        r.insert("shading".into(), shading_name(m).into());
+        r.insert("shading".into(), m.name().into());
     }
     if let Some(toml::Value::Array(models)) = t.get_mut("model") {
         for model in models.iter_mut().filter_map(toml::Value::as_table_mut) {

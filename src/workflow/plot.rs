@@ -4,9 +4,10 @@
 //! Sans font the project ships (`assets/fonts/`), so it needs no system
 //! fonts; written as PNG and as SVG beside it.
 
+use crate::names::Named;
 use crate::resolve::ShadingMode;
 use crate::validate::compare::TruthErrors;
-use crate::validate::sweep::{MODES, SweepRow, mode_name};
+use crate::validate::sweep::{MODES, SweepRow};
 use crate::{Error, Result};
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
@@ -144,7 +145,7 @@ where
     let name = format!(
         "{} {}",
         rows.first().map_or("", |r| r.backends[k].name),
-        mode_name(mode)
+        mode.name()
     );
     let xy: Vec<(f64, f64)> = pts.iter().map(|&(x, y, _)| (x, y)).collect();
     let stroke = color.stroke_width(2);

@@ -17,7 +17,7 @@ use crate::progress::{Progress, notify};
 use crate::render::output::{check_extension, check_writable};
 use crate::splat::color::fit_cloud;
 use crate::splat::{PointCloud, SplatParams, SplatReport};
-use crate::tiled::{BYTES_PER_POINT, Stage, TiledOptions, TiledReport, generate_tiled};
+use crate::tiled::{BYTES_PER_POINT, Stage, TiledOptions, TiledReport, Tiling, generate_tiled};
 use crate::validate::holdout::{
     HeldOutCoverage, Windows, heldout_coverage, heldout_coverage_windows,
 };
@@ -123,13 +123,8 @@ pub struct SplatRequest {
     /// Tiled generation within this many bytes (`None`: what the process
     /// may use; given: tiled).
     pub max_memory: Option<u64>,
-    /// At most this many points per tile (given: tiled).
-    pub tile_points: Option<u64>,
-    /// The stage of tiled generation to run.
-    pub stage: Stage,
-    /// Carry tiled generation on from the work folder, or refuse in one
-    /// line (given: tiled; [`TiledOptions::resume`]).
-    pub resume: bool,
+    /// Tile size, stage and resuming (any given: tiled).
+    pub tiling: Tiling,
 }
 
 impl SplatRequest {
@@ -147,9 +142,7 @@ impl SplatRequest {
             holdout_full: false,
             min_opacity: crate::io::MIN_OPACITY,
             max_memory: None,
-            tile_points: None,
-            stage: Stage::All,
-            resume: false,
+            tiling: Tiling::default(),
         }
     }
 }
@@ -274,7 +267,7 @@ pub fn splat(req: &SplatRequest, progress: Option<Progress<'_>>) -> Result<Splat
         }
         return Ok(SplatOutcome::Tiled(TiledOutcome {
             report,
-            stage: tiled.stage,
+            stage: tiled.tiling.stage,
             work: tiled.work,
         }));
     }
@@ -475,7 +468,7 @@ fn tiled_options(req: &SplatRequest, inputs: &[PathBuf]) -> Result<Option<TiledO
         Some(b) => b,
         None => crate::memory::available().unwrap_or(u64::MAX),
     };
-    if req.tile_points == Some(0) {
+    if req.tiling.tile_points == Some(0) {
         return Err("--tile-points must be at least 1".into());
     }
     // At least 12 bytes a point on disk: a file of B bytes holds at most
@@ -486,12 +479,8 @@ fn tiled_options(req: &SplatRequest, inputs: &[PathBuf]) -> Result<Option<TiledO
         .map(|m| m.len())
         .sum();
     let too_big = (disk / 12).saturating_mul(BYTES_PER_POINT) > max_memory;
-    let tiled = req.max_memory.is_some()
-        || req.tile_points.is_some()
-        || inputs.len() > 1
-        || too_big
-        || req.stage != Stage::All
-        || req.resume;
+    let tiled =
+        req.max_memory.is_some() || req.tiling != Tiling::default() || inputs.len() > 1 || too_big;
     if !tiled {
         return Ok(None);
     }
@@ -513,12 +502,10 @@ fn tiled_options(req: &SplatRequest, inputs: &[PathBuf]) -> Result<Option<TiledO
     }
     Ok(Some(TiledOptions {
         max_memory,
-        tile_points: req.tile_points,
         work: work_folder(&req.output),
         viewpoint: req.generation.viewpoint,
         no_viewpoint: req.generation.no_viewpoint,
-        stage: req.stage,
-        resume: req.resume,
+        tiling: req.tiling,
     }))
 }
 

@@ -48,7 +48,7 @@ impl Scene {
     ) -> PyResult<splatray::scene::Scene> {
         let shading = match shading {
             None => None,
-            Some(s) => Some(s.parse::<ShadingMode>().map_err(|_| {
+            Some(s) => Some(splatray::names::parse::<ShadingMode>(s).map_err(|_| {
                 PyValueError::new_err(format!("shading {s:?}: expected flat, blended or phong"))
             })?),
         };
@@ -217,8 +217,7 @@ impl Scene {
             .unwrap_or_default()
             .iter()
             .map(|a| {
-                a.parse::<Aov>()
-                    .map_err(|e| PyValueError::new_err(e.to_string()))
+                splatray::names::parse::<Aov>(a).map_err(|e| PyValueError::new_err(e.to_string()))
             })
             .collect::<PyResult<Vec<_>>>()?;
         let cb = Callback::new(progress);
@@ -441,9 +440,8 @@ impl Image {
 
     /// Writes one AOV as `render --aov` does (EXR).
     fn save_aov(&self, py: Python<'_>, name: &str, path: PathBuf) -> PyResult<()> {
-        let a: Aov = name
-            .parse()
-            .map_err(|e: splatray::Error| PyValueError::new_err(e.to_string()))?;
+        let a = splatray::names::parse::<Aov>(name)
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
         py.detach(|| splatray::render::output::write_aov(&self.frame, a, &path))
             .map_err(err)
     }

@@ -306,10 +306,10 @@ impl<P: Primitive> Tree<P> {
             let k = left.trailing_zeros() as usize;
             left &= left - 1;
             if let Some(v) = vis[k].as_ref() {
-                let (r, t_min, t_max) = v.filter();
+                let r = v.filter();
                 rays.dir[k] = r.dir;
-                rays.t_min[k] = t_min;
-                rays.t_max[k] = t_max;
+                rays.t_min[k] = r.t_min;
+                rays.t_max[k] = r.t_max;
             }
         }
         let range = node.first as usize..(node.first + node.meta) as usize;
@@ -343,7 +343,7 @@ impl<P: Primitive> Tree<P> {
                             break;
                         }
                     }
-                    rays.t_max[k] = v.filter().2;
+                    rays.t_max[k] = v.filter().t_max;
                 }
                 if active == 0 {
                     return false;

@@ -4,7 +4,7 @@
 use super::{ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Octree, Tree, child_lo, lanes};
 use crate::accel::{Candidate, CandidateHits, Skip};
 use crate::geometry::Ray;
-use crate::primitive::{Pack, PackRay, Primitive};
+use crate::primitive::{Hit, Pack, PackRay, Primitive};
 use crate::simd::Isa;
 use glam::{Vec3, Vec3A, Vec4};
 
@@ -394,8 +394,8 @@ pub(super) trait Visitor<P: Primitive> {
     const FIXED_CUTOFF: bool = false;
     /// Cells entered beyond this are skipped.
     fn cutoff(&self) -> f32;
-    /// The ray's lanes and the span `[t_min, t_max]` the filter tests now.
-    fn filter(&self) -> (PackRay, f32, f32);
+    /// The ray's lanes with the span `[t_min, t_max]` the filter tests now.
+    fn filter(&self) -> PackRay;
     /// Decides one lane the filter passed, primitive `prim` with id `id`,
     /// with the exact test; true stops the traversal.
     fn lane(&mut self, prim: P, id: u32) -> bool;
@@ -410,8 +410,8 @@ pub(super) trait Visitor<P: Primitive> {
         let l = super::lanes::<P>();
         for (c, chunk) in packs.chunks(CHUNK).enumerate() {
             let mut masks = [0u32; CHUNK];
-            let (ray, t_min, t_max) = self.filter();
-            <P::Pack as Pack<P>>::masks(chunk, &ray, t_min, t_max, isa, &mut masks);
+            let ray = self.filter();
+            <P::Pack as Pack<P>>::masks(chunk, &ray, isa, &mut masks);
             for (j, pack) in chunk.iter().enumerate() {
                 let mut mask = masks[j] & lanes;
                 let ids = &ids[(c * CHUNK + j) * l..];
@@ -431,14 +431,36 @@ pub(super) trait Visitor<P: Primitive> {
 /// Packs filtered per call of [`Pack::masks`] (a leaf holds a few).
 const CHUNK: usize = 16;
 
+/// What both queries test a lane against: the ray, its lanes for the
+/// filter with its span `[t_min, t_max]`, and the rule that skips hits.
+struct Query<'a, S> {
+    ray: &'a Ray,
+    lanes: PackRay,
+    skip: S,
+}
+
+impl<'a, S: Skip> Query<'a, S> {
+    fn new(ray: &'a Ray, t_min: f32, t_max: f32, skip: S) -> Self {
+        Query {
+            ray,
+            lanes: PackRay::new(ray, t_min, t_max),
+            skip,
+        }
+    }
+
+    /// The exact test of `prim` (id `id`) in `[t_min, cut]`, its hit kept
+    /// unless `skip` skips it.
+    #[inline(always)]
+    fn hit<P: Primitive>(&self, prim: &P, id: u32, cut: f32) -> Option<Hit> {
+        prim.intersect(self.ray, self.lanes.t_min, cut)
+            .filter(|h| !self.skip.skips(self.ray.dir, id, prim, h))
+    }
+}
+
 /// `intersect`: gathers the candidate window, leaving out what `skip`
 /// skips.
 pub(super) struct Gather<'a, S> {
-    ray: &'a Ray,
-    lanes: PackRay,
-    t_min: f32,
-    t_max: f32,
-    skip: S,
+    query: Query<'a, S>,
     hits: &'a mut CandidateHits,
     /// `t_max` or the window's far end, whichever is nearer: kept up to
     /// date as candidates are offered.
@@ -454,12 +476,8 @@ impl<'a, S: Skip> Gather<'a, S> {
         hits: &'a mut CandidateHits,
     ) -> Self {
         Gather {
-            ray,
-            lanes: PackRay::new(ray),
-            t_min,
-            t_max,
+            query: Query::new(ray, t_min, t_max, skip),
             cut: t_max.min(hits.far()),
-            skip,
             hits,
         }
     }
@@ -472,47 +490,36 @@ impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, S> {
     }
 
     #[inline(always)]
-    fn filter(&self) -> (PackRay, f32, f32) {
-        (self.lanes, self.t_min, self.cut)
+    fn filter(&self) -> PackRay {
+        PackRay {
+            t_max: self.cut,
+            ..self.query.lanes
+        }
     }
 
     #[inline(always)]
     fn lane(&mut self, prim: P, id: u32) -> bool {
         // The shared routine decides, with the window's current end, and
         // the shared rule skips.
-        if let Some(h) = prim.intersect(self.ray, self.t_min, self.cut)
-            && !self.skip.skips(self.ray.dir, id, &prim, &h)
-        {
+        if let Some(h) = self.query.hit(&prim, id, self.cut) {
             let c = Candidate {
                 id,
                 t: h.t,
                 u: h.u,
                 v: h.v,
             };
-            self.cut = self.hits.offer(c).min(self.t_max);
+            self.cut = self.hits.offer(c).min(self.query.lanes.t_max);
         }
         false
     }
 }
 
 /// `occluded`: stops at the first hit that `skip` does not skip.
-pub(super) struct AnyHit<'a, S> {
-    ray: &'a Ray,
-    lanes: PackRay,
-    t_min: f32,
-    t_max: f32,
-    skip: S,
-}
+pub(super) struct AnyHit<'a, S>(Query<'a, S>);
 
 impl<'a, S: Skip> AnyHit<'a, S> {
     pub(super) fn new(ray: &'a Ray, t_min: f32, t_max: f32, skip: S) -> Self {
-        AnyHit {
-            ray,
-            lanes: PackRay::new(ray),
-            t_min,
-            t_max,
-            skip,
-        }
+        AnyHit(Query::new(ray, t_min, t_max, skip))
     }
 }
 
@@ -521,17 +528,16 @@ impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, S> {
 
     #[inline]
     fn cutoff(&self) -> f32 {
-        self.t_max
+        self.0.lanes.t_max
     }
 
     #[inline(always)]
-    fn filter(&self) -> (PackRay, f32, f32) {
-        (self.lanes, self.t_min, self.t_max)
+    fn filter(&self) -> PackRay {
+        self.0.lanes
     }
 
     #[inline(always)]
     fn lane(&mut self, prim: P, id: u32) -> bool {
-        prim.intersect(self.ray, self.t_min, self.t_max)
-            .is_some_and(|h| !self.skip.skips(self.ray.dir, id, &prim, &h))
+        self.0.hit(&prim, id, self.0.lanes.t_max).is_some()
     }
 }

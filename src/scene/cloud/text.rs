@@ -10,6 +10,7 @@
 
 use super::survey::{CloudKind, Survey};
 use super::view::{View, frame};
+use crate::names::Named;
 use crate::resolve::ShadingMode;
 use crate::{Error, Result};
 use glam::DVec3;
@@ -114,12 +115,7 @@ pub fn scene_text(
     lights_text(&mut t, view, d);
     let _ = writeln!(t, "\n[render]\nambient = 0.05");
     if let Some(m) = o.shading {
-        let name = match m {
-            ShadingMode::Flat => "flat",
-            ShadingMode::Blended => "blended",
-            ShadingMode::Phong => "phong",
-        };
-        let _ = writeln!(t, "shading = \"{name}\"");
+        let _ = writeln!(t, "shading = \"{}\"", m.name());
     }
     Ok(t)
 }
