@@ -471,6 +471,7 @@ pub fn generate_with_progress(
         normals: &nrm,
         colors: colors.as_deref(),
         knn: &knn,
+        tree: &tree,
         // The requested k: a graph widened for scan lines is for joining
         // the lines, not for the no-holes radius.
         cover: params.k.min(knn.k),
