@@ -104,13 +104,14 @@ struct TerrainArgs {
     /// The survey's south-west corner, X,Y,Z (e.g. UTM metres).
     #[arg(long, value_delimiter = ',', default_value = "500000,4000000,100")]
     origin: Vec<f64>,
-    /// How the scanner's rays look at the ground (flying north): across
-    /// (one line scanner, ±15° across the track only: walls facing north
-    /// and south get no point), palmer (an elliptical scanner, ±20° across
-    /// and ±14° fore and aft, as RIEGL's VQ-840-G), oblique (two line
-    /// scanners ±30° across, pitched 14° forward and back, as RIEGL's
-    /// VQ-1560i) or cross (strips flown north-south and east-west).
-    #[arg(long, default_value = "across", value_parser = parse_pattern)]
+    /// How the scanner's rays look at the ground (flying north): oblique
+    /// (two line scanners ±30° across, pitched 14° forward and back, as
+    /// RIEGL's VQ-1560i), palmer (an elliptical scanner, ±20° across and
+    /// ±14° fore and aft, as RIEGL's VQ-840-G), cross (strips flown
+    /// north-south and east-west, ±15°) or across (one line scanner, ±15°
+    /// across the track only: walls facing north and south get no point;
+    /// the default before issue 39)
+    #[arg(long, default_value = "oblique", value_parser = parse_pattern)]
     pattern: splatray::terrain::ScanPattern,
 }
 

@@ -59,8 +59,8 @@ pub enum ScanPattern {
     /// One line scanner sweeping across the track only, up to ±15° off
     /// nadir: no ray has a component along the track, so walls facing ±y
     /// get no return at all (`docs/development.md`, "The airborne survey:
-    /// walls the scan never saw"). The survey of issue 39's first figures.
-    #[default]
+    /// walls the scan never saw"). The survey of issue 39's first figures,
+    /// and the default until the scanner was made one a real system flies.
     Across,
     /// An elliptical (Palmer) scanner, as the RIEGL VQ-840-G's nearly
     /// elliptic pattern: ±20° across the track, ±14° along it, the phase
@@ -69,7 +69,10 @@ pub enum ScanPattern {
     Palmer,
     /// Two line scanners as the RIEGL VQ-1560i's two channels: each sweeps
     /// ±30° across the track, one pitched 14° forward, the other 14° back;
-    /// half the rays each.
+    /// half the rays each. The default: of the patterns real systems fly it
+    /// measured best on the default survey (`docs/development.md`, "Issue
+    /// 39: a survey a real scanner makes").
+    #[default]
     Oblique,
     /// Crossing strips: half the rays flown north-south (tilted across, as
     /// [`ScanPattern::Across`]), half east-west (tilted along y), ±15°.
