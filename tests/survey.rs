@@ -71,12 +71,13 @@ fn the_default_survey_renders_as_its_surface_with_creases() {
     assert_eq!(TerrainParams::default().pattern, ScanPattern::Oblique);
     let e = survey_errors(ScanPattern::Oblique);
     let psnr = e.image_psnr_db.unwrap();
-    // Measured: 24.70 dB, false hits 0.132 % of the image, mean normal
-    // error 9.33° (the small survey's hills are steep: 4 m waves over 60 m;
-    // most of the normal error is shading on the ground).
-    assert!(psnr > 24.4, "{psnr}");
-    assert!(e.false_hits < 0.0016, "{}", e.false_hits);
-    assert!(e.normal_deg_mean < 9.7, "{}", e.normal_deg_mean);
+    // Measured: 24.06 dB, false hits 0.253 % of the image, mean normal
+    // error 8.65° (the small survey's hills are steep: 4 m waves over 60 m;
+    // most of the normal error is shading on the ground). Before
+    // `normals::face_normals`: 24.70 dB, 0.132 %, 9.33°.
+    assert!(psnr > 23.8, "{psnr}");
+    assert!(e.false_hits < 0.0029, "{}", e.false_hits);
+    assert!(e.normal_deg_mean < 9.0, "{}", e.normal_deg_mean);
     // The across-only scanner leaves the walls facing north and south
     // open: the camera sees through the south walls.
     let across = survey_errors(ScanPattern::Across);
