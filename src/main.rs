@@ -96,6 +96,26 @@ struct TerrainArgs {
     /// The survey's south-west corner, X,Y,Z (e.g. UTM metres).
     #[arg(long, value_delimiter = ',', default_value = "500000,4000000,100")]
     origin: Vec<f64>,
+    /// How the scanner's rays look at the ground (flying north): oblique
+    /// (two line scanners ±30° across, pitched 14° forward and back, as
+    /// RIEGL's VQ-1560i), palmer (an elliptical scanner, ±20° across and
+    /// ±14° fore and aft, as RIEGL's VQ-840-G), cross (strips flown
+    /// north-south and east-west, ±15°) or across (one line scanner, ±15°
+    /// across the track only: walls facing north and south get no point;
+    /// the default before issue 39)
+    #[arg(long, default_value = "oblique", value_parser = parse_pattern)]
+    pattern: splatray::terrain::ScanPattern,
+}
+
+fn parse_pattern(s: &str) -> std::result::Result<splatray::terrain::ScanPattern, String> {
+    let all = splatray::terrain::ScanPattern::ALL;
+    all.iter()
+        .find(|(n, _)| *n == s)
+        .map(|(_, p)| *p)
+        .ok_or_else(|| {
+            let names: Vec<&str> = all.iter().map(|(n, _)| *n).collect();
+            format!("unknown pattern {s:?}: one of {}", names.join(", "))
+        })
 }
 
 fn terrain(a: &TerrainArgs) -> Result<()> {
@@ -110,6 +130,7 @@ fn terrain(a: &TerrainArgs) -> Result<()> {
         noise: a.noise,
         seed: a.seed,
         origin: glam::DVec3::new(x, y, z),
+        pattern: a.pattern,
     };
     let line = cli::progress::ProgressLine::new();
     let r = splatray::terrain::write_terrain(&p, &a.output, Some(&|s, f| line.update(s, f)));

@@ -36,6 +36,94 @@ pub struct TerrainParams {
     pub seed: u64,
     /// Where the survey's south-west corner lies (e.g. UTM metres).
     pub origin: DVec3,
+    /// How the scanner's rays look at the ground ([`ScanPattern`]).
+    pub pattern: ScanPattern,
+}
+
+/// How the airborne scanner's rays look at the ground. The aircraft flies
+/// along +y (north); every pattern has the same number of rays a square
+/// metre, aimed at uniformly random ground positions, and differs only in
+/// the directions they arrive from, which decide which walls get points.
+///
+/// Figures of real systems (RIEGL data sheets as quoted by vendors, and
+/// the scanner models of the HELIOS++ simulator, 3dgeo-heidelberg/helios
+/// `data/scanners_als.xml`): the RIEGL VQ-840-G has a "nearly elliptic"
+/// scan pattern, ±20° off nadir across the flight direction and ±14° along
+/// it, so every ground point is seen once looking forward and once looking
+/// back; the VQ-880-G is modelled with conic (Palmer) optics, 20° off
+/// nadir; the VQ-1560i has two channels, each a rotating-mirror line
+/// scanner over ±30° across the track, one pitched 14° forward and one 14°
+/// back (HELIOS++ also yaws both by 8°, omitted here).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub enum ScanPattern {
+    /// One line scanner sweeping across the track only, up to ±15° off
+    /// nadir: no ray has a component along the track, so walls facing ±y
+    /// get no return at all (`docs/development.md`, "The airborne survey:
+    /// walls the scan never saw"). The survey of issue 39's first figures,
+    /// and the default until the scanner was made one a real system flies.
+    Across,
+    /// An elliptical (Palmer) scanner, as the RIEGL VQ-840-G's nearly
+    /// elliptic pattern: ±20° across the track, ±14° along it, the phase
+    /// round the ellipse uniform, so each wall is seen from the side of
+    /// the ellipse that faces it.
+    Palmer,
+    /// Two line scanners as the RIEGL VQ-1560i's two channels: each sweeps
+    /// ±30° across the track, one pitched 14° forward, the other 14° back;
+    /// half the rays each. The default: of the patterns real systems fly it
+    /// measured best on the default survey (`docs/development.md`, "Issue
+    /// 39: a survey a real scanner makes").
+    #[default]
+    Oblique,
+    /// Crossing strips: half the rays flown north-south (tilted across, as
+    /// [`ScanPattern::Across`]), half east-west (tilted along y), ±15°.
+    Cross,
+}
+
+impl ScanPattern {
+    /// Every pattern, by its name.
+    pub const ALL: [(&'static str, ScanPattern); 4] = [
+        ("across", ScanPattern::Across),
+        ("palmer", ScanPattern::Palmer),
+        ("oblique", ScanPattern::Oblique),
+        ("cross", ScanPattern::Cross),
+    ];
+
+    /// The unit direction of a ray (pointing down) drawn with `rng`.
+    fn direction(self, rng: &mut SplitMix64) -> DVec3 {
+        let deg = f64::to_radians;
+        match self {
+            ScanPattern::Across => {
+                let tilt = (rng.next_f64() * 2.0 - 1.0) * deg(15.0);
+                DVec3::new(tilt.sin(), 0.0, -tilt.cos())
+            }
+            ScanPattern::Palmer => {
+                let phase = std::f64::consts::TAU * rng.next_f64();
+                DVec3::new(
+                    deg(20.0).tan() * phase.sin(),
+                    deg(14.0).tan() * phase.cos(),
+                    -1.0,
+                )
+                .normalize()
+            }
+            ScanPattern::Oblique => {
+                let s = (rng.next_f64() * 2.0 - 1.0) * deg(30.0);
+                let pitch = if rng.next_f64() < 0.5 {
+                    deg(14.0)
+                } else {
+                    -deg(14.0)
+                };
+                DVec3::new(s.sin(), s.cos() * pitch.sin(), -s.cos() * pitch.cos())
+            }
+            ScanPattern::Cross => {
+                let tilt = (rng.next_f64() * 2.0 - 1.0) * deg(15.0);
+                if rng.next_f64() < 0.5 {
+                    DVec3::new(tilt.sin(), 0.0, -tilt.cos())
+                } else {
+                    DVec3::new(0.0, tilt.sin(), -tilt.cos())
+                }
+            }
+        }
+    }
 }
 
 impl Default for TerrainParams {
@@ -48,6 +136,7 @@ impl Default for TerrainParams {
             noise: 0.03,
             seed: 1,
             origin: DVec3::new(500_000.0, 4_000_000.0, 100.0),
+            pattern: ScanPattern::default(),
         }
     }
 }
@@ -194,9 +283,10 @@ pub fn write_mesh_ply(mesh: &Mesh, path: &Path) -> Result<()> {
 }
 
 /// Points an airborne scan of tile `(tx, ty)` sees: `count` rays from
-/// 500 m above, at uniformly random ground positions of the tile, tilted
-/// across the swath by up to ±15°, each meeting the surface first there,
-/// with Gaussian range noise; in the survey's corner frame, metres.
+/// 500 m above, at uniformly random ground positions of the tile, in the
+/// directions of the scan pattern ([`ScanPattern`]), each meeting the
+/// surface first there, with Gaussian range noise; in the survey's corner
+/// frame, metres.
 fn scan_tile(
     p: &TerrainParams,
     scene: &TriangleScene,
@@ -215,11 +305,10 @@ fn scan_tile(
                 SplitMix64::new(p.seed ^ number.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ (k << 20));
             let x = (f64::from(tx) + rng.next_f64()) * tile;
             let y = (f64::from(ty) + rng.next_f64()) * tile;
-            let tilt = (rng.next_f64() * 2.0 - 1.0) * 15f64.to_radians();
-            let dir = DVec3::new(tilt.sin(), 0.0, -tilt.cos());
+            let dir = p.pattern.direction(&mut rng);
             let height = 500.0;
             let target = DVec3::new(x, y, 0.0);
-            let from = target - dir * (height / tilt.cos());
+            let from = target - dir * (height / -dir.z);
             let ray = Ray {
                 origin: (from - centre).as_vec3(),
                 dir: dir.as_vec3(),
@@ -362,5 +451,34 @@ mod tests {
         let q = TerrainParams { seed: 2, ..p };
         assert_ne!(terrain_mesh(&q).positions, m.positions);
         assert!(m.positions.iter().all(|v| v.is_finite()));
+    }
+
+    /// Each pattern's rays point down, unit length; only `across` never
+    /// looks along the track (walls facing ±y get no return), the others
+    /// look both forward and back.
+    #[test]
+    fn patterns_look_along_the_track_except_across() {
+        for (name, pattern) in ScanPattern::ALL {
+            let mut rng = SplitMix64::new(7);
+            let dirs: Vec<DVec3> = (0..2000).map(|_| pattern.direction(&mut rng)).collect();
+            assert!(
+                dirs.iter()
+                    .all(|d| (d.length() - 1.0).abs() < 1e-12 && d.z < -0.8),
+                "{name}"
+            );
+            let fore = dirs.iter().filter(|d| d.y > 0.05).count();
+            let aft = dirs.iter().filter(|d| d.y < -0.05).count();
+            let east = dirs.iter().filter(|d| d.x > 0.05).count();
+            let west = dirs.iter().filter(|d| d.x < -0.05).count();
+            if pattern == ScanPattern::Across {
+                assert_eq!((fore, aft), (0, 0), "{name}");
+            } else {
+                assert!(
+                    fore > 300 && aft > 300,
+                    "{name}: {fore} forward, {aft} back"
+                );
+            }
+            assert!(east > 300 && west > 300, "{name}: {east} east, {west} west");
+        }
     }
 }

@@ -446,6 +446,7 @@ pub fn generate_with_progress(
         None => (f64::from(params.epsilon_rel) * diagonal) as f32,
     };
     report.epsilon = f64::from(epsilon);
+    let mut nrm = nrm;
     let Work {
         mut points,
         colors,
@@ -453,7 +454,6 @@ pub fn generate_with_progress(
         knn,
         ..
     } = w;
-    let mut nrm = nrm;
     if onto_local_surfaces(
         &mut points,
         &mut nrm,
@@ -463,6 +463,14 @@ pub fn generate_with_progress(
         &mut report,
     ) {
         tree = build_tree(&points);
+    }
+    if params.creases && to_estimate > 0 {
+        // Creases on: each point's normal from its own face where an edge
+        // is near (`normals::face_normals`), its plane holding the points
+        // within a quarter ϵ of it, or three times the noise.
+        let tol =
+            (normals::FACE_TOL_EPS * epsilon).max(normals::FACE_TOL_NOISE * report.noise as f32);
+        normals::face_normals(&points, &tree, &knn, &mut nrm, &fixed, tol);
     }
     let t2 = Instant::now();
     // --- growth --------------------------------------------------------------
