@@ -103,19 +103,8 @@ struct TerrainArgs {
     /// north-south and east-west, ±15°) or across (one line scanner, ±15°
     /// across the track only: walls facing north and south get no point;
     /// the default before issue 39)
-    #[arg(long, default_value = "oblique", value_parser = parse_pattern)]
+    #[arg(long, default_value = "oblique", value_parser = splatray::names::parse::<splatray::terrain::ScanPattern>)]
     pattern: splatray::terrain::ScanPattern,
-}
-
-fn parse_pattern(s: &str) -> std::result::Result<splatray::terrain::ScanPattern, String> {
-    let all = splatray::terrain::ScanPattern::ALL;
-    all.iter()
-        .find(|(n, _)| *n == s)
-        .map(|(_, p)| *p)
-        .ok_or_else(|| {
-            let names: Vec<&str> = all.iter().map(|(n, _)| *n).collect();
-            format!("unknown pattern {s:?}: one of {}", names.join(", "))
-        })
 }
 
 fn terrain(a: &TerrainArgs) -> Result<()> {

@@ -67,6 +67,7 @@ mod tests {
         round_trip::<ShadingMode>();
         round_trip::<ScanPattern>();
         round_trip::<Aov>();
+        round_trip::<crate::terrain::ScanPattern>();
         let msg = |e: Error| e.to_string();
         assert_eq!(
             msg(parse::<ShadingMode>("gouraud").unwrap_err()),

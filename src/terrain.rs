@@ -79,15 +79,13 @@ pub enum ScanPattern {
     Cross,
 }
 
-impl ScanPattern {
-    /// Every pattern, by its name.
-    pub const ALL: [(&'static str, ScanPattern); 4] = [
-        ("across", ScanPattern::Across),
-        ("palmer", ScanPattern::Palmer),
-        ("oblique", ScanPattern::Oblique),
-        ("cross", ScanPattern::Cross),
-    ];
+impl crate::names::Named for ScanPattern {
+    const WHAT: &'static str = "survey pattern";
+    const ALL: &'static [Self] = &[Self::Across, Self::Palmer, Self::Oblique, Self::Cross];
+    const NAMES: &'static [&'static str] = &["across", "palmer", "oblique", "cross"];
+}
 
+impl ScanPattern {
     /// The unit direction of a ray (pointing down) drawn with `rng`.
     fn direction(self, rng: &mut SplitMix64) -> DVec3 {
         let deg = f64::to_radians;
@@ -458,7 +456,9 @@ mod tests {
     /// look both forward and back.
     #[test]
     fn patterns_look_along_the_track_except_across() {
-        for (name, pattern) in ScanPattern::ALL {
+        use crate::names::Named;
+        for &pattern in ScanPattern::ALL {
+            let name = pattern.name();
             let mut rng = SplitMix64::new(7);
             let dirs: Vec<DVec3> = (0..2000).map(|_| pattern.direction(&mut rng)).collect();
             assert!(

@@ -71,18 +71,21 @@ fn the_default_survey_renders_as_its_surface_with_creases() {
     assert_eq!(TerrainParams::default().pattern, ScanPattern::Oblique);
     let e = survey_errors(ScanPattern::Oblique);
     let psnr = e.image_psnr_db.unwrap();
-    // Measured: 24.06 dB, false hits 0.253 % of the image, mean normal
-    // error 8.65° (the small survey's hills are steep: 4 m waves over 60 m;
-    // most of the normal error is shading on the ground). Before
-    // `normals::face_normals`: 24.70 dB, 0.132 %, 9.33°.
-    assert!(psnr > 23.8, "{psnr}");
-    assert!(e.false_hits < 0.0029, "{}", e.false_hits);
+    // Measured: 24.28 dB, false hits 0.311 % of the image, mean normal
+    // error 8.66° (the small survey's hills are steep: 4 m waves over 60 m;
+    // most of the normal error is shading on the ground). With
+    // `normals::face_normals` and before the border band counted from
+    // the whole cloud: 24.06 dB, 0.253 %, 8.65°; before both: 24.70 dB,
+    // 0.132 %, 9.33°. (The default 200 m survey moved the other way with
+    // the border band: 0.097 % -> 0.062 % false hits.)
+    assert!(psnr > 24.0, "{psnr}");
+    assert!(e.false_hits < 0.0035, "{}", e.false_hits);
     assert!(e.normal_deg_mean < 9.0, "{}", e.normal_deg_mean);
     // The across-only scanner leaves the walls facing north and south
     // open: the camera sees through the south walls.
     let across = survey_errors(ScanPattern::Across);
     let psnr_across = across.image_psnr_db.unwrap();
-    // Measured: across 23.48 dB, 14.27° (coverage 0.897 against 0.992).
+    // Measured: across 23.04 dB, 15.33° (coverage 0.912 against 0.993).
     assert!(
         psnr > psnr_across + 0.8,
         "oblique {psnr} across {psnr_across}"
