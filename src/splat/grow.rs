@@ -1188,21 +1188,31 @@ mod tests {
         (p, nrm)
     }
 
-    fn grow(points: &[Vec3], normals: &[Vec3], regions: usize, threads: usize) -> Grown {
-        let tree = build_tree(points);
-        let knn = Knn::build(&tree, points, 12);
-        let inp = GrowInput {
+    /// The growth input the region tests share: ellipses and creases on.
+    fn sheet_input<'a>(
+        points: &'a [Vec3],
+        normals: &'a [Vec3],
+        knn: &'a Knn,
+        tree: &'a PointTree,
+    ) -> GrowInput<'a> {
+        GrowInput {
             points,
             normals,
             colors: None,
-            knn: &knn,
-            tree: &tree,
+            knn,
+            tree,
             cover: knn.k,
             epsilon: 0.002,
             density: 0.5,
             ellipses: true,
             creases: true,
-        };
+        }
+    }
+
+    fn grow(points: &[Vec3], normals: &[Vec3], regions: usize, threads: usize) -> Grown {
+        let tree = build_tree(points);
+        let knn = Knn::build(&tree, points, 12);
+        let inp = sheet_input(points, normals, &knn, &tree);
         rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
@@ -1305,18 +1315,7 @@ mod tests {
         // earlier splat took, and every point ends taken or a seed.
         let tree = build_tree(&p);
         let knn = Knn::build(&tree, &p, 12);
-        let inp = GrowInput {
-            points: &p,
-            normals: &n,
-            colors: None,
-            knn: &knn,
-            tree: &tree,
-            cover: knn.k,
-            epsilon: 0.002,
-            density: 0.5,
-            ellipses: true,
-            creases: true,
-        };
+        let inp = sheet_input(&p, &n, &knn, &tree);
         let mut g = Grower::new(&inp);
         let mut active = vec![true; p.len()];
         for &i in &split.seeds {
