@@ -27,8 +27,9 @@ pub struct SplatOptions {
     /// cloud's points (`splat::color`; the fields are on by default).
     #[arg(long)]
     pub flat_colors: bool,
-    /// Find creases, corners and borders and clip splats at them (issue
-    /// 39; off by default: whole discs). Not with tiled generation yet.
+    /// Find creases, corners and borders and clip splats at them, whole
+    /// or in tiles (off by default: whole discs; docs/usage.md, "Sharp
+    /// edges").
     #[arg(long)]
     pub creases: bool,
     /// Where the scanner stood, as X,Y,Z in the input's coordinates:
