@@ -7,8 +7,6 @@ mod common;
 use glam::Vec3;
 use splatray::scene::{build_scene, parse_scene_str};
 use splatray::splat::{PointCloud, SplatParams, generate};
-use splatray::validate::compare::{render_truth, truth_errors};
-use splatray::validate::truth::Truth;
 use std::path::Path;
 
 /// A ring of points round an empty middle (an annulus 0.8..1.0 in the
@@ -166,9 +164,7 @@ fn solids_figures(text: &str, root: &Path, creases: bool) -> (f64, f64) {
     );
     let t = text.replace(key, &format!("splat = {{ creases = {creases} }}"));
     let scene = build_scene(&parse_scene_str(&t).unwrap(), root, None).unwrap();
-    let truth = render_truth(&scene, &Truth::new(&scene).unwrap(), None);
-    let frame = common::render_with(&scene, common::default_renderer());
-    let e = truth_errors(frame, &truth, &scene.camera, scene.options.scale.diagonal);
+    let e = common::errors_against_truth(&scene);
     eprintln!("creases {creases}: {e:?}");
     (e.image_psnr_db.unwrap(), e.false_hits)
 }

@@ -9,8 +9,7 @@ mod common;
 
 use splatray::scene::{build_scene, parse_scene_str};
 use splatray::terrain::{ScanPattern, TerrainParams, write_terrain};
-use splatray::validate::compare::{TruthErrors, render_truth, truth_errors};
-use splatray::validate::truth::Truth;
+use splatray::validate::compare::TruthErrors;
 
 /// The survey `pattern` makes (60 m, one tile, three buildings, the
 /// default density, noise and seed), splatted whole with creases on and
@@ -57,9 +56,7 @@ intensity = 0.85
 ambient = 0.05
 "#;
     let scene = build_scene(&parse_scene_str(scene).unwrap(), &dir, None).unwrap();
-    let truth = render_truth(&scene, &Truth::new(&scene).unwrap(), None);
-    let frame = common::render_with(&scene, common::default_renderer());
-    let e = truth_errors(frame, &truth, &scene.camera, scene.options.scale.diagonal);
+    let e = common::errors_against_truth(&scene);
     eprintln!("{pattern:?}: {} points, {e:?}", made.points);
     e
 }

@@ -45,6 +45,21 @@ pub fn render_with(
     splatray::render::integrator::render(scene, b.as_ref(), None)
 }
 
+/// `scene` rendered with the default renderer and measured against its
+/// exact surfaces (`validate::compare::truth_errors`).
+pub fn errors_against_truth(
+    scene: &splatray::scene::Scene,
+) -> splatray::validate::compare::TruthErrors {
+    use splatray::validate::compare::{render_truth, truth_errors};
+    let truth = render_truth(
+        scene,
+        &splatray::validate::truth::Truth::new(scene).unwrap(),
+        None,
+    );
+    let frame = render_with(scene, default_renderer());
+    truth_errors(frame, &truth, &scene.camera, scene.options.scale.diagonal)
+}
+
 /// The registry's renderers (`accel::registry::renderers`), by name: the
 /// backends a scene-level test renders with. Panics when there are fewer
 /// than two (every cross-check between renderers would compare nothing).
