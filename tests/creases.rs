@@ -140,14 +140,15 @@ fn a_noisy_scan_of_a_solid_renders_with_creases() {
         .replace("height = 600", "height = 150");
     let (psnr_on, false_on) = solids_figures(&text, &root, true);
     let (psnr_off, false_off) = solids_figures(&text, &root, false);
-    // Measured: on 29.81 dB, 0.13 % false hits (with normals of the
-    // point's own face near an edge, `normals::face_normals`; 27.60 dB,
-    // 0.12 % without them; 27.53 dB, 0.12 % before the border band from
-    // the whole cloud; 27.31 dB, 0.30 % before the
-    // deep border band of part C); off 26.91 dB, 0.45 % (a scan's splats
-    // are small where it is noisy, so whole discs overhang less than on
-    // exact samples).
-    assert!(psnr_on > 29.5, "{psnr_on}");
+    // Measured: on 30.80 dB, 0.133 % false hits (a point at an edge takes
+    // the nearer of the two faces' planes, `normals::face_normals`; 29.81
+    // dB, 0.13 % with the plane through the point holding the most; 27.60
+    // dB, 0.12 % without face normals; 27.53 dB, 0.12 % before the border
+    // band from the whole cloud; 27.31 dB, 0.30 % before the deep border
+    // band of part C); off 26.91 dB, 0.45 % (a scan's splats are small
+    // where it is noisy, so whole discs overhang less than on exact
+    // samples).
+    assert!(psnr_on > 30.5, "{psnr_on}");
     assert!(false_on < 0.0015, "{false_on}");
     assert!(psnr_on > psnr_off + 0.2, "on {psnr_on} off {psnr_off}");
     assert!(false_on < false_off, "on {false_on} off {false_off}");

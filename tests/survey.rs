@@ -68,21 +68,23 @@ fn the_default_survey_renders_as_its_surface_with_creases() {
     assert_eq!(TerrainParams::default().pattern, ScanPattern::Oblique);
     let e = survey_errors(ScanPattern::Oblique);
     let psnr = e.image_psnr_db.unwrap();
-    // Measured: 24.28 dB, false hits 0.311 % of the image, mean normal
-    // error 8.66° (the small survey's hills are steep: 4 m waves over 60 m;
-    // most of the normal error is shading on the ground). With
-    // `normals::face_normals` and before the border band counted from
-    // the whole cloud: 24.06 dB, 0.253 %, 8.65°; before both: 24.70 dB,
-    // 0.132 %, 9.33°. (The default 200 m survey moved the other way with
-    // the border band: 0.097 % -> 0.062 % false hits.)
-    assert!(psnr > 24.0, "{psnr}");
+    // Measured: 24.74 dB, false hits 0.327 % of the image, mean normal
+    // error 8.13° (the small survey's hills are steep: 4 m waves over 60 m;
+    // most of the normal error is shading on the ground). With the plane
+    // through the point in `normals::face_normals` (before the nearer of
+    // two faces' planes): 24.28 dB, 0.311 %, 8.66°; before the border band
+    // counted from the whole cloud: 24.06 dB, 0.253 %, 8.65°; before both:
+    // 24.70 dB, 0.132 %, 9.33°. (The default 200 m survey moved the other
+    // way with the border band: 0.097 % -> 0.062 % false hits.)
+    assert!(psnr > 24.5, "{psnr}");
     assert!(e.false_hits < 0.0035, "{}", e.false_hits);
-    assert!(e.normal_deg_mean < 9.0, "{}", e.normal_deg_mean);
+    assert!(e.normal_deg_mean < 8.4, "{}", e.normal_deg_mean);
     // The across-only scanner leaves the walls facing north and south
     // open: the camera sees through the south walls.
     let across = survey_errors(ScanPattern::Across);
     let psnr_across = across.image_psnr_db.unwrap();
-    // Measured: across 23.04 dB, 15.33° (coverage 0.912 against 0.993).
+    // Measured: across 23.17 dB, 14.97° (23.04 dB, 15.33° before the
+    // nearer of two faces' planes; coverage 0.909 against 0.992).
     assert!(
         psnr > psnr_across + 0.8,
         "oblique {psnr} across {psnr_across}"
