@@ -11,18 +11,75 @@ use std::time::Instant;
 /// The primitives as Embree sees them, addressed by primitive id.
 struct Primitives<P>(Vec<P>);
 
+/// How far past the query's span Embree traverses, relative to the span's
+/// ends and the ray origin's largest coordinate: 2⁻¹².
+///
+/// The span `[t_min, t_max]` is exact, and tested in the callbacks on the
+/// `t` the primitive's intersection rounds (as the octree and the oracle
+/// test it). Embree culls a box whose interval along the ray misses the
+/// span it traverses; on a splat whose normal is an axis the box is a slab
+/// a few ulps thick, and a hit's rounded `t` can lie just past the box's
+/// exit (by a few ulps of the origin's coordinates over the ray's slope
+/// through the slab). A span that starts at that very `t` (the resolver
+/// gathering again from a candidate, [`crate::resolve::Resolved::Beyond`])
+/// then lost the hit on Embree alone. Traversing a slightly wider span
+/// costs a few more exact tests near its ends and changes no answer.
+const SPAN_SLACK: f32 = 1.0 / 4096.0;
+
+/// The span Embree traverses for the exact span `[t_min, t_max]` of `ray`:
+/// each finite end moved out by [`SPAN_SLACK`] of its size and the origin's,
+/// a start at or below 0 kept (Embree takes `tnear >= 0`).
+fn traversal_span(ray: &Ray, t_min: f32, t_max: f32) -> (f32, f32) {
+    let m = ray.origin.abs().max_element();
+    let lo = if t_min > 0.0 && t_min.is_finite() {
+        (t_min - (t_min + m) * SPAN_SLACK).max(0.0)
+    } else {
+        t_min
+    };
+    (lo, traversal_end(ray, t_max))
+}
+
+/// The far end Embree traverses to for the exact far end `t`.
+fn traversal_end(ray: &Ray, t: f32) -> f32 {
+    if t.is_finite() {
+        t + (t.abs() + ray.origin.abs().max_element()) * SPAN_SLACK
+    } else {
+        t
+    }
+}
+
 /// What one ray's query carries to the intersect callback.
 struct Gather<'q> {
     hits: &'q mut CandidateHits,
+    /// The query's exact span ([`traversal_span`] is what Embree sees).
+    t_min: f32,
     t_max: f32,
     /// What a secondary ray skips (the splat it leaves, hits it passes):
     /// such hits are not offered.
     skip: Secondary<'q>,
 }
 
+/// What one shadow ray's query carries to the occluded callback.
+struct Shadow<'q> {
+    /// The query's exact span ([`traversal_span`] is what Embree sees).
+    t_min: f32,
+    t_max: f32,
+    skip: Secondary<'q>,
+}
+
+impl Shadow<'_> {
+    fn of<'a>(q: &'a Query<'_>) -> Shadow<'a> {
+        Shadow {
+            t_min: q.t_min,
+            t_max: q.t_max,
+            skip: q.secondary(),
+        }
+    }
+}
+
 impl<P: Primitive> UserGeometry for Primitives<P> {
     type Query<'q> = Gather<'q>;
-    type ShadowQuery<'q> = Secondary<'q>;
+    type ShadowQuery<'q> = Shadow<'q>;
 
     fn count(&self) -> usize {
         self.0.len()
@@ -38,14 +95,16 @@ impl<P: Primitive> UserGeometry for Primitives<P> {
     }
 
     /// Instead of keeping only the closest hit, records every hit into the
-    /// window and moves `tfar` to `min(t_max, nearest + xi)`, so Embree
-    /// culls everything beyond the window (§4.3).
+    /// window and moves `tfar` to `min(t_max, nearest + xi)` (widened as
+    /// [`traversal_end`]), so Embree culls everything beyond the window
+    /// (§4.3). The hit is tested against the query's exact span, not
+    /// Embree's widened `tnear`.
     #[inline]
     fn intersect(
         &self,
         prim: u32,
         ray: &Ray,
-        tnear: f32,
+        _tnear: f32,
         tfar: f32,
         q: &mut Gather<'_>,
     ) -> Option<f32> {
@@ -56,7 +115,7 @@ impl<P: Primitive> UserGeometry for Primitives<P> {
             return None;
         }
         let p = &self.0[prim as usize];
-        let h = p.intersect(ray, tnear, tfar)?;
+        let h = p.intersect(ray, q.t_min, tfar.min(q.t_max))?;
         if q.skip.skips(ray.dir, prim, p, &h) {
             return None;
         }
@@ -66,18 +125,18 @@ impl<P: Primitive> UserGeometry for Primitives<P> {
             u: h.u,
             v: h.v,
         });
-        Some(far.min(q.t_max))
+        Some(traversal_end(ray, far.min(q.t_max)))
     }
 
     #[inline]
-    fn occluded(&self, prim: u32, ray: &Ray, tnear: f32, tfar: f32, skip: &Secondary<'_>) -> bool {
-        // As in `intersect`: the splat left first, by id.
-        if skip.from.is_some_and(|d| d.id == prim) {
+    fn occluded(&self, prim: u32, ray: &Ray, _tnear: f32, _tfar: f32, s: &Shadow<'_>) -> bool {
+        // As in `intersect`: the splat left first, by id; the exact span.
+        if s.skip.from.is_some_and(|d| d.id == prim) {
             return false;
         }
         let p = &self.0[prim as usize];
-        p.intersect(ray, tnear, tfar)
-            .is_some_and(|h| !skip.skips(ray.dir, prim, p, &h))
+        p.intersect(ray, s.t_min, s.t_max)
+            .is_some_and(|h| !s.skip.skips(ray.dir, prim, p, &h))
     }
 }
 
@@ -85,8 +144,10 @@ impl<P: Primitive> UserGeometry for Primitives<P> {
 /// them repeat the first ray; the packet calls leave them out).
 fn packet_rays(qs: &[Query]) -> [(Ray, f32, f32); PACKET] {
     std::array::from_fn(|k| {
-        qs.get(k)
-            .map_or((qs[0].ray, 0.0, 0.0), |q| (q.ray, q.t_min, q.t_max))
+        qs.get(k).map_or((qs[0].ray, 0.0, 0.0), |q| {
+            let (lo, hi) = traversal_span(&q.ray, q.t_min, q.t_max);
+            (q.ray, lo, hi)
+        })
     })
 }
 
@@ -123,17 +184,22 @@ impl<P: Primitive> Backend for EmbreeBackend<P> {
         if q.meets_nothing() {
             return;
         }
-        let (t_max, skip) = (q.t_max, q.secondary());
-        self.scene
-            .intersect(&q.ray, q.t_min, t_max, &mut Gather { hits, t_max, skip });
+        let (lo, hi) = traversal_span(&q.ray, q.t_min, q.t_max);
+        let mut g = Gather {
+            hits,
+            t_min: q.t_min,
+            t_max: q.t_max,
+            skip: q.secondary(),
+        };
+        self.scene.intersect(&q.ray, lo, hi, &mut g);
     }
 
     fn occluded_from(&self, q: &Query) -> bool {
         if q.meets_nothing() {
             return false;
         }
-        self.scene
-            .occluded(&q.ray, q.t_min, q.t_max, &q.secondary())
+        let (lo, hi) = traversal_span(&q.ray, q.t_min, q.t_max);
+        self.scene.occluded(&q.ray, lo, hi, &Shadow::of(q))
     }
 
     /// True: `rtcIntersect8` traces the primary rays of 8×1 pixel tiles
@@ -158,6 +224,7 @@ impl<P: Primitive> Backend for EmbreeBackend<P> {
                     hits.clear();
                     Gather {
                         hits,
+                        t_min: q.t_min,
                         t_max: q.t_max,
                         skip: q.secondary(),
                     }
@@ -179,13 +246,17 @@ impl<P: Primitive> Backend for EmbreeBackend<P> {
         assert!(out.len() >= qs.len(), "an answer per query");
         for (qs, out) in qs.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
             let rays = packet_rays(qs);
-            let skip: [Secondary<'_>; PACKET] = std::array::from_fn(|k| {
+            let skip: [Shadow<'_>; PACKET] = std::array::from_fn(|k| {
                 qs.get(k).map_or(
-                    Secondary {
-                        from: None,
-                        pass: None,
+                    Shadow {
+                        t_min: 0.0,
+                        t_max: 0.0,
+                        skip: Secondary {
+                            from: None,
+                            pass: None,
+                        },
                     },
-                    Query::secondary,
+                    Shadow::of,
                 )
             });
             self.scene.occluded8(&rays[..qs.len()], &skip, out);
