@@ -976,7 +976,7 @@ mod tests {
             "of {} points inside the edge, {before} -> {after} on a face",
             inside.len()
         );
-        // Measured: 0 -> 19 of 19 (0 -> 0 with the plane through the
+        // Measured: 0 -> 5 of 5 (0 -> 0 with the plane through the
         // point holding the most: no face's plane holds the point).
         assert_eq!(before, 0);
         assert_eq!(after, inside.len());
