@@ -137,6 +137,56 @@ pub fn normals_after(points: &[Vec3], normals: &[Vec3], knn: &Knn) -> Vec<Option
         .collect()
 }
 
+/// How closely `offsets` (points minus a point on the surface) lie on the
+/// quadratic height field over the plane of normal `n` fitted to them by
+/// least squares (the fit of the module notes): MSAC's score, the sum of
+/// `1 - (r / tol)²` over the residuals `r` within `tol`, as
+/// `normals::face_normals` scores its planes; `None` where they do not
+/// determine a quadric. A smooth surface's neighbourhood, curved beyond
+/// one plane's `tol`, lies on its quadric within the noise; two faces
+/// meeting at an edge lie closer to their two planes.
+#[must_use]
+pub fn quadric_fit(offsets: &[Vec3], n: Vec3, tol: f32) -> Option<f32> {
+    let n = n.as_dvec3().try_normalize()?;
+    let u = n.any_orthonormal_vector();
+    let v = n.cross(u);
+    let scale = offsets
+        .iter()
+        .map(|d| d.as_dvec3().length())
+        .fold(0.0f64, f64::max);
+    if scale.is_nan() || scale <= 0.0 || offsets.len() < MIN_POINTS {
+        return None;
+    }
+    let rows: Vec<([f64; 6], f64)> = offsets
+        .iter()
+        .map(|d| {
+            let d = d.as_dvec3() / scale;
+            let (x, y) = (d.dot(u), d.dot(v));
+            ([1.0, x, y, x * x, x * y, y * y], d.dot(n))
+        })
+        .collect();
+    let mut ata = [[0f64; 6]; 6];
+    let mut atb = [0f64; 6];
+    for (row, h) in &rows {
+        for r in 0..6 {
+            for c in 0..6 {
+                ata[r][c] += row[r] * row[c];
+            }
+            atb[r] += row[r] * h;
+        }
+    }
+    let coef = solve6(ata, atb)?;
+    let tol = f64::from(tol) / scale;
+    Some(
+        rows.iter()
+            .map(|(row, h)| {
+                let f: f64 = row.iter().zip(&coef).map(|(a, b)| a * b).sum();
+                (1.0 - ((h - f) / tol).powi(2)).max(0.0)
+            })
+            .sum::<f64>() as f32,
+    )
+}
+
 /// Solves the 6×6 normal equations by Gaussian elimination with partial
 /// pivoting; `None` when they are singular (the points do not determine a
 /// quadratic surface, e.g. they lie on one line).
