@@ -300,6 +300,21 @@ impl Splats {
         })
     }
 
+    /// (N, 6) float32 clip lines `(a, b, d)` twice: a splat keeps the
+    /// part of its disc with `a u + b v <= d` in its normalised coordinates
+    /// (`u`, `v` along the axes in units of the radii); a line of zeros
+    /// keeps all (a whole disc has two, an edge's splat one).
+    #[getter]
+    fn clip_lines<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        self.rows(py, |s| {
+            let mut row = [0f32; 6];
+            for (k, l) in s.clip.lines().iter().enumerate() {
+                row[3 * k..3 * k + 3].copy_from_slice(&[l.a, l.b, l.d]);
+            }
+            row
+        })
+    }
+
     /// (N, 3) float32 linear RGB colours.
     #[getter]
     fn colors<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
@@ -336,7 +351,8 @@ impl Splats {
 /// fields); the options are the command's.
 #[pyfunction]
 #[pyo3(signature = (points, normals=None, colors=None, viewpoint=None, *, epsilon=None, k=None,
-    density=None, ellipses=false, flat_colors=false, no_viewpoint=false, thin=None, progress=None))]
+    density=None, ellipses=false, flat_colors=false, creases=false, no_viewpoint=false, thin=None,
+    progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn splat(
     py: Python<'_>,
@@ -349,6 +365,7 @@ pub fn splat(
     density: Option<f32>,
     ellipses: bool,
     flat_colors: bool,
+    creases: bool,
     no_viewpoint: bool,
     thin: Option<f64>,
     progress: Option<Py<PyAny>>,
@@ -382,7 +399,7 @@ pub fn splat(
         density,
         ellipses,
         flat_colors,
-        creases: false,
+        creases,
         viewpoint: vp,
         no_viewpoint,
         thin,

@@ -75,6 +75,10 @@ class Splats:
     def normal_fields(self) -> npt.NDArray[np.float32]:
         """(N, 4): x_c, y_c, alpha, beta of eq. (4)."""
     @property
+    def clip_lines(self) -> npt.NDArray[np.float32]:
+        """(N, 6): two clip lines (a, b, d) per splat; the splat keeps
+        a*u + b*v <= d (u, v in units of its radii); zeros keep all."""
+    @property
     def colors(self) -> npt.NDArray[np.float32]: ...
     @property
     def color_fields(self) -> Optional[npt.NDArray[np.float32]]:
@@ -94,12 +98,14 @@ def splat(
     density: Optional[float] = None,
     ellipses: bool = False,
     flat_colors: bool = False,
+    creases: bool = False,
     no_viewpoint: bool = False,
     thin: Optional[float] = None,
     progress: Optional[Progress] = None,
 ) -> Splats:
     """Splats from points as `splatray splat` makes them; the options are
-    its flags (epsilon: fraction of the bounding-box diagonal)."""
+    its flags (epsilon: fraction of the bounding-box diagonal; creases=True
+    is --creases: splats clipped at creases, corners and borders)."""
 
 class CastResult(TypedDict):
     t_hit: npt.NDArray[np.float32]

@@ -56,7 +56,7 @@ def run_binary(binary: str, args: Sequence[str]) -> str:
 #: The options of ``splat`` by the Python package's names (those of
 #: ``splatray.splat``, and the tiling's), each a ``splatray splat`` flag.
 SPLAT_OPTIONS = (
-    "epsilon", "k", "density", "ellipses", "flat_colors", "viewpoint",
+    "epsilon", "k", "density", "ellipses", "flat_colors", "creases", "viewpoint",
     "no_viewpoint", "thin", "tile_points", "max_memory",
 )
 #: The options of ``render`` by the Python package's names (those of
