@@ -147,6 +147,21 @@ pub fn normals_after(points: &[Vec3], normals: &[Vec3], knn: &Knn) -> Vec<Option
 /// meeting at an edge lie closer to their two planes.
 #[must_use]
 pub fn quadric_fit(offsets: &[Vec3], n: Vec3, tol: f32) -> Option<f32> {
+    height_fit(offsets, n, tol, 6, MIN_POINTS)
+}
+
+/// The MSAC score (as [`quadric_fit`]'s) of the height field over the
+/// plane of normal `n` fitted to `offsets` by least squares with its first
+/// `terms` of `1, x, y, x², xy, y²`: 3 a plane, 6 a quadric; `None` where
+/// fewer than `min_points` or they do not determine it.
+#[must_use]
+pub fn height_fit(
+    offsets: &[Vec3],
+    n: Vec3,
+    tol: f32,
+    terms: usize,
+    min_points: usize,
+) -> Option<f32> {
     let n = n.as_dvec3().try_normalize()?;
     let u = n.any_orthonormal_vector();
     let v = n.cross(u);
@@ -154,7 +169,7 @@ pub fn quadric_fit(offsets: &[Vec3], n: Vec3, tol: f32) -> Option<f32> {
         .iter()
         .map(|d| d.as_dvec3().length())
         .fold(0.0f64, f64::max);
-    if scale.is_nan() || scale <= 0.0 || offsets.len() < MIN_POINTS {
+    if scale.is_nan() || scale <= 0.0 || offsets.len() < min_points.max(terms) {
         return None;
     }
     let rows: Vec<([f64; 6], f64)> = offsets
@@ -174,6 +189,16 @@ pub fn quadric_fit(offsets: &[Vec3], n: Vec3, tol: f32) -> Option<f32> {
             }
             atb[r] += row[r] * h;
         }
+    }
+    // Unused terms: identity rows, so their coefficients solve to 0.
+    for r in terms.min(6)..6 {
+        ata[r] = [0.0; 6];
+        ata[r][r] = 1.0;
+        for row in &mut ata {
+            row[r] = 0.0;
+        }
+        ata[r][r] = 1.0;
+        atb[r] = 0.0;
     }
     let coef = solve6(ata, atb)?;
     let tol = f64::from(tol) / scale;
@@ -236,6 +261,37 @@ mod tests {
         }
         let normals = pts.iter().map(|p| p.normalize()).collect();
         (pts, normals)
+    }
+
+    /// `height_fit` with 3 terms fits a plane, with 6 a quadric: a tilted
+    /// plane's points score in full under both, a paraboloid's under the
+    /// quadric only, and a crease (two planes) under neither.
+    #[test]
+    fn height_fit_takes_a_plane_or_a_quadric() {
+        let grid = |h: &dyn Fn(f32, f32) -> f32| -> Vec<Vec3> {
+            (0..11)
+                .flat_map(|i| (0..11).map(move |j| (i as f32 * 0.1 - 0.5, j as f32 * 0.1 - 0.5)))
+                .map(|(x, y)| Vec3::new(x, y, h(x, y)))
+                .collect()
+        };
+        let tol = 1e-3;
+        let n = grid(&|_, _| 0.0).len() as f32;
+        let plane = grid(&|x, y| 0.3 * x - 0.2 * y + 0.1);
+        let bowl = grid(&|x, y| x * x + 0.5 * y * y);
+        let crease = grid(&|x, _| x.abs());
+        let fit = |p: &[Vec3], terms| height_fit(p, Vec3::Z, tol, terms, 6).unwrap();
+        assert!(fit(&plane, 3) > n - 0.01 && fit(&plane, 6) > n - 0.01);
+        eprintln!(
+            "bowl plane {} quadric {}, crease quadric {}",
+            fit(&bowl, 3),
+            fit(&bowl, 6),
+            fit(&crease, 6)
+        );
+        // Measured: the bowl's plane 0 of 121, its quadric 121; the
+        // crease's quadric 0.
+        assert!(fit(&bowl, 3) < 0.1 * n && fit(&bowl, 6) > n - 0.01);
+        assert!(fit(&crease, 6) < 0.1 * n, "{}", fit(&crease, 6));
+        assert!(height_fit(&plane[..5], Vec3::Z, tol, 6, 6).is_none());
     }
 
     #[test]
