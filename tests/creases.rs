@@ -106,12 +106,16 @@ fn a_solid_renders_as_itself_with_creases() {
         .replace("height = 600", "height = 150");
     let (psnr_on, false_on) = solids_figures(&text, &root, true);
     let (psnr_off, false_off) = solids_figures(&text, &root, false);
-    // Measured: on 28.14 dB, 0.21 % false hits (27.32 dB, 0.56 % before
-    // the border band from the whole cloud, the border's gap by the chord
-    // and corners' lines by the area they cut; 26.26 dB, 0.94 % before
-    // clip lines turned to the finer direction); off 18.26 dB, 17.3 %.
+    // Measured: on 27.97 dB, 0.277 % false hits with the rise test of
+    // `grow::CREASE_STEEP` and the smooth-rim test of `grow::smooth_across`
+    // (at these 60k samples a few edge splats have too few points across
+    // to show their face's rise, while the scene's 300k gain 34.20 -> 34.94
+    // dB); 28.14 dB, 0.21 % before them (27.32 dB, 0.56 % before the
+    // border band from the whole cloud, the border's gap by the chord and
+    // corners' lines by the area they cut; 26.26 dB, 0.94 % before clip
+    // lines turned to the finer direction); off 18.26 dB, 17.3 %.
     assert!(psnr_on > 27.8, "{psnr_on}");
-    assert!(false_on < 0.0026, "{false_on}");
+    assert!(false_on < 0.0030, "{false_on}");
     assert!(psnr_off < 19.0, "{psnr_off}");
     assert!(false_off > 0.15, "{false_off}");
 }
@@ -140,7 +144,12 @@ fn a_noisy_scan_of_a_solid_renders_with_creases() {
         .replace("height = 600", "height = 150");
     let (psnr_on, false_on) = solids_figures(&text, &root, true);
     let (psnr_off, false_off) = solids_figures(&text, &root, false);
-    // Measured: on 30.80 dB, 0.133 % false hits (a point at an edge takes
+    // Measured: on 30.58 dB, 0.180 % false hits with the rise test, the
+    // quadric gate of `normals::face_normals` and the flat faces' wide
+    // planes (`normals::smooth_flat`; fewer, larger splats on the faces:
+    // at 800x600 the scene's noisy scan gains 31.36 -> 31.63 dB while its
+    // false hits go 0.230 -> 0.258 %); 30.80 dB, 0.133 % before them (a
+    // point at an edge takes
     // the nearer of the two faces' planes, `normals::face_normals`; 29.81
     // dB, 0.13 % with the plane through the point holding the most; 27.60
     // dB, 0.12 % without face normals; 27.53 dB, 0.12 % before the border
@@ -148,8 +157,8 @@ fn a_noisy_scan_of_a_solid_renders_with_creases() {
     // band of part C); off 26.91 dB, 0.45 % (a scan's splats are small
     // where it is noisy, so whole discs overhang less than on exact
     // samples).
-    assert!(psnr_on > 30.5, "{psnr_on}");
-    assert!(false_on < 0.0015, "{false_on}");
+    assert!(psnr_on > 30.4, "{psnr_on}");
+    assert!(false_on < 0.0020, "{false_on}");
     assert!(psnr_on > psnr_off + 0.2, "on {psnr_on} off {psnr_off}");
     assert!(false_on < false_off, "on {false_on} off {false_off}");
 }
