@@ -144,12 +144,13 @@ fn a_noisy_scan_of_a_solid_renders_with_creases() {
         .replace("height = 600", "height = 150");
     let (psnr_on, false_on) = solids_figures(&text, &root, true);
     let (psnr_off, false_off) = solids_figures(&text, &root, false);
-    // Measured: on 30.58 dB, 0.180 % false hits with the rise test, the
-    // quadric gate of `normals::face_normals` and the flat faces' wide
-    // planes (`normals::smooth_flat`; fewer, larger splats on the faces:
-    // at 800x600 the scene's noisy scan gains 31.36 -> 31.63 dB while its
-    // false hits go 0.230 -> 0.258 %); 30.80 dB, 0.133 % before them (a
-    // point at an edge takes
+    // Measured: on 30.39 dB, 0.130 % false hits with the quadric gate of
+    // `normals::face_normals` (a neighbourhood one quadric fits as closely
+    // as two planes keeps its normal: the noisy bunny scans with creases
+    // gain 0.9-1.1 dB, a few of this scan's noisy edge points keep their
+    // blended normals), the rise test of `grow::CREASE_STEEP` and the
+    // smooth-rim test of `grow::smooth_across`; 30.80 dB, 0.133 % before
+    // them (a point at an edge takes
     // the nearer of the two faces' planes, `normals::face_normals`; 29.81
     // dB, 0.13 % with the plane through the point holding the most; 27.60
     // dB, 0.12 % without face normals; 27.53 dB, 0.12 % before the border
@@ -157,8 +158,8 @@ fn a_noisy_scan_of_a_solid_renders_with_creases() {
     // band of part C); off 26.91 dB, 0.45 % (a scan's splats are small
     // where it is noisy, so whole discs overhang less than on exact
     // samples).
-    assert!(psnr_on > 30.4, "{psnr_on}");
-    assert!(false_on < 0.0020, "{false_on}");
+    assert!(psnr_on > 30.3, "{psnr_on}");
+    assert!(false_on < 0.0015, "{false_on}");
     assert!(psnr_on > psnr_off + 0.2, "on {psnr_on} off {psnr_off}");
     assert!(false_on < false_off, "on {false_on} off {false_off}");
 }
