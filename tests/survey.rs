@@ -69,7 +69,10 @@ fn the_default_survey_renders_as_its_surface_with_creases() {
     let e = survey_errors(ScanPattern::Oblique);
     let psnr = e.image_psnr_db.unwrap();
     // Measured: 24.96 dB, false hits 0.343 % of the image, mean normal
-    // error 7.90° (the small survey's hills are steep: 4 m waves over 60 m;
+    // error 7.90° with Embree's avx512 kernels tracing the truth (avx2:
+    // 24.87 dB, 0.358 %, 7.90°; sse4.2: 24.91 dB, 0.353 %, 7.91°: edge
+    // pixels of the mesh move with the kernel) (the small survey's hills
+    // are steep: 4 m waves over 60 m;
     // most of the normal error is shading on the ground); 24.74 dB,
     // 0.327 %, 8.13° before the rise test of `grow::CREASE_STEEP`, the
     // quadric gate of `normals::face_normals` and `grow::smooth_across`.
@@ -80,7 +83,7 @@ fn the_default_survey_renders_as_its_surface_with_creases() {
     // 24.70 dB, 0.132 %, 9.33°. (The default 200 m survey moved the other
     // way with the border band: 0.097 % -> 0.062 % false hits.)
     assert!(psnr > 24.5, "{psnr}");
-    assert!(e.false_hits < 0.0035, "{}", e.false_hits);
+    assert!(e.false_hits < 0.0037, "{}", e.false_hits);
     assert!(e.normal_deg_mean < 8.4, "{}", e.normal_deg_mean);
     // The across-only scanner leaves the walls facing north and south
     // open: the camera sees through the south walls.
