@@ -73,21 +73,15 @@ fn fit(points: &[Vec3], n: Vec3, i: usize, nb: &[u32]) -> Option<Local> {
     if scale.is_nan() || scale <= 0.0 || nb.len() + 1 < MIN_POINTS {
         return None;
     }
-    let mut ata = [[0f64; 6]; 6];
-    let mut atb = [0f64; 6];
-    let mut samples = Vec::with_capacity(nb.len() + 1);
-    for q in std::iter::once(p).chain(nb.iter().map(|&j| points[j as usize].as_dvec3())) {
-        let d: DVec3 = (q - p) / scale;
-        let (x, y, h) = (d.dot(u), d.dot(v), d.dot(n));
-        let row = [1.0, x, y, x * x, x * y, y * y];
-        for r in 0..6 {
-            for c in 0..6 {
-                ata[r][c] += row[r] * row[c];
-            }
-            atb[r] += row[r] * h;
-        }
-        samples.push((row, h));
-    }
+    let samples: Vec<([f64; 6], f64)> = std::iter::once(p)
+        .chain(nb.iter().map(|&j| points[j as usize].as_dvec3()))
+        .map(|q| {
+            let d: DVec3 = (q - p) / scale;
+            let (x, y, h) = (d.dot(u), d.dot(v), d.dot(n));
+            ([1.0, x, y, x * x, x * y, y * y], h)
+        })
+        .collect();
+    let (ata, atb) = normal_equations(&samples);
     let coef = solve6(ata, atb)?;
     let ssr: f64 = samples
         .iter()
@@ -180,20 +174,10 @@ pub fn height_fit(
             ([1.0, x, y, x * x, x * y, y * y], d.dot(n))
         })
         .collect();
-    let mut ata = [[0f64; 6]; 6];
-    let mut atb = [0f64; 6];
-    for (row, h) in &rows {
-        for r in 0..6 {
-            for c in 0..6 {
-                ata[r][c] += row[r] * row[c];
-            }
-            atb[r] += row[r] * h;
-        }
-    }
+    let (mut ata, mut atb) = normal_equations(&rows);
     // Unused terms: identity rows, so their coefficients solve to 0.
     for r in terms.min(6)..6 {
         ata[r] = [0.0; 6];
-        ata[r][r] = 1.0;
         for row in &mut ata {
             row[r] = 0.0;
         }
@@ -210,6 +194,23 @@ pub fn height_fit(
             })
             .sum::<f64>() as f32,
     )
+}
+
+/// The normal equations `(AᵀA, Aᵀh)` of the height field's least squares
+/// over `rows` (each the terms `1, x, y, x², xy, y²` and the height `h`).
+#[allow(clippy::needless_range_loop)] // index form mirrors the matrix
+fn normal_equations(rows: &[([f64; 6], f64)]) -> ([[f64; 6]; 6], [f64; 6]) {
+    let mut ata = [[0f64; 6]; 6];
+    let mut atb = [0f64; 6];
+    for (row, h) in rows {
+        for r in 0..6 {
+            for c in 0..6 {
+                ata[r][c] += row[r] * row[c];
+            }
+            atb[r] += row[r] * h;
+        }
+    }
+    (ata, atb)
 }
 
 /// Solves the 6×6 normal equations by Gaussian elimination with partial
