@@ -8,8 +8,10 @@
 //! and their normals are then fitted again to the moved points
 //! ([`normals_after`]).
 
+use super::fit::{
+    COLLINEAR, MIN_QUADRIC_POINTS as MIN_POINTS, normal_equations, plane_fit, solve6,
+};
 use super::knn::Knn;
-use super::normals::{COLLINEAR, plane_fit};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
@@ -24,9 +26,6 @@ pub struct Local {
     /// its six parameters).
     pub sd: f32,
 }
-
-/// Fits of fewer points than this are not made (six parameters).
-const MIN_POINTS: usize = 10;
 
 /// The quadratic fit at every point over its graph neighbours facing the
 /// same way (consistently oriented `normals`; see the module notes); `None`
@@ -131,121 +130,11 @@ pub fn normals_after(points: &[Vec3], normals: &[Vec3], knn: &Knn) -> Vec<Option
         .collect()
 }
 
-/// How closely `offsets` (points minus a point on the surface) lie on the
-/// quadratic height field over the plane of normal `n` fitted to them by
-/// least squares (the fit of the module notes): MSAC's score, the sum of
-/// `1 - (r / tol)²` over the residuals `r` within `tol`, as
-/// `normals::face_normals` scores its planes; `None` where they do not
-/// determine a quadric. A smooth surface's neighbourhood, curved beyond
-/// one plane's `tol`, lies on its quadric within the noise; two faces
-/// meeting at an edge lie closer to their two planes.
-#[must_use]
-pub fn quadric_fit(offsets: &[Vec3], n: Vec3, tol: f32) -> Option<f32> {
-    height_fit(offsets, n, tol, 6, MIN_POINTS)
-}
-
-/// The MSAC score (as [`quadric_fit`]'s) of the height field over the
-/// plane of normal `n` fitted to `offsets` by least squares with its first
-/// `terms` of `1, x, y, x², xy, y²`: 3 a plane, 6 a quadric; `None` where
-/// fewer than `min_points` or they do not determine it.
-#[must_use]
-pub fn height_fit(
-    offsets: &[Vec3],
-    n: Vec3,
-    tol: f32,
-    terms: usize,
-    min_points: usize,
-) -> Option<f32> {
-    let n = n.as_dvec3().try_normalize()?;
-    let u = n.any_orthonormal_vector();
-    let v = n.cross(u);
-    let scale = offsets
-        .iter()
-        .map(|d| d.as_dvec3().length())
-        .fold(0.0f64, f64::max);
-    if scale.is_nan() || scale <= 0.0 || offsets.len() < min_points.max(terms) {
-        return None;
-    }
-    let rows: Vec<([f64; 6], f64)> = offsets
-        .iter()
-        .map(|d| {
-            let d = d.as_dvec3() / scale;
-            let (x, y) = (d.dot(u), d.dot(v));
-            ([1.0, x, y, x * x, x * y, y * y], d.dot(n))
-        })
-        .collect();
-    let (mut ata, mut atb) = normal_equations(&rows);
-    // Unused terms: identity rows, so their coefficients solve to 0.
-    for r in terms.min(6)..6 {
-        ata[r] = [0.0; 6];
-        for row in &mut ata {
-            row[r] = 0.0;
-        }
-        ata[r][r] = 1.0;
-        atb[r] = 0.0;
-    }
-    let coef = solve6(ata, atb)?;
-    let tol = f64::from(tol) / scale;
-    Some(
-        rows.iter()
-            .map(|(row, h)| {
-                let f: f64 = row.iter().zip(&coef).map(|(a, b)| a * b).sum();
-                (1.0 - ((h - f) / tol).powi(2)).max(0.0)
-            })
-            .sum::<f64>() as f32,
-    )
-}
-
-/// The normal equations `(AᵀA, Aᵀh)` of the height field's least squares
-/// over `rows` (each the terms `1, x, y, x², xy, y²` and the height `h`).
-#[allow(clippy::needless_range_loop)] // index form mirrors the matrix
-fn normal_equations(rows: &[([f64; 6], f64)]) -> ([[f64; 6]; 6], [f64; 6]) {
-    let mut ata = [[0f64; 6]; 6];
-    let mut atb = [0f64; 6];
-    for (row, h) in rows {
-        for r in 0..6 {
-            for c in 0..6 {
-                ata[r][c] += row[r] * row[c];
-            }
-            atb[r] += row[r] * h;
-        }
-    }
-    (ata, atb)
-}
-
-/// Solves the 6×6 normal equations by Gaussian elimination with partial
-/// pivoting; `None` when they are singular (the points do not determine a
-/// quadratic surface, e.g. they lie on one line).
-#[allow(clippy::needless_range_loop)] // index form mirrors the elimination
-fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
-    let norm = a.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
-    for col in 0..6 {
-        let piv = (col..6).max_by(|&r, &s| a[r][col].abs().total_cmp(&a[s][col].abs()))?;
-        if a[piv][col].abs() <= 1e-10 * norm {
-            return None;
-        }
-        a.swap(col, piv);
-        b.swap(col, piv);
-        for r in col + 1..6 {
-            let f = a[r][col] / a[col][col];
-            for c in col..6 {
-                a[r][c] -= f * a[col][c];
-            }
-            b[r] -= f * b[col];
-        }
-    }
-    let mut x = [0f64; 6];
-    for r in (0..6).rev() {
-        let s: f64 = (r + 1..6).map(|c| a[r][c] * x[c]).sum();
-        x[r] = (b[r] - s) / a[r][r];
-    }
-    Some(x)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::rng::SplitMix64;
+    use crate::splat::fit::height_fit;
     use crate::splat::knn::build_tree;
 
     /// A patch of the sphere of radius 1 around its north pole, with range

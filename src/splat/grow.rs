@@ -419,14 +419,14 @@ fn rise_angle(across: &[Near], w: Vec2) -> f32 {
 /// Whether the splat's own points `own` and the points `across` a crease
 /// candidate lie on one smooth surface: the quadratic height field over
 /// the plane of normal `n` (the two sides' mean normals' bisector) fitted
-/// to both together ([`super::denoise::height_fit`]) fits them within
+/// to both together ([`super::fit::height_fit`]) fits them within
 /// [`CREASE_SMOOTH_SLACK`] points of MSAC's score as closely as a quadric
 /// fitted to `own` alone and a plane fitted to `across` alone (a curved
 /// face meeting a flat one: the cylinder's side on the ground), with
 /// residuals scored within [`CREASE_SMOOTH_TOL`] `ϵ`. `p` is the seed's
 /// position (the offsets' origin).
 fn smooth_across(own: &[Near], across: &[Near], n: Vec3, inp: &GrowInput, p: Vec3) -> bool {
-    use super::denoise::height_fit;
+    use super::fit::height_fit;
     let off =
         |v: &[Near]| -> Vec<Vec3> { v.iter().map(|m| inp.points[m.j as usize] - p).collect() };
     let (o, ac) = (off(own), off(across));

@@ -129,6 +129,7 @@ mod cloud;
 pub mod color;
 pub mod denoise;
 pub mod field;
+pub mod fit;
 pub(crate) mod frame;
 mod generate;
 pub mod grow;

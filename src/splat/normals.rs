@@ -2,84 +2,10 @@
 //! neighbours (§2.1), oriented consistently by propagation along a minimum
 //! spanning tree of the neighbourhood graph (Hoppe et al. 1992).
 
+pub use super::fit::{COLLINEAR, plane_fit, sym_eigen3};
 use super::knn::Knn;
-use glam::{DVec3, Vec3};
+use glam::Vec3;
 use rayon::prelude::*;
-
-/// Eigen-decomposition of a symmetric 3×3 matrix by cyclic Jacobi rotations
-/// (robust for repeated and zero eigenvalues). Returns the eigenvalues in
-/// ascending order and the matching unit eigenvectors.
-#[must_use]
-#[allow(clippy::needless_range_loop)] // index form mirrors the rotation formulas
-pub fn sym_eigen3(m: [[f64; 3]; 3]) -> ([f64; 3], [DVec3; 3]) {
-    let mut a = m;
-    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    let scale = a[0][0].abs() + a[1][1].abs() + a[2][2].abs() + 1e-300;
-    for _sweep in 0..50 {
-        let off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
-        if off <= (1e-15 * scale) * (1e-15 * scale) {
-            break;
-        }
-        for (p, q) in [(0usize, 1usize), (0, 2), (1, 2)] {
-            let apq = a[p][q];
-            if apq == 0.0 {
-                continue;
-            }
-            let theta = (a[q][q] - a[p][p]) / (2.0 * apq);
-            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-            let c = 1.0 / (t * t + 1.0).sqrt();
-            let s = t * c;
-            for row in &mut a {
-                let (kp, kq) = (row[p], row[q]);
-                row[p] = c * kp - s * kq;
-                row[q] = s * kp + c * kq;
-            }
-            for k in 0..3 {
-                let (pk, qk) = (a[p][k], a[q][k]);
-                a[p][k] = c * pk - s * qk;
-                a[q][k] = s * pk + c * qk;
-            }
-            for row in &mut v {
-                let (kp, kq) = (row[p], row[q]);
-                row[p] = c * kp - s * kq;
-                row[q] = s * kp + c * kq;
-            }
-        }
-    }
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&i, &j| a[i][i].total_cmp(&a[j][j]));
-    let vals = order.map(|i| a[i][i]);
-    let vecs = order.map(|i| DVec3::new(v[0][i], v[1][i], v[2][i]).normalize_or_zero());
-    (vals, vecs)
-}
-
-/// The least-squares plane of `points`, accumulated relative to their
-/// centroid in `f64`: (centroid, eigenvalues ascending, eigenvectors).
-#[must_use]
-pub fn plane_fit(points: impl Iterator<Item = Vec3> + Clone) -> (DVec3, [f64; 3], [DVec3; 3]) {
-    let mut c = DVec3::ZERO;
-    let mut n = 0f64;
-    for p in points.clone() {
-        c += p.as_dvec3();
-        n += 1.0;
-    }
-    c /= n.max(1.0);
-    let mut m = [[0f64; 3]; 3];
-    for p in points {
-        let d = p.as_dvec3() - c;
-        let d = d.to_array();
-        for r in 0..3 {
-            for s in r..3 {
-                m[r][s] += d[r] * d[s];
-            }
-        }
-    }
-    m[1][0] = m[0][1];
-    m[2][0] = m[0][2];
-    m[2][1] = m[1][2];
-    let (vals, vecs) = sym_eigen3(m);
-    (c, vals, vecs)
-}
 
 /// PCA normal of every point from itself and its `k` neighbours (unoriented).
 #[must_use]
@@ -100,10 +26,6 @@ pub fn estimate(points: &[Vec3], knn: &Knn) -> Vec<Vec3> {
         })
         .collect()
 }
-
-/// A neighbourhood is collinear (no plane to fit) when its middle
-/// eigenvalue is below this fraction of the largest.
-pub const COLLINEAR: f64 = 1e-3;
 
 /// Where the normal of the `k` nearest neighbours and that of a neighbourhood
 /// [`WIDE_FACTOR`] times larger differ by more than this many degrees, the
@@ -375,7 +297,7 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
 /// neighbours is found ([`face_plane`]), and where it holds more than the
 /// current plane, so is the plane holding the most of the rest (the face
 /// across the edge, at least [`FACE_MIN_POINTS`]). Where the quadratic
-/// height field over the current plane ([`super::denoise::quadric_fit`])
+/// height field over the current plane ([`super::fit::quadric_fit`])
 /// fits the point and its neighbours at least as closely as the two planes
 /// (MSAC's score, the same six parameters), the neighbourhood is one
 /// smooth surface, not two faces, and the normal stays: on the bunny
@@ -444,7 +366,7 @@ pub fn face_normals(
             // reach: the quadric fits it at least as closely as the two
             // planes (MSAC's score of each), and the normal stays.
             let two = first.fit + second.map_or(0.0, |f| f.fit);
-            if super::denoise::quadric_fit(&all, n0, tol).is_some_and(|q| q >= two) {
+            if super::fit::quadric_fit(&all, n0, tol).is_some_and(|q| q >= two) {
                 return None;
             }
             // The point's own face: the nearer of the two planes (a point
