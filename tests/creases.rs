@@ -93,6 +93,64 @@ fn a_smooth_surface_has_no_crease() {
     assert_eq!(generate(&cloud, &off).unwrap().1.clipped, 0);
 }
 
+/// A flat rectangle smaller than the splats its sampling allows (a box's
+/// top seen alone: its face ends on all four sides): with creases, no
+/// splat overhangs it, though two clip lines can cut only two of a disc's
+/// sides. A splat whose face ends on a third side grows again smaller
+/// (`grow::SPILL_SHARE`).
+#[test]
+fn a_face_ending_on_four_sides_is_not_overhung() {
+    let (w, h) = (0.8f32, 0.6f32);
+    let mut rng = splatray::rng::SplitMix64::new(39);
+    let positions: Vec<Vec3> = (0..3000)
+        .map(|_| Vec3::new(w * rng.next_f32(), h * rng.next_f32(), 0.0))
+        .collect();
+    let cloud = PointCloud {
+        positions,
+        normals: Some(vec![Vec3::Z; 3000]),
+        ..PointCloud::default()
+    };
+    let params = SplatParams {
+        creases: true,
+        ..SplatParams::default()
+    };
+    let (splats, report) = generate(&cloud, &params).unwrap();
+    // The area of the splats (as clipped) outside the rectangle, over
+    // their whole area: a 64x64 grid over each disc.
+    let o = cloud.origin.as_vec3();
+    let (mut outside, mut total) = (0f64, 0f64);
+    let mut largest = 0f32;
+    for s in &splats {
+        largest = largest.max(s.radii.max_element());
+        let cell = f64::from(s.radii.x * s.radii.y) * 4.0 / (64.0 * 64.0);
+        for k in 0..64 * 64 {
+            let u = 2.0 * ((k % 64) as f32 + 0.5) / 64.0 - 1.0;
+            let v = 2.0 * ((k / 64) as f32 + 0.5) / 64.0 - 1.0;
+            if u * u + v * v > 1.0 || !s.clip.keeps(u, v) {
+                continue;
+            }
+            let p = s.center + o + s.u_axis * (u * s.radii.x) + s.v_axis * (v * s.radii.y);
+            total += cell;
+            if p.x < 0.0 || p.x > w || p.y < 0.0 || p.y > h {
+                outside += cell;
+            }
+        }
+    }
+    let share = outside / total;
+    eprintln!(
+        "{} splats ({} clipped), largest radius {largest}, outside {:.4} % of their area",
+        splats.len(),
+        report.clipped,
+        100.0 * share
+    );
+    // Splats this sampling allows span most of the rectangle.
+    assert!(largest > 0.15, "{largest}");
+    // Measured: 78 splats, 0.25 % of their area outside (border lines
+    // stand up to 0.15 spacings past the last points); 144 splats, 0.68 %
+    // before splats grew again smaller at a third side.
+    assert!(share < 0.0035, "{share}");
+}
+
 /// The solids of scenes/solids.toml (box, gable-roofed block, cylinder on a
 /// ground plane), 60k exact samples, 200x150: PSNR and false hits against
 /// the mesh with crease clipping on and off.
@@ -106,7 +164,9 @@ fn a_solid_renders_as_itself_with_creases() {
         .replace("height = 600", "height = 150");
     let (psnr_on, false_on) = solids_figures(&text, &root, true);
     let (psnr_off, false_off) = solids_figures(&text, &root, false);
-    // Measured: on 27.97 dB, 0.277 % false hits with the rise test of
+    // Measured: on 29.38 dB, 0.140 % false hits with splats whose face
+    // ends on a third side grown again smaller (`grow::SPILL_SHARE`);
+    // 27.97 dB, 0.277 % before, with the rise test of
     // `grow::CREASE_STEEP` and the smooth-rim test of `grow::smooth_across`
     // (at these 60k samples a few edge splats have too few points across
     // to show their face's rise, while the scene's 300k gain 34.20 -> 34.94
@@ -114,8 +174,8 @@ fn a_solid_renders_as_itself_with_creases() {
     // border band from the whole cloud, the border's gap by the chord and
     // corners' lines by the area they cut; 26.26 dB, 0.94 % before clip
     // lines turned to the finer direction); off 18.26 dB, 17.3 %.
-    assert!(psnr_on > 27.8, "{psnr_on}");
-    assert!(false_on < 0.0030, "{false_on}");
+    assert!(psnr_on > 29.2, "{psnr_on}");
+    assert!(false_on < 0.0017, "{false_on}");
     assert!(psnr_off < 19.0, "{psnr_off}");
     assert!(false_off > 0.15, "{false_off}");
 }
@@ -144,7 +204,9 @@ fn a_noisy_scan_of_a_solid_renders_with_creases() {
         .replace("height = 600", "height = 150");
     let (psnr_on, false_on) = solids_figures(&text, &root, true);
     let (psnr_off, false_off) = solids_figures(&text, &root, false);
-    // Measured: on 30.39 dB, 0.130 % false hits with the quadric gate of
+    // Measured: on 30.48 dB, 0.123 % false hits with splats whose face
+    // ends on a third side grown again smaller (`grow::SPILL_SHARE`);
+    // 30.39 dB, 0.130 % before, with the quadric gate of
     // `normals::face_normals` (a neighbourhood one quadric fits as closely
     // as two planes keeps its normal: the noisy bunny scans with creases
     // gain 0.9-1.1 dB, a few of this scan's noisy edge points keep their
@@ -158,8 +220,8 @@ fn a_noisy_scan_of_a_solid_renders_with_creases() {
     // band of part C); off 26.91 dB, 0.45 % (a scan's splats are small
     // where it is noisy, so whole discs overhang less than on exact
     // samples).
-    assert!(psnr_on > 30.3, "{psnr_on}");
-    assert!(false_on < 0.0015, "{false_on}");
+    assert!(psnr_on > 30.35, "{psnr_on}");
+    assert!(false_on < 0.0014, "{false_on}");
     assert!(psnr_on > psnr_off + 0.2, "on {psnr_on} off {psnr_off}");
     assert!(false_on < false_off, "on {false_on} off {false_off}");
 }

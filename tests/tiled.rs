@@ -474,10 +474,10 @@ fn small_tiles_foresee_their_spill_warn_and_agree_in_orientation() {
 /// A tiled run with `--creases` writes every tile with the clip lines'
 /// layout and merges records of that size: the merged file loads, carries
 /// clipped splats and writes back to the same bytes. Its count against
-/// the whole cloud's with creases is the tiling's own excess, the same as
-/// without creases: on this cloud, sparse against its splats (1,658 of
-/// 5,008 may reach past the halo), tiles of 15,000 points grow 13 % more
-/// splats than the whole cloud, creases or not.
+/// the whole cloud's with creases is the tiling's own excess, no more than
+/// without creases: on this cloud, sparse against its splats, tiles of
+/// 15,000 points grow 13 % more splats than the whole cloud without
+/// creases and 5 % more with them.
 #[test]
 fn tiled_runs_carry_clip_lines() {
     let dir = scratch("tiled-creases");
@@ -528,14 +528,17 @@ fn tiled_runs_carry_clip_lines() {
         again == std::fs::read(&tiled).unwrap(),
         "the merged file does not round-trip"
     );
-    // Measured: 5,008 splats tiled (3,138 clipped), 4,432 whole (2,411);
-    // without creases 4,928 tiled, 4,355 whole. Tiled over whole: 1.130
-    // with creases, 1.132 without; clipped shares 0.627 and 0.544.
+    // Measured: 4,566 splats tiled (2,556 clipped), 4,336 whole (2,239);
+    // without creases 4,928 tiled, 4,355 whole. Tiled over whole: 1.053
+    // with creases, 1.132 without; clipped shares 0.560 and 0.516. Before
+    // splats whose face ends on a third side grew again smaller
+    // (`grow::SPILL_SHARE`; a tile's cut edges are such sides): 5,008
+    // tiled (3,138 clipped), 4,432 whole (2,411), 1.130 against 1.132.
     let excess = nt as f64 / nw as f64;
     let plain = npt as f64 / npw as f64;
     assert!((excess - 1.0).abs() < 0.16, "{nt} splats tiled, {nw} whole");
     assert!(
-        (excess / plain - 1.0).abs() < 0.02,
+        excess / plain < 0.95,
         "tiled over whole: {excess:.3} with creases, {plain:.3} without"
     );
     let share = |c: usize, n: usize| c as f64 / n as f64;
