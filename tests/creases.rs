@@ -311,3 +311,89 @@ fn the_smooth_bunny_gets_no_false_creases() {
     assert!(clipped_on < 0.03, "{clipped_on}");
     assert!(psnr_on > psnr_off, "on {psnr_on} off {psnr_off}");
 }
+
+/// A pole 1.6 scan spacings in radius with a thin sign (a plate 0.5
+/// spacings thick) on a ground plane, y up: the mesh written as PLY.
+fn write_pole(path: &Path) {
+    let mut verts: Vec<[f32; 3]> = Vec::new();
+    let mut faces: Vec<[usize; 3]> = Vec::new();
+    let mut quad = |q: [[f32; 3]; 4]| {
+        let i = verts.len();
+        verts.extend(q);
+        faces.push([i, i + 1, i + 2]);
+        faces.push([i, i + 2, i + 3]);
+    };
+    let g = 1.0;
+    quad([[-g, 0.0, -g], [-g, 0.0, g], [g, 0.0, g], [g, 0.0, -g]]);
+    let (r, h, n) = (0.03f32, 1.6f32, 48);
+    let at = |k: usize| {
+        let a = std::f32::consts::TAU * k as f32 / n as f32;
+        (r * a.cos(), r * a.sin())
+    };
+    for k in 0..n {
+        let ((ax, az), (bx, bz)) = (at(k), at(k + 1));
+        quad([[bx, 0.0, bz], [ax, 0.0, az], [ax, h, az], [bx, h, bz]]);
+        // The cap as a thin quad to the axis.
+        quad([[0.0, h, 0.0], [bx, h, bz], [ax, h, az], [0.0, h, 0.0]]);
+    }
+    let (x0, x1, y0, y1, z0, z1) = (0.03, 0.33, 0.9, 1.1, -0.005, 0.005);
+    quad([[x0, y0, z1], [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]]);
+    quad([[x1, y0, z0], [x0, y0, z0], [x0, y1, z0], [x1, y1, z0]]);
+    quad([[x1, y0, z1], [x1, y0, z0], [x1, y1, z0], [x1, y1, z1]]);
+    quad([[x0, y1, z1], [x1, y1, z1], [x1, y1, z0], [x0, y1, z0]]);
+    quad([[x0, y0, z0], [x1, y0, z0], [x1, y0, z1], [x0, y0, z1]]);
+    let mut text = format!(
+        "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\n\
+         property float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        verts.len(),
+        faces.len()
+    );
+    for v in &verts {
+        text += &format!("{} {} {}\n", v[0], v[1], v[2]);
+    }
+    for f in &faces {
+        text += &format!("3 {} {} {}\n", f[0], f[1], f[2]);
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+/// A thin pole with a sign, scanned from one side with range noise (half
+/// a spacing), against its mesh: whole discs, wider than the pole, make it
+/// and the sign fat blobs; clipped at the points' borders they are nearer
+/// the mesh. (The bundled lamppost scan, which has no mesh, draws on fewer
+/// pixels with creases: 1.3 % of a 160×120 render against 1.97 %.)
+#[test]
+fn a_thin_pole_scan_is_nearer_its_mesh_with_creases() {
+    let dir = common::scratch("thin-pole");
+    write_pole(&dir.join("pole.ply"));
+    let scene = |creases: bool| {
+        format!(
+            "background = [0.60, 0.70, 0.85]\n\
+             [camera]\nfrom = [1.2, 1.0, 2.0]\nat = [0.0, 0.8, 0.0]\nfov = 40\n\
+             width = 400\nheight = 300\n\
+             [[model]]\nmesh = \"pole.ply\"\nseed = 1\n\
+             scan = {{ from = [1.2, 1.0, 2.0], at = [0.0, 0.8, 0.0], rays = [320, 240], \
+             range_noise_spacing = 0.5 }}\n\
+             splat = {{ creases = {creases} }}\n\
+             material = {{ kind = \"phong\", color = [0.80, 0.76, 0.70], specular = 0.15, \
+             shininess = 30 }}\n\
+             [[light]]\nkind = \"sphere\"\nposition = [2.0, 4.0, 3.0]\nradius = 0.3\nintensity = 28.0\n\
+             [[light]]\nkind = \"directional\"\ndirection = [0.3, -0.5, -1.0]\nintensity = 0.25\n"
+        )
+    };
+    let figures = |creases: bool| {
+        let s = build_scene(&parse_scene_str(&scene(creases)).unwrap(), &dir, None).unwrap();
+        let e = common::errors_against_truth(&s);
+        eprintln!("creases {creases}: {} splats, {e:?}", s.splats.len());
+        e
+    };
+    let (on, off) = (figures(true), figures(false));
+    let (p_on, p_off) = (on.image_psnr_db.unwrap(), off.image_psnr_db.unwrap());
+    // Measured: on 29.36 dB, 0.44 % false hits, coverage 0.979; off 28.37
+    // dB, 0.90 %, 0.991 (400x300, 1,468 and 1,461 splats).
+    assert!(p_on > p_off + 0.7, "on {p_on} off {p_off}");
+    assert!(
+        on.false_hits < 0.6 * off.false_hits,
+        "on {on:?} off {off:?}"
+    );
+}
