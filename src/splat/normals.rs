@@ -195,6 +195,54 @@ pub const FACE_MIN_POINTS: usize = 6;
 /// `tol` of it (range noise puts a point at an edge off both faces).
 pub const FACE_REACH: f32 = 2.0;
 
+/// Where [`face_normals`] turns a normal so far that its cosine with the old
+/// one is under this (more than 60°), the new normal's side is taken from
+/// the edge ([`side_across_edge`]), not from the old normal's.
+pub const FACE_SIDE_COS: f32 = 0.5;
+
+/// The outward side of `normal`, the normal of the face `own`, from the face
+/// `other` across the edge: `other`'s side is the one its points' (oriented)
+/// normals agree with, and two faces of one surface meet either convex, each
+/// face's points behind the other face, or concave, each in front of it, so
+/// `own` faces `other`'s points the way `other` faces `own`'s. A point on a
+/// thin plate's rim wall (`tests/thin.rs`), whose old normal is a blend of
+/// the plate's faces at right angles to the wall, took the wall's side from
+/// that blend's slight lean, inward for 2 of the plate's 400 wall points.
+/// `None` where either side is unclear (the faces nearly parallel, or
+/// `other`'s points' normals split).
+fn side_across_edge(
+    normal: Vec3,
+    own: FacePlane,
+    other: FacePlane,
+    wide: &[Vec3],
+    near: &[usize],
+    normals: &[Vec3],
+    tol: f32,
+) -> Option<Vec3> {
+    let agree: f32 = wide
+        .iter()
+        .zip(near)
+        .filter(|(d, _)| other.holds(**d, tol))
+        .map(|(_, &j)| normals[j].dot(other.normal))
+        .sum();
+    let held = wide.iter().filter(|d| other.holds(**d, tol)).count();
+    // Most of them agree: their sum is at least half their number.
+    if agree.abs() < 0.5 * held as f32 {
+        return None;
+    }
+    let other_n = other.normal * agree.signum();
+    let to_own = other_n.dot(own.origin - other.origin);
+    let to_other = normal.dot(other.origin - own.origin);
+    if to_own.abs() <= tol || to_other.abs() <= tol {
+        return None;
+    }
+    Some(if (to_own > 0.0) == (to_other > 0.0) {
+        normal
+    } else {
+        -normal
+    })
+}
+
 /// A plane found by [`face_plane`]: unit normal, a point on it (the
 /// centroid of the points it holds) and how many it holds.
 #[derive(Clone, Copy, Debug)]
@@ -336,11 +384,12 @@ pub fn face_normals(
             let (p, n0) = (points[i], old[i]);
             let mut found = tree.nearest_n::<SquaredEuclidean>(&p.to_array(), m);
             found.sort_by(|a, b| a.distance.total_cmp(&b.distance).then(a.item.cmp(&b.item)));
-            let wide: Vec<Vec3> = found
+            let near: Vec<usize> = found
                 .iter()
-                .filter(|f| f.item as usize != i)
-                .map(|f| points[f.item as usize] - p)
+                .map(|f| f.item as usize)
+                .filter(|&j| j != i)
                 .collect();
+            let wide: Vec<Vec3> = near.iter().map(|&j| points[j] - p).collect();
             let holds = |c: Vec3| wide.iter().filter(|d| c.dot(**d).abs() <= tol).count();
             let held = holds(n0);
             if held as f32 >= FACE_HOLDS * wide.len() as f32 {
@@ -384,6 +433,16 @@ pub fn face_normals(
                 -fitted
             } else {
                 fitted
+            };
+            // Turned by about a right angle, the old normal is the other
+            // face's and its side says nothing of this one's: the side comes
+            // from the edge instead.
+            let fitted = match second {
+                Some(f) if fitted.dot(n0).abs() < FACE_SIDE_COS => {
+                    let other = if own.origin == f.origin { first } else { f };
+                    side_across_edge(fitted, own, other, &wide, &near, old, tol).unwrap_or(fitted)
+                }
+                _ => fitted,
             };
             (fitted.dot(n0) < FACE_TURN_DEG.to_radians().cos()).then_some(fitted)
         })
