@@ -68,10 +68,12 @@ fn the_default_survey_renders_as_its_surface_with_creases() {
     assert_eq!(TerrainParams::default().pattern, ScanPattern::Oblique);
     let e = survey_errors(ScanPattern::Oblique);
     let psnr = e.image_psnr_db.unwrap();
-    // Measured: 24.92 dB, false hits 0.355 % of the image, mean normal
-    // error 7.89° with Embree's avx512 kernels tracing the truth (avx2:
-    // 24.91 dB, 0.358 %, 7.90°; sse4.2: 24.89 dB, 0.361 %, 7.91°: edge
-    // pixels of the mesh move with the kernel); before splats whose face
+    // Measured: 24.93 dB, false hits 0.353 % of the image, mean normal
+    // error 7.82° with Embree's avx512 kernels tracing the truth (avx2:
+    // 24.92 dB, 0.356 %, 7.82°; sse4.2: 24.90 dB, 0.359 %, 7.83°: edge
+    // pixels of the mesh move with the kernel); 24.92 dB, 0.355 %, 7.89°
+    // before a turned normal took its side from the edge
+    // (`normals::FACE_SIDE_COS`); before splats whose face
     // ends on a third side grew again smaller (`grow::SPILL_SHARE`):
     // 24.96 dB, 0.343 % (avx2 0.358 %, sse4.2 0.353 %), 7.90° (the small survey's hills
     // are steep: 4 m waves over 60 m;
