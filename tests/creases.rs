@@ -342,19 +342,12 @@ fn write_pole(path: &Path) {
     quad([[x1, y0, z1], [x1, y0, z0], [x1, y1, z0], [x1, y1, z1]]);
     quad([[x0, y1, z1], [x1, y1, z1], [x1, y1, z0], [x0, y1, z0]]);
     quad([[x0, y0, z0], [x1, y0, z0], [x1, y0, z1], [x0, y0, z1]]);
-    let mut text = format!(
-        "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\n\
-         property float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
-        verts.len(),
-        faces.len()
-    );
-    for v in &verts {
-        text += &format!("{} {} {}\n", v[0], v[1], v[2]);
-    }
-    for f in &faces {
-        text += &format!("3 {} {} {}\n", f[0], f[1], f[2]);
-    }
-    std::fs::write(path, text).unwrap();
+    let mesh = splatray::io::Mesh {
+        positions: verts.iter().map(|v| Vec3::from(*v)).collect(),
+        triangles: faces.iter().map(|f| f.map(|k| k as u32)).collect(),
+        origin: glam::DVec3::ZERO,
+    };
+    splatray::terrain::write_mesh_ply(&mesh, path).unwrap();
 }
 
 /// A thin pole with a sign, scanned from one side with range noise (half
