@@ -1002,8 +1002,6 @@ fn min_curvature(samples: &[(f64, f64, f64)]) -> Option<(f64, f64, f64)> {
     ))
 }
 
-/// One seed's splat and what it marks: every point it covers, and whether
-/// it also deactivates it (takes it within `k·r`, §2.2).
 /// A splat's clip lines and what a third would cut of what they keep
 /// (a share of the disc, [`SPILL_SHARE`]).
 #[derive(Clone, Copy, Debug)]
@@ -1019,6 +1017,8 @@ impl Clipped {
     };
 }
 
+/// One seed's splat and what it marks: every point it covers, and whether
+/// it also deactivates it (takes it within `k·r`, §2.2).
 struct Seeded {
     splat: Splat,
     marks: Vec<(u32, bool)>,

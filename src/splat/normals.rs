@@ -219,13 +219,13 @@ fn side_across_edge(
     normals: &[Vec3],
     tol: f32,
 ) -> Option<Vec3> {
-    let agree: f32 = wide
+    let (agree, held) = wide
         .iter()
         .zip(near)
         .filter(|(d, _)| other.holds(**d, tol))
-        .map(|(_, &j)| normals[j].dot(other.normal))
-        .sum();
-    let held = wide.iter().filter(|d| other.holds(**d, tol)).count();
+        .fold((-0.0f32, 0usize), |(s, c), (_, &j)| {
+            (s + normals[j].dot(other.normal), c + 1)
+        });
     // Most of them agree: their sum is at least half their number.
     if agree.abs() < 0.5 * held as f32 {
         return None;
