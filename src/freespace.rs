@@ -146,17 +146,24 @@ fn blocked(
             },
         )
         .collect();
-    lines.par_extend(misses.dirs.par_iter().with_min_len(512).map_init(
-        || CandidateHits::new(0.0),
-        |hits, &dir| {
-            let ray = Ray {
-                origin: misses.from,
-                dir,
-            };
-            octree.intersect(&ray, 0.0, f32::INFINITY, hits);
-            hits.nearest().map(|h| (h.id, Vec2::new(h.u, h.v)))
-        },
-    ));
+    lines.par_extend(
+        misses
+            .dirs
+            .par_iter()
+            .enumerate()
+            .with_min_len(512)
+            .map_init(
+                || CandidateHits::new(0.0),
+                |hits, (k, &dir)| {
+                    let ray = Ray {
+                        origin: misses.origin(k),
+                        dir,
+                    };
+                    octree.intersect(&ray, 0.0, f32::INFINITY, hits);
+                    hits.nearest().map(|h| (h.id, Vec2::new(h.u, h.v)))
+                },
+            ),
+    );
     lines
 }
 
@@ -172,14 +179,28 @@ fn octree_of(splats: &[Splat]) -> Box<dyn Backend> {
     Box::new(Octree::new(&discs, &OctreeParams::default()))
 }
 
-/// The scanner's rays that met nothing ([`PointCloud::misses`]), from its
-/// one viewpoint.
+/// The scanners' rays that met nothing: [`PointCloud::misses`] from its
+/// one viewpoint, or [`crate::splat::Scans::misses`] from each scan's.
 #[derive(Clone, Debug, Default)]
 pub struct Misses {
-    /// The viewpoint.
-    pub from: Vec3,
+    /// The scanners' positions.
+    pub from: Vec<Vec3>,
     /// Unit directions.
     pub dirs: Vec<Vec3>,
+    /// Per direction, its scanner's index in `from`; empty when every ray
+    /// is `from[0]`'s.
+    pub of: Vec<u16>,
+}
+
+impl Misses {
+    /// Where miss `k` was cast from.
+    ///
+    /// # Panics
+    /// When `from` has no entry for it (misses built without scanners).
+    #[must_use]
+    pub fn origin(&self, k: usize) -> Vec3 {
+        self.from[self.of.get(k).map_or(0, |&s| usize::from(s))]
+    }
 }
 
 /// Shrinks splat `s` so the normalised disc point `q` (|q| ≤ 1) falls just
@@ -264,7 +285,7 @@ fn opened_holes(
                     }
                     eye
                 } else {
-                    misses.from
+                    misses.origin(i - points.len())
                 };
                 let new = splats[id].clipped_geometry();
                 let reach = old.radii.max_element();
@@ -447,11 +468,25 @@ pub fn generate_trimmed(
     let margin = (MARGIN_EPS * report.epsilon as f32).max(MARGIN_NOISE * report.noise as f32);
     // Misses are the cloud's own scanner's, usable when trimming looks from
     // it alone.
-    let misses = match (&vp, &cloud.misses, cloud.viewpoint) {
-        (Viewpoints::One(v), Some(dirs), Some(own)) if *v == own => Misses {
-            from: own,
+    let misses = match (&vp, &cloud.misses, cloud.viewpoint, &cloud.scans) {
+        (Viewpoints::One(v), Some(dirs), Some(own), _) if *v == own => Misses {
+            from: vec![own],
             dirs: dirs.clone(),
+            of: Vec::new(),
         },
+        // Per-point viewpoints are the scans' own (`viewpoints_of`).
+        (Viewpoints::PerPoint(_), _, _, Some(s))
+            if s.misses_of.len() == s.misses.len()
+                && s.misses_of
+                    .iter()
+                    .all(|&k| usize::from(k) < s.positions.len()) =>
+        {
+            Misses {
+                from: s.positions.clone(),
+                dirs: s.misses.clone(),
+                of: s.misses_of.clone(),
+            }
+        }
         _ => Misses::default(),
     };
     let t = trim(&mut splats, &points, &vp, &misses, margin);
@@ -549,8 +584,9 @@ mod tests {
         let past = Vec3::new(1.1, 0.02, 0.0);
         let inside = Vec3::new(0.31, -0.27, 0.0);
         let misses = Misses {
-            from: EYE,
+            from: vec![EYE],
             dirs: vec![(past - EYE).normalize(), (inside - EYE).normalize()],
+            of: Vec::new(),
         };
         let r = trim(&mut splats, &points, &Viewpoints::One(EYE), &misses, MARGIN);
         assert_eq!((r.misses, r.misses_blocked), (2, 2), "{r:?}");

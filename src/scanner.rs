@@ -384,3 +384,67 @@ pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
     );
     Ok(scan)
 }
+
+/// Scans `mesh` from each of `stations` with `params`' other settings
+/// (station `k`'s seed is `params.seed + k`, so the first station's scan is
+/// `scan_mesh`'s) and joins them: one station gives its scan's cloud as it
+/// is (its viewpoint and misses); several give one cloud of several scans
+/// ([`crate::splat::Scans`], each point with its own scanner, as an E57
+/// survey's), each scan's misses kept with it ([`crate::splat::Scans::misses`]).
+///
+/// # Errors
+/// No station, more than `u16` indexes, or a station's [`scan_mesh`]
+/// error (naming the station when there are several).
+pub fn scan_stations(mesh: &Mesh, params: &ScanParams, stations: &[DVec3]) -> Result<PointCloud> {
+    if stations.is_empty() {
+        return Err(Error::invalid("a scan needs at least one station"));
+    }
+    if stations.len() > usize::from(u16::MAX) + 1 {
+        return Err(Error::invalid(format!(
+            "{} scan stations is more than the {} a cloud indexes",
+            stations.len(),
+            usize::from(u16::MAX) + 1
+        )));
+    }
+    let scan_at = |k: usize, from: DVec3| {
+        let p = ScanParams {
+            from,
+            seed: params.seed.wrapping_add(k as u64),
+            ..params.clone()
+        };
+        scan_mesh(mesh, &p)
+    };
+    if let [from] = stations {
+        return Ok(scan_at(0, *from)?.cloud);
+    }
+    let mut cloud = PointCloud {
+        origin: mesh.origin,
+        ..PointCloud::default()
+    };
+    let mut scans = crate::splat::Scans::default();
+    for (k, &from) in stations.iter().enumerate() {
+        let scan = scan_at(k, from).map_err(|e| {
+            e.context(format!(
+                "station {} of {} at {:?}",
+                k + 1,
+                stations.len(),
+                from.to_array()
+            ))
+        })?;
+        let n = scan.cloud.len();
+        let misses = scan.cloud.misses.unwrap_or_default();
+        scans
+            .misses_of
+            .extend(std::iter::repeat_n(k as u16, misses.len()));
+        scans.misses.extend(misses);
+        cloud.positions.extend(scan.cloud.positions);
+        scans.positions.push(
+            scan.cloud
+                .viewpoint
+                .unwrap_or_else(|| (from - mesh.origin).as_vec3()),
+        );
+        scans.of.extend(std::iter::repeat_n(k as u16, n));
+    }
+    cloud.scans = Some(scans);
+    Ok(cloud)
+}

@@ -259,3 +259,65 @@ fn cli_sample_scan_and_scan_check_write_what_they_say() {
     assert!(!out.status.success());
     assert!(!dir.join("never.pcd").exists());
 }
+
+/// Several stations make one cloud of several scans: each station's
+/// points with its scanner (the first station's exactly `scan_mesh`'s),
+/// each scan's misses kept from its own scanner; one station gives
+/// `scan_mesh`'s cloud; no station is an error.
+#[test]
+fn stations_make_one_cloud_of_several_scans() {
+    use splatray::scanner::scan_stations;
+    let mesh = read_mesh(&data("bunny-mesh.ply")).unwrap();
+    let params = ScanParams {
+        columns: 120,
+        rows: 90,
+        range_noise: RangeNoise::Spacing(0.5),
+        seed: 7,
+        ..ScanParams::default()
+    };
+    let stations = [DVec3::new(1.5, 1.0, 3.5), DVec3::new(-2.0, 1.2, -2.5)];
+    let each: Vec<_> = stations
+        .iter()
+        .enumerate()
+        .map(|(k, &from)| {
+            let p = ScanParams {
+                from,
+                seed: 7 + k as u64,
+                ..params.clone()
+            };
+            scan_mesh(&mesh, &p).unwrap().cloud
+        })
+        .collect();
+    let one = scan_stations(&mesh, &params, &stations[..1]).unwrap();
+    assert_eq!(one, each[0]);
+    let both = scan_stations(&mesh, &params, &stations).unwrap();
+    let s = both.scans.as_ref().unwrap();
+    assert_eq!(both.viewpoint, None);
+    assert_eq!(both.misses, None);
+    assert_eq!(both.origin, each[0].origin);
+    let n0 = each[0].len();
+    assert_eq!(both.len(), n0 + each[1].len());
+    assert_eq!(both.positions[..n0], each[0].positions[..]);
+    assert_eq!(both.positions[n0..], each[1].positions[..]);
+    assert_eq!(s.of.iter().filter(|&&k| k == 0).count(), n0);
+    assert!(s.of[..n0].iter().all(|&k| k == 0) && s.of[n0..].iter().all(|&k| k == 1));
+    for (k, c) in each.iter().enumerate() {
+        assert_eq!(Some(s.positions[k]), c.viewpoint);
+        let m: Vec<Vec3> = (0..s.misses.len())
+            .filter(|&i| usize::from(s.misses_of[i]) == k)
+            .map(|i| s.misses[i])
+            .collect();
+        assert!(!m.is_empty(), "station {k} missed nothing");
+        assert_eq!(Some(m), c.misses);
+    }
+    // Every point seen from its own station.
+    let vp = both.viewpoints().unwrap();
+    assert_eq!(vp.at(0), s.positions[0]);
+    assert_eq!(vp.at(both.len() - 1), s.positions[1]);
+    let e = scan_stations(&mesh, &params, &[]).unwrap_err().to_string();
+    assert_eq!(e, "a scan needs at least one station");
+    let far = [stations[0], DVec3::new(f64::NAN, 0.0, 0.0)];
+    let e = scan_stations(&mesh, &params, &far).unwrap_err().to_string();
+    assert!(e.starts_with("station 2 of 2 at [NaN, 0.0, 0.0]: "), "{e}");
+    assert_eq!(e.lines().count(), 1, "{e}");
+}

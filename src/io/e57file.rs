@@ -90,6 +90,7 @@ fn read(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
         cloud.scans = Some(Scans {
             positions: local,
             of: scan_of,
+            ..Scans::default()
         });
     }
     Ok(cloud)

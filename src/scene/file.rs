@@ -206,13 +206,15 @@ pub struct SplatSpec {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScanSpec {
-    /// The scanner's position (model space).
-    #[serde(deserialize_with = "num::finite")]
-    pub from: [f32; 3],
+    /// The scanner's position (model space): `[x, y, z]`, or several
+    /// stations `[[x, y, z], ...]`, each scanned with the same settings,
+    /// which make one cloud of several scans (as an E57 survey's).
+    #[serde(deserialize_with = "num::stations")]
+    pub from: Vec<[f32; 3]>,
     /// The point it looks at (default: the mesh's centre).
     #[serde(default, deserialize_with = "num::finite")]
     pub at: Option<[f32; 3]>,
-    /// Rays per row and rows.
+    /// Rays per row and rows (per station).
     #[serde(default, deserialize_with = "num::generated")]
     pub rays: Option<[u32; 2]>,
     /// `raster` or `lines`.
@@ -439,6 +441,41 @@ mod tests {
     use super::*;
 
     const HEAD: &str = "[camera]\nfrom = [0.0, 0.0, 3.0]\nat = [0.0, 0.0, 0.0]\n[[model]]\n";
+
+    /// `scan.from` takes one station or a list; an empty list, a
+    /// non-finite coordinate or another shape is a one-line error.
+    #[test]
+    fn scan_stations_one_or_several() {
+        let scan = |from: &str| {
+            parse_scene_str(&format!(
+                "{HEAD}mesh = \"m.ply\"\nscan = {{ from = {from} }}\n"
+            ))
+            .map(|f| f.models[0].scan.as_ref().unwrap().from.clone())
+            .map_err(|e| e.to_string())
+        };
+        assert_eq!(scan("[1.0, 2.0, 3.0]").unwrap(), [[1.0, 2.0, 3.0]]);
+        assert_eq!(
+            scan("[[1.0, 2.0, 3.0], [-1.0, 0.5, 2.0]]").unwrap(),
+            [[1.0, 2.0, 3.0], [-1.0, 0.5, 2.0]]
+        );
+        for (from, expect) in [
+            ("[]", "must list 1..=1024 stations, got 0"),
+            ("[[1.0, 2.0, nan]]", "must be finite, got [1.0, 2.0, NaN]"),
+            ("[1.0, inf, 3.0]", "must be finite, got [1.0, inf, 3.0]"),
+            (
+                "[1.0, 2.0]",
+                "must be a position [x, y, z] or a list of them",
+            ),
+            ("[[1.0, 2.0, 3.0], [1.0]]", "must be a position [x, y, z]"),
+        ] {
+            let e = scan(from).unwrap_err();
+            assert!(
+                e.starts_with("line 6: `from` ") && e.contains(expect),
+                "{from}: {e}"
+            );
+            assert_eq!(e.lines().count(), 1, "{e}");
+        }
+    }
 
     #[test]
     fn unknown_kinds_are_line_numbered_parse_errors() {

@@ -517,7 +517,6 @@ fn sample_mesh_model(spec: &ModelSpec, path: &Path) -> Result<(PointCloud, Mesh)
         }
         let [columns, rows] = scan.rays.unwrap_or([640, 480]);
         let params = crate::scanner::ScanParams {
-            from: Vec3::from(scan.from).as_dvec3(),
             at: scan.at.map(|a| Vec3::from(a).as_dvec3()),
             columns,
             rows,
@@ -530,11 +529,17 @@ fn sample_mesh_model(spec: &ModelSpec, path: &Path) -> Result<(PointCloud, Mesh)
             outliers: scan.outliers,
             missing: scan.missing,
             seed: spec.seed,
+            ..crate::scanner::ScanParams::default()
         };
+        let stations: Vec<DVec3> = scan
+            .from
+            .iter()
+            .map(|&p| Vec3::from(p).as_dvec3())
+            .collect();
         let mesh = crate::io::read_mesh(path)?;
-        let scan =
-            crate::scanner::scan_mesh(&mesh, &params).map_err(|e| e.context(path.display()))?;
-        return Ok((scan.cloud, mesh));
+        let cloud = crate::scanner::scan_stations(&mesh, &params, &stations)
+            .map_err(|e| e.context(path.display()))?;
+        return Ok((cloud, mesh));
     }
     let samples = spec.samples.ok_or_else(|| {
         Error::invalid(format!(

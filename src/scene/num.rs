@@ -176,3 +176,38 @@ pub fn generated<'de, D: Deserializer<'de>, T: Deserialize<'de> + Numbers>(
         "about 84 bytes each before the accelerators",
     )
 }
+
+/// The most stations a synthetic scan takes (a cloud of several scans
+/// indexes its scanners with 16 bits).
+pub const MAX_STATIONS: usize = 1024;
+
+/// A scanner's stations: one position `[x, y, z]` or a list of them
+/// `[[x, y, z], ...]` (at least one, at most [`MAX_STATIONS`]), each
+/// finite.
+///
+/// # Errors
+/// Neither shape, an empty or too long list, or a non-finite coordinate.
+pub fn stations<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<[f32; 3]>, D::Error> {
+    #[derive(serde::Deserialize)]
+    #[serde(untagged)]
+    enum Stations {
+        One([f32; 3]),
+        Many(Vec<[f32; 3]>),
+    }
+    let list = match Stations::deserialize(d).map_err(|_| {
+        D::Error::custom("must be a position [x, y, z] or a list of them [[x, y, z], ...]")
+    })? {
+        Stations::One(p) => vec![p],
+        Stations::Many(list) => list,
+    };
+    if list.is_empty() || list.len() > MAX_STATIONS {
+        return Err(D::Error::custom(format!(
+            "must list 1..={MAX_STATIONS} stations, got {}",
+            list.len()
+        )));
+    }
+    if let Some(p) = list.iter().find(|p| p.iter().any(|x| !x.is_finite())) {
+        return Err(D::Error::custom(format!("must be finite, got {p:?}")));
+    }
+    Ok(list)
+}

@@ -45,6 +45,12 @@ pub struct Scans {
     pub positions: Vec<Vec3>,
     /// Per point: the index of its scan in `positions`.
     pub of: Vec<u16>,
+    /// Unit directions of the scanners' rays that met nothing (as
+    /// [`PointCloud::misses`], each from its own scanner); empty when not
+    /// known (an E57 file does not record them).
+    pub misses: Vec<Vec3>,
+    /// Per entry of `misses`, the index of its scan in `positions`.
+    pub misses_of: Vec<u16>,
 }
 
 /// Where points were seen from: one scanner for all, or each point's own.
@@ -144,6 +150,8 @@ impl PointCloud {
                 .map(|s| Scans {
                     positions: s.positions.clone(),
                     of: pick(&s.of, keep),
+                    misses: s.misses.clone(),
+                    misses_of: s.misses_of.clone(),
                 }),
         }
     }

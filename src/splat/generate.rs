@@ -550,6 +550,8 @@ fn to_unit(
                 .map(|&v| frame.unit_viewpoint(v))
                 .collect(),
             of: s.of.clone(),
+            misses: Vec::new(),
+            misses_of: Vec::new(),
         }),
         // Free-space trimming, the one user of misses, runs in the cloud's
         // own frame.

@@ -201,6 +201,7 @@ pub(super) fn read_spill(plan: &Plan, work: &Path, t: usize) -> Result<PointClou
         scans: (with_s && plan.per_scan).then(|| crate::splat::Scans {
             positions: plan.survey.scans.iter().map(|&v| local(v)).collect(),
             of: scan_of,
+            ..crate::splat::Scans::default()
         }),
         ..PointCloud::default()
     })
