@@ -204,7 +204,11 @@ fn a_noisy_scan_of_a_solid_renders_with_creases() {
         .replace("height = 600", "height = 150");
     let (psnr_on, false_on) = solids_figures(&text, &root, true);
     let (psnr_off, false_off) = solids_figures(&text, &root, false);
-    // Measured: on 30.48 dB, 0.123 % false hits with splats whose face
+    // Measured: on 31.00 dB, 0.137 % false hits with flat faces' normals
+    // from their wide planes (2 rounds of smoothing over the face) and
+    // constant fields where no gradient stands out of the noise
+    // (`normals::FLAT_F`, `field::GRADIENT_F`); 30.48 dB, 0.123 % before,
+    // with splats whose face
     // ends on a third side grown again smaller (`grow::SPILL_SHARE`);
     // 30.39 dB, 0.130 % before, with the quadric gate of
     // `normals::face_normals` (a neighbourhood one quadric fits as closely
@@ -220,10 +224,41 @@ fn a_noisy_scan_of_a_solid_renders_with_creases() {
     // band of part C); off 26.91 dB, 0.45 % (a scan's splats are small
     // where it is noisy, so whole discs overhang less than on exact
     // samples).
-    assert!(psnr_on > 30.35, "{psnr_on}");
+    assert!(psnr_on > 30.85, "{psnr_on}");
     assert!(false_on < 0.0014, "{false_on}");
     assert!(psnr_on > psnr_off + 0.2, "on {psnr_on} off {psnr_off}");
     assert!(false_on < false_off, "on {false_on} off {false_off}");
+}
+
+/// The same solids scanned with range noise from two stations (the
+/// camera's and one to its left, `scan = { from = [[...], [...]] }`, 800x600
+/// rays each): the second station sees the faces the sphere light lights
+/// and the first does not, so shadows are cast by scanned geometry; 200x150
+/// against the mesh, creases on.
+#[test]
+fn a_solid_scanned_from_two_stations_renders_near_its_mesh() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let samples = "samples = 300000\nseed = 1";
+    let text = std::fs::read_to_string(root.join("solids.toml")).unwrap();
+    assert!(
+        text.contains(samples),
+        "scenes/solids.toml no longer says `{samples}`"
+    );
+    let text = text
+        .replace(
+            samples,
+            "seed = 1\nscan = { from = [[1.9, 1.5, 2.4], [-2.4, 1.5, 1.9]], \
+             at = [0.0, 0.2, 0.0], rays = [800, 600], range_noise_spacing = 0.5 }",
+        )
+        .replace("width = 800", "width = 200")
+        .replace("height = 600", "height = 150");
+    let (psnr, false_hits) = solids_figures(&text, &root, true);
+    // Measured: 33.35 dB, 0.100 % false hits (33.03 dB, 0.093 % without
+    // the flat faces' wide-plane normals and constant fields; the camera's
+    // station alone 32.65 dB, 0.077 %). At 800x600 (docs/development.md,
+    // "the noisy scan, round 2"): 33.21 dB, 1.0 dB under the exact samples.
+    assert!(psnr > 33.2, "{psnr}");
+    assert!(false_hits < 0.0012, "{false_hits}");
 }
 
 /// PSNR (dB) and false-hit share of the solids scene `text` (scenes/solids.toml

@@ -130,6 +130,59 @@ pub fn normals_after(points: &[Vec3], normals: &[Vec3], knn: &Knn) -> Vec<Option
         .collect()
 }
 
+/// Whether `offsets` (points minus a point on the surface) curve
+/// significantly against their scatter: the F statistic of the quadratic
+/// height field over the plane of normal `n` (six parameters) against the
+/// tilted plane (three), both fitted by least squares, `((RSS₃ − RSS₆) / 3)
+/// / (RSS₆ / (N − 6))`; `None` where they do not determine a quadric. On a
+/// flat face with range noise it is about 1; a curved surface whose bend
+/// across the neighbourhood exceeds the noise gives far more.
+#[must_use]
+pub fn curvature_f(offsets: &[Vec3], n: Vec3) -> Option<f64> {
+    let n = n.as_dvec3().try_normalize()?;
+    let u = n.any_orthonormal_vector();
+    let v = n.cross(u);
+    let scale = offsets
+        .iter()
+        .map(|d| d.as_dvec3().length())
+        .fold(0.0f64, f64::max);
+    if scale.is_nan() || scale <= 0.0 || offsets.len() < MIN_POINTS {
+        return None;
+    }
+    let rows: Vec<([f64; 6], f64)> = offsets
+        .iter()
+        .map(|d| {
+            let d = d.as_dvec3() / scale;
+            let (x, y) = (d.dot(u), d.dot(v));
+            ([1.0, x, y, x * x, x * y, y * y], d.dot(n))
+        })
+        .collect();
+    let (ata, atb) = normal_equations(&rows);
+    let a3 = glam::DMat3::from_cols_array_2d(&[
+        [ata[0][0], ata[0][1], ata[0][2]],
+        [ata[1][0], ata[1][1], ata[1][2]],
+        [ata[2][0], ata[2][1], ata[2][2]],
+    ]);
+    if a3.determinant().abs() <= 1e-12 * ata[0][0].powi(3) {
+        return None;
+    }
+    let plane = a3.inverse() * glam::DVec3::new(atb[0], atb[1], atb[2]);
+    let plane = [plane.x, plane.y, plane.z, 0.0, 0.0, 0.0];
+    let quad = solve6(ata, atb)?;
+    let rss = |coef: &[f64; 6]| -> f64 {
+        rows.iter()
+            .map(|(row, h)| {
+                let f: f64 = row.iter().zip(coef).map(|(a, b)| a * b).sum();
+                (h - f) * (h - f)
+            })
+            .sum()
+    };
+    let (rss3, rss6) = (rss(&plane), rss(&quad));
+    let dof = (rows.len() - 6).max(1) as f64;
+    let f = ((rss3 - rss6) / 3.0) / (rss6 / dof).max(f64::MIN_POSITIVE);
+    f.is_finite().then_some(f)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

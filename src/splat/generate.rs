@@ -464,13 +464,19 @@ pub fn generate_with_progress(
     ) {
         tree = build_tree(&points);
     }
+    let mut flat = Vec::new();
     if params.creases && to_estimate > 0 {
         // Creases on: each point's normal from its own face where an edge
         // is near (`normals::face_normals`), its plane holding the points
-        // within a quarter ϵ of it, or three times the noise.
-        let tol =
-            (normals::FACE_TOL_EPS * epsilon).max(normals::FACE_TOL_NOISE * report.noise as f32);
-        normals::face_normals(&points, &tree, &knn, &mut nrm, &fixed, tol);
+        // within a quarter ϵ of it, or three times the noise. Where the
+        // noise sets that tolerance, flat faces take their normals from
+        // their wide planes, and their fields stay constant unless a
+        // gradient stands out of the noise (`field::fit_field`).
+        let by_eps = normals::FACE_TOL_EPS * epsilon;
+        let by_noise = normals::FACE_TOL_NOISE * report.noise as f32;
+        let tol = by_eps.max(by_noise);
+        let noisy = by_noise >= by_eps;
+        flat = normals::face_normals(&points, &tree, &knn, &mut nrm, &fixed, tol, noisy).1;
     }
     let t2 = Instant::now();
     // --- growth --------------------------------------------------------------
@@ -501,6 +507,7 @@ pub fn generate_with_progress(
         &tree,
         &points,
         &nrm,
+        &flat,
     );
     report.coverage = coverage(&points, &grown.covered, &splats, epsilon);
     report.splats = splats.len();
