@@ -204,7 +204,8 @@ fn a_noisy_scan_of_a_solid_renders_with_creases() {
         .replace("height = 600", "height = 150");
     let (psnr_on, false_on) = solids_figures(&text, &root, true);
     let (psnr_off, false_off) = solids_figures(&text, &root, false);
-    // Measured: on 31.00 dB, 0.137 % false hits with flat faces' normals
+    // Measured: on 31.00 dB, 0.137 % false hits (Embree forced to avx2:
+    // 30.94 dB, sse4.2: 30.98 dB, the same false hits) with flat faces' normals
     // from their wide planes (2 rounds of smoothing over the face) and
     // constant fields where no gradient stands out of the noise
     // (`normals::FLAT_F`, `field::GRADIENT_F`); 30.48 dB, 0.123 % before,
@@ -253,7 +254,8 @@ fn a_solid_scanned_from_two_stations_renders_near_its_mesh() {
         .replace("width = 800", "width = 200")
         .replace("height = 600", "height = 150");
     let (psnr, false_hits) = solids_figures(&text, &root, true);
-    // Measured: 33.35 dB, 0.100 % false hits (33.03 dB, 0.093 % without
+    // Measured: 33.35 dB, 0.100 % false hits (Embree forced to avx2:
+    // 33.34 dB, 0.100 %; sse4.2: 33.37 dB, 0.097 %) (33.03 dB, 0.093 % without
     // the flat faces' wide-plane normals and constant fields; the camera's
     // station alone 32.65 dB, 0.077 %). At 800x600 (docs/development.md,
     // "the noisy scan, round 2"): 33.21 dB, 1.0 dB under the exact samples.
