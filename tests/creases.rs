@@ -6,7 +6,7 @@ mod common;
 
 use glam::Vec3;
 use splatray::scene::{build_scene, parse_scene_str};
-use splatray::splat::{PointCloud, SplatParams, generate};
+use splatray::splat::{Creases, PointCloud, SplatParams, generate};
 use std::path::Path;
 
 /// A ring of points round an empty middle (an annulus 0.8..1.0 in the
@@ -70,7 +70,7 @@ fn a_smooth_surface_has_no_crease() {
         ..PointCloud::default()
     };
     let on = SplatParams {
-        creases: true,
+        creases: Creases::On,
         ..SplatParams::default()
     };
     let (splats, report) = generate(&cloud, &on).unwrap();
@@ -87,7 +87,7 @@ fn a_smooth_surface_has_no_crease() {
     assert_eq!(inner, 0, "{} clipped of {}", report.clipped, splats.len());
     assert!(report.clipped > 0, "the borders are clipped");
     let off = SplatParams {
-        creases: false,
+        creases: Creases::Off,
         ..SplatParams::default()
     };
     assert_eq!(generate(&cloud, &off).unwrap().1.clipped, 0);
@@ -111,7 +111,7 @@ fn a_face_ending_on_four_sides_is_not_overhung() {
         ..PointCloud::default()
     };
     let params = SplatParams {
-        creases: true,
+        creases: Creases::On,
         ..SplatParams::default()
     };
     let (splats, report) = generate(&cloud, &params).unwrap();

@@ -4,7 +4,7 @@
 use glam::Vec3;
 use splatray::io::PointCloud;
 use splatray::rng::SplitMix64;
-use splatray::splat::{Splat, SplatParams, SplatReport, generate};
+use splatray::splat::{Creases, Splat, SplatParams, SplatReport, generate};
 
 fn cloud(positions: Vec<Vec3>) -> PointCloud {
     PointCloud {
@@ -17,7 +17,11 @@ fn splat(pts: Vec<Vec3>, viewpoint: Option<Vec3>) -> (Vec<Splat>, SplatReport) {
     splat_with(pts, viewpoint, SplatParams::default().creases)
 }
 
-fn splat_with(pts: Vec<Vec3>, viewpoint: Option<Vec3>, creases: bool) -> (Vec<Splat>, SplatReport) {
+fn splat_with(
+    pts: Vec<Vec3>,
+    viewpoint: Option<Vec3>,
+    creases: Creases,
+) -> (Vec<Splat>, SplatReport) {
     let params = SplatParams {
         viewpoint,
         creases,
@@ -135,14 +139,14 @@ fn a_noisy_plate_keeps_both_faces_outward() {
 /// (`normals::FACE_SIDE_COS`).
 #[test]
 fn a_plate_with_creases_keeps_both_faces_outward() {
-    plate_faces_outward_with(0.0, true);
+    plate_faces_outward_with(0.0, Creases::On);
 }
 
 fn plate_faces_outward(sigma: f32) {
     plate_faces_outward_with(sigma, SplatParams::default().creases);
 }
 
-fn plate_faces_outward_with(sigma: f32, creases: bool) {
+fn plate_faces_outward_with(sigma: f32, creases: Creases) {
     let (w, s) = (1.0, 0.01);
     let t = 1.5 * s;
     let (splats, rep) = splat_with(plate(w, t, s, sigma, 7), None, creases);
@@ -163,7 +167,7 @@ fn plate_faces_outward_with(sigma: f32, creases: bool) {
     let top_in = top.iter().filter(|sp| sp.normal.z < 0.5).count();
     let bottom_in = bottom.iter().filter(|sp| sp.normal.z > -0.5).count();
     eprintln!(
-        "plate (noise {sigma}, creases {creases}): {within} of {} splats within 30 deg of the outward normal (cone at the rim); \
+        "plate (noise {sigma}, creases {creases:?}): {within} of {} splats within 30 deg of the outward normal (cone at the rim); \
          inside the rim: top {top_in} of {} and bottom {bottom_in} of {} off; warnings {:?}",
         splats.len(),
         top.len(),

@@ -95,11 +95,11 @@ def test_the_drivers_options_are_the_packages(client, binary, cloud, tmp_path):
     splat(client, binary, [cloud], a, ["--tile-points", "30000", "--epsilon", "0.004"], progress=None)
     splat(client, binary, [cloud], b, tile_points=30000, epsilon=0.004, progress=None)
     assert a.read_bytes() == b.read_bytes()
-    # creases=True is --creases.
+    # creases=False is --no-creases (creases are on by default).
     c, d = tmp_path / "c.ply", tmp_path / "d.ply"
-    splat(client, binary, [cloud], c, ["--tile-points", "30000", "--epsilon", "0.004", "--creases"],
-          progress=None)
-    splat(client, binary, [cloud], d, tile_points=30000, epsilon=0.004, creases=True, progress=None)
+    splat(client, binary, [cloud], c,
+          ["--tile-points", "30000", "--epsilon", "0.004", "--no-creases"], progress=None)
+    splat(client, binary, [cloud], d, tile_points=30000, epsilon=0.004, creases=False, progress=None)
     assert c.read_bytes() == d.read_bytes() != a.read_bytes()
     with pytest.raises(TypeError, match="unknown option 'epsilonn'"):
         splat(client, binary, [cloud], b, epsilonn=0.004, progress=None)

@@ -27,11 +27,14 @@ pub struct SplatOptions {
     /// cloud's points (`splat::color`; the fields are on by default).
     #[arg(long)]
     pub flat_colors: bool,
-    /// Find creases, corners and borders and clip splats at them, whole
-    /// or in tiles (off by default: whole discs; docs/usage.md, "Sharp
-    /// edges").
+    /// Find creases, corners and borders and clip splats at them
+    /// everywhere, also in a cloud sampled along scan lines (by default
+    /// they are found but there; docs/usage.md, "Sharp edges").
     #[arg(long)]
     pub creases: bool,
+    /// Whole discs: find no creases, corners or borders.
+    #[arg(long, conflicts_with = "creases")]
+    pub no_creases: bool,
     /// Where the scanner stood, as X,Y,Z in the input's coordinates:
     /// normals are oriented toward it. Default: the cloud's own (a PCD's
     /// VIEWPOINT).
@@ -74,7 +77,7 @@ impl SplatOptions {
             density: self.density,
             ellipses: self.ellipses,
             flat_colors: self.flat_colors,
-            creases: self.creases,
+            creases: (self.creases || self.no_creases).then_some(self.creases),
             viewpoint: self.viewpoint()?,
             no_viewpoint: self.no_viewpoint,
             thin: self.thin,

@@ -192,8 +192,9 @@ pub struct SplatSpec {
     /// Fit a linear colour field to each splat of a coloured cloud
     /// (`SplatParams::color_fields`; default true).
     pub color_fields: Option<bool>,
-    /// Find creases and clip splats at them (`SplatParams::creases`;
-    /// default true).
+    /// Find creases and clip splats at them (`SplatParams::creases`):
+    /// true everywhere, false nowhere; absent, the default
+    /// (`Creases::Auto`: on but for a cloud sampled along scan lines).
     pub creases: Option<bool>,
     /// Orient estimated normals toward this point (model space: the point
     /// file's coordinates).

@@ -572,7 +572,10 @@ fn generate_splats(
         density: spec.splat.density.unwrap_or(d.density),
         ellipses: spec.splat.ellipses,
         color_fields: spec.splat.color_fields.unwrap_or(d.color_fields),
-        creases: spec.splat.creases.unwrap_or(d.creases),
+        creases: spec
+            .splat
+            .creases
+            .map_or(d.creases, crate::splat::Creases::from_bool),
         viewpoint: spec
             .splat
             .viewpoint

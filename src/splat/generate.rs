@@ -77,11 +77,49 @@ pub struct SplatParams {
     pub color_fields: bool,
     /// Find creases, corners and borders while growing: each splat is
     /// clipped where its own face's points end (`grow::CREASE_DEG`,
-    /// `Grower::clip_lines` in `grow.rs`). Default off, `--creases` or a
-    /// scene's `splat = { creases = true }` turns it on: it costs smooth
-    /// surfaces (the bunny 37.62 against 37.87 dB) and tiled generation
-    /// does not carry clip lines through its merge yet.
-    pub creases: bool,
+    /// `Grower::clip_lines` in `grow.rs`). Default [`Creases::Auto`]: on,
+    /// but for a cloud sampled along scan lines.
+    pub creases: Creases,
+}
+
+/// Whether generation finds creases ([`SplatParams::creases`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Creases {
+    /// Whole discs everywhere (`--no-creases`, a scene's `creases = false`).
+    Off,
+    /// On, except in a cloud whose nearest neighbours lie along scan lines
+    /// (the graph widened to join them, see [`SplatReport::k`]): there the
+    /// gap between two lines looks like a border to the border test of
+    /// `Grower::clip_lines`, and on the scan-line bunny
+    /// (`scenes/scan-lines.toml`) creases gave 68 dark specks against 48
+    /// (17 on the surface against 1), and its coarse scan (800×100 rays)
+    /// 95.43 % of the held-out lines of sight meeting the rendered surface
+    /// against 95.73 % (`docs/development.md`, "Issue 39: creases on by
+    /// default"); a warning says when they were left off.
+    #[default]
+    Auto,
+    /// On everywhere (`--creases`, a scene's `creases = true`).
+    On,
+}
+
+impl Creases {
+    /// `true` is [`Creases::On`], `false` [`Creases::Off`].
+    #[must_use]
+    pub fn from_bool(on: bool) -> Creases {
+        if on { Creases::On } else { Creases::Off }
+    }
+
+    /// Whether creases are found in a cloud whose graph was `widened` for
+    /// scan lines.
+    #[must_use]
+    pub fn found(self, widened: bool) -> bool {
+        match self {
+            Creases::Off => false,
+            Creases::Auto => !widened,
+            Creases::On => true,
+        }
+    }
 }
 
 /// Where generation takes `cloud`'s points to have been seen from, indexed
@@ -111,7 +149,7 @@ impl Default for SplatParams {
             epsilon_abs: None,
             thin: 0.0,
             color_fields: true,
-            creases: false,
+            creases: Creases::Auto,
         }
     }
 }
@@ -465,7 +503,15 @@ pub fn generate_with_progress(
         tree = build_tree(&points);
     }
     let mut flat = Vec::new();
-    if params.creases && to_estimate > 0 {
+    let creases = params.creases.found(knn.k > params.k);
+    if params.creases == Creases::Auto && !creases {
+        report.warnings.push(
+            "creases not searched: the nearest neighbours lie along scan lines, whose gaps look \
+             like borders (--creases searches them anyway)"
+                .into(),
+        );
+    }
+    if creases && to_estimate > 0 {
         // Creases on: each point's normal from its own face where an edge
         // is near (`normals::face_normals`), its plane holding the points
         // within a quarter ϵ of it, or three times the noise. Where the
@@ -492,7 +538,7 @@ pub fn generate_with_progress(
         epsilon,
         density: params.density,
         ellipses: params.ellipses,
-        creases: params.creases,
+        creases,
     };
     let grown = grow_all(&input, |i| {
         notify(progress, "growing splats", i as f64 / n as f64);

@@ -145,7 +145,7 @@ pub use cloud::{PointCloud, Scans, Viewpoints};
 /// for clouds made in memory (the Python package's arrays).
 pub use frame::robust_centre_size;
 pub use generate::{
-    GenerateError, HOLLOW_LARGE, NOISE_PROJECT, Skipped, SplatParams, SplatReport, StageSeconds,
-    count_on_splats, coverage, generate, generate_with_progress, hollow_large, on_splat,
-    viewpoints_of,
+    Creases, GenerateError, HOLLOW_LARGE, NOISE_PROJECT, Skipped, SplatParams, SplatReport,
+    StageSeconds, count_on_splats, coverage, generate, generate_with_progress, hollow_large,
+    on_splat, viewpoints_of,
 };

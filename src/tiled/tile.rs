@@ -224,7 +224,7 @@ pub(super) fn finished_tile(work: &Path, t: usize) -> Option<TileSummary> {
 /// Whether the tiles write clip lines: every tile of a run with creases
 /// does, clipped splats or not, so the merge joins records of one size.
 pub(super) fn clip_lines(params: &SplatParams) -> bool {
-    params.creases
+    params.creases != crate::splat::Creases::Off
 }
 
 /// Whether the tiles write colour fields: the survey found colours and the

@@ -16,7 +16,7 @@ use crate::io::{
 use crate::progress::{Progress, notify};
 use crate::render::output::{check_extension, check_writable};
 use crate::splat::color::fit_cloud;
-use crate::splat::{PointCloud, SplatParams, SplatReport};
+use crate::splat::{Creases, PointCloud, SplatParams, SplatReport};
 use crate::tiled::{BYTES_PER_POINT, Stage, TiledOptions, TiledReport, Tiling, generate_tiled};
 use crate::validate::holdout::{
     HeldOutCoverage, Windows, heldout_coverage, heldout_coverage_windows,
@@ -41,8 +41,10 @@ pub struct GenerationOptions {
     pub ellipses: bool,
     /// One colour per splat: no linear colour fields.
     pub flat_colors: bool,
-    /// Find creases and clip splats at them (`SplatParams::creases`).
-    pub creases: bool,
+    /// Find creases and clip splats at them (`SplatParams::creases`):
+    /// `Some(true)` everywhere, `Some(false)` nowhere, `None` the default
+    /// ([`crate::splat::Creases::Auto`]).
+    pub creases: Option<bool>,
     /// Where the scanner stood, in the input's coordinates (default: the
     /// cloud's own).
     pub viewpoint: Option<DVec3>,
@@ -82,7 +84,7 @@ impl GenerationOptions {
             density: self.density.unwrap_or(defaults.density),
             ellipses: self.ellipses,
             color_fields: !self.flat_colors,
-            creases: self.creases,
+            creases: self.creases.map_or(defaults.creases, Creases::from_bool),
             scan_viewpoints: !self.no_viewpoint,
             thin: self.thin.unwrap_or(defaults.thin),
             ..defaults
@@ -96,7 +98,7 @@ impl GenerationOptions {
             || self.k.is_some()
             || self.density.is_some()
             || self.ellipses
-            || self.creases
+            || self.creases.is_some()
     }
 }
 

@@ -351,7 +351,7 @@ impl Splats {
 /// fields); the options are the command's.
 #[pyfunction]
 #[pyo3(signature = (points, normals=None, colors=None, viewpoint=None, *, epsilon=None, k=None,
-    density=None, ellipses=false, flat_colors=false, creases=false, no_viewpoint=false, thin=None,
+    density=None, ellipses=false, flat_colors=false, creases=None, no_viewpoint=false, thin=None,
     progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn splat(
@@ -365,7 +365,7 @@ pub fn splat(
     density: Option<f32>,
     ellipses: bool,
     flat_colors: bool,
-    creases: bool,
+    creases: Option<bool>,
     no_viewpoint: bool,
     thin: Option<f64>,
     progress: Option<Py<PyAny>>,

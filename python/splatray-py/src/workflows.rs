@@ -36,7 +36,7 @@ fn detached<'py>(
 /// organised colour capture. The generation options are `splat`'s.
 #[pyfunction]
 #[pyo3(signature = (path, *, tolerance=0.01, holdout=0.1, seed=1, photo=false, backend=None,
-    epsilon=None, k=None, density=None, ellipses=false, flat_colors=false, creases=false,
+    epsilon=None, k=None, density=None, ellipses=false, flat_colors=false, creases=None,
     viewpoint=None, no_viewpoint=false, thin=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn scan_check<'py>(
@@ -52,7 +52,7 @@ pub fn scan_check<'py>(
     density: Option<f32>,
     ellipses: bool,
     flat_colors: bool,
-    creases: bool,
+    creases: Option<bool>,
     viewpoint: Option<&Bound<'_, PyAny>>,
     no_viewpoint: bool,
     thin: Option<f64>,

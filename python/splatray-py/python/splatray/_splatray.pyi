@@ -98,14 +98,16 @@ def splat(
     density: Optional[float] = None,
     ellipses: bool = False,
     flat_colors: bool = False,
-    creases: bool = False,
+    creases: Optional[bool] = None,
     no_viewpoint: bool = False,
     thin: Optional[float] = None,
     progress: Optional[Progress] = None,
 ) -> Splats:
     """Splats from points as `splatray splat` makes them; the options are
     its flags (epsilon: fraction of the bounding-box diagonal; creases=True
-    is --creases: splats clipped at creases, corners and borders)."""
+    is --creases: splats clipped at creases, corners and borders everywhere,
+    False --no-creases: whole discs, None the default: clipped but in a cloud
+    sampled along scan lines)."""
 
 class CastResult(TypedDict):
     t_hit: npt.NDArray[np.float32]
@@ -194,7 +196,7 @@ def scan_check(
     density: Optional[float] = None,
     ellipses: bool = False,
     flat_colors: bool = False,
-    creases: bool = False,
+    creases: Optional[bool] = None,
     viewpoint: Optional[Sequence[float]] = None,
     no_viewpoint: bool = False,
     thin: Optional[float] = None,

@@ -68,11 +68,16 @@ def options_flags(options: dict, allowed: Sequence[str], what: str) -> list[str]
     """Keyword options as command-line flags: ``tile_points=30000`` ->
     ``--tile-points 30000``, ``ellipses=True`` -> ``--ellipses``,
     ``viewpoint=(x, y, z)`` -> ``--viewpoint x,y,z``; ``None`` and
-    ``False`` give nothing."""
+    ``False`` give nothing, but ``creases=False``, which gives
+    ``--no-creases``."""
     flags: list[str] = []
     for name, value in options.items():
         if name not in allowed:
             raise TypeError(f"{what}: unknown option {name!r} (options: {', '.join(allowed)})")
+        if name == "creases" and value is False:
+            # Creases are on by default: False is --no-creases.
+            flags.append("--no-creases")
+            continue
         if value is None or value is False:
             continue
         flag = "--" + name.replace("_", "-")
