@@ -146,18 +146,23 @@ fn blocked(
             },
         )
         .collect();
-    // A ray that met nothing is checked against whole discs: a splat its
-    // clip lines let it pass stands at the capture's border or hole, and
-    // shrinks as a whole disc would. Its lines already cut the overhang,
-    // but a splat grown to its full size across a textured capture's edge
-    // spreads one linear colour field over it: on the striped organised
-    // capture (`scan-check --photo`, creases on) 25.99 dB with the clipped
-    // discs, 27.49 with whole ones, 26.92 without creases
-    // (`docs/development.md`, "Issue 39: creases on by default").
-    let whole = (!misses.dirs.is_empty() && splats.iter().any(Splat::is_clipped)).then(|| {
-        let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
-        Octree::new(&discs, &OctreeParams::default())
-    });
+    // In a coloured cloud a ray that met nothing is checked against whole
+    // discs: a splat its clip lines let pass stands at the capture's border
+    // or hole, and shrinks as a whole disc would. Its lines already cut the
+    // overhang, but a splat grown to its full size across a textured
+    // capture's edge spreads one linear colour field over it: on the
+    // striped organised capture (`scan-check --photo`, creases on) 25.99 dB
+    // with the clipped discs, 27.49 with whole ones, 26.92 without creases.
+    // Without colours the clipped disc is the surface, and shrinking it
+    // costs: the noisy solids scan 31.00 -> 30.78 dB, `scenes/scan.toml`
+    // 34.10 -> 34.02 (`docs/development.md`, "Issue 39: creases on by
+    // default").
+    let whole =
+        (misses.whole_discs && !misses.dirs.is_empty() && splats.iter().any(Splat::is_clipped))
+            .then(|| {
+                let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
+                Octree::new(&discs, &OctreeParams::default())
+            });
     let past: &dyn Backend = match &whole {
         Some(o) => o,
         None => octree.as_ref(),
@@ -206,6 +211,10 @@ pub struct Misses {
     /// Per direction, its scanner's index in `from`; empty when every ray
     /// is `from[0]`'s.
     pub of: Vec<u16>,
+    /// Test the rays against whole discs, clipped or not (a coloured
+    /// cloud's splats, whose colour fields span what their clip lines
+    /// cut): see [`blocked`].
+    pub whole_discs: bool,
 }
 
 impl Misses {
@@ -489,6 +498,7 @@ pub fn generate_trimmed(
             from: vec![own],
             dirs: dirs.clone(),
             of: Vec::new(),
+            whole_discs: false,
         },
         // Per-point viewpoints are the scans' own (`viewpoints_of`).
         (Viewpoints::PerPoint(_), _, _, Some(s))
@@ -501,9 +511,14 @@ pub fn generate_trimmed(
                 from: s.positions.clone(),
                 dirs: s.misses.clone(),
                 of: s.misses_of.clone(),
+                whole_discs: false,
             }
         }
         _ => Misses::default(),
+    };
+    let misses = Misses {
+        whole_discs: cloud.colors.is_some() && params.color_fields,
+        ..misses
     };
     let t = trim(&mut splats, &points, &vp, &misses, margin);
     if t.skipped {
@@ -603,6 +618,7 @@ mod tests {
             from: vec![EYE],
             dirs: vec![(past - EYE).normalize(), (inside - EYE).normalize()],
             of: Vec::new(),
+            whole_discs: false,
         };
         let r = trim(&mut splats, &points, &Viewpoints::One(EYE), &misses, MARGIN);
         assert_eq!((r.misses, r.misses_blocked), (2, 2), "{r:?}");
