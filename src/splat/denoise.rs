@@ -9,7 +9,7 @@
 //! ([`normals_after`]).
 
 use super::fit::{
-    COLLINEAR, MIN_QUADRIC_POINTS as MIN_POINTS, normal_equations, plane_fit, solve6,
+    COLLINEAR, MIN_QUADRIC_POINTS as MIN_POINTS, height_rows, normal_equations, plane_fit, solve6,
 };
 use super::knn::Knn;
 use glam::{DVec3, Vec3};
@@ -139,24 +139,7 @@ pub fn normals_after(points: &[Vec3], normals: &[Vec3], knn: &Knn) -> Vec<Option
 /// across the neighbourhood exceeds the noise gives far more.
 #[must_use]
 pub fn curvature_f(offsets: &[Vec3], n: Vec3) -> Option<f64> {
-    let n = n.as_dvec3().try_normalize()?;
-    let u = n.any_orthonormal_vector();
-    let v = n.cross(u);
-    let scale = offsets
-        .iter()
-        .map(|d| d.as_dvec3().length())
-        .fold(0.0f64, f64::max);
-    if scale.is_nan() || scale <= 0.0 || offsets.len() < MIN_POINTS {
-        return None;
-    }
-    let rows: Vec<([f64; 6], f64)> = offsets
-        .iter()
-        .map(|d| {
-            let d = d.as_dvec3() / scale;
-            let (x, y) = (d.dot(u), d.dot(v));
-            ([1.0, x, y, x * x, x * y, y * y], d.dot(n))
-        })
-        .collect();
+    let (rows, _) = height_rows(offsets, n, MIN_POINTS)?;
     let (ata, atb) = normal_equations(&rows);
     let a3 = glam::DMat3::from_cols_array_2d(&[
         [ata[0][0], ata[0][1], ata[0][2]],

@@ -102,6 +102,41 @@ pub fn quadric_fit(offsets: &[Vec3], n: Vec3, tol: f32) -> Option<f32> {
     height_fit(offsets, n, tol, 6, MIN_QUADRIC_POINTS)
 }
 
+/// One least-squares row of a height field: `(1, x, y, x², xy, y²)` and `h`.
+pub(crate) type HeightRow = ([f64; 6], f64);
+
+/// The rows `(1, x, y, x², xy, y²; h)` of the height field over the plane
+/// of normal `n` through the origin, `offsets` scaled into the unit ball,
+/// and that scale; `None` for fewer than `min_points`, a zero normal or no
+/// extent.
+pub(crate) fn height_rows(
+    offsets: &[Vec3],
+    n: Vec3,
+    min_points: usize,
+) -> Option<(Vec<HeightRow>, f64)> {
+    let n = n.as_dvec3().try_normalize()?;
+    let u = n.any_orthonormal_vector();
+    let v = n.cross(u);
+    let scale = offsets
+        .iter()
+        .map(|d| d.as_dvec3().length())
+        .fold(0.0f64, f64::max);
+    if scale.is_nan() || scale <= 0.0 || offsets.len() < min_points {
+        return None;
+    }
+    Some((
+        offsets
+            .iter()
+            .map(|d| {
+                let d = d.as_dvec3() / scale;
+                let (x, y) = (d.dot(u), d.dot(v));
+                ([1.0, x, y, x * x, x * y, y * y], d.dot(n))
+            })
+            .collect(),
+        scale,
+    ))
+}
+
 /// The MSAC score (as [`quadric_fit`]'s) of the height field over the
 /// plane of normal `n` fitted to `offsets` by least squares with its first
 /// `terms` of `1, x, y, x², xy, y²`: 3 a plane, 6 a quadric; `None` where
@@ -114,24 +149,7 @@ pub fn height_fit(
     terms: usize,
     min_points: usize,
 ) -> Option<f32> {
-    let n = n.as_dvec3().try_normalize()?;
-    let u = n.any_orthonormal_vector();
-    let v = n.cross(u);
-    let scale = offsets
-        .iter()
-        .map(|d| d.as_dvec3().length())
-        .fold(0.0f64, f64::max);
-    if scale.is_nan() || scale <= 0.0 || offsets.len() < min_points.max(terms) {
-        return None;
-    }
-    let rows: Vec<([f64; 6], f64)> = offsets
-        .iter()
-        .map(|d| {
-            let d = d.as_dvec3() / scale;
-            let (x, y) = (d.dot(u), d.dot(v));
-            ([1.0, x, y, x * x, x * y, y * y], d.dot(n))
-        })
-        .collect();
+    let (rows, scale) = height_rows(offsets, n, min_points.max(terms))?;
     let (mut ata, mut atb) = normal_equations(&rows);
     // Unused terms: identity rows, so their coefficients solve to 0.
     for r in terms.min(6)..6 {
