@@ -187,21 +187,10 @@ fn a_solid_renders_as_itself_with_creases() {
 /// creases).
 #[test]
 fn a_noisy_scan_of_a_solid_renders_with_creases() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
-    let samples = "samples = 300000\nseed = 1";
-    let text = std::fs::read_to_string(root.join("solids.toml")).unwrap();
-    assert!(
-        text.contains(samples),
-        "scenes/solids.toml no longer says `{samples}`"
-    );
-    let text = text
-        .replace(
-            samples,
-            "seed = 1\nscan = { from = [1.9, 1.5, 2.4], at = [0.0, 0.2, 0.0], \
+    let (root, text) = solids_scanned(
+        "seed = 1\nscan = { from = [1.9, 1.5, 2.4], at = [0.0, 0.2, 0.0], \
              rays = [400, 300], range_noise_spacing = 0.5 }",
-        )
-        .replace("width = 800", "width = 200")
-        .replace("height = 600", "height = 150");
+    );
     let (psnr_on, false_on) = solids_figures(&text, &root, true);
     let (psnr_off, false_off) = solids_figures(&text, &root, false);
     // Measured: on 31.00 dB, 0.137 % false hits (Embree forced to avx2:
@@ -238,21 +227,10 @@ fn a_noisy_scan_of_a_solid_renders_with_creases() {
 /// against the mesh, creases on.
 #[test]
 fn a_solid_scanned_from_two_stations_renders_near_its_mesh() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
-    let samples = "samples = 300000\nseed = 1";
-    let text = std::fs::read_to_string(root.join("solids.toml")).unwrap();
-    assert!(
-        text.contains(samples),
-        "scenes/solids.toml no longer says `{samples}`"
-    );
-    let text = text
-        .replace(
-            samples,
-            "seed = 1\nscan = { from = [[1.9, 1.5, 2.4], [-2.4, 1.5, 1.9]], \
+    let (root, text) = solids_scanned(
+        "seed = 1\nscan = { from = [[1.9, 1.5, 2.4], [-2.4, 1.5, 1.9]], \
              at = [0.0, 0.2, 0.0], rays = [800, 600], range_noise_spacing = 0.5 }",
-        )
-        .replace("width = 800", "width = 200")
-        .replace("height = 600", "height = 150");
+    );
     let (psnr, false_hits) = solids_figures(&text, &root, true);
     // Measured: 33.35 dB, 0.100 % false hits (Embree forced to avx2:
     // 33.34 dB, 0.100 %; sse4.2: 33.37 dB, 0.097 %) (33.03 dB, 0.093 % without
@@ -262,6 +240,23 @@ fn a_solid_scanned_from_two_stations_renders_near_its_mesh() {
     // samples' 36.14 (issue 39 asks for 3).
     assert!(psnr > 33.2, "{psnr}");
     assert!(false_hits < 0.0012, "{false_hits}");
+}
+
+/// The scenes folder and scenes/solids.toml with its exact samples
+/// replaced by `scan` (a model's `seed` and `scan` lines), at 200x150.
+fn solids_scanned(scan: &str) -> (std::path::PathBuf, String) {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let samples = "samples = 300000\nseed = 1";
+    let text = std::fs::read_to_string(root.join("solids.toml")).unwrap();
+    assert!(
+        text.contains(samples),
+        "scenes/solids.toml no longer says `{samples}`"
+    );
+    let text = text
+        .replace(samples, scan)
+        .replace("width = 800", "width = 200")
+        .replace("height = 600", "height = 150");
+    (root, text)
 }
 
 /// PSNR (dB) and false-hit share of the solids scene `text` (scenes/solids.toml
