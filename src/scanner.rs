@@ -387,15 +387,24 @@ pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
 
 /// Scans `mesh` from each of `stations` with `params`' other settings
 /// (station `k`'s seed is `params.seed + k`, so the first station's scan is
-/// `scan_mesh`'s) and joins them: one station gives its scan's cloud as it
-/// is (its viewpoint and misses); several give one cloud of several scans
-/// ([`crate::splat::Scans`], each point with its own scanner, as an E57
-/// survey's), each scan's misses kept with it ([`crate::splat::Scans::misses`]).
+/// `scan_mesh`'s) and joins them ([`join_scans`]): one station gives its
+/// scan's cloud as it is (its viewpoint and misses); several give one cloud
+/// of several scans ([`crate::splat::Scans`], each point with its own
+/// scanner, as an E57 survey's), each scan's misses kept with it
+/// ([`crate::splat::Scans::misses`]).
 ///
 /// # Errors
 /// No station, more than `u16` indexes, or a station's [`scan_mesh`]
 /// error (naming the station when there are several).
 pub fn scan_stations(mesh: &Mesh, params: &ScanParams, stations: &[DVec3]) -> Result<PointCloud> {
+    Ok(join_scans(mesh.origin, &scan_each(mesh, params, stations)?))
+}
+
+/// The scans of [`scan_stations`], one per station, each with its counts.
+///
+/// # Errors
+/// As [`scan_stations`].
+pub fn scan_each(mesh: &Mesh, params: &ScanParams, stations: &[DVec3]) -> Result<Vec<Scan>> {
     if stations.is_empty() {
         return Err(Error::invalid("a scan needs at least one station"));
     }
@@ -406,45 +415,66 @@ pub fn scan_stations(mesh: &Mesh, params: &ScanParams, stations: &[DVec3]) -> Re
             usize::from(u16::MAX) + 1
         )));
     }
-    let scan_at = |k: usize, from: DVec3| {
-        let p = ScanParams {
-            from,
-            seed: params.seed.wrapping_add(k as u64),
-            ..params.clone()
-        };
-        scan_mesh(mesh, &p)
-    };
-    if let [from] = stations {
-        return Ok(scan_at(0, *from)?.cloud);
+    let several = stations.len() > 1;
+    stations
+        .iter()
+        .enumerate()
+        .map(|(k, &from)| {
+            let p = ScanParams {
+                from,
+                seed: params.seed.wrapping_add(k as u64),
+                ..params.clone()
+            };
+            scan_mesh(mesh, &p).map_err(|e| {
+                if several {
+                    e.context(format!(
+                        "station {} of {} at {:?}",
+                        k + 1,
+                        stations.len(),
+                        from.to_array()
+                    ))
+                } else {
+                    e
+                }
+            })
+        })
+        .collect()
+}
+
+/// One cloud of `scans` (of a mesh whose origin is `origin`): one scan's
+/// cloud as it is; several scans' points and misses each kept with their
+/// scanner ([`crate::splat::Scans`]).
+///
+/// # Panics
+/// When `scans` is empty or holds more than `u16` indexes.
+#[must_use]
+pub fn join_scans(origin: DVec3, scans: &[Scan]) -> PointCloud {
+    assert!(
+        !scans.is_empty() && scans.len() <= usize::from(u16::MAX) + 1,
+        "join_scans takes 1 to 65536 scans"
+    );
+    if let [one] = scans {
+        return one.cloud.clone();
     }
     let mut cloud = PointCloud {
-        origin: mesh.origin,
+        origin,
         ..PointCloud::default()
     };
-    let mut scans = crate::splat::Scans::default();
-    for (k, &from) in stations.iter().enumerate() {
-        let scan = scan_at(k, from).map_err(|e| {
-            e.context(format!(
-                "station {} of {} at {:?}",
-                k + 1,
-                stations.len(),
-                from.to_array()
-            ))
-        })?;
+    let mut joined = crate::splat::Scans::default();
+    for (k, scan) in scans.iter().enumerate() {
         let n = scan.cloud.len();
-        let misses = scan.cloud.misses.unwrap_or_default();
-        scans
+        let misses = scan.cloud.misses.as_deref().unwrap_or_default();
+        joined
             .misses_of
             .extend(std::iter::repeat_n(k as u16, misses.len()));
-        scans.misses.extend(misses);
-        cloud.positions.extend(scan.cloud.positions);
-        scans.positions.push(
-            scan.cloud
-                .viewpoint
-                .unwrap_or_else(|| (from - mesh.origin).as_vec3()),
-        );
-        scans.of.extend(std::iter::repeat_n(k as u16, n));
+        joined.misses.extend_from_slice(misses);
+        cloud.positions.extend_from_slice(&scan.cloud.positions);
+        // (`scan_mesh` always sets the viewpoint.)
+        joined
+            .positions
+            .push(scan.cloud.viewpoint.unwrap_or_default());
+        joined.of.extend(std::iter::repeat_n(k as u16, n));
     }
-    cloud.scans = Some(scans);
-    Ok(cloud)
+    cloud.scans = Some(joined);
+    cloud
 }

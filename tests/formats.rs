@@ -285,6 +285,82 @@ fn e57_scans_are_placed_by_their_poses_and_seen_from_their_scanners() {
     );
 }
 
+/// A direction-only point (`cartesianInvalidState` 1: a ray that met
+/// nothing) is a miss of its scan, turned by the scan's pose as points are
+/// (rotation only), never a point; a fully invalid point (state 2) is
+/// skipped and counted.
+#[test]
+fn e57_direction_only_points_are_their_scans_misses() {
+    use e57::{Quaternion, Record, RecordValue, Transform, Translation};
+    let path = scratch("e57-misses").join("misses.e57");
+    let turn = glam::DQuat::from_axis_angle(DVec3::Y, std::f64::consts::FRAC_PI_2);
+    let at = [DVec3::new(10.0, 0.0, 0.0), DVec3::new(-10.0, 2.0, 0.0)];
+    let mut w = e57::E57Writer::from_file(&path, "splatray-test-misses").unwrap();
+    for (k, at) in at.iter().enumerate() {
+        let proto = vec![
+            Record::CARTESIAN_X_F64,
+            Record::CARTESIAN_Y_F64,
+            Record::CARTESIAN_Z_F64,
+            Record::CARTESIAN_INVALID_STATE,
+        ];
+        let mut pc = w.add_pointcloud(&format!("scan-{k}"), proto).unwrap();
+        pc.set_transform(Some(Transform {
+            rotation: Quaternion {
+                w: turn.w,
+                x: turn.x,
+                y: turn.y,
+                z: turn.z,
+            },
+            translation: Translation {
+                x: at.x,
+                y: at.y,
+                z: at.z,
+            },
+        }));
+        let mut rng = Rng::new(3 + k as u64);
+        for _ in 0..200 {
+            let p = rng.unit().as_dvec3() * 3.0;
+            pc.add_point(
+                [p.x, p.y, p.z]
+                    .map(RecordValue::Double)
+                    .into_iter()
+                    .chain([RecordValue::Integer(0)])
+                    .collect(),
+            )
+            .unwrap();
+        }
+        // Two misses along the scan's local +x (scaled: only the direction
+        // counts), one invalid point.
+        for (d, state) in [(DVec3::X * 2.0, 1), (DVec3::X, 1), (DVec3::Z, 2)] {
+            pc.add_point(vec![
+                RecordValue::Double(d.x),
+                RecordValue::Double(d.y),
+                RecordValue::Double(d.z),
+                RecordValue::Integer(state),
+            ])
+            .unwrap();
+        }
+        pc.finalize().unwrap();
+    }
+    w.finalize().unwrap();
+    let cloud = read_points(&path).unwrap();
+    assert_eq!(cloud.len(), 400);
+    let s = cloud.scans.as_ref().expect("two scans");
+    assert_eq!(s.misses_of, [0, 0, 1, 1]);
+    let want = (turn * DVec3::X).as_vec3();
+    for m in &s.misses {
+        assert!((*m - want).length() < 1e-6, "miss {m}, want {want}");
+    }
+    assert!(
+        cloud
+            .skipped
+            .iter()
+            .any(|(why, n)| why.contains("invalid") && *n == 2),
+        "{:?}",
+        cloud.skipped
+    );
+}
+
 /// The same two scans in tiles (`splat --tile-points`): the E57 file is
 /// streamed, each point carries its scan through the spill, so the splats
 /// face their own scanner on both sides as when the cloud is splatted

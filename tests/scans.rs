@@ -322,6 +322,85 @@ fn stations_make_one_cloud_of_several_scans() {
     assert_eq!(e.lines().count(), 1, "{e}");
 }
 
+/// `sample --scan-from A --scan-from B -o scans.e57` writes the scans
+/// `scan_stations` makes: read back, every point in place (f64 in the
+/// file), each with its own station, each station's misses kept with it;
+/// one station's E57 keeps its viewpoint and misses as its PCD keeps the
+/// viewpoint. Several stations to a PCD: a one-line error, nothing written.
+#[test]
+fn cli_sample_from_stations_writes_an_e57_of_scans() {
+    use splatray::scanner::scan_stations;
+    let dir = scratch("cli-stations");
+    let stations = [DVec3::new(1.5, 1.0, 3.5), DVec3::new(-2.0, 1.2, -2.5)];
+    let run = |from: &[DVec3], out: &std::path::Path| {
+        let mut cmd = common::bin();
+        cmd.arg("sample").arg(data("bunny-mesh.ply"));
+        for s in from {
+            cmd.arg("--scan-from")
+                .arg(format!("{},{},{}", s.x, s.y, s.z));
+        }
+        cmd.args([
+            "--rays",
+            "120,90",
+            "--range-noise-spacing",
+            "0.5",
+            "--seed",
+            "7",
+            "-o",
+        ])
+        .arg(out)
+        .output()
+        .unwrap()
+    };
+    let mesh = read_mesh(&data("bunny-mesh.ply")).unwrap();
+    let params = ScanParams {
+        columns: 120,
+        rows: 90,
+        range_noise: RangeNoise::Spacing(0.5),
+        seed: 7,
+        ..ScanParams::default()
+    };
+    let close = |a: DVec3, b: DVec3| (a - b).length() < 1e-6;
+    for from in [&stations[..], &stations[..1]] {
+        let path = dir.join(format!("scans{}.e57", from.len()));
+        let out = run(from, &path);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let made = scan_stations(&mesh, &params, from).unwrap();
+        let read = read_points(&path).unwrap();
+        assert_eq!(read.len(), made.len());
+        assert!((0..made.len()).all(|i| close(read.world(i), made.world(i))));
+        let world = |c: &PointCloud, v: Vec3| c.origin + v.as_dvec3();
+        let dirs_close = |a: &[Vec3], b: &[Vec3]| {
+            a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (*x - *y).length() < 1e-6)
+        };
+        if from.len() == 1 {
+            assert!(read.scans.is_none());
+            assert!(close(world(&read, read.viewpoint.unwrap()), from[0]));
+            let (r, m) = (read.misses.unwrap(), made.misses.unwrap());
+            assert!(!m.is_empty() && dirs_close(&r, &m));
+            continue;
+        }
+        let (r, m) = (read.scans.as_ref().unwrap(), made.scans.as_ref().unwrap());
+        assert_eq!(r.of, m.of);
+        for (k, at) in from.iter().enumerate() {
+            assert!(close(world(&read, r.positions[k]), *at), "station {k}");
+        }
+        assert_eq!(r.misses_of, m.misses_of);
+        assert!(m.misses_of.contains(&1) && dirs_close(&r.misses, &m.misses));
+    }
+    let pcd = dir.join("never.pcd");
+    let out = run(&stations, &pcd);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("write them to an E57 file"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(!pcd.exists());
+}
+
 /// Creases by default, but not along scan lines (`Creases::Auto`): the
 /// coarse scan-line bunny is grown without clip lines and says so, as it
 /// was before creases were the default (byte for byte: `docs/development.md`,

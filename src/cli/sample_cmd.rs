@@ -1,7 +1,8 @@
 //! `splatray sample MESH.ply -n N -o points.ply [--noise SIGMA] [--seed S]`,
 //! or a synthetic scan: `splatray sample MESH.ply --scan-from X,Y,Z -o
 //! scan.pcd [--pattern raster|lines] [--rays W,H] [--range-noise S |
-//! --range-noise-spacing F] [--outliers F] [--missing F]`.
+//! --range-noise-spacing F] [--outliers F] [--missing F]`, from several
+//! stations with `--scan-from` repeated and `-o scans.e57`.
 
 use super::progress::ProgressLine;
 use splatray::scanner::{RangeNoise, ScanParams, ScanPattern};
@@ -18,7 +19,9 @@ pub struct SampleArgs {
     #[arg(short = 'n', long = "points", required_unless_present = "scan_from")]
     pub n: Option<usize>,
     /// Output point cloud: binary PLY (x y z nx ny nz), or PCD when the
-    /// name ends in .pcd (a scan's VIEWPOINT is kept only there).
+    /// name ends in .pcd (a scan's VIEWPOINT is kept there), or for a scan
+    /// E57 when it ends in .e57 (each station's scan with its pose and the
+    /// directions of its rays that met nothing).
     #[arg(short = 'o', long = "output")]
     pub output: PathBuf,
     /// Standard deviation of isotropic Gaussian noise added to positions, in
@@ -30,14 +33,10 @@ pub struct SampleArgs {
     pub seed: u64,
     /// Scan the mesh from this point (X,Y,Z) like a range scanner instead of
     /// sampling its area: points where the rays meet it, no normals, the
-    /// viewpoint written as the PCD's VIEWPOINT.
-    #[arg(
-        long,
-        value_delimiter = ',',
-        allow_negative_numbers = true,
-        num_args = 1
-    )]
-    pub scan_from: Option<Vec<f64>>,
+    /// viewpoint written as the PCD's VIEWPOINT. Repeated, a scan from each
+    /// station (station k's seed is --seed plus k), written to an E57 file.
+    #[arg(long, value_parser = parse_xyz, allow_hyphen_values = true, action = clap::ArgAction::Append)]
+    pub scan_from: Vec<glam::DVec3>,
     /// The point the scanner looks at (X,Y,Z). Default: the mesh's centre.
     #[arg(
         long,
@@ -96,6 +95,20 @@ pub enum Frame {
     Gl,
 }
 
+/// `X,Y,Z` as a point (`--scan-from`).
+fn parse_xyz(s: &str) -> std::result::Result<glam::DVec3, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| format!("{s:?} is not three numbers X,Y,Z"))?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(glam::DVec3::new(x, y, z)),
+        [_, _, _] => Err(format!("{s:?}: a station must be finite")),
+        _ => Err(format!("{s:?} needs three numbers X,Y,Z, got {}", v.len())),
+    }
+}
+
 fn vec3(v: &[f64], what: &str) -> Result<glam::DVec3> {
     match v {
         [x, y, z] => Ok(glam::DVec3::new(*x, *y, *z)),
@@ -121,10 +134,11 @@ impl From<Frame> for SensorFrame {
 /// When the mesh cannot be read, has no area, the scan sees nothing, or the
 /// output cannot be written.
 pub fn run(args: &SampleArgs) -> Result<()> {
-    splatray::render::output::check_extension(&args.output, &["ply", "pcd"])?;
-    if let Some(from) = &args.scan_from {
-        return scan(args, vec3(from, "--scan-from")?);
+    if !args.scan_from.is_empty() {
+        splatray::render::output::check_extension(&args.output, &["ply", "pcd", "e57"])?;
+        return scan(args);
     }
+    splatray::render::output::check_extension(&args.output, &["ply", "pcd"])?;
     let req = AreaSampling {
         mesh: args.mesh.clone(),
         output: args.output.clone(),
@@ -146,7 +160,7 @@ pub fn run(args: &SampleArgs) -> Result<()> {
 }
 
 /// The scan's parameters from the arguments.
-fn scan_params(args: &SampleArgs, from: glam::DVec3) -> Result<ScanParams> {
+fn scan_params(args: &SampleArgs) -> Result<ScanParams> {
     let [columns, rows] = args.rays[..] else {
         return Err(Error::invalid(format!(
             "--rays needs two numbers W,H, got {}",
@@ -154,7 +168,7 @@ fn scan_params(args: &SampleArgs, from: glam::DVec3) -> Result<ScanParams> {
         )));
     };
     Ok(ScanParams {
-        from,
+        from: args.scan_from[0],
         at: args
             .scan_at
             .as_deref()
@@ -174,7 +188,7 @@ fn scan_params(args: &SampleArgs, from: glam::DVec3) -> Result<ScanParams> {
     })
 }
 
-fn scan(args: &SampleArgs, from: glam::DVec3) -> Result<()> {
+fn scan(args: &SampleArgs) -> Result<()> {
     if args.n.is_some() {
         return Err("-n and --scan-from exclude each other: a scan's rays set the points".into());
     }
@@ -182,26 +196,46 @@ fn scan(args: &SampleArgs, from: glam::DVec3) -> Result<()> {
         None => ScanOutput::Points,
         Some(frame) => ScanOutput::Organised(frame.into(), args.texture),
     };
-    let scan = sample_scan(&args.mesh, &scan_params(args, from)?, &args.output, how)?;
-    if let (ScanOutput::Organised(frame, _), Some((f, cx, cy))) = (how, scan.pinhole) {
+    let stations = &args.scan_from;
+    let scans = sample_scan(&args.mesh, &scan_params(args)?, stations, &args.output, how)?;
+    if let (ScanOutput::Organised(frame, _), Some((f, cx, cy))) = (how, scans[0].pinhole) {
         eprintln!(
             "splatray: an organised {}x{} grid in the {} frame, a pinhole of focal length \
              {f:.4} px centred at ({cx:.2}, {cy:.2})",
-            scan.columns,
-            scan.rows,
+            scans[0].columns,
+            scans[0].rows,
             frame.describe()
         );
     }
-    eprintln!(
-        "splatray: scan of {} rays: {} returns, {} missing, {} outliers, {} points (spacing {:.3e}, range noise {:.3e}) -> {}",
-        scan.rays,
-        scan.returns,
-        scan.missing,
-        scan.outliers,
-        scan.cloud.len(),
-        scan.spacing,
-        scan.noise_sigma,
-        args.output.display()
-    );
+    for (scan, at) in scans.iter().zip(stations) {
+        let from = if stations.len() > 1 {
+            format!(" from {}", at.to_array().map(|c| format!("{c}")).join(","))
+        } else {
+            String::new()
+        };
+        eprintln!(
+            "splatray: scan of {} rays{from}: {} returns, {} missing, {} outliers, {} points (spacing {:.3e}, range noise {:.3e}){}",
+            scan.rays,
+            scan.returns,
+            scan.missing,
+            scan.outliers,
+            scan.cloud.len(),
+            scan.spacing,
+            scan.noise_sigma,
+            if stations.len() > 1 {
+                String::new()
+            } else {
+                format!(" -> {}", args.output.display())
+            }
+        );
+    }
+    if stations.len() > 1 {
+        let points: usize = scans.iter().map(|s| s.cloud.len()).sum();
+        eprintln!(
+            "splatray: {} scans, {points} points -> {}",
+            scans.len(),
+            args.output.display()
+        );
+    }
     Ok(())
 }

@@ -5,15 +5,23 @@
 //! points: one scan (or scans taken from one place) gives
 //! [`PointCloud::viewpoint`], several give [`PointCloud::scans`].
 //!
-//! Points flagged invalid are skipped and counted; colours (normalised by
-//! the file's colour limits) are sRGB, made linear, and kept when every
-//! scan has them. A panic inside the decoder becomes an error.
+//! Points flagged invalid are skipped and counted; a point that holds only
+//! a direction (`cartesianInvalidState` 1: the scanner's ray met nothing)
+//! is a miss of its scan ([`PointCloud::misses`], [`Scans::misses`]).
+//! Colours (normalised by the file's colour limits) are sRGB, made linear,
+//! and kept when every scan has them. A panic inside the decoder becomes
+//! an error.
+//!
+//! [`encode`] writes a cloud back: one scan per scanner, its points
+//! relative to it and its position as the pose's translation, its misses
+//! as direction-only points (what `splatray sample --scan-from` writes for
+//! several stations).
 
 use super::batch::{BATCH, PointBatch, StreamInfo};
 use super::{IoErrorKind, PointCloud, cloud_from_world, srgb_to_linear};
 use crate::splat::Scans;
-use e57::{CartesianCoordinate, E57Reader};
-use glam::{DVec3, Vec3};
+use e57::{CartesianCoordinate, E57Reader, E57Writer, Record, RecordValue};
+use glam::{DQuat, DVec3, Vec3};
 use std::io::{Cursor, Read, Seek};
 use std::path::Path;
 
@@ -60,8 +68,10 @@ fn read(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
     let mut taken = Taken::default();
     let mut positions: Vec<DVec3> = Vec::with_capacity(scans.len());
     let (mut invalid, mut non_finite) = (0usize, 0usize);
+    let (mut misses, mut misses_of) = (Vec::new(), Vec::new());
     for (k, scan) in scans.iter().enumerate() {
         positions.push(scan_position(k, scan)?);
+        let turn = scan_rotation(scan);
         let mut points = reader.pointcloud_simple(scan).map_err(|e| e57_error(&e))?;
         points.intensity_to_color(false);
         for p in points {
@@ -69,6 +79,10 @@ fn read(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
                 Ok(()) => {}
                 Err(Skipped::Invalid) => invalid += 1,
                 Err(Skipped::NonFinite) => non_finite += 1,
+                Err(Skipped::Miss(d)) => {
+                    misses.push((turn * d).as_vec3());
+                    misses_of.push(k as u16);
+                }
             }
         }
     }
@@ -86,14 +100,137 @@ fn read(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
         .collect();
     if local.iter().all(|p| *p == local[0]) {
         cloud.viewpoint = Some(local[0]);
+        cloud.misses = (!misses.is_empty()).then_some(misses);
     } else {
         cloud.scans = Some(Scans {
             positions: local,
             of: scan_of,
-            ..Scans::default()
+            misses,
+            misses_of,
         });
     }
     Ok(cloud)
+}
+
+/// The rotation of scan `k`'s pose (identity without one), which turns its
+/// misses' directions into the file's frame (the crate places points by
+/// the pose, directions not).
+fn scan_rotation(scan: &e57::PointCloud) -> DQuat {
+    scan.transform
+        .as_ref()
+        .map(|t| {
+            let q = &t.rotation;
+            DQuat::from_xyzw(q.x, q.y, q.z, q.w)
+        })
+        .filter(|q| q.is_finite() && q.length_squared() > 0.5)
+        .map_or(DQuat::IDENTITY, DQuat::normalize)
+}
+
+/// `cloud` as an E57 file: one scan per scanner (each of [`Scans`], or
+/// the cloud's viewpoint, or one scan at the file's zero), its points as
+/// f64 offsets from its position and that position as its pose's
+/// translation, 8-bit sRGB colour when the cloud has colour, and its
+/// misses as direction-only points (`cartesianInvalidState` 1), which
+/// [`read_cloud`] reads back as misses.
+///
+/// # Errors
+/// A cloud with normals (E57 has no field for them), or the writer's error.
+pub(crate) fn encode(cloud: &PointCloud) -> Result<Vec<u8>, IoErrorKind> {
+    if cloud.normals.is_some() {
+        return Err(IoErrorKind::Data(
+            "an E57 file holds no normals: write a .ply or .pcd".into(),
+        ));
+    }
+    let n = cloud.len();
+    let colors = cloud.colors.as_ref().filter(|c| c.len() == n);
+    // (position in the file's frame, points, misses) per scan.
+    let mut scans: Vec<(DVec3, Vec<usize>, Vec<Vec3>)> = match (&cloud.scans, cloud.viewpoint) {
+        (Some(s), _) => s
+            .positions
+            .iter()
+            .map(|p| (cloud.origin + p.as_dvec3(), Vec::new(), Vec::new()))
+            .collect(),
+        (None, Some(v)) => vec![(
+            cloud.origin + v.as_dvec3(),
+            Vec::new(),
+            cloud.misses.clone().unwrap_or_default(),
+        )],
+        (None, None) => vec![(DVec3::ZERO, Vec::new(), Vec::new())],
+    };
+    let last = scans.len() - 1;
+    match &cloud.scans {
+        Some(s) => {
+            for (i, &k) in s.of.iter().enumerate().take(n) {
+                scans[usize::from(k).min(last)].1.push(i);
+            }
+            for (d, &k) in s.misses.iter().zip(&s.misses_of) {
+                scans[usize::from(k).min(last)].2.push(*d);
+            }
+        }
+        None => scans[0].1.extend(0..n),
+    }
+    let e = |e: e57::Error| e57_error(&e);
+    let mut bytes = Cursor::new(Vec::new());
+    let mut w = E57Writer::new(&mut bytes, "splatray-e57").map_err(e)?;
+    for (k, (at, points, misses)) in scans.iter().enumerate() {
+        let mut proto = vec![
+            Record::CARTESIAN_X_F64,
+            Record::CARTESIAN_Y_F64,
+            Record::CARTESIAN_Z_F64,
+            Record::CARTESIAN_INVALID_STATE,
+        ];
+        if colors.is_some() {
+            proto.extend([
+                Record::COLOR_RED_U8,
+                Record::COLOR_GREEN_U8,
+                Record::COLOR_BLUE_U8,
+            ]);
+        }
+        let mut pc = w
+            .add_pointcloud(&format!("splatray-e57-scan-{k}"), proto)
+            .map_err(e)?;
+        pc.set_transform(Some(e57::Transform {
+            rotation: e57::Quaternion {
+                w: 1.0,
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+            },
+            translation: e57::Translation {
+                x: at.x,
+                y: at.y,
+                z: at.z,
+            },
+        }));
+        let record = |p: DVec3, state: i64, rgb: Vec3| {
+            let mut v = vec![
+                RecordValue::Double(p.x),
+                RecordValue::Double(p.y),
+                RecordValue::Double(p.z),
+                RecordValue::Integer(state),
+            ];
+            if colors.is_some() {
+                v.extend(
+                    rgb.to_array()
+                        .map(|c| RecordValue::Integer(i64::from(super::linear_to_srgb8(c)))),
+                );
+            }
+            v
+        };
+        for &i in points {
+            let rgb = colors.map_or(Vec3::ZERO, |c| c[i]);
+            pc.add_point(record(cloud.world(i) - *at, 0, rgb))
+                .map_err(e)?;
+        }
+        for d in misses {
+            pc.add_point(record(d.as_dvec3(), 1, Vec3::ZERO))
+                .map_err(e)?;
+        }
+        pc.finalize().map_err(e)?;
+    }
+    w.finalize().map_err(e)?;
+    drop(w);
+    Ok(bytes.into_inner())
 }
 
 /// The scans of an E57 file, checked: at least one, at most what a `u16`
@@ -216,7 +353,8 @@ fn stream_inner(
         for p in points {
             match batch.take(k, &p.map_err(|e| e57_error(&e))?, colored) {
                 Ok(()) if batch.world.len() == BATCH => flush(&mut batch, &mut info)?,
-                Ok(()) | Err(Skipped::Invalid) => {}
+                // (Streaming, as tiled generation does, keeps no misses.)
+                Ok(()) | Err(Skipped::Invalid | Skipped::Miss(_)) => {}
                 Err(Skipped::NonFinite) => info.non_finite += 1,
             }
         }
@@ -241,14 +379,24 @@ enum Skipped {
     Invalid,
     /// A coordinate is NaN or infinite.
     NonFinite,
+    /// Only a direction: a ray of the scanner's that met nothing.
+    Miss(DVec3),
 }
 
 impl Taken {
     /// Takes point `p` of scan `k` (its colour too when `colored`: sRGB
     /// made linear, grey where a point has none), or says why not.
     fn take(&mut self, k: usize, p: &e57::Point, colored: bool) -> Result<(), Skipped> {
-        let CartesianCoordinate::Valid { x, y, z } = p.cartesian else {
-            return Err(Skipped::Invalid);
+        let (x, y, z) = match p.cartesian {
+            CartesianCoordinate::Valid { x, y, z } => (x, y, z),
+            CartesianCoordinate::Direction { x, y, z } => {
+                let d = DVec3::new(x, y, z);
+                return Err(match d.try_normalize() {
+                    Some(d) => Skipped::Miss(d),
+                    None => Skipped::NonFinite,
+                });
+            }
+            CartesianCoordinate::Invalid => return Err(Skipped::Invalid),
         };
         let w = DVec3::new(x, y, z);
         if !w.is_finite() {

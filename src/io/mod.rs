@@ -208,8 +208,9 @@ pub fn parse_mesh(bytes: &[u8]) -> Result<Mesh, IoErrorKind> {
 
 /// Write a point cloud, atomically (a temporary file in the same folder,
 /// then renamed): a `.pcd` path gets binary PCD with the cloud's
-/// `VIEWPOINT` (see [`pcd::encode`]); any other path binary little-endian
-/// PLY (`x y z`, plus `nx ny nz` and float `red green blue` when present).
+/// `VIEWPOINT` (see [`pcd::encode`]); a `.e57` path an E57 file of the
+/// cloud's scans with their misses (`e57file::encode`; not a cloud with
+/// normals); any other path binary little-endian PLY (`x y z`, plus `nx ny nz` and float `red green blue` when present).
 /// Positions (and the viewpoint) are written in the file's coordinates,
 /// `origin + positions[i]`: as `float` (PCD `F 4`) when the origin is zero,
 /// else as `double` (`F 8`), so a far cloud keeps its precision.
@@ -223,8 +224,13 @@ pub fn write_points(path: &Path, cloud: &PointCloud) -> Result<(), IoError> {
         let what = format!("point {i} is not finite ({})", cloud.world(i));
         return Err(IoError::not_written(path, &what));
     }
-    if Format::from_extension(path) == Some(Format::Pcd) {
-        return write_bytes(path, &pcd::encode(cloud));
+    match Format::from_extension(path) {
+        Some(Format::Pcd) => return write_bytes(path, &pcd::encode(cloud)),
+        Some(Format::E57) => {
+            let bytes = e57file::encode(cloud).map_err(|k| IoError::new(path, k))?;
+            return write_bytes(path, &bytes);
+        }
+        _ => {}
     }
     let normals = cloud.normals.as_ref().filter(|v| v.len() == n);
     let colors = cloud.colors.as_ref().filter(|v| v.len() == n);

@@ -47,7 +47,7 @@ pub struct Scans {
     pub of: Vec<u16>,
     /// Unit directions of the scanners' rays that met nothing (as
     /// [`PointCloud::misses`], each from its own scanner); empty when not
-    /// known (an E57 file does not record them).
+    /// known (an E57 file records them only as direction-only points).
     pub misses: Vec<Vec3>,
     /// Per entry of `misses`, the index of its scan in `positions`.
     pub misses_of: Vec<u16>,

@@ -1,12 +1,13 @@
 //! The `sample` workflow: points from a triangle mesh, either sampled
 //! uniformly by area (a binary PLY written a batch at a time, or a PCD made
-//! in memory) or cast as a synthetic range scan (`scanner`), optionally
+//! in memory) or cast as a synthetic range scan (`scanner`) from one
+//! station or several (an E57 file of scans), optionally
 //! written as an organised PCD with a procedural colour texture, as a depth
 //! and colour camera would capture it. The front end parses and prints.
 
 use crate::io::{Format, MeshSampler, read_mesh, sample_mesh, write_points, write_sample_ply};
 use crate::progress::Progress;
-use crate::scanner::{Scan, ScanParams, scan_mesh};
+use crate::scanner::{Scan, ScanParams, join_scans, scan_each};
 use crate::{Error, Result};
 use glam::{DVec3, Vec3};
 use std::path::{Path, PathBuf};
@@ -124,18 +125,24 @@ pub enum ScanOutput {
     Organised(SensorFrame, Option<f64>),
 }
 
-/// Scans the mesh at `mesh` as `params` say and writes the scan to
-/// `output`; returns the scan for its counts.
+/// Scans the mesh at `mesh` from each of `stations` (`params.from` is
+/// replaced by each in turn; station `k`'s seed is `params.seed + k`) and
+/// writes the scans to `output`; returns them for their counts. One
+/// station's scan goes to any point format (the PCD's `VIEWPOINT` and an
+/// E57 file's pose keep the scanner; E57 keeps its misses too); several
+/// stations' need an E57 file, which keeps each scan with its scanner.
 ///
 /// # Errors
-/// An unreadable mesh, a scan that sees nothing, an organised output that
-/// is not a PCD or not a raster, an unwritable output; each one line.
+/// An unreadable mesh, a scan that sees nothing, several stations not
+/// written to E57, an organised output that is not one raster written to a
+/// PCD, an unwritable output; each one line.
 pub fn sample_scan(
     mesh: &Path,
     params: &ScanParams,
+    stations: &[DVec3],
     output: &Path,
     how: ScanOutput,
-) -> Result<Scan> {
+) -> Result<Vec<Scan>> {
     if let ScanOutput::Organised(_, Some(period)) = how
         && !(period.is_finite() && period > 0.0)
     {
@@ -143,22 +150,34 @@ pub fn sample_scan(
             "--texture {period} must be a positive period"
         )));
     }
+    let format = Format::from_extension(output);
+    if let ScanOutput::Organised(..) = how
+        && (format != Some(Format::Pcd) || stations.len() != 1)
+    {
+        return Err(Error::invalid(format!(
+            "{}: --organised writes one scan's raster to a PCD (a name ending in .pcd)",
+            output.display()
+        )));
+    }
+    if stations.len() > 1 && format != Some(Format::E57) {
+        return Err(Error::invalid(format!(
+            "{}: {} stations make {} scans, each with its own scanner: write them to an \
+             E57 file (a name ending in .e57); a PLY or PCD holds one viewpoint",
+            output.display(),
+            stations.len(),
+            stations.len()
+        )));
+    }
     let mesh = read_mesh(mesh)?;
-    let scan = scan_mesh(&mesh, params)?;
+    let scans = scan_each(&mesh, params, stations)?;
     match how {
-        ScanOutput::Points => write_points(output, &scan.cloud)?,
+        ScanOutput::Points => write_points(output, &join_scans(mesh.origin, &scans))?,
         ScanOutput::Organised(frame, texture) => {
-            if Format::from_extension(output) != Some(Format::Pcd) {
-                return Err(Error::invalid(format!(
-                    "{}: --organised writes a PCD (a name ending in .pcd)",
-                    output.display()
-                )));
-            }
-            let bytes = encode_organised_scan(&scan, frame, texture)?;
+            let bytes = encode_organised_scan(&scans[0], frame, texture)?;
             crate::io::write_bytes(output, &bytes)?;
         }
     }
-    Ok(scan)
+    Ok(scans)
 }
 
 /// The organised PCD of a raster scan: the grid of rays (NaN where a ray
