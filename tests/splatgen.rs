@@ -195,6 +195,7 @@ fn real_scans_give_fewer_splats_than_points_and_full_coverage() {
                 0.0
             };
         let on = count_on_splats(&c.positions, &splats, tol as f32);
+        eprintln!("{f}: {on} of {} points on a splat", c.positions.len());
         assert!(on as f64 >= 0.99 * c.positions.len() as f64, "{f}: {on}");
         let json = serde_json::to_string(&rep).unwrap();
         assert!(json.contains("\"coverage\""));

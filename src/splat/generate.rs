@@ -521,8 +521,8 @@ pub fn generate_with_progress(
         let by_eps = normals::FACE_TOL_EPS * epsilon;
         let by_noise = normals::FACE_TOL_NOISE * report.noise as f32;
         let tol = by_eps.max(by_noise);
-        let noisy = by_noise >= by_eps;
-        flat = normals::face_normals(&points, &tree, &knn, &mut nrm, &fixed, tol, noisy).1;
+        let faces = normals::FlatFaces::from_tolerances(by_eps, by_noise);
+        flat = normals::face_normals(&points, &tree, &knn, &mut nrm, &fixed, tol, faces).1;
     }
     let t2 = Instant::now();
     // --- growth --------------------------------------------------------------
