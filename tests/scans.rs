@@ -260,6 +260,18 @@ fn cli_sample_scan_and_scan_check_write_what_they_say() {
     assert!(!dir.join("never.pcd").exists());
 }
 
+/// The scan settings of the station tests: 120x90 rays, range noise of
+/// half a spacing, seed 7 (station k's seed 7 + k).
+fn two_station_params() -> ScanParams {
+    ScanParams {
+        columns: 120,
+        rows: 90,
+        range_noise: RangeNoise::Spacing(0.5),
+        seed: 7,
+        ..ScanParams::default()
+    }
+}
+
 /// Several stations make one cloud of several scans: each station's
 /// points with its scanner (the first station's exactly `scan_mesh`'s),
 /// each scan's misses kept from its own scanner; one station gives
@@ -268,13 +280,7 @@ fn cli_sample_scan_and_scan_check_write_what_they_say() {
 fn stations_make_one_cloud_of_several_scans() {
     use splatray::scanner::scan_stations;
     let mesh = read_mesh(&data("bunny-mesh.ply")).unwrap();
-    let params = ScanParams {
-        columns: 120,
-        rows: 90,
-        range_noise: RangeNoise::Spacing(0.5),
-        seed: 7,
-        ..ScanParams::default()
-    };
+    let params = two_station_params();
     let stations = [DVec3::new(1.5, 1.0, 3.5), DVec3::new(-2.0, 1.2, -2.5)];
     let each: Vec<_> = stations
         .iter()
@@ -353,13 +359,7 @@ fn cli_sample_from_stations_writes_an_e57_of_scans() {
         .unwrap()
     };
     let mesh = read_mesh(&data("bunny-mesh.ply")).unwrap();
-    let params = ScanParams {
-        columns: 120,
-        rows: 90,
-        range_noise: RangeNoise::Spacing(0.5),
-        seed: 7,
-        ..ScanParams::default()
-    };
+    let params = two_station_params();
     let close = |a: DVec3, b: DVec3| (a - b).length() < 1e-6;
     for from in [&stations[..], &stations[..1]] {
         let path = dir.join(format!("scans{}.e57", from.len()));
