@@ -361,6 +361,45 @@ fn e57_direction_only_points_are_their_scans_misses() {
     );
 }
 
+/// `write_points` to a `.e57` path: an E57 file has no field for normals
+/// and places each scan at its scanner, so a cloud with normals or without
+/// a viewpoint is refused in one line and nothing is written; with a
+/// viewpoint and no normals it round-trips, the viewpoint kept.
+#[test]
+fn e57_output_refuses_normals_and_keeps_points() {
+    use splatray::io::write_points;
+    use splatray::splat::PointCloud;
+    let dir = scratch("e57-write");
+    let path = dir.join("cloud.e57");
+    let positions: Vec<glam::Vec3> = (0..50)
+        .map(|i| glam::Vec3::new(i as f32 * 0.1, (i % 7) as f32 * 0.05, 1.0))
+        .collect();
+    let with = PointCloud {
+        positions: positions.clone(),
+        normals: Some(vec![glam::Vec3::Z; positions.len()]),
+        ..PointCloud::default()
+    };
+    let e = write_points(&path, &with).unwrap_err().to_string();
+    assert!(e.contains("no normals"), "{e}");
+    assert_eq!(e.lines().count(), 1, "{e}");
+    assert!(!path.exists());
+    let mut without = PointCloud {
+        positions,
+        ..PointCloud::default()
+    };
+    let e = write_points(&path, &without).unwrap_err().to_string();
+    assert!(e.contains("no viewpoint"), "{e}");
+    assert!(!path.exists());
+    without.viewpoint = Some(glam::Vec3::new(2.0, 3.0, -1.0));
+    write_points(&path, &without).unwrap();
+    let read = read_points(&path).unwrap();
+    assert_eq!(read.len(), without.len());
+    assert!((0..read.len()).all(|i| (read.world(i) - without.world(i)).length() < 1e-6));
+    let vp = read.origin + read.viewpoint.unwrap().as_dvec3();
+    assert!((vp - DVec3::new(2.0, 3.0, -1.0)).length() < 1e-6, "{vp}");
+    assert!(read.misses.is_none() && read.scans.is_none());
+}
+
 /// The same two scans in tiles (`splat --tile-points`): the E57 file is
 /// streamed, each point carries its scan through the spill, so the splats
 /// face their own scanner on both sides as when the cloud is splatted

@@ -127,14 +127,15 @@ fn scan_rotation(scan: &e57::PointCloud) -> DQuat {
 }
 
 /// `cloud` as an E57 file: one scan per scanner (each of [`Scans`], or
-/// the cloud's viewpoint, or one scan at the file's zero), its points as
+/// the cloud's viewpoint), its points as
 /// f64 offsets from its position and that position as its pose's
 /// translation, 8-bit sRGB colour when the cloud has colour, and its
 /// misses as direction-only points (`cartesianInvalidState` 1), which
 /// [`read_cloud`] reads back as misses.
 ///
 /// # Errors
-/// A cloud with normals (E57 has no field for them), or the writer's error.
+/// A cloud with normals (E57 has no field for them) or without a scanner
+/// (no viewpoint, no scans), or the writer's error.
 pub(crate) fn encode(cloud: &PointCloud) -> Result<Vec<u8>, IoErrorKind> {
     if cloud.normals.is_some() {
         return Err(IoErrorKind::Data(
@@ -155,7 +156,14 @@ pub(crate) fn encode(cloud: &PointCloud) -> Result<Vec<u8>, IoErrorKind> {
             Vec::new(),
             cloud.misses.clone().unwrap_or_default(),
         )],
-        (None, None) => vec![(DVec3::ZERO, Vec::new(), Vec::new())],
+        // (A reader takes a scan's pose as where its scanner stood.)
+        (None, None) => {
+            return Err(IoErrorKind::Data(
+                "an E57 scan is placed at its scanner and this cloud has no viewpoint: \
+                 write a .ply or .pcd"
+                    .into(),
+            ));
+        }
     };
     let last = scans.len() - 1;
     match &cloud.scans {

@@ -560,7 +560,9 @@ enum Kind {
     Flat,
     /// At an edge: turned to its own face's plane.
     Turned,
-    /// At an edge, its own face's plane within [`FACE_TURN_DEG`]: kept.
+    /// At an edge, its own face's plane within [`FACE_TURN_DEG`]: kept
+    /// (with [`FlatFaces::Strong`] noise at a crease of [`FLAT_EDGE_DEG`] or
+    /// more, the face's plane taken all the same).
     Kept,
 }
 
@@ -1117,6 +1119,19 @@ fn root_axis(points: &[Vec3], normals: &[Vec3]) -> usize {
 mod tests {
     use super::*;
     use crate::splat::knn::build_tree;
+
+    /// The flat-face rules follow the noise's tolerance against ϵ's: off
+    /// under it, on from it, the strong-noise rules from twice it.
+    #[test]
+    fn flat_faces_from_the_tolerances() {
+        assert_eq!(FlatFaces::from_tolerances(1.0, 0.99), FlatFaces::Off);
+        assert_eq!(FlatFaces::from_tolerances(1.0, 1.0), FlatFaces::On);
+        assert_eq!(FlatFaces::from_tolerances(1.0, 1.99), FlatFaces::On);
+        assert_eq!(
+            FlatFaces::from_tolerances(1.0, STRONG_NOISE),
+            FlatFaces::Strong
+        );
+    }
 
     /// A dense floor (z = 0, 0.3 apart) meeting a sparse wall (x = 0, 0.9
     /// apart): the PCA normals of points near the edge lean; [`face_normals`]
