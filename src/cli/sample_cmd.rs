@@ -38,13 +38,8 @@ pub struct SampleArgs {
     #[arg(long, value_parser = parse_xyz, allow_hyphen_values = true, action = clap::ArgAction::Append)]
     pub scan_from: Vec<glam::DVec3>,
     /// The point the scanner looks at (X,Y,Z). Default: the mesh's centre.
-    #[arg(
-        long,
-        value_delimiter = ',',
-        allow_negative_numbers = true,
-        requires = "scan_from"
-    )]
-    pub scan_at: Option<Vec<f64>>,
+    #[arg(long, value_parser = parse_xyz, allow_hyphen_values = true, requires = "scan_from")]
+    pub scan_at: Option<glam::DVec3>,
     /// raster (a camera's pixel grid) or lines (equal angular steps, the
     /// lines `W/H` times farther apart than the samples along them).
     #[arg(long, default_value = "raster", requires = "scan_from", value_parser = splatray::names::parse::<ScanPattern>)]
@@ -95,7 +90,7 @@ pub enum Frame {
     Gl,
 }
 
-/// `X,Y,Z` as a point (`--scan-from`).
+/// `X,Y,Z` as a point (`--scan-from`, `--scan-at`).
 fn parse_xyz(s: &str) -> std::result::Result<glam::DVec3, String> {
     let v: Vec<f64> = s
         .split(',')
@@ -104,18 +99,8 @@ fn parse_xyz(s: &str) -> std::result::Result<glam::DVec3, String> {
         .map_err(|_| format!("{s:?} is not three numbers X,Y,Z"))?;
     match v[..] {
         [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(glam::DVec3::new(x, y, z)),
-        [_, _, _] => Err(format!("{s:?}: a station must be finite")),
+        [_, _, _] => Err(format!("{s:?}: a point must be finite")),
         _ => Err(format!("{s:?} needs three numbers X,Y,Z, got {}", v.len())),
-    }
-}
-
-fn vec3(v: &[f64], what: &str) -> Result<glam::DVec3> {
-    match v {
-        [x, y, z] => Ok(glam::DVec3::new(*x, *y, *z)),
-        _ => Err(Error::invalid(format!(
-            "{what} needs three numbers X,Y,Z, got {}",
-            v.len()
-        ))),
     }
 }
 
@@ -169,11 +154,7 @@ fn scan_params(args: &SampleArgs) -> Result<ScanParams> {
     };
     Ok(ScanParams {
         from: args.scan_from[0],
-        at: args
-            .scan_at
-            .as_deref()
-            .map(|v| vec3(v, "--scan-at"))
-            .transpose()?,
+        at: args.scan_at,
         columns,
         rows,
         fov: args.fov,

@@ -210,11 +210,13 @@ fn print_generated(args: &SplatArgs, p: &PointsOutcome) {
         eprintln!("splatray: {kind} {} points: {}", s.count, s.reason);
     }
     eprintln!(
-        "splatray: {} points -> {} splats ({} elliptical, {} clipped), coverage {:.4}, mean radius {:.4e}, largest splat {:.1}x its local spacing, epsilon {:.3e}, noise {:.3e}, {} flat normal fields, origin [{:?}, {:?}, {:?}], {:.2} s -> {}",
+        "splatray: {} points -> {} splats ({} elliptical, {} clipped: {} crease lines met across, {} whole discs cut), coverage {:.4}, mean radius {:.4e}, largest splat {:.1}x its local spacing, epsilon {:.3e}, noise {:.3e}, {} flat normal fields, origin [{:?}, {:?}, {:?}], {:.2} s -> {}",
         report.used_points,
         report.splats,
         report.elliptical_splats,
         report.clipped,
+        report.partner_lines,
+        report.partner_cut,
         report.coverage,
         report.mean_radius,
         report.largest_over_spacing,

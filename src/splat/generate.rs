@@ -196,6 +196,12 @@ pub struct SplatReport {
     /// How many of them carry clip lines (`splat::clip`: a splat cut at a
     /// crease or a corner).
     pub clipped: usize,
+    /// Crease lines moved onto the plane of the splat across them (clip
+    /// partners, `splat::partners`).
+    pub partner_lines: usize,
+    /// Whole discs cut by a clipped neighbour's plane (under strong range
+    /// noise, `splat::partners`).
+    pub partner_cut: usize,
     /// Fraction of the used points lying on at least one splat: within `ϵ`
     /// of its plane and inside its disc.
     pub coverage: f64,
@@ -544,6 +550,14 @@ pub fn generate_with_progress(
         notify(progress, "growing splats", i as f64 / n as f64);
     });
     let mut splats = grown.splats;
+    if creases {
+        // Clip partners: crease lines onto the planes of the splats across
+        // them. Whole discs are not cut (`partners` module doc: measured,
+        // not on).
+        let met = super::partners::meet_partners(&mut splats, epsilon, false, (&points, &tree));
+        report.partner_lines = met.moved;
+        report.partner_cut = met.cut;
+    }
     let t3 = Instant::now();
     // --- fields and coverage ---------------------------------------------------
     notify(progress, "normal fields", 0.0);

@@ -136,6 +136,7 @@ pub mod grow;
 pub mod knn;
 pub mod normals;
 pub mod outliers;
+pub mod partners;
 pub mod standoff;
 pub mod thin;
 
