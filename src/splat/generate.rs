@@ -498,6 +498,10 @@ pub fn generate_with_progress(
         knn,
         ..
     } = w;
+    // The points as read, for the check that a crease cut leaves none of
+    // them off every splat (`partners::meet_partners`).
+    let read = (params.creases != Creases::Off).then(|| points.clone());
+    let mut read_tree = None;
     if onto_local_surfaces(
         &mut points,
         &mut nrm,
@@ -506,8 +510,9 @@ pub fn generate_with_progress(
         &knn,
         &mut report,
     ) {
-        tree = build_tree(&points);
+        read_tree = Some(std::mem::replace(&mut tree, build_tree(&points)));
     }
+    let mut strong = false;
     let mut flat = Vec::new();
     let creases = params.creases.found(knn.k > params.k);
     if params.creases == Creases::Auto && !creases {
@@ -528,6 +533,7 @@ pub fn generate_with_progress(
         let by_noise = normals::FACE_TOL_NOISE * report.noise as f32;
         let tol = by_eps.max(by_noise);
         let faces = normals::FlatFaces::from_tolerances(by_eps, by_noise);
+        strong = faces == normals::FlatFaces::Strong;
         flat = normals::face_normals(&points, &tree, &knn, &mut nrm, &fixed, tol, faces).1;
     }
     let t2 = Instant::now();
@@ -552,9 +558,20 @@ pub fn generate_with_progress(
     let mut splats = grown.splats;
     if creases {
         // Clip partners: crease lines onto the planes of the splats across
-        // them. Whole discs are not cut (`partners` module doc: measured,
-        // not on).
-        let met = super::partners::meet_partners(&mut splats, epsilon, false, (&points, &tree));
+        // them; under strong noise, whole discs such a line crosses cut.
+        let cover = epsilon
+            + if report.moved_onto_surfaces() {
+                3.0 * report.noise as f32
+            } else {
+                0.0
+            };
+        let read = read.as_deref().unwrap_or(&points);
+        let met = super::partners::meet_partners(
+            &mut splats,
+            epsilon,
+            strong,
+            (read, read_tree.as_ref().unwrap_or(&tree), cover),
+        );
         report.partner_lines = met.moved;
         report.partner_cut = met.cut;
     }

@@ -23,18 +23,19 @@
 //! none of them a gap to show through). A border (no splat across) keeps
 //! its line.
 //!
-//! With `whole_discs`, a whole disc that a clipped neighbour's crease line
-//! runs across, the neighbour turned as above, is cut by the neighbour's
-//! plane: the side under it at a convex edge (the neighbour's centre below
-//! the disc's plane), over it at a concave one, where the cut keeps at
-//! least a fifth of the disc ([`CUT_MIN_D`]). Under strong range noise the
-//! points' normals at an edge are too noisy for growth to find every
-//! crease, and such a disc overhangs the edge (a flap casting a false
-//! shadow on the face below). Generation does not ask for it yet: on the
-//! solids' one-station scan it gains 0.1–0.2 dB, but it costs the coarse
-//! real bunny scan of `tests/splatgen.rs` a point off its splats, and at
-//! weaker noise it cuts the bunny's ears (docs/development.md, "the noisy
-//! scan, round 4").
+//! With `whole_discs` (generation asks for it under strong range noise,
+//! `normals::FlatFaces::Strong`, where the points' normals at an edge are
+//! too noisy for growth to find every crease and a whole disc on the edge
+//! overhangs it, a flap casting a false shadow on the face below), a whole
+//! disc that a clipped neighbour's crease line runs across, the neighbour
+//! turned as above, is cut by the neighbour's plane: the side under it at a
+//! convex edge (the neighbour's centre below the disc's plane), over it at
+//! a concave one, where the cut keeps at least a fifth of the disc
+//! ([`CUT_MIN_D`]). A cut that leaves one of the points as read (before
+//! denoising moved them) within the coverage tolerance of no splat is
+//! undone. At weaker noise growth finds the creases and these cuts only
+//! add false ones: the bunny's ears (docs/development.md, "the noisy scan,
+//! round 4").
 
 use super::Splat;
 use super::clip::{Clip, ClipLine};
@@ -71,7 +72,7 @@ pub fn meet_partners(
     splats: &mut [Splat],
     epsilon: f32,
     whole_discs: bool,
-    cloud: (&[Vec3], &PointTree),
+    cloud: (&[Vec3], &PointTree, f32),
 ) -> Met {
     if splats.iter().all(|s| s.clip.is_none()) {
         return Met::default();
@@ -181,22 +182,25 @@ fn meeting(s: &Splat, p: &Splat) -> Option<ClipLine> {
 impl Near<'_> {
     /// Whether splat `i`, its lines `old` before, now leaves a point that
     /// lay on it on no splat.
-    fn uncovers(&self, i: usize, old: &Clip, (points, tree): (&[Vec3], &PointTree)) -> bool {
+    fn uncovers(
+        &self,
+        i: usize,
+        old: &Clip,
+        (points, tree, tol): (&[Vec3], &PointTree, f32),
+    ) -> bool {
         let s = &self.splats[i];
         let was = Splat { clip: *old, ..*s };
         let r = s.radii.max_element();
         tree.within_unsorted::<SquaredEuclidean>(&s.center.to_array(), r * r)
             .into_iter()
             .map(|nb| points[nb.item as usize])
-            .filter(|&x| {
-                super::on_splat(&was, x, self.epsilon) && !super::on_splat(s, x, self.epsilon)
-            })
+            .filter(|&x| super::on_splat(&was, x, tol) && !super::on_splat(s, x, tol))
             .any(|x| {
                 !self
                     .tree
                     .within_unsorted::<SquaredEuclidean>(&x.to_array(), self.r_max * self.r_max)
                     .into_iter()
-                    .any(|nb| super::on_splat(&self.splats[nb.item as usize], x, self.epsilon))
+                    .any(|nb| super::on_splat(&self.splats[nb.item as usize], x, tol))
             })
     }
 
@@ -320,7 +324,7 @@ mod tests {
     fn meet(s: &mut [Splat], whole: bool) -> Met {
         let far = [Vec3::splat(100.0)];
         let tree = crate::splat::knn::build_tree(&far);
-        meet_partners(s, 0.01, whole, (&far, &tree))
+        meet_partners(s, 0.01, whole, (&far, &tree, 0.01))
     }
 
     fn line(a: f32, b: f32, d: f32) -> ClipLine {
@@ -439,7 +443,7 @@ mod tests {
         s[0].clip = Clip::NONE;
         let pts = [Vec3::new(0.02, 0.0, 0.0), Vec3::new(-0.05, 0.0, 0.0)];
         let tree = crate::splat::knn::build_tree(&pts);
-        let met = meet_partners(&mut s, 0.01, true, (&pts, &tree));
+        let met = meet_partners(&mut s, 0.01, true, (&pts, &tree, 0.01));
         assert_eq!(met.cut, 0);
         assert!(s[0].clip.is_none());
     }
