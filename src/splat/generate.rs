@@ -499,8 +499,9 @@ pub fn generate_with_progress(
         ..
     } = w;
     // The points as read, for the check that a crease cut leaves none of
-    // them off every splat (`partners::meet_partners`).
-    let read = (params.creases != Creases::Off).then(|| points.clone());
+    // them off every splat (`partners::meet_partners`), kept only where
+    // denoising moved them (12 bytes a point through growth).
+    let mut read = (params.creases != Creases::Off).then(|| points.clone());
     let mut read_tree = None;
     if onto_local_surfaces(
         &mut points,
@@ -511,6 +512,8 @@ pub fn generate_with_progress(
         &mut report,
     ) {
         read_tree = Some(std::mem::replace(&mut tree, build_tree(&points)));
+    } else {
+        read = None;
     }
     let mut strong = false;
     let mut flat = Vec::new();
