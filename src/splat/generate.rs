@@ -261,6 +261,20 @@ impl SplatReport {
     pub fn moved_onto_surfaces(&self) -> bool {
         self.noise > NOISE_PROJECT * self.epsilon
     }
+
+    /// How far a point may lie from a splat's plane and still count as on
+    /// it: `ϵ`, plus three times the noise where the points were moved onto
+    /// their local surfaces (a point as read, or held out, lies within that
+    /// noise of them).
+    #[must_use]
+    pub fn cover_tolerance(&self) -> f64 {
+        self.epsilon
+            + if self.moved_onto_surfaces() {
+                3.0 * self.noise
+            } else {
+                0.0
+            }
+    }
 }
 
 /// A normal facing away from the line of sight by more than this cosine
@@ -562,12 +576,7 @@ pub fn generate_with_progress(
     if creases {
         // Clip partners: crease lines onto the planes of the splats across
         // them; under strong noise, whole discs such a line crosses cut.
-        let cover = epsilon
-            + if report.moved_onto_surfaces() {
-                3.0 * report.noise as f32
-            } else {
-                0.0
-            };
+        let cover = report.cover_tolerance() as f32;
         let read = read.as_deref().unwrap_or(&points);
         let met = super::partners::meet_partners(
             &mut splats,

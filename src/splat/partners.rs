@@ -101,29 +101,33 @@ pub fn meet_partners(
             }
         })
         .collect();
-    let before: Vec<Clip> = splats.iter().map(|s| s.clip).collect();
-    let mut after = splats.to_vec();
-    for (s, n) in after.iter_mut().zip(&new) {
-        if let Some((clip, _)) = n {
-            s.clip = *clip;
-        }
-    }
+    let mut new = new;
     // A cut that leaves one of the disc's points on no splat is undone (it
     // must not open a hole in the cloud's coverage; a moved line's points
     // past the partner's plane are the noise the move is for).
-    let now = Near {
-        splats: &after,
-        ..near
-    };
-    let undo: Vec<usize> = (0..splats.len())
-        .into_par_iter()
-        .filter(|&i| new[i].is_some_and(|(_, cut)| cut) && now.uncovers(i, &before[i], cloud))
-        .collect();
-    let mut met = Met::default();
-    for (i, (s, n)) in splats.iter_mut().zip(new).enumerate() {
-        if undo.contains(&i) {
-            continue;
+    if new.iter().flatten().any(|&(_, cut)| cut) {
+        let mut after = splats.to_vec();
+        for (s, n) in after.iter_mut().zip(&new) {
+            if let Some((clip, _)) = n {
+                s.clip = *clip;
+            }
         }
+        let now = Near {
+            splats: &after,
+            ..near
+        };
+        let undo: Vec<bool> = (0..splats.len())
+            .into_par_iter()
+            .map(|i| new[i].is_some_and(|(_, cut)| cut) && now.uncovers(i, &splats[i].clip, cloud))
+            .collect();
+        for (n, u) in new.iter_mut().zip(undo) {
+            if u {
+                *n = None;
+            }
+        }
+    }
+    let mut met = Met::default();
+    for (s, n) in splats.iter_mut().zip(new) {
         if let Some((clip, cut)) = n {
             if cut {
                 met.cut += 1;
@@ -131,7 +135,7 @@ pub fn meet_partners(
                 met.moved += clip
                     .lines()
                     .iter()
-                    .zip(before[i].lines())
+                    .zip(s.clip.lines())
                     .filter(|(a, b)| a != b)
                     .count();
             }

@@ -107,12 +107,7 @@ pub fn heldout_coverage(
 ) -> Result<HeldOutCoverage> {
     let s = split(cloud, params, fraction, seed)?;
     let (splats, report, _) = generate_trimmed(&s.train, params, None)?;
-    let tolerance = report.epsilon
-        + if report.moved_onto_surfaces() {
-            3.0 * report.noise
-        } else {
-            0.0
-        };
+    let tolerance = report.cover_tolerance();
     let found = count_on_splats(&s.test, &splats, tolerance as f32);
     Ok(HeldOutCoverage {
         fraction,
@@ -213,12 +208,7 @@ pub fn heldout_coverage_windows(
     };
     let s = split(&local, &windowed, fraction, seed)?;
     let (splats, report, _) = generate_trimmed(&s.train, &windowed, None)?;
-    let tolerance = report.epsilon
-        + if report.moved_onto_surfaces() {
-            3.0 * report.noise
-        } else {
-            0.0
-        };
+    let tolerance = report.cover_tolerance();
     let test: Vec<Vec3> = s
         .test
         .iter()
