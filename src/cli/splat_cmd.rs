@@ -229,6 +229,12 @@ fn print_generated(args: &SplatArgs, p: &PointsOutcome) {
         report.seconds.total,
         args.output.display()
     );
+    if report.flat_faces > 0 {
+        eprintln!(
+            "splatray: {} flat faces fitted under range noise: {} points moved onto their planes",
+            report.flat_faces, report.face_points
+        );
+    }
     eprintln!(
         "splatray: largest splats (> {}x median radius) whose centre is farther than half a radius from their points: {}",
         splatray::splat::HOLLOW_LARGE,

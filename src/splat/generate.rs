@@ -202,6 +202,10 @@ pub struct SplatReport {
     /// Whole discs cut by a clipped neighbour's plane (under strong range
     /// noise, `splat::partners`).
     pub partner_cut: usize,
+    /// Flat faces fitted whole under range noise (`splat::planes`).
+    pub flat_faces: usize,
+    /// Points moved onto those faces.
+    pub face_points: usize,
     /// Fraction of the used points lying on at least one splat: within `ϵ`
     /// of its plane and inside its disc.
     pub coverage: f64,
@@ -510,6 +514,7 @@ pub fn generate_with_progress(
         colors,
         mut tree,
         knn,
+        sights,
         ..
     } = w;
     // The points as read, for the check that a crease cut leaves none of
@@ -531,6 +536,7 @@ pub fn generate_with_progress(
     }
     let mut strong = false;
     let mut flat = Vec::new();
+    let mut on_face = Vec::new();
     let creases = params.creases.found(knn.k > params.k);
     if params.creases == Creases::Auto && !creases {
         report.warnings.push(
@@ -552,6 +558,25 @@ pub fn generate_with_progress(
         let faces = normals::FlatFaces::from_tolerances(by_eps, by_noise);
         strong = faces == normals::FlatFaces::Strong;
         flat = normals::face_normals(&points, &tree, &knn, &mut nrm, &fixed, tol, faces).1;
+        if strong {
+            // Under strong noise, whole flat faces fitted, their points
+            // moved onto them along their lines of sight (`splat::planes`).
+            let found = super::planes::fit_faces(
+                &mut points,
+                &mut nrm,
+                &fixed,
+                &mut flat,
+                &knn,
+                super::planes::FACE_TOL * tol,
+                sights.as_ref(),
+            );
+            report.flat_faces = found.faces;
+            report.face_points = found.points;
+            if found.points > 0 {
+                tree = build_tree(&points);
+            }
+            on_face = found.on_face;
+        }
     }
     let t2 = Instant::now();
     // --- growth --------------------------------------------------------------
@@ -568,6 +593,7 @@ pub fn generate_with_progress(
         density: params.density,
         ellipses: params.ellipses,
         creases,
+        on_face: &on_face,
     };
     let grown = grow_all(&input, |i| {
         notify(progress, "growing splats", i as f64 / n as f64);

@@ -137,6 +137,7 @@ pub mod knn;
 pub mod normals;
 pub mod outliers;
 pub mod partners;
+pub mod planes;
 pub mod standoff;
 pub mod thin;
 
