@@ -195,8 +195,12 @@ fn a_noisy_scan_of_a_solid_renders_with_creases() {
     );
     let (psnr_on, false_on) = solids_figures(&text, &root, true);
     let (psnr_off, false_off) = solids_figures(&text, &root, false);
-    // Measured: on 31.74 dB, 0.123 % false hits (Embree forced to sse4.2:
-    // 31.66 dB, 0.130 %) with crease lines moved onto their clip partners'
+    // Measured: on 32.09 dB, 0.123 % false hits (Embree forced to sse4.2:
+    // 32.16 dB, 0.133 %) with flat faces fitted whole and their points
+    // moved onto them along their lines of sight (`splat::planes`); 32.02
+    // dB, 0.153 % with face splats as large as elsewhere
+    // (`grow::FACE_RADIUS_FACTOR`); 31.74 dB, 0.123 % (sse4.2: 31.66 dB,
+    // 0.130 %) before, with crease lines moved onto their clip partners'
     // planes and whole discs on an edge cut by them (`splat::partners`);
     // 31.63 dB with the lines moved only; 31.36 dB, 0.130 % (sse4.2: 31.26
     // dB) before, with a point whose
@@ -223,7 +227,7 @@ fn a_noisy_scan_of_a_solid_renders_with_creases() {
     // band of part C); off 26.91 dB, 0.45 % (a scan's splats are small
     // where it is noisy, so whole discs overhang less than on exact
     // samples).
-    assert!(psnr_on > 31.55, "{psnr_on}");
+    assert!(psnr_on > 31.9, "{psnr_on}");
     assert!(false_on < 0.0014, "{false_on}");
     assert!(psnr_on > psnr_off + 0.2, "on {psnr_on} off {psnr_off}");
     assert!(false_on < false_off, "on {false_on} off {false_off}");
@@ -241,8 +245,10 @@ fn a_solid_scanned_from_two_stations_renders_near_its_mesh() {
              at = [0.0, 0.2, 0.0], rays = [800, 600], range_noise_spacing = 0.5 }",
     );
     let (psnr, false_hits) = solids_figures(&text, &root, true);
-    // Measured: 33.71 dB, 0.100 % false hits (Embree forced to sse4.2:
-    // 33.76 dB, 0.097 %) with crease lines moved onto their clip
+    // Measured: 35.13 dB, 0.053 % false hits (Embree forced to sse4.2:
+    // 35.16 dB, 0.053 %) with flat faces fitted whole (`splat::planes`);
+    // 33.71 dB, 0.100 % (sse4.2: 33.76 dB, 0.097 %) before, with crease
+    // lines moved onto their clip
     // partners' planes and whole discs on an edge cut by them
     // (`splat::partners`; 33.52 dB with the lines moved only); 33.32 dB,
     // 0.103 % (sse4.2: 33.25 dB) before, with the tilted-plane
@@ -250,10 +256,10 @@ fn a_solid_scanned_from_two_stations_renders_near_its_mesh() {
     // 33.03 dB, 0.093 % without
     // the flat faces' wide-plane normals and constant fields; the camera's
     // station alone 32.65 dB, 0.077 %). At 800x600 (docs/development.md,
-    // "the noisy scan, round 4"): 33.69 dB, 2.73 dB under the exact
-    // samples' 36.42 (issue 39 asks for 3; 33.41 dB before).
-    assert!(psnr > 33.55, "{psnr}");
-    assert!(false_hits < 0.0012, "{false_hits}");
+    // "the noisy scan, round 5"): 34.41 dB, 2.01 dB under the exact
+    // samples' 36.42 (issue 39 asks for 3; 33.69 dB before the faces).
+    assert!(psnr > 34.95, "{psnr}");
+    assert!(false_hits < 0.0008, "{false_hits}");
 }
 
 /// The scenes folder and scenes/solids.toml with its exact samples

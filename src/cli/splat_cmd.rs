@@ -231,7 +231,7 @@ fn print_generated(args: &SplatArgs, p: &PointsOutcome) {
     );
     if report.flat_faces > 0 {
         eprintln!(
-            "splatray: {} flat faces fitted under range noise: {} points moved onto their planes",
+            "splatray: {} flat faces fitted under strong range noise: {} points moved onto their planes",
             report.flat_faces, report.face_points
         );
     }
