@@ -43,9 +43,9 @@
 //! scan: 3,293 splats instead of 11,460), up to `grow::FACE_RADIUS_FACTOR`.
 
 use super::cloud::Viewpoints;
-use super::fit::{normal_equations, plane_fit, solve6};
+use super::fit::{COLLINEAR, normal_equations, plane_fit, solve6};
 use super::knn::Knn;
-use glam::{DVec3, Vec3};
+use glam::Vec3;
 
 /// A point joins a face within this many times the face tolerance of
 /// `normals::face_normals` of its plane (three times the noise under range
@@ -141,7 +141,6 @@ pub fn fit_faces(
         members.clear();
         stack.clear();
         let mut plane = Plane::new(points[seed], normals[seed]);
-        let mut sums = Sums::new(points[seed]);
         let mut refit_at = 16usize;
         label[seed] = id;
         members.push(seed as u32);
@@ -163,24 +162,23 @@ pub fn fit_faces(
                 }
                 label[ju] = id;
                 members.push(j);
-                sums.add(p);
                 if grows {
                     stack.push(j);
                 }
+                // Refitted at each doubling: every fit over all the
+                // members, twice the final count in all.
                 if members.len() >= refit_at {
                     refit_at *= 2;
-                    if let Some(p) = sums.plane(plane.normal) {
+                    if let Some(p) = Plane::fit(&members, points, plane.normal) {
                         plane = p;
                     }
                 }
             }
         }
         let face = (members.len() >= MIN_FACE_POINTS)
-            .then(|| {
-                let (c, _, vecs) = plane_fit(members.iter().map(|&j| points[j as usize]));
-                let m = vecs[0].as_vec3();
-                let m = if m.dot(plane.normal) < 0.0 { -m } else { m };
-                let plane = Plane::new(c.as_vec3(), m);
+            .then(|| Plane::fit(&members, points, plane.normal))
+            .flatten()
+            .and_then(|plane| {
                 let spread = members
                     .iter()
                     .map(|&j| {
@@ -194,10 +192,12 @@ pub fn fit_faces(
                 (spread <= FACE_SPREAD_DEG.to_radians()
                     && flat_enough(&plane, members.iter().map(|&j| points[j as usize])))
                 .then_some(plane)
-            })
-            .flatten();
+            });
         match face {
             Some(plane) => {
+                if found.on_face.is_empty() {
+                    found.on_face = vec![false; n];
+                }
                 for &j in &members {
                     let ju = j as usize;
                     points[ju] = plane.onto(points[ju], sights.map(|s| s.at(ju)));
@@ -207,15 +207,10 @@ pub fn fit_faces(
                         plane.normal
                     };
                     flat[ju] = true;
+                    found.on_face[ju] = true;
                 }
                 found.faces += 1;
                 found.points += members.len();
-                if found.on_face.is_empty() {
-                    found.on_face = vec![false; n];
-                }
-                for &j in &members {
-                    found.on_face[j as usize] = true;
-                }
             }
             None => {
                 for &j in &members {
@@ -242,6 +237,18 @@ impl Plane {
         }
     }
 
+    /// The least-squares plane of the points `members` picks (`fit::plane_fit`),
+    /// its normal turned to `side`; `None` when they do not span a plane.
+    fn fit(members: &[u32], points: &[Vec3], side: Vec3) -> Option<Plane> {
+        let (c, vals, vecs) = plane_fit(members.iter().map(|&j| points[j as usize]));
+        if vals[1] <= COLLINEAR * vals[2] {
+            return None;
+        }
+        let m = vecs[0].as_vec3();
+        let m = if m.dot(side) < 0.0 { -m } else { m };
+        m.is_finite().then(|| Plane::new(c.as_vec3(), m))
+    }
+
     fn height(&self, p: Vec3) -> f32 {
         self.normal.dot(p - self.origin)
     }
@@ -258,61 +265,6 @@ impl Plane {
             Some(d) => p - d * (h / d.dot(self.normal)),
             None => p - self.normal * h,
         }
-    }
-}
-
-/// Running first and second moments of a region's points, about its seed
-/// (for precision far from the origin).
-struct Sums {
-    at: DVec3,
-    count: f64,
-    sum: DVec3,
-    outer: [[f64; 3]; 3],
-}
-
-impl Sums {
-    fn new(seed: Vec3) -> Sums {
-        let mut s = Sums {
-            at: seed.as_dvec3(),
-            count: 0.0,
-            sum: DVec3::ZERO,
-            outer: [[0.0; 3]; 3],
-        };
-        s.add(seed);
-        s
-    }
-
-    fn add(&mut self, p: Vec3) {
-        let d = p.as_dvec3() - self.at;
-        self.count += 1.0;
-        self.sum += d;
-        let d = d.to_array();
-        for r in 0..3 {
-            for c in 0..3 {
-                self.outer[r][c] += d[r] * d[c];
-            }
-        }
-    }
-
-    /// The least-squares plane of the points so far, its normal turned to
-    /// `side`; `None` when they do not span a plane.
-    fn plane(&self, side: Vec3) -> Option<Plane> {
-        let mean = self.sum / self.count;
-        let m = mean.to_array();
-        let mut cov = [[0.0; 3]; 3];
-        for r in 0..3 {
-            for c in 0..3 {
-                cov[r][c] = self.outer[r][c] / self.count - m[r] * m[c];
-            }
-        }
-        let (vals, vecs) = super::fit::sym_eigen3(cov);
-        if vals[1] <= super::fit::COLLINEAR * vals[2] {
-            return None;
-        }
-        let n = vecs[0].as_vec3();
-        let n = if n.dot(side) < 0.0 { -n } else { n };
-        n.is_finite()
-            .then(|| Plane::new((self.at + mean).as_vec3(), n))
     }
 }
 
