@@ -42,7 +42,9 @@ pub struct SplatArgs {
     pub holdout: f32,
     /// Measure the held-out coverage over the whole cloud (splats grown a
     /// second time from all but the held-out points) instead of in four
-    /// windows holding about 6 % of it (clouds of 2,000,000 points or more).
+    /// windows (about 6 % of a large cloud, more of a small one so that at
+    /// least 500 points are tested; a cloud so small that they would hold
+    /// half of it is measured whole anyway).
     #[arg(long)]
     pub holdout_full: bool,
     /// When the input is a Gaussian splat file (2DGS or 3DGS layout, read

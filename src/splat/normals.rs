@@ -107,12 +107,20 @@ pub fn estimate_multiscale(
     use std::num::NonZero;
     let cos_max = DISAGREE_DEG.to_radians().cos();
     let n = points.len();
+    let first = (knn.k * WIDE_FACTOR).min(n);
     let out: Vec<(Vec3, Scale)> = (0..n)
         .into_par_iter()
         .with_min_len(512)
         .map_init(
-            || (Vec::new(), Vec::new()),
-            |(ids, heights), i| {
+            || {
+                (
+                    Vec::new(),
+                    Vec::new(),
+                    super::knn::Nearest::new(),
+                    Vec::new(),
+                )
+            },
+            |(ids, heights, nearest, items), i| {
                 let nb = knn.of(i);
                 let sight = viewpoint.and_then(|v| (v.at(i) - points[i]).try_normalize());
                 let small = fitted_normal(
@@ -120,19 +128,28 @@ pub fn estimate_multiscale(
                     sight,
                 );
                 let guess = (small.unwrap_or(Vec3::Z), Scale::Degenerate);
-                let mut m = (knn.k * WIDE_FACTOR).min(n);
+                let mut m = first;
                 loop {
                     let Some(q) = NonZero::new(m) else {
                         return guess;
                     };
-                    let found = tree.nearest_n::<SquaredEuclidean>(&points[i].to_array(), q);
+                    items.clear();
+                    if m == first {
+                        // The wide neighbourhood every point asks for, by
+                        // the bounded query of Morton-ordered points.
+                        let found = nearest.query(tree, points[i], m);
+                        items.extend(found.iter().map(|f| f.1));
+                    } else {
+                        let found = tree.nearest_n::<SquaredEuclidean>(&points[i].to_array(), q);
+                        items.extend(found.iter().map(|f| f.item));
+                    }
                     if let Some(wide) =
-                        fitted_normal(found.iter().map(|f| points[f.item as usize]), sight)
+                        fitted_normal(items.iter().map(|&j| points[j as usize]), sight)
                     {
                         // Two sheets (a thin plate's faces) in the wide
                         // neighbourhood: the normal of the point's own.
                         ids.clear();
-                        ids.extend(found.iter().map(|f| f.item).filter(|&j| j as usize != i));
+                        ids.extend(items.iter().copied().filter(|&j| j as usize != i));
                         if let Some((_, own)) = sheet_of(points, points[i], wide, ids, heights) {
                             return (own, Scale::Sheet);
                         }
@@ -402,7 +419,6 @@ pub fn face_normals(
 ) -> (usize, Vec<bool>) {
     let flat_faces = flat != FlatFaces::Off;
     let strong = flat == FlatFaces::Strong;
-    use kiddo::SquaredEuclidean;
     use std::num::NonZero;
     let n = points.len();
     let Some(m) = NonZero::new((knn.k * WIDE_FACTOR + 1).min(n)) else {
@@ -412,16 +428,15 @@ pub fn face_normals(
     let new: Vec<Option<(Vec3, Kind, Vec<u32>)>> = (0..n)
         .into_par_iter()
         .with_min_len(512)
-        .map(|i| {
+        .map_init(super::knn::Nearest::new, |nearest, i| {
             if fixed[i] {
                 return None;
             }
             let (p, n0) = (points[i], old[i]);
-            let mut found = tree.nearest_n::<SquaredEuclidean>(&p.to_array(), m);
-            found.sort_by(|a, b| a.distance.total_cmp(&b.distance).then(a.item.cmp(&b.item)));
+            let found = nearest.query(tree, p, m.get());
             let near: Vec<usize> = found
                 .iter()
-                .map(|f| f.item as usize)
+                .map(|f| f.1 as usize)
                 .filter(|&j| j != i)
                 .collect();
             let wide: Vec<Vec3> = near.iter().map(|&j| points[j] - p).collect();
@@ -446,10 +461,10 @@ pub fn face_normals(
                 let m = wide_plane(&wide, tilted.unwrap_or(n0), tol)?;
                 let near: Vec<u32> = found
                     .iter()
-                    .filter(|f| f.item as usize != i)
+                    .filter(|f| f.1 as usize != i)
                     .zip(&wide)
                     .filter(|(_, d)| m.dot(**d).abs() <= tol)
-                    .map(|(f, _)| f.item)
+                    .map(|(f, _)| f.1)
                     .collect();
                 return Some((m, Kind::Flat, near));
             }
@@ -506,10 +521,10 @@ pub fn face_normals(
             // (`smooth_flat`).
             let face: Vec<u32> = found
                 .iter()
-                .filter(|f| f.item as usize != i)
+                .filter(|f| f.1 as usize != i)
                 .zip(&wide)
                 .filter(|(_, d)| own.holds(**d, tol))
-                .map(|(f, _)| f.item)
+                .map(|(f, _)| f.1)
                 .collect();
             Some(if fitted.dot(n0) < FACE_TURN_DEG.to_radians().cos() {
                 (fitted, Kind::Turned, face)

@@ -123,17 +123,26 @@ pub fn heldout_coverage(
     })
 }
 
-/// Clouds of fewer points measure the held-out coverage whole: below this
-/// a second generation takes a few seconds, and windows would test too
-/// few points to say anything.
-pub const WINDOWED_FROM: usize = 2_000_000;
+/// The held-out points the windows' cores should hold in all: windows
+/// grow (their share by [`WINDOW_GROWTH`]) until they do, so a small
+/// cloud's check still tests enough points to tell a coverage of 0.99
+/// from 1 (five misses).
+pub const MIN_TESTED: usize = 500;
 
-/// Windows taken, each holding with its halo this share of the cloud: in
-/// all about 6 %, so the coverage costs under 10 % of generation.
+/// See [`MIN_TESTED`].
+pub const WINDOW_GROWTH: f64 = 1.4;
+
+/// Windows taken, each holding with its halo at least [`WINDOW_SHARE`] of
+/// the cloud: in all about 6 % on a large cloud, so the coverage costs
+/// under 10 % of generation.
 pub const WINDOWS: usize = 4;
 
 /// See [`WINDOWS`].
 pub const WINDOW_SHARE: f64 = 0.015;
+
+/// Windows holding more than this share of the cloud in all cost about
+/// as much as the whole cloud: it is measured whole instead.
+pub const WHOLE_FROM_SHARE: f64 = 0.5;
 
 /// Where the held-out coverage was measured.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -146,15 +155,66 @@ pub struct Windows {
     pub share: f64,
 }
 
+/// One window: its centre, the half width of its core and of the whole
+/// box (core and halo), in the cloud's units.
+type Window = (Vec3, f32, f32);
+
+/// [`WINDOWS`] boxes around points picked by `seed`, each just large
+/// enough to hold `share` of the cloud, whose outer `halo` is their halo
+/// (at least `min_core` of core kept); and which points they hold.
+fn pick_windows(
+    pos: &[Vec3],
+    seed: u64,
+    share: f64,
+    halo: f32,
+    min_core: f32,
+) -> (Vec<Window>, Vec<bool>) {
+    use rayon::prelude::*;
+    let n = pos.len();
+    let mut windows: Vec<Window> = Vec::new();
+    let mut in_window = vec![false; n];
+    let mut rng = SplitMix64::new(seed ^ 0x0571_d0e5);
+    // Every 16th point measures the reach (every point of a small cloud).
+    let step = if n >= 64_000 { 16 } else { 1 };
+    while windows.len() < WINDOWS {
+        let c = pos[(rng.next_u64() % n as u64) as usize];
+        let mut d: Vec<f32> = pos
+            .par_iter()
+            .step_by(step)
+            .map(|p| (*p - c).abs().max_element())
+            .collect();
+        let k = ((share * d.len() as f64) as usize).min(d.len() - 1);
+        let (_, &mut reach, _) = d.select_nth_unstable_by(k, f32::total_cmp);
+        let core = (reach - halo).max(min_core);
+        let half = core + halo;
+        in_window
+            .par_iter_mut()
+            .zip(pos.par_iter())
+            .for_each(|(w, p)| *w |= (*p - c).abs().max_element() <= half);
+        windows.push((c, core, half));
+    }
+    (windows, in_window)
+}
+
+/// Whether `p` lies in the core of one of `windows`.
+fn in_core(windows: &[Window], p: Vec3) -> bool {
+    windows
+        .iter()
+        .any(|(c, core, _)| (p - *c).abs().max_element() <= *core)
+}
+
 /// [`heldout_coverage`] measured in [`WINDOWS`] windows rather than over
-/// the whole cloud (a cloud of fewer than [`WINDOWED_FROM`] points is
-/// measured whole). Each window is a box around a point picked by `seed`,
-/// just large enough to hold [`WINDOW_SHARE`] of the cloud; its outer
-/// [`crate::tiled::HALO_EPS`] `ϵ` are its halo (at least 2 `ϵ` of core are
-/// kept), so the splats over its core grow as they would in the whole
-/// cloud. Splats are regrown from the windows' points without the held-out
-/// ones, with the whole cloud's `epsilon` (absolute, in the cloud's units),
-/// and the held-out points of the windows' cores are tested against them.
+/// the whole cloud, at every size. Each window is a box around a point
+/// picked by `seed`, large enough to hold [`WINDOW_SHARE`] of the cloud;
+/// its outer [`crate::tiled::HALO_EPS`] `ϵ` are its halo (at least 2 `ϵ` of
+/// core are kept), so the splats over its core grow as they would in the
+/// whole cloud. While the cores would hold fewer than [`MIN_TESTED`]
+/// held-out points, the windows' share grows by [`WINDOW_GROWTH`]; where they would then hold
+/// over [`WHOLE_FROM_SHARE`] of the cloud (a small cloud), the coverage is
+/// measured whole. Splats are regrown from the windows' points without the
+/// held-out ones, with the whole cloud's `epsilon` (absolute, in the
+/// cloud's units), and the held-out points of the windows' cores are
+/// tested against them.
 ///
 /// # Errors
 /// As [`split`] and [`generate_trimmed`].
@@ -165,42 +225,37 @@ pub fn heldout_coverage_windows(
     seed: u64,
     epsilon: f64,
 ) -> Result<(HeldOutCoverage, Windows)> {
-    use rayon::prelude::*;
     let n = cloud.len();
-    if n < WINDOWED_FROM {
-        let h = heldout_coverage(cloud, params, fraction, seed)?;
-        return Ok((
-            h,
-            Windows {
-                windows: 0,
-                points: n,
-                share: 1.0,
-            },
-        ));
-    }
     let pos = &cloud.positions;
     let halo = (crate::tiled::HALO_EPS * epsilon) as f32;
-    let mut windows: Vec<(Vec3, f32, f32)> = Vec::new();
-    let mut in_window = vec![false; n];
-    let mut rng = SplitMix64::new(seed ^ 0x0571_d0e5);
-    while windows.len() < WINDOWS {
-        let c = pos[(rng.next_u64() % n as u64) as usize];
-        // The reach holding the share, from every 16th point.
-        let mut d: Vec<f32> = pos
-            .par_iter()
-            .step_by(16)
-            .map(|p| (*p - c).abs().max_element())
-            .collect();
-        let k = ((WINDOW_SHARE * d.len() as f64) as usize).min(d.len() - 1);
-        let (_, &mut reach, _) = d.select_nth_unstable_by(k, f32::total_cmp);
-        let core = (reach - halo).max(2.0 * epsilon as f32);
-        let half = core + halo;
-        in_window
-            .par_iter_mut()
-            .zip(pos.par_iter())
-            .for_each(|(w, p)| *w |= (*p - c).abs().max_element() <= half);
-        windows.push((c, core, half));
+    let whole = || {
+        heldout_coverage(cloud, params, fraction, seed).map(|h| {
+            (
+                h,
+                Windows {
+                    windows: 0,
+                    points: n,
+                    share: 1.0,
+                },
+            )
+        })
+    };
+    if n == 0 || fraction.is_nan() || fraction <= 0.0 {
+        return whole();
     }
+    let mut share = WINDOW_SHARE;
+    let (windows, in_window) = loop {
+        let (windows, in_window) = pick_windows(pos, seed, share, halo, 2.0 * epsilon as f32);
+        let held = in_window.iter().filter(|&&w| w).count();
+        if held as f64 > WHOLE_FROM_SHARE * n as f64 {
+            return whole();
+        }
+        let cores = pos.iter().filter(|p| in_core(&windows, **p)).count();
+        if cores as f64 * f64::from(fraction) >= MIN_TESTED as f64 {
+            break (windows, in_window);
+        }
+        share *= WINDOW_GROWTH;
+    };
     let local = cloud.subset(&in_window);
     let windowed = SplatParams {
         epsilon_abs: Some(epsilon),
@@ -213,11 +268,7 @@ pub fn heldout_coverage_windows(
         .test
         .iter()
         .copied()
-        .filter(|p| {
-            windows
-                .iter()
-                .any(|(c, core, _)| (*p - *c).abs().max_element() <= *core)
-        })
+        .filter(|p| in_core(&windows, *p))
         .collect();
     let found = count_on_splats(&test, &splats, tolerance as f32);
     Ok((
