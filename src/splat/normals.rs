@@ -204,6 +204,14 @@ pub const FACE_TRIPLES: usize = 12;
 /// (planes through three noisy points tilt).
 pub const FACE_REFITS: usize = 8;
 
+/// A neighbourhood whose quadratic height field scores at least this
+/// share of its points (MSAC's score, [`super::fit::quadric_fit`]) is one
+/// smooth surface: [`face_normals`] searches it for no faces. Two planes
+/// meeting at a crease inside it would leave residuals of several `tol`
+/// about any quadric; exact samples of a curved surface score about 1 a
+/// point.
+pub const FACE_SMOOTH: f32 = 0.95;
+
 /// A second face needs at least this many points the first plane does not
 /// hold.
 pub const FACE_MIN_POINTS: usize = 6;
@@ -473,6 +481,13 @@ pub fn face_normals(
             let all: Vec<Vec3> = std::iter::once(Vec3::ZERO)
                 .chain(wide.iter().copied())
                 .collect();
+            // One smooth surface curving past the plane's reach: the
+            // quadric holds nearly all of it closely, and no crease is
+            // searched (a smooth patch costs one quadric fit).
+            let quadric = super::fit::quadric_fit(&all, n0, tol);
+            if quadric.is_some_and(|q| q >= FACE_SMOOTH * all.len() as f32) {
+                return None;
+            }
             let first = face_plane(&all, tol)?;
             // (The current plane, through the point, holds it too.)
             if first.held <= held + 1 {
@@ -483,12 +498,17 @@ pub fn face_normals(
                 .copied()
                 .filter(|d| !first.holds(*d, tol))
                 .collect();
-            let second = face_plane(&rest, tol).filter(|f| f.held >= FACE_MIN_POINTS);
             // Two faces, or one smooth surface curving past the plane's
             // reach: the quadric fits it at least as closely as the two
-            // planes (MSAC's score of each), and the normal stays.
+            // planes (MSAC's score of each, the second's at most one a
+            // point of the rest), and the normal stays.
+            let q = quadric.unwrap_or(f32::NEG_INFINITY);
+            if q >= first.fit + rest.len() as f32 {
+                return None;
+            }
+            let second = face_plane(&rest, tol).filter(|f| f.held >= FACE_MIN_POINTS);
             let two = first.fit + second.map_or(0.0, |f| f.fit);
-            if super::fit::quadric_fit(&all, n0, tol).is_some_and(|q| q >= two) {
+            if q >= two {
                 return None;
             }
             // The point's own face: the nearer of the two planes (a point
