@@ -307,10 +307,38 @@ impl FacePlane {
 /// `None`
 /// when no three are spread enough to fix a plane.
 fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
+    // The points by coordinate, so a plane's count runs over lanes (the
+    // same operations in the same order as `normal.dot(d - origin)`).
+    let (xs, ys, zs): (Vec<f32>, Vec<f32>, Vec<f32>) = (
+        pts.iter().map(|d| d.x).collect(),
+        pts.iter().map(|d| d.y).collect(),
+        pts.iter().map(|d| d.z).collect(),
+    );
     let count = |normal: Vec3, origin: Vec3| {
-        pts.iter()
-            .filter(|d| normal.dot(**d - origin).abs() <= tol)
-            .count()
+        let (nx, ny, nz) = (normal.x, normal.y, normal.z);
+        let (ox, oy, oz) = (origin.x, origin.y, origin.z);
+        xs.iter()
+            .zip(&ys)
+            .zip(&zs)
+            .map(|((x, y), z)| {
+                let h = (nx * (x - ox)) + (ny * (y - oy)) + (nz * (z - oz));
+                u32::from(h.abs() <= tol)
+            })
+            .sum::<u32>() as usize
+    };
+    // Which points a plane holds, as a bit set (up to `HELD_BITS` points;
+    // beyond, no set is kept and nothing is skipped below).
+    let sets = pts.len() <= HELD_BITS;
+    let held_set = |normal: Vec3, origin: Vec3| {
+        let mut set = [0u64; HELD_BITS / 64];
+        if sets {
+            for (j, d) in pts.iter().enumerate() {
+                if normal.dot(*d - origin).abs() <= tol {
+                    set[j / 64] |= 1 << (j % 64);
+                }
+            }
+        }
+        set
     };
     let fit = |normal: Vec3, origin: Vec3| {
         pts.iter()
@@ -341,7 +369,10 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
     candidates.sort_by_key(|f| std::cmp::Reverse(f.held));
     candidates.truncate(FACE_REFITS);
     // Refitted to what a plane holds, twice: the first refit still leans
-    // toward the three points it passed through.
+    // toward the three points it passed through. A refit depends on the
+    // points held alone: a candidate holding the same points as one before
+    // it refits to the same plane (and loses the tie), and a refit holding
+    // what its candidate held refits to itself.
     let refit = |f: FacePlane| {
         let (centre, vals, vecs) = plane_fit(pts.iter().copied().filter(|d| f.holds(*d, tol)));
         let (normal, origin) = (vecs[0].as_vec3(), centre.as_vec3());
@@ -354,14 +385,36 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
             fit: fit(normal, origin),
         })
     };
+    let mut seen: Vec<HeldSet> = Vec::with_capacity(FACE_REFITS);
     candidates
         .iter()
-        .filter_map(|&f| refit(f).and_then(refit))
+        .filter_map(|&f| {
+            let set = held_set(f.normal, f.origin);
+            if sets {
+                if seen.contains(&set) {
+                    return None;
+                }
+                seen.push(set);
+            }
+            let once = refit(f)?;
+            if sets && held_set(once.normal, once.origin) == set {
+                Some(once)
+            } else {
+                refit(once)
+            }
+        })
         .fold(None, |best: Option<FacePlane>, f| match best {
             Some(b) if b.fit >= f.fit => Some(b),
             _ => Some(f),
         })
 }
+
+/// [`face_plane`] keeps the set of points a plane holds for neighbourhoods
+/// of up to this many points (a widened graph's 4·48 + 1 among them).
+const HELD_BITS: usize = 256;
+
+/// See [`HELD_BITS`].
+type HeldSet = [u64; HELD_BITS / 64];
 
 /// Normals of the point's own face where its neighbourhood holds two (a
 /// roof meeting a wall, a wall meeting the ground): the PCA normal of a
