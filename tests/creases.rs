@@ -40,6 +40,7 @@ fn no_disc_over_a_ring_of_points() {
     };
     let (splats, report) = generate(&cloud, &params).unwrap();
     assert_eq!(report.hollow_large_splats, 0);
+    assert_eq!(report.uncovered_large_splats, 0);
     // Every splat's centre lies within half its radius of a point.
     for s in &splats {
         let c = s.center + cloud.origin.as_vec3();
@@ -442,4 +443,109 @@ fn a_thin_pole_scan_is_nearer_its_mesh_with_creases() {
         on.false_hits < 0.6 * off.false_hits,
         "on {on:?} off {off:?}"
     );
+}
+
+/// A floor that ends at a table leg, with a sparse stray row of points
+/// beyond its edge (a scan's spray past the floor, seen in a real scan of
+/// a table): no splat wider than five times the median radius may cover
+/// less than half of its disc with points (the splat grown from the
+/// floor's edge out to the row spans the gap).
+#[test]
+fn no_disc_over_the_gap_to_a_stray_row() {
+    let jit = |i: usize| ((i.wrapping_mul(2_654_435_761) >> 7) % 1001) as f32 / 1000.0 - 0.5;
+    let mut positions = Vec::new();
+    for i in 0..50 {
+        for j in 0..50 {
+            let q = positions.len();
+            positions.push(Vec3::new(
+                0.02 * i as f32 + 0.004 * jit(q),
+                0.02 * j as f32 + 0.004 * jit(q + 1),
+                0.0005 * jit(q + 2),
+            ));
+        }
+    }
+    // The leg: a cylinder of radius 0.03 standing at the floor's edge.
+    for k in 0..35 {
+        for t in 0..10 {
+            let a = std::f32::consts::TAU * t as f32 / 10.0;
+            positions.push(Vec3::new(
+                1.0 + 0.03 * a.cos(),
+                0.5 + 0.03 * a.sin(),
+                0.02 * (k + 1) as f32,
+            ));
+        }
+    }
+    // The stray row, 0.3 past the edge, a point every 0.1.
+    for j in 0..11 {
+        positions.push(Vec3::new(1.3, 0.1 * j as f32, 0.0));
+    }
+    let cloud = PointCloud {
+        positions,
+        ..PointCloud::default()
+    };
+    let (splats, report) = generate(&cloud, &SplatParams::default()).unwrap();
+    let mut radii: Vec<f32> = splats.iter().map(|s| s.radii.max_element()).collect();
+    radii.sort_by(f32::total_cmp);
+    eprintln!(
+        "{} splats, median radius {}, largest {:?}, uncovered large {}",
+        splats.len(),
+        radii[radii.len() / 2],
+        &radii[radii.len() - 5..],
+        report.uncovered_large_splats
+    );
+    // Measured: 230 splats, median radius 0.040, the largest 0.55 (the
+    // flat floor's, clipped at its corners and covered), none uncovered.
+    assert_eq!(report.uncovered_large_splats, 0, "{report:?}");
+    assert_eq!(report.hollow_large_splats, 0, "{report:?}");
+}
+
+/// The measure behind `uncovered_large_splats` (`covered_share`): a disc
+/// over a dense grid is covered, a disc over a ring of points round an
+/// empty middle is not, and neither is a disc reaching from a dense patch
+/// across a gap to a sparse stray row (the spacing it counts in is the
+/// densest the disc touches); a clip line leaves out what it cuts away.
+#[test]
+fn covered_share_tells_a_disc_over_a_hole() {
+    use splatray::splat::covered_share;
+    use splatray::splat::knn::{Knn, build_tree};
+    use splatray::splat::{Clip, ClipLine, Splat};
+    let share = |pts: &[Vec3], s: &Splat| {
+        let tree = build_tree(pts);
+        covered_share(s, &tree, &Knn::build(&tree, pts, 12), false)
+    };
+    let disc = |c: Vec3, r: f32| Splat::disc(c, Vec3::Z, r).unwrap();
+    let grid: Vec<Vec3> = (0..40 * 40)
+        .map(|i| Vec3::new(0.025 * (i % 40) as f32, 0.025 * (i / 40) as f32, 0.0))
+        .collect();
+    let full = share(&grid, &disc(Vec3::new(0.5, 0.5, 0.0), 0.4));
+    assert!(full > 0.99, "{full}");
+    // A ring 0.8..1 round an empty middle.
+    let ring: Vec<Vec3> = (0..3000)
+        .map(|i| {
+            let t = i as f32 * 0.618_034 * std::f32::consts::TAU;
+            let r = 0.8 + 0.2 * ((i * 37) % 100) as f32 / 100.0;
+            Vec3::new(r * t.cos(), r * t.sin(), 0.0)
+        })
+        .collect();
+    let hollow = share(&ring, &disc(Vec3::ZERO, 1.0));
+    // Measured 0.44: the ring's band and three spacings inside it.
+    assert!(hollow < 0.5, "{hollow}");
+    // The dense patch x < 0.4 and a stray row at x = 1.3, a point every
+    // 0.1: a disc from the patch's edge over the row.
+    let mut stray: Vec<Vec3> = grid.iter().copied().filter(|p| p.x < 0.4).collect();
+    stray.extend((0..11).map(|j| Vec3::new(1.3, 0.1 * j as f32, 0.0)));
+    let gap = share(&stray, &disc(Vec3::new(0.85, 0.5, 0.0), 0.5));
+    // Measured 0.15.
+    assert!(gap < 0.5, "{gap}");
+    // The same disc clipped at the patch's edge keeps only covered ground.
+    let mut clipped = disc(Vec3::new(0.85, 0.5, 0.0), 0.5);
+    // Keeps x <= 0.4: (x - 0.85) = 0.5 (u u_axis.x + v v_axis.x).
+    clipped.clip = Clip::one(ClipLine {
+        a: clipped.u_axis.x,
+        b: clipped.v_axis.x,
+        d: -0.9,
+    });
+    let kept = share(&stray, &clipped);
+    eprintln!("covered: grid {full}, ring {hollow}, gap {gap}, clipped {kept}");
+    assert!(kept > 0.99, "{kept}");
 }

@@ -238,9 +238,11 @@ fn print_generated(args: &SplatArgs, p: &PointsOutcome) {
         );
     }
     eprintln!(
-        "splatray: largest splats (> {}x median radius) whose centre is farther than half a radius from their points: {}",
+        "splatray: large splats over holes: {} (> {}x median radius, centre farther than half a radius from their points), {} (> {}x, kept disc less than half covered by points)",
+        report.hollow_large_splats,
         splatray::splat::HOLLOW_LARGE,
-        report.hollow_large_splats
+        report.uncovered_large_splats,
+        splatray::splat::UNCOVERED_LARGE,
     );
 }
 

@@ -222,6 +222,12 @@ pub struct SplatReport {
     /// farther than half their radius from every point (issue 39's "no disc
     /// over a hole"; growth shrinks such splats, so this is 0).
     pub hollow_large_splats: usize,
+    /// Large splats over a hole, by how much of them their points cover:
+    /// of the splats wider than [`UNCOVERED_LARGE`] times the median
+    /// radius, those whose kept (clipped) disc is less than half covered
+    /// (a sample of the disc is covered where a point lies within
+    /// [`COVER_SPACINGS`] local spacings of it; [`uncovered_large`]).
+    pub uncovered_large_splats: usize,
     /// Splats whose normal field fell back to flat (too few points or a
     /// singular fit).
     pub fallback_normal_fields: usize,
@@ -630,6 +636,7 @@ pub fn generate_with_progress(
     report.clipped = splats.iter().filter(|s| s.is_clipped()).count();
     report.largest_over_spacing = largest_over_spacing(&splats, &tree, &knn);
     report.hollow_large_splats = hollow_large(&splats, &tree);
+    report.uncovered_large_splats = uncovered_large(&splats, &tree, &knn, knn.k > params.k);
     report.mean_radius = splats
         .iter()
         .map(|s| 0.5 * f64::from(s.radii.x + s.radii.y))
@@ -886,6 +893,78 @@ pub fn hollow_large(splats: &[Splat], tree: &super::knn::PointTree) -> usize {
                 let near = tree.nearest_one::<kiddo::SquaredEuclidean>(&s.center.to_array());
                 near.distance > (0.5 * r) * (0.5 * r)
             }
+        })
+        .count()
+}
+
+/// A splat counts as large for [`SplatReport::uncovered_large_splats`]
+/// above this many times the median radius.
+pub const UNCOVERED_LARGE: f32 = 5.0;
+
+/// A sample of a splat's disc is covered where a point lies within this
+/// many local spacings of it. The spacing is the densest the disc
+/// touches: the least, over the points nearest its samples, of the k-th
+/// neighbour distance over `sqrt(k / π)` (the side of the square each of
+/// `k` points holds), so a disc reaching from a dense floor to a sparse
+/// stray row counts the gap between them as uncovered.
+pub const COVER_SPACINGS: f32 = 3.0;
+
+/// The share of `s`'s kept (clipped) disc that points cover: of a grid of
+/// samples over the disc (21 across) that its clip lines keep, those with
+/// a point of `tree` within [`COVER_SPACINGS`] local spacings (from `knn`).
+/// With `scan_lines` (a graph widened to join the lines of a scan), the
+/// spacing is the k-th neighbour distance itself: the gap between two
+/// lines is the sampling there, not a hole.
+#[must_use]
+pub fn covered_share(s: &Splat, tree: &super::knn::PointTree, knn: &Knn, scan_lines: bool) -> f32 {
+    const N: i32 = 10;
+    let per = if scan_lines {
+        1.0
+    } else {
+        (std::f32::consts::PI / knn.k.max(1) as f32).sqrt()
+    };
+    let mut near: Vec<f32> = Vec::new();
+    let mut spacing = f32::INFINITY;
+    for y in -N..=N {
+        for x in -N..=N {
+            let (u, v) = (x as f32 / N as f32, y as f32 / N as f32);
+            if u * u + v * v > 1.0 || !s.clip.keeps(u, v) {
+                continue;
+            }
+            let q = s.center + s.u_axis * (u * s.radii.x) + s.v_axis * (v * s.radii.y);
+            let nn = tree.nearest_one::<kiddo::SquaredEuclidean>(&q.to_array());
+            near.push(nn.distance);
+            spacing = spacing.min(per * knn.kth_distance[nn.item as usize]);
+        }
+    }
+    if near.is_empty() {
+        return 1.0;
+    }
+    let reach2 = (COVER_SPACINGS * spacing) * (COVER_SPACINGS * spacing);
+    near.iter().filter(|&&d| d <= reach2).count() as f32 / near.len() as f32
+}
+
+/// How many splats wider than [`UNCOVERED_LARGE`] times the median radius
+/// have less than half their kept disc covered by points
+/// ([`covered_share`]; `scan_lines` as there).
+#[must_use]
+pub fn uncovered_large(
+    splats: &[Splat],
+    tree: &super::knn::PointTree,
+    knn: &Knn,
+    scan_lines: bool,
+) -> usize {
+    let mut radii: Vec<f32> = splats.iter().map(|s| s.radii.max_element()).collect();
+    if radii.is_empty() {
+        return 0;
+    }
+    let mid = radii.len() / 2;
+    let median = *radii.select_nth_unstable_by(mid, f32::total_cmp).1;
+    splats
+        .par_iter()
+        .filter(|s| {
+            s.radii.max_element() > UNCOVERED_LARGE * median
+                && covered_share(s, tree, knn, scan_lines) < 0.5
         })
         .count()
 }

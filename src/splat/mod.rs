@@ -147,7 +147,7 @@ pub use cloud::{PointCloud, Scans, Viewpoints};
 /// for clouds made in memory (the Python package's arrays).
 pub use frame::robust_centre_size;
 pub use generate::{
-    Creases, GenerateError, HOLLOW_LARGE, NOISE_PROJECT, Skipped, SplatParams, SplatReport,
-    StageSeconds, count_on_splats, coverage, generate, generate_with_progress, hollow_large,
-    on_splat, viewpoints_of,
+    COVER_SPACINGS, Creases, GenerateError, HOLLOW_LARGE, NOISE_PROJECT, Skipped, SplatParams,
+    SplatReport, StageSeconds, UNCOVERED_LARGE, count_on_splats, coverage, covered_share, generate,
+    generate_with_progress, hollow_large, on_splat, uncovered_large, viewpoints_of,
 };

@@ -154,7 +154,7 @@ impl SplatRequest {
 #[serde(untagged)]
 pub enum SplatOutcome {
     /// One cloud of points, read whole.
-    Points(PointsOutcome),
+    Points(Box<PointsOutcome>),
     /// A Gaussian splat file read as splats.
     Gaussians(GaussiansOutcome),
     /// Tiled generation (or one stage of it).
@@ -277,7 +277,7 @@ pub fn splat(req: &SplatRequest, progress: Option<Progress<'_>>) -> Result<Splat
     if let Some(layout) = source.gaussian_layout() {
         return from_gaussians(req, &source, layout.name()).map(SplatOutcome::Gaussians);
     }
-    points(req, &source, progress).map(SplatOutcome::Points)
+    points(req, &source, progress).map(|p| SplatOutcome::Points(Box::new(p)))
 }
 
 /// One cloud read whole, generated, trimmed, coloured, checked.
