@@ -549,3 +549,74 @@ fn covered_share_tells_a_disc_over_a_hole() {
     eprintln!("covered: grid {full}, ring {hollow}, gap {gap}, clipped {kept}");
     assert!(kept > 0.99, "{kept}");
 }
+
+/// The action on a disc over a hole (`holes::shrink_uncovered`): a large
+/// splat reaching from a dense patch across a gap to a sparse stray row
+/// (as growth from the patch's edge makes where the graph joins them) is
+/// shrunk to the patch's part of it; the row's points it leaves on no
+/// splat get small splats of their own, so every point still lies on a
+/// splat; small splats and a covered large one are left as they are.
+#[test]
+fn a_disc_over_a_gap_shrinks_to_what_its_points_cover() {
+    use splatray::splat::holes::{covered_share, shrink_uncovered};
+    use splatray::splat::knn::{Knn, build_tree};
+    use splatray::splat::{Splat, on_splat};
+    let mut pts: Vec<Vec3> = (0..40 * 40)
+        .map(|i| Vec3::new(0.025 * (i % 40) as f32, 0.025 * (i / 40) as f32, 0.0))
+        .filter(|p| p.x < 0.4)
+        .collect();
+    let row = pts.len();
+    pts.extend((0..11).map(|j| Vec3::new(1.3, 0.1 * j as f32, 0.0)));
+    let normals = vec![Vec3::Z; pts.len()];
+    let tree = build_tree(&pts);
+    let knn = Knn::build(&tree, &pts, 12);
+    let eps = 0.001;
+    // Small splats over the patch (radius 0.03, every other grid point),
+    // a large covered one inside it, and the one over the gap.
+    let mut splats: Vec<Splat> = pts[..row]
+        .iter()
+        .step_by(2)
+        .map(|&p| Splat::disc(p, Vec3::Z, 0.03).unwrap())
+        .collect();
+    splats.push(Splat::disc(Vec3::new(0.2, 0.5, 0.0), Vec3::Z, 0.18).unwrap());
+    let gap = Splat::disc(Vec3::new(0.85, 0.5, 0.0), Vec3::Z, 0.5).unwrap();
+    splats.push(gap);
+    let before = splats.len();
+    assert!(covered_share(&gap, &tree, &knn, false) < 0.5);
+    let held: Vec<bool> = pts
+        .iter()
+        .map(|p| splats.iter().any(|s| on_splat(s, *p, eps)))
+        .collect();
+    let mut covered = vec![false; pts.len()];
+    let done = shrink_uncovered(
+        &mut splats,
+        &mut covered,
+        (&pts, &normals, None),
+        &tree,
+        &knn,
+        false,
+        eps,
+    );
+    eprintln!(
+        "{done:?}, the gap's splat now {:?} at {}",
+        splats[before - 1].radii,
+        splats[before - 1].center
+    );
+    assert_eq!(done.shrunk, 1, "{done:?}");
+    let shrunk = splats[before - 1];
+    // Measured: radius 0.038 at x = 0.43, the patch's edge (0.375) and
+    // the three spacings it covers past it.
+    assert!(shrunk.radii.x < 0.1, "{shrunk:?}");
+    assert!(covered_share(&shrunk, &tree, &knn, false) >= 0.5);
+    // The covered large splat and the small ones are as they were.
+    assert_eq!(splats[before - 2].radii.x, 0.18);
+    // Every point a splat held still lies on one: the row's got their own
+    // (measured: 5 added, for the row's points the gap's disc held).
+    assert!(done.added >= 1, "{done:?}");
+    for (j, p) in pts.iter().enumerate().filter(|(j, _)| held[*j]) {
+        assert!(
+            splats.iter().any(|s| on_splat(s, *p, eps)),
+            "point {j} at {p} is on no splat"
+        );
+    }
+}

@@ -238,11 +238,13 @@ fn print_generated(args: &SplatArgs, p: &PointsOutcome) {
         );
     }
     eprintln!(
-        "splatray: large splats over holes: {} (> {}x median radius, centre farther than half a radius from their points), {} (> {}x, kept disc less than half covered by points)",
+        "splatray: large splats over holes: {} (> {}x median radius, centre farther than half a radius from their points), {} (> {}x, kept disc less than half covered by points; {} shrunk to what their points cover, {} small splats added for the points they left)",
         report.hollow_large_splats,
         splatray::splat::HOLLOW_LARGE,
         report.uncovered_large_splats,
         splatray::splat::UNCOVERED_LARGE,
+        report.shrunk_over_holes,
+        report.added_for_holes,
     );
 }
 

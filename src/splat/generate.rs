@@ -6,6 +6,7 @@ use super::denoise;
 use super::field;
 use super::frame::{UnitFrame, first_unusable};
 use super::grow::{GrowInput, grow_all};
+use super::holes::{on_splat, uncovered_large};
 use super::knn::{Knn, build_tree};
 use super::normals;
 use super::outliers;
@@ -223,11 +224,16 @@ pub struct SplatReport {
     /// over a hole"; growth shrinks such splats, so this is 0).
     pub hollow_large_splats: usize,
     /// Large splats over a hole, by how much of them their points cover:
-    /// of the splats wider than [`UNCOVERED_LARGE`] times the median
+    /// of the splats wider than [`super::holes::UNCOVERED_LARGE`] times the median
     /// radius, those whose kept (clipped) disc is less than half covered
     /// (a sample of the disc is covered where a point lies within
-    /// [`COVER_SPACINGS`] local spacings of it; [`uncovered_large`]).
+    /// [`super::holes::COVER_SPACINGS`] local spacings of it; [`super::holes::uncovered_large`]).
     pub uncovered_large_splats: usize,
+    /// Large splats shrunk because their points covered less than half of
+    /// their disc (`splat::holes::shrink_uncovered`).
+    pub shrunk_over_holes: usize,
+    /// Small splats added for the points those shrunk splats left bare.
+    pub added_for_holes: usize,
     /// Splats whose normal field fell back to flat (too few points or a
     /// singular fit).
     pub fallback_normal_fields: usize,
@@ -605,6 +611,7 @@ pub fn generate_with_progress(
         notify(progress, "growing splats", i as f64 / n as f64);
     });
     let mut splats = grown.splats;
+    let mut covered = grown.covered;
     if creases {
         // Clip partners: crease lines onto the planes of the splats across
         // them; under strong noise, whole discs such a line crosses cut.
@@ -619,6 +626,20 @@ pub fn generate_with_progress(
         report.partner_lines = met.moved;
         report.partner_cut = met.cut;
     }
+    // No disc over a hole: large splats their points cover less than half
+    // of shrunk to what they cover, the points they leave bare given
+    // splats of their own (`splat::holes`).
+    let holes = super::holes::shrink_uncovered(
+        &mut splats,
+        &mut covered,
+        (&points, &nrm, colors.as_deref()),
+        &tree,
+        &knn,
+        knn.k > params.k,
+        epsilon,
+    );
+    report.shrunk_over_holes = holes.shrunk;
+    report.added_for_holes = holes.added;
     let t3 = Instant::now();
     // --- fields and coverage ---------------------------------------------------
     notify(progress, "normal fields", 0.0);
@@ -630,7 +651,7 @@ pub fn generate_with_progress(
         &nrm,
         &flat,
     );
-    report.coverage = coverage(&points, &grown.covered, &splats, epsilon);
+    report.coverage = coverage(&points, &covered, &splats, epsilon);
     report.splats = splats.len();
     report.elliptical_splats = grown.elliptical;
     report.clipped = splats.iter().filter(|s| s.is_clipped()).count();
@@ -897,78 +918,6 @@ pub fn hollow_large(splats: &[Splat], tree: &super::knn::PointTree) -> usize {
         .count()
 }
 
-/// A splat counts as large for [`SplatReport::uncovered_large_splats`]
-/// above this many times the median radius.
-pub const UNCOVERED_LARGE: f32 = 5.0;
-
-/// A sample of a splat's disc is covered where a point lies within this
-/// many local spacings of it. The spacing is the densest the disc
-/// touches: the least, over the points nearest its samples, of the k-th
-/// neighbour distance over `sqrt(k / π)` (the side of the square each of
-/// `k` points holds), so a disc reaching from a dense floor to a sparse
-/// stray row counts the gap between them as uncovered.
-pub const COVER_SPACINGS: f32 = 3.0;
-
-/// The share of `s`'s kept (clipped) disc that points cover: of a grid of
-/// samples over the disc (21 across) that its clip lines keep, those with
-/// a point of `tree` within [`COVER_SPACINGS`] local spacings (from `knn`).
-/// With `scan_lines` (a graph widened to join the lines of a scan), the
-/// spacing is the k-th neighbour distance itself: the gap between two
-/// lines is the sampling there, not a hole.
-#[must_use]
-pub fn covered_share(s: &Splat, tree: &super::knn::PointTree, knn: &Knn, scan_lines: bool) -> f32 {
-    const N: i32 = 10;
-    let per = if scan_lines {
-        1.0
-    } else {
-        (std::f32::consts::PI / knn.k.max(1) as f32).sqrt()
-    };
-    let mut near: Vec<f32> = Vec::new();
-    let mut spacing = f32::INFINITY;
-    for y in -N..=N {
-        for x in -N..=N {
-            let (u, v) = (x as f32 / N as f32, y as f32 / N as f32);
-            if u * u + v * v > 1.0 || !s.clip.keeps(u, v) {
-                continue;
-            }
-            let q = s.center + s.u_axis * (u * s.radii.x) + s.v_axis * (v * s.radii.y);
-            let nn = tree.nearest_one::<kiddo::SquaredEuclidean>(&q.to_array());
-            near.push(nn.distance);
-            spacing = spacing.min(per * knn.kth_distance[nn.item as usize]);
-        }
-    }
-    if near.is_empty() {
-        return 1.0;
-    }
-    let reach2 = (COVER_SPACINGS * spacing) * (COVER_SPACINGS * spacing);
-    near.iter().filter(|&&d| d <= reach2).count() as f32 / near.len() as f32
-}
-
-/// How many splats wider than [`UNCOVERED_LARGE`] times the median radius
-/// have less than half their kept disc covered by points
-/// ([`covered_share`]; `scan_lines` as there).
-#[must_use]
-pub fn uncovered_large(
-    splats: &[Splat],
-    tree: &super::knn::PointTree,
-    knn: &Knn,
-    scan_lines: bool,
-) -> usize {
-    let mut radii: Vec<f32> = splats.iter().map(|s| s.radii.max_element()).collect();
-    if radii.is_empty() {
-        return 0;
-    }
-    let mid = radii.len() / 2;
-    let median = *radii.select_nth_unstable_by(mid, f32::total_cmp).1;
-    splats
-        .par_iter()
-        .filter(|s| {
-            s.radii.max_element() > UNCOVERED_LARGE * median
-                && covered_share(s, tree, knn, scan_lines) < 0.5
-        })
-        .count()
-}
-
 /// The splats and the report's lengths back in the cloud's units; a splat
 /// single precision cannot hold is an error, a cloud below its normal range
 /// a warning.
@@ -1189,18 +1138,6 @@ fn check_params(p: &SplatParams) -> Result<(), GenerateError> {
         ));
     }
     Ok(())
-}
-
-/// Does `p` lie on `s`: within `epsilon` of its plane, inside its disc and
-/// on the kept side of its clip lines?
-#[must_use]
-pub fn on_splat(s: &Splat, p: Vec3, epsilon: f32) -> bool {
-    let d = p - s.center;
-    if d.dot(s.normal).abs() > epsilon {
-        return false;
-    }
-    let (u, v) = (d.dot(s.u_axis) / s.radii.x, d.dot(s.v_axis) / s.radii.y);
-    u * u + v * v <= 1.0 && s.clip.keeps(u, v)
 }
 
 /// Fraction of `points` lying on at least one splat. Points marked `covered`

@@ -133,6 +133,7 @@ pub mod fit;
 pub(crate) mod frame;
 mod generate;
 pub mod grow;
+pub mod holes;
 pub mod knn;
 pub mod normals;
 pub mod outliers;
@@ -147,7 +148,8 @@ pub use cloud::{PointCloud, Scans, Viewpoints};
 /// for clouds made in memory (the Python package's arrays).
 pub use frame::robust_centre_size;
 pub use generate::{
-    COVER_SPACINGS, Creases, GenerateError, HOLLOW_LARGE, NOISE_PROJECT, Skipped, SplatParams,
-    SplatReport, StageSeconds, UNCOVERED_LARGE, count_on_splats, coverage, covered_share, generate,
-    generate_with_progress, hollow_large, on_splat, uncovered_large, viewpoints_of,
+    Creases, GenerateError, HOLLOW_LARGE, NOISE_PROJECT, Skipped, SplatParams, SplatReport,
+    StageSeconds, count_on_splats, coverage, generate, generate_with_progress, hollow_large,
+    viewpoints_of,
 };
+pub use holes::{COVER_SPACINGS, UNCOVERED_LARGE, covered_share, on_splat, uncovered_large};
