@@ -565,24 +565,17 @@ fn generate_splats(
     load: &mut LoadReport,
     progress: Option<Progress<'_>>,
 ) -> Result<(Vec<Splat>, Vec<ColorField>)> {
-    let d = crate::splat::SplatParams::default();
-    let params = crate::splat::SplatParams {
-        k: spec.splat.k.unwrap_or(d.k),
-        epsilon_rel: spec.splat.epsilon_rel.unwrap_or(d.epsilon_rel),
-        density: spec.splat.density.unwrap_or(d.density),
+    let params = crate::splat::GenerationOptions {
+        epsilon_rel: spec.splat.epsilon_rel,
+        k: spec.splat.k,
+        density: spec.splat.density,
         ellipses: spec.splat.ellipses,
-        color_fields: spec.splat.color_fields.unwrap_or(d.color_fields),
-        creases: spec
-            .splat
-            .creases
-            .map_or(d.creases, crate::splat::Creases::from_bool),
-        viewpoint: spec
-            .splat
-            .viewpoint
-            .map(|v| cloud.local_viewpoint(Vec3::from(v).as_dvec3()))
-            .or(cloud.viewpoint),
-        ..d
-    };
+        flat_colors: spec.splat.color_fields == Some(false),
+        creases: spec.splat.creases,
+        viewpoint: spec.splat.viewpoint.map(|v| Vec3::from(v).as_dvec3()),
+        ..crate::splat::GenerationOptions::default()
+    }
+    .params(cloud);
     let (mut splats, report, trim) = crate::freespace::generate_trimmed(cloud, &params, progress)?;
     let (fields, _) = crate::splat::color::fit_cloud(&mut splats, cloud, &params);
     if let Some(t) = trim.filter(|t| t.shrunk > 0) {

@@ -136,6 +136,7 @@ pub mod grow;
 pub mod holes;
 pub mod knn;
 pub mod normals;
+mod options;
 pub mod outliers;
 pub mod partners;
 pub mod planes;
@@ -153,3 +154,4 @@ pub use generate::{
     viewpoints_of,
 };
 pub use holes::{COVER_SPACINGS, UNCOVERED_LARGE, covered_share, on_splat, uncovered_large};
+pub use options::GenerationOptions;

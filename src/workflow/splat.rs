@@ -16,91 +16,19 @@ use crate::io::{
 use crate::progress::{Progress, notify};
 use crate::render::output::{check_extension, check_writable};
 use crate::splat::color::fit_cloud;
-use crate::splat::{Creases, PointCloud, SplatParams, SplatReport};
+use crate::splat::{PointCloud, SplatParams, SplatReport};
 use crate::tiled::{BYTES_PER_POINT, Stage, TiledOptions, TiledReport, Tiling, generate_tiled};
 use crate::validate::holdout::{
     HeldOutCoverage, Windows, heldout_coverage, heldout_coverage_windows,
 };
 use crate::{Error, Result};
-use glam::DVec3;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// Splat generation's options as given (what `splat` and `scan-check`
-/// take); `None`: the default of [`SplatParams`].
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct GenerationOptions {
-    /// Error threshold ϵ of §2.1 as a fraction of the bounding-box diagonal.
-    pub epsilon_rel: Option<f32>,
-    /// Neighbours per point.
-    pub k: Option<usize>,
-    /// Density factor of §2.2, in (0, 1].
-    pub density: Option<f32>,
-    /// Elliptical splats along the minimum-curvature direction.
-    pub ellipses: bool,
-    /// One colour per splat: no linear colour fields.
-    pub flat_colors: bool,
-    /// Find creases and clip splats at them (`SplatParams::creases`):
-    /// `Some(true)` everywhere, `Some(false)` nowhere, `None` the default
-    /// ([`crate::splat::Creases::Auto`]).
-    pub creases: Option<bool>,
-    /// Where the scanner stood, in the input's coordinates (default: the
-    /// cloud's own).
-    pub viewpoint: Option<DVec3>,
-    /// Ignore the cloud's own viewpoint (or its scanners' positions).
-    pub no_viewpoint: bool,
-    /// Keep one point per cell this many ϵ wide (default: every point).
-    pub thin: Option<f64>,
-}
-
-impl GenerationOptions {
-    /// The generation parameters for `cloud`: the options given, defaults
-    /// for the rest, the viewpoint given (made relative to the cloud's
-    /// origin, in f64) or else the cloud's own.
-    #[must_use]
-    pub fn params(&self, cloud: &PointCloud) -> SplatParams {
-        let viewpoint = if self.no_viewpoint {
-            None
-        } else {
-            self.viewpoint
-                .map(|v| cloud.local_viewpoint(v))
-                .or(cloud.viewpoint)
-        };
-        SplatParams {
-            viewpoint,
-            ..self.params_without_viewpoint()
-        }
-    }
-
-    /// The generation parameters before a cloud is read (tiled generation
-    /// finds each tile's viewpoints itself).
-    #[must_use]
-    pub fn params_without_viewpoint(&self) -> SplatParams {
-        let defaults = SplatParams::default();
-        SplatParams {
-            k: self.k.unwrap_or(defaults.k),
-            epsilon_rel: self.epsilon_rel.unwrap_or(defaults.epsilon_rel),
-            density: self.density.unwrap_or(defaults.density),
-            ellipses: self.ellipses,
-            color_fields: !self.flat_colors,
-            creases: self.creases.map_or(defaults.creases, Creases::from_bool),
-            scan_viewpoints: !self.no_viewpoint,
-            thin: self.thin.unwrap_or(defaults.thin),
-            ..defaults
-        }
-    }
-
-    /// Whether an option of point clouds was given (they do not apply to a
-    /// Gaussian splat file).
-    fn point_options_given(&self) -> bool {
-        self.epsilon_rel.is_some()
-            || self.k.is_some()
-            || self.density.is_some()
-            || self.ellipses
-            || self.creases.is_some()
-    }
-}
+/// Splat generation's options as given (built into [`SplatParams`] in one
+/// place, [`crate::splat::GenerationOptions::params`]).
+pub use crate::splat::GenerationOptions;
 
 /// What [`splat`] is asked to do.
 #[derive(Clone, Debug, PartialEq)]
