@@ -6,7 +6,7 @@ use super::denoise;
 use super::field;
 use super::frame::{UnitFrame, first_unusable};
 use super::grow::{GrowInput, grow_all};
-use super::holes::{on_splat, uncovered_large};
+use super::holes::{median_radius, on_splat, uncovered_large};
 use super::knn::{Knn, build_tree};
 use super::normals;
 use super::outliers;
@@ -900,12 +900,10 @@ pub const HOLLOW_LARGE: f32 = 10.0;
 /// have no point within half their (larger) radius of their centre.
 #[must_use]
 pub fn hollow_large(splats: &[Splat], tree: &super::knn::PointTree) -> usize {
-    let mut radii: Vec<f32> = splats.iter().map(|s| s.radii.max_element()).collect();
-    if radii.is_empty() {
+    if splats.is_empty() {
         return 0;
     }
-    let mid = radii.len() / 2;
-    let median = *radii.select_nth_unstable_by(mid, f32::total_cmp).1;
+    let median = median_radius(splats);
     splats
         .par_iter()
         .filter(|s| {

@@ -95,7 +95,7 @@ fn share(samples: &[(Vec2, bool)]) -> f32 {
 }
 
 /// The median of the splats' larger radii (0 for none).
-fn median_radius(splats: &[Splat]) -> f32 {
+pub(crate) fn median_radius(splats: &[Splat]) -> f32 {
     let mut radii: Vec<f32> = splats.iter().map(|s| s.radii.max_element()).collect();
     if radii.is_empty() {
         return 0.0;
