@@ -140,6 +140,7 @@ mod options;
 pub mod outliers;
 pub mod partners;
 pub mod planes;
+mod rim;
 pub mod standoff;
 pub mod thin;
 

@@ -1,0 +1,646 @@
+//! Clip lines at a splat's rim (`docs/DESIGN.md`, "Creases"): where the
+//! points of the splat's own face end inside its disc, at a crease or a
+//! border, a line of eq. (5)'s clipped disc cuts the rest away. Growth
+//! ([`super::grow`]) gathers the face's points and asks [`clip_lines`].
+
+use super::clip::{Clip, ClipLine};
+use super::knn::PointTree;
+use glam::{Vec2, Vec3};
+
+/// Directions tried for a clip line (evenly spaced over the full turn).
+pub const CLIP_DIRECTIONS: usize = 96;
+
+/// A clip line's direction is refined between the coarse directions in
+/// this many steps each way, over half a coarse step.
+pub const REFINE_STEPS: i32 = 4;
+
+/// A corner's two clip lines are chosen again in turns, each given the
+/// other, at most this many times ([`clip_lines`]).
+pub const CORNER_ROUNDS: usize = 4;
+
+/// A crease needs at least this many points of the other face past the
+/// own face's last points ([`clip_lines`]).
+pub const CREASE_MIN_POINTS: usize = 3;
+
+/// ... and a jump of at least this many degrees between the mean normals
+/// of the own face's points along the line and of those points.
+pub const CREASE_JUMP_DEG: f32 = 30.0;
+
+/// ... and the normals on either side each agree, the length of their
+/// mean at least this (a plane each; about 26° of spread): the noise of
+/// estimated normals makes no crease.
+pub const CREASE_COHERENCE: f32 = 0.9;
+
+/// ... and both run along the line over at least this share of its chord
+/// across the disc: a crease crosses the splat, the facet of a fine mesh
+/// or a lump of noise does not.
+pub const CREASE_LENGTH: f32 = 0.4;
+
+/// ... and only where the face across leaves the splat's plane by more
+/// than this many `ϵ` at the disc's rim: a gentler crease, or one near the
+/// rim, the whole disc stands close enough to. On the bunny (a scanned
+/// mesh whose facets meet at over 30° along 1.4 % of its edges) 1 `ϵ` cost
+/// 0.8 dB, 2 `ϵ` 0.03 dB (`docs/development.md`, "Issue 39").
+pub const CREASE_RISE_EPS: f32 = 2.0;
+
+/// ... and the points across rise from the splat's plane as a face turned
+/// by at least this share of that jump: the main axis of their offsets
+/// across the line and heights over the plane (total least squares) turns
+/// from the plane by at least this share of the angle between the two
+/// sides' mean normals. The facets of a scanned mesh (the bunny's) turn
+/// their normals by 30–60° while their points stay on the smooth surface,
+/// near the plane; a true crease's other face leaves it at its own angle.
+/// Measured with `compare --truth` (creases on, 800×600): bunny 37.54 ->
+/// 37.77 dB (37.87 creases off), solids 34.20 -> 34.58 dB
+/// (`docs/development.md`, "Issue 39: creases on by default").
+pub const CREASE_STEEP: f32 = 0.5;
+
+/// ... and, where the jump is under this many degrees, only where the two
+/// sides are not one smooth surface ([`smooth_across`]): the facets of a
+/// scanned mesh turn their sampled normals by 32–62° (deciles 1 and 9 of
+/// the bunny's crease candidates that passed every other test) over a
+/// thin rounded rim (the ears'), whose points across rise steeply; the
+/// solids' creases jump by 90° (the median), their roof's by less. With
+/// `compare --truth` (creases on, 800×600): glass 39.67 -> 39.96 dB (40.00
+/// off), bunny 37.77 -> 37.86 (37.87 off), solids 34.58 -> 34.94; at 50°
+/// glass 39.77, bunny 37.76; at 70° glass 39.99, bunny 37.79
+/// (`docs/development.md`, "Issue 39: smooth rims").
+pub const CREASE_SMOOTH_JUMP_DEG: f32 = 60.0;
+
+/// [`smooth_across`]: one quadric over both sides may fit this many points
+/// (of MSAC's score) worse than a quadric and a plane apart. 0: glass
+/// 39.76 dB, solids 34.58 (every roof and cylinder crease kept, too few
+/// rims gated); 2: 39.96 / 34.94; 3: 39.97 / 34.96.
+pub const CREASE_SMOOTH_SLACK: f32 = 2.0;
+
+/// [`smooth_across`] scores residuals within this many `ϵ` (half the span
+/// eq. (1) allows a splat's own points).
+pub const CREASE_SMOOTH_TOL: f32 = 0.5;
+
+/// A border (no point past the face's last) needs an empty band at least
+/// this many point spacings wide: sampling leaves smaller gaps.
+pub const BORDER_SPACINGS: f32 = 2.0;
+
+/// A border's clip line stands at most this many point spacings past the
+/// last of the face's points (where the surface ends between them is not
+/// known); along a chord of length `L` (in spacings) at `1/L` spacings,
+/// the mean distance from a straight border to the last of points spread
+/// one per spacing² along it. At a fixed 0.15 spacings the ground of the
+/// solids overhung its border by a fraction of a pixel all round: 0.17 %
+/// of the image in false hits, against 0.08 % (`docs/development.md`,
+/// "Issue 39, part D").
+pub const CLIP_GAP_SPACINGS: f32 = 0.15;
+
+/// ... or, where that band crosses the rim, few points of the face (from
+/// the whole cloud, not only the graph's neighbours) in a band
+/// [`BORDER_SPACINGS`] deep past the last point, along the line's chord
+/// across the disc but at least this many spacings either side of the
+/// line's middle: near the rim the chord is short, and random sampling
+/// leaves a short band empty by chance (the graph's neighbours just
+/// outside the rim, limited to the chord, cost the bunny with creases
+/// 0.3 dB; `docs/development.md`, "Issue 39, part C").
+pub const BORDER_HALF_SPACINGS: f32 = 4.0;
+
+/// ... counting the points of the face within this many radii of the
+/// splat's plane (the face goes on past the rim, bending as it may).
+pub const BORDER_HEIGHT: f32 = 0.5;
+
+/// ... counting fewer of them than this share of the points a face going
+/// on past the rim puts in the band (its area outside the disc over
+/// spacing²): a straight border's last points, noisy, reach a little past
+/// the last one inside the disc; a face going on fills the band.
+pub const BORDER_FILL: f32 = 0.1;
+
+/// What the clip lines are measured against: the cloud, its normals and
+/// kd-tree, `ϵ`, and the cosine at which a neighbour's normal turns onto
+/// another face ([`super::grow::CREASE_DEG`]).
+pub(super) struct Surface<'a> {
+    pub(super) points: &'a [Vec3],
+    pub(super) normals: &'a [Vec3],
+    pub(super) tree: &'a PointTree,
+    pub(super) epsilon: f32,
+    pub(super) face_cos: f32,
+}
+
+/// A splat in the making, as its seed sees it: the seed `p` with normal
+/// `n`, the metric frame `(a, b, aspect)`, the centre at metric offset
+/// `shift` from the seed, metric radius `r`, the plane at height `hc`
+/// along `n`.
+#[derive(Clone, Copy)]
+pub(super) struct Frame {
+    pub(super) p: Vec3,
+    pub(super) n: Vec3,
+    pub(super) a: Vec3,
+    pub(super) b: Vec3,
+    pub(super) aspect: f32,
+    pub(super) shift: Vec2,
+    pub(super) r: f32,
+    pub(super) hc: f32,
+}
+
+impl Frame {
+    /// Point `q` of `points` in the splat's normalised coordinates.
+    pub(super) fn near(&self, points: &[Vec3], q: usize) -> Near {
+        let d = points[q] - self.p;
+        Near {
+            q: (Vec2::new(self.a.dot(d) / self.aspect, self.b.dot(d)) - self.shift) / self.r,
+            h: (self.n.dot(d) - self.hc) / self.r,
+            j: q as u32,
+        }
+    }
+}
+
+/// A point met while gathering a splat's own face ([`clip_lines`]):
+/// its position in the splat's normalised coordinates, its height over the
+/// plane (in radii) and its index.
+#[derive(Clone, Copy)]
+pub(super) struct Near {
+    pub(super) q: Vec2,
+    h: f32,
+    j: u32,
+}
+
+/// Where along `w` (normalised splat coordinates) the face across a crease
+/// meets the splat's plane: the offset `s = w·q` of the points of `across`
+/// regressed on their height `h` by least squares, and the offset at
+/// `h = 0` taken (the two planes' line of intersection, where Zwicker et
+/// al.'s clip lines and the 2012 clipping method put it), kept within
+/// `[ext, ext + spacing]` (`ext`: the own face's farthest point along `w`).
+fn crease_at(across: &[Near], w: Vec2, ext: f32, spacing: f32) -> (f32, f32) {
+    let n = across.len() as f32;
+    let (mut sh, mut ss, mut shh, mut ssh) = (0f32, 0f32, 0f32, 0f32);
+    for p in across {
+        let s = w.dot(p.q);
+        sh += p.h;
+        ss += s;
+        shh += p.h * p.h;
+        ssh += s * p.h;
+    }
+    let (mh, ms) = (sh / n, ss / n);
+    let var_h = shh / n - mh * mh;
+    let slope = if var_h > 1e-12 {
+        (ssh / n - ms * mh) / var_h
+    } else {
+        0.0
+    };
+    let c = ms - slope * mh;
+    if c.is_finite() {
+        (c.clamp(ext, ext + spacing), slope)
+    } else {
+        (ext + CLIP_GAP_SPACINGS * spacing, 0.0)
+    }
+}
+
+/// The angle (radians, in `[0, π/2]`) between the splat's plane and the
+/// main axis of the points of `across` in the plane of their offset
+/// `s = w·q` across the line and their height `h` over the splat's plane
+/// (total least squares, so a face rising straight up is as well defined
+/// as one going on flat).
+fn rise_angle(across: &[Near], w: Vec2) -> f32 {
+    let n = across.len().max(1) as f32;
+    let ms = across.iter().map(|m| w.dot(m.q)).sum::<f32>() / n;
+    let mh = across.iter().map(|m| m.h).sum::<f32>() / n;
+    let (mut vs, mut vh, mut cv) = (0f32, 0f32, 0f32);
+    for m in across {
+        let (ds, dh) = (w.dot(m.q) - ms, m.h - mh);
+        vs += ds * ds;
+        vh += dh * dh;
+        cv += ds * dh;
+    }
+    (0.5 * (2.0 * cv).atan2(vs - vh)).abs()
+}
+
+/// Whether the splat's own points `own` and the points `across` a crease
+/// candidate lie on one smooth surface: the quadratic height field over
+/// the plane of normal `n` (the two sides' mean normals' bisector) fitted
+/// to both together ([`super::fit::height_fit`]) fits them within
+/// [`CREASE_SMOOTH_SLACK`] points of MSAC's score as closely as a quadric
+/// fitted to `own` alone and a plane fitted to `across` alone (a curved
+/// face meeting a flat one: the cylinder's side on the ground), with
+/// residuals scored within [`CREASE_SMOOTH_TOL`] `ϵ`. `p` is the seed's
+/// position (the offsets' origin).
+fn smooth_across(own: &[Near], across: &[Near], n: Vec3, inp: &Surface, p: Vec3) -> bool {
+    use super::fit::height_fit;
+    let off =
+        |v: &[Near]| -> Vec<Vec3> { v.iter().map(|m| inp.points[m.j as usize] - p).collect() };
+    let (o, ac) = (off(own), off(across));
+    let both: Vec<Vec3> = o.iter().chain(ac.iter()).copied().collect();
+    let tol = CREASE_SMOOTH_TOL * inp.epsilon;
+    let Some(one) = height_fit(&both, n, tol, 6, 6) else {
+        return false;
+    };
+    // Too few own points for a quadric: their plane.
+    let apart = height_fit(&o, n, tol, 6, 6)
+        .or_else(|| height_fit(&o, n, tol, 3, 3))
+        .unwrap_or(0.0)
+        + height_fit(&ac, n, tol, 3, 3).unwrap_or(0.0);
+    one + CREASE_SMOOTH_SLACK >= apart
+}
+
+/// The unit mean of the normals of `pts`, and their coherence: the length
+/// of their mean (1 when they agree, smaller the more they spread).
+fn mean_normal(pts: &[Near], normals: &[Vec3]) -> (Vec3, f32) {
+    let sum = pts.iter().map(|p| normals[p.j as usize]).sum::<Vec3>();
+    (
+        sum.normalize_or_zero(),
+        sum.length() / pts.len().max(1) as f32,
+    )
+}
+
+/// The unit disc as a polygon, for the area a clip line cuts away.
+fn disc_polygon() -> &'static [Vec2] {
+    static POLY: std::sync::OnceLock<Vec<Vec2>> = std::sync::OnceLock::new();
+    POLY.get_or_init(|| {
+        const N: usize = 128;
+        (0..N)
+            .map(|k| {
+                let t = std::f32::consts::TAU * k as f32 / N as f32;
+                Vec2::new(t.cos(), t.sin())
+            })
+            .collect()
+    })
+}
+
+/// The convex polygon `poly` (counter-clockwise) cut to the side of `l`
+/// it keeps (Sutherland–Hodgman, one edge).
+fn clip_polygon(poly: &[Vec2], l: ClipLine) -> Vec<Vec2> {
+    let f = |q: Vec2| l.a * q.x + l.b * q.y - l.d;
+    let mut out = Vec::with_capacity(poly.len() + 2);
+    for (k, &p) in poly.iter().enumerate() {
+        let q = poly[(k + 1) % poly.len()];
+        let (fp, fq) = (f(p), f(q));
+        if fp <= 0.0 {
+            out.push(p);
+        }
+        if (fp <= 0.0) != (fq <= 0.0) {
+            out.push(p + (q - p) * (fp / (fp - fq)));
+        }
+    }
+    out
+}
+
+/// The area of a simple polygon (shoelace).
+fn polygon_area(poly: &[Vec2]) -> f32 {
+    let n = poly.len();
+    0.5 * (0..n)
+        .map(|k| poly[k].perp_dot(poly[(k + 1) % n]))
+        .sum::<f32>()
+        .abs()
+}
+
+/// Points of a grid over the unit disc, for whether a clip line cuts
+/// anything away.
+fn disc_grid() -> &'static [Vec2] {
+    static GRID: std::sync::OnceLock<Vec<Vec2>> = std::sync::OnceLock::new();
+    GRID.get_or_init(|| {
+        const N: i32 = 10;
+        let mut g = Vec::new();
+        for y in -N..=N {
+            for x in -N..=N {
+                let q = Vec2::new(x as f32, y as f32) / N as f32;
+                if q.length_squared() <= 1.0 {
+                    g.push(q);
+                }
+            }
+        }
+        g
+    })
+}
+
+/// A splat's clip lines and what a third would cut of what they keep
+/// (a share of the disc, [`super::grow::SPILL_SHARE`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Clipped {
+    pub(super) lines: Clip,
+    pub(super) spill: f32,
+}
+
+impl Clipped {
+    pub(super) const NONE: Clipped = Clipped {
+        lines: Clip::NONE,
+        spill: 0.0,
+    };
+}
+
+/// The clip lines (none, one or two) of the splat `f`, given the points
+/// of its own face inside its disc (`own`, the seed first) and those of
+/// other faces met while gathering them (`other`), and the point spacing
+/// in radii.
+///
+/// The points of the splat's own face inside its disc (normals within
+/// [`super::grow::CREASE_DEG`] of the seed's) are gathered by a traversal of the
+/// neighbourhood graph from the seed through that face, with the points
+/// of other faces it meets on the way. For each of [`CLIP_DIRECTIONS`]
+/// directions `w` in the splat's normalised coordinates, the part of the
+/// disc past the own face's farthest point along `w` holds none of the
+/// face's points. It is cut away when the face ends there:
+/// - at a crease: at least [`CREASE_MIN_POINTS`] points of other faces
+///   lie there, and their mean normal turns from the mean normal of the
+///   own face's points along that rim by at least [`CREASE_JUMP_DEG`] (a
+///   jump, where a smooth surface bending past [`super::grow::CREASE_DEG`] turns by
+///   a little from one point to the next), each side's normals agree
+///   ([`CREASE_COHERENCE`]), both run along [`CREASE_LENGTH`] of the
+///   chord, the points across rise from the plane at an angle of at
+///   least [`CREASE_STEEP`] of that jump ([`rise_angle`]), and the face across leaves the plane by over
+///   [`CREASE_RISE_EPS`] `ϵ` at the rim, and, under a jump of
+///   [`CREASE_SMOOTH_JUMP_DEG`], the two sides are not one smooth
+///   surface ([`smooth_across`]); the line is the two faces'
+///   line of intersection ([`crease_at`]);
+/// - at a border (a free edge, a hole): no point at all lies there, over
+///   a band at least [`BORDER_SPACINGS`] point spacings wide; or, where
+///   that band crosses the rim, the cloud holds fewer than
+///   [`BORDER_FILL`] of the points a face going on would put in it
+///   ([`BORDER_HALF_SPACINGS`], [`BORDER_HEIGHT`]); the line stands
+///   the mean gap of evenly spread points short of a straight border
+///   past the last point, at most [`CLIP_GAP_SPACINGS`] spacings.
+///
+/// The candidate cutting away the largest share of the disc is the
+/// first line, and the one cutting away the most of what the first
+/// keeps the second (a corner); then the first is chosen again, as the
+/// one cutting the most of what the second keeps.
+#[must_use]
+pub(super) fn clip_lines(
+    s: &Surface,
+    f: &Frame,
+    own: &[Near],
+    other: &[Near],
+    spacing: f32,
+) -> Clipped {
+    let mut lines = Lines::new(s, f, own, other, spacing);
+    let step = std::f32::consts::TAU / CLIP_DIRECTIONS as f32;
+    let candidates: Vec<(f32, ClipLine)> = (0..CLIP_DIRECTIONS)
+        .filter_map(|k| {
+            let t = step * k as f32;
+            lines.line_at(t).map(|l| (t, l))
+        })
+        .collect();
+    let Some((first, cut)) = lines.best(&candidates, &[]) else {
+        return Clipped::NONE;
+    };
+    if cut == 0 {
+        return Clipped::NONE;
+    }
+    let one = Clipped {
+        lines: Clip::one(first),
+        spill: 0.0,
+    };
+    let Some((mut second, c)) = lines.best(&candidates, &[first]) else {
+        return one;
+    };
+    if c == 0 {
+        return one;
+    }
+    // At a corner a line chosen alone may turn to take some of what the
+    // other cuts, pivoting on the corner's last point and overhanging
+    // its own edge at its far end: each is chosen again, in turns, as
+    // the line cutting the most of what the other keeps, until neither
+    // changes (both then follow their own edges).
+    let mut first = first;
+    for round in 0..CORNER_ROUNDS {
+        let kept_by = if round % 2 == 0 { second } else { first };
+        let Some((again, c)) = lines.best(&candidates, &[kept_by]) else {
+            break;
+        };
+        let old = if round % 2 == 0 {
+            &mut first
+        } else {
+            &mut second
+        };
+        if c == 0 || again == *old {
+            break;
+        }
+        *old = again;
+    }
+    // What a third line would cut of what the two keep: the face ends
+    // on a third side.
+    let spill = lines
+        .best(&candidates, &[first, second])
+        .map_or(0.0, |(_, c)| c as f32 / disc_grid().len() as f32);
+    Clipped {
+        lines: Clip::two(first, second),
+        spill,
+    }
+}
+
+/// The candidate lines of one splat ([`clip_lines`]), direction by
+/// direction.
+struct Lines<'a> {
+    s: &'a Surface<'a>,
+    /// The seed.
+    p: Vec3,
+    /// The metric radius.
+    r: f32,
+    own: &'a [Near],
+    other: &'a [Near],
+    /// The face's points (from the whole cloud) just past the rim.
+    beyond: Vec<Near>,
+    /// The point spacing, in radii.
+    spacing: f32,
+    jump_cos: f32,
+    /// Scratch: the own face's points along the rim, and those across.
+    rim: Vec<Near>,
+    across: Vec<Near>,
+}
+
+impl<'a> Lines<'a> {
+    fn new(
+        s: &'a Surface<'a>,
+        f: &Frame,
+        own: &'a [Near],
+        other: &'a [Near],
+        spacing: f32,
+    ) -> Self {
+        // The face's points round the rim, from the whole cloud (the graph
+        // holds only a ring one neighbour deep): where one lies just past
+        // the last inside point along a direction, the face goes on there.
+        let reach = 1.0 + (BORDER_SPACINGS + BORDER_HALF_SPACINGS) * spacing;
+        let centre = f.p + f.n * f.hc + f.a * (f.shift.x * f.aspect) + f.b * f.shift.y;
+        let ball = reach * f.r * f.aspect;
+        let beyond: Vec<Near> = s
+            .tree
+            .within_unsorted::<kiddo::SquaredEuclidean>(&centre.to_array(), ball * ball)
+            .into_iter()
+            .filter(|q| s.normals[q.item as usize].dot(f.n) > s.face_cos)
+            .map(|q| f.near(s.points, q.item as usize))
+            .filter(|m| m.h.abs() <= BORDER_HEIGHT && m.q.length_squared() > 1.0)
+            .collect();
+        Lines {
+            s,
+            p: f.p,
+            r: f.r,
+            own,
+            other,
+            beyond,
+            spacing,
+            jump_cos: CREASE_JUMP_DEG.to_radians().cos(),
+            rim: Vec::new(),
+            across: Vec::new(),
+        }
+    }
+
+    /// The line cutting the disc in direction `t` (radians), if the face
+    /// ends there.
+    fn line_at(&mut self, t: f32) -> Option<ClipLine> {
+        let w = Vec2::new(t.cos(), t.sin());
+        let ext = self.own.iter().map(|m| w.dot(m.q)).fold(f32::MIN, f32::max);
+        let spacing = self.spacing;
+        self.across.clear();
+        self.across.extend(self.other.iter().filter(|m| {
+            let s = w.dot(m.q);
+            s >= ext - spacing && s <= ext + 2.0 * spacing && (m.q - w * s).length_squared() <= 1.0
+        }));
+        let d = if self.across.is_empty() {
+            self.border(w, ext)?
+        } else if self.across.len() >= CREASE_MIN_POINTS {
+            self.crease(w, ext)?
+        } else {
+            return None;
+        };
+        (d > -1.0 && d < 1.0).then_some(ClipLine { a: w.x, b: w.y, d })
+    }
+
+    /// A border along `w` past the own face's last point at `ext`: a band
+    /// wide enough inside the disc; or, where it crosses the rim, none of
+    /// the face's points past the rim in it. The line's offset.
+    fn border(&self, w: Vec2, ext: f32) -> Option<f32> {
+        let spacing = self.spacing;
+        let band = ext + BORDER_SPACINGS * spacing;
+        let open = band < 1.0 || {
+            let half = (1.0 - ext * ext)
+                .max(0.0)
+                .sqrt()
+                .max(BORDER_HALF_SPACINGS * spacing);
+            let count = self
+                .beyond
+                .iter()
+                .filter(|m| {
+                    let s = w.dot(m.q);
+                    s > ext && s <= band && w.perp_dot(m.q).abs() <= half
+                })
+                .count();
+            // The band's area outside the disc (a grid's share of
+            // it), over spacing²: what a face going on puts there.
+            const N: usize = 8;
+            let outside = (0..N * N)
+                .filter(|k| {
+                    let s = ext + (band - ext) * ((k % N) as f32 + 0.5) / N as f32;
+                    let t = half * (2.0 * ((k / N) as f32 + 0.5) / N as f32 - 1.0);
+                    s * s + t * t > 1.0
+                })
+                .count() as f32
+                / (N * N) as f32;
+            let expected = outside * (band - ext) * 2.0 * half / (spacing * spacing);
+            (count as f32) < BORDER_FILL * expected
+        };
+        // Points spread evenly (one per spacing²) along a chord
+        // of length L lie a mean spacing²/L short of a straight
+        // border: the line stands there, never farther than
+        // CLIP_GAP_SPACINGS.
+        let chord = 2.0 * (1.0 - ext * ext).max(0.0).sqrt();
+        let gap = (spacing * spacing / chord.max(spacing)).min(CLIP_GAP_SPACINGS * spacing);
+        (open && ext + gap < 1.0).then_some(ext + gap)
+    }
+
+    /// A crease along `w` past the own face's last point at `ext`, between
+    /// the own face's points along the rim and those `across`: the line's
+    /// offset.
+    fn crease(&mut self, w: Vec2, ext: f32) -> Option<f32> {
+        let (inp, spacing) = (self.s, self.spacing);
+        self.rim.clear();
+        self.rim.extend(
+            self.own
+                .iter()
+                .filter(|m| w.dot(m.q) >= ext - 1.5 * spacing),
+        );
+        let (rim, across) = (&self.rim, &self.across);
+        let (m_rim, c_rim) = mean_normal(rim, inp.normals);
+        let (m_across, c_across) = mean_normal(across, inp.normals);
+        // Both sides run along the line over most of its chord.
+        let chord = 2.0 * (1.0 - ext * ext).max(0.0).sqrt();
+        let along = |pts: &[Near]| {
+            let (lo, hi) = pts
+                .iter()
+                .map(|m| w.perp_dot(m.q))
+                .fold((f32::MAX, f32::MIN), |(lo, hi), x| (lo.min(x), hi.max(x)));
+            hi - lo
+        };
+        if m_rim.dot(m_across) > self.jump_cos
+            || c_rim < CREASE_COHERENCE
+            || c_across < CREASE_COHERENCE
+            || along(across) < CREASE_LENGTH * chord
+            || along(rim) < CREASE_LENGTH * chord
+        {
+            return None;
+        }
+        // Only where the face across leaves the disc's plane
+        // by more than ϵ at its rim: a gentler crease, or one
+        // near the rim, the whole disc stands within ϵ of.
+        // A face across, not facets of one surface: its points
+        // rise from the plane at an angle that goes with the jump.
+        let jump = m_rim.dot(m_across).clamp(-1.0, 1.0).acos();
+        if rise_angle(across, w) < CREASE_STEEP * jump {
+            return None;
+        }
+        let (c, slope) = crease_at(across, w, ext, spacing);
+        if ((1.0 - c) * self.r).abs() < slope.abs() * CREASE_RISE_EPS * inp.epsilon {
+            return None;
+        }
+        // Facets of one smooth surface, not two faces: below
+        // CREASE_SMOOTH_JUMP_DEG, where one quadric fits both sides
+        // about as closely as a quadric and a plane apart.
+        if jump < CREASE_SMOOTH_JUMP_DEG.to_radians()
+            && smooth_across(self.own, across, m_rim + m_across, inp, self.p)
+        {
+            return None;
+        }
+        Some(c)
+    }
+
+    /// Of the lines found in `lines` (direction, line), the one cutting the
+    /// most of what `kept` keeps, with how many of [`disc_grid`]'s points it
+    /// cuts of it.
+    ///
+    /// The best of the coarse directions, then turned by up to half a
+    /// step either way to the line cutting the most: a straight border
+    /// or crease between two coarse directions is met along its length,
+    /// not touched at one end and overhung at the other. "Most" is the
+    /// area cut away of what `kept` keeps (the disc as a polygon): a
+    /// grid's count cannot tell a line along a border from one turned a
+    /// few degrees to pivot on the last point at its end, and overhang
+    /// the border at the other.
+    fn best(&mut self, lines: &[(f32, ClipLine)], kept: &[ClipLine]) -> Option<(ClipLine, usize)> {
+        let step = std::f32::consts::TAU / CLIP_DIRECTIONS as f32;
+        let base = kept
+            .iter()
+            .fold(disc_polygon().to_vec(), |poly, k| clip_polygon(&poly, *k));
+        let whole = polygon_area(&base);
+        let cut = |l: &ClipLine| whole - polygon_area(&clip_polygon(&base, *l));
+        let (t, coarse) = lines
+            .iter()
+            .map(|(t, l)| (*t, (*l, cut(l))))
+            .max_by(|x, y| more(&x.1, &y.1))?;
+        let fine = (-REFINE_STEPS..=REFINE_STEPS)
+            .filter(|&j| j != 0)
+            .filter_map(|j| {
+                let l = self.line_at(t + step * j as f32 / (2 * REFINE_STEPS) as f32)?;
+                Some((l, cut(&l)))
+            })
+            .max_by(more);
+        let (l, _) = match fine {
+            Some(f) if more(&f, &coarse).is_gt() => f,
+            _ => coarse,
+        };
+        let keeps = |q: Vec2| kept.iter().all(|k| k.keeps(q.x, q.y));
+        let cuts = disc_grid()
+            .iter()
+            .filter(|q| keeps(**q) && !l.keeps(q.x, q.y))
+            .count();
+        Some((l, cuts))
+    }
+}
+
+/// Which of two (line, area cut) cuts more; of equal cuts, the line
+/// standing nearer the centre.
+fn more(x: &(ClipLine, f32), y: &(ClipLine, f32)) -> std::cmp::Ordering {
+    x.1.total_cmp(&y.1).then(y.0.d.total_cmp(&x.0.d))
+}
