@@ -16,8 +16,9 @@
 use glam::{DVec3, Vec3};
 use splatray::accel::{CandidateHits, Ray, registry};
 use splatray::embree::{Device, TriangleScene};
-use splatray::freespace::{generate_trimmed, sight_line};
+use splatray::freespace::sight_line;
 use splatray::io::{read_mesh, read_points};
+use splatray::pipeline::generate_uncoloured;
 use splatray::resolve::{Resolved, ShadingMode, resolve_within};
 use splatray::splat::knn::{Knn, build_tree};
 use splatray::splat::{SplatParams, Viewpoints, denoise, normals, outliers};
@@ -150,7 +151,7 @@ fn main() {
         stats("point normal error deg", ang);
     }
 
-    let (splats, _rep, _trim) = generate_trimmed(&train, &sp, None).unwrap();
+    let splats = generate_uncoloured(&train, &sp, None).unwrap().splats;
     let backend = registry::renderers()[0].build_splats(&splats).unwrap();
     let window = 3.0 * splatray::splat::standoff::standoff(&splats);
     let mut hits = CandidateHits::new(window);

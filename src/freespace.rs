@@ -15,9 +15,7 @@ use crate::accel::octree::{Octree, OctreeParams};
 use crate::accel::{Backend, CandidateHits, Ray};
 use crate::primitive::{ClippedDisc, Disc, Primitive};
 use crate::splat::knn::{PointTree, build_tree};
-use crate::splat::{
-    PointCloud, Splat, SplatParams, SplatReport, Viewpoints, generate_with_progress, outliers,
-};
+use crate::splat::{PointCloud, Splat, SplatParams, SplatReport, Viewpoints, outliers};
 use crate::{Error, Result};
 use glam::{Vec2, Vec3};
 use kiddo::SquaredEuclidean;
@@ -435,20 +433,23 @@ pub fn trim(
     report
 }
 
-/// Splat generation ([`generate_with_progress`]) followed, when the
-/// parameters carry a viewpoint, by free-space trimming against the
-/// cloud's points (its outliers left out, as generation leaves them out).
+/// Free-space trimming, the pipeline's stage after growth
+/// ([`crate::pipeline::generate`]): when the parameters carry a viewpoint,
+/// `splats` (generated from `cloud` with `params`, `report` their report)
+/// are trimmed against the cloud's lines of sight (its outliers left out,
+/// as generation leaves them out). `None` without a viewpoint.
 ///
 /// # Errors
-/// As [`generate_with_progress`].
-pub fn generate_trimmed(
+/// A viewpoint that is not finite.
+pub(crate) fn trim_free_space(
     cloud: &PointCloud,
     params: &SplatParams,
+    splats: &mut [Splat],
+    report: &mut SplatReport,
     progress: Option<crate::progress::Progress<'_>>,
-) -> Result<(Vec<Splat>, SplatReport, Option<TrimReport>)> {
-    let (mut splats, mut report) = generate_with_progress(cloud, params, progress)?;
+) -> Result<Option<TrimReport>> {
     let Some(vp) = crate::splat::viewpoints_of(cloud, params) else {
-        return Ok((splats, report, None));
+        return Ok(None);
     };
     if !vp.is_finite() {
         return Err(Error::invalid("the viewpoint must be finite"));
@@ -460,14 +461,10 @@ pub fn generate_trimmed(
              VIEWPOINT), so no splat was trimmed (give --viewpoint, or --no-viewpoint)",
             100.0 * away
         ));
-        return Ok((
-            splats,
-            report,
-            Some(TrimReport {
-                skipped: true,
-                ..TrimReport::default()
-            }),
-        ));
+        return Ok(Some(TrimReport {
+            skipped: true,
+            ..TrimReport::default()
+        }));
     }
     crate::progress::notify(progress, "free space", 0.0);
     let flags = if params.remove_outliers {
@@ -520,7 +517,7 @@ pub fn generate_trimmed(
         whole_discs: cloud.colors.is_some() && params.color_fields,
         ..misses
     };
-    let t = trim(&mut splats, &points, &vp, &misses, margin);
+    let t = trim(splats, &points, &vp, &misses, margin);
     if t.skipped {
         report.warnings.push(format!(
             "{:.1} % of the lines of sight from the viewpoint are blocked: it does not look like \
@@ -528,7 +525,7 @@ pub fn generate_trimmed(
             100.0 * t.blocked as f64 / t.rays.max(1) as f64
         ));
     }
-    Ok((splats, report, Some(t)))
+    Ok(Some(t))
 }
 
 #[cfg(test)]

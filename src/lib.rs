@@ -12,6 +12,7 @@ pub mod geometry;
 pub mod io;
 pub mod memory;
 pub mod names;
+pub mod pipeline;
 pub mod primitive;
 pub mod progress;
 pub mod render;

@@ -259,8 +259,8 @@ fn e57_scans_are_placed_by_their_poses_and_seen_from_their_scanners() {
             / splats.len() as f64
     };
     let params = splatray::splat::SplatParams::default();
-    let (splats_per_scan, report, trim) =
-        splatray::freespace::generate_trimmed(&cloud, &params, None).unwrap();
+    let g = splatray::pipeline::generate(&cloud, &params, None).unwrap();
+    let (splats_per_scan, report, trim) = (g.splats, g.report, g.trim);
     assert!(
         report.facing_away.unwrap() < 0.01,
         "{:?}",
@@ -276,7 +276,9 @@ fn e57_scans_are_placed_by_their_poses_and_seen_from_their_scanners() {
         viewpoint: Some(s.positions[0]),
         ..params
     };
-    let (splats, _, _) = splatray::freespace::generate_trimmed(&cloud, &one, None).unwrap();
+    let splats = splatray::pipeline::generate(&cloud, &one, None)
+        .unwrap()
+        .splats;
     let o = outward(&splats);
     assert!((0.3..0.7).contains(&o), "outward {o}");
     eprintln!(
@@ -544,12 +546,9 @@ fn an_e57_file_from_the_reference_library_reads_and_renders() {
             .max_element()
             < 1e-4
     );
-    let (splats, _, trim) = splatray::freespace::generate_trimmed(
-        &cloud,
-        &splatray::splat::SplatParams::default(),
-        None,
-    )
-    .unwrap();
+    let g = splatray::pipeline::generate(&cloud, &splatray::splat::SplatParams::default(), None)
+        .unwrap();
+    let (splats, trim) = (g.splats, g.trim);
     let centre = (CENTRE - cloud.origin).as_vec3();
     let outward = splats
         .iter()

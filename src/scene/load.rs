@@ -576,8 +576,13 @@ fn generate_splats(
         ..crate::splat::GenerationOptions::default()
     }
     .params(cloud);
-    let (mut splats, report, trim) = crate::freespace::generate_trimmed(cloud, &params, progress)?;
-    let (fields, _) = crate::splat::color::fit_cloud(&mut splats, cloud, &params);
+    let crate::pipeline::Generated {
+        splats,
+        report,
+        trim,
+        color_fields: fields,
+        ..
+    } = crate::pipeline::generate(cloud, &params, progress)?;
     if let Some(t) = trim.filter(|t| t.shrunk > 0) {
         load.warnings.push(format!(
             "{} splats shrunk off {} blocked lines of sight from the viewpoint and {} of the \

@@ -177,6 +177,10 @@ pub struct StageSeconds {
     pub grow: f64,
     /// Normal-field fitting and the coverage check.
     pub fit: f64,
+    /// Free-space trimming (`crate::pipeline`; 0 without a viewpoint).
+    pub trim: f64,
+    /// Colour fields (`crate::pipeline`; 0 without colours).
+    pub colors: f64,
     /// All of the above (the caller adds `read`).
     pub total: f64,
 }
@@ -674,6 +678,8 @@ pub fn generate_with_progress(
         normals: (t2 - t1).as_secs_f64(),
         grow: (t3 - t2).as_secs_f64(),
         fit: (t4 - t3).as_secs_f64(),
+        trim: 0.0,
+        colors: 0.0,
         total: (t4 - t0).as_secs_f64(),
     };
     Ok((splats, report))

@@ -13,7 +13,7 @@
 //!    file of every tile whose core-plus-halo box holds it (positions as
 //!    f32 offsets from the tile's centre, normals and colours carried).
 //! 4. **Generate**, tile by tile: the tile's points become a cloud, splats
-//!    are generated as for any cloud ([`generate_trimmed`]: outliers,
+//!    are generated as for any cloud ([`crate::pipeline::generate`]: outliers,
 //!    normals, orientation, growth, fields, free-space trimming) with the
 //!    shared `ϵ`, and a splat is kept when its centre lies in the tile's
 //!    core. The result is a splat file per tile, written atomically: a rerun

@@ -7,7 +7,6 @@ use super::spill::{read_spill, spill_path};
 use super::{
     BYTES_PER_POINT, FIXED_BYTES, NORMALS_REACH_EPS, Stage, TILES_IN_FLIGHT, TiledOptions, data_err,
 };
-use crate::freespace::generate_trimmed;
 use crate::io::{IoError, encode_splats_layout, write_bytes};
 use crate::progress::{Progress, notify};
 use crate::splat::color::ColorField;
@@ -59,18 +58,15 @@ pub(super) fn generate_tile(
         let tile_params = SplatParams {
             epsilon_abs: Some(plan.epsilon),
             viewpoint: cloud.viewpoint,
+            color_fields: with_fields,
             ..params.clone()
         };
-        let generated = generate_trimmed(&cloud, &tile_params, progress);
+        let generated = crate::pipeline::generate(&cloud, &tile_params, progress);
         match generated {
-            Ok((mut splats, report, _)) => {
+            Ok(g) => {
+                let (splats, mut fields) = (g.splats, g.color_fields);
                 summary.grown = splats.len();
-                summary.warnings = report.warnings;
-                let mut fields = if with_fields {
-                    crate::splat::color::fit_cloud(&mut splats, &cloud, &tile_params).0
-                } else {
-                    Vec::new()
-                };
+                summary.warnings = g.report.warnings;
                 fields.resize(splats.len(), ColorField::ZERO);
                 for (s, f) in splats.into_iter().zip(fields) {
                     let world = cloud.origin + s.center.as_dvec3();

@@ -4,7 +4,7 @@
 //! coverage asks whether they lie on the splats at all, which a coverage
 //! measured on the points the splats were grown from cannot fail to do.
 
-use crate::freespace::generate_trimmed;
+use crate::pipeline::{Generated, generate_uncoloured};
 use crate::rng::SplitMix64;
 use crate::splat::{PointCloud, SplatParams, count_on_splats, outliers};
 use crate::{Error, Result};
@@ -93,12 +93,12 @@ pub struct HeldOutCoverage {
 }
 
 /// Grows splats from `cloud` without `fraction` of its points (as
-/// [`generate_trimmed`] would from all of them) and tests the held-out
+/// [`generate_uncoloured`] would from all of them) and tests the held-out
 /// points against them: the share lying on a splat (see
 /// [`crate::splat::on_splat`]).
 ///
 /// # Errors
-/// As [`split`] and [`generate_trimmed`].
+/// As [`split`] and [`generate_uncoloured`].
 pub fn heldout_coverage(
     cloud: &PointCloud,
     params: &SplatParams,
@@ -106,7 +106,7 @@ pub fn heldout_coverage(
     seed: u64,
 ) -> Result<HeldOutCoverage> {
     let s = split(cloud, params, fraction, seed)?;
-    let (splats, report, _) = generate_trimmed(&s.train, params, None)?;
+    let Generated { splats, report, .. } = generate_uncoloured(&s.train, params, None)?;
     let tolerance = report.cover_tolerance();
     let found = count_on_splats(&s.test, &splats, tolerance as f32);
     Ok(HeldOutCoverage {
@@ -217,7 +217,7 @@ fn in_core(windows: &[Window], p: Vec3) -> bool {
 /// tested against them.
 ///
 /// # Errors
-/// As [`split`] and [`generate_trimmed`].
+/// As [`split`] and [`generate_uncoloured`].
 pub fn heldout_coverage_windows(
     cloud: &PointCloud,
     params: &SplatParams,
@@ -262,7 +262,7 @@ pub fn heldout_coverage_windows(
         ..params.clone()
     };
     let s = split(&local, &windowed, fraction, seed)?;
-    let (splats, report, _) = generate_trimmed(&s.train, &windowed, None)?;
+    let Generated { splats, report, .. } = generate_uncoloured(&s.train, &windowed, None)?;
     let tolerance = report.cover_tolerance();
     let test: Vec<Vec3> = s
         .test

@@ -121,8 +121,12 @@ pub fn photo_check(
         viewpoint: Some(Vec3::ZERO),
         ..splat.clone()
     };
-    let (mut splats, _, _) = crate::freespace::generate_trimmed(&cloud, &params, None)?;
-    let (fields, constant) = crate::splat::color::fit_cloud(&mut splats, &cloud, &params);
+    let crate::pipeline::Generated {
+        splats,
+        color_fields: fields,
+        constant_color_fields: constant,
+        ..
+    } = crate::pipeline::generate(&cloud, &params, None)?;
     let color_fields = fields.len() - constant;
     let camera = Camera::look_at_intrinsics(
         Vec3::ZERO,

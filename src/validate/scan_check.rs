@@ -7,7 +7,8 @@
 use super::holdout;
 use crate::accel::CandidateHits;
 use crate::accel::registry;
-use crate::freespace::{TrimReport, generate_trimmed, sight_line};
+use crate::freespace::{TrimReport, sight_line};
+use crate::pipeline::{Generated, generate};
 use crate::resolve::{Resolved, ShadingMode, resolve_within};
 use crate::splat::{PointCloud, SplatParams, SplatReport};
 use crate::{Error, Result};
@@ -169,7 +170,12 @@ pub fn scan_check(
     train.viewpoint = Some(vp);
     let held_len = split.held_out;
     let t0 = Instant::now();
-    let (splats, generation, trim) = generate_trimmed(&train, &sp, progress)?;
+    let Generated {
+        splats,
+        report: generation,
+        trim,
+        ..
+    } = generate(&train, &sp, progress)?;
     let t1 = Instant::now();
     let info = &registry::renderers()[0];
     let backend = info.build_splats(&splats)?;

@@ -8,14 +8,13 @@
 //! failure leaves neither. Options are plain values and the outcome a
 //! typed, serialisable report: the command line only parses and prints.
 
-use crate::freespace::{TrimReport, generate_trimmed};
+use crate::freespace::TrimReport;
 use crate::io::{
     Batch, Format, RADIUS_PER_SIGMA, Source, encode_splats, encode_splats_with, file_layout,
     is_piped,
 };
 use crate::progress::{Progress, notify};
 use crate::render::output::{check_extension, check_writable};
-use crate::splat::color::fit_cloud;
 use crate::splat::{PointCloud, SplatParams, SplatReport};
 use crate::tiled::{BYTES_PER_POINT, Stage, TiledOptions, TiledReport, Tiling, generate_tiled};
 use crate::validate::holdout::{
@@ -219,12 +218,11 @@ fn points(
     let cloud = source.read_points()?;
     let read = t0.elapsed().as_secs_f64();
     let params = req.generation.params(&cloud);
-    let (mut splats, mut generation, trim) = generate_trimmed(&cloud, &params, progress)
+    let generated = crate::pipeline::generate(&cloud, &params, progress)
         .map_err(|e| e.context(source.path().display()))?;
-    notify(progress, "colour fields", 0.0);
-    let t_colors = Instant::now();
-    let (fields, zero_fields) = fit_cloud(&mut splats, &cloud, &params);
-    let colors_seconds = t_colors.elapsed().as_secs_f64();
+    let (splats, mut generation, trim) = (generated.splats, generated.report, generated.trim);
+    let (fields, zero_fields) = (generated.color_fields, generated.constant_color_fields);
+    let colors_seconds = generation.seconds.colors;
     let heldout = HeldOut::measure(req, &cloud, &params, generation.epsilon, progress);
     generation.seconds.read = read;
     generation.seconds.total += read;

@@ -408,12 +408,9 @@ pub fn splat(
     let cb = Callback::new(progress);
     let out = py.detach(|| {
         let report_to = |s: &str, f: f64| cb.report(s, f);
-        let (mut splats, report, trim) =
-            splatray::freespace::generate_trimmed(cloud, &p, Some(&report_to))?;
-        cb.report("colour fields", 0.0);
-        let (fields, _) = splatray::splat::color::fit_cloud(&mut splats, cloud, &p);
-        let json = serde_json::json!({ "generation": report, "trim": trim });
-        Ok::<_, splatray::Error>((splats, fields, json.to_string()))
+        let g = splatray::pipeline::generate(cloud, &p, Some(&report_to))?;
+        let json = serde_json::json!({ "generation": g.report, "trim": g.trim });
+        Ok::<_, splatray::Error>((g.splats, g.color_fields, json.to_string()))
     });
     cb.finish()?;
     let (splats, color_fields, report) = out.map_err(err)?;
