@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """The import graph of src/: which file names which, and its circles.
 
-Usage: python3 scripts/imports.py [--graph] [SRC]   (SRC defaults to src)
+Usage: python3 scripts/imports.py [--graph] [--no-up DIR]... [--forbid A:B]... [SRC]
+(SRC defaults to src)
 
 Every path a file's code names (`use crate::a::b`, `super::c::f(..)`,
 `crate::d::E` inline; comments and unit-test modules are not counted) is resolved to the deepest
@@ -10,6 +11,12 @@ makes an arrow from the naming file to the named one. A module's own
 file (mod.rs, lib.rs) stands above the files of its folder: its arrows
 down to them (`pub use child::X`, `mod child;`) are not counted, theirs up
 to it are. The binary's main.rs names the library as `splatray::`.
+
+`--no-up DIR`: no file in SRC/DIR/ names SRC/DIR/mod.rs (the folder's
+facade): its files name each other and what lies below them, never back
+up through the module they make. `--forbid A:B`: no file in A (a folder
+or a file, without `.rs`) names one in B (`io:splat`: reading and writing
+know nothing of generation).
 
 Exits 1, naming each circle (a set of files each reaching the others),
 when there is one; 0 with a one-line summary otherwise. `--graph` prints
@@ -156,9 +163,36 @@ def circles(arrows: dict) -> list:
     return out
 
 
+def rule_breaks(arrows: dict, no_up: list, forbid: list) -> list:
+    """Arrows that break a `--no-up` or `--forbid` rule, described."""
+    def under(f, d):
+        return f == d + ".rs" or f.startswith(d.rstrip("/") + "/")
+
+    out = []
+    for a in sorted(arrows):
+        for b in sorted(arrows[a]):
+            for d in no_up:
+                facade = d.rstrip("/") + "/mod.rs"
+                if under(a, d) and a != facade and b == facade:
+                    out.append(f"{a} -> {b} runs back up through {d}'s facade")
+            for x, y in forbid:
+                if under(a, x) and under(b, y):
+                    out.append(f"{a} -> {b}: {x} may not name {y}")
+    return out
+
+
 def main(argv):
     show = "--graph" in argv
-    args = [a for a in argv if a != "--graph"]
+    no_up, forbid, args = [], [], []
+    it = iter(a for a in argv if a != "--graph")
+    for a in it:
+        if a == "--no-up":
+            no_up.append(next(it))
+        elif a == "--forbid":
+            x, _, y = next(it).partition(":")
+            forbid.append((x, y))
+        else:
+            args.append(a)
     src = Path(args[0] if args else "src")
     if not src.is_dir():
         print(f"imports.py: no folder {src}", file=sys.stderr)
@@ -170,12 +204,16 @@ def main(argv):
                 print(f"{a} -> {b}")
     found = circles(arrows)
     n = sum(len(v) for v in arrows.values())
-    if found:
-        for c in found:
-            ties = [f"{a} -> {b}" for a in c for b in sorted(arrows.get(a, ())) if b in c]
-            print(f"circle of {len(c)} files: {', '.join(c)} ({'; '.join(ties)})")
+    broken = rule_breaks(arrows, no_up, forbid)
+    for c in found:
+        ties = [f"{a} -> {b}" for a in c for b in sorted(arrows.get(a, ())) if b in c]
+        print(f"circle of {len(c)} files: {', '.join(c)} ({'; '.join(ties)})")
+    for b in broken:
+        print(b)
+    if found or broken:
         return 1
-    print(f"{len(arrows)} files, {n} arrows, no circle")
+    rules = len(no_up) + len(forbid)
+    print(f"{len(arrows)} files, {n} arrows, no circle" + (f", {rules} rules kept" if rules else ""))
     return 0
 
 

@@ -5,6 +5,7 @@
 
 pub mod accel;
 pub mod config;
+pub mod data;
 pub mod embree;
 pub mod error;
 pub mod freespace;

@@ -10,11 +10,11 @@ use super::Backend;
 use super::brute::Brute;
 use super::embree::EmbreeBackend;
 use super::octree::{Layout, Octree, OctreeParams, OverlapTest};
+use crate::data::Splat;
 use crate::embree::Device;
 use crate::error::Result;
 use crate::primitive::{ClippedDisc, Disc, Primitive};
 use crate::simd::Isa;
-use crate::splat::Splat;
 
 /// What a registered backend is for: which commands and suites use it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -19,7 +19,7 @@
 
 use super::batch::{BATCH, PointBatch, StreamInfo};
 use super::{IoErrorKind, PointCloud, cloud_from_world, srgb_to_linear};
-use crate::splat::Scans;
+use crate::data::Scans;
 use e57::{CartesianCoordinate, E57Reader, E57Writer, Record, RecordValue};
 use glam::{DQuat, DVec3, Vec3};
 use std::io::{Cursor, Read, Seek};

@@ -23,7 +23,8 @@
 use super::ply::{PlyFile, require_scalars, scalar};
 use super::splat_ply::SplatSet;
 use super::{IoError, IoErrorKind, linear_to_srgb, srgb_to_linear};
-use crate::splat::{Clip, NormalField, Splat};
+use crate::data::{NormalField, Splat};
+use crate::primitive::clip::Clip;
 use glam::{DVec3, Mat3, Quat, Vec2, Vec3};
 use ply_rs_bw::ply::{Header, Property, PropertyAccess};
 use std::path::Path;

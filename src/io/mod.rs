@@ -30,7 +30,7 @@ mod splat_ply;
 mod stream;
 mod xyz;
 
-pub use crate::splat::PointCloud;
+pub use crate::data::PointCloud;
 pub use any::{CloudRead, is_splat_ply, read_any};
 pub use atomic::{Batch, write_atomic, write_bytes};
 pub use batch::{PointBatch, StreamInfo};
@@ -359,7 +359,7 @@ pub(crate) fn cloud_from_world(
             colors.map(|c| kept(&c, &keep)),
         )
     };
-    let origin = crate::splat::frame::robust_centre_size(world.len(), |i| world[i])
+    let origin = crate::data::robust_centre_size(world.len(), |i| world[i])
         .map_or(DVec3::ZERO, |(centre, _)| centre);
     let positions: Vec<Vec3> = world.iter().map(|p| (*p - origin).as_vec3()).collect();
     if let Some(i) = positions.iter().position(|p| !p.is_finite()) {

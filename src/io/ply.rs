@@ -554,7 +554,7 @@ pub(crate) fn read_mesh(bytes: &[u8]) -> Result<Mesh, IoErrorKind> {
     )?;
     // Re-centred in f64 before single precision, as a point cloud is.
     let finite: Vec<DVec3> = world.iter().copied().filter(|p| p.is_finite()).collect();
-    let origin = crate::splat::frame::robust_centre_size(finite.len(), |i| finite[i])
+    let origin = crate::data::robust_centre_size(finite.len(), |i| finite[i])
         .map_or(DVec3::ZERO, |(centre, _)| centre);
     let positions: Vec<Vec3> = world.iter().map(|p| (*p - origin).as_vec3()).collect();
     let n = positions.len();

@@ -23,8 +23,9 @@
 
 use super::ply::{PlyFile, scalar};
 use super::{IoError, IoErrorKind, write_bytes};
-use crate::splat::color::ColorField;
-use crate::splat::{Clip, ClipLine, NormalField, Splat};
+use crate::data::ColorField;
+use crate::data::{NormalField, Splat};
+use crate::primitive::clip::{Clip, ClipLine};
 use glam::{DVec3, Vec2, Vec3};
 use ply_rs_bw::ply::{Property, PropertyAccess};
 use std::path::Path;

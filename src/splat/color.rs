@@ -12,8 +12,9 @@
 //! models that carry colours and ask for them: a scene without them pays
 //! nothing.
 
+use super::generate::SplatParams;
 use super::knn::{PointTree, build_tree};
-use super::{PointCloud, Splat, SplatParams};
+use crate::data::{PointCloud, Splat};
 use glam::{DVec3, Vec3};
 use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
@@ -27,41 +28,7 @@ pub const MIN_COLOR_POINTS: usize = 6;
 /// disc does not.
 pub const COLOR_PLANE_REACH: f64 = 0.25;
 
-/// The change of a splat's linear RGB colour across its disc: `du` from
-/// its centre to the rim along `u_axis`, `dv` along `v_axis`.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct ColorField {
-    /// Colour change per unit of the normalised coordinate `u`.
-    pub du: Vec3,
-    /// Colour change per unit of the normalised coordinate `v`.
-    pub dv: Vec3,
-}
-
-impl ColorField {
-    /// No change: the splat's constant colour.
-    pub const ZERO: ColorField = ColorField {
-        du: Vec3::ZERO,
-        dv: Vec3::ZERO,
-    };
-
-    /// The colour of `splat` with this field at world point `p` (on or
-    /// near its plane), clamped to `[0, 1]`; beyond the rim (within the
-    /// blending window of §4.3) the field is held at the rim's value.
-    #[must_use]
-    pub fn at(&self, splat: &Splat, p: Vec3) -> Vec3 {
-        let d = p - splat.center;
-        let (mut u, mut v) = (
-            d.dot(splat.u_axis) / splat.radii.x,
-            d.dot(splat.v_axis) / splat.radii.y,
-        );
-        let r2 = u * u + v * v;
-        if r2 > 1.0 {
-            let s = r2.sqrt().recip();
-            (u, v) = (u * s, v * s);
-        }
-        (splat.color + self.du * u + self.dv * v).clamp(Vec3::ZERO, Vec3::ONE)
-    }
-}
+pub use crate::data::ColorField;
 
 /// The least-squares field of `splat` over the `(u, v, colour)` samples of
 /// the points it covers, with the constant part: `(c, field)`; `None` with

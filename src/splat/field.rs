@@ -1,7 +1,8 @@
 //! Phong normal fields (§4.1–4.2, eq. 4), fitted by least squares.
 
+use super::clip::{Clip, ClipLine};
 use super::knn::PointTree;
-use super::{Clip, ClipLine, NormalField, Splat};
+use crate::data::{NormalField, Splat};
 use glam::{DVec3, Vec3};
 use kiddo::SquaredEuclidean;
 use rayon::prelude::*;

@@ -1,7 +1,6 @@
 //! Points in, splats out: the whole splat generation pipeline of §2 and §4
 //! behind one call, [`generate`].
 
-use super::Splat;
 use super::denoise;
 use super::field;
 use super::frame::{UnitFrame, first_unusable};
@@ -10,7 +9,8 @@ use super::holes::{median_radius, on_splat, uncovered_large};
 use super::knn::{Knn, build_tree};
 use super::normals;
 use super::outliers;
-use super::{PointCloud, Viewpoints};
+use crate::data::Splat;
+use crate::data::{PointCloud, Viewpoints};
 use crate::progress::{Progress, notify};
 use glam::Vec3;
 use kiddo::SquaredEuclidean;
@@ -699,7 +699,7 @@ fn to_unit(
         colors: cloud.colors.clone(),
         skipped: cloud.skipped.clone(),
         viewpoint: cloud.viewpoint.map(|v| frame.unit_viewpoint(v)),
-        scans: cloud.scans.as_ref().map(|s| super::Scans {
+        scans: cloud.scans.as_ref().map(|s| crate::data::Scans {
             positions: s
                 .positions
                 .iter()

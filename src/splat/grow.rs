@@ -2,7 +2,8 @@
 
 use super::knn::{Knn, PointTree};
 use super::rim::{self, Clipped, Near};
-use super::{NormalField, Splat, tangent_frame};
+use crate::data::{NormalField, Splat};
+use crate::geometry::tangent_frame;
 use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use std::cmp::Reverse;

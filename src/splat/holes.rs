@@ -10,8 +10,8 @@
 //! holds. The centre-based rule of growth (`grow::HOLLOW_SHARE`) catches a
 //! ring round an empty middle, not a disc whose centre sits on its seed.
 
-use super::Splat;
 use super::knn::{Knn, PointTree};
+use crate::data::Splat;
 use glam::{Vec2, Vec3};
 use kiddo::SquaredEuclidean;
 use kiddo::immutable::float::kdtree::ImmutableKdTree;

@@ -101,7 +101,7 @@ pub fn estimate_multiscale(
     points: &[Vec3],
     tree: &super::knn::PointTree,
     knn: &Knn,
-    viewpoint: Option<&super::Viewpoints>,
+    viewpoint: Option<&crate::data::Viewpoints>,
 ) -> Estimated {
     use kiddo::SquaredEuclidean;
     use std::num::NonZero;
@@ -810,7 +810,7 @@ pub fn orient(
     knn: &Knn,
     normals: &mut [Vec3],
     fixed: &[bool],
-    viewpoint: Option<&super::Viewpoints>,
+    viewpoint: Option<&crate::data::Viewpoints>,
 ) {
     let n = points.len();
     if n == 0 {
@@ -995,7 +995,7 @@ fn face_viewpoint(
     points: &[Vec3],
     normals: &mut [Vec3],
     fixed: &[bool],
-    vp: &super::Viewpoints,
+    vp: &crate::data::Viewpoints,
     parent: &mut [u32],
 ) {
     let n = points.len();

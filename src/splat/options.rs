@@ -1,8 +1,8 @@
 //! Splat generation's options as a user gives them, and the one place
 //! they become [`SplatParams`].
 
-use super::cloud::PointCloud;
 use super::generate::{Creases, SplatParams};
+use crate::data::PointCloud;
 use glam::DVec3;
 
 /// Splat generation's options as given (what `splat`, `scan-check`, a

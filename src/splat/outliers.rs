@@ -3,8 +3,8 @@
 //! the scan sampled (a spurious return, a mixed pixel far behind an edge),
 //! and would grow a giant splat.
 
-use super::Viewpoints;
 use super::knn::{Knn, build_tree};
+use crate::data::Viewpoints;
 use glam::Vec3;
 use rayon::prelude::*;
 

@@ -37,9 +37,9 @@
 //! add false ones: the bunny's ears (docs/development.md, "the noisy scan,
 //! round 4").
 
-use super::Splat;
 use super::clip::{Clip, ClipLine};
 use super::knn::PointTree;
+use crate::data::Splat;
 use glam::{Vec2, Vec3};
 use kiddo::SquaredEuclidean;
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
@@ -198,13 +198,13 @@ impl Near<'_> {
         tree.within_unsorted::<SquaredEuclidean>(&s.center.to_array(), r * r)
             .into_iter()
             .map(|nb| points[nb.item as usize])
-            .filter(|&x| super::on_splat(&was, x, tol) && !super::on_splat(s, x, tol))
+            .filter(|&x| super::holes::on_splat(&was, x, tol) && !super::holes::on_splat(s, x, tol))
             .any(|x| {
                 !self
                     .tree
                     .within_unsorted::<SquaredEuclidean>(&x.to_array(), self.r_max * self.r_max)
                     .into_iter()
-                    .any(|nb| super::on_splat(&self.splats[nb.item as usize], x, tol))
+                    .any(|nb| super::holes::on_splat(&self.splats[nb.item as usize], x, tol))
             })
     }
 

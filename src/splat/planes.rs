@@ -42,9 +42,9 @@
 //! A face's splats grow larger than the noise let them (the one-station
 //! scan: 3,293 splats instead of 11,460), up to `grow::FACE_RADIUS_FACTOR`.
 
-use super::cloud::Viewpoints;
 use super::fit::{COLLINEAR, normal_equations, plane_fit, solve6};
 use super::knn::Knn;
+use crate::data::Viewpoints;
 use glam::Vec3;
 
 /// A point joins a face within this many times the face tolerance of

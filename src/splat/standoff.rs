@@ -2,8 +2,8 @@
 //! their normals: the depth the blending window of §4.3 must reach to
 //! gather them (`docs/DESIGN.md`, "Tolerances").
 
-use super::Splat;
 use super::knn::build_tree;
+use crate::data::Splat;
 use glam::Vec3;
 use kiddo::SquaredEuclidean;
 use rayon::prelude::*;

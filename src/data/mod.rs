@@ -1,0 +1,14 @@
+//! The data splatray holds: point clouds (positions, normals, colours,
+//! scanners) and splats (discs with normal, colour and clip fields). They
+//! sit below everything that reads, makes, traces or writes them: `io`
+//! reads and writes them, `splat` generates splats from clouds, `accel`
+//! and `render` trace splats, and none of those needs another to name the
+//! types.
+
+mod cloud;
+mod robust;
+mod splat;
+
+pub use cloud::{PointCloud, Scans, Viewpoints};
+pub use robust::robust_centre_size;
+pub use splat::{ColorField, NormalField, Splat};
