@@ -480,132 +480,28 @@ pub fn face_normals(
 ) -> (usize, Vec<bool>) {
     let flat_faces = flat != FlatFaces::Off;
     let strong = flat == FlatFaces::Strong;
-    use std::num::NonZero;
     let n = points.len();
-    let Some(m) = NonZero::new((knn.k * WIDE_FACTOR + 1).min(n)) else {
+    let m = (knn.k * WIDE_FACTOR + 1).min(n);
+    if m == 0 {
         return (0, vec![false; n]);
+    }
+    let search = FaceSearch {
+        points,
+        tree,
+        old: normals,
+        tol,
+        m,
+        flat_faces,
+        strong,
     };
-    let old: &[Vec3] = normals;
     let new: Vec<Option<(Vec3, Kind, Vec<u32>)>> = (0..n)
         .into_par_iter()
         .with_min_len(512)
-        .map_init(super::knn::Nearest::new, |nearest, i| {
+        .map_init(FaceScratch::default, |scratch, i| {
             if fixed[i] {
                 return None;
             }
-            let (p, n0) = (points[i], old[i]);
-            let found = nearest.query(tree, p, m.get());
-            let near: Vec<usize> = found
-                .iter()
-                .map(|f| f.1 as usize)
-                .filter(|&j| j != i)
-                .collect();
-            let wide: Vec<Vec3> = near.iter().map(|&j| points[j] - p).collect();
-            let holds = |c: Vec3| wide.iter().filter(|d| c.dot(**d).abs() <= tol).count();
-            let held = holds(n0);
-            let flat_at = (FACE_HOLDS * wide.len() as f32).ceil() as usize;
-            // A normal tilted by the noise tilts its plane off the flat face
-            // the point lies on: the plane fitted to the whole neighbourhood
-            // is tried too.
-            let tilted = if strong && held < flat_at {
-                let (_, vals, vecs) = plane_fit(wide.iter().copied());
-                let m = vecs[0].as_vec3();
-                let m = if m.dot(n0) < 0.0 { -m } else { m };
-                (m.is_finite() && vals[1] > COLLINEAR * vals[2] && holds(m) >= flat_at).then_some(m)
-            } else {
-                None
-            };
-            if held >= flat_at || tilted.is_some() {
-                if !flat_faces {
-                    return None;
-                }
-                let m = wide_plane(&wide, tilted.unwrap_or(n0), tol)?;
-                let near: Vec<u32> = found
-                    .iter()
-                    .filter(|f| f.1 as usize != i)
-                    .zip(&wide)
-                    .filter(|(_, d)| m.dot(**d).abs() <= tol)
-                    .map(|(f, _)| f.1)
-                    .collect();
-                return Some((m, Kind::Flat, near));
-            }
-            // The point and its neighbours, nearest first; the plane holding
-            // the most of them, and the plane holding the most of the rest.
-            let all: Vec<Vec3> = std::iter::once(Vec3::ZERO)
-                .chain(wide.iter().copied())
-                .collect();
-            // One smooth surface curving past the plane's reach: the
-            // quadric holds nearly all of it closely, and no crease is
-            // searched (a smooth patch costs one quadric fit).
-            let quadric = super::fit::quadric_fit(&all, n0, tol);
-            if quadric.is_some_and(|q| q >= FACE_SMOOTH * all.len() as f32) {
-                return None;
-            }
-            let first = face_plane(&all, tol)?;
-            // (The current plane, through the point, holds it too.)
-            if first.held <= held + 1 {
-                return None;
-            }
-            let rest: Vec<Vec3> = all
-                .iter()
-                .copied()
-                .filter(|d| !first.holds(*d, tol))
-                .collect();
-            // Two faces, or one smooth surface curving past the plane's
-            // reach: the quadric fits it at least as closely as the two
-            // planes (MSAC's score of each, the second's at most one a
-            // point of the rest), and the normal stays.
-            let q = quadric.unwrap_or(f32::NEG_INFINITY);
-            if q >= first.fit + rest.len() as f32 {
-                return None;
-            }
-            let second = face_plane(&rest, tol).filter(|f| f.held >= FACE_MIN_POINTS);
-            let two = first.fit + second.map_or(0.0, |f| f.fit);
-            if q >= two {
-                return None;
-            }
-            // The point's own face: the nearer of the two planes (a point
-            // at an edge, put off both faces by range noise, takes one of
-            // them, not the plane between them).
-            let own = match second {
-                Some(f) if f.off(Vec3::ZERO) < first.off(Vec3::ZERO) => f,
-                _ => first,
-            };
-            if own.off(Vec3::ZERO) > FACE_REACH * tol {
-                return None;
-            }
-            let fitted = own.normal;
-            let fitted = if fitted.dot(n0) < 0.0 {
-                -fitted
-            } else {
-                fitted
-            };
-            // Turned by about a right angle, the old normal is the other
-            // face's and its side says nothing of this one's: the side comes
-            // from the edge instead.
-            let fitted = match second {
-                Some(f) if fitted.dot(n0).abs() < FACE_SIDE_COS => {
-                    let other = if own.origin == f.origin { first } else { f };
-                    side_across_edge(fitted, own, other, &wide, &near, old, tol).unwrap_or(fitted)
-                }
-                _ => fitted,
-            };
-            // Its neighbours on that face, whose flat normals it takes up
-            // (`smooth_flat`).
-            let face: Vec<u32> = found
-                .iter()
-                .filter(|f| f.1 as usize != i)
-                .zip(&wide)
-                .filter(|(_, d)| own.holds(**d, tol))
-                .map(|(f, _)| f.1)
-                .collect();
-            Some(if fitted.dot(n0) < FACE_TURN_DEG.to_radians().cos() {
-                (fitted, Kind::Turned, face)
-            } else if strong && crease_between(first, second, FLAT_EDGE_DEG) {
-                (fitted, Kind::Kept, face)
-            } else {
-                (n0, Kind::Kept, face)
-            })
+            search.face_at(scratch, i)
         })
         .collect();
     let mut changed = 0;
@@ -633,6 +529,171 @@ pub fn face_normals(
         .map(|f| matches!(f, Some((Kind::Flat, _))))
         .collect();
     (changed, flat)
+}
+
+/// What [`face_normals`] reads for every point.
+struct FaceSearch<'a> {
+    points: &'a [Vec3],
+    tree: &'a super::knn::PointTree,
+    /// The normals before (each point's `n0`).
+    old: &'a [Vec3],
+    tol: f32,
+    /// The wide neighbourhood's size, the point included.
+    m: usize,
+    flat_faces: bool,
+    strong: bool,
+}
+
+/// One thread's buffers for [`FaceSearch::face_at`]: the bounded query
+/// and a point's neighbours (indices, offsets, offsets with the point's).
+#[derive(Default)]
+struct FaceScratch {
+    nearest: super::knn::Nearest,
+    near: Vec<usize>,
+    wide: Vec<Vec3>,
+    all: Vec<Vec3>,
+}
+
+impl FaceSearch<'_> {
+    /// Point `i`'s new normal, what kind of point it is, and its
+    /// neighbours on its face; `None` where it keeps its normal and lies on
+    /// no flat face ([`face_normals`]).
+    fn face_at(&self, scratch: &mut FaceScratch, i: usize) -> Option<(Vec3, Kind, Vec<u32>)> {
+        let tol = self.tol;
+        let (p, n0) = (self.points[i], self.old[i]);
+        let FaceScratch {
+            nearest,
+            near,
+            wide,
+            all,
+        } = scratch;
+        let found = nearest.query(self.tree, p, self.m);
+        near.clear();
+        near.extend(found.iter().map(|f| f.1 as usize).filter(|&j| j != i));
+        wide.clear();
+        wide.extend(near.iter().map(|&j| self.points[j] - p));
+        let holds = |c: Vec3| wide.iter().filter(|d| c.dot(**d).abs() <= tol).count();
+        let held = holds(n0);
+        let flat_at = (FACE_HOLDS * wide.len() as f32).ceil() as usize;
+        // A normal tilted by the noise tilts its plane off the flat face
+        // the point lies on: the plane fitted to the whole neighbourhood
+        // is tried too.
+        let tilted = if self.strong && held < flat_at {
+            let (_, vals, vecs) = plane_fit(wide.iter().copied());
+            let m = vecs[0].as_vec3();
+            let m = if m.dot(n0) < 0.0 { -m } else { m };
+            (m.is_finite() && vals[1] > COLLINEAR * vals[2] && holds(m) >= flat_at).then_some(m)
+        } else {
+            None
+        };
+        // The neighbours (not the point) whose offsets `keep`.
+        let on = |keep: &dyn Fn(Vec3) -> bool| -> Vec<u32> {
+            found
+                .iter()
+                .filter(|f| f.1 as usize != i)
+                .zip(wide.iter())
+                .filter(|(_, d)| keep(**d))
+                .map(|(f, _)| f.1)
+                .collect()
+        };
+        if held >= flat_at || tilted.is_some() {
+            if !self.flat_faces {
+                return None;
+            }
+            let m = wide_plane(wide, tilted.unwrap_or(n0), tol)?;
+            return Some((m, Kind::Flat, on(&|d| m.dot(d).abs() <= tol)));
+        }
+        // The point and its neighbours, nearest first.
+        all.clear();
+        all.push(Vec3::ZERO);
+        all.extend(wide.iter().copied());
+        let (fitted, own, crease) = self.edge_face(all, wide, near, n0, held)?;
+        // Its neighbours on that face, whose flat normals it takes up
+        // (`smooth_flat`).
+        let face = on(&|d| own.holds(d, tol));
+        Some(if fitted.dot(n0) < FACE_TURN_DEG.to_radians().cos() {
+            (fitted, Kind::Turned, face)
+        } else if self.strong && crease {
+            (fitted, Kind::Kept, face)
+        } else {
+            (n0, Kind::Kept, face)
+        })
+    }
+
+    /// A point off every flat face, with its neighbourhood `all` (the
+    /// point first, offsets from it), `wide` (without it) and `near` (their
+    /// indices), its normal `n0` whose plane holds `held`: the plane
+    /// holding the most of them, and the plane holding the most of the
+    /// rest. `None` where one smooth surface fits as well as the two
+    /// planes; else the normal of the point's own face (the nearer plane),
+    /// that plane, and whether the two meet at [`FLAT_EDGE_DEG`] or more.
+    fn edge_face(
+        &self,
+        all: &[Vec3],
+        wide: &[Vec3],
+        near: &[usize],
+        n0: Vec3,
+        held: usize,
+    ) -> Option<(Vec3, FacePlane, bool)> {
+        let tol = self.tol;
+        // One smooth surface curving past the plane's reach: the
+        // quadric holds nearly all of it closely, and no crease is
+        // searched (a smooth patch costs one quadric fit).
+        let quadric = super::fit::quadric_fit(all, n0, tol);
+        if quadric.is_some_and(|q| q >= FACE_SMOOTH * all.len() as f32) {
+            return None;
+        }
+        let first = face_plane(all, tol)?;
+        // (The current plane, through the point, holds it too.)
+        if first.held <= held + 1 {
+            return None;
+        }
+        let rest: Vec<Vec3> = all
+            .iter()
+            .copied()
+            .filter(|d| !first.holds(*d, tol))
+            .collect();
+        // Two faces, or one smooth surface curving past the plane's
+        // reach: the quadric fits it at least as closely as the two
+        // planes (MSAC's score of each, the second's at most one a
+        // point of the rest), and the normal stays.
+        let q = quadric.unwrap_or(f32::NEG_INFINITY);
+        if q >= first.fit + rest.len() as f32 {
+            return None;
+        }
+        let second = face_plane(&rest, tol).filter(|f| f.held >= FACE_MIN_POINTS);
+        let two = first.fit + second.map_or(0.0, |f| f.fit);
+        if q >= two {
+            return None;
+        }
+        // The point's own face: the nearer of the two planes (a point
+        // at an edge, put off both faces by range noise, takes one of
+        // them, not the plane between them).
+        let own = match second {
+            Some(f) if f.off(Vec3::ZERO) < first.off(Vec3::ZERO) => f,
+            _ => first,
+        };
+        if own.off(Vec3::ZERO) > FACE_REACH * tol {
+            return None;
+        }
+        let fitted = own.normal;
+        let fitted = if fitted.dot(n0) < 0.0 {
+            -fitted
+        } else {
+            fitted
+        };
+        // Turned by about a right angle, the old normal is the other
+        // face's and its side says nothing of this one's: the side comes
+        // from the edge instead.
+        let fitted = match second {
+            Some(f) if fitted.dot(n0).abs() < FACE_SIDE_COS => {
+                let other = if own.origin == f.origin { first } else { f };
+                side_across_edge(fitted, own, other, wide, near, self.old, tol).unwrap_or(fitted)
+            }
+            _ => fitted,
+        };
+        Some((fitted, own, crease_between(first, second, FLAT_EDGE_DEG)))
+    }
 }
 
 /// Whether the two planes of a point's neighbourhood meet at a crease of
