@@ -500,173 +500,17 @@ pub fn generate_with_progress(
     let (unit_cloud, unit_params) = to_unit(&frame, cloud, params);
     let (cloud, params) = (&unit_cloud, &unit_params);
     let mut report = start_report(cloud);
-    // --- clean, reorder, kNN -------------------------------------------------
     notify(progress, "neighbours", 0.0);
-    let order = clean_and_thin(cloud, raw, params, &mut report);
-    let mut w = neighbours(cloud, params, order, &mut report)?;
-    // --- outliers ------------------------------------------------------------
-    if params.remove_outliers {
-        drop_outliers(&mut w, &mut report);
-    }
-    let n = w.points.len();
-    let (lo, hi) = w.points.iter().fold(
-        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
-        |(a, b), p| (a.min(*p), b.max(*p)),
-    );
-    let diagonal = f64::from((hi - lo).length());
-    report.bbox_diagonal = diagonal;
+    let w = graph_stage(cloud, raw, params, &mut report)?;
     let t1 = Instant::now();
-    // --- normals ---------------------------------------------------------------
     notify(progress, "normals", 0.0);
-    let (nrm, fixed, to_estimate) = normals_of(&mut w, cloud, params, &mut report);
-    let epsilon = match params.epsilon_abs {
-        Some(e) => (e / frame.scale) as f32,
-        None => (f64::from(params.epsilon_rel) * diagonal) as f32,
-    };
-    report.epsilon = f64::from(epsilon);
-    let mut nrm = nrm;
-    let Work {
-        mut points,
-        colors,
-        mut tree,
-        knn,
-        sights,
-        ..
-    } = w;
-    // The points as read, for the check that a crease cut leaves none of
-    // them off every splat (`partners::meet_partners`), kept only where
-    // denoising moved them (12 bytes a point through growth).
-    let mut read = (params.creases != Creases::Off).then(|| points.clone());
-    let mut read_tree = None;
-    if onto_local_surfaces(
-        &mut points,
-        &mut nrm,
-        &fixed,
-        to_estimate,
-        &knn,
-        &mut report,
-    ) {
-        read_tree = Some(std::mem::replace(&mut tree, build_tree(&points)));
-    } else {
-        read = None;
-    }
-    let mut strong = false;
-    let mut flat = Vec::new();
-    let mut on_face = Vec::new();
-    let creases = params.creases.found(knn.k > params.k);
-    if params.creases == Creases::Auto && !creases {
-        report.warnings.push(
-            "creases not searched: the nearest neighbours lie along scan lines, whose gaps look \
-             like borders (--creases searches them anyway)"
-                .into(),
-        );
-    }
-    if creases && to_estimate > 0 {
-        // Creases on: each point's normal from its own face where an edge
-        // is near (`normals::face_normals`), its plane holding the points
-        // within a quarter ϵ of it, or three times the noise. Where the
-        // noise sets that tolerance, flat faces take their normals from
-        // their wide planes, and their fields stay constant unless a
-        // gradient stands out of the noise (`field::fit_field`).
-        let by_eps = normals::FACE_TOL_EPS * epsilon;
-        let by_noise = normals::FACE_TOL_NOISE * report.noise as f32;
-        let tol = by_eps.max(by_noise);
-        let faces = normals::FlatFaces::from_tolerances(by_eps, by_noise);
-        strong = faces == normals::FlatFaces::Strong;
-        flat = normals::face_normals(&points, &tree, &knn, &mut nrm, &fixed, tol, faces).1;
-        if strong {
-            // Under strong noise, whole flat faces fitted, their points
-            // moved onto them along their lines of sight (`splat::planes`).
-            let found = super::planes::fit_faces(
-                &mut points,
-                &mut nrm,
-                &fixed,
-                &mut flat,
-                &knn,
-                super::planes::FACE_TOL * tol,
-                sights.as_ref(),
-            );
-            report.flat_faces = found.faces;
-            report.face_points = found.points;
-            if found.points > 0 {
-                tree = build_tree(&points);
-            }
-            on_face = found.on_face;
-        }
-    }
+    let surface = surface_stage(w, cloud, params, &frame, &mut report);
     let t2 = Instant::now();
-    // --- growth --------------------------------------------------------------
-    let input = GrowInput {
-        points: &points,
-        normals: &nrm,
-        colors: colors.as_deref(),
-        knn: &knn,
-        tree: &tree,
-        // The requested k: a graph widened for scan lines is for joining
-        // the lines, not for the no-holes radius.
-        cover: params.k.min(knn.k),
-        epsilon,
-        density: params.density,
-        ellipses: params.ellipses,
-        creases,
-        on_face: &on_face,
-    };
-    let grown = grow_all(&input, |i| {
-        notify(progress, "growing splats", i as f64 / n as f64);
-    });
-    let mut splats = grown.splats;
-    let mut covered = grown.covered;
-    if creases {
-        // Clip partners: crease lines onto the planes of the splats across
-        // them; under strong noise, whole discs such a line crosses cut.
-        let cover = report.cover_tolerance() as f32;
-        let read = read.as_deref().unwrap_or(&points);
-        let met = super::partners::meet_partners(
-            &mut splats,
-            epsilon,
-            strong,
-            (read, read_tree.as_ref().unwrap_or(&tree), cover),
-        );
-        report.partner_lines = met.moved;
-        report.partner_cut = met.cut;
-    }
-    // No disc over a hole: large splats their points cover less than half
-    // of shrunk to what they cover, the points they leave bare given
-    // splats of their own (`splat::holes`).
-    let holes = super::holes::shrink_uncovered(
-        &mut splats,
-        &mut covered,
-        (&points, &nrm, colors.as_deref()),
-        &tree,
-        &knn,
-        knn.k > params.k,
-        epsilon,
-    );
-    report.shrunk_over_holes = holes.shrunk;
-    report.added_for_holes = holes.added;
+    let (mut splats, covered, elliptical) = growth_stage(&surface, params, progress, &mut report);
     let t3 = Instant::now();
-    // --- fields and coverage ---------------------------------------------------
     notify(progress, "normal fields", 0.0);
-    report.fallback_normal_fields = field::fit_all(
-        &mut splats,
-        params.field_radius_factor,
-        &tree,
-        &points,
-        &nrm,
-        &flat,
-    );
-    report.coverage = coverage(&points, &covered, &splats, epsilon);
-    report.splats = splats.len();
-    report.elliptical_splats = grown.elliptical;
-    report.clipped = splats.iter().filter(|s| s.is_clipped()).count();
-    report.largest_over_spacing = largest_over_spacing(&splats, &tree, &knn);
-    report.hollow_large_splats = hollow_large(&splats, &tree);
-    report.uncovered_large_splats = uncovered_large(&splats, &tree, &knn, knn.k > params.k);
-    report.mean_radius = splats
-        .iter()
-        .map(|s| 0.5 * f64::from(s.radii.x + s.radii.y))
-        .sum::<f64>()
-        / splats.len().max(1) as f64;
+    fields_stage(&mut splats, &covered, &surface, params, &mut report);
+    report.elliptical_splats = elliptical;
     // Back to the cloud's units, and nothing that single precision cannot
     // hold leaves here.
     from_unit(&frame, &mut splats, &mut report)?;
@@ -683,6 +527,254 @@ pub fn generate_with_progress(
         total: (t4 - t0).as_secs_f64(),
     };
     Ok((splats, report))
+}
+
+/// The first stage: the cloud (in the unit frame; `raw` as read) cleaned,
+/// thinned and reordered, its neighbourhood graph, its statistical
+/// outliers left out, and the bounding box's diagonal in the report.
+fn graph_stage(
+    cloud: &PointCloud,
+    raw: &PointCloud,
+    params: &SplatParams,
+    report: &mut SplatReport,
+) -> Result<Work, GenerateError> {
+    let order = clean_and_thin(cloud, raw, params, report);
+    let mut w = neighbours(cloud, params, order, report)?;
+    if params.remove_outliers {
+        drop_outliers(&mut w, report);
+    }
+    let (lo, hi) = w.points.iter().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(a, b), p| (a.min(*p), b.max(*p)),
+    );
+    report.bbox_diagonal = f64::from((hi - lo).length());
+    Ok(w)
+}
+
+/// The surface growth reads: points (moved onto their local surfaces
+/// where noise scatters them), oriented normals, faces and creases.
+struct Surface {
+    points: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    colors: Option<Vec<Vec3>>,
+    /// The kd-tree over `points`.
+    tree: super::knn::PointTree,
+    knn: Knn,
+    /// The points as read, and their tree, where denoising moved them
+    /// (for `partners::meet_partners`).
+    read: Option<(Vec<Vec3>, super::knn::PointTree)>,
+    /// Which points lie on a flat face (for `field::fit_field`).
+    flat: Vec<bool>,
+    /// Which lie on a whole flat face fitted under strong noise.
+    on_face: Vec<bool>,
+    /// Strong noise (`normals::FlatFaces::Strong`).
+    strong: bool,
+    /// Creases searched.
+    creases: bool,
+    /// `ϵ` in the unit frame.
+    epsilon: f32,
+}
+
+/// The second stage: normals, denoising, and with creases each point's
+/// own face (`normals::face_normals`) and, under strong noise, whole flat
+/// faces (`splat::planes`).
+fn surface_stage(
+    mut w: Work,
+    cloud: &PointCloud,
+    params: &SplatParams,
+    frame: &UnitFrame,
+    report: &mut SplatReport,
+) -> Surface {
+    let (mut nrm, fixed, to_estimate) = normals_of(&mut w, cloud, params, report);
+    let epsilon = match params.epsilon_abs {
+        Some(e) => (e / frame.scale) as f32,
+        None => (f64::from(params.epsilon_rel) * report.bbox_diagonal) as f32,
+    };
+    report.epsilon = f64::from(epsilon);
+    let Work {
+        mut points,
+        colors,
+        mut tree,
+        knn,
+        sights,
+        ..
+    } = w;
+    // The points as read, for the check that a crease cut leaves none of
+    // them off every splat (`partners::meet_partners`), kept only where
+    // denoising moved them (12 bytes a point through growth).
+    let mut read = None;
+    let before = (params.creases != Creases::Off).then(|| points.clone());
+    if onto_local_surfaces(&mut points, &mut nrm, &fixed, to_estimate, &knn, report) {
+        let read_tree = std::mem::replace(&mut tree, build_tree(&points));
+        read = before.map(|b| (b, read_tree));
+    }
+    let mut surface = Surface {
+        points,
+        normals: nrm,
+        colors,
+        tree,
+        read,
+        flat: Vec::new(),
+        on_face: Vec::new(),
+        strong: false,
+        creases: params.creases.found(knn.k > params.k),
+        knn,
+        epsilon,
+    };
+    if params.creases == Creases::Auto && !surface.creases {
+        report.warnings.push(
+            "creases not searched: the nearest neighbours lie along scan lines, whose gaps look \
+             like borders (--creases searches them anyway)"
+                .into(),
+        );
+    }
+    if surface.creases && to_estimate > 0 {
+        faces_and_creases(&mut surface, &fixed, sights.as_ref(), report);
+    }
+    surface
+}
+
+/// With creases on: each point's normal from its own face where an edge is
+/// near (`normals::face_normals`), its plane holding the points within a
+/// quarter ϵ of it, or three times the noise. Where the noise sets that
+/// tolerance, flat faces take their normals from their wide planes, and
+/// their fields stay constant unless a gradient stands out of the noise
+/// (`field::fit_field`).
+fn faces_and_creases(
+    s: &mut Surface,
+    fixed: &[bool],
+    sights: Option<&Viewpoints>,
+    report: &mut SplatReport,
+) {
+    let by_eps = normals::FACE_TOL_EPS * s.epsilon;
+    let by_noise = normals::FACE_TOL_NOISE * report.noise as f32;
+    let tol = by_eps.max(by_noise);
+    let faces = normals::FlatFaces::from_tolerances(by_eps, by_noise);
+    s.strong = faces == normals::FlatFaces::Strong;
+    s.flat = normals::face_normals(
+        &s.points,
+        &s.tree,
+        &s.knn,
+        &mut s.normals,
+        fixed,
+        tol,
+        faces,
+    )
+    .1;
+    if s.strong {
+        // Under strong noise, whole flat faces fitted, their points
+        // moved onto them along their lines of sight (`splat::planes`).
+        let found = super::planes::fit_faces(
+            &mut s.points,
+            &mut s.normals,
+            fixed,
+            &mut s.flat,
+            &s.knn,
+            super::planes::FACE_TOL * tol,
+            sights,
+        );
+        report.flat_faces = found.faces;
+        report.face_points = found.points;
+        if found.points > 0 {
+            s.tree = build_tree(&s.points);
+        }
+        s.on_face = found.on_face;
+    }
+}
+
+/// The third stage: splats grown over the surface (§2.1–2.2), clipped
+/// where faces end, crease lines met across, and no disc left over a hole
+/// (`splat::holes`). The splats, which points they cover, and how many
+/// are elliptical.
+fn growth_stage(
+    s: &Surface,
+    params: &SplatParams,
+    progress: Option<Progress<'_>>,
+    report: &mut SplatReport,
+) -> (Vec<Splat>, Vec<bool>, usize) {
+    let n = s.points.len();
+    let input = GrowInput {
+        points: &s.points,
+        normals: &s.normals,
+        colors: s.colors.as_deref(),
+        knn: &s.knn,
+        tree: &s.tree,
+        // The requested k: a graph widened for scan lines is for joining
+        // the lines, not for the no-holes radius.
+        cover: params.k.min(s.knn.k),
+        epsilon: s.epsilon,
+        density: params.density,
+        ellipses: params.ellipses,
+        creases: s.creases,
+        on_face: &s.on_face,
+    };
+    let grown = grow_all(&input, |i| {
+        notify(progress, "growing splats", i as f64 / n as f64);
+    });
+    let mut splats = grown.splats;
+    let mut covered = grown.covered;
+    if s.creases {
+        // Clip partners: crease lines onto the planes of the splats across
+        // them; under strong noise, whole discs such a line crosses cut.
+        let cover = report.cover_tolerance() as f32;
+        let (read, read_tree) = match &s.read {
+            Some((p, t)) => (&p[..], t),
+            None => (&s.points[..], &s.tree),
+        };
+        let met = super::partners::meet_partners(
+            &mut splats,
+            s.epsilon,
+            s.strong,
+            (read, read_tree, cover),
+        );
+        report.partner_lines = met.moved;
+        report.partner_cut = met.cut;
+    }
+    // No disc over a hole: large splats their points cover less than half
+    // of shrunk to what they cover, the points they leave bare given
+    // splats of their own (`splat::holes`).
+    let holes = super::holes::shrink_uncovered(
+        &mut splats,
+        &mut covered,
+        (&s.points, &s.normals, s.colors.as_deref()),
+        &s.tree,
+        &s.knn,
+        s.knn.k > params.k,
+        s.epsilon,
+    );
+    report.shrunk_over_holes = holes.shrunk;
+    report.added_for_holes = holes.added;
+    (splats, covered, grown.elliptical)
+}
+
+/// The fourth stage: normal fields (§4.1, eq. 4) fitted, and what the
+/// report measures of the splats (coverage, sizes, large splats over holes).
+fn fields_stage(
+    splats: &mut [Splat],
+    covered: &[bool],
+    s: &Surface,
+    params: &SplatParams,
+    report: &mut SplatReport,
+) {
+    report.fallback_normal_fields = field::fit_all(
+        splats,
+        params.field_radius_factor,
+        &s.tree,
+        &s.points,
+        &s.normals,
+        &s.flat,
+    );
+    report.coverage = coverage(&s.points, covered, splats, s.epsilon);
+    report.splats = splats.len();
+    report.clipped = splats.iter().filter(|s| s.is_clipped()).count();
+    report.largest_over_spacing = largest_over_spacing(splats, &s.tree, &s.knn);
+    report.hollow_large_splats = hollow_large(splats, &s.tree);
+    report.uncovered_large_splats = uncovered_large(splats, &s.tree, &s.knn, s.knn.k > params.k);
+    report.mean_radius = splats
+        .iter()
+        .map(|s| 0.5 * f64::from(s.radii.x + s.radii.y))
+        .sum::<f64>()
+        / splats.len().max(1) as f64;
 }
 
 /// The cloud and parameters in the unit frame `frame` (positions,
