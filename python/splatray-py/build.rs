@@ -1,8 +1,12 @@
-//! The extension module finds Embree 4 where the splatray crate's build
+//! The extension module links Embree 4 where the splatray crate's build
 //! script found it (`EMBREE_DIR`, `pkg-config embree4`, the clone's
 //! `.embree/lib` from `scripts/setup.sh`) and records that folder as its
-//! rpath, so `import splatray` needs no `LD_LIBRARY_PATH` (the library's
-//! link search path reaches this crate; its rpath does not).
+//! rpath (the library's link search path reaches this crate; its rpath
+//! does not). That rpath is what `auditwheel repair`
+//! (scripts/python-package.sh) follows to find Embree and TBB; it copies
+//! them into the wheel's `splatray.libs/` and replaces the rpath with
+//! `$ORIGIN/../splatray.libs`, so the installed module uses those copies.
+//! `splatray info` (the command line compiled into the module) says so.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -35,8 +39,21 @@ fn main() {
         let d = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").ok()?).join("../../.embree/lib");
         has_embree(&d).then_some(d)
     };
-    if let Some(dir) = from_env.or_else(from_pkg).or_else(local) {
-        let dir = dir.canonicalize().unwrap_or(dir);
+    let found = from_env
+        .or_else(from_pkg)
+        .or_else(local)
+        .map(|d| d.canonicalize().unwrap_or(d));
+    if let Some(dir) = &found {
         println!("cargo:rustc-link-arg=-Wl,-rpath,{}", dir.display());
     }
+    // `splatray info`'s "found by" line: where the wheel's copy comes from.
+    println!(
+        "cargo:rustc-env=SPLATRAY_EMBREE_FOUND_BY=the wheel (splatray.libs, bundled by auditwheel repair)"
+    );
+    println!(
+        "cargo:rustc-env=SPLATRAY_EMBREE_LIB_DIR=copied at build time from {}",
+        found.map_or("the linker's default path".into(), |d| d
+            .display()
+            .to_string())
+    );
 }

@@ -1,6 +1,9 @@
-//! Subcommands of the `splatray` binary (a module of the binary: the
-//! library does not depend on it).
+//! Subcommands of the `splatray` command line (a module of the binary: the
+//! library does not depend on it). The Python package's native module
+//! (python/splatray-py) compiles this folder too, so its `splatray`
+//! command is this one ([`app::run`]).
 
+pub mod app;
 pub mod common;
 pub mod compare;
 pub mod export;

@@ -7,6 +7,11 @@
 
 mod arrays;
 mod cast;
+// The `splatray` command line, the binary's own source (not a copy): the
+// wheel's `splatray` command and `python -m splatray` call it through
+// `main` below.
+#[path = "../../../src/cli/mod.rs"]
+mod cli;
 mod progress;
 mod scene;
 mod splats;
@@ -26,6 +31,17 @@ pub(crate) fn err(e: impl std::fmt::Display) -> PyErr {
     SplatrayError::new_err(e.to_string())
 }
 
+/// `splatray ARGS...`: runs the command line with `argv` (the program's
+/// name first) as the `splatray` binary does, and returns its exit status.
+/// Its output goes to the process's stdout and stderr (progress on stderr);
+/// the GIL is released while it runs. A panic returns 101, the status of a
+/// binary that panicked, after the panic's message on stderr.
+#[pyfunction]
+#[pyo3(name = "main")]
+fn cli_main(py: Python<'_>, argv: Vec<std::ffi::OsString>) -> i32 {
+    py.detach(|| std::panic::catch_unwind(|| cli::app::run(argv)).map_or(101, i32::from))
+}
+
 /// The native module.
 #[pymodule]
 fn _splatray(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -42,5 +58,6 @@ fn _splatray(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(scene::read_image, m)?)?;
     m.add_function(wrap_pyfunction!(workflows::scan_check, m)?)?;
     m.add_function(wrap_pyfunction!(workflows::sweep, m)?)?;
+    m.add_function(wrap_pyfunction!(cli_main, m)?)?;
     Ok(())
 }

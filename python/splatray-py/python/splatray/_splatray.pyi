@@ -224,3 +224,11 @@ def sweep(
     and whether the backends agree bit for bit. `steps` (5 to 64) epsilons
     from `eps_coarse` to `eps_fine`, fractions of the bounding-box
     diagonal; bad options raise ValueError before any work."""
+
+def main(argv: list[str]) -> int:
+    """Runs the `splatray` command line (the binary's, compiled into this
+    module) with `argv`, the program's name first, and returns its exit
+    status (0; 1 after its one-line error; 2 after a usage error; 101 after
+    a panic). Output goes to the process's stdout and stderr. The
+    `splatray` command and `python -m splatray` call it
+    (`splatray.__main__.main`)."""

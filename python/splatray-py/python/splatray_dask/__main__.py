@@ -21,7 +21,8 @@ def _binary(given: str | None) -> str:
     found = shutil.which("splatray")
     if found:
         return found
-    sys.exit("splatray-dask: no splatray binary: give --binary (the clone's target/release/splatray)")
+    sys.exit("splatray-dask: no splatray binary: give --binary (the wheel's splatray command, "
+             "or a clone's target/release/splatray)")
 
 
 def main(argv: list[str] | None = None) -> int:
