@@ -1,5 +1,6 @@
 //! Splat growth (§2.1, eqs. 1–3) with density control (§2.2).
 
+use super::clip::Clip;
 use super::knn::{Knn, PointTree};
 use super::rim::{self, Clipped, Near};
 use crate::data::{NormalField, Splat};
@@ -752,36 +753,12 @@ impl<'a> Grower<'a> {
         let grown_r = growth.accepted.last().map_or(0.0, |a| a.1.sqrt()); // eq. (3)
         let mut frame = (tu, tv, 1.0f32);
         let mut r = grown_r.max(g.cover_radius(i, tu, tv, 1.0));
-        if inp.ellipses {
-            let samples: Vec<(f64, f64, f64)> = growth
-                .accepted
-                .iter()
-                .map(|&(j, _)| {
-                    let d = (inp.points[j as usize] - p).as_dvec3();
-                    (
-                        d.dot(tu.as_dvec3()),
-                        d.dot(tv.as_dvec3()),
-                        d.dot(n.as_dvec3()),
-                    )
-                })
-                .collect();
-            if let Some((ex, ey, ratio)) = min_curvature(&samples) {
-                let aspect = ratio.sqrt().clamp(1.0, 4.0) as f32;
-                if aspect > 1.25 {
-                    let a = (tu.as_dvec3() * ex + tv.as_dvec3() * ey)
-                        .as_vec3()
-                        .normalize();
-                    let b = n.cross(a);
-                    let e = g.run(i, a, b, aspect, max_d);
-                    let e_r = e.accepted.last().map_or(0.0, |a| a.1.sqrt());
-                    let rv = e_r.max(g.cover_radius(i, a, b, aspect));
-                    if aspect * rv * rv > r * r * 1.05 {
-                        growth = e;
-                        frame = (a, b, aspect);
-                        r = rv;
-                    }
-                }
-            }
+        if inp.ellipses
+            && let Some((e, f, rv)) = g.elliptical(i, (tu, tv), &growth, max_d, r)
+        {
+            growth = e;
+            frame = f;
+            r = rv;
         }
         if r.is_nan() || r <= 0.0 {
             r = 0.5 * d_k;
@@ -815,36 +792,8 @@ impl<'a> Grower<'a> {
 
             + a * (shift.x * aspect)
             + b * shift.y;
-        let mut color = DVec3::ZERO;
-        for &(j, _) in &growth.accepted {
-            if let Some(c) = inp.colors {
-                color += c[j as usize].as_dvec3();
-            }
-        }
-        // Density control (§2.2): every point reached that lies on this splat
-        // (within ϵ of its plane, inside its disc, facing the same way) is
-        // covered, and seeds nothing within the projected distance k·r.
-        let limit2 = (inp.density * r) * (inp.density * r);
-        let r2 = r * r;
-        let mut marks = Vec::new();
-        for &j in &growth.visited {
-            let d = inp.points[j as usize] - p;
-            let (x, y) = (a.dot(d) / aspect - shift.x, b.dot(d) - shift.y);
-            let d2 = x * x + y * y;
-            let on = d2 <= r2
-                && (n.dot(d) - hc).abs() <= inp.epsilon
-                && (j as usize == i || inp.normals[j as usize].dot(n) > 0.0)
-                && clip.keeps(x / r, y / r);
-            if on {
-                marks.push((j, d2 <= limit2));
-            }
-        }
-        let color = match inp.colors {
-            Some(_) if !growth.accepted.is_empty() => {
-                (color / growth.accepted.len() as f64).as_vec3()
-            }
-            _ => Vec3::ONE,
-        };
+        let color = mean_color(inp.colors, &growth);
+        let marks = density_marks(inp, i, &growth, frame, shift, r, hc, clip);
         let splat = Splat {
             center,
             normal: n,
@@ -861,6 +810,99 @@ impl<'a> Grower<'a> {
             elliptical: aspect > 1.0,
         }
     }
+}
+
+impl Grower<'_> {
+    /// The growth from seed `i` in its minimum-curvature direction (the
+    /// tangent frame `(tu, tv)`; curvature from the points `growth` took),
+    /// with its frame and radius, where its ellipse is elongated by over
+    /// 1.25 and covers over 5 % more than the disc of radius `r`.
+    fn elliptical(
+        &mut self,
+        i: usize,
+        (tu, tv): (Vec3, Vec3),
+        growth: &Growth,
+        max_d: f32,
+        r: f32,
+    ) -> Option<(Growth, (Vec3, Vec3, f32), f32)> {
+        let inp = self.inp;
+        let (p, n) = (inp.points[i], inp.normals[i]);
+        let samples: Vec<(f64, f64, f64)> = growth
+            .accepted
+            .iter()
+            .map(|&(j, _)| {
+                let d = (inp.points[j as usize] - p).as_dvec3();
+                (
+                    d.dot(tu.as_dvec3()),
+                    d.dot(tv.as_dvec3()),
+                    d.dot(n.as_dvec3()),
+                )
+            })
+            .collect();
+        let (ex, ey, ratio) = min_curvature(&samples)?;
+        let aspect = ratio.sqrt().clamp(1.0, 4.0) as f32;
+        if aspect <= 1.25 {
+            return None;
+        }
+        let a = (tu.as_dvec3() * ex + tv.as_dvec3() * ey)
+            .as_vec3()
+            .normalize();
+        let b = n.cross(a);
+        let e = self.run(i, a, b, aspect, max_d);
+        let e_r = e.accepted.last().map_or(0.0, |a| a.1.sqrt());
+        let rv = e_r.max(self.cover_radius(i, a, b, aspect));
+        (aspect * rv * rv > r * r * 1.05).then_some((e, (a, b, aspect), rv))
+    }
+}
+
+/// The mean colour of the points `growth` took (white without colours).
+fn mean_color(colors: Option<&[Vec3]>, growth: &Growth) -> Vec3 {
+    let mut color = DVec3::ZERO;
+    for &(j, _) in &growth.accepted {
+        if let Some(c) = colors {
+            color += c[j as usize].as_dvec3();
+        }
+    }
+    match colors {
+        Some(_) if !growth.accepted.is_empty() => (color / growth.accepted.len() as f64).as_vec3(),
+        _ => Vec3::ONE,
+    }
+}
+
+/// Density control (§2.2): every point `growth` reached that lies on the
+/// splat of seed `i` (frame `(a, b, aspect)`, centre at metric offset
+/// `shift`, metric radius `r`, plane at height `hc`, clip lines `clip`):
+/// within ϵ of its plane, inside its kept disc, facing the same way. Each
+/// is covered, and with `true` seeds nothing (it lies within the projected
+/// distance k·r).
+#[allow(clippy::too_many_arguments)]
+fn density_marks(
+    inp: &GrowInput,
+    i: usize,
+    growth: &Growth,
+    (a, b, aspect): (Vec3, Vec3, f32),
+    shift: Vec2,
+    r: f32,
+    hc: f32,
+    clip: Clip,
+) -> Vec<(u32, bool)> {
+    let (p, n) = (inp.points[i], inp.normals[i]);
+    let limit2 = (inp.density * r) * (inp.density * r);
+    let r2 = r * r;
+    let mut marks = Vec::new();
+    for &j in &growth.visited {
+        let d = inp.points[j as usize] - p;
+        let (x, y) = (a.dot(d) / aspect - shift.x, b.dot(d) - shift.y);
+        let d2 = x * x + y * y;
+        let on = d2 <= r2
+            && (n.dot(d) - hc).abs() <= inp.epsilon
+            && (j as usize == i || inp.normals[j as usize].dot(n) > 0.0)
+            && clip.keeps(x / r, y / r);
+        if on {
+            marks.push((j, d2 <= limit2));
+        }
+    }
+    marks
 }
 
 #[cfg(test)]
