@@ -307,25 +307,8 @@ impl FacePlane {
 /// `None`
 /// when no three are spread enough to fix a plane.
 fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
-    // The points by coordinate, so a plane's count runs over lanes (the
-    // same operations in the same order as `normal.dot(d - origin)`).
-    let (xs, ys, zs): (Vec<f32>, Vec<f32>, Vec<f32>) = (
-        pts.iter().map(|d| d.x).collect(),
-        pts.iter().map(|d| d.y).collect(),
-        pts.iter().map(|d| d.z).collect(),
-    );
-    let count = |normal: Vec3, origin: Vec3| {
-        let (nx, ny, nz) = (normal.x, normal.y, normal.z);
-        let (ox, oy, oz) = (origin.x, origin.y, origin.z);
-        xs.iter()
-            .zip(&ys)
-            .zip(&zs)
-            .map(|((x, y), z)| {
-                let h = (nx * (x - ox)) + (ny * (y - oy)) + (nz * (z - oz));
-                u32::from(h.abs() <= tol)
-            })
-            .sum::<u32>() as usize
-    };
+    let lanes = Lanes::of(pts);
+    let count = |normal: Vec3, origin: Vec3| lanes.count(normal, origin, tol);
     // Which points a plane holds, as a bit set (up to `HELD_BITS` points;
     // beyond, no set is kept and nothing is skipped below).
     let sets = pts.len() <= HELD_BITS;
@@ -345,27 +328,7 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
             .map(|d| (1.0 - (normal.dot(*d - origin) / tol).powi(2)).max(0.0))
             .sum::<f32>()
     };
-    let near = &pts[..FACE_TRIPLES.min(pts.len())];
-    let mut candidates: Vec<FacePlane> = Vec::new();
-    for (a, &pa) in near.iter().enumerate() {
-        for (b, &pb) in near.iter().enumerate().skip(a + 1) {
-            for &pc in &near[b + 1..] {
-                let (u, v) = (pb - pa, pc - pa);
-                let c = u.cross(v);
-                // Triples nearly in line fix no plane.
-                if c.length_squared() < 0.04 * u.length_squared() * v.length_squared() {
-                    continue;
-                }
-                let normal = c.normalize();
-                candidates.push(FacePlane {
-                    normal,
-                    origin: pa,
-                    held: count(normal, pa),
-                    fit: 0.0,
-                });
-            }
-        }
-    }
+    let mut candidates = triple_planes(&pts[..FACE_TRIPLES.min(pts.len())], &count);
     candidates.sort_by_key(|f| std::cmp::Reverse(f.held));
     candidates.truncate(FACE_REFITS);
     // Refitted to what a plane holds, twice: the first refit still leans
@@ -407,6 +370,66 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
             Some(b) if b.fit >= f.fit => Some(b),
             _ => Some(f),
         })
+}
+
+/// Points by coordinate, so a plane's count runs over lanes (the same
+/// operations in the same order as `normal.dot(d - origin)`).
+struct Lanes {
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+    zs: Vec<f32>,
+}
+
+impl Lanes {
+    fn of(pts: &[Vec3]) -> Lanes {
+        Lanes {
+            xs: pts.iter().map(|d| d.x).collect(),
+            ys: pts.iter().map(|d| d.y).collect(),
+            zs: pts.iter().map(|d| d.z).collect(),
+        }
+    }
+
+    /// How many lie within `tol` of the plane through `origin` with unit
+    /// `normal`.
+    fn count(&self, normal: Vec3, origin: Vec3, tol: f32) -> usize {
+        let (nx, ny, nz) = (normal.x, normal.y, normal.z);
+        let (ox, oy, oz) = (origin.x, origin.y, origin.z);
+        self.xs
+            .iter()
+            .zip(&self.ys)
+            .zip(&self.zs)
+            .map(|((x, y), z)| {
+                let h = (nx * (x - ox)) + (ny * (y - oy)) + (nz * (z - oz));
+                u32::from(h.abs() <= tol)
+            })
+            .sum::<u32>() as usize
+    }
+}
+
+/// The planes through three of `near` (those not nearly in line), each
+/// with the count `count` gives it, in the order of the triples.
+fn triple_planes(near: &[Vec3], count: &dyn Fn(Vec3, Vec3) -> usize) -> Vec<FacePlane> {
+    let mut candidates: Vec<FacePlane> = Vec::new();
+    for (a, &pa) in near.iter().enumerate() {
+        for (b, &pb) in near.iter().enumerate().skip(a + 1) {
+            for &pc in &near[b + 1..] {
+                let (u, v) = (pb - pa, pc - pa);
+                let c = u.cross(v);
+                // Triples nearly in line fix no plane.
+                if c.length_squared() < 0.04 * u.length_squared() * v.length_squared() {
+                    continue;
+                }
+                let normal = c.normalize();
+                candidates.push(FacePlane {
+                    normal,
+                    origin: pa,
+                    held: count(normal, pa),
+                    fit: 0.0,
+                });
+            }
+        }
+    }
+    candidates
 }
 
 /// [`face_plane`] keeps the set of points a plane holds for neighbourhoods

@@ -175,43 +175,15 @@ pub fn fit_faces(
                 }
             }
         }
-        let face = (members.len() >= MIN_FACE_POINTS)
-            .then(|| Plane::fit(&members, points, plane.normal))
-            .flatten()
-            .and_then(|plane| {
-                let spread = members
-                    .iter()
-                    .map(|&j| {
-                        normals[j as usize]
-                            .dot(plane.normal)
-                            .clamp(-1.0, 1.0)
-                            .acos()
-                    })
-                    .sum::<f32>()
-                    / members.len() as f32;
-                (spread <= FACE_SPREAD_DEG.to_radians()
-                    && flat_enough(&plane, members.iter().map(|&j| points[j as usize])))
-                .then_some(plane)
-            });
+        let face = accepted_face(&members, points, normals, plane.normal);
         match face {
-            Some(plane) => {
-                if found.on_face.is_empty() {
-                    found.on_face = vec![false; n];
-                }
-                for &j in &members {
-                    let ju = j as usize;
-                    points[ju] = plane.onto(points[ju], sights.map(|s| s.at(ju)));
-                    normals[ju] = if normals[ju].dot(plane.normal) < 0.0 {
-                        -plane.normal
-                    } else {
-                        plane.normal
-                    };
-                    flat[ju] = true;
-                    found.on_face[ju] = true;
-                }
-                found.faces += 1;
-                found.points += members.len();
-            }
+            Some(plane) => settle(
+                &plane,
+                &members,
+                (points, normals, flat),
+                sights,
+                &mut found,
+            ),
             None => {
                 for &j in &members {
                     label[j as usize] = TRIED;
@@ -220,6 +192,63 @@ pub fn fit_faces(
         }
     }
     found
+}
+
+/// The plane fitted to a face's `members` (starting from `normal`) where
+/// the face holds at least [`MIN_FACE_POINTS`], their normals spread by at
+/// most [`FACE_SPREAD_DEG`] about it on average and it is flat enough
+/// ([`flat_enough`]); `None` otherwise.
+fn accepted_face(
+    members: &[u32],
+    points: &[Vec3],
+    normals: &[Vec3],
+    normal: Vec3,
+) -> Option<Plane> {
+    if members.len() < MIN_FACE_POINTS {
+        return None;
+    }
+    let plane = Plane::fit(members, points, normal)?;
+    let spread = members
+        .iter()
+        .map(|&j| {
+            normals[j as usize]
+                .dot(plane.normal)
+                .clamp(-1.0, 1.0)
+                .acos()
+        })
+        .sum::<f32>()
+        / members.len() as f32;
+    (spread <= FACE_SPREAD_DEG.to_radians()
+        && flat_enough(&plane, members.iter().map(|&j| points[j as usize])))
+    .then_some(plane)
+}
+
+/// Every point of an accepted face moved onto its `plane` (along its line
+/// of sight where `sights` are known), its normal the plane's on its own
+/// side, marked flat and on a face; the face counted in `found`.
+fn settle(
+    plane: &Plane,
+    members: &[u32],
+    (points, normals, flat): (&mut [Vec3], &mut [Vec3], &mut [bool]),
+    sights: Option<&Viewpoints>,
+    found: &mut Faces,
+) {
+    if found.on_face.is_empty() {
+        found.on_face = vec![false; points.len()];
+    }
+    for &j in members {
+        let ju = j as usize;
+        points[ju] = plane.onto(points[ju], sights.map(|s| s.at(ju)));
+        normals[ju] = if normals[ju].dot(plane.normal) < 0.0 {
+            -plane.normal
+        } else {
+            plane.normal
+        };
+        flat[ju] = true;
+        found.on_face[ju] = true;
+    }
+    found.faces += 1;
+    found.points += members.len();
 }
 
 /// A plane through `origin` with unit `normal`.
