@@ -575,3 +575,84 @@ fn an_organised_capture_s_empty_pixels_trim_the_overhang() {
     );
     assert!(covered >= 0.99 && filled <= 0.006, "{r}");
 }
+
+/// A stereo rig's capture, NaN where it found no match: a wall 3 units
+/// away fills the image but for its right quarter, which looks past the
+/// wall's edge at nothing (NaN out to the image's edge), and small
+/// textureless patches in the wall's middle found no match (NaN, enclosed
+/// by the wall's pixels). The open NaN pixels are rays that met nothing
+/// and trim the wall's overhang past its edge; the enclosed ones prove no
+/// free space and trim nothing: the whole discs still cover the patches.
+#[test]
+fn a_stereo_capture_s_unmatched_pixels_trim_nothing() {
+    let dir = scratch("stereo-nan");
+    let [fx, fy, cx, cy] = K;
+    let patch = |u: usize, v: usize| {
+        [(40, 30), (70, 50), (100, 80), (30, 90)]
+            .iter()
+            .any(|&(pu, pv)| (pu..pu + PATCH).contains(&u) && (pv..pv + PATCH).contains(&v))
+    };
+    const PATCH: usize = 4;
+    const EDGE: usize = 120;
+    let ray = |u: usize, v: usize| DVec3::new((u as f64 - cx) / fx, (v as f64 - cy) / fy, 1.0);
+    let grid: Vec<Option<DVec3>> = (0..W * H)
+        .map(|i| {
+            let (u, v) = (i % W, i / W);
+            (u < EDGE && !patch(u, v)).then(|| ray(u, v) * 3.0)
+        })
+        .collect();
+    let pcd = dir.join("stereo.pcd");
+    // The sensor posed off the origin (a VIEWPOINT at the origin, looking
+    // along +z, is the format's default: no pose).
+    let (at, q) = (
+        DVec3::new(0.4, -0.2, 1.5),
+        DQuat::from_axis_angle(DVec3::new(0.3, 1.0, 0.1).normalize(), 0.4),
+    );
+    write_pcd(&pcd, &grid, |p| q * p + at, at, q);
+    let cloud = splatray::io::read_points(&pcd).unwrap();
+    let eye = cloud.viewpoint.unwrap();
+    let misses = cloud.misses.as_ref().expect("the open pixels' rays");
+    // Every miss looks past the wall's edge; none through a patch.
+    let past_edge = misses
+        .iter()
+        .map(|m| q.inverse() * m.as_dvec3())
+        .filter(|m| m.x / m.z > (EDGE as f64 - 0.5 - cx) / fx)
+        .count();
+    assert_eq!(past_edge, misses.len(), "misses through the wall's patches");
+    assert!(
+        misses.len() >= (W - EDGE - 1) * (H - 2),
+        "{} misses",
+        misses.len()
+    );
+    let hits_in = |params: &splatray::splat::SplatParams| {
+        let g = splatray::pipeline::generate(&cloud, params, None).unwrap();
+        let trim = g.trim.expect("trimmed from the viewpoint");
+        let backend = splatray::accel::registry::renderers()[0]
+            .build_splats(&g.splats)
+            .unwrap();
+        let covered = (0..W * H)
+            .filter(|&i| patch(i % W, i / W))
+            .filter(|&i| {
+                let d = (q * ray(i % W, i / W)).as_vec3();
+                let r = splatray::geometry::Ray::new(eye, d);
+                backend.occluded(&r, 0.0, 10.0)
+            })
+            .count();
+        (covered, trim)
+    };
+    let whole = splatray::splat::SplatParams {
+        creases: splatray::splat::Creases::Off,
+        viewpoint: Some(eye),
+        ..Default::default()
+    };
+    let (covered, trim) = hits_in(&whole);
+    eprintln!(
+        "stereo patches: {covered} of {} pixels covered; {trim:?}",
+        4 * PATCH * PATCH
+    );
+    assert_eq!(covered, 4 * PATCH * PATCH, "{trim:?}");
+    assert!(
+        trim.shrunk > 0,
+        "the overhang past the edge trimmed: {trim:?}"
+    );
+}

@@ -150,7 +150,17 @@ impl Organised {
     }
 
     /// The grid's empty cells with at least two empty neighbours
-    /// ([`grid_misses`]), as indices `row · width + column`.
+    /// ([`grid_misses`]) whose empty region reaches the grid's edge, as
+    /// indices `row · width + column`.
+    ///
+    /// An empty region the measured pixels enclose is left out: a stereo
+    /// rig leaves NaN where it found no match (a surface without texture,
+    /// a reflection), in the middle of a surface it did see, and a ray
+    /// through such a pixel proves no free space; trimming along it would
+    /// cut a hole in that surface. Free space past everything (a depth
+    /// camera's rays beyond its range, the background round an object)
+    /// runs out to the edge of the image. The cost: a true hole through an
+    /// object seen against nothing (a mug's handle) trims nothing.
     #[must_use]
     pub fn miss_cells(&self) -> Vec<usize> {
         let mut filled = vec![None; self.width * self.height];
@@ -159,7 +169,11 @@ impl Organised {
                 *f = Some(());
             }
         }
+        let open = open_to_edge(&filled, self.width, self.height);
         grid_misses(&filled, self.width, self.height)
+            .into_iter()
+            .filter(|&k| open[k])
+            .collect()
     }
 
     /// Unit direction, in the file's frame, of `pinhole`'s ray through cell
@@ -170,6 +184,38 @@ impl Organised {
         let (u, v) = ((k % w) as f64, (k / w) as f64);
         (self.orientation * pinhole.ray(u, v)).as_vec3()
     }
+}
+
+/// For each cell of a grid (`cols` × `rows`, row by row): is it empty and
+/// joined to the grid's edge through empty cells (four-neighbour steps)?
+fn open_to_edge<T>(grid: &[Option<T>], cols: usize, rows: usize) -> Vec<bool> {
+    let n = grid.len().min(cols * rows);
+    let mut open = vec![false; grid.len()];
+    let mut stack: Vec<usize> = (0..n)
+        .filter(|&k| {
+            let (c, r) = (k % cols, k / cols);
+            grid[k].is_none() && (c == 0 || r == 0 || c + 1 == cols || r + 1 == rows)
+        })
+        .collect();
+    for &k in &stack {
+        open[k] = true;
+    }
+    while let Some(k) = stack.pop() {
+        let (c, r) = (k % cols, k / cols);
+        let next = [
+            (c > 0).then(|| k - 1),
+            (c + 1 < cols).then(|| k + 1),
+            (r > 0).then(|| k - cols),
+            (r + 1 < rows).then(|| k + cols),
+        ];
+        for j in next.into_iter().flatten() {
+            if j < n && !open[j] && grid[j].is_none() {
+                open[j] = true;
+                stack.push(j);
+            }
+        }
+    }
+    open
 }
 
 /// The cells of a scan's grid (`cols` × `rows`, row by row) that hold no
