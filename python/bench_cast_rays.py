@@ -2,7 +2,12 @@
 against Open3D's RaycastingScene on the bunny mesh the splats were sampled
 from, and the Python call's overhead against the Rust call at 1M rays.
 
-    python python/bench_cast_rays.py [--rays 1000000] [--points 200000]
+    python python/bench_cast_rays.py [--rays 1000000] [--points 200000] [--camera 1024]
+
+Rows: random rays (from a sphere around the model), and --camera^2
+pinhole rays from one eye (sharing an origin: packets), each through
+cast_rays with every output, with the distance alone (when the package
+has optional outputs) and through occluded.
 
 needs the splatray wheel (scripts/python-package.sh) and the release
 binary (for `splatray sample`); Open3D is optional (a separate venv:
@@ -47,12 +52,32 @@ def rays_around(centre: np.ndarray, radius: float, n: int, seed: int = 1) -> np.
     return np.hstack([o, target - o]).astype(np.float32)
 
 
+def camera_rays(centre: np.ndarray, radius: float, side: int) -> np.ndarray:
+    """side x side pinhole rays (40 degrees) from one eye at 2 radii from
+    the centre, looking at it, row after row (they share an origin)."""
+    eye = centre + radius * np.array([0.35, 0.25, 0.9]) * 2 / np.linalg.norm([0.35, 0.25, 0.9])
+    fwd = (centre - eye) / np.linalg.norm(centre - eye)
+    right = np.cross(fwd, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+    s = np.tan(np.radians(20)) * ((np.arange(side) + 0.5) / side * 2 - 1)
+    x, y = np.meshgrid(s, -s)
+    d = fwd + x[..., None] * right + y[..., None] * up
+    o = np.broadcast_to(eye, d.shape)
+    return np.concatenate([o, d], axis=-1).reshape(-1, 6).astype(np.float32)
+
+
+def mrays(f, n: int, repeat: int) -> float:
+    return n / best(f, repeat) / 1e6
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--rays", type=int, default=1_000_000)
     ap.add_argument("--points", type=int, default=200_000)
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--binary", default=str(ROOT / "target" / "release" / "splatray"))
+    ap.add_argument("--camera", type=int, default=1024, help="camera rays per side (0: none)")
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as d:
         pts = Path(d) / "pts.ply"
@@ -86,6 +111,19 @@ def main() -> None:
             ratios = [p / r for p, r in pairs]
             print(f"    Python call overhead, {name} seconds: {100 * (float(np.median(ratios)) - 1):+.1f} % "
                   f"(median of {a.repeat} pairs: {', '.join(f'{x:.3f}' for x in ratios)})")
+        try:
+            ss.cast_rays(rays[:1], splat_ids=False, normals=False)
+            t_only = lambda r: ss.cast_rays(r, splat_ids=False, normals=False)  # noqa: E731
+        except TypeError:  # a package without optional outputs
+            t_only = None
+        rows = [("random", rays)]
+        if a.camera:
+            rows.append((f"camera {a.camera}^2", camera_rays(centre, radius, a.camera)))
+        for label, r in rows:
+            full = mrays(lambda: ss.cast_rays(r), len(r), a.repeat)
+            dist = mrays(lambda: t_only(r), len(r), a.repeat) if t_only else float("nan")
+            occ = mrays(lambda: ss.occluded(r), len(r), a.repeat)
+            print(f"    {label:14s}: cast_rays {full:6.2f}, t_hit only {dist:6.2f}, occluded {occ:6.2f} Mrays/s")
     try:
         import open3d as o3d
     except ImportError:
@@ -99,6 +137,11 @@ def main() -> None:
     o3 = best(lambda: scene.cast_rays(t), a.repeat)
     print(f"open3d {o3d.__version__} RaycastingScene: {len(mesh.triangles)} triangles, "
           f"{a.rays / o3 / 1e6:6.2f} Mrays/s (hits {100 * hits:.1f} %)")
+    if a.camera:
+        c = o3d.core.Tensor(camera_rays(centre, radius, a.camera))
+        n = a.camera * a.camera
+        print(f"    camera {a.camera}^2: cast_rays {mrays(lambda: scene.cast_rays(c), n, a.repeat):6.2f}, "
+              f"test_occlusions {mrays(lambda: scene.test_occlusions(c), n, a.repeat):6.2f} Mrays/s")
 
 
 if __name__ == "__main__":

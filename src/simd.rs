@@ -835,7 +835,11 @@ mod tests {
                         dir: dirs[k].into(),
                     };
                     for l in 0..LANES {
-                        if pack.get(l).intersect(&ray, t_min[k], t_max[k]).is_some() {
+                        if pack
+                            .get(l, 0, &())
+                            .intersect(&ray, t_min[k], t_max[k])
+                            .is_some()
+                        {
                             hits += 1;
                             assert!(
                                 coned[k] & (1 << l) != 0,

@@ -128,6 +128,10 @@ def test_cast_rays_are_the_cli_renders_hits(binary, cli, tmp_path, backend):
         assert np.all(np.isinf(r["t_hit"][~hit]))
         # t in units of the direction's length; the AOV's is a distance.
         np.testing.assert_allclose(r["t_hit"][hit] * length[hit], depth[hit], rtol=max(tol, 1e-6))
+        # The distance alone when the rest is not asked for: the same bits.
+        t_only = ss.cast_rays(rays, splat_ids=False, normals=False)
+        assert list(t_only) == ["t_hit"]
+        assert np.array_equal(t_only["t_hit"].view(np.uint32), r["t_hit"].view(np.uint32))
     # Through the surface and out: a ray through the bunny's middle meets
     # an even number of surfaces, one that misses none.
     ss = scene.splat_scene(backend)

@@ -73,32 +73,43 @@ impl Primitive for ClippedDisc {
     }
 }
 
-/// [`DiscPack`]'s lanes with each lane's clip: the disc filter runs on
+/// [`DiscPack`]'s lanes, nothing more: the clip lines live in the
+/// structure's [`ClipTable`] (the pack's [`Pack::Side`]), looked up by
+/// primitive id for the lanes the disc filter passes. The filter runs on
 /// the discs (it passes every lane the whole disc's `intersect` hits,
-/// hence every lane the clipped one hits) and `intersect` decides.
+/// hence every lane the clipped one hits) and `intersect` decides, on the
+/// disc and the clip as stored, bit for bit.
 #[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
 pub struct ClippedPack {
     discs: DiscPack,
-    clips: [Clip; simd::LANES],
 }
 
 impl Pack<ClippedDisc> for ClippedPack {
     const LANES: usize = <DiscPack as Pack<Disc>>::LANES;
     const EMPTY: ClippedPack = ClippedPack {
         discs: <DiscPack as Pack<Disc>>::EMPTY,
-        clips: [Clip::NONE; simd::LANES],
     };
+    type Side = ClipTable;
 
+    fn side(prims: &[ClippedDisc]) -> ClipTable {
+        ClipTable::new(prims)
+    }
+
+    fn side_bytes(side: &ClipTable) -> usize {
+        side.bytes()
+    }
+
+    /// The disc alone (its clip is the side table's).
     fn set(&mut self, lane: usize, p: &ClippedDisc) {
         self.discs.set(lane, &p.disc);
-        self.clips[lane] = p.clip;
     }
 
     #[inline]
-    fn get(&self, lane: usize) -> ClippedDisc {
+    fn get(&self, lane: usize, id: u32, side: &ClipTable) -> ClippedDisc {
         ClippedDisc {
-            disc: self.discs.get(lane),
-            clip: self.clips[lane],
+            disc: self.discs.get(lane, id, &()),
+            clip: side.clip(id),
         }
     }
 
@@ -126,6 +137,93 @@ impl Pack<ClippedDisc> for ClippedPack {
         any: &mut [u32],
     ) {
         super::disc::pack_masks_rays(packs, rays, active, isa, out, any);
+    }
+}
+
+/// The clip lines of the clipped splats alone, by primitive id: per 64
+/// ids a word with a bit set for each clipped one and the count of
+/// clipped ids before the word, and the clipped ones' [`Clip`]s in id
+/// order. An id's clip is [`Clip::NONE`] when its bit is clear (one load
+/// of a word, 16 bytes per 64 splats), else the entry counted by the bits
+/// before it. A structure over [`ClippedDisc`]s with no clipped splat
+/// holds nothing at all; with `k` clipped ones, `28 k` bytes and the
+/// words, once each, not once per reference as a clip in every lane
+/// would be (`docs/DESIGN.md`, "Clipped splats: a second primitive").
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ClipTable {
+    /// Per 64 ids (empty when no splat is clipped).
+    words: Vec<ClipWord>,
+    /// The clipped splats' clips, in id order.
+    clips: Vec<Clip>,
+}
+
+/// 64 ids of a [`ClipTable`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct ClipWord {
+    /// Bit `i` set when id `64 w + i` is clipped.
+    bits: u64,
+    /// Clipped ids below `64 w`.
+    before: u32,
+}
+
+impl ClipTable {
+    /// The table of `prims` (primitive `i` has id `i`).
+    ///
+    /// Panics if `prims` holds 2^32 or more primitives.
+    #[must_use]
+    pub fn new(prims: &[ClippedDisc]) -> ClipTable {
+        assert!(u32::try_from(prims.len()).is_ok(), "at most 2^32 - 1 ids");
+        let clips: Vec<Clip> = prims
+            .iter()
+            .filter(|p| !p.clip.is_none())
+            .map(|p| p.clip)
+            .collect();
+        if clips.is_empty() {
+            return ClipTable::default();
+        }
+        let mut before = 0u32;
+        let words = prims
+            .chunks(64)
+            .map(|chunk| {
+                let bits = chunk
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, p)| !p.clip.is_none())
+                    .fold(0u64, |b, (i, _)| b | 1 << i);
+                let w = ClipWord { bits, before };
+                before += bits.count_ones();
+                w
+            })
+            .collect();
+        ClipTable { words, clips }
+    }
+
+    /// The clip of primitive `id` ([`Clip::NONE`] when it is not clipped,
+    /// or beyond the table).
+    #[inline]
+    #[must_use]
+    pub fn clip(&self, id: u32) -> Clip {
+        let Some(w) = self.words.get((id >> 6) as usize) else {
+            return Clip::NONE;
+        };
+        let bit = 1u64 << (id & 63);
+        if w.bits & bit == 0 {
+            return Clip::NONE;
+        }
+        let k = w.before as usize + (w.bits & (bit - 1)).count_ones() as usize;
+        self.clips[k]
+    }
+
+    /// The clipped splats it holds.
+    #[must_use]
+    pub fn clipped(&self) -> usize {
+        self.clips.len()
+    }
+
+    /// Bytes held.
+    #[must_use]
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of_val(self.words.as_slice()) + std::mem::size_of_val(self.clips.as_slice())
     }
 }
 
@@ -190,11 +288,21 @@ mod tests {
     fn pack_lanes_round_trip_and_filter_conservatively() {
         let c = clipped(Clip::two(line(0.6, -0.8, -0.1), line(-1.0, 0.0, 0.5)));
         let pack = ClippedPack::from_fn(|l| (l % 3 == 0).then_some(c));
+        // Ids 0..LANES, the clipped ones in the side table.
+        let prims: Vec<ClippedDisc> = (0..ClippedPack::LANES)
+            .map(|l| if l % 3 == 0 { c } else { clipped(Clip::NONE) })
+            .collect();
+        let side = ClippedPack::side(&prims);
         for l in 0..ClippedPack::LANES {
             if l % 3 == 0 {
-                assert_eq!(pack.get(l), c);
+                assert_eq!(pack.get(l, l as u32, &side), c);
             }
         }
+        assert_eq!(
+            std::mem::size_of::<ClippedPack>(),
+            std::mem::size_of::<DiscPack>(),
+            "a lane holds a disc, no clip"
+        );
         let ray = Ray::new(Vec3::new(0.0, 0.0, 2.0), -Vec3::Z);
         let m = pack.may_hit(&PackRay::new(&ray, 0.0, f32::INFINITY));
         assert_eq!(m, 0b100_1001 & ((1 << ClippedPack::LANES) - 1));
@@ -207,5 +315,36 @@ mod tests {
         let kept = c.locate(s.u_axis * -0.3);
         assert_eq!(kept, c.disc.locate(s.u_axis * -0.3));
         assert!(c.locate(s.u_axis * 0.3).radial2.is_infinite());
+    }
+
+    #[test]
+    fn the_table_holds_the_clipped_alone_and_gives_every_id_its_clip() {
+        let edge = Clip::one(line(1.0, 0.0, 0.25));
+        let corner = Clip::two(line(0.6, -0.8, -0.1), line(-1.0, 0.0, 0.5));
+        // Ids across word boundaries: 0, 63, 64, 130 and the last clipped.
+        let n = 200;
+        let want = |i: usize| match i {
+            0 | 64 | 199 => edge,
+            63 | 130 => corner,
+            _ => Clip::NONE,
+        };
+        let prims: Vec<ClippedDisc> = (0..n).map(|i| clipped(want(i))).collect();
+        let t = ClipTable::new(&prims);
+        assert_eq!(t.clipped(), 5);
+        for i in 0..n {
+            assert_eq!(t.clip(i as u32), want(i), "id {i}");
+        }
+        assert_eq!(t.clip(n as u32 + 100), Clip::NONE);
+        assert_eq!(t.clip(u32::MAX), Clip::NONE);
+        // 5 clips and 4 words of 64 ids.
+        assert_eq!(
+            t.bytes(),
+            5 * std::mem::size_of::<Clip>() + 4 * std::mem::size_of::<ClipWord>()
+        );
+        // No clipped splat: nothing held.
+        let whole: Vec<ClippedDisc> = (0..n).map(|_| clipped(Clip::NONE)).collect();
+        let t = ClipTable::new(&whole);
+        assert_eq!(t.bytes(), 0);
+        assert!((0..n as u32).all(|i| t.clip(i) == Clip::NONE));
     }
 }

@@ -207,6 +207,14 @@ impl Pack<Disc> for DiscPack {
     const EMPTY: DiscPack = simd::DiscColumns {
         cols: [[0.0; LANES]; 12],
     };
+    /// Nothing: the lanes hold the whole disc.
+    type Side = ();
+
+    fn side(_prims: &[Disc]) {}
+
+    fn side_bytes((): &()) -> usize {
+        0
+    }
 
     fn set(&mut self, lane: usize, d: &Disc) {
         let c = &mut self.cols;
@@ -219,7 +227,7 @@ impl Pack<Disc> for DiscPack {
     }
 
     #[inline]
-    fn get(&self, lane: usize) -> Disc {
+    fn get(&self, lane: usize, _id: u32, (): &()) -> Disc {
         let c = &self.cols;
         let get = |k: usize| Vec3::new(c[k][lane], c[k + 1][lane], c[k + 2][lane]);
         Disc {
@@ -353,7 +361,11 @@ mod tests {
                 if d.is_none() {
                     assert_eq!(mask & (1 << lane), 0, "padding lane passed");
                 } else {
-                    assert_eq!(pack.get(lane), d.unwrap(), "lane {lane} stored bit for bit");
+                    assert_eq!(
+                        pack.get(lane, 0, &()),
+                        d.unwrap(),
+                        "lane {lane} stored bit for bit"
+                    );
                 }
             }
         }
@@ -379,7 +391,7 @@ mod tests {
         }
         let by_fn = DiscPack::from_fn(lanes);
         for l in 0..LANES {
-            let (a, b) = (by_set.get(l), by_fn.get(l));
+            let (a, b) = (by_set.get(l, 0, &()), by_fn.get(l, 0, &()));
             for (x, y) in [
                 (a.center, b.center),
                 (a.normal, b.normal),

@@ -14,7 +14,7 @@ mod clipped;
 mod disc;
 
 pub use clip::{Clip, ClipLine};
-pub use clipped::{ClippedDisc, ClippedPack};
+pub use clipped::{ClipTable, ClippedDisc, ClippedPack};
 pub use disc::{Disc, DiscPack};
 
 use glam::Vec3;
@@ -141,10 +141,24 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
     const LANES: usize;
     /// A pack whose every lane is padding that no ray can hit.
     const EMPTY: Self;
-    /// Stores `p` in `lane`, bit for bit.
+    /// What the lanes leave out of their primitives, kept once beside a
+    /// structure's packs and looked up by primitive id: `()` for a pack
+    /// whose lanes hold their primitives whole ([`DiscPack`]); for
+    /// [`ClippedPack`] the clip lines of the clipped splats alone
+    /// ([`ClipTable`]), so a lane costs what a disc's does and a scene
+    /// pays for the clip lines it has, once each, not once per reference.
+    type Side: Send + Sync + 'static;
+    /// The side table of `prims` (primitive `i` has id `i`).
+    fn side(prims: &[P]) -> Self::Side;
+    /// Bytes the side table holds.
+    fn side_bytes(side: &Self::Side) -> usize;
+    /// Stores in `lane` what the lanes hold of `p` (the rest is `side`'s),
+    /// bit for bit.
     fn set(&mut self, lane: usize, p: &P);
-    /// The primitive of `lane`, bit for bit as stored.
-    fn get(&self, lane: usize) -> P;
+    /// The primitive of `lane`, whose id is `id`, with what `side` (made
+    /// by [`Pack::side`] over the primitives the ids index) holds of it:
+    /// bit for bit the primitive stored.
+    fn get(&self, lane: usize, id: u32, side: &Self::Side) -> P;
     /// The pack whose lane `l` holds `lane(l)` (padding where `None`).
     fn from_fn(lane: impl Fn(usize) -> Option<P>) -> Self {
         let mut pack = Self::EMPTY;
@@ -213,12 +227,19 @@ pub struct Single<P>(Option<P>);
 impl<P: Primitive> Pack<P> for Single<P> {
     const LANES: usize = 1;
     const EMPTY: Self = Single(None);
+    type Side = ();
+
+    fn side(_prims: &[P]) {}
+
+    fn side_bytes((): &()) -> usize {
+        0
+    }
 
     fn set(&mut self, _lane: usize, p: &P) {
         self.0 = Some(*p);
     }
 
-    fn get(&self, _lane: usize) -> P {
+    fn get(&self, _lane: usize, _id: u32, (): &()) -> P {
         match self.0 {
             Some(p) => p,
             None => unreachable!("padding lanes are never passed by may_hit"),

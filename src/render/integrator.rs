@@ -218,15 +218,42 @@ impl SplatSurfaces<'_> {
     /// past candidates beyond their Phong fields' silhouettes
     /// ([`Resolved::Beyond`]) until a surface or nothing is left.
     #[must_use]
-    pub fn surface(&self, mut q: Query, hits: &mut CandidateHits) -> Option<ShadeHit> {
+    pub fn surface(&self, q: Query, hits: &mut CandidateHits) -> Option<ShadeHit> {
+        self.surface_hit(q, hits).map(|h| self.shade_hit(h))
+    }
+
+    /// [`SplatSurfaces::surface`] without the material and colour: the
+    /// resolved hit alone.
+    #[must_use]
+    pub fn surface_hit(&self, mut q: Query, hits: &mut CandidateHits) -> Option<SurfaceHit> {
         loop {
             self.backend.intersect_from(&q, hits);
             match self.resolve(hits, &q.ray)? {
-                Resolved::Hit(h) => return Some(self.shade_hit(h)),
+                Resolved::Hit(h) => return Some(h),
                 // Beyond every candidate gathered: strictly farther, so
                 // the loop ends.
                 Resolved::Beyond(t) => q.t_min = t,
             }
+        }
+    }
+
+    /// The resolved hit of each camera ray `qs` (at most [`PACKET`]) into
+    /// `out`, the windows gathered in one [`Backend::intersect_packet`]
+    /// call (into `hits`, one per query) and resolved as
+    /// [`SplatSurfaces::surface_hit`] resolves them: the same hits.
+    pub fn surface_hits(
+        &self,
+        qs: &[Query],
+        hits: &mut [CandidateHits],
+        out: &mut [Option<SurfaceHit>],
+    ) {
+        self.backend.intersect_packet(qs, hits);
+        for ((q, h), o) in qs.iter().zip(hits.iter_mut()).zip(out.iter_mut()) {
+            *o = match self.resolve(h, &q.ray) {
+                None => None,
+                Some(Resolved::Hit(s)) => Some(s),
+                Some(Resolved::Beyond(t)) => self.surface_hit(Query { t_min: t, ..*q }, h),
+            };
         }
     }
 
@@ -312,13 +339,11 @@ impl Surfaces for SplatSurfaces<'_> {
             let qs: [Query; PACKET] = std::array::from_fn(|k| {
                 Query::new(rays[k.min(rays.len() - 1)], 0.0, f32::INFINITY)
             });
-            self.backend.intersect_packet(&qs[..rays.len()], hits);
-            for ((q, h), o) in qs.iter().zip(hits.iter_mut()).zip(out.iter_mut()) {
-                *o = match self.resolve(h, &q.ray) {
-                    None => None,
-                    Some(Resolved::Hit(s)) => Some(self.shade_hit(s)),
-                    Some(Resolved::Beyond(t)) => self.surface(Query { t_min: t, ..*q }, h),
-                };
+            let mut found = [None; PACKET];
+            let n = rays.len();
+            self.surface_hits(&qs[..n], hits, &mut found[..n]);
+            for (f, o) in found.iter().zip(out.iter_mut()) {
+                *o = f.map(|s| self.shade_hit(s));
             }
         }
     }

@@ -2,5 +2,6 @@
 //! (scenes are in [`crate::scene`]).
 
 pub mod budget;
+pub mod cast;
 pub mod integrator;
 pub mod output;

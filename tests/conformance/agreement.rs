@@ -9,7 +9,7 @@ use crate::common::*;
 use glam::Vec3;
 use splatray::accel::Backend;
 use splatray::accel::octree::{Layout, Octree, OctreeParams};
-use splatray::primitive::Disc;
+use splatray::primitive::{Clip, ClipLine, ClipTable, ClippedDisc, Disc};
 use splatray::scene::SceneScale;
 use splatray::splat::Splat;
 
@@ -80,6 +80,113 @@ fn clipped_splats_agree_on_every_backend() {
     );
     assert_all_agree(&b, &splats, &queries, scale.xi, "random rays, clipped");
     camera_and_secondary_agree(&splats);
+}
+
+#[test]
+fn one_clipped_splat_costs_the_octree_its_clip_alone_and_agrees() {
+    // One splat of 3000 clipped through its centre (keeping u <= 0): the
+    // octree over clipped discs holds its packs of discs and a side table
+    // of one clip (issue 55), not a clip in every lane; and its hits are
+    // the oracle's bit for bit, the clip applied (rays through the
+    // clipped-away half miss the splat, rays through the kept half hit).
+    let seed = seed();
+    let mut splats = blobby_splats(SPLATS, seed);
+    let k = SPLATS / 2;
+    splats[k].clip = Clip::one(ClipLine {
+        a: 1.0,
+        b: 0.0,
+        d: 0.0,
+    });
+    let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
+    let clipped: Vec<ClippedDisc> = splats.iter().map(Splat::clipped_geometry).collect();
+    for layout in [Layout::Copies, Layout::Shared] {
+        let params = OctreeParams {
+            layout,
+            ..OctreeParams::default()
+        };
+        let whole = Octree::new(&discs, &params).stats().memory_bytes;
+        let one = Octree::new(&clipped, &params).stats().memory_bytes;
+        let table = ClipTable::new(&clipped);
+        assert_eq!(table.clipped(), 1);
+        // One clip and a 16-byte word per 64 splats.
+        assert!(
+            table.bytes() <= SPLATS.div_ceil(64) * 16 + std::mem::size_of::<Clip>(),
+            "{} bytes of table",
+            table.bytes()
+        );
+        assert_eq!(one, whole + table.bytes(), "{layout:?}");
+        assert!(
+            one as f64 <= whole as f64 * 1.01,
+            "{layout:?}: {one} bytes clipped, {whole} whole"
+        );
+    }
+    // Rays down the normal onto splat k's two halves, from just above it.
+    let s = splats[k];
+    let mut queries = Vec::new();
+    for i in 0..17 {
+        for j in 0..17 {
+            let (x, y) = (i as f32 / 9.0 - 0.89, j as f32 / 9.0 - 0.89);
+            if x.abs() < 0.05 || x * x + y * y > 0.8 {
+                continue;
+            }
+            let p = s.center + s.u_axis * (x * s.radii.x) + s.v_axis * (y * s.radii.y);
+            let origin = p + s.normal * (0.02 * s.radii.x);
+            queries.push(Query::new(
+                splatray::geometry::Ray {
+                    origin,
+                    dir: -s.normal,
+                },
+                0.0,
+                f32::INFINITY,
+            ));
+        }
+    }
+    let scale = SceneScale::from_diagonal(diagonal(&splats));
+    let b = backends(&splats);
+    assert!(
+        b.oracle.name().ends_with("<clipped>"),
+        "{}",
+        b.oracle.name()
+    );
+    let mut whole = splats.clone();
+    whole[k].clip = Clip::NONE;
+    let discs = backends(&whole);
+    let mut h = splatray::accel::CandidateHits::new(scale.xi);
+    let mut meets = |oracle: &Named, q: &Query| {
+        oracle.intersect_from(q, &mut h);
+        h.as_slice().iter().any(|c| c.id == k as u32)
+    };
+    // Of the rays whose window holds the whole disc k: those through the
+    // kept half still hold it, the others not.
+    let (mut kept, mut cut) = (0, 0);
+    for q in &queries {
+        if !meets(&discs.oracle, q) {
+            continue;
+        }
+        if (q.ray.origin - s.center).dot(s.u_axis) < 0.0 {
+            assert!(
+                meets(&b.oracle, q),
+                "a ray through the kept half missed splat {k}"
+            );
+            kept += 1;
+        } else {
+            assert!(
+                !meets(&b.oracle, q),
+                "a ray through the clipped-away half met splat {k}"
+            );
+            cut += 1;
+        }
+    }
+    assert!(kept > 20 && cut > 20, "{kept} kept, {cut} cut");
+    assert_all_agree(&b, &splats, &queries, scale.xi, "one clipped splat");
+    let random = random_queries(&splats, 1000, seed);
+    assert_all_agree(
+        &b,
+        &splats,
+        &random,
+        scale.xi,
+        "one clipped splat, random rays",
+    );
 }
 
 fn camera_and_secondary_agree(splats: &[Splat]) {

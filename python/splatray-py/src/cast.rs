@@ -11,13 +11,11 @@ use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use rayon::prelude::*;
-use splatray::accel::{Backend, CandidateHits, PACKET, Query, Ray};
+use splatray::accel::{Backend, CandidateHits, Ray};
+use splatray::render::cast::{CastOutputs, cast_rays, occluded};
 use splatray::render::integrator::{SplatSurfaces, Surfaces};
 use splatray::scene::Scene;
 use std::time::Instant;
-
-/// Rays per rayon task.
-const CHUNK: usize = 512;
 
 /// Splats in one acceleration backend, for ray casting.
 #[pyclass(module = "splatray", frozen)]
@@ -100,72 +98,6 @@ impl SplatScene {
     }
 }
 
-/// What `cast_rays` returns, filled by [`cast`].
-pub struct Hits {
-    /// Distance in units of the direction's length (inf: a miss).
-    pub t: Vec<f32>,
-    /// Splat id (`u32::MAX`: a miss).
-    pub ids: Vec<u32>,
-    /// Shading normal, 3 per ray (0: a miss).
-    pub normals: Vec<f32>,
-}
-
-impl Hits {
-    /// Room for `n` rays.
-    pub fn new(n: usize) -> Hits {
-        Hits {
-            t: vec![0.0; n],
-            ids: vec![0; n],
-            normals: vec![0.0; 3 * n],
-        }
-    }
-}
-
-/// The resolved hit of every ray, as the renderer's camera rays are
-/// resolved: in packets of [`PACKET`] when the backend prefers them (the
-/// same hits either way), in parallel; `lens` are the directions' lengths
-/// `t` is divided by.
-pub fn cast(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: &mut Hits) {
-    let xi = surfaces.scene.options.scale.xi;
-    let packets = surfaces.packets();
-    rays.par_chunks(CHUNK)
-        .zip(lens.par_chunks(CHUNK))
-        .zip(out.t.par_chunks_mut(CHUNK))
-        .zip(out.ids.par_chunks_mut(CHUNK))
-        .zip(out.normals.par_chunks_mut(3 * CHUNK))
-        .for_each(|((((rays, lens), t), ids), normals)| {
-            let mut hits: [CandidateHits; PACKET] = std::array::from_fn(|_| CandidateHits::new(xi));
-            let mut found = [None; PACKET];
-            for (k, r) in rays.chunks(PACKET).enumerate() {
-                let found = &mut found[..r.len()];
-                if packets {
-                    surfaces.hits(r, &mut hits, found);
-                } else {
-                    for (ray, f) in r.iter().zip(found.iter_mut()) {
-                        *f = surfaces.hit(ray, None, &mut hits[0]);
-                    }
-                }
-                for (j, f) in found.iter().enumerate() {
-                    let i = k * PACKET + j;
-                    let (tt, id, n) = match f {
-                        None => (f32::INFINITY, u32::MAX, [0.0; 3]),
-                        Some(h) => {
-                            let (l, h) = (lens[i], &h.surface);
-                            (
-                                if l == 1.0 { h.t } else { h.t / l },
-                                h.id,
-                                h.normal.to_array(),
-                            )
-                        }
-                    };
-                    t[i] = tt;
-                    ids[i] = id;
-                    normals[3 * i..3 * i + 3].copy_from_slice(&n);
-                }
-            }
-        });
-}
-
 #[pymethods]
 impl SplatScene {
     /// `splats` in the backend `backend` (`splatray.BACKENDS`; the first
@@ -211,23 +143,46 @@ impl SplatScene {
     /// Casts `rays` ((N, 6) float32 or float64: origin, direction, in the
     /// splats' coordinates; directions need not be unit) and returns a dict
     /// of `t_hit` (N,) float32 (in units of each direction's length; inf on
-    /// a miss), `splat_ids` (N,) uint32 (`INVALID_ID` on a miss) and
-    /// `normals` (N, 3) float32 (the resolved shading normal; 0 on a miss).
+    /// a miss), and when asked for (both are by default) `splat_ids` (N,)
+    /// uint32 (`INVALID_ID` on a miss) and `normals` (N, 3) float32 (the
+    /// resolved shading normal; 0 on a miss). Rays sharing an origin
+    /// (camera rays) are found and traced in packets by the library
+    /// (`splatray::render::cast`).
+    #[pyo3(signature = (rays, splat_ids=true, normals=true))]
     fn cast_rays<'py>(
         &self,
         py: Python<'py>,
         rays: &Bound<'py, PyAny>,
+        splat_ids: bool,
+        normals: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
         let (rays, lens) = self.rays(rays)?;
-        let out = py.detach(|| {
-            let mut out = Hits::new(rays.len());
-            cast(&self.surfaces(), &rays, &lens, &mut out);
-            out
+        let n = rays.len();
+        let (t, ids, nrm) = py.detach(|| {
+            let mut t = vec![0.0f32; n];
+            let mut ids = splat_ids.then(|| vec![0u32; n]);
+            let mut nrm = normals.then(|| vec![0.0f32; 3 * n]);
+            cast_rays(
+                &self.surfaces(),
+                &rays,
+                &lens,
+                CastOutputs {
+                    t: &mut t,
+                    ids: ids.as_deref_mut(),
+                    normals: nrm.as_deref_mut(),
+                },
+            );
+            (t, ids, nrm)
         });
+        // The vectors are handed to numpy as they are (no copy).
         let d = pyo3::types::PyDict::new(py);
-        d.set_item("t_hit", vector(py, out.t))?;
-        d.set_item("splat_ids", vector(py, out.ids))?;
-        d.set_item("normals", matrix(py, 3, out.normals))?;
+        d.set_item("t_hit", vector(py, t))?;
+        if let Some(ids) = ids {
+            d.set_item("splat_ids", vector(py, ids))?;
+        }
+        if let Some(nrm) = nrm {
+            d.set_item("normals", matrix(py, 3, nrm))?;
+        }
         Ok(d.into_any())
     }
 
@@ -288,22 +243,9 @@ impl SplatScene {
         }
         let (rays, lens) = self.rays(rays)?;
         let out = py.detach(|| {
-            let pass = self
-                .scene
-                .has_phong()
-                .then_some(&self.scene as &dyn splatray::accel::PassOver);
-            rays.par_iter()
-                .zip(&lens)
-                .map(|(ray, l)| {
-                    self.backend.occluded_from(&Query {
-                        ray: *ray,
-                        t_min: tnear * l,
-                        t_max: tfar * l,
-                        from: None,
-                        pass,
-                    })
-                })
-                .collect::<Vec<bool>>()
+            let mut out = vec![false; rays.len()];
+            occluded(&self.surfaces(), &rays, &lens, (tnear, tfar), &mut out);
+            out
         });
         Ok(vector(py, out))
     }
@@ -314,9 +256,15 @@ impl SplatScene {
     fn _cast_seconds(&self, py: Python<'_>, rays: &Bound<'_, PyAny>) -> PyResult<(f64, f64)> {
         let (rays, lens) = self.rays(rays)?;
         Ok(py.detach(|| {
-            let mut out = Hits::new(rays.len());
+            let n = rays.len();
+            let (mut t, mut ids, mut nrm) = (vec![0.0; n], vec![0; n], vec![0.0; 3 * n]);
             let (t0, c0) = (Instant::now(), process_cpu());
-            cast(&self.surfaces(), &rays, &lens, &mut out);
+            let out = CastOutputs {
+                t: &mut t,
+                ids: Some(&mut ids),
+                normals: Some(&mut nrm),
+            };
+            cast_rays(&self.surfaces(), &rays, &lens, out);
             (t0.elapsed().as_secs_f64(), process_cpu() - c0)
         }))
     }

@@ -78,11 +78,13 @@ pub(super) fn build<P: Primitive>(
         Some(isa) if isa.supported() => isa,
         _ => crate::config::current().simd,
     };
+    let side = std::sync::Arc::new(<P::Pack as Pack<P>>::side(prims));
+    let side_bytes = <P::Pack as Pack<P>>::side_bytes(&side);
     let mut nonempty = 0;
     let parts: Vec<Tree<P>> = staged
         .into_iter()
         .map(|s| {
-            let (tree, leaves) = finish(s, shared, isa);
+            let (tree, leaves) = finish(s, shared, isa, &side);
             nonempty += leaves;
             tree
         })
@@ -91,7 +93,7 @@ pub(super) fn build<P: Primitive>(
     assert!(references < INTERIOR as usize, "too many references");
     let stats = BuildStats {
         build_seconds: start.elapsed().as_secs_f64(),
-        memory_bytes: parts.iter().map(Tree::bytes).sum(),
+        memory_bytes: parts.iter().map(Tree::bytes).sum::<usize>() + side_bytes,
         nodes: parts.iter().map(|t| t.nodes.len()).sum(),
         leaves: parts
             .iter()
@@ -167,7 +169,12 @@ fn stage<P: Primitive>(
 
 /// Steps 4-5 of a staged part in the layout chosen: the tree, and its
 /// count of non-empty leaves.
-fn finish<P: Primitive>(s: Staged<P>, shared: bool, isa: crate::simd::Isa) -> (Tree<P>, usize) {
+fn finish<P: Primitive>(
+    s: Staged<P>,
+    shared: bool,
+    isa: crate::simd::Isa,
+    side: &std::sync::Arc<<P::Pack as Pack<P>>::Side>,
+) -> (Tree<P>, usize) {
     let cube = &s.cube;
     let references: usize = s.leaf_refs.iter().map(|&c| c as usize).sum();
     assert!(references < INTERIOR as usize, "too many references");
@@ -197,6 +204,7 @@ fn finish<P: Primitive>(s: Staged<P>, shared: bool, isa: crate::simd::Isa) -> (T
         boxes,
         packs,
         pack_ids,
+        side: std::sync::Arc::clone(side),
         entries,
         shared,
         isa,
@@ -213,7 +221,8 @@ fn finish<P: Primitive>(s: Staged<P>, shared: bool, isa: crate::simd::Isa) -> (T
 }
 
 impl<P: Primitive> Tree<P> {
-    /// Bytes held (the primitives' copies in the packs included).
+    /// Bytes held (the primitives' copies in the packs included; the side
+    /// table, shared by the parts, is counted once by the octree).
     fn bytes(&self) -> usize {
         std::mem::size_of_val(self.nodes.as_slice())
             + std::mem::size_of_val(self.packs.as_slice())

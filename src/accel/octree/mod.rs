@@ -265,6 +265,10 @@ struct Tree<P: Primitive> {
     packs: Vec<P::Pack>,
     /// Primitive id of each lane of `packs` ([`NO_PRIMITIVE`] on padding).
     pack_ids: Vec<u32>,
+    /// What the packs' lanes leave out of their primitives
+    /// ([`Pack::Side`], by global id: for clipped discs the clip lines of
+    /// the clipped ones alone), one table for every part.
+    side: std::sync::Arc<<P::Pack as Pack<P>>::Side>,
     /// [`Layout::Shared`]: the leaves' references, leaf after leaf: per
     /// entry, the index of a pack in `packs` (bits below
     /// [`ENTRY_MASK_SHIFT`]) and the mask of the lanes the leaf references

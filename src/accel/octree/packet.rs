@@ -337,7 +337,7 @@ impl<P: Primitive> Tree<P> {
                     while m != 0 {
                         let lane = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        if v.lane(pack.get(lane), ids[lane]) {
+                        if v.lane(pack.get(lane, ids[lane], &self.side), ids[lane]) {
                             stopped |= 1 << k;
                             active &= !(1 << k);
                             break;

@@ -202,11 +202,11 @@ impl<P: Primitive> Tree<P> {
                 let p = (e & ENTRY_PACK) as usize;
                 let ids = &self.pack_ids[p * l..(p + 1) * l];
                 let pack = std::slice::from_ref(&self.packs[p]);
-                visitor.packs(pack, ids, e >> ENTRY_MASK_SHIFT, self.isa)
+                visitor.packs(pack, ids, e >> ENTRY_MASK_SHIFT, self.isa, &self.side)
             });
         }
         let ids = &self.pack_ids[range.start * l..range.end * l];
-        visitor.packs(&self.packs[range], ids, u32::MAX, self.isa)
+        visitor.packs(&self.packs[range], ids, u32::MAX, self.isa, &self.side)
     }
 
     /// The subtree of node `index` (cell `lo`, edge `size`), front to back;
@@ -402,11 +402,19 @@ pub(super) trait Visitor<P: Primitive> {
 
     /// Tests the lanes set in `lanes` of each of a leaf's `packs` (`ids`:
     /// pack after pack), filtered on the SIMD path `isa`, [`CHUNK`] packs
-    /// per filter call; true stops the traversal. A window that narrows
-    /// meanwhile only makes the filter looser than it could be (it stays
-    /// conservative: [`Visitor::lane`] decides with the exact test).
+    /// per filter call, each lane passed rebuilt whole with `side`; true
+    /// stops the traversal. A window that narrows meanwhile only makes
+    /// the filter looser than it could be (it stays conservative:
+    /// [`Visitor::lane`] decides with the exact test).
     #[inline(always)]
-    fn packs(&mut self, packs: &[P::Pack], ids: &[u32], lanes: u32, isa: Isa) -> bool {
+    fn packs(
+        &mut self,
+        packs: &[P::Pack],
+        ids: &[u32],
+        lanes: u32,
+        isa: Isa,
+        side: &<P::Pack as Pack<P>>::Side,
+    ) -> bool {
         let l = super::lanes::<P>();
         for (c, chunk) in packs.chunks(CHUNK).enumerate() {
             let mut masks = [0u32; CHUNK];
@@ -418,7 +426,7 @@ pub(super) trait Visitor<P: Primitive> {
                 while mask != 0 {
                     let lane = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
-                    if self.lane(pack.get(lane), ids[lane]) {
+                    if self.lane(pack.get(lane, ids[lane], side), ids[lane]) {
                         return true;
                     }
                 }

@@ -1,0 +1,258 @@
+//! Batches of rays cast at a scene's splats, one resolved hit or one
+//! occlusion answer per ray: what the Python package's
+//! `SplatScene.cast_rays` and `occluded` ask (its binding only parses the
+//! arrays and presents the answers).
+//!
+//! The rays are taken in chunks of [`CHUNK`] in parallel, with one
+//! window per packet slot allocated per chunk, none per ray. When the
+//! backend prefers packets ([`crate::accel::use_packets`]), the batch
+//! finds its packets itself ([`Packets`]): runs of consecutive rays
+//! leaving one origin (a camera's or a scanner's rays, in any order of
+//! directions) are split by their directions' signs and traced
+//! [`PACKET`] at a time, so the octree takes each leaf once for the
+//! packet ([`crate::accel::Backend::intersect_packet`]); a ray sharing
+//! its origin with no neighbour is traced alone (a packet of rays from
+//! unrelated origins would descend together for nothing). Every answer is
+//! the one-ray-at-a-time answer, bit for bit: packets gather the same
+//! candidate windows (`docs/DESIGN.md`, "The backend contract"), resolved
+//! by the same resolver (§3.2, eq. 5). Outputs other than the distance
+//! are written only when asked for.
+
+use super::integrator::SplatSurfaces;
+use crate::accel::{CandidateHits, PACKET, PassOver, Query, Ray};
+use crate::resolve::SurfaceHit;
+use rayon::prelude::*;
+
+/// Rays per parallel task.
+pub const CHUNK: usize = 512;
+
+/// Where [`cast_rays`] writes its answers, one slot per ray.
+pub struct CastOutputs<'a> {
+    /// Distance in units of the ray's direction length (`inf`: a miss).
+    pub t: &'a mut [f32],
+    /// Splat id (`u32::MAX`: a miss), when asked for.
+    pub ids: Option<&'a mut [u32]>,
+    /// Resolved shading normal, three per ray (0: a miss), when asked for.
+    pub normals: Option<&'a mut [f32]>,
+}
+
+/// The resolved hit of every ray of `rays` (directions of length `lens`,
+/// which `t` is divided by) into `out`, as [`SplatSurfaces::surface_hit`]
+/// resolves a camera ray alone.
+///
+/// Panics if `lens` or an output is shorter than the rays ask.
+pub fn cast_rays(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: CastOutputs<'_>) {
+    let n = rays.len();
+    assert!(lens.len() >= n && out.t.len() >= n, "an output per ray");
+    let xi = surfaces.scene.options.scale.xi;
+    let packets = crate::accel::use_packets(surfaces.backend);
+    let ids = slots(out.ids.map(|v| &mut v[..n]), 1, n);
+    let normals = slots(out.normals.map(|v| &mut v[..3 * n]), 3, n);
+    out.t[..n]
+        .par_chunks_mut(CHUNK)
+        .zip(ids)
+        .zip(normals)
+        .enumerate()
+        .for_each(|(c, ((t, mut ids), mut normals))| {
+            let range = c * CHUNK..(c * CHUNK + t.len());
+            let (rays, lens) = (&rays[range.clone()], &lens[range]);
+            let mut write = |i: usize, f: Option<SurfaceHit>| {
+                let (tt, id, nn) = match f {
+                    None => (f32::INFINITY, u32::MAX, [0.0; 3]),
+                    Some(h) => {
+                        let l = lens[i];
+                        let tt = if l == 1.0 { h.t } else { h.t / l };
+                        (tt, h.id, h.normal.to_array())
+                    }
+                };
+                t[i] = tt;
+                if let Some(ids) = ids.as_deref_mut() {
+                    ids[i] = id;
+                }
+                if let Some(normals) = normals.as_deref_mut() {
+                    normals[3 * i..3 * i + 3].copy_from_slice(&nn);
+                }
+            };
+            let mut hits: [CandidateHits; PACKET] = std::array::from_fn(|_| CandidateHits::new(xi));
+            let query = |i: usize| Query::new(rays[i], 0.0, f32::INFINITY);
+            if !packets {
+                for i in 0..rays.len() {
+                    write(i, surfaces.surface_hit(query(i), &mut hits[0]));
+                }
+                return;
+            }
+            let mut found = [None; PACKET];
+            for_each_packet(rays, |idx| {
+                let m = idx.len();
+                if m == 1 {
+                    let i = usize::from(idx[0]);
+                    write(i, surfaces.surface_hit(query(i), &mut hits[0]));
+                    return;
+                }
+                let qs: [Query; PACKET] =
+                    std::array::from_fn(|k| query(usize::from(idx[k.min(m - 1)])));
+                surfaces.surface_hits(&qs[..m], &mut hits[..m], &mut found[..m]);
+                for (&i, f) in idx.iter().zip(&found) {
+                    write(usize::from(i), *f);
+                }
+            });
+        });
+}
+
+/// Whether each ray of `rays` (directions of length `lens`) meets a
+/// surface with `t` in `[t_near, t_far]` (in units of its direction's
+/// length) into `out`: a shadow ray's question, the hits on Phong splats'
+/// discs beyond their curved surfaces' silhouettes passed over (the
+/// scene's [`PassOver`], as the renderer's shadow rays), in packets as
+/// [`cast_rays`] forms them; the answers of one ray at a time.
+///
+/// Panics if `lens` or `out` is shorter than `rays`.
+pub fn occluded(
+    surfaces: &SplatSurfaces<'_>,
+    rays: &[Ray],
+    lens: &[f32],
+    (t_near, t_far): (f32, f32),
+    out: &mut [bool],
+) {
+    let n = rays.len();
+    assert!(lens.len() >= n && out.len() >= n, "an output per ray");
+    let scene = surfaces.scene;
+    let backend = surfaces.backend;
+    let pass = scene.has_phong().then_some(scene as &dyn PassOver);
+    let packets = crate::accel::use_packets(backend);
+    out[..n]
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .for_each(|(c, out)| {
+            let range = c * CHUNK..(c * CHUNK + out.len());
+            let (rays, lens) = (&rays[range.clone()], &lens[range]);
+            let query = |i: usize| Query {
+                ray: rays[i],
+                t_min: t_near * lens[i],
+                t_max: t_far * lens[i],
+                from: None,
+                pass,
+            };
+            if !packets {
+                for (i, o) in out.iter_mut().enumerate() {
+                    *o = backend.occluded_from(&query(i));
+                }
+                return;
+            }
+            let mut got = [false; PACKET];
+            for_each_packet(rays, |idx| {
+                let m = idx.len();
+                if m == 1 {
+                    let i = usize::from(idx[0]);
+                    out[i] = backend.occluded_from(&query(i));
+                    return;
+                }
+                let qs: [Query; PACKET] =
+                    std::array::from_fn(|k| query(usize::from(idx[k.min(m - 1)])));
+                backend.occluded_packet(&qs[..m], &mut got[..m]);
+                for (&i, g) in idx.iter().zip(&got) {
+                    out[usize::from(i)] = *g;
+                }
+            });
+        });
+}
+
+/// An optional output cut into the chunks of [`CHUNK`] rays (`per` slots
+/// a ray), or a `None` per chunk: one list per call, none per ray.
+fn slots<T: Send>(out: Option<&mut [T]>, per: usize, n: usize) -> Vec<Option<&mut [T]>> {
+    match out {
+        Some(v) => v.chunks_mut(per * CHUNK).map(Some).collect(),
+        None => (0..n.div_ceil(CHUNK)).map(|_| None).collect(),
+    }
+}
+
+/// The packets of a chunk (at most [`CHUNK`] rays): each run of
+/// consecutive rays leaving one origin (bit for bit) split by the signs
+/// of their directions (the octree's front-to-back order needs one sign
+/// per axis in a packet), [`PACKET`] rays at a time, each packet's ray
+/// indices handed to `each` (in increasing order); a ray whose origin no
+/// neighbour shares is handed alone. Every ray is handed exactly once.
+fn for_each_packet(rays: &[Ray], mut each: impl FnMut(&[u16])) {
+    debug_assert!(rays.len() <= CHUNK);
+    let bits = |r: &Ray| r.origin.to_array().map(f32::to_bits);
+    let mut start = 0;
+    while start < rays.len() {
+        let o = bits(&rays[start]);
+        let end = start
+            + 1
+            + rays[start + 1..]
+                .iter()
+                .take_while(|r| bits(r) == o)
+                .count();
+        if end - start == 1 {
+            each(&[start as u16]);
+        } else {
+            let mut by = [[0u16; PACKET]; 8];
+            let mut len = [0usize; 8];
+            for (i, r) in rays.iter().enumerate().take(end).skip(start) {
+                let s = octant(r);
+                by[s][len[s]] = i as u16;
+                len[s] += 1;
+                if len[s] == PACKET {
+                    each(&by[s]);
+                    len[s] = 0;
+                }
+            }
+            for (b, &l) in by.iter().zip(&len) {
+                if l > 0 {
+                    each(&b[..l]);
+                }
+            }
+        }
+        start = end;
+    }
+}
+
+/// The signs of a direction's components, bit `k` for axis `k` (the sign
+/// bit, so `-0.0` counts as negative, as the octree's traversal orders
+/// children).
+fn octant(r: &Ray) -> usize {
+    usize::from(r.dir.x.is_sign_negative())
+        | usize::from(r.dir.y.is_sign_negative()) << 1
+        | usize::from(r.dir.z.is_sign_negative()) << 2
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    #[test]
+    fn packets_share_an_origin_and_signs_and_take_every_ray_once() {
+        // Three runs: 20 camera rays from one eye (signs mixed), a lone
+        // ray, 5 rays from another eye.
+        let eye = Vec3::new(0.0, 1.0, 5.0);
+        let mut rays: Vec<Ray> = (0..20)
+            .map(|i| Ray::new(eye, Vec3::new(i as f32 - 9.5, -1.0 - (i % 3) as f32, -4.0)))
+            .collect();
+        rays.push(Ray::new(Vec3::X, Vec3::Y));
+        let other = Vec3::new(2.0, 0.0, 0.0);
+        rays.extend((0..5).map(|i| Ray::new(other, Vec3::new(1.0, i as f32, 0.5))));
+        let mut seen = vec![0; rays.len()];
+        let mut sizes = Vec::new();
+        for_each_packet(&rays, |idx| {
+            assert!(!idx.is_empty() && idx.len() <= PACKET);
+            let first = &rays[usize::from(idx[0])];
+            for &i in idx {
+                let r = &rays[usize::from(i)];
+                assert_eq!(r.origin, first.origin);
+                assert_eq!(octant(r), octant(first));
+                seen[usize::from(i)] += 1;
+            }
+            assert!(idx.windows(2).all(|w| w[0] < w[1]));
+            sizes.push(idx.len());
+        });
+        assert!(seen.iter().all(|&k| k == 1), "{seen:?}");
+        // The lone ray alone; the 5 of the second eye (one octant) as one
+        // packet; the first eye's 20 (two octants, 10 each) as 8 + 2 twice.
+        assert!(sizes.contains(&1) && sizes.contains(&5), "{sizes:?}");
+        let mut sorted = sizes.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, [1, 2, 2, 5, PACKET, PACKET], "{sizes:?}");
+    }
+}
