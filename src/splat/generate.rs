@@ -602,12 +602,15 @@ fn surface_stage(
     // The points as read, for the check that a crease cut leaves none of
     // them off every splat (`partners::meet_partners`), kept only where
     // denoising moved them (12 bytes a point through growth).
-    let mut read = None;
     let before = (params.creases != Creases::Off).then(|| points.clone());
-    if onto_local_surfaces(&mut points, &mut nrm, &fixed, to_estimate, &knn, report) {
+    let read = if onto_local_surfaces(&mut points, &mut nrm, &fixed, to_estimate, &knn, report) {
         let read_tree = std::mem::replace(&mut tree, build_tree(&points));
-        read = before.map(|b| (b, read_tree));
-    }
+        before.map(|b| (b, read_tree))
+    } else {
+        // Not kept through the face search (12 bytes a point).
+        drop(before);
+        None
+    };
     let mut surface = Surface {
         points,
         normals: nrm,
