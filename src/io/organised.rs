@@ -264,6 +264,40 @@ mod tests {
         assert_eq!(m, vec![3, 4, 8, 9, 13, 14, 18, 19]);
     }
 
+    /// A 6 × 5 grid: a 2 × 2 empty block inside (a stereo rig's "no
+    /// match", enclosed by measured cells) and an empty column at the right
+    /// edge. Both give misses to `grid_misses`; only the column reaches
+    /// the edge, so only its misses are a capture's.
+    #[test]
+    fn enclosed_empty_cells_are_no_misses() {
+        let o = Some(());
+        #[rustfmt::skip]
+        let grid = [
+            o, o, o, o, o, None,
+            o, None, None, o, o, None,
+            o, None, None, o, o, None,
+            o, o, o, o, o, None,
+            o, o, o, o, o, None,
+        ];
+        // (The column's end cells have one empty neighbour: dropouts.)
+        assert_eq!(grid_misses(&grid, 6, 5), vec![7, 8, 11, 13, 14, 17, 23]);
+        let open = super::open_to_edge(&grid, 6, 5);
+        let open: Vec<usize> = (0..30).filter(|&k| open[k]).collect();
+        assert_eq!(open, vec![5, 11, 17, 23, 29]);
+        let capture = Organised {
+            width: 6,
+            height: 5,
+            position: DVec3::ZERO,
+            orientation: DQuat::IDENTITY,
+            pixels: (0..30u32)
+                .filter(|&k| grid[k as usize].is_some())
+                .map(|k| (k, DVec3::new(f64::from(k % 6), f64::from(k / 6), 1.0)))
+                .collect(),
+            colors: None,
+        };
+        assert_eq!(capture.miss_cells(), vec![11, 17, 23]);
+    }
+
     /// A 40 × 30 capture of a slanted plane by a known pinhole in the
     /// `-z` frame, turned and moved, its right third empty: the fit gives
     /// the pinhole back and an empty pixel's ray is the pinhole's ray
