@@ -414,7 +414,10 @@ pub fn parse_scene_str(text: &str) -> Result<SceneFile> {
         let msg = e.message().to_string();
         match e.span() {
             Some(span) => {
-                let start = span.start.min(text.len());
+                let mut start = span.start.min(text.len());
+                while !text.is_char_boundary(start) {
+                    start -= 1;
+                }
                 let line = text[..start].matches('\n').count() + 1;
                 match key_before(&text[..start]) {
                     Some(key) => Error::invalid(format!("line {line}: `{key}` {msg}")),
@@ -431,9 +434,14 @@ pub fn parse_scene_str(text: &str) -> Result<SceneFile> {
 fn key_before(before: &str) -> Option<&str> {
     let line = &before[before.rfind('\n').map_or(0, |i| i + 1)..];
     let lhs = line[..line.rfind('=')?].trim_end();
-    let key = &lhs[lhs
-        .rfind(|c: char| !(c.is_alphanumeric() || c == '_' || c == '-' || c == '.'))
-        .map_or(0, |i| i + 1)..];
+    // Past the last character that cannot be part of a key (one of
+    // several bytes, as `§`, included).
+    let from = lhs
+        .char_indices()
+        .rev()
+        .find(|&(_, c)| !(c.is_alphanumeric() || c == '_' || c == '-' || c == '.'))
+        .map_or(0, |(i, c)| i + c.len_utf8());
+    let key = &lhs[from..];
     (!key.is_empty()).then_some(key)
 }
 
@@ -442,6 +450,17 @@ mod tests {
     use super::*;
 
     const HEAD: &str = "[camera]\nfrom = [0.0, 0.0, 3.0]\nat = [0.0, 0.0, 0.0]\n[[model]]\n";
+
+    /// An error on a line whose text before `=` ends in a character of
+    /// several bytes (`§`, found by the fuzzer in a mutated comment) is a
+    /// one-line error naming the line, not a panic slicing inside it.
+    #[test]
+    fn an_error_after_a_multibyte_character_names_its_line() {
+        let e = parse_scene_str("# x\n# report \u{a7}4e=\u{7f}\n").unwrap_err();
+        assert!(e.to_string().starts_with("line 2: "), "{e}");
+        let e = parse_scene_str("[camera]\nfov\u{a7} = \"x\"\n").unwrap_err();
+        assert!(e.to_string().starts_with("line 2"), "{e}");
+    }
 
     /// `scan.from` takes one station or a list; an empty list, a
     /// non-finite coordinate or another shape is a one-line error.
