@@ -126,6 +126,8 @@ pub struct Nearest {
     bound: f32,
     /// The last query's result: (squared distance, index), nearest first.
     pub found: Vec<(f32, u32)>,
+    /// Scratch: the candidates as [`key`]s.
+    keys: Vec<u64>,
 }
 
 impl Nearest {
@@ -135,6 +137,7 @@ impl Nearest {
         Nearest {
             bound: f32::INFINITY,
             found: Vec::new(),
+            keys: Vec::new(),
         }
     }
 
@@ -142,20 +145,20 @@ impl Nearest {
     /// (fewer only when the tree holds fewer), nearest first, ties by
     /// index.
     pub fn query(&mut self, tree: &PointTree, q: Vec3, m: usize) -> &[(f32, u32)] {
-        let by = |a: &(f32, u32), b: &(f32, u32)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
         self.found.clear();
+        self.keys.clear();
         let Some(mq) = NonZero::new(m) else {
             return &self.found;
         };
         let q = q.to_array();
         if self.bound.is_finite() {
-            self.found.extend(
+            self.keys.extend(
                 tree.within_unsorted::<SquaredEuclidean>(&q, self.bound)
                     .into_iter()
-                    .map(|f| (f.distance, f.item)),
+                    .map(|f| key(f.distance, f.item)),
             );
         }
-        if self.found.len() < m {
+        if self.keys.len() < m {
             // Too few within the bound: the m nearest found without one,
             // then every point as near as the m-th (its ties, which
             // `nearest_n` breaks in no fixed order).
@@ -163,18 +166,23 @@ impl Nearest {
                 .nearest_n::<SquaredEuclidean>(&q, mq)
                 .last()
                 .map_or(0.0, |f| f.distance);
-            self.found.clear();
-            self.found.extend(
+            self.keys.clear();
+            self.keys.extend(
                 tree.within_unsorted::<SquaredEuclidean>(&q, reach)
                     .into_iter()
-                    .map(|f| (f.distance, f.item)),
+                    .map(|f| key(f.distance, f.item)),
             );
         }
-        if self.found.len() > m {
-            self.found.select_nth_unstable_by(m - 1, by);
-            self.found.truncate(m);
+        if self.keys.len() > m {
+            self.keys.select_nth_unstable(m - 1);
+            self.keys.truncate(m);
         }
-        self.found.sort_unstable_by(by);
+        self.keys.sort_unstable();
+        self.found.extend(
+            self.keys
+                .iter()
+                .map(|&k| (f32::from_bits((k >> 32) as u32), k as u32)),
+        );
         let last = self.found.last().map_or(0.0, |f| f.0);
         self.bound = if last > 0.0 {
             BOUND_GROWTH_SQ * last
@@ -183,6 +191,14 @@ impl Nearest {
         };
         &self.found
     }
+}
+
+/// A found point as one integer ordered as (squared distance, index): a
+/// squared distance is never negative, and non-negative floats order as
+/// their bits do (`total_cmp`'s order), so one integer compare sorts them.
+fn key(distance: f32, item: u32) -> u64 {
+    debug_assert!(distance.is_sign_positive());
+    (u64::from(distance.to_bits()) << 32) | u64::from(item)
 }
 
 #[cfg(test)]

@@ -328,9 +328,7 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
             .map(|d| (1.0 - (normal.dot(*d - origin) / tol).powi(2)).max(0.0))
             .sum::<f32>()
     };
-    let mut candidates = triple_planes(&pts[..FACE_TRIPLES.min(pts.len())], &count);
-    candidates.sort_by_key(|f| std::cmp::Reverse(f.held));
-    candidates.truncate(FACE_REFITS);
+    let candidates = triple_planes(&pts[..FACE_TRIPLES.min(pts.len())], &count);
     // Refitted to what a plane holds, twice: the first refit still leans
     // toward the three points it passed through. A refit depends on the
     // points held alone: a candidate holding the same points as one before
@@ -349,6 +347,9 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
         })
     };
     let mut seen: Vec<HeldSet> = Vec::with_capacity(FACE_REFITS);
+    // The sets whose refit was already a result: a later refit of the same
+    // set is the same plane, and loses the tie.
+    let mut done: Vec<HeldSet> = Vec::with_capacity(FACE_REFITS);
     candidates
         .iter()
         .filter_map(|&f| {
@@ -360,9 +361,17 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
                 seen.push(set);
             }
             let once = refit(f)?;
-            if sets && held_set(once.normal, once.origin) == set {
+            if !sets {
+                return refit(once);
+            }
+            let now = held_set(once.normal, once.origin);
+            if now == set {
+                done.push(set);
                 Some(once)
+            } else if done.contains(&now) {
+                None
             } else {
+                done.push(now);
                 refit(once)
             }
         })
@@ -407,9 +416,10 @@ impl Lanes {
 }
 
 /// The planes through three of `near` (those not nearly in line), each
-/// with the count `count` gives it, in the order of the triples.
+/// with the count `count` gives it: the [`FACE_REFITS`] holding the most,
+/// most first, ties in the order of the triples.
 fn triple_planes(near: &[Vec3], count: &dyn Fn(Vec3, Vec3) -> usize) -> Vec<FacePlane> {
-    let mut candidates: Vec<FacePlane> = Vec::new();
+    let mut best: Vec<FacePlane> = Vec::with_capacity(FACE_REFITS + 1);
     for (a, &pa) in near.iter().enumerate() {
         for (b, &pb) in near.iter().enumerate().skip(a + 1) {
             for &pc in &near[b + 1..] {
@@ -420,16 +430,25 @@ fn triple_planes(near: &[Vec3], count: &dyn Fn(Vec3, Vec3) -> usize) -> Vec<Face
                     continue;
                 }
                 let normal = c.normalize();
-                candidates.push(FacePlane {
-                    normal,
-                    origin: pa,
-                    held: count(normal, pa),
-                    fit: 0.0,
-                });
+                let held = count(normal, pa);
+                // After every candidate holding as many (a stable order).
+                let at = best.partition_point(|f| f.held >= held);
+                if at < FACE_REFITS {
+                    best.insert(
+                        at,
+                        FacePlane {
+                            normal,
+                            origin: pa,
+                            held,
+                            fit: 0.0,
+                        },
+                    );
+                    best.truncate(FACE_REFITS);
+                }
             }
         }
     }
-    candidates
+    best
 }
 
 /// [`face_plane`] keeps the set of points a plane holds for neighbourhoods
