@@ -518,6 +518,15 @@ impl<'a> Lines<'a> {
                     s > ext && s <= band && w.perp_dot(m.q).abs() <= half
                 })
                 .count();
+            // What a face going on puts in the whole band (over
+            // spacing²): `expected` below with the outside's share 1, the
+            // same products in the same order, so never less than it (each
+            // rounding is monotonic): a count reaching its share of the
+            // whole is no border whatever the outside's share.
+            let whole = (band - ext) * 2.0 * half / (spacing * spacing);
+            if count as f32 >= BORDER_FILL * whole {
+                return None;
+            }
             // The band's area outside the disc (a grid's share of
             // it), over spacing²: what a face going on puts there.
             const N: usize = 8;
