@@ -211,6 +211,10 @@ pub struct SplatReport {
     pub flat_faces: usize,
     /// Points moved onto those faces.
     pub face_points: usize,
+    /// Points whose neighbourhood was searched for two faces meeting at an
+    /// edge (`normals::face_normals`): with creases on, those neither on a
+    /// flat face nor on one smooth surface; none on a smooth cloud's.
+    pub face_searches: usize,
     /// Fraction of the used points lying on at least one splat: within `ϵ`
     /// of its plane and inside its disc.
     pub coverage: f64,
@@ -654,7 +658,7 @@ fn faces_and_creases(
     let tol = by_eps.max(by_noise);
     let faces = normals::FlatFaces::from_tolerances(by_eps, by_noise);
     s.strong = faces == normals::FlatFaces::Strong;
-    s.flat = normals::face_normals(
+    let found = normals::face_normals(
         &s.points,
         &s.tree,
         &s.knn,
@@ -662,8 +666,9 @@ fn faces_and_creases(
         fixed,
         tol,
         faces,
-    )
-    .1;
+    );
+    s.flat = found.flat;
+    report.face_searches = found.searched;
     if s.strong {
         // Under strong noise, whole flat faces fitted, their points
         // moved onto them along their lines of sight (`splat::planes`).
