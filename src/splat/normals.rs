@@ -1196,6 +1196,36 @@ impl Sheet {
     }
 }
 
+/// `h` sorted by height as a stable sort by `total_cmp` orders it (ties in
+/// their order before), by one integer key each: the height's bits mapped
+/// to an unsigned order that is `total_cmp`'s, then the position.
+fn sort_heights(h: &mut [(f32, u32)]) {
+    const MAX: usize = WIDE_MAX + 1;
+    if h.len() > MAX {
+        h.sort_by(|a, b| a.0.total_cmp(&b.0));
+        return;
+    }
+    let order = |x: f32| {
+        let b = x.to_bits();
+        if b & 0x8000_0000 == 0 {
+            b | 0x8000_0000
+        } else {
+            !b
+        }
+    };
+    let mut keys = [0u64; MAX];
+    let mut was = [(0f32, 0u32); MAX];
+    let n = h.len();
+    for (j, (k, x)) in keys.iter_mut().zip(h.iter()).enumerate() {
+        *k = (u64::from(order(x.0)) << 32) | j as u64;
+    }
+    was[..n].copy_from_slice(h);
+    keys[..n].sort_unstable();
+    for (x, k) in h.iter_mut().zip(&keys[..n]) {
+        *x = was[(k & 0xffff_ffff) as usize];
+    }
+}
+
 /// A gap in the heights splits two sheets only when it is this many times
 /// the spread of the heights on the point's own side: range noise and
 /// curvature fill the heights of one noisy sheet without such a gap.
@@ -1235,7 +1265,7 @@ pub fn sheet_of(
             .iter()
             .map(|&j| (normal.dot(points[j as usize] - p), j)),
     );
-    h.sort_by(|a, b| a.0.total_cmp(&b.0));
+    sort_heights(h);
     let me = h.iter().position(|x| x.1 == u32::MAX)?;
     let widest = |range: std::ops::RangeInclusive<usize>| {
         range
@@ -1459,6 +1489,41 @@ mod tests {
         }
         // Every case fixes a plane (none is collinear): all 400 compared.
         assert_eq!(compared, 400);
+    }
+
+    /// [`sort_heights`] orders as the stable sort by `total_cmp` does:
+    /// negative and positive zeros, ties, infinities and NaNs of both signs.
+    #[test]
+    fn heights_sort_as_the_stable_sort() {
+        let mut rng = crate::rng::SplitMix64::new(7);
+        let pool = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.5,
+            -0.5,
+            1e-30,
+            -1e-30,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            -f32::NAN,
+        ];
+        for len in [0, 1, 2, 7, 49, 257, 300] {
+            for _ in 0..20 {
+                let h: Vec<(f32, u32)> = (0..len)
+                    .map(|j| (pool[(rng.next_u64() % pool.len() as u64) as usize], j))
+                    .collect();
+                let mut want = h.clone();
+                want.sort_by(|a, b| a.0.total_cmp(&b.0));
+                let mut got = h.clone();
+                sort_heights(&mut got);
+                let bits =
+                    |v: &[(f32, u32)]| v.iter().map(|x| (x.0.to_bits(), x.1)).collect::<Vec<_>>();
+                assert_eq!(bits(&got), bits(&want), "len {len}");
+            }
+        }
     }
 
     /// The flat-face rules follow the noise's tolerance against ϵ's: off
