@@ -125,7 +125,7 @@ fn main() {
         let tree = build_tree(&pts);
         let knn12 = Knn::build(&tree, &pts, 12);
         let sights = Viewpoints::One(vp);
-        let est = normals::estimate_multiscale(&pts, &tree, &knn12, Some(&sights));
+        let est = normals::estimate_multiscale(&pts, &tree, &knn12, Some(&sights), None);
         let mut nrm = est.normals;
         // The graph a scan-line cloud is widened to (k = 48).
         let knn = Knn::build(&tree, &pts, 48);

@@ -571,6 +571,9 @@ struct Surface {
     flat: Vec<bool>,
     /// Which lie on a whole flat face fitted under strong noise.
     on_face: Vec<bool>,
+    /// Which are settled on one face (`normals::Estimated::settled`; empty
+    /// for none, and after the face search).
+    settled: Vec<bool>,
     /// Strong noise (`normals::FlatFaces::Strong`).
     strong: bool,
     /// Creases searched.
@@ -589,12 +592,17 @@ fn surface_stage(
     frame: &UnitFrame,
     report: &mut SplatReport,
 ) -> Surface {
-    let (mut nrm, fixed, to_estimate) = normals_of(&mut w, cloud, params, report);
     let epsilon = match params.epsilon_abs {
         Some(e) => (e / frame.scale) as f32,
         None => (f64::from(params.epsilon_rel) * report.bbox_diagonal) as f32,
     };
     report.epsilon = f64::from(epsilon);
+    // The face search's least tolerance (`faces_and_creases`): points
+    // whose planes hold their neighbourhoods within it are settled while
+    // their normals are estimated.
+    let settle_tol = (params.creases != Creases::Off).then_some(normals::FACE_TOL_EPS * epsilon);
+    let (mut nrm, fixed, to_estimate, mut settled) =
+        normals_of(&mut w, cloud, params, settle_tol, report);
     let Work {
         mut points,
         colors,
@@ -609,6 +617,8 @@ fn surface_stage(
     let before = (params.creases != Creases::Off).then(|| points.clone());
     let read = if onto_local_surfaces(&mut points, &mut nrm, &fixed, to_estimate, &knn, report) {
         let read_tree = std::mem::replace(&mut tree, build_tree(&points));
+        // Moved points and refitted normals: nothing is settled.
+        settled = Vec::new();
         before.map(|b| (b, read_tree))
     } else {
         // Not kept through the face search (12 bytes a point).
@@ -623,6 +633,7 @@ fn surface_stage(
         read,
         flat: Vec::new(),
         on_face: Vec::new(),
+        settled,
         strong: false,
         creases: params.creases.found(knn.k > params.k),
         knn,
@@ -666,7 +677,9 @@ fn faces_and_creases(
         fixed,
         tol,
         faces,
+        &s.settled,
     );
+    s.settled = Vec::new();
     s.flat = found.flat;
     report.face_searches = found.searched;
     if s.strong {
@@ -1106,9 +1119,11 @@ fn normals_of(
     w: &mut Work,
     cloud: &PointCloud,
     params: &SplatParams,
+    settle_tol: Option<f32>,
     report: &mut SplatReport,
-) -> (Vec<Vec3>, Vec<bool>, usize) {
+) -> (Vec<Vec3>, Vec<bool>, usize, Vec<bool>) {
     let n = w.points.len();
+    let mut settled = Vec::new();
     let input_normals: Option<Vec<Vec3>> = cloud
         .normals
         .as_ref()
@@ -1135,8 +1150,10 @@ fn normals_of(
             wide,
             collinear,
             degenerate,
+            settled: settled_here,
             ..
-        } = normals::estimate_multiscale(&w.points, &w.tree, &w.knn, w.sights.as_ref());
+        } = normals::estimate_multiscale(&w.points, &w.tree, &w.knn, w.sights.as_ref(), settle_tol);
+        settled = settled_here;
         if (collinear * 20 > n || wide * 5 > n) && w.k < params.k * normals::WIDE_FACTOR {
             // Anisotropic sampling (scan lines) or heavy noise: the k nearest
             // neighbours of many points lie along one line or do not reach
@@ -1151,6 +1168,8 @@ fn normals_of(
             ));
             w.k = wider;
             report.k = wider;
+            // The face search's neighbourhood widens with the graph.
+            settled = Vec::new();
             w.knn = Knn::build(&w.tree, &w.points, wider);
         }
         if wide * 100 > n {
@@ -1186,7 +1205,7 @@ fn normals_of(
         ));
     }
     report.estimated_normals = to_estimate;
-    (nrm, fixed, to_estimate)
+    (nrm, fixed, to_estimate, settled)
 }
 
 /// The diagonal of the box holding all but the 0.1 % most extreme of
