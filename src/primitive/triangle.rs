@@ -202,7 +202,7 @@ impl Primitive for Triangle {
         let r = n.abs().dot(half);
         let slack = 1e-5 * (n.abs().dot(mid.abs() + self.v[0].as_dvec3().abs()) + r);
         // NaN: kept (never drop what rounding cannot decide).
-        !(s.abs() > r + slack)
+        s.abs().partial_cmp(&(r + slack)) != Some(std::cmp::Ordering::Greater)
     }
 
     /// The point's distance from the triangle, measured in units of
