@@ -8,7 +8,7 @@
 //! triangles`.
 
 use glam::Vec3;
-use splatray::accel::{Backend, CandidateHits, registry};
+use splatray::accel::{CandidateHits, registry};
 use splatray::embree::Device;
 use splatray::embree::TriangleScene;
 use splatray::geometry::Ray;
