@@ -265,3 +265,67 @@ fn nan_and_infinite_rays_meet_nothing_on_every_backend() {
         assert_eq!(window(b.as_ref(), &ray).len(), 1, "{name}");
     }
 }
+
+/// A splat standing on a triangle floor (`accel::hybrid`): a disc of
+/// radius 0.5 at `(0, 0, 0.5)` facing +x, its rim touching the floor
+/// `z = 0` (two triangles) at the origin; a light up and toward +x.
+#[test]
+fn a_splat_touching_a_triangle_floor_has_no_gap_and_no_self_shadow() {
+    use splatray::splat::Splat;
+    let splats = vec![Splat::disc(Vec3::new(0.0, 0.0, 0.5), Vec3::X, 0.5).unwrap()];
+    let c = |x: f32, y: f32| Vec3::new(x, y, 0.0);
+    let floor = vec![
+        Triangle {
+            v: [c(-2.0, -2.0), c(2.0, -2.0), c(2.0, 2.0)],
+        },
+        Triangle {
+            v: [c(-2.0, -2.0), c(2.0, 2.0), c(-2.0, 2.0)],
+        },
+    ];
+    let light = Vec3::new(3.0, 0.2, 3.0);
+    for info in registry::renderers() {
+        let b = info.build_hybrid(&splats, &floor).unwrap();
+        // No gap: rays at the contact from the lit side meet the splat or
+        // the floor, the splat (id 0) when aimed above the floor.
+        for k in 0..=40 {
+            let aim = Vec3::new(0.0, (k as f32 - 20.0) * 0.0001, k as f32 * 0.0005);
+            let ray = Ray::new(Vec3::new(1.0, 0.1, 0.6), aim - Vec3::new(1.0, 0.1, 0.6));
+            let mut hits = CandidateHits::new(0.0);
+            b.intersect(&ray, 0.0, f32::INFINITY, &mut hits);
+            let n = hits
+                .nearest()
+                .unwrap_or_else(|| panic!("{}: gap at {aim}", info.name));
+            assert!(
+                k == 0 || n.id == 0,
+                "{}: aimed at the splat {aim}, met {n:?}",
+                info.name
+            );
+        }
+        // No self-shadow: shadow rays leaving the floor in front of the
+        // splat, and the splat's front near its foot, reach the light;
+        // leaving the floor behind the splat they are blocked by it.
+        for k in 1..=20 {
+            let s = k as f32 * 0.005;
+            for (id, point, normal, blocked) in [
+                (1u32, Vec3::new(s, 0.0, 0.0), Vec3::Z, false),
+                (0, Vec3::new(0.0, 0.0, s), Vec3::X, false),
+                (1, Vec3::new(-s, 0.0, 0.0), Vec3::Z, true),
+            ] {
+                let dir = light - point;
+                let q = Query {
+                    ray: Ray::new(point, dir),
+                    t_min: 0.0,
+                    t_max: dir.length(),
+                    from: Some(Departure { id, point, normal }),
+                    pass: None,
+                };
+                assert_eq!(
+                    b.occluded_from(&q),
+                    blocked,
+                    "{}: leaving {point} of primitive {id}",
+                    info.name
+                );
+            }
+        }
+    }
+}
