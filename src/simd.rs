@@ -20,6 +20,9 @@
 //! for a given path ([`crate::accel::octree::OctreeParams::simd`]), which is
 //! how the registry's `octree-<path>` variants force each one.
 
+mod tri;
+pub use tri::{SURE, Shear, TRI_LANES, TriColumns, tri_masks};
+
 /// The environment variable that forces a path for the whole process
 /// (read by `crate::config`).
 pub const SIMD_VAR: &str = "SPLATRAY_SIMD";

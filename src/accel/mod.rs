@@ -11,6 +11,7 @@
 pub mod brute;
 mod departure;
 pub mod embree;
+pub mod hybrid;
 pub mod octree;
 mod pass;
 pub mod registry;

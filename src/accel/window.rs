@@ -110,6 +110,19 @@ impl CandidateHits {
         }
     }
 
+    /// Offers every candidate of `other` (another structure's window of the
+    /// same ray, its ids shifted by `id_offset`) and its dropped hits'
+    /// record: the window both would have made together (issue 57).
+    pub fn merge(&mut self, other: &CandidateHits, id_offset: u32) {
+        for c in other.as_slice() {
+            self.offer(Candidate {
+                id: c.id + id_offset,
+                ..*c
+            });
+        }
+        self.min_dropped = self.min_dropped.min(other.min_dropped);
+    }
+
     /// Offers a hit. Returns the (possibly shrunk) far end of the window.
     pub fn offer(&mut self, c: Candidate) -> f32 {
         if c.t.is_nan() || c.t > self.far() {

@@ -12,10 +12,12 @@
 pub mod clip;
 mod clipped;
 mod disc;
+mod triangle;
 
 pub use clip::{Clip, ClipLine};
 pub use clipped::{ClipTable, ClippedDisc, ClippedPack};
 pub use disc::{Disc, DiscPack};
+pub use triangle::{ON_TRIANGLE, Triangle, TrianglePack};
 
 use glam::Vec3;
 

@@ -1,0 +1,331 @@
+//! Triangles on every backend and SIMD path (issue 57): every registered
+//! backend built over `Triangle`s (the octree on each SIMD path this CPU
+//! runs, Embree's user geometry, the brute-force oracle) gives the
+//! oracle's candidates bit for bit, a ray through a shared edge or vertex
+//! hits exactly one triangle, grazing and in-plane rays agree, a shadow
+//! ray leaving a triangle does not meet it or its neighbours at the
+//! departure point but does meet a blocker, and NaN or infinite rays meet
+//! nothing.
+
+use glam::Vec3;
+use splatray::accel::{Backend, CandidateHits, Departure, Query, registry};
+use splatray::geometry::Ray;
+use splatray::primitive::Triangle;
+
+/// A bumpy `n × n` grid of unit squares, two triangles each, wound so the
+/// face normals point up (+z); heights from the vertex indices so that
+/// neighbouring faces are not coplanar.
+fn terrain(n: usize) -> Vec<Triangle> {
+    let h = |i: usize, j: usize| ((i * 7 + j * 3) % 5) as f32 * 0.125;
+    let p = |i: usize, j: usize| Vec3::new(i as f32, j as f32, h(i, j));
+    let mut out = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            out.push(Triangle {
+                v: [p(i, j), p(i + 1, j), p(i + 1, j + 1)],
+            });
+            out.push(Triangle {
+                v: [p(i, j), p(i + 1, j + 1), p(i, j + 1)],
+            });
+        }
+    }
+    out
+}
+
+fn backends(tris: &[Triangle]) -> Vec<(&'static str, Box<dyn Backend>)> {
+    registry::backends::<Triangle>()
+        .into_iter()
+        .map(|b| (b.name, b.build(tris).expect(b.name)))
+        .collect()
+}
+
+/// The brute-force oracle among the built backends.
+fn oracle<'a>(all: &'a [(&'static str, Box<dyn Backend>)]) -> &'a dyn Backend {
+    let name = registry::oracle::<Triangle>().name;
+    all.iter().find(|(n, _)| *n == name).unwrap().1.as_ref()
+}
+
+fn window(b: &dyn Backend, ray: &Ray) -> Vec<(u32, f32, f32, f32)> {
+    let mut hits = CandidateHits::new(0.0);
+    b.intersect(ray, 0.0, f32::INFINITY, &mut hits);
+    hits.as_slice()
+        .iter()
+        .map(|c| (c.id, c.t, c.u, c.v))
+        .collect()
+}
+
+#[test]
+fn rays_through_shared_edges_and_vertices_hit_exactly_one_triangle_on_every_backend() {
+    let tris = terrain(6);
+    let all = backends(&tris);
+    assert!(
+        all.len() >= 4,
+        "octree, embree, variants, brute: {}",
+        all.len()
+    );
+    let mut rays = 0;
+    for i in 1..12 {
+        for j in 1..12 {
+            let (x, y) = (i as f32 * 0.5, j as f32 * 0.5);
+            // The point of the surface over (x, y) on the grid lines: a
+            // vertex, an edge's midpoint or a diagonal's.
+            let z = tris
+                .iter()
+                .find_map(|t| t.intersect_down(x, y))
+                .expect("over the grid");
+            let p = Vec3::new(x, y, z);
+            for d in [
+                Vec3::new(0.0, 0.0, -1.0),
+                Vec3::new(0.2, -0.1, -1.0),
+                Vec3::new(-0.4, 0.3, -1.0),
+                Vec3::new(0.0, 0.0, 1.0),
+            ] {
+                let ray = Ray::new(p - d.normalize() * 5.0, d);
+                let want = window(oracle(&all), &ray);
+                assert_eq!(want.len(), 1, "brute, through {p} along {d}: {want:?}");
+                for (name, b) in &all {
+                    assert_eq!(
+                        window(b.as_ref(), &ray),
+                        want,
+                        "{name}: through {p} along {d}"
+                    );
+                }
+                rays += 1;
+            }
+        }
+    }
+    assert_eq!(rays, 484);
+}
+
+/// The height of the triangle under `(x, y)` straight down, if it is
+/// over the triangle (a helper on the test's side, from the exact test).
+trait Down {
+    fn intersect_down(&self, x: f32, y: f32) -> Option<f32>;
+}
+
+impl Down for Triangle {
+    fn intersect_down(&self, x: f32, y: f32) -> Option<f32> {
+        use splatray::primitive::Primitive;
+        let ray = Ray::new(Vec3::new(x, y, 10.0), -Vec3::Z);
+        self.intersect(&ray, 0.0, f32::INFINITY)
+            .map(|h| ray.at(h.t).z)
+    }
+}
+
+#[test]
+fn grazing_in_plane_and_random_rays_agree_with_the_oracle() {
+    let tris = terrain(5);
+    let all = backends(&tris);
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut r = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut hit = 0;
+    for k in 0..600 {
+        let ray = match k % 3 {
+            // Grazing: nearly horizontal, just over the surface.
+            0 => Ray::new(
+                Vec3::new(-1.0, r() * 5.0, 0.3 + r() * 0.3),
+                Vec3::new(1.0, r() - 0.5, -0.05 * r()),
+            ),
+            // In the plane of a flat stretch (z = 0 plane through vertices
+            // of height 0) and along a grid line.
+            1 => Ray::new(Vec3::new(-1.0, (k % 6) as f32, 0.0), Vec3::X),
+            _ => Ray::new(
+                Vec3::new(r() * 5.0, r() * 5.0, 3.0),
+                Vec3::new(r() - 0.5, r() - 0.5, -1.0),
+            ),
+        };
+        let want = window(oracle(&all), &ray);
+        hit += usize::from(!want.is_empty());
+        for (name, b) in &all {
+            assert_eq!(window(b.as_ref(), &ray), want, "{name}: ray {k} {ray:?}");
+            let occluded = b.occluded(&ray, 0.0, f32::INFINITY);
+            assert_eq!(occluded, !want.is_empty(), "{name}: ray {k}");
+        }
+    }
+    assert!(hit > 300, "too few rays hit: {hit}");
+}
+
+#[test]
+fn a_shadow_ray_leaving_a_triangle_skips_only_the_surface_it_leaves() {
+    // The terrain, and one blocker triangle high over its middle.
+    let mut tris = terrain(4);
+    let blocker = tris.len() as u32;
+    tris.push(Triangle {
+        v: [
+            Vec3::new(1.5, 1.5, 3.0),
+            Vec3::new(2.5, 1.5, 3.0),
+            Vec3::new(2.0, 2.5, 3.0),
+        ],
+    });
+    let all = backends(&tris);
+    let (mut left, mut blocked) = (0, 0);
+    for i in 1..8 {
+        for j in 1..8 {
+            let (x, y) = (i as f32 * 0.5, j as f32 * 0.5);
+            // Where a camera ray from above meets the terrain (a vertex or
+            // an edge: the departure point lies on several triangles).
+            let cam = Ray::new(Vec3::new(x, y, 10.0), -Vec3::Z);
+            let (id, t) = tris[..blocker as usize]
+                .iter()
+                .enumerate()
+                .filter_map(|(i, tri)| {
+                    splatray::primitive::Primitive::intersect(tri, &cam, 0.0, 20.0)
+                        .map(|h| (i as u32, h.t))
+                })
+                .min_by(|a, b| (a.1, a.0).partial_cmp(&(b.1, b.0)).unwrap())
+                .unwrap();
+            let c = splatray::accel::Candidate {
+                id,
+                t,
+                u: 0.0,
+                v: 0.0,
+            };
+            let point = cam.at(c.t);
+            let from = Departure {
+                id: c.id,
+                point,
+                normal: tris[c.id as usize].unit_normal(),
+            };
+            for (up, name_dir) in [(Vec3::Z, "up"), (Vec3::new(0.3, -0.2, 1.0), "tilted")] {
+                let ray = Ray::new(point, up);
+                let q = Query {
+                    ray,
+                    t_min: 0.0,
+                    t_max: 100.0,
+                    from: Some(from),
+                    pass: None,
+                };
+                // Blocked exactly when the ray meets the blocker.
+                let want = splatray::primitive::Primitive::intersect(
+                    &tris[blocker as usize],
+                    &ray,
+                    0.0,
+                    100.0,
+                )
+                .is_some();
+                for (name, b) in &all {
+                    assert_eq!(
+                        b.occluded_from(&q),
+                        want,
+                        "{name}: leaving {point} {name_dir} from triangle {}",
+                        c.id
+                    );
+                }
+                left += 1;
+                blocked += usize::from(want);
+            }
+        }
+    }
+    // 49 points, two rays each; those meeting the blocker are blocked (3
+    // measured: most points under it lie on its rim).
+    assert_eq!(left, 98);
+    assert!((3..=20).contains(&blocked), "{blocked} of {left} blocked");
+}
+
+#[test]
+fn nan_and_infinite_rays_meet_nothing_on_every_backend() {
+    let tris = terrain(3);
+    let all = backends(&tris);
+    let o = Vec3::new(1.2, 1.3, 3.0);
+    for ray in [
+        Ray {
+            origin: o,
+            dir: Vec3::new(f32::NAN, 0.0, -1.0),
+        },
+        Ray {
+            origin: Vec3::NAN,
+            dir: -Vec3::Z,
+        },
+        Ray {
+            origin: Vec3::new(f32::INFINITY, 1.0, 3.0),
+            dir: -Vec3::Z,
+        },
+        Ray {
+            origin: o,
+            dir: Vec3::new(0.0, 0.0, f32::NEG_INFINITY),
+        },
+        Ray {
+            origin: o,
+            dir: Vec3::ZERO,
+        },
+    ] {
+        for (name, b) in &all {
+            assert!(window(b.as_ref(), &ray).is_empty(), "{name}: {ray:?}");
+            assert!(!b.occluded(&ray, 0.0, f32::INFINITY), "{name}: {ray:?}");
+        }
+    }
+    // The same rays' finite twin hits on every backend.
+    let ray = Ray::new(o, -Vec3::Z);
+    for (name, b) in &all {
+        assert_eq!(window(b.as_ref(), &ray).len(), 1, "{name}");
+    }
+}
+
+/// A splat standing on a triangle floor (`accel::hybrid`): a disc of
+/// radius 0.5 at `(0, 0, 0.5)` facing +x, its rim touching the floor
+/// `z = 0` (two triangles) at the origin; a light up and toward +x.
+#[test]
+fn a_splat_touching_a_triangle_floor_has_no_gap_and_no_self_shadow() {
+    use splatray::splat::Splat;
+    let splats = vec![Splat::disc(Vec3::new(0.0, 0.0, 0.5), Vec3::X, 0.5).unwrap()];
+    let c = |x: f32, y: f32| Vec3::new(x, y, 0.0);
+    let floor = vec![
+        Triangle {
+            v: [c(-2.0, -2.0), c(2.0, -2.0), c(2.0, 2.0)],
+        },
+        Triangle {
+            v: [c(-2.0, -2.0), c(2.0, 2.0), c(-2.0, 2.0)],
+        },
+    ];
+    let light = Vec3::new(3.0, 0.2, 3.0);
+    for info in registry::renderers() {
+        let b = info.build_hybrid(&splats, &floor).unwrap();
+        // No gap: rays at the contact from the lit side meet the splat or
+        // the floor, the splat (id 0) when aimed above the floor.
+        for k in 0..=40 {
+            let aim = Vec3::new(0.0, (k as f32 - 20.0) * 0.0001, k as f32 * 0.0005);
+            let ray = Ray::new(Vec3::new(1.0, 0.1, 0.6), aim - Vec3::new(1.0, 0.1, 0.6));
+            let mut hits = CandidateHits::new(0.0);
+            b.intersect(&ray, 0.0, f32::INFINITY, &mut hits);
+            let n = hits
+                .nearest()
+                .unwrap_or_else(|| panic!("{}: gap at {aim}", info.name));
+            assert!(
+                k == 0 || n.id == 0,
+                "{}: aimed at the splat {aim}, met {n:?}",
+                info.name
+            );
+        }
+        // No self-shadow: shadow rays leaving the floor in front of the
+        // splat, and the splat's front near its foot, reach the light;
+        // leaving the floor behind the splat they are blocked by it.
+        for k in 1..=20 {
+            let s = k as f32 * 0.005;
+            for (id, point, normal, blocked) in [
+                (1u32, Vec3::new(s, 0.0, 0.0), Vec3::Z, false),
+                (0, Vec3::new(0.0, 0.0, s), Vec3::X, false),
+                (1, Vec3::new(-s, 0.0, 0.0), Vec3::Z, true),
+            ] {
+                let dir = light - point;
+                let q = Query {
+                    ray: Ray::new(point, dir),
+                    t_min: 0.0,
+                    t_max: dir.length(),
+                    from: Some(Departure { id, point, normal }),
+                    pass: None,
+                };
+                assert_eq!(
+                    b.occluded_from(&q),
+                    blocked,
+                    "{}: leaving {point} of primitive {id}",
+                    info.name
+                );
+            }
+        }
+    }
+}
