@@ -24,7 +24,19 @@ python3 scripts/fnlen.py --max 100 src/splat >/dev/null
 python3 scripts/imports.py src --no-up splat --forbid io:splat --forbid data:splat \
     --forbid data:io --forbid accel:splat
 
+# Every test, the documentation's examples included (`cargo test` runs
+# the library's doc tests: src/lib.rs's front door and the modules').
 cargo test --release
+
+# The library's public API (issue 56): its documentation builds without a
+# warning (a link to a private item; a public item without documentation:
+# `missing_docs` warns without the `internals` feature), and at most 150
+# items are public, counted from that documentation (scripts/api_count.py
+# says what counts).
+echo "== cargo doc: the public API"
+rm -rf target/doc/splatray
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps -q -p splatray
+python3 scripts/api_count.py --max 150 target/doc/splatray
 
 # Every benchmark compiles (`cargo test` never builds benches/).
 echo "== cargo bench --no-run"
