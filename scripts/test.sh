@@ -65,6 +65,22 @@ for path in $paths; do
     case "$path" in portable | avx2 | avx512) ;; *) echo "test.sh: unknown SIMD path '$path' in info" >&2; exit 1 ;; esac
 done
 
+# The library's examples of use (examples/, the front door only), their
+# output checked: a cloud to an image, byte for byte the image `render`
+# makes of the cloud given alone (the scene it used saved and handed to
+# the example); rays cast on both backends, identical bit for bit (the
+# example exits 1 otherwise); a small sweep of speed against error (exits 1
+# when the backends' images differ or the error does not fall).
+echo "== examples"
+ex=$(mktemp -d)
+trap 'rm -rf "$ex"' EXIT
+cargo run --release -q -- render scenes/data/milk.pcd --width 160 --height 120 \
+    -o "$ex/cli.png" --save-scene "$ex/milk.toml"
+cargo run --release -q --example cloud_to_image -- "$ex/milk.toml" "$ex/example.png"
+cmp "$ex/cli.png" "$ex/example.png" || { echo "test.sh: cloud_to_image's image differs from render's" >&2; exit 1; }
+cargo run --release -q --example cast_both -- scenes/data/milk.pcd
+cargo run --release -q --example speed_error
+
 targets=()
 for f in tests/*.rs tests/*/main.rs; do
     name=$(basename "$f" .rs)
