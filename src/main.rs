@@ -1,9 +1,8 @@
-//! The `splatray` command line (its arguments and commands: `cli::app`).
-
-mod cli;
+//! The `splatray` command line: the library's [`splatray::run_cli`] (its
+//! arguments and commands are the library's private `cli` module).
 
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    ExitCode::from(cli::app::run(std::env::args_os()))
+    ExitCode::from(splatray::run_cli(std::env::args_os()))
 }

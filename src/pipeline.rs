@@ -28,7 +28,7 @@ use crate::splat::{PointCloud, Splat, SplatParams, SplatReport, generate_with_pr
 use crate::{Error, Result};
 use std::time::Instant;
 
-/// What [`generate`] made.
+/// What `generate` made.
 #[derive(Clone, Debug)]
 pub struct Generated {
     /// The splats, positions relative to the cloud's origin.
@@ -38,7 +38,7 @@ pub struct Generated {
     /// What free-space trimming did (`None`: the cloud has no viewpoint).
     pub trim: Option<TrimReport>,
     /// One colour field per splat, or none (no colours, one colour, or
-    /// [`SplatParams::color_fields`] off).
+    /// `SplatParams::color_fields` off).
     pub color_fields: Vec<ColorField>,
     /// How many of those are zero (a constant colour).
     pub constant_color_fields: usize,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -63,3 +64,17 @@ def fresh_client():
 def one_machine(binary: str, args: list[str]) -> None:
     r = subprocess.run([binary, *args], capture_output=True, text=True, env=dict(os.environ))
     assert r.returncode == 0, r.stderr
+
+
+HIDDEN = [d for d in (ROOT / ".embree", ROOT / "target") if d.is_dir()]
+
+
+def hiding_clone(args: list[str]) -> list[str]:
+    """`args` run with the clone's .embree/ and target/ (those it has) hidden:
+    in a user and mount namespace (`unshare -rm`) with an empty tmpfs
+    mounted over each, so nothing there can be found or loaded."""
+    unshare = shutil.which("unshare")
+    assert unshare, "no unshare (util-linux) to hide the clone's .embree/ and target/ with"
+    script = " && ".join(f'mount -t tmpfs none "${i + 1}"' for i in range(len(HIDDEN)))
+    script += f' && shift {len(HIDDEN)} && exec "$@"'
+    return [unshare, "-rm", "sh", "-c", script, "sh", *map(str, HIDDEN), *args]

@@ -2,8 +2,11 @@
 scheduler` and two `dask worker` processes as separate commands, from a
 folder other than the driver's, with only the set-up the document gives
 (the environment with the splatray wheel installed; no PYTHONPATH), and
-the driver run as `python -m splatray_dask --scheduler ...`: splats and an
-image byte-identical to one machine."""
+the driver run as `python -m splatray_dask --scheduler ...` without
+`--binary`, so the tasks run the wheel's `splatray` command; every one of
+those processes runs with the clone's .embree/ and target/ hidden
+(`conftest.hiding_clone`): splats and an image byte-identical to the
+cargo-built binary on one machine."""
 
 from __future__ import annotations
 
@@ -17,7 +20,7 @@ from pathlib import Path
 import pytest
 from distributed import Client
 
-from conftest import ROOT, one_machine
+from conftest import ROOT, hiding_clone, one_machine
 
 BIN = Path(sys.executable).parent  # the environment's bin/, as on PATH
 
@@ -36,13 +39,14 @@ def cluster(tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     env["PATH"] = f"{BIN}{os.pathsep}{env.get('PATH', '')}"
     address = f"tcp://127.0.0.1:{free_port()}"
-    procs = [subprocess.Popen(["dask", "scheduler", "--host", "127.0.0.1", "--port", address.rsplit(":", 1)[1],
-                               "--no-dashboard"], cwd=node, env=env,
+    procs = [subprocess.Popen(hiding_clone(["dask", "scheduler", "--host", "127.0.0.1", "--port",
+                                            address.rsplit(":", 1)[1], "--no-dashboard"]), cwd=node, env=env,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
     try:
         for _ in range(2):
-            procs.append(subprocess.Popen(["dask", "worker", address, "--nworkers", "1", "--nthreads", "1",
-                                           "--memory-limit", "0", "--no-dashboard"], cwd=node, env=env,
+            procs.append(subprocess.Popen(hiding_clone(["dask", "worker", address, "--nworkers", "1", "--nthreads",
+                                                        "1", "--memory-limit", "0", "--no-dashboard"]),
+                                          cwd=node, env=env,
                                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         deadline = time.time() + 60
         while True:
@@ -66,7 +70,7 @@ def cluster(tmp_path):
 
 
 def driver(node: Path, env: dict, *args: str) -> None:
-    r = subprocess.run([str(BIN / "python"), "-m", "splatray_dask", *args], cwd=node, env=env,
+    r = subprocess.run(hiding_clone([str(BIN / "python"), "-m", "splatray_dask", *args]), cwd=node, env=env,
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
 
@@ -77,13 +81,13 @@ def test_a_cluster_started_as_documented_gives_the_one_machine_bytes(cluster, bi
     one_machine(binary, ["splat", str(cloud), "-o", str(local), "--tile-points", "30000"])
     out = tmp_path / "out" / "dask.ply"
     out.parent.mkdir()
-    driver(node, env, "--scheduler", address, "--binary", binary,
+    driver(node, env, "--scheduler", address,
            "splat", str(cloud), "-o", str(out), "--", "--tile-points", "30000")
     assert out.read_bytes() == local.read_bytes()
     flags = ["--width", "160", "--height", "123", "--spp", "2"]
     scene = ROOT / "scenes" / "bunny.toml"
     one_machine(binary, ["render", str(scene), *flags, "-o", str(tmp_path / "local.png")])
-    driver(node, env, "--scheduler", address, "--binary", binary,
+    driver(node, env, "--scheduler", address,
            "render", str(scene), "-o", str(tmp_path / "out" / "dask.png"), "--", *flags)
     assert (tmp_path / "out" / "dask.png").read_bytes() == (tmp_path / "local.png").read_bytes()
 

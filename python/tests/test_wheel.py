@@ -2,7 +2,9 @@
 wheel (scripts/python-package.sh, which setup.sh and test.sh run) that
 carries Embree 4 and TBB, reached through $ORIGIN only, with a stripped
 module; installed into a fresh environment outside the clone, with no
-LD_LIBRARY_PATH, its `splatray` command is the binary's command line
+LD_LIBRARY_PATH, and run where the clone's .embree/ and target/ cannot be
+seen (a user and mount namespace, `unshare -rm`, with an empty tmpfs
+mounted over each), its `splatray` command is the binary's command line
 (help, info, exit statuses, one-line errors, a render byte-identical to
 the binary's, progress on stderr, Ctrl-C) and a process that imports the
 package and casts rays maps nothing from the clone."""
@@ -25,7 +27,7 @@ import pytest
 from elftools.elf.dynamic import DynamicSection
 from elftools.elf.elffile import ELFFile
 
-from conftest import ROOT
+from conftest import HIDDEN, ROOT, hiding_clone
 
 WHEELS = ROOT / "target" / "wheels"
 MODULE = "splatray/_splatray.abi3.so"
@@ -101,12 +103,26 @@ def fresh(wheel: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     for p in src.parent.iterdir():
         if p.name == "numpy" or p.name.startswith(("numpy.libs", "numpy-")):
             shutil.copytree(p, site / p.name, symlinks=True)
+    # The wheel copied out of target/, which is hidden while pip installs it.
+    copy = env.parent / wheel.name
+    shutil.copyfile(wheel, copy)
     r = subprocess.run(
-        [str(env / "bin" / "pip"), "install", "-q", "--no-index", "--disable-pip-version-check", str(wheel)],
+        hiding_clone([str(env / "bin" / "pip"), "install", "-q", "--no-index", "--disable-pip-version-check",
+                      str(copy)]),
         capture_output=True, text=True, env=clean_env(env),
     )
     assert r.returncode == 0, r.stderr
     return env
+
+
+def test_the_clone_is_hidden(tmp_path: Path) -> None:
+    """What the tests below run in sees the clone's .embree/ and target/
+    empty (a failure here names why the namespace could not be made)."""
+    assert ROOT / "target" in HIDDEN
+    r = subprocess.run(hiding_clone(["ls", "-A", *map(str, HIDDEN)]), capture_output=True, text=True, cwd=tmp_path)
+    assert r.returncode == 0, f"unshare -rm with tmpfs mounts failed: {r.stderr}"
+    listed = [line for line in r.stdout.splitlines() if line and not line.endswith(":")]
+    assert listed == [], listed
 
 
 def clean_env(venv: Path) -> dict[str, str]:
@@ -119,7 +135,9 @@ def clean_env(venv: Path) -> dict[str, str]:
 
 
 def sh(venv: Path, *args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run(list(args), capture_output=True, text=True, env=clean_env(venv), cwd=cwd, timeout=120)
+    """`args` in the fresh environment, the clone's .embree/ and target/ hidden."""
+    return subprocess.run(hiding_clone(list(args)), capture_output=True, text=True, env=clean_env(venv), cwd=cwd,
+                          timeout=120)
 
 
 def test_command_is_the_binary_command_line(fresh: Path, binary: str, tmp_path: Path) -> None:
@@ -179,8 +197,8 @@ def test_progress_on_stderr_and_ctrl_c_ends_the_command(fresh: Path, tmp_path: P
     the binary, leaving no image."""
     master, slave = os.openpty()
     p = subprocess.Popen(
-        ["splatray", "render", str(ROOT / "scenes/bunny.toml"), "--width", "1600", "--height", "1200",
-         "--spp", "16", "-o", "big.png"],
+        hiding_clone(["splatray", "render", str(ROOT / "scenes/bunny.toml"), "--width", "1600", "--height", "1200",
+                      "--spp", "16", "-o", "big.png"]),
         stdout=subprocess.PIPE, stderr=slave, env=clean_env(fresh), cwd=tmp_path,
     )
     os.close(slave)

@@ -106,14 +106,14 @@ impl<'a> Query<'a> {
 }
 
 /// One acceleration backend (`docs/DESIGN.md`, "The backend contract"). Implemented by the brute-force
-/// oracle, the octree and Embree; its name is its [`registry`] entry's.
+/// oracle, the octree and Embree; its name is its `registry` entry's.
 pub trait Backend: Send + Sync {
     /// Fills `hits` (cleared first) with the candidate hits of `q.ray` in
     /// `[q.t_min, q.t_max]`: the nearest and all within the window of it.
     /// With `q.from`, a secondary ray leaving that splat: every hit
-    /// [`Departure::skips`] is left out before it counts (as if absent).
+    /// `Departure::skips` is left out before it counts (as if absent).
     /// An interval with a NaN end, or with `t_min > t_max`, meets nothing
-    /// ([`Query::meets_nothing`]): the same miss on every backend.
+    /// (`Query::meets_nothing`): the same miss on every backend.
     fn intersect_from(&self, q: &Query, hits: &mut CandidateHits);
 
     /// True when any splat is hit with `t` in `[q.t_min, q.t_max]`, leaving

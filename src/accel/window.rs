@@ -43,7 +43,7 @@ pub struct CandidateHits {
 
 impl CandidateHits {
     /// An empty window of width `xi` (scene-relative, see
-    /// [`crate::scene::SceneScale`]).
+    /// `crate::scene::SceneScale`).
     #[must_use]
     pub fn new(xi: f32) -> CandidateHits {
         CandidateHits {
@@ -89,7 +89,7 @@ impl CandidateHits {
         self.len == 0
     }
 
-    /// True when more than [`MAX_CANDIDATES`] hits fell in the final window.
+    /// True when more than `MAX_CANDIDATES` hits fell in the final window.
     ///
     /// Like the candidates themselves this does not depend on the order in
     /// which hits were offered: a hit dropped while the window was full only

@@ -1,11 +1,11 @@
-//! The `splatray` command line: its arguments and [`run`], which the
-//! binary's `main` calls with the process's arguments and the Python
-//! package's `splatray` command (`splatray._splatray.main`, which compiles
-//! this folder into its native module) calls with `sys.argv`.
+//! The `splatray` command line: its arguments and [`run`] (the library's
+//! `run_cli`), which the binary's `main` calls with the process's arguments
+//! and the Python package's `splatray` command (`splatray._splatray.main`)
+//! calls with `sys.argv`.
 
 use super::progress::ProgressLine;
+use crate::Result;
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
-use splatray::Result;
 use std::ffi::OsString;
 use std::io::Write;
 
@@ -106,15 +106,15 @@ struct TerrainArgs {
     /// north-south and east-west, ±15°) or across (one line scanner, ±15°
     /// across the track only: walls facing north and south get no point;
     /// the default before issue 39)
-    #[arg(long, default_value = "oblique", value_parser = splatray::names::parse::<splatray::terrain::ScanPattern>)]
-    pattern: splatray::terrain::ScanPattern,
+    #[arg(long, default_value = "oblique", value_parser = crate::names::parse::<crate::terrain::ScanPattern>)]
+    pattern: crate::terrain::ScanPattern,
 }
 
 fn terrain(a: &TerrainArgs) -> Result<()> {
     let [x, y, z] = a.origin[..] else {
         return Err("--origin needs three numbers, X,Y,Z".into());
     };
-    let p = splatray::terrain::TerrainParams {
+    let p = crate::terrain::TerrainParams {
         size: a.size,
         tiles: a.tiles,
         density: a.density,
@@ -125,7 +125,7 @@ fn terrain(a: &TerrainArgs) -> Result<()> {
         pattern: a.pattern,
     };
     let line = ProgressLine::new();
-    let r = splatray::terrain::write_terrain(&p, &a.output, Some(&|s, f| line.update(s, f)));
+    let r = crate::terrain::write_terrain(&p, &a.output, Some(&|s, f| line.update(s, f)));
     line.finish();
     let r = r?;
     println!(
@@ -140,18 +140,18 @@ fn terrain(a: &TerrainArgs) -> Result<()> {
 }
 
 fn stitch(a: &StitchArgs) -> Result<()> {
-    splatray::render::output::check_output_path(&a.output)?;
-    let (w, h) = splatray::render::output::stitch(&a.parts, &a.output)?;
+    crate::render::output::check_output_path(&a.output)?;
+    let (w, h) = crate::render::output::stitch(&a.parts, &a.output)?;
     println!("{} bands -> {w}x{h} {}", a.parts.len(), a.output.display());
     Ok(())
 }
 
 fn info() -> Result<()> {
-    let device = splatray::embree::Device::new()?;
+    let device = crate::embree::Device::new()?;
     let (a, b, c) = device.version();
     println!("splatray {}", env!("CARGO_PKG_VERSION"));
     println!("embree   {a}.{b}.{c} (reported by the device)");
-    match splatray::embree::Device::library_path() {
+    match crate::embree::Device::library_path() {
         Some(p) => println!("library  {}", p.display()),
         None => println!("library  (not found in /proc/self/maps)"),
     }
@@ -160,29 +160,26 @@ fn info() -> Result<()> {
         env!("SPLATRAY_EMBREE_FOUND_BY"),
         env!("SPLATRAY_EMBREE_LIB_DIR")
     );
-    let config = splatray::embree::config_in_force();
-    let cpu = splatray::embree::cpu_isas();
+    let config = crate::embree::config_in_force();
+    let cpu = crate::embree::cpu_isas();
     if config.is_empty() {
         println!(
             "config   none: Embree runs the widest ISA this CPU has ({}); set {} to choose",
             cpu.last().copied().unwrap_or("unknown"),
-            splatray::embree::CONFIG_VAR
+            crate::embree::CONFIG_VAR
         );
     } else {
-        println!("config   {config} (from {})", splatray::embree::CONFIG_VAR);
+        println!("config   {config} (from {})", crate::embree::CONFIG_VAR);
     }
     println!("cpu isas {}", cpu.join(" "));
-    let paths: Vec<&str> = splatray::simd::available()
-        .iter()
-        .map(|i| i.name())
-        .collect();
+    let paths: Vec<&str> = crate::simd::available().iter().map(|i| i.name()).collect();
     println!(
         "simd     {} (the octree's leaf filter; this CPU runs: {}; set {} to choose)",
-        splatray::config::current().simd,
+        crate::config::current().simd,
         paths.join(" "),
-        splatray::simd::SIMD_VAR
+        crate::simd::SIMD_VAR
     );
-    match splatray::memory::limit() {
+    match crate::memory::limit() {
         Some(b) => println!(
             "memory   {:.1} GB may be allocated ({})",
             b.bytes as f64 / 1e9,
@@ -198,7 +195,7 @@ fn info() -> Result<()> {
     let forcible: Vec<&str> = cpu
         .iter()
         .copied()
-        .filter(|i| splatray::embree::FORCIBLE_ISAS.contains(i))
+        .filter(|i| crate::embree::FORCIBLE_ISAS.contains(i))
         .collect();
     println!("embree-isas: {}", forcible.join(" "));
     println!("simd-paths: {}", paths.join(" "));
@@ -261,9 +258,9 @@ fn run_command(command: Command) -> u8 {
     catch_file_size_signal();
     // The environment is read once, here: an unusable SPLATRAY_SIMD or
     // SPLATRAY_PACKETS is refused before any work.
-    let result = splatray::config::Config::from_env()
-        .and_then(splatray::config::Config::install)
-        .map_err(splatray::Error::from)
+    let result = crate::config::Config::from_env()
+        .and_then(crate::config::Config::install)
+        .map_err(crate::Error::from)
         .and_then(|()| match command {
             Command::Info => info(),
             Command::Render(args) => super::render::run(&args),

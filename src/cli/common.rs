@@ -1,10 +1,10 @@
 //! What several subcommands share: the splat generation options (`splat`,
 //! `scan-check`), the default backend, writing a JSON report.
 
+use crate::accel::registry;
+use crate::workflow::splat::GenerationOptions;
+use crate::{Error, Result};
 use glam::DVec3;
-use splatray::accel::registry;
-use splatray::workflow::splat::GenerationOptions;
-use splatray::{Error, Result};
 use std::path::Path;
 
 /// The splat generation options `splat` and `scan-check` share.
@@ -92,6 +92,6 @@ pub fn default_backend() -> String {
 
 /// Writes `value` as pretty JSON to `path`, atomically.
 pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
-    splatray::io::write_text(path, &(super::json_text(value)? + "\n"))?;
+    crate::io::write_text(path, &(super::json_text(value)? + "\n"))?;
     Ok(())
 }

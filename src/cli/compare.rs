@@ -5,15 +5,15 @@
 use super::progress::ProgressLine;
 use super::view::SceneArgs;
 use super::{json_text, stage_text};
-use splatray::io::Batch;
-use splatray::render::integrator::Frame;
-use splatray::render::output::{check_output_path, check_writable, save_into};
-use splatray::validate::causes::{Cause, ErrorBudget, cause_image};
-use splatray::validate::compare::diff_image;
-use splatray::workflow::compare::{
+use crate::io::Batch;
+use crate::render::integrator::Frame;
+use crate::render::output::{check_output_path, check_writable, save_into};
+use crate::validate::causes::{Cause, ErrorBudget, cause_image};
+use crate::validate::compare::diff_image;
+use crate::workflow::compare::{
     BackendRun, CompareOptions, CompareReport, Compared, TruthReport, compare, holds,
 };
-use splatray::{Error, Result};
+use crate::{Error, Result};
 use std::path::PathBuf;
 
 /// Options of `splatray compare`.

@@ -1,10 +1,10 @@
 //! `splatray export SPLATS.ply --format 2dgs|3dgs -o OUT.ply`: splats as a
 //! Gaussian splat file other splat renderers and trainers read.
 
-use splatray::Result;
-use splatray::io::{GaussianLayout, RADIUS_PER_SIGMA};
-use splatray::render::output::check_extension;
-use splatray::workflow::export::export;
+use crate::Result;
+use crate::io::{GaussianLayout, RADIUS_PER_SIGMA};
+use crate::render::output::check_extension;
+use crate::workflow::export::export;
 use std::path::PathBuf;
 
 /// The Gaussian layouts `export` writes.
@@ -37,7 +37,7 @@ pub struct ExportArgs {
     pub sh_degree: u32,
     /// When the input is a Gaussian file: leave out Gaussians less opaque
     /// than this.
-    #[arg(long, default_value_t = splatray::io::MIN_OPACITY)]
+    #[arg(long, default_value_t = crate::io::MIN_OPACITY)]
     pub min_opacity: f32,
 }
 
@@ -77,7 +77,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     eprintln!(
         "splatray: {n} splats -> {n} Gaussians ({}, sigma = radius / {RADIUS_PER_SIGMA}, opacity {}, SH degree {}), {} bytes -> {}",
         layout.name(),
-        splatray::io::EXPORT_OPACITY,
+        crate::io::EXPORT_OPACITY,
         args.sh_degree,
         done.bytes,
         args.output.display()

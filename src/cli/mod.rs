@@ -1,7 +1,8 @@
-//! Subcommands of the `splatray` command line (a module of the binary: the
-//! library does not depend on it). The Python package's native module
-//! (python/splatray-py) compiles this folder too, so its `splatray`
-//! command is this one ([`app::run`]).
+//! Subcommands of the `splatray` command line: a private module of the
+//! library, run through `crate::run_cli` ([`app::run`]) by the binary
+//! (src/main.rs) and by the Python package's `splatray` command, so both
+//! are this one. It parses arguments and prints; the work is in
+//! `crate::workflow`.
 
 pub mod app;
 pub mod common;
@@ -16,8 +17,8 @@ pub mod sweep;
 pub mod view;
 pub mod viewer;
 
-use splatray::io::Batch;
-use splatray::{Error, Result};
+use crate::io::Batch;
+use crate::{Error, Result};
 use std::path::Path;
 
 /// `value` as pretty JSON (a report).

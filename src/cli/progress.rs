@@ -1,6 +1,6 @@
 //! The one progress display: a line on stderr, shown only when stderr is a
 //! terminal and the command has run for a while. It implements the
-//! library's progress callback ([`splatray::progress::Progress`]).
+//! library's progress callback ([`crate::progress::Progress`]).
 
 use std::io::{IsTerminal, Write};
 use std::sync::Mutex;

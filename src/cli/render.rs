@@ -4,14 +4,14 @@ use super::common::default_backend;
 use super::progress::ProgressLine;
 use super::view::SceneArgs;
 use super::{json_text, stage_text};
-use splatray::accel::registry;
-use splatray::io::Batch;
-use splatray::render::output::{
+use crate::accel::registry;
+use crate::io::Batch;
+use crate::render::output::{
     Aov, aov_path, check_output_path, check_writable, write_aov_into, write_image_into,
 };
-use splatray::scene::Scene;
-use splatray::workflow::render::{Rendered, band_rows, render_scene};
-use splatray::{Error, Result};
+use crate::scene::Scene;
+use crate::workflow::render::{Rendered, band_rows, render_scene};
+use crate::{Error, Result};
 use std::path::{Path, PathBuf};
 
 /// Options of `splatray render`.
@@ -40,7 +40,7 @@ pub struct RenderArgs {
     pub report: Option<PathBuf>,
     /// Also write these AOVs as EXR beside the image (comma separated:
     /// depth,normal,splat,albedo).
-    #[arg(long, value_delimiter = ',', value_parser = splatray::names::parse::<Aov>)]
+    #[arg(long, value_delimiter = ',', value_parser = crate::names::parse::<Aov>)]
     pub aov: Vec<Aov>,
     /// Render band I of N (I from 0): rows I·H/N to (I+1)·H/N of the image,
     /// the same pixels a whole render gives them; `splatray stitch` joins
@@ -115,7 +115,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let progress = |stage: &str, f: f64| line.update(stage, f);
     let scene = args.view.load(args.spp, &line)?;
     args.view
-        .check_budget(&scene, splatray::render::budget::Holds::ONE)?;
+        .check_budget(&scene, crate::render::budget::Holds::ONE)?;
     let rendered = render_scene(&scene, &args.backend, args.band, Some(&progress));
     line.finish();
     let Rendered { frame, report } = rendered?;

@@ -5,9 +5,9 @@
 //! stations with `--scan-from` repeated and `-o scans.e57`.
 
 use super::progress::ProgressLine;
-use splatray::scanner::{RangeNoise, ScanParams, ScanPattern};
-use splatray::workflow::sample::{AreaSampling, ScanOutput, SensorFrame, sample_area, sample_scan};
-use splatray::{Error, Result};
+use crate::scanner::{RangeNoise, ScanParams, ScanPattern};
+use crate::workflow::sample::{AreaSampling, ScanOutput, SensorFrame, sample_area, sample_scan};
+use crate::{Error, Result};
 use std::path::PathBuf;
 
 /// Arguments of `splatray sample`.
@@ -42,7 +42,7 @@ pub struct SampleArgs {
     pub scan_at: Option<glam::DVec3>,
     /// raster (a camera's pixel grid) or lines (equal angular steps, the
     /// lines `W/H` times farther apart than the samples along them).
-    #[arg(long, default_value = "raster", requires = "scan_from", value_parser = splatray::names::parse::<ScanPattern>)]
+    #[arg(long, default_value = "raster", requires = "scan_from", value_parser = crate::names::parse::<ScanPattern>)]
     pub pattern: ScanPattern,
     /// Rays per row and rows, as W,H.
     #[arg(
@@ -120,10 +120,10 @@ impl From<Frame> for SensorFrame {
 /// output cannot be written.
 pub fn run(args: &SampleArgs) -> Result<()> {
     if !args.scan_from.is_empty() {
-        splatray::render::output::check_extension(&args.output, &["ply", "pcd", "e57"])?;
+        crate::render::output::check_extension(&args.output, &["ply", "pcd", "e57"])?;
         return scan(args);
     }
-    splatray::render::output::check_extension(&args.output, &["ply", "pcd"])?;
+    crate::render::output::check_extension(&args.output, &["ply", "pcd"])?;
     let req = AreaSampling {
         mesh: args.mesh.clone(),
         output: args.output.clone(),

@@ -3,11 +3,11 @@
 
 use super::common::{SplatOptions, default_backend, write_json};
 use super::progress::ProgressLine;
-use splatray::Result;
-use splatray::render::output::check_writable;
-use splatray::validate::photo::PhotoReport;
-use splatray::validate::scan_check::ScanCheckReport;
-use splatray::workflow::scan_check::{ScanCheckOutcome, ScanCheckRequest, scan_check};
+use crate::Result;
+use crate::render::output::check_writable;
+use crate::validate::photo::PhotoReport;
+use crate::validate::scan_check::ScanCheckReport;
+use crate::workflow::scan_check::{ScanCheckOutcome, ScanCheckRequest, scan_check};
 use std::path::PathBuf;
 
 /// Arguments of `splatray scan-check`.

@@ -1,15 +1,15 @@
 //! `splatray splat IN -o OUT.ply [--epsilon E] [--k K] [--density F]
 //! [--ellipses] [--report R.json]`: parses the arguments, runs
-//! `splatray::workflow::splat::splat` and prints what it did.
+//! `crate::workflow::splat::splat` and prints what it did.
 
 use super::common::SplatOptions;
 use super::progress::ProgressLine;
-use splatray::io::Format;
-use splatray::tiled::{Stage, TiledReport, Tiling};
-use splatray::workflow::splat::{
+use crate::io::Format;
+use crate::tiled::{Stage, TiledReport, Tiling};
+use crate::workflow::splat::{
     GaussiansOutcome, PointsOutcome, SplatOutcome, SplatRequest, TiledOutcome, splat,
 };
-use splatray::{Error, Result};
+use crate::{Error, Result};
 use std::path::PathBuf;
 
 /// Arguments of `splatray splat`.
@@ -50,7 +50,7 @@ pub struct SplatArgs {
     /// When the input is a Gaussian splat file (2DGS or 3DGS layout, read
     /// as splats without growing them): leave out Gaussians less opaque
     /// than this.
-    #[arg(long, default_value_t = splatray::io::MIN_OPACITY)]
+    #[arg(long, default_value_t = crate::io::MIN_OPACITY)]
     pub min_opacity: f32,
     /// Generate in tiles within this many GB (the whole process): points
     /// are spilled to per-tile files beside the output and each tile
@@ -240,9 +240,9 @@ fn print_generated(args: &SplatArgs, p: &PointsOutcome) {
     eprintln!(
         "splatray: large splats over holes: {} (> {}x median radius, centre farther than half a radius from their points), {} (> {}x, kept disc less than half covered by points; {} shrunk to what their points cover, {} small splats added for the points they left)",
         report.hollow_large_splats,
-        splatray::splat::HOLLOW_LARGE,
+        crate::splat::HOLLOW_LARGE,
         report.uncovered_large_splats,
-        splatray::splat::UNCOVERED_LARGE,
+        crate::splat::UNCOVERED_LARGE,
         report.shrunk_over_holes,
         report.added_for_holes,
     );

@@ -4,11 +4,11 @@
 
 use super::progress::ProgressLine;
 use super::view::default_scene;
-use splatray::names::Named;
-use splatray::render::output::check_output_path;
-use splatray::validate::sweep::{MODES, SweepRow, csv_text, pareto};
-use splatray::workflow::sweep::SweepRequest;
-use splatray::{Error, Result};
+use crate::names::Named;
+use crate::render::output::check_output_path;
+use crate::validate::sweep::{MODES, SweepRow, csv_text, pareto};
+use crate::workflow::sweep::SweepRequest;
+use crate::{Error, Result};
 use std::path::{Path, PathBuf};
 
 /// Coarsest default `ϵ` (fraction of the bounding-box diagonal, §2.1).
@@ -52,7 +52,7 @@ fn check_csv_path(path: &Path) -> Result<()> {
             path.display()
         )));
     }
-    splatray::render::output::check_writable(path)
+    crate::render::output::check_writable(path)
 }
 
 /// Runs `splatray sweep`: checks every output first, then measures (printing
@@ -109,12 +109,12 @@ fn check_outputs(args: &SweepArgs) -> Result<()> {
 /// The CSV and the plot, committed together: a failure in either leaves
 /// neither.
 fn write_outputs(args: &SweepArgs, rows: &[SweepRow]) -> Result<()> {
-    let mut batch = splatray::io::Batch::new();
+    let mut batch = crate::io::Batch::new();
     if let Some(c) = &args.csv {
         super::stage_text(&mut batch, c, &csv_text(rows))?;
     }
     if let Some(p) = &args.plot {
-        splatray::workflow::plot::plot_sweep(&mut batch, rows, p)?;
+        crate::workflow::plot::plot_sweep(&mut batch, rows, p)?;
     }
     batch.commit()?;
     if let Some(c) = &args.csv {

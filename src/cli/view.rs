@@ -3,11 +3,11 @@
 //! overrides applied to it.
 
 use super::progress::ProgressLine;
+use crate::resolve::ShadingMode;
+use crate::scene::cloud::{CloudRequest, is_cloud_path, make_scene};
+use crate::scene::{Scene, load_scene};
+use crate::{Error, Result};
 use glam::DVec3;
-use splatray::resolve::ShadingMode;
-use splatray::scene::cloud::{CloudRequest, is_cloud_path, make_scene};
-use splatray::scene::{Scene, load_scene};
-use splatray::{Error, Result};
 use std::path::{Path, PathBuf};
 
 /// The scene and its view overrides (flattened into a command's options).
@@ -25,7 +25,7 @@ pub struct SceneArgs {
     #[arg(long)]
     pub height: Option<u32>,
     /// Override the shading mode: flat, blended or phong.
-    #[arg(long, value_parser = splatray::names::parse::<ShadingMode>)]
+    #[arg(long, value_parser = crate::names::parse::<ShadingMode>)]
     pub shading: Option<ShadingMode>,
     /// A point cloud's up axis: x, y, z, -x, -y, -z or X,Y,Z. Default: a
     /// flat cloud's thinnest side; +z when the cloud's viewpoint looks down
@@ -38,7 +38,7 @@ pub struct SceneArgs {
     pub save_scene: Option<PathBuf>,
     /// The most rays the render may trace, worst case (every glass hit
     /// reflecting and refracting to max_depth, every light sample).
-    #[arg(long, default_value_t = splatray::render::budget::DEFAULT_MAX_RAYS, value_parser = positive)]
+    #[arg(long, default_value_t = crate::render::budget::DEFAULT_MAX_RAYS, value_parser = positive)]
     pub max_rays: f64,
     /// The most memory the render may take, GB (default: what the machine
     /// has available).
@@ -90,16 +90,12 @@ impl SceneArgs {
     ///
     /// # Errors
     /// Over a limit: one line with the cost and the flag.
-    pub fn check_budget(
-        &self,
-        scene: &Scene,
-        holds: splatray::render::budget::Holds,
-    ) -> Result<()> {
-        let limits = splatray::render::budget::Limits {
+    pub fn check_budget(&self, scene: &Scene, holds: crate::render::budget::Holds) -> Result<()> {
+        let limits = crate::render::budget::Limits {
             max_rays: self.max_rays,
             max_bytes: self.max_memory.map(|gb| (gb * 1e9) as u64),
         };
-        splatray::render::budget::check(scene, holds, &limits)
+        crate::render::budget::check(scene, holds, &limits)
             .map(|_| ())
             .map_err(|e| e.context(self.path().display()))
     }
@@ -164,7 +160,7 @@ impl SceneArgs {
         eprintln!("{}: {}", path.display(), made.note());
         if let Some(s) = &self.save_scene {
             let text = made.saved_text(path, s)?;
-            splatray::io::write_text(s, &text)?;
+            crate::io::write_text(s, &text)?;
         }
         Ok(made.scene)
     }

@@ -1,10 +1,10 @@
-//! `splatray view`: the thin command over [`splatray::viewer`].
+//! `splatray view`: the thin command over [`crate::viewer`].
 
 use super::progress::ProgressLine;
 use super::view::default_scene;
+use crate::Result;
+use crate::viewer::{Overrides, ServeOptions, Source, serve};
 use glam::DVec3;
-use splatray::Result;
-use splatray::viewer::{Overrides, ServeOptions, Source, serve};
 use std::path::PathBuf;
 
 /// Options of `splatray view`.

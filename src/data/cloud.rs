@@ -198,7 +198,7 @@ impl PointCloud {
     }
 
     /// A viewpoint given in the file's coordinates, relative to `origin` (the
-    /// frame of [`crate::splat::SplatParams::viewpoint`]); subtracted in f64.
+    /// frame of `crate::splat::SplatParams::viewpoint`); subtracted in f64.
     /// One further than `1e30` is pulled in along its direction, which is
     /// all that orienting normals uses.
     #[must_use]

@@ -125,14 +125,14 @@ pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
 
 /// Read a point cloud from a `.ply`, `.pcd`, `.xyz`, `.txt`, `.las`, `.laz` or `.e57` file; files
 /// with another extension are recognised by their first bytes; a folder is
-/// read as one cloud from its point files ([`read_folder`]).
+/// read as one cloud from its point files (`read_folder`).
 ///
 /// Points with a NaN or infinite coordinate are skipped and counted in
 /// [`PointCloud::skipped`]. The positions are offsets from the points'
 /// per-axis medians, [`PointCloud::origin`], computed in f64.
 ///
 /// # Errors
-/// An [`IoError`] when the file cannot be read, is empty, has an unknown
+/// An `IoError` when the file cannot be read, is empty, has an unknown
 /// format, a malformed header or body, holds no usable point, or its points
 /// span more than single precision holds.
 ///

@@ -216,7 +216,7 @@ impl SplatSurfaces<'_> {
     /// The surface the query's ray meets, with its material and colour:
     /// its window gathered (into `hits`) and resolved, and gathered again
     /// past candidates beyond their Phong fields' silhouettes
-    /// ([`Resolved::Beyond`]) until a surface or nothing is left.
+    /// (`Resolved::Beyond`) until a surface or nothing is left.
     #[must_use]
     pub fn surface(&self, q: Query, hits: &mut CandidateHits) -> Option<ShadeHit> {
         self.surface_hit(q, hits).map(|h| self.shade_hit(h))
@@ -237,7 +237,7 @@ impl SplatSurfaces<'_> {
         }
     }
 
-    /// The resolved hit of each camera ray `qs` (at most [`PACKET`]) into
+    /// The resolved hit of each camera ray `qs` (at most `PACKET`) into
     /// `out`, the windows gathered in one [`Backend::intersect_packet`]
     /// call (into `hits`, one per query) and resolved as
     /// [`SplatSurfaces::surface_hit`] resolves them: the same hits.

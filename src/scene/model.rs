@@ -341,7 +341,7 @@ pub struct Scene {
 impl Scene {
     /// The colour of splat `id` at world point `p` on it: its constant
     /// colour, or with a colour field the field's value there
-    /// ([`ColorField::at`]).
+    /// (`ColorField::at`).
     #[must_use]
     pub fn color_at(&self, id: u32, p: Vec3) -> Vec3 {
         let s = &self.splats[id as usize];
@@ -364,7 +364,7 @@ impl Scene {
     }
 
     /// True when some material shades its splats with Phong fields (the
-    /// only splats a shadow ray can pass, [`crate::accel::PassOver`]): a
+    /// only splats a shadow ray can pass, `crate::accel::PassOver`): a
     /// scene without them gives its shadow rays no pass-over rule.
     #[must_use]
     pub fn has_phong(&self) -> bool {

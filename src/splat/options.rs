@@ -7,7 +7,7 @@ use glam::DVec3;
 
 /// Splat generation's options as given (what `splat`, `scan-check`, a
 /// scene's `[model.splat]` table and the Python package take); `None`:
-/// the default of [`SplatParams`]. Every caller builds its parameters
+/// the default of `SplatParams`. Every caller builds its parameters
 /// here, once.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct GenerationOptions {
@@ -23,7 +23,7 @@ pub struct GenerationOptions {
     pub flat_colors: bool,
     /// Find creases and clip splats at them (`SplatParams::creases`):
     /// `Some(true)` everywhere, `Some(false)` nowhere, `None` the default
-    /// ([`crate::splat::Creases::Auto`]).
+    /// (`crate::splat::Creases::Auto`).
     pub creases: Option<bool>,
     /// Where the scanner stood, in the input's coordinates (default: the
     /// cloud's own).

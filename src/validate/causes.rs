@@ -188,7 +188,7 @@ pub struct ErrorBudget {
     pub pixels: usize,
     /// The image's PSNR, dB (as `TruthErrors::image_psnr_db`).
     pub psnr_db: Option<f64>,
-    /// Every cause of [`Cause::ALL`], in that order.
+    /// Every cause of `Cause::ALL`, in that order.
     pub causes: Vec<CauseError>,
     /// The holes by distance to the exact surface's silhouette.
     pub holes: Coverage,

@@ -89,7 +89,7 @@ pub struct SweepRow {
     /// `ϵ` of the step (§2.1), fraction of the bounding-box diagonal.
     pub epsilon_rel: f32,
     /// Shading mode (§4: flat, blended by eq. 5, Phong fields of eq. 4),
-    /// serialised by its name ([`Named::name`]).
+    /// serialised by its name (`Named::name`).
     #[serde(serialize_with = "serialize_mode")]
     pub shading: ShadingMode,
     /// Splats of the varied models (points and meshes).

@@ -102,7 +102,7 @@ impl Sweep {
     }
 }
 
-/// [`SweepRequest::prepare`], then [`Sweep::run`].
+/// [`SweepRequest::prepare`], then `Sweep::run`.
 ///
 /// # Errors
 /// As those.

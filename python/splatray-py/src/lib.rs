@@ -7,11 +7,6 @@
 
 mod arrays;
 mod cast;
-// The `splatray` command line, the binary's own source (not a copy): the
-// wheel's `splatray` command and `python -m splatray` call it through
-// `main` below.
-#[path = "../../../src/cli/mod.rs"]
-mod cli;
 mod progress;
 mod scene;
 mod splats;
@@ -32,14 +27,15 @@ pub(crate) fn err(e: impl std::fmt::Display) -> PyErr {
 }
 
 /// `splatray ARGS...`: runs the command line with `argv` (the program's
-/// name first) as the `splatray` binary does, and returns its exit status.
+/// name first) as the `splatray` binary does (the library's `run_cli`, the
+/// binary's own code), and returns its exit status.
 /// Its output goes to the process's stdout and stderr (progress on stderr);
 /// the GIL is released while it runs. A panic returns 101, the status of a
 /// binary that panicked, after the panic's message on stderr.
 #[pyfunction]
 #[pyo3(name = "main")]
 fn cli_main(py: Python<'_>, argv: Vec<std::ffi::OsString>) -> i32 {
-    py.detach(|| std::panic::catch_unwind(|| cli::app::run(argv)).map_or(101, i32::from))
+    py.detach(|| std::panic::catch_unwind(|| splatray::run_cli(argv)).map_or(101, i32::from))
 }
 
 /// The native module.
