@@ -1,5 +1,5 @@
 //! Issue 23: a scan's splats against the exact surface the scan was taken
-//! of (`docs/development.md`, "Issue 23: the coarse case against the exact
+//! of (`docs/notes/generation.md`, "Issue 23: the coarse case against the exact
 //! surface"). Holds out the points `scan-check` holds out, grows splats from
 //! the rest, and for each held-out line of sight compares the resolved
 //! surface's `t` with the exact mesh's along the same ray: the error split

@@ -104,7 +104,7 @@ pub fn sight_line(viewpoint: Vec3, point: Vec3) -> Option<(Ray, f32)> {
 /// is kept: shrinking it would open a hole through that surface along the
 /// line, which a camera near the scanner looks through (on
 /// `scenes/scan-lines.toml` such holes show the floor through the bunny;
-/// `docs/development.md`, "Issue 23: the specks' causes, and shadow rays
+/// `docs/notes/generation.md`, "Issue 23: the specks' causes, and shadow rays
 /// that see the surface").
 ///
 /// Then, for every miss of `misses` (a ray from their one viewpoint that
@@ -153,7 +153,7 @@ fn blocked(
     // with the clipped discs, 27.49 with whole ones, 26.92 without creases.
     // Without colours the clipped disc is the surface, and shrinking it
     // costs: the noisy solids scan 31.00 -> 30.78 dB, `scenes/scan.toml`
-    // 34.10 -> 34.02 (`docs/development.md`, "Issue 39: creases on by
+    // 34.10 -> 34.02 (`docs/notes/creases.md`, "Issue 39: creases on by
     // default").
     let whole =
         (misses.whole_discs && !misses.dirs.is_empty() && splats.iter().any(Splat::is_clipped))

@@ -94,7 +94,7 @@ pub fn available() -> Vec<Isa> {
 /// AVX-512 Xeon this was measured on, pairing two packs in a 512-bit
 /// register was slower than AVX2 (the accel benchmark at 35k splats,
 /// primary / shadow rays against Embree: AVX2 1.011 / 1.071, AVX-512
-/// 0.871 / 0.882, portable 0.936 / 0.891; `docs/development.md`).
+/// 0.871 / 0.882, portable 0.936 / 0.891; `docs/notes/README.md`).
 #[must_use]
 pub fn default_path() -> Isa {
     if Isa::Avx2.supported() {

@@ -58,7 +58,7 @@ pub struct TerrainParams {
 pub enum ScanPattern {
     /// One line scanner sweeping across the track only, up to ±15° off
     /// nadir: no ray has a component along the track, so walls facing ±y
-    /// get no return at all (`docs/development.md`, "The airborne survey:
+    /// get no return at all (`docs/notes/creases.md`, "The airborne survey:
     /// walls the scan never saw"). The survey of issue 39's first figures,
     /// and the default until the scanner was made one a real system flies.
     Across,
@@ -70,7 +70,7 @@ pub enum ScanPattern {
     /// Two line scanners as the RIEGL VQ-1560i's two channels: each sweeps
     /// ±30° across the track, one pitched 14° forward, the other 14° back;
     /// half the rays each. The default: of the patterns real systems fly it
-    /// measured best on the default survey (`docs/development.md`, "Issue
+    /// measured best on the default survey (`docs/notes/real-scans.md`, "Issue
     /// 39: a survey a real scanner makes").
     #[default]
     Oblique,

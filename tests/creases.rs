@@ -256,7 +256,7 @@ fn a_solid_scanned_from_two_stations_renders_near_its_mesh() {
     // and edge rules of `normals::face_normals` (33.35 dB, 0.100 % before;
     // 33.03 dB, 0.093 % without
     // the flat faces' wide-plane normals and constant fields; the camera's
-    // station alone 32.65 dB, 0.077 %). At 800x600 (docs/development.md,
+    // station alone 32.65 dB, 0.077 %). At 800x600 (docs/notes/real-scans.md,
     // "the noisy scan, round 5"): 34.41 dB, 2.01 dB under the exact
     // samples' 36.42 (issue 39 asks for 3; 33.69 dB before the faces).
     assert!(psnr > 34.95, "{psnr}");

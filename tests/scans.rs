@@ -115,7 +115,7 @@ fn scan_line_lines_of_sight_are_free() {
 /// early, 1.98 % late; `sample`'s seed 1 gives 95.97 % and 96.51 %). Before
 /// splats covered only the requested `k` neighbours rather than the
 /// widened graph's, and before the normals were fitted again to the
-/// projected points (issue 23, `docs/development.md`): 88.88 % and 94.95 %.
+/// projected points (issue 23, `docs/notes/README.md`): 88.88 % and 94.95 %.
 #[test]
 fn coarse_scan_lines_meet_the_rendered_surface() {
     let scan = bunny_scan(ScanPattern::Lines, 800, 100);
@@ -403,7 +403,7 @@ fn cli_sample_from_stations_writes_an_e57_of_scans() {
 
 /// Creases by default, but not along scan lines (`Creases::Auto`): the
 /// coarse scan-line bunny is grown without clip lines and says so, as it
-/// was before creases were the default (byte for byte: `docs/development.md`,
+/// was before creases were the default (byte for byte: `docs/notes/creases.md`,
 /// "Issue 39: creases on by default"); `Creases::On` still clips it.
 #[test]
 fn scan_lines_get_no_creases_unless_asked() {

@@ -4,7 +4,7 @@
 //! channels) than the exact surface's, none of its four neighbours so;
 //! one within 2 pixels of a step of 0.6 in the exact image lies on an
 //! outline or a shadow's edge that moved, the others on the surface.
-//! Measured (800×600, `docs/development.md`, "Issue 23: the specks'
+//! Measured (800×600, `docs/notes/generation.md`, "Issue 23: the specks'
 //! causes, and shadow rays that see the surface"): 188 specks, 60 on the
 //! surface, 4,840 pixels whose error is a shadow before; shadow rays that
 //! pass Phong splats beyond their curved silhouettes 154 / 51 / 2,940;

@@ -117,7 +117,7 @@ fn tiles_match_the_whole_cloud_and_their_seams_hold() {
     // not hit beyond their fields' silhouettes, remove most of these false
     // hits, less so at the seams (800x600, near seams: discs 1.57 % tiled
     // and untiled; Phong 0.19 % tiled, 0.13 % untiled: issue 24's notes in
-    // docs/development.md).
+    // docs/notes/README.md).
     // The untiled splats over the same regions are the control (the seams
     // may cross harder geometry than the average).
     let whole_path = dir.join("untiled.ply");

@@ -205,7 +205,7 @@ impl<P: Primitive> Backend for EmbreeBackend<P> {
     /// True: `rtcIntersect8` traces the primary rays of 8×1 pixel tiles
     /// 1.69 times and the shadow rays of neighbouring hits 1.58 times as
     /// fast as `rtcIntersect1` at 35k splats (1.02 / 0.75 at 1M), and
-    /// renders the bunny in 0.89 of the time (`docs/development.md`,
+    /// renders the bunny in 0.89 of the time (`docs/notes/backends.md`,
     /// "Issue 25: ray packets", with the commands).
     fn prefers_packets(&self) -> bool {
         true

@@ -252,7 +252,7 @@ fn angle_off(splat: &Splat, field: &NormalField, nu: DVec3, nv: DVec3, row: &Row
 /// cut-off) more than a level one's. Unweighted, the few steep normals at
 /// the rim of a large splat over a curved surface decided its field: at
 /// coarse budgets Phong splats shaded worse than flat ones (issue 24,
-/// `docs/development.md`).
+/// `docs/notes/README.md`).
 ///
 /// With at least [`ROBUST_MIN_POINTS`] normals (the large splats of coarse
 /// budgets, whose discs span creases and ears), the fit is then reweighted
@@ -353,7 +353,7 @@ pub fn fit_field(
 /// that curves away within the disc, which a linear field of eq. (4)
 /// cannot follow to the rim, while the few-point splats of fine budgets
 /// need to read past their rims for enough normals to fit (issue 24,
-/// `docs/development.md`).
+/// `docs/notes/README.md`).
 #[must_use]
 pub fn field_factor(splat: &Splat, max_factor: f32, near: &[usize], points: &[Vec3]) -> f32 {
     let inside = near

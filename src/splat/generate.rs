@@ -96,7 +96,7 @@ pub enum Creases {
     /// (`scenes/scan-lines.toml`) creases gave 68 dark specks against 48
     /// (17 on the surface against 1), and its coarse scan (800×100 rays)
     /// 95.43 % of the held-out lines of sight meeting the rendered surface
-    /// against 95.73 % (`docs/development.md`, "Issue 39: creases on by
+    /// against 95.73 % (`docs/notes/creases.md`, "Issue 39: creases on by
     /// default"); a warning says when they were left off.
     #[default]
     Auto,

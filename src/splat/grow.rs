@@ -53,7 +53,7 @@ pub struct GrowInput<'a> {
     /// fewer where the graph was widened past the requested `k` to join
     /// scan lines. The widened graph's `k` nearest reach far along the
     /// lines, and a radius covering them all makes splats several times
-    /// larger than growth would (`docs/development.md`, "Issue 23: the
+    /// larger than growth would (`docs/notes/generation.md`, "Issue 23: the
     /// coarse case against the exact surface").
     pub cover: usize,
     /// Error threshold `ϵ` on the span of eq. (1), absolute.
@@ -77,7 +77,7 @@ pub struct GrowInput<'a> {
 /// Growth itself still stops at the first point past `ϵ` (eq. 1): letting
 /// it pass over the points of other faces, to grow along its own face past
 /// a crease, cost the bunny 2.6 dB (splats over the facets of its scanned
-/// mesh) and gained the solids nothing (`docs/development.md`, "Issue 39").
+/// mesh) and gained the solids nothing (`docs/notes/README.md`, "Issue 39").
 pub const CREASE_DEG: f32 = 30.0;
 
 /// With creases, a splat whose face ends on a third side, where a third
@@ -86,7 +86,7 @@ pub const CREASE_DEG: f32 = 30.0;
 /// at most [`SPILL_ROUNDS`] times: two lines cannot hold a face that ends
 /// on three sides of its disc (a splat over most of a box's top, seen from
 /// a scanner, overhung the top's far edge against the sky). Chosen by
-/// `compare --truth` at 800×600 (`docs/development.md`, "Issue 39: a third
+/// `compare --truth` at 800×600 (`docs/notes/creases.md`, "Issue 39: a third
 /// side"): share 0.02 / 0.01 / 0.005 with shrink 0.75 gave the exact
 /// solids 35.00 / 35.04 / 35.93 dB, their noiseless scan 33.82 / 34.13 /
 /// 34.10 dB; 0.005 with 0.6 36.14 and 34.48.
@@ -416,7 +416,7 @@ impl Grower<'_> {
 /// surface, or past the silhouette. The mean puts it on the bulk. It is
 /// never raised above mid-span: where the mean is higher (a concave patch)
 /// the disc's middle already stands proud of the surface. Measured on the
-/// bunny (issue 24, `docs/development.md`): Phong/flat mean normal error at
+/// bunny (issue 24, `docs/notes/README.md`): Phong/flat mean normal error at
 /// 507 splats 0.803 → 0.786, `compare --truth` 33.98 → 34.06 dB; the mean
 /// alone, raised too, gave 0.769 at 507 splats but 33.75 dB.
 fn plane_height(growth: &Growth) -> f32 {

@@ -557,7 +557,7 @@ type HeldSet = [u64; HELD_BITS / 64];
 /// plane's tilt error under noise falls with the square of its reach; the
 /// k-nearest planes tilt by about the noise over a few spacings (the solids
 /// scanned with range noise of half a spacing, `compare --truth`: mean
-/// normal error on flat faces 1.92° before, see `docs/development.md`).
+/// normal error on flat faces 1.92° before, see `docs/notes/README.md`).
 /// With [`FlatFaces::Strong`] noise the k-nearest normal a point starts
 /// from can be tilted so far that its plane leaves the face within the
 /// wide reach: the plane fitted to the whole wide neighbourhood is tried
@@ -567,7 +567,7 @@ type HeldSet = [u64; HELD_BITS / 64];
 /// meet at [`FLAT_EDGE_DEG`] or more; and `smooth_flat` averages normals
 /// within [`FLAT_AGREE_STRONG_DEG`]. The solids scanned from one station
 /// with noise, three seeds: 32.18, 32.61, 33.09 dB before, 32.96, 33.25,
-/// 33.45 with these (`docs/development.md`, "the noisy scan, round 3").
+/// 33.45 with these (`docs/notes/real-scans.md`, "the noisy scan, round 3").
 ///
 /// Points marked in `settled` ([`Estimated::settled`], from the same
 /// points with normals equal up to their signs and a tolerance at most
@@ -890,7 +890,7 @@ impl FlatFaces {
 /// `tests/survey.rs` (ratio 1.69–1.77, noise about a tenth of the point
 /// spacing) lose 0.07–0.25 dB with them, while the solids scanned with
 /// range noise of half a spacing (ratio 2.94–3.01) gain 0.4–0.8 dB and the
-/// coarse real bunny scan (10.2) is unchanged (`docs/development.md`, "the
+/// coarse real bunny scan (10.2) is unchanged (`docs/notes/real-scans.md`, "the
 /// noisy scan, round 3").
 pub const STRONG_NOISE: f32 = 2.0;
 
@@ -905,7 +905,7 @@ pub const STRONG_NOISE: f32 = 2.0;
 pub const FLAT_EDGE_DEG: f32 = 40.0;
 
 /// Rounds of [`smooth_flat`]. Chosen on the solids scanned with range noise
-/// of half a spacing (`compare --truth`, 800×600; `docs/development.md`,
+/// of half a spacing (`compare --truth`, 800×600; `docs/notes/real-scans.md`,
 /// "the noisy scan, round 2"): from two stations 32.99 dB with none, 33.21
 /// with 2, 33.10 with 4; more rounds widen the face's plane but
 /// move the normals of the points at its edges too (the 200×150 scan of
@@ -917,7 +917,7 @@ pub const FLAT_ROUNDS: usize = 2;
 pub const FLAT_AGREE_DEG: f32 = 5.0;
 
 /// ... with [`FlatFaces::Strong`] noise. Chosen with edge points taking
-/// their face's plane (`docs/development.md`, "the noisy scan, round 3";
+/// their face's plane (`docs/notes/real-scans.md`, "the noisy scan, round 3";
 /// before [`FLAT_EDGE_DEG`]): the solids scanned from one station / two,
 /// seed 1, 32.79 / 33.34 dB with 5°, 32.97 / 33.45 with 10°, 32.92 /
 /// 33.54 with 15°.

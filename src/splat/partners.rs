@@ -34,7 +34,7 @@
 //! ([`CUT_MIN_D`]). A cut that leaves one of the points as read (before
 //! denoising moved them) within the coverage tolerance of no splat is
 //! undone. At weaker noise growth finds the creases and these cuts only
-//! add false ones: the bunny's ears (docs/development.md, "the noisy scan,
+//! add false ones: the bunny's ears (docs/notes/real-scans.md, "the noisy scan,
 //! round 4").
 
 use super::clip::{Clip, ClipLine};

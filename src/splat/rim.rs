@@ -40,7 +40,7 @@ pub const CREASE_LENGTH: f32 = 0.4;
 /// than this many `ϵ` at the disc's rim: a gentler crease, or one near the
 /// rim, the whole disc stands close enough to. On the bunny (a scanned
 /// mesh whose facets meet at over 30° along 1.4 % of its edges) 1 `ϵ` cost
-/// 0.8 dB, 2 `ϵ` 0.03 dB (`docs/development.md`, "Issue 39").
+/// 0.8 dB, 2 `ϵ` 0.03 dB (`docs/notes/README.md`, "Issue 39").
 pub const CREASE_RISE_EPS: f32 = 2.0;
 
 /// ... and the points across rise from the splat's plane as a face turned
@@ -52,7 +52,7 @@ pub const CREASE_RISE_EPS: f32 = 2.0;
 /// near the plane; a true crease's other face leaves it at its own angle.
 /// Measured with `compare --truth` (creases on, 800×600): bunny 37.54 ->
 /// 37.77 dB (37.87 creases off), solids 34.20 -> 34.58 dB
-/// (`docs/development.md`, "Issue 39: creases on by default").
+/// (`docs/notes/creases.md`, "Issue 39: creases on by default").
 pub const CREASE_STEEP: f32 = 0.5;
 
 /// ... and, where the jump is under this many degrees, only where the two
@@ -64,7 +64,7 @@ pub const CREASE_STEEP: f32 = 0.5;
 /// `compare --truth` (creases on, 800×600): glass 39.67 -> 39.96 dB (40.00
 /// off), bunny 37.77 -> 37.86 (37.87 off), solids 34.58 -> 34.94; at 50°
 /// glass 39.77, bunny 37.76; at 70° glass 39.99, bunny 37.79
-/// (`docs/development.md`, "Issue 39: smooth rims").
+/// (`docs/notes/creases.md`, "Issue 39: smooth rims").
 pub const CREASE_SMOOTH_JUMP_DEG: f32 = 60.0;
 
 /// [`smooth_across`]: one quadric over both sides may fit this many points
@@ -87,7 +87,7 @@ pub const BORDER_SPACINGS: f32 = 2.0;
 /// the mean distance from a straight border to the last of points spread
 /// one per spacing² along it. At a fixed 0.15 spacings the ground of the
 /// solids overhung its border by a fraction of a pixel all round: 0.17 %
-/// of the image in false hits, against 0.08 % (`docs/development.md`,
+/// of the image in false hits, against 0.08 % (`docs/notes/creases.md`,
 /// "Issue 39, part D").
 pub const CLIP_GAP_SPACINGS: f32 = 0.15;
 
@@ -98,7 +98,7 @@ pub const CLIP_GAP_SPACINGS: f32 = 0.15;
 /// line's middle: near the rim the chord is short, and random sampling
 /// leaves a short band empty by chance (the graph's neighbours just
 /// outside the rim, limited to the chord, cost the bunny with creases
-/// 0.3 dB; `docs/development.md`, "Issue 39, part C").
+/// 0.3 dB; `docs/notes/creases.md`, "Issue 39, part C").
 pub const BORDER_HALF_SPACINGS: f32 = 4.0;
 
 /// ... counting the points of the face within this many radii of the

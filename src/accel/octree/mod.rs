@@ -39,7 +39,7 @@
 //! uniform grid: a ray walks it cell by cell (3D-DDA) and descends only from
 //! the nodes of the cells it crosses, instead of from the root (the upper
 //! four levels were 59 % of the interior nodes a ray visited on the bundled
-//! bunny; `docs/development.md`, round `octree-perf3`).
+//! bunny; `docs/notes/backends.md`, round `octree-perf3`).
 //!
 //! Traversal (§3.2, in [`traverse`]) computes the entry and exit of a cell's
 //! eight children at once, then visits the non-empty ones in the order given
@@ -100,7 +100,7 @@ pub enum Layout {
     /// centres; a leaf lists the packs it needs with a mask of the lanes it
     /// references, so neighbouring leaves share packs (a fifth of the
     /// memory of [`Layout::Copies`], but about twice the pack tests per
-    /// ray: `docs/development.md`, round `octree-perf4`).
+    /// ray: `docs/notes/backends.md`, round `octree-perf4`).
     Shared,
     /// [`Layout::Copies`] while the copies' packs would take at most this
     /// many bytes, [`Layout::Shared`] beyond: the copies are 10–20 %
@@ -135,7 +135,7 @@ pub struct OctreeParams {
 
 impl Default for OctreeParams {
     /// `max_leaf = 96`, `max_depth = 16`, exact overlap test (measured
-    /// better than the bounding square: see `docs/development.md`), copies
+    /// better than the bounding square: see `docs/notes/README.md`), copies
     /// in the leaves up to [`AUTO_MAX_COPIES_BYTES`], shared packs beyond.
     ///
     /// 96 centres a leaf: with 8-disc packs filtered a leaf at a time, large
@@ -145,7 +145,7 @@ impl Default for OctreeParams {
     /// 0.99 / 1.05 (4.6x), 0.94 / 0.98 (4.6x), -; 64 gave 1.08 / 1.34
     /// (1.48x), 1.20 / 1.31 (1.62x), 1.70 / 1.67 (1.44x); 96 gave
     /// 1.05 / 1.31 (1.28x), 1.21 / 1.32 (1.38x), 1.73 / 1.83 (1.23x)
-    /// (`docs/development.md`, issue 25).
+    /// (`docs/notes/README.md`, issue 25).
     fn default() -> Self {
         OctreeParams {
             max_leaf: 96,
@@ -392,7 +392,7 @@ impl<P: Primitive> Backend for Octree<P> {
     /// origin (the integrator's batches), the octree renders the bunny in
     /// 0.92-0.93 of the CPU time of its single rays, and the glass,
     /// contact, scan and shading scenes in 0.85-0.90
-    /// (`docs/development.md`, "Issue 25: octree packets, round 2", with
+    /// (`docs/notes/generation.md`, "Issue 25: octree packets, round 2", with
     /// the commands; before it, packets rendered the bunny 1.09 times
     /// slower, "Issue 25: ray packets").
     fn prefers_packets(&self) -> bool {
