@@ -415,7 +415,7 @@ mod tests {
             let d = Vec3::new(r(1.0), r(1.0), r(1.0)).normalize();
             let ray = Ray::new(aim - d * 4.0, d);
             let hits = count(&tet, &ray);
-            assert!(hits % 2 == 0, "ray {k}: {hits} hits through {aim} {ray:?}");
+            assert!(hits.is_multiple_of(2), "ray {k}: {hits} hits through {aim} {ray:?}");
             through += usize::from(hits == 2);
         }
         assert!(through > 5_000, "too few rays went through: {through}");
