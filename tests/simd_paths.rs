@@ -1,4 +1,4 @@
-//! The octree's SIMD paths chosen by `SPLATRAY_SIMD` (`src/simd.rs`): every
+//! The octree's SIMD paths chosen by `SPLATRAY_SIMD` (`src/simd/`): every
 //! path this CPU runs renders the bundled bunny to the same bytes and `info`
 //! names it; a path that is not one, or that this CPU cannot run, is a
 //! one-line error before any work. (The conformance suite checks each
