@@ -200,10 +200,15 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
         out: &mut [[u32; crate::simd::RAYS]],
         any: &mut [u32],
     ) {
-        let _ = isa;
-        for ((p, out), any) in packs.iter().zip(out.iter_mut()).zip(any.iter_mut()) {
-            *out = [0; crate::simd::RAYS];
-            *any = 0;
+        // Each active ray's masks by [`Pack::masks`] (the pack's SIMD path
+        // where it has one), a chunk of packs at a time.
+        const CHUNK: usize = 64;
+        let mut buf = [0u32; CHUNK];
+        for (c, chunk) in packs.chunks(CHUNK).enumerate() {
+            let out = &mut out[c * CHUNK..c * CHUNK + chunk.len()];
+            let any = &mut any[c * CHUNK..c * CHUNK + chunk.len()];
+            out.fill([0; crate::simd::RAYS]);
+            any.fill(0);
             let mut left = active & ((1 << crate::simd::RAYS) - 1);
             while left != 0 {
                 let k = left.trailing_zeros() as usize;
@@ -214,8 +219,12 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
                     t_min: rays.t_min[k],
                     t_max: rays.t_max[k],
                 };
-                out[k] = p.may_hit(&ray);
-                *any |= u32::from(out[k] != 0) << k;
+                let m = &mut buf[..chunk.len()];
+                Self::masks(chunk, &ray, isa, m);
+                for ((o, a), &m) in out.iter_mut().zip(any.iter_mut()).zip(m.iter()) {
+                    o[k] = m;
+                    *a |= u32::from(m != 0) << k;
+                }
             }
         }
     }

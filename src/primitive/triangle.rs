@@ -18,7 +18,7 @@
 //! through a shared edge or vertex of a consistently wound mesh hits
 //! exactly one triangle.
 
-use super::{Hit, Local, Pack, PackRay, PackRays, Primitive};
+use super::{Hit, Local, Pack, PackRay, Primitive};
 use crate::geometry::Ray;
 use crate::simd::{self, Shear, TRI_LANES, TriColumns};
 use glam::{DVec3, Vec3};
@@ -289,47 +289,6 @@ impl Pack<Triangle> for TrianglePack {
     #[inline]
     fn masks(packs: &[Self], ray: &PackRay, isa: simd::Isa, out: &mut [u32]) {
         simd::tri_masks(packs, ray.origin, ray.dir, ray.t_min, ray.t_max, isa, out);
-    }
-
-    /// [`TrianglePack::masks`] for each active ray in turn.
-    #[inline]
-    fn masks_rays(
-        packs: &[Self],
-        rays: &PackRays,
-        active: u32,
-        isa: simd::Isa,
-        out: &mut [[u32; simd::RAYS]],
-        any: &mut [u32],
-    ) {
-        const CHUNK: usize = 64;
-        let mut buf = [0u32; CHUNK];
-        for (c, chunk) in packs.chunks(CHUNK).enumerate() {
-            let out = &mut out[c * CHUNK..c * CHUNK + chunk.len()];
-            let any = &mut any[c * CHUNK..c * CHUNK + chunk.len()];
-            for o in out.iter_mut() {
-                *o = [0; simd::RAYS];
-            }
-            any.fill(0);
-            let mut left = active & ((1 << simd::RAYS) - 1);
-            while left != 0 {
-                let k = left.trailing_zeros() as usize;
-                left &= left - 1;
-                let m = &mut buf[..chunk.len()];
-                simd::tri_masks(
-                    chunk,
-                    rays.origin,
-                    rays.dir[k],
-                    rays.t_min[k],
-                    rays.t_max[k],
-                    isa,
-                    m,
-                );
-                for ((o, a), &m) in out.iter_mut().zip(any.iter_mut()).zip(m.iter()) {
-                    o[k] = m;
-                    *a |= u32::from(m != 0) << k;
-                }
-            }
-        }
     }
 }
 
