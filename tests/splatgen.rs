@@ -565,3 +565,50 @@ fn a_smooth_cloud_searches_few_neighbourhoods_for_faces() {
     assert!(bunny < 0.75, "{bunny}");
     assert!(solids > 0.2, "{solids}");
 }
+
+/// The neighbourhood graph is built once per cloud: 20k exact bunny
+/// samples with 100 points scattered through their box, which the outlier
+/// rule drops. The graph is repaired around them (only the points that
+/// had one as a neighbour are queried again), not rebuilt; the normals
+/// ask one wide neighbourhood a point; the face search asks none for the
+/// points settled while their normals were estimated.
+#[test]
+fn the_graph_is_built_once_and_repaired_around_outliers() {
+    let mesh = read_mesh(&data("bunny-mesh.ply")).unwrap();
+    let mut positions = sample_mesh(&mesh, 20_000, 0.0, 5).positions;
+    let (lo, hi) = positions.iter().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(a, b), p| (a.min(*p), b.max(*p)),
+    );
+    let mut s = 0x9e37_79b9_7f4a_7c15_u64;
+    let mut next = || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 40) as f32 / (1u64 << 24) as f32
+    };
+    for _ in 0..100 {
+        positions.push(lo + (hi - lo) * Vec3::new(next(), next(), next()));
+    }
+    let (_, rep) = generate(&cloud(positions), &SplatParams::default()).unwrap();
+    let dropped: usize = rep
+        .skipped_points
+        .iter()
+        .filter(|s| s.reason.starts_with("statistical outlier"))
+        .map(|s| s.count)
+        .sum();
+    let q = rep.queries;
+    eprintln!(
+        "{dropped} outliers dropped; queries {q:?} for {} points",
+        rep.input_points
+    );
+    // Measured: 62 of the 100 dropped (the others lie near the surface);
+    // graph 20,100 queries (no kept point had a dropped one among its
+    // nearest: nothing to repair; a rebuild made 40,138), normals 20,038,
+    // faces 19,761 (277 settled: at this density the 48 nearest span
+    // enough of the bunny's curvature that few planes hold them).
+    assert!(dropped >= 50, "{dropped}");
+    assert!(q.graph < rep.input_points + dropped, "{q:?}");
+    assert_eq!(q.normals, rep.used_points, "{q:?}");
+    assert!(q.faces < rep.used_points, "{q:?}");
+}

@@ -185,6 +185,21 @@ pub struct StageSeconds {
     pub total: f64,
 }
 
+/// Tree queries for a point's `m` nearest neighbours (`knn::Nearest`), by
+/// the stage that asked: the neighbourhood graph is built once, repaired
+/// (not rebuilt) where outliers leave it, and rebuilt only where scan
+/// lines widen it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct NeighbourQueries {
+    /// The graph's `k` nearest (`knn::Knn`).
+    pub graph: usize,
+    /// The normals' wide neighbourhoods (`normals::estimate_multiscale`).
+    pub normals: usize,
+    /// The face search's (`normals::face_normals`): none for a point
+    /// settled while its normal was estimated.
+    pub faces: usize,
+}
+
 /// What [`generate`] did, for people and for `--report` JSON.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct SplatReport {
@@ -215,6 +230,8 @@ pub struct SplatReport {
     /// edge (`normals::face_normals`): with creases on, those neither on a
     /// flat face nor on one smooth surface; none on a smooth cloud's.
     pub face_searches: usize,
+    /// Tree queries for a point's nearest neighbours, by stage.
+    pub queries: NeighbourQueries,
     /// Fraction of the used points lying on at least one splat: within `ϵ`
     /// of its plane and inside its disc.
     pub coverage: f64,
@@ -682,6 +699,7 @@ fn faces_and_creases(
     s.settled = Vec::new();
     s.flat = found.flat;
     report.face_searches = found.searched;
+    report.queries.faces = found.queries;
     if s.strong {
         // Under strong noise, whole flat faces fitted, their points
         // moved onto them along their lines of sight (`splat::planes`).
@@ -936,6 +954,7 @@ fn neighbours(
     report.k = k;
     let tree = build_tree(&points);
     let knn = Knn::build(&tree, &points, k);
+    report.queries.graph = knn.queries;
     Ok(Work {
         order,
         points,
@@ -1084,7 +1103,9 @@ struct Work {
 }
 
 /// Leaves out the statistical outliers (with their colours and scanners)
-/// and counts them; the kd-tree and the graph are rebuilt without them.
+/// and counts them; the kd-tree is rebuilt without them, and the graph
+/// repaired (`Knn::without`: only the points that had one as a neighbour
+/// are queried again).
 fn drop_outliers(w: &mut Work, report: &mut SplatReport) {
     let n = w.points.len();
     let out = outliers::flag(&w.points, &w.knn, w.sights.as_ref());
@@ -1108,7 +1129,9 @@ fn drop_outliers(w: &mut Work, report: &mut SplatReport) {
         });
         report.used_points = n - count;
         w.tree = build_tree(&w.points);
-        w.knn = Knn::build(&w.tree, &w.points, w.k);
+        let keep: Vec<bool> = out.iter().map(|&o| !o).collect();
+        w.knn = w.knn.without(&keep, &w.tree, &w.points);
+        report.queries.graph += w.knn.queries;
     }
 }
 
@@ -1151,9 +1174,11 @@ fn normals_of(
             collinear,
             degenerate,
             settled: settled_here,
+            queries,
             ..
         } = normals::estimate_multiscale(&w.points, &w.tree, &w.knn, w.sights.as_ref(), settle_tol);
         settled = settled_here;
+        report.queries.normals = queries;
         if (collinear * 20 > n || wide * 5 > n) && w.k < params.k * normals::WIDE_FACTOR {
             // Anisotropic sampling (scan lines) or heavy noise: the k nearest
             // neighbours of many points lie along one line or do not reach
@@ -1171,6 +1196,7 @@ fn normals_of(
             // The face search's neighbourhood widens with the graph.
             settled = Vec::new();
             w.knn = Knn::build(&w.tree, &w.points, wider);
+            report.queries.graph += w.knn.queries;
         }
         if wide * 100 > n {
             report.warnings.push(format!(

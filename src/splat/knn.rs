@@ -32,6 +32,10 @@ pub struct Knn {
     /// The distance `d_i = |p_i - p_k|` to the k-th neighbour: the local
     /// sampling density estimate of §2.
     pub kth_distance: Vec<f32>,
+    /// The tree queries that made it: one a point when built, those of
+    /// the points whose neighbours were dropped when repaired
+    /// ([`Knn::without`]).
+    pub queries: usize,
 }
 
 impl Knn {
@@ -46,7 +50,6 @@ impl Knn {
     #[must_use]
     pub fn build(tree: &PointTree, points: &[Vec3], k: usize) -> Knn {
         let k = k.clamp(1, points.len().saturating_sub(1).max(1));
-        let n = NonZero::new(k + 1).unwrap_or(NonZero::<usize>::MIN);
         let mut idx = vec![0u32; points.len() * k];
         let mut kth_distance = vec![0f32; points.len()];
         // Points come in spatial (Morton) order, so a point's k + 1
@@ -56,39 +59,123 @@ impl Knn {
         // order, not the tree's). Against the heap of `nearest_n_within`
         // bounded the same way: 0.97x the CPU of the whole `splat` of 200k
         // bunny points (paired runs in turns, 5 pairs).
+        let tally = Tally::default();
         idx.par_chunks_mut(k * CHUNK)
             .zip(kth_distance.par_chunks_mut(CHUNK))
             .enumerate()
             .for_each(|(c, (rows, kths))| {
-                let mut nearest = Nearest::new();
+                let mut nearest = Nearest::counted(&tally);
                 for (j, (row, kth)) in rows.chunks_mut(k).zip(kths.iter_mut()).enumerate() {
                     let i = c * CHUNK + j;
-                    let found = nearest.query(tree, points[i], n.get());
-                    let mut len = 0usize;
-                    let mut last = 0f32;
-                    for &(d, item) in found {
-                        if item as usize == i || len == k {
-                            continue;
-                        }
-                        row[len] = item;
-                        len += 1;
-                        last = d;
-                    }
-                    // Pad (only with fewer found than asked) with the last one.
-                    let fill = if len > 0 {
-                        row[len - 1]
-                    } else {
-                        u32::from(i == 0)
-                    };
-                    row[len..].fill(fill);
-                    *kth = last.sqrt();
+                    *kth = nearest_row(&mut nearest, tree, points, i, row);
                 }
             });
         Knn {
             k,
             idx,
             kth_distance,
+            queries: tally.get(),
         }
+    }
+
+    /// The graph of the points `keep` holds, from this graph of all of
+    /// them (`points` and `tree` are the kept ones', in the same order):
+    /// a point none of whose neighbours was dropped keeps its row
+    /// (renumbered), and only the others are queried again. The same graph
+    /// as [`Knn::build`] over the kept points, bit for bit: a kept row's
+    /// `k` nearest are nearest among fewer points too, and renumbering
+    /// keeps the order of indices, so ties break the same way.
+    #[must_use]
+    pub fn without(&self, keep: &[bool], tree: &PointTree, points: &[Vec3]) -> Knn {
+        let k = self.k.clamp(1, points.len().saturating_sub(1).max(1));
+        let mut new_of = vec![u32::MAX; keep.len()];
+        let mut kept_old = Vec::with_capacity(points.len());
+        for i in (0..keep.len()).filter(|&i| keep[i]) {
+            new_of[i] = kept_old.len() as u32;
+            kept_old.push(i);
+        }
+        if k != self.k || kept_old.len() != points.len() {
+            // Fewer points than a neighbourhood (or a caller's mismatch):
+            // built afresh.
+            return Knn::build(tree, points, k);
+        }
+        let mut idx = vec![0u32; points.len() * k];
+        let mut kth_distance = vec![0f32; points.len()];
+        let tally = Tally::default();
+        idx.par_chunks_mut(k * CHUNK)
+            .zip(kth_distance.par_chunks_mut(CHUNK))
+            .enumerate()
+            .for_each(|(c, (rows, kths))| {
+                let mut nearest = Nearest::counted(&tally);
+                for (j, (row, kth)) in rows.chunks_mut(k).zip(kths.iter_mut()).enumerate() {
+                    let i = c * CHUNK + j;
+                    let old = kept_old[i];
+                    let was = self.of(old);
+                    if was.iter().all(|&o| keep[o as usize]) {
+                        for (r, &o) in row.iter_mut().zip(was) {
+                            *r = new_of[o as usize];
+                        }
+                        *kth = self.kth_distance[old];
+                    } else {
+                        *kth = nearest_row(&mut nearest, tree, points, i, row);
+                    }
+                }
+            });
+        Knn {
+            k,
+            idx,
+            kth_distance,
+            queries: tally.get(),
+        }
+    }
+}
+
+/// Point `i`'s row of the graph: its `row.len()` nearest others, nearest
+/// first (padded with the last where fewer exist); returns the last one's
+/// distance.
+fn nearest_row(
+    nearest: &mut Nearest<'_>,
+    tree: &PointTree,
+    points: &[Vec3],
+    i: usize,
+    row: &mut [u32],
+) -> f32 {
+    let k = row.len();
+    let found = nearest.query(tree, points[i], k + 1);
+    let mut len = 0usize;
+    let mut last = 0f32;
+    for &(d, item) in found {
+        if item as usize == i || len == k {
+            continue;
+        }
+        row[len] = item;
+        len += 1;
+        last = d;
+    }
+    // Pad (only with fewer found than asked) with the last one.
+    let fill = if len > 0 {
+        row[len - 1]
+    } else {
+        u32::from(i == 0)
+    };
+    row[len..].fill(fill);
+    last.sqrt()
+}
+
+/// A count of tree queries shared by the threads of one stage: each
+/// [`Nearest`] adds its own when dropped.
+#[derive(Default)]
+pub struct Tally(std::sync::atomic::AtomicUsize);
+
+impl Tally {
+    /// Queries counted so far.
+    #[must_use]
+    pub fn get(&self) -> usize {
+        self.0.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    fn add(&self, n: usize) {
+        self.0.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
     }
 }
 
@@ -106,31 +193,63 @@ const BOUND_GROWTH_SQ: f32 = 1.44;
 /// One per thread (the bound carries from one query to the next); results
 /// in `found`, sorted by (squared distance, index), the query point itself
 /// included when it is one of the tree's.
+/// Queries are counted into a [`Tally`] when it is dropped.
 #[derive(Default)]
-pub struct Nearest {
+pub struct Nearest<'t> {
     /// The bound on the next query's squared distance (infinite: none).
     bound: f32,
     /// The last query's result: (squared distance, index), nearest first.
     pub found: Vec<(f32, u32)>,
     /// Scratch: the candidates as [`key`]s.
     keys: Vec<u64>,
+    /// Queries made, and where they are counted.
+    queries: usize,
+    tally: Option<&'t Tally>,
 }
 
-impl Nearest {
-    /// A query state with no bound yet.
+impl Drop for Nearest<'_> {
+    fn drop(&mut self) {
+        if let Some(t) = self.tally {
+            t.add(self.queries);
+        }
+    }
+}
+
+impl<'t> Nearest<'t> {
+    /// A query state with no bound yet, counted nowhere.
     #[must_use]
-    pub fn new() -> Nearest {
+    pub fn new() -> Nearest<'t> {
         Nearest {
             bound: f32::INFINITY,
             found: Vec::new(),
             keys: Vec::new(),
+            queries: 0,
+            tally: None,
         }
+    }
+
+    /// A query state with no bound yet, its queries counted in `tally`.
+    #[must_use]
+    pub fn counted(tally: &'t Tally) -> Nearest<'t> {
+        Nearest {
+            bound: f32::INFINITY,
+            found: Vec::new(),
+            keys: Vec::new(),
+            queries: 0,
+            tally: Some(tally),
+        }
+    }
+
+    /// Counts a query the caller made on the tree itself.
+    pub fn count_other(&mut self) {
+        self.queries += 1;
     }
 
     /// The `m` nearest points of `tree` to `q` into [`Nearest::found`]
     /// (fewer only when the tree holds fewer), nearest first, ties by
     /// index.
     pub fn query(&mut self, tree: &PointTree, q: Vec3, m: usize) -> &[(f32, u32)] {
+        self.queries += 1;
         self.found.clear();
         self.keys.clear();
         let Some(mq) = NonZero::new(m) else {
@@ -235,6 +354,54 @@ mod tests {
         }
         // Most queries took the bound of the one before.
         assert!(bounded * 2 > 4 * pts.len(), "{bounded}");
+    }
+
+    /// A graph repaired around dropped points ([`Knn::without`]) is the
+    /// graph built over the points left, bit for bit, on a grid (where
+    /// most distances tie) and a scattered cloud, with single points, a
+    /// block and every third point dropped; and only the points that had a
+    /// dropped neighbour are queried again.
+    #[test]
+    fn a_repaired_graph_is_the_graph_built_without_the_dropped() {
+        let mut grid = Vec::new();
+        for i in 0..30 {
+            for j in 0..30 {
+                grid.push(Vec3::new(i as f32 * 0.5, j as f32 * 0.5, 0.0));
+            }
+        }
+        let mut s = 0x2545_f491_u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let scattered: Vec<Vec3> = (0..1500)
+            .map(|_| Vec3::new(next(), next(), 0.1 * next()))
+            .collect();
+        for pts in [grid, scattered] {
+            let n = pts.len();
+            let drops: [Vec<bool>; 3] = [
+                (0..n).map(|i| i == 7 || i == n / 2).collect(),
+                (0..n).map(|i| (200..260).contains(&i)).collect(),
+                (0..n).map(|i| i % 3 == 0).collect(),
+            ];
+            let all = Knn::build(&build_tree(&pts), &pts, 12);
+            for drop in drops {
+                let keep: Vec<bool> = drop.iter().map(|&d| !d).collect();
+                let left: Vec<Vec3> = (0..n).filter(|&i| keep[i]).map(|i| pts[i]).collect();
+                let tree = build_tree(&left);
+                let want = Knn::build(&tree, &left, 12);
+                let got = all.without(&keep, &tree, &left);
+                assert_eq!(got.idx, want.idx);
+                assert_eq!(got.kth_distance, want.kth_distance);
+                let touched = (0..n)
+                    .filter(|&i| keep[i] && all.of(i).iter().any(|&j| drop[j as usize]))
+                    .count();
+                assert_eq!(got.queries, touched);
+                assert_eq!(want.queries, left.len());
+            }
+        }
     }
 
     /// The graph holds each point's `k` nearest others, nearest first and

@@ -97,6 +97,8 @@ pub struct Estimated {
     /// the tolerance given that [`face_normals`] would find them on one
     /// face: empty when none was given (see [`estimate_multiscale`]).
     pub settled: Vec<bool>,
+    /// Tree queries made (one a point, more where collinear ones widen).
+    pub queries: usize,
 }
 
 /// Which neighbourhood a point's normal came from.
@@ -144,6 +146,7 @@ pub fn estimate_multiscale(
     // `FaceSearch::face_at`'s share of its neighbours (the point excluded).
     let face_wide = (knn.k * WIDE_FACTOR + 1).min(n).saturating_sub(1);
     let flat_at = (FACE_HOLDS * face_wide as f32).ceil() as usize;
+    let tally = super::knn::Tally::default();
     let out: Vec<(Vec3, Scale, bool)> = (0..n)
         .into_par_iter()
         .with_min_len(512)
@@ -152,7 +155,7 @@ pub fn estimate_multiscale(
                 (
                     Vec::new(),
                     Vec::new(),
-                    super::knn::Nearest::new(),
+                    super::knn::Nearest::counted(&tally),
                     Vec::new(),
                 )
             },
@@ -179,6 +182,7 @@ pub fn estimate_multiscale(
                         let found = nearest.query(tree, points[i], m);
                         items.extend(found.iter().map(|f| f.1));
                     } else {
+                        nearest.count_other();
                         let found = tree.nearest_n::<SquaredEuclidean>(&points[i].to_array(), q);
                         items.extend(found.iter().map(|f| f.item));
                     }
@@ -221,6 +225,7 @@ pub fn estimate_multiscale(
             Vec::new()
         },
         normals: out.into_iter().map(|o| o.0).collect(),
+        queries: tally.get(),
     }
 }
 
@@ -598,8 +603,10 @@ pub fn face_normals(
             turned: 0,
             flat: vec![false; n],
             searched: 0,
+            queries: 0,
         };
     }
+    let tally = super::knn::Tally::default();
     let search = FaceSearch {
         points,
         tree,
@@ -613,7 +620,7 @@ pub fn face_normals(
     let new: Vec<Option<(Vec3, Kind, Vec<u32>)>> = (0..n)
         .into_par_iter()
         .with_min_len(512)
-        .map_init(FaceScratch::default, |scratch, i| {
+        .map_init(|| FaceScratch::new(&tally), |scratch, i| {
             // A point settled on one face keeps its normal: with no
             // flat-face rules, all `face_at` would find.
             if fixed[i] || (!flat_faces && settled.get(i) == Some(&true)) {
@@ -644,6 +651,7 @@ pub fn face_normals(
         smooth_flat(normals, &flat, agree);
     }
     FaceNormals {
+        queries: tally.get(),
         turned: changed,
         flat: flat
             .iter()
@@ -663,6 +671,8 @@ pub struct FaceNormals {
     /// Neighbourhoods searched for two faces (`face_plane`): those neither
     /// flat nor one smooth surface ([`FACE_SMOOTH`]).
     pub searched: usize,
+    /// Tree queries made (one a point not skipped as settled).
+    pub queries: usize,
 }
 
 /// What [`face_normals`] reads for every point.
@@ -682,19 +692,29 @@ struct FaceSearch<'a> {
 
 /// One thread's buffers for [`FaceSearch::face_at`]: the bounded query
 /// and a point's neighbours (indices, offsets, offsets with the point's).
-#[derive(Default)]
-struct FaceScratch {
-    nearest: super::knn::Nearest,
+struct FaceScratch<'t> {
+    nearest: super::knn::Nearest<'t>,
     near: Vec<usize>,
     wide: Vec<Vec3>,
     all: Vec<Vec3>,
+}
+
+impl<'t> FaceScratch<'t> {
+    fn new(tally: &'t super::knn::Tally) -> Self {
+        FaceScratch {
+            nearest: super::knn::Nearest::counted(tally),
+            near: Vec::new(),
+            wide: Vec::new(),
+            all: Vec::new(),
+        }
+    }
 }
 
 impl FaceSearch<'_> {
     /// Point `i`'s new normal, what kind of point it is, and its
     /// neighbours on its face; `None` where it keeps its normal and lies on
     /// no flat face ([`face_normals`]).
-    fn face_at(&self, scratch: &mut FaceScratch, i: usize) -> Option<(Vec3, Kind, Vec<u32>)> {
+    fn face_at(&self, scratch: &mut FaceScratch<'_>, i: usize) -> Option<(Vec3, Kind, Vec<u32>)> {
         let tol = self.tol;
         let (p, n0) = (self.points[i], self.old[i]);
         let FaceScratch {
