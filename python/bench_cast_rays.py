@@ -135,12 +135,14 @@ def main() -> None:
     t = o3d.core.Tensor(rays)
     hits = np.isfinite(scene.cast_rays(t)["t_hit"].numpy()).mean()
     o3 = best(lambda: scene.cast_rays(t), a.repeat)
-    print(f"open3d {o3d.__version__} RaycastingScene: {len(mesh.triangles)} triangles, "
-          f"{a.rays / o3 / 1e6:6.2f} Mrays/s (hits {100 * hits:.1f} %)")
+    print(f"open3d {o3d.__version__} RaycastingScene: {len(mesh.triangles)} triangles "
+          f"(hits {100 * hits:.1f} %)")
+    print(f"    {'random':14s}: cast_rays {a.rays / o3 / 1e6:6.2f}, "
+          f"test_occlusions {mrays(lambda: scene.test_occlusions(t), a.rays, a.repeat):6.2f} Mrays/s")
     if a.camera:
         c = o3d.core.Tensor(camera_rays(centre, radius, a.camera))
         n = a.camera * a.camera
-        print(f"    camera {a.camera}^2: cast_rays {mrays(lambda: scene.cast_rays(c), n, a.repeat):6.2f}, "
+        print(f"    {f'camera {a.camera}^2':14s}: cast_rays {mrays(lambda: scene.cast_rays(c), n, a.repeat):6.2f}, "
               f"test_occlusions {mrays(lambda: scene.test_occlusions(c), n, a.repeat):6.2f} Mrays/s")
 
 

@@ -172,6 +172,15 @@ def test_bad_rays_and_inputs_raise(points):
     ]:
         with pytest.raises(error):
             ss.cast_rays(bad)
+    # Of several bad rows (converted in parallel), the first is named.
+    many = np.repeat(ok, 5000, axis=0)
+    many[3000, 5] = 0.0
+    many[4000, 0] = np.nan
+    many[700, 3:] = 0.0
+    for call in (ss.cast_rays, ss.occluded):
+        with pytest.raises(ValueError) as e:
+            call(many)
+        assert str(e.value) == "rays: row 700 has a zero (or too small or large) direction"
     with pytest.raises(ValueError, match="normals has 2 rows"):
         splatray.splat(points, normals=np.ones((2, 3)))
     # The library's own errors: one line, naming what is wrong.

@@ -15,6 +15,7 @@ use splatray::accel::{Backend, CandidateHits, Ray};
 use splatray::render::cast::{CastOutputs, cast_rays, occluded};
 use splatray::render::integrator::{SplatSurfaces, Surfaces};
 use splatray::scene::Scene;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 /// Splats in one acceleration backend, for ray casting.
@@ -68,33 +69,52 @@ impl SplatScene {
         self.convert(&rows::<f64>(rays, "rays", 6, true)?)
     }
 
+    /// Rows of six numbers to rays and direction lengths, written straight
+    /// into their vectors in parallel (no per-chunk lists joined and
+    /// unzipped: that was a quarter of a camera-ray `cast_rays` call,
+    /// `docs/notes/backends.md`, "Issue 55, round 2"); the first bad row
+    /// is reported.
     fn convert<T: Copy + Into<f64> + Sync>(&self, v: &[T]) -> PyResult<(Vec<Ray>, Vec<f32>)> {
-        let o = self.to_internal;
-        let out: Result<Vec<(Ray, f32)>, String> = v
-            .par_chunks_exact(6)
+        let n = v.len() / 6;
+        let bad = AtomicUsize::new(usize::MAX);
+        let mut rays = Vec::with_capacity(n);
+        let mut lens = Vec::with_capacity(n);
+        v.par_chunks_exact(6)
             .enumerate()
             .map(|(i, r)| {
-                let r: [f64; 6] = std::array::from_fn(|k| r[k].into());
-                if r.iter().any(|x| !x.is_finite()) {
-                    return Err(format!("rays: row {i} holds a NaN or infinite value"));
-                }
-                let d = Vec3::new(r[3] as f32, r[4] as f32, r[5] as f32);
-                let len = d.length();
-                if !(len > 0.0 && len.is_finite()) {
-                    return Err(format!(
-                        "rays: row {i} has a zero (or too small or large) direction"
-                    ));
-                }
-                let origin = (DVec3::new(r[0], r[1], r[2]) - o).as_vec3();
-                if !origin.is_finite() {
-                    return Err(format!(
-                        "rays: row {i}'s origin lies beyond single precision from the splats"
-                    ));
-                }
-                Ok((Ray::new(origin, d), len))
+                self.ray(r).unwrap_or_else(|_| {
+                    bad.fetch_min(i, Ordering::Relaxed);
+                    (Ray::new(Vec3::ZERO, Vec3::X), 1.0)
+                })
             })
-            .collect();
-        Ok(out.map_err(PyValueError::new_err)?.into_iter().unzip())
+            .unzip_into_vecs(&mut rays, &mut lens);
+        match bad.into_inner() {
+            usize::MAX => Ok((rays, lens)),
+            i => {
+                let why = self.ray(&v[6 * i..6 * i + 6]).err().unwrap_or("is wrong");
+                Err(PyValueError::new_err(format!("rays: row {i} {why}")))
+            }
+        }
+    }
+
+    /// One row as a ray in the scene's frame and its direction's length,
+    /// or what is wrong with it.
+    #[inline]
+    fn ray<T: Copy + Into<f64>>(&self, r: &[T]) -> Result<(Ray, f32), &'static str> {
+        let r: [f64; 6] = std::array::from_fn(|k| r[k].into());
+        if r.iter().any(|x| !x.is_finite()) {
+            return Err("holds a NaN or infinite value");
+        }
+        let d = Vec3::new(r[3] as f32, r[4] as f32, r[5] as f32);
+        let len = d.length();
+        if !(len > 0.0 && len.is_finite()) {
+            return Err("has a zero (or too small or large) direction");
+        }
+        let origin = (DVec3::new(r[0], r[1], r[2]) - self.to_internal).as_vec3();
+        if !origin.is_finite() {
+            return Err("has an origin beyond single precision from the splats");
+        }
+        Ok((Ray::new(origin, d), len))
     }
 }
 
