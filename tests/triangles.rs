@@ -329,3 +329,62 @@ fn a_splat_touching_a_triangle_floor_has_no_gap_and_no_self_shadow() {
         }
     }
 }
+
+/// A triangle hit is a window of one: a splat just behind a triangle,
+/// within the blending window, is not blended into it, and a splat just in
+/// front of it is the surface, not blended with the triangle either.
+#[test]
+fn the_resolver_treats_a_triangle_hit_as_a_window_of_one() {
+    use splatray::accel::Candidate;
+    use splatray::resolve::{Resolved, ShadingMode, resolve_with_triangles};
+    use splatray::splat::Splat;
+    let splats = vec![Splat::disc(Vec3::ZERO, Vec3::Z, 1.0).unwrap()];
+    let ray = Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z);
+    let tri_hit = |c: &Candidate| splatray::resolve::SurfaceHit {
+        id: c.id,
+        t: c.t,
+        point: ray.at(c.t),
+        normal: Vec3::X,
+        geometric_normal: Vec3::X,
+        front: true,
+        blended: 1,
+        shadow_origin: ray.at(c.t),
+    };
+    let model = |_| (ShadingMode::Blended, 0.1);
+    let window = |hits: &[(u32, f32)]| {
+        let mut w = CandidateHits::new(0.1);
+        for &(id, t) in hits {
+            w.offer(Candidate {
+                id,
+                t,
+                u: 0.0,
+                v: 0.0,
+            });
+        }
+        w
+    };
+    // Triangle (id 1) nearest, the splat 0.05 behind it.
+    let r = resolve_with_triangles(
+        &window(&[(1, 4.95), (0, 5.0)]),
+        &ray,
+        &splats,
+        model,
+        tri_hit,
+    );
+    assert!(
+        matches!(r, Some(Resolved::Hit(h)) if h.id == 1 && h.normal == Vec3::X),
+        "{r:?}"
+    );
+    // The splat nearest, the triangle 0.05 behind: the splat alone.
+    let r = resolve_with_triangles(
+        &window(&[(0, 5.0), (1, 5.05)]),
+        &ray,
+        &splats,
+        model,
+        tri_hit,
+    );
+    assert!(
+        matches!(r, Some(Resolved::Hit(h)) if h.id == 0 && h.blended == 1 && h.normal == Vec3::Z),
+        "{r:?}"
+    );
+}

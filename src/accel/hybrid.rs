@@ -114,3 +114,12 @@ impl BackendInfo<Disc> {
         Ok(Box::new(Hybrid::new(s, t, first)))
     }
 }
+
+impl BackendInfo<Disc> {
+    /// This backend over a loaded scene's splats and triangles
+    /// ([`BackendInfo::build_hybrid`]): what the renderer, `compare`, the
+    /// sweep and the viewer trace.
+    pub fn build_scene(&self, scene: &crate::scene::Scene) -> Result<Box<dyn Backend>> {
+        self.build_hybrid(&scene.splats, &scene.triangles.tris)
+    }
+}

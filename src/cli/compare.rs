@@ -165,8 +165,13 @@ fn write_outputs(
 
 /// The report as lines on stdout.
 fn print_report(report: &CompareReport) {
+    let triangles = if report.triangles > 0 {
+        format!(", {} triangles", report.triangles)
+    } else {
+        String::new()
+    };
     println!(
-        "{}: {} splats, {} primary rays",
+        "{}: {} splats{triangles}, {} primary rays",
         report.scene, report.splats, report.rays
     );
     let Some(reference) = report.backends.first() else {

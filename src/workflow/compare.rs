@@ -79,6 +79,9 @@ pub struct CompareReport {
     pub scene: String,
     /// Splats.
     pub splats: usize,
+    /// Triangles (left out of the report when none).
+    #[serde(skip_serializing_if = "super::render::is_zero")]
+    pub triangles: usize,
     /// Primary rays compared (one per pixel).
     pub rays: usize,
     /// Renders per backend, taken in turns (`--rounds`).
@@ -179,6 +182,7 @@ pub fn compare(
     let report = CompareReport {
         scene: name.to_string(),
         splats: scene.splats.len(),
+        triangles: scene.triangles.tris.len(),
         rays: frames.first().map_or(0, |f| f.depth.len()),
         rounds: options.rounds,
         backends,
@@ -229,14 +233,14 @@ fn render_every_backend(
     };
     if rounds <= 1 {
         for (i, info) in infos.iter().enumerate() {
-            let backend = info.build_splats(&scene.splats)?;
+            let backend = info.build_scene(scene)?;
             render_one(i, backend.as_ref())?;
             built.push((backend.stats().build_seconds, backend.stats().memory_bytes));
         }
     } else {
         let backends = infos
             .iter()
-            .map(|info| info.build_splats(&scene.splats))
+            .map(|info| info.build_scene(scene))
             .collect::<Result<Vec<_>>>()?;
         for _ in 0..rounds {
             for (i, backend) in backends.iter().enumerate() {
