@@ -81,12 +81,16 @@ pub fn parse_triangles(bytes: &[u8], obj: bool) -> Result<TriangleMesh, IoErrorK
             v: t.map(|i| mesh.positions[i as usize]),
         };
         if !tri.is_proper() {
-            let line = line_of
+            // Vertices as the file counts them: OBJ from 1, PLY from 0.
+            let (line, from) = line_of
                 .as_ref()
-                .map_or(String::new(), |l| format!(" (line {})", l[k]));
+                .map_or((String::new(), 0), |l| (format!(" (line {})", l[k]), 1));
             return Err(IoErrorKind::Data(format!(
                 "face {}{line} is degenerate: its vertices {}, {} and {} span no area",
-                face_of[k], t[0], t[1], t[2]
+                face_of[k],
+                t[0] + from,
+                t[1] + from,
+                t[2] + from
             )));
         }
     }
@@ -299,7 +303,7 @@ mod tests {
             (format!("{tri}f 1 2 4\n"), "line 4: face 0: vertex 4 out of range: 3 read so far"),
             (format!("{tri}f 1 2 0\n"), "face 0: vertex index 0"),
             (format!("{tri}f 1 2 2\n"), "face 0 (line 4) is degenerate"),
-            (format!("{tri}v 2 0 0\nf 1 2 4\n"), "face 0 (line 5) is degenerate"),
+            (format!("{tri}v 2 0 0\nf 1 2 4\n"), "face 0 (line 5) is degenerate: its vertices 1, 2 and 4"),
             (format!("{tri}v nan 0 0\nf 1 2 4\n"), "face 0 uses vertex 4, which has a non-finite"),
             (format!("{tri}v inf 0 0\nf 4 2 3\n"), "non-finite coordinate"),
             (tri.to_string(), "no triangles"),
