@@ -157,7 +157,7 @@ pub fn backend_names() -> Vec<&'static str> {
 /// An unknown name (one line listing the known ones); a backend that does
 /// not build (Embree's device or memory).
 pub fn build_backend(name: &str, scene: &Scene) -> Result<Box<dyn Backend>> {
-    accel::registry::lookup(name)?.build_splats(&scene.splats)
+    accel::registry::lookup(name)?.build_scene(scene)
 }
 
 /// Runs the `splatray` command line with `args` (the program's name first),

@@ -303,6 +303,42 @@ pub fn resolve_models(
     }))
 }
 
+/// Resolves a window that may hold triangle hits (issue 57; ids from
+/// `splats.len()`, `triangle` gives a triangle candidate's hit). A
+/// triangle is an exact surface, its hit a window of one: the splat
+/// candidates nearer than the window's first triangle resolve as
+/// [`resolve_models`] resolves them alone (so a splat window never blends
+/// past a triangle), and where none is nearer, or every one nearer is
+/// passed over, the surface is the triangle. A window without triangles
+/// resolves as [`resolve_models`].
+#[must_use]
+pub fn resolve_with_triangles(
+    hits: &CandidateHits,
+    ray: &Ray,
+    splats: &[Splat],
+    model: impl Fn(u32) -> (ShadingMode, f32),
+    triangle: impl Fn(&Candidate) -> SurfaceHit,
+) -> Option<Resolved> {
+    let all = hits.as_slice();
+    let first_triangle = splats.len() as u32;
+    let Some(j) = all.iter().position(|c| c.id >= first_triangle) else {
+        return resolve_models(hits, ray, splats, model);
+    };
+    let tri = &all[j];
+    let Some(last) = j.checked_sub(1).map(|i| all[i]) else {
+        return Some(Resolved::Hit(triangle(tri)));
+    };
+    let mut before = CandidateHits::new(hits.xi());
+    for c in &all[..j] {
+        before.offer(*c);
+    }
+    match resolve_models(&before, ray, splats, model)? {
+        // Every splat before the triangle passed over.
+        Resolved::Beyond(t) if t > last.t => Some(Resolved::Hit(triangle(tri))),
+        r => Some(r),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

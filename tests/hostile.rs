@@ -349,6 +349,67 @@ fn far_or_huge_models_are_named_not_blamed_on_the_camera() {
     }
 }
 
+/// Bad triangle input (issue 57): a `triangles` model's degenerate,
+/// non-finite or out-of-range face, a non-finite normal, a mesh without
+/// faces, a face placed beyond f32: one line naming the file and the
+/// face, a non-zero exit, nothing written, in `render` and `compare`.
+#[test]
+fn bad_triangle_meshes_fail_naming_the_file_and_the_face() {
+    let ply = |verts: &str, faces: &str, nf: usize| {
+        format!(
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+             property float z\nelement face {nf}\nproperty list uchar int vertex_indices\n\
+             end_header\n{verts}{faces}"
+        )
+    };
+    let tri = "0 0 0\n1 0 0\n0 1 0\n";
+    let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+    let cases: [(&str, &str, String, &[&str]); 11] = [
+        ("degenerate-ply", "m.ply", ply(tri, "3 0 1 2\n3 1 1 2\n", 2), &["m.ply", "face 1 is degenerate"]),
+        ("collinear-obj", "m.obj", format!("{obj}v 2 0 0\nf 1 2 3\nf 1 2 4\n"), &["m.obj", "face 1 (line 6) is degenerate"]),
+        ("nan-ply", "m.ply", ply("0 0 0\n1 nan 0\n0 1 0\n", "3 0 1 2\n", 1), &["m.ply", "face 0 uses vertex 1", "non-finite"]),
+        ("inf-obj", "m.obj", format!("{obj}v 1 inf 0\nf 1 2 4\n"), &["m.obj", "face 0 uses vertex 4", "non-finite"]),
+        ("index-ply", "m.ply", ply(tri, "3 0 1 7\n", 1), &["m.ply", "face 0 uses vertex 7", "only 3 vertices"]),
+        ("negative-ply", "m.ply", ply(tri, "3 0 -1 2\n", 1), &["m.ply", "face 0", "negative"]),
+        ("index-obj", "m.obj", format!("{obj}f 1 2 3\nf 1 -5 3\n"), &["m.obj", "line 5: face 1", "out of range"]),
+        ("no-faces-ply", "m.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n".to_string(), &["m.ply", "not a mesh"]),
+        ("no-faces-obj", "m.obj", obj.to_string(), &["m.obj", "no triangles"]),
+        ("normal-obj", "m.obj", format!("{obj}vn 0 0 nan\nf 1//1 2//1 3//1\n"), &["m.obj", "normal 1 is not finite"]),
+        ("placed", "m.obj", format!("{obj}f 1 2 3\n"), &["model 2", "triangle 0", "once placed"]),
+    ];
+    for (name, file, text, expect) in cases {
+        for cmd in ["render", "compare"] {
+            let dir = scratch(&format!("hostile-tri-{name}-{cmd}"));
+            std::fs::write(dir.join(file), &text).unwrap();
+            let transform = if name == "placed" {
+                "transform = { scale = 1e-30, translate = [1e20, 0.0, 0.0] }\n"
+            } else {
+                ""
+            };
+            std::fs::write(
+                dir.join("scene.toml"),
+                scene(&format!("[[model]]\ntriangles = \"{file}\"\n{transform}")),
+            )
+            .unwrap();
+            let mut c = Command::new(env!("CARGO_BIN_EXE_splatray"));
+            c.arg(cmd).arg(dir.join("scene.toml"));
+            if cmd == "render" {
+                c.arg("-o").arg(dir.join("out.png"));
+            } else {
+                c.arg("--report").arg(dir.join("out.json"));
+            }
+            let o = c.bounded_output();
+            let r = Run {
+                ok: o.status.success(),
+                stderr: String::from_utf8_lossy(&o.stderr).into_owned(),
+                stdout: String::from_utf8_lossy(&o.stdout).into_owned(),
+                leftovers: leftovers(&dir),
+            };
+            fails_cleanly(&format!("{name} ({cmd})"), &r, expect);
+        }
+    }
+}
+
 /// Class 11: negative radiance, a light without samples, a NaN normal.
 #[test]
 fn loose_numbers_are_checked() {

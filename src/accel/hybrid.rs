@@ -7,7 +7,7 @@
 //! backend alike. A scene without triangles never builds one: its
 //! backend is the splats' own, as before.
 
-use super::{Backend, BackendInfo, BuildStats, CandidateHits, Departure, Query};
+use super::{Backend, BackendInfo, BuildStats, CandidateHits, Departure, PACKET, Query};
 use crate::data::Splat;
 use crate::error::Result;
 use crate::primitive::{Disc, Triangle};
@@ -94,6 +94,47 @@ impl Backend for Hybrid {
     fn prefers_packets(&self) -> bool {
         self.splats.prefers_packets()
     }
+
+    /// Each side's packet call in turn (a coherent batch stays one on
+    /// both), then each query's windows merged as in
+    /// [`Backend::intersect_from`]: the same candidates.
+    fn intersect_packet(&self, qs: &[Query], hits: &mut [CandidateHits]) {
+        assert!(hits.len() >= qs.len(), "a window per query");
+        for (qs, hits) in qs.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
+            let n = qs.len();
+            let sq: [Query; PACKET] = std::array::from_fn(|k| self.splat_query(&qs[k.min(n - 1)]));
+            self.splats.intersect_packet(&sq[..n], hits);
+            let tq: [Query; PACKET] = std::array::from_fn(|k| {
+                let i = k.min(n - 1);
+                self.tri_query(&qs[i], qs[i].t_max.min(hits[i].far()))
+            });
+            let mut tris: [CandidateHits; PACKET] =
+                std::array::from_fn(|k| CandidateHits::new(hits[k.min(n - 1)].xi()));
+            self.tris.intersect_packet(&tq[..n], &mut tris[..n]);
+            for (h, t) in hits.iter_mut().zip(&tris[..n]) {
+                h.merge(t, self.first);
+            }
+        }
+    }
+
+    /// Each side's packet call, the answers or-ed.
+    fn occluded_packet(&self, qs: &[Query], out: &mut [bool]) {
+        assert!(out.len() >= qs.len(), "an answer per query");
+        for (qs, out) in qs.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
+            let n = qs.len();
+            let sq: [Query; PACKET] = std::array::from_fn(|k| self.splat_query(&qs[k.min(n - 1)]));
+            self.splats.occluded_packet(&sq[..n], out);
+            let tq: [Query; PACKET] = std::array::from_fn(|k| {
+                let q = &qs[k.min(n - 1)];
+                self.tri_query(q, q.t_max)
+            });
+            let mut blocked = [false; PACKET];
+            self.tris.occluded_packet(&tq[..n], &mut blocked[..n]);
+            for (o, b) in out.iter_mut().zip(blocked) {
+                *o |= b;
+            }
+        }
+    }
 }
 
 impl BackendInfo<Disc> {
@@ -112,5 +153,14 @@ impl BackendInfo<Disc> {
             .ok_or_else(|| crate::Error::invalid("too many splats and triangles for 32-bit ids"))?;
         let t = super::registry::lookup::<Triangle>(self.name)?.build(tris)?;
         Ok(Box::new(Hybrid::new(s, t, first)))
+    }
+}
+
+impl BackendInfo<Disc> {
+    /// This backend over a loaded scene's splats and triangles
+    /// ([`BackendInfo::build_hybrid`]): what the renderer, `compare`, the
+    /// sweep and the viewer trace.
+    pub fn build_scene(&self, scene: &crate::scene::Scene) -> Result<Box<dyn Backend>> {
+        self.build_hybrid(&scene.splats, &scene.triangles.tris)
     }
 }

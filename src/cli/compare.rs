@@ -47,6 +47,12 @@ pub struct CompareArgs {
     /// on a busy machine. Every backend stays built meanwhile. Default 1.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
     pub rounds: u32,
+    /// Also render the scene with every model that has a mesh (`mesh`, or
+    /// `truth` beside points or splats) as that mesh's triangles, on every
+    /// backend in the same run: each one's speed, memory and build time on
+    /// the triangles, and its splat image's PSNR against its triangle image.
+    #[arg(long)]
+    pub as_triangles: bool,
 }
 
 /// Where `--diff D.png` with `--truth` puts the reference backend against
@@ -70,6 +76,28 @@ fn causes_diff_path(diff: &std::path::Path) -> PathBuf {
 /// Runs `splatray compare`.
 pub fn run(args: &CompareArgs) -> Result<()> {
     let scene_path = args.view.path();
+    if args.as_triangles && args.view.is_cloud() {
+        return Err(Error::invalid(format!(
+            "{}: --as-triangles needs a scene file with a `mesh` model (or a `truth` mesh), not a \
+             point cloud",
+            scene_path.display()
+        )));
+    }
+    // The triangles' scene file, checked before any rendering.
+    let tri_file = if args.as_triangles {
+        let file = crate::scene::parse_scene_file(&scene_path)?;
+        let (f, n) = crate::workflow::compare::meshes_as_triangles(&file);
+        if n == 0 {
+            return Err(Error::invalid(format!(
+                "{}: --as-triangles: no model has a mesh (`mesh`, or `truth` beside points or \
+                 splats)",
+                scene_path.display()
+            )));
+        }
+        Some((f, n))
+    } else {
+        None
+    };
     if args.truth && args.view.is_cloud() {
         return Err(Error::invalid(format!(
             "{}: --truth needs exact surfaces, and a point cloud has none (write a scene with a `mesh` model or a `shape`)",
@@ -94,11 +122,26 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     );
     line.finish();
     let Compared {
-        report,
+        mut report,
         frames,
         truth_frame,
         reference_causes,
     } = compared?;
+    if let Some((file, models)) = tri_file {
+        let base = scene_path.parent().unwrap_or(std::path::Path::new("."));
+        let mut tris = crate::scene::build_scene(&file, base, Some(&progress))
+            .map_err(|e| e.context(scene_path.display()))?;
+        let c = &scene.camera;
+        tris.set_view(
+            Some(c.width),
+            Some(c.height),
+            Some(c.spp),
+            args.view.shading,
+        )?;
+        let r = crate::workflow::compare::as_triangles(&tris, models, &frames, Some(&progress));
+        line.finish();
+        report.as_triangles = Some(r?);
+    }
     write_outputs(
         args,
         &frames,
@@ -165,8 +208,13 @@ fn write_outputs(
 
 /// The report as lines on stdout.
 fn print_report(report: &CompareReport) {
+    let triangles = if report.triangles > 0 {
+        format!(", {} triangles", report.triangles)
+    } else {
+        String::new()
+    };
     println!(
-        "{}: {} splats, {} primary rays",
+        "{}: {} splats{triangles}, {} primary rays",
         report.scene, report.splats, report.rays
     );
     let Some(reference) = report.backends.first() else {
@@ -177,6 +225,37 @@ fn print_report(report: &CompareReport) {
     }
     if let Some(t) = &report.truth {
         print_truth(t);
+    }
+    if let Some(t) = &report.as_triangles {
+        println!(
+            "  as triangles: {} model(s) -> {} triangles ({} splats left)",
+            t.models, t.triangles, t.splats
+        );
+        for ((r, s), p) in report
+            .backends
+            .iter()
+            .zip(&t.backends)
+            .zip(&t.splats_psnr_db)
+        {
+            let psnr = p.map_or("inf (identical)".to_string(), |p| format!("{p:.2}"));
+            println!(
+                "    {}: splats {:.2} Mrays/s, {:.1} MB, build {:.3} s | triangles {:.2} Mrays/s, \
+                 {:.1} MB, build {:.3} s | splats vs triangles PSNR {psnr} dB",
+                r.name,
+                r.mrays_per_s,
+                r.memory_bytes as f64 / 1e6,
+                r.build_seconds,
+                s.mrays_per_s,
+                s.memory_bytes as f64 / 1e6,
+                s.build_seconds
+            );
+        }
+        if let Some(a) = t.backends.get(1).and_then(|b| b.agreement.as_ref()) {
+            println!(
+                "    triangles, {} vs {}: hit agreement {:.6}, same triangle {:.6}",
+                t.backends[0].name, t.backends[1].name, a.hit_agreement, a.same_splat
+            );
+        }
     }
 }
 

@@ -137,8 +137,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         let r = band_rows(scene.camera.height, (i, n));
         format!(" (band {i}/{n}: rows {} to {})", r.start, r.end)
     });
+    let triangles = match scene.triangles.tris.len() {
+        0 => String::new(),
+        n => format!(" and {n} triangles"),
+    };
     println!(
-        "{}: {}x{}{band} spp {}, {} splats ({:.2} s to make), {} build {:.3} s, render {:.3} s, {} rays ({:.2} Mrays/s) -> {}",
+        "{}: {}x{}{band} spp {}, {} splats{triangles} ({:.2} s to make), {} build {:.3} s, render {:.3} s, {} rays ({:.2} Mrays/s) -> {}",
         scene_path.display(),
         frame.width,
         frame.height,

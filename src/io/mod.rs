@@ -28,6 +28,7 @@ mod sample;
 mod source;
 mod splat_ply;
 mod stream;
+mod trimesh;
 mod xyz;
 
 pub use crate::data::PointCloud;
@@ -52,6 +53,7 @@ pub use splat_ply::{
     splat_header_with, splat_row_bytes, write_splats,
 };
 pub use stream::stream_points;
+pub use trimesh::{TriangleMesh, parse_triangles, read_triangles};
 
 use glam::{DVec3, Vec3};
 use std::path::Path;
@@ -204,6 +206,16 @@ pub fn parse_mesh(bytes: &[u8]) -> Result<Mesh, IoErrorKind> {
         ));
     }
     ply::read_mesh(bytes)
+}
+
+/// [`parse_mesh`] with the vertex normals and each triangle's face.
+pub(crate) fn parse_mesh_full(bytes: &[u8]) -> Result<ply::MeshRead, IoErrorKind> {
+    if Format::sniff(&bytes[..bytes.len().min(4096)]) != Some(Format::Ply) {
+        return Err(IoErrorKind::Header(
+            "a mesh must be a PLY or OBJ file (it does not start with \"ply\")".into(),
+        ));
+    }
+    ply::read_mesh_full(bytes)
 }
 
 /// Write a point cloud, atomically (a temporary file in the same folder,

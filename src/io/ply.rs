@@ -504,6 +504,20 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
 
 /// Read a PLY mesh: vertices and fan-triangulated faces.
 pub(crate) fn read_mesh(bytes: &[u8]) -> Result<Mesh, IoErrorKind> {
+    read_mesh_full(bytes).map(|m| m.mesh)
+}
+
+/// A PLY mesh as [`read_mesh`] reads it, with what a mesh rendered as
+/// triangles also needs: the vertex normals where the file has `nx ny nz`,
+/// and the file's face each triangle comes from (0-based).
+pub(crate) struct MeshRead {
+    pub(crate) mesh: Mesh,
+    pub(crate) normals: Option<Vec<Vec3>>,
+    pub(crate) face_of: Vec<u32>,
+}
+
+/// [`read_mesh`] with the vertex normals and each triangle's face.
+pub(crate) fn read_mesh_full(bytes: &[u8]) -> Result<MeshRead, IoErrorKind> {
     let file = PlyFile::open(bytes)?;
     if !has_props(&file.header, &["x", "y", "z"]) {
         return Err(IoErrorKind::Header(
@@ -540,7 +554,9 @@ pub(crate) fn read_mesh(bytes: &[u8]) -> Result<Mesh, IoErrorKind> {
             p.name, p.data_type
         )));
     }
+    let with_normals = has_props(&file.header, &["nx", "ny", "nz"]);
     let mut world: Vec<DVec3> = Vec::new();
+    let mut normals = None;
     let mut faces = Vec::new();
     let mut take_faces = |rows: Vec<Option<Vec<u32>>>| faces = rows;
     file.read::<PointRow>(
@@ -549,6 +565,11 @@ pub(crate) fn read_mesh(bytes: &[u8]) -> Result<Mesh, IoErrorKind> {
                 .iter()
                 .map(|r| DVec3::new(r.v[0], r.v[1], r.v[2]))
                 .collect();
+            normals = with_normals.then(|| {
+                rows.iter()
+                    .map(|r| Vec3::new(r.v[3] as f32, r.v[4] as f32, r.v[5] as f32))
+                    .collect()
+            });
         },
         Some(&mut take_faces),
     )?;
@@ -559,6 +580,7 @@ pub(crate) fn read_mesh(bytes: &[u8]) -> Result<Mesh, IoErrorKind> {
     let positions: Vec<Vec3> = world.iter().map(|p| (*p - origin).as_vec3()).collect();
     let n = positions.len();
     let mut triangles = Vec::with_capacity(faces.len());
+    let mut face_of = Vec::with_capacity(faces.len());
     for (fi, face) in faces.iter().enumerate() {
         let Some(idx) = face else {
             return Err(IoErrorKind::Data(format!(
@@ -577,15 +599,20 @@ pub(crate) fn read_mesh(bytes: &[u8]) -> Result<Mesh, IoErrorKind> {
         }
         for k in 1..idx.len().saturating_sub(1) {
             triangles.push([idx[0], idx[k], idx[k + 1]]);
+            face_of.push(fi as u32);
         }
     }
     if triangles.is_empty() {
         return Err(IoErrorKind::NoPoints("the mesh has no triangles".into()));
     }
-    Ok(Mesh {
-        positions,
-        triangles,
-        origin,
+    Ok(MeshRead {
+        mesh: Mesh {
+            positions,
+            triangles,
+            origin,
+        },
+        normals,
+        face_of,
     })
 }
 

@@ -15,7 +15,8 @@ pub const BYTES_PER_PIXEL: u64 = 80;
 
 /// Peak bytes per splat of a loaded scene with one accelerator built: 550
 /// measured for the octree, 300 for Embree (a 287,390-splat file rendered
-/// at 64², 164 MB and 95 MB peak resident), rounded up.
+/// at 64², 164 MB and 95 MB peak resident), rounded up. A triangle (36
+/// bytes, its normals 52 more, its leaf references) is counted as a splat.
 pub const BYTES_PER_SPLAT: u64 = 640;
 
 /// The default cap on the worst-case rays of one render: about half an
@@ -113,7 +114,7 @@ pub fn estimate(scene: &Scene, holds: Holds) -> Estimate {
         .saturating_mul(BYTES_PER_PIXEL)
         .saturating_mul(u64::from(holds.frames.max(1)))
         .saturating_add(
-            (scene.splats.len() as u64)
+            (scene.splats.len() as u64 + scene.triangles.tris.len() as u64)
                 .saturating_mul(BYTES_PER_SPLAT)
                 .saturating_mul(u64::from(holds.accelerators.max(1))),
         );
@@ -175,7 +176,7 @@ pub fn check(scene: &Scene, holds: Holds, limits: &Limits) -> Result<Estimate> {
             cam.width,
             cam.height,
             holds.frames,
-            scene.splats.len(),
+            scene.splats.len() + scene.triangles.tris.len(),
             holds.accelerators,
             gb(limit)
         )));

@@ -6,7 +6,7 @@
 
 use crate::accel::{Backend, CandidateHits, Departure, PACKET, Query, Ray};
 use crate::progress::{Progress, notify};
-use crate::resolve::{Resolved, SurfaceHit, resolve_models};
+use crate::resolve::{Resolved, SurfaceHit, resolve_models, resolve_with_triangles};
 use crate::scene::{Light, Material, Scene};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -204,13 +204,16 @@ pub struct SplatSurfaces<'a> {
 
 impl SplatSurfaces<'_> {
     /// What the candidate `hits` a backend gathered for `ray` resolve to
-    /// (§3.2, eq. 5; each splat with its model's shading mode and window).
+    /// (§3.2, eq. 5; each splat with its model's shading mode and window;
+    /// a triangle hit a window of one, `resolve_with_triangles`).
     #[must_use]
     pub fn resolve(&self, hits: &CandidateHits, ray: &Ray) -> Option<Resolved> {
         let sc = self.scene;
-        resolve_models(hits, ray, &sc.splats, |id| {
-            (sc.shading_for(id), sc.xi_for(id))
-        })
+        let model = |id| (sc.shading_for(id), sc.xi_for(id));
+        if sc.triangles.tris.is_empty() {
+            return resolve_models(hits, ray, &sc.splats, model);
+        }
+        resolve_with_triangles(hits, ray, &sc.splats, model, |c| sc.triangle_hit(c, ray))
     }
 
     /// The surface the query's ray meets, with its material and colour:
@@ -262,7 +265,7 @@ impl SplatSurfaces<'_> {
         let sc = self.scene;
         ShadeHit {
             surface: h,
-            material: sc.material_of[h.id as usize],
+            material: sc.material_for(h.id),
             color: sc.color_at(h.id, h.point),
         }
     }

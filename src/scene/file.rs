@@ -289,7 +289,7 @@ pub struct MaterialSpec {
 }
 
 /// `[[model]]`: exactly one of `points`, `splats`, `gaussians`, `mesh`
-/// (with `samples`) or `shape`.
+/// (with `samples`), `triangles` or `shape`.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModelSpec {
@@ -316,6 +316,10 @@ pub struct ModelSpec {
     pub seed: u64,
     /// A procedural shape.
     pub shape: Option<ShapeSpec>,
+    /// A triangle mesh (PLY or OBJ) rendered as its triangles, beside the
+    /// splats (issue 57): shaded with its vertex normals where it has
+    /// them, else its face normals.
+    pub triangles: Option<PathBuf>,
     /// The exact surface behind a `points`, `splats` or `gaussians` model
     /// (a triangle mesh PLY in the model's own coordinates), for
     /// `compare --truth`: e.g. the mesh a scan was simulated from.

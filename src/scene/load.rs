@@ -7,9 +7,10 @@ use super::file::{
     ShapeKind, ShapeSpec, TransformSpec, parse_scene_file,
 };
 use super::model::{
-    Camera, Light, LoadReport, MAX_EXTENT, Material, RenderOptions, Scene, TruthSource,
+    Camera, Light, LoadReport, MAX_EXTENT, Material, RenderOptions, Scene, Triangles, TruthSource,
 };
-use crate::io::{CloudRead, Mesh, PointCloud};
+use crate::io::{CloudRead, Mesh, PointCloud, TriangleMesh};
+use crate::primitive::Triangle;
 use crate::progress::Progress;
 use crate::resolve::ShadingMode;
 use crate::scene::SceneScale;
@@ -90,7 +91,7 @@ pub fn build_scene_reads(
         .iter()
         .map(|l| light(l, shift))
         .collect::<Result<Vec<_>, _>>()?;
-    let (offset, diagonal) = recentre(&mut models.splats);
+    let (offset, diagonal) = recentre(&mut models.splats, &mut models.triangles.tris);
     if !diagonal.is_finite() || diagonal > MAX_EXTENT {
         return Err(Error::invalid(format!(
             "the models span {:.2e} once placed, beyond the {MAX_EXTENT:e} the renderer's f32 \
@@ -103,6 +104,7 @@ pub fn build_scene_reads(
     let (options, xi_of) = render_options(&file.render, diagonal, &models.standoff)?;
     Ok(Scene {
         splats: models.splats,
+        triangles: models.triangles,
         color_fields: models.color_fields,
         material_of: models.material_of,
         materials: models.materials,
@@ -174,7 +176,7 @@ pub fn scene_camera(c: &CameraSpec, shift: DVec3, offset: Vec3) -> Result<Camera
 /// holds.
 pub fn splats_scene(mut splats: Vec<Splat>, camera: Camera) -> Result<Scene> {
     let standoff = crate::splat::standoff::standoff(&splats);
-    let (offset, diagonal) = recentre(&mut splats);
+    let (offset, diagonal) = recentre(&mut splats, &mut []);
     if !diagonal.is_finite() || diagonal > MAX_EXTENT {
         return Err(Error::invalid(format!(
             "the splats span {diagonal:e}, beyond the {MAX_EXTENT:e} the renderer's f32 geometry holds"
@@ -187,6 +189,7 @@ pub fn splats_scene(mut splats: Vec<Splat>, camera: Camera) -> Result<Scene> {
         material_of: vec![0; splats.len()],
         color_fields: Vec::new(),
         splats,
+        triangles: Triangles::default(),
         materials: vec![Material::Diffuse { color: Vec3::ONE }],
         shading_of: vec![None],
         xi_of,
@@ -242,6 +245,8 @@ fn check_camera(c: &CameraSpec) -> Result<()> {
 /// their materials, the shift, and what loading measured.
 struct Models {
     splats: Vec<Splat>,
+    /// The triangle models' faces, placed.
+    triangles: Triangles,
     /// One per splat when a model carries colour fields (zero for the
     /// others), else empty.
     color_fields: Vec<ColorField>,
@@ -269,6 +274,7 @@ fn load_models(
     let mut shift = None;
     let mut out = Models {
         splats: Vec::new(),
+        triangles: Triangles::default(),
         color_fields: Vec::new(),
         shift: DVec3::ZERO,
         material_of: Vec::new(),
@@ -294,6 +300,12 @@ fn load_models(
         out.load
             .truth
             .push(truth_of(src.truth, m, number, mid, shift));
+        if let Some(tm) = src.tris.take() {
+            let placed = place_triangles(&tm, &m.transform, shift, mid, &mut out.triangles)
+                .map_err(in_model)?;
+            lo = lo.min(placed.0);
+            hi = hi.max(placed.1);
+        }
         let s = &mut src.splats;
         m.transform.apply(s, src.origin, shift);
         for sp in s.iter() {
@@ -342,6 +354,8 @@ fn load_models(
 /// meshes and shapes).
 struct Source<'a> {
     splats: Vec<Splat>,
+    /// A `triangles` model's mesh, in model space (its splats are none).
+    tris: Option<TriangleMesh>,
     /// The splats' colour fields, or empty (constant colours).
     color_fields: Vec<ColorField>,
     origin: DVec3,
@@ -403,13 +417,17 @@ fn model_source<'a>(
         spec.gaussians.is_some(),
         spec.mesh.is_some(),
         spec.shape.is_some(),
+        spec.triangles.is_some(),
     ];
     if sources.iter().filter(|&&b| b).count() != 1 {
         return Err(Error::invalid(
-            "a model needs exactly one of `points`, `splats`, `gaussians`, `mesh` or `shape`",
+            "a model needs exactly one of `points`, `splats`, `gaussians`, `mesh`, `triangles` or \
+             `shape`",
         ));
     }
-    if spec.truth.is_some() && (spec.mesh.is_some() || spec.shape.is_some()) {
+    if spec.truth.is_some()
+        && (spec.mesh.is_some() || spec.shape.is_some() || spec.triangles.is_some())
+    {
         return Err(Error::invalid(
             "`truth` applies to `points`, `splats` and `gaussians` models: a mesh or shape is its own truth",
         ));
@@ -425,8 +443,25 @@ fn model_source<'a>(
             "`min_opacity` applies to `gaussians` models only",
         ));
     }
+    if let Some(p) = &spec.triangles {
+        if spec.samples.is_some() || spec.scan.is_some() {
+            return Err(Error::invalid(
+                "`samples` and `scan` apply to `mesh` models only: a `triangles` model is rendered \
+                 as its triangles",
+            ));
+        }
+        let tm = crate::io::read_triangles(&base.join(p))?;
+        return Ok(Source {
+            splats: Vec::new(),
+            color_fields: Vec::new(),
+            origin: tm.mesh.origin,
+            truth: PendingTruth::Mesh(tm.mesh.clone()),
+            tris: Some(tm),
+        });
+    }
     if let Some(shape) = &spec.shape {
         return Ok(Source {
+            tris: None,
             splats: shape_splats(shape)?,
             color_fields: Vec::new(),
             origin: DVec3::ZERO,
@@ -440,6 +475,7 @@ fn model_source<'a>(
             _ => crate::io::read_splats(&path)?,
         };
         return Ok(Source {
+            tris: None,
             splats: set.splats,
             color_fields: set.color_fields,
             origin: set.origin,
@@ -455,6 +491,7 @@ fn model_source<'a>(
         };
         load.warnings.extend(gaussians.warnings());
         return Ok(Source {
+            tris: None,
             splats: gaussians.set.splats,
             color_fields: Vec::new(),
             origin: gaussians.set.origin,
@@ -475,6 +512,7 @@ fn model_source<'a>(
         let (splats, color_fields) = generate_splats(spec, &cloud, load, progress)?;
         return Ok(Source {
             splats,
+            tris: None,
             color_fields,
             origin: cloud.origin,
             truth: given_truth("a point file")?,
@@ -487,6 +525,7 @@ fn model_source<'a>(
     let (splats, color_fields) = generate_splats(spec, &cloud, load, progress)?;
     Ok(Source {
         splats,
+        tris: None,
         color_fields,
         origin: cloud.origin,
         truth: PendingTruth::Mesh(mesh),
@@ -664,6 +703,61 @@ fn shape_truth(sh: &ShapeSpec, t: &TransformSpec, material: u16, shift: DVec3) -
     }
 }
 
+/// Places a `triangles` model's faces by its transform (positions as
+/// [`TransformSpec::point_from`] places a mesh's, normals rotated) with
+/// material `material` into `out`; returns the placed vertices' box (f64).
+/// A face whose vertex normals face away from its winding's normal is
+/// turned to face with them.
+///
+/// # Errors
+/// A triangle that is no longer finite or spans no area once placed in f32
+/// (a scale or translate beyond what it holds), naming the triangle.
+fn place_triangles(
+    tm: &TriangleMesh,
+    t: &TransformSpec,
+    shift: DVec3,
+    material: u16,
+    out: &mut Triangles,
+) -> Result<(DVec3, DVec3)> {
+    let rot = t.rotation();
+    let m = &tm.mesh;
+    let placed: Vec<Vec3> = m
+        .positions
+        .iter()
+        .map(|&p| t.point_from(m.origin, p, shift))
+        .collect();
+    let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+    for (k, ix) in m.triangles.iter().enumerate() {
+        let tri = Triangle {
+            v: ix.map(|i| placed[i as usize]),
+        };
+        if !tri.is_proper() {
+            return Err(Error::invalid(format!(
+                "triangle {k} is not finite or spans no area once placed (transform.scale {}, \
+                 translate {:?}): beyond what the renderer's f32 geometry holds",
+                t.scale, t.translate
+            )));
+        }
+        for v in tri.v {
+            lo = lo.min(v.as_dvec3());
+            hi = hi.max(v.as_dvec3());
+        }
+        let mut face = tri.unit_normal();
+        let corners = match &tm.normals {
+            Some(n) if n[k][0] != Vec3::ZERO => n[k].map(|c| (rot * c).normalize()),
+            _ => [Vec3::ZERO; 3],
+        };
+        if face.dot(corners[0] + corners[1] + corners[2]) < 0.0 {
+            face = -face;
+        }
+        out.tris.push(tri);
+        out.face.push(face);
+        out.normals.push(corners);
+        out.material_of.push(material);
+    }
+    Ok((lo, hi))
+}
+
 /// A placed splat the renderer can use: finite centre, frame and field,
 /// radii finite and above zero.
 fn placed_ok(s: &Splat) -> bool {
@@ -832,10 +926,11 @@ impl TransformSpec {
     }
 }
 
-/// Re-centres the splats on their bounding box (`docs/DESIGN.md`, "Precision": far-from-origin
-/// scenes keep their precision); returns the offset subtracted and the
-/// box's diagonal (1 without splats).
-fn recentre(splats: &mut [Splat]) -> (Vec3, f32) {
+/// Re-centres the splats and triangles on their bounding box
+/// (`docs/DESIGN.md`, "Precision": far-from-origin scenes keep their
+/// precision); returns the offset subtracted and the box's diagonal (1
+/// without either).
+fn recentre(splats: &mut [Splat], tris: &mut [Triangle]) -> (Vec3, f32) {
     let (lo, hi) = splats.iter().fold(
         (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
         |(lo, hi), s| {
@@ -843,6 +938,10 @@ fn recentre(splats: &mut [Splat]) -> (Vec3, f32) {
             (lo.min(s.center - h), hi.max(s.center + h))
         },
     );
+    let (lo, hi) = tris
+        .iter()
+        .flat_map(|t| t.v)
+        .fold((lo, hi), |(lo, hi), v| (lo.min(v), hi.max(v)));
     let (offset, diagonal) = if lo.x <= hi.x {
         ((lo + hi) * 0.5, (hi - lo).length().max(f32::MIN_POSITIVE))
     } else {
@@ -850,6 +949,9 @@ fn recentre(splats: &mut [Splat]) -> (Vec3, f32) {
     };
     for s in splats {
         s.center -= offset;
+    }
+    for t in tris {
+        t.v = t.v.map(|v| v - offset);
     }
     (offset, diagonal)
 }

@@ -23,5 +23,6 @@ pub use file::{
 };
 pub use load::{build_scene, build_scene_reads, load_scene, scene_camera, scene_lights};
 pub use model::{
-    Camera, Light, LoadReport, Material, RenderOptions, Scene, SceneScale, TruthSource,
+    Camera, Light, LoadReport, Material, RenderOptions, Scene, SceneScale, Triangles,
+    TruthSource,
 };

@@ -2,7 +2,7 @@
 //! materials, splats) in re-centred f32 coordinates, and what loading
 //! measured and knew about the exact surfaces.
 
-use crate::resolve::ShadingMode;
+use crate::resolve::{ShadingMode, SurfaceHit};
 use crate::splat::Splat;
 use crate::splat::color::ColorField;
 use crate::{Error, Result};
@@ -300,6 +300,23 @@ pub enum TruthSource {
     },
 }
 
+/// The faces of a scene's `triangles` models (issue 57), placed and
+/// re-centred with the splats: triangle `i` is hit id `splats.len() + i`
+/// ([`Scene::first_triangle`]).
+#[derive(Clone, Debug, Default)]
+pub struct Triangles {
+    /// The faces.
+    pub tris: Vec<crate::primitive::Triangle>,
+    /// Each face's unit normal, turned to the side its vertex normals face
+    /// where it has them (the side a ray meets as its front).
+    pub face: Vec<Vec3>,
+    /// Each face's unit vertex normals, `[Vec3::ZERO; 3]` where it has none
+    /// (it shades with `face`).
+    pub normals: Vec<[Vec3; 3]>,
+    /// Each face's material index.
+    pub material_of: Vec<u16>,
+}
+
 /// A loaded scene, re-centred so that its splats' bounding box is centred at
 /// the origin (`docs/DESIGN.md`, "Precision": far-from-origin scenes keep their
 /// precision).
@@ -307,6 +324,8 @@ pub enum TruthSource {
 pub struct Scene {
     /// All splats of all models.
     pub splats: Vec<Splat>,
+    /// The triangles of the triangle models (empty in a scene without).
+    pub triangles: Triangles,
     /// Each splat's linear colour field (`splat::color`), or empty when no
     /// model carries them (a scene without them pays nothing).
     pub color_fields: Vec<ColorField>,
@@ -344,20 +363,66 @@ impl Scene {
     /// (`ColorField::at`).
     #[must_use]
     pub fn color_at(&self, id: u32, p: Vec3) -> Vec3 {
-        let s = &self.splats[id as usize];
+        let Some(s) = self.splats.get(id as usize) else {
+            // A triangle: the material's colour alone.
+            return Vec3::ONE;
+        };
         match self.color_fields.get(id as usize) {
             Some(f) => f.at(s, p),
             None => s.color,
         }
     }
 
-    /// The splats' bounding box in world coordinates (as the scene file
-    /// states them), or `None` without splats.
+    /// The hit id of the first triangle: the splats' count.
+    #[must_use]
+    pub fn first_triangle(&self) -> u32 {
+        self.splats.len() as u32
+    }
+
+    /// The material of hit `id`, a splat's or a triangle's.
+    #[must_use]
+    pub fn material_for(&self, id: u32) -> u16 {
+        match self.material_of.get(id as usize) {
+            Some(&m) => m,
+            None => self.triangles.material_of[(id - self.first_triangle()) as usize],
+        }
+    }
+
+    /// The surface hit of triangle candidate `c` of `ray` (a window of
+    /// one): its vertex normals interpolated at the hit's barycentric
+    /// `(u, v)` where it has them, else its face normal.
+    #[must_use]
+    pub fn triangle_hit(&self, c: &crate::accel::Candidate, ray: &crate::accel::Ray) -> SurfaceHit {
+        let i = (c.id - self.first_triangle()) as usize;
+        let face = self.triangles.face[i];
+        let n = self.triangles.normals[i];
+        let normal = if n[0] == Vec3::ZERO {
+            face
+        } else {
+            (n[0] * (1.0 - c.u - c.v) + n[1] * c.u + n[2] * c.v)
+                .try_normalize()
+                .unwrap_or(face)
+        };
+        let point = ray.at(c.t);
+        SurfaceHit {
+            id: c.id,
+            t: c.t,
+            point,
+            normal,
+            geometric_normal: face,
+            front: face.dot(ray.dir) < 0.0,
+            blended: 1,
+            shadow_origin: point,
+        }
+    }
+
+    /// The splats' and triangles' bounding box in world coordinates (as
+    /// the scene file states them), or `None` without either.
     #[must_use]
     pub fn world_bounds(&self) -> Option<(DVec3, DVec3)> {
-        let (lo, hi) = self.splats.iter().fold(
+        let (lo, hi) = self.splats.iter().map(|s| s.center).chain(self.triangles.tris.iter().flat_map(|t| t.v)).fold(
             (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-            |(lo, hi), s| (lo.min(s.center), hi.max(s.center)),
+            |(lo, hi), c| (lo.min(c), hi.max(c)),
         );
         let to_world = |v: Vec3| (v + self.offset).as_dvec3() + self.shift;
         (lo.x <= hi.x).then(|| (to_world(lo), to_world(hi)))

@@ -140,7 +140,7 @@ pub fn photo_check(
     let n_splats = splats.len();
     let mut scene = splats_scene(splats, camera)?;
     scene.color_fields = fields;
-    let built = info.build_splats(&scene.splats)?;
+    let built = info.build_scene(&scene)?;
     let frame = render(&scene, built.as_ref(), None);
     // The albedo each pixel sees (None: its ray meets nothing).
     let seen: Vec<Option<Vec3>> = frame

@@ -301,7 +301,7 @@ pub fn run_sweep(
             .count();
         let mut built = Vec::new();
         for info in renderers() {
-            let b = info.build_splats(&scene.splats)?;
+            let b = info.build_scene(&scene)?;
             built.push((info.name, b));
         }
         let builds: Vec<String> = built

@@ -216,7 +216,7 @@ impl Worker {
     fn backend(&mut self, name: &str) -> Result<&dyn Backend> {
         if !self.backends.contains_key(name) {
             let info = registry::lookup(name)?;
-            let b = info.build_splats(&self.scene.splats)?;
+            let b = info.build_scene(&self.scene)?;
             self.backends.insert(name.to_string(), b);
         }
         Ok(self.backends[name].as_ref())

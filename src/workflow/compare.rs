@@ -79,6 +79,12 @@ pub struct CompareReport {
     pub scene: String,
     /// Splats.
     pub splats: usize,
+    /// Triangles (left out of the report when none).
+    #[serde(skip_serializing_if = "super::render::is_zero")]
+    pub triangles: usize,
+    /// With `--as-triangles`: the scene again, its meshes as triangles.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub as_triangles: Option<AsTriangles>,
     /// Primary rays compared (one per pixel).
     pub rays: usize,
     /// Renders per backend, taken in turns (`--rounds`).
@@ -88,6 +94,72 @@ pub struct CompareReport {
     /// Errors against the exact surfaces (with `--truth`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub truth: Option<TruthReport>,
+}
+
+/// `compare --as-triangles` (issue 57): the scene rendered again with
+/// every model that has a mesh (`mesh`, or `truth` beside points or
+/// splats) as that mesh's triangles, on every rendering backend in the
+/// same run, beside the splats' figures, with each backend's splat image
+/// against its triangle image.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct AsTriangles {
+    /// Models turned into triangles.
+    pub models: usize,
+    /// Triangles in that scene.
+    pub triangles: usize,
+    /// Splats left in it (the models without a mesh).
+    pub splats: usize,
+    /// Each backend on the triangles (agreement: with the reference's
+    /// triangle image).
+    pub backends: Vec<BackendRun>,
+    /// Each backend's splat image against its triangle image, PSNR dB
+    /// (`None`: identical).
+    pub splats_psnr_db: Vec<Option<f64>>,
+}
+
+/// The scene file with every model that has a mesh (a `mesh` model, or a
+/// `truth` beside `points`, `splats` or `gaussians`) made a `triangles`
+/// model of that mesh, its material and transform kept; and how many.
+#[must_use]
+pub fn meshes_as_triangles(file: &crate::scene::SceneFile) -> (crate::scene::SceneFile, usize) {
+    let mut out = file.clone();
+    let mut n = 0;
+    for m in &mut out.models {
+        let Some(mesh) = m.mesh.take().or_else(|| m.truth.take()) else {
+            continue;
+        };
+        m.triangles = Some(mesh);
+        (m.points, m.splats, m.gaussians) = (None, None, None);
+        (m.samples, m.scan, m.min_opacity) = (None, None, None);
+        n += 1;
+    }
+    (out, n)
+}
+
+/// [`AsTriangles`] of `tris` (the scene of [`meshes_as_triangles`], with
+/// the view of the splats' scene), against the splats' `frames`.
+///
+/// # Errors
+/// A backend that does not build.
+pub fn as_triangles(
+    tris: &Scene,
+    models: usize,
+    frames: &[Frame],
+    progress: Option<Progress<'_>>,
+) -> Result<AsTriangles> {
+    let (tri_frames, backends) = render_every_backend(tris, 1, progress)?;
+    let diagonal = tris.options.scale.diagonal;
+    Ok(AsTriangles {
+        models,
+        triangles: tris.triangles.tris.len(),
+        splats: tris.splats.len(),
+        backends,
+        splats_psnr_db: frames
+            .iter()
+            .zip(&tri_frames)
+            .map(|(s, t)| compare_frames(s, t, diagonal).image_psnr_db)
+            .collect(),
+    })
 }
 
 /// Errors of each backend against the exact surfaces.
@@ -179,6 +251,8 @@ pub fn compare(
     let report = CompareReport {
         scene: name.to_string(),
         splats: scene.splats.len(),
+        triangles: scene.triangles.tris.len(),
+        as_triangles: None,
         rays: frames.first().map_or(0, |f| f.depth.len()),
         rounds: options.rounds,
         backends,
@@ -229,14 +303,14 @@ fn render_every_backend(
     };
     if rounds <= 1 {
         for (i, info) in infos.iter().enumerate() {
-            let backend = info.build_splats(&scene.splats)?;
+            let backend = info.build_scene(scene)?;
             render_one(i, backend.as_ref())?;
             built.push((backend.stats().build_seconds, backend.stats().memory_bytes));
         }
     } else {
         let backends = infos
             .iter()
-            .map(|info| info.build_splats(&scene.splats))
+            .map(|info| info.build_scene(scene))
             .collect::<Result<Vec<_>>>()?;
         for _ in 0..rounds {
             for (i, backend) in backends.iter().enumerate() {

@@ -29,6 +29,9 @@ pub struct RenderReport {
     pub spp: u32,
     /// Splats in the scene.
     pub splats: usize,
+    /// Triangles in the scene (left out of the report when none).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub triangles: usize,
     /// Seconds to read points and generate splats.
     pub splat_seconds: f64,
     /// Seconds to build the acceleration structure.
@@ -51,6 +54,7 @@ impl RenderReport {
             height: frame.height,
             spp: scene.camera.spp,
             splats: scene.splats.len(),
+            triangles: scene.triangles.tris.len(),
             splat_seconds: scene.load.splat_seconds,
             build_seconds,
             render_seconds: frame.seconds,
@@ -58,6 +62,11 @@ impl RenderReport {
             mrays_per_s: frame.rays.total() as f64 / frame.seconds.max(1e-9) / 1e6,
         }
     }
+}
+
+/// For reports: a count left out when zero.
+pub(crate) fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// What [`render_scene`] gives.
@@ -82,7 +91,7 @@ pub fn render_scene(
     progress: Option<Progress<'_>>,
 ) -> Result<Rendered> {
     let info = registry::lookup(backend)?;
-    let built = info.build_splats(&scene.splats)?;
+    let built = info.build_scene(scene)?;
     let build_seconds = built.stats().build_seconds;
     let frame = match band {
         Some(b) => render_rows(

@@ -40,7 +40,7 @@ pub fn render_with(
 ) -> splatray::render::integrator::Frame {
     let info = splatray::accel::registry::find(name).unwrap_or_else(|| panic!("no backend {name}"));
     let b = info
-        .build_splats(&scene.splats)
+        .build_scene(scene)
         .unwrap_or_else(|e| panic!("building {name}: {e}"));
     splatray::render::integrator::render(scene, b.as_ref(), None)
 }

@@ -232,7 +232,7 @@ impl Scene {
         let backend = backend.unwrap_or(splatray::accel::registry::names()[0]);
         let out = py.detach(|| {
             let info = splatray::accel::registry::lookup(backend)?;
-            let built = info.build_splats(&scene.splats)?;
+            let built = info.build_scene(&scene)?;
             let report = |s: &str, f: f64| cb.report(s, f);
             let frame = splatray::render::integrator::render(&scene, built.as_ref(), Some(&report));
             let build_seconds = built.stats().build_seconds;
