@@ -222,9 +222,13 @@ impl Splats {
     /// leaves nothing).
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         py.detach(|| {
-            let fields = (!self.set.color_fields.is_empty()).then_some(&self.set.color_fields[..]);
+            let options = splatray::io::EncodeOptions {
+                color_fields: (!self.set.color_fields.is_empty())
+                    .then_some(&self.set.color_fields[..]),
+                ..Default::default()
+            };
             let bytes =
-                splatray::io::encode_splats_with(&path, &self.set.splats, fields, self.set.origin)?;
+                splatray::io::encode_splats(&path, &self.set.splats, self.set.origin, &options)?;
             splatray::io::write_bytes(&path, &bytes)
         })
         .map_err(err)
