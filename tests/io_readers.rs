@@ -6,18 +6,10 @@ use common::{data, scratch};
 
 use glam::{DVec3, Vec2, Vec3};
 use splatray::io::{
-    COLOR_FIELD_PROPS, EncodeOptions, IoErrorKind, PointCloud, SplatSet, encode_splats,
-    lzf_decompress, read_mesh, read_points, read_splats, sample_mesh, write_points, write_splats,
+    COLOR_FIELD_PROPS, IoErrorKind, PointCloud, SplatSet, encode_splats_with, lzf_decompress,
+    read_mesh, read_points, read_splats, sample_mesh, write_points, write_splats,
 };
 use splatray::splat::color::ColorField;
-
-/// The splat file's options with each splat's colour field.
-fn with_fields(fields: &[ColorField]) -> EncodeOptions<'_> {
-    EncodeOptions {
-        color_fields: Some(fields),
-        ..Default::default()
-    }
-}
 use splatray::splat::{NormalField, Splat};
 use std::path::{Path, PathBuf};
 
@@ -339,7 +331,7 @@ fn clipped_splats_round_trip_bit_for_bit_and_only_they_add_properties() {
     let q = dir.join("both.ply");
     std::fs::write(
         &q,
-        encode_splats(&q, &splats, origin, &with_fields(&fields)).unwrap(),
+        encode_splats_with(&q, &splats, Some(&fields), origin).unwrap(),
     )
     .unwrap();
     let back = read_splats(&q).unwrap();
@@ -351,11 +343,7 @@ fn clipped_splats_round_trip_bit_for_bit_and_only_they_add_properties() {
         .position(|w| w == b"end_header\n")
         .unwrap()
         + 11;
-    let rec = splatray::io::SplatLayout {
-        clips: true,
-        ..Default::default()
-    }
-    .row_bytes();
+    let rec = splatray::io::splat_row_bytes(false, true);
     let at = |k: usize| body + 21 * 4 + 4 * k; // splat 0, clip value k
     let mut lone = bytes.clone();
     lone[at(3)..at(4)].copy_from_slice(&1.0f32.to_le_bytes());
@@ -435,7 +423,7 @@ fn splat_files_round_trip_losslessly_and_atomically() {
         })
         .collect();
     let q = dir.join("fields.ply");
-    let bytes = encode_splats(&q, &splats, origin, &with_fields(&fields)).unwrap();
+    let bytes = encode_splats_with(&q, &splats, Some(&fields), origin).unwrap();
     std::fs::write(&q, &bytes).unwrap();
     let back = read_splats(&q).unwrap();
     assert_eq!(
@@ -465,12 +453,7 @@ fn splat_files_round_trip_losslessly_and_atomically() {
     );
     assert_one_line_naming(&e, &r);
     // Fields that do not match the splats are refused, nothing written.
-    let e = must_fail(encode_splats(
-        &q,
-        &splats,
-        origin,
-        &with_fields(&fields[1..]),
-    ));
+    let e = must_fail(encode_splats_with(&q, &splats, Some(&fields[1..]), origin));
     assert!(
         e.to_string().contains("49 colour fields for 50 splats"),
         "{e}"

@@ -522,16 +522,8 @@ fn tiled_runs_carry_clip_lines() {
     assert_eq!(clipped(&pt.splats), 0);
     // The merged file is one layout: read and written again, the same bytes.
     let tiled = dir.join("tiled.ply");
-    let again = splatray::io::encode_splats(
-        &tiled,
-        &t.splats,
-        t.origin,
-        &splatray::io::EncodeOptions {
-            clips: Some(true),
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let again =
+        splatray::io::encode_splats_layout(&tiled, &t.splats, None, true, t.origin).unwrap();
     assert!(
         again == std::fs::read(&tiled).unwrap(),
         "the merged file does not round-trip"

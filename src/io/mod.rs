@@ -47,8 +47,9 @@ pub use pcd::{encode_organised, read_organised};
 pub use sample::{MeshSampler, sample_mesh, write_sample_ply};
 pub use source::{STDIN, Source, is_piped};
 pub use splat_ply::{
-    CLIP_PROPS, COLOR_FIELD_PROPS, EncodeOptions, SPLAT_ROW_BYTES, SplatLayout, SplatSet,
-    encode_splats, parse_splats, read_splats, splat_header, write_splats,
+    CLIP_PROPS, COLOR_FIELD_PROPS, SPLAT_ROW_BYTES, SplatSet, encode_splats, encode_splats_layout,
+    encode_splats_with, parse_splats, read_splats, splat_header, splat_header_layout,
+    splat_header_with, splat_row_bytes, write_splats,
 };
 pub use stream::stream_points;
 

@@ -194,47 +194,51 @@ fn clip_of(v: &[f32; 6]) -> Result<Clip, &'static str> {
 /// not positive, the origin is not finite (nothing is written then), or the
 /// file cannot be written.
 pub fn write_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<(), IoError> {
-    write_bytes(
-        path,
-        &encode_splats(path, splats, origin, &EncodeOptions::default())?,
-    )
+    write_bytes(path, &encode_splats(path, splats, origin)?)
 }
 
-/// What [`encode_splats`] writes beside each splat's disc and colour. The
-/// default: the file [`write_splats`] writes (no colour fields; the clip
-/// lines when some splat is clipped).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct EncodeOptions<'a> {
-    /// Each splat's colour field, one per splat, written as
-    /// [`COLOR_FIELD_PROPS`] (the header has them even with no splats).
-    pub color_fields: Option<&'a [ColorField]>,
-    /// Whether the [`CLIP_PROPS`] are written: `None`, when some splat is
-    /// clipped; `Some(true)`, always (files to be joined record by record,
-    /// like the tiles of `tiled`, must share one layout; see
-    /// [`SplatLayout`]); `Some(false)`, never (a clipped splat is then an
-    /// error).
-    pub clips: Option<bool>,
-}
-
-/// The bytes [`write_splats`] writes to `path` (named in errors), with the
-/// colour fields and clip lines `options` asks for, to write them with
-/// other outputs of one run ([`super::Batch`]).
+/// The bytes [`write_splats`] writes to `path` (named in errors), to write
+/// them with other outputs of one run ([`super::Batch`]).
 ///
 /// # Errors
-/// As [`write_splats`], before anything is written; also when the colour
-/// fields are not one per splat or hold a non-finite value, and when a
-/// splat is clipped and the clip lines are not written, or a clip line is
-/// not finite or has a zero normal.
-pub fn encode_splats(
+/// As [`write_splats`], before anything is written.
+pub fn encode_splats(path: &Path, splats: &[Splat], origin: DVec3) -> Result<Vec<u8>, IoError> {
+    encode_splats_with(path, splats, None, origin)
+}
+
+/// [`encode_splats`] with each splat's colour field (`fields` `None`: the
+/// file [`encode_splats`] writes; else one per splat, written as
+/// [`COLOR_FIELD_PROPS`], and the header has them even with no splats).
+/// The clip lines ([`CLIP_PROPS`]) are written when some splat is clipped.
+///
+/// # Errors
+/// As [`write_splats`]; also when `fields` is not one per splat, or holds
+/// a non-finite value.
+pub fn encode_splats_with(
     path: &Path,
     splats: &[Splat],
+    fields: Option<&[ColorField]>,
     origin: DVec3,
-    options: &EncodeOptions<'_>,
 ) -> Result<Vec<u8>, IoError> {
-    let fields = options.color_fields;
-    let clips = options
-        .clips
-        .unwrap_or_else(|| splats.iter().any(Splat::is_clipped));
+    let clips = splats.iter().any(Splat::is_clipped);
+    encode_splats_layout(path, splats, fields, clips, origin)
+}
+
+/// [`encode_splats_with`] with the [`CLIP_PROPS`] written when `clips`
+/// (whether or not a splat is clipped: files to be joined record by
+/// record, like the tiles of `tiled`, must share one layout; see
+/// [`splat_row_bytes`]). A clipped splat with `clips` false is an error.
+///
+/// # Errors
+/// As [`encode_splats_with`]; also when a splat is clipped and `clips` is
+/// false, or a clip line is not finite or has a zero normal.
+pub fn encode_splats_layout(
+    path: &Path,
+    splats: &[Splat],
+    fields: Option<&[ColorField]>,
+    clips: bool,
+    origin: DVec3,
+) -> Result<Vec<u8>, IoError> {
     let bad = |what: String| Err(IoError::not_written(path, &what));
     if !origin.is_finite() {
         return bad(format!("the splats' origin {origin} is not finite"));
@@ -275,12 +279,9 @@ pub fn encode_splats(
             splats[i].clip
         ));
     }
-    let layout = SplatLayout {
-        color_fields: fields.is_some(),
-        clips,
-    };
-    let header = splat_header(splats.len() as u64, origin, layout);
-    let row = layout.row_bytes();
+    let with = fields.is_some();
+    let header = splat_header_layout(splats.len() as u64, origin, with, clips);
+    let row = splat_row_bytes(with, clips);
     let mut out = Vec::with_capacity(header.len() + splats.len() * row);
     out.extend_from_slice(header.as_bytes());
     for (i, s) in splats.iter().enumerate() {
@@ -306,36 +307,39 @@ pub fn encode_splats(
 /// the 8-bit sRGB colour.
 pub const SPLAT_ROW_BYTES: usize = SPLAT_PROPS.len() * 4 + SRGB_PROPS.len();
 
-/// What a splat file's records hold beside each splat's disc and colour
-/// ([`splat_header`]). The default: neither.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct SplatLayout {
-    /// The [`COLOR_FIELD_PROPS`], after the linear colour.
-    pub color_fields: bool,
-    /// The [`CLIP_PROPS`], after the colour field.
-    pub clips: bool,
-}
-
-impl SplatLayout {
-    /// Bytes of one splat record in a file of this layout.
-    #[must_use]
-    pub fn row_bytes(self) -> usize {
-        SPLAT_ROW_BYTES
-            + if self.color_fields {
-                4 * COLOR_FIELD_PROPS.len()
-            } else {
-                0
-            }
-            + if self.clips { 4 * CLIP_PROPS.len() } else { 0 }
-    }
-}
-
-/// The header of a splat file of `count` splats of `layout` whose centres
-/// are offsets from `origin`; the records follow it,
-/// [`SplatLayout::row_bytes`] each, so splat files of one origin and
-/// layout join by adding their counts and concatenating their bodies.
+/// The header of a splat file of `count` splats whose centres are offsets
+/// from `origin`; the records follow it, [`SPLAT_ROW_BYTES`] each, so
+/// splat files of one origin join by adding their counts and concatenating
+/// their bodies.
 #[must_use]
-pub fn splat_header(count: u64, origin: DVec3, layout: SplatLayout) -> String {
+pub fn splat_header(count: u64, origin: DVec3) -> String {
+    splat_header_with(count, origin, false)
+}
+
+/// Bytes of one splat record in a splat file with colour fields and clip
+/// lines as given.
+#[must_use]
+pub fn splat_row_bytes(color_fields: bool, clips: bool) -> usize {
+    SPLAT_ROW_BYTES
+        + if color_fields {
+            4 * COLOR_FIELD_PROPS.len()
+        } else {
+            0
+        }
+        + if clips { 4 * CLIP_PROPS.len() } else { 0 }
+}
+
+/// [`splat_header`], with the [`COLOR_FIELD_PROPS`] after the linear colour
+/// when `color_fields`.
+#[must_use]
+pub fn splat_header_with(count: u64, origin: DVec3, color_fields: bool) -> String {
+    splat_header_layout(count, origin, color_fields, false)
+}
+
+/// [`splat_header_with`], with the [`CLIP_PROPS`] after the colour field
+/// when `clips`.
+#[must_use]
+pub fn splat_header_layout(count: u64, origin: DVec3, color_fields: bool, clips: bool) -> String {
     let mut header = format!(
         "ply\nformat binary_little_endian 1.0\ncomment splatray {} splats: Linsen et al. 2007 discs with Botsch et al. 2004 normal fields\ncomment {ORIGIN_COMMENT} {:?} {:?} {:?}\nelement vertex {count}\n",
         env!("CARGO_PKG_VERSION"),
@@ -343,12 +347,12 @@ pub fn splat_header(count: u64, origin: DVec3, layout: SplatLayout) -> String {
         origin.y,
         origin.z,
     );
-    let fields = if layout.color_fields {
+    let fields = if color_fields {
         &COLOR_FIELD_PROPS[..]
     } else {
         &[]
     };
-    let clip: &[&str] = if layout.clips { &CLIP_PROPS[..] } else { &[] };
+    let clip: &[&str] = if clips { &CLIP_PROPS[..] } else { &[] };
     for p in SPLAT_PROPS.iter().chain(fields).chain(clip) {
         header.push_str("property float ");
         header.push_str(p);

@@ -37,7 +37,26 @@ pub fn load_scene(path: &Path, progress: Option<Progress<'_>>) -> Result<Scene> 
 /// # Errors
 /// One line (naming the model where one is at fault).
 pub fn build_scene(file: &SceneFile, base: &Path, progress: Option<Progress<'_>>) -> Result<Scene> {
-    build_scene_reads(file, base, Vec::new(), progress)
+    build_scene_read(file, base, None, progress)
+}
+
+/// [`build_scene`] with one model's input already read: `read` is the file
+/// at `path` (as [`crate::io::read_any`] gives it), which a model
+/// naming that path (joined to `base`) takes instead of reading it again.
+///
+/// # Errors
+/// As [`build_scene`].
+pub fn build_scene_read(
+    file: &SceneFile,
+    base: &Path,
+    read: Option<(&Path, CloudRead)>,
+    progress: Option<Progress<'_>>,
+) -> Result<Scene> {
+    let reads = read
+        .map(|(p, r)| (p.to_path_buf(), r))
+        .into_iter()
+        .collect();
+    build_scene_reads(file, base, reads, progress)
 }
 
 /// [`build_scene`] with several models' inputs already read (or made in

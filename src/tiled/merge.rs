@@ -4,7 +4,7 @@
 use super::plan::Plan;
 use super::tile::{clip_lines, color_fields, halo_path, tile_path};
 use super::{data_err, io_err};
-use crate::io::{IoError, SplatLayout, splat_header, write_atomic};
+use crate::io::{IoError, splat_header_layout, splat_row_bytes, write_atomic};
 use crate::progress::{Progress, notify};
 use crate::splat::{Splat, SplatParams};
 use glam::{DVec3, Vec3};
@@ -24,11 +24,7 @@ pub(super) fn merge(
     let n = plan.tiles.len();
     let with_fields = color_fields(plan, params);
     let clips = clip_lines(params);
-    let layout = SplatLayout {
-        color_fields: with_fields,
-        clips,
-    };
-    let row_bytes = layout.row_bytes();
+    let row_bytes = splat_row_bytes(with_fields, clips);
     let mut bodies = Vec::with_capacity(n);
     let mut total = 0u64;
     for t in 0..n {
@@ -42,7 +38,7 @@ pub(super) fn merge(
         total += body / row_bytes as u64;
         bodies.push((p, head));
     }
-    let header = splat_header(total, DVec3::from(plan.origin), layout);
+    let header = splat_header_layout(total, DVec3::from(plan.origin), with_fields, clips);
     // A tile that does not read is named as itself, not as the output.
     let mut read_failed: Option<IoError> = None;
     let written = write_atomic(output, |tmp| -> std::io::Result<()> {

@@ -7,7 +7,7 @@ use super::spill::{read_spill, spill_path};
 use super::{
     BYTES_PER_POINT, FIXED_BYTES, NORMALS_REACH_EPS, Stage, TILES_IN_FLIGHT, TiledOptions, data_err,
 };
-use crate::io::{EncodeOptions, IoError, encode_splats, write_bytes};
+use crate::io::{IoError, encode_splats_layout, write_bytes};
 use crate::progress::{Progress, notify};
 use crate::splat::color::ColorField;
 use crate::splat::{Splat, SplatParams};
@@ -103,15 +103,7 @@ pub(super) fn generate_tile(
     let fields = with_fields.then_some(&kept_fields[..]);
     write_bytes(
         &out,
-        &encode_splats(
-            &out,
-            &kept,
-            origin,
-            &EncodeOptions {
-                color_fields: fields,
-                clips: Some(clip_lines(params)),
-            },
-        )?,
+        &encode_splats_layout(&out, &kept, fields, clip_lines(params), origin)?,
     )?;
     if plan.reconciles() {
         crate::io::write_splats(&halo_path(work, t), &halo, origin)?;

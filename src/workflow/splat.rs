@@ -10,7 +10,7 @@
 
 use crate::freespace::TrimReport;
 use crate::io::{
-    Batch, EncodeOptions, Format, RADIUS_PER_SIGMA, Source, encode_splats, file_layout,
+    Batch, Format, RADIUS_PER_SIGMA, Source, encode_splats, encode_splats_with, file_layout,
     is_piped,
 };
 use crate::progress::{Progress, notify};
@@ -226,14 +226,11 @@ fn points(
     let heldout = HeldOut::measure(req, &cloud, &params, generation.epsilon, progress);
     generation.seconds.read = read;
     generation.seconds.total += read;
-    let bytes = encode_splats(
+    let bytes = encode_splats_with(
         &req.output,
         &splats,
+        (!fields.is_empty()).then_some(&fields[..]),
         cloud.origin,
-        &EncodeOptions {
-            color_fields: (!fields.is_empty()).then_some(&fields[..]),
-            ..EncodeOptions::default()
-        },
     )?;
     let report = PointsReport {
         generation,
@@ -337,12 +334,7 @@ fn from_gaussians(
     let t0 = Instant::now();
     let read = source.read_gaussians(req.min_opacity)?;
     let set = &read.set;
-    let bytes = encode_splats(
-        &req.output,
-        &set.splats,
-        set.origin,
-        &EncodeOptions::default(),
-    )?;
+    let bytes = encode_splats(&req.output, &set.splats, set.origin)?;
     let report = GaussianReport {
         layout,
         gaussians: read.gaussians,

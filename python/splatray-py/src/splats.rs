@@ -222,13 +222,9 @@ impl Splats {
     /// leaves nothing).
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         py.detach(|| {
-            let options = splatray::io::EncodeOptions {
-                color_fields: (!self.set.color_fields.is_empty())
-                    .then_some(&self.set.color_fields[..]),
-                ..Default::default()
-            };
+            let fields = (!self.set.color_fields.is_empty()).then_some(&self.set.color_fields[..]);
             let bytes =
-                splatray::io::encode_splats(&path, &self.set.splats, self.set.origin, &options)?;
+                splatray::io::encode_splats_with(&path, &self.set.splats, fields, self.set.origin)?;
             splatray::io::write_bytes(&path, &bytes)
         })
         .map_err(err)

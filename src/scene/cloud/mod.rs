@@ -11,7 +11,7 @@
 //! 2. [`view`]: the camera, its up vector by the rules of [`up`];
 //! 3. [`text`]: the scene as TOML;
 //! 4. the scene: that text parsed and built like any scene file
-//!    ([`crate::scene::load::build_scene_reads`]), the model taking the cloud
+//!    ([`crate::scene::load::build_scene_read`]), the model taking the cloud
 //!    the survey read.
 
 pub mod survey;
@@ -34,7 +34,7 @@ use crate::io::Format;
 use crate::progress::{Progress, notify};
 use crate::resolve::ShadingMode;
 use crate::scene::file::parse_scene_str;
-use crate::scene::load::build_scene_reads;
+use crate::scene::load::build_scene_read;
 use crate::scene::model::Scene;
 use crate::{Error, Result};
 use glam::DVec3;
@@ -136,7 +136,7 @@ pub fn make_scene(
     let text = scene_text(path, &survey, &view, &options)?;
     let file = parse_scene_str(&text).map_err(|e| e.context(path.display()))?;
     // The scene names the cloud by `path`: it takes what was read.
-    let mut scene = build_scene_reads(&file, Path::new(""), vec![(path.to_path_buf(), read)], progress)
+    let mut scene = build_scene_read(&file, Path::new(""), Some((path, read)), progress)
         .map_err(|e| e.context(path.display()))?;
     // As a scene file is set up (`load_scene`'s callers), so that the scene
     // saved renders these bytes wherever the cloud lies.

@@ -85,7 +85,7 @@ pub fn survey_file(path: &Path) -> Result<Survey> {
 }
 
 /// [`survey_file`], and what was read, for the scene built from the survey
-/// (`build_scene_reads`): the file is read once.
+/// (`build_scene_read`): the file is read once.
 ///
 /// # Errors
 /// As [`survey_file`]; a cloud wider than the renderer's f32 geometry
