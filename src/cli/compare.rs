@@ -76,34 +76,7 @@ fn causes_diff_path(diff: &std::path::Path) -> PathBuf {
 /// Runs `splatray compare`.
 pub fn run(args: &CompareArgs) -> Result<()> {
     let scene_path = args.view.path();
-    if args.as_triangles && args.view.is_cloud() {
-        return Err(Error::invalid(format!(
-            "{}: --as-triangles needs a scene file with a `mesh` model (or a `truth` mesh), not a \
-             point cloud",
-            scene_path.display()
-        )));
-    }
-    // The triangles' scene file, checked before any rendering.
-    let tri_file = if args.as_triangles {
-        let file = crate::scene::parse_scene_file(&scene_path)?;
-        let (f, n) = crate::workflow::compare::meshes_as_triangles(&file);
-        if n == 0 {
-            return Err(Error::invalid(format!(
-                "{}: --as-triangles: no model has a mesh (`mesh`, or `truth` beside points or \
-                 splats)",
-                scene_path.display()
-            )));
-        }
-        Some((f, n))
-    } else {
-        None
-    };
-    if args.truth && args.view.is_cloud() {
-        return Err(Error::invalid(format!(
-            "{}: --truth needs exact surfaces, and a point cloud has none (write a scene with a `mesh` model or a `shape`)",
-            scene_path.display()
-        )));
-    }
+    let tri_file = check_args(args, &scene_path)?;
     check_outputs(args)?;
     let line = ProgressLine::new();
     let progress = |stage: &str, f: f64| line.update(stage, f);
@@ -151,6 +124,41 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     )?;
     print_report(&report);
     Ok(())
+}
+
+/// The flags checked against what is compared, before any rendering:
+/// with `--as-triangles`, the triangles' scene file and how many models
+/// it turns to triangles.
+fn check_args(
+    args: &CompareArgs,
+    scene_path: &std::path::Path,
+) -> Result<Option<(crate::scene::SceneFile, usize)>> {
+    if args.as_triangles && args.view.is_cloud() {
+        return Err(Error::invalid(format!(
+            "{}: --as-triangles needs a scene file with a `mesh` model (or a `truth` mesh), not a \
+             point cloud",
+            scene_path.display()
+        )));
+    }
+    if args.truth && args.view.is_cloud() {
+        return Err(Error::invalid(format!(
+            "{}: --truth needs exact surfaces, and a point cloud has none (write a scene with a `mesh` model or a `shape`)",
+            scene_path.display()
+        )));
+    }
+    if !args.as_triangles {
+        return Ok(None);
+    }
+    let file = crate::scene::parse_scene_file(scene_path)?;
+    let (f, n) = crate::workflow::compare::meshes_as_triangles(&file);
+    if n == 0 {
+        return Err(Error::invalid(format!(
+            "{}: --as-triangles: no model has a mesh (`mesh`, or `truth` beside points or \
+             splats)",
+            scene_path.display()
+        )));
+    }
+    Ok(Some((f, n)))
 }
 
 /// The output paths `--diff` (with `--truth`, its truth and causes images
