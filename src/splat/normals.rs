@@ -81,6 +81,43 @@ fn held_by(points: &[Vec3], i: usize, c: Vec3, items: &[u32], tol: f32) -> usize
         .count()
 }
 
+/// The settling test of [`estimate_multiscale`]: at tolerance `tol`, a
+/// point's plane holding `flat_at` of its `wide` nearest, or holding
+/// `quadric_at` of them and the quadric over the face search's
+/// neighbourhood scoring [`FACE_SMOOTH_EXACT`].
+struct Settle {
+    tol: f32,
+    wide: usize,
+    flat_at: usize,
+    quadric_at: f32,
+}
+
+impl Settle {
+    /// Whether point `i` with normal `c` and the face search's
+    /// neighbourhood `items` (nearest first; `all` scratch) is settled.
+    fn settles(&self, points: &[Vec3], i: usize, c: Vec3, items: &[u32], all: &mut Vec<Vec3>) -> bool {
+        let tol = self.tol;
+        let held = held_by(points, i, c, &items[..self.wide.min(items.len())], tol);
+        if held >= self.flat_at {
+            return true;
+        }
+        if (held as f32) < self.quadric_at {
+            return false;
+        }
+        // The face search's offsets, the point first (`FaceSearch::face_at`).
+        all.clear();
+        all.push(Vec3::ZERO);
+        all.extend(
+            items
+                .iter()
+                .filter(|&&j| j as usize != i)
+                .map(|&j| points[j as usize] - points[i]),
+        );
+        super::fit::quadric_fit(all, c, tol)
+            .is_some_and(|q| q >= FACE_SMOOTH_EXACT * all.len() as f32)
+    }
+}
+
 /// What [`estimate_multiscale`] found.
 pub struct Estimated {
     /// Unoriented unit normals.
@@ -177,30 +214,16 @@ pub fn estimate_multiscale(
                     sight,
                 );
                 let guess = (small.unwrap_or(Vec3::Z), Scale::Degenerate, false);
-                // With the face search's neighbourhood `items`: settled
-                // where the plane holds enough of the wide one, or (holding
-                // half of it) the quadric fits the face search's.
                 let settled = |c: Vec3, items: &[u32], all: &mut Vec<Vec3>| {
-                    let Some(tol) = settle_tol else {
-                        return false;
-                    };
-                    let held = held_by(points, i, c, &items[..first.min(items.len())], tol);
-                    if held >= flat_at {
-                        return true;
-                    }
-                    if (held as f32) < SETTLE_QUADRIC_HELD * face_wide as f32 {
-                        return false;
-                    }
-                    all.clear();
-                    all.push(Vec3::ZERO);
-                    all.extend(
-                        items
-                            .iter()
-                            .filter(|&&j| j as usize != i)
-                            .map(|&j| points[j as usize] - points[i]),
-                    );
-                    super::fit::quadric_fit(all, c, tol)
-                        .is_some_and(|q| q >= FACE_SMOOTH_EXACT * all.len() as f32)
+                    settle_tol.is_some_and(|tol| {
+                        let bar = Settle {
+                            tol,
+                            wide: first,
+                            flat_at,
+                            quadric_at: SETTLE_QUADRIC_HELD * face_wide as f32,
+                        };
+                        bar.settles(points, i, c, items, all)
+                    })
                 };
                 let mut m = first;
                 loop {
@@ -247,6 +270,12 @@ pub fn estimate_multiscale(
             },
         )
         .collect();
+    estimated(out, settle_tol.is_some(), tally.get())
+}
+
+/// [`estimate_multiscale`]'s per-point answers counted: each point's
+/// normal, its scale, whether it settled (kept where `settling`).
+fn estimated(out: Vec<(Vec3, Scale, bool)>, settling: bool, queries: usize) -> Estimated {
     let count = |k: Scale| out.iter().filter(|o| o.1 == k).count();
     let collinear = count(Scale::WideForCollinear);
     Estimated {
@@ -254,13 +283,13 @@ pub fn estimate_multiscale(
         collinear,
         degenerate: count(Scale::Degenerate),
         sheets: count(Scale::Sheet),
-        settled: if settle_tol.is_some() {
+        settled: if settling {
             out.iter().map(|o| o.2).collect()
         } else {
             Vec::new()
         },
         normals: out.into_iter().map(|o| o.0).collect(),
-        queries: tally.get(),
+        queries,
     }
 }
 
