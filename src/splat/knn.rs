@@ -50,8 +50,6 @@ impl Knn {
     #[must_use]
     pub fn build(tree: &PointTree, points: &[Vec3], k: usize) -> Knn {
         let k = k.clamp(1, points.len().saturating_sub(1).max(1));
-        let mut idx = vec![0u32; points.len() * k];
-        let mut kth_distance = vec![0f32; points.len()];
         // Points come in spatial (Morton) order, so a point's k + 1
         // nearest lie about as far as its predecessor's: each chunk's
         // queries are [`Nearest`]'s, bounded by the one before, exact, ties
@@ -59,15 +57,30 @@ impl Knn {
         // order, not the tree's). Against the heap of `nearest_n_within`
         // bounded the same way: 0.97x the CPU of the whole `splat` of 200k
         // bunny points (paired runs in turns, 5 pairs).
+        Knn::rows(points.len(), k, |nearest, i, row| {
+            nearest_row(nearest, tree, points, i, row)
+        })
+    }
+
+    /// The graph of `n` points, `k` neighbours each, row by row in chunks
+    /// of [`CHUNK`] in parallel: `row(nearest, i, row)` fills point `i`'s
+    /// row (querying with the chunk's `nearest`, counted) and returns its
+    /// k-th distance.
+    fn rows(
+        n: usize,
+        k: usize,
+        row: impl Fn(&mut Nearest<'_>, usize, &mut [u32]) -> f32 + Sync,
+    ) -> Knn {
+        let mut idx = vec![0u32; n * k];
+        let mut kth_distance = vec![0f32; n];
         let tally = Tally::default();
         idx.par_chunks_mut(k * CHUNK)
             .zip(kth_distance.par_chunks_mut(CHUNK))
             .enumerate()
             .for_each(|(c, (rows, kths))| {
                 let mut nearest = Nearest::counted(&tally);
-                for (j, (row, kth)) in rows.chunks_mut(k).zip(kths.iter_mut()).enumerate() {
-                    let i = c * CHUNK + j;
-                    *kth = nearest_row(&mut nearest, tree, points, i, row);
+                for (j, (r, kth)) in rows.chunks_mut(k).zip(kths.iter_mut()).enumerate() {
+                    *kth = row(&mut nearest, c * CHUNK + j, r);
                 }
             });
         Knn {
@@ -99,34 +112,18 @@ impl Knn {
             // built afresh.
             return Knn::build(tree, points, k);
         }
-        let mut idx = vec![0u32; points.len() * k];
-        let mut kth_distance = vec![0f32; points.len()];
-        let tally = Tally::default();
-        idx.par_chunks_mut(k * CHUNK)
-            .zip(kth_distance.par_chunks_mut(CHUNK))
-            .enumerate()
-            .for_each(|(c, (rows, kths))| {
-                let mut nearest = Nearest::counted(&tally);
-                for (j, (row, kth)) in rows.chunks_mut(k).zip(kths.iter_mut()).enumerate() {
-                    let i = c * CHUNK + j;
-                    let old = kept_old[i];
-                    let was = self.of(old);
-                    if was.iter().all(|&o| keep[o as usize]) {
-                        for (r, &o) in row.iter_mut().zip(was) {
-                            *r = new_of[o as usize];
-                        }
-                        *kth = self.kth_distance[old];
-                    } else {
-                        *kth = nearest_row(&mut nearest, tree, points, i, row);
-                    }
+        Knn::rows(points.len(), k, |nearest, i, row| {
+            let old = kept_old[i];
+            let was = self.of(old);
+            if was.iter().all(|&o| keep[o as usize]) {
+                for (r, &o) in row.iter_mut().zip(was) {
+                    *r = new_of[o as usize];
                 }
-            });
-        Knn {
-            k,
-            idx,
-            kth_distance,
-            queries: tally.get(),
-        }
+                self.kth_distance[old]
+            } else {
+                nearest_row(nearest, tree, points, i, row)
+            }
+        })
     }
 }
 
