@@ -96,11 +96,14 @@ pub enum Layout {
     /// primitives are read contiguously and every pack is full but the
     /// last: the fastest layout, at about 5 copies of every primitive.
     Copies,
-    /// Every primitive stored once, in packs in the Morton order of the
-    /// centres; a leaf lists the packs it needs with a mask of the lanes it
-    /// references, so neighbouring leaves share packs (a fifth of the
-    /// memory of [`Layout::Copies`], but about twice the pack tests per
-    /// ray: `docs/notes/backends.md`, round `octree-perf4`).
+    /// Every primitive stored once, in packs grouped by the leaves that
+    /// reference them (a leaf's own primitives together, then those it
+    /// shares with one neighbour); a leaf lists the packs it needs with a
+    /// mask of the lanes it references, and consecutive packs are filtered
+    /// in one call. Half the memory of [`Layout::Copies`] on the accel
+    /// benchmark's surface, 1.6 times its pack tests per leaf (in Morton
+    /// order 2.2), 0.6-0.9 of its speed (`docs/notes/backends.md`, issue
+    /// 55 round 3; round `octree-perf4` for the Morton order).
     Shared,
     /// [`Layout::Copies`] while the copies' packs would take at most this
     /// many bytes, [`Layout::Shared`] beyond: the copies are 10–20 %
@@ -261,7 +264,8 @@ struct Tree<P: Primitive> {
     /// The primitives, `P::Pack::LANES` to a pack (SoA): with
     /// [`Layout::Copies`] each leaf's references copied in reference order
     /// (the last pack of a leaf padded with empty lanes), with
-    /// [`Layout::Shared`] every primitive once in Morton order.
+    /// [`Layout::Shared`] every primitive once, grouped by the leaves
+    /// that reference it.
     packs: Vec<P::Pack>,
     /// Primitive id of each lane of `packs` ([`NO_PRIMITIVE`] on padding).
     pack_ids: Vec<u32>,

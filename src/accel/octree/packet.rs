@@ -315,11 +315,11 @@ impl<P: Primitive> Tree<P> {
         let range = node.first as usize..(node.first + node.meta) as usize;
         let l = lanes::<P>();
         let mut stopped = 0;
-        // Consecutive packs (lanes `lanes` of each, ids `ids`, pack after
-        // pack) for every active ray, filtered in one call; false once no
+        // Consecutive packs (lanes `lanes[j]` of pack `j`, ids `ids`, pack
+        // after pack; at most LEAF_CHUNK) for every active ray, filtered in one call; false once no
         // ray is left. A window narrowed within the call only leaves the
         // filter looser (each lane is decided by the visitor).
-        let mut chunk = |packs: &[P::Pack], ids: &[u32], lanes: u32| {
+        let mut chunk = |packs: &[P::Pack], ids: &[u32], lanes: &[u32]| {
             let mut masks = [[0; PACKET]; LEAF_CHUNK];
             let mut passed = [0; LEAF_CHUNK];
             P::Pack::masks_rays(packs, &rays, active, self.isa, &mut masks, &mut passed);
@@ -328,7 +328,7 @@ impl<P: Primitive> Tree<P> {
                 while left != 0 {
                     let k = left.trailing_zeros() as usize;
                     left &= left - 1;
-                    let mut m = masks[j][k] & lanes;
+                    let mut m = masks[j][k] & lanes[j];
                     if m == 0 {
                         continue;
                     }
@@ -352,15 +352,27 @@ impl<P: Primitive> Tree<P> {
             true
         };
         if self.shared {
-            for &e in &self.entries[range] {
-                let p = (e & ENTRY_PACK) as usize;
-                if !chunk(
-                    std::slice::from_ref(&self.packs[p]),
-                    &self.pack_ids[p * l..(p + 1) * l],
-                    e >> ENTRY_MASK_SHIFT,
-                ) {
+            // Entries of consecutive packs filtered together, as in
+            // `Tree::leaf`.
+            let entries = &self.entries[range];
+            let mut i = 0;
+            while i < entries.len() {
+                let p = (entries[i] & ENTRY_PACK) as usize;
+                let mut lanes = [0; LEAF_CHUNK];
+                lanes[0] = entries[i] >> ENTRY_MASK_SHIFT;
+                let mut n = 1;
+                while n < LEAF_CHUNK
+                    && i + n < entries.len()
+                    && (entries[i + n] & ENTRY_PACK) as usize == p + n
+                {
+                    lanes[n] = entries[i + n] >> ENTRY_MASK_SHIFT;
+                    n += 1;
+                }
+                let ids = &self.pack_ids[p * l..(p + n) * l];
+                if !chunk(&self.packs[p..p + n], ids, &lanes[..n]) {
                     break;
                 }
+                i += n;
             }
         } else {
             for start in range.clone().step_by(LEAF_CHUNK) {
@@ -368,7 +380,7 @@ impl<P: Primitive> Tree<P> {
                 if !chunk(
                     &self.packs[start..end],
                     &self.pack_ids[start * l..end * l],
-                    u32::MAX,
+                    &[u32::MAX; LEAF_CHUNK][..end - start],
                 ) {
                     break;
                 }

@@ -197,16 +197,29 @@ impl<P: Primitive> Tree<P> {
         let range = node.first as usize..(node.first + node.meta) as usize;
         let l = lanes::<P>();
         if self.shared {
-            // One branch, the same for every leaf of the tree.
-            return self.entries[range].iter().any(|&e| {
-                let p = (e & ENTRY_PACK) as usize;
-                let ids = &self.pack_ids[p * l..(p + 1) * l];
-                let pack = std::slice::from_ref(&self.packs[p]);
-                visitor.packs(pack, ids, e >> ENTRY_MASK_SHIFT, self.isa, &self.side)
-            });
+            // One branch, the same for every leaf of the tree. Entries of
+            // consecutive packs (a leaf's own packs, stored together) go
+            // to one filter call.
+            let entries = &self.entries[range];
+            let mut i = 0;
+            while i < entries.len() {
+                let p = (entries[i] & ENTRY_PACK) as usize;
+                let mut n = 1;
+                while i + n < entries.len() && (entries[i + n] & ENTRY_PACK) as usize == p + n {
+                    n += 1;
+                }
+                let run = &entries[i..i + n];
+                let ids = &self.pack_ids[p * l..(p + n) * l];
+                let lanes = |k: usize| run[k] >> ENTRY_MASK_SHIFT;
+                if visitor.packs(&self.packs[p..p + n], ids, lanes, self.isa, &self.side) {
+                    return true;
+                }
+                i += n;
+            }
+            return false;
         }
         let ids = &self.pack_ids[range.start * l..range.end * l];
-        visitor.packs(&self.packs[range], ids, u32::MAX, self.isa, &self.side)
+        visitor.packs(&self.packs[range], ids, |_| u32::MAX, self.isa, &self.side)
     }
 
     /// The subtree of node `index` (cell `lo`, edge `size`), front to back;
@@ -400,8 +413,8 @@ pub(super) trait Visitor<P: Primitive> {
     /// with the exact test; true stops the traversal.
     fn lane(&mut self, prim: P, id: u32) -> bool;
 
-    /// Tests the lanes set in `lanes` of each of a leaf's `packs` (`ids`:
-    /// pack after pack), filtered on the SIMD path `isa`, [`CHUNK`] packs
+    /// Tests the lanes set in `lanes(j)` of each pack `j` of a leaf's
+    /// `packs` (`ids`: pack after pack), filtered on the SIMD path `isa`, [`CHUNK`] packs
     /// per filter call, each lane passed rebuilt whole with `side`; true
     /// stops the traversal. A window that narrows meanwhile only makes
     /// the filter looser than it could be (it stays conservative:
@@ -411,7 +424,7 @@ pub(super) trait Visitor<P: Primitive> {
         &mut self,
         packs: &[P::Pack],
         ids: &[u32],
-        lanes: u32,
+        lanes: impl Fn(usize) -> u32,
         isa: Isa,
         side: &<P::Pack as Pack<P>>::Side,
     ) -> bool {
@@ -421,7 +434,7 @@ pub(super) trait Visitor<P: Primitive> {
             let ray = self.filter();
             <P::Pack as Pack<P>>::masks(chunk, &ray, isa, &mut masks);
             for (j, pack) in chunk.iter().enumerate() {
-                let mut mask = masks[j] & lanes;
+                let mut mask = masks[j] & lanes(c * CHUNK + j);
                 let ids = &ids[(c * CHUNK + j) * l..];
                 while mask != 0 {
                     let lane = mask.trailing_zeros() as usize;
