@@ -6,6 +6,14 @@
 //! Embree's native oriented discs with every hit confirmed by the shared
 //! disc test. The brute-force oracle is left out (quadratic).
 //!
+//! Then the triangle rows (issue 57): the bundled bunny mesh's 69,666
+//! triangles on the octree and on Embree's user geometry (both deciding
+//! with the one exact test, asserted to find the same hits) against
+//! Embree's own triangles (its own test, one ray at a time: the speed the
+//! report's first claim is about), `W`x`H` primary rays and the shadow rays
+//! of their hits; `SPLATRAY_BENCH_ONLY=triangles,octree` keeps them (with
+//! `SPLATRAY_BENCH_SIZES=` alone).
+//!
 //! Splats lie on the procedural blobby surface of the test suite; primary
 //! rays come from a 1024×1024 pinhole camera, traced in parallel with rayon
 //! over rows; shadow rays go from each primary hit (resolved with Phong
@@ -47,9 +55,9 @@ use criterion::{Criterion, SamplingMode, Throughput};
 use glam::Vec3;
 use rayon::prelude::*;
 use splatray::accel::octree::{Octree, OctreeParams};
-use splatray::accel::{Backend, BuildStats, Candidate, CandidateHits, PACKET, backends};
-use splatray::embree::{Device, NativeDiscScene};
-use splatray::primitive::Disc;
+use splatray::accel::{Backend, BuildStats, Candidate, CandidateHits, PACKET, backends, registry};
+use splatray::embree::{Device, NativeDiscScene, TriangleScene};
+use splatray::primitive::{Disc, Triangle};
 use splatray::scene::SceneScale;
 use splatray::splat::Splat;
 use std::hint::black_box;
@@ -289,7 +297,7 @@ fn summary(scenes: &[(usize, Scene)], rounds: usize, only: Option<&[String]>) {
         "(shadow)"
     );
     for (n, sc) in scenes {
-        let built: Vec<(&str, f64, Box<dyn Backend>)> = builders()
+        let built: Vec<Built> = builders()
             .into_iter()
             .filter(|(name, _)| only.is_none_or(|o| o.iter().any(|x| x == name)))
             .map(|(name, build)| {
@@ -305,85 +313,261 @@ fn summary(scenes: &[(usize, Scene)], rounds: usize, only: Option<&[String]>) {
                 (name, build_s, b)
             })
             .collect();
-        let packets = |name: &str| name != "embree-native";
-        // Per backend and mode (0: one ray at a time, 1: packets), the
-        // seconds of each pass.
-        let mut prim = vec![[Vec::new(), Vec::new()]; built.len()];
-        let mut shad = vec![[Vec::new(), Vec::new()]; built.len()];
-        for _ in 0..rounds {
-            for (i, (name, _, b)) in built.iter().enumerate() {
-                prim[i][0].push(seconds(&mut || {
-                    black_box(trace(b.as_ref(), &sc.primary, sc.scale.xi));
-                }));
-                shad[i][0].push(seconds(&mut || {
-                    black_box(shadow(b.as_ref(), &sc.shadow));
-                }));
-                if packets(name) {
-                    prim[i][1].push(seconds(&mut || {
-                        black_box(trace_packets(b.as_ref(), &sc.primary, sc.scale.xi));
-                    }));
-                    shad[i][1].push(seconds(&mut || {
-                        black_box(shadow_packets(b.as_ref(), &sc.shadow));
-                    }));
-                }
-            }
-        }
-        let embree = built.iter().position(|b| b.0 == "embree");
-        // Median over the passes of `a`'s seconds over `b`'s.
-        let ratio = |a: &[f64], b: &[f64]| median((0..rounds).map(|r| a[r] / b[r]).collect());
-        let vs = |times: &[[Vec<f64>; 2]], i: usize, m: usize| {
-            embree.map_or(f64::NAN, |e| ratio(&times[e][m], &times[i][m]))
+        let rays = Rays {
+            primary: &sc.primary,
+            shadow: &sc.shadow,
+            xi: sc.scale.xi,
         };
-        for m in 0..2 {
-            for (i, (name, build_s, b)) in built.iter().enumerate() {
-                if m == 1 && !packets(name) {
-                    continue;
-                }
-                let s = b.stats();
-                let (one, one_s) = if m == 1 {
-                    (
-                        ratio(&prim[i][0], &prim[i][1]),
-                        ratio(&shad[i][0], &shad[i][1]),
-                    )
-                } else {
-                    (f64::NAN, f64::NAN)
-                };
-                let label = if m == 1 {
-                    format!("{name} packets")
-                } else {
-                    (*name).to_string()
-                };
-                eprintln!(
-                    "{:>9} {:>17} {:>8.3} {:>9} {:>8} {:>10.2} {:>9.1} {:>11.3e} {:>11.3e} {:>8.3} {:>8.3} {:>8.3} {:>8.3}",
-                    n,
-                    label,
-                    build_s,
-                    s.nodes,
-                    s.leaves,
-                    s.mean_refs_per_leaf,
-                    s.memory_bytes as f64 / 1e6,
-                    sc.primary.len() as f64 / median(prim[i][m].clone()),
-                    sc.shadow.len() as f64 / median(shad[i][m].clone()),
-                    vs(&prim, i, m),
-                    vs(&shad, i, m),
-                    one,
-                    one_s,
-                );
-            }
-        }
+        rows(&n.to_string(), &built, &rays, "embree", rounds);
+    }
+    if only.is_none_or(|o| o.iter().any(|x| x == "triangles")) {
+        triangle_rows(rounds, only);
     }
     eprintln!(
         "(build s: median of 3, as each structure reports it: Embree's without creating its device ({:.1} ms \
          apart, median of 3) and with the discs copied in; rays/s: median of {rounds} passes of {W}x{H} primary rays and of the shadow rays of \
          their hits, the backends taking turns pass by pass, one ray at a time, then in packets of {PACKET} \
          (8x1 pixel tiles; the shadow rays of 8 neighbouring hits); 'vs embree': median over the passes of the \
-         row's speed / Embree user geometry's in the same pass and mode, primary and (shadow) rays; 'vs 1 ray': \
+         row's speed / Embree user geometry's in the same pass and mode, primary and (shadow) rays (the \
+         bunny mesh's rows: / Embree's own triangles', one ray at a time); 'vs 1 ray': \
          a packet row's speed / the same backend's one ray at a time in the same pass; {} threads)\n",
         1e3 * median_seconds(3, || drop(black_box(
             Device::new().expect("an Embree device")
         ))),
         rayon::current_num_threads()
     );
+}
+
+/// A benchmarked backend: its name, build seconds and the built structure.
+type Built<'a> = (&'a str, f64, Box<dyn Backend>);
+
+/// The rays of a table's rows.
+struct Rays<'a> {
+    primary: &'a [Query<'static>],
+    shadow: &'a [Query<'static>],
+    xi: f32,
+}
+
+/// The rows of one scene: `rounds` passes of the primary and the shadow
+/// rays, one ray at a time and in packets, the backends taking turns pass
+/// by pass; the speed ratios against the row named `reference` (one ray at
+/// a time when that row has no packets).
+fn rows(label: &str, built: &[Built], rays: &Rays, reference: &str, rounds: usize) {
+    let packets = |name: &str| !name.starts_with("embree-native");
+    // Per backend and mode (0: one ray at a time, 1: packets), the
+    // seconds of each pass.
+    let mut prim = vec![[Vec::new(), Vec::new()]; built.len()];
+    let mut shad = vec![[Vec::new(), Vec::new()]; built.len()];
+    for _ in 0..rounds {
+        for (i, (name, _, b)) in built.iter().enumerate() {
+            prim[i][0].push(seconds(&mut || {
+                black_box(trace(b.as_ref(), rays.primary, rays.xi));
+            }));
+            shad[i][0].push(seconds(&mut || {
+                black_box(shadow(b.as_ref(), rays.shadow));
+            }));
+            if packets(name) {
+                prim[i][1].push(seconds(&mut || {
+                    black_box(trace_packets(b.as_ref(), rays.primary, rays.xi));
+                }));
+                shad[i][1].push(seconds(&mut || {
+                    black_box(shadow_packets(b.as_ref(), rays.shadow));
+                }));
+            }
+        }
+    }
+    let refer = built.iter().position(|b| b.0 == reference);
+    // Median over the passes of `a`'s seconds over `b`'s.
+    let ratio = |a: &[f64], b: &[f64]| median((0..rounds).map(|r| a[r] / b[r]).collect());
+    let vs = |times: &[[Vec<f64>; 2]], i: usize, m: usize| {
+        refer.map_or(f64::NAN, |e| {
+            let me = if packets(reference) { m } else { 0 };
+            ratio(&times[e][me], &times[i][m])
+        })
+    };
+    for m in 0..2 {
+        for (i, (name, build_s, b)) in built.iter().enumerate() {
+            if m == 1 && !packets(name) {
+                continue;
+            }
+            let s = b.stats();
+            let (one, one_s) = if m == 1 {
+                (
+                    ratio(&prim[i][0], &prim[i][1]),
+                    ratio(&shad[i][0], &shad[i][1]),
+                )
+            } else {
+                (f64::NAN, f64::NAN)
+            };
+            let label_b = if m == 1 {
+                format!("{name} packets")
+            } else {
+                (*name).to_string()
+            };
+            eprintln!(
+                "{:>9} {:>17} {:>8.3} {:>9} {:>8} {:>10.2} {:>9.1} {:>11.3e} {:>11.3e} {:>8.3} {:>8.3} {:>8.3} {:>8.3}",
+                label,
+                label_b,
+                build_s,
+                s.nodes,
+                s.leaves,
+                s.mean_refs_per_leaf,
+                s.memory_bytes as f64 / 1e6,
+                rays.primary.len() as f64 / median(prim[i][m].clone()),
+                rays.shadow.len() as f64 / median(shad[i][m].clone()),
+                vs(&prim, i, m),
+                vs(&shad, i, m),
+                one,
+                one_s,
+            );
+        }
+    }
+}
+
+/// Embree's own triangles (`splatray::embree::TriangleScene`, its own
+/// watertight test, no filter): the speed the report's first claim is
+/// about. A benchmark row, not a backend: the nearest hit only.
+struct NativeTriangles {
+    scene: TriangleScene,
+    stats: BuildStats,
+}
+
+impl NativeTriangles {
+    fn new(positions: &[Vec3], faces: &[[u32; 3]]) -> NativeTriangles {
+        let device = Device::new().expect("an Embree device");
+        let before = device.memory();
+        let start = Instant::now();
+        let scene = TriangleScene::new(&device, &[(positions, faces)]).expect("Embree triangles");
+        let stats = BuildStats {
+            build_seconds: start.elapsed().as_secs_f64(),
+            memory_bytes: device.memory().saturating_sub(before),
+            ..BuildStats::default()
+        };
+        NativeTriangles { scene, stats }
+    }
+}
+
+impl Backend for NativeTriangles {
+    fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
+        hits.clear();
+        if let Some(h) = self.scene.intersect(&q.ray, q.t_min, q.t_max) {
+            hits.offer(Candidate {
+                id: h.triangle,
+                t: h.t,
+                u: h.u,
+                v: h.v,
+            });
+        }
+    }
+
+    fn occluded_from(&self, q: &Query) -> bool {
+        self.scene.occluded(&q.ray, q.t_min, q.t_max)
+    }
+
+    fn stats(&self) -> &BuildStats {
+        &self.stats
+    }
+}
+
+/// The triangle rows (issue 57): the bundled bunny mesh
+/// (`scenes/data/bunny-mesh.ply`, 69,666 faces) as `Triangle`s on the
+/// octree and on Embree's user geometry (both confirming with the one
+/// exact test), against Embree's own triangles. Primary rays of a
+/// `W`x`H` view filled by the bunny, shadow rays from their hits toward a
+/// point light (`t_min` 1e-4 of the mesh's size). The octree and Embree's
+/// user geometry must find the same hits, Embree's own test the same but
+/// for a few rays along edges.
+fn triangle_rows(rounds: usize, only: Option<&[String]>) {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data/bunny-mesh.ply");
+    let mesh = splatray::io::read_mesh(&path).expect("the bundled bunny mesh");
+    let tri = |t: &[u32; 3]| Triangle {
+        v: t.map(|i| mesh.positions[i as usize]),
+    };
+    let faces: Vec<[u32; 3]> = (mesh.triangles.iter().copied())
+        .filter(|t| tri(t).is_proper())
+        .collect();
+    let tris: Vec<Triangle> = faces.iter().map(tri).collect();
+    let (lo, hi) = mesh.positions.iter().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    let (c, size) = ((lo + hi) * 0.5, (hi - lo).max_element());
+    let primary = camera_queries(c + Vec3::new(0.3, 0.4, 1.4) * size, c, W, H);
+    let probe = registry::lookup::<Triangle>("octree")
+        .and_then(|b| b.build(&tris))
+        .expect("the octree over triangles");
+    let light = c + Vec3::new(1.5, 2.5, 1.0) * size;
+    let shadows: Vec<Query<'static>> = primary
+        .par_iter()
+        .filter_map(|q| {
+            let mut h = CandidateHits::new(0.0);
+            probe.intersect_from(q, &mut h);
+            let p = q.ray.origin + q.ray.dir * h.nearest()?.t;
+            let to_light = light - p;
+            Some(Query::new(
+                splatray::accel::Ray {
+                    origin: p,
+                    dir: to_light.normalize(),
+                },
+                1e-4 * size,
+                to_light.length(),
+            ))
+        })
+        .collect();
+    let mut built: Vec<Built> = backends::<Triangle>()
+        .into_iter()
+        .filter(|b| b.name == "octree" || b.name == "embree")
+        .filter(|b| only.is_none_or(|o| o.iter().any(|x| x == b.name)))
+        .map(|b| {
+            let build_s = median(
+                (0..3)
+                    .map(|_| black_box(b.build(&tris).unwrap()).stats().build_seconds)
+                    .collect(),
+            );
+            (b.name, build_s, b.build(&tris).unwrap())
+        })
+        .collect();
+    let native = "embree-native-tri";
+    if only.is_none_or(|o| o.iter().any(|x| x == native)) {
+        let build_s = median(
+            (0..3)
+                .map(|_| {
+                    black_box(NativeTriangles::new(&mesh.positions, &faces))
+                        .stats()
+                        .build_seconds
+                })
+                .collect(),
+        );
+        let b = NativeTriangles::new(&mesh.positions, &faces);
+        built.push((native, build_s, Box::new(b)));
+    }
+    // Per backend: primary rays that hit, shadow rays blocked.
+    let hits: Vec<(&str, usize, usize)> = built
+        .iter()
+        .map(|(name, _, b)| {
+            let p = trace(b.as_ref(), &primary, 0.0);
+            (*name, p, shadow(b.as_ref(), &shadows))
+        })
+        .collect();
+    let exact: Vec<_> = hits.iter().filter(|h| h.0 != native).collect();
+    assert!(
+        exact
+            .windows(2)
+            .all(|w| w[0].1 == w[1].1 && w[0].2 == w[1].2),
+        "the exact test's backends disagree: {hits:?}"
+    );
+    eprintln!(
+        "bunny mesh: {} triangles, {} primary rays, {} shadow rays; (hits, blocked): {hits:?}",
+        tris.len(),
+        primary.len(),
+        shadows.len(),
+    );
+    let rays = Rays {
+        primary: &primary,
+        shadow: &shadows,
+        xi: 0.0,
+    };
+    rows("bunny tri", &built, &rays, "embree-native-tri", rounds);
 }
 
 fn main() {

@@ -410,6 +410,87 @@ fn bad_triangle_meshes_fail_naming_the_file_and_the_face() {
     }
 }
 
+/// A huge mesh (issue 57) is refused before anything is rendered or
+/// written, its triangles counted at their own bytes
+/// (`BYTES_PER_TRIANGLE`, 320: half a splat's 640). A PLY header declaring
+/// 10^12 faces is refused from its header alone (320,000 GB), whatever
+/// follows it. A binary PLY grid of 1,002,528 triangles (19 MB) with
+/// `--max-memory 0.25` is refused in one line naming the triangles
+/// (0.3 GB), nothing written; with `--max-memory 0.5` it renders (at 640 B
+/// a triangle, 0.64 GB, it was refused).
+#[test]
+fn a_huge_mesh_is_refused_up_front() {
+    let dir = scratch("hostile-huge-mesh");
+    // From its header alone: the body is not there.
+    let fake = "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n\
+                property float y\nproperty float z\nelement face 1000000000000\n\
+                property list uchar int vertex_indices\nend_header\n";
+    std::fs::write(dir.join("huge.ply"), fake).unwrap();
+    let r = run(
+        "huge-header",
+        "render",
+        &scene(&format!(
+            "[[model]]\ntriangles = \"{}\"",
+            dir.join("huge.ply").display()
+        )),
+        &[],
+    );
+    fails_cleanly(
+        "huge-header",
+        &r,
+        &["huge.ply", "1000000000000 faces", "GB"],
+    );
+    // A grid of n x n squares, two triangles each.
+    let n: u32 = 708;
+    let mut ply = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\n\
+         property float y\nproperty float z\nelement face {}\n\
+         property list uchar int vertex_indices\nend_header\n",
+        (n + 1) * (n + 1),
+        2 * n * n
+    )
+    .into_bytes();
+    for j in 0..=n {
+        for i in 0..=n {
+            for x in [i as f32 / n as f32 - 0.5, j as f32 / n as f32 - 0.5, 0.0] {
+                ply.extend_from_slice(&x.to_le_bytes());
+            }
+        }
+    }
+    let v = |i: u32, j: u32| (j * (n + 1) + i) as i32;
+    for j in 0..n {
+        for i in 0..n {
+            for t in [
+                [v(i, j), v(i + 1, j), v(i + 1, j + 1)],
+                [v(i, j), v(i + 1, j + 1), v(i, j + 1)],
+            ] {
+                ply.push(3);
+                for k in t {
+                    ply.extend_from_slice(&k.to_le_bytes());
+                }
+            }
+        }
+    }
+    std::fs::write(dir.join("grid.ply"), &ply).unwrap();
+    let grid = scene(&format!(
+        "[[model]]\ntriangles = \"{}\"",
+        dir.join("grid.ply").display()
+    ));
+    let r = run("grid-limit", "render", &grid, &["--max-memory", "0.25"]);
+    fails_cleanly(
+        "grid-limit",
+        &r,
+        &[
+            "0.3 GB",
+            "1002528 triangles x 320 B",
+            "--max-memory limit (0.2 GB)",
+        ],
+    );
+    let r = run("grid-fits", "render", &grid, &["--max-memory", "0.5"]);
+    assert!(r.ok, "grid-fits: {}", r.stderr);
+    assert!(r.stdout.contains("1002528 triangles"), "{}", r.stdout);
+}
+
 /// Class 11: negative radiance, a light without samples, a NaN normal.
 #[test]
 fn loose_numbers_are_checked() {

@@ -716,3 +716,102 @@ fn the_saved_camera_is_the_one_the_page_sent() {
         );
     }
 }
+
+/// The viewer opens the hybrid scene (splats and triangles, issue 57): its
+/// full frame is `splatray render scenes/hybrid.toml` at the viewer's size
+/// byte for byte (a render that shows 4,726 triangle pixels at 160 × 120 in
+/// `tests/triangles.rs`), Embree's frame is the octree's, the saved scene
+/// keeps the three triangle models and renders the frame again, and the
+/// same text without them renders another image (the triangles are in the
+/// frames). Picks on the table and on the lamp shade answer a triangle's
+/// id (from the number of splats on) from both backends.
+#[test]
+fn the_viewer_opens_the_hybrid_scene() {
+    let hybrid = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/hybrid.toml");
+    let dir = TempDir::new("viewer-hybrid");
+    let server = Server::start(
+        Path::new(BIN),
+        &[
+            &hybrid.display().to_string(),
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--refine-spp",
+            "1",
+        ],
+    );
+    let (mut s, hello) = Session::open(&server);
+    assert_eq!(hello["width"], 64, "{hello}");
+    let (h, full) = s.frame("full");
+    assert_eq!(h["backend"], "octree", "{h}");
+
+    // The scene file rendered by `render` at the viewer's size.
+    let out = dir.0.join("direct.png");
+    let r = Command::new(BIN)
+        .arg("render")
+        .arg(&hybrid)
+        .args(["--width", "64", "--height", "48", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    // "64x48 spp 1, 23670 splats and 158 triangles (...": the splats
+    // count, the first triangle's id.
+    let report = String::from_utf8_lossy(&r.stdout).to_string();
+    let splats: u64 = report
+        .split(" splats and 158 triangles")
+        .next()
+        .and_then(|h| h.rsplit(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no splat and triangle count: {report}"));
+    assert!(
+        std::fs::read(&out).unwrap() == full,
+        "the viewer's first frame is not `render scenes/hybrid.toml` at 64x48"
+    );
+
+    // Embree's frame: the same bytes.
+    s.send(serde_json::json!({"type": "backend", "name": "embree"}));
+    let embree = loop {
+        let (h, png) = s.frame("full");
+        if h["backend"] == "embree" {
+            break png;
+        }
+    };
+    assert!(embree == full, "Embree's frame of the hybrid scene differs");
+
+    // "save scene": the triangle models kept, the frame again; without
+    // them, another image.
+    s.send(serde_json::json!({"type": "save_scene"}));
+    let text = s.text("scene")["text"].as_str().unwrap().to_string();
+    let mut table: toml::Table = text.parse().unwrap();
+    let models = table["model"].as_array_mut().unwrap();
+    let n = models.len();
+    models.retain(|m| m.get("triangles").is_none());
+    assert_eq!(n - models.len(), 3, "the saved triangle models:\n{text}");
+    assert!(
+        render_saved(&dir.0, "saved", &text) == full,
+        "the saved hybrid scene renders another image:\n{text}"
+    );
+    let bare = toml::to_string(&table).unwrap();
+    assert!(
+        render_saved(&dir.0, "bare", &bare) != full,
+        "the frame is the same without its triangles"
+    );
+
+    // The table top (left of the bunny) and the lamp shade: triangles
+    // (ids from the splats' count on) on both backends, the same hit.
+    for (x, y) in [(20, 32), (34, 10)] {
+        s.send(serde_json::json!({"type": "pick", "x": x, "y": y}));
+        let pick = s.text("pick");
+        let first = &pick["backends"][0]["hit"];
+        for b in pick["backends"].as_array().unwrap() {
+            assert_eq!(&b["hit"], first, "({x}, {y}): {pick}");
+        }
+        let id = first["splat"].as_u64().unwrap_or(0);
+        assert!(
+            (splats..splats + 158).contains(&id),
+            "({x}, {y}) is not on a triangle ({splats} splats): {pick}"
+        );
+    }
+}

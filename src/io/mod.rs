@@ -53,7 +53,7 @@ pub use splat_ply::{
     splat_header_with, splat_row_bytes, write_splats,
 };
 pub use stream::stream_points;
-pub use trimesh::{TriangleMesh, parse_triangles, read_triangles};
+pub use trimesh::{BYTES_PER_TRIANGLE, TriangleMesh, parse_triangles, read_triangles};
 
 use glam::{DVec3, Vec3};
 use std::path::Path;

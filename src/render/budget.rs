@@ -15,9 +15,11 @@ pub const BYTES_PER_PIXEL: u64 = 80;
 
 /// Peak bytes per splat of a loaded scene with one accelerator built: 550
 /// measured for the octree, 300 for Embree (a 287,390-splat file rendered
-/// at 64², 164 MB and 95 MB peak resident), rounded up. A triangle (36
-/// bytes, its normals 52 more, its leaf references) is counted as a splat.
+/// at 64², 164 MB and 95 MB peak resident), rounded up. A triangle counts
+/// its own [`BYTES_PER_TRIANGLE`].
 pub const BYTES_PER_SPLAT: u64 = 640;
+
+pub use crate::io::BYTES_PER_TRIANGLE;
 
 /// The default cap on the worst-case rays of one render: about half an
 /// hour at the 5 Mrays/s two cores trace on the bundled bunny.
@@ -114,8 +116,11 @@ pub fn estimate(scene: &Scene, holds: Holds) -> Estimate {
         .saturating_mul(BYTES_PER_PIXEL)
         .saturating_mul(u64::from(holds.frames.max(1)))
         .saturating_add(
-            (scene.splats.len() as u64 + scene.triangles.tris.len() as u64)
+            (scene.splats.len() as u64)
                 .saturating_mul(BYTES_PER_SPLAT)
+                .saturating_add(
+                    (scene.triangles.tris.len() as u64).saturating_mul(BYTES_PER_TRIANGLE),
+                )
                 .saturating_mul(u64::from(holds.accelerators.max(1))),
         );
     Estimate {
@@ -168,15 +173,19 @@ pub fn check(scene: &Scene, holds: Holds, limits: &Limits) -> Result<Estimate> {
         && e.bytes > limit
     {
         let gb = |b: u64| b as f64 / 1e9;
+        let tris = match scene.triangles.tris.len() {
+            0 => String::new(),
+            n => format!(" and {n} triangles x {BYTES_PER_TRIANGLE} B"),
+        };
         return Err(Error::invalid(format!(
             "the render needs about {:.1} GB ({}x{} pixels x {BYTES_PER_PIXEL} B x {} \
-             frame(s), {} splats x {BYTES_PER_SPLAT} B x {} accelerator(s)), over {whose} \
+             frame(s), {} splats x {BYTES_PER_SPLAT} B{tris} x {} accelerator(s)), over {whose} \
              ({:.1} GB): lower --width/--height, or pass --max-memory GB",
             gb(e.bytes),
             cam.width,
             cam.height,
             holds.frames,
-            scene.splats.len() + scene.triangles.tris.len(),
+            scene.splats.len(),
             holds.accelerators,
             gb(limit)
         )));

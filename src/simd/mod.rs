@@ -380,7 +380,7 @@ mod x86 {
     /// `[t_min, t_max]` (all ones), as the portable filter's `in_range`.
     #[inline]
     #[target_feature(enable = "avx2")]
-    fn avx2_in_range(t: __m256, t_min: __m256, t_max: __m256) -> __m256 {
+    pub(super) fn avx2_in_range(t: __m256, t_min: __m256, t_max: __m256) -> __m256 {
         let sign = _mm256_set1_ps(-0.0);
         _mm256_and_ps(
             _mm256_and_ps(

@@ -165,10 +165,51 @@ fn portable_tri_mask(p: &TriColumns, o: [f32; 3], sh: &Shear, t_min: f32, t_max:
 
 #[cfg(target_arch = "x86_64")]
 mod x86 {
+    use super::super::x86::avx2_in_range;
     use super::{Shear, TriColumns};
     use std::arch::x86_64::*;
 
-    /// [`super::tri_masks`] with one pack per 256-bit register.
+    /// Vertex `i` of the pack relative to the origin `org`, sheared by
+    /// `(sx, sy, sz)` along the axes `k`: `(x - sx z, y - sy z, sz z)`.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn avx2_vert(
+        p: &TriColumns,
+        i: usize,
+        k: [usize; 3],
+        org: &[__m256; 3],
+        s: &[__m256; 3],
+    ) -> [__m256; 3] {
+        // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
+        // (`TriColumns` is 32-byte aligned, each column 32 bytes).
+        let col = |a: usize| _mm256_sub_ps(unsafe { _mm256_load_ps(p.cols[3 * i + a].as_ptr()) }, org[a]);
+        let (x, y, z) = (col(k[0]), col(k[1]), col(k[2]));
+        [
+            _mm256_sub_ps(x, _mm256_mul_ps(s[0], z)),
+            _mm256_sub_ps(y, _mm256_mul_ps(s[1], z)),
+            _mm256_mul_ps(s[2], z),
+        ]
+    }
+
+    /// The edge function `a b - c d` and the lanes where its sign is not
+    /// sure (all ones).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn avx2_edge(a: __m256, b: __m256, c: __m256, d: __m256) -> (__m256, __m256) {
+        let sign = _mm256_set1_ps(-0.0);
+        let abs = |x| _mm256_andnot_ps(sign, x);
+        let (p, q) = (_mm256_mul_ps(a, b), _mm256_mul_ps(c, d));
+        let e = _mm256_sub_ps(p, q);
+        let bound = _mm256_add_ps(
+            _mm256_mul_ps(_mm256_add_ps(abs(p), abs(q)), _mm256_set1_ps(super::SURE)),
+            _mm256_set1_ps(f32::MIN_POSITIVE),
+        );
+        (e, _mm256_cmp_ps::<_CMP_LE_OQ>(abs(e), bound))
+    }
+
+    /// [`super::tri_masks`] with one pack per 256-bit register. A pack
+    /// with no lane inside its three edges (nor unsure) is done before
+    /// its plane parameter's division.
     ///
     /// # Safety
     /// The CPU must run AVX2.
@@ -181,66 +222,35 @@ mod x86 {
         t_max: f32,
         out: &mut [u32],
     ) {
-        let [kx, ky, kz] = sh.k;
-        let [sx, sy, sz] = sh.s.map(|x| _mm256_set1_ps(x));
+        let s = sh.s.map(|x| _mm256_set1_ps(x));
         let org = o.map(|x| _mm256_set1_ps(x));
         let (tmin, tmax) = (_mm256_set1_ps(t_min), _mm256_set1_ps(t_max));
-        let inf = _mm256_set1_ps(f32::INFINITY);
-        let sign = _mm256_set1_ps(-0.0);
         let zero = _mm256_setzero_ps();
-        let sure = _mm256_set1_ps(super::SURE);
-        let tiny = _mm256_set1_ps(f32::MIN_POSITIVE);
         for (p, m) in packs.iter().zip(out.iter_mut()) {
-            // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
-            // (`TriColumns` is 32-byte aligned, each column 32 bytes).
-            let col = |i: usize, a: usize| {
-                _mm256_sub_ps(
-                    unsafe { _mm256_load_ps(p.cols[3 * i + a].as_ptr()) },
-                    org[a],
-                )
-            };
-            let vert = |i: usize| {
-                let (x, y, z) = (col(i, kx), col(i, ky), col(i, kz));
-                (
-                    _mm256_sub_ps(x, _mm256_mul_ps(sx, z)),
-                    _mm256_sub_ps(y, _mm256_mul_ps(sy, z)),
-                    _mm256_mul_ps(sz, z),
-                )
-            };
-            let (ax, ay, az) = vert(0);
-            let (bx, by, bz) = vert(1);
-            let (cx, cy, cz) = vert(2);
-            let abs = |x| _mm256_andnot_ps(sign, x);
-            // The edge function `a b - c d` and whether its sign is unsure.
-            let edge = |a: __m256, b: __m256, c: __m256, d: __m256| {
-                let (p, q) = (_mm256_mul_ps(a, b), _mm256_mul_ps(c, d));
-                let e = _mm256_sub_ps(p, q);
-                let bound = _mm256_add_ps(_mm256_mul_ps(_mm256_add_ps(abs(p), abs(q)), sure), tiny);
-                (e, _mm256_cmp_ps::<_CMP_LE_OQ>(abs(e), bound))
-            };
-            let (u, uu) = edge(cx, by, cy, bx);
-            let (v, uv) = edge(ax, cy, ay, cx);
-            let (w, uw) = edge(bx, ay, by, ax);
+            let [ax, ay, az] = avx2_vert(p, 0, sh.k, &org, &s);
+            let [bx, by, bz] = avx2_vert(p, 1, sh.k, &org, &s);
+            let [cx, cy, cz] = avx2_vert(p, 2, sh.k, &org, &s);
+            let (u, uu) = avx2_edge(cx, by, cy, bx);
+            let (v, uv) = avx2_edge(ax, cy, ay, cx);
+            let (w, uw) = avx2_edge(bx, ay, by, ax);
             let gt = |x| _mm256_cmp_ps::<_CMP_GT_OQ>(x, zero);
             let lt = |x| _mm256_cmp_ps::<_CMP_LT_OQ>(x, zero);
-            let on_edge = _mm256_or_ps(_mm256_or_ps(uu, uv), uw);
+            let on_edge = _mm256_movemask_ps(_mm256_or_ps(_mm256_or_ps(uu, uv), uw)) as u32;
             let pos = _mm256_and_ps(_mm256_and_ps(gt(u), gt(v)), gt(w));
             let neg = _mm256_and_ps(_mm256_and_ps(lt(u), lt(v)), lt(w));
+            let sided = _mm256_movemask_ps(_mm256_or_ps(pos, neg)) as u32;
+            if sided & !on_edge == 0 {
+                *m = on_edge;
+                continue;
+            }
             let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
             let tt = _mm256_add_ps(
                 _mm256_add_ps(_mm256_mul_ps(u, az), _mm256_mul_ps(v, bz)),
                 _mm256_mul_ps(w, cz),
             );
             let t = _mm256_div_ps(tt, det);
-            let ok = _mm256_and_ps(
-                _mm256_and_ps(
-                    _mm256_cmp_ps::<_CMP_GE_OQ>(t, tmin),
-                    _mm256_cmp_ps::<_CMP_LE_OQ>(t, tmax),
-                ),
-                _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_andnot_ps(sign, t), inf),
-            );
-            let pass = _mm256_or_ps(on_edge, _mm256_and_ps(_mm256_or_ps(pos, neg), ok));
-            *m = _mm256_movemask_ps(pass) as u32;
+            let ok = _mm256_movemask_ps(avx2_in_range(t, tmin, tmax)) as u32;
+            *m = on_edge | (sided & ok);
         }
     }
 

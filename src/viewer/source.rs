@@ -128,7 +128,7 @@ pub struct Overrides {
 }
 
 /// The model keys that hold paths, relative to the scene file's folder.
-const PATH_KEYS: [&str; 5] = ["points", "splats", "gaussians", "mesh", "truth"];
+const PATH_KEYS: [&str; 6] = ["points", "splats", "gaussians", "mesh", "triangles", "truth"];
 
 impl Source {
     /// Loads `path`: a scene file, or a point cloud with the scene
