@@ -299,35 +299,19 @@ impl Cache {
     }
 
     /// The cached points within squared distance `bound` of `q`, as keys.
-    #[allow(clippy::needless_range_loop)] // the lanes indexed alike, to vectorise
     fn within(&self, q: [f32; 3], bound: f32, keys: &mut Vec<u64>) {
-        // Eight at a time, the distances first (vectorised), then the few
-        // within the bound taken.
-        const L: usize = 8;
-        let n = self.items.len();
-        let whole = n - n % L;
-        let mut d = [0f32; L];
-        for j in (0..whole).step_by(L) {
-            let (x, y, z) = (&self.x[j..j + L], &self.y[j..j + L], &self.z[j..j + L]);
-            let mut any = false;
-            for l in 0..L {
-                d[l] = dist_sq([x[l], y[l], z[l]], q);
-                any |= d[l] <= bound;
-            }
-            if any {
-                for (&dl, &item) in d.iter().zip(&self.items[j..j + L]) {
-                    if dl <= bound {
-                        keys.push(key(dl, item));
-                    }
-                }
-            }
+        // Without a branch on the bound (half the points pass it, at
+        // random): every key is written, and the next one lands after it
+        // only where it passed.
+        let start = keys.len();
+        keys.resize(start + self.items.len(), 0);
+        let mut len = start;
+        for (((&x, &y), &z), &item) in self.x.iter().zip(&self.y).zip(&self.z).zip(&self.items) {
+            let d = dist_sq([x, y, z], q);
+            keys[len] = key(d, item);
+            len += usize::from(d <= bound);
         }
-        for j in whole..n {
-            let d = dist_sq([self.x[j], self.y[j], self.z[j]], q);
-            if d <= bound {
-                keys.push(key(d, self.items[j]));
-            }
-        }
+        keys.truncate(len);
     }
 }
 
