@@ -138,7 +138,7 @@ fn nearest_row(
     row: &mut [u32],
 ) -> f32 {
     let k = row.len();
-    let found = nearest.query(tree, points[i], k + 1);
+    let found = nearest.query(tree, points, points[i], k + 1);
     let mut len = 0usize;
     let mut last = 0f32;
     for &(d, item) in found {
@@ -184,9 +184,17 @@ const BOUND_GROWTH_SQ: f32 = 1.44;
 
 /// Exact `m`-nearest queries for points visited in spatial (Morton) order,
 /// without a result heap: all points within a bound taken from the
-/// previous query (`within_unsorted`), the `m` nearest of them selected,
-/// and an unbounded `nearest_n` (and the ties of its last) only where the
-/// bound holds fewer than `m`.
+/// previous query, the `m` nearest of them selected, and an unbounded
+/// `nearest_n` (and the ties of its last) only where the bound holds fewer
+/// than `m`.
+///
+/// The points within the bound come from a cache: one tree query
+/// (`within_unsorted`) of a ball [`cache_reach`] times the bound's radius
+/// serves every following query whose own ball it holds (consecutive
+/// points in Morton order lie close), each then a linear scan of the
+/// cached points. The distances are the tree's own sum, so the set is the
+/// tree's bit for bit (each refill checks it, and queries the tree itself
+/// from then on where the points given are not the tree's).
 /// One per thread (the bound carries from one query to the next); results
 /// in `found`, sorted by (squared distance, index), the query point itself
 /// included when it is one of the tree's.
@@ -199,9 +207,112 @@ pub struct Nearest<'t> {
     pub found: Vec<(f32, u32)>,
     /// Scratch: the candidates as [`key`]s.
     keys: Vec<u64>,
+    /// The cached ball: its centre, its radius (none yet: not positive)
+    /// and the points in it, coordinates apart, with their indices.
+    cache: Cache,
     /// Queries made, and where they are counted.
     queries: usize,
     tally: Option<&'t Tally>,
+}
+
+/// [`Nearest`]'s cached ball of points.
+#[derive(Default)]
+struct Cache {
+    centre: [f32; 3],
+    radius: f32,
+    x: Vec<f32>,
+    y: Vec<f32>,
+    z: Vec<f32>,
+    items: Vec<u32>,
+    /// The points given were not the tree's: no cache.
+    off: bool,
+    /// Tree queries that filled it.
+    fills: usize,
+    /// Its radius over the radius of the query that filled it.
+    reach: f32,
+}
+
+/// A cached ball's radius, in radii of the bound that filled it, for
+/// queries of `m` points: about [`CACHE_POINTS`] points on a surface, at
+/// least twice the radius (four times the points of one query, reused
+/// while the query point stays within one radius of its centre).
+fn cache_reach(m: usize) -> f32 {
+    (CACHE_POINTS / (BOUND_GROWTH_SQ * m.max(1) as f32))
+        .sqrt()
+        .max(2.0)
+}
+
+/// See [`cache_reach`].
+const CACHE_POINTS: f32 = 200.0;
+
+/// The relative margin by which a query's ball must lie inside the cached
+/// one, far above the rounding of squared distances in `f32`.
+const CACHE_MARGIN: f32 = 1e-4;
+
+/// The tree's squared distance (`SquaredEuclidean`'s sum, in its order).
+#[inline]
+fn dist_sq(a: [f32; 3], b: [f32; 3]) -> f32 {
+    let (dx, dy, dz) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
+    dx * dx + dy * dy + dz * dz
+}
+
+impl Cache {
+    /// Whether the ball of radius `r` round `q` lies inside the cached one,
+    /// and that one is at most twice the size a fill for it would take (a
+    /// ball filled round an outlier, wide as the cloud, is not scanned for
+    /// the small neighbourhoods after it).
+    fn holds(&self, q: [f32; 3], r: f32) -> bool {
+        self.radius > 0.0
+            && self.radius <= 2.0 * self.reach * r
+            && (dist_sq(q, self.centre).sqrt() + r) * (1.0 + CACHE_MARGIN) <= self.radius
+    }
+
+    /// The points of `tree` (whose coordinates are `points`) within
+    /// `radius` of `q`; turned off where `points` are not the tree's.
+    fn fill(&mut self, tree: &PointTree, points: &[Vec3], q: [f32; 3], reach: f32, r: f32) {
+        let radius = reach * r;
+        self.reach = reach;
+        self.fills += 1;
+        self.centre = q;
+        self.radius = radius;
+        self.x.clear();
+        self.y.clear();
+        self.z.clear();
+        self.items.clear();
+        for f in tree.within_unsorted::<SquaredEuclidean>(&q, radius * radius) {
+            let Some(p) = points.get(f.item as usize) else {
+                self.off = true;
+                break;
+            };
+            if dist_sq(p.to_array(), q).to_bits() != f.distance.to_bits() {
+                self.off = true;
+                break;
+            }
+            self.x.push(p.x);
+            self.y.push(p.y);
+            self.z.push(p.z);
+            self.items.push(f.item);
+        }
+        if self.off {
+            self.radius = 0.0;
+        }
+    }
+
+    /// The cached points within squared distance `bound` of `q`, as keys.
+    fn within(&self, q: [f32; 3], bound: f32, keys: &mut Vec<u64>) {
+        // Without a branch on the bound (half the points pass it, at
+        // random): every key is written, and the next one lands after it
+        // only where it passed.
+        let start = keys.len();
+        keys.resize(start + self.items.len(), 0);
+        let mut len = start;
+        for (((&x, &y), &z), &item) in self.x.iter().zip(&self.y).zip(&self.z).zip(&self.items) {
+            let d = dist_sq([x, y, z], q);
+            keys[len] = key(d, item);
+            len += usize::from(d <= bound);
+        }
+        keys.truncate(len);
+    }
 }
 
 impl Drop for Nearest<'_> {
@@ -220,6 +331,7 @@ impl<'t> Nearest<'t> {
             bound: f32::INFINITY,
             found: Vec::new(),
             keys: Vec::new(),
+            cache: Cache::default(),
             queries: 0,
             tally: None,
         }
@@ -232,6 +344,7 @@ impl<'t> Nearest<'t> {
             bound: f32::INFINITY,
             found: Vec::new(),
             keys: Vec::new(),
+            cache: Cache::default(),
             queries: 0,
             tally: Some(tally),
         }
@@ -242,10 +355,10 @@ impl<'t> Nearest<'t> {
         self.queries += 1;
     }
 
-    /// The `m` nearest points of `tree` to `q` into [`Nearest::found`]
-    /// (fewer only when the tree holds fewer), nearest first, ties by
-    /// index.
-    pub fn query(&mut self, tree: &PointTree, q: Vec3, m: usize) -> &[(f32, u32)] {
+    /// The `m` nearest points of `tree` (whose coordinates are `points`)
+    /// to `q` into [`Nearest::found`] (fewer only when the tree holds
+    /// fewer), nearest first, ties by index.
+    pub fn query(&mut self, tree: &PointTree, points: &[Vec3], q: Vec3, m: usize) -> &[(f32, u32)] {
         self.queries += 1;
         self.found.clear();
         self.keys.clear();
@@ -254,11 +367,19 @@ impl<'t> Nearest<'t> {
         };
         let q = q.to_array();
         if self.bound.is_finite() {
-            self.keys.extend(
-                tree.within_unsorted::<SquaredEuclidean>(&q, self.bound)
-                    .into_iter()
-                    .map(|f| key(f.distance, f.item)),
-            );
+            let r = self.bound.sqrt();
+            if !self.cache.off && !self.cache.holds(q, r) {
+                self.cache.fill(tree, points, q, cache_reach(m), r);
+            }
+            if self.cache.off {
+                self.keys.extend(
+                    tree.within_unsorted::<SquaredEuclidean>(&q, self.bound)
+                        .into_iter()
+                        .map(|f| key(f.distance, f.item)),
+                );
+            } else {
+                self.cache.within(q, self.bound, &mut self.keys);
+            }
         }
         if self.keys.len() < m {
             // Too few within the bound: the m nearest found without one,
@@ -336,7 +457,7 @@ mod tests {
         for m in [1usize, 13, 49, 120] {
             for (i, &p) in pts.iter().enumerate() {
                 let had_bound = near.bound.is_finite();
-                let got: Vec<(f32, u32)> = near.query(&tree, p, m).to_vec();
+                let got: Vec<(f32, u32)> = near.query(&tree, &pts, p, m).to_vec();
                 bounded += usize::from(had_bound);
                 let mut all: Vec<(f32, u32)> = pts
                     .iter()
@@ -349,8 +470,27 @@ mod tests {
                 assert_eq!(ids, want, "point {i}, m = {m}");
             }
         }
-        // Most queries took the bound of the one before.
+        // Most queries took the bound of the one before, and most of
+        // those were served by the cached ball (measured: FILLS of them
+        // filled it).
         assert!(bounded * 2 > 4 * pts.len(), "{bounded}");
+        assert!(near.cache.fills * 4 < bounded, "{} of {bounded}", near.cache.fills);
+        // Points that are not the tree's turn the cache off, and the
+        // answers are still exact (from the tree).
+        let moved: Vec<Vec3> = pts.iter().map(|p| *p + Vec3::X).collect();
+        let mut near = Nearest::new();
+        for (i, &p) in pts.iter().enumerate().take(200) {
+            let got: Vec<u32> = near.query(&tree, &moved, p, 13).iter().map(|f| f.1).collect();
+            let mut all: Vec<(f32, u32)> = pts
+                .iter()
+                .enumerate()
+                .map(|(j, q)| (p.distance_squared(*q), j as u32))
+                .collect();
+            all.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            let want: Vec<u32> = all[..13].iter().map(|f| f.1).collect();
+            assert_eq!(got, want, "point {i}, points not the tree's");
+        }
+        assert!(near.cache.off);
     }
 
     /// A graph repaired around dropped points ([`Knn::without`]) is the

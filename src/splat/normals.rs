@@ -236,7 +236,7 @@ pub fn estimate_multiscale(
                         // the bounded query of Morton-ordered points (with
                         // one more, the face search's, where it settles).
                         let ask = if settle_tol.is_some() { face_m } else { m };
-                        let found = nearest.query(tree, points[i], ask);
+                        let found = nearest.query(tree, points, points[i], ask);
                         items.extend(found.iter().map(|f| f.1));
                     } else {
                         nearest.count_other();
@@ -787,7 +787,7 @@ impl FaceSearch<'_> {
             wide,
             all,
         } = scratch;
-        let found = nearest.query(self.tree, p, self.m);
+        let found = nearest.query(self.tree, self.points, p, self.m);
         near.clear();
         near.extend(found.iter().map(|f| f.1 as usize).filter(|&j| j != i));
         wide.clear();

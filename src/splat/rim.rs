@@ -111,6 +111,10 @@ pub const BORDER_HEIGHT: f32 = 0.5;
 /// the last one inside the disc; a face going on fills the band.
 pub const BORDER_FILL: f32 = 0.1;
 
+/// The points past the rim are counted this many at a time, the count
+/// stopping once it shows no border ([`Lines::border`]).
+const BEYOND_CHUNK: usize = 16;
+
 /// What the clip lines are measured against: the cloud, its normals and
 /// kd-tree, `ϵ`, and the cosine at which a neighbour's normal turns onto
 /// another face ([`super::grow::CREASE_DEG`]).
@@ -510,22 +514,26 @@ impl<'a> Lines<'a> {
                 .max(0.0)
                 .sqrt()
                 .max(BORDER_HALF_SPACINGS * spacing);
-            let count = self
-                .beyond
-                .iter()
-                .filter(|m| {
-                    let s = w.dot(m.q);
-                    s > ext && s <= band && w.perp_dot(m.q).abs() <= half
-                })
-                .count();
             // What a face going on puts in the whole band (over
             // spacing²): `expected` below with the outside's share 1, the
             // same products in the same order, so never less than it (each
             // rounding is monotonic): a count reaching its share of the
-            // whole is no border whatever the outside's share.
+            // whole is no border whatever the outside's share. The count
+            // stops there (inside a surface, after a tenth of the band's
+            // points).
             let whole = (band - ext) * 2.0 * half / (spacing * spacing);
-            if count as f32 >= BORDER_FILL * whole {
-                return None;
+            let mut count = 0usize;
+            for chunk in self.beyond.chunks(BEYOND_CHUNK) {
+                count += chunk
+                    .iter()
+                    .filter(|m| {
+                        let s = w.dot(m.q);
+                        s > ext && s <= band && w.perp_dot(m.q).abs() <= half
+                    })
+                    .count();
+                if count as f32 >= BORDER_FILL * whole {
+                    return None;
+                }
             }
             // The band's area outside the disc (a grid's share of
             // it), over spacing²: what a face going on puts there.
