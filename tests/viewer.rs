@@ -69,22 +69,21 @@ fn render_saved_with(dir: &Path, name: &str, text: &str, backend: &str) -> Vec<u
     std::fs::read(&out).unwrap()
 }
 
+/// The viewer of `input` serving `width` × `height` frames, refined at
+/// `spp` samples a pixel.
+fn serve(input: &str, width: u32, height: u32, spp: u32) -> Server {
+    let (w, h, spp) = (width.to_string(), height.to_string(), spp.to_string());
+    Server::start(
+        Path::new(BIN),
+        &[input, "--width", &w, "--height", &h, "--refine-spp", &spp],
+    )
+}
+
 #[test]
 fn the_viewer_in_chromium() {
     // Small frames keep it quick: 160x120, refined at 16 samples (slow
     // enough, about 0.3 s, for the tab to close while it renders).
-    let mut server = Server::start(
-        Path::new(BIN),
-        &[
-            &bunny(),
-            "--width",
-            "160",
-            "--height",
-            "120",
-            "--refine-spp",
-            "16",
-        ],
-    );
+    let mut server = serve(&bunny(), 160, 120, 16);
     let mut b = Browser::start(400, 320);
     b.open(&server.url);
 
@@ -316,18 +315,7 @@ fn the_viewer_in_chromium() {
 /// next page (no browser needed).
 #[test]
 fn an_oversized_request_is_refused() {
-    let server = Server::start(
-        Path::new(BIN),
-        &[
-            &bunny(),
-            "--width",
-            "32",
-            "--height",
-            "24",
-            "--refine-spp",
-            "1",
-        ],
-    );
+    let server = serve(&bunny(), 32, 24, 1);
     let connect = || {
         let s = std::net::TcpStream::connect(server.authority()).unwrap();
         s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
@@ -440,18 +428,7 @@ fn clouds_save_the_scene_of_their_frames() {
     ];
     for (k, path) in clouds.iter().enumerate() {
         let cloud = path.display().to_string();
-        let server = Server::start(
-            Path::new(BIN),
-            &[
-                &cloud,
-                "--width",
-                "64",
-                "--height",
-                "48",
-                "--refine-spp",
-                "1",
-            ],
-        );
+        let server = serve(&cloud, 64, 48, 1);
         let (mut s, hello) = Session::open(&server);
         let organised = *path == scan;
         assert_eq!(hello["sensor"].is_object(), organised, "{hello}");
@@ -574,18 +551,7 @@ fn the_saved_camera_is_the_one_the_page_sent() {
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data");
     let inputs = [bunny(), data.join("milk.pcd").display().to_string()];
     for input in &inputs {
-        let server = Server::start(
-            Path::new(BIN),
-            &[
-                input,
-                "--width",
-                "64",
-                "--height",
-                "48",
-                "--refine-spp",
-                "1",
-            ],
-        );
+        let server = serve(input, 64, 48, 1);
         let mut b = Browser::start(400, 320);
         b.open(&server.url);
         b.wait_for("!!(window.viewer && viewer.hello)", T, "the page's hello");
@@ -729,18 +695,7 @@ fn the_saved_camera_is_the_one_the_page_sent() {
 fn the_viewer_opens_the_hybrid_scene() {
     let hybrid = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/hybrid.toml");
     let dir = TempDir::new("viewer-hybrid");
-    let server = Server::start(
-        Path::new(BIN),
-        &[
-            &hybrid.display().to_string(),
-            "--width",
-            "64",
-            "--height",
-            "48",
-            "--refine-spp",
-            "1",
-        ],
-    );
+    let server = serve(&hybrid.display().to_string(), 64, 48, 1);
     let (mut s, hello) = Session::open(&server);
     assert_eq!(hello["width"], 64, "{hello}");
     let (h, full) = s.frame("full");

@@ -428,6 +428,17 @@ fn key(distance: f32, item: u32) -> u64 {
 mod tests {
     use super::*;
 
+    /// The `m` nearest of `pts` to `p` by sorting them all, ties by index.
+    fn brute_nearest(pts: &[Vec3], p: Vec3, m: usize) -> Vec<u32> {
+        let mut all: Vec<(f32, u32)> = pts
+            .iter()
+            .enumerate()
+            .map(|(j, q)| (p.distance_squared(*q), j as u32))
+            .collect();
+        all.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        all[..m].iter().map(|f| f.1).collect()
+    }
+
     /// The bounded queries of [`Nearest`] find exactly the `m` nearest, ties
     /// by index, whether the bound held enough points or the unbounded
     /// query ran: checked against a brute-force sort on a cloud with a
@@ -459,15 +470,8 @@ mod tests {
                 let had_bound = near.bound.is_finite();
                 let got: Vec<(f32, u32)> = near.query(&tree, &pts, p, m).to_vec();
                 bounded += usize::from(had_bound);
-                let mut all: Vec<(f32, u32)> = pts
-                    .iter()
-                    .enumerate()
-                    .map(|(j, q)| (p.distance_squared(*q), j as u32))
-                    .collect();
-                all.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
                 let ids: Vec<u32> = got.iter().map(|f| f.1).collect();
-                let want: Vec<u32> = all[..m].iter().map(|f| f.1).collect();
-                assert_eq!(ids, want, "point {i}, m = {m}");
+                assert_eq!(ids, brute_nearest(&pts, p, m), "point {i}, m = {m}");
             }
         }
         // Most queries took the bound of the one before, and most of
@@ -481,14 +485,7 @@ mod tests {
         let mut near = Nearest::new();
         for (i, &p) in pts.iter().enumerate().take(200) {
             let got: Vec<u32> = near.query(&tree, &moved, p, 13).iter().map(|f| f.1).collect();
-            let mut all: Vec<(f32, u32)> = pts
-                .iter()
-                .enumerate()
-                .map(|(j, q)| (p.distance_squared(*q), j as u32))
-                .collect();
-            all.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            let want: Vec<u32> = all[..13].iter().map(|f| f.1).collect();
-            assert_eq!(got, want, "point {i}, points not the tree's");
+            assert_eq!(got, brute_nearest(&pts, p, 13), "point {i}, points not the tree's");
         }
         assert!(near.cache.off);
     }
