@@ -125,6 +125,27 @@ impl Pack<ClippedDisc> for ClippedPack {
         super::disc::pack_masks(packs, ray, isa, out);
     }
 
+    /// [`DiscPack`]'s masks of the packs `packs[at[j]]` in one call.
+    #[inline]
+    fn masks_at(packs: &[Self], at: &[u32], ray: &PackRay, isa: simd::Isa, out: &mut [u32]) {
+        super::disc::pack_masks_at(packs, at, ray, isa, out);
+    }
+
+    /// [`DiscPack`]'s per-ray masks of the packs `packs[at[j]]` in one
+    /// call.
+    #[inline]
+    fn masks_rays_at(
+        packs: &[Self],
+        at: &[u32],
+        rays: &PackRays,
+        active: u32,
+        isa: simd::Isa,
+        out: &mut [[u32; simd::RAYS]],
+        any: &mut [u32],
+    ) {
+        super::disc::pack_masks_rays_at(packs, at, rays, active, isa, out, any);
+    }
+
     /// [`DiscPack`]'s per-ray masks on the path `isa`:
     /// [`simd::disc_masks_rays`] over the packs' discs in one call.
     #[inline]

@@ -1,7 +1,7 @@
 //! The oriented elliptical disc of a splat (§2.1, fig. 3): the primitive of
 //! every scene today.
 
-use super::{Hit, Local, Pack, PackRay, PackRays, Primitive};
+use super::{AT_CHUNK, Hit, Local, Pack, PackRay, PackRays, Primitive};
 use crate::geometry::Ray;
 use crate::simd;
 use glam::Vec3;
@@ -257,6 +257,28 @@ impl Pack<Disc> for DiscPack {
         pack_masks(packs, ray, isa, out);
     }
 
+    /// [`simd::disc_masks`] of the packs `packs[at[j]]` in one call
+    /// ([`pack_masks_at`]).
+    #[inline]
+    fn masks_at(packs: &[Self], at: &[u32], ray: &PackRay, isa: simd::Isa, out: &mut [u32]) {
+        pack_masks_at(packs, at, ray, isa, out);
+    }
+
+    /// [`simd::disc_masks_rays`] of the packs `packs[at[j]]` in one call
+    /// ([`pack_masks_rays_at`]).
+    #[inline]
+    fn masks_rays_at(
+        packs: &[Self],
+        at: &[u32],
+        rays: &PackRays,
+        active: u32,
+        isa: simd::Isa,
+        out: &mut [[u32; simd::RAYS]],
+        any: &mut [u32],
+    ) {
+        pack_masks_rays_at(packs, at, rays, active, isa, out, any);
+    }
+
     /// [`simd::disc_masks_rays`]: each pack and its `n·(o - c)` once for
     /// all the rays (the lanes of [`DiscPack::masks`] per ray, less those
     /// whose disc lies beyond its radius from the rays' cone).
@@ -311,6 +333,41 @@ pub(super) fn pack_masks_rays<C: AsRef<DiscPack>>(
         out,
         any,
     );
+}
+
+/// [`pack_masks`] of the packs `packs[at[j]]`, [`AT_CHUNK`] indices a
+/// call: the kernels take a list of references as they take a slice of
+/// packs (the same operations on the same lanes, read where they are).
+#[inline]
+pub(super) fn pack_masks_at<C: AsRef<DiscPack>>(
+    packs: &[C],
+    at: &[u32],
+    ray: &PackRay,
+    isa: simd::Isa,
+    out: &mut [u32],
+) {
+    for (c, at) in at.chunks(AT_CHUNK).enumerate() {
+        let refs: [&C; AT_CHUNK] = std::array::from_fn(|j| &packs[at[j.min(at.len() - 1)] as usize]);
+        pack_masks(&refs[..at.len()], ray, isa, &mut out[c * AT_CHUNK..]);
+    }
+}
+
+/// [`pack_masks_rays`] of the packs `packs[at[j]]`, as [`pack_masks_at`].
+#[inline]
+pub(super) fn pack_masks_rays_at<C: AsRef<DiscPack>>(
+    packs: &[C],
+    at: &[u32],
+    rays: &PackRays,
+    active: u32,
+    isa: simd::Isa,
+    out: &mut [[u32; simd::RAYS]],
+    any: &mut [u32],
+) {
+    for (c, at) in at.chunks(AT_CHUNK).enumerate() {
+        let refs: [&C; AT_CHUNK] = std::array::from_fn(|j| &packs[at[j.min(at.len() - 1)] as usize]);
+        let (o, a) = (&mut out[c * AT_CHUNK..], &mut any[c * AT_CHUNK..]);
+        pack_masks_rays(&refs[..at.len()], rays, active, isa, o, a);
+    }
 }
 
 #[cfg(test)]
@@ -370,6 +427,63 @@ mod tests {
             }
         }
         assert!(hits > 1000, "the rays should often hit: {hits}");
+    }
+
+    #[test]
+    fn masks_at_are_the_masks_of_each_listed_pack_on_every_path() {
+        // 40 packs of discs around the origin, lists of indices in any
+        // order (repeats, runs, longer than a call takes), rays sharing
+        // an origin: on every SIMD path the listed packs' masks, single
+        // ray and per ray of a packet, are each pack's own.
+        let mut rng = SplitMix64::new(0x55_0004);
+        let mut rnd = || rng.next_f32() - 0.5;
+        let packs: Vec<DiscPack> = (0..40)
+            .map(|_| {
+                let discs: [Option<Disc>; LANES] = std::array::from_fn(|_| {
+                    let (c, n) = (Vec3::new(rnd(), rnd(), rnd()), Vec3::new(rnd(), rnd(), rnd()));
+                    Splat::disc(c, n, 0.15 + 0.2 * rnd().abs()).map(|s| s.disc_geometry())
+                });
+                DiscPack::from_fn(|l| discs[l])
+            })
+            .collect();
+        let origin = Vec3::new(0.3, 2.5, 4.0);
+        let mut set = 0;
+        for trial in 0..60 {
+            let len = 1 + trial % 37;
+            let at: Vec<u32> = (0..len)
+                .map(|j| if trial % 3 == 0 { (trial + j) as u32 % 40 } else { (rnd().abs() * 79.0) as u32 % 40 })
+                .collect();
+            let dirs: [[f32; 3]; simd::RAYS] =
+                std::array::from_fn(|_| (Vec3::new(rnd(), rnd(), rnd()) * 0.8 - origin).to_array());
+            let t_max = if trial % 4 == 0 { 5.0 } else { f32::INFINITY };
+            let cols: [[f32; simd::RAYS]; 3] = std::array::from_fn(|a| dirs.map(|d| d[a]));
+            let rays = PackRays {
+                origin: origin.to_array(),
+                dir: dirs,
+                t_min: [0.0; simd::RAYS],
+                t_max: [t_max; simd::RAYS],
+                cone: if trial % 2 == 0 { simd::Cone::around(&cols) } else { None },
+            };
+            let active = 0b1011_0111;
+            for isa in simd::available() {
+                let ray = PackRay::new(&Ray::new(origin, Vec3::from(dirs[0])), 0.0, t_max);
+                let mut got = vec![0; len];
+                DiscPack::masks_at(&packs, &at, &ray, isa, &mut got);
+                let (mut out, mut any) = (vec![[0; simd::RAYS]; len], vec![0; len]);
+                DiscPack::masks_rays_at(&packs, &at, &rays, active, isa, &mut out, &mut any);
+                for (j, &p) in at.iter().enumerate() {
+                    let one = std::slice::from_ref(&packs[p as usize]);
+                    let mut m = [0];
+                    DiscPack::masks(one, &ray, isa, &mut m);
+                    assert_eq!(got[j], m[0], "{isa:?}, list {trial}, entry {j}");
+                    let (mut o, mut a) = ([[0; simd::RAYS]], [0]);
+                    DiscPack::masks_rays(one, &rays, active, isa, &mut o, &mut a);
+                    assert_eq!((out[j], any[j]), (o[0], a[0]), "{isa:?}, list {trial}, entry {j}");
+                    set += usize::from(m[0] != 0) + usize::from(a[0] != 0);
+                }
+            }
+        }
+        assert!(set > 500, "the rays should pass lanes often: {set}");
     }
 
     #[test]

@@ -228,7 +228,58 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
             }
         }
     }
+
+    /// [`Pack::masks`] of the packs `packs[at[j]]` into `out[j]` (the
+    /// packs a leaf of the octree's shared layout lists, not all
+    /// consecutive). Here: one [`Pack::masks`] call per run of consecutive
+    /// indices; a pack with a SIMD filter takes them all in one call.
+    #[inline]
+    fn masks_at(packs: &[Self], at: &[u32], ray: &PackRay, isa: crate::simd::Isa, out: &mut [u32]) {
+        let mut j = 0;
+        while j < at.len() {
+            let p = at[j] as usize;
+            let n = runs_from(&at[j..]);
+            Self::masks(&packs[p..p + n], ray, isa, &mut out[j..j + n]);
+            j += n;
+        }
+    }
+
+    /// [`Pack::masks_rays`] of the packs `packs[at[j]]` into `out[j]` and
+    /// `any[j]`, as [`Pack::masks_at`].
+    #[inline]
+    fn masks_rays_at(
+        packs: &[Self],
+        at: &[u32],
+        rays: &PackRays,
+        active: u32,
+        isa: crate::simd::Isa,
+        out: &mut [[u32; crate::simd::RAYS]],
+        any: &mut [u32],
+    ) {
+        let mut j = 0;
+        while j < at.len() {
+            let p = at[j] as usize;
+            let n = runs_from(&at[j..]);
+            let (o, a) = (&mut out[j..j + n], &mut any[j..j + n]);
+            Self::masks_rays(&packs[p..p + n], rays, active, isa, o, a);
+            j += n;
+        }
+    }
 }
+
+/// How many indices at the start of `at` (not empty) are consecutive.
+#[inline]
+fn runs_from(at: &[u32]) -> usize {
+    1 + at[1..]
+        .iter()
+        .zip(1..)
+        .take_while(|&(&a, d)| a == at[0] + d)
+        .count()
+}
+
+/// Packs filtered per call by [`Pack::masks_at`] on a SIMD path (the
+/// longest list of indices taken at once; longer ones are cut).
+pub(crate) const AT_CHUNK: usize = 16;
 
 /// The pack of a primitive with no SIMD filter: one primitive, tested by
 /// [`Primitive::intersect`] itself (`None` is padding).

@@ -99,11 +99,12 @@ pub enum Layout {
     /// Every primitive stored once, in packs grouped by the leaves that
     /// reference them (a leaf's own primitives together, then those it
     /// shares with one neighbour); a leaf lists the packs it needs with a
-    /// mask of the lanes it references, and consecutive packs are filtered
-    /// in one call. Half the memory of [`Layout::Copies`] on the accel
-    /// benchmark's surface, 1.6 times its pack tests per leaf (in Morton
-    /// order 2.2), 0.6-0.9 of its speed (`docs/notes/backends.md`, issue
-    /// 55 round 3; round `octree-perf4` for the Morton order).
+    /// mask of the lanes it references, and its list goes to the filter 16
+    /// packs a call wherever they lie ([`crate::primitive::Pack::masks_at`]).
+    /// Half the memory of [`Layout::Copies`] on the accel benchmark's
+    /// surface, 1.5 times its pack tests per leaf (in Morton order 2.2),
+    /// 0.7-0.85 of its speed (`docs/notes/backends.md`, issue 55 rounds 3
+    /// and 4; round `octree-perf4` for the Morton order).
     Shared,
     /// [`Layout::Copies`] while the copies' packs would take at most this
     /// many bytes, [`Layout::Shared`] beyond: the copies are 10–20 %

@@ -315,15 +315,22 @@ impl<P: Primitive> Tree<P> {
         let range = node.first as usize..(node.first + node.meta) as usize;
         let l = lanes::<P>();
         let mut stopped = 0;
-        // Consecutive packs (lanes `lanes[j]` of pack `j`, ids `ids`, pack
-        // after pack; at most LEAF_CHUNK) for every active ray, filtered in one call; false once no
-        // ray is left. A window narrowed within the call only leaves the
-        // filter looser (each lane is decided by the visitor).
-        let mut chunk = |packs: &[P::Pack], ids: &[u32], lanes: &[u32]| {
+        // The packs `at` (lanes `lanes[j]` of pack `at[j]`; at most
+        // LEAF_CHUNK) for every active ray, filtered in one call; false
+        // once no ray is left. A window narrowed within the call only
+        // leaves the filter looser (each lane is decided by the visitor).
+        let mut chunk = |at: &[u32], lanes: &[u32]| {
             let mut masks = [[0; PACKET]; LEAF_CHUNK];
             let mut passed = [0; LEAF_CHUNK];
-            P::Pack::masks_rays(packs, &rays, active, self.isa, &mut masks, &mut passed);
-            for (j, pack) in packs.iter().enumerate() {
+            if self.shared {
+                P::Pack::masks_rays_at(&self.packs, at, &rays, active, self.isa, &mut masks, &mut passed);
+            } else {
+                let packs = &self.packs[at[0] as usize..at[0] as usize + at.len()];
+                P::Pack::masks_rays(packs, &rays, active, self.isa, &mut masks, &mut passed);
+            }
+            for (j, &p) in at.iter().enumerate() {
+                let pack = &self.packs[p as usize];
+                let ids = &self.pack_ids[p as usize * l..(p as usize + 1) * l];
                 let mut left = passed[j] & active;
                 while left != 0 {
                     let k = left.trailing_zeros() as usize;
@@ -333,7 +340,6 @@ impl<P: Primitive> Tree<P> {
                         continue;
                     }
                     let Some(v) = vis[k].as_mut() else { continue };
-                    let ids = &ids[j * l..(j + 1) * l];
                     while m != 0 {
                         let lane = m.trailing_zeros() as usize;
                         m &= m - 1;
@@ -352,36 +358,23 @@ impl<P: Primitive> Tree<P> {
             true
         };
         if self.shared {
-            // Entries of consecutive packs filtered together, as in
-            // `Tree::leaf`.
-            let entries = &self.entries[range];
-            let mut i = 0;
-            while i < entries.len() {
-                let p = (entries[i] & ENTRY_PACK) as usize;
+            // The leaf's entries, LEAF_CHUNK a call wherever their packs
+            // lie.
+            for entries in self.entries[range].chunks(LEAF_CHUNK) {
+                let mut at = [0; LEAF_CHUNK];
                 let mut lanes = [0; LEAF_CHUNK];
-                lanes[0] = entries[i] >> ENTRY_MASK_SHIFT;
-                let mut n = 1;
-                while n < LEAF_CHUNK
-                    && i + n < entries.len()
-                    && (entries[i + n] & ENTRY_PACK) as usize == p + n
-                {
-                    lanes[n] = entries[i + n] >> ENTRY_MASK_SHIFT;
-                    n += 1;
+                for (j, &e) in entries.iter().enumerate() {
+                    (at[j], lanes[j]) = (e & ENTRY_PACK, e >> ENTRY_MASK_SHIFT);
                 }
-                let ids = &self.pack_ids[p * l..(p + n) * l];
-                if !chunk(&self.packs[p..p + n], ids, &lanes[..n]) {
+                if !chunk(&at[..entries.len()], &lanes[..entries.len()]) {
                     break;
                 }
-                i += n;
             }
         } else {
             for start in range.clone().step_by(LEAF_CHUNK) {
                 let end = (start + LEAF_CHUNK).min(range.end);
-                if !chunk(
-                    &self.packs[start..end],
-                    &self.pack_ids[start * l..end * l],
-                    &[u32::MAX; LEAF_CHUNK][..end - start],
-                ) {
+                let at: [u32; LEAF_CHUNK] = std::array::from_fn(|j| (start + j) as u32);
+                if !chunk(&at[..end - start], &[u32::MAX; LEAF_CHUNK][..end - start]) {
                     break;
                 }
             }

@@ -197,26 +197,12 @@ impl<P: Primitive> Tree<P> {
         let range = node.first as usize..(node.first + node.meta) as usize;
         let l = lanes::<P>();
         if self.shared {
-            // One branch, the same for every leaf of the tree. Entries of
-            // consecutive packs (a leaf's own packs, stored together) go
-            // to one filter call.
+            // One branch, the same for every leaf of the tree. The
+            // entries go to the filter 16 a call, wherever their packs lie
+            // (one call for a run of consecutive packs cost a call per
+            // neighbour's group: `docs/notes/backends.md`, issue 55 round 4).
             let entries = &self.entries[range];
-            let mut i = 0;
-            while i < entries.len() {
-                let p = (entries[i] & ENTRY_PACK) as usize;
-                let mut n = 1;
-                while i + n < entries.len() && (entries[i + n] & ENTRY_PACK) as usize == p + n {
-                    n += 1;
-                }
-                let run = &entries[i..i + n];
-                let ids = &self.pack_ids[p * l..(p + n) * l];
-                let lanes = |k: usize| run[k] >> ENTRY_MASK_SHIFT;
-                if visitor.packs(&self.packs[p..p + n], ids, lanes, self.isa, &self.side) {
-                    return true;
-                }
-                i += n;
-            }
-            return false;
+            return visitor.entries(&self.packs, &self.pack_ids, entries, self.isa, &self.side);
         }
         let ids = &self.pack_ids[range.start * l..range.end * l];
         visitor.packs(&self.packs[range], ids, |_| u32::MAX, self.isa, &self.side)
@@ -447,9 +433,49 @@ pub(super) trait Visitor<P: Primitive> {
         }
         false
     }
+
+    /// [`Visitor::packs`] for a leaf of the shared layout: the packs its
+    /// `entries` list (a pack index and the mask of the lanes the leaf
+    /// references, [`ENTRY_PACK`], [`ENTRY_MASK_SHIFT`]), [`CHUNK`] entries
+    /// per filter call wherever the packs lie ([`Pack::masks_at`]), their
+    /// lanes decided in entry order.
+    #[inline(always)]
+    fn entries(
+        &mut self,
+        packs: &[P::Pack],
+        pack_ids: &[u32],
+        entries: &[u32],
+        isa: Isa,
+        side: &<P::Pack as Pack<P>>::Side,
+    ) -> bool {
+        let l = super::lanes::<P>();
+        for chunk in entries.chunks(CHUNK) {
+            let mut at = [0u32; CHUNK];
+            for (a, &e) in at.iter_mut().zip(chunk) {
+                *a = e & ENTRY_PACK;
+            }
+            let mut masks = [0u32; CHUNK];
+            let ray = self.filter();
+            <P::Pack as Pack<P>>::masks_at(packs, &at[..chunk.len()], &ray, isa, &mut masks);
+            for (j, &e) in chunk.iter().enumerate() {
+                let p = at[j] as usize;
+                let mut mask = masks[j] & (e >> ENTRY_MASK_SHIFT);
+                let ids = &pack_ids[p * l..(p + 1) * l];
+                while mask != 0 {
+                    let lane = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    if self.lane(packs[p].get(lane, ids[lane], side), ids[lane]) {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
 }
 
 /// Packs filtered per call of [`Pack::masks`] (a leaf holds a few).
+/// [`Pack::masks_at`] takes as many.
 const CHUNK: usize = 16;
 
 /// What both queries test a lane against: the ray, its lanes for the
