@@ -98,10 +98,12 @@ pub enum Layout {
     Copies,
     /// Every primitive stored once, in packs grouped by the leaves that
     /// reference them (a leaf's own primitives together, then those it
-    /// shares with one neighbour); a leaf lists the packs it needs with a
+    /// shares with one neighbour), but for the lone lanes a leaf would read
+    /// in a lower leaf's packs, copied after its own (3 % of the
+    /// references); a leaf lists the packs it needs with a
     /// mask of the lanes it references, and its list goes to the filter 16
     /// packs a call wherever they lie ([`crate::primitive::Pack::masks_at`]).
-    /// Half the memory of [`Layout::Copies`] on the accel benchmark's
+    /// About half the memory of [`Layout::Copies`] on the accel benchmark's
     /// surface, 1.5 times its pack tests per leaf (in Morton order 2.2),
     /// 0.7-0.85 of its speed (`docs/notes/backends.md`, issue 55 rounds 3
     /// and 4; round `octree-perf4` for the Morton order).
@@ -265,8 +267,8 @@ struct Tree<P: Primitive> {
     /// The primitives, `P::Pack::LANES` to a pack (SoA): with
     /// [`Layout::Copies`] each leaf's references copied in reference order
     /// (the last pack of a leaf padded with empty lanes), with
-    /// [`Layout::Shared`] every primitive once, grouped by the leaves
-    /// that reference it.
+    /// [`Layout::Shared`] every primitive once (a few twice), grouped by
+    /// the leaves that reference it.
     packs: Vec<P::Pack>,
     /// Primitive id of each lane of `packs` ([`NO_PRIMITIVE`] on padding).
     pack_ids: Vec<u32>,
