@@ -171,6 +171,12 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
         }
         pack
     }
+    /// What the filter derives from a ray's origin and direction alone,
+    /// made once per ray ([`Pack::prep`]) for every leaf the ray visits:
+    /// the triangles' shear; `()` where a pack needs nothing.
+    type Prep: Copy + Send + Sync;
+    /// The [`Pack::Prep`] of `ray` (its span is not used).
+    fn prep(ray: &PackRay) -> Self::Prep;
     /// Bit `l` set when lane `l` may be hit in the ray's span: a filter
     /// that must pass every lane [`Primitive::intersect`] hits and no padding
     /// lane; each lane passed is then decided by `intersect` itself.
@@ -184,6 +190,20 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
         for (p, m) in packs.iter().zip(out.iter_mut()) {
             *m = p.may_hit(ray);
         }
+    }
+
+    /// [`Pack::masks`] given `prep`, made by [`Pack::prep`] from this
+    /// ray's origin and direction: the same masks.
+    #[inline]
+    fn masks_prepped(
+        packs: &[Self],
+        ray: &PackRay,
+        prep: &Self::Prep,
+        isa: crate::simd::Isa,
+        out: &mut [u32],
+    ) {
+        let _ = prep;
+        Self::masks(packs, ray, isa, out);
     }
 
     /// [`Pack::may_hit`] of each of `packs` for each ray `k` set in
@@ -245,6 +265,10 @@ impl<P: Primitive> Pack<P> for Single<P> {
     fn side_bytes((): &()) -> usize {
         0
     }
+
+    type Prep = ();
+
+    fn prep(_ray: &PackRay) {}
 
     fn set(&mut self, _lane: usize, p: &P) {
         self.0 = Some(*p);

@@ -263,6 +263,13 @@ impl Pack<Triangle> for TrianglePack {
         0
     }
 
+    /// The ray's shear (Woop et al. 2013, section 3), once per ray.
+    type Prep = Option<Shear>;
+
+    fn prep(ray: &PackRay) -> Option<Shear> {
+        Shear::new(ray.dir)
+    }
+
     fn set(&mut self, lane: usize, t: &Triangle) {
         for i in 0..3 {
             for a in 0..3 {
@@ -289,6 +296,19 @@ impl Pack<Triangle> for TrianglePack {
     #[inline]
     fn masks(packs: &[Self], ray: &PackRay, isa: simd::Isa, out: &mut [u32]) {
         simd::tri_masks(packs, ray.origin, ray.dir, ray.t_min, ray.t_max, isa, out);
+    }
+
+    /// [`simd::tri_masks_sheared`] with the ray's shear made once.
+    #[inline]
+    fn masks_prepped(
+        packs: &[Self],
+        ray: &PackRay,
+        prep: &Option<Shear>,
+        isa: simd::Isa,
+        out: &mut [u32],
+    ) {
+        let (o, t) = (ray.origin, (ray.t_min, ray.t_max));
+        simd::tri_masks_sheared(packs, o, prep.as_ref(), t.0, t.1, isa, out);
     }
 }
 
@@ -467,7 +487,13 @@ mod tests {
             };
             for isa in simd::available() {
                 let mut m = vec![0; packs.len()];
-                TrianglePack::masks(&packs, &PackRay::new(&ray, t_min, t_max), isa, &mut m);
+                let lanes = PackRay::new(&ray, t_min, t_max);
+                TrianglePack::masks(&packs, &lanes, isa, &mut m);
+                // The shear made once per ray: the same masks.
+                let mut once = vec![u32::MAX; packs.len()];
+                let prep = TrianglePack::prep(&lanes);
+                TrianglePack::masks_prepped(&packs, &lanes, &prep, isa, &mut once);
+                assert_eq!(once, m, "{isa}: ray {r}, the shear made once");
                 for (i, t) in tris.iter().enumerate() {
                     let hit = t.intersect(&ray, t_min, t_max).is_some();
                     let passed = m[i / TRI_LANES] >> (i % TRI_LANES) & 1 == 1;

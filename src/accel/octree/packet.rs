@@ -678,7 +678,7 @@ impl<P: Primitive> Octree<P> {
             return;
         };
         let mut it = qs.iter().zip(hits.iter_mut());
-        let mut vis: [Option<Gather<'_, S>>; PACKET] = std::array::from_fn(|_| {
+        let mut vis: [Option<Gather<'_, P, S>>; PACKET] = std::array::from_fn(|_| {
             it.next()
                 .map(|(q, h)| Gather::new(&q.ray, q.t_min, q.t_max, skip(q), h))
         });
@@ -705,7 +705,7 @@ impl<P: Primitive> Octree<P> {
             return;
         };
         let mut it = qs.iter();
-        let mut vis: [Option<AnyHit<'_, S>>; PACKET] = std::array::from_fn(|_| {
+        let mut vis: [Option<AnyHit<'_, P, S>>; PACKET] = std::array::from_fn(|_| {
             it.next()
                 .map(|q| AnyHit::new(&q.ray, q.t_min, q.t_max, skip(q)))
         });
