@@ -312,6 +312,9 @@ impl<P: Primitive> Tree<P> {
                 rays.t_max[k] = r.t_max;
             }
         }
+        // Each active ray's filter constants, made when its query started.
+        let preps: [Option<<P::Pack as Pack<P>>::Prep>; PACKET] =
+            std::array::from_fn(|k| vis[k].as_ref().map(|v| *v.prep()));
         let range = node.first as usize..(node.first + node.meta) as usize;
         let l = lanes::<P>();
         let mut stopped = 0;
@@ -322,7 +325,15 @@ impl<P: Primitive> Tree<P> {
         let mut chunk = |packs: &[P::Pack], ids: &[u32], lanes: &[u32]| {
             let mut masks = [[0; PACKET]; LEAF_CHUNK];
             let mut passed = [0; LEAF_CHUNK];
-            P::Pack::masks_rays(packs, &rays, active, self.isa, &mut masks, &mut passed);
+            P::Pack::masks_rays_prepped(
+                packs,
+                &rays,
+                &preps,
+                active,
+                self.isa,
+                &mut masks,
+                &mut passed,
+            );
             for (j, pack) in packs.iter().enumerate() {
                 let mut left = passed[j] & active;
                 while left != 0 {
