@@ -96,6 +96,10 @@ impl Pack<ClippedDisc> for ClippedPack {
         ClipTable::new(prims)
     }
 
+    type Prep = ();
+
+    fn prep(_ray: &PackRay) {}
+
     fn side_bytes(side: &ClipTable) -> usize {
         side.bytes()
     }

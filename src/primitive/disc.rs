@@ -216,6 +216,10 @@ impl Pack<Disc> for DiscPack {
         0
     }
 
+    type Prep = ();
+
+    fn prep(_ray: &PackRay) {}
+
     fn set(&mut self, lane: usize, d: &Disc) {
         let c = &mut self.cols;
         for k in 0..3 {

@@ -171,6 +171,12 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
         }
         pack
     }
+    /// What the filter derives from a ray's origin and direction alone,
+    /// made once per ray ([`Pack::prep`]) for every leaf the ray visits:
+    /// the triangles' shear; `()` where a pack needs nothing.
+    type Prep: Copy + Send + Sync;
+    /// The [`Pack::Prep`] of `ray` (its span is not used).
+    fn prep(ray: &PackRay) -> Self::Prep;
     /// Bit `l` set when lane `l` may be hit in the ray's span: a filter
     /// that must pass every lane [`Primitive::intersect`] hits and no padding
     /// lane; each lane passed is then decided by `intersect` itself.
@@ -184,6 +190,20 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
         for (p, m) in packs.iter().zip(out.iter_mut()) {
             *m = p.may_hit(ray);
         }
+    }
+
+    /// [`Pack::masks`] given `prep`, made by [`Pack::prep`] from this
+    /// ray's origin and direction: the same masks.
+    #[inline]
+    fn masks_prepped(
+        packs: &[Self],
+        ray: &PackRay,
+        prep: &Self::Prep,
+        isa: crate::simd::Isa,
+        out: &mut [u32],
+    ) {
+        let _ = prep;
+        Self::masks(packs, ray, isa, out);
     }
 
     /// [`Pack::may_hit`] of each of `packs` for each ray `k` set in
@@ -201,32 +221,27 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
         any: &mut [u32],
     ) {
         // Each active ray's masks by [`Pack::masks`] (the pack's SIMD path
-        // where it has one), a chunk of packs at a time.
-        const CHUNK: usize = 64;
-        let mut buf = [0u32; CHUNK];
-        for (c, chunk) in packs.chunks(CHUNK).enumerate() {
-            let out = &mut out[c * CHUNK..c * CHUNK + chunk.len()];
-            let any = &mut any[c * CHUNK..c * CHUNK + chunk.len()];
-            out.fill([0; crate::simd::RAYS]);
-            any.fill(0);
-            let mut left = active & ((1 << crate::simd::RAYS) - 1);
-            while left != 0 {
-                let k = left.trailing_zeros() as usize;
-                left &= left - 1;
-                let ray = PackRay {
-                    origin: rays.origin,
-                    dir: rays.dir[k],
-                    t_min: rays.t_min[k],
-                    t_max: rays.t_max[k],
-                };
-                let m = &mut buf[..chunk.len()];
-                Self::masks(chunk, &ray, isa, m);
-                for ((o, a), &m) in out.iter_mut().zip(any.iter_mut()).zip(m.iter()) {
-                    o[k] = m;
-                    *a |= u32::from(m != 0) << k;
-                }
-            }
-        }
+        // where it has one).
+        masks_per_ray(packs, rays, active, out, any, |c, r, _, m| {
+            Self::masks(c, r, isa, m);
+        });
+    }
+
+    /// [`Pack::masks_rays`] given each active ray's [`Pack::Prep`]
+    /// (`preps[k]`, made by [`Pack::prep`] from ray `k`; `None` for a ray
+    /// not active): the same masks.
+    #[inline]
+    fn masks_rays_prepped(
+        packs: &[Self],
+        rays: &PackRays,
+        preps: &[Option<Self::Prep>; crate::simd::RAYS],
+        active: u32,
+        isa: crate::simd::Isa,
+        out: &mut [[u32; crate::simd::RAYS]],
+        any: &mut [u32],
+    ) {
+        let _ = preps;
+        Self::masks_rays(packs, rays, active, isa, out, any);
     }
 
     /// [`Pack::masks`] of the packs `packs[at[j]]` into `out[j]` (the
@@ -267,6 +282,47 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
     }
 }
 
+/// Each active ray `k`'s masks of `packs` by `masks(chunk, ray k, k, out)`,
+/// a chunk of packs at a time, into `out[j][k]` (0 for the other rays),
+/// and the rays with a lane passed into `any[j]`: [`Pack::masks_rays`]
+/// one ray after another.
+#[inline]
+pub(crate) fn masks_per_ray<T>(
+    packs: &[T],
+    rays: &PackRays,
+    active: u32,
+    out: &mut [[u32; crate::simd::RAYS]],
+    any: &mut [u32],
+    mut masks: impl FnMut(&[T], &PackRay, usize, &mut [u32]),
+) {
+    const CHUNK: usize = 64;
+    let mut buf = [0u32; CHUNK];
+    for (c, chunk) in packs.chunks(CHUNK).enumerate() {
+        let out = &mut out[c * CHUNK..c * CHUNK + chunk.len()];
+        let any = &mut any[c * CHUNK..c * CHUNK + chunk.len()];
+        out.fill([0; crate::simd::RAYS]);
+        any.fill(0);
+        let mut left = active & ((1 << crate::simd::RAYS) - 1);
+        while left != 0 {
+            let k = left.trailing_zeros() as usize;
+            left &= left - 1;
+            let ray = PackRay {
+                origin: rays.origin,
+                dir: rays.dir[k],
+                t_min: rays.t_min[k],
+                t_max: rays.t_max[k],
+            };
+            let m = &mut buf[..chunk.len()];
+            masks(chunk, &ray, k, m);
+            for ((o, a), &m) in out.iter_mut().zip(any.iter_mut()).zip(m.iter()) {
+                o[k] = m;
+                *a |= u32::from(m != 0) << k;
+            }
+        }
+    }
+
+}
+
 /// How many indices at the start of `at` (not empty) are consecutive.
 #[inline]
 fn runs_from(at: &[u32]) -> usize {
@@ -296,6 +352,10 @@ impl<P: Primitive> Pack<P> for Single<P> {
     fn side_bytes((): &()) -> usize {
         0
     }
+
+    type Prep = ();
+
+    fn prep(_ray: &PackRay) {}
 
     fn set(&mut self, _lane: usize, p: &P) {
         self.0 = Some(*p);

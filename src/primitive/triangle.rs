@@ -18,7 +18,7 @@
 //! through a shared edge or vertex of a consistently wound mesh hits
 //! exactly one triangle.
 
-use super::{Hit, Local, Pack, PackRay, Primitive};
+use super::{Hit, Local, Pack, PackRay, PackRays, Primitive};
 use crate::geometry::Ray;
 use crate::simd::{self, Shear, TRI_LANES, TriColumns};
 use glam::{DVec3, Vec3};
@@ -263,6 +263,13 @@ impl Pack<Triangle> for TrianglePack {
         0
     }
 
+    /// The ray's shear (Woop et al. 2013, section 3), once per ray.
+    type Prep = Option<Shear>;
+
+    fn prep(ray: &PackRay) -> Option<Shear> {
+        Shear::new(ray.dir)
+    }
+
     fn set(&mut self, lane: usize, t: &Triangle) {
         for i in 0..3 {
             for a in 0..3 {
@@ -289,6 +296,38 @@ impl Pack<Triangle> for TrianglePack {
     #[inline]
     fn masks(packs: &[Self], ray: &PackRay, isa: simd::Isa, out: &mut [u32]) {
         simd::tri_masks(packs, ray.origin, ray.dir, ray.t_min, ray.t_max, isa, out);
+    }
+
+    /// [`simd::tri_masks_sheared`] with the ray's shear made once.
+    #[inline]
+    fn masks_prepped(
+        packs: &[Self],
+        ray: &PackRay,
+        prep: &Option<Shear>,
+        isa: simd::Isa,
+        out: &mut [u32],
+    ) {
+        let (o, t) = (ray.origin, (ray.t_min, ray.t_max));
+        simd::tri_masks_sheared(packs, o, prep.as_ref(), t.0, t.1, isa, out);
+    }
+
+    /// Each active ray's masks with its shear made once per ray.
+    #[inline]
+    fn masks_rays_prepped(
+        packs: &[Self],
+        rays: &PackRays,
+        preps: &[Option<Option<Shear>>; simd::RAYS],
+        active: u32,
+        isa: simd::Isa,
+        out: &mut [[u32; simd::RAYS]],
+        any: &mut [u32],
+    ) {
+        super::masks_per_ray(packs, rays, active, out, any, |c, r, k, m| {
+            match &preps[k] {
+                Some(p) => Self::masks_prepped(c, r, p, isa, m),
+                None => Self::masks(c, r, isa, m),
+            }
+        });
     }
 }
 
@@ -467,7 +506,13 @@ mod tests {
             };
             for isa in simd::available() {
                 let mut m = vec![0; packs.len()];
-                TrianglePack::masks(&packs, &PackRay::new(&ray, t_min, t_max), isa, &mut m);
+                let lanes = PackRay::new(&ray, t_min, t_max);
+                TrianglePack::masks(&packs, &lanes, isa, &mut m);
+                // The shear made once per ray: the same masks.
+                let mut once = vec![u32::MAX; packs.len()];
+                let prep = TrianglePack::prep(&lanes);
+                TrianglePack::masks_prepped(&packs, &lanes, &prep, isa, &mut once);
+                assert_eq!(once, m, "{isa}: ray {r}, the shear made once");
                 for (i, t) in tris.iter().enumerate() {
                     let hit = t.intersect(&ray, t_min, t_max).is_some();
                     let passed = m[i / TRI_LANES] >> (i % TRI_LANES) & 1 == 1;
@@ -483,6 +528,63 @@ mod tests {
             }
         }
         assert!(hits > 2000, "too few hits to test: {hits}");
+    }
+
+    #[test]
+    fn packet_masks_with_the_shears_made_once_are_each_rays_own() {
+        let tris = grid(4);
+        let packs: Vec<TrianglePack> = tris
+            .chunks(TRI_LANES)
+            .map(|c| TrianglePack::from_fn(|l| c.get(l).copied()))
+            .collect();
+        let origin = [1.7, 2.1, 3.0];
+        let mut rays = PackRays {
+            origin,
+            dir: [[0.0; 3]; simd::RAYS],
+            t_min: [0.0; simd::RAYS],
+            t_max: [f32::INFINITY; simd::RAYS],
+            cone: None,
+        };
+        // Toward the grid's vertices and edge midpoints, one ray stopping
+        // short of it.
+        rays.dir = std::array::from_fn(|k| {
+            let aim = [k as f32 * 0.5, 4.0 - k as f32 * 0.5, 0.0];
+            [0, 1, 2].map(|a| aim[a] - origin[a])
+        });
+        rays.t_max[5] = 0.5;
+        let preps = rays.dir.map(|dir| {
+            let one = PackRay {
+                origin,
+                dir,
+                t_min: 0.0,
+                t_max: 1.0,
+            };
+            Some(TrianglePack::prep(&one))
+        });
+        let active = 0b1011_1111;
+        let mut passed = 0;
+        for isa in simd::available() {
+            let (mut out, mut any) = (vec![[0; simd::RAYS]; packs.len()], vec![0; packs.len()]);
+            TrianglePack::masks_rays_prepped(&packs, &rays, &preps, active, isa, &mut out, &mut any);
+            for (k, &dir) in rays.dir.iter().enumerate() {
+                let ray = PackRay {
+                    origin,
+                    dir,
+                    t_min: rays.t_min[k],
+                    t_max: rays.t_max[k],
+                };
+                let mut want = vec![0; packs.len()];
+                if active >> k & 1 == 1 {
+                    TrianglePack::masks(&packs, &ray, isa, &mut want);
+                }
+                for j in 0..packs.len() {
+                    assert_eq!(out[j][k], want[j], "{isa}: ray {k}, pack {j}");
+                    assert_eq!(any[j] >> k & 1, u32::from(want[j] != 0));
+                    passed += want[j].count_ones();
+                }
+            }
+        }
+        assert!(passed > 10, "too few lanes passed to test: {passed}");
     }
 
     #[test]

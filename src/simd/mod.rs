@@ -21,7 +21,7 @@
 //! how the registry's `octree-<path>` variants force each one.
 
 mod tri;
-pub use tri::{SURE, Shear, TRI_LANES, TriColumns, tri_masks};
+pub use tri::{SURE, Shear, TRI_LANES, TriColumns, tri_masks, tri_masks_sheared};
 
 /// The environment variable that forces a path for the whole process
 /// (read by `crate::config`).

@@ -97,8 +97,24 @@ pub fn tri_masks(
     isa: super::Isa,
     out: &mut [u32],
 ) {
+    tri_masks_sheared(packs, origin, Shear::new(dir).as_ref(), t_min, t_max, isa, out);
+}
+
+/// [`tri_masks`] with the ray's shear made beforehand (`Shear::new` of its
+/// direction, `None` passing no lane), so a ray tested against many leaves
+/// shears once.
+#[inline]
+pub fn tri_masks_sheared(
+    packs: &[TriColumns],
+    origin: [f32; 3],
+    sh: Option<&Shear>,
+    t_min: f32,
+    t_max: f32,
+    isa: super::Isa,
+    out: &mut [u32],
+) {
     let out = &mut out[..packs.len()];
-    let Some(sh) = Shear::new(dir) else {
+    let Some(sh) = sh else {
         out.fill(0);
         return;
     };
@@ -106,16 +122,16 @@ pub fn tri_masks(
         #[cfg(target_arch = "x86_64")]
         super::Isa::Avx2 if super::Isa::Avx2.supported() => {
             // SAFETY: the guard checked that the CPU runs AVX2.
-            unsafe { x86::avx2_tri_masks(packs, origin, &sh, t_min, t_max, out) }
+            unsafe { x86::avx2_tri_masks(packs, origin, sh, t_min, t_max, out) }
         }
         #[cfg(target_arch = "x86_64")]
         super::Isa::Avx512 if super::Isa::Avx512.supported() => {
             // SAFETY: the guard checked that the CPU runs AVX-512 F.
-            unsafe { x86::avx512_tri_masks(packs, origin, &sh, t_min, t_max, out) }
+            unsafe { x86::avx512_tri_masks(packs, origin, sh, t_min, t_max, out) }
         }
         _ => {
             for (p, m) in packs.iter().zip(out.iter_mut()) {
-                *m = portable_tri_mask(p, origin, &sh, t_min, t_max);
+                *m = portable_tri_mask(p, origin, sh, t_min, t_max);
             }
         }
     }
@@ -225,7 +241,6 @@ mod x86 {
         let s = sh.s.map(|x| _mm256_set1_ps(x));
         let org = o.map(|x| _mm256_set1_ps(x));
         let (tmin, tmax) = (_mm256_set1_ps(t_min), _mm256_set1_ps(t_max));
-        let zero = _mm256_setzero_ps();
         for (p, m) in packs.iter().zip(out.iter_mut()) {
             let [ax, ay, az] = avx2_vert(p, 0, sh.k, &org, &s);
             let [bx, by, bz] = avx2_vert(p, 1, sh.k, &org, &s);
@@ -233,12 +248,17 @@ mod x86 {
             let (u, uu) = avx2_edge(cx, by, cy, bx);
             let (v, uv) = avx2_edge(ax, cy, ay, cx);
             let (w, uw) = avx2_edge(bx, ay, by, ax);
-            let gt = |x| _mm256_cmp_ps::<_CMP_GT_OQ>(x, zero);
-            let lt = |x| _mm256_cmp_ps::<_CMP_LT_OQ>(x, zero);
             let on_edge = _mm256_movemask_ps(_mm256_or_ps(_mm256_or_ps(uu, uv), uw)) as u32;
-            let pos = _mm256_and_ps(_mm256_and_ps(gt(u), gt(v)), gt(w));
-            let neg = _mm256_and_ps(_mm256_and_ps(lt(u), lt(v)), lt(w));
-            let sided = _mm256_movemask_ps(_mm256_or_ps(pos, neg)) as u32;
+            // Sided: one sign bit for the three and none NaN. This takes
+            // a zero's sign bit for a sign, unlike the other paths' strict
+            // comparisons; but a zero is never sure (`on_edge` passes it
+            // anyway): the same masks.
+            let mixed = _mm256_or_ps(_mm256_xor_ps(u, v), _mm256_xor_ps(u, w));
+            let nan = _mm256_or_ps(
+                _mm256_cmp_ps::<_CMP_UNORD_Q>(u, v),
+                _mm256_cmp_ps::<_CMP_UNORD_Q>(w, w),
+            );
+            let sided = !(_mm256_movemask_ps(_mm256_or_ps(mixed, nan)) as u32) & 0xff;
             if sided & !on_edge == 0 {
                 *m = on_edge;
                 continue;

@@ -312,6 +312,9 @@ impl<P: Primitive> Tree<P> {
                 rays.t_max[k] = r.t_max;
             }
         }
+        // Each active ray's filter constants, made when its query started.
+        let preps: [Option<<P::Pack as Pack<P>>::Prep>; PACKET] =
+            std::array::from_fn(|k| vis[k].as_ref().map(|v| *v.prep()));
         let range = node.first as usize..(node.first + node.meta) as usize;
         let l = lanes::<P>();
         let mut stopped = 0;
@@ -326,7 +329,15 @@ impl<P: Primitive> Tree<P> {
                 P::Pack::masks_rays_at(&self.packs, at, &rays, active, self.isa, &mut masks, &mut passed);
             } else {
                 let packs = &self.packs[at[0] as usize..at[0] as usize + at.len()];
-                P::Pack::masks_rays(packs, &rays, active, self.isa, &mut masks, &mut passed);
+                P::Pack::masks_rays_prepped(
+                    packs,
+                    &rays,
+                    &preps,
+                    active,
+                    self.isa,
+                    &mut masks,
+                    &mut passed,
+                );
             }
             for (j, &p) in at.iter().enumerate() {
                 let pack = &self.packs[p as usize];
@@ -671,7 +682,7 @@ impl<P: Primitive> Octree<P> {
             return;
         };
         let mut it = qs.iter().zip(hits.iter_mut());
-        let mut vis: [Option<Gather<'_, S>>; PACKET] = std::array::from_fn(|_| {
+        let mut vis: [Option<Gather<'_, P, S>>; PACKET] = std::array::from_fn(|_| {
             it.next()
                 .map(|(q, h)| Gather::new(&q.ray, q.t_min, q.t_max, skip(q), h))
         });
@@ -698,7 +709,7 @@ impl<P: Primitive> Octree<P> {
             return;
         };
         let mut it = qs.iter();
-        let mut vis: [Option<AnyHit<'_, S>>; PACKET] = std::array::from_fn(|_| {
+        let mut vis: [Option<AnyHit<'_, P, S>>; PACKET] = std::array::from_fn(|_| {
             it.next()
                 .map(|q| AnyHit::new(&q.ray, q.t_min, q.t_max, skip(q)))
         });

@@ -395,6 +395,9 @@ pub(super) trait Visitor<P: Primitive> {
     fn cutoff(&self) -> f32;
     /// The ray's lanes with the span `[t_min, t_max]` the filter tests now.
     fn filter(&self) -> PackRay;
+    /// What the filter derives from the ray alone ([`Pack::prep`]), made
+    /// once for the whole traversal.
+    fn prep(&self) -> &<P::Pack as Pack<P>>::Prep;
     /// Decides one lane the filter passed, primitive `prim` with id `id`,
     /// with the exact test; true stops the traversal.
     fn lane(&mut self, prim: P, id: u32) -> bool;
@@ -418,7 +421,7 @@ pub(super) trait Visitor<P: Primitive> {
         for (c, chunk) in packs.chunks(CHUNK).enumerate() {
             let mut masks = [0u32; CHUNK];
             let ray = self.filter();
-            <P::Pack as Pack<P>>::masks(chunk, &ray, isa, &mut masks);
+            <P::Pack as Pack<P>>::masks_prepped(chunk, &ray, self.prep(), isa, &mut masks);
             for (j, pack) in chunk.iter().enumerate() {
                 let mut mask = masks[j] & lanes(c * CHUNK + j);
                 let ids = &ids[(c * CHUNK + j) * l..];
@@ -479,18 +482,22 @@ pub(super) trait Visitor<P: Primitive> {
 const CHUNK: usize = 16;
 
 /// What both queries test a lane against: the ray, its lanes for the
-/// filter with its span `[t_min, t_max]`, and the rule that skips hits.
-struct Query<'a, S> {
+/// filter with its span `[t_min, t_max]` and what the filter derives from
+/// it once, and the rule that skips hits.
+struct Query<'a, P: Primitive, S> {
     ray: &'a Ray,
     lanes: PackRay,
+    prep: <P::Pack as Pack<P>>::Prep,
     skip: S,
 }
 
-impl<'a, S: Skip> Query<'a, S> {
+impl<'a, P: Primitive, S: Skip> Query<'a, P, S> {
     fn new(ray: &'a Ray, t_min: f32, t_max: f32, skip: S) -> Self {
+        let lanes = PackRay::new(ray, t_min, t_max);
         Query {
             ray,
-            lanes: PackRay::new(ray, t_min, t_max),
+            lanes,
+            prep: <P::Pack as Pack<P>>::prep(&lanes),
             skip,
         }
     }
@@ -498,7 +505,7 @@ impl<'a, S: Skip> Query<'a, S> {
     /// The exact test of `prim` (id `id`) in `[t_min, cut]`, its hit kept
     /// unless `skip` skips it.
     #[inline(always)]
-    fn hit<P: Primitive>(&self, prim: &P, id: u32, cut: f32) -> Option<Hit> {
+    fn hit(&self, prim: &P, id: u32, cut: f32) -> Option<Hit> {
         prim.intersect(self.ray, self.lanes.t_min, cut)
             .filter(|h| !self.skip.skips(self.ray.dir, id, prim, h))
     }
@@ -506,15 +513,15 @@ impl<'a, S: Skip> Query<'a, S> {
 
 /// `intersect`: gathers the candidate window, leaving out what `skip`
 /// skips.
-pub(super) struct Gather<'a, S> {
-    query: Query<'a, S>,
+pub(super) struct Gather<'a, P: Primitive, S> {
+    query: Query<'a, P, S>,
     hits: &'a mut CandidateHits,
     /// `t_max` or the window's far end, whichever is nearer: kept up to
     /// date as candidates are offered.
     cut: f32,
 }
 
-impl<'a, S: Skip> Gather<'a, S> {
+impl<'a, P: Primitive, S: Skip> Gather<'a, P, S> {
     pub(super) fn new(
         ray: &'a Ray,
         t_min: f32,
@@ -530,7 +537,7 @@ impl<'a, S: Skip> Gather<'a, S> {
     }
 }
 
-impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, S> {
+impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, P, S> {
     #[inline]
     fn cutoff(&self) -> f32 {
         self.cut
@@ -542,6 +549,11 @@ impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, S> {
             t_max: self.cut,
             ..self.query.lanes
         }
+    }
+
+    #[inline(always)]
+    fn prep(&self) -> &<P::Pack as Pack<P>>::Prep {
+        &self.query.prep
     }
 
     #[inline(always)]
@@ -562,15 +574,15 @@ impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, S> {
 }
 
 /// `occluded`: stops at the first hit that `skip` does not skip.
-pub(super) struct AnyHit<'a, S>(Query<'a, S>);
+pub(super) struct AnyHit<'a, P: Primitive, S>(Query<'a, P, S>);
 
-impl<'a, S: Skip> AnyHit<'a, S> {
+impl<'a, P: Primitive, S: Skip> AnyHit<'a, P, S> {
     pub(super) fn new(ray: &'a Ray, t_min: f32, t_max: f32, skip: S) -> Self {
         AnyHit(Query::new(ray, t_min, t_max, skip))
     }
 }
 
-impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, S> {
+impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, P, S> {
     const FIXED_CUTOFF: bool = true;
 
     #[inline]
@@ -581,6 +593,11 @@ impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, S> {
     #[inline(always)]
     fn filter(&self) -> PackRay {
         self.0.lanes
+    }
+
+    #[inline(always)]
+    fn prep(&self) -> &<P::Pack as Pack<P>>::Prep {
+        &self.0.prep
     }
 
     #[inline(always)]
