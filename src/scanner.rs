@@ -8,6 +8,7 @@ use crate::embree::{Device, TriangleScene};
 use crate::geometry::Ray;
 use crate::io::{Mesh, grid_misses};
 use crate::names::Named;
+use crate::primitive::Triangle;
 use crate::rng::SplitMix64;
 use crate::splat::PointCloud;
 use crate::{Error, Result};
@@ -32,6 +33,65 @@ impl Named for ScanPattern {
     const WHAT: &'static str = "scan pattern";
     const ALL: &'static [Self] = &[Self::Raster, Self::Lines];
     const NAMES: &'static [&'static str] = &["raster", "lines"];
+}
+
+/// What traces the scanner's rays to the mesh.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ScanTracer {
+    /// Embree's triangles. Its kernels round a range's last bits
+    /// differently on each ISA (SSE4.2, AVX2, AVX-512), so the points move
+    /// by an ulp or so from one machine to another.
+    #[default]
+    Embree,
+    /// The octree's exact triangles (`crate::primitive::Triangle`): the
+    /// same ranges, bit for bit, on every SIMD path. For a test whose
+    /// measure hangs on the points' last bits.
+    Octree,
+}
+
+/// The scanner's tracer, built over the mesh.
+enum Tracer {
+    Embree(TriangleScene),
+    Octree(Box<dyn crate::accel::Backend>),
+}
+
+impl Tracer {
+    fn new(mesh: &Mesh, which: ScanTracer) -> Result<Tracer> {
+        Ok(match which {
+            ScanTracer::Embree => {
+                let device = Device::new()?;
+                Tracer::Embree(TriangleScene::new(
+                    &device,
+                    &[(&mesh.positions, &mesh.triangles)],
+                )?)
+            }
+            ScanTracer::Octree => {
+                let tris: Vec<Triangle> = mesh
+                    .triangles
+                    .iter()
+                    .map(|ix| Triangle {
+                        v: ix.map(|i| mesh.positions[i as usize]),
+                    })
+                    .filter(Triangle::is_proper)
+                    .collect();
+                let octree = crate::accel::registry::lookup::<Triangle>("octree")?;
+                Tracer::Octree(octree.build(&tris)?)
+            }
+        })
+    }
+
+    /// The range of the nearest hit along `ray`, or infinity.
+    fn range(&self, ray: &Ray) -> f32 {
+        match self {
+            Tracer::Embree(s) => s.intersect(ray, 0.0, f32::INFINITY).map_or(f32::INFINITY, |h| h.t),
+            Tracer::Octree(b) => {
+                let mut hits = crate::accel::CandidateHits::new(0.0);
+                b.intersect(ray, 0.0, f32::INFINITY, &mut hits);
+                hits.nearest().map_or(f32::INFINITY, |c| c.t)
+            }
+        }
+    }
 }
 
 /// Range noise: absolute, or relative to the scan's own point spacing.
@@ -70,6 +130,8 @@ pub struct ScanParams {
     pub missing: f32,
     /// Seed: the same seed gives the same scan on any machine.
     pub seed: u64,
+    /// What traces the rays (Embree unless asked).
+    pub tracer: ScanTracer,
 }
 
 impl Default for ScanParams {
@@ -85,6 +147,7 @@ impl Default for ScanParams {
             outliers: 0.0,
             missing: 0.0,
             seed: 1,
+            tracer: ScanTracer::Embree,
         }
     }
 }
@@ -287,8 +350,7 @@ pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
     } = aim;
     let (cols, rows) = (params.columns as usize, params.rows as usize);
     let (dir_of, step, pinhole) = pattern(params, &aim);
-    let device = Device::new()?;
-    let tris = TriangleScene::new(&device, &[(&mesh.positions, &mesh.triangles)])?;
+    let tracer = Tracer::new(mesh, params.tracer)?;
     // Exact ranges first (the noise may be relative to the spacing).
     let ranges: Vec<f32> = (0..rows * cols)
         .into_par_iter()
@@ -298,8 +360,7 @@ pub fn scan_mesh(mesh: &Mesh, params: &ScanParams) -> Result<Scan> {
                 origin: from,
                 dir: dir_of(k % cols, k / cols),
             };
-            tris.intersect(&ray, 0.0, f32::INFINITY)
-                .map_or(f32::INFINITY, |h| h.t)
+            tracer.range(&ray)
         })
         .collect();
     let mut hit_ranges: Vec<f32> = ranges.iter().copied().filter(|t| t.is_finite()).collect();

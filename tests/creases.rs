@@ -620,3 +620,126 @@ fn a_disc_over_a_gap_shrinks_to_what_its_points_cover() {
         );
     }
 }
+
+/// A gable-roofed block on a ground plane, y up: walls 1 × 1.6 and 0.5
+/// high, the ridge 0.9 high along z, so each roof meets its wall at an
+/// eave of 128.7° (the normals 51.3° apart). The mesh written as PLY.
+fn write_gable(path: &Path) {
+    let mut verts: Vec<[f32; 3]> = Vec::new();
+    let mut faces: Vec<[usize; 3]> = Vec::new();
+    let mut poly = |q: &[[f32; 3]]| {
+        let i = verts.len();
+        verts.extend(q);
+        for k in 1..q.len() - 1 {
+            faces.push([i, i + k, i + k + 1]);
+        }
+    };
+    let g = 1.6;
+    poly(&[[-g, 0.0, -g], [-g, 0.0, g], [g, 0.0, g], [g, 0.0, -g]]);
+    let (x0, x1, z0, z1, h, r) = (-0.5f32, 0.5f32, -0.8f32, 0.8f32, 0.5f32, 0.9f32);
+    poly(&[[x1, 0.0, z1], [x1, 0.0, z0], [x1, h, z0], [x1, h, z1]]);
+    poly(&[[x0, 0.0, z0], [x0, 0.0, z1], [x0, h, z1], [x0, h, z0]]);
+    poly(&[
+        [x0, 0.0, z1],
+        [x1, 0.0, z1],
+        [x1, h, z1],
+        [0.0, r, z1],
+        [x0, h, z1],
+    ]);
+    poly(&[
+        [x1, 0.0, z0],
+        [x0, 0.0, z0],
+        [x0, h, z0],
+        [0.0, r, z0],
+        [x1, h, z0],
+    ]);
+    poly(&[[x1, h, z1], [x1, h, z0], [0.0, r, z0], [0.0, r, z1]]);
+    poly(&[[x0, h, z0], [x0, h, z1], [0.0, r, z1], [0.0, r, z0]]);
+    let mesh = splatray::io::Mesh {
+        positions: verts.iter().map(|v| Vec3::from(*v)).collect(),
+        triangles: faces.iter().map(|f| f.map(|k| k as u32)).collect(),
+        origin: glam::DVec3::ZERO,
+    };
+    splatray::terrain::write_mesh_ply(&mesh, path).unwrap();
+}
+
+/// The gable block scanned from below its eave (a scanner on a tripod
+/// beside the wall, `scan` of the scene, looking up at the eave) and
+/// rendered from there, 400×300, creases `on` or off: the pixels where
+/// one face of the eave shows the other's shading (the exact surface
+/// shows the wall, within 5° of its normal, and the splats the roof's,
+/// within 15°, or the other way round), and the pixels of each face.
+fn eave_seam(dir: &Path, scan: &str, creases: bool) -> (usize, usize) {
+    use splatray::validate::compare::render_truth;
+    let scene = format!(
+        "background = [0.60, 0.70, 0.85]\n\
+         [camera]\nfrom = [1.8, 0.2, 0.4]\nat = [0.5, 0.5, 0.0]\nfov = 30\n\
+         width = 400\nheight = 300\n\
+         [[model]]\nmesh = \"gable.ply\"\nseed = 1\n{scan}\n\
+         splat = {{ creases = {creases} }}\n\
+         material = {{ kind = \"phong\", color = [0.80, 0.76, 0.70], specular = 0.15, \
+         shininess = 30 }}\n\
+         [[light]]\nkind = \"sphere\"\nposition = [2.0, 4.0, 3.0]\nradius = 0.3\nintensity = 28.0\n\
+         [[light]]\nkind = \"directional\"\ndirection = [0.3, -0.5, -1.0]\nintensity = 0.25\n"
+    );
+    let s = build_scene(&parse_scene_str(&scene).unwrap(), dir, None).unwrap();
+    let truth = render_truth(
+        &s,
+        &splatray::validate::truth::Truth::new(&s).unwrap(),
+        None,
+    );
+    let mut frame = common::render_with(&s, common::default_renderer());
+    splatray::validate::compare::orient_to_camera(&mut frame, &s.camera);
+    let wall = Vec3::X;
+    let roof = Vec3::new(0.4, 0.5, 0.0).normalize();
+    let within = |n: Vec3, m: Vec3, deg: f32| n.dot(m) >= deg.to_radians().cos();
+    let (mut seam, mut faces) = (0, 0);
+    for (t, n) in truth.normal.iter().zip(&frame.normal) {
+        for (a, b) in [(wall, roof), (roof, wall)] {
+            if within(*t, a, 5.0) {
+                faces += 1;
+                seam += usize::from(within(*n, b, 15.0));
+            }
+        }
+    }
+    eprintln!(
+        "creases {creases}: {} splats, {seam} seam pixels of {faces}",
+        s.splats.len()
+    );
+    (seam, faces)
+}
+
+/// Issue 54: a gable block seen from below its eaves has no seam. The
+/// roof's and the wall's splats along the eave end where the two faces
+/// meet (`rim::CREASE_RISE_EPS`): few show their face's shading across the
+/// eave on the other. Scanned without noise and with range noise of half a
+/// spacing.
+#[test]
+fn a_gable_block_seen_from_below_its_eave_has_no_seam() {
+    let dir = common::scratch("gable-eave");
+    write_gable(&dir.join("gable.ply"));
+    let scan = "scan = { from = [1.8, 0.2, 0.4], at = [0.5, 0.5, 0.0], rays = [600, 450], \
+                tracer = \"octree\" }";
+    let (seam, faces) = eave_seam(&dir, scan, true);
+    let (seam_off, _) = eave_seam(&dir, scan, false);
+    let noisy = "scan = { from = [1.8, 0.2, 0.4], at = [0.5, 0.5, 0.0], rays = [600, 450], \
+                 range_noise_spacing = 0.5, tracer = \"octree\" }";
+    let (seam_noisy, _) = eave_seam(&dir, noisy, true);
+    // The scans are traced by the octree's exact triangles (`tracer =
+    // "octree"`), so the points and the figures are the same on every
+    // Embree ISA and SIMD path: measured 608 seam pixels of 90,738 on the
+    // two faces (the eave runs across the whole 400-pixel image: about 1.5
+    // pixels wide), whole discs 1,096, range noise 226, the same with Embree
+    // forced to sse4.2, avx2 and avx512 and with SPLATRAY_SIMD=portable.
+    // (Scanned by Embree the seam moved 711-791 pixels and whole discs
+    // 1,128-2,026 with the ISA: docs/notes/generation.md, "Issue 54, round
+    // 5".) Not yet "no seam": what is left are splats of the wall whose own
+    // face's points (the roof's first rows, their estimated normals blended
+    // to within 30° of the wall's) reach their rim, so no line is found, and
+    // under range noise sides too scattered to count as planes.
+    assert!(faces > 80_000, "{faces}");
+    assert!(seam < 640, "{seam}");
+    assert!(seam_noisy < 240, "{seam_noisy}");
+    // 608 against 1,096: 0.55 of whole discs.
+    assert!(5 * seam < 3 * seam_off, "{seam} {seam_off}");
+}

@@ -166,6 +166,7 @@ fn scan_params(args: &SampleArgs) -> Result<ScanParams> {
         outliers: args.outliers,
         missing: args.missing,
         seed: args.seed,
+        tracer: crate::scanner::ScanTracer::Embree,
     })
 }
 

@@ -236,6 +236,10 @@ pub struct ScanSpec {
     /// Fraction of returns dropped.
     #[serde(default, deserialize_with = "num::fraction")]
     pub missing: f32,
+    /// What traces the rays: `embree` (default) or `octree` (the same
+    /// points on every SIMD path).
+    #[serde(default)]
+    pub tracer: crate::scanner::ScanTracer,
 }
 
 /// `shape = { ... }`: a procedural model.

@@ -568,6 +568,7 @@ fn sample_mesh_model(spec: &ModelSpec, path: &Path) -> Result<(PointCloud, Mesh)
             outliers: scan.outliers,
             missing: scan.missing,
             seed: spec.seed,
+            tracer: scan.tracer,
             ..crate::scanner::ScanParams::default()
         };
         let stations: Vec<DVec3> = scan
