@@ -346,10 +346,10 @@ mod tests {
     #[test]
     fn closed_form_against_known_spectra() {
         // (spectrum, bound on the normal's angle error in radians) at three
-        // scales, 2000 random rotations each. Measured worst: 1.5e-15 rad
-        // where the gap is wide (Jacobi 5.8e-15), 1.1e-11 just past
-        // `CLOSED_FORM_GAP` (Jacobi 8.9e-13); λ₀ within 7.5e-16 of the
-        // largest, the others 9.1e-9 where λ₁ = λ₂ (the cubic's double root).
+        // scales, 2000 random rotations each. Measured worst: 2.0e-15 rad
+        // where the gap is wide (Jacobi 6.1e-15), 1.3e-11 just past
+        // `CLOSED_FORM_GAP` (Jacobi 9.7e-13); λ₀ within 8.2e-16 of the
+        // largest, the others 8.1e-9 where λ₁ = λ₂ (the cubic's double root).
         // An f32 normal rounds at 6e-8 rad.
         let cases: [([f64; 3], f64); 7] = [
             ([0.0, 1.0, 1.0], 3e-15),       // a flat disc, λ₁ = λ₂
