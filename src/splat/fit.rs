@@ -61,6 +61,14 @@ pub fn sym_eigen3(m: [[f64; 3]; 3]) -> ([f64; 3], [DVec3; 3]) {
 /// centroid in `f64`: (centroid, eigenvalues ascending, eigenvectors).
 #[must_use]
 pub fn plane_fit(points: impl Iterator<Item = Vec3> + Clone) -> (DVec3, [f64; 3], [DVec3; 3]) {
+    let (c, m) = covariance(points);
+    let (vals, vecs) = plane_eigen3(m);
+    (c, vals, vecs)
+}
+
+/// The centroid of `points` and their covariance about it (unnormalised),
+/// accumulated in `f64`: the matrix [`plane_fit`] solves.
+fn covariance(points: impl Iterator<Item = Vec3> + Clone) -> (DVec3, [[f64; 3]; 3]) {
     let mut c = DVec3::ZERO;
     let mut n = 0f64;
     for p in points.clone() {
@@ -81,8 +89,7 @@ pub fn plane_fit(points: impl Iterator<Item = Vec3> + Clone) -> (DVec3, [f64; 3]
     m[1][0] = m[0][1];
     m[2][0] = m[0][2];
     m[2][1] = m[1][2];
-    let (vals, vecs) = plane_eigen3(m);
-    (c, vals, vecs)
+    (c, m)
 }
 
 /// Below this gap between the two smallest eigenvalues, as a fraction of
@@ -375,30 +382,6 @@ mod tests {
         }
         assert!(!failed, "see the errors above");
     }
-}
-
-#[cfg(test)]
-mod point_tests {
-    use super::*;
-
-    fn angle(a: DVec3, b: DVec3) -> f64 {
-        a.cross(b).length().atan2(a.dot(b).abs())
-    }
-
-    /// The covariance `plane_fit` makes of `points`.
-    fn covariance(points: &[Vec3]) -> [[f64; 3]; 3] {
-        let c = points.iter().map(|p| p.as_dvec3()).sum::<DVec3>() / points.len() as f64;
-        let mut m = [[0f64; 3]; 3];
-        for p in points {
-            let d = (p.as_dvec3() - c).to_array();
-            for r in 0..3 {
-                for s in 0..3 {
-                    m[r][s] += d[r] * d[s];
-                }
-            }
-        }
-        m
-    }
 
     /// A grid of `n × n` points on a tilted plane through `at`, spacing
     /// `h`, heights `noise` times a fixed pattern, and `stretch` along x.
@@ -438,7 +421,7 @@ mod point_tests {
         ];
         let mut failed = false;
         for (name, points, bound) in cases {
-            let m = covariance(&points);
+            let (_, m) = covariance(points.iter().copied());
             let (want_vals, want) = sym_eigen3(m);
             let (_, vals, got) = plane_fit(points.iter().copied());
             let a = angle(got[0], want[0]);
