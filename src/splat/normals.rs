@@ -443,15 +443,11 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
     // beyond, no set is kept and nothing is skipped below).
     let sets = pts.len() <= HELD_BITS;
     let held_set = |normal: Vec3, origin: Vec3| {
-        let mut set = [0u64; HELD_BITS / 64];
         if sets {
-            for (j, d) in pts.iter().enumerate() {
-                if normal.dot(*d - origin).abs() <= tol {
-                    set[j / 64] |= 1 << (j % 64);
-                }
-            }
+            lanes.held_set(normal, origin, tol)
+        } else {
+            [0u64; HELD_BITS / 64]
         }
-        set
     };
     let fit = |normal: Vec3, origin: Vec3| {
         pts.iter()
@@ -469,11 +465,25 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
         let (normal, origin) = (vecs[0].as_vec3(), centre.as_vec3());
         let ok =
             normal.is_finite() && normal.length_squared() > 0.5 && vals[1] > COLLINEAR * vals[2];
-        ok.then(|| FacePlane {
-            normal,
-            origin,
-            held: count(normal, origin),
-            fit: fit(normal, origin),
+        // The set it holds, and how many: the set's bits where it is kept
+        // (the same test of every point as `count`'s).
+        ok.then(|| {
+            let set = held_set(normal, origin);
+            let held = if sets {
+                set.iter().map(|w| w.count_ones() as usize).sum()
+            } else {
+                count(normal, origin)
+            };
+            let fit = fit(normal, origin);
+            (
+                FacePlane {
+                    normal,
+                    origin,
+                    held,
+                    fit,
+                },
+                set,
+            )
         })
     };
     let mut seen: Vec<HeldSet> = Vec::with_capacity(FACE_REFITS);
@@ -490,11 +500,10 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
                 }
                 seen.push(set);
             }
-            let once = refit(f)?;
+            let (once, now) = refit(f)?;
             if !sets {
-                return refit(once);
+                return refit(once).map(|r| r.0);
             }
-            let now = held_set(once.normal, once.origin);
             if now == set {
                 done.push(set);
                 Some(once)
@@ -502,7 +511,7 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
                 None
             } else {
                 done.push(now);
-                refit(once)
+                refit(once).map(|r| r.0)
             }
         })
         .fold(None, |best: Option<FacePlane>, f| match best {
@@ -542,6 +551,32 @@ impl Lanes {
                 u32::from(h.abs() <= tol)
             })
             .sum::<u32>() as usize
+    }
+
+    /// Which of the points (up to [`HELD_BITS`]) lie within `tol` of the
+    /// plane through `origin` with unit `normal`, as a bit set: the test of
+    /// [`Lanes::count`], point by point, without a branch.
+    fn held_set(&self, normal: Vec3, origin: Vec3, tol: f32) -> HeldSet {
+        let (nx, ny, nz) = (normal.x, normal.y, normal.z);
+        let (ox, oy, oz) = (origin.x, origin.y, origin.z);
+        let mut set = [0u64; HELD_BITS / 64];
+        let chunks = self
+            .xs
+            .chunks(64)
+            .zip(self.ys.chunks(64))
+            .zip(self.zs.chunks(64));
+        for (word, ((xs, ys), zs)) in set.iter_mut().zip(chunks) {
+            *word = xs
+                .iter()
+                .zip(ys)
+                .zip(zs)
+                .enumerate()
+                .fold(0u64, |bits, (j, ((x, y), z))| {
+                    let h = (nx * (x - ox)) + (ny * (y - oy)) + (nz * (z - oz));
+                    bits | (u64::from(h.abs() <= tol) << j)
+                });
+        }
+        set
     }
 }
 

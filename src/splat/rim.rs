@@ -391,10 +391,12 @@ pub(super) fn clip_lines(
 ) -> Clipped {
     let mut lines = Lines::new(s, f, own, other, spacing);
     let step = std::f32::consts::TAU / CLIP_DIRECTIONS as f32;
+    let exts = coarse_exts(own);
     let candidates: Vec<(f32, ClipLine)> = (0..CLIP_DIRECTIONS)
         .filter_map(|k| {
             let t = step * k as f32;
-            lines.line_at(t).map(|l| (t, l))
+            let w = Vec2::new(t.cos(), t.sin());
+            lines.line_with(w, exts[k]).map(|l| (t, l))
         })
         .collect();
     let Some((first, cut)) = lines.best(&candidates, &[]) else {
@@ -443,6 +445,33 @@ pub(super) fn clip_lines(
         lines: Clip::two(first, second),
         spill,
     }
+}
+
+/// The own face's farthest extent `max w·q` over `own` along each of the
+/// [`CLIP_DIRECTIONS`] coarse directions `w` of [`clip_lines`]: the same
+/// products, sums and maxima, point by point in the same order, as
+/// [`Lines::line_at`] takes along one direction, so bit for bit its `ext`,
+/// but all directions at once in lanes.
+fn coarse_exts(own: &[Near]) -> [f32; CLIP_DIRECTIONS] {
+    static DIRS: std::sync::OnceLock<([f32; CLIP_DIRECTIONS], [f32; CLIP_DIRECTIONS])> =
+        std::sync::OnceLock::new();
+    let (xs, ys) = DIRS.get_or_init(|| {
+        let step = std::f32::consts::TAU / CLIP_DIRECTIONS as f32;
+        let (mut xs, mut ys) = ([0f32; CLIP_DIRECTIONS], [0f32; CLIP_DIRECTIONS]);
+        for k in 0..CLIP_DIRECTIONS {
+            let t = step * k as f32;
+            (xs[k], ys[k]) = (t.cos(), t.sin());
+        }
+        (xs, ys)
+    });
+    let mut ext = [f32::MIN; CLIP_DIRECTIONS];
+    for m in own {
+        let (qx, qy) = (m.q.x, m.q.y);
+        for ((e, wx), wy) in ext.iter_mut().zip(xs).zip(ys) {
+            *e = e.max((wx * qx) + (wy * qy));
+        }
+    }
+    ext
 }
 
 /// The candidate lines of one splat ([`clip_lines`]), direction by
@@ -506,6 +535,12 @@ impl<'a> Lines<'a> {
     fn line_at(&mut self, t: f32) -> Option<ClipLine> {
         let w = Vec2::new(t.cos(), t.sin());
         let ext = self.own.iter().map(|m| w.dot(m.q)).fold(f32::MIN, f32::max);
+        self.line_with(w, ext)
+    }
+
+    /// [`Lines::line_at`] along the unit `w`, the own face's farthest
+    /// point along it at `ext`.
+    fn line_with(&mut self, w: Vec2, ext: f32) -> Option<ClipLine> {
         let spacing = self.spacing;
         self.across.clear();
         self.across.extend(self.other.iter().filter(|m| {
@@ -684,4 +719,46 @@ impl<'a> Lines<'a> {
 /// standing nearer the centre.
 fn more(x: &(ClipLine, f32), y: &(ClipLine, f32)) -> std::cmp::Ordering {
     x.1.total_cmp(&y.1).then(y.0.d.total_cmp(&x.0.d))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// [`coarse_exts`] gives, bit for bit, the farthest extent
+    /// [`Lines::line_at`] folds along each coarse direction: points spread
+    /// over the disc, on its rim, snapped to a coarse grid (ties between
+    /// points, zeros of both signs) and a single point at the centre.
+    #[test]
+    fn coarse_exts_are_each_directions_fold() {
+        let mut rng = crate::rng::SplitMix64::new(54);
+        let mut uniform = || (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
+        let step = std::f32::consts::TAU / CLIP_DIRECTIONS as f32;
+        let mut compared = 0;
+        for case in 0..200 {
+            let count = [1, 2, 7, 40, 300][case % 5];
+            let own: Vec<Near> = (0..count)
+                .map(|j| {
+                    let (t, r) = (std::f32::consts::TAU * uniform(), uniform().sqrt());
+                    let mut q = Vec2::new(t.cos(), t.sin()) * if case % 7 == 3 { 1.0 } else { r };
+                    if case % 3 == 0 {
+                        q = (q * 4.0).round() / 4.0;
+                    }
+                    if count == 1 && case % 2 == 0 {
+                        q = Vec2::new(-0.0, 0.0);
+                    }
+                    Near { q, h: 0.0, j }
+                })
+                .collect();
+            let exts = coarse_exts(&own);
+            for (k, got) in exts.iter().enumerate() {
+                let t = step * k as f32;
+                let w = Vec2::new(t.cos(), t.sin());
+                let want = own.iter().map(|m| w.dot(m.q)).fold(f32::MIN, f32::max);
+                assert_eq!(got.to_bits(), want.to_bits(), "case {case}, direction {k}");
+                compared += 1;
+            }
+        }
+        assert_eq!(compared, 200 * CLIP_DIRECTIONS);
+    }
 }
