@@ -136,6 +136,28 @@ pub fn check(what: &str, bytes: u64) -> Result<(), TooLarge> {
     }
 }
 
+/// [`check`] against the least of [`limit`] and `cap`, the bytes the user
+/// allowed (`--max-memory`), named "the --max-memory limit" when it is the
+/// tighter.
+///
+/// # Errors
+/// As [`check`].
+pub fn check_within(what: &str, bytes: u64, cap: Option<u64>) -> Result<(), TooLarge> {
+    let user = cap.map(|b| Bound {
+        bytes: b,
+        source: "the --max-memory limit",
+    });
+    match limit().into_iter().chain(user).min_by_key(|b| b.bytes) {
+        Some(b) if bytes > b.bytes => Err(TooLarge {
+            what: what.to_string(),
+            bytes,
+            bound: b,
+            hint: None,
+        }),
+        _ => Ok(()),
+    }
+}
+
 /// `MemAvailable` of `/proc/meminfo`, in bytes.
 fn meminfo_available() -> Option<u64> {
     let text = std::fs::read_to_string("/proc/meminfo").ok()?;

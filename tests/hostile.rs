@@ -415,9 +415,10 @@ fn bad_triangle_meshes_fail_naming_the_file_and_the_face() {
 /// (`BYTES_PER_TRIANGLE`, 320: half a splat's 640). A PLY header declaring
 /// 10^12 faces is refused from its header alone (320,000 GB), whatever
 /// follows it. A binary PLY grid of 1,002,528 triangles (19 MB) with
-/// `--max-memory 0.25` is refused in one line naming the triangles
-/// (0.3 GB), nothing written; with `--max-memory 0.5` it renders (at 640 B
-/// a triangle, 0.64 GB, it was refused).
+/// `--max-memory 0.25` is refused from its header in one line naming the
+/// file and its faces (0.3 GB), nothing written; the same grid as OBJ
+/// while it is read; with `--max-memory 0.5` both render (at 640 B a
+/// triangle, 0.64 GB, they were refused).
 #[test]
 fn a_huge_mesh_is_refused_up_front() {
     let dir = scratch("hostile-huge-mesh");
@@ -476,18 +477,62 @@ fn a_huge_mesh_is_refused_up_front() {
         "[[model]]\ntriangles = \"{}\"",
         dir.join("grid.ply").display()
     ));
+    // Refused by the reader from the header's count (the budget reaches
+    // the reader), not by the render's budget after reading.
     let r = run("grid-limit", "render", &grid, &["--max-memory", "0.25"]);
     fails_cleanly(
         "grid-limit",
         &r,
         &[
-            "0.3 GB",
-            "1002528 triangles x 320 B",
-            "--max-memory limit (0.2 GB)",
+            "grid.ply",
+            "1002528 faces as triangles needs about 0.3 GB",
+            "the --max-memory limit",
         ],
     );
     let r = run("grid-fits", "render", &grid, &["--max-memory", "0.5"]);
     assert!(r.ok, "grid-fits: {}", r.stderr);
+    assert!(r.stdout.contains("1002528 triangles"), "{}", r.stdout);
+    // The same grid as OBJ text (44 MB): refused while it is read, at the
+    // first count of 65,536 faces whose triangles pass 0.25 GB (786,432
+    // x 320 B = 0.252 GB), before its last 216,096 faces are held.
+    let mut obj = String::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            obj += &format!(
+                "v {} {} 0\n",
+                i as f32 / n as f32 - 0.5,
+                j as f32 / n as f32 - 0.5
+            );
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let (a, b, c, d) = (
+                v(i, j) + 1,
+                v(i + 1, j) + 1,
+                v(i + 1, j + 1) + 1,
+                v(i, j + 1) + 1,
+            );
+            obj += &format!("f {a} {b} {c}\nf {a} {c} {d}\n");
+        }
+    }
+    std::fs::write(dir.join("grid.obj"), obj).unwrap();
+    let grid = scene(&format!(
+        "[[model]]\ntriangles = \"{}\"",
+        dir.join("grid.obj").display()
+    ));
+    let r = run("obj-limit", "render", &grid, &["--max-memory", "0.25"]);
+    fails_cleanly(
+        "obj-limit",
+        &r,
+        &[
+            "grid.obj",
+            "its first 786432 faces as 786432 triangles",
+            "the --max-memory limit",
+        ],
+    );
+    let r = run("obj-fits", "render", &grid, &["--max-memory", "0.5"]);
+    assert!(r.ok, "obj-fits: {}", r.stderr);
     assert!(r.stdout.contains("1002528 triangles"), "{}", r.stdout);
 }
 

@@ -5,7 +5,7 @@
 use super::progress::ProgressLine;
 use crate::resolve::ShadingMode;
 use crate::scene::cloud::{CloudRequest, is_cloud_path, make_scene};
-use crate::scene::{Scene, load_scene};
+use crate::scene::{Scene, load_scene_within};
 use crate::{Error, Result};
 use glam::DVec3;
 use std::path::{Path, PathBuf};
@@ -130,7 +130,8 @@ impl SceneArgs {
                 )));
             }
             let progress = |stage: &str, f: f64| line.update(stage, f);
-            let mut scene = load_scene(&path, Some(&progress))?;
+            let cap = self.max_memory.map(|gb| (gb * 1e9) as u64);
+            let mut scene = load_scene_within(&path, Some(&progress), cap)?;
             line.finish();
             scene.set_view(self.width, self.height, spp, self.shading)?;
             scene

@@ -53,7 +53,10 @@ pub use splat_ply::{
     splat_header_with, splat_row_bytes, write_splats,
 };
 pub use stream::stream_points;
-pub use trimesh::{BYTES_PER_TRIANGLE, TriangleMesh, parse_triangles, read_triangles};
+pub use trimesh::{
+    BYTES_PER_TRIANGLE, TriangleMesh, parse_triangles, parse_triangles_within, read_triangles,
+    read_triangles_within,
+};
 
 use glam::{DVec3, Vec3};
 use std::path::Path;

@@ -61,18 +61,36 @@ fn ply_face_count(path: &Path) -> Option<u64> {
 /// vertex or normal, or spans no area (its face number, counted from 0 in
 /// the file's order, and for OBJ its line).
 pub fn read_triangles(path: &Path) -> Result<TriangleMesh, IoError> {
+    read_triangles_within(path, None)
+}
+
+/// [`read_triangles`] within `cap` bytes (`--max-memory`) as well as the
+/// machine's bounds: a PLY mesh is refused from its header's face count,
+/// an OBJ mesh while it is read, its triangles so far counted every 65,536
+/// faces, so that a mesh over the cap is refused before it is all in
+/// memory.
+///
+/// # Errors
+/// As [`read_triangles`]; over `cap`, one line naming the file and the
+/// faces counted.
+pub fn read_triangles_within(path: &Path, cap: Option<u64>) -> Result<TriangleMesh, IoError> {
     if let Some(faces) = ply_face_count(path) {
-        crate::memory::check(
+        crate::memory::check_within(
             &format!("holding its {faces} faces as triangles"),
             faces.saturating_mul(BYTES_PER_TRIANGLE),
+            cap,
         )
         .map_err(|e| IoError::new(path, IoErrorKind::Memory(e)))?;
+    }
+    if let (Some(cap), Ok(meta)) = (cap, std::fs::metadata(path)) {
+        crate::memory::check_within("reading the file whole", meta.len(), Some(cap))
+            .map_err(|e| IoError::new(path, IoErrorKind::Memory(e)))?;
     }
     let bytes = read_file(path)?;
     let obj = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("obj"));
-    parse_triangles(&bytes, obj).map_err(|kind| IoError::new(path, kind))
+    parse_triangles_within(&bytes, obj, cap).map_err(|kind| IoError::new(path, kind))
 }
 
 /// [`read_triangles`] on a file's bytes; `obj` when the name says OBJ
@@ -81,9 +99,22 @@ pub fn read_triangles(path: &Path) -> Result<TriangleMesh, IoError> {
 /// # Errors
 /// As [`read_triangles`], without the file's name.
 pub fn parse_triangles(bytes: &[u8], obj: bool) -> Result<TriangleMesh, IoErrorKind> {
+    parse_triangles_within(bytes, obj, None)
+}
+
+/// [`parse_triangles`] with an OBJ mesh's triangles checked against `cap`
+/// (and the machine's bounds) every 65,536 faces while it is read.
+///
+/// # Errors
+/// As [`read_triangles_within`], without the file's name.
+pub fn parse_triangles_within(
+    bytes: &[u8],
+    obj: bool,
+    cap: Option<u64>,
+) -> Result<TriangleMesh, IoErrorKind> {
     let ply = bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r\n");
     let (mesh, normals, face_of, line_of) = if !ply && (obj || looks_like_obj(bytes)) {
-        let o = parse_obj(bytes)?;
+        let o = parse_obj(bytes, cap)?;
         (o.mesh, o.normals, o.face_of, Some(o.line_of))
     } else {
         let m = super::parse_mesh_full(bytes)?;
@@ -171,7 +202,7 @@ struct ObjRead {
 /// Reads OBJ's `v`, `vn` and `f` statements (others are ignored); face
 /// corners `v`, `v/t`, `v//n` or `v/t/n`, indices from 1 or, negative,
 /// back from the last one read.
-fn parse_obj(bytes: &[u8]) -> Result<ObjRead, IoErrorKind> {
+fn parse_obj(bytes: &[u8], cap: Option<u64>) -> Result<ObjRead, IoErrorKind> {
     let text = std::str::from_utf8(bytes)
         .map_err(|e| IoErrorKind::Data(format!("an OBJ file must be UTF-8 text: {e}")))?;
     let mut world: Vec<DVec3> = Vec::new();
@@ -236,6 +267,15 @@ fn parse_obj(bytes: &[u8]) -> Result<ObjRead, IoErrorKind> {
                     tris.push((c.map(|(v, _)| v), n));
                     face_of.push(face);
                     line_of.push(ln as u32);
+                }
+                if faces.is_multiple_of(1 << 16) {
+                    let n = tris.len() as u64;
+                    crate::memory::check_within(
+                        &format!("holding its first {faces} faces as {n} triangles"),
+                        n.saturating_mul(BYTES_PER_TRIANGLE),
+                        cap,
+                    )
+                    .map_err(IoErrorKind::Memory)?;
                 }
             }
             _ => {}

@@ -27,9 +27,25 @@ use std::path::{Path, PathBuf};
 /// # Errors
 /// One line naming the file (and the model, where one is at fault).
 pub fn load_scene(path: &Path, progress: Option<Progress<'_>>) -> Result<Scene> {
+    load_scene_within(path, progress, None)
+}
+
+/// [`load_scene`] within `max_bytes` (`--max-memory`): a `triangles`
+/// model's mesh is refused while it is read when its triangles alone, with
+/// those of the models before it, pass the cap
+/// ([`crate::io::read_triangles_within`]).
+///
+/// # Errors
+/// As [`load_scene`].
+pub fn load_scene_within(
+    path: &Path,
+    progress: Option<Progress<'_>>,
+    max_bytes: Option<u64>,
+) -> Result<Scene> {
     let file = parse_scene_file(path)?;
     let base = path.parent().unwrap_or(Path::new("."));
-    build_scene(&file, base, progress).map_err(|e| e.context(path.display()))
+    build_scene_within(&file, base, Vec::new(), progress, max_bytes)
+        .map_err(|e| e.context(path.display()))
 }
 
 /// Builds a scene from a parsed file; relative model paths are resolved
@@ -73,6 +89,17 @@ pub fn build_scene_reads(
     reads: Vec<(PathBuf, CloudRead)>,
     progress: Option<Progress<'_>>,
 ) -> Result<Scene> {
+    build_scene_within(file, base, reads, progress, None)
+}
+
+/// [`build_scene_reads`] within `max_bytes` (see [`load_scene_within`]).
+fn build_scene_within(
+    file: &SceneFile,
+    base: &Path,
+    reads: Vec<(PathBuf, CloudRead)>,
+    progress: Option<Progress<'_>>,
+    max_bytes: Option<u64>,
+) -> Result<Scene> {
     let mut read = reads;
     let c = &file.camera;
     check_camera(c)?;
@@ -84,7 +111,7 @@ pub fn build_scene_reads(
     if file.models.is_empty() {
         return Err(Error::invalid("the scene has no [[model]]"));
     }
-    let mut models = load_models(&file.models, base, &mut read, progress)?;
+    let mut models = load_models(&file.models, base, &mut read, progress, max_bytes)?;
     let shift = models.shift;
     let lights = file
         .lights
@@ -269,6 +296,7 @@ fn load_models(
     base: &Path,
     read: &mut Vec<(PathBuf, CloudRead)>,
     progress: Option<Progress<'_>>,
+    max_bytes: Option<u64>,
 ) -> Result<Models> {
     let start = std::time::Instant::now();
     let mut shift = None;
@@ -289,7 +317,14 @@ fn load_models(
         let number = i + 1;
         let in_model = |e: Error| e.context(format_args!("model {number}"));
         let mid = u16::try_from(i).map_err(|_| Error::invalid("more than 65535 models"))?;
-        let mut src = model_source(m, base, read, &mut out.load, progress).map_err(in_model)?;
+        // What the cap leaves once the triangles of the models before it are held.
+        let left = max_bytes.map(|b| {
+            b.saturating_sub(
+                (out.triangles.tris.len() as u64).saturating_mul(crate::io::BYTES_PER_TRIANGLE),
+            )
+        });
+        let mut src =
+            model_source(m, base, read, &mut out.load, progress, left).map_err(in_model)?;
         if !(m.transform.scale > 0.0 && m.transform.scale.is_finite()) {
             return Err(in_model(Error::invalid(format!(
                 "transform.scale must be positive, got {}",
@@ -410,6 +445,7 @@ fn model_source<'a>(
     read: &mut Vec<(PathBuf, CloudRead)>,
     load: &mut LoadReport,
     progress: Option<Progress<'_>>,
+    max_bytes: Option<u64>,
 ) -> Result<Source<'a>> {
     let sources = [
         spec.points.is_some(),
@@ -450,7 +486,7 @@ fn model_source<'a>(
                  as its triangles",
             ));
         }
-        let tm = crate::io::read_triangles(&base.join(p))?;
+        let tm = crate::io::read_triangles_within(&base.join(p), max_bytes)?;
         return Ok(Source {
             splats: Vec::new(),
             color_fields: Vec::new(),

@@ -21,7 +21,9 @@ pub use file::{
     CameraSpec, LightKind, LightSpec, MaterialKind, MaterialSpec, ModelSpec, RenderSpec, SceneFile,
     ShapeKind, ShapeSpec, SplatSpec, TransformSpec, parse_scene_file, parse_scene_str,
 };
-pub use load::{build_scene, build_scene_reads, load_scene, scene_camera, scene_lights};
+pub use load::{
+    build_scene, build_scene_reads, load_scene, load_scene_within, scene_camera, scene_lights,
+};
 pub use model::{
     Camera, Light, LoadReport, Material, RenderOptions, Scene, SceneScale, Triangles,
     TruthSource,
