@@ -15,6 +15,7 @@ use splatray::accel::{Backend, CandidateHits, Ray};
 use splatray::render::cast::{CastOutputs, cast_rays, occluded};
 use splatray::render::integrator::{SplatSurfaces, Surfaces};
 use splatray::scene::Scene;
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
@@ -26,7 +27,17 @@ pub struct SplatScene {
     /// The scene's frame: world = scene + `to_internal`, subtracted in f64.
     to_internal: DVec3,
     name: &'static str,
+    /// The last call's converted rays and lengths, whose memory the next
+    /// call writes into: fresh vectors are pages the kernel maps and
+    /// zeroes on first touch, a sixth of the CPU of a process casting
+    /// camera rays (`docs/notes/backends.md`, "Issue 55, seventh
+    /// session"). Kept up to [`KEEP_RAYS`] rays.
+    scratch: Mutex<(Vec<Ray>, Vec<f32>)>,
 }
+
+/// The most rays whose conversion buffers a scene keeps between calls
+/// (28 bytes a ray: 112 MB).
+const KEEP_RAYS: usize = 1 << 22;
 
 impl SplatScene {
     /// `scene` (its splats, shading modes and windows) in `backend` (a
@@ -39,6 +50,7 @@ impl SplatScene {
             backend: built,
             to_internal,
             name: info.name,
+            scratch: Mutex::default(),
         })
     }
 
@@ -75,10 +87,11 @@ impl SplatScene {
     /// `docs/notes/backends.md`, "Issue 55, round 2"); the first bad row
     /// is reported.
     fn convert<T: Copy + Into<f64> + Sync>(&self, v: &[T]) -> PyResult<(Vec<Ray>, Vec<f32>)> {
-        let n = v.len() / 6;
         let bad = AtomicUsize::new(usize::MAX);
-        let mut rays = Vec::with_capacity(n);
-        let mut lens = Vec::with_capacity(n);
+        // The kept buffers (a call running beside this one finds none
+        // and allocates); a poisoned lock still holds plain vectors.
+        let (mut rays, mut lens) =
+            std::mem::take(&mut *self.scratch.lock().unwrap_or_else(|p| p.into_inner()));
         v.par_chunks_exact(6)
             .enumerate()
             .map(|(i, r)| {
@@ -94,6 +107,14 @@ impl SplatScene {
                 let why = self.ray(&v[6 * i..6 * i + 6]).err().unwrap_or("is wrong");
                 Err(PyValueError::new_err(format!("rays: row {i} {why}")))
             }
+        }
+    }
+
+    /// Keeps a call's converted `rays` and `lens` for the next call's
+    /// conversion (none beyond [`KEEP_RAYS`] rays).
+    fn keep(&self, rays: Vec<Ray>, lens: Vec<f32>) {
+        if rays.capacity() <= KEEP_RAYS {
+            *self.scratch.lock().unwrap_or_else(|p| p.into_inner()) = (rays, lens);
         }
     }
 
@@ -194,6 +215,7 @@ impl SplatScene {
             );
             (t, ids, nrm)
         });
+        self.keep(rays, lens);
         // The vectors are handed to numpy as they are (no copy).
         let d = pyo3::types::PyDict::new(py);
         d.set_item("t_hit", vector(py, t))?;
@@ -267,6 +289,7 @@ impl SplatScene {
             occluded(&self.surfaces(), &rays, &lens, (tnear, tfar), &mut out);
             out
         });
+        self.keep(rays, lens);
         Ok(vector(py, out))
     }
 
