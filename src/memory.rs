@@ -125,15 +125,7 @@ impl std::error::Error for TooLarge {}
 /// [`TooLarge`]: what needs how much, against the tightest bound and its
 /// name.
 pub fn check(what: &str, bytes: u64) -> Result<(), TooLarge> {
-    match limit() {
-        Some(b) if bytes > b.bytes => Err(TooLarge {
-            what: what.to_string(),
-            bytes,
-            bound: b,
-            hint: None,
-        }),
-        _ => Ok(()),
-    }
+    check_within(what, bytes, None)
 }
 
 /// [`check`] against the least of [`limit`] and `cap`, the bytes the user

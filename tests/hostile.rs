@@ -473,25 +473,28 @@ fn a_huge_mesh_is_refused_up_front() {
         }
     }
     std::fs::write(dir.join("grid.ply"), &ply).unwrap();
-    let grid = scene(&format!(
-        "[[model]]\ntriangles = \"{}\"",
-        dir.join("grid.ply").display()
-    ));
+    // The grid in `file` is refused under 0.25 GB, the reason `expect`
+    // named, and renders whole under 0.5 GB.
+    let refused_then_fits = |file: &str, expect: &str| {
+        let grid = scene(&format!(
+            "[[model]]\ntriangles = \"{}\"",
+            dir.join(file).display()
+        ));
+        let name = format!("{file}-limit");
+        let r = run(&name, "render", &grid, &["--max-memory", "0.25"]);
+        fails_cleanly(&name, &r, &[file, expect, "the --max-memory limit"]);
+        let r = run(
+            &format!("{file}-fits"),
+            "render",
+            &grid,
+            &["--max-memory", "0.5"],
+        );
+        assert!(r.ok, "{file} fits: {}", r.stderr);
+        assert!(r.stdout.contains("1002528 triangles"), "{}", r.stdout);
+    };
     // Refused by the reader from the header's count (the budget reaches
     // the reader), not by the render's budget after reading.
-    let r = run("grid-limit", "render", &grid, &["--max-memory", "0.25"]);
-    fails_cleanly(
-        "grid-limit",
-        &r,
-        &[
-            "grid.ply",
-            "1002528 faces as triangles needs about 0.3 GB",
-            "the --max-memory limit",
-        ],
-    );
-    let r = run("grid-fits", "render", &grid, &["--max-memory", "0.5"]);
-    assert!(r.ok, "grid-fits: {}", r.stderr);
-    assert!(r.stdout.contains("1002528 triangles"), "{}", r.stdout);
+    refused_then_fits("grid.ply", "1002528 faces as triangles needs about 0.3 GB");
     // The same grid as OBJ text (44 MB): refused while it is read, at the
     // first count of 65,536 faces whose triangles pass 0.25 GB (786,432
     // x 320 B = 0.252 GB), before its last 216,096 faces are held.
@@ -517,23 +520,7 @@ fn a_huge_mesh_is_refused_up_front() {
         }
     }
     std::fs::write(dir.join("grid.obj"), obj).unwrap();
-    let grid = scene(&format!(
-        "[[model]]\ntriangles = \"{}\"",
-        dir.join("grid.obj").display()
-    ));
-    let r = run("obj-limit", "render", &grid, &["--max-memory", "0.25"]);
-    fails_cleanly(
-        "obj-limit",
-        &r,
-        &[
-            "grid.obj",
-            "its first 786432 faces as 786432 triangles",
-            "the --max-memory limit",
-        ],
-    );
-    let r = run("obj-fits", "render", &grid, &["--max-memory", "0.5"]);
-    assert!(r.ok, "obj-fits: {}", r.stderr);
-    assert!(r.stdout.contains("1002528 triangles"), "{}", r.stdout);
+    refused_then_fits("grid.obj", "its first 786432 faces as 786432 triangles");
 }
 
 /// Class 11: negative radiance, a light without samples, a NaN normal.

@@ -84,6 +84,11 @@ pub fn parse_up(s: &str) -> Result<DVec3, String> {
 }
 
 impl SceneArgs {
+    /// `--max-memory` in bytes (given in GB, 10^9 bytes).
+    fn max_bytes(&self) -> Option<u64> {
+        self.max_memory.map(|gb| (gb * 1e9) as u64)
+    }
+
     /// Checks the worst-case rays and the memory of rendering `scene`
     /// while holding `holds` against `--max-rays` and `--max-memory` (or the
     /// memory available).
@@ -93,7 +98,7 @@ impl SceneArgs {
     pub fn check_budget(&self, scene: &Scene, holds: crate::render::budget::Holds) -> Result<()> {
         let limits = crate::render::budget::Limits {
             max_rays: self.max_rays,
-            max_bytes: self.max_memory.map(|gb| (gb * 1e9) as u64),
+            max_bytes: self.max_bytes(),
         };
         crate::render::budget::check(scene, holds, &limits)
             .map(|_| ())
@@ -130,8 +135,7 @@ impl SceneArgs {
                 )));
             }
             let progress = |stage: &str, f: f64| line.update(stage, f);
-            let cap = self.max_memory.map(|gb| (gb * 1e9) as u64);
-            let mut scene = load_scene_within(&path, Some(&progress), cap)?;
+            let mut scene = load_scene_within(&path, Some(&progress), self.max_bytes())?;
             line.finish();
             scene.set_view(self.width, self.height, spp, self.shading)?;
             scene

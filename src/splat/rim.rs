@@ -392,11 +392,11 @@ pub(super) fn clip_lines(
     let mut lines = Lines::new(s, f, own, other, spacing);
     let step = std::f32::consts::TAU / CLIP_DIRECTIONS as f32;
     let exts = coarse_exts(own);
+    let (xs, ys) = coarse_dirs();
     let candidates: Vec<(f32, ClipLine)> = (0..CLIP_DIRECTIONS)
         .filter_map(|k| {
-            let t = step * k as f32;
-            let w = Vec2::new(t.cos(), t.sin());
-            lines.line_with(w, exts[k]).map(|l| (t, l))
+            let w = Vec2::new(xs[k], ys[k]);
+            lines.line_with(w, exts[k]).map(|l| (step * k as f32, l))
         })
         .collect();
     let Some((first, cut)) = lines.best(&candidates, &[]) else {
@@ -447,15 +447,13 @@ pub(super) fn clip_lines(
     }
 }
 
-/// The own face's farthest extent `max w·q` over `own` along each of the
-/// [`CLIP_DIRECTIONS`] coarse directions `w` of [`clip_lines`]: the same
-/// products, sums and maxima, point by point in the same order, as
-/// [`Lines::line_at`] takes along one direction, so bit for bit its `ext`,
-/// but all directions at once in lanes.
-fn coarse_exts(own: &[Near]) -> [f32; CLIP_DIRECTIONS] {
+/// The [`CLIP_DIRECTIONS`] coarse directions of [`clip_lines`], `(cos t,
+/// sin t)` at `t = k·τ/CLIP_DIRECTIONS` as [`Lines::line_at`] makes them,
+/// made once.
+fn coarse_dirs() -> &'static ([f32; CLIP_DIRECTIONS], [f32; CLIP_DIRECTIONS]) {
     static DIRS: std::sync::OnceLock<([f32; CLIP_DIRECTIONS], [f32; CLIP_DIRECTIONS])> =
         std::sync::OnceLock::new();
-    let (xs, ys) = DIRS.get_or_init(|| {
+    DIRS.get_or_init(|| {
         let step = std::f32::consts::TAU / CLIP_DIRECTIONS as f32;
         let (mut xs, mut ys) = ([0f32; CLIP_DIRECTIONS], [0f32; CLIP_DIRECTIONS]);
         for k in 0..CLIP_DIRECTIONS {
@@ -463,7 +461,16 @@ fn coarse_exts(own: &[Near]) -> [f32; CLIP_DIRECTIONS] {
             (xs[k], ys[k]) = (t.cos(), t.sin());
         }
         (xs, ys)
-    });
+    })
+}
+
+/// The own face's farthest extent `max w·q` over `own` along each of the
+/// [`CLIP_DIRECTIONS`] coarse directions `w` of [`clip_lines`]: the same
+/// products, sums and maxima, point by point in the same order, as
+/// [`Lines::line_at`] takes along one direction, so bit for bit its `ext`,
+/// but all directions at once in lanes.
+fn coarse_exts(own: &[Near]) -> [f32; CLIP_DIRECTIONS] {
+    let (xs, ys) = coarse_dirs();
     let mut ext = [f32::MIN; CLIP_DIRECTIONS];
     for m in own {
         let (qx, qy) = (m.q.x, m.q.y);
