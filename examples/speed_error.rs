@@ -54,7 +54,8 @@ fn run() -> Result<()> {
     };
     let rows = sweep(&request, None, &mut |_| {});
     std::fs::remove_dir_all(&dir).map_err(Error::other)?;
-    let rows = rows?;
+    let result = rows?;
+    let rows = result.rows;
 
     println!("step epsilon  splats shading  backend: render s, PSNR dB, normal error mean deg");
     for r in &rows {
@@ -110,6 +111,14 @@ fn run() -> Result<()> {
             "Phong normal error {e1:.3}° at {} splats is not below {e0:.3}° at {}",
             fine.splats, coarse.splats
         )));
+    }
+    if let Some(m) = &result.mesh {
+        let speeds: Vec<String> = m
+            .backends
+            .iter()
+            .map(|b| format!("{}: {:.4} s", b.name, b.render_s))
+            .collect();
+        println!("mesh ({} triangles): {}", m.triangles, speeds.join("; "));
     }
     println!(
         "{} rows, backends identical in each; Phong normal error {e0:.3}° at {} splats -> {e1:.3}° at {}",

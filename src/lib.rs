@@ -15,7 +15,7 @@
 //! | render | [`render`] → [`Frame`] ([`RayCounts`]), [`write_image`] |
 //! | cast rays on a chosen backend | [`backend_names`], [`build_backend`] → a [`Backend`], [`SplatSurfaces`], [`cast_rays`] ([`Ray`], [`CastOutputs`]) |
 //! | compare backends | [`compare`] ([`CompareOptions`]) → [`Compared`]: a [`CompareReport`] ([`BackendRun`], [`Agreement`], [`TruthReport`], [`NamedTruthErrors`], [`TruthErrors`], [`ErrorBudget`]) and the frames |
-//! | speed against error | [`sweep`] ([`SweepRequest`]) → [`SweepRow`]s ([`BackendFigures`]) |
+//! | speed against error | [`sweep`] ([`SweepRequest`]) → [`SweepResult`]: [`SweepRow`]s and a [`MeshRow`] ([`BackendFigures`]) |
 //! | the command line | [`run_cli`] |
 //!
 //! Errors are one line ([`Error`]); long work reports how far it is through
@@ -116,7 +116,7 @@ pub use render::integrator::SplatSurfaces;
 // Comparing backends, speed against error.
 pub use validate::causes::ErrorBudget;
 pub use validate::compare::{Agreement, TruthErrors};
-pub use validate::sweep::{BackendFigures, SweepRow};
+pub use validate::sweep::{BackendFigures, MeshRow, SweepResult, SweepRow};
 pub use workflow::compare::{
     BackendRun, CompareOptions, CompareReport, Compared, NamedTruthErrors, TruthReport, compare,
 };

@@ -54,17 +54,22 @@ fn sweep(args: &[&str]) -> Output {
         .unwrap()
 }
 
-const COLUMNS: [&str; 21] = [
+const COLUMNS: [&str; 26] = [
     "step",
     "epsilon",
     "shading",
     "splats",
     "scene_splats",
+    "triangles",
     "splat_seconds",
     "octree_build_s",
     "embree_build_s",
     "octree_render_s",
     "embree_render_s",
+    "octree_mrays_per_s",
+    "embree_mrays_per_s",
+    "octree_memory_bytes",
+    "embree_memory_bytes",
     "coverage",
     "false_hits",
     "depth_rel_p50",
@@ -111,13 +116,14 @@ fn sweep_measures_budget_against_error() {
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     assert_eq!(header, COLUMNS);
-    let rows: Vec<HashMap<&str, &str>> = lines
+    type Rows<'a> = Vec<HashMap<&'a str, &'a str>>;
+    let (mesh, rows): (Rows, Rows) = lines
         .map(|l| {
             let cells: Vec<&str> = l.split(',').collect();
             assert_eq!(cells.len(), header.len(), "row {l}");
-            header.iter().copied().zip(cells).collect()
+            header.iter().copied().zip(cells).collect::<HashMap<_, _>>()
         })
-        .collect();
+        .partition(|r| r["shading"] == "mesh");
     let num = |r: &HashMap<&str, &str>, k: &str| -> f64 {
         r[k].parse::<f64>()
             .unwrap_or_else(|_| panic!("{k} = {}", r[k]))
@@ -153,6 +159,7 @@ fn sweep_measures_budget_against_error() {
             assert!(num(r, k) > 0.0 && num(r, k) < 60.0, "{k}: {}", num(r, k));
         }
     }
+    assert_mesh_row(&mesh, &stdout);
     let span = num(flat[4], "splats") / num(flat[0], "splats");
     assert!(span >= 3.0, "splat span only {span:.2}x");
 
@@ -191,12 +198,56 @@ fn sweep_measures_budget_against_error() {
     assert_eq!((img.width(), img.height()), (1280, 560));
     let svg = std::fs::read_to_string(dir.join("s.svg")).unwrap();
     assert!(svg.contains("<svg") && svg.contains("normal error"));
+    // The mesh's point per backend, labelled, and its legend entry.
+    for label in [
+        "mesh octree",
+        "mesh embree",
+        "mesh, 69666 triangles (zero error)",
+    ] {
+        assert!(svg.contains(label), "{label} not in the plot");
+    }
     let leftovers: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
         .filter_map(|e| e.ok())
         .filter(|e| e.file_name().to_string_lossy().contains("partial"))
         .collect();
     assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
+}
+
+/// Issue 57: the CSV's mesh row, the bunny mesh's 69,666 triangles
+/// rendered once on every backend beside the sphere's 400 splats: zero
+/// error (the exact surface), a measured speed and memory per backend, the
+/// backends' renders identical; and its log line.
+fn assert_mesh_row(mesh: &[HashMap<&str, &str>], stdout: &str) {
+    assert_eq!(mesh.len(), 1, "one mesh row");
+    let m = &mesh[0];
+    let num = |k: &str| -> f64 {
+        m[k].parse::<f64>()
+            .unwrap_or_else(|_| panic!("{k} = {}", m[k]))
+    };
+    assert_eq!((num("triangles"), num("splats")), (69666.0, 0.0));
+    assert_eq!(num("scene_splats"), 400.0);
+    for b in ["octree", "embree"] {
+        let (build, render) = (num(&format!("{b}_build_s")), num(&format!("{b}_render_s")));
+        assert!(build > 0.0 && build < 60.0, "{b} build {build}");
+        assert!(render > 0.0 && render < 60.0, "{b} render {render}");
+        // Rays over seconds: the render's own figure, consistent with it.
+        let mrays = num(&format!("{b}_mrays_per_s"));
+        assert!(mrays > 0.0 && mrays.is_finite(), "{b} {mrays} Mrays/s");
+        // 69,666 triangles hold at least their 36 bytes of vertices each.
+        let bytes = num(&format!("{b}_memory_bytes"));
+        assert!(bytes > 69666.0 * 36.0, "{b} {bytes} bytes");
+    }
+    for k in ["normal_deg_mean", "false_hits", "embree_normal_deg_mean"] {
+        assert_eq!(num(k), 0.0, "{k}");
+    }
+    assert_eq!((m["psnr_db"], m["embree_psnr_db"]), ("inf", "inf"));
+    assert_eq!(m["backends_identical"], "true");
+    assert!(
+        stdout.contains("mesh as triangles: 69666 triangles (400 splats beside them)")
+            && stdout.contains("backends identical; plotted at zero error"),
+        "{stdout}"
+    );
 }
 
 fn assert_clean_failure(args: &[&str], expect: &str) {

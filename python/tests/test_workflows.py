@@ -84,7 +84,9 @@ def test_sweep_rows_are_the_cli_csv(binary, tmp_path):
     with open(tmp_path / "s.csv", newline="") as f:
         want = list(csv.DictReader(f))
     got = splatray.sweep(scene, **opts)
-    assert len(got) == len(want) == 5 * 3
+    # Five steps in three modes, then the mesh row (issue 57).
+    assert len(got) == len(want) == 5 * 3 + 1
+    mesh, want_mesh = got.pop(), want.pop()
     names = [b["name"] for b in got[0]["backends"]]
     assert names == splatray.BACKENDS[: len(names)] and len(names) >= 2
     for g, w in zip(got, want):
@@ -102,6 +104,19 @@ def test_sweep_rows_are_the_cli_csv(binary, tmp_path):
             assert b["errors"]["normal_deg_mean"] == float(w[f"{b['name']}_normal_deg_mean"])
     # Smaller epsilon, more splats.
     assert got[-1]["splats"] > got[0]["splats"]
+    # The mesh row: the bunny's triangles on every backend, zero error (the
+    # exact surface), a measured speed, and what its render measured.
+    assert mesh["shading"] == want_mesh["shading"] == "mesh"
+    assert mesh["triangles"] == int(want_mesh["triangles"]) == 69666
+    assert mesh["splats"] == mesh["scene_splats"] == 0
+    assert mesh["backends_identical"] and want_mesh["backends_identical"] == "true"
+    assert [b["name"] for b in mesh["backends"]] == names
+    for b in mesh["backends"]:
+        assert b["errors"]["normal_deg_mean"] == 0.0 and b["errors"]["image_psnr_db"] is None
+        assert b["render_s"] > 0 and b["mrays_per_s"] > 0 and b["memory_bytes"] > 69666 * 36
+        # Faces shaded flat against the exact surface's smooth normals.
+        assert b["measured"]["normal_deg_mean"] > 0
+        assert b["measured"]["coverage"] > 0.99
 
 
 def test_sweep_refuses_bad_options_before_work(tmp_path):

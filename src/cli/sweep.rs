@@ -6,7 +6,7 @@ use super::progress::ProgressLine;
 use super::view::default_scene;
 use crate::names::Named;
 use crate::render::output::check_output_path;
-use crate::validate::sweep::{MODES, SweepRow, csv_text, pareto};
+use crate::validate::sweep::{MODES, SweepResult, SweepRow, csv_text, pareto};
 use crate::workflow::sweep::SweepRequest;
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -81,12 +81,12 @@ pub fn run(args: &SweepArgs) -> Result<()> {
     );
     let line = ProgressLine::new();
     let progress = |stage: &str, f: f64| line.update(stage, f);
-    let rows = prepared.run(Some(&progress), &mut |text| {
+    let result = prepared.run(Some(&progress), &mut |text| {
         line.finish();
         println!("{text}");
     })?;
-    summary(&rows);
-    write_outputs(args, &rows)
+    summary(&result);
+    write_outputs(args, &result)
 }
 
 /// The CSV and the plot can be written where asked.
@@ -108,13 +108,13 @@ fn check_outputs(args: &SweepArgs) -> Result<()> {
 
 /// The CSV and the plot, committed together: a failure in either leaves
 /// neither.
-fn write_outputs(args: &SweepArgs, rows: &[SweepRow]) -> Result<()> {
+fn write_outputs(args: &SweepArgs, result: &SweepResult) -> Result<()> {
     let mut batch = crate::io::Batch::new();
     if let Some(c) = &args.csv {
-        super::stage_text(&mut batch, c, &csv_text(rows))?;
+        super::stage_text(&mut batch, c, &csv_text(result))?;
     }
     if let Some(p) = &args.plot {
-        crate::workflow::plot::plot_sweep(&mut batch, rows, p)?;
+        crate::workflow::plot::plot_sweep(&mut batch, result, p)?;
     }
     batch.commit()?;
     if let Some(c) = &args.csv {
@@ -130,9 +130,11 @@ fn write_outputs(args: &SweepArgs, rows: &[SweepRow]) -> Result<()> {
     Ok(())
 }
 
-/// The summary lines: the span of the budget, and per mode the normal error
-/// and PSNR at the coarsest and finest steps (all from this run's rows).
-fn summary(rows: &[SweepRow]) {
+/// The summary lines: the span of the budget, per mode the normal error
+/// and PSNR at the coarsest and finest steps, each backend's Pareto front
+/// and its speed on the mesh's triangles (all from this run's rows).
+fn summary(result: &SweepResult) {
+    let rows = &result.rows;
     let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
         return;
     };
@@ -147,6 +149,18 @@ fn summary(rows: &[SweepRow]) {
     summary_modes(rows);
     for b in &first.backends {
         summary_pareto(rows, b.name);
+    }
+    if let Some(m) = &result.mesh {
+        let speeds: Vec<String> = m
+            .backends
+            .iter()
+            .map(|b| format!("{} {:.3} s", b.name, b.render_s))
+            .collect();
+        println!(
+            "  mesh ({} triangles, zero error by definition): render {}",
+            m.triangles,
+            speeds.join(", ")
+        );
     }
 }
 

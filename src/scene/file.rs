@@ -407,6 +407,28 @@ pub struct SceneFile {
     pub render: RenderSpec,
 }
 
+impl SceneFile {
+    /// This file with every model that has a mesh (a `mesh` model, or a
+    /// `truth` beside `points`, `splats` or `gaussians`) made a `triangles`
+    /// model of that mesh, its material and transform kept; and how many
+    /// (issue 57: `compare --as-triangles` and the sweep's mesh row).
+    #[must_use]
+    pub fn meshes_as_triangles(&self) -> (SceneFile, usize) {
+        let mut out = self.clone();
+        let mut n = 0;
+        for m in &mut out.models {
+            let Some(mesh) = m.mesh.take().or_else(|| m.truth.take()) else {
+                continue;
+            };
+            m.triangles = Some(mesh);
+            (m.points, m.splats, m.gaussians) = (None, None, None);
+            (m.samples, m.scan, m.min_opacity) = (None, None, None);
+            n += 1;
+        }
+        (out, n)
+    }
+}
+
 /// Reads and parses a scene file. Errors are one line (the TOML parser's
 /// message, which names the key and the line, is folded onto it).
 pub fn parse_scene_file(path: &Path) -> Result<SceneFile> {

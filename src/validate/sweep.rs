@@ -76,8 +76,67 @@ pub struct BackendFigures {
     pub build_s: f64,
     /// Render seconds in this row's mode.
     pub render_s: f64,
+    /// Millions of rays (all kinds) per second of that render.
+    pub mrays_per_s: f64,
+    /// Bytes the backend's structure holds (its build statistics).
+    pub memory_bytes: usize,
     /// Its render against the exact surface.
     pub errors: TruthErrors,
+}
+
+impl BackendFigures {
+    /// `frame` rendered by `backend` (named `name`), measured against
+    /// `truth`.
+    fn measure(
+        name: &'static str,
+        backend: &dyn crate::accel::Backend,
+        frame: Frame,
+        truth: (&Frame, &crate::scene::Camera, f32),
+    ) -> BackendFigures {
+        let stats = backend.stats();
+        BackendFigures {
+            name,
+            build_s: stats.build_seconds,
+            render_s: frame.seconds,
+            mrays_per_s: frame.rays.total() as f64 / frame.seconds.max(1e-9) / 1e6,
+            memory_bytes: stats.memory_bytes,
+            errors: truth_errors(frame, truth.0, truth.1, truth.2),
+        }
+    }
+}
+
+/// The sweep's mesh row (issue 57): the varied models' meshes rendered as
+/// their triangles ([`SceneFile::meshes_as_triangles`]; shapes and splat
+/// files stay as they are), once, on every rendering backend, in Phong
+/// mode at the sweep's resolution. The mesh is the exact surface every
+/// row is measured against, so its row is the zero-error point beside
+/// each backend's front: the CSV writes its errors as zero and the plot
+/// draws it there. What its render measures against the exact surface's
+/// (faces shaded with their own normals where the file has none, where
+/// the exact surface interpolates smooth vertex normals; shapes still
+/// splats) is kept in `backends[k].errors` and logged.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct MeshRow {
+    /// Triangles of the meshes.
+    pub triangles: usize,
+    /// Splats left in that scene (shapes and splat files).
+    pub scene_splats: usize,
+    /// Every rendering backend on the triangles, the reference first (its
+    /// errors: measured against the exact surface, see above).
+    pub backends: Vec<BackendFigures>,
+    /// True when every backend's render of the triangles is the
+    /// reference's bit for bit (image, depths and hit ids).
+    pub backends_identical: bool,
+}
+
+/// What a sweep measures: its rows, and the mesh row when the varied
+/// models have meshes.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct SweepResult {
+    /// One row per budget step and shading mode.
+    pub rows: Vec<SweepRow>,
+    /// The meshes as triangles.
+    pub mesh: Option<MeshRow>,
 }
 
 /// One row of the sweep: one budget step in one shading mode, every figure
@@ -123,9 +182,10 @@ fn psnr(p: Option<f64>) -> String {
 }
 
 /// The CSV header for backends `names` (reference first), matching
-/// [`csv_line`]: per backend `NAME_build_s` and `NAME_render_s`; the
-/// reference's truth errors unprefixed; then per other backend its key
-/// errors as `NAME_coverage`, `NAME_normal_deg_mean`, `NAME_psnr_db`.
+/// [`csv_line`]: per backend `NAME_build_s`, `NAME_render_s`,
+/// `NAME_mrays_per_s` and `NAME_memory_bytes`; the reference's truth errors
+/// unprefixed; then per other backend its key errors as `NAME_coverage`,
+/// `NAME_normal_deg_mean`, `NAME_psnr_db`.
 #[must_use]
 pub fn csv_header(names: &[&str]) -> String {
     let mut h = vec![
@@ -134,10 +194,12 @@ pub fn csv_header(names: &[&str]) -> String {
         "shading".into(),
         "splats".into(),
         "scene_splats".into(),
+        "triangles".into(),
         "splat_seconds".into(),
     ];
-    h.extend(names.iter().map(|n| format!("{n}_build_s")));
-    h.extend(names.iter().map(|n| format!("{n}_render_s")));
+    for k in ["build_s", "render_s", "mrays_per_s", "memory_bytes"] {
+        h.extend(names.iter().map(|n| format!("{n}_{k}")));
+    }
     h.extend(
         [
             "coverage",
@@ -157,21 +219,21 @@ pub fn csv_header(names: &[&str]) -> String {
     h.join(",")
 }
 
-/// One CSV line (no newline) for `r`, in the columns of [`csv_header`]. An
-/// infinite PSNR (identical images) is written `inf`.
-#[must_use]
-pub fn csv_line(r: &SweepRow) -> String {
-    let o = &r.reference().errors;
-    let mut c = vec![
-        r.step.to_string(),
-        r.epsilon_rel.to_string(),
-        r.shading.name().to_string(),
-        r.splats.to_string(),
-        r.scene_splats.to_string(),
-        r.splat_seconds.to_string(),
-    ];
-    c.extend(r.backends.iter().map(|b| b.build_s.to_string()));
-    c.extend(r.backends.iter().map(|b| b.render_s.to_string()));
+/// The cells of [`csv_header`] from `triangles` on, for `backends` (their
+/// figures) with errors `errors` (each backend's, reference first).
+fn csv_figures(
+    triangles: usize,
+    splat_seconds: f64,
+    backends: &[BackendFigures],
+    errors: &[&TruthErrors],
+    identical: bool,
+) -> Vec<String> {
+    let mut c = vec![triangles.to_string(), splat_seconds.to_string()];
+    c.extend(backends.iter().map(|b| b.build_s.to_string()));
+    c.extend(backends.iter().map(|b| b.render_s.to_string()));
+    c.extend(backends.iter().map(|b| b.mrays_per_s.to_string()));
+    c.extend(backends.iter().map(|b| b.memory_bytes.to_string()));
+    let o = errors[0];
     c.extend([
         o.coverage.to_string(),
         o.false_hits.to_string(),
@@ -180,30 +242,90 @@ pub fn csv_line(r: &SweepRow) -> String {
         o.normal_deg_mean.to_string(),
         o.normal_deg_p99.to_string(),
         psnr(o.image_psnr_db),
-        r.backends_identical.to_string(),
+        identical.to_string(),
     ]);
-    for b in r.backends.iter().skip(1) {
-        let e = &b.errors;
+    for e in errors.iter().skip(1) {
         c.extend([
             e.coverage.to_string(),
             e.normal_deg_mean.to_string(),
             psnr(e.image_psnr_db),
         ]);
     }
+    c
+}
+
+/// One CSV line (no newline) for `r`, in the columns of [`csv_header`]. An
+/// infinite PSNR (identical images) is written `inf`.
+#[must_use]
+pub fn csv_line(r: &SweepRow) -> String {
+    let mut c = vec![
+        r.step.to_string(),
+        r.epsilon_rel.to_string(),
+        r.shading.name().to_string(),
+        r.splats.to_string(),
+        r.scene_splats.to_string(),
+    ];
+    let errors: Vec<&TruthErrors> = r.backends.iter().map(|b| &b.errors).collect();
+    c.extend(csv_figures(
+        0,
+        r.splat_seconds,
+        &r.backends,
+        &errors,
+        r.backends_identical,
+    ));
     c.join(",")
 }
 
-/// The whole CSV text, header first, one line per row.
+/// The errors of the exact surface against itself: what the mesh row
+/// writes (see [`MeshRow`]).
+pub const EXACT: TruthErrors = TruthErrors {
+    coverage: 1.0,
+    false_hits: 0.0,
+    depth_rel_p50: 0.0,
+    depth_rel_p99: 0.0,
+    normal_deg_mean: 0.0,
+    normal_deg_p99: 0.0,
+    image_psnr_db: None,
+};
+
+/// The mesh row's CSV line: step and epsilon 0, shading `mesh`, no varied
+/// splats, its triangles, its speeds, and zero error ([`EXACT`]).
 #[must_use]
-pub fn csv_text(rows: &[SweepRow]) -> String {
-    let names: Vec<&str> = rows
+pub fn csv_mesh_line(m: &MeshRow) -> String {
+    let mut c = vec![
+        "0".to_string(),
+        "0".into(),
+        "mesh".into(),
+        "0".into(),
+        m.scene_splats.to_string(),
+    ];
+    let errors = vec![&EXACT; m.backends.len()];
+    c.extend(csv_figures(
+        m.triangles,
+        0.0,
+        &m.backends,
+        &errors,
+        m.backends_identical,
+    ));
+    c.join(",")
+}
+
+/// The whole CSV text, header first, one line per row, the mesh row last.
+#[must_use]
+pub fn csv_text(result: &SweepResult) -> String {
+    let names: Vec<&str> = result
+        .rows
         .first()
         .map(|r| r.backends.iter().map(|b| b.name).collect())
         .unwrap_or_default();
     let mut s = csv_header(&names);
     s.push('\n');
-    for r in rows {
+    for r in &result.rows {
         s.push_str(&csv_line(r));
+        s.push('\n');
+    }
+    if let Some(m) = &result.mesh {
+        s.push_str(&csv_mesh_line(m));
         s.push('\n');
     }
     s
@@ -254,7 +376,7 @@ pub fn run_sweep(
     plan: &SweepPlan,
     progress: Option<Progress<'_>>,
     log: &mut dyn FnMut(&str),
-) -> Result<Vec<SweepRow>> {
+) -> Result<SweepResult> {
     if !file.models.iter().any(is_generated) {
         return Err(Error::invalid(
             "the scene has no model made from points or a mesh: nothing to vary",
@@ -321,12 +443,8 @@ pub fn run_sweep(
                 .iter()
                 .map(|(name, b)| {
                     let fr = render(&scene, b.as_ref(), None);
-                    BackendFigures {
-                        name,
-                        build_s: b.stats().build_seconds,
-                        render_s: fr.seconds,
-                        errors: truth_errors(fr, truth_frame, &scene.camera, diagonal),
-                    }
+                    let truth = (truth_frame, &scene.camera, diagonal);
+                    BackendFigures::measure(name, b.as_ref(), fr, truth)
                 })
                 .collect();
             let reference = &backends[0];
@@ -380,7 +498,93 @@ pub fn run_sweep(
             rows.push(row);
         }
     }
-    Ok(rows)
+    let mesh = match &reference {
+        Some((ref_scene, truth_frame)) => {
+            mesh_row(file, base, plan, (ref_scene, truth_frame), progress, log)?
+        }
+        None => None,
+    };
+    Ok(SweepResult { rows, mesh })
+}
+
+/// The sweep's [`MeshRow`]: `file`'s meshes as triangles, built and
+/// rendered once on every rendering backend at `plan`'s resolution in
+/// Phong mode, each render timed and measured against the exact
+/// surface's frame of `reference`; `None` when no model has a mesh.
+fn mesh_row(
+    file: &SceneFile,
+    base: &Path,
+    plan: &SweepPlan,
+    reference: (&Scene, &Frame),
+    progress: Option<Progress<'_>>,
+    log: &mut dyn FnMut(&str),
+) -> Result<Option<MeshRow>> {
+    let (tris, n) = file.meshes_as_triangles();
+    if n == 0 {
+        return Ok(None);
+    }
+    let mut scene = build_scene(&tris, base, progress)?;
+    set_view(&mut scene, plan, ShadingMode::Phong)?;
+    let holds = crate::render::budget::Holds {
+        frames: 2,
+        accelerators: 1,
+    };
+    crate::render::budget::check(&scene, holds, &crate::render::budget::Limits::default())?;
+    let (ref_scene, truth_frame) = reference;
+    let truth = (truth_frame, &ref_scene.camera, ref_scene.options.scale.diagonal);
+    let mut backends = Vec::new();
+    let mut first: Option<Frame> = None;
+    let mut identical = true;
+    for info in renderers() {
+        let b = info.build_scene(&scene)?;
+        let fr = render(&scene, b.as_ref(), None);
+        match &first {
+            None => first = Some(fr.clone()),
+            Some(f) => identical &= same_frame(f, &fr),
+        }
+        backends.push(BackendFigures::measure(info.name, b.as_ref(), fr, truth));
+    }
+    let figures: Vec<String> = backends
+        .iter()
+        .map(|b| {
+            format!(
+                "{} build {:.3} s, render {:.3} s ({:.2} Mrays/s), {:.1} MB",
+                b.name,
+                b.build_s,
+                b.render_s,
+                b.mrays_per_s,
+                b.memory_bytes as f64 / 1e6
+            )
+        })
+        .collect();
+    let o = &backends[0].errors;
+    log(&format!(
+        "mesh as triangles: {} triangles ({} splats beside them); {}; backends {}; \
+         plotted at zero error (its render against the exact surface's: normal deg mean {:.3}, PSNR {})",
+        scene.triangles.tris.len(),
+        scene.splats.len(),
+        figures.join("; "),
+        if identical { "identical" } else { "differ" },
+        o.normal_deg_mean,
+        o.image_psnr_db
+            .map_or("inf".to_string(), |p| format!("{p:.2} dB")),
+    ));
+    Ok(Some(MeshRow {
+        triangles: scene.triangles.tris.len(),
+        scene_splats: scene.splats.len(),
+        backends,
+        backends_identical: identical,
+    }))
+}
+
+/// True when two renders give the same image, depths and hit ids, bit for
+/// bit.
+fn same_frame(a: &Frame, b: &Frame) -> bool {
+    let bits = |x: &f32| x.to_bits();
+    let rgb = |c: &glam::Vec3| c.to_array().map(f32::to_bits);
+    a.rgb.iter().map(rgb).eq(b.rgb.iter().map(rgb))
+        && a.depth.iter().map(bits).eq(b.depth.iter().map(bits))
+        && a.splat == b.splat
 }
 
 /// One configuration on a Pareto front of render time against image error.
@@ -452,6 +656,8 @@ mod tests {
                 name: "octree",
                 build_s: 0.0,
                 render_s,
+                mrays_per_s: 1.0,
+                memory_bytes: 1,
                 errors: TruthErrors {
                     coverage: 1.0,
                     false_hits: 0.0,
@@ -534,12 +740,16 @@ mod tests {
                     name: "octree",
                     build_s: 0.1,
                     render_s: 0.3,
+                    mrays_per_s: 2.5,
+                    memory_bytes: 1000,
                     errors: e.clone(),
                 },
                 BackendFigures {
                     name: "embree",
                     build_s: 0.2,
                     render_s: 0.4,
+                    mrays_per_s: 2.0,
+                    memory_bytes: 2000,
                     errors: TruthErrors {
                         image_psnr_db: Some(30.0),
                         ..e
@@ -548,7 +758,16 @@ mod tests {
             ],
             backends_identical: false,
         };
-        let text = csv_text(&[r]);
+        let mesh = MeshRow {
+            triangles: 7,
+            scene_splats: 2,
+            backends: r.backends.clone(),
+            backends_identical: true,
+        };
+        let text = csv_text(&SweepResult {
+            rows: vec![r],
+            mesh: Some(mesh),
+        });
         let mut lines = text.lines();
         let header: Vec<&str> = lines.next().unwrap().split(',').collect();
         let cells: Vec<&str> = lines.next().unwrap().split(',').collect();
@@ -560,12 +779,31 @@ mod tests {
         assert_eq!(cell("embree_psnr_db"), "30");
         assert_eq!(cell("backends_identical"), "false");
         assert_eq!(cell("embree_render_s"), "0.4");
+        assert_eq!(cell("embree_mrays_per_s"), "2");
+        assert_eq!(cell("octree_memory_bytes"), "1000");
+        assert_eq!(cell("triangles"), "0");
         assert_eq!(
             header.join(","),
-            "step,epsilon,shading,splats,scene_splats,splat_seconds,\
+            "step,epsilon,shading,splats,scene_splats,triangles,splat_seconds,\
 octree_build_s,embree_build_s,octree_render_s,embree_render_s,\
+octree_mrays_per_s,embree_mrays_per_s,octree_memory_bytes,embree_memory_bytes,\
 coverage,false_hits,depth_rel_p50,depth_rel_p99,normal_deg_mean,normal_deg_p99,psnr_db,\
 backends_identical,embree_coverage,embree_normal_deg_mean,embree_psnr_db"
         );
+        // The mesh row: last, its speeds, zero error by definition.
+        let m: Vec<&str> = lines.next().unwrap().split(',').collect();
+        assert!(lines.next().is_none());
+        assert_eq!(m.len(), header.len());
+        let cell = |k: &str| m[header.iter().position(|h| *h == k).unwrap()];
+        assert_eq!((cell("shading"), cell("triangles")), ("mesh", "7"));
+        assert_eq!((cell("splats"), cell("scene_splats")), ("0", "2"));
+        assert_eq!(cell("embree_render_s"), "0.4");
+        for k in ["normal_deg_mean", "embree_normal_deg_mean", "false_hits"] {
+            assert_eq!(cell(k), "0", "{k}");
+        }
+        for k in ["psnr_db", "embree_psnr_db"] {
+            assert_eq!(cell(k), "inf", "{k}");
+        }
+        assert_eq!(cell("backends_identical"), "true");
     }
 }

@@ -117,23 +117,11 @@ pub struct AsTriangles {
     pub splats_psnr_db: Vec<Option<f64>>,
 }
 
-/// The scene file with every model that has a mesh (a `mesh` model, or a
-/// `truth` beside `points`, `splats` or `gaussians`) made a `triangles`
-/// model of that mesh, its material and transform kept; and how many.
+/// The scene file with every model that has a mesh made a `triangles`
+/// model of it ([`crate::scene::SceneFile::meshes_as_triangles`]).
 #[must_use]
 pub fn meshes_as_triangles(file: &crate::scene::SceneFile) -> (crate::scene::SceneFile, usize) {
-    let mut out = file.clone();
-    let mut n = 0;
-    for m in &mut out.models {
-        let Some(mesh) = m.mesh.take().or_else(|| m.truth.take()) else {
-            continue;
-        };
-        m.triangles = Some(mesh);
-        (m.points, m.splats, m.gaussians) = (None, None, None);
-        (m.samples, m.scan, m.min_opacity) = (None, None, None);
-        n += 1;
-    }
-    (out, n)
+    file.meshes_as_triangles()
 }
 
 /// [`AsTriangles`] of `tris` (the scene of [`meshes_as_triangles`], with

@@ -7,7 +7,7 @@
 use crate::names::Named;
 use crate::resolve::ShadingMode;
 use crate::validate::compare::TruthErrors;
-use crate::validate::sweep::{MODES, SweepRow};
+use crate::validate::sweep::{MODES, MeshRow, SweepResult, SweepRow};
 use crate::{Error, Result};
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
@@ -49,14 +49,24 @@ fn short_count(n: usize) -> String {
 /// The chart of a panel: render seconds (log scale) across, `y` up.
 type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<LogCoord<f64>, RangedCoordf64>>;
 
-/// The axis ranges of a panel: the render seconds of every row (log scale,
-/// padded by factors), and `y` of every row (padded by 8 %).
-fn ranges(rows: &[SweepRow], y: fn(&TruthErrors) -> Option<f64>) -> ((f64, f64), (f64, f64)) {
+/// The axis ranges of a panel: the render seconds of every row and of the
+/// mesh (log scale, padded by factors), and `y` of every row and the
+/// mesh's `mesh_y` (padded by 8 %).
+fn ranges(
+    rows: &[SweepRow],
+    mesh: Option<&MeshRow>,
+    y: fn(&TruthErrors) -> Option<f64>,
+    mesh_y: Option<f64>,
+) -> ((f64, f64), (f64, f64)) {
     let mut xs = Vec::new();
     let mut ys = Vec::new();
     for r in rows {
         xs.extend(r.backends.iter().map(|b| b.render_s));
         ys.extend(r.backends.iter().filter_map(|b| y(&b.errors)));
+    }
+    if let Some(m) = mesh {
+        xs.extend(m.backends.iter().map(|b| b.render_s));
+        ys.extend(mesh_y);
     }
     let fin = |v: &Vec<f64>| {
         v.iter()
@@ -82,18 +92,17 @@ fn ranges(rows: &[SweepRow], y: fn(&TruthErrors) -> Option<f64>) -> ((f64, f64),
     (x, y)
 }
 
-/// The panel's chart with its axes, grid and labels drawn.
+/// The panel's chart over `((x0, x1), (y0, y1))` with its axes, grid and
+/// labels drawn.
 fn axes<'a, DB: DrawingBackend>(
     area: &'a DrawingArea<DB, Shift>,
-    rows: &[SweepRow],
+    ((x0, x1), (y0, y1)): ((f64, f64), (f64, f64)),
     caption: &str,
     y_desc: &str,
-    y: fn(&TruthErrors) -> Option<f64>,
 ) -> Result<Chart<'a, DB>>
 where
     DB::ErrorType: 'static,
 {
-    let ((x0, x1), (y0, y1)) = ranges(rows, y);
     let mut chart = ChartBuilder::on(area)
         .caption(caption, (FAMILY, 20))
         .margin(12)
@@ -207,24 +216,69 @@ where
     Ok(())
 }
 
-/// One panel: `y` of every row against render seconds, log-scaled seconds.
+/// The mesh row's points (issue 57): each backend's render seconds on the
+/// triangles at zero error, `mesh_y` (`None`: an infinite PSNR, drawn at
+/// the top of `ys`), in black with the backend's marker, labelled with
+/// its name; one legend entry.
+fn mesh_points<'a, DB: DrawingBackend + 'a>(
+    chart: &mut Chart<'a, DB>,
+    mesh: &MeshRow,
+    mesh_y: Option<f64>,
+    (y0, y1): (f64, f64),
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let y = mesh_y.unwrap_or(y0 + 0.96 * (y1 - y0));
+    let label = if mesh_y.is_some() { "" } else { ", inf dB" };
+    for (k, b) in mesh.backends.iter().enumerate() {
+        let p = [(b.render_s, y, 0)];
+        markers(chart, &p, k + 4, BLACK)?;
+        let text = format!("mesh {}{label}", b.name);
+        let placed = chart
+            .draw_series(std::iter::once(
+                EmptyElement::at((b.render_s, y))
+                    + Text::new(
+                        text,
+                        (7, 4 + 14 * i32::from(k % 2 == 1)),
+                        (FAMILY, 12).into_font(),
+                    ),
+            ))
+            .map_err(err)?;
+        if k == 0 {
+            let name = format!("mesh, {} triangles (zero error)", mesh.triangles);
+            placed.label(name).legend(|(x, y)| {
+                EmptyElement::at((x + 11, y)) + Circle::new((0, 0), 4, BLACK.filled())
+            });
+        }
+    }
+    Ok(())
+}
+
+/// One panel: `y` of every row against render seconds, log-scaled seconds,
+/// and the mesh at `mesh_y` (see [`mesh_points`]).
 fn panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
-    rows: &[SweepRow],
-    caption: &str,
-    y_desc: &str,
+    result: &SweepResult,
+    (caption, y_desc): (&str, &str),
     y: fn(&TruthErrors) -> Option<f64>,
+    mesh_y: Option<f64>,
     legend: bool,
 ) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
-    let mut chart = axes(area, rows, caption, y_desc, y)?;
+    let rows = &result.rows;
+    let range = ranges(rows, result.mesh.as_ref(), y, mesh_y);
+    let mut chart = axes(area, range, caption, y_desc)?;
     let count = rows.first().map_or(0, |r| r.backends.len());
     for mode in MODES.into_iter().enumerate() {
         for k in 0..count {
             curve(&mut chart, rows, mode, k, y)?;
         }
+    }
+    if let Some(m) = &result.mesh {
+        mesh_points(&mut chart, m, mesh_y, range.1)?;
     }
     if legend {
         chart
@@ -239,7 +293,7 @@ where
     Ok(())
 }
 
-fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, rows: &[SweepRow]) -> Result<()>
+fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, result: &SweepResult) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
@@ -253,18 +307,21 @@ where
     let (left, right) = root.split_horizontally(SIZE.0 / 2);
     panel(
         &left,
-        rows,
-        "mean normal error vs exact surface",
-        "normal error, degrees (mean)",
+        result,
+        (
+            "mean normal error vs exact surface",
+            "normal error, degrees (mean)",
+        ),
         |e| Some(e.normal_deg_mean),
+        Some(0.0),
         true,
     )?;
     panel(
         &right,
-        rows,
-        "image PSNR vs exact surface",
-        "PSNR, dB (higher is better)",
+        result,
+        ("image PSNR vs exact surface", "PSNR, dB (higher is better)"),
         |e| e.image_psnr_db,
+        None,
         false,
     )?;
     root.present().map_err(err)
@@ -272,22 +329,23 @@ where
 
 /// Draws the sweep's rows (render seconds against mean normal error and
 /// against image PSNR, one curve per backend and shading mode, points
-/// labelled with splat counts) into `png` and into the SVG of the same stem.
-/// Both files are written atomically; errors are one line.
-pub fn plot_sweep(batch: &mut crate::io::Batch, rows: &[SweepRow], png: &Path) -> Result<()> {
+/// labelled with splat counts; the mesh row's point per backend at zero
+/// error, in black) into `png` and into the SVG of the same stem. Both
+/// files are written atomically; errors are one line.
+pub fn plot_sweep(batch: &mut crate::io::Batch, result: &SweepResult, png: &Path) -> Result<()> {
     plotters::style::register_font(FAMILY, FontStyle::Normal, FONT)
         .map_err(|_| Error::invalid("plot: the embedded font is invalid"))?;
     let mut buf = vec![255u8; (SIZE.0 * SIZE.1 * 3) as usize];
     draw(
         BitMapBackend::with_buffer(&mut buf, SIZE).into_drawing_area(),
-        rows,
+        result,
     )?;
     let img = image::RgbImage::from_raw(SIZE.0, SIZE.1, buf)
         .ok_or_else(|| Error::invalid("plot: image buffer has the wrong size"))?;
     let mut svg = String::new();
     draw(
         SVGBackend::with_string(&mut svg, SIZE).into_drawing_area(),
-        rows,
+        result,
     )?;
     crate::render::output::save_into(batch, &img, png, image::ImageFormat::Png)?;
     batch.stage(&png.with_extension("svg"), |t| std::fs::write(t, &svg))?;

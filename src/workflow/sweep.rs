@@ -5,7 +5,7 @@
 
 use crate::progress::Progress;
 use crate::scene::{SceneFile, parse_scene_file};
-use crate::validate::sweep::{SweepPlan, SweepRow, run_sweep};
+use crate::validate::sweep::{SweepPlan, SweepResult, run_sweep};
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
 
@@ -85,7 +85,8 @@ impl SweepRequest {
 
 impl Sweep {
     /// Every budget step and shading mode rendered with every backend and
-    /// measured against the exact surface, one row each (`log` hears each
+    /// measured against the exact surface, one row each, and the meshes
+    /// as triangles on every backend (the mesh row; `log` hears each
     /// row's line as it is measured).
     ///
     /// # Errors
@@ -95,7 +96,7 @@ impl Sweep {
         &self,
         progress: Option<Progress<'_>>,
         log: &mut dyn FnMut(&str),
-    ) -> Result<Vec<SweepRow>> {
+    ) -> Result<SweepResult> {
         let base = self.scene.parent().unwrap_or(Path::new("."));
         run_sweep(&self.file, base, &self.plan, progress, log)
             .map_err(|e| e.context(self.scene.display()))
@@ -110,6 +111,6 @@ pub fn sweep(
     req: &SweepRequest,
     progress: Option<Progress<'_>>,
     log: &mut dyn FnMut(&str),
-) -> Result<Vec<SweepRow>> {
+) -> Result<SweepResult> {
     req.prepare()?.run(progress, log)
 }
