@@ -239,3 +239,101 @@ def test_compare_reports_what_the_cli_reports(binary, cli, tmp_path):
     for g, w in zip(got["backends"][1:], want["backends"][1:]):
         assert g["agreement"] == w["agreement"]
         assert g["agreement"]["same_splat"] == 1.0
+
+
+# A square of two triangles beside the bunny (which spans about ±1), in the
+# plane z = 0, its winding facing +z.
+QUAD_V = np.array([[3.0, 0.0, 0.0], [5.0, 0.0, 0.0], [5.0, 2.0, 0.0], [3.0, 2.0, 0.0]])
+QUAD_F = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int32)
+
+
+def test_cast_rays_meet_triangles_beside_splats(points):
+    """Issue 57: triangles given as arrays beside the splats are cast as the
+    renderer traces them, on both backends alike; their ids follow the
+    splats' (face i is `first_triangle + i`)."""
+    sp = splatray.splat(points, epsilon=0.01)
+    c = points.mean(axis=0)
+    rays = np.array([
+        [4.5, 0.5, 2.0, 0.0, 0.0, -2.0],   # face 0 (below the diagonal), t = 1
+        [3.5, 1.5, 1.0, 0.0, 0.0, -1.0],   # face 1, t = 1
+        [4.0, 1.0, 3.0, 0.0, 0.0, -3.0],   # the shared edge: one face, t = 1
+        [c[0], c[1], c[2] + 5.0, 0.0, 0.0, -1.0],  # the bunny: a splat
+        [10.0, 10.0, 10.0, 1.0, 0.0, 0.0],  # nothing
+    ])
+    got = {}
+    for backend in splatray.BACKENDS:
+        ss = splatray.SplatScene(sp, backend, vertices=QUAD_V, faces=QUAD_F)
+        first = ss.first_triangle
+        assert first == len(sp) and ss.triangles == 2
+        r = ss.cast_rays(rays)
+        ids, t = r["splat_ids"], r["t_hit"]
+        assert ids[0] == first and ids[1] == first + 1 and ids[2] in (first, first + 1)
+        np.testing.assert_allclose(t[:3], 1.0, rtol=1e-6)
+        np.testing.assert_allclose(r["normals"][:3], [[0, 0, 1]] * 3, atol=1e-6)
+        assert ids[3] < first and np.isfinite(t[3])
+        assert ids[4] == splatray.INVALID_ID and np.isinf(t[4])
+        # A shadow ray stops at the triangle, not before it.
+        assert ss.occluded(rays[:1], tfar=1.1).tolist() == [True]
+        assert ss.occluded(rays[:1], tfar=0.9).tolist() == [False]
+        assert not ss.occluded(rays[4:]).any()
+        got[backend] = r
+    a, b = (got[n] for n in splatray.BACKENDS[:2])
+    assert np.array_equal(a["t_hit"].view(np.uint32), b["t_hit"].view(np.uint32))
+    assert np.array_equal(a["splat_ids"], b["splat_ids"])
+    assert np.array_equal(a["normals"], b["normals"])
+
+
+def test_a_scene_files_triangles_are_cast_as_rendered(points, tmp_path):
+    """A scene's `triangles` model: `splat_scene` casts its camera rays to
+    the ids its render's splat AOV holds, triangles and splats, on both
+    backends; the same faces as the arrays give."""
+    (tmp_path / "quad.obj").write_text("v 3 0 0\nv 5 0 0\nv 5 2 0\nv 3 2 0\nf 1 2 3\nf 1 3 4\n")
+    sp = splatray.splat(points, epsilon=0.01)
+    camera = {"from": [2.0, 1.0, 6.0], "at": [2.0, 0.5, 0.0], "fov": 60, "width": 48, "height": 32}
+    scene = splatray.Scene(camera=camera, models=[{"splats": sp}, {"triangles": str(tmp_path / "quad.obj")}],
+                           lights=[{"kind": "point", "position": [2.0, 3.0, 4.0], "intensity": 20.0}])
+    rays = scene.camera_rays()
+    ids = {}
+    for backend in splatray.BACKENDS:
+        ss = scene.splat_scene(backend)
+        assert (ss.first_triangle, ss.triangles) == (len(sp), 2)
+        r = ss.cast_rays(rays)
+        aov = scene.render(backend=backend, aov=["splat"]).aov["splat"].ravel()
+        assert np.array_equal(r["splat_ids"], aov)
+        ids[backend] = r["splat_ids"]
+        on_tri = r["splat_ids"] != splatray.INVALID_ID
+        on_tri &= r["splat_ids"] >= len(sp)
+        on_splat = r["splat_ids"] < len(sp)
+        # Measured: 81 triangle and 61 splat pixels of 1,536.
+        assert on_tri.sum() >= 70 and on_splat.sum() >= 50, (on_tri.sum(), on_splat.sum())
+        # The arrays' faces are the file's: the same ids at the same rays.
+        direct = splatray.SplatScene(sp, backend, vertices=QUAD_V, faces=QUAD_F).cast_rays(rays)
+        assert np.array_equal(direct["splat_ids"][on_tri], r["splat_ids"][on_tri])
+    assert np.array_equal(*(ids[n] for n in splatray.BACKENDS[:2]))
+
+
+@pytest.mark.parametrize(
+    "arrays, error, says",
+    [
+        (dict(vertices=QUAD_V[:, :2], faces=QUAD_F), ValueError, "vertices must be"),
+        (dict(vertices=QUAD_V, faces=QUAD_F[:, :2]), ValueError, "faces must be"),
+        (dict(vertices=QUAD_V, faces=QUAD_F.astype(np.float64)), TypeError, "faces must be an int32"),
+        (dict(vertices=QUAD_V, faces=[[0, 1, 2]]), TypeError, "list"),
+        (dict(vertices=QUAD_V, faces=np.array([[0, 1, 4]])), ValueError, "faces: row 0 has index 4, not in 0..4"),
+        (dict(vertices=QUAD_V, faces=np.array([[0, 1, 2], [0, -1, 3]])), ValueError, "faces: row 1 has index -1"),
+        (dict(vertices=QUAD_V, faces=np.array([[0, 1, 2**40]], np.uint64)), ValueError, "not in 0..4"),
+        (dict(vertices=np.vstack([QUAD_V, [[np.nan, 0, 0]]]), faces=QUAD_F), ValueError, "vertices: row 4 holds a NaN"),
+        (dict(vertices=np.vstack([QUAD_V, [[np.inf, 0, 0]]]), faces=QUAD_F), ValueError, "vertices: row 4"),
+        (dict(vertices=QUAD_V, faces=np.array([[0, 1, 2], [0, 2, 2]])), ValueError, "faces: row 1 is degenerate"),
+        (dict(vertices=np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0.0]]), faces=np.array([[0, 1, 2]])),
+         ValueError, "faces: row 0 spans no area"),
+        (dict(vertices=QUAD_V, faces=np.zeros((0, 3), np.int64)), ValueError, "faces is empty"),
+        (dict(vertices=QUAD_V), ValueError, "both `vertices` and `faces`"),
+    ],
+)
+def test_bad_triangle_arrays_raise(points, arrays, error, says):
+    sp = splatray.splat(points, epsilon=0.01)
+    for backend in splatray.BACKENDS:
+        with pytest.raises(error) as e:
+            splatray.SplatScene(sp, backend, **arrays)
+        assert says in str(e.value) and "\n" not in str(e.value), str(e.value)

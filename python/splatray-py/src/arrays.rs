@@ -127,6 +127,36 @@ fn finish<T: Copy>(
     Ok(v)
 }
 
+/// The rows of an (N, `cols`) integer array (int32, int64, uint32 or
+/// uint64) as `i64`, row-major (a uint64 beyond `i64::MAX` is read as
+/// `i64::MAX`: out of any range). Zero rows are an error.
+pub fn index_rows(obj: &Bound<'_, PyAny>, name: &str, cols: usize) -> PyResult<Vec<i64>> {
+    const DTYPES: &str = "int32, int64, uint32 or uint64";
+    fn read<T: numpy::Element + Copy>(
+        obj: &Bound<'_, PyAny>,
+        name: &str,
+        cols: usize,
+        to: impl Fn(T) -> i64,
+    ) -> Option<PyResult<Vec<i64>>> {
+        let a = obj.extract::<PyReadonlyArray2<'_, T>>().ok()?;
+        Some(
+            check_cols(&a, obj, name, cols, DTYPES)
+                .map(|()| a.as_array().iter().map(|&x| to(x)).collect()),
+        )
+    }
+    let v = read::<i64>(obj, name, cols, |x| x)
+        .or_else(|| read::<i32>(obj, name, cols, i64::from))
+        .or_else(|| read::<u32>(obj, name, cols, i64::from))
+        .or_else(|| read::<u64>(obj, name, cols, |x| i64::try_from(x).unwrap_or(i64::MAX)))
+        .unwrap_or_else(|| {
+            Err(PyTypeError::new_err(format!(
+                "{name} must be an {DTYPES} numpy array of shape (N, {cols}), got {}",
+                describe(obj)
+            )))
+        })?;
+    finish(v, name, cols, false, |_| true)
+}
+
 /// An (N, 3) array of vectors.
 pub fn vec3s<'py>(
     py: Python<'py>,

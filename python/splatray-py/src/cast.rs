@@ -2,8 +2,11 @@
 //! camera rays (the point-cloud counterpart of Open3D's
 //! `RaycastingScene`). One backend and the shared resolver
 //! (`SplatSurfaces`), so the octree and Embree give the same answers.
+//! Triangles (a scene file's `triangles` models, or arrays given beside
+//! the splats) are traced with the splats as the renderer traces them
+//! (issue 57): hit ids from `first_triangle` on are triangles.
 
-use crate::arrays::{matrix, rows, vector};
+use crate::arrays::{index_rows, matrix, rows, vector};
 use crate::err;
 use crate::splats::Splats;
 use glam::{DVec3, Vec3};
@@ -19,7 +22,8 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
-/// Splats in one acceleration backend, for ray casting.
+/// Splats, and triangles beside them, in one acceleration backend, for
+/// ray casting.
 #[pyclass(module = "splatray", frozen)]
 pub struct SplatScene {
     scene: Scene,
@@ -40,11 +44,12 @@ pub struct SplatScene {
 const KEEP_RAYS: usize = 1 << 22;
 
 impl SplatScene {
-    /// `scene` (its splats, shading modes and windows) in `backend` (a
-    /// registry name); its world frame is its own plus `to_internal`.
+    /// `scene` (its splats and triangles, shading modes and windows) in
+    /// `backend` (a registry name); its world frame is its own plus
+    /// `to_internal`.
     pub fn build(scene: Scene, to_internal: DVec3, backend: &str) -> splatray::Result<SplatScene> {
         let info = splatray::accel::registry::lookup(backend)?;
-        let built = info.build_splats(&scene.splats)?;
+        let built = info.build_scene(&scene)?;
         Ok(SplatScene {
             scene,
             backend: built,
@@ -139,32 +144,129 @@ impl SplatScene {
     }
 }
 
+/// Checked `vertices` ((V, 3) floats) and `faces` ((F, 3) integer
+/// indices): the faces' corners in f64, or a one-line error naming the
+/// array and the row (a NaN or infinite vertex, an index out of range or
+/// negative, a face whose corners repeat).
+fn mesh_arrays(vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>) -> PyResult<Vec<[DVec3; 3]>> {
+    let v = rows::<f64>(vertices, "vertices", 3, false)?;
+    let f = index_rows(faces, "faces", 3)?;
+    let n = v.len() / 3;
+    f.chunks_exact(3)
+        .enumerate()
+        .map(|(i, ix)| {
+            if let Some(&j) = ix.iter().find(|&&j| j < 0 || j as u64 >= n as u64) {
+                return Err(PyValueError::new_err(format!(
+                    "faces: row {i} has index {j}, not in 0..{n} (the vertices' rows)"
+                )));
+            }
+            if ix[0] == ix[1] || ix[1] == ix[2] || ix[0] == ix[2] {
+                return Err(PyValueError::new_err(format!(
+                    "faces: row {i} is degenerate: its vertices {}, {} and {} repeat",
+                    ix[0], ix[1], ix[2]
+                )));
+            }
+            let at = |j: i64| {
+                let k = 3 * j as usize;
+                DVec3::new(v[k], v[k + 1], v[k + 2])
+            };
+            Ok([at(ix[0]), at(ix[1]), at(ix[2])])
+        })
+        .collect()
+}
+
+/// `corners` (world frame) placed in `scene`'s frame (world less
+/// `to_internal`, in f64) as its triangles, of the splats' first material:
+/// ids from `scene.first_triangle()` on, in the rows' order. A face that
+/// spans no area, or is not finite, once in f32 is a one-line error.
+fn add_triangles(
+    scene: &mut Scene,
+    corners: &[[DVec3; 3]],
+    to_internal: DVec3,
+) -> Result<(), String> {
+    let t = &mut scene.triangles;
+    for (i, c) in corners.iter().enumerate() {
+        let tri = splatray::primitive::Triangle {
+            v: c.map(|p| (p - to_internal).as_vec3()),
+        };
+        if !tri.is_proper() {
+            return Err(format!(
+                "faces: row {i} spans no area (its corners are collinear, or too far from \
+                 the splats for single precision)"
+            ));
+        }
+        t.face.push(tri.unit_normal());
+        t.tris.push(tri);
+        t.normals.push([Vec3::ZERO; 3]);
+        t.material_of.push(0);
+    }
+    u32::try_from(scene.splats.len() + t.tris.len())
+        .map(|_| ())
+        .map_err(|_| "too many splats and triangles for 32-bit ids".to_string())
+}
+
 #[pymethods]
 impl SplatScene {
     /// `splats` in the backend `backend` (`splatray.BACKENDS`; the first
     /// is the default), resolved with the defaults of a scene file (Phong
-    /// shading, each model's measured window).
+    /// shading, each model's measured window). With `vertices` ((V, 3)
+    /// float32 or float64, in the splats' coordinates) and `faces` ((F, 3)
+    /// int32, int64, uint32 or uint64 indices into `vertices`), those
+    /// triangles too, traced and resolved with the splats as the renderer
+    /// does (a triangle hit is a window of one; shaded with its face
+    /// normal): face `i` is hit id `first_triangle + i`. A NaN or
+    /// infinite vertex, an index out of range or negative, or a face
+    /// spanning no area raises ValueError naming the row; a wrong shape
+    /// or dtype, TypeError or ValueError.
     #[new]
-    #[pyo3(signature = (splats, backend=None))]
+    #[pyo3(signature = (splats, backend=None, *, vertices=None, faces=None))]
     fn new(
         py: Python<'_>,
         splats: &Bound<'_, Splats>,
         backend: Option<&str>,
+        vertices: Option<&Bound<'_, PyAny>>,
+        faces: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<SplatScene> {
         let set = &splats.get().set;
         let backend = backend.unwrap_or(splatray::accel::registry::names()[0]);
         if set.splats.is_empty() {
             return Err(PyValueError::new_err("splats: no splats"));
         }
+        let corners = match (vertices, faces) {
+            (None, None) => Vec::new(),
+            (Some(v), Some(f)) => mesh_arrays(v, f)?,
+            _ => {
+                return Err(PyValueError::new_err(
+                    "triangles need both `vertices` and `faces`",
+                ));
+            }
+        };
         py.detach(|| {
             let camera =
-                splatray::scene::Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 40.0, 1, 1, 1)?;
-            let mut scene = splatray::scene::load::splats_scene(set.splats.clone(), camera)?;
+                splatray::scene::Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 40.0, 1, 1, 1)
+                    .map_err(err)?;
+            let mut scene =
+                splatray::scene::load::splats_scene(set.splats.clone(), camera).map_err(err)?;
             scene.color_fields = set.color_fields.clone();
             let to_internal = set.origin + scene.offset.as_dvec3();
-            SplatScene::build(scene, to_internal, backend)
+            add_triangles(&mut scene, &corners, to_internal).map_err(PyValueError::new_err)?;
+            SplatScene::build(scene, to_internal, backend).map_err(err)
         })
-        .map_err(err)
+    }
+
+    /// The hit id of the first triangle (the splats' count): ids below it
+    /// are splats, ids from it on triangles (face `id - first_triangle`
+    /// of the faces given, or of the scene's `triangles` models in their
+    /// order).
+    #[getter]
+    fn first_triangle(&self) -> u32 {
+        self.scene.first_triangle()
+    }
+
+    /// Triangles in the scene.
+    #[getter]
+    fn triangles(&self) -> usize {
+        self.scene.triangles.tris.len()
     }
 
     /// The backend's name.
@@ -175,8 +277,9 @@ impl SplatScene {
 
     fn __repr__(&self) -> String {
         format!(
-            "SplatScene({} splats, backend {:?})",
+            "SplatScene({} splats, {} triangles, backend {:?})",
             self.scene.splats.len(),
+            self.scene.triangles.tris.len(),
             self.name
         )
     }

@@ -333,8 +333,10 @@ impl Scene {
         Ok(matrix(py, 6, flat))
     }
 
-    /// The scene's splats (all models, placed) in `backend`, for
-    /// `cast_rays` resolved exactly as this scene's renders resolve.
+    /// The scene's splats and triangles (all models, placed) in `backend`,
+    /// for `cast_rays` resolved exactly as this scene's renders resolve
+    /// (triangle `i` of the `triangles` models, in their order, is hit id
+    /// `first_triangle + i`).
     #[pyo3(signature = (backend=None))]
     fn splat_scene(&self, py: Python<'_>, backend: Option<&str>) -> PyResult<SplatScene> {
         let cb = Callback::new(None);

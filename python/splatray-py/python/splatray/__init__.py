@@ -5,7 +5,10 @@
   ``splatray splat`` does, with the command's option names;
 * :class:`SplatScene` casts rays against splats (``cast_rays``,
   ``count_intersections``, ``occluded``), resolved as the renderer
-  resolves its camera rays, with either backend of :data:`BACKENDS`;
+  resolves its camera rays, with either backend of :data:`BACKENDS`, and
+  against triangles beside them (``vertices``/``faces`` arrays, or a
+  scene's ``triangles`` models through ``Scene.splat_scene``): hit ids
+  from ``first_triangle`` on are faces;
 * :class:`Scene` (from TOML, or built here from ``Splats`` and
   ``PointCloud`` models) renders an :class:`Image` (linear float32 RGB
   and AOVs; shown as an image in a notebook);

@@ -115,14 +115,33 @@ class CastResult(TypedDict):
     normals: npt.NDArray[np.float32]
 
 class SplatScene:
-    """Splats in one backend, for ray casting (cf. Open3D's RaycastingScene)."""
-    def __init__(self, splats: Splats, backend: Optional[str] = None) -> None: ...
+    """Splats, and triangles beside them, in one backend, for ray casting
+    (cf. Open3D's RaycastingScene)."""
+    def __init__(
+        self,
+        splats: Splats,
+        backend: Optional[str] = None,
+        *,
+        vertices: Optional[ArrayF] = None,
+        faces: Optional[npt.NDArray[np.integer]] = None,
+    ) -> None:
+        """With `vertices` (V, 3) float and `faces` (F, 3) int32/int64/uint32/
+        uint64 indices, those triangles too, in the splats' coordinates: face
+        i is hit id `first_triangle + i`. A NaN vertex, an index out of
+        range or negative, or a degenerate face raises ValueError naming
+        the row; a wrong shape or dtype, ValueError or TypeError."""
     @property
     def backend(self) -> str: ...
+    @property
+    def first_triangle(self) -> int:
+        """The splats' count: ids below it are splats, from it on triangles."""
+    @property
+    def triangles(self) -> int: ...
     def cast_rays(self, rays: ArrayF) -> CastResult:
         """rays (N, 6) float32/float64: origin, direction (any length), in
         the splats' coordinates. t_hit in units of the direction's length
-        (inf: miss), splat_ids (INVALID_ID: miss), resolved shading normals."""
+        (inf: miss), splat_ids (INVALID_ID: miss; a triangle from
+        first_triangle on), resolved shading normals."""
     def count_intersections(self, rays: ArrayF, limit: int = 1024) -> npt.NDArray[np.int32]: ...
     def occluded(self, rays: ArrayF, tnear: float = 0.0, tfar: float = ...) -> npt.NDArray[np.bool_]: ...
 
@@ -220,10 +239,13 @@ def sweep(
 ) -> list[dict]:
     """`splatray sweep` as one dict per (budget step, shading mode), the
     rows its CSV holds: splat counts, each backend's build and render
-    seconds and errors against the exact surface (report §4.4, fig. 16),
-    and whether the backends agree bit for bit. `steps` (5 to 64) epsilons
-    from `eps_coarse` to `eps_fine`, fractions of the bounding-box
-    diagonal; bad options raise ValueError before any work."""
+    seconds, rays per second, memory and errors against the exact surface
+    (report §4.4, fig. 16), and whether the backends agree bit for bit;
+    then the mesh row (`shading` "mesh"): the meshes as `triangles` on
+    each backend, errors zero (the exact surface), each backend's
+    `measured` errors of its render against the exact surface's. `steps`
+    (5 to 64) epsilons from `eps_coarse` to `eps_fine`, fractions of the
+    bounding-box diagonal; bad options raise ValueError before any work."""
 
 def main(argv: list[str]) -> int:
     """Runs the `splatray` command line (the binary's, compiled into this
