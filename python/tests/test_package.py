@@ -249,7 +249,7 @@ QUAD_F = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int32)
 
 def test_cast_rays_meet_triangles_beside_splats(points):
     """Issue 57: triangles given as arrays beside the splats are cast as the
-    renderer traces them, on both backends alike; their ids follow the
+    renderer traces them, on every backend alike; their ids follow the
     splats' (face i is `first_triangle + i`)."""
     sp = splatray.splat(points, epsilon=0.01)
     c = points.mean(axis=0)
@@ -276,17 +276,21 @@ def test_cast_rays_meet_triangles_beside_splats(points):
         assert ss.occluded(rays[:1], tfar=1.1).tolist() == [True]
         assert ss.occluded(rays[:1], tfar=0.9).tolist() == [False]
         assert not ss.occluded(rays[4:]).any()
+        # The square is one surface, from either side.
+        assert ss.count_intersections(rays[:1]).tolist() == [1]
+        assert ss.count_intersections(rays[:1] * [1, 1, -1, 1, 1, -1]).tolist() == [1]
         got[backend] = r
-    a, b = (got[n] for n in splatray.BACKENDS[:2])
-    assert np.array_equal(a["t_hit"].view(np.uint32), b["t_hit"].view(np.uint32))
-    assert np.array_equal(a["splat_ids"], b["splat_ids"])
-    assert np.array_equal(a["normals"], b["normals"])
+    a = got[splatray.BACKENDS[0]]
+    for n, b in got.items():
+        assert np.array_equal(a["t_hit"].view(np.uint32), b["t_hit"].view(np.uint32)), n
+        assert np.array_equal(a["splat_ids"], b["splat_ids"]), n
+        assert np.array_equal(a["normals"], b["normals"]), n
 
 
 def test_a_scene_files_triangles_are_cast_as_rendered(points, tmp_path):
     """A scene's `triangles` model: `splat_scene` casts its camera rays to
-    the ids its render's splat AOV holds, triangles and splats, on both
-    backends; the same faces as the arrays give."""
+    the ids its render's splat AOV holds, triangles and splats, on every
+    backend; the same faces as the arrays give."""
     (tmp_path / "quad.obj").write_text("v 3 0 0\nv 5 0 0\nv 5 2 0\nv 3 2 0\nf 1 2 3\nf 1 3 4\n")
     sp = splatray.splat(points, epsilon=0.01)
     camera = {"from": [2.0, 1.0, 6.0], "at": [2.0, 0.5, 0.0], "fov": 60, "width": 48, "height": 32}
@@ -309,7 +313,8 @@ def test_a_scene_files_triangles_are_cast_as_rendered(points, tmp_path):
         # The arrays' faces are the file's: the same ids at the same rays.
         direct = splatray.SplatScene(sp, backend, vertices=QUAD_V, faces=QUAD_F).cast_rays(rays)
         assert np.array_equal(direct["splat_ids"][on_tri], r["splat_ids"][on_tri])
-    assert np.array_equal(*(ids[n] for n in splatray.BACKENDS[:2]))
+    for n in splatray.BACKENDS:
+        assert np.array_equal(ids[splatray.BACKENDS[0]], ids[n]), n
 
 
 @pytest.mark.parametrize(
