@@ -202,7 +202,7 @@ fn sweep_measures_budget_against_error() {
     for label in [
         "mesh octree",
         "mesh embree",
-        "mesh, 69666 triangles (zero error)",
+        "mesh, 69666 triangles (smooth-shaded)",
     ] {
         assert!(svg.contains(label), "{label} not in the plot");
     }
@@ -215,9 +215,10 @@ fn sweep_measures_budget_against_error() {
 }
 
 /// Issue 57: the CSV's mesh row, the bunny mesh's 69,666 triangles
-/// rendered once on every backend beside the sphere's 400 splats: zero
-/// error (the exact surface), a measured speed and memory per backend, the
-/// backends' renders identical; and its log line.
+/// rendered once on every backend beside the sphere's 400 splats, shaded
+/// smooth as the exact surface is: near zero error against it (measured),
+/// a measured speed and memory per backend, the backends' renders
+/// identical; and its log line.
 fn assert_mesh_row(mesh: &[HashMap<&str, &str>], stdout: &str) {
     assert_eq!(mesh.len(), 1, "one mesh row");
     let m = &mesh[0];
@@ -238,14 +239,26 @@ fn assert_mesh_row(mesh: &[HashMap<&str, &str>], stdout: &str) {
         let bytes = num(&format!("{b}_memory_bytes"));
         assert!(bytes > 69666.0 * 36.0, "{b} {bytes} bytes");
     }
-    for k in ["normal_deg_mean", "false_hits", "embree_normal_deg_mean"] {
-        assert_eq!(num(k), 0.0, "{k}");
+    // Measured: the same surface and normals, traced by the backends'
+    // triangle test where the exact surface is traced by Embree's, so only
+    // a few silhouette pixels differ. Measured at 48x36 (each Embree ISA):
+    // normal error 0.0276 deg, false hits 0.00058 (1 pixel of 1,728),
+    // coverage 1, PSNR 60.2 dB; shaded flat it would be about 1.2 deg and
+    // 35 dB.
+    for k in ["normal_deg_mean", "embree_normal_deg_mean"] {
+        assert!(num(k) < 0.05, "{k} {}", num(k));
     }
-    assert_eq!((m["psnr_db"], m["embree_psnr_db"]), ("inf", "inf"));
+    assert!(
+        num("false_hits") < 0.002 && num("coverage") > 0.999,
+        "{m:?}"
+    );
+    for k in ["psnr_db", "embree_psnr_db"] {
+        assert!(m[k] == "inf" || num(k) > 55.0, "{k} {}", m[k]);
+    }
     assert_eq!(m["backends_identical"], "true");
     assert!(
         stdout.contains("mesh as triangles: 69666 triangles (400 splats beside them)")
-            && stdout.contains("backends identical; plotted at zero error"),
+            && stdout.contains("backends identical; against the exact surface's render"),
         "{stdout}"
     );
 }

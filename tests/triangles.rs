@@ -640,3 +640,64 @@ fn the_hybrid_backends_packets_answer_as_single_queries() {
         );
     }
 }
+
+/// `smooth = true` on a `triangles` model whose file has no normals: each
+/// corner shades with the area-weighted vertex normal (a tent of two
+/// faces: the ridge's corners get the two faces' mean, the others their
+/// own face's); without it every corner is zero (face normals). `smooth`
+/// on any other model is refused in one line.
+#[test]
+fn smooth_triangles_shade_with_area_weighted_vertex_normals() {
+    let dir = std::env::temp_dir().join(format!("splatray-smooth-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // Two unit right triangles meeting at the ridge x = 0, tilted 45° each way.
+    std::fs::write(
+        dir.join("tent.obj"),
+        "v 0 1 0\nv 0 1 1\nv -1 0 0\nv 1 0 0\nf 1 3 2\nf 1 2 4\n",
+    )
+    .unwrap();
+    let load = |extra: &str| {
+        let text = format!(
+            "[camera]\nfrom = [0, 3, 3]\nat = [0, 0.5, 0.5]\n\
+             [[model]]\ntriangles = \"tent.obj\"\n{extra}\n\
+             [[light]]\nkind = \"point\"\nposition = [0, 4, 0]\nintensity = 5\n"
+        );
+        let file = splatray::scene::parse_scene_str(&text).unwrap();
+        splatray::scene::build_scene(&file, &dir, None)
+    };
+    let flat = load("").unwrap();
+    assert!(
+        flat.triangles
+            .normals
+            .iter()
+            .flatten()
+            .all(|n| *n == Vec3::ZERO)
+    );
+    let smooth = load("smooth = true").unwrap();
+    let s = 0.5f32.sqrt();
+    let (left, right) = (Vec3::new(-s, s, 0.0), Vec3::new(s, s, 0.0));
+    for (k, corners) in smooth.triangles.normals.iter().enumerate() {
+        let face = smooth.triangles.face[k];
+        for n in corners {
+            // Ridge corners: the faces' mean, straight up; the rest: the face's.
+            let want = if n.x.abs() < 1e-6 { Vec3::Y } else { face };
+            assert!((*n - want).length() < 1e-6, "face {k}: {n} against {want}");
+            assert!(
+                want == Vec3::Y || (want - left).length() < 1e-6 || (want - right).length() < 1e-6
+            );
+        }
+    }
+    let text = "[camera]\nfrom = [0, 3, 3]\nat = [0, 0, 0]\n[[model]]\n\
+                shape = { kind = \"sphere\", center = [0, 0, 0], radius = 1, splats = 50 }\n\
+                smooth = true\n";
+    let file = splatray::scene::parse_scene_str(text).unwrap();
+    let err = splatray::scene::build_scene(&file, &dir, None)
+        .err()
+        .expect("smooth on a shape is refused")
+        .to_string();
+    assert!(
+        err.contains("`smooth` applies to `triangles` models only") && !err.contains('\n'),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

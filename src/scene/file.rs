@@ -324,6 +324,11 @@ pub struct ModelSpec {
     /// splats (issue 57): shaded with its vertex normals where it has
     /// them, else its face normals.
     pub triangles: Option<PathBuf>,
+    /// A `triangles` mesh without vertex normals shaded with area-weighted
+    /// vertex normals (the smooth surface it samples, as `compare --truth`
+    /// shades a mesh) instead of its face normals; `triangles` models only.
+    #[serde(default)]
+    pub smooth: bool,
     /// The exact surface behind a `points`, `splats` or `gaussians` model
     /// (a triangle mesh PLY in the model's own coordinates), for
     /// `compare --truth`: e.g. the mesh a scan was simulated from.
@@ -411,9 +416,10 @@ impl SceneFile {
     /// This file with every model that has a mesh (a `mesh` model, or a
     /// `truth` beside `points`, `splats` or `gaussians`) made a `triangles`
     /// model of that mesh, its material and transform kept; and how many
-    /// (issue 57: `compare --as-triangles` and the sweep's mesh row).
+    /// (issue 57: `compare --as-triangles` and the sweep's mesh row);
+    /// `smooth` sets [`ModelSpec::smooth`] on them.
     #[must_use]
-    pub fn meshes_as_triangles(&self) -> (SceneFile, usize) {
+    pub fn meshes_as_triangles(&self, smooth: bool) -> (SceneFile, usize) {
         let mut out = self.clone();
         let mut n = 0;
         for m in &mut out.models {
@@ -421,6 +427,7 @@ impl SceneFile {
                 continue;
             };
             m.triangles = Some(mesh);
+            m.smooth = smooth;
             (m.points, m.splats, m.gaussians) = (None, None, None);
             (m.samples, m.scan, m.min_opacity) = (None, None, None);
             n += 1;

@@ -336,7 +336,7 @@ fn load_models(
             .truth
             .push(truth_of(src.truth, m, number, mid, shift));
         if let Some(tm) = src.tris.take() {
-            let placed = place_triangles(&tm, &m.transform, shift, mid, &mut out.triangles)
+            let placed = place_triangles(&tm, m, shift, mid, &mut out.triangles)
                 .map_err(in_model)?;
             lo = lo.min(placed.0);
             hi = hi.max(placed.1);
@@ -478,6 +478,9 @@ fn model_source<'a>(
         return Err(Error::invalid(
             "`min_opacity` applies to `gaussians` models only",
         ));
+    }
+    if spec.smooth && spec.triangles.is_none() {
+        return Err(Error::invalid("`smooth` applies to `triangles` models only"));
     }
     if let Some(p) = &spec.triangles {
         if spec.samples.is_some() || spec.scan.is_some() {
@@ -744,18 +747,20 @@ fn shape_truth(sh: &ShapeSpec, t: &TransformSpec, material: u16, shift: DVec3) -
 /// [`TransformSpec::point_from`] places a mesh's, normals rotated) with
 /// material `material` into `out`; returns the placed vertices' box (f64).
 /// A face whose vertex normals face away from its winding's normal is
-/// turned to face with them.
+/// turned to face with them. A mesh without normals gets area-weighted
+/// vertex normals of its placed vertices when `spec.smooth` asks.
 ///
 /// # Errors
 /// A triangle that is no longer finite or spans no area once placed in f32
 /// (a scale or translate beyond what it holds), naming the triangle.
 fn place_triangles(
     tm: &TriangleMesh,
-    t: &TransformSpec,
+    spec: &ModelSpec,
     shift: DVec3,
     material: u16,
     out: &mut Triangles,
 ) -> Result<(DVec3, DVec3)> {
+    let t = &spec.transform;
     let rot = t.rotation();
     let m = &tm.mesh;
     let placed: Vec<Vec3> = m
@@ -763,6 +768,8 @@ fn place_triangles(
         .iter()
         .map(|&p| t.point_from(m.origin, p, shift))
         .collect();
+    let smooth = (spec.smooth && tm.normals.is_none())
+        .then(|| crate::scene::area_weighted_normals(&placed, &m.triangles));
     let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
     for (k, ix) in m.triangles.iter().enumerate() {
         let tri = Triangle {
@@ -780,8 +787,9 @@ fn place_triangles(
             hi = hi.max(v.as_dvec3());
         }
         let mut face = tri.unit_normal();
-        let corners = match &tm.normals {
-            Some(n) if n[k][0] != Vec3::ZERO => n[k].map(|c| (rot * c).normalize()),
+        let corners = match (&tm.normals, &smooth) {
+            (Some(n), _) if n[k][0] != Vec3::ZERO => n[k].map(|c| (rot * c).normalize()),
+            (None, Some(vn)) => ix.map(|i| vn[i as usize]),
             _ => [Vec3::ZERO; 3],
         };
         if face.dot(corners[0] + corners[1] + corners[2]) < 0.0 {

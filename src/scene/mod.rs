@@ -26,5 +26,5 @@ pub use load::{
 };
 pub use model::{
     Camera, Light, LoadReport, Material, RenderOptions, Scene, SceneScale, Triangles,
-    TruthSource,
+    TruthSource, area_weighted_normals,
 };

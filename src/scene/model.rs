@@ -522,3 +522,21 @@ impl crate::accel::PassOver for Scene {
             && crate::resolve::beyond_silhouette_at(&self.splats[id as usize], hit.u, hit.v, dir)
     }
 }
+
+/// Area-weighted vertex normals of a mesh (each face's winding normal,
+/// weighted by its area, summed at its corners and normalised; zero at a
+/// vertex no face uses): the smooth surface the mesh samples. The exact
+/// surface of `compare --truth` and a `smooth` triangles model shade with
+/// them.
+#[must_use]
+pub fn area_weighted_normals(p: &[Vec3], tris: &[[u32; 3]]) -> Vec<Vec3> {
+    let mut n = vec![Vec3::ZERO; p.len()];
+    for t in tris {
+        let [a, b, c] = t.map(|k| p[k as usize]);
+        let f = (b - a).cross(c - a); // length = twice the area
+        for &k in t {
+            n[k as usize] += f;
+        }
+    }
+    n.into_iter().map(Vec3::normalize_or_zero).collect()
+}

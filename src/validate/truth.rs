@@ -26,18 +26,6 @@ pub struct Truth {
     eps: f32,
 }
 
-fn vertex_normals(p: &[Vec3], tris: &[[u32; 3]]) -> Vec<Vec3> {
-    let mut n = vec![Vec3::ZERO; p.len()];
-    for t in tris {
-        let [a, b, c] = t.map(|k| p[k as usize]);
-        let f = (b - a).cross(c - a); // length = twice the area
-        for &k in t {
-            n[k as usize] += f;
-        }
-    }
-    n.into_iter().map(Vec3::normalize_or_zero).collect()
-}
-
 impl Truth {
     /// Builds the exact surfaces of every model of `scene`, or says which
     /// model has none (point and splat files).
@@ -50,7 +38,7 @@ impl Truth {
                     let positions: Vec<Vec3> =
                         mesh.positions.iter().map(|&p| p - scene.offset).collect();
                     meshes.push(TruthMesh {
-                        normals: vertex_normals(&positions, &mesh.triangles),
+                        normals: crate::scene::area_weighted_normals(&positions, &mesh.triangles),
                         triangles: mesh.triangles.clone(),
                         positions,
                         material: *material,

@@ -121,7 +121,7 @@ pub struct AsTriangles {
 /// model of it ([`crate::scene::SceneFile::meshes_as_triangles`]).
 #[must_use]
 pub fn meshes_as_triangles(file: &crate::scene::SceneFile) -> (crate::scene::SceneFile, usize) {
-    file.meshes_as_triangles()
+    file.meshes_as_triangles(false)
 }
 
 /// [`AsTriangles`] of `tris` (the scene of [`meshes_as_triangles`], with

@@ -50,13 +50,12 @@ fn short_count(n: usize) -> String {
 type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<LogCoord<f64>, RangedCoordf64>>;
 
 /// The axis ranges of a panel: the render seconds of every row and of the
-/// mesh (log scale, padded by factors), and `y` of every row and the
-/// mesh's `mesh_y` (padded by 8 %).
+/// mesh (log scale, padded by factors), and `y` of every row and of the
+/// mesh's backends (padded by 8 %).
 fn ranges(
     rows: &[SweepRow],
     mesh: Option<&MeshRow>,
     y: fn(&TruthErrors) -> Option<f64>,
-    mesh_y: Option<f64>,
 ) -> ((f64, f64), (f64, f64)) {
     let mut xs = Vec::new();
     let mut ys = Vec::new();
@@ -66,7 +65,7 @@ fn ranges(
     }
     if let Some(m) = mesh {
         xs.extend(m.backends.iter().map(|b| b.render_s));
-        ys.extend(mesh_y);
+        ys.extend(m.backends.iter().filter_map(|b| y(&b.errors)));
     }
     let fin = |v: &Vec<f64>| {
         v.iter()
@@ -217,21 +216,22 @@ where
 }
 
 /// The mesh row's points (issue 57): each backend's render seconds on the
-/// triangles at zero error, `mesh_y` (`None`: an infinite PSNR, drawn at
-/// the top of `ys`), in black with the backend's marker, labelled with
-/// its name; one legend entry.
+/// triangles at its measured `y` (`None`: an infinite PSNR, drawn at the
+/// top of `ys`), in black with the backend's marker, labelled with its
+/// name; one legend entry.
 fn mesh_points<'a, DB: DrawingBackend + 'a>(
     chart: &mut Chart<'a, DB>,
     mesh: &MeshRow,
-    mesh_y: Option<f64>,
+    y: fn(&TruthErrors) -> Option<f64>,
     (y0, y1): (f64, f64),
 ) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
-    let y = mesh_y.unwrap_or(y0 + 0.96 * (y1 - y0));
-    let label = if mesh_y.is_some() { "" } else { ", inf dB" };
     for (k, b) in mesh.backends.iter().enumerate() {
+        let at = y(&b.errors);
+        let y = at.unwrap_or(y0 + 0.96 * (y1 - y0));
+        let label = if at.is_some() { "" } else { ", inf dB" };
         let p = [(b.render_s, y, 0)];
         markers(chart, &p, k + 4, BLACK)?;
         let text = format!("mesh {}{label}", b.name);
@@ -246,7 +246,7 @@ where
             ))
             .map_err(err)?;
         if k == 0 {
-            let name = format!("mesh, {} triangles (zero error)", mesh.triangles);
+            let name = format!("mesh, {} triangles (smooth-shaded)", mesh.triangles);
             placed.label(name).legend(|(x, y)| {
                 EmptyElement::at((x + 11, y)) + Circle::new((0, 0), 4, BLACK.filled())
             });
@@ -256,20 +256,19 @@ where
 }
 
 /// One panel: `y` of every row against render seconds, log-scaled seconds,
-/// and the mesh at `mesh_y` (see [`mesh_points`]).
+/// and the mesh's points (see [`mesh_points`]).
 fn panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     result: &SweepResult,
     (caption, y_desc): (&str, &str),
     y: fn(&TruthErrors) -> Option<f64>,
-    mesh_y: Option<f64>,
     legend: bool,
 ) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
     let rows = &result.rows;
-    let range = ranges(rows, result.mesh.as_ref(), y, mesh_y);
+    let range = ranges(rows, result.mesh.as_ref(), y);
     let mut chart = axes(area, range, caption, y_desc)?;
     let count = rows.first().map_or(0, |r| r.backends.len());
     for mode in MODES.into_iter().enumerate() {
@@ -278,7 +277,7 @@ where
         }
     }
     if let Some(m) = &result.mesh {
-        mesh_points(&mut chart, m, mesh_y, range.1)?;
+        mesh_points(&mut chart, m, y, range.1)?;
     }
     if legend {
         chart
@@ -313,7 +312,6 @@ where
             "normal error, degrees (mean)",
         ),
         |e| Some(e.normal_deg_mean),
-        Some(0.0),
         true,
     )?;
     panel(
@@ -321,7 +319,6 @@ where
         result,
         ("image PSNR vs exact surface", "PSNR, dB (higher is better)"),
         |e| e.image_psnr_db,
-        None,
         false,
     )?;
     root.present().map_err(err)
@@ -329,8 +326,8 @@ where
 
 /// Draws the sweep's rows (render seconds against mean normal error and
 /// against image PSNR, one curve per backend and shading mode, points
-/// labelled with splat counts; the mesh row's point per backend at zero
-/// error, in black) into `png` and into the SVG of the same stem. Both
+/// labelled with splat counts; the mesh row's point per backend at its
+/// measured error, in black) into `png` and into the SVG of the same stem. Both
 /// files are written atomically; errors are one line.
 pub fn plot_sweep(batch: &mut crate::io::Batch, result: &SweepResult, png: &Path) -> Result<()> {
     plotters::style::register_font(FAMILY, FontStyle::Normal, FONT)

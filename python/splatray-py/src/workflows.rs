@@ -120,8 +120,7 @@ pub fn sweep<'py>(
     detached(py, progress, |p| {
         let result = splatray::workflow::sweep::sweep(&req, Some(p), &mut |_| {})?;
         // The CSV's rows: the budget rows, then the mesh row (its shading
-        // `mesh`, errors zero by definition, `measured` what its render
-        // measured against the exact surface's).
+        // `mesh`, its errors measured against the exact surface).
         let mut rows = serde_json::to_value(&result.rows).map_err(splatray::Error::other)?;
         if let (Some(m), Some(list)) = (&result.mesh, rows.as_array_mut()) {
             list.push(mesh_dict(m));
@@ -131,22 +130,9 @@ pub fn sweep<'py>(
 }
 
 /// The mesh row as `sweep`'s dict: `shading` "mesh", step and epsilon 0,
-/// no varied splats, every backend's speed with the errors of the exact
-/// surface (zero), and what each render measured in `measured`.
+/// no varied splats, every backend's speed and measured errors.
 fn mesh_dict(m: &splatray::MeshRow) -> serde_json::Value {
-    let exact = serde_json::to_value(splatray::validate::sweep::EXACT).unwrap_or_default();
-    let backends: Vec<serde_json::Value> = m
-        .backends
-        .iter()
-        .map(|b| {
-            let mut v = serde_json::to_value(b).unwrap_or_default();
-            if let Some(o) = v.as_object_mut() {
-                let measured = o.insert("errors".into(), exact.clone());
-                o.insert("measured".into(), measured.unwrap_or_default());
-            }
-            v
-        })
-        .collect();
+    let backends = serde_json::to_value(&m.backends).unwrap_or_default();
     serde_json::json!({
         "step": 0,
         "epsilon_rel": 0.0,

@@ -241,9 +241,9 @@ def sweep(
     rows its CSV holds: splat counts, each backend's build and render
     seconds, rays per second, memory and errors against the exact surface
     (report §4.4, fig. 16), and whether the backends agree bit for bit;
-    then the mesh row (`shading` "mesh"): the meshes as `triangles` on
-    each backend, errors zero (the exact surface), each backend's
-    `measured` errors of its render against the exact surface's. `steps`
+    then the mesh row (`shading` "mesh"): the meshes as `triangles`
+    shaded smooth as the exact surface is, on each backend, with its
+    speed and its measured errors against the exact surface. `steps`
     (5 to 64) epsilons from `eps_coarse` to `eps_fine`, fractions of the
     bounding-box diagonal; bad options raise ValueError before any work."""
 
