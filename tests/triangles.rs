@@ -691,10 +691,10 @@ fn smooth_triangles_shade_with_area_weighted_vertex_normals() {
                 shape = { kind = \"sphere\", center = [0, 0, 0], radius = 1, splats = 50 }\n\
                 smooth = true\n";
     let file = splatray::scene::parse_scene_str(text).unwrap();
-    let err = splatray::scene::build_scene(&file, &dir, None)
-        .err()
-        .expect("smooth on a shape is refused")
-        .to_string();
+    let Err(err) = splatray::scene::build_scene(&file, &dir, None) else {
+        panic!("smooth on a shape is refused");
+    };
+    let err = err.to_string();
     assert!(
         err.contains("`smooth` applies to `triangles` models only") && !err.contains('\n'),
         "{err}"
