@@ -417,7 +417,7 @@ impl SceneFile {
     /// `truth` beside `points`, `splats` or `gaussians`) made a `triangles`
     /// model of that mesh, its material and transform kept; and how many
     /// (issue 57: `compare --as-triangles` and the sweep's mesh row);
-    /// `smooth` sets [`ModelSpec::smooth`] on them.
+    /// `smooth` sets their `smooth` key (area-weighted vertex normals).
     #[must_use]
     pub fn meshes_as_triangles(&self, smooth: bool) -> (SceneFile, usize) {
         let mut out = self.clone();
