@@ -62,6 +62,35 @@ impl Knn {
         })
     }
 
+    /// [`Knn::build`] with the queries made in `order` (a permutation of
+    /// the points' indices): the same graph bit for bit, since each row is
+    /// its point's exact nearest, ties by index, whatever bound the query
+    /// before it gave ([`Nearest::query`]). For points that are not in
+    /// spatial order (a scan's lines, as read) queried in [`morton_order`]:
+    /// each query is then bounded by a near one's and served from its
+    /// cached ball ([`super::outliers::find`]'s graph of a cloud as read).
+    #[must_use]
+    pub fn build_in_order(tree: &PointTree, points: &[Vec3], k: usize, order: &[u32]) -> Knn {
+        let k = k.clamp(1, points.len().saturating_sub(1).max(1));
+        debug_assert_eq!(order.len(), points.len());
+        let by_order = Knn::rows(points.len(), k, |nearest, j, row| {
+            nearest_row(nearest, tree, points, order[j] as usize, row)
+        });
+        let mut idx = vec![0u32; points.len() * k];
+        let mut kth_distance = vec![0f32; points.len()];
+        for (j, &i) in order.iter().enumerate() {
+            let i = i as usize;
+            idx[i * k..(i + 1) * k].copy_from_slice(by_order.of(j));
+            kth_distance[i] = by_order.kth_distance[j];
+        }
+        Knn {
+            k,
+            idx,
+            kth_distance,
+            queries: by_order.queries,
+        }
+    }
+
     /// The graph of `n` points, `k` neighbours each, row by row in chunks
     /// of [`CHUNK`] in parallel: `row(nearest, i, row)` fills point `i`'s
     /// row (querying with the chunk's `nearest`, counted) and returns its
@@ -157,6 +186,43 @@ fn nearest_row(
     };
     row[len..].fill(fill);
     last.sqrt()
+}
+
+/// The points' indices in Morton (Z-curve) order over their bounding box,
+/// ties by index, the non-finite last: an order of queries, not of the
+/// points (see [`Knn::build_in_order`]).
+#[must_use]
+pub fn morton_order(points: &[Vec3]) -> Vec<u32> {
+    let (lo, hi) = points
+        .iter()
+        .filter(|p| p.is_finite())
+        .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |a, &p| {
+            (a.0.min(p), a.1.max(p))
+        });
+    let scale = Vec3::splat((1u32 << 21) as f32 - 1.0) / (hi - lo).max(Vec3::splat(1e-30));
+    let spread = |v: u32| {
+        let mut x = u64::from(v) & 0x1f_ffff;
+        x = (x | x << 32) & 0x1f00000000ffff;
+        x = (x | x << 16) & 0x1f0000ff0000ff;
+        x = (x | x << 8) & 0x100f00f00f00f00f;
+        x = (x | x << 4) & 0x10c30c30c30c30c3;
+        (x | x << 2) & 0x1249249249249249
+    };
+    let mut keyed: Vec<(u64, u32)> = points
+        .par_iter()
+        .enumerate()
+        .map(|(i, &p)| {
+            let m = if p.is_finite() {
+                let q = ((p - lo) * scale).as_uvec3();
+                spread(q.x) | spread(q.y) << 1 | spread(q.z) << 2
+            } else {
+                u64::MAX
+            };
+            (m, i as u32)
+        })
+        .collect();
+    keyed.par_sort_unstable();
+    keyed.into_iter().map(|(_, i)| i).collect()
 }
 
 /// A count of tree queries shared by the threads of one stage: each
@@ -562,6 +628,47 @@ mod tests {
             let want: Vec<u32> = all[..12].iter().map(|f| f.1).collect();
             assert_eq!(knn.of(i), &want[..], "point {i}");
             assert_eq!(knn.kth_distance[i], all[11].0.sqrt(), "point {i}");
+        }
+    }
+
+    #[test]
+    fn a_graph_queried_in_any_order_is_the_graph() {
+        // A grid (distances tie everywhere) in row order, and scattered
+        // noisy points along scan lines.
+        let mut grid = Vec::new();
+        for i in 0..40 {
+            for j in 0..25 {
+                grid.push(Vec3::new(i as f32 * 0.5, j as f32 * 0.5, 0.0));
+            }
+        }
+        let mut state = 12345u64;
+        let mut r = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let lines: Vec<Vec3> = (0..1500)
+            .map(|i| {
+                let (a, b) = ((i % 60) as f32 * 0.03, (i / 60) as f32 * 0.1);
+                Vec3::new(a.cos() * (2.0 + 0.01 * r()), b, a.sin() * 2.0 + 0.01 * r())
+            })
+            .collect();
+        for pts in [grid, lines] {
+            let tree = build_tree(&pts);
+            let want = Knn::build(&tree, &pts, 12);
+            let mut reversed: Vec<u32> = (0..pts.len() as u32).collect();
+            reversed.reverse();
+            let morton = morton_order(&pts);
+            let mut sorted = morton.clone();
+            sorted.sort_unstable();
+            assert!(sorted.iter().enumerate().all(|(i, &j)| j as usize == i));
+            assert_ne!(morton, (0..pts.len() as u32).collect::<Vec<_>>());
+            for order in [&morton, &reversed] {
+                let got = Knn::build_in_order(&tree, &pts, 12, order);
+                assert_eq!(got.idx, want.idx);
+                let bits = |k: &Knn| k.kth_distance.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&got), bits(&want));
+                assert_eq!(got.queries, want.queries);
+            }
         }
     }
 }
