@@ -6,7 +6,7 @@ use super::field;
 use super::frame::{UnitFrame, first_unusable};
 use super::grow::{GrowInput, grow_all};
 use super::holes::{median_radius, on_splat, uncovered_large};
-use super::knn::{Knn, build_tree};
+use super::knn::{Knn, MortonGrid, build_tree};
 use super::normals;
 use super::outliers;
 use crate::data::Splat;
@@ -405,15 +405,7 @@ fn clean_order(pos: &[Vec3]) -> (Vec<u32>, usize, usize) {
             || (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
             |a, b| (a.0.min(b.0), a.1.max(b.1)),
         );
-    let scale = Vec3::splat((1u32 << 21) as f32 - 1.0) / (hi - lo).max(Vec3::splat(1e-30));
-    let spread = |v: u64| {
-        let mut x = v & 0x1f_ffff;
-        x = (x | x << 32) & 0x1f00000000ffff;
-        x = (x | x << 16) & 0x1f0000ff0000ff;
-        x = (x | x << 8) & 0x100f00f00f00f00f;
-        x = (x | x << 4) & 0x10c30c30c30c30c3;
-        (x | x << 2) & 0x1249249249249249
-    };
+    let grid = MortonGrid::new(lo, hi);
     let bits = |i: u32| {
         let p = pos[i as usize];
         [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
@@ -422,13 +414,7 @@ fn clean_order(pos: &[Vec3]) -> (Vec<u32>, usize, usize) {
     // (half the bytes to move), then each run of one key by bits.
     let mut keyed: Vec<(u64, u32)> = finite
         .par_iter()
-        .map(|&i| {
-            let p = pos[i as usize];
-            let q = ((p - lo) * scale).as_uvec3();
-            let m =
-                spread(u64::from(q.x)) | spread(u64::from(q.y)) << 1 | spread(u64::from(q.z)) << 2;
-            (m, i)
-        })
+        .map(|&i| (grid.key(pos[i as usize]), i))
         .collect();
     drop(finite);
     keyed.par_sort_unstable();

@@ -188,6 +188,34 @@ fn nearest_row(
     last.sqrt()
 }
 
+/// Morton (Z-curve) keys over a box: 21 bits an axis, interleaved.
+pub(crate) struct MortonGrid {
+    lo: Vec3,
+    scale: Vec3,
+}
+
+impl MortonGrid {
+    /// The grid over the box `lo`..`hi` (of finite points).
+    pub(crate) fn new(lo: Vec3, hi: Vec3) -> MortonGrid {
+        let scale = Vec3::splat((1u32 << 21) as f32 - 1.0) / (hi - lo).max(Vec3::splat(1e-30));
+        MortonGrid { lo, scale }
+    }
+
+    /// The key of finite `p` inside the box.
+    pub(crate) fn key(&self, p: Vec3) -> u64 {
+        let spread = |v: u32| {
+            let mut x = u64::from(v) & 0x1f_ffff;
+            x = (x | x << 32) & 0x1f00000000ffff;
+            x = (x | x << 16) & 0x1f0000ff0000ff;
+            x = (x | x << 8) & 0x100f00f00f00f00f;
+            x = (x | x << 4) & 0x10c30c30c30c30c3;
+            (x | x << 2) & 0x1249249249249249
+        };
+        let q = ((p - self.lo) * self.scale).as_uvec3();
+        spread(q.x) | spread(q.y) << 1 | spread(q.z) << 2
+    }
+}
+
 /// The points' indices in Morton (Z-curve) order over their bounding box,
 /// ties by index, the non-finite last: an order of queries, not of the
 /// points (see [`Knn::build_in_order`]).
@@ -199,25 +227,12 @@ pub fn morton_order(points: &[Vec3]) -> Vec<u32> {
         .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |a, &p| {
             (a.0.min(p), a.1.max(p))
         });
-    let scale = Vec3::splat((1u32 << 21) as f32 - 1.0) / (hi - lo).max(Vec3::splat(1e-30));
-    let spread = |v: u32| {
-        let mut x = u64::from(v) & 0x1f_ffff;
-        x = (x | x << 32) & 0x1f00000000ffff;
-        x = (x | x << 16) & 0x1f0000ff0000ff;
-        x = (x | x << 8) & 0x100f00f00f00f00f;
-        x = (x | x << 4) & 0x10c30c30c30c30c3;
-        (x | x << 2) & 0x1249249249249249
-    };
+    let grid = MortonGrid::new(lo, hi);
     let mut keyed: Vec<(u64, u32)> = points
         .par_iter()
         .enumerate()
         .map(|(i, &p)| {
-            let m = if p.is_finite() {
-                let q = ((p - lo) * scale).as_uvec3();
-                spread(q.x) | spread(q.y) << 1 | spread(q.z) << 2
-            } else {
-                u64::MAX
-            };
+            let m = if p.is_finite() { grid.key(p) } else { u64::MAX };
             (m, i as u32)
         })
         .collect();
@@ -556,6 +571,14 @@ mod tests {
         assert!(near.cache.off);
     }
 
+    /// A `w × h` grid of spacing 0.5 in `z = 0`, row by row (most
+    /// distances tie).
+    fn grid(w: usize, h: usize) -> Vec<Vec3> {
+        (0..w)
+            .flat_map(|i| (0..h).map(move |j| Vec3::new(i as f32 * 0.5, j as f32 * 0.5, 0.0)))
+            .collect()
+    }
+
     /// A graph repaired around dropped points ([`Knn::without`]) is the
     /// graph built over the points left, bit for bit, on a grid (where
     /// most distances tie) and a scattered cloud, with single points, a
@@ -563,12 +586,7 @@ mod tests {
     /// dropped neighbour are queried again.
     #[test]
     fn a_repaired_graph_is_the_graph_built_without_the_dropped() {
-        let mut grid = Vec::new();
-        for i in 0..30 {
-            for j in 0..30 {
-                grid.push(Vec3::new(i as f32 * 0.5, j as f32 * 0.5, 0.0));
-            }
-        }
+        let grid = grid(30, 30);
         let mut s = 0x2545_f491_u64;
         let mut next = || {
             s ^= s << 13;
@@ -609,12 +627,7 @@ mod tests {
     /// the tree keeps them in; and the k-th one's distance.
     #[test]
     fn the_graph_breaks_ties_by_index() {
-        let mut pts = Vec::new();
-        for i in 0..30 {
-            for j in 0..30 {
-                pts.push(Vec3::new(i as f32 * 0.5, j as f32 * 0.5, 0.0));
-            }
-        }
+        let pts = grid(30, 30);
         let tree = build_tree(&pts);
         let knn = Knn::build(&tree, &pts, 12);
         for (i, &p) in pts.iter().enumerate() {
@@ -635,12 +648,7 @@ mod tests {
     fn a_graph_queried_in_any_order_is_the_graph() {
         // A grid (distances tie everywhere) in row order, and scattered
         // noisy points along scan lines.
-        let mut grid = Vec::new();
-        for i in 0..40 {
-            for j in 0..25 {
-                grid.push(Vec3::new(i as f32 * 0.5, j as f32 * 0.5, 0.0));
-            }
-        }
+        let grid = grid(40, 25);
         let mut state = 12345u64;
         let mut r = || {
             state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
