@@ -610,15 +610,21 @@ fn surface_stage(
         mut points,
         colors,
         mut tree,
-        knn,
+        mut knn,
         sights,
         ..
     } = w;
+    if !params.creases.found(knn.k > params.k) || to_estimate == 0 {
+        // No face search: the wide rows' last reader is done.
+        knn.wide = None;
+    }
     // The points as read, for the check that a crease cut leaves none of
     // them off every splat (`partners::meet_partners`), kept only where
     // denoising moved them (12 bytes a point through growth).
     let before = (params.creases != Creases::Off).then(|| points.clone());
     let read = if onto_local_surfaces(&mut points, &mut nrm, &fixed, to_estimate, &knn, report) {
+        // The wide rows were of the points before they moved.
+        knn.wide = None;
         let read_tree = std::mem::replace(&mut tree, build_tree(&points));
         // Moved points and refitted normals: nothing is settled.
         settled = Vec::new();
@@ -652,6 +658,8 @@ fn surface_stage(
     if surface.creases && to_estimate > 0 {
         faces_and_creases(&mut surface, &fixed, sights.as_ref(), report);
     }
+    // No stage after reads the wide rows.
+    surface.knn.wide = None;
     surface
 }
 
@@ -672,6 +680,13 @@ fn faces_and_creases(
     let tol = by_eps.max(by_noise);
     let faces = normals::FlatFaces::from_tolerances(by_eps, by_noise);
     s.strong = faces == normals::FlatFaces::Strong;
+    if faces == normals::FlatFaces::Off {
+        // The face search reads the wide rows of the points it does not
+        // skip only.
+        let settled = &s.settled;
+        s.knn
+            .keep_wide(|i| !fixed[i] && settled.get(i) != Some(&true));
+    }
     let found = normals::face_normals(
         &s.points,
         &s.tree,
@@ -683,6 +698,7 @@ fn faces_and_creases(
         &s.settled,
     );
     s.settled = Vec::new();
+    s.knn.wide = None;
     s.flat = found.flat;
     report.face_searches = found.searched;
     report.queries.faces = found.queries;
@@ -939,7 +955,14 @@ fn neighbours(
     }
     report.k = k;
     let tree = build_tree(&points);
-    let knn = Knn::build(&tree, &points, k);
+    // One query a point: with normals to estimate, each point's wide
+    // neighbourhood (the face search's, `normals::estimate_multiscale`),
+    // whose prefix is the graph's row.
+    let knn = if estimates_normals(cloud, &order) {
+        Knn::build_wide(&tree, &points, k, (k * normals::WIDE_FACTOR + 1).min(n))
+    } else {
+        Knn::build(&tree, &points, k)
+    };
     report.queries.graph = knn.queries;
     Ok(Work {
         order,
@@ -950,6 +973,17 @@ fn neighbours(
         tree,
         knn,
     })
+}
+
+/// Whether some of `order`'s points of `cloud` have no usable normal
+/// (`normals_of` estimates theirs).
+fn estimates_normals(cloud: &PointCloud, order: &[u32]) -> bool {
+    match &cloud.normals {
+        Some(v) if v.len() == cloud.positions.len() => order
+            .iter()
+            .any(|&i| v[i as usize].try_normalize().is_none()),
+        _ => true,
+    }
 }
 
 /// Range noise beyond the growth threshold: each splat would sit at its
@@ -1181,7 +1215,7 @@ fn normals_of(
             report.k = wider;
             // The face search's neighbourhood widens with the graph.
             settled = Vec::new();
-            w.knn = Knn::build(&w.tree, &w.points, wider);
+            w.knn = w.knn.widened(wider, &w.tree, &w.points);
             report.queries.graph += w.knn.queries;
         }
         if wide * 100 > n {

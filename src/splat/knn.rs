@@ -36,6 +36,44 @@ pub struct Knn {
     /// the points whose neighbours were dropped when repaired
     /// ([`Knn::without`]).
     pub queries: usize,
+    /// Each point's wide neighbourhood, from the same queries
+    /// ([`Knn::build_wide`]), while the stages that read it run; `None`
+    /// once they are done (or never asked for).
+    pub wide: Option<Wide>,
+}
+
+/// Each point's `m` nearest points of the cloud, itself among them,
+/// nearest first, ties by index: the wide neighbourhoods the normals'
+/// estimate and the face search read (`normals::estimate_multiscale`,
+/// `normals::face_normals`), kept from the one query a point that made
+/// the graph, whose `k` nearest are their prefix. `4 m + 4` bytes a point
+/// while all are kept ([`Knn::keep_wide`] keeps fewer).
+#[derive(Clone, Debug)]
+pub struct Wide {
+    /// Points a row.
+    pub m: usize,
+    /// The rows kept, `m` each.
+    idx: Vec<u32>,
+    /// Which row each point's is (`u32::MAX`: not kept); `None`: every
+    /// point's, in order.
+    slot: Option<Vec<u32>>,
+    /// Each row's last squared distance, while every row is kept.
+    last: Vec<f32>,
+}
+
+impl Wide {
+    /// Point `i`'s row, where kept.
+    #[must_use]
+    pub fn of(&self, i: usize) -> Option<&[u32]> {
+        let r = match &self.slot {
+            None => i,
+            Some(slot) => match slot.get(i) {
+                Some(&r) if r != u32::MAX => r as usize,
+                _ => return None,
+            },
+        };
+        self.idx.get(r * self.m..(r + 1) * self.m)
+    }
 }
 
 impl Knn {
@@ -88,6 +126,7 @@ impl Knn {
             idx,
             kth_distance,
             queries: by_order.queries,
+            wide: None,
         }
     }
 
@@ -117,7 +156,131 @@ impl Knn {
             idx,
             kth_distance,
             queries: tally.get(),
+            wide: None,
         }
+    }
+
+    /// [`Knn::build`] with each point's wide neighbourhood of its `m`
+    /// nearest ([`Wide`]; `m` at least `k + 1` and at most the points),
+    /// from one query a point: the `k + 1` nearest, ties by index, are the
+    /// prefix of the `m` nearest, so the graph is [`Knn::build`]'s bit for
+    /// bit.
+    #[must_use]
+    pub fn build_wide(tree: &PointTree, points: &[Vec3], k: usize, m: usize) -> Knn {
+        let n = points.len();
+        let k = k.clamp(1, n.saturating_sub(1).max(1));
+        let m = m.max(k + 1).min(n);
+        if m == 0 {
+            return Knn::build(tree, points, k);
+        }
+        Knn::rows_wide(n, k, m, |nearest, i, row, wide| {
+            let found = nearest.query(tree, points, points[i], m);
+            wide_row(found, i, row, wide)
+        })
+    }
+
+    /// [`Knn::rows`] with the wide rows: `row(nearest, i, row, wide)`
+    /// fills point `i`'s `k` and `m` nearest and returns the k-th's
+    /// distance and the m-th's squared distance.
+    fn rows_wide(
+        n: usize,
+        k: usize,
+        m: usize,
+        row: impl Fn(&mut Nearest<'_>, usize, &mut [u32], &mut [u32]) -> (f32, f32) + Sync,
+    ) -> Knn {
+        let mut idx = vec![0u32; n * k];
+        let mut kth_distance = vec![0f32; n];
+        let mut wide = vec![0u32; n * m];
+        let mut last = vec![0f32; n];
+        let tally = Tally::default();
+        idx.par_chunks_mut(k * CHUNK)
+            .zip(kth_distance.par_chunks_mut(CHUNK))
+            .zip(wide.par_chunks_mut(m * CHUNK))
+            .zip(last.par_chunks_mut(CHUNK))
+            .enumerate()
+            .for_each(|(c, (((rows, kths), wides), lasts))| {
+                let mut nearest = Nearest::counted(&tally);
+                let per_point = rows
+                    .chunks_mut(k)
+                    .zip(kths.iter_mut())
+                    .zip(wides.chunks_mut(m))
+                    .zip(lasts.iter_mut());
+                for (j, (((r, kth), w), l)) in per_point.enumerate() {
+                    (*kth, *l) = row(&mut nearest, c * CHUNK + j, r, w);
+                }
+            });
+        Knn {
+            k,
+            idx,
+            kth_distance,
+            queries: tally.get(),
+            wide: Some(Wide {
+                m,
+                idx: wide,
+                slot: None,
+                last,
+            }),
+        }
+    }
+
+    /// Point `i`'s wide row of `m` points where this graph keeps it
+    /// ([`Knn::build_wide`]).
+    #[must_use]
+    pub fn wide_row(&self, i: usize, m: usize) -> Option<&[u32]> {
+        self.wide.as_ref().filter(|w| w.m == m).and_then(|w| w.of(i))
+    }
+
+    /// Keeps the wide rows of the points `keep` marks only (the others'
+    /// readers are done).
+    pub fn keep_wide(&mut self, keep: impl Fn(usize) -> bool) {
+        let Some(w) = self.wide.take() else {
+            return;
+        };
+        let n = self.kth_distance.len();
+        let mut slot = vec![u32::MAX; n];
+        let mut idx = Vec::new();
+        for (i, s) in slot.iter_mut().enumerate() {
+            if let Some(row) = w.of(i).filter(|_| keep(i)) {
+                *s = (idx.len() / w.m) as u32;
+                idx.extend_from_slice(row);
+            }
+        }
+        self.wide = Some(Wide {
+            m: w.m,
+            idx,
+            slot: Some(slot),
+            last: Vec::new(),
+        });
+    }
+
+    /// This graph widened to `k` neighbours (more than its own): from the
+    /// wide rows where they hold `k + 1` points ([`Knn::build_wide`]),
+    /// each row less the point itself, bit for bit [`Knn::build`]'s; else
+    /// built. Without wide rows.
+    #[must_use]
+    pub fn widened(&self, k: usize, tree: &PointTree, points: &[Vec3]) -> Knn {
+        let k = k.clamp(1, points.len().saturating_sub(1).max(1));
+        let Some(w) = self
+            .wide
+            .as_ref()
+            .filter(|w| w.m == k + 1 && w.slot.is_none() && w.last.len() == points.len())
+        else {
+            return Knn::build(tree, points, k);
+        };
+        Knn::rows(points.len(), k, |nearest, i, row| {
+            let wide = &w.idx[i * w.m..(i + 1) * w.m];
+            // The row less the point, whose last is the row's last (as
+            // `nearest_row` takes it from the same query's answer).
+            if wide[..k].contains(&(i as u32)) {
+                let mut rest = wide.iter().filter(|&&j| j as usize != i);
+                for r in row.iter_mut() {
+                    *r = *rest.next().unwrap_or(&wide[k]);
+                }
+                w.last[i].sqrt()
+            } else {
+                nearest_row(nearest, tree, points, i, row)
+            }
+        })
     }
 
     /// The graph of the points `keep` holds, from this graph of all of
@@ -126,7 +289,9 @@ impl Knn {
     /// (renumbered), and only the others are queried again. The same graph
     /// as [`Knn::build`] over the kept points, bit for bit: a kept row's
     /// `k` nearest are nearest among fewer points too, and renumbering
-    /// keeps the order of indices, so ties break the same way.
+    /// keeps the order of indices, so ties break the same way. With wide
+    /// rows ([`Knn::build_wide`]), the same holds of them: a point whose
+    /// wide row held a dropped one is queried again, for both rows.
     #[must_use]
     pub fn without(&self, keep: &[bool], tree: &PointTree, points: &[Vec3]) -> Knn {
         let k = self.k.clamp(1, points.len().saturating_sub(1).max(1));
@@ -136,10 +301,35 @@ impl Knn {
             new_of[i] = kept_old.len() as u32;
             kept_old.push(i);
         }
-        if k != self.k || kept_old.len() != points.len() {
+        let wide = self.wide.as_ref().filter(|w| w.slot.is_none());
+        let m = wide.map_or(0, |w| w.m.min(points.len()));
+        if k != self.k || kept_old.len() != points.len() || wide.is_some_and(|w| w.m != m) {
             // Fewer points than a neighbourhood (or a caller's mismatch):
             // built afresh.
-            return Knn::build(tree, points, k);
+            return match wide {
+                Some(_) => Knn::build_wide(tree, points, k, m),
+                None => Knn::build(tree, points, k),
+            };
+        }
+        if let Some(w) = wide {
+            // A kept point none of whose wide row was dropped keeps both
+            // rows (its `k` nearest are their prefix).
+            return Knn::rows_wide(points.len(), k, m, |nearest, i, row, wide| {
+                let old = kept_old[i];
+                let was = &w.idx[old * m..(old + 1) * m];
+                if was.iter().all(|&o| keep[o as usize]) {
+                    for (r, &o) in wide.iter_mut().zip(was) {
+                        *r = new_of[o as usize];
+                    }
+                    for (r, &o) in row.iter_mut().zip(self.of(old)) {
+                        *r = new_of[o as usize];
+                    }
+                    (self.kth_distance[old], w.last[old])
+                } else {
+                    let found = nearest.query(tree, points, points[i], m);
+                    wide_row(found, i, row, wide)
+                }
+            });
         }
         Knn::rows(points.len(), k, |nearest, i, row| {
             let old = kept_old[i];
@@ -166,8 +356,30 @@ fn nearest_row(
     i: usize,
     row: &mut [u32],
 ) -> f32 {
+    let found = nearest.query(tree, points, points[i], row.len() + 1);
+    take_row(found, i, row)
+}
+
+/// Point `i`'s rows from its `wide.len()` nearest `found` (nearest first,
+/// ties by index): `row` from their prefix as [`nearest_row`] takes it,
+/// `wide` all of them (padded with the last where fewer exist); returns
+/// the k-th's distance and the last one's squared distance.
+fn wide_row(found: &[(f32, u32)], i: usize, row: &mut [u32], wide: &mut [u32]) -> (f32, f32) {
+    let kth = take_row(&found[..found.len().min(row.len() + 1)], i, row);
+    for (w, f) in wide.iter_mut().zip(found) {
+        *w = f.1;
+    }
+    let fill = found.last().map_or(u32::from(i == 0), |f| f.1);
+    let len = found.len().min(wide.len());
+    wide[len..].fill(fill);
+    (kth, found.last().map_or(0.0, |f| f.0))
+}
+
+/// Point `i`'s row of the graph from its nearest `found` (nearest first,
+/// ties by index, at most `row.len() + 1`): the others, padded with the
+/// last where fewer; returns the last one's distance.
+fn take_row(found: &[(f32, u32)], i: usize, row: &mut [u32]) -> f32 {
     let k = row.len();
-    let found = nearest.query(tree, points, points[i], k + 1);
     let mut len = 0usize;
     let mut last = 0f32;
     for &(d, item) in found {
@@ -619,6 +831,74 @@ mod tests {
                 assert_eq!(got.queries, touched);
                 assert_eq!(want.queries, left.len());
             }
+        }
+    }
+
+    /// One query a point gives the graph and the wide rows
+    /// ([`Knn::build_wide`]): the graph is [`Knn::build`]'s bit for bit,
+    /// each wide row the point's `m` nearest (itself among them) by a
+    /// brute-force sort, ties by index; the graph widened to `m - 1` from
+    /// the rows is [`Knn::build`]'s at `m - 1` without a query; repaired
+    /// around dropped points, both are the ones built over the points
+    /// left, and only the points whose wide row held a dropped one are
+    /// queried again; rows kept for some points are theirs.
+    #[test]
+    fn the_wide_rows_hold_the_graph() {
+        let mut s = 0x853c_49e6_u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let scattered: Vec<Vec3> = (0..1200)
+            .map(|_| Vec3::new(next(), next(), 0.1 * next()))
+            .collect();
+        let bits = |k: &Knn| k.kth_distance.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+        for pts in [grid(30, 30), scattered] {
+            let n = pts.len();
+            let tree = build_tree(&pts);
+            let plain = Knn::build(&tree, &pts, 12);
+            let wide = Knn::build_wide(&tree, &pts, 12, 49);
+            assert_eq!(wide.idx, plain.idx);
+            assert_eq!(bits(&wide), bits(&plain));
+            assert_eq!(wide.queries, n);
+            for (i, &p) in pts.iter().enumerate() {
+                assert_eq!(wide.wide_row(i, 49).unwrap(), &brute_nearest(&pts, p, 49)[..]);
+            }
+            assert!(wide.wide_row(0, 48).is_none() && plain.wide_row(0, 49).is_none());
+            let widened = wide.widened(48, &tree, &pts);
+            let want = Knn::build(&tree, &pts, 48);
+            assert_eq!(widened.idx, want.idx);
+            assert_eq!(bits(&widened), bits(&want));
+            assert_eq!(widened.queries, 0);
+            for drop in [
+                (0..n).map(|i| i == 7 || i == n / 2).collect::<Vec<bool>>(),
+                (0..n).map(|i| i % 3 == 0).collect(),
+            ] {
+                let keep: Vec<bool> = drop.iter().map(|&d| !d).collect();
+                let left: Vec<Vec3> = (0..n).filter(|&i| keep[i]).map(|i| pts[i]).collect();
+                let tree = build_tree(&left);
+                let want = Knn::build_wide(&tree, &left, 12, 49);
+                let got = wide.without(&keep, &tree, &left);
+                assert_eq!(got.idx, want.idx);
+                assert_eq!(bits(&got), bits(&want));
+                for i in 0..left.len() {
+                    assert_eq!(got.wide_row(i, 49), want.wide_row(i, 49), "{i}");
+                }
+                let touched = (0..n)
+                    .filter(|&i| keep[i] && wide.wide_row(i, 49).unwrap().iter().any(|&j| drop[j as usize]))
+                    .count();
+                assert_eq!(got.queries, touched);
+            }
+            let mut some = wide.clone();
+            some.keep_wide(|i| i % 5 == 1);
+            for i in 0..n {
+                let want = (i % 5 == 1).then(|| wide.wide_row(i, 49).unwrap());
+                assert_eq!(some.wide_row(i, 49), want, "{i}");
+            }
+            // Kept for some points only: widened by queries.
+            assert_eq!(some.widened(48, &tree, &pts).queries, n);
         }
     }
 

@@ -176,6 +176,10 @@ enum Scale {
 /// monotonic), and the fit is the same up to signs for the normal either
 /// way round, so without flat-face rules `face_normals` would find it one
 /// smooth surface and keep its normal, as it would skip it.
+///
+/// Where `knn` holds wide rows of the face search's size
+/// ([`Knn::build_wide`]), they are read instead of queried: the same
+/// neighbourhoods, nearest first, ties by index.
 pub fn estimate_multiscale(
     points: &[Vec3],
     tree: &super::knn::PointTree,
@@ -231,7 +235,12 @@ pub fn estimate_multiscale(
                         return guess;
                     };
                     items.clear();
-                    if m == first {
+                    if let Some(row) = knn.wide_row(i, face_m).filter(|_| m == first) {
+                        // The graph's wide row: the face search's
+                        // neighbourhood, whose first `first` are the wide
+                        // one (`Knn::build_wide`).
+                        items.extend_from_slice(row);
+                    } else if m == first {
                         // The wide neighbourhood every point asks for, by
                         // the bounded query of Morton-ordered points (with
                         // one more, the face search's, where it settles).
@@ -679,6 +688,10 @@ type HeldSet = [u64; HELD_BITS / 64];
 /// planes hold at least [`FACE_HOLDS`] here too, and they keep their
 /// normals.
 ///
+/// A point's neighbourhood is `knn`'s wide row where it keeps one of this
+/// size ([`Knn::build_wide`]), else queried (the same points in the same
+/// order).
+///
 /// Returns how many normals turned to a face at an edge, which points lie
 /// on a flat face, and how many neighbourhoods were searched for two faces
 /// ([`FaceNormals`]).
@@ -709,6 +722,7 @@ pub fn face_normals(
     let search = FaceSearch {
         points,
         tree,
+        knn,
         old: normals,
         tol,
         m,
@@ -778,6 +792,8 @@ pub struct FaceNormals {
 struct FaceSearch<'a> {
     points: &'a [Vec3],
     tree: &'a super::knn::PointTree,
+    /// The graph, whose wide rows are read where it keeps them.
+    knn: &'a Knn,
     /// The normals before (each point's `n0`).
     old: &'a [Vec3],
     tol: f32,
@@ -793,6 +809,7 @@ struct FaceSearch<'a> {
 /// and a point's neighbours (indices, offsets, offsets with the point's).
 struct FaceScratch<'t> {
     nearest: super::knn::Nearest<'t>,
+    ids: Vec<u32>,
     near: Vec<usize>,
     wide: Vec<Vec3>,
     all: Vec<Vec3>,
@@ -802,6 +819,7 @@ impl<'t> FaceScratch<'t> {
     fn new(tally: &'t super::knn::Tally) -> Self {
         FaceScratch {
             nearest: super::knn::Nearest::counted(tally),
+            ids: Vec::new(),
             near: Vec::new(),
             wide: Vec::new(),
             all: Vec::new(),
@@ -818,13 +836,24 @@ impl FaceSearch<'_> {
         let (p, n0) = (self.points[i], self.old[i]);
         let FaceScratch {
             nearest,
+            ids,
             near,
             wide,
             all,
         } = scratch;
-        let found = nearest.query(self.tree, self.points, p, self.m);
+        // The graph's wide row where it keeps one of this size, else the
+        // same neighbourhood queried.
+        let found: &[u32] = match self.knn.wide_row(i, self.m) {
+            Some(row) => row,
+            None => {
+                let found = nearest.query(self.tree, self.points, p, self.m);
+                ids.clear();
+                ids.extend(found.iter().map(|f| f.1));
+                ids
+            }
+        };
         near.clear();
-        near.extend(found.iter().map(|f| f.1 as usize).filter(|&j| j != i));
+        near.extend(found.iter().map(|&j| j as usize).filter(|&j| j != i));
         wide.clear();
         wide.extend(near.iter().map(|&j| self.points[j] - p));
         let holds = |c: Vec3| wide.iter().filter(|d| c.dot(**d).abs() <= tol).count();
@@ -843,12 +872,10 @@ impl FaceSearch<'_> {
         };
         // The neighbours (not the point) whose offsets `keep`.
         let on = |keep: &dyn Fn(Vec3) -> bool| -> Vec<u32> {
-            found
-                .iter()
-                .filter(|f| f.1 as usize != i)
+            near.iter()
                 .zip(wide.iter())
                 .filter(|(_, d)| keep(**d))
-                .map(|(f, _)| f.1)
+                .map(|(&j, _)| j as u32)
                 .collect()
         };
         if held >= flat_at || tilted.is_some() {
@@ -1706,6 +1733,73 @@ mod tests {
     /// count and the two-face searches are the same, bit for bit, with and
     /// without skipping them, at the settling tolerance and above it; and
     /// the curved side is settled by its quadric, not its plane.
+    /// The normals' estimate and the face search read the graph's wide
+    /// rows (`Knn::build_wide`) instead of querying, and find the same
+    /// normals, settled points, flat points and turned normals bit for
+    /// bit: three faces meeting at edges, a gentle curve, and a noisy
+    /// patch (with and without a settling tolerance, flat faces off and
+    /// on).
+    #[test]
+    fn the_wide_rows_are_the_queried_neighbourhoods() {
+        let mut rng = crate::rng::SplitMix64::new(23);
+        let mut u = || (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
+        let mut pts = Vec::new();
+        for i in 0..2500 {
+            let (a, b, c) = (u(), u(), u());
+            pts.push(match i % 5 {
+                0 => Vec3::new(a, b, 0.0),
+                1 => Vec3::new(a, 0.0, b),
+                2 => Vec3::new(0.0, a, b),
+                3 => Vec3::new(2.0 + a, 2.0 + b, 0.02 * c),
+                _ => {
+                    let t = a * std::f32::consts::FRAC_PI_2;
+                    Vec3::new(3.0 + 2.0 * t.cos(), 0.5 + 2.0 * t.sin(), b)
+                }
+            });
+        }
+        let tree = build_tree(&pts);
+        let plain = Knn::build(&tree, &pts, 12);
+        let mut wide = Knn::build_wide(&tree, &pts, 12, 49);
+        let bits = |v: &[Vec3]| {
+            v.iter()
+                .map(|n| n.to_array().map(f32::to_bits))
+                .collect::<Vec<_>>()
+        };
+        let fixed = vec![false; pts.len()];
+        for settle in [None, Some(0.004)] {
+            let a = estimate_multiscale(&pts, &tree, &plain, None, settle);
+            let b = estimate_multiscale(&pts, &tree, &wide, None, settle);
+            assert_eq!(bits(&a.normals), bits(&b.normals), "{settle:?}");
+            assert_eq!(a.settled, b.settled, "{settle:?}");
+            assert_eq!((a.wide, a.sheets), (b.wide, b.sheets), "{settle:?}");
+            assert_eq!(a.queries, pts.len());
+            assert_eq!(b.queries, 0);
+        }
+        let est = estimate_multiscale(&pts, &tree, &plain, None, Some(0.004));
+        let mut nrm = est.normals.clone();
+        orient(&pts, &plain, &mut nrm, &fixed, None);
+        let unsettled = est.settled.iter().filter(|&&s| !s).count();
+        // Only the rows the face search reads kept (as generation keeps
+        // them with flat faces off).
+        wide.keep_wide(|i| !est.settled[i]);
+        for (flat, settled) in [(FlatFaces::Off, &est.settled[..]), (FlatFaces::On, &[][..])] {
+            let knn = if flat == FlatFaces::Off {
+                wide.clone()
+            } else {
+                Knn::build_wide(&tree, &pts, 12, 49)
+            };
+            let (mut x, mut y) = (nrm.clone(), nrm.clone());
+            let a = face_normals(&pts, &tree, &plain, &mut x, &fixed, 0.006, flat, settled);
+            let b = face_normals(&pts, &tree, &knn, &mut y, &fixed, 0.006, flat, settled);
+            assert_eq!(bits(&x), bits(&y), "{flat:?}");
+            assert_eq!((a.turned, a.searched), (b.turned, b.searched), "{flat:?}");
+            assert_eq!(a.flat, b.flat, "{flat:?}");
+            assert!(a.turned > 0, "no edge turned a normal");
+            let searched = if flat == FlatFaces::Off { unsettled } else { pts.len() };
+            assert_eq!((a.queries, b.queries), (searched, 0), "{flat:?}");
+        }
+    }
+
     #[test]
     fn settled_points_are_those_the_face_search_leaves() {
         let mut rng = crate::rng::SplitMix64::new(11);
