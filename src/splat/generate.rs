@@ -680,13 +680,6 @@ fn faces_and_creases(
     let tol = by_eps.max(by_noise);
     let faces = normals::FlatFaces::from_tolerances(by_eps, by_noise);
     s.strong = faces == normals::FlatFaces::Strong;
-    if faces == normals::FlatFaces::Off {
-        // The face search reads the wide rows of the points it does not
-        // skip only.
-        let settled = &s.settled;
-        s.knn
-            .keep_wide(|i| !fixed[i] && settled.get(i) != Some(&true));
-    }
     let found = normals::face_normals(
         &s.points,
         &s.tree,
@@ -1233,6 +1226,15 @@ fn normals_of(
                  their normals are a guess",
                 normals::WIDE_MAX
             ));
+        }
+        if settle_tol.is_some() {
+            // The face search reads the wide rows of the points it does not
+            // skip only (it queries the others, settled here, where noise
+            // turns its flat-face rules on); none are read otherwise.
+            w.knn
+                .keep_wide(|i| !fixed[i] && settled.get(i) != Some(&true));
+        } else {
+            w.knn.wide = None;
         }
         for i in 0..n {
             if !fixed[i] {

@@ -46,15 +46,19 @@ pub struct Knn {
 /// nearest first, ties by index: the wide neighbourhoods the normals'
 /// estimate and the face search read (`normals::estimate_multiscale`,
 /// `normals::face_normals`), kept from the one query a point that made
-/// the graph, whose `k` nearest are their prefix. `4 m + 4` bytes a point
-/// while all are kept ([`Knn::keep_wide`] keeps fewer).
+/// the graph. A row is the point itself, then its graph row (its `k`
+/// nearest others), then a tail, and only the tails are stored:
+/// `4 (m - k - 1) + 4` bytes a point while all are kept
+/// ([`Knn::keep_wide`] keeps fewer).
 #[derive(Clone, Debug)]
 pub struct Wide {
     /// Points a row.
     pub m: usize,
-    /// The rows kept, `m` each.
-    idx: Vec<u32>,
-    /// Which row each point's is (`u32::MAX`: not kept); `None`: every
+    /// Points a tail (`m - k - 1`, at least 1).
+    t: usize,
+    /// The tails kept, `t` each.
+    tail: Vec<u32>,
+    /// Which tail each point's is (`u32::MAX`: not kept); `None`: every
     /// point's, in order.
     slot: Option<Vec<u32>>,
     /// Each row's last squared distance, while every row is kept.
@@ -62,9 +66,8 @@ pub struct Wide {
 }
 
 impl Wide {
-    /// Point `i`'s row, where kept.
-    #[must_use]
-    pub fn of(&self, i: usize) -> Option<&[u32]> {
+    /// Point `i`'s tail, where kept.
+    fn tail(&self, i: usize) -> Option<&[u32]> {
         let r = match &self.slot {
             None => i,
             Some(slot) => match slot.get(i) {
@@ -72,7 +75,7 @@ impl Wide {
                 _ => return None,
             },
         };
-        self.idx.get(r * self.m..(r + 1) * self.m)
+        self.tail.get(r * self.t..(r + 1) * self.t)
     }
 }
 
@@ -161,73 +164,90 @@ impl Knn {
     }
 
     /// [`Knn::build`] with each point's wide neighbourhood of its `m`
-    /// nearest ([`Wide`]; `m` at least `k + 1` and at most the points),
-    /// from one query a point: the `k + 1` nearest, ties by index, are the
-    /// prefix of the `m` nearest, so the graph is [`Knn::build`]'s bit for
-    /// bit.
+    /// nearest ([`Wide`]; `m` at most the points), from one query a point:
+    /// the `k + 1` nearest, ties by index, are the prefix of the `m`
+    /// nearest, so the graph is [`Knn::build`]'s bit for bit. Without wide
+    /// rows where `m` is under `k + 2`, or where a point is not the first of
+    /// its own row (another at distance 0 before it: not a cloud of
+    /// distinct points).
     #[must_use]
     pub fn build_wide(tree: &PointTree, points: &[Vec3], k: usize, m: usize) -> Knn {
         let n = points.len();
         let k = k.clamp(1, n.saturating_sub(1).max(1));
-        let m = m.max(k + 1).min(n);
-        if m == 0 {
+        let m = m.min(n);
+        if m < k + 2 {
             return Knn::build(tree, points, k);
         }
-        Knn::rows_wide(n, k, m, |nearest, i, row, wide| {
+        Knn::rows_wide(n, k, m, |nearest, i, row, tail| {
             let found = nearest.query(tree, points, points[i], m);
-            wide_row(found, i, row, wide)
+            wide_row(found, i, row, tail)
         })
     }
 
-    /// [`Knn::rows`] with the wide rows: `row(nearest, i, row, wide)`
-    /// fills point `i`'s `k` and `m` nearest and returns the k-th's
-    /// distance and the m-th's squared distance.
+    /// [`Knn::rows`] with the wide rows' tails: `row(nearest, i, row,
+    /// tail)` fills point `i`'s graph row and tail and returns the k-th's
+    /// distance, the row's last squared distance, and whether the point
+    /// came first in its row (else no wide rows are kept).
     fn rows_wide(
         n: usize,
         k: usize,
         m: usize,
-        row: impl Fn(&mut Nearest<'_>, usize, &mut [u32], &mut [u32]) -> (f32, f32) + Sync,
+        row: impl Fn(&mut Nearest<'_>, usize, &mut [u32], &mut [u32]) -> (f32, f32, bool) + Sync,
     ) -> Knn {
+        let t = m - k - 1;
         let mut idx = vec![0u32; n * k];
         let mut kth_distance = vec![0f32; n];
-        let mut wide = vec![0u32; n * m];
+        let mut tail = vec![0u32; n * t];
         let mut last = vec![0f32; n];
         let tally = Tally::default();
+        let odd = std::sync::atomic::AtomicBool::new(false);
         idx.par_chunks_mut(k * CHUNK)
             .zip(kth_distance.par_chunks_mut(CHUNK))
-            .zip(wide.par_chunks_mut(m * CHUNK))
+            .zip(tail.par_chunks_mut(t * CHUNK))
             .zip(last.par_chunks_mut(CHUNK))
             .enumerate()
-            .for_each(|(c, (((rows, kths), wides), lasts))| {
+            .for_each(|(c, (((rows, kths), tails), lasts))| {
                 let mut nearest = Nearest::counted(&tally);
                 let per_point = rows
                     .chunks_mut(k)
                     .zip(kths.iter_mut())
-                    .zip(wides.chunks_mut(m))
+                    .zip(tails.chunks_mut(t))
                     .zip(lasts.iter_mut());
                 for (j, (((r, kth), w), l)) in per_point.enumerate() {
-                    (*kth, *l) = row(&mut nearest, c * CHUNK + j, r, w);
+                    let first;
+                    (*kth, *l, first) = row(&mut nearest, c * CHUNK + j, r, w);
+                    if !first {
+                        odd.store(true, std::sync::atomic::Ordering::Relaxed);
+                    }
                 }
             });
+        let wide = (!odd.into_inner()).then_some(Wide {
+            m,
+            t,
+            tail,
+            slot: None,
+            last,
+        });
         Knn {
             k,
             idx,
             kth_distance,
             queries: tally.get(),
-            wide: Some(Wide {
-                m,
-                idx: wide,
-                slot: None,
-                last,
-            }),
+            wide,
         }
     }
 
-    /// Point `i`'s wide row of `m` points where this graph keeps it
-    /// ([`Knn::build_wide`]).
-    #[must_use]
-    pub fn wide_row(&self, i: usize, m: usize) -> Option<&[u32]> {
-        self.wide.as_ref().filter(|w| w.m == m).and_then(|w| w.of(i))
+    /// Point `i`'s wide row of `m` points into `out` (the point, its graph
+    /// row, its tail), where this graph keeps it ([`Knn::build_wide`]):
+    /// whether it did.
+    pub fn wide_into(&self, i: usize, m: usize, out: &mut Vec<u32>) -> bool {
+        let Some(tail) = self.wide.as_ref().filter(|w| w.m == m).and_then(|w| w.tail(i)) else {
+            return false;
+        };
+        out.push(i as u32);
+        out.extend_from_slice(self.of(i));
+        out.extend_from_slice(tail);
+        true
     }
 
     /// Keeps the wide rows of the points `keep` marks only (the others'
@@ -238,25 +258,26 @@ impl Knn {
         };
         let n = self.kth_distance.len();
         let mut slot = vec![u32::MAX; n];
-        let mut idx = Vec::new();
+        let mut tail = Vec::new();
         for (i, s) in slot.iter_mut().enumerate() {
-            if let Some(row) = w.of(i).filter(|_| keep(i)) {
-                *s = (idx.len() / w.m) as u32;
-                idx.extend_from_slice(row);
+            if let Some(t) = w.tail(i).filter(|_| keep(i)) {
+                *s = (tail.len() / w.t) as u32;
+                tail.extend_from_slice(t);
             }
         }
         self.wide = Some(Wide {
-            m: w.m,
-            idx,
             slot: Some(slot),
+            tail,
             last: Vec::new(),
+            ..w
         });
     }
 
     /// This graph widened to `k` neighbours (more than its own): from the
     /// wide rows where they hold `k + 1` points ([`Knn::build_wide`]),
-    /// each row less the point itself, bit for bit [`Knn::build`]'s; else
-    /// built. Without wide rows.
+    /// each row less the point itself (its first), with its last
+    /// distance, bit for bit [`Knn::build`]'s (the same query's answer);
+    /// else built. Without wide rows.
     #[must_use]
     pub fn widened(&self, k: usize, tree: &PointTree, points: &[Vec3]) -> Knn {
         let k = k.clamp(1, points.len().saturating_sub(1).max(1));
@@ -267,19 +288,11 @@ impl Knn {
         else {
             return Knn::build(tree, points, k);
         };
-        Knn::rows(points.len(), k, |nearest, i, row| {
-            let wide = &w.idx[i * w.m..(i + 1) * w.m];
-            // The row less the point, whose last is the row's last (as
-            // `nearest_row` takes it from the same query's answer).
-            if wide[..k].contains(&(i as u32)) {
-                let mut rest = wide.iter().filter(|&&j| j as usize != i);
-                for r in row.iter_mut() {
-                    *r = *rest.next().unwrap_or(&wide[k]);
-                }
-                w.last[i].sqrt()
-            } else {
-                nearest_row(nearest, tree, points, i, row)
-            }
+        Knn::rows(points.len(), k, |_, i, row| {
+            let (head, tail) = row.split_at_mut(self.k);
+            head.copy_from_slice(self.of(i));
+            tail.copy_from_slice(&w.tail[i * w.t..(i + 1) * w.t]);
+            w.last[i].sqrt()
         })
     }
 
@@ -314,20 +327,20 @@ impl Knn {
         if let Some(w) = wide {
             // A kept point none of whose wide row was dropped keeps both
             // rows (its `k` nearest are their prefix).
-            return Knn::rows_wide(points.len(), k, m, |nearest, i, row, wide| {
+            return Knn::rows_wide(points.len(), k, m, |nearest, i, row, tail| {
                 let old = kept_old[i];
-                let was = &w.idx[old * m..(old + 1) * m];
-                if was.iter().all(|&o| keep[o as usize]) {
-                    for (r, &o) in wide.iter_mut().zip(was) {
-                        *r = new_of[o as usize];
-                    }
+                let was = w.tail(old).unwrap_or(&[]);
+                if self.of(old).iter().chain(was).all(|&o| keep[o as usize]) {
                     for (r, &o) in row.iter_mut().zip(self.of(old)) {
                         *r = new_of[o as usize];
                     }
-                    (self.kth_distance[old], w.last[old])
+                    for (r, &o) in tail.iter_mut().zip(was) {
+                        *r = new_of[o as usize];
+                    }
+                    (self.kth_distance[old], w.last[old], true)
                 } else {
                     let found = nearest.query(tree, points, points[i], m);
-                    wide_row(found, i, row, wide)
+                    wide_row(found, i, row, tail)
                 }
             });
         }
@@ -360,19 +373,20 @@ fn nearest_row(
     take_row(found, i, row)
 }
 
-/// Point `i`'s rows from its `wide.len()` nearest `found` (nearest first,
-/// ties by index): `row` from their prefix as [`nearest_row`] takes it,
-/// `wide` all of them (padded with the last where fewer exist); returns
-/// the k-th's distance and the last one's squared distance.
-fn wide_row(found: &[(f32, u32)], i: usize, row: &mut [u32], wide: &mut [u32]) -> (f32, f32) {
-    let kth = take_row(&found[..found.len().min(row.len() + 1)], i, row);
-    for (w, f) in wide.iter_mut().zip(found) {
-        *w = f.1;
+/// Point `i`'s rows from its nearest `found` (nearest first, ties by
+/// index, `row.len() + 1 + tail.len()` of them): `row` from their prefix
+/// as [`nearest_row`] takes it, `tail` the rest; returns the k-th's
+/// distance, the last one's squared distance, and whether the point came
+/// first (so that the row is the point, `row`, `tail`).
+fn wide_row(found: &[(f32, u32)], i: usize, row: &mut [u32], tail: &mut [u32]) -> (f32, f32, bool) {
+    let k = row.len();
+    let kth = take_row(&found[..found.len().min(k + 1)], i, row);
+    let rest = found.get(k + 1..).unwrap_or(&[]);
+    for (t, f) in tail.iter_mut().zip(rest) {
+        *t = f.1;
     }
-    let fill = found.last().map_or(u32::from(i == 0), |f| f.1);
-    let len = found.len().min(wide.len());
-    wide[len..].fill(fill);
-    (kth, found.last().map_or(0.0, |f| f.0))
+    let first = found.first().is_some_and(|f| f.1 as usize == i) && rest.len() == tail.len();
+    (kth, found.last().map_or(0.0, |f| f.0), first)
 }
 
 /// Point `i`'s row of the graph from its nearest `found` (nearest first,
@@ -855,6 +869,10 @@ mod tests {
             .map(|_| Vec3::new(next(), next(), 0.1 * next()))
             .collect();
         let bits = |k: &Knn| k.kth_distance.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+        let row = |k: &Knn, i: usize, m: usize| {
+            let mut out = Vec::new();
+            k.wide_into(i, m, &mut out).then_some(out)
+        };
         for pts in [grid(30, 30), scattered] {
             let n = pts.len();
             let tree = build_tree(&pts);
@@ -864,9 +882,9 @@ mod tests {
             assert_eq!(bits(&wide), bits(&plain));
             assert_eq!(wide.queries, n);
             for (i, &p) in pts.iter().enumerate() {
-                assert_eq!(wide.wide_row(i, 49).unwrap(), &brute_nearest(&pts, p, 49)[..]);
+                assert_eq!(row(&wide, i, 49).unwrap(), brute_nearest(&pts, p, 49));
             }
-            assert!(wide.wide_row(0, 48).is_none() && plain.wide_row(0, 49).is_none());
+            assert!(row(&wide, 0, 48).is_none() && row(&plain, 0, 49).is_none());
             let widened = wide.widened(48, &tree, &pts);
             let want = Knn::build(&tree, &pts, 48);
             assert_eq!(widened.idx, want.idx);
@@ -884,18 +902,18 @@ mod tests {
                 assert_eq!(got.idx, want.idx);
                 assert_eq!(bits(&got), bits(&want));
                 for i in 0..left.len() {
-                    assert_eq!(got.wide_row(i, 49), want.wide_row(i, 49), "{i}");
+                    assert_eq!(row(&got, i, 49), row(&want, i, 49), "{i}");
                 }
                 let touched = (0..n)
-                    .filter(|&i| keep[i] && wide.wide_row(i, 49).unwrap().iter().any(|&j| drop[j as usize]))
+                    .filter(|&i| keep[i] && row(&wide, i, 49).unwrap().iter().any(|&j| drop[j as usize]))
                     .count();
                 assert_eq!(got.queries, touched);
             }
             let mut some = wide.clone();
             some.keep_wide(|i| i % 5 == 1);
             for i in 0..n {
-                let want = (i % 5 == 1).then(|| wide.wide_row(i, 49).unwrap());
-                assert_eq!(some.wide_row(i, 49), want, "{i}");
+                let want = row(&wide, i, 49).filter(|_| i % 5 == 1);
+                assert_eq!(row(&some, i, 49), want, "{i}");
             }
             // Kept for some points only: widened by queries.
             assert_eq!(some.widened(48, &tree, &pts).queries, n);

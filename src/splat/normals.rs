@@ -235,11 +235,10 @@ pub fn estimate_multiscale(
                         return guess;
                     };
                     items.clear();
-                    if let Some(row) = knn.wide_row(i, face_m).filter(|_| m == first) {
+                    if m == first && knn.wide_into(i, face_m, items) {
                         // The graph's wide row: the face search's
                         // neighbourhood, whose first `first` are the wide
                         // one (`Knn::build_wide`).
-                        items.extend_from_slice(row);
                     } else if m == first {
                         // The wide neighbourhood every point asks for, by
                         // the bounded query of Morton-ordered points (with
@@ -843,15 +842,12 @@ impl FaceSearch<'_> {
         } = scratch;
         // The graph's wide row where it keeps one of this size, else the
         // same neighbourhood queried.
-        let found: &[u32] = match self.knn.wide_row(i, self.m) {
-            Some(row) => row,
-            None => {
-                let found = nearest.query(self.tree, self.points, p, self.m);
-                ids.clear();
-                ids.extend(found.iter().map(|f| f.1));
-                ids
-            }
-        };
+        ids.clear();
+        if !self.knn.wide_into(i, self.m, ids) {
+            let found = nearest.query(self.tree, self.points, p, self.m);
+            ids.extend(found.iter().map(|f| f.1));
+        }
+        let found: &[u32] = ids;
         near.clear();
         near.extend(found.iter().map(|&j| j as usize).filter(|&j| j != i));
         wide.clear();
