@@ -1227,15 +1227,11 @@ fn normals_of(
                 normals::WIDE_MAX
             ));
         }
-        if settle_tol.is_some() {
-            // The face search reads the wide rows of the points it does not
-            // skip only (it queries the others, settled here, where noise
-            // turns its flat-face rules on); none are read otherwise.
-            w.knn
-                .keep_wide(|i| !fixed[i] && settled.get(i) != Some(&true));
-        } else {
-            w.knn.wide = None;
-        }
+        // The face search (with a settling tolerance) reads the wide rows
+        // of the points it does not skip only; it queries the others,
+        // settled here, where noise turns its flat-face rules on.
+        let searched = |i: usize| !fixed[i] && settled.get(i) != Some(&true);
+        w.knn.keep_wide(|i| settle_tol.is_some() && searched(i));
         for i in 0..n {
             if !fixed[i] {
                 nrm[i] = est[i];

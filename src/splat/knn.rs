@@ -251,7 +251,7 @@ impl Knn {
     }
 
     /// Keeps the wide rows of the points `keep` marks only (the others'
-    /// readers are done).
+    /// readers are done); none where it marks none.
     pub fn keep_wide(&mut self, keep: impl Fn(usize) -> bool) {
         let Some(w) = self.wide.take() else {
             return;
@@ -265,7 +265,7 @@ impl Knn {
                 tail.extend_from_slice(t);
             }
         }
-        self.wide = Some(Wide {
+        self.wide = (!tail.is_empty()).then_some(Wide {
             slot: Some(slot),
             tail,
             last: Vec::new(),
