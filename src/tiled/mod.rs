@@ -71,9 +71,11 @@ pub const HALO_EPS: f64 = 12.0;
 pub const NORMALS_REACH_EPS: f64 = 2.0;
 
 /// Bytes a point takes while its tile is generated, for planning: measured
-/// 161 B a point for a whole 10M-point cloud read and generated in memory
-/// (peak RSS 1.61 GB), rounded up.
-pub const BYTES_PER_POINT: u64 = 192;
+/// 292 B a point for a whole 10M-point cloud (bunny samples, positions
+/// only) read and generated in memory (`splat --holdout 0`, peak RSS
+/// 2.92 GB; 211 B before the graph kept each point's wide neighbourhood,
+/// `splat::knn::Wide`, and 161 B before that), rounded up.
+pub const BYTES_PER_POINT: u64 = 320;
 
 /// The most tiles generated at once in one process, when they fit the
 /// budget together. The kd-tree's build and the last of the growth (the
