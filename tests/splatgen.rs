@@ -612,7 +612,8 @@ fn the_graph_is_built_once_and_repaired_around_outliers() {
         rep.input_points
     );
     // Measured: 62 of the 100 dropped (the others lie near the surface);
-    // graph QGRAPH queries (a rebuild would make 40,138), normals 0, faces 0
+    // graph 20,100 queries (no kept point had a dropped one in its wide
+    // row: nothing to repair; a rebuild made 40,138), normals 0, faces 0
     // (before one wide query a point: normals 20,038, faces 19,761).
     assert!(dropped >= 50, "{dropped}");
     assert!(q.graph < rep.input_points + dropped, "{q:?}");
