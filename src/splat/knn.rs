@@ -447,9 +447,11 @@ impl Cache {
         let mut len = 0;
         let lanes = x.len() / 8 * 8;
         for at in (0..lanes).step_by(8) {
+            let lane = |v: &[f32]| -> [f32; 8] { v[at..at + 8].try_into().unwrap_or_default() };
+            let (cx, cy, cz) = (lane(x), lane(y), lane(z));
             let mut d = [0f32; 8];
-            for (l, d) in d.iter_mut().enumerate() {
-                *d = dist_sq([x[at + l], y[at + l], z[at + l]], q);
+            for l in 0..8 {
+                d[l] = dist_sq([cx[l], cy[l], cz[l]], q);
             }
             let out = &mut keys[len..len + 8];
             let mut n = 0;
@@ -649,6 +651,75 @@ mod tests {
             assert_eq!(got, brute_nearest(&pts, p, 13), "point {i}, points not the tree's");
         }
         assert!(near.cache.off);
+    }
+
+    /// A cached ball's query ([`Cache::within`], scanning only the shells
+    /// its ball reaches) finds every cached point within the bound, and
+    /// only those, against a scan of the whole cache: on a lattice (points
+    /// exactly on the bound and on shell boundaries) and scattered points,
+    /// balls round many centres and queries anywhere inside them. The
+    /// shells skip most of the cache (the test fails if they stop to).
+    #[test]
+    fn cached_shells_miss_no_point_within_the_bound() {
+        let mut lattice = Vec::new();
+        for i in -12..=12 {
+            for j in -12..=12 {
+                for k in -2..=2 {
+                    lattice.push(Vec3::new(i as f32, j as f32, k as f32) * 0.25);
+                }
+            }
+        }
+        let mut s = 0x9e37_79b9_u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        };
+        let scattered: Vec<Vec3> = (0..4000)
+            .map(|_| Vec3::new(6.0 * next(), 6.0 * next(), 0.5 * next()))
+            .collect();
+        let (mut scanned, mut cached) = (0usize, 0usize);
+        for pts in [lattice, scattered] {
+            let tree = build_tree(&pts);
+            let mut keys = vec![0u64; pts.len()];
+            for c in 0..12 {
+                let centre = pts[c * pts.len() / 12].to_array();
+                let mut cache = Cache::default();
+                cache.fill(&tree, &pts, centre, 2.5, 0.5);
+                assert!(!cache.off);
+                for t in 0..200 {
+                    let (r, a) = (0.5 * (1.0 + t as f32 / 200.0) / 2.0, t as f32 * 0.37);
+                    let q = [
+                        centre[0] + 0.7 * r * a.cos() * (t % 7) as f32 / 6.0,
+                        centre[1] + 0.7 * r * a.sin() * (t % 5) as f32 / 4.0,
+                        centre[2],
+                    ];
+                    // Bounds that fall exactly on lattice distances too.
+                    for bound in [r * r, 0.0625, 0.125, 0.25] {
+                        if !cache.holds(q, bound.sqrt()) {
+                            continue;
+                        }
+                        let mut want: Vec<u64> = (0..cache.items.len())
+                            .map(|j| {
+                                let p = [cache.x[j], cache.y[j], cache.z[j]];
+                                (dist_sq(p, q), cache.items[j])
+                            })
+                            .filter(|&(d, _)| d <= bound)
+                            .map(|(d, j)| key(d, j))
+                            .collect();
+                        let len = cache.within(q, bound, &mut keys);
+                        let mut got = keys[..len].to_vec();
+                        got.sort_unstable();
+                        want.sort_unstable();
+                        assert_eq!(got, want, "centre {c}, query {t}, bound {bound}");
+                        scanned += cache.reach_of(q, bound).len();
+                        cached += cache.items.len();
+                    }
+                }
+            }
+        }
+        assert!(scanned * 10 < cached * 8, "{scanned} of {cached}");
     }
 
     /// A `w × h` grid of spacing 0.5 in `z = 0`, row by row (most
