@@ -272,8 +272,10 @@ const BOUND_GROWTH_SQ: f32 = 1.44;
 /// The points within the bound come from a cache: one tree query
 /// (`within_unsorted`) of a ball [`cache_reach`] times the bound's radius
 /// serves every following query whose own ball it holds (consecutive
-/// points in Morton order lie close), each then a linear scan of the
-/// cached points. The distances are the tree's own sum, so the set is the
+/// points in Morton order lie close), each then a scan of the cached
+/// points, kept in shells of squared distance from the ball's centre, in
+/// the shells the query's own ball reaches (between its centre's distance
+/// less and plus its radius). The distances are the tree's own sum, so the set is the
 /// tree's bit for bit (each refill checks it, and queries the tree itself
 /// from then on where the points given are not the tree's).
 /// One per thread (the bound carries from one query to the next); results

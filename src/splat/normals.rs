@@ -1434,26 +1434,24 @@ pub fn sheet_of(
     neighbours: &[u32],
     h: &mut Vec<(f32, u32)>,
 ) -> Option<(Sheet, Vec3)> {
-    // The nearest neighbour's distance (not 0): the square root of the
-    // least squared distance, as the least of their roots (the root is
-    // correctly rounded, so it keeps their order).
-    let d1_sq = neighbours
-        .iter()
-        .map(|&j| p.distance_squared(points[j as usize]))
-        .filter(|&d| d > 0.0)
-        .fold(f32::INFINITY, f32::min);
+    // The heights, and the nearest neighbour's distance (not 0) as the
+    // square root of the least squared distance: the least of the roots,
+    // since the root is correctly rounded and keeps their order.
+    h.clear();
+    h.reserve(neighbours.len() + 1);
+    h.push((0.0, u32::MAX));
+    let mut d1_sq = f32::INFINITY;
+    for &j in neighbours {
+        let o = points[j as usize] - p;
+        let d = o.length_squared();
+        d1_sq = if d > 0.0 && d < d1_sq { d } else { d1_sq };
+        h.push((normal.dot(o), j));
+    }
     let d1 = if d1_sq < f32::INFINITY {
         d1_sq.sqrt()
     } else {
         f32::MAX
     };
-    h.clear();
-    h.push((0.0, u32::MAX));
-    h.extend(
-        neighbours
-            .iter()
-            .map(|&j| (normal.dot(points[j as usize] - p), j)),
-    );
     sort_heights(h);
     let me = h.iter().position(|x| x.1 == u32::MAX)?;
     let widest = |range: std::ops::RangeInclusive<usize>| {
