@@ -498,8 +498,10 @@ const BOUND_GROWTH_SQ: f32 = 1.44;
 /// The points within the bound come from a cache: one tree query
 /// (`within_unsorted`) of a ball [`cache_reach`] times the bound's radius
 /// serves every following query whose own ball it holds (consecutive
-/// points in Morton order lie close), each then a linear scan of the
-/// cached points. The distances are the tree's own sum, so the set is the
+/// points in Morton order lie close), each then a scan of the cached
+/// points, kept in shells of squared distance from the ball's centre, in
+/// the shells the query's own ball reaches (between its centre's distance
+/// less and plus its radius). The distances are the tree's own sum, so the set is the
 /// tree's bit for bit (each refill checks it, and queries the tree itself
 /// from then on where the points given are not the tree's).
 /// One per thread (the bound carries from one query to the next); results
@@ -522,8 +524,8 @@ pub struct Nearest<'t> {
     tally: Option<&'t Tally>,
 }
 
-/// [`Nearest`]'s cached ball of points.
-#[derive(Default)]
+/// [`Nearest`]'s cached ball of points, in [`SHELLS`] shells about its
+/// centre: a query scans only the shells its own ball can reach.
 struct Cache {
     centre: [f32; 3],
     radius: f32,
@@ -531,12 +533,35 @@ struct Cache {
     y: Vec<f32>,
     z: Vec<f32>,
     items: Vec<u32>,
+    /// Where each shell's points start in `x`, `y`, `z` and `items`, and
+    /// where the last ends.
+    starts: [usize; SHELLS + 1],
+    /// [`SHELLS`] over the squared radius (see [`Cache::shell`]).
+    scale: f32,
     /// The points given were not the tree's: no cache.
     off: bool,
     /// Tree queries that filled it.
     fills: usize,
     /// Its radius over the radius of the query that filled it.
     reach: f32,
+}
+
+impl Default for Cache {
+    fn default() -> Cache {
+        Cache {
+            centre: [0.0; 3],
+            radius: 0.0,
+            x: Vec::new(),
+            y: Vec::new(),
+            z: Vec::new(),
+            items: Vec::new(),
+            starts: [0; SHELLS + 1],
+            scale: 0.0,
+            off: false,
+            fills: 0,
+            reach: 0.0,
+        }
+    }
 }
 
 /// A cached ball's radius, in radii of the bound that filled it, for
@@ -556,6 +581,10 @@ const CACHE_POINTS: f32 = 200.0;
 /// one, far above the rounding of squared distances in `f32`.
 const CACHE_MARGIN: f32 = 1e-4;
 
+/// The shells of a cached ball: equal steps of squared distance from its
+/// centre (equal areas on a surface through it).
+const SHELLS: usize = 32;
+
 /// The tree's squared distance (`SquaredEuclidean`'s sum, in its order).
 #[inline]
 fn dist_sq(a: [f32; 3], b: [f32; 3]) -> f32 {
@@ -574,51 +603,98 @@ impl Cache {
             && (dist_sq(q, self.centre).sqrt() + r) * (1.0 + CACHE_MARGIN) <= self.radius
     }
 
+    /// The shell of a point at squared distance `d` from the centre: a
+    /// function of `d` that never decreases, so the points between two
+    /// squared distances lie in the shells between theirs.
+    #[inline]
+    fn shell(&self, d: f32) -> usize {
+        ((d * self.scale) as usize).min(SHELLS - 1)
+    }
+
     /// The points of `tree` (whose coordinates are `points`) within
-    /// `radius` of `q`; turned off where `points` are not the tree's.
+    /// `radius` of `q`, shell by shell; turned off where `points` are not
+    /// the tree's.
     fn fill(&mut self, tree: &PointTree, points: &[Vec3], q: [f32; 3], reach: f32, r: f32) {
         let radius = reach * r;
         self.reach = reach;
         self.fills += 1;
         self.centre = q;
         self.radius = radius;
-        self.x.clear();
-        self.y.clear();
-        self.z.clear();
-        self.items.clear();
-        for f in tree.within_unsorted::<SquaredEuclidean>(&q, radius * radius) {
-            let Some(p) = points.get(f.item as usize) else {
+        self.scale = SHELLS as f32 / (radius * radius);
+        let found = tree.within_unsorted::<SquaredEuclidean>(&q, radius * radius);
+        let mut starts = [0usize; SHELLS + 1];
+        for f in &found {
+            let p = points.get(f.item as usize);
+            if p.is_none_or(|p| dist_sq(p.to_array(), q).to_bits() != f.distance.to_bits()) {
                 self.off = true;
-                break;
-            };
-            if dist_sq(p.to_array(), q).to_bits() != f.distance.to_bits() {
-                self.off = true;
-                break;
+                self.radius = 0.0;
+                return;
             }
-            self.x.push(p.x);
-            self.y.push(p.y);
-            self.z.push(p.z);
-            self.items.push(f.item);
+            starts[self.shell(f.distance) + 1] += 1;
         }
-        if self.off {
-            self.radius = 0.0;
+        for s in 1..=SHELLS {
+            starts[s] += starts[s - 1];
+        }
+        self.starts = starts;
+        let n = found.len();
+        for v in [&mut self.x, &mut self.y, &mut self.z] {
+            v.resize(n, 0.0);
+        }
+        self.items.resize(n, 0);
+        // A counting sort by shell: `starts` moves on to each shell's end.
+        for f in &found {
+            let s = self.shell(f.distance);
+            let (at, p) = (starts[s], points[f.item as usize]);
+            starts[s] += 1;
+            (self.x[at], self.y[at], self.z[at], self.items[at]) = (p.x, p.y, p.z, f.item);
         }
     }
 
-    /// The cached points within squared distance `bound` of `q`, as keys.
-    fn within(&self, q: [f32; 3], bound: f32, keys: &mut Vec<u64>) {
-        // Without a branch on the bound (half the points pass it, at
-        // random): every key is written, and the next one lands after it
-        // only where it passed.
-        let start = keys.len();
-        keys.resize(start + self.items.len(), 0);
-        let mut len = start;
-        for (((&x, &y), &z), &item) in self.x.iter().zip(&self.y).zip(&self.z).zip(&self.items) {
-            let d = dist_sq([x, y, z], q);
-            keys[len] = key(d, item);
+    /// The cached points whose shells a ball of squared radius `bound`
+    /// round `q` reaches: by the triangle inequality its points lie between
+    /// `|q - c| - r` and `|q - c| + r` of the centre `c` (widened by
+    /// [`CACHE_MARGIN`] of the sum, far past rounding).
+    fn reach_of(&self, q: [f32; 3], bound: f32) -> std::ops::Range<usize> {
+        let (off, r) = (dist_sq(q, self.centre).sqrt(), bound.sqrt());
+        let margin = CACHE_MARGIN * (off + r);
+        let lo = (off - r - margin).max(0.0);
+        let hi = off + r + margin;
+        self.starts[self.shell(lo * lo)]..self.starts[self.shell(hi * hi) + 1]
+    }
+
+    /// The cached points within squared distance `bound` of `q`, as keys
+    /// into `keys` (at least as long as the cache); returns how many.
+    fn within(&self, q: [f32; 3], bound: f32, keys: &mut [u64]) -> usize {
+        let range = self.reach_of(q, bound);
+        let (x, y, z) = (&self.x[range.clone()], &self.y[range.clone()], &self.z[range.clone()]);
+        let items = &self.items[range];
+        // Eight distances at a time (in lanes), then their keys without a
+        // branch on the bound (half the points pass it, at random): every
+        // key is written, and the next one lands after it only where it
+        // passed.
+        let mut len = 0;
+        let lanes = x.len() / 8 * 8;
+        for at in (0..lanes).step_by(8) {
+            let lane = |v: &[f32]| -> [f32; 8] { v[at..at + 8].try_into().unwrap_or_default() };
+            let (cx, cy, cz) = (lane(x), lane(y), lane(z));
+            let mut d = [0f32; 8];
+            for l in 0..8 {
+                d[l] = dist_sq([cx[l], cy[l], cz[l]], q);
+            }
+            let out = &mut keys[len..len + 8];
+            let mut n = 0;
+            for (l, &d) in d.iter().enumerate() {
+                out[n & 7] = key(d, items[at + l]);
+                n += usize::from(d <= bound);
+            }
+            len += n;
+        }
+        for j in lanes..x.len() {
+            let d = dist_sq([x[j], y[j], z[j]], q);
+            keys[len] = key(d, items[j]);
             len += usize::from(d <= bound);
         }
-        keys.truncate(len);
+        len
     }
 }
 
@@ -668,27 +744,34 @@ impl<'t> Nearest<'t> {
     pub fn query(&mut self, tree: &PointTree, points: &[Vec3], q: Vec3, m: usize) -> &[(f32, u32)] {
         self.queries += 1;
         self.found.clear();
-        self.keys.clear();
         let Some(mq) = NonZero::new(m) else {
             return &self.found;
         };
         let q = q.to_array();
+        // The candidates are `keys[..len]` (`keys` is kept as long as the
+        // cache, not cleared and refilled each query).
+        let mut len = 0;
         if self.bound.is_finite() {
             let r = self.bound.sqrt();
             if !self.cache.off && !self.cache.holds(q, r) {
                 self.cache.fill(tree, points, q, cache_reach(m), r);
             }
             if self.cache.off {
+                self.keys.clear();
                 self.keys.extend(
                     tree.within_unsorted::<SquaredEuclidean>(&q, self.bound)
                         .into_iter()
                         .map(|f| key(f.distance, f.item)),
                 );
+                len = self.keys.len();
             } else {
-                self.cache.within(q, self.bound, &mut self.keys);
+                if self.keys.len() < self.cache.items.len() {
+                    self.keys.resize(self.cache.items.len(), 0);
+                }
+                len = self.cache.within(q, self.bound, &mut self.keys);
             }
         }
-        if self.keys.len() < m {
+        if len < m {
             // Too few within the bound: the m nearest found without one,
             // then every point as near as the m-th (its ties, which
             // `nearest_n` breaks in no fixed order).
@@ -702,15 +785,16 @@ impl<'t> Nearest<'t> {
                     .into_iter()
                     .map(|f| key(f.distance, f.item)),
             );
+            len = self.keys.len();
         }
-        if self.keys.len() > m {
-            self.keys.select_nth_unstable(m - 1);
-            self.keys.truncate(m);
+        let keys = &mut self.keys[..len];
+        if len > m {
+            keys.select_nth_unstable(m - 1);
         }
-        self.keys.sort_unstable();
+        let keys = &mut keys[..len.min(m)];
+        keys.sort_unstable();
         self.found.extend(
-            self.keys
-                .iter()
+            keys.iter()
                 .map(|&k| (f32::from_bits((k >> 32) as u32), k as u32)),
         );
         let last = self.found.last().map_or(0.0, |f| f.0);
@@ -795,6 +879,75 @@ mod tests {
             assert_eq!(got, brute_nearest(&pts, p, 13), "point {i}, points not the tree's");
         }
         assert!(near.cache.off);
+    }
+
+    /// A cached ball's query ([`Cache::within`], scanning only the shells
+    /// its ball reaches) finds every cached point within the bound, and
+    /// only those, against a scan of the whole cache: on a lattice (points
+    /// exactly on the bound and on shell boundaries) and scattered points,
+    /// balls round many centres and queries anywhere inside them. The
+    /// shells skip most of the cache (the test fails if they stop to).
+    #[test]
+    fn cached_shells_miss_no_point_within_the_bound() {
+        let mut lattice = Vec::new();
+        for i in -12..=12 {
+            for j in -12..=12 {
+                for k in -2..=2 {
+                    lattice.push(Vec3::new(i as f32, j as f32, k as f32) * 0.25);
+                }
+            }
+        }
+        let mut s = 0x9e37_79b9_u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        };
+        let scattered: Vec<Vec3> = (0..4000)
+            .map(|_| Vec3::new(6.0 * next(), 6.0 * next(), 0.5 * next()))
+            .collect();
+        let (mut scanned, mut cached) = (0usize, 0usize);
+        for pts in [lattice, scattered] {
+            let tree = build_tree(&pts);
+            let mut keys = vec![0u64; pts.len()];
+            for c in 0..12 {
+                let centre = pts[c * pts.len() / 12].to_array();
+                let mut cache = Cache::default();
+                cache.fill(&tree, &pts, centre, 2.5, 0.5);
+                assert!(!cache.off);
+                for t in 0..200 {
+                    let (r, a) = (0.5 * (1.0 + t as f32 / 200.0) / 2.0, t as f32 * 0.37);
+                    let q = [
+                        centre[0] + 0.7 * r * a.cos() * (t % 7) as f32 / 6.0,
+                        centre[1] + 0.7 * r * a.sin() * (t % 5) as f32 / 4.0,
+                        centre[2],
+                    ];
+                    // Bounds that fall exactly on lattice distances too.
+                    for bound in [r * r, 0.0625, 0.125, 0.25] {
+                        if !cache.holds(q, bound.sqrt()) {
+                            continue;
+                        }
+                        let mut want: Vec<u64> = (0..cache.items.len())
+                            .map(|j| {
+                                let p = [cache.x[j], cache.y[j], cache.z[j]];
+                                (dist_sq(p, q), cache.items[j])
+                            })
+                            .filter(|&(d, _)| d <= bound)
+                            .map(|(d, j)| key(d, j))
+                            .collect();
+                        let len = cache.within(q, bound, &mut keys);
+                        let mut got = keys[..len].to_vec();
+                        got.sort_unstable();
+                        want.sort_unstable();
+                        assert_eq!(got, want, "centre {c}, query {t}, bound {bound}");
+                        scanned += cache.reach_of(q, bound).len();
+                        cached += cache.items.len();
+                    }
+                }
+            }
+        }
+        assert!(scanned * 10 < cached * 8, "{scanned} of {cached}");
     }
 
     /// A `w × h` grid of spacing 0.5 in `z = 0`, row by row (most

@@ -1397,11 +1397,21 @@ impl Sheet {
 /// their order before), by one integer key each: the height's bits mapped
 /// to an unsigned order that is `total_cmp`'s, then the position.
 fn sort_heights(h: &mut [(f32, u32)]) {
-    const MAX: usize = WIDE_MAX + 1;
-    if h.len() > MAX {
-        h.sort_by(|a, b| a.0.total_cmp(&b.0));
-        return;
+    /// The most sorted with buffers on the stack (a wide neighbourhood of
+    /// the default `k` holds 49); more take them from the heap.
+    const STACK: usize = 64;
+    let n = h.len();
+    if n <= STACK {
+        let mut keys = [0u64; STACK];
+        let mut was = [(0f32, 0u32); STACK];
+        sort_heights_by_keys(h, &mut keys[..n], &mut was[..n]);
+    } else {
+        sort_heights_by_keys(h, &mut vec![0; n], &mut vec![(0.0, 0); n]);
     }
+}
+
+/// [`sort_heights`] with buffers `keys` and `was` as long as `h`.
+fn sort_heights_by_keys(h: &mut [(f32, u32)], keys: &mut [u64], was: &mut [(f32, u32)]) {
     let order = |x: f32| {
         let b = x.to_bits();
         if b & 0x8000_0000 == 0 {
@@ -1410,15 +1420,12 @@ fn sort_heights(h: &mut [(f32, u32)]) {
             !b
         }
     };
-    let mut keys = [0u64; MAX];
-    let mut was = [(0f32, 0u32); MAX];
-    let n = h.len();
     for (j, (k, x)) in keys.iter_mut().zip(h.iter()).enumerate() {
         *k = (u64::from(order(x.0)) << 32) | j as u64;
     }
-    was[..n].copy_from_slice(h);
-    keys[..n].sort_unstable();
-    for (x, k) in h.iter_mut().zip(&keys[..n]) {
+    was.copy_from_slice(h);
+    keys.sort_unstable();
+    for (x, k) in h.iter_mut().zip(keys.iter()) {
         *x = was[(k & 0xffff_ffff) as usize];
     }
 }
@@ -1450,18 +1457,24 @@ pub fn sheet_of(
     neighbours: &[u32],
     h: &mut Vec<(f32, u32)>,
 ) -> Option<(Sheet, Vec3)> {
-    let d1 = neighbours
-        .iter()
-        .map(|&j| p.distance(points[j as usize]))
-        .filter(|&d| d > 0.0)
-        .fold(f32::MAX, f32::min);
+    // The heights, and the nearest neighbour's distance (not 0) as the
+    // square root of the least squared distance: the least of the roots,
+    // since the root is correctly rounded and keeps their order.
     h.clear();
+    h.reserve(neighbours.len() + 1);
     h.push((0.0, u32::MAX));
-    h.extend(
-        neighbours
-            .iter()
-            .map(|&j| (normal.dot(points[j as usize] - p), j)),
-    );
+    let mut d1_sq = f32::INFINITY;
+    for &j in neighbours {
+        let o = points[j as usize] - p;
+        let d = o.length_squared();
+        d1_sq = if d > 0.0 && d < d1_sq { d } else { d1_sq };
+        h.push((normal.dot(o), j));
+    }
+    let d1 = if d1_sq < f32::INFINITY {
+        d1_sq.sqrt()
+    } else {
+        f32::MAX
+    };
     sort_heights(h);
     let me = h.iter().position(|x| x.1 == u32::MAX)?;
     let widest = |range: std::ops::RangeInclusive<usize>| {
