@@ -6,7 +6,7 @@ use crate::accel::{Candidate, CandidateHits, MAX_CANDIDATES};
 use crate::geometry::Ray;
 use crate::names::Named;
 use crate::splat::{NormalField, Splat};
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
 /// How the shading normal is formed (report §4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Deserialize)]
@@ -137,7 +137,14 @@ pub fn beyond_silhouette_at(s: &Splat, u: f32, v: f32, d: Vec3) -> bool {
         return true;
     }
     let sq = disc.sqrt();
-    !(within((-qb - sq) / (2.0 * qa)) || within((-qb + sq) / (2.0 * qa)))
+    // Both roots at once, lane by lane `within`'s operations (the same
+    // bits): the footprint point of `(-qb - sq) / 2qa` in lanes 0–1, of
+    // `(-qb + sq) / 2qa` in lanes 2–3. Neither waits on the other's test.
+    let (lo, hi) = (-qb - sq, -qb + sq);
+    let roots = Vec4::new(lo, lo, hi, hi) / (2.0 * qa);
+    let at = (Vec4::new(x, y, x, y) + roots * Vec4::new(du, dv, du, dv)) / Vec4::new(ru, rv, ru, rv);
+    let r2 = at * at;
+    !(r2.x + r2.y <= 1.0 || r2.z + r2.w <= 1.0)
 }
 
 /// What a window of candidate hits resolves to.
