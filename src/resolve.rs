@@ -2,11 +2,11 @@
 //! hit, shared by every backend (`docs/DESIGN.md`, "The backend contract";
 //! report §3.2 and §4.3).
 
-use crate::accel::{Candidate, CandidateHits};
+use crate::accel::{Candidate, CandidateHits, MAX_CANDIDATES};
 use crate::geometry::Ray;
 use crate::names::Named;
 use crate::splat::{NormalField, Splat};
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
 /// How the shading normal is formed (report §4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Deserialize)]
@@ -104,6 +104,7 @@ pub fn beyond_silhouette(c: &Candidate, s: &Splat, ray: &Ray) -> bool {
 /// uses for a window's candidates and the backends, through
 /// [`crate::accel::PassOver`], for the hits of shadow rays.
 #[must_use]
+#[inline]
 pub fn beyond_silhouette_at(s: &Splat, u: f32, v: f32, d: Vec3) -> bool {
     let f = &s.field;
     if *f == NormalField::FLAT {
@@ -136,11 +137,15 @@ pub fn beyond_silhouette_at(s: &Splat, u: f32, v: f32, d: Vec3) -> bool {
         return true;
     }
     let sq = disc.sqrt();
-    !(within((-qb - sq) / (2.0 * qa)) || within((-qb + sq) / (2.0 * qa)))
+    // Both roots at once, lane by lane `within`'s operations (the same
+    // bits): the footprint point of `(-qb - sq) / 2qa` in lanes 0–1, of
+    // `(-qb + sq) / 2qa` in lanes 2–3. Neither waits on the other's test.
+    let (lo, hi) = (-qb - sq, -qb + sq);
+    let roots = Vec4::new(lo, lo, hi, hi) / (2.0 * qa);
+    let at = (Vec4::new(x, y, x, y) + roots * Vec4::new(du, dv, du, dv)) / Vec4::new(ru, rv, ru, rv);
+    let r2 = at * at;
+    !(r2.x + r2.y <= 1.0 || r2.z + r2.w <= 1.0)
 }
-
-/// A window's candidates fit the pass-over mask of [`resolve_models`].
-const _: () = assert!(crate::accel::MAX_CANDIDATES <= 32);
 
 /// What a window of candidate hits resolves to.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -234,17 +239,16 @@ pub fn resolve_models(
 ) -> Option<Resolved> {
     let all = hits.as_slice();
     let nearest = all.first()?;
-    // Bit `i` set when candidate `i` is passed over: decided once each
-    // (a window holds at most `MAX_CANDIDATES`, 32).
-    let passed = all.iter().enumerate().fold(0u32, |m, (i, c)| {
-        let s = &splats[c.id as usize];
-        let over = model(c.id).0 == ShadingMode::Phong && beyond_silhouette(c, s, ray);
-        m | u32::from(over) << i
-    });
-    let k = (!passed).trailing_zeros() as usize;
-    let Some(first) = all.get(k) else {
+    // Whether a candidate is passed over: decided only where it matters,
+    // for the candidates up to the first that is not and for those that
+    // would otherwise blend.
+    let over = |c: &Candidate| {
+        model(c.id).0 == ShadingMode::Phong && beyond_silhouette(c, &splats[c.id as usize], ray)
+    };
+    let Some(k) = all.iter().position(|c| !over(c)) else {
         return Some(Resolved::Beyond(all.last()?.t.next_up()));
     };
+    let first = &all[k];
     if first.t > nearest.t {
         return Some(Resolved::Beyond(first.t));
     }
@@ -252,36 +256,50 @@ pub fn resolve_models(
     let first_splat = &splats[first.id as usize];
     let front = faces_front(first_splat, ray);
     let far = first.t + window.min(hits.xi());
-    let same_side = all
+    // The candidates that blend (within the surface's window, not passed
+    // over, facing the same side, on the same face), nearest first, each
+    // with its `|(u, v)|`, taken once.
+    let mut same_side = [(*first, 0.0f32); MAX_CANDIDATES];
+    let mut count = 0;
+    for (i, c) in all.iter().enumerate().skip(k) {
+        if far.is_nan() || c.t > far {
+            break;
+        }
+        let s = &splats[c.id as usize];
+        if faces_front(s, ray) == front && same_face(first_splat, s) && (i == k || !over(c)) {
+            same_side[count] = (*c, c.radial());
+            count += 1;
+        }
+    }
+    let same_side = &same_side[..count];
+    // The least by `(|(u, v)|, t, id)`, the first of equals (`min_by`'s
+    // fold, an unordered pair counting as equal).
+    let key = |(c, r): &(Candidate, f32)| (*r, c.t, c.id);
+    let winner = same_side
         .iter()
-        .enumerate()
-        .skip(k)
-        .take_while(|(_, c)| c.t <= far)
-        .filter(|&(i, c)| {
-            let s = &splats[c.id as usize];
-            passed & 1 << i == 0 && faces_front(s, ray) == front && same_face(first_splat, s)
-        })
-        .map(|(_, c)| c);
-    let key = |c: &Candidate| (c.radial(), c.t, c.id);
-    let winner = *same_side.clone().min_by(|a, b| {
-        key(a)
-            .partial_cmp(&key(b))
-            .unwrap_or(std::cmp::Ordering::Equal)
-    })?;
+        .copied()
+        .reduce(|a, b| {
+            if key(&a).partial_cmp(&key(&b)) == Some(std::cmp::Ordering::Greater) {
+                b
+            } else {
+                a
+            }
+        })?
+        .0;
     let ws = &splats[winner.id as usize];
-    let own = match mode {
+    let own = || match mode {
         ShadingMode::Phong => ws.field_normal(winner.u, winner.v),
         _ => ws.normal,
     };
     let mut blended = 0u32;
     let normal = if mode == ShadingMode::Flat {
         blended = 1;
-        own
+        own()
     } else {
         let mut sum = Vec3::ZERO;
-        for c in same_side {
+        for (c, r) in same_side {
             let s = &splats[c.id as usize];
-            let w = (1.0 - c.radial()).max(0.0);
+            let w = (1.0 - r).max(0.0);
             let n = match mode {
                 ShadingMode::Phong => s.field_normal(c.u, c.v),
                 _ => s.normal,
@@ -289,7 +307,7 @@ pub fn resolve_models(
             sum += w * n;
             blended += 1;
         }
-        sum.try_normalize().unwrap_or(own)
+        sum.try_normalize().unwrap_or_else(own)
     };
     Some(Resolved::Hit(SurfaceHit {
         id: winner.id,

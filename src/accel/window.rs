@@ -124,15 +124,25 @@ impl CandidateHits {
     }
 
     /// Offers a hit. Returns the (possibly shrunk) far end of the window.
+    ///
+    /// One pass over the kept candidates (a window holds about four) finds
+    /// a duplicate id and the insertion point, the count of candidates
+    /// before `c` by `(t, id)`; the later ones move up one slot each, from
+    /// the last. A new nearest drops, from the end, the candidates beyond
+    /// its window.
+    #[inline]
     pub fn offer(&mut self, c: Candidate) -> f32 {
         if c.t.is_nan() || c.t > self.far() {
             return self.far();
         }
-        let items = &mut self.items[..self.len];
-        if items.iter().any(|h| h.id == c.id) {
-            return self.far();
+        let mut pos = 0;
+        for h in &self.items[..self.len] {
+            if h.id == c.id {
+                return self.far();
+            }
+            // `(h.t, h.id) < (c.t, c.id)`: no kept `t` is NaN.
+            pos += usize::from(h.t < c.t || (h.t == c.t && h.id < c.id));
         }
-        let pos = items.partition_point(|h| (h.t, h.id) < (c.t, c.id));
         if self.len == MAX_CANDIDATES {
             if pos == MAX_CANDIDATES {
                 self.min_dropped = self.min_dropped.min(c.t);
@@ -141,12 +151,20 @@ impl CandidateHits {
             self.min_dropped = self.min_dropped.min(self.items[MAX_CANDIDATES - 1].t);
             self.len -= 1;
         }
-        self.items.copy_within(pos..self.len, pos + 1);
+        let mut i = self.len;
+        while i > pos {
+            self.items[i] = self.items[i - 1];
+            i -= 1;
+        }
         self.items[pos] = c;
         self.len += 1;
         if pos == 0 {
-            let far = self.far();
-            self.len = self.as_slice().partition_point(|h| h.t <= far);
+            // Sorted by `t`: the candidates within the new window (`t <=
+            // far`) are a prefix, none when `far` is NaN.
+            let far = c.t + self.xi;
+            while self.len > 0 && (far.is_nan() || self.items[self.len - 1].t > far) {
+                self.len -= 1;
+            }
         }
         self.far()
     }

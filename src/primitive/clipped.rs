@@ -228,15 +228,27 @@ impl ClipTable {
     #[inline]
     #[must_use]
     pub fn clip(&self, id: u32) -> Clip {
+        *self.clip_ref(id)
+    }
+
+    /// Where [`ClipTable::clip`] reads the clip of `id`: the table's entry
+    /// or a static [`Clip::NONE`]. One copy from memory whichever it is
+    /// (returning the two values from two branches had the compiler merge
+    /// them through overlapping stack stores, which stalled the leaf's
+    /// exact test on reloading them; `docs/notes/backends.md`, "Issue 55,
+    /// ninth session").
+    #[inline]
+    fn clip_ref(&self, id: u32) -> &Clip {
+        static NONE: Clip = Clip::NONE;
         let Some(w) = self.words.get((id >> 6) as usize) else {
-            return Clip::NONE;
+            return &NONE;
         };
         let bit = 1u64 << (id & 63);
         if w.bits & bit == 0 {
-            return Clip::NONE;
+            return &NONE;
         }
         let k = w.before as usize + (w.bits & (bit - 1)).count_ones() as usize;
-        self.clips[k]
+        &self.clips[k]
     }
 
     /// The clipped splats it holds.
