@@ -161,7 +161,7 @@ impl CandidateHits {
         if pos == 0 {
             // Sorted by `t`: the candidates within the new window (`t <=
             // far`) are a prefix, none when `far` is NaN.
-            let far = c.t + self.xi;
+            let far = self.far();
             while self.len > 0 && (far.is_nan() || self.items[self.len - 1].t > far) {
                 self.len -= 1;
             }

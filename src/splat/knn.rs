@@ -897,16 +897,7 @@ mod tests {
                 }
             }
         }
-        let mut s = 0x9e37_79b9_u64;
-        let mut next = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 40) as f32 / (1u64 << 24) as f32 - 0.5
-        };
-        let scattered: Vec<Vec3> = (0..4000)
-            .map(|_| Vec3::new(6.0 * next(), 6.0 * next(), 0.5 * next()))
-            .collect();
+        let scattered = scattered(0x9e37_79b9, 4000, Vec3::new(6.0, 6.0, 0.5), 0.5);
         let (mut scanned, mut cached) = (0usize, 0usize);
         for pts in [lattice, scattered] {
             let tree = build_tree(&pts);
@@ -952,6 +943,21 @@ mod tests {
 
     /// A `w × h` grid of spacing 0.5 in `z = 0`, row by row (most
     /// distances tie).
+    /// `n` points of a xorshift sequence from `seed`: each coordinate a
+    /// step in `[0, 1)` less `shift`, times `scale`'s.
+    fn scattered(seed: u64, n: usize, scale: Vec3, shift: f32) -> Vec<Vec3> {
+        let mut s = seed;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32 - shift
+        };
+        (0..n)
+            .map(|_| Vec3::new(scale.x * next(), scale.y * next(), scale.z * next()))
+            .collect()
+    }
+
     fn grid(w: usize, h: usize) -> Vec<Vec3> {
         (0..w)
             .flat_map(|i| (0..h).map(move |j| Vec3::new(i as f32 * 0.5, j as f32 * 0.5, 0.0)))
@@ -966,16 +972,7 @@ mod tests {
     #[test]
     fn a_repaired_graph_is_the_graph_built_without_the_dropped() {
         let grid = grid(30, 30);
-        let mut s = 0x2545_f491_u64;
-        let mut next = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
-        let scattered: Vec<Vec3> = (0..1500)
-            .map(|_| Vec3::new(next(), next(), 0.1 * next()))
-            .collect();
+        let scattered = scattered(0x2545_f491, 1500, Vec3::new(1.0, 1.0, 0.1), 0.0);
         for pts in [grid, scattered] {
             let n = pts.len();
             let drops: [Vec<bool>; 3] = [
@@ -1011,16 +1008,7 @@ mod tests {
     /// queried again; rows kept for some points are theirs.
     #[test]
     fn the_wide_rows_hold_the_graph() {
-        let mut s = 0x853c_49e6_u64;
-        let mut next = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
-        let scattered: Vec<Vec3> = (0..1200)
-            .map(|_| Vec3::new(next(), next(), 0.1 * next()))
-            .collect();
+        let scattered = scattered(0x853c_49e6, 1200, Vec3::new(1.0, 1.0, 0.1), 0.0);
         let bits = |k: &Knn| k.kth_distance.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
         let row = |k: &Knn, i: usize, m: usize| {
             let mut out = Vec::new();
