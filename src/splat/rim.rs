@@ -161,6 +161,22 @@ pub(super) struct Frame {
 }
 
 impl Frame {
+    /// The ball round the splat's centre holding the face's points round
+    /// its rim that a border is counted from ([`Lines`]), for the point
+    /// spacing `spacing` in radii.
+    pub(super) fn reach(&self, spacing: f32) -> Reach {
+        let reach = 1.0 + (BORDER_SPACINGS + BORDER_HALF_SPACINGS) * spacing;
+        let centre = self.p
+            + self.n * self.hc
+            + self.a * (self.shift.x * self.aspect)
+            + self.b * self.shift.y;
+        let ball = reach * self.r * self.aspect;
+        Reach {
+            centre,
+            ball2: ball * ball,
+        }
+    }
+
     /// Point `q` of `points` in the splat's normalised coordinates.
     pub(super) fn near(&self, points: &[Vec3], q: usize) -> Near {
         let d = points[q] - self.p;
@@ -181,6 +197,36 @@ pub(super) struct Near {
     h: f32,
     j: u32,
 }
+
+impl Near {
+    /// Whether the point lies past the disc's rim and near enough its plane
+    /// ([`BORDER_HEIGHT`]) to count for a border ([`Lines::border`]).
+    pub(super) fn past_rim(&self) -> bool {
+        self.h.abs() <= BORDER_HEIGHT && self.q.length_squared() > 1.0
+    }
+}
+
+/// [`Frame::reach`]: the ball the kd-tree is asked for the face's points
+/// round a splat's rim.
+#[derive(Clone, Copy)]
+pub(super) struct Reach {
+    centre: Vec3,
+    ball2: f32,
+}
+
+impl Reach {
+    /// Whether `x` lies in the ball with room to spare: its squared
+    /// distance from the centre, however rounded, is within the tree's
+    /// bound by [`REACH_MARGIN`], so the tree's query finds it too.
+    pub(super) fn surely_holds(&self, x: Vec3) -> bool {
+        (x - self.centre).length_squared() <= self.ball2 * (1.0 - REACH_MARGIN)
+    }
+}
+
+/// [`Reach::surely_holds`]'s room, a share of the squared radius: the
+/// squared distances the kd-tree and [`Reach::surely_holds`] take of one
+/// point differ by a few roundings of `f32` (about 1e-7 of it each).
+const REACH_MARGIN: f32 = 1e-4;
 
 /// Where along `w` (normalised splat coordinates) the face across a crease
 /// meets the splat's plane: the offset `s = w·q` of the points of `across`
@@ -345,9 +391,11 @@ impl Clipped {
 }
 
 /// The clip lines (none, one or two) of the splat `f`, given the points
-/// of its own face inside its disc (`own`, the seed first) and those of
-/// other faces met while gathering them (`other`), and the point spacing
-/// in radii.
+/// of its own face inside its disc (`own`, the seed first), those of
+/// other faces met while gathering them (`other`), those of its own face
+/// met past the rim ([`Near::past_rim`]) that lie in the ball of
+/// [`Frame::reach`] ([`Reach::surely_holds`]; `ring`), and the point
+/// spacing in radii.
 ///
 /// The points of the splat's own face inside its disc (normals within
 /// [`super::grow::CREASE_DEG`] of the seed's) are gathered by a traversal of the
@@ -385,11 +433,10 @@ impl Clipped {
 pub(super) fn clip_lines(
     s: &Surface,
     f: &Frame,
-    own: &[Near],
-    other: &[Near],
+    (own, other, ring): (&[Near], &[Near], &[Near]),
     spacing: f32,
 ) -> Clipped {
-    let mut lines = Lines::new(s, f, own, other, spacing);
+    let mut lines = Lines::new(s, f, own, other, ring, spacing);
     let step = std::f32::consts::TAU / CLIP_DIRECTIONS as f32;
     let exts = coarse_exts(own);
     let (xs, ys) = coarse_dirs();
@@ -491,8 +538,14 @@ struct Lines<'a> {
     r: f32,
     own: &'a [Near],
     other: &'a [Near],
-    /// The face's points (from the whole cloud) just past the rim.
-    beyond: Vec<Near>,
+    /// The face's points just past the rim that the neighbourhood graph
+    /// met while gathering `own`, each in the tree's ball ([`Frame::reach`]):
+    /// some of `beyond`, known without asking the tree.
+    ring: &'a [Near],
+    /// The face's points (from the whole cloud) just past the rim, asked of
+    /// the tree the first time a border's count needs more than `ring`.
+    beyond: Option<Vec<Near>>,
+    frame: Frame,
     /// The point spacing, in radii.
     spacing: f32,
     jump_cos: f32,
@@ -507,34 +560,41 @@ impl<'a> Lines<'a> {
         f: &Frame,
         own: &'a [Near],
         other: &'a [Near],
+        ring: &'a [Near],
         spacing: f32,
     ) -> Self {
-        // The face's points round the rim, from the whole cloud (the graph
-        // holds only a ring one neighbour deep): where one lies just past
-        // the last inside point along a direction, the face goes on there.
-        let reach = 1.0 + (BORDER_SPACINGS + BORDER_HALF_SPACINGS) * spacing;
-        let centre = f.p + f.n * f.hc + f.a * (f.shift.x * f.aspect) + f.b * f.shift.y;
-        let ball = reach * f.r * f.aspect;
-        let beyond: Vec<Near> = s
-            .tree
-            .within_unsorted::<kiddo::SquaredEuclidean>(&centre.to_array(), ball * ball)
-            .into_iter()
-            .filter(|q| s.normals[q.item as usize].dot(f.n) > s.face_cos)
-            .map(|q| f.near(s.points, q.item as usize))
-            .filter(|m| m.h.abs() <= BORDER_HEIGHT && m.q.length_squared() > 1.0)
-            .collect();
         Lines {
             s,
             p: f.p,
             r: f.r,
             own,
             other,
-            beyond,
+            ring,
+            beyond: None,
+            frame: *f,
             spacing,
             jump_cos: CREASE_JUMP_DEG.to_radians().cos(),
             rim: Vec::new(),
             across: Vec::new(),
         }
+    }
+
+    /// The face's points round the rim, from the whole cloud (the graph
+    /// holds only a ring one neighbour deep): where one lies just past the
+    /// last inside point along a direction, the face goes on there. Asked
+    /// of the tree once, when first needed.
+    fn beyond(&mut self) -> &[Near] {
+        let (s, f, spacing) = (self.s, self.frame, self.spacing);
+        self.beyond.get_or_insert_with(|| {
+            let reach = f.reach(spacing);
+            s.tree
+                .within_unsorted::<kiddo::SquaredEuclidean>(&reach.centre.to_array(), reach.ball2)
+                .into_iter()
+                .filter(|q| s.normals[q.item as usize].dot(f.n) > s.face_cos)
+                .map(|q| f.near(s.points, q.item as usize))
+                .filter(Near::past_rim)
+                .collect()
+        })
     }
 
     /// The line cutting the disc in direction `t` (radians), if the face
@@ -567,7 +627,7 @@ impl<'a> Lines<'a> {
     /// A border along `w` past the own face's last point at `ext`: a band
     /// wide enough inside the disc; or, where it crosses the rim, none of
     /// the face's points past the rim in it. The line's offset.
-    fn border(&self, w: Vec2, ext: f32) -> Option<f32> {
+    fn border(&mut self, w: Vec2, ext: f32) -> Option<f32> {
         let spacing = self.spacing;
         let band = ext + BORDER_SPACINGS * spacing;
         let open = band < 1.0 || {
@@ -582,16 +642,26 @@ impl<'a> Lines<'a> {
             // whole is no border whatever the outside's share. The count
             // stops there (inside a surface, after a tenth of the band's
             // points).
+            //
+            // The decision rests on the whole count alone, whatever the
+            // order the points are counted in: the graph's `ring`, part of
+            // `beyond`, is counted first, and where its count reaches that
+            // share (inside a surface, nearly always) the tree is not asked.
             let whole = (band - ext) * 2.0 * half / (spacing * spacing);
+            let in_band = |m: &&Near| {
+                let s = w.dot(m.q);
+                s > ext && s <= band && w.perp_dot(m.q).abs() <= half
+            };
             let mut count = 0usize;
-            for chunk in self.beyond.chunks(BEYOND_CHUNK) {
-                count += chunk
-                    .iter()
-                    .filter(|m| {
-                        let s = w.dot(m.q);
-                        s > ext && s <= band && w.perp_dot(m.q).abs() <= half
-                    })
-                    .count();
+            for chunk in self.ring.chunks(BEYOND_CHUNK) {
+                count += chunk.iter().filter(in_band).count();
+                if count as f32 >= BORDER_FILL * whole {
+                    return None;
+                }
+            }
+            count = 0;
+            for chunk in self.beyond().chunks(BEYOND_CHUNK) {
+                count += chunk.iter().filter(in_band).count();
                 if count as f32 >= BORDER_FILL * whole {
                     return None;
                 }
