@@ -528,6 +528,37 @@ fn coarse_exts(own: &[Near]) -> [f32; CLIP_DIRECTIONS] {
     ext
 }
 
+/// Points' normalised coordinates in lanes (x's and y's apart), for
+/// counts over them that the compiler vectorises.
+#[derive(Default)]
+struct Lanes {
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+}
+
+impl Lanes {
+    fn of(pts: &[Near]) -> Self {
+        pts.iter().map(|m| m.q).collect()
+    }
+}
+
+impl FromIterator<Vec2> for Lanes {
+    fn from_iter<I: IntoIterator<Item = Vec2>>(it: I) -> Self {
+        let (xs, ys) = it.into_iter().map(|q| (q.x, q.y)).unzip();
+        Lanes { xs, ys }
+    }
+}
+
+/// Whether the point at `q` (normalised splat coordinates) lies across a
+/// candidate line along `w` past the own face's last point at `ext`
+/// ([`Lines::line_with`]): from a spacing short of it to two past it, within
+/// the disc's chord. Every test taken (no branch), so that a count over
+/// lanes vectorises.
+fn across(q: Vec2, w: Vec2, ext: f32, spacing: f32) -> bool {
+    let s = w.dot(q);
+    (s >= ext - spacing) & (s <= ext + 2.0 * spacing) & ((q - w * s).length_squared() <= 1.0)
+}
+
 /// The candidate lines of one splat ([`clip_lines`]), direction by
 /// direction.
 struct Lines<'a> {
@@ -540,11 +571,14 @@ struct Lines<'a> {
     other: &'a [Near],
     /// The face's points just past the rim that the neighbourhood graph
     /// met while gathering `own`, each in the tree's ball ([`Frame::reach`]):
-    /// some of `beyond`, known without asking the tree.
-    ring: &'a [Near],
+    /// some of `beyond`, known without asking the tree; in lanes.
+    ring: Lanes,
     /// The face's points (from the whole cloud) just past the rim, asked of
-    /// the tree the first time a border's count needs more than `ring`.
-    beyond: Option<Vec<Near>>,
+    /// the tree the first time a border's count needs more than `ring`; in
+    /// lanes.
+    beyond: Option<Lanes>,
+    /// `other` in lanes.
+    other_lanes: Lanes,
     frame: Frame,
     /// The point spacing, in radii.
     spacing: f32,
@@ -569,8 +603,9 @@ impl<'a> Lines<'a> {
             r: f.r,
             own,
             other,
-            ring,
+            ring: Lanes::of(ring),
             beyond: None,
+            other_lanes: Lanes::of(other),
             frame: *f,
             spacing,
             jump_cos: CREASE_JUMP_DEG.to_radians().cos(),
@@ -583,7 +618,7 @@ impl<'a> Lines<'a> {
     /// holds only a ring one neighbour deep): where one lies just past the
     /// last inside point along a direction, the face goes on there. Asked
     /// of the tree once, when first needed.
-    fn beyond(&mut self) -> &[Near] {
+    fn beyond(&mut self) -> &Lanes {
         let (s, f, spacing) = (self.s, self.frame, self.spacing);
         self.beyond.get_or_insert_with(|| {
             let reach = f.reach(spacing);
@@ -593,6 +628,7 @@ impl<'a> Lines<'a> {
                 .filter(|q| s.normals[q.item as usize].dot(f.n) > s.face_cos)
                 .map(|q| f.near(s.points, q.item as usize))
                 .filter(Near::past_rim)
+                .map(|m| m.q)
                 .collect()
         })
     }
@@ -609,14 +645,20 @@ impl<'a> Lines<'a> {
     /// point along it at `ext`.
     fn line_with(&mut self, w: Vec2, ext: f32) -> Option<ClipLine> {
         let spacing = self.spacing;
-        self.across.clear();
-        self.across.extend(self.other.iter().filter(|m| {
-            let s = w.dot(m.q);
-            s >= ext - spacing && s <= ext + 2.0 * spacing && (m.q - w * s).length_squared() <= 1.0
-        }));
-        let d = if self.across.is_empty() {
+        // How many lie across, counted in lanes; gathered only for a
+        // crease.
+        let (xs, ys) = (&self.other_lanes.xs, &self.other_lanes.ys);
+        let count: u32 = xs
+            .iter()
+            .zip(ys)
+            .map(|(&x, &y)| u32::from(across(Vec2::new(x, y), w, ext, spacing)))
+            .sum();
+        let d = if count == 0 {
             self.border(w, ext)?
-        } else if self.across.len() >= CREASE_MIN_POINTS {
+        } else if count as usize >= CREASE_MIN_POINTS {
+            self.across.clear();
+            self.across
+                .extend(self.other.iter().filter(|m| across(m.q, w, ext, spacing)));
             self.crease(w, ext)?
         } else {
             return None;
@@ -648,24 +690,30 @@ impl<'a> Lines<'a> {
             // `beyond`, is counted first, and where its count reaches that
             // share (inside a surface, nearly always) the tree is not asked.
             let whole = (band - ext) * 2.0 * half / (spacing * spacing);
-            let in_band = |m: &&Near| {
-                let s = w.dot(m.q);
-                s > ext && s <= band && w.perp_dot(m.q).abs() <= half
+            let reaches = |lanes: &Lanes| {
+                let mut count = 0u32;
+                for (xs, ys) in lanes
+                    .xs
+                    .chunks(BEYOND_CHUNK)
+                    .zip(lanes.ys.chunks(BEYOND_CHUNK))
+                {
+                    count += xs
+                        .iter()
+                        .zip(ys)
+                        .map(|(&x, &y)| {
+                            let q = Vec2::new(x, y);
+                            let s = w.dot(q);
+                            u32::from((s > ext) & (s <= band) & (w.perp_dot(q).abs() <= half))
+                        })
+                        .sum::<u32>();
+                    if count as f32 >= BORDER_FILL * whole {
+                        return Err(());
+                    }
+                }
+                Ok(count)
             };
-            let mut count = 0usize;
-            for chunk in self.ring.chunks(BEYOND_CHUNK) {
-                count += chunk.iter().filter(in_band).count();
-                if count as f32 >= BORDER_FILL * whole {
-                    return None;
-                }
-            }
-            count = 0;
-            for chunk in self.beyond().chunks(BEYOND_CHUNK) {
-                count += chunk.iter().filter(in_band).count();
-                if count as f32 >= BORDER_FILL * whole {
-                    return None;
-                }
-            }
+            reaches(&self.ring).ok()?;
+            let count = reaches(self.beyond()).ok()?;
             // The band's area outside the disc (a grid's share of
             // it), over spacing²: what a face going on puts there.
             const N: usize = 8;
@@ -694,15 +742,6 @@ impl<'a> Lines<'a> {
     /// offset.
     fn crease(&mut self, w: Vec2, ext: f32) -> Option<f32> {
         let (inp, spacing) = (self.s, self.spacing);
-        self.rim.clear();
-        self.rim.extend(
-            self.own
-                .iter()
-                .filter(|m| w.dot(m.q) >= ext - 1.5 * spacing),
-        );
-        let (rim, across) = (&self.rim, &self.across);
-        let (m_rim, c_rim) = mean_normal(rim, inp.normals);
-        let (m_across, c_across) = mean_normal(across, inp.normals);
         // Both sides run along the line over most of its chord.
         let chord = 2.0 * (1.0 - ext * ext).max(0.0).sqrt();
         let along = |pts: &[Near]| {
@@ -712,10 +751,22 @@ impl<'a> Lines<'a> {
                 .fold((f32::MAX, f32::MIN), |(lo, hi), x| (lo.min(x), hi.max(x)));
             hi - lo
         };
+        // The side across first (a few points): where it fails, the own
+        // face's side along the rim is not gathered.
+        let (m_across, c_across) = mean_normal(&self.across, inp.normals);
+        if c_across < CREASE_COHERENCE || along(&self.across) < CREASE_LENGTH * chord {
+            return None;
+        }
+        self.rim.clear();
+        self.rim.extend(
+            self.own
+                .iter()
+                .filter(|m| w.dot(m.q) >= ext - 1.5 * spacing),
+        );
+        let (rim, across) = (&self.rim, &self.across);
+        let (m_rim, c_rim) = mean_normal(rim, inp.normals);
         if m_rim.dot(m_across) > self.jump_cos
             || c_rim < CREASE_COHERENCE
-            || c_across < CREASE_COHERENCE
-            || along(across) < CREASE_LENGTH * chord
             || along(rim) < CREASE_LENGTH * chord
         {
             return None;
