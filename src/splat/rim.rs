@@ -516,17 +516,53 @@ fn coarse_dirs() -> &'static ([f32; CLIP_DIRECTIONS], [f32; CLIP_DIRECTIONS]) {
 /// products, sums and maxima, point by point in the same order, as
 /// [`Lines::line_at`] takes along one direction, so bit for bit its `ext`,
 /// but all directions at once in lanes.
+///
+/// The points near the rim (at least [`OUTER_EXT`] from the centre) are
+/// folded first. Where every extent is then positive, a point nearer the
+/// centre than the least of them (by [`EXT_MARGIN`], against rounding) is
+/// below every direction's extent and is passed over; the rest are folded.
+/// A maximum of positive values does not depend on the order (equal ones
+/// have equal bits); where an extent is not positive (a zero's sign would
+/// follow the order), every point is folded again in order.
 fn coarse_exts(own: &[Near]) -> [f32; CLIP_DIRECTIONS] {
     let (xs, ys) = coarse_dirs();
-    let mut ext = [f32::MIN; CLIP_DIRECTIONS];
-    for m in own {
-        let (qx, qy) = (m.q.x, m.q.y);
+    let fold = |ext: &mut [f32; CLIP_DIRECTIONS], q: Vec2| {
         for ((e, wx), wy) in ext.iter_mut().zip(xs).zip(ys) {
-            *e = e.max((wx * qx) + (wy * qy));
+            *e = e.max((wx * q.x) + (wy * q.y));
         }
+    };
+    let mut ext = [f32::MIN; CLIP_DIRECTIONS];
+    let outer = |m: &&Near| m.q.length_squared() >= OUTER_EXT * OUTER_EXT;
+    for m in own.iter().filter(outer) {
+        fold(&mut ext, m.q);
+    }
+    let least = ext.iter().copied().fold(f32::INFINITY, f32::min);
+    if least > 0.0 && least.is_finite() {
+        let below = least * least * (1.0 - EXT_MARGIN);
+        for m in own {
+            let d2 = m.q.length_squared();
+            if d2 < OUTER_EXT * OUTER_EXT && d2 >= below {
+                fold(&mut ext, m.q);
+            }
+        }
+        return ext;
+    }
+    ext = [f32::MIN; CLIP_DIRECTIONS];
+    for m in own {
+        fold(&mut ext, m.q);
     }
     ext
 }
+
+/// [`coarse_exts`] folds first the points at least this far from the
+/// centre (in radii).
+const OUTER_EXT: f32 = 0.9;
+
+/// [`coarse_exts`] passes over a point whose squared distance from the
+/// centre is below the least extent's square by this share: the products
+/// `w·q` along the directions round to within a few `f32` units of `|q|`
+/// (about 1e-7 each).
+const EXT_MARGIN: f32 = 1e-4;
 
 /// Points' normalised coordinates in lanes (x's and y's apart), for
 /// counts over them that the compiler vectorises.
@@ -856,7 +892,8 @@ mod tests {
     /// [`coarse_exts`] gives, bit for bit, the farthest extent
     /// [`Lines::line_at`] folds along each coarse direction: points spread
     /// over the disc, on its rim, snapped to a coarse grid (ties between
-    /// points, zeros of both signs) and a single point at the centre.
+    /// points, zeros of both signs), on one side of a line through the
+    /// centre (extents of zero and below) and a single point at the centre.
     #[test]
     fn coarse_exts_are_each_directions_fold() {
         let mut rng = crate::rng::SplitMix64::new(54);
@@ -874,6 +911,10 @@ mod tests {
                     }
                     if count == 1 && case % 2 == 0 {
                         q = Vec2::new(-0.0, 0.0);
+                    }
+                    if case % 11 == 5 {
+                        // One-sided: a face ending through the centre.
+                        q.x = q.x.abs();
                     }
                     Near { q, h: 0.0, j }
                 })
