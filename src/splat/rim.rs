@@ -619,8 +619,10 @@ struct Lines<'a> {
     /// The point spacing, in radii.
     spacing: f32,
     jump_cos: f32,
-    /// Scratch: the own face's points along the rim, and those across.
-    rim: Vec<Near>,
+    /// The normals of `own`, in its order, taken the first time a crease
+    /// needs them.
+    own_normals: Vec<Vec3>,
+    /// Scratch: the points across a crease.
     across: Vec<Near>,
 }
 
@@ -645,7 +647,7 @@ impl<'a> Lines<'a> {
             frame: *f,
             spacing,
             jump_cos: CREASE_JUMP_DEG.to_radians().cos(),
-            rim: Vec::new(),
+            own_normals: Vec::new(),
             across: Vec::new(),
         }
     }
@@ -773,6 +775,34 @@ impl<'a> Lines<'a> {
         (open && ext + gap < 1.0).then_some(ext + gap)
     }
 
+    /// The own face's side of a crease along `w` past its last point at
+    /// `ext`: of its points along the rim (from 1.5 spacings short of it),
+    /// the unit mean normal, the coherence ([`mean_normal`]'s, the same sum
+    /// in the same order) and their extent along the line. One pass over
+    /// `own`, the points not gathered.
+    fn rim_side(&mut self, w: Vec2, ext: f32) -> (Vec3, f32, f32) {
+        if self.own_normals.len() != self.own.len() {
+            let normals = self.s.normals;
+            self.own_normals = self.own.iter().map(|m| normals[m.j as usize]).collect();
+        }
+        let from = ext - 1.5 * self.spacing;
+        let (mut sum, mut count) = (Vec3::ZERO, 0usize);
+        let (mut lo, mut hi) = (f32::MAX, f32::MIN);
+        for (m, &n) in self.own.iter().zip(&self.own_normals) {
+            if w.dot(m.q) >= from {
+                sum = sum + n;
+                count += 1;
+                let x = w.perp_dot(m.q);
+                (lo, hi) = (lo.min(x), hi.max(x));
+            }
+        }
+        (
+            sum.normalize_or_zero(),
+            sum.length() / count.max(1) as f32,
+            hi - lo,
+        )
+    }
+
     /// A crease along `w` past the own face's last point at `ext`, between
     /// the own face's points along the rim and those `across`: the line's
     /// offset.
@@ -793,17 +823,11 @@ impl<'a> Lines<'a> {
         if c_across < CREASE_COHERENCE || along(&self.across) < CREASE_LENGTH * chord {
             return None;
         }
-        self.rim.clear();
-        self.rim.extend(
-            self.own
-                .iter()
-                .filter(|m| w.dot(m.q) >= ext - 1.5 * spacing),
-        );
-        let (rim, across) = (&self.rim, &self.across);
-        let (m_rim, c_rim) = mean_normal(rim, inp.normals);
+        let (m_rim, c_rim, along_rim) = self.rim_side(w, ext);
+        let across = &self.across;
         if m_rim.dot(m_across) > self.jump_cos
             || c_rim < CREASE_COHERENCE
-            || along(rim) < CREASE_LENGTH * chord
+            || along_rim < CREASE_LENGTH * chord
         {
             return None;
         }
