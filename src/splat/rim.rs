@@ -790,7 +790,7 @@ impl<'a> Lines<'a> {
         let (mut lo, mut hi) = (f32::MAX, f32::MIN);
         for (m, &n) in self.own.iter().zip(&self.own_normals) {
             if w.dot(m.q) >= from {
-                sum = sum + n;
+                sum += n;
                 count += 1;
                 let x = w.perp_dot(m.q);
                 (lo, hi) = (lo.min(x), hi.max(x));
