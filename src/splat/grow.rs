@@ -137,6 +137,12 @@ struct Grower<'a> {
     /// Neighbours whose normal's cosine to the seed's is at most this lie
     /// on another face (0: facing away; see [`CREASE_DEG`]).
     face_cos: f32,
+    /// [`Grower::clip_lines`]' buffers: the own face's points, the other
+    /// faces', the own face's past the rim, the traversal's stack.
+    own: Vec<Near>,
+    other: Vec<Near>,
+    ring: Vec<Near>,
+    stack: Vec<u32>,
 }
 
 impl Grower<'_> {
@@ -337,7 +343,8 @@ impl Grower<'_> {
     /// inside its disc (normals within [`CREASE_DEG`] of the seed's) are
     /// gathered by a traversal of the neighbourhood graph from the seed
     /// through that face, with the points of other faces it meets on the
-    /// way.
+    /// way and those of its own face it meets past the rim (a border's
+    /// count takes them before it asks the kd-tree for the rest).
     #[allow(clippy::too_many_arguments)]
     fn clip_lines(
         &mut self,
@@ -370,9 +377,22 @@ impl Grower<'_> {
             self.round = 1;
         }
         let round = self.round;
-        let mut own: Vec<Near> = vec![f.near(inp.points, i)];
-        let mut other: Vec<Near> = Vec::new();
-        let mut stack = vec![i as u32];
+        let d_k = inp.knn.kth_distance[i].max(f32::MIN_POSITIVE);
+        let spacing = d_k * (std::f32::consts::PI / inp.knn.k.max(1) as f32).sqrt() / r;
+        let reach = f.reach(spacing);
+        // The buffers are the grower's, kept from seed to seed.
+        let (mut own, mut other, mut ring, mut stack) = (
+            std::mem::take(&mut self.own),
+            std::mem::take(&mut self.other),
+            std::mem::take(&mut self.ring),
+            std::mem::take(&mut self.stack),
+        );
+        own.clear();
+        other.clear();
+        ring.clear();
+        stack.clear();
+        own.push(f.near(inp.points, i));
+        stack.push(i as u32);
         self.stamp[i] = round;
         while let Some(j) = stack.pop() {
             for &q in inp.knn.of(j as usize) {
@@ -387,11 +407,11 @@ impl Grower<'_> {
                 } else if m.q.length_squared() <= 1.0 {
                     own.push(m);
                     stack.push(q);
+                } else if m.past_rim() && reach.surely_holds(inp.points[qi]) {
+                    ring.push(m);
                 }
             }
         }
-        let d_k = inp.knn.kth_distance[i].max(f32::MIN_POSITIVE);
-        let spacing = d_k * (std::f32::consts::PI / inp.knn.k.max(1) as f32).sqrt() / r;
         let surface = rim::Surface {
             points: inp.points,
             normals: inp.normals,
@@ -399,7 +419,9 @@ impl Grower<'_> {
             epsilon: inp.epsilon,
             face_cos: self.face_cos,
         };
-        rim::clip_lines(&surface, &f, &own, &other, spacing)
+        let clipped = rim::clip_lines(&surface, &f, (&own, &other, &ring), spacing);
+        (self.own, self.other, self.ring, self.stack) = (own, other, ring, stack);
+        clipped
     }
 }
 
@@ -732,6 +754,10 @@ impl<'a> Grower<'a> {
             } else {
                 0.0
             },
+            own: Vec::new(),
+            other: Vec::new(),
+            ring: Vec::new(),
+            stack: Vec::new(),
         }
     }
 

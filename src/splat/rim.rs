@@ -161,6 +161,22 @@ pub(super) struct Frame {
 }
 
 impl Frame {
+    /// The ball round the splat's centre holding the face's points round
+    /// its rim that a border is counted from ([`Lines`]), for the point
+    /// spacing `spacing` in radii.
+    pub(super) fn reach(&self, spacing: f32) -> Reach {
+        let reach = 1.0 + (BORDER_SPACINGS + BORDER_HALF_SPACINGS) * spacing;
+        let centre = self.p
+            + self.n * self.hc
+            + self.a * (self.shift.x * self.aspect)
+            + self.b * self.shift.y;
+        let ball = reach * self.r * self.aspect;
+        Reach {
+            centre,
+            ball2: ball * ball,
+        }
+    }
+
     /// Point `q` of `points` in the splat's normalised coordinates.
     pub(super) fn near(&self, points: &[Vec3], q: usize) -> Near {
         let d = points[q] - self.p;
@@ -181,6 +197,36 @@ pub(super) struct Near {
     h: f32,
     j: u32,
 }
+
+impl Near {
+    /// Whether the point lies past the disc's rim and near enough its plane
+    /// ([`BORDER_HEIGHT`]) to count for a border ([`Lines::border`]).
+    pub(super) fn past_rim(&self) -> bool {
+        self.h.abs() <= BORDER_HEIGHT && self.q.length_squared() > 1.0
+    }
+}
+
+/// [`Frame::reach`]: the ball the kd-tree is asked for the face's points
+/// round a splat's rim.
+#[derive(Clone, Copy)]
+pub(super) struct Reach {
+    centre: Vec3,
+    ball2: f32,
+}
+
+impl Reach {
+    /// Whether `x` lies in the ball with room to spare: its squared
+    /// distance from the centre, however rounded, is within the tree's
+    /// bound by [`REACH_MARGIN`], so the tree's query finds it too.
+    pub(super) fn surely_holds(&self, x: Vec3) -> bool {
+        (x - self.centre).length_squared() <= self.ball2 * (1.0 - REACH_MARGIN)
+    }
+}
+
+/// [`Reach::surely_holds`]'s room, a share of the squared radius: the
+/// squared distances the kd-tree and [`Reach::surely_holds`] take of one
+/// point differ by a few roundings of `f32` (about 1e-7 of it each).
+const REACH_MARGIN: f32 = 1e-4;
 
 /// Where along `w` (normalised splat coordinates) the face across a crease
 /// meets the splat's plane: the offset `s = w·q` of the points of `across`
@@ -345,9 +391,11 @@ impl Clipped {
 }
 
 /// The clip lines (none, one or two) of the splat `f`, given the points
-/// of its own face inside its disc (`own`, the seed first) and those of
-/// other faces met while gathering them (`other`), and the point spacing
-/// in radii.
+/// of its own face inside its disc (`own`, the seed first), those of
+/// other faces met while gathering them (`other`), those of its own face
+/// met past the rim ([`Near::past_rim`]) that lie in the ball of
+/// [`Frame::reach`] ([`Reach::surely_holds`]; `ring`), and the point
+/// spacing in radii.
 ///
 /// The points of the splat's own face inside its disc (normals within
 /// [`super::grow::CREASE_DEG`] of the seed's) are gathered by a traversal of the
@@ -385,11 +433,10 @@ impl Clipped {
 pub(super) fn clip_lines(
     s: &Surface,
     f: &Frame,
-    own: &[Near],
-    other: &[Near],
+    (own, other, ring): (&[Near], &[Near], &[Near]),
     spacing: f32,
 ) -> Clipped {
-    let mut lines = Lines::new(s, f, own, other, spacing);
+    let mut lines = Lines::new(s, f, own, other, ring, spacing);
     let step = std::f32::consts::TAU / CLIP_DIRECTIONS as f32;
     let exts = coarse_exts(own);
     let (xs, ys) = coarse_dirs();
@@ -469,16 +516,83 @@ fn coarse_dirs() -> &'static ([f32; CLIP_DIRECTIONS], [f32; CLIP_DIRECTIONS]) {
 /// products, sums and maxima, point by point in the same order, as
 /// [`Lines::line_at`] takes along one direction, so bit for bit its `ext`,
 /// but all directions at once in lanes.
+///
+/// The points near the rim (at least [`OUTER_EXT`] from the centre) are
+/// folded first. Where every extent is then positive, a point nearer the
+/// centre than the least of them (by [`EXT_MARGIN`], against rounding) is
+/// below every direction's extent and is passed over; the rest are folded.
+/// A maximum of positive values does not depend on the order (equal ones
+/// have equal bits); where an extent is not positive (a zero's sign would
+/// follow the order), every point is folded again in order.
 fn coarse_exts(own: &[Near]) -> [f32; CLIP_DIRECTIONS] {
     let (xs, ys) = coarse_dirs();
-    let mut ext = [f32::MIN; CLIP_DIRECTIONS];
-    for m in own {
-        let (qx, qy) = (m.q.x, m.q.y);
+    let fold = |ext: &mut [f32; CLIP_DIRECTIONS], q: Vec2| {
         for ((e, wx), wy) in ext.iter_mut().zip(xs).zip(ys) {
-            *e = e.max((wx * qx) + (wy * qy));
+            *e = e.max((wx * q.x) + (wy * q.y));
         }
+    };
+    let mut ext = [f32::MIN; CLIP_DIRECTIONS];
+    let outer = |m: &&Near| m.q.length_squared() >= OUTER_EXT * OUTER_EXT;
+    for m in own.iter().filter(outer) {
+        fold(&mut ext, m.q);
+    }
+    let least = ext.iter().copied().fold(f32::INFINITY, f32::min);
+    if least > 0.0 && least.is_finite() {
+        let below = least * least * (1.0 - EXT_MARGIN);
+        for m in own {
+            let d2 = m.q.length_squared();
+            if d2 < OUTER_EXT * OUTER_EXT && d2 >= below {
+                fold(&mut ext, m.q);
+            }
+        }
+        return ext;
+    }
+    ext = [f32::MIN; CLIP_DIRECTIONS];
+    for m in own {
+        fold(&mut ext, m.q);
     }
     ext
+}
+
+/// [`coarse_exts`] folds first the points at least this far from the
+/// centre (in radii).
+const OUTER_EXT: f32 = 0.9;
+
+/// [`coarse_exts`] passes over a point whose squared distance from the
+/// centre is below the least extent's square by this share: the products
+/// `w·q` along the directions round to within a few `f32` units of `|q|`
+/// (about 1e-7 each).
+const EXT_MARGIN: f32 = 1e-4;
+
+/// Points' normalised coordinates in lanes (x's and y's apart), for
+/// counts over them that the compiler vectorises.
+#[derive(Default)]
+struct Lanes {
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+}
+
+impl Lanes {
+    fn of(pts: &[Near]) -> Self {
+        pts.iter().map(|m| m.q).collect()
+    }
+}
+
+impl FromIterator<Vec2> for Lanes {
+    fn from_iter<I: IntoIterator<Item = Vec2>>(it: I) -> Self {
+        let (xs, ys) = it.into_iter().map(|q| (q.x, q.y)).unzip();
+        Lanes { xs, ys }
+    }
+}
+
+/// Whether the point at `q` (normalised splat coordinates) lies across a
+/// candidate line along `w` past the own face's last point at `ext`
+/// ([`Lines::line_with`]): from a spacing short of it to two past it, within
+/// the disc's chord. Every test taken (no branch), so that a count over
+/// lanes vectorises.
+fn across(q: Vec2, w: Vec2, ext: f32, spacing: f32) -> bool {
+    let s = w.dot(q);
+    (s >= ext - spacing) & (s <= ext + 2.0 * spacing) & ((q - w * s).length_squared() <= 1.0)
 }
 
 /// The candidate lines of one splat ([`clip_lines`]), direction by
@@ -491,13 +605,24 @@ struct Lines<'a> {
     r: f32,
     own: &'a [Near],
     other: &'a [Near],
-    /// The face's points (from the whole cloud) just past the rim.
-    beyond: Vec<Near>,
+    /// The face's points just past the rim that the neighbourhood graph
+    /// met while gathering `own`, each in the tree's ball ([`Frame::reach`]):
+    /// some of `beyond`, known without asking the tree; in lanes.
+    ring: Lanes,
+    /// The face's points (from the whole cloud) just past the rim, asked of
+    /// the tree the first time a border's count needs more than `ring`; in
+    /// lanes.
+    beyond: Option<Lanes>,
+    /// `other` in lanes.
+    other_lanes: Lanes,
+    frame: Frame,
     /// The point spacing, in radii.
     spacing: f32,
     jump_cos: f32,
-    /// Scratch: the own face's points along the rim, and those across.
-    rim: Vec<Near>,
+    /// The normals of `own`, in its order, taken the first time a crease
+    /// needs them.
+    own_normals: Vec<Vec3>,
+    /// Scratch: the points across a crease.
     across: Vec<Near>,
 }
 
@@ -507,34 +632,43 @@ impl<'a> Lines<'a> {
         f: &Frame,
         own: &'a [Near],
         other: &'a [Near],
+        ring: &'a [Near],
         spacing: f32,
     ) -> Self {
-        // The face's points round the rim, from the whole cloud (the graph
-        // holds only a ring one neighbour deep): where one lies just past
-        // the last inside point along a direction, the face goes on there.
-        let reach = 1.0 + (BORDER_SPACINGS + BORDER_HALF_SPACINGS) * spacing;
-        let centre = f.p + f.n * f.hc + f.a * (f.shift.x * f.aspect) + f.b * f.shift.y;
-        let ball = reach * f.r * f.aspect;
-        let beyond: Vec<Near> = s
-            .tree
-            .within_unsorted::<kiddo::SquaredEuclidean>(&centre.to_array(), ball * ball)
-            .into_iter()
-            .filter(|q| s.normals[q.item as usize].dot(f.n) > s.face_cos)
-            .map(|q| f.near(s.points, q.item as usize))
-            .filter(|m| m.h.abs() <= BORDER_HEIGHT && m.q.length_squared() > 1.0)
-            .collect();
         Lines {
             s,
             p: f.p,
             r: f.r,
             own,
             other,
-            beyond,
+            ring: Lanes::of(ring),
+            beyond: None,
+            other_lanes: Lanes::of(other),
+            frame: *f,
             spacing,
             jump_cos: CREASE_JUMP_DEG.to_radians().cos(),
-            rim: Vec::new(),
+            own_normals: Vec::new(),
             across: Vec::new(),
         }
+    }
+
+    /// The face's points round the rim, from the whole cloud (the graph
+    /// holds only a ring one neighbour deep): where one lies just past the
+    /// last inside point along a direction, the face goes on there. Asked
+    /// of the tree once, when first needed.
+    fn beyond(&mut self) -> &Lanes {
+        let (s, f, spacing) = (self.s, self.frame, self.spacing);
+        self.beyond.get_or_insert_with(|| {
+            let reach = f.reach(spacing);
+            s.tree
+                .within_unsorted::<kiddo::SquaredEuclidean>(&reach.centre.to_array(), reach.ball2)
+                .into_iter()
+                .filter(|q| s.normals[q.item as usize].dot(f.n) > s.face_cos)
+                .map(|q| f.near(s.points, q.item as usize))
+                .filter(Near::past_rim)
+                .map(|m| m.q)
+                .collect()
+        })
     }
 
     /// The line cutting the disc in direction `t` (radians), if the face
@@ -549,14 +683,20 @@ impl<'a> Lines<'a> {
     /// point along it at `ext`.
     fn line_with(&mut self, w: Vec2, ext: f32) -> Option<ClipLine> {
         let spacing = self.spacing;
-        self.across.clear();
-        self.across.extend(self.other.iter().filter(|m| {
-            let s = w.dot(m.q);
-            s >= ext - spacing && s <= ext + 2.0 * spacing && (m.q - w * s).length_squared() <= 1.0
-        }));
-        let d = if self.across.is_empty() {
+        // How many lie across, counted in lanes; gathered only for a
+        // crease.
+        let (xs, ys) = (&self.other_lanes.xs, &self.other_lanes.ys);
+        let count: u32 = xs
+            .iter()
+            .zip(ys)
+            .map(|(&x, &y)| u32::from(across(Vec2::new(x, y), w, ext, spacing)))
+            .sum();
+        let d = if count == 0 {
             self.border(w, ext)?
-        } else if self.across.len() >= CREASE_MIN_POINTS {
+        } else if count as usize >= CREASE_MIN_POINTS {
+            self.across.clear();
+            self.across
+                .extend(self.other.iter().filter(|m| across(m.q, w, ext, spacing)));
             self.crease(w, ext)?
         } else {
             return None;
@@ -567,7 +707,7 @@ impl<'a> Lines<'a> {
     /// A border along `w` past the own face's last point at `ext`: a band
     /// wide enough inside the disc; or, where it crosses the rim, none of
     /// the face's points past the rim in it. The line's offset.
-    fn border(&self, w: Vec2, ext: f32) -> Option<f32> {
+    fn border(&mut self, w: Vec2, ext: f32) -> Option<f32> {
         let spacing = self.spacing;
         let band = ext + BORDER_SPACINGS * spacing;
         let open = band < 1.0 || {
@@ -582,20 +722,36 @@ impl<'a> Lines<'a> {
             // whole is no border whatever the outside's share. The count
             // stops there (inside a surface, after a tenth of the band's
             // points).
+            //
+            // The decision rests on the whole count alone, whatever the
+            // order the points are counted in: the graph's `ring`, part of
+            // `beyond`, is counted first, and where its count reaches that
+            // share (inside a surface, nearly always) the tree is not asked.
             let whole = (band - ext) * 2.0 * half / (spacing * spacing);
-            let mut count = 0usize;
-            for chunk in self.beyond.chunks(BEYOND_CHUNK) {
-                count += chunk
-                    .iter()
-                    .filter(|m| {
-                        let s = w.dot(m.q);
-                        s > ext && s <= band && w.perp_dot(m.q).abs() <= half
-                    })
-                    .count();
-                if count as f32 >= BORDER_FILL * whole {
-                    return None;
+            let reaches = |lanes: &Lanes| {
+                let mut count = 0u32;
+                for (xs, ys) in lanes
+                    .xs
+                    .chunks(BEYOND_CHUNK)
+                    .zip(lanes.ys.chunks(BEYOND_CHUNK))
+                {
+                    count += xs
+                        .iter()
+                        .zip(ys)
+                        .map(|(&x, &y)| {
+                            let q = Vec2::new(x, y);
+                            let s = w.dot(q);
+                            u32::from((s > ext) & (s <= band) & (w.perp_dot(q).abs() <= half))
+                        })
+                        .sum::<u32>();
+                    if count as f32 >= BORDER_FILL * whole {
+                        return Err(());
+                    }
                 }
-            }
+                Ok(count)
+            };
+            reaches(&self.ring).ok()?;
+            let count = reaches(self.beyond()).ok()?;
             // The band's area outside the disc (a grid's share of
             // it), over spacing²: what a face going on puts there.
             const N: usize = 8;
@@ -619,20 +775,39 @@ impl<'a> Lines<'a> {
         (open && ext + gap < 1.0).then_some(ext + gap)
     }
 
+    /// The own face's side of a crease along `w` past its last point at
+    /// `ext`: of its points along the rim (from 1.5 spacings short of it),
+    /// the unit mean normal, the coherence ([`mean_normal`]'s, the same sum
+    /// in the same order) and their extent along the line. One pass over
+    /// `own`, the points not gathered.
+    fn rim_side(&mut self, w: Vec2, ext: f32) -> (Vec3, f32, f32) {
+        if self.own_normals.len() != self.own.len() {
+            let normals = self.s.normals;
+            self.own_normals = self.own.iter().map(|m| normals[m.j as usize]).collect();
+        }
+        let from = ext - 1.5 * self.spacing;
+        let (mut sum, mut count) = (Vec3::ZERO, 0usize);
+        let (mut lo, mut hi) = (f32::MAX, f32::MIN);
+        for (m, &n) in self.own.iter().zip(&self.own_normals) {
+            if w.dot(m.q) >= from {
+                sum += n;
+                count += 1;
+                let x = w.perp_dot(m.q);
+                (lo, hi) = (lo.min(x), hi.max(x));
+            }
+        }
+        (
+            sum.normalize_or_zero(),
+            sum.length() / count.max(1) as f32,
+            hi - lo,
+        )
+    }
+
     /// A crease along `w` past the own face's last point at `ext`, between
     /// the own face's points along the rim and those `across`: the line's
     /// offset.
     fn crease(&mut self, w: Vec2, ext: f32) -> Option<f32> {
         let (inp, spacing) = (self.s, self.spacing);
-        self.rim.clear();
-        self.rim.extend(
-            self.own
-                .iter()
-                .filter(|m| w.dot(m.q) >= ext - 1.5 * spacing),
-        );
-        let (rim, across) = (&self.rim, &self.across);
-        let (m_rim, c_rim) = mean_normal(rim, inp.normals);
-        let (m_across, c_across) = mean_normal(across, inp.normals);
         // Both sides run along the line over most of its chord.
         let chord = 2.0 * (1.0 - ext * ext).max(0.0).sqrt();
         let along = |pts: &[Near]| {
@@ -642,11 +817,17 @@ impl<'a> Lines<'a> {
                 .fold((f32::MAX, f32::MIN), |(lo, hi), x| (lo.min(x), hi.max(x)));
             hi - lo
         };
+        // The side across first (a few points): where it fails, the own
+        // face's side along the rim is not gathered.
+        let (m_across, c_across) = mean_normal(&self.across, inp.normals);
+        if c_across < CREASE_COHERENCE || along(&self.across) < CREASE_LENGTH * chord {
+            return None;
+        }
+        let (m_rim, c_rim, along_rim) = self.rim_side(w, ext);
+        let across = &self.across;
         if m_rim.dot(m_across) > self.jump_cos
             || c_rim < CREASE_COHERENCE
-            || c_across < CREASE_COHERENCE
-            || along(across) < CREASE_LENGTH * chord
-            || along(rim) < CREASE_LENGTH * chord
+            || along_rim < CREASE_LENGTH * chord
         {
             return None;
         }
@@ -735,7 +916,8 @@ mod tests {
     /// [`coarse_exts`] gives, bit for bit, the farthest extent
     /// [`Lines::line_at`] folds along each coarse direction: points spread
     /// over the disc, on its rim, snapped to a coarse grid (ties between
-    /// points, zeros of both signs) and a single point at the centre.
+    /// points, zeros of both signs), on one side of a line through the
+    /// centre (extents of zero and below) and a single point at the centre.
     #[test]
     fn coarse_exts_are_each_directions_fold() {
         let mut rng = crate::rng::SplitMix64::new(54);
@@ -753,6 +935,10 @@ mod tests {
                     }
                     if count == 1 && case % 2 == 0 {
                         q = Vec2::new(-0.0, 0.0);
+                    }
+                    if case % 11 == 5 {
+                        // One-sided: a face ending through the centre.
+                        q.x = q.x.abs();
                     }
                     Near { q, h: 0.0, j }
                 })
