@@ -463,13 +463,23 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
             .sum::<f32>()
     };
     let candidates = triple_planes(&pts[..FACE_TRIPLES.min(pts.len())], &count);
-    // Refitted to what a plane holds, twice: the first refit still leans
-    // toward the three points it passed through. A refit depends on the
-    // points held alone: a candidate holding the same points as one before
-    // it refits to the same plane (and loses the tie), and a refit holding
-    // what its candidate held refits to itself.
-    let refit = |f: FacePlane| {
-        let (centre, vals, vecs) = plane_fit(pts.iter().copied().filter(|d| f.holds(*d, tol)));
+    // The points a plane holds, in order: its set's bits where sets are
+    // kept (the same test of every point), else tested again.
+    let held_by = |f: &FacePlane, set: &HeldSet| -> Held<'_> {
+        if sets {
+            Held::Bits(pts, *set, 0)
+        } else {
+            Held::Test(pts.iter(), f.normal, f.origin, tol)
+        }
+    };
+    // Refitted to what a plane holds (`set`, its held set), twice: the
+    // first refit still leans toward the three points it passed through.
+    // A refit depends on the points held alone: a candidate holding the
+    // same points as one before it refits to the same plane (and loses
+    // the tie), and a refit holding what its candidate held refits to
+    // itself. Its MSAC score is left 0 until it is a result (`scored`).
+    let refit = |f: FacePlane, set: &HeldSet| {
+        let (centre, vals, vecs) = plane_fit(held_by(&f, set));
         let (normal, origin) = (vecs[0].as_vec3(), centre.as_vec3());
         let ok =
             normal.is_finite() && normal.length_squared() > 0.5 && vals[1] > COLLINEAR * vals[2];
@@ -482,17 +492,20 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
             } else {
                 count(normal, origin)
             };
-            let fit = fit(normal, origin);
             (
                 FacePlane {
                     normal,
                     origin,
                     held,
-                    fit,
+                    fit: 0.0,
                 },
                 set,
             )
         })
+    };
+    let scored = |f: FacePlane| FacePlane {
+        fit: fit(f.normal, f.origin),
+        ..f
     };
     let mut seen: Vec<HeldSet> = Vec::with_capacity(FACE_REFITS);
     // The sets whose refit was already a result: a later refit of the same
@@ -508,24 +521,55 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
                 }
                 seen.push(set);
             }
-            let (once, now) = refit(f)?;
+            let (once, now) = refit(f, &set)?;
             if !sets {
-                return refit(once).map(|r| r.0);
+                return refit(once, &now).map(|r| scored(r.0));
             }
             if now == set {
                 done.push(set);
-                Some(once)
+                Some(scored(once))
             } else if done.contains(&now) {
                 None
             } else {
                 done.push(now);
-                refit(once).map(|r| r.0)
+                refit(once, &now).map(|r| scored(r.0))
             }
         })
         .fold(None, |best: Option<FacePlane>, f| match best {
             Some(b) if b.fit >= f.fit => Some(b),
             _ => Some(f),
         })
+}
+
+/// The points a plane holds, in order ([`face_plane`]'s refits): the bits
+/// of its held set (from the first word, bit 0 up), or each point tested
+/// as [`FacePlane::holds`] tests it where no set is kept.
+#[derive(Clone)]
+enum Held<'a> {
+    Bits(&'a [Vec3], HeldSet, usize),
+    Test(std::slice::Iter<'a, Vec3>, Vec3, Vec3, f32),
+}
+
+impl Iterator for Held<'_> {
+    type Item = Vec3;
+
+    fn next(&mut self) -> Option<Vec3> {
+        match self {
+            Held::Bits(pts, set, word) => loop {
+                let w = set.get_mut(*word)?;
+                if *w != 0 {
+                    let bit = w.trailing_zeros() as usize;
+                    *w &= *w - 1;
+                    return pts.get(*word * 64 + bit).copied();
+                }
+                *word += 1;
+            },
+            Held::Test(it, normal, origin, tol) => {
+                let (normal, origin, tol) = (*normal, *origin, *tol);
+                it.find(|d| normal.dot(**d - origin).abs() <= tol).copied()
+            }
+        }
+    }
 }
 
 /// Points by coordinate, so a plane's count runs over lanes (the same
@@ -887,8 +931,12 @@ impl FaceSearch<'_> {
         all.extend(wide.iter().copied());
         let (fitted, own, crease) = self.edge_face(all, wide, near, n0, held)?;
         // Its neighbours on that face, whose flat normals it takes up
-        // (`smooth_flat`).
-        let face = on(&|d| own.holds(d, tol));
+        // (`smooth_flat`, run with the flat-face rules only).
+        let face = if self.flat_faces {
+            on(&|d| own.holds(d, tol))
+        } else {
+            Vec::new()
+        };
         Some(if fitted.dot(n0) < FACE_TURN_DEG.to_radians().cos() {
             (fitted, Kind::Turned, face)
         } else if self.strong && crease {
@@ -945,7 +993,11 @@ impl FaceSearch<'_> {
         if q >= first.fit + rest.len() as f32 {
             return None;
         }
-        let second = face_plane(&rest, tol).filter(|f| f.held >= FACE_MIN_POINTS);
+        // (A plane holds at most all of the rest: too few fix no second.)
+        let second = (rest.len() >= FACE_MIN_POINTS)
+            .then(|| face_plane(&rest, tol))
+            .flatten()
+            .filter(|f| f.held >= FACE_MIN_POINTS);
         let two = first.fit + second.map_or(0.0, |f| f.fit);
         if q >= two {
             return None;
