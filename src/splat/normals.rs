@@ -462,7 +462,7 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
             .map(|d| (1.0 - (normal.dot(*d - origin) / tol).powi(2)).max(0.0))
             .sum::<f32>()
     };
-    let candidates = triple_planes(&pts[..FACE_TRIPLES.min(pts.len())], &count);
+    let candidates = triple_planes(&pts[..FACE_TRIPLES.min(pts.len())], &lanes, tol);
     // The points a plane holds, in order: its set's bits where sets are
     // kept (the same test of every point), else tested again.
     let held_by = |f: &FacePlane, set: &HeldSet| -> Held<'_> {
@@ -605,6 +605,34 @@ impl Lanes {
             .sum::<u32>() as usize
     }
 
+    /// Each point's offset from `origin`, by coordinate (`Lanes::count`'s
+    /// differences).
+    fn offsets_from(&self, origin: Vec3, dx: &mut [f32], dy: &mut [f32], dz: &mut [f32]) {
+        for (d, x) in dx.iter_mut().zip(&self.xs) {
+            *d = x - origin.x;
+        }
+        for (d, y) in dy.iter_mut().zip(&self.ys) {
+            *d = y - origin.y;
+        }
+        for (d, z) in dz.iter_mut().zip(&self.zs) {
+            *d = z - origin.z;
+        }
+    }
+
+    /// [`Lanes::count`] from the points' offsets from the plane's origin
+    /// (`Lanes::offsets_from`): the same products and sums.
+    fn count_offsets(dx: &[f32], dy: &[f32], dz: &[f32], normal: Vec3, tol: f32) -> usize {
+        let (nx, ny, nz) = (normal.x, normal.y, normal.z);
+        dx.iter()
+            .zip(dy)
+            .zip(dz)
+            .map(|((x, y), z)| {
+                let h = (nx * x) + (ny * y) + (nz * z);
+                u32::from(h.abs() <= tol)
+            })
+            .sum::<u32>() as usize
+    }
+
     /// Which of the points (up to [`HELD_BITS`]) lie within `tol` of the
     /// plane through `origin` with unit `normal`, as a bit set: the test of
     /// [`Lanes::count`], point by point, without a branch.
@@ -633,11 +661,19 @@ impl Lanes {
 }
 
 /// The planes through three of `near` (those not nearly in line), each
-/// with the count `count` gives it: the [`FACE_REFITS`] holding the most,
-/// most first, ties in the order of the triples.
-fn triple_planes(near: &[Vec3], count: &dyn Fn(Vec3, Vec3) -> usize) -> Vec<FacePlane> {
+/// with the count [`Lanes::count`] gives it at `tol`: the [`FACE_REFITS`]
+/// holding the most, most first, ties in the order of the triples. The
+/// offsets of `lanes`' points from each triple's first point are taken
+/// once for all the triples through it (the differences `Lanes::count`
+/// takes, bit for bit).
+fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
     let mut best: Vec<FacePlane> = Vec::with_capacity(FACE_REFITS + 1);
+    let len = lanes.xs.len();
+    let mut offsets = vec![0f32; 3 * len];
     for (a, &pa) in near.iter().enumerate() {
+        let (dx, rest) = offsets.split_at_mut(len);
+        let (dy, dz) = rest.split_at_mut(len);
+        lanes.offsets_from(pa, dx, dy, dz);
         for (b, &pb) in near.iter().enumerate().skip(a + 1) {
             for &pc in &near[b + 1..] {
                 let (u, v) = (pb - pa, pc - pa);
@@ -647,21 +683,23 @@ fn triple_planes(near: &[Vec3], count: &dyn Fn(Vec3, Vec3) -> usize) -> Vec<Face
                     continue;
                 }
                 let normal = c.normalize();
-                let held = count(normal, pa);
-                // After every candidate holding as many (a stable order).
-                let at = best.partition_point(|f| f.held >= held);
-                if at < FACE_REFITS {
-                    best.insert(
-                        at,
-                        FacePlane {
-                            normal,
-                            origin: pa,
-                            held,
-                            fit: 0.0,
-                        },
-                    );
-                    best.truncate(FACE_REFITS);
+                let held = Lanes::count_offsets(dx, dy, dz, normal, tol);
+                // After every candidate holding as many (a stable order):
+                // past the last of a full list, not kept.
+                if best.len() == FACE_REFITS && best[FACE_REFITS - 1].held >= held {
+                    continue;
                 }
+                let at = best.partition_point(|f| f.held >= held);
+                best.insert(
+                    at,
+                    FacePlane {
+                        normal,
+                        origin: pa,
+                        held,
+                        fit: 0.0,
+                    },
+                );
+                best.truncate(FACE_REFITS);
             }
         }
     }
