@@ -252,18 +252,28 @@ pub fn height_fit(
 
 /// The normal equations `(AᵀA, Aᵀh)` of the height field's least squares
 /// over `rows` (each the terms `1, x, y, x², xy, y²` and the height `h`).
-/// Only the upper triangle of `AᵀA` is summed; the lower is its mirror,
-/// bit for bit what summing it would give (each product `a·b` equals
-/// `b·a`, and each entry sums its products in the order of `rows`).
+/// Each entry sums its products in the order of `rows`, from zero; the
+/// rows of `AᵀA` are summed two at a time from their diagonal on (few
+/// sums live at once, in adjacent pairs), and the lower triangle is the
+/// mirror of the upper, bit for bit what summing it would give (each
+/// product `a·b` equals `b·a`).
 #[allow(clippy::needless_range_loop)] // index form mirrors the matrix
 pub(crate) fn normal_equations(rows: &[([f64; 6], f64)]) -> ([[f64; 6]; 6], [f64; 6]) {
     let mut ata = [[0f64; 6]; 6];
     let mut atb = [0f64; 6];
+    for r in [0, 2, 4] {
+        let (mut upper, mut lower) = ([0f64; 6], [0f64; 6]);
+        for (row, _) in rows {
+            for c in r..6 {
+                upper[c] += row[r] * row[c];
+                lower[c] += row[r + 1] * row[c];
+            }
+        }
+        ata[r] = upper;
+        ata[r + 1] = lower;
+    }
     for (row, h) in rows {
         for r in 0..6 {
-            for c in r..6 {
-                ata[r][c] += row[r] * row[c];
-            }
             atb[r] += row[r] * h;
         }
     }
