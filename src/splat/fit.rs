@@ -252,16 +252,34 @@ pub fn height_fit(
 
 /// The normal equations `(AᵀA, Aᵀh)` of the height field's least squares
 /// over `rows` (each the terms `1, x, y, x², xy, y²` and the height `h`).
+/// Each entry sums its products in the order of `rows`, from zero; the
+/// rows of `AᵀA` are summed two at a time from their diagonal on (few
+/// sums live at once, in adjacent pairs), and the lower triangle is the
+/// mirror of the upper, bit for bit what summing it would give (each
+/// product `a·b` equals `b·a`).
 #[allow(clippy::needless_range_loop)] // index form mirrors the matrix
 pub(crate) fn normal_equations(rows: &[([f64; 6], f64)]) -> ([[f64; 6]; 6], [f64; 6]) {
     let mut ata = [[0f64; 6]; 6];
     let mut atb = [0f64; 6];
+    for r in [0, 2, 4] {
+        let (mut upper, mut lower) = ([0f64; 6], [0f64; 6]);
+        for (row, _) in rows {
+            for c in r..6 {
+                upper[c] += row[r] * row[c];
+                lower[c] += row[r + 1] * row[c];
+            }
+        }
+        ata[r] = upper;
+        ata[r + 1] = lower;
+    }
     for (row, h) in rows {
         for r in 0..6 {
-            for c in 0..6 {
-                ata[r][c] += row[r] * row[c];
-            }
             atb[r] += row[r] * h;
+        }
+    }
+    for r in 1..6 {
+        for c in 0..r {
+            ata[r][c] = ata[c][r];
         }
     }
     (ata, atb)
@@ -434,5 +452,47 @@ mod tests {
             failed |= a > bound || low > 2e-16 || all > 1e-9;
         }
         assert!(!failed, "see the errors above");
+    }
+
+    /// The normal equations summed whole, every entry (as before the
+    /// mirror): the reference `normal_equations` must equal bit for bit.
+    fn normal_equations_whole(rows: &[HeightRow]) -> ([[f64; 6]; 6], [f64; 6]) {
+        let mut ata = [[0f64; 6]; 6];
+        let mut atb = [0f64; 6];
+        for (row, h) in rows {
+            for r in 0..6 {
+                for c in 0..6 {
+                    ata[r][c] += row[r] * row[c];
+                }
+                atb[r] += row[r] * h;
+            }
+        }
+        (ata, atb)
+    }
+
+    #[test]
+    fn mirrored_normal_equations_are_the_whole_sums() {
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+        let bits = |m: &([[f64; 6]; 6], [f64; 6])| {
+            (m.0.map(|r| r.map(f64::to_bits)), m.1.map(f64::to_bits))
+        };
+        for len in 0..80 {
+            // Heights and terms of mixed signs and scales, some exact
+            // zeros of either sign (the first term is the rows' 1).
+            let rows: Vec<HeightRow> = (0..len)
+                .map(|_| {
+                    let mut t = || match (rng.unit() * 8.0) as u32 {
+                        0 => 0.0,
+                        1 => -0.0,
+                        _ => (rng.unit() - 0.5) * 10f64.powi((rng.unit() * 12.0) as i32 - 6),
+                    };
+                    let (x, y) = (t(), t());
+                    ([1.0, x, y, x * x, x * y, y * y], t())
+                })
+                .collect();
+            let got = normal_equations(&rows);
+            let want = normal_equations_whole(&rows);
+            assert_eq!(bits(&got), bits(&want), "{len} rows");
+        }
     }
 }

@@ -462,14 +462,24 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
             .map(|d| (1.0 - (normal.dot(*d - origin) / tol).powi(2)).max(0.0))
             .sum::<f32>()
     };
-    let candidates = triple_planes(&pts[..FACE_TRIPLES.min(pts.len())], &count);
-    // Refitted to what a plane holds, twice: the first refit still leans
-    // toward the three points it passed through. A refit depends on the
-    // points held alone: a candidate holding the same points as one before
-    // it refits to the same plane (and loses the tie), and a refit holding
-    // what its candidate held refits to itself.
-    let refit = |f: FacePlane| {
-        let (centre, vals, vecs) = plane_fit(pts.iter().copied().filter(|d| f.holds(*d, tol)));
+    let candidates = triple_planes(&pts[..FACE_TRIPLES.min(pts.len())], &lanes, tol);
+    // The points a plane holds, in order: its set's bits where sets are
+    // kept (the same test of every point), else tested again.
+    let held_by = |f: &FacePlane, set: &HeldSet| -> Held<'_> {
+        if sets {
+            Held::Bits(pts, *set, 0)
+        } else {
+            Held::Test(pts.iter(), f.normal, f.origin, tol)
+        }
+    };
+    // Refitted to what a plane holds (`set`, its held set), twice: the
+    // first refit still leans toward the three points it passed through.
+    // A refit depends on the points held alone: a candidate holding the
+    // same points as one before it refits to the same plane (and loses
+    // the tie), and a refit holding what its candidate held refits to
+    // itself. Its MSAC score is left 0 until it is a result (`scored`).
+    let refit = |f: FacePlane, set: &HeldSet| {
+        let (centre, vals, vecs) = plane_fit(held_by(&f, set));
         let (normal, origin) = (vecs[0].as_vec3(), centre.as_vec3());
         let ok =
             normal.is_finite() && normal.length_squared() > 0.5 && vals[1] > COLLINEAR * vals[2];
@@ -482,17 +492,20 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
             } else {
                 count(normal, origin)
             };
-            let fit = fit(normal, origin);
             (
                 FacePlane {
                     normal,
                     origin,
                     held,
-                    fit,
+                    fit: 0.0,
                 },
                 set,
             )
         })
+    };
+    let scored = |f: FacePlane| FacePlane {
+        fit: fit(f.normal, f.origin),
+        ..f
     };
     let mut seen: Vec<HeldSet> = Vec::with_capacity(FACE_REFITS);
     // The sets whose refit was already a result: a later refit of the same
@@ -508,24 +521,55 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
                 }
                 seen.push(set);
             }
-            let (once, now) = refit(f)?;
+            let (once, now) = refit(f, &set)?;
             if !sets {
-                return refit(once).map(|r| r.0);
+                return refit(once, &now).map(|r| scored(r.0));
             }
             if now == set {
                 done.push(set);
-                Some(once)
+                Some(scored(once))
             } else if done.contains(&now) {
                 None
             } else {
                 done.push(now);
-                refit(once).map(|r| r.0)
+                refit(once, &now).map(|r| scored(r.0))
             }
         })
         .fold(None, |best: Option<FacePlane>, f| match best {
             Some(b) if b.fit >= f.fit => Some(b),
             _ => Some(f),
         })
+}
+
+/// The points a plane holds, in order ([`face_plane`]'s refits): the bits
+/// of its held set (from the first word, bit 0 up), or each point tested
+/// as [`FacePlane::holds`] tests it where no set is kept.
+#[derive(Clone)]
+enum Held<'a> {
+    Bits(&'a [Vec3], HeldSet, usize),
+    Test(std::slice::Iter<'a, Vec3>, Vec3, Vec3, f32),
+}
+
+impl Iterator for Held<'_> {
+    type Item = Vec3;
+
+    fn next(&mut self) -> Option<Vec3> {
+        match self {
+            Held::Bits(pts, set, word) => loop {
+                let w = set.get_mut(*word)?;
+                if *w != 0 {
+                    let bit = w.trailing_zeros() as usize;
+                    *w &= *w - 1;
+                    return pts.get(*word * 64 + bit).copied();
+                }
+                *word += 1;
+            },
+            Held::Test(it, normal, origin, tol) => {
+                let (normal, origin, tol) = (*normal, *origin, *tol);
+                it.find(|d| normal.dot(**d - origin).abs() <= tol).copied()
+            }
+        }
+    }
 }
 
 /// Points by coordinate, so a plane's count runs over lanes (the same
@@ -561,6 +605,34 @@ impl Lanes {
             .sum::<u32>() as usize
     }
 
+    /// Each point's offset from `origin`, by coordinate (`Lanes::count`'s
+    /// differences).
+    fn offsets_from(&self, origin: Vec3, dx: &mut [f32], dy: &mut [f32], dz: &mut [f32]) {
+        for (d, x) in dx.iter_mut().zip(&self.xs) {
+            *d = x - origin.x;
+        }
+        for (d, y) in dy.iter_mut().zip(&self.ys) {
+            *d = y - origin.y;
+        }
+        for (d, z) in dz.iter_mut().zip(&self.zs) {
+            *d = z - origin.z;
+        }
+    }
+
+    /// [`Lanes::count`] from the points' offsets from the plane's origin
+    /// (`Lanes::offsets_from`): the same products and sums.
+    fn count_offsets(dx: &[f32], dy: &[f32], dz: &[f32], normal: Vec3, tol: f32) -> usize {
+        let (nx, ny, nz) = (normal.x, normal.y, normal.z);
+        dx.iter()
+            .zip(dy)
+            .zip(dz)
+            .map(|((x, y), z)| {
+                let h = (nx * x) + (ny * y) + (nz * z);
+                u32::from(h.abs() <= tol)
+            })
+            .sum::<u32>() as usize
+    }
+
     /// Which of the points (up to [`HELD_BITS`]) lie within `tol` of the
     /// plane through `origin` with unit `normal`, as a bit set: the test of
     /// [`Lanes::count`], point by point, without a branch.
@@ -589,11 +661,19 @@ impl Lanes {
 }
 
 /// The planes through three of `near` (those not nearly in line), each
-/// with the count `count` gives it: the [`FACE_REFITS`] holding the most,
-/// most first, ties in the order of the triples.
-fn triple_planes(near: &[Vec3], count: &dyn Fn(Vec3, Vec3) -> usize) -> Vec<FacePlane> {
+/// with the count [`Lanes::count`] gives it at `tol`: the [`FACE_REFITS`]
+/// holding the most, most first, ties in the order of the triples. The
+/// offsets of `lanes`' points from each triple's first point are taken
+/// once for all the triples through it (the differences `Lanes::count`
+/// takes, bit for bit).
+fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
     let mut best: Vec<FacePlane> = Vec::with_capacity(FACE_REFITS + 1);
+    let len = lanes.xs.len();
+    let mut offsets = vec![0f32; 3 * len];
     for (a, &pa) in near.iter().enumerate() {
+        let (dx, rest) = offsets.split_at_mut(len);
+        let (dy, dz) = rest.split_at_mut(len);
+        lanes.offsets_from(pa, dx, dy, dz);
         for (b, &pb) in near.iter().enumerate().skip(a + 1) {
             for &pc in &near[b + 1..] {
                 let (u, v) = (pb - pa, pc - pa);
@@ -603,21 +683,23 @@ fn triple_planes(near: &[Vec3], count: &dyn Fn(Vec3, Vec3) -> usize) -> Vec<Face
                     continue;
                 }
                 let normal = c.normalize();
-                let held = count(normal, pa);
-                // After every candidate holding as many (a stable order).
-                let at = best.partition_point(|f| f.held >= held);
-                if at < FACE_REFITS {
-                    best.insert(
-                        at,
-                        FacePlane {
-                            normal,
-                            origin: pa,
-                            held,
-                            fit: 0.0,
-                        },
-                    );
-                    best.truncate(FACE_REFITS);
+                let held = Lanes::count_offsets(dx, dy, dz, normal, tol);
+                // After every candidate holding as many (a stable order):
+                // past the last of a full list, not kept.
+                if best.len() == FACE_REFITS && best[FACE_REFITS - 1].held >= held {
+                    continue;
                 }
+                let at = best.partition_point(|f| f.held >= held);
+                best.insert(
+                    at,
+                    FacePlane {
+                        normal,
+                        origin: pa,
+                        held,
+                        fit: 0.0,
+                    },
+                );
+                best.truncate(FACE_REFITS);
             }
         }
     }
@@ -887,8 +969,12 @@ impl FaceSearch<'_> {
         all.extend(wide.iter().copied());
         let (fitted, own, crease) = self.edge_face(all, wide, near, n0, held)?;
         // Its neighbours on that face, whose flat normals it takes up
-        // (`smooth_flat`).
-        let face = on(&|d| own.holds(d, tol));
+        // (`smooth_flat`, run with the flat-face rules only).
+        let face = if self.flat_faces {
+            on(&|d| own.holds(d, tol))
+        } else {
+            Vec::new()
+        };
         Some(if fitted.dot(n0) < FACE_TURN_DEG.to_radians().cos() {
             (fitted, Kind::Turned, face)
         } else if self.strong && crease {
@@ -945,7 +1031,11 @@ impl FaceSearch<'_> {
         if q >= first.fit + rest.len() as f32 {
             return None;
         }
-        let second = face_plane(&rest, tol).filter(|f| f.held >= FACE_MIN_POINTS);
+        // (A plane holds at most all of the rest: too few fix no second.)
+        let second = (rest.len() >= FACE_MIN_POINTS)
+            .then(|| face_plane(&rest, tol))
+            .flatten()
+            .filter(|f| f.held >= FACE_MIN_POINTS);
         let two = first.fit + second.map_or(0.0, |f| f.fit);
         if q >= two {
             return None;
