@@ -469,7 +469,7 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
         if sets {
             Held::Bits(pts, *set, 0)
         } else {
-            Held::Test(pts.iter(), f.normal, f.origin, tol)
+            Held::Test(pts.iter(), *f, tol)
         }
     };
     // Refitted to what a plane holds (`set`, its held set), twice: the
@@ -547,7 +547,7 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
 #[derive(Clone)]
 enum Held<'a> {
     Bits(&'a [Vec3], HeldSet, usize),
-    Test(std::slice::Iter<'a, Vec3>, Vec3, Vec3, f32),
+    Test(std::slice::Iter<'a, Vec3>, FacePlane, f32),
 }
 
 impl Iterator for Held<'_> {
@@ -564,9 +564,9 @@ impl Iterator for Held<'_> {
                 }
                 *word += 1;
             },
-            Held::Test(it, normal, origin, tol) => {
-                let (normal, origin, tol) = (*normal, *origin, *tol);
-                it.find(|d| normal.dot(**d - origin).abs() <= tol).copied()
+            Held::Test(it, plane, tol) => {
+                let (plane, tol) = (*plane, *tol);
+                it.find(|d| plane.holds(**d, tol)).copied()
             }
         }
     }
