@@ -1117,7 +1117,7 @@ struct Work {
 
 /// Leaves out the statistical outliers (with their colours and scanners)
 /// and counts them; the kd-tree is rebuilt without them, and the graph
-/// repaired (`Knn::without`: only the points that had one as a neighbour
+/// repaired (`Knn::retain`: only the points that had one as a neighbour
 /// are queried again).
 fn drop_outliers(w: &mut Work, report: &mut SplatReport) {
     let n = w.points.len();
@@ -1143,7 +1143,7 @@ fn drop_outliers(w: &mut Work, report: &mut SplatReport) {
         report.used_points = n - count;
         w.tree = build_tree(&w.points);
         let keep: Vec<bool> = out.iter().map(|&o| !o).collect();
-        w.knn = w.knn.without(&keep, &w.tree, &w.points);
+        w.knn.retain(&keep, &w.tree, &w.points);
         report.queries.graph += w.knn.queries;
     }
 }

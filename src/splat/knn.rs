@@ -34,7 +34,7 @@ pub struct Knn {
     pub kth_distance: Vec<f32>,
     /// The tree queries that made it: one a point when built, those of
     /// the points whose neighbours were dropped when repaired
-    /// ([`Knn::without`]).
+    /// ([`Knn::retain`]).
     pub queries: usize,
     /// Each point's wide neighbourhood, from the same queries
     /// ([`Knn::build_wide`]), while the stages that read it run; `None`
@@ -296,17 +296,20 @@ impl Knn {
         })
     }
 
-    /// The graph of the points `keep` holds, from this graph of all of
-    /// them (`points` and `tree` are the kept ones', in the same order):
-    /// a point none of whose neighbours was dropped keeps its row
-    /// (renumbered), and only the others are queried again. The same graph
-    /// as [`Knn::build`] over the kept points, bit for bit: a kept row's
-    /// `k` nearest are nearest among fewer points too, and renumbering
-    /// keeps the order of indices, so ties break the same way. With wide
-    /// rows ([`Knn::build_wide`]), the same holds of them: a point whose
-    /// wide row held a dropped one is queried again, for both rows.
-    #[must_use]
-    pub fn without(&self, keep: &[bool], tree: &PointTree, points: &[Vec3]) -> Knn {
+    /// This graph cut down to the points `keep` holds (`points` and
+    /// `tree` are the kept ones', in the same order), in place: a point
+    /// none of whose neighbours was dropped keeps its row (renumbered), and
+    /// only the others are queried again. The same graph as [`Knn::build`]
+    /// over the kept points, bit for bit: a kept row's `k` nearest are
+    /// nearest among fewer points too, and renumbering keeps the order of
+    /// indices, so ties break the same way. With wide rows
+    /// ([`Knn::build_wide`]), the same holds of them: a point whose wide
+    /// row held a dropped one is queried again, for both rows.
+    ///
+    /// In place, because a second graph beside the first doubled the
+    /// peak memory of a cloud with outliers: the wide rows alone take
+    /// 148 B a point (a survey's tile peaked at 480 B a point with both).
+    pub fn retain(&mut self, keep: &[bool], tree: &PointTree, points: &[Vec3]) {
         let k = self.k.clamp(1, points.len().saturating_sub(1).max(1));
         let mut new_of = vec![u32::MAX; keep.len()];
         let mut kept_old = Vec::with_capacity(points.len());
@@ -314,48 +317,116 @@ impl Knn {
             new_of[i] = kept_old.len() as u32;
             kept_old.push(i);
         }
-        let wide = self.wide.as_ref().filter(|w| w.slot.is_none());
-        let m = wide.map_or(0, |w| w.m.min(points.len()));
-        if k != self.k || kept_old.len() != points.len() || wide.is_some_and(|w| w.m != m) {
+        let whole = self.wide.as_ref().filter(|w| w.slot.is_none());
+        let m = whole.map_or(0, |w| w.m.min(points.len()));
+        if k != self.k || kept_old.len() != points.len() || whole.is_some_and(|w| w.m != m) {
             // Fewer points than a neighbourhood (or a caller's mismatch):
-            // built afresh.
-            return match wide {
-                Some(_) => Knn::build_wide(tree, points, k, m),
-                None => Knn::build(tree, points, k),
-            };
-        }
-        if let Some(w) = wide {
-            // A kept point none of whose wide row was dropped keeps both
-            // rows (its `k` nearest are their prefix).
-            return Knn::rows_wide(points.len(), k, m, |nearest, i, row, tail| {
-                let old = kept_old[i];
-                let was = w.tail(old).unwrap_or(&[]);
-                if self.of(old).iter().chain(was).all(|&o| keep[o as usize]) {
-                    for (r, &o) in row.iter_mut().zip(self.of(old)) {
-                        *r = new_of[o as usize];
-                    }
-                    for (r, &o) in tail.iter_mut().zip(was) {
-                        *r = new_of[o as usize];
-                    }
-                    (self.kth_distance[old], w.last[old], true)
-                } else {
-                    let found = nearest.query(tree, points, points[i], m);
-                    wide_row(found, i, row, tail)
-                }
-            });
-        }
-        Knn::rows(points.len(), k, |nearest, i, row| {
-            let old = kept_old[i];
-            let was = self.of(old);
-            if was.iter().all(|&o| keep[o as usize]) {
-                for (r, &o) in row.iter_mut().zip(was) {
-                    *r = new_of[o as usize];
-                }
-                self.kth_distance[old]
+            // built afresh, the old graph dropped first.
+            let wide = whole.is_some();
+            self.idx = Vec::new();
+            self.wide = None;
+            *self = if wide {
+                Knn::build_wide(tree, points, k, m)
             } else {
-                nearest_row(nearest, tree, points, i, row)
+                Knn::build(tree, points, k)
+            };
+            return;
+        }
+        if whole.is_none() {
+            self.wide = None;
+        }
+        // Which kept points had a dropped neighbour (in either row).
+        let again: Vec<bool> = kept_old
+            .par_iter()
+            .map(|&old| {
+                let tail = self.wide.as_ref().and_then(|w| w.tail(old)).unwrap_or(&[]);
+                !self.of(old).iter().chain(tail).all(|&o| keep[o as usize])
+            })
+            .collect();
+        self.compact(&kept_old, &new_of, &again);
+        self.requery(&again, tree, points, m);
+    }
+
+    /// [`Knn::retain`]'s move of the kept rows down to their new places,
+    /// renumbered, in order (a new index is at most its old one, so a row
+    /// is read before any write reaches it); rows marked `again` are left
+    /// for [`Knn::requery`].
+    fn compact(&mut self, kept_old: &[usize], new_of: &[u32], again: &[bool]) {
+        let (k, n) = (self.k, kept_old.len());
+        let renumber = |v: &mut [u32], i: usize, old: usize, w: usize| {
+            for j in 0..w {
+                v[i * w + j] = new_of[v[old * w + j] as usize];
             }
-        })
+        };
+        for (i, &old) in kept_old.iter().enumerate() {
+            if again[i] {
+                continue;
+            }
+            renumber(&mut self.idx, i, old, k);
+            self.kth_distance[i] = self.kth_distance[old];
+            if let Some(w) = self.wide.as_mut() {
+                renumber(&mut w.tail, i, old, w.t);
+                w.last[i] = w.last[old];
+            }
+        }
+        self.idx.truncate(n * k);
+        self.kth_distance.truncate(n);
+        if let Some(w) = self.wide.as_mut() {
+            w.tail.truncate(n * w.t);
+            w.last.truncate(n);
+        }
+    }
+
+    /// [`Knn::retain`]'s queries: the rows marked `again` (and their wide
+    /// rows of `m`, where kept), in chunks of [`CHUNK`] in parallel,
+    /// counted in [`Knn::queries`]; the wide rows are dropped where a point
+    /// is not the first of its own.
+    fn requery(&mut self, again: &[bool], tree: &PointTree, points: &[Vec3], m: usize) {
+        let k = self.k;
+        let tally = Tally::default();
+        let odd = std::sync::atomic::AtomicBool::new(false);
+        let (t, mut tails, mut lasts) = match self.wide.as_mut() {
+            Some(w) => (w.t, Some(&mut w.tail), Some(&mut w.last)),
+            None => (0, None, None),
+        };
+        let tail_chunks = tails.as_mut().map(|v| v.par_chunks_mut(t * CHUNK));
+        let last_chunks = lasts.as_mut().map(|v| v.par_chunks_mut(CHUNK));
+        let rows = self
+            .idx
+            .par_chunks_mut(k * CHUNK)
+            .zip(self.kth_distance.par_chunks_mut(CHUNK))
+            .enumerate();
+        let each = |c: usize, rows: &mut [u32], kths: &mut [f32], mut wide: Option<(&mut [u32], &mut [f32])>| {
+            let mut nearest = Nearest::counted(&tally);
+            for (j, (r, kth)) in rows.chunks_mut(k).zip(kths.iter_mut()).enumerate() {
+                let i = c * CHUNK + j;
+                if !again[i] {
+                    continue;
+                }
+                match wide.as_mut() {
+                    Some((tail, last)) => {
+                        let found = nearest.query(tree, points, points[i], m);
+                        let first;
+                        (*kth, last[j], first) = wide_row(found, i, r, &mut tail[j * t..(j + 1) * t]);
+                        if !first {
+                            odd.store(true, std::sync::atomic::Ordering::Relaxed);
+                        }
+                    }
+                    None => *kth = nearest_row(&mut nearest, tree, points, i, r),
+                }
+            }
+        };
+        match (tail_chunks, last_chunks) {
+            (Some(tc), Some(lc)) => rows
+                .zip(tc)
+                .zip(lc)
+                .for_each(|(((c, (r, kth)), tail), last)| each(c, r, kth, Some((tail, last)))),
+            _ => rows.for_each(|(c, (r, kth))| each(c, r, kth, None)),
+        }
+        self.queries = tally.get();
+        if odd.into_inner() {
+            self.wide = None;
+        }
     }
 }
 
@@ -964,7 +1035,7 @@ mod tests {
             .collect()
     }
 
-    /// A graph repaired around dropped points ([`Knn::without`]) is the
+    /// A graph repaired around dropped points ([`Knn::retain`]) is the
     /// graph built over the points left, bit for bit, on a grid (where
     /// most distances tie) and a scattered cloud, with single points, a
     /// block and every third point dropped; and only the points that had a
@@ -986,7 +1057,8 @@ mod tests {
                 let left: Vec<Vec3> = (0..n).filter(|&i| keep[i]).map(|i| pts[i]).collect();
                 let tree = build_tree(&left);
                 let want = Knn::build(&tree, &left, 12);
-                let got = all.without(&keep, &tree, &left);
+                let mut got = all.clone();
+                got.retain(&keep, &tree, &left);
                 assert_eq!(got.idx, want.idx);
                 assert_eq!(got.kth_distance, want.kth_distance);
                 let touched = (0..n)
@@ -1039,7 +1111,8 @@ mod tests {
                 let left: Vec<Vec3> = (0..n).filter(|&i| keep[i]).map(|i| pts[i]).collect();
                 let tree = build_tree(&left);
                 let want = Knn::build_wide(&tree, &left, 12, 49);
-                let got = wide.without(&keep, &tree, &left);
+                let mut got = wide.clone();
+                got.retain(&keep, &tree, &left);
                 assert_eq!(got.idx, want.idx);
                 assert_eq!(bits(&got), bits(&want));
                 for i in 0..left.len() {
