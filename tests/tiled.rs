@@ -547,3 +547,102 @@ fn tiled_runs_carry_clip_lines() {
         "clipped: {ct} of {nt} tiled, {cw} of {nw} whole"
     );
 }
+
+/// `splat ARGS --report R` through the command line in a process of its
+/// own; the report's (points, peak RSS in bytes, tile points).
+fn splat_report(dir: &Path, name: &str, args: &[&str]) -> (f64, f64, f64) {
+    let report = dir.join(format!("{name}.json"));
+    let o = bin()
+        .arg("splat")
+        .args(args)
+        .arg("-o")
+        .arg(dir.join(format!("{name}.ply")))
+        .arg("--report")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let f = |k: &str| r[k].as_f64().unwrap_or_else(|| panic!("no {k} in {r}"));
+    (f("points"), f("peak_rss"), f("tile_points"))
+}
+
+/// A tile takes about the bytes a point it is planned at
+/// (`BYTES_PER_POINT`, `BYTES_PER_POINT_GIVEN_NORMALS`): the peak's growth
+/// a point from one tile to one twice as large, each run in a process of
+/// its own, on a survey with outliers (normals estimated) and on bunny
+/// samples with normals; and a cloud with a normal on every point is
+/// planned in larger tiles under the same budget.
+#[test]
+fn a_tile_takes_the_bytes_a_point_it_is_planned_at() {
+    use splatray::tiled::{BYTES_PER_POINT, BYTES_PER_POINT_GIVEN_NORMALS};
+    let dir = scratch("tiled-bytes");
+    let one_tile = ["--tile-points", "100000000"];
+    let mut survey = Vec::new();
+    for size in ["173", "245"] {
+        let out = dir.join(format!("survey-{size}"));
+        let o = bin()
+            .arg("terrain")
+            .arg("-o")
+            .arg(&out)
+            .args(["--size", size])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let tiles = out.join("tiles");
+        let args = [tiles.to_str().unwrap(), one_tile[0], one_tile[1]];
+        survey.push(splat_report(&dir, &format!("survey-{size}"), &args));
+    }
+    let slope = |a: (f64, f64, f64), b: (f64, f64, f64)| (b.1 - a.1) / (b.0 - a.0);
+    // 297k and 596k points: measured 341 B a point (299 from 1M to 2M
+    // points, which BYTES_PER_POINT covers); 539 while outliers were
+    // dropped from a copy of the graph beside the graph.
+    let s = slope(survey[0], survey[1]);
+    assert!(s < 400.0, "the survey's tile took {s:.0} B a point");
+    let mesh = data("bunny-mesh.ply");
+    let mut bunny = Vec::new();
+    for n in ["300000", "600000"] {
+        let p = dir.join(format!("bunny-{n}.ply"));
+        let o = bin()
+            .arg("sample")
+            .arg(&mesh)
+            .args(["-n", n, "-o"])
+            .arg(&p)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let args = [p.to_str().unwrap(), one_tile[0], one_tile[1]];
+        bunny.push(splat_report(&dir, &format!("bunny-{n}"), &args));
+    }
+    // Measured 177 B a point (188 from 1M to 2M points).
+    let s = slope(bunny[0], bunny[1]);
+    assert!(
+        s <= BYTES_PER_POINT_GIVEN_NORMALS as f64,
+        "the bunny's tile took {s:.0} B a point with its normals given"
+    );
+    // The same budget, planned: tiles as many points larger as the
+    // figures say (a budget of 0.4 GB: about 411k points a tile without
+    // normals, 598k with).
+    let budget = ["--max-memory", "0.4", "--plan-only"];
+    let tiles = dir.join("survey-245").join("tiles");
+    let without = splat_report(
+        &dir,
+        "plan-survey",
+        &[&[tiles.to_str().unwrap()][..], &budget].concat(),
+    );
+    let bunny_path = dir.join("bunny-600000.ply");
+    let with = splat_report(
+        &dir,
+        "plan-bunny",
+        &[&[bunny_path.to_str().unwrap()][..], &budget].concat(),
+    );
+    let want = BYTES_PER_POINT as f64 / BYTES_PER_POINT_GIVEN_NORMALS as f64;
+    let got = with.2 / without.2;
+    assert!(
+        (got - want).abs() < 1e-4,
+        "tiles {} and {}: {got} against {want}",
+        with.2,
+        without.2
+    );
+}

@@ -70,12 +70,55 @@ pub const HALO_EPS: f64 = 12.0;
 /// What the neighbourhoods of a splat's points add to its reach, in `ϵ`.
 pub const NORMALS_REACH_EPS: f64 = 2.0;
 
-/// Bytes a point takes while its tile is generated, for planning: measured
-/// 292 B a point for a whole 10M-point cloud (bunny samples, positions
-/// only) read and generated in memory (`splat --holdout 0`, peak RSS
-/// 2.92 GB; 211 B before the graph kept each point's wide neighbourhood,
-/// `splat::knn::Wide`, and 161 B before that), rounded up.
+/// Bytes a point takes while its tile is generated, for planning, where
+/// normals are estimated: measured 292 B a point for a whole 10M-point
+/// cloud (bunny samples, positions only) read and generated in memory
+/// (`splat --holdout 0`, peak RSS 2.92 GB; 211 B before the graph kept
+/// each point's wide neighbourhood, `splat::knn::Wide`, and 161 B before
+/// that); in one tile, the peak's growth from 1M to 2M points is 299 B a
+/// point on a survey with outliers, 297 on a noisy bunny sample and 302 on
+/// a clean one (475 on the survey while the graph was repaired beside a
+/// copy of itself, `splat::knn::Knn::retain`); rounded up.
 pub const BYTES_PER_POINT: u64 = 320;
+
+/// [`BYTES_PER_POINT`] for a cloud whose every point comes with a usable
+/// normal: none is estimated, so no wide neighbourhoods are held. The
+/// peak's growth from 1M to 2M bunny samples with normals in one tile is
+/// 188 B a point (a 100M-point run's largest tile peaked at 162 B a point
+/// of it); rounded up.
+pub const BYTES_PER_POINT_GIVEN_NORMALS: u64 = 220;
+
+/// The bytes a point of a tile is planned at: [`BYTES_PER_POINT_GIVEN_NORMALS`]
+/// when the survey found a usable normal on every point, else
+/// [`BYTES_PER_POINT`].
+#[must_use]
+pub fn tile_bytes_per_point(every_normal: bool) -> u64 {
+    if every_normal {
+        BYTES_PER_POINT_GIVEN_NORMALS
+    } else {
+        BYTES_PER_POINT
+    }
+}
+
+/// How many points a tile may hold: the memory budget's (whose bytes a
+/// point depend on whether normals are given, [`tile_bytes_per_point`])
+/// and at most `--tile-points`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct TileSize {
+    /// Bytes for tiles: the budget less [`FIXED_BYTES`].
+    bytes: u64,
+    /// `--tile-points`.
+    forced: Option<u64>,
+}
+
+impl TileSize {
+    /// The most points a tile holds when the survey found a usable normal
+    /// on every point (`every_normal`) or not.
+    pub(crate) fn points(self, every_normal: bool) -> u64 {
+        let budget = self.bytes / tile_bytes_per_point(every_normal);
+        self.forced.map_or(budget, |t| t.min(budget))
+    }
+}
 
 /// The most tiles generated at once in one process, when they fit the
 /// budget together. The kd-tree's build and the last of the growth (the
@@ -193,15 +236,11 @@ pub fn generate_tiled(
         .iter()
         .map(|p| stamp(p))
         .collect::<Result<Vec<_>, _>>()?;
-    let budget_points = opts
-        .max_memory
-        .checked_sub(FIXED_BYTES)
-        .map_or(0, |b| b / BYTES_PER_POINT);
-    let target = opts
-        .tiling
-        .tile_points
-        .map_or(budget_points, |t| t.min(budget_points));
-    if target < 1000 {
+    let size = TileSize {
+        bytes: opts.max_memory.saturating_sub(FIXED_BYTES),
+        forced: opts.tiling.tile_points,
+    };
+    if size.points(false) < 1000 {
         return Err(data_err(
             work,
             format!(
@@ -214,7 +253,7 @@ pub fn generate_tiled(
     }
     let params_text = format!("{params:?} {:?} {}", opts.viewpoint, opts.no_viewpoint);
     let plan_file = work.join("plan.json");
-    let old = found_plan(&plan_file, opts, &stamps, &params_text, target)?;
+    let old = found_plan(&plan_file, opts, &stamps, &params_text, size)?;
     let mut report = TiledReport {
         max_memory: opts.max_memory,
         ..TiledReport::default()
@@ -234,7 +273,7 @@ pub fn generate_tiled(
                 opts,
                 stamps,
                 params_text,
-                target,
+                size,
                 progress,
                 t0,
                 &mut report,

@@ -72,6 +72,11 @@ pub(super) struct Survey {
     pub(super) non_finite: u64,
     pub(super) bounds: Box3,
     pub(super) normals: bool,
+    /// Every point carries a usable normal (a finite, non-zero one):
+    /// generation estimates none, and a tile is planned at
+    /// [`super::BYTES_PER_POINT_GIVEN_NORMALS`] a point.
+    #[serde(default)]
+    pub(super) every_normal: bool,
     pub(super) colors: bool,
     pub(super) viewpoint: Option<[f64; 3]>,
     /// Where each scan was taken from, when the inputs hold several scans
@@ -149,6 +154,7 @@ pub(super) fn survey(
     let mut rng = SplitMix64::new(0x7115_5eed);
     let (mut seen, mut non_finite) = (0u64, 0u64);
     let (mut normals, mut colors) = (false, false);
+    let mut every_normal = true;
     let mut viewpoint = None;
     // Every input's scanner positions (an E57 file's scans, a PCD's
     // viewpoint); `None` once an input has none.
@@ -156,6 +162,9 @@ pub(super) fn survey(
     let mut scan_offsets = Vec::with_capacity(inputs.len());
     for (k, path) in inputs.iter().enumerate() {
         let info = stream_points(path, |b| {
+            every_normal &= b
+                .normals
+                .is_some_and(|n| n.iter().all(|v| v.try_normalize().is_some()));
             for &p in b.world {
                 lo = lo.min(p);
                 hi = hi.max(p);
@@ -229,6 +238,7 @@ pub(super) fn survey(
             hi: hi.to_array(),
         },
         normals,
+        every_normal,
         colors,
         viewpoint,
         scans,
@@ -303,7 +313,7 @@ pub(super) fn free_space(dir: &Path) -> Option<u64> {
     Some(v.f_bavail.saturating_mul(v.f_frsize))
 }
 
-/// A new plan for `inputs`: the survey, the tiles of at most `target`
+/// A new plan for `inputs`: the survey, the tiles of at most `size`'s
 /// points with their halos, and the spill it will write, estimated from the
 /// survey's sample and checked against the work folder's free disk; the
 /// survey's seconds (since `t0`), the estimate and its warnings go to
@@ -315,13 +325,14 @@ pub(super) fn new_plan(
     opts: &TiledOptions,
     stamps: Vec<InputStamp>,
     params_text: String,
-    target: u64,
+    size: super::TileSize,
     progress: Option<Progress<'_>>,
     t0: Instant,
     report: &mut TiledReport,
 ) -> Result<Plan, IoError> {
     let work = &opts.work;
     let s = survey(inputs, progress)?;
+    let target = size.points(s.every_normal);
     report.seconds.survey = t0.elapsed().as_secs_f64();
     let diagonal = (DVec3::from(s.bounds.hi) - DVec3::from(s.bounds.lo)).length();
     let epsilon = match params.epsilon_abs {
@@ -429,16 +440,17 @@ pub(super) fn check_space(work: &Path, bytes: u64, what: &str) -> Result<(), IoE
 }
 
 /// Why `plan` cannot be resumed for `stamps` and `params` with tiles of
-/// `target` points (`None`: it can). A tile or the merge may run on
+/// as many points as `size` gives its survey (`None`: it can). A tile or the merge may run on
 /// another machine, with another memory: there the plan's tiles stand (a
 /// tile too large for that machine is refused when read).
 pub(super) fn mismatch(
     plan: &Plan,
     stamps: &[InputStamp],
     params: &str,
-    target: u64,
+    size: super::TileSize,
     stage: super::Stage,
 ) -> Option<String> {
+    let target = size.points(plan.survey.every_normal);
     use super::Stage;
     if plan.version != env!("CARGO_PKG_VERSION") {
         return Some(format!(
@@ -484,7 +496,7 @@ pub(super) fn mismatch(
 }
 
 /// The plan in `plan_file` when this run carries it on: it matches the
-/// inputs (`stamps`), the options (`params`) and the tile size (`target`).
+/// inputs (`stamps`), the options (`params`) and the tile size (`size`).
 /// One that does not match (or does not read) is `None`, a fresh start,
 /// unless `opts.tiling.resume` asks to carry on: then it is refused in one line
 /// saying what changed.
@@ -496,7 +508,7 @@ pub(super) fn found_plan(
     opts: &TiledOptions,
     stamps: &[InputStamp],
     params: &str,
-    target: u64,
+    size: super::TileSize,
 ) -> Result<Option<Plan>, IoError> {
     let refuse = |why: String| {
         io_err(
@@ -518,7 +530,7 @@ pub(super) fn found_plan(
         Err(e) if opts.tiling.resume => return Err(io_err(plan_file, e)),
         Err(_) => return Ok(None),
     };
-    match mismatch(&plan, stamps, params, target, opts.tiling.stage) {
+    match mismatch(&plan, stamps, params, size, opts.tiling.stage) {
         None => Ok(Some(plan)),
         Some(why) if opts.tiling.resume => Err(refuse(why)),
         Some(_) => Ok(None),

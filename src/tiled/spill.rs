@@ -3,7 +3,7 @@
 
 use super::plan::{Plan, record_bytes};
 use super::report::Box3;
-use super::{BYTES_PER_POINT, io_err};
+use super::{io_err, tile_bytes_per_point};
 use crate::io::{IoError, IoErrorKind, stream_points};
 use crate::progress::{Progress, notify};
 use crate::splat::PointCloud;
@@ -158,7 +158,8 @@ pub(super) fn read_spill(plan: &Plan, work: &Path, t: usize) -> Result<PointClou
     let p = spill_path(work, t);
     let rb = record_bytes(&plan.survey);
     let bytes = std::fs::metadata(&p).map_err(|e| io_err(&p, e))?.len();
-    crate::memory::check(&format!("tile {t}"), bytes / rb as u64 * BYTES_PER_POINT)
+    crate::memory::check(&format!("tile {t}"), bytes / rb as u64 * tile_bytes_per_point(plan.survey.every_normal),
+    )
         .map_err(|e| IoError::new(&p, IoErrorKind::Memory(e)))?;
     let mut r =
         BufReader::with_capacity(1 << 20, std::fs::File::open(&p).map_err(|e| io_err(&p, e))?);

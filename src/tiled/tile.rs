@@ -5,7 +5,8 @@ use super::plan::Plan;
 use super::report::{TileSummary, TiledReport};
 use super::spill::{read_spill, spill_path};
 use super::{
-    BYTES_PER_POINT, FIXED_BYTES, NORMALS_REACH_EPS, Stage, TILES_IN_FLIGHT, TiledOptions, data_err,
+    FIXED_BYTES, NORMALS_REACH_EPS, Stage, TILES_IN_FLIGHT, TiledOptions, data_err,
+    tile_bytes_per_point,
 };
 use crate::io::{IoError, encode_splats_layout, write_bytes};
 use crate::progress::{Progress, notify};
@@ -144,7 +145,8 @@ pub(super) fn run_tiles(
     sizes.sort_unstable_by(|a, b| b.cmp(a));
     let largest: u64 = sizes.iter().take(TILES_IN_FLIGHT).sum();
     let fits =
-        largest.saturating_mul(BYTES_PER_POINT) <= opts.max_memory.saturating_sub(FIXED_BYTES);
+        largest.saturating_mul(tile_bytes_per_point(plan.survey.every_normal))
+            <= opts.max_memory.saturating_sub(FIXED_BYTES);
     let workers = if fits { TILES_IN_FLIGHT } else { 1 }
         .min(rayon::current_num_threads())
         .min(mine.len())
