@@ -350,31 +350,6 @@ pub const FACE_SMOOTH: f32 = 0.95;
 /// real scan byte-identical.
 pub const FACE_SMOOTH_EXACT: f32 = 0.85;
 
-/// Where no noise sets the tolerance (no flat-face rules), a normal turns
-/// to a face only where the two planes' MSAC score beats the quadric's by
-/// at least this share of the neighbourhood's points, and ...
-///
-/// On a smooth cloud the search otherwise finds the facets of a scanned
-/// mesh: on the 200k bunny sample 4,441 normals turned (by 11-30°,
-/// deciles 1 and 9), half of them on the base's rough rim and a quarter
-/// on the ears, and after the turn 87 % of them lay farther from the
-/// mesh's smooth normal than before (mean 8.2° → 18.4°). Its estimated
-/// normals rendered at 37.01 dB with creases and 38.64 without
-/// (`compare --truth`, `points =` that sample, `truth =` the mesh); with
-/// this margin and [`FACE_TWO_HOLD`] at 37.99 dB, the solids sampled
-/// exactly (estimated normals) 35.55 → 35.68 dB, the default survey 29.44
-/// → 29.42 dB. A margin of 0.2 (which would let a quadric scoring 0.8
-/// skip the search: two planes score at most one a point) took the bunny
-/// to 38.48 dB but the survey, whose range noise lowers both planes'
-/// scores, to 29.32 (docs/notes/generation.md, "Issue 54, eleventh
-/// session").
-pub const FACE_TURN_MARGIN: f32 = 0.1;
-
-/// ... where the two planes together hold at least this share of them: a
-/// crease's two faces hold nearly all of its neighbourhood, a rough curved
-/// patch's two best planes less.
-pub const FACE_TWO_HOLD: f32 = 0.8;
-
 /// A second face needs at least this many points the first plane does not
 /// hold.
 pub const FACE_MIN_POINTS: usize = 6;
@@ -1062,7 +1037,7 @@ impl FaceSearch<'_> {
             .flatten()
             .filter(|f| f.held >= FACE_MIN_POINTS);
         let two = first.fit + second.map_or(0.0, |f| f.fit);
-        if q >= two || (!self.flat_faces && !two_faces_clear(first, second, q, all.len())) {
+        if q >= two {
             return None;
         }
         // The point's own face: the nearer of the two planes (a point
@@ -1093,18 +1068,6 @@ impl FaceSearch<'_> {
         };
         Some((fitted, own, crease_between(first, second, FLAT_EDGE_DEG)))
     }
-}
-
-/// Whether two planes `first` and `second` (MSAC scores summed) fit a
-/// neighbourhood of `n` points (without noise) so much better than its
-/// quadric (score `q`, `NEG_INFINITY` where none was fitted) and hold so
-/// much of it that a normal may turn to one of them ([`FACE_TURN_MARGIN`],
-/// [`FACE_TWO_HOLD`]).
-fn two_faces_clear(first: FacePlane, second: Option<FacePlane>, q: f32, n: usize) -> bool {
-    let n = n as f32;
-    let two = first.fit + second.map_or(0.0, |f| f.fit);
-    let held = first.held + second.map_or(0, |f| f.held);
-    two >= q + FACE_TURN_MARGIN * n && held as f32 >= FACE_TWO_HOLD * n
 }
 
 /// Whether the two planes of a point's neighbourhood meet at a crease of
