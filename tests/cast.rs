@@ -7,7 +7,7 @@
 mod common;
 
 use glam::Vec3;
-use splatray::accel::{PassOver, Query, Ray};
+use splatray::accel::{CandidateHits, PassOver, Query, Ray};
 use splatray::render::cast::{CastOutputs, cast_rays, occluded};
 use splatray::render::integrator::SplatSurfaces;
 use splatray::rng::SplitMix64;
@@ -150,4 +150,141 @@ fn batch_casts_are_one_ray_at_a_time_bit_for_bit() {
         // Measured: 727 of 8444 on the octree.
         assert!(some > n / 20 && some < n, "{name}: {some} of {n} occluded");
     }
+}
+
+/// Two windows alike bit for bit: candidates (id, `t`, `u`, `v`) and the
+/// overflow flag.
+fn same_window(a: &CandidateHits, b: &CandidateHits) -> bool {
+    let bits = |h: &CandidateHits| -> Vec<[u32; 4]> {
+        h.as_slice()
+            .iter()
+            .map(|c| [c.id, c.t.to_bits(), c.u.to_bits(), c.v.to_bits()])
+            .collect()
+    };
+    bits(a) == bits(b) && a.overflowed() == b.overflowed()
+}
+
+/// Rays from `eye`: a 240×180 pinhole grid looking at `at` (the run's
+/// bulk), then 3000 in random directions (backwards and sideways among
+/// them) and 1000 grazing the plane across the view (perpendicular to the
+/// view direction, give or take a little).
+fn fan_rays(eye: Vec3, at: Vec3, seed: u64) -> Vec<Ray> {
+    let mut rays: Vec<Ray> = common::camera_queries(eye, at, 240, 180)
+        .iter()
+        .map(|q| q.ray)
+        .collect();
+    let mut rng = SplitMix64::new(seed);
+    let mut r = |a: f32, b: f32| a + (b - a) * rng.next_f32();
+    let fwd = (at - eye).normalize();
+    for i in 0..4000 {
+        let d = Vec3::new(r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0));
+        let d = if i < 3000 {
+            d
+        } else {
+            d - fwd * (d.dot(fwd) + r(-1e-3, 1e-3))
+        };
+        rays.push(Ray::new(eye, d * r(0.5, 2.0)));
+    }
+    rays
+}
+
+/// The windows, occlusion answers and resolved hits of `fan` against the
+/// octree's own for every ray of `rays`: from 0, within a random span
+/// (`t_min` 0 to 2, `t_max` beyond it), and with the scene's pass-over
+/// rule; returns the rays that hit from 0.
+fn fan_agrees(scene: &Scene, rays: &[Ray], what: &str) -> usize {
+    let info = splatray::accel::registry::find("octree").unwrap();
+    let octree = info.build_splats(&scene.splats).unwrap();
+    let fan = octree.fan(rays).unwrap_or_else(|| panic!("{what}: no fan"));
+    let xi = scene.options.scale.xi;
+    let (mut a, mut b) = (CandidateHits::new(xi), CandidateHits::new(xi));
+    let pass = scene as &dyn PassOver;
+    let mut rng = SplitMix64::new(7);
+    let mut hit = 0;
+    for (i, ray) in rays.iter().enumerate() {
+        let t_min = 2.0 * rng.next_f32();
+        let spans = [
+            Query::new(*ray, 0.0, f32::INFINITY),
+            Query::new(*ray, t_min, t_min + 4.0 * rng.next_f32()),
+            Query {
+                pass: Some(pass),
+                ..Query::new(*ray, 0.0, f32::INFINITY)
+            },
+            Query {
+                pass: Some(pass),
+                ..Query::new(*ray, t_min, f32::INFINITY)
+            },
+        ];
+        for (k, q) in spans.iter().enumerate() {
+            octree.intersect_from(q, &mut a);
+            fan.intersect_from(q, &mut b);
+            assert!(same_window(&a, &b), "{what}: ray {i} {ray:?}, span {k}");
+            assert_eq!(
+                octree.occluded_from(q),
+                fan.occluded_from(q),
+                "{what}: ray {i} {ray:?}, span {k} occluded"
+            );
+            hit += usize::from(k == 0 && !a.is_empty());
+        }
+        let s = SplatSurfaces {
+            scene,
+            backend: octree.as_ref(),
+        };
+        let f = SplatSurfaces {
+            scene,
+            backend: fan.as_ref(),
+        };
+        let q = spans[0];
+        let (x, y) = (s.surface_hit(q, &mut a), f.surface_hit(q, &mut b));
+        assert_eq!(
+            x.map(|h| (h.id, h.t.to_bits(), h.normal.to_array().map(f32::to_bits))),
+            y.map(|h| (h.id, h.t.to_bits(), h.normal.to_array().map(f32::to_bits))),
+            "{what}: ray {i} resolved"
+        );
+    }
+    hit
+}
+
+/// Issue 55's fans (a camera's rays through the octree's primitives binned
+/// by direction, `Backend::fan`): every window, occlusion answer and
+/// resolved hit is the octree's own, bit for bit, on the bundled bunny
+/// scene's splats (some clipped), the same 10⁴ away from the coordinates'
+/// origin, from an eye inside some splats' bounding balls, and on blobby
+/// splats a third clipped; rays in every direction.
+#[test]
+fn fans_answer_as_the_octree_bit_for_bit() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let bunny = splatray::scene::load_scene(&root.join("bunny.toml"), None).unwrap();
+    assert!(
+        bunny.splats.iter().any(|s| s.is_clipped()),
+        "clipped splats"
+    );
+    let (eye, at) = (Vec3::new(1.5, 1.1, 4.4), Vec3::new(0.0, -0.1, 0.0));
+    let hit = fan_agrees(&bunny, &fan_rays(eye, at, 1), "bunny");
+    assert!(hit > 10_000, "bunny: {hit} hit");
+    // Far from the origin.
+    let off = Vec3::new(1e4, -3e3, 1e4);
+    let mut far = bunny.clone();
+    for s in &mut far.splats {
+        s.center += off;
+    }
+    let hit = fan_agrees(&far, &fan_rays(eye + off, at + off, 2), "offset");
+    assert!(hit > 10_000, "offset: {hit} hit");
+    // An eye on a splat of the bunny, inside its neighbours' balls.
+    let s = &bunny.splats[bunny.splats.len() / 3];
+    let eye = s.center + s.normal * (0.05 * s.radii.max_element());
+    let hit = fan_agrees(&bunny, &fan_rays(eye, at, 3), "inside");
+    assert!(hit > 1000, "inside: {hit} hit");
+    // Blobby splats, a third clipped.
+    let mut blob = scene();
+    blob.splats = common::blobby_splats(20_000, 9);
+    common::clip_some(&mut blob.splats, 9);
+    blob.material_of = vec![0; blob.splats.len()];
+    assert!(blob.color_fields.is_empty());
+    let hit = fan_agrees(
+        &blob,
+        &fan_rays(Vec3::new(0.4, 1.5, 4.0), Vec3::ZERO, 4),
+        "blobby",
+    );
+    assert!(hit > 10_000, "blobby: {hit} hit");
 }

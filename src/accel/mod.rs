@@ -157,6 +157,17 @@ pub trait Backend: Send + Sync {
         }
     }
 
+    /// A backend answering every query exactly as this one, prepared for
+    /// many primary rays leaving one origin: `rays`, a run of a batch
+    /// sharing their first ray's origin bit for bit (a camera's rays), for
+    /// which it is faster than this one's packets (the octree's binning by
+    /// direction, `octree`'s module doc). `None` (the default, and when the
+    /// run would not pay): the caller traces the run as before, in packets.
+    fn fan(&self, rays: &[Ray]) -> Option<Box<dyn Backend + '_>> {
+        let _ = rays;
+        None
+    }
+
     /// [`Backend::occluded_from`] for a batch: `out[i]` is its answer for
     /// `qs[i]`. The default asks one query at a time.
     ///

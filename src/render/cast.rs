@@ -19,9 +19,10 @@
 //! are written only when asked for.
 
 use super::integrator::SplatSurfaces;
-use crate::accel::{CandidateHits, PACKET, PassOver, Query, Ray};
+use crate::accel::{Backend, CandidateHits, PACKET, PassOver, Query, Ray};
 use crate::resolve::SurfaceHit;
 use rayon::prelude::*;
+use std::ops::Range;
 
 /// Rays per parallel task.
 pub const CHUNK: usize = 512;
@@ -46,6 +47,7 @@ pub fn cast_rays(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: 
     assert!(lens.len() >= n && out.t.len() >= n, "an output per ray");
     let xi = surfaces.scene.options.scale.xi;
     let packets = crate::accel::use_packets(surfaces.backend);
+    let fans = fans(surfaces.backend, rays);
     let ids = slots(out.ids.map(|v| &mut v[..n]), 1, n);
     let normals = slots(out.normals.map(|v| &mut v[..3 * n]), 3, n);
     out.t[..n]
@@ -55,7 +57,7 @@ pub fn cast_rays(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: 
         .enumerate()
         .for_each(|(c, ((t, mut ids), mut normals))| {
             let range = c * CHUNK..(c * CHUNK + t.len());
-            let (rays, lens) = (&rays[range.clone()], &lens[range]);
+            let (rays, lens) = (&rays[range.clone()], &lens[range.clone()]);
             let mut write = |i: usize, f: Option<SurfaceHit>| {
                 let (tt, id, nn) = match f {
                     None => (f32::INFINITY, u32::MAX, [0.0; 3]),
@@ -75,26 +77,36 @@ pub fn cast_rays(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: 
             };
             let mut hits: [CandidateHits; PACKET] = std::array::from_fn(|_| CandidateHits::new(xi));
             let query = |i: usize| Query::new(rays[i], 0.0, f32::INFINITY);
-            if !packets {
-                for i in 0..rays.len() {
-                    write(i, surfaces.surface_hit(query(i), &mut hits[0]));
-                }
-                return;
-            }
             let mut found = [None; PACKET];
-            for_each_packet(rays, |idx| {
-                let m = idx.len();
-                if m == 1 {
-                    let i = usize::from(idx[0]);
-                    write(i, surfaces.surface_hit(query(i), &mut hits[0]));
+            pieces(&fans, range, |piece, fan| {
+                if let Some(backend) = fan {
+                    let s = SplatSurfaces { backend, ..*surfaces };
+                    for i in piece {
+                        write(i, s.surface_hit(query(i), &mut hits[0]));
+                    }
                     return;
                 }
-                let qs: [Query; PACKET] =
-                    std::array::from_fn(|k| query(usize::from(idx[k.min(m - 1)])));
-                surfaces.surface_hits(&qs[..m], &mut hits[..m], &mut found[..m]);
-                for (&i, f) in idx.iter().zip(&found) {
-                    write(usize::from(i), *f);
+                if !packets {
+                    for i in piece {
+                        write(i, surfaces.surface_hit(query(i), &mut hits[0]));
+                    }
+                    return;
                 }
+                let at = piece.start;
+                for_each_packet(&rays[piece], |idx| {
+                    let m = idx.len();
+                    if m == 1 {
+                        let i = at + usize::from(idx[0]);
+                        write(i, surfaces.surface_hit(query(i), &mut hits[0]));
+                        return;
+                    }
+                    let qs: [Query; PACKET] =
+                        std::array::from_fn(|k| query(at + usize::from(idx[k.min(m - 1)])));
+                    surfaces.surface_hits(&qs[..m], &mut hits[..m], &mut found[..m]);
+                    for (&i, f) in idx.iter().zip(&found) {
+                        write(at + usize::from(i), *f);
+                    }
+                });
             });
         });
 }
@@ -103,8 +115,8 @@ pub fn cast_rays(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: 
 /// surface with `t` in `[t_near, t_far]` (in units of its direction's
 /// length) into `out`: a shadow ray's question, the hits on Phong splats'
 /// discs beyond their curved surfaces' silhouettes passed over (the
-/// scene's [`PassOver`], as the renderer's shadow rays), in packets as
-/// [`cast_rays`] forms them; the answers of one ray at a time.
+/// scene's [`PassOver`], as the renderer's shadow rays), in packets or
+/// fans as [`cast_rays`] forms them; the answers of one ray at a time.
 ///
 /// Panics if `lens` or `out` is shorter than `rays`.
 pub fn occluded(
@@ -120,12 +132,13 @@ pub fn occluded(
     let backend = surfaces.backend;
     let pass = scene.has_phong().then_some(scene as &dyn PassOver);
     let packets = crate::accel::use_packets(backend);
+    let fans = fans(backend, rays);
     out[..n]
         .par_chunks_mut(CHUNK)
         .enumerate()
         .for_each(|(c, out)| {
             let range = c * CHUNK..(c * CHUNK + out.len());
-            let (rays, lens) = (&rays[range.clone()], &lens[range]);
+            let (rays, lens) = (&rays[range.clone()], &lens[range.clone()]);
             let query = |i: usize| Query {
                 ray: rays[i],
                 t_min: t_near * lens[i],
@@ -133,28 +146,91 @@ pub fn occluded(
                 from: None,
                 pass,
             };
-            if !packets {
-                for (i, o) in out.iter_mut().enumerate() {
-                    *o = backend.occluded_from(&query(i));
-                }
-                return;
-            }
             let mut got = [false; PACKET];
-            for_each_packet(rays, |idx| {
-                let m = idx.len();
-                if m == 1 {
-                    let i = usize::from(idx[0]);
-                    out[i] = backend.occluded_from(&query(i));
+            pieces(&fans, range, |piece, fan| {
+                if let Some(fan) = fan {
+                    for i in piece {
+                        out[i] = fan.occluded_from(&query(i));
+                    }
                     return;
                 }
-                let qs: [Query; PACKET] =
-                    std::array::from_fn(|k| query(usize::from(idx[k.min(m - 1)])));
-                backend.occluded_packet(&qs[..m], &mut got[..m]);
-                for (&i, g) in idx.iter().zip(&got) {
-                    out[usize::from(i)] = *g;
+                if !packets {
+                    for i in piece {
+                        out[i] = backend.occluded_from(&query(i));
+                    }
+                    return;
                 }
+                let at = piece.start;
+                for_each_packet(&rays[piece], |idx| {
+                    let m = idx.len();
+                    if m == 1 {
+                        let i = at + usize::from(idx[0]);
+                        out[i] = backend.occluded_from(&query(i));
+                        return;
+                    }
+                    let qs: [Query; PACKET] =
+                        std::array::from_fn(|k| query(at + usize::from(idx[k.min(m - 1)])));
+                    backend.occluded_packet(&qs[..m], &mut got[..m]);
+                    for (&i, g) in idx.iter().zip(&got) {
+                        out[at + usize::from(i)] = *g;
+                    }
+                });
             });
         });
+}
+
+/// Fewest consecutive rays sharing an origin for which the backend is
+/// asked for a fan ([`crate::accel::Backend::fan`], which may still
+/// decline).
+const FAN_RUN: usize = 4096;
+
+/// The runs of at least [`FAN_RUN`] consecutive rays of `rays` leaving one
+/// origin (bit for bit) for which `backend` builds a fan, each with its
+/// fan, in order (built in parallel).
+fn fans<'b>(backend: &'b dyn Backend, rays: &[Ray]) -> Vec<(Range<usize>, Box<dyn Backend + 'b>)> {
+    let bits = |r: &Ray| r.origin.to_array().map(f32::to_bits);
+    let mut runs = Vec::new();
+    let mut start = 0;
+    while start < rays.len() {
+        let o = bits(&rays[start]);
+        let len = 1 + rays[start + 1..].iter().take_while(|r| bits(r) == o).count();
+        if len >= FAN_RUN {
+            runs.push(start..start + len);
+        }
+        start += len;
+    }
+    runs.into_par_iter()
+        .filter_map(|run| {
+            let fan = backend.fan(&rays[run.clone()])?;
+            Some((run, fan))
+        })
+        .collect()
+}
+
+/// The chunk `range` of a batch cut by the runs of `fans` (sorted, not
+/// overlapping): each piece (relative to the chunk's start, in order)
+/// handed to `each` with the fan of its run, or `None` between runs.
+fn pieces(
+    fans: &[(Range<usize>, Box<dyn Backend + '_>)],
+    range: Range<usize>,
+    mut each: impl FnMut(Range<usize>, Option<&dyn Backend>),
+) {
+    let mut at = range.start;
+    let first = fans.partition_point(|(run, _)| run.end <= at);
+    for (run, fan) in &fans[first..] {
+        if run.start >= range.end {
+            break;
+        }
+        if run.start > at {
+            each(at - range.start..run.start - range.start, None);
+        }
+        let end = run.end.min(range.end);
+        each(at.max(run.start) - range.start..end - range.start, Some(fan.as_ref()));
+        at = end;
+    }
+    if at < range.end {
+        each(at - range.start..range.end - range.start, None);
+    }
 }
 
 /// An optional output cut into the chunks of [`CHUNK`] rays (`per` slots

@@ -66,6 +66,7 @@
 //! hits anything.
 
 mod build;
+mod fan;
 mod packet;
 mod parts;
 mod traverse;
@@ -404,6 +405,13 @@ impl<P: Primitive> Backend for Octree<P> {
     /// slower, "Issue 25: ray packets").
     fn prefers_packets(&self) -> bool {
         true
+    }
+
+    /// Its primitives binned by direction from the rays' origin (`fan`),
+    /// for a run of at least 4096 rays and as many as the primitives.
+    fn fan(&self, rays: &[crate::geometry::Ray]) -> Option<Box<dyn Backend + '_>> {
+        self.build_fan(rays)
+            .map(|f| Box::new(f) as Box<dyn Backend + '_>)
     }
 
     fn stats(&self) -> &BuildStats {
