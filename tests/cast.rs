@@ -152,18 +152,6 @@ fn batch_casts_are_one_ray_at_a_time_bit_for_bit() {
     }
 }
 
-/// Two windows alike bit for bit: candidates (id, `t`, `u`, `v`) and the
-/// overflow flag.
-fn same_window(a: &CandidateHits, b: &CandidateHits) -> bool {
-    let bits = |h: &CandidateHits| -> Vec<[u32; 4]> {
-        h.as_slice()
-            .iter()
-            .map(|c| [c.id, c.t.to_bits(), c.u.to_bits(), c.v.to_bits()])
-            .collect()
-    };
-    bits(a) == bits(b) && a.overflowed() == b.overflowed()
-}
-
 /// Rays from `eye`: a 240×180 pinhole grid looking at `at` (the run's
 /// bulk), then 3000 in random directions (backwards and sideways among
 /// them) and 1000 grazing the plane across the view (perpendicular to the
@@ -188,19 +176,19 @@ fn fan_rays(eye: Vec3, at: Vec3, seed: u64) -> Vec<Ray> {
     rays
 }
 
-/// The windows, occlusion answers and resolved hits of `fan` against the
-/// octree's own for every ray of `rays`: from 0, within a random span
-/// (`t_min` 0 to 2, `t_max` beyond it), and with the scene's pass-over
-/// rule; returns the rays that hit from 0.
-fn fan_agrees(scene: &Scene, rays: &[Ray], what: &str) -> usize {
+/// The octree's fan of `rays` (`None` when it declines), checked: every
+/// ray it says misses gets an empty window and no occlusion from the
+/// octree, from 0 and within a random span, with and without the scene's
+/// pass-over rule. Returns how many rays it says miss, and how many the
+/// octree says miss.
+fn fan_misses(scene: &Scene, rays: &[Ray], what: &str) -> Option<(usize, usize)> {
     let info = splatray::accel::registry::find("octree").unwrap();
     let octree = info.build_splats(&scene.splats).unwrap();
-    let fan = octree.fan(rays).unwrap_or_else(|| panic!("{what}: no fan"));
-    let xi = scene.options.scale.xi;
-    let (mut a, mut b) = (CandidateHits::new(xi), CandidateHits::new(xi));
+    let fan = octree.fan(rays)?;
+    let mut h = CandidateHits::new(scene.options.scale.xi);
     let pass = scene as &dyn PassOver;
     let mut rng = SplitMix64::new(7);
-    let mut hit = 0;
+    let (mut said, mut missed) = (0, 0);
     for (i, ray) in rays.iter().enumerate() {
         let t_min = 2.0 * rng.next_f32();
         let spans = [
@@ -210,81 +198,77 @@ fn fan_agrees(scene: &Scene, rays: &[Ray], what: &str) -> usize {
                 pass: Some(pass),
                 ..Query::new(*ray, 0.0, f32::INFINITY)
             },
-            Query {
-                pass: Some(pass),
-                ..Query::new(*ray, t_min, f32::INFINITY)
-            },
         ];
+        let misses = fan.misses(ray);
         for (k, q) in spans.iter().enumerate() {
-            octree.intersect_from(q, &mut a);
-            fan.intersect_from(q, &mut b);
-            assert!(same_window(&a, &b), "{what}: ray {i} {ray:?}, span {k}");
-            assert_eq!(
-                octree.occluded_from(q),
-                fan.occluded_from(q),
-                "{what}: ray {i} {ray:?}, span {k} occluded"
+            octree.intersect_from(q, &mut h);
+            let occluded = octree.occluded_from(q);
+            assert!(
+                !misses || (h.is_empty() && !occluded),
+                "{what}: ray {i} {ray:?}, span {k}: said to miss, hits {:?}",
+                h.as_slice()
             );
-            hit += usize::from(k == 0 && !a.is_empty());
+            missed += usize::from(k == 0 && h.is_empty());
         }
-        let s = SplatSurfaces {
-            scene,
-            backend: octree.as_ref(),
-        };
-        let f = SplatSurfaces {
-            scene,
-            backend: fan.as_ref(),
-        };
-        let q = spans[0];
-        let (x, y) = (s.surface_hit(q, &mut a), f.surface_hit(q, &mut b));
-        assert_eq!(
-            x.map(|h| (h.id, h.t.to_bits(), h.normal.to_array().map(f32::to_bits))),
-            y.map(|h| (h.id, h.t.to_bits(), h.normal.to_array().map(f32::to_bits))),
-            "{what}: ray {i} resolved"
-        );
+        said += usize::from(misses);
     }
-    hit
+    Some((said, missed))
 }
 
-/// Issue 55's fans (a camera's rays through the octree's primitives binned
-/// by direction, `Backend::fan`): every window, occlusion answer and
-/// resolved hit is the octree's own, bit for bit, on the bundled bunny
-/// scene's splats (some clipped), the same 10⁴ away from the coordinates'
-/// origin, from an eye inside some splats' bounding balls, and on blobby
-/// splats a third clipped; rays in every direction.
+/// Issue 55's fans (what the octree knows of a camera's rays:
+/// `Backend::fan`): no ray said to miss hits anything, on the bundled
+/// bunny's splats (some clipped), the same 10⁴ away from the coordinates'
+/// origin, and blobby splats a third clipped; rays in every direction;
+/// two thirds of the misses or more are said. An eye inside some splats'
+/// bounding balls (on the bunny) or beside the floor's gets no fan.
 #[test]
-fn fans_answer_as_the_octree_bit_for_bit() {
+fn fans_say_only_true_misses() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
-    let bunny = splatray::scene::load_scene(&root.join("bunny.toml"), None).unwrap();
+    let scene = splatray::scene::load_scene(&root.join("bunny.toml"), None).unwrap();
+    let (eye, at) = (Vec3::new(1.5, 1.1, 4.4), Vec3::new(0.0, -0.1, 0.0));
+    assert!(
+        fan_misses(&scene, &fan_rays(eye, at, 1), "bunny and floor").is_none(),
+        "the floor's splats straddle the eye's plane"
+    );
+    // The bunny alone (the first model's splats).
+    let mut bunny = scene.clone();
+    let n = bunny.material_of.iter().take_while(|&&m| m == 0).count();
+    bunny.splats.truncate(n);
+    bunny.material_of.truncate(n);
     assert!(
         bunny.splats.iter().any(|s| s.is_clipped()),
         "clipped splats"
     );
-    let (eye, at) = (Vec3::new(1.5, 1.1, 4.4), Vec3::new(0.0, -0.1, 0.0));
-    let hit = fan_agrees(&bunny, &fan_rays(eye, at, 1), "bunny");
-    assert!(hit > 10_000, "bunny: {hit} hit");
+    let check = |scene: &Scene, rays: &[Ray], what: &str| {
+        let (said, missed) =
+            fan_misses(scene, rays, what).unwrap_or_else(|| panic!("{what}: no fan"));
+        // Of the camera grid's 43,200 rays and 4,000 others.
+        assert!(
+            said * 3 > missed * 2 && missed > 20_000,
+            "{what}: {said} of {missed} misses said"
+        );
+    };
+    check(&bunny, &fan_rays(eye, at, 1), "bunny");
     // Far from the origin.
     let off = Vec3::new(1e4, -3e3, 1e4);
     let mut far = bunny.clone();
     for s in &mut far.splats {
         s.center += off;
     }
-    let hit = fan_agrees(&far, &fan_rays(eye + off, at + off, 2), "offset");
-    assert!(hit > 10_000, "offset: {hit} hit");
+    check(&far, &fan_rays(eye + off, at + off, 2), "offset");
     // An eye on a splat of the bunny, inside its neighbours' balls.
-    let s = &bunny.splats[bunny.splats.len() / 3];
-    let eye = s.center + s.normal * (0.05 * s.radii.max_element());
-    let hit = fan_agrees(&bunny, &fan_rays(eye, at, 3), "inside");
-    assert!(hit > 1000, "inside: {hit} hit");
+    let s = &bunny.splats[n / 3];
+    let eye_on = s.center + s.normal * (0.05 * s.radii.max_element());
+    assert!(fan_misses(&bunny, &fan_rays(eye_on, at, 3), "inside").is_none());
     // Blobby splats, a third clipped.
-    let mut blob = scene();
+    let mut blob = self::scene();
     blob.splats = common::blobby_splats(20_000, 9);
     common::clip_some(&mut blob.splats, 9);
     blob.material_of = vec![0; blob.splats.len()];
     assert!(blob.color_fields.is_empty());
-    let hit = fan_agrees(
+    check(
         &blob,
         &fan_rays(Vec3::new(0.4, 1.5, 4.0), Vec3::ZERO, 4),
         "blobby",
     );
-    assert!(hit > 10_000, "blobby: {hit} hit");
 }

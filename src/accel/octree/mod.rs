@@ -407,11 +407,12 @@ impl<P: Primitive> Backend for Octree<P> {
         true
     }
 
-    /// Its primitives binned by direction from the rays' origin (`fan`),
-    /// for a run of at least 4096 rays and as many as the primitives.
-    fn fan(&self, rays: &[crate::geometry::Ray]) -> Option<Box<dyn Backend + '_>> {
+    /// The directions from the rays' origin in which no primitive's
+    /// bounding ball lies (`fan`), for a run of at least 4096 rays and as
+    /// many as the primitives.
+    fn fan(&self, rays: &[crate::geometry::Ray]) -> Option<Box<dyn super::Fan + '_>> {
         self.build_fan(rays)
-            .map(|f| Box::new(f) as Box<dyn Backend + '_>)
+            .map(|f| Box::new(f) as Box<dyn super::Fan>)
     }
 
     fn stats(&self) -> &BuildStats {
