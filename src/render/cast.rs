@@ -5,7 +5,7 @@
 //!
 //! The rays are taken in chunks of [`CHUNK`] in parallel, with one
 //! window per packet slot allocated per chunk, none per ray. A run of at
-//! least [`FAN_RUN`] consecutive rays leaving one origin (a camera's) is
+//! least 4096 consecutive rays leaving one origin (a camera's) is
 //! first shown to the backend ([`crate::accel::Backend::fan`]): the rays
 //! its [`Fan`] knows to miss everything are answered so without a
 //! traversal (issue 55: the octree's fan, the directions in which no

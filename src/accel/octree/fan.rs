@@ -220,7 +220,8 @@ impl Coverage {
             if cw < -r {
                 continue;
             }
-            if !(cw > 1.01 * r) {
+            let in_front = cw > 1.01 * r;
+            if !in_front {
                 return None;
             }
             let (Some([i0, i1]), Some([j0, j1])) = (self.span(cu, cw, r, 0), self.span(cv, cw, r, 1))
@@ -262,7 +263,8 @@ impl Fan for Coverage {
         let z = d.dot(self.w);
         // NaN compares false. A direction inside the grid lies within
         // about 75° of `w` ([`MIN_COS`]).
-        if !(z > 0.0) {
+        let ahead = z > 0.0;
+        if !ahead {
             return false;
         }
         let inv = 1.0 / z;
