@@ -7,7 +7,7 @@
 mod common;
 
 use glam::Vec3;
-use splatray::accel::{PassOver, Query, Ray};
+use splatray::accel::{CandidateHits, PassOver, Query, Ray};
 use splatray::render::cast::{CastOutputs, cast_rays, occluded};
 use splatray::render::integrator::SplatSurfaces;
 use splatray::rng::SplitMix64;
@@ -150,4 +150,125 @@ fn batch_casts_are_one_ray_at_a_time_bit_for_bit() {
         // Measured: 727 of 8444 on the octree.
         assert!(some > n / 20 && some < n, "{name}: {some} of {n} occluded");
     }
+}
+
+/// Rays from `eye`: a 240×180 pinhole grid looking at `at` (the run's
+/// bulk), then 3000 in random directions (backwards and sideways among
+/// them) and 1000 grazing the plane across the view (perpendicular to the
+/// view direction, give or take a little).
+fn fan_rays(eye: Vec3, at: Vec3, seed: u64) -> Vec<Ray> {
+    let mut rays: Vec<Ray> = common::camera_queries(eye, at, 240, 180)
+        .iter()
+        .map(|q| q.ray)
+        .collect();
+    let mut rng = SplitMix64::new(seed);
+    let mut r = |a: f32, b: f32| a + (b - a) * rng.next_f32();
+    let fwd = (at - eye).normalize();
+    for i in 0..4000 {
+        let d = Vec3::new(r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0));
+        let d = if i < 3000 {
+            d
+        } else {
+            d - fwd * (d.dot(fwd) + r(-1e-3, 1e-3))
+        };
+        rays.push(Ray::new(eye, d * r(0.5, 2.0)));
+    }
+    rays
+}
+
+/// The octree's fan of `rays` (`None` when it declines), checked: every
+/// ray it says misses gets an empty window and no occlusion from the
+/// octree, from 0 and within a random span, with and without the scene's
+/// pass-over rule. Returns how many rays it says miss, and how many the
+/// octree says miss.
+fn fan_misses(scene: &Scene, rays: &[Ray], what: &str) -> Option<(usize, usize)> {
+    let info = splatray::accel::registry::find("octree").unwrap();
+    let octree = info.build_splats(&scene.splats).unwrap();
+    let fan = octree.fan(rays)?;
+    let mut h = CandidateHits::new(scene.options.scale.xi);
+    let pass = scene as &dyn PassOver;
+    let mut rng = SplitMix64::new(7);
+    let (mut said, mut missed) = (0, 0);
+    for (i, ray) in rays.iter().enumerate() {
+        let t_min = 2.0 * rng.next_f32();
+        let spans = [
+            Query::new(*ray, 0.0, f32::INFINITY),
+            Query::new(*ray, t_min, t_min + 4.0 * rng.next_f32()),
+            Query {
+                pass: Some(pass),
+                ..Query::new(*ray, 0.0, f32::INFINITY)
+            },
+        ];
+        let misses = fan.misses(ray);
+        for (k, q) in spans.iter().enumerate() {
+            octree.intersect_from(q, &mut h);
+            let occluded = octree.occluded_from(q);
+            assert!(
+                !misses || (h.is_empty() && !occluded),
+                "{what}: ray {i} {ray:?}, span {k}: said to miss, hits {:?}",
+                h.as_slice()
+            );
+            missed += usize::from(k == 0 && h.is_empty());
+        }
+        said += usize::from(misses);
+    }
+    Some((said, missed))
+}
+
+/// Issue 55's fans (what the octree knows of a camera's rays:
+/// `Backend::fan`): no ray said to miss hits anything, on the bundled
+/// bunny's splats (some clipped), the same 10⁴ away from the coordinates'
+/// origin, and blobby splats a third clipped; rays in every direction;
+/// two thirds of the misses or more are said. An eye inside some splats'
+/// bounding balls (on the bunny) or beside the floor's gets no fan.
+#[test]
+fn fans_say_only_true_misses() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let scene = splatray::scene::load_scene(&root.join("bunny.toml"), None).unwrap();
+    let (eye, at) = (Vec3::new(1.5, 1.1, 4.4), Vec3::new(0.0, -0.1, 0.0));
+    assert!(
+        fan_misses(&scene, &fan_rays(eye, at, 1), "bunny and floor").is_none(),
+        "the floor's splats straddle the eye's plane"
+    );
+    // The bunny alone (the first model's splats).
+    let mut bunny = scene.clone();
+    let n = bunny.material_of.iter().take_while(|&&m| m == 0).count();
+    bunny.splats.truncate(n);
+    bunny.material_of.truncate(n);
+    assert!(
+        bunny.splats.iter().any(|s| s.is_clipped()),
+        "clipped splats"
+    );
+    let check = |scene: &Scene, rays: &[Ray], what: &str| {
+        let (said, missed) =
+            fan_misses(scene, rays, what).unwrap_or_else(|| panic!("{what}: no fan"));
+        // Of the camera grid's 43,200 rays and 4,000 others.
+        assert!(
+            said * 3 > missed * 2 && missed > 20_000,
+            "{what}: {said} of {missed} misses said"
+        );
+    };
+    check(&bunny, &fan_rays(eye, at, 1), "bunny");
+    // Far from the origin.
+    let off = Vec3::new(1e4, -3e3, 1e4);
+    let mut far = bunny.clone();
+    for s in &mut far.splats {
+        s.center += off;
+    }
+    check(&far, &fan_rays(eye + off, at + off, 2), "offset");
+    // An eye on a splat of the bunny, inside its neighbours' balls.
+    let s = &bunny.splats[n / 3];
+    let eye_on = s.center + s.normal * (0.05 * s.radii.max_element());
+    assert!(fan_misses(&bunny, &fan_rays(eye_on, at, 3), "inside").is_none());
+    // Blobby splats, a third clipped.
+    let mut blob = self::scene();
+    blob.splats = common::blobby_splats(20_000, 9);
+    common::clip_some(&mut blob.splats, 9);
+    blob.material_of = vec![0; blob.splats.len()];
+    assert!(blob.color_fields.is_empty());
+    check(
+        &blob,
+        &fan_rays(Vec3::new(0.4, 1.5, 4.0), Vec3::ZERO, 4),
+        "blobby",
+    );
 }

@@ -157,6 +157,17 @@ pub trait Backend: Send + Sync {
         }
     }
 
+    /// What the backend knows once about many primary rays leaving one
+    /// origin: `rays`, a run of a batch sharing their first ray's origin
+    /// bit for bit (a camera's rays), and the directions in which they
+    /// certainly hit nothing ([`Fan`]; the octree's, `octree`'s module
+    /// doc). `None` (the default, and when the run would not pay): every
+    /// ray is traced.
+    fn fan(&self, rays: &[Ray]) -> Option<Box<dyn Fan + '_>> {
+        let _ = rays;
+        None
+    }
+
     /// [`Backend::occluded_from`] for a batch: `out[i]` is its answer for
     /// `qs[i]`. The default asks one query at a time.
     ///
@@ -168,6 +179,16 @@ pub trait Backend: Send + Sync {
             *o = self.occluded_from(q);
         }
     }
+}
+
+/// A backend's knowledge of the rays leaving one origin
+/// ([`Backend::fan`]).
+pub trait Fan: Send + Sync {
+    /// True only when `ray` (leaving the fan's origin) hits nothing at
+    /// `t >= 0` in its backend: a query of it from `t_min >= 0` with
+    /// nothing skipped gets an empty window, and its occlusion is false,
+    /// whatever its span. False when it may hit, or is not known.
+    fn misses(&self, ray: &Ray) -> bool;
 }
 
 pub use crate::config::PACKETS_VAR;

@@ -1,27 +1,34 @@
 //! Batches of rays cast at a scene's splats, one resolved hit or one
 //! occlusion answer per ray: what the Python package's
-//! `SplatScene.cast_rays` and `occluded` ask (its binding only parses the
+//! `SplatScene.cast_rays` and `occluded` call (its binding only parses the
 //! arrays and presents the answers).
 //!
 //! The rays are taken in chunks of [`CHUNK`] in parallel, with one
-//! window per packet slot allocated per chunk, none per ray. When the
-//! backend prefers packets ([`crate::accel::use_packets`]), the batch
-//! finds its packets itself ([`Packets`]): runs of consecutive rays
-//! leaving one origin (a camera's or a scanner's rays, in any order of
-//! directions) are split by their directions' signs and traced
-//! [`PACKET`] at a time, so the octree takes each leaf once for the
-//! packet ([`crate::accel::Backend::intersect_packet`]); a ray sharing
+//! window per packet slot allocated per chunk, none per ray. A run of at
+//! least 4096 consecutive rays leaving one origin (a camera's) is
+//! first shown to the backend ([`crate::accel::Backend::fan`]): the rays
+//! its [`Fan`] knows to miss everything are answered so without a
+//! traversal (issue 55: the octree's fan, the directions in which no
+//! splat's bounding ball lies, takes most of a camera's rays that miss
+//! an object in view). When the backend prefers packets
+//! ([`crate::accel::use_packets`]), the batch finds its packets itself:
+//! runs of consecutive rays leaving one origin (a camera's or a scanner's
+//! rays, in any order of directions) are split by their directions' signs
+//! and traced [`PACKET`] at a time, so the octree takes each leaf once for
+//! the packet ([`crate::accel::Backend::intersect_packet`]); a ray sharing
 //! its origin with no neighbour is traced alone (a packet of rays from
 //! unrelated origins would descend together for nothing). Every answer is
 //! the one-ray-at-a-time answer, bit for bit: packets gather the same
 //! candidate windows (`docs/DESIGN.md`, "The backend contract"), resolved
-//! by the same resolver (§3.2, eq. 5). Outputs other than the distance
-//! are written only when asked for.
+//! by the same resolver (§3.2, eq. 5), and a fan's misses are rays that
+//! window would leave empty. Outputs other than the distance are written
+//! only when asked for.
 
 use super::integrator::SplatSurfaces;
-use crate::accel::{CandidateHits, PACKET, PassOver, Query, Ray};
+use crate::accel::{Backend, CandidateHits, Fan, PACKET, PassOver, Query, Ray};
 use crate::resolve::SurfaceHit;
 use rayon::prelude::*;
+use std::ops::Range;
 
 /// Rays per parallel task.
 pub const CHUNK: usize = 512;
@@ -46,6 +53,7 @@ pub fn cast_rays(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: 
     assert!(lens.len() >= n && out.t.len() >= n, "an output per ray");
     let xi = surfaces.scene.options.scale.xi;
     let packets = crate::accel::use_packets(surfaces.backend);
+    let fans = fans(surfaces.backend, rays);
     let ids = slots(out.ids.map(|v| &mut v[..n]), 1, n);
     let normals = slots(out.normals.map(|v| &mut v[..3 * n]), 3, n);
     out.t[..n]
@@ -55,7 +63,7 @@ pub fn cast_rays(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: 
         .enumerate()
         .for_each(|(c, ((t, mut ids), mut normals))| {
             let range = c * CHUNK..(c * CHUNK + t.len());
-            let (rays, lens) = (&rays[range.clone()], &lens[range]);
+            let (rays, lens) = (&rays[range.clone()], &lens[range.clone()]);
             let mut write = |i: usize, f: Option<SurfaceHit>| {
                 let (tt, id, nn) = match f {
                     None => (f32::INFINITY, u32::MAX, [0.0; 3]),
@@ -75,26 +83,26 @@ pub fn cast_rays(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: 
             };
             let mut hits: [CandidateHits; PACKET] = std::array::from_fn(|_| CandidateHits::new(xi));
             let query = |i: usize| Query::new(rays[i], 0.0, f32::INFINITY);
-            if !packets {
-                for i in 0..rays.len() {
-                    write(i, surfaces.surface_hit(query(i), &mut hits[0]));
-                }
-                return;
-            }
             let mut found = [None; PACKET];
-            for_each_packet(rays, |idx| {
-                let m = idx.len();
-                if m == 1 {
-                    let i = usize::from(idx[0]);
+            // A ray known to miss, a lone ray, or a packet.
+            let mut trace = |idx: &[u16], miss: bool| match idx {
+                _ if miss => idx.iter().for_each(|&i| write(usize::from(i), None)),
+                &[i] => {
+                    let i = usize::from(i);
                     write(i, surfaces.surface_hit(query(i), &mut hits[0]));
-                    return;
                 }
-                let qs: [Query; PACKET] =
-                    std::array::from_fn(|k| query(usize::from(idx[k.min(m - 1)])));
-                surfaces.surface_hits(&qs[..m], &mut hits[..m], &mut found[..m]);
-                for (&i, f) in idx.iter().zip(&found) {
-                    write(usize::from(i), *f);
+                _ => {
+                    let m = idx.len();
+                    let qs: [Query; PACKET] =
+                        std::array::from_fn(|k| query(usize::from(idx[k.min(m - 1)])));
+                    surfaces.surface_hits(&qs[..m], &mut hits[..m], &mut found[..m]);
+                    for (&i, f) in idx.iter().zip(&found) {
+                        write(usize::from(i), *f);
+                    }
                 }
+            };
+            pieces(&fans, range, |piece, fan| {
+                batches(rays, piece, fan, packets, &mut trace);
             });
         });
 }
@@ -103,8 +111,8 @@ pub fn cast_rays(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: 
 /// surface with `t` in `[t_near, t_far]` (in units of its direction's
 /// length) into `out`: a shadow ray's question, the hits on Phong splats'
 /// discs beyond their curved surfaces' silhouettes passed over (the
-/// scene's [`PassOver`], as the renderer's shadow rays), in packets as
-/// [`cast_rays`] forms them; the answers of one ray at a time.
+/// scene's [`PassOver`], as the renderer's shadow rays), in packets or
+/// fans as [`cast_rays`] forms them; the answers of one ray at a time.
 ///
 /// Panics if `lens` or `out` is shorter than `rays`.
 pub fn occluded(
@@ -120,12 +128,18 @@ pub fn occluded(
     let backend = surfaces.backend;
     let pass = scene.has_phong().then_some(scene as &dyn PassOver);
     let packets = crate::accel::use_packets(backend);
+    // A fan's misses hold from `t >= 0` only.
+    let fans = if t_near >= 0.0 {
+        fans(backend, rays)
+    } else {
+        Vec::new()
+    };
     out[..n]
         .par_chunks_mut(CHUNK)
         .enumerate()
         .for_each(|(c, out)| {
             let range = c * CHUNK..(c * CHUNK + out.len());
-            let (rays, lens) = (&rays[range.clone()], &lens[range]);
+            let (rays, lens) = (&rays[range.clone()], &lens[range.clone()]);
             let query = |i: usize| Query {
                 ray: rays[i],
                 t_min: t_near * lens[i],
@@ -133,28 +147,115 @@ pub fn occluded(
                 from: None,
                 pass,
             };
-            if !packets {
-                for (i, o) in out.iter_mut().enumerate() {
-                    *o = backend.occluded_from(&query(i));
-                }
-                return;
-            }
             let mut got = [false; PACKET];
-            for_each_packet(rays, |idx| {
-                let m = idx.len();
-                if m == 1 {
-                    let i = usize::from(idx[0]);
-                    out[i] = backend.occluded_from(&query(i));
-                    return;
+            let mut trace = |idx: &[u16], miss: bool| match idx {
+                _ if miss => idx.iter().for_each(|&i| out[usize::from(i)] = false),
+                &[i] => out[usize::from(i)] = backend.occluded_from(&query(usize::from(i))),
+                _ => {
+                    let m = idx.len();
+                    let qs: [Query; PACKET] =
+                        std::array::from_fn(|k| query(usize::from(idx[k.min(m - 1)])));
+                    backend.occluded_packet(&qs[..m], &mut got[..m]);
+                    for (&i, g) in idx.iter().zip(&got) {
+                        out[usize::from(i)] = *g;
+                    }
                 }
-                let qs: [Query; PACKET] =
-                    std::array::from_fn(|k| query(usize::from(idx[k.min(m - 1)])));
-                backend.occluded_packet(&qs[..m], &mut got[..m]);
-                for (&i, g) in idx.iter().zip(&got) {
-                    out[usize::from(i)] = *g;
-                }
+            };
+            pieces(&fans, range, |piece, fan| {
+                batches(rays, piece, fan, packets, &mut trace);
             });
         });
+}
+
+/// The rays `piece` of a chunk (indices into `rays`, the chunk's) to
+/// `trace`: with a `fan`, the rays it knows to miss flagged so, one at a
+/// time, the others in packets of one origin and direction signs
+/// ([`by_octant`]); without, in the packets [`for_each_packet`] finds;
+/// without `packets`, one at a time.
+fn batches(
+    rays: &[Ray],
+    piece: Range<usize>,
+    fan: Option<&dyn Fan>,
+    packets: bool,
+    trace: &mut impl FnMut(&[u16], bool),
+) {
+    let Some(fan) = fan else {
+        if packets {
+            for_each_packet(rays, piece, |idx| trace(idx, false));
+        } else {
+            piece.for_each(|i| trace(&[i as u16], false));
+        }
+        return;
+    };
+    let mut left = [0u16; CHUNK];
+    let mut k = 0;
+    for i in piece {
+        if fan.misses(&rays[i]) {
+            trace(&[i as u16], true);
+        } else {
+            left[k] = i as u16;
+            k += 1;
+        }
+    }
+    if packets {
+        by_octant(rays, &left[..k], |idx| trace(idx, false));
+    } else {
+        left[..k].iter().for_each(|&i| trace(&[i], false));
+    }
+}
+
+/// Fewest consecutive rays sharing an origin for which the backend is
+/// asked for a fan ([`crate::accel::Backend::fan`], which may still
+/// decline).
+const FAN_RUN: usize = 4096;
+
+/// The runs of at least [`FAN_RUN`] consecutive rays of `rays` leaving one
+/// origin (bit for bit) for which `backend` builds a fan, each with its
+/// fan, in order (built in parallel).
+fn fans<'b>(backend: &'b dyn Backend, rays: &[Ray]) -> Vec<(Range<usize>, Box<dyn Fan + 'b>)> {
+    let bits = |r: &Ray| r.origin.to_array().map(f32::to_bits);
+    let mut runs = Vec::new();
+    let mut start = 0;
+    while start < rays.len() {
+        let o = bits(&rays[start]);
+        let len = 1 + rays[start + 1..].iter().take_while(|r| bits(r) == o).count();
+        if len >= FAN_RUN {
+            runs.push(start..start + len);
+        }
+        start += len;
+    }
+    runs.into_par_iter()
+        .filter_map(|run| {
+            let fan = backend.fan(&rays[run.clone()])?;
+            Some((run, fan))
+        })
+        .collect()
+}
+
+/// The chunk `range` of a batch cut by the runs of `fans` (sorted, not
+/// overlapping): each piece (relative to the chunk's start, in order)
+/// handed to `each` with the fan of its run, or `None` between runs.
+fn pieces(
+    fans: &[(Range<usize>, Box<dyn Fan + '_>)],
+    range: Range<usize>,
+    mut each: impl FnMut(Range<usize>, Option<&dyn Fan>),
+) {
+    let mut at = range.start;
+    let first = fans.partition_point(|(run, _)| run.end <= at);
+    for (run, fan) in &fans[first..] {
+        if run.start >= range.end {
+            break;
+        }
+        if run.start > at {
+            each(at - range.start..run.start - range.start, None);
+        }
+        let end = run.end.min(range.end);
+        each(at.max(run.start) - range.start..end - range.start, Some(fan.as_ref()));
+        at = end;
+    }
+    if at < range.end {
+        each(at - range.start..range.end - range.start, None);
+    }
 }
 
 /// An optional output cut into the chunks of [`CHUNK`] rays (`per` slots
@@ -166,45 +267,52 @@ fn slots<T: Send>(out: Option<&mut [T]>, per: usize, n: usize) -> Vec<Option<&mu
     }
 }
 
-/// The packets of a chunk (at most [`CHUNK`] rays): each run of
-/// consecutive rays leaving one origin (bit for bit) split by the signs
-/// of their directions (the octree's front-to-back order needs one sign
-/// per axis in a packet), [`PACKET`] rays at a time, each packet's ray
-/// indices handed to `each` (in increasing order); a ray whose origin no
+/// The packets of the rays `range` of a chunk (at most [`CHUNK`] rays):
+/// each run of consecutive rays leaving one origin (bit for bit) split by
+/// the signs of their directions ([`by_octant`]); a ray whose origin no
 /// neighbour shares is handed alone. Every ray is handed exactly once.
-fn for_each_packet(rays: &[Ray], mut each: impl FnMut(&[u16])) {
+fn for_each_packet(rays: &[Ray], range: Range<usize>, mut each: impl FnMut(&[u16])) {
     debug_assert!(rays.len() <= CHUNK);
     let bits = |r: &Ray| r.origin.to_array().map(f32::to_bits);
-    let mut start = 0;
-    while start < rays.len() {
+    let mut start = range.start;
+    while start < range.end {
         let o = bits(&rays[start]);
         let end = start
             + 1
-            + rays[start + 1..]
+            + rays[start + 1..range.end]
                 .iter()
                 .take_while(|r| bits(r) == o)
                 .count();
         if end - start == 1 {
             each(&[start as u16]);
         } else {
-            let mut by = [[0u16; PACKET]; 8];
-            let mut len = [0usize; 8];
-            for (i, r) in rays.iter().enumerate().take(end).skip(start) {
-                let s = octant(r);
-                by[s][len[s]] = i as u16;
-                len[s] += 1;
-                if len[s] == PACKET {
-                    each(&by[s]);
-                    len[s] = 0;
-                }
-            }
-            for (b, &l) in by.iter().zip(&len) {
-                if l > 0 {
-                    each(&b[..l]);
-                }
-            }
+            let idx: [u16; CHUNK] = std::array::from_fn(|k| (start + k) as u16);
+            by_octant(rays, &idx[..end - start], &mut each);
         }
         start = end;
+    }
+}
+
+/// The rays `idx` of a chunk, which share an origin, split by the signs of
+/// their directions (the octree's front-to-back order needs one sign per
+/// axis in a packet), [`PACKET`] rays at a time, each packet's indices
+/// handed to `each` in increasing order.
+fn by_octant(rays: &[Ray], idx: &[u16], mut each: impl FnMut(&[u16])) {
+    let mut by = [[0u16; PACKET]; 8];
+    let mut len = [0usize; 8];
+    for &i in idx {
+        let s = octant(&rays[usize::from(i)]);
+        by[s][len[s]] = i;
+        len[s] += 1;
+        if len[s] == PACKET {
+            each(&by[s]);
+            len[s] = 0;
+        }
+    }
+    for (b, &l) in by.iter().zip(&len) {
+        if l > 0 {
+            each(&b[..l]);
+        }
     }
 }
 
@@ -235,7 +343,7 @@ mod tests {
         rays.extend((0..5).map(|i| Ray::new(other, Vec3::new(1.0, i as f32, 0.5))));
         let mut seen = vec![0; rays.len()];
         let mut sizes = Vec::new();
-        for_each_packet(&rays, |idx| {
+        for_each_packet(&rays, 0..rays.len(), |idx| {
             assert!(!idx.is_empty() && idx.len() <= PACKET);
             let first = &rays[usize::from(idx[0])];
             for &i in idx {

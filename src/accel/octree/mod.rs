@@ -66,6 +66,7 @@
 //! hits anything.
 
 mod build;
+mod fan;
 mod packet;
 mod parts;
 mod traverse;
@@ -404,6 +405,14 @@ impl<P: Primitive> Backend for Octree<P> {
     /// slower, "Issue 25: ray packets").
     fn prefers_packets(&self) -> bool {
         true
+    }
+
+    /// The directions from the rays' origin in which no primitive's
+    /// bounding ball lies (`fan`), for a run of at least 4096 rays and as
+    /// many as the primitives.
+    fn fan(&self, rays: &[crate::geometry::Ray]) -> Option<Box<dyn super::Fan + '_>> {
+        self.build_fan(rays)
+            .map(|f| Box::new(f) as Box<dyn super::Fan>)
     }
 
     fn stats(&self) -> &BuildStats {

@@ -1,0 +1,276 @@
+//! Many primary rays leaving one origin (a camera's, issue 55): the
+//! directions in which no primitive lies, found once for the run
+//! ([`Coverage`], built by [`crate::accel::Backend::fan`]), so a ray
+//! along one of them is known to miss without a descent.
+//!
+//! In the basis `(u, v, w)`, `w` the run's mean direction, a point `p`
+//! (relative to the origin) with `p·w > 0` has the gnomonic coordinates
+//! `(p·u / p·w, p·v / p·w)`, the same for every point of a ray. A
+//! primitive inside a ball of centre `c` and radius `R` lying wholly in
+//! front (`c·w > R`) spans, in `x = p·u / p·w`, exactly the span over the
+//! ball's projection on the `(u, w)` plane, a disc: the two tangents
+//! from the origin bound it, slopes `(c_u c_w ± R sqrt(ρ² - R²)) / (c_w² -
+//! R²)` with `ρ² = c_u² + c_w²`; the same for `y`. So each such primitive
+//! covers a rectangle of the gnomonic plane, and every cell of a uniform
+//! grid its rectangle meets is marked. A ray's direction is one point of
+//! that plane: one cell; a ray starting at `t >= 0` in a cell no rectangle
+//! meets hits nothing. A ball wholly behind (`c·w < -R`) is met by no ray
+//! of the fan; a run with a ball the plane `p·w = 0` cuts (the origin
+//! inside or beside it) gets no fan.
+//!
+//! Why the answers are the octree's, bit for bit (`docs/DESIGN.md`, "The
+//! backend contract", rule 1): only a ray that no primitive's ball can
+//! hold a hit of is answered as a miss; every other ray goes to the
+//! backend as before. `R` is the radius of the primitive's box
+//! (`|half_extent|`) grown by [`MARGIN`] of `|c| + R`: a hit the f32 test
+//! [`Primitive::intersect`] accepts lies on the ray within a few ulps of
+//! `|c| + R` of the true primitive (its `t` and point are rounded, not the
+//! ray), far inside that margin. Rectangles are padded by [`PAD`] for the
+//! f64 arithmetic of the rectangles and of the rays' gnomonic
+//! coordinates, and a ray's cell is found with the same monotone
+//! operations as the rectangles' cells.
+
+use super::{NO_PRIMITIVE, Octree, lanes};
+use crate::accel::Fan;
+use crate::geometry::Ray;
+use crate::primitive::{Pack, Primitive};
+use glam::{DVec3, Vec3};
+
+/// A ball's radius grows by this fraction of `|c| + R` (about 170 ulps of
+/// f32), covering the exact test's rounding.
+const MARGIN: f64 = 1e-5;
+
+/// Rectangles grow by this fraction of `1 + |x0| + |x1|` each way,
+/// covering the f64 arithmetic of rectangles and rays' cells.
+const PAD: f64 = 1e-9;
+
+/// The grid reaches no farther than `d·w = MIN_COS |d|` (about 75° from
+/// `w`) along either axis.
+const MIN_COS: f64 = 0.25;
+
+/// Fewest rays in a run for which a fan is built, and the least ratio of
+/// rays to primitives: fewer do not pay for visiting every primitive.
+const MIN_RAYS: usize = 4096;
+
+/// Rays sampled for the run's mean direction and the grid's extent.
+const SAMPLE: usize = 4096;
+
+/// Rays per cell the grid is sized for (from the sample's extent).
+const RAYS_PER_CELL: f64 = 4.0;
+
+/// Most cells of a grid.
+const MAX_CELLS: usize = 1 << 20;
+
+/// The cells of the gnomonic plane of one origin that some primitive's
+/// ball covers (module doc).
+pub(super) struct Coverage {
+    /// The origin's bits.
+    origin: [u32; 3],
+    u: DVec3,
+    v: DVec3,
+    w: DVec3,
+    /// The grid: lower corner in gnomonic coordinates, cells per unit,
+    /// cells per axis.
+    lo: [f64; 2],
+    scale: f64,
+    n: [usize; 2],
+    /// Per cell (`i + n[0] j`): 1 when some ball covers it.
+    covered: Vec<u8>,
+}
+
+impl<P: Primitive> Octree<P> {
+    /// The coverage of the rays `rays` (sharing their first ray's
+    /// origin), or `None` when it would not pay ([`MIN_RAYS`]) or a ball
+    /// straddles the plane through the origin across the rays.
+    pub(super) fn build_fan(&self, rays: &[Ray]) -> Option<Coverage> {
+        let origin = rays.first()?.origin;
+        let count = self.primitive_count();
+        if rays.len() < MIN_RAYS.max(count) || !origin.is_finite() {
+            return None;
+        }
+        let mut fan = Coverage::frame(origin, rays)?;
+        fan.cover(&self.primitives())?;
+        Some(fan)
+    }
+
+    /// One more than the largest primitive id held.
+    fn primitive_count(&self) -> usize {
+        self.parts
+            .iter()
+            .flat_map(|t| t.pack_ids.iter())
+            .filter(|&&id| id != NO_PRIMITIVE)
+            .max()
+            .map_or(0, |&m| m as usize + 1)
+    }
+
+    /// Every primitive held, once.
+    fn primitives(&self) -> Vec<P> {
+        let mut seen = vec![false; self.primitive_count()];
+        let mut out = Vec::with_capacity(seen.len());
+        let l = lanes::<P>();
+        for tree in &self.parts {
+            for (p, pack) in tree.packs.iter().enumerate() {
+                for (lane, &id) in tree.pack_ids[p * l..(p + 1) * l].iter().enumerate() {
+                    if id != NO_PRIMITIVE && !std::mem::replace(&mut seen[id as usize], true) {
+                        out.push(pack.get(lane, id, &tree.side));
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+impl Coverage {
+    /// The basis and the grid (nothing covered yet): `w` the mean of a sample
+    /// of the rays' unit directions, the grid over the sample's gnomonic
+    /// extent grown by a sixteenth each way, sized for [`RAYS_PER_CELL`].
+    fn frame(origin: Vec3, rays: &[Ray]) -> Option<Coverage> {
+        let step = rays.len().div_ceil(SAMPLE).max(1);
+        let sample = || rays.iter().step_by(step).map(|r| r.dir.as_dvec3());
+        let w = sample()
+            .filter(|d| d.is_finite() && *d != DVec3::ZERO)
+            .map(DVec3::normalize)
+            .sum::<DVec3>()
+            .try_normalize()?;
+        let u = w.any_orthonormal_vector();
+        let v = w.cross(u);
+        let mut lo = [f64::INFINITY; 2];
+        let mut hi = [f64::NEG_INFINITY; 2];
+        let mut taken = 0usize;
+        for d in sample() {
+            let z = d.dot(w);
+            if z > MIN_COS * d.length() {
+                let g = [d.dot(u) / z, d.dot(v) / z];
+                for a in 0..2 {
+                    lo[a] = lo[a].min(g[a]);
+                    hi[a] = hi[a].max(g[a]);
+                }
+                taken += 1;
+            }
+        }
+        if taken * 2 < sample().count() {
+            return None;
+        }
+        let limit = (1.0 - MIN_COS * MIN_COS).sqrt() / MIN_COS;
+        for a in 0..2 {
+            let grow = (hi[a] - lo[a]) / 16.0 + 1e-6;
+            lo[a] = (lo[a] - grow).max(-limit);
+            hi[a] = (hi[a] + grow).min(limit);
+        }
+        let area = (hi[0] - lo[0]) * (hi[1] - lo[1]);
+        let cells = (rays.len() as f64 / RAYS_PER_CELL).clamp(1.0, MAX_CELLS as f64);
+        let mut scale = (cells / area).sqrt();
+        let n = |scale: f64| [0, 1].map(|a| (((hi[a] - lo[a]) * scale).ceil() as usize).max(1));
+        while n(scale)[0] * n(scale)[1] > MAX_CELLS {
+            scale *= 0.9;
+        }
+        Some(Coverage {
+            origin: origin.to_array().map(f32::to_bits),
+            u,
+            v,
+            w,
+            lo,
+            scale,
+            n: n(scale),
+            covered: Vec::new(),
+        })
+    }
+
+    /// The cells `[i0, i1]` along axis `a` of a ball wholly in front
+    /// (centre `cx` across, `cw` along `w`, radius `r`), or `None` when its
+    /// span misses the grid.
+    fn span(&self, cx: f64, cw: f64, r: f64, a: usize) -> Option<[usize; 2]> {
+        let den = cw * cw - r * r;
+        let rho2 = cx * cx + cw * cw;
+        let s = r * (rho2 - r * r).sqrt();
+        let (x0, x1) = ((cx * cw - s) / den, (cx * cw + s) / den);
+        let pad = PAD * (1.0 + x0.abs() + x1.abs());
+        let (i0, i1) = (self.coord(x0 - pad, a), self.coord(x1 + pad, a));
+        // NaN compares false: kept, at every cell of the axis.
+        if i1 < 0.0 || i0 >= self.n[a] as f64 {
+            return None;
+        }
+        let last = self.n[a] - 1;
+        let cell = |i: f64| if i >= 0.0 { (i as usize).min(last) } else { 0 };
+        Some([cell(i0), if i1.is_nan() { last } else { cell(i1) }])
+    }
+
+    /// Gnomonic coordinate `x` on axis `a` in cells from the grid's lower
+    /// corner: the one operation rectangles and rays share (monotone).
+    #[inline(always)]
+    fn coord(&self, x: f64, a: usize) -> f64 {
+        (x - self.lo[a]) * self.scale
+    }
+
+    /// Marks the cells each primitive's ball covers (a difference array
+    /// summed along both axes); `None` when a ball straddles the plane
+    /// `p·w = 0` (or is not finite).
+    fn cover<P: Primitive>(&mut self, prims: &[P]) -> Option<()> {
+        let [nx, ny] = self.n;
+        let o = Vec3::from_array(self.origin.map(f32::from_bits)).as_dvec3();
+        let mut diff = vec![0i32; (nx + 1) * (ny + 1)];
+        for prim in prims {
+            let c = prim.center().as_dvec3() - o;
+            let r = prim.half_extent().as_dvec3().length();
+            let r = r + MARGIN * (c.length() + r);
+            let (cu, cv, cw) = (c.dot(self.u), c.dot(self.v), c.dot(self.w));
+            // Wholly behind: no ray of the fan (`d·w > 0`, `t >= 0`) meets
+            // it. NaN compares false: no fan.
+            if cw < -r {
+                continue;
+            }
+            let in_front = cw > 1.01 * r;
+            if !in_front {
+                return None;
+            }
+            let (Some([i0, i1]), Some([j0, j1])) = (self.span(cu, cw, r, 0), self.span(cv, cw, r, 1))
+            else {
+                continue;
+            };
+            let at = |i: usize, j: usize| i + (nx + 1) * j;
+            diff[at(i0, j0)] += 1;
+            diff[at(i1 + 1, j0)] -= 1;
+            diff[at(i0, j1 + 1)] -= 1;
+            diff[at(i1 + 1, j1 + 1)] += 1;
+        }
+        for j in 0..=ny {
+            for i in 1..=nx {
+                diff[i + (nx + 1) * j] += diff[i - 1 + (nx + 1) * j];
+            }
+        }
+        for j in 1..=ny {
+            for i in 0..=nx {
+                diff[i + (nx + 1) * j] += diff[i + (nx + 1) * (j - 1)];
+            }
+        }
+        self.covered = (0..nx * ny)
+            .map(|c| u8::from(diff[c % nx + (nx + 1) * (c / nx)] != 0))
+            .collect();
+        Some(())
+    }
+}
+
+impl Fan for Coverage {
+    /// True when `ray` leaves the fan's origin within the grid in a cell
+    /// no ball covers.
+    #[inline]
+    fn misses(&self, ray: &Ray) -> bool {
+        if ray.origin.to_array().map(f32::to_bits) != self.origin {
+            return false;
+        }
+        let d = ray.dir.as_dvec3();
+        let z = d.dot(self.w);
+        // NaN compares false. A direction inside the grid lies within
+        // about 75° of `w` ([`MIN_COS`]).
+        let ahead = z > 0.0;
+        if !ahead {
+            return false;
+        }
+        let inv = 1.0 / z;
+        let i = self.coord(d.dot(self.u) * inv, 0);
+        let j = self.coord(d.dot(self.v) * inv, 1);
+        let inside = |i: f64, a: usize| i >= 0.0 && i < self.n[a] as f64;
+        inside(i, 0) && inside(j, 1) && self.covered[i as usize + self.n[0] * j as usize] == 0
+    }
+}
