@@ -548,20 +548,26 @@ fn tiled_runs_carry_clip_lines() {
     );
 }
 
+/// Runs `cmd`, which must succeed.
+fn succeed(cmd: &mut std::process::Command) {
+    let o = cmd.output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
 /// `splat ARGS --report R` through the command line in a process of its
 /// own; the report's (points, peak RSS in bytes, tile points).
 fn splat_report(dir: &Path, name: &str, args: &[&str]) -> (f64, f64, f64) {
     let report = dir.join(format!("{name}.json"));
-    let o = bin()
-        .arg("splat")
-        .args(args)
-        .arg("-o")
-        .arg(dir.join(format!("{name}.ply")))
-        .arg("--report")
-        .arg(&report)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = dir.join(format!("{name}.ply"));
+    succeed(
+        bin()
+            .arg("splat")
+            .args(args)
+            .arg("-o")
+            .arg(out)
+            .arg("--report")
+            .arg(&report),
+    );
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     let f = |k: &str| r[k].as_f64().unwrap_or_else(|| panic!("no {k} in {r}"));
@@ -582,14 +588,13 @@ fn a_tile_takes_the_bytes_a_point_it_is_planned_at() {
     let mut survey = Vec::new();
     for size in ["173", "245"] {
         let out = dir.join(format!("survey-{size}"));
-        let o = bin()
-            .arg("terrain")
-            .arg("-o")
-            .arg(&out)
-            .args(["--size", size])
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        succeed(
+            bin()
+                .arg("terrain")
+                .arg("-o")
+                .arg(&out)
+                .args(["--size", size]),
+        );
         let tiles = out.join("tiles");
         let args = [tiles.to_str().unwrap(), one_tile[0], one_tile[1]];
         survey.push(splat_report(&dir, &format!("survey-{size}"), &args));
@@ -604,14 +609,7 @@ fn a_tile_takes_the_bytes_a_point_it_is_planned_at() {
     let mut bunny = Vec::new();
     for n in ["300000", "600000"] {
         let p = dir.join(format!("bunny-{n}.ply"));
-        let o = bin()
-            .arg("sample")
-            .arg(&mesh)
-            .args(["-n", n, "-o"])
-            .arg(&p)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        succeed(bin().arg("sample").arg(&mesh).args(["-n", n, "-o"]).arg(&p));
         let args = [p.to_str().unwrap(), one_tile[0], one_tile[1]];
         bunny.push(splat_report(&dir, &format!("bunny-{n}"), &args));
     }

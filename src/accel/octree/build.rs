@@ -110,6 +110,7 @@ pub(super) fn build<P: Primitive>(
         references,
         shared,
         isa,
+        count: n,
         stats,
     }
 }

@@ -84,8 +84,7 @@ impl<P: Primitive> Octree<P> {
     /// straddles the plane through the origin across the rays.
     pub(super) fn build_fan(&self, rays: &[Ray]) -> Option<Coverage> {
         let origin = rays.first()?.origin;
-        let count = self.primitive_count();
-        if rays.len() < MIN_RAYS.max(count) || !origin.is_finite() {
+        if rays.len() < MIN_RAYS.max(self.count) || !origin.is_finite() {
             return None;
         }
         let mut fan = Coverage::frame(origin, rays)?;
@@ -93,19 +92,9 @@ impl<P: Primitive> Octree<P> {
         Some(fan)
     }
 
-    /// One more than the largest primitive id held.
-    fn primitive_count(&self) -> usize {
-        self.parts
-            .iter()
-            .flat_map(|t| t.pack_ids.iter())
-            .filter(|&&id| id != NO_PRIMITIVE)
-            .max()
-            .map_or(0, |&m| m as usize + 1)
-    }
-
     /// Every primitive held, once.
     fn primitives(&self) -> Vec<P> {
-        let mut seen = vec![false; self.primitive_count()];
+        let mut seen = vec![false; self.count];
         let mut out = Vec::with_capacity(seen.len());
         let l = lanes::<P>();
         for tree in &self.parts {

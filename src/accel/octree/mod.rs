@@ -254,6 +254,8 @@ pub struct Octree<P: Primitive> {
     shared: bool,
     /// The SIMD path of the leaf filter.
     isa: Isa,
+    /// Primitives the tree was built over (ids `0..count`).
+    count: usize,
     stats: BuildStats,
 }
 
