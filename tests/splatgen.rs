@@ -455,8 +455,10 @@ fn windowed_held_out_coverage_tests_the_window_cores() {
 /// (with a growth cap of 12 k-th neighbour distances alone: 106 and 493).
 #[test]
 fn splat_count_does_not_follow_the_density() {
+    // Growth itself: 160k points would be thinned unasked at this ϵ.
     let params = SplatParams {
         epsilon_rel: 0.03,
+        auto_thin: false,
         ..SplatParams::default()
     };
     let count = |n: usize| {
@@ -523,6 +525,74 @@ fn thinning_keeps_the_surface_and_every_point_on_it() {
         (used - 1.0).abs() < 0.02 && (count - 1.0).abs() < 0.03,
         "{used} {count}"
     );
+}
+
+/// Thinning unasked: a unit sphere of 160k points at `ϵ` 0.03 of its
+/// diagonal (a typical point's cell 0.25 `ϵ` wide holds about 9) is
+/// thinned to about one point a cell, the normals its splats' fields give
+/// as near the sphere's as every point's; 20k points (about 1 a cell) are left whole,
+/// their splats those of `--thin 0` bit for bit.
+#[test]
+fn a_cloud_far_denser_than_epsilon_needs_is_thinned_unasked() {
+    let base = SplatParams {
+        epsilon_rel: 0.03,
+        ..SplatParams::default()
+    };
+    let off = SplatParams {
+        auto_thin: false,
+        ..base.clone()
+    };
+    // Mean angle (degrees) between the normal a ray would see (the splat's
+    // Phong field, eq. 4, at probe points on the sphere, every splat over
+    // them) and the sphere's.
+    let error = |splats: &[Splat]| {
+        let (mut sum, mut tested) = (0f64, 0usize);
+        for q in sphere(2000, Vec3::ZERO, 1.0, 0.7) {
+            for s in splats {
+                let d = q - s.center;
+                let (u, v) = (d.dot(s.u_axis) / s.radii.x, d.dot(s.v_axis) / s.radii.y);
+                if u * u + v * v <= 1.0 && d.dot(s.normal).abs() <= s.radii.x {
+                    sum += f64::from(angle(s.field_normal(u, v), q).to_degrees());
+                    tested += 1;
+                }
+            }
+        }
+        assert!(tested > 2000, "{tested}");
+        sum / tested as f64
+    };
+    let dense = cloud(sphere(160_000, Vec3::ZERO, 1.0, 0.0));
+    let (auto, rep) = generate(&dense, &base).unwrap();
+    let (whole, whole_rep) = generate(&dense, &off).unwrap();
+    let thinned: usize = rep
+        .skipped_points
+        .iter()
+        .filter(|s| s.reason.contains("--thin 0 keeps every point"))
+        .map(|s| s.count)
+        .sum();
+    let (e_auto, e_whole) = (error(&auto), error(&whole));
+    eprintln!(
+        "160k: thinned {thinned}, {} splats (normal error {e_auto:.4}°) against {} ({e_whole:.4}°)",
+        auto.len(),
+        whole.len()
+    );
+    assert!(thinned > 100_000, "{thinned} thinned");
+    assert!(
+        whole_rep.skipped_points.is_empty(),
+        "{:?}",
+        whole_rep.skipped_points
+    );
+    // Measured 0.6475° thinned against 0.6607° whole.
+    assert!(e_auto <= 1.02 * e_whole, "{e_auto} against {e_whole}");
+    let on = count_on_splats(&dense.positions, &auto, rep.epsilon as f32);
+    assert!(
+        on as f64 >= 0.999 * dense.len() as f64,
+        "{on} on the thinned splats"
+    );
+    let sparse = cloud(sphere(20_000, Vec3::ZERO, 1.0, 0.0));
+    let (a, ra) = generate(&sparse, &base).unwrap();
+    let (b, _) = generate(&sparse, &off).unwrap();
+    assert!(ra.skipped_points.is_empty(), "{:?}", ra.skipped_points);
+    assert_eq!(a, b);
 }
 
 /// The held-out coverage of `c` (10 % held out, seed 1: splats regrown

@@ -57,18 +57,10 @@ impl PropertyAccess for PointRow {
         PointRow { v: [f64::NAN; 9] }
     }
     fn set_property(&mut self, name: &str, p: Property) {
-        let (i, val) = match name {
-            "x" => (0, scalar(&p)),
-            "y" => (1, scalar(&p)),
-            "z" => (2, scalar(&p)),
-            "nx" => (3, scalar(&p)),
-            "ny" => (4, scalar(&p)),
-            "nz" => (5, scalar(&p)),
-            "red" | "r" | "diffuse_red" => (6, unit_color(&p)),
-            "green" | "g" | "diffuse_green" => (7, unit_color(&p)),
-            "blue" | "b" | "diffuse_blue" => (8, unit_color(&p)),
-            _ => return,
+        let Some((i, color)) = point_slot(name) else {
+            return;
         };
+        let val = if color { unit_color(&p) } else { scalar(&p) };
         self.v[i] = val.unwrap_or(f64::NAN);
     }
 }
@@ -114,12 +106,7 @@ impl PropertyAccess for SkipRow {
 }
 
 fn scalar_size(t: &ScalarType) -> usize {
-    match t {
-        ScalarType::Char | ScalarType::UChar => 1,
-        ScalarType::Short | ScalarType::UShort => 2,
-        ScalarType::Int | ScalarType::UInt | ScalarType::Float => 4,
-        ScalarType::Double => 8,
-    }
+    Scalar::of(t).size()
 }
 
 /// The fewest bytes a binary element can occupy (lists counted as empty).
@@ -481,6 +468,18 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
     let with_colors = has_any_prop(&file.header, &["red", "r", "diffuse_red"])
         && has_any_prop(&file.header, &["green", "g", "diffuse_green"])
         && has_any_prop(&file.header, &["blue", "b", "diffuse_blue"]);
+    if let Some(columns) = VertexColumns::of(&file) {
+        return columns.cloud(with_normals, with_colors);
+    }
+    cloud_from_rows(file, with_normals, with_colors)
+}
+
+/// [`read_cloud`] through `ply-rs-bw`'s rows: any encoding and layout.
+fn cloud_from_rows(
+    file: PlyFile<'_>,
+    with_normals: bool,
+    with_colors: bool,
+) -> Result<PointCloud, IoErrorKind> {
     let rows = file.read_vertices::<PointRow>()?;
     let world = rows
         .iter()
@@ -500,6 +499,104 @@ pub(crate) fn read_cloud(bytes: &[u8]) -> Result<PointCloud, IoErrorKind> {
             .collect()
     });
     cloud_from_world(world, normals, colors)
+}
+
+/// A binary little-endian vertex element of scalar properties that comes
+/// first in its file: its records are read in place, in parallel, with the
+/// values [`PointRow`] would take (a property's last-named slot wins, as it
+/// does there; the slots are [`PointRow`]'s nine).
+struct VertexColumns<'a> {
+    body: &'a [u8],
+    count: usize,
+    record: usize,
+    /// (offset in the record, type, a colour's normalisation) of each slot.
+    slots: [Option<(usize, Scalar, bool)>; 9],
+}
+
+impl<'a> VertexColumns<'a> {
+    /// `None` when the file is not such a file (ascii, big-endian, a list
+    /// property, another element first): it is read row by row instead.
+    fn of(file: &PlyFile<'a>) -> Option<VertexColumns<'a>> {
+        if file.header.encoding != Encoding::BinaryLittleEndian {
+            return None;
+        }
+        let (name, def) = file.header.elements.get_index(0)?;
+        if name != "vertex" {
+            return None;
+        }
+        let mut slots = [None; 9];
+        let mut record = 0;
+        for (name, p) in &def.properties {
+            let PropertyType::Scalar(t) = &p.data_type else {
+                return None;
+            };
+            let s = Scalar::of(t);
+            if let Some((slot, color)) = point_slot(name) {
+                slots[slot] = Some((record, s, color));
+            }
+            record += s.size();
+        }
+        let bytes = *file.cursor.get_ref();
+        let start = usize::try_from(file.cursor.position()).ok()?;
+        let len = def.count.checked_mul(record)?;
+        let body = bytes.get(start..start.checked_add(len)?)?;
+        Some(VertexColumns {
+            body,
+            count: def.count,
+            record,
+            slots,
+        })
+    }
+
+    /// Slot `i` of every record (NaN where the file has no such property).
+    fn column(&self, i: usize) -> impl Fn(usize) -> f64 + Sync + '_ {
+        move |r| match self.slots[i] {
+            Some((o, s, false)) => s.read(&self.body[r * self.record + o..]),
+            Some((o, s, true)) => s.unit(&self.body[r * self.record + o..]),
+            None => f64::NAN,
+        }
+    }
+
+    fn cloud(&self, with_normals: bool, with_colors: bool) -> Result<PointCloud, IoErrorKind> {
+        use rayon::prelude::*;
+        let v3 = |a: usize| {
+            let (x, y, z) = (self.column(a), self.column(a + 1), self.column(a + 2));
+            move |r: usize| DVec3::new(x(r), y(r), z(r))
+        };
+        let world: Vec<DVec3> = (0..self.count).into_par_iter().map(v3(0)).collect();
+        let normals = with_normals.then(|| {
+            let n = v3(3);
+            (0..self.count).into_par_iter().map(|r| n(r).as_vec3()).collect()
+        });
+        let colors = with_colors.then(|| {
+            let c = v3(6);
+            let lin = |x: f64| srgb_to_linear(if x.is_finite() { x as f32 } else { 0.0 });
+            (0..self.count)
+                .into_par_iter()
+                .map(|r| {
+                    let c = c(r);
+                    Vec3::new(lin(c.x), lin(c.y), lin(c.z))
+                })
+                .collect()
+        });
+        cloud_from_world(world, normals, colors)
+    }
+}
+
+/// [`PointRow`]'s slot for a property name, and whether it is a colour.
+fn point_slot(name: &str) -> Option<(usize, bool)> {
+    Some(match name {
+        "x" => (0, false),
+        "y" => (1, false),
+        "z" => (2, false),
+        "nx" => (3, false),
+        "ny" => (4, false),
+        "nz" => (5, false),
+        "red" | "r" | "diffuse_red" => (6, true),
+        "green" | "g" | "diffuse_green" => (7, true),
+        "blue" | "b" | "diffuse_blue" => (8, true),
+        _ => return None,
+    })
 }
 
 /// Read a PLY mesh: vertices and fan-triangulated faces.
@@ -642,6 +739,18 @@ impl Scalar {
             "double" | "float64" => Scalar::F64,
             _ => return None,
         })
+    }
+    fn of(t: &ScalarType) -> Scalar {
+        match t {
+            ScalarType::Char => Scalar::I8,
+            ScalarType::UChar => Scalar::U8,
+            ScalarType::Short => Scalar::I16,
+            ScalarType::UShort => Scalar::U16,
+            ScalarType::Int => Scalar::I32,
+            ScalarType::UInt => Scalar::U32,
+            ScalarType::Float => Scalar::F32,
+            ScalarType::Double => Scalar::F64,
+        }
     }
     fn size(self) -> usize {
         match self {
@@ -832,4 +941,129 @@ pub(crate) fn stream_binary_ply(
         left -= take as u64;
     }
     Ok(info)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A binary little-endian PLY: a header of `props` (type, name), then
+    /// `n` records of the `value(row, column)` each type holds, then `tail`.
+    fn binary_ply(props: &[(&str, &str)], n: usize, tail: &str, extra: &[u8]) -> Vec<u8> {
+        let mut out = format!("ply\nformat binary_little_endian 1.0\nelement vertex {n}\n");
+        for (t, name) in props {
+            out += &format!("property {t} {name}\n");
+        }
+        out += tail;
+        out += "end_header\n";
+        let mut bytes = out.into_bytes();
+        for r in 0..n {
+            for (c, (t, _)) in props.iter().enumerate() {
+                let v = ((r * 7 + c * 13) % 251) as f64 * 0.37 - 20.0;
+                match *t {
+                    "double" => bytes.extend((1e6 + v * 1.000_001).to_le_bytes()),
+                    "float" if r == 3 && c == 1 => bytes.extend(f32::NAN.to_le_bytes()),
+                    "float" => bytes.extend((v as f32 * 0.01).to_le_bytes()),
+                    "uchar" => bytes.push((r * 31 + c) as u8),
+                    "char" => bytes.push((r * 31 + c) as u8),
+                    "ushort" => bytes.extend(((r * 977 + c) as u16).to_le_bytes()),
+                    "short" => bytes.extend(((r * 977 + c) as i16 - 9000).to_le_bytes()),
+                    "int" => bytes.extend(((r * 99_991) as i32 - 7).to_le_bytes()),
+                    "uint" => bytes.extend(((r * 99_991) as u32).to_le_bytes()),
+                    _ => unreachable!(),
+                }
+            }
+        }
+        bytes.extend_from_slice(extra);
+        bytes
+    }
+
+    fn both(bytes: &[u8]) -> (String, String) {
+        let read = |fast: bool| {
+            let file = PlyFile::open(bytes).unwrap();
+            let n = has_props(&file.header, &["nx", "ny", "nz"]);
+            let c = has_any_prop(&file.header, &["red", "r", "diffuse_red"])
+                && has_any_prop(&file.header, &["green", "g", "diffuse_green"])
+                && has_any_prop(&file.header, &["blue", "b", "diffuse_blue"]);
+            let cloud = if fast {
+                VertexColumns::of(&file).expect("read in place").cloud(n, c)
+            } else {
+                cloud_from_rows(file, n, c)
+            };
+            format!("{:?}", cloud.unwrap())
+        };
+        (read(true), read(false))
+    }
+
+    #[test]
+    fn vertices_read_in_place_are_the_rows_bit_for_bit() {
+        let cases: Vec<Vec<u8>> = vec![
+            // Doubles far from zero, float normals, uchar colours, extras, faces.
+            binary_ply(
+                &[
+                    ("double", "x"),
+                    ("float", "intensity"),
+                    ("double", "y"),
+                    ("double", "z"),
+                    ("float", "nx"),
+                    ("float", "ny"),
+                    ("float", "nz"),
+                    ("uchar", "red"),
+                    ("uchar", "green"),
+                    ("uchar", "blue"),
+                    ("ushort", "label"),
+                ],
+                40,
+                "element face 1\nproperty list uchar int vertex_indices\n",
+                &[3, 0, 0, 0, 0, 1, 0, 0, 0, 2, 0, 0, 0],
+            ),
+            // Every integer type, colours under two names (the last wins),
+            // a NaN coordinate (row 3, column 1) dropped and counted.
+            binary_ply(
+                &[
+                    ("float", "x"),
+                    ("float", "y"),
+                    ("int", "z"),
+                    ("ushort", "red"),
+                    ("short", "g"),
+                    ("char", "diffuse_blue"),
+                    ("uint", "b"),
+                    ("uchar", "diffuse_red"),
+                ],
+                25,
+                "",
+                &[],
+            ),
+            // Positions alone; half a normal (nx) is no normal.
+            binary_ply(
+                &[("float", "x"), ("float", "y"), ("float", "z"), ("float", "nx")],
+                9,
+                "",
+                &[],
+            ),
+        ];
+        for bytes in &cases {
+            let (fast, rows) = both(bytes);
+            assert_eq!(fast, rows);
+        }
+        assert!(both(&cases[1]).0.contains("non-finite"), "{}", both(&cases[1]).0);
+    }
+
+    #[test]
+    fn only_a_first_binary_little_endian_vertex_element_of_scalars_reads_in_place() {
+        let xyz = [("float", "x"), ("float", "y"), ("float", "z")];
+        let ok = binary_ply(&xyz, 4, "", &[]);
+        assert!(VertexColumns::of(&PlyFile::open(&ok).unwrap()).is_some());
+        let xyz_props = "property float x\nproperty float y\nproperty float z\n";
+        let big = format!("ply\nformat binary_big_endian 1.0\nelement vertex 1\n{xyz_props}end_header\n");
+        let big = [big.as_bytes(), &[0; 12]].concat();
+        assert!(VertexColumns::of(&PlyFile::open(&big).unwrap()).is_none());
+        let later = format!(
+            "ply\nformat binary_little_endian 1.0\nelement camera 1\nproperty float k\nelement vertex 1\n{xyz_props}end_header\n"
+        );
+        let later = [later.as_bytes(), &[0; 16]].concat();
+        assert!(VertexColumns::of(&PlyFile::open(&later).unwrap()).is_none());
+        let list = binary_ply(&xyz, 0, "property list uchar int extra\n", &[]);
+        assert!(VertexColumns::of(&PlyFile::open(&list).unwrap()).is_none());
+    }
 }

@@ -69,8 +69,12 @@ pub struct SplatParams {
     pub epsilon_abs: Option<f64>,
     /// Thin the cloud to one point per cell this many `ϵ` wide where it is
     /// denser (see [`super::thin`]; default [`super::thin::CELL_EPS`]);
-    /// 0 keeps every point.
+    /// 0 keeps every point, or thins unasked with `auto_thin`.
     pub thin: f64,
+    /// With `thin` 0: thin at [`super::thin::AUTO_CELL_EPS`] a cloud whose
+    /// typical point's cell holds [`super::thin::AUTO_POINTS`] or more
+    /// points (default on; `--thin 0` turns it off).
+    pub auto_thin: bool,
     /// Fit a linear colour field to each splat of a coloured cloud
     /// ([`super::color`], by [`super::color::fit_cloud`], the step after
     /// generation; default on): texture finer than a splat is kept to
@@ -149,6 +153,7 @@ impl Default for SplatParams {
             remove_outliers: true,
             epsilon_abs: None,
             thin: 0.0,
+            auto_thin: true,
             color_fields: true,
             creases: Creases::Auto,
         }
@@ -864,7 +869,10 @@ fn start_report(cloud: &PointCloud) -> SplatReport {
 /// The points of the unit cloud `unit` kept, in the order growth visits
 /// them: finite, not duplicates, and with `params.thin`, one per cell
 /// `thin` ε wide (cells in the cloud's own units, `raw`, so tiles and the
-/// whole cloud cut alike); what was left out is counted in the report.
+/// whole cloud cut alike), or unasked (`params.auto_thin`) one per cell
+/// [`super::thin::AUTO_CELL_EPS`] ε wide when a typical point's cell holds
+/// [`super::thin::AUTO_POINTS`] or more; what was left out is counted in
+/// the report.
 fn clean_and_thin(
     unit: &PointCloud,
     raw: &PointCloud,
@@ -883,22 +891,33 @@ fn clean_and_thin(
             });
         }
     }
-    if params.thin > 0.0 && order.len() > 3 {
+    if order.len() > 3 && (params.thin > 0.0 || params.auto_thin) {
         let epsilon = match params.epsilon_abs {
             Some(e) => e,
             None => f64::from(params.epsilon_rel) * robust_diagonal(&raw.positions, &order),
         };
         let world = |i: u32| raw.origin + raw.positions[i as usize].as_dvec3();
-        if let Some(keep) =
-            super::thin::keep(&order, raw.positions.len(), world, params.thin * epsilon)
-        {
+        let (cell, why) = if params.thin > 0.0 {
+            let why = format!(
+                "denser than epsilon needs: one point kept per cell {} epsilon wide",
+                params.thin
+            );
+            (params.thin, why)
+        } else {
+            let (auto, at_least) = (super::thin::AUTO_CELL_EPS, super::thin::AUTO_POINTS);
+            if super::thin::typical_cell_count(&order, world, auto * epsilon) < at_least {
+                return order;
+            }
+            let why = format!(
+                "denser than epsilon needs (a typical point's cell {auto} epsilon wide held {at_least} or more): one point kept per cell; --thin 0 keeps every point"
+            );
+            (auto, why)
+        };
+        if let Some(keep) = super::thin::keep(&order, raw.positions.len(), world, cell * epsilon) {
             let before = order.len();
             order.retain(|&i| keep[i as usize]);
             report.skipped_points.push(Skipped {
-                reason: format!(
-                    "denser than epsilon needs: one point kept per cell {} epsilon wide",
-                    params.thin
-                ),
+                reason: why,
                 count: before - order.len(),
             });
         }

@@ -30,7 +30,8 @@ pub struct GenerationOptions {
     pub viewpoint: Option<DVec3>,
     /// Ignore the cloud's own viewpoint (or its scanners' positions).
     pub no_viewpoint: bool,
-    /// Keep one point per cell this many ϵ wide (default: every point).
+    /// Keep one point per cell this many ϵ wide (default: a cloud far
+    /// denser than ϵ needs is thinned unasked; 0 keeps every point).
     pub thin: Option<f64>,
 }
 
@@ -67,6 +68,7 @@ impl GenerationOptions {
             creases: self.creases.map_or(defaults.creases, Creases::from_bool),
             scan_viewpoints: !self.no_viewpoint,
             thin: self.thin.unwrap_or(defaults.thin),
+            auto_thin: self.thin.is_none(),
             ..defaults
         }
     }

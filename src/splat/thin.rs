@@ -21,6 +21,63 @@ use rayon::prelude::*;
 /// Cell width in `ϵ`.
 pub const CELL_EPS: f64 = 0.5;
 
+/// Cell width in `ϵ` of the thinning a cloud gets unasked
+/// ([`typical_cell_count`]): at 100M points sampled from the bunny mesh,
+/// thinning at 0.25 `ϵ` cost nothing against the mesh (31.93 → 31.99 dB);
+/// at 10M noisy points, whose typical cell holds about 3, it cost 0.5 dB.
+pub const AUTO_CELL_EPS: f64 = 0.25;
+
+/// A cloud is thinned unasked when the cell [`AUTO_CELL_EPS`] `ϵ` wide of
+/// a typical point holds at least this many points.
+pub const AUTO_POINTS: usize = 8;
+
+/// Points sampled by [`typical_cell_count`].
+const SAMPLE: usize = 4096;
+
+/// How many points the cell `cell` wide of a typical point of `indices`
+/// holds (the point itself included): the median over about [`SAMPLE`]
+/// points taken at even steps through `indices`, each counted against
+/// every point. Costs one pass over the points, a binary search each.
+#[must_use]
+pub fn typical_cell_count(indices: &[u32], world: impl Fn(u32) -> DVec3 + Sync, cell: f64) -> usize {
+    if !(cell.is_finite() && cell > 0.0) || indices.is_empty() {
+        return 0;
+    }
+    let key = |i: u32| {
+        let c = (world(i) / cell).floor();
+        [c.x as i64, c.y as i64, c.z as i64]
+    };
+    let stride = indices.len().div_ceil(SAMPLE).max(1);
+    let sampled: Vec<[i64; 3]> = indices.iter().step_by(stride).map(|&i| key(i)).collect();
+    let mut probes = sampled.clone();
+    probes.sort_unstable();
+    probes.dedup();
+    let counts = indices
+        .par_chunks(1 << 14)
+        .map(|chunk| {
+            let mut counts = vec![0usize; probes.len()];
+            for &i in chunk {
+                if let Ok(at) = probes.binary_search(&key(i)) {
+                    counts[at] += 1;
+                }
+            }
+            counts
+        })
+        .reduce(
+            || vec![0usize; probes.len()],
+            |mut a, b| {
+                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+                a
+            },
+        );
+    let mut held: Vec<usize> = sampled
+        .iter()
+        .map(|k| counts[probes.binary_search(k).unwrap_or(0)])
+        .collect();
+    let mid = held.len() / 2;
+    *held.select_nth_unstable(mid).1
+}
+
 /// Bits per axis of a packed cell key.
 const KEY_BITS: u32 = 21;
 
@@ -123,6 +180,25 @@ mod tests {
             .collect();
         let k2 = keep(&idx, p.len(), |i| far[i as usize], 1.0).unwrap();
         assert_eq!(k, k2);
+    }
+
+    #[test]
+    fn a_typical_cell_is_counted() {
+        use super::typical_cell_count;
+        // A 100 x 100 grid 0.1 apart in cells 1 wide: 100 points a cell.
+        let grid: Vec<DVec3> = (0..10_000)
+            .map(|i| DVec3::new((i % 100) as f64 * 0.1 + 0.05, (i / 100) as f64 * 0.1 + 0.05, 0.5))
+            .collect();
+        let idx: Vec<u32> = (0..grid.len() as u32).collect();
+        assert_eq!(typical_cell_count(&idx, |i| grid[i as usize], 1.0), 100);
+        assert_eq!(typical_cell_count(&idx, |i| grid[i as usize], 0.05), 1);
+        // Three quarters of the points in one cell: it is the typical one.
+        let mut lumped = grid.clone();
+        for p in lumped.iter_mut().take(7_500) {
+            *p = DVec3::new(0.5, 0.5, 0.5) + (*p - DVec3::new(5.0, 5.0, 0.5)) * 1e-3;
+        }
+        assert_eq!(typical_cell_count(&idx, |i| lumped[i as usize], 1.0), 7_500);
+        assert_eq!(typical_cell_count(&[], |i| grid[i as usize], 1.0), 0);
     }
 
     #[test]
