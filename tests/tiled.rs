@@ -644,3 +644,65 @@ fn a_tile_takes_the_bytes_a_point_it_is_planned_at() {
         without.2
     );
 }
+
+/// Tiles of a cloud far denser than `ϵ` needs (1M bunny points at 6
+/// times the default `ϵ`: a typical point's cell 0.25 `ϵ` wide holds
+/// about 14) are thinned unasked, each alike, and the run says how many
+/// points it left out; `--thin 0` keeps every point.
+#[test]
+fn a_tiled_cloud_far_denser_than_epsilon_needs_is_thinned_and_says_so() {
+    let dir = scratch("tiled-thin");
+    let p = dir.join("dense.ply");
+    let mesh = data("bunny-mesh.ply");
+    succeed(
+        bin()
+            .arg("sample")
+            .arg(&mesh)
+            .args(["-n", "1000000", "-o"])
+            .arg(&p),
+    );
+    let run = |name: &str, extra: &[&str]| {
+        let report = dir.join(format!("{name}.json"));
+        let o = bin()
+            .arg("splat")
+            .arg(&p)
+            .args(["--epsilon", "0.012", "--tile-points", "300000", "-o"])
+            .arg(dir.join(format!("{name}.ply")))
+            .arg("--report")
+            .arg(&report)
+            .args(extra)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).to_string();
+        assert!(o.status.success(), "{err}");
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        let tiles = r["tiles"].as_array().unwrap().clone();
+        let thinned: u64 = tiles.iter().map(|t| t["thinned"].as_u64().unwrap()).sum();
+        let thinned_tiles = tiles
+            .iter()
+            .filter(|t| t["thinned"].as_u64() > Some(0))
+            .count();
+        (
+            err,
+            thinned,
+            thinned_tiles,
+            tiles.len(),
+            r["spilled"].as_u64().unwrap(),
+        )
+    };
+    let (err, thinned, thinned_tiles, tiles, spilled) = run("auto", &[]);
+    eprintln!("{thinned} of {spilled} spilled points thinned in {thinned_tiles} of {tiles} tiles");
+    assert!(tiles > 1, "{tiles} tiles");
+    assert_eq!(thinned_tiles, tiles);
+    assert!(thinned > spilled / 2, "{thinned} of {spilled}");
+    assert!(
+        err.contains(&format!(
+            "note: thinned {thinned} of the {spilled} spilled points"
+        )),
+        "{err}"
+    );
+    let (err, thinned, _, _, _) = run("whole", &["--thin", "0"]);
+    assert_eq!(thinned, 0);
+    assert!(!err.contains("thinned"), "{err}");
+}

@@ -203,7 +203,8 @@ fn print_generated(args: &SplatArgs, p: &PointsOutcome) {
         eprintln!("splatray: warning: {w}");
     }
     for s in &report.skipped_points {
-        // Thinning is asked for (--thin): a note, not a warning.
+        // Thinning (asked for, or unasked where the cloud is far denser
+        // than epsilon needs): a note, not a warning.
         let kind = if s.reason.starts_with("denser than") {
             "note: thinned"
         } else {
@@ -345,6 +346,14 @@ fn print_merged(args: &SplatArgs, report: &TiledReport) {
         eprintln!("splatray: note: held-out coverage is not measured in tiled generation");
     }
     let resumed = report.tiles.iter().filter(|t| t.resumed).count();
+    let thinned: u64 = report.tiles.iter().map(|t| t.thinned).sum();
+    if thinned > 0 {
+        eprintln!(
+            "splatray: note: thinned {thinned} of the {} spilled points: denser than epsilon needs, \
+             one point kept per cell (--thin 0 keeps every point)",
+            report.spilled
+        );
+    }
     if report.flipped_tiles > 0 {
         eprintln!(
             "splatray: note: {} tiles had turned their piece of the surface the other way from their \

@@ -47,6 +47,10 @@ pub struct TileSummary {
     pub resumed: bool,
     /// Its generation's warnings.
     pub warnings: Vec<String>,
+    /// Points its generation left out as denser than `ϵ` needs (`--thin`,
+    /// or unasked: `crate::splat::thin`).
+    #[serde(default)]
+    pub thinned: u64,
 }
 
 /// What tiled generation reports.

@@ -68,6 +68,10 @@ pub(super) fn generate_tile(
                 let (splats, mut fields) = (g.splats, g.color_fields);
                 summary.grown = splats.len();
                 summary.warnings = g.report.warnings;
+                summary.thinned = (g.report.skipped_points.iter())
+                    .filter(|s| s.reason.starts_with("denser than"))
+                    .map(|s| s.count as u64)
+                    .sum();
                 fields.resize(splats.len(), ColorField::ZERO);
                 for (s, f) in splats.into_iter().zip(fields) {
                     let world = cloud.origin + s.center.as_dvec3();
