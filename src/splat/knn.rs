@@ -940,8 +940,7 @@ fn least_first(keys: &mut [u64], m: usize, pivot: u64) {
     let mut below = 0;
     for i in 0..keys.len() {
         let k = keys[i];
-        keys[i] = keys[below];
-        keys[below] = k;
+        keys.swap(i, below);
         below += usize::from(k <= pivot);
     }
     match below.cmp(&m) {
