@@ -10,7 +10,9 @@
 //! operations per lane in the same order (no fused multiply-add), so every
 //! path passes exactly the lanes the portable one does and the candidates
 //! stay bit-identical (the conformance suite builds the octree on every
-//! path this CPU runs and compares).
+//! path this CPU runs and compares). The face search's count of the points
+//! near a plane ([`count_within`], the normals stage's hottest loop) is
+//! dispatched the same way, and counts the same points on every path.
 //!
 //! The path is AVX2 where the CPU runs it ([`default_path`] says why not
 //! AVX-512), or the one named by [`SIMD_VAR`] (`portable`, `avx2`,
@@ -20,7 +22,9 @@
 //! for a given path ([`crate::accel::octree::OctreeParams::simd`]), which is
 //! how the registry's `octree-<path>` variants force each one.
 
+mod count;
 mod tri;
+pub use count::count_within;
 pub use tri::{SURE, Shear, TRI_LANES, TriColumns, tri_masks, tri_masks_sheared};
 
 /// The environment variable that forces a path for the whole process

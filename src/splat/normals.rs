@@ -619,20 +619,6 @@ impl Lanes {
         }
     }
 
-    /// [`Lanes::count`] from the points' offsets from the plane's origin
-    /// (`Lanes::offsets_from`): the same products and sums.
-    fn count_offsets(dx: &[f32], dy: &[f32], dz: &[f32], normal: Vec3, tol: f32) -> usize {
-        let (nx, ny, nz) = (normal.x, normal.y, normal.z);
-        dx.iter()
-            .zip(dy)
-            .zip(dz)
-            .map(|((x, y), z)| {
-                let h = (nx * x) + (ny * y) + (nz * z);
-                u32::from(h.abs() <= tol)
-            })
-            .sum::<u32>() as usize
-    }
-
     /// Which of the points (up to [`HELD_BITS`]) lie within `tol` of the
     /// plane through `origin` with unit `normal`, as a bit set: the test of
     /// [`Lanes::count`], point by point, without a branch.
@@ -665,8 +651,11 @@ impl Lanes {
 /// holding the most, most first, ties in the order of the triples. The
 /// offsets of `lanes`' points from each triple's first point are taken
 /// once for all the triples through it (the differences `Lanes::count`
-/// takes, bit for bit).
+/// takes, bit for bit), and counted on the process's SIMD path
+/// ([`crate::simd::count_within`]: the same products and sums, eight
+/// points at a time on AVX2).
 fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
+    let isa = crate::config::current().simd;
     let mut best: Vec<FacePlane> = Vec::with_capacity(FACE_REFITS + 1);
     let len = lanes.xs.len();
     let mut offsets = vec![0f32; 3 * len];
@@ -683,7 +672,7 @@ fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
                     continue;
                 }
                 let normal = c.normalize();
-                let held = Lanes::count_offsets(dx, dy, dz, normal, tol);
+                let held = crate::simd::count_within(dx, dy, dz, normal.to_array(), tol, isa);
                 // After every candidate holding as many (a stable order):
                 // past the last of a full list, not kept.
                 if best.len() == FACE_REFITS && best[FACE_REFITS - 1].held >= held {
@@ -1597,18 +1586,18 @@ pub fn sheet_of(
     let m = if m.dot(normal) < 0.0 { -m } else { m };
     let c = c.as_vec3();
     let height = |x: &(f32, u32)| m.dot(at(x) - c);
+    // The own side's heights along the refitted normal, each taken once
+    // (in place of the sorted heights, read no more).
+    for x in &mut h[lo_g..hi_g] {
+        x.0 = height(x);
+    }
+    let own = &h[lo_g..hi_g];
     let count = own.len() as f32;
-    let mean = own.iter().map(height).sum::<f32>() / count;
-    let sd = (own
-        .iter()
-        .map(|x| (height(x) - mean) * (height(x) - mean))
-        .sum::<f32>()
-        / count)
-        .sqrt();
+    let mean = own.iter().map(|x| x.0).sum::<f32>() / count;
+    let sd = (own.iter().map(|x| (x.0 - mean) * (x.0 - mean)).sum::<f32>() / count).sqrt();
     let (own_lo, own_hi) = own
         .iter()
-        .map(height)
-        .fold((f32::MAX, f32::MIN), |(a, b), x| (a.min(x), b.max(x)));
+        .fold((f32::MAX, f32::MIN), |(a, b), x| (a.min(x.0), b.max(x.0)));
     let need = d1.max(SHEET_GAP_SPREAD * sd);
     let mut sheet = Sheet {
         axis: m,
