@@ -9,29 +9,43 @@
 
 use super::Isa;
 
-/// How many of the offsets `(dx[i], dy[i], dz[i])` have a height
-/// `(n_x d_x + n_y d_y) + n_z d_z` of at most `tol` in magnitude along
-/// `normal`, on the path `isa` (AVX-512 takes the AVX2 kernel; a path the
-/// CPU does not run is replaced by the portable loop, which counts the
-/// same). The three slices must be equally long.
-#[must_use]
+/// For each of `normals`, into `out` (as long), how many of the offsets
+/// `(dx[i], dy[i], dz[i])` have a height `(n_x d_x + n_y d_y) + n_z d_z` of
+/// at most `tol` in magnitude along it, on the path `isa` (AVX-512 takes
+/// the AVX2 kernel; a path the CPU does not run is replaced by the
+/// portable loop, which counts the same). The three slices must be equally
+/// long; a multiple of eight is counted eight at a time throughout (pad
+/// with NaN, which no path counts).
 #[inline]
-pub fn count_within(dx: &[f32], dy: &[f32], dz: &[f32], normal: [f32; 3], tol: f32, isa: Isa) -> usize {
+pub fn count_within(
+    dx: &[f32],
+    dy: &[f32],
+    dz: &[f32],
+    normals: &[[f32; 3]],
+    tol: f32,
+    isa: Isa,
+    out: &mut [u32],
+) {
     let n = dx.len();
     let (dy, dz) = (&dy[..n], &dz[..n]);
+    let out = &mut out[..normals.len()];
     match isa {
         #[cfg(target_arch = "x86_64")]
         Isa::Avx2 | Isa::Avx512 if Isa::Avx2.supported() => {
             // SAFETY: the guard checked that the CPU runs AVX2.
-            unsafe { avx2_count(dx, dy, dz, normal, tol) }
+            unsafe { avx2_count(dx, dy, dz, normals, tol, out) }
         }
-        _ => portable_count(dx, dy, dz, normal, tol),
+        _ => {
+            for (o, &normal) in out.iter_mut().zip(normals) {
+                *o = portable_count(dx, dy, dz, normal, tol);
+            }
+        }
     }
 }
 
-/// The portable loop of [`count_within`].
+/// The portable loop of [`count_within`] for one normal.
 #[inline]
-fn portable_count(dx: &[f32], dy: &[f32], dz: &[f32], normal: [f32; 3], tol: f32) -> usize {
+fn portable_count(dx: &[f32], dy: &[f32], dz: &[f32], normal: [f32; 3], tol: f32) -> u32 {
     let [nx, ny, nz] = normal;
     dx.iter()
         .zip(dy)
@@ -40,45 +54,50 @@ fn portable_count(dx: &[f32], dy: &[f32], dz: &[f32], normal: [f32; 3], tol: f32
             let h = (nx * x) + (ny * y) + (nz * z);
             u32::from(h.abs() <= tol)
         })
-        .sum::<u32>() as usize
+        .sum::<u32>()
 }
 
-/// [`count_within`] on AVX2: eight offsets a step, the rest by the
-/// portable loop.
+/// [`count_within`] on AVX2: eight offsets a step, the rest (past the last
+/// multiple of eight) by the portable loop.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn avx2_count(dx: &[f32], dy: &[f32], dz: &[f32], normal: [f32; 3], tol: f32) -> usize {
+fn avx2_count(dx: &[f32], dy: &[f32], dz: &[f32], normals: &[[f32; 3]], tol: f32, out: &mut [u32]) {
     use std::arch::x86_64::*;
     let n = dx.len();
     let wide = n - n % 8;
-    let (nx, ny, nz) = (
-        _mm256_set1_ps(normal[0]),
-        _mm256_set1_ps(normal[1]),
-        _mm256_set1_ps(normal[2]),
-    );
     let (tol8, sign) = (_mm256_set1_ps(tol), _mm256_set1_ps(-0.0));
-    let mut count = 0u32;
-    let mut i = 0;
-    while i < wide {
-        // SAFETY: `i + 8 <= wide <= n`, and `dy` and `dz` are `n` long
-        // (`count_within` cut them), so each unaligned load reads eight
-        // floats inside its slice.
-        let (x, y, z) = unsafe {
-            (
-                _mm256_loadu_ps(dx.as_ptr().add(i)),
-                _mm256_loadu_ps(dy.as_ptr().add(i)),
-                _mm256_loadu_ps(dz.as_ptr().add(i)),
-            )
-        };
-        let h = _mm256_add_ps(
-            _mm256_add_ps(_mm256_mul_ps(nx, x), _mm256_mul_ps(ny, y)),
-            _mm256_mul_ps(nz, z),
+    for (o, &normal) in out.iter_mut().zip(normals) {
+        let (nx, ny, nz) = (
+            _mm256_set1_ps(normal[0]),
+            _mm256_set1_ps(normal[1]),
+            _mm256_set1_ps(normal[2]),
         );
-        let within = _mm256_cmp_ps::<_CMP_LE_OQ>(_mm256_andnot_ps(sign, h), tol8);
-        count += (_mm256_movemask_ps(within) as u32).count_ones();
-        i += 8;
+        let mut count = 0u32;
+        let mut i = 0;
+        while i < wide {
+            // SAFETY: `i + 8 <= wide <= n`, and `dy` and `dz` are `n` long
+            // (`count_within` cut them), so each unaligned load reads eight
+            // floats inside its slice.
+            let (x, y, z) = unsafe {
+                (
+                    _mm256_loadu_ps(dx.as_ptr().add(i)),
+                    _mm256_loadu_ps(dy.as_ptr().add(i)),
+                    _mm256_loadu_ps(dz.as_ptr().add(i)),
+                )
+            };
+            let h = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(nx, x), _mm256_mul_ps(ny, y)),
+                _mm256_mul_ps(nz, z),
+            );
+            let within = _mm256_cmp_ps::<_CMP_LE_OQ>(_mm256_andnot_ps(sign, h), tol8);
+            count += (_mm256_movemask_ps(within) as u32).count_ones();
+            i += 8;
+        }
+        if wide < n {
+            count += portable_count(&dx[wide..], &dy[wide..], &dz[wide..], normal, tol);
+        }
+        *o = count;
     }
-    count as usize + portable_count(&dx[wide..], &dy[wide..], &dz[wide..], normal, tol)
 }
 
 #[cfg(test)]
@@ -121,7 +140,9 @@ mod tests {
                 };
                 let want = portable_count(&d[0], &d[1], &d[2], normal, tol);
                 for isa in super::super::available() {
-                    assert_eq!(count_within(&d[0], &d[1], &d[2], normal, tol, isa), want, "{isa} at {len}");
+                    let mut got = [0u32; 2];
+                    count_within(&d[0], &d[1], &d[2], &[normal; 2], tol, isa, &mut got);
+                    assert_eq!(got, [want; 2], "{isa} at {len}");
                     checked += 1;
                 }
                 if r == 0 {

@@ -657,12 +657,17 @@ impl Lanes {
 fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
     let isa = crate::config::current().simd;
     let mut best: Vec<FacePlane> = Vec::with_capacity(FACE_REFITS + 1);
-    let len = lanes.xs.len();
-    let mut offsets = vec![0f32; 3 * len];
+    // The offsets padded with NaN to a multiple of eight lanes (counted by
+    // no path).
+    let len = lanes.xs.len().div_ceil(8) * 8;
+    let mut offsets = vec![f32::NAN; 3 * len];
+    let (mut planes, mut held) = (Vec::new(), Vec::new());
     for (a, &pa) in near.iter().enumerate() {
         let (dx, rest) = offsets.split_at_mut(len);
         let (dy, dz) = rest.split_at_mut(len);
         lanes.offsets_from(pa, dx, dy, dz);
+        // The planes through `pa` and two later points, in order.
+        planes.clear();
         for (b, &pb) in near.iter().enumerate().skip(a + 1) {
             for &pc in &near[b + 1..] {
                 let (u, v) = (pb - pa, pc - pa);
@@ -671,25 +676,29 @@ fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
                 if c.length_squared() < 0.04 * u.length_squared() * v.length_squared() {
                     continue;
                 }
-                let normal = c.normalize();
-                let held = crate::simd::count_within(dx, dy, dz, normal.to_array(), tol, isa);
-                // After every candidate holding as many (a stable order):
-                // past the last of a full list, not kept.
-                if best.len() == FACE_REFITS && best[FACE_REFITS - 1].held >= held {
-                    continue;
-                }
-                let at = best.partition_point(|f| f.held >= held);
-                best.insert(
-                    at,
-                    FacePlane {
-                        normal,
-                        origin: pa,
-                        held,
-                        fit: 0.0,
-                    },
-                );
-                best.truncate(FACE_REFITS);
+                planes.push(c.normalize().to_array());
             }
+        }
+        held.resize(planes.len(), 0);
+        crate::simd::count_within(dx, dy, dz, &planes, tol, isa, &mut held);
+        for (&normal, &held) in planes.iter().zip(&held) {
+            let held = held as usize;
+            // After every candidate holding as many (a stable order):
+            // past the last of a full list, not kept.
+            if best.len() == FACE_REFITS && best[FACE_REFITS - 1].held >= held {
+                continue;
+            }
+            let at = best.partition_point(|f| f.held >= held);
+            best.insert(
+                at,
+                FacePlane {
+                    normal: Vec3::from_array(normal),
+                    origin: pa,
+                    held,
+                    fit: 0.0,
+                },
+            );
+            best.truncate(FACE_REFITS);
         }
     }
     best
