@@ -256,9 +256,18 @@ pub fn height_fit(
 /// rows of `AᵀA` are summed two at a time from their diagonal on (few
 /// sums live at once, in adjacent pairs), and the lower triangle is the
 /// mirror of the upper, bit for bit what summing it would give (each
-/// product `a·b` equals `b·a`).
-#[allow(clippy::needless_range_loop)] // index form mirrors the matrix
+/// product `a·b` equals `b·a`). On AVX2 every entry is summed four at a
+/// time ([`crate::simd::normal_equations6`]), bit for bit these sums.
 pub(crate) fn normal_equations(rows: &[([f64; 6], f64)]) -> ([[f64; 6]; 6], [f64; 6]) {
+    // The process's SIMD path where it has a kernel: the same sums.
+    crate::simd::normal_equations6(rows, crate::config::current().simd)
+        .unwrap_or_else(|| mirrored_sums(rows))
+}
+
+/// [`normal_equations`] on the portable path: the upper triangle's sums,
+/// two matrix rows at a time, mirrored.
+#[allow(clippy::needless_range_loop)] // index form mirrors the matrix
+fn mirrored_sums(rows: &[([f64; 6], f64)]) -> ([[f64; 6]; 6], [f64; 6]) {
     let mut ata = [[0f64; 6]; 6];
     let mut atb = [0f64; 6];
     for r in [0, 2, 4] {
@@ -490,9 +499,9 @@ mod tests {
                     ([1.0, x, y, x * x, x * y, y * y], t())
                 })
                 .collect();
-            let got = normal_equations(&rows);
             let want = normal_equations_whole(&rows);
-            assert_eq!(bits(&got), bits(&want), "{len} rows");
+            assert_eq!(bits(&normal_equations(&rows)), bits(&want), "{len} rows");
+            assert_eq!(bits(&mirrored_sums(&rows)), bits(&want), "{len} rows, portable");
         }
     }
 }

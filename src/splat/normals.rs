@@ -619,20 +619,6 @@ impl Lanes {
         }
     }
 
-    /// [`Lanes::count`] from the points' offsets from the plane's origin
-    /// (`Lanes::offsets_from`): the same products and sums.
-    fn count_offsets(dx: &[f32], dy: &[f32], dz: &[f32], normal: Vec3, tol: f32) -> usize {
-        let (nx, ny, nz) = (normal.x, normal.y, normal.z);
-        dx.iter()
-            .zip(dy)
-            .zip(dz)
-            .map(|((x, y), z)| {
-                let h = (nx * x) + (ny * y) + (nz * z);
-                u32::from(h.abs() <= tol)
-            })
-            .sum::<u32>() as usize
-    }
-
     /// Which of the points (up to [`HELD_BITS`]) lie within `tol` of the
     /// plane through `origin` with unit `normal`, as a bit set: the test of
     /// [`Lanes::count`], point by point, without a branch.
@@ -665,15 +651,23 @@ impl Lanes {
 /// holding the most, most first, ties in the order of the triples. The
 /// offsets of `lanes`' points from each triple's first point are taken
 /// once for all the triples through it (the differences `Lanes::count`
-/// takes, bit for bit).
+/// takes, bit for bit), and counted on the process's SIMD path
+/// ([`crate::simd::count_within`]: the same products and sums, eight
+/// points at a time on AVX2).
 fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
+    let isa = crate::config::current().simd;
     let mut best: Vec<FacePlane> = Vec::with_capacity(FACE_REFITS + 1);
-    let len = lanes.xs.len();
-    let mut offsets = vec![0f32; 3 * len];
+    // The offsets padded with NaN to a multiple of eight lanes (counted by
+    // no path).
+    let len = lanes.xs.len().div_ceil(8) * 8;
+    let mut offsets = vec![f32::NAN; 3 * len];
+    let (mut planes, mut held) = (Vec::new(), Vec::new());
     for (a, &pa) in near.iter().enumerate() {
         let (dx, rest) = offsets.split_at_mut(len);
         let (dy, dz) = rest.split_at_mut(len);
         lanes.offsets_from(pa, dx, dy, dz);
+        // The planes through `pa` and two later points, in order.
+        planes.clear();
         for (b, &pb) in near.iter().enumerate().skip(a + 1) {
             for &pc in &near[b + 1..] {
                 let (u, v) = (pb - pa, pc - pa);
@@ -682,25 +676,29 @@ fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
                 if c.length_squared() < 0.04 * u.length_squared() * v.length_squared() {
                     continue;
                 }
-                let normal = c.normalize();
-                let held = Lanes::count_offsets(dx, dy, dz, normal, tol);
-                // After every candidate holding as many (a stable order):
-                // past the last of a full list, not kept.
-                if best.len() == FACE_REFITS && best[FACE_REFITS - 1].held >= held {
-                    continue;
-                }
-                let at = best.partition_point(|f| f.held >= held);
-                best.insert(
-                    at,
-                    FacePlane {
-                        normal,
-                        origin: pa,
-                        held,
-                        fit: 0.0,
-                    },
-                );
-                best.truncate(FACE_REFITS);
+                planes.push(c.normalize().to_array());
             }
+        }
+        held.resize(planes.len(), 0);
+        crate::simd::count_within(dx, dy, dz, &planes, tol, isa, &mut held);
+        for (&normal, &held) in planes.iter().zip(&held) {
+            let held = held as usize;
+            // After every candidate holding as many (a stable order):
+            // past the last of a full list, not kept.
+            if best.len() == FACE_REFITS && best[FACE_REFITS - 1].held >= held {
+                continue;
+            }
+            let at = best.partition_point(|f| f.held >= held);
+            best.insert(
+                at,
+                FacePlane {
+                    normal: Vec3::from_array(normal),
+                    origin: pa,
+                    held,
+                    fit: 0.0,
+                },
+            );
+            best.truncate(FACE_REFITS);
         }
     }
     best
@@ -1597,18 +1595,18 @@ pub fn sheet_of(
     let m = if m.dot(normal) < 0.0 { -m } else { m };
     let c = c.as_vec3();
     let height = |x: &(f32, u32)| m.dot(at(x) - c);
+    // The own side's heights along the refitted normal, each taken once
+    // (in place of the sorted heights, read no more).
+    for x in &mut h[lo_g..hi_g] {
+        x.0 = height(x);
+    }
+    let own = &h[lo_g..hi_g];
     let count = own.len() as f32;
-    let mean = own.iter().map(height).sum::<f32>() / count;
-    let sd = (own
-        .iter()
-        .map(|x| (height(x) - mean) * (height(x) - mean))
-        .sum::<f32>()
-        / count)
-        .sqrt();
+    let mean = own.iter().map(|x| x.0).sum::<f32>() / count;
+    let sd = (own.iter().map(|x| (x.0 - mean) * (x.0 - mean)).sum::<f32>() / count).sqrt();
     let (own_lo, own_hi) = own
         .iter()
-        .map(height)
-        .fold((f32::MAX, f32::MIN), |(a, b), x| (a.min(x), b.max(x)));
+        .fold((f32::MAX, f32::MIN), |(a, b), x| (a.min(x.0), b.max(x.0)));
     let need = d1.max(SHEET_GAP_SPREAD * sd);
     let mut sheet = Sheet {
         axis: m,
