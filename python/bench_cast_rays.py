@@ -4,8 +4,11 @@ from, and the Python call's overhead against the Rust call at 1M rays.
 
     python python/bench_cast_rays.py [--rays 1000000] [--points 200000] [--camera 1024]
 
-Rows: random rays (from a sphere around the model), and --camera^2
-pinhole rays from one eye (sharing an origin: packets), each through
+Rows: random rays from a sphere around the model, aimed near its
+centre; random rays as issue 55 defines them (origins uniform in the
+splats' bounding box, directions normal-distributed: many start inside
+the model); and --camera^2 pinhole rays from one eye (sharing an
+origin: packets), each through
 cast_rays with every output, with the distance alone (when the package
 has optional outputs) and through occluded.
 
@@ -52,6 +55,14 @@ def rays_around(centre: np.ndarray, radius: float, n: int, seed: int = 1) -> np.
     return np.hstack([o, target - o]).astype(np.float32)
 
 
+def rays_in_box(lo: np.ndarray, hi: np.ndarray, n: int, seed: int = 7) -> np.ndarray:
+    """n rays with origins uniform in the box [lo, hi] and normal-distributed
+    directions (issue 55's random rays)."""
+    rng = np.random.default_rng(seed)
+    o = rng.uniform(lo, hi, size=(n, 3))
+    return np.hstack([o, rng.normal(size=(n, 3))]).astype(np.float32)
+
+
 def camera_rays(centre: np.ndarray, radius: float, side: int) -> np.ndarray:
     """side x side pinhole rays (40 degrees) from one eye at 2 radii from
     the centre, looking at it, row after row (they share an origin)."""
@@ -89,6 +100,7 @@ def main() -> None:
     centre = (c.min(0) + c.max(0)) / 2
     radius = float(np.linalg.norm(c.max(0) - c.min(0)))
     rays = rays_around(centre, radius, a.rays)
+    boxed = rays_in_box(c.min(0), c.max(0), a.rays)
     print(f"{len(cloud)} points -> {len(splats)} splats; {a.rays} rays")
     for backend in ("octree", "embree"):
         ss = splatray.SplatScene(splats, backend)
@@ -116,7 +128,7 @@ def main() -> None:
             t_only = lambda r: ss.cast_rays(r, splat_ids=False, normals=False)  # noqa: E731
         except TypeError:  # a package without optional outputs
             t_only = None
-        rows = [("random", rays)]
+        rows = [("random", rays), ("random in box", boxed)]
         if a.camera:
             rows.append((f"camera {a.camera}^2", camera_rays(centre, radius, a.camera)))
         for label, r in rows:
@@ -139,6 +151,9 @@ def main() -> None:
           f"(hits {100 * hits:.1f} %)")
     print(f"    {'random':14s}: cast_rays {a.rays / o3 / 1e6:6.2f}, "
           f"test_occlusions {mrays(lambda: scene.test_occlusions(t), a.rays, a.repeat):6.2f} Mrays/s")
+    b = o3d.core.Tensor(boxed)
+    print(f"    {'random in box':14s}: cast_rays {mrays(lambda: scene.cast_rays(b), a.rays, a.repeat):6.2f}, "
+          f"test_occlusions {mrays(lambda: scene.test_occlusions(b), a.rays, a.repeat):6.2f} Mrays/s")
     if a.camera:
         c = o3d.core.Tensor(camera_rays(centre, radius, a.camera))
         n = a.camera * a.camera

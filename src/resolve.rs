@@ -239,6 +239,15 @@ pub fn resolve_models(
 ) -> Option<Resolved> {
     let all = hits.as_slice();
     let nearest = all.first()?;
+    // The window's splats are read below one after another, each read
+    // waiting on branches decided by the one before: ask for them all
+    // first, so their loads from memory overlap (random rays meet them
+    // cold; `docs/notes/backends.md`, "Issue 55, twelfth session").
+    for c in all {
+        if let Some(s) = splats.get(c.id as usize) {
+            crate::simd::prefetch(s);
+        }
+    }
     // Whether a candidate is passed over: decided only where it matters,
     // for the candidates up to the first that is not and for those that
     // would otherwise blend.

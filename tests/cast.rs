@@ -71,7 +71,7 @@ fn rays() -> (Vec<Ray>, Vec<f32>) {
 fn batch_casts_are_one_ray_at_a_time_bit_for_bit() {
     let scene = scene();
     let (rays, lens) = rays();
-    let n = rays.len();
+    let (apart, apart_lens) = scattered();
     for name in common::renderers() {
         let info = splatray::accel::registry::find(name).unwrap();
         let backend = info.build_splats(&scene.splats).unwrap();
@@ -79,77 +79,105 @@ fn batch_casts_are_one_ray_at_a_time_bit_for_bit() {
             scene: &scene,
             backend: backend.as_ref(),
         };
-        // One ray at a time.
-        let mut h = splatray::accel::CandidateHits::new(scene.options.scale.xi);
-        let want: Vec<_> = rays
-            .iter()
-            .map(|r| s.surface_hit(Query::new(*r, 0.0, f32::INFINITY), &mut h))
-            .collect();
-        let hits = want.iter().filter(|w| w.is_some()).count();
-        assert!(hits > n / 3 && hits < n, "{name}: {hits} of {n} hit");
-        let (mut t, mut ids, mut normals) = (vec![0.0; n], vec![0; n], vec![0.0; 3 * n]);
-        cast_rays(
-            &s,
-            &rays,
-            &lens,
-            CastOutputs {
-                t: &mut t,
-                ids: Some(&mut ids),
-                normals: Some(&mut normals),
-            },
-        );
-        for (i, w) in want.iter().enumerate() {
-            let (tt, id, nn) = match w {
-                None => (f32::INFINITY, u32::MAX, [0.0; 3]),
-                Some(h) => (h.t / lens[i], h.id, h.normal.to_array()),
-            };
-            assert_eq!(t[i].to_bits(), tt.to_bits(), "{name}: ray {i}'s t");
-            assert_eq!(ids[i], id, "{name}: ray {i}'s splat");
-            let got: [f32; 3] = normals[3 * i..3 * i + 3].try_into().unwrap();
-            assert_eq!(
-                got.map(f32::to_bits),
-                nn.map(f32::to_bits),
-                "{name}: ray {i}"
-            );
-        }
-        // The distance alone: the same distances.
-        let mut t_only = vec![0.0; n];
-        cast_rays(
-            &s,
-            &rays,
-            &lens,
-            CastOutputs {
-                t: &mut t_only,
-                ids: None,
-                normals: None,
-            },
-        );
-        assert!(
-            t.iter()
-                .zip(&t_only)
-                .all(|(a, b)| a.to_bits() == b.to_bits())
-        );
-        // Occlusion within a span, against one query at a time.
-        let pass = scene.has_phong().then_some(&scene as &dyn PassOver);
-        let span = (0.1f32, 2.0f32);
-        let mut blocked = vec![false; n];
-        occluded(&s, &rays, &lens, span, &mut blocked);
-        let mut some = 0;
-        for (i, r) in rays.iter().enumerate() {
-            let q = Query {
-                ray: *r,
-                t_min: span.0 * lens[i],
-                t_max: span.1 * lens[i],
-                from: None,
-                pass,
-            };
-            let one = backend.occluded_from(&q);
-            assert_eq!(blocked[i], one, "{name}: ray {i} occluded");
-            some += usize::from(one);
-        }
         // Measured: 727 of 8444 on the octree.
-        assert!(some > n / 20 && some < n, "{name}: {some} of {n} occluded");
+        agrees(name, &s, &rays, &lens);
+        agrees(&format!("{name}, scattered"), &s, &apart, &apart_lens);
     }
+}
+
+/// 6000 rays from scattered origins (no two sharing one), as [`rays`]'
+/// middle part: a batch `render::cast` traces in the order of its
+/// origins' cells (issue 55, twelfth session).
+fn scattered() -> (Vec<Ray>, Vec<f32>) {
+    let mut rng = SplitMix64::new(12);
+    let mut r = |a: f32, b: f32| a + (b - a) * rng.next_f32();
+    let rays: Vec<Ray> = (0..6000)
+        .map(|_| {
+            let o = Vec3::new(r(-3.0, 3.0), r(-0.5, 3.0), r(-3.0, 3.0));
+            let to = Vec3::new(r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0));
+            Ray::new(o, (to - o) * r(0.3, 3.0))
+        })
+        .collect();
+    let lens = rays.iter().map(|ray| ray.dir.length()).collect();
+    (rays, lens)
+}
+
+/// `cast_rays` and `occluded` of the batch `rays` (directions of length
+/// `lens`) on `s` against one ray at a time, bit for bit, with every
+/// output and with the distance alone; a third or more of the rays hit,
+/// a twentieth or more are occluded within the span.
+fn agrees(name: &str, s: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32]) {
+    let (scene, backend) = (s.scene, s.backend);
+    let n = rays.len();
+    // One ray at a time.
+    let mut h = splatray::accel::CandidateHits::new(scene.options.scale.xi);
+    let want: Vec<_> = rays
+        .iter()
+        .map(|r| s.surface_hit(Query::new(*r, 0.0, f32::INFINITY), &mut h))
+        .collect();
+    let hits = want.iter().filter(|w| w.is_some()).count();
+    assert!(hits > n / 3 && hits < n, "{name}: {hits} of {n} hit");
+    let (mut t, mut ids, mut normals) = (vec![0.0; n], vec![0; n], vec![0.0; 3 * n]);
+    cast_rays(
+        s,
+        rays,
+        lens,
+        CastOutputs {
+            t: &mut t,
+            ids: Some(&mut ids),
+            normals: Some(&mut normals),
+        },
+    );
+    for (i, w) in want.iter().enumerate() {
+        let (tt, id, nn) = match w {
+            None => (f32::INFINITY, u32::MAX, [0.0; 3]),
+            Some(h) => (h.t / lens[i], h.id, h.normal.to_array()),
+        };
+        assert_eq!(t[i].to_bits(), tt.to_bits(), "{name}: ray {i}'s t");
+        assert_eq!(ids[i], id, "{name}: ray {i}'s splat");
+        let got: [f32; 3] = normals[3 * i..3 * i + 3].try_into().unwrap();
+        assert_eq!(
+            got.map(f32::to_bits),
+            nn.map(f32::to_bits),
+            "{name}: ray {i}"
+        );
+    }
+    // The distance alone: the same distances.
+    let mut t_only = vec![0.0; n];
+    cast_rays(
+        s,
+        rays,
+        lens,
+        CastOutputs {
+            t: &mut t_only,
+            ids: None,
+            normals: None,
+        },
+    );
+    assert!(
+        t.iter()
+            .zip(&t_only)
+            .all(|(a, b)| a.to_bits() == b.to_bits())
+    );
+    // Occlusion within a span, against one query at a time.
+    let pass = scene.has_phong().then_some(scene as &dyn PassOver);
+    let span = (0.1f32, 2.0f32);
+    let mut blocked = vec![false; n];
+    occluded(s, rays, lens, span, &mut blocked);
+    let mut some = 0;
+    for (i, r) in rays.iter().enumerate() {
+        let q = Query {
+            ray: *r,
+            t_min: span.0 * lens[i],
+            t_max: span.1 * lens[i],
+            from: None,
+            pass,
+        };
+        let one = backend.occluded_from(&q);
+        assert_eq!(blocked[i], one, "{name}: ray {i} occluded");
+        some += usize::from(one);
+    }
+    assert!(some > n / 20 && some < n, "{name}: {some} of {n} occluded");
 }
 
 /// Rays from `eye`: a 240×180 pinhole grid looking at `at` (the run's
