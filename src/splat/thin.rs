@@ -43,10 +43,7 @@ pub fn typical_cell_count(indices: &[u32], world: impl Fn(u32) -> DVec3 + Sync, 
     if !(cell.is_finite() && cell > 0.0) || indices.is_empty() {
         return 0;
     }
-    let key = |i: u32| {
-        let c = (world(i) / cell).floor();
-        [c.x as i64, c.y as i64, c.z as i64]
-    };
+    let key = |i: u32| cell_of(world(i), cell);
     let stride = indices.len().div_ceil(SAMPLE).max(1);
     let sampled: Vec<[i64; 3]> = indices.iter().step_by(stride).map(|&i| key(i)).collect();
     let mut probes = sampled.clone();
@@ -81,6 +78,13 @@ pub fn typical_cell_count(indices: &[u32], world: impl Fn(u32) -> DVec3 + Sync, 
 /// Bits per axis of a packed cell key.
 const KEY_BITS: u32 = 21;
 
+/// The cell `cell` wide holding `p` (cells aligned to the coordinates'
+/// zero).
+fn cell_of(p: DVec3, cell: f64) -> [i64; 3] {
+    let c = (p / cell).floor();
+    [c.x as i64, c.y as i64, c.z as i64]
+}
+
 /// Which of `indices` to keep: `keep[i]` for every `i` in `indices` (the
 /// positions `world(i)` in the cloud's coordinates, f64), cutting space into
 /// cells `cell` wide. `None` when nothing would be thinned, or when the
@@ -98,10 +102,7 @@ pub fn keep(
     }
     let cells: Vec<[i64; 3]> = indices
         .par_iter()
-        .map(|&i| {
-            let c = (world(i) / cell).floor();
-            [c.x as i64, c.y as i64, c.z as i64]
-        })
+        .map(|&i| cell_of(world(i), cell))
         .collect();
     let mut lo = [i64::MAX; 3];
     let mut hi = [i64::MIN; 3];
