@@ -15,7 +15,7 @@ use crate::accel::octree::{Octree, OctreeParams};
 use crate::accel::{Backend, CandidateHits, Ray};
 use crate::primitive::{ClippedDisc, Disc, Primitive};
 use crate::splat::knn::{PointTree, build_tree};
-use crate::splat::{PointCloud, Splat, SplatParams, SplatReport, Viewpoints, outliers};
+use crate::splat::{PointCloud, Splat, SplatParams, SplatReport, Viewpoints};
 use crate::{Error, Result};
 use glam::{Vec2, Vec3};
 use kiddo::SquaredEuclidean;
@@ -95,6 +95,18 @@ pub fn sight_line(viewpoint: Vec3, point: Vec3) -> Option<(Ray, f32)> {
     ))
 }
 
+/// What one line of sight met in a pass: the first splat on it (short of
+/// its point by more than the margin; [`NO_SPLAT`] for none) and, where
+/// that splat blocks it, the blocking hit (see [`blocked`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Sight {
+    first: u32,
+    block: Option<(u32, Vec2)>,
+}
+
+/// [`Sight::first`] of a line that meets no splat.
+const NO_SPLAT: u32 = u32::MAX;
+
 /// For every point, the first splat blocking its line of sight (more than
 /// `margin` in front of it, see [`MARGIN_ALONG`]), with the hit's
 /// normalised disc coordinates; only when some splat stands within
@@ -108,42 +120,18 @@ pub fn sight_line(viewpoint: Vec3, point: Vec3) -> Option<(Ray, f32)> {
 /// that see the surface").
 ///
 /// Then, for every miss of `misses` (a ray from their one viewpoint that
-/// met nothing), the first splat it meets, if any.
+/// met nothing), the first splat it meets, if any. Lines are numbered
+/// points first, then misses; with `only`, just those lines are cast, in
+/// its order.
 fn blocked(
     splats: &[Splat],
     points: &[Vec3],
     vp: &Viewpoints,
     misses: &Misses,
     margin: f32,
-) -> Vec<Option<(u32, Vec2)>> {
+    only: Option<&[u32]>,
+) -> Vec<Sight> {
     let octree = octree_of(splats);
-    let mut lines: Vec<_> = points
-        .par_iter()
-        .enumerate()
-        .with_min_len(512)
-        .map_init(
-            || CandidateHits::new(0.0),
-            |hits, (i, &p)| {
-                let (ray, d) = sight_line(vp.at(i), p)?;
-                let t_max = d - margin;
-                if t_max <= 0.0 {
-                    return None;
-                }
-                octree.intersect(&ray, 0.0, t_max, hits);
-                let h = hits.nearest()?;
-                let depth = d - h.t;
-                let cos = splats[h.id as usize].normal.dot(ray.dir).abs();
-                let blocks =
-                    depth > margin && (depth * cos > margin || depth > MARGIN_ALONG * margin);
-                if !blocks {
-                    return None;
-                }
-                let q = (h.id, Vec2::new(h.u, h.v));
-                octree.intersect(&ray, d - margin, d + margin, hits);
-                (!hits.is_empty()).then_some(q)
-            },
-        )
-        .collect();
     // In a coloured cloud a ray that met nothing is checked against whole
     // discs: a splat its clip lines let pass stands at the capture's border
     // or hole, and shrinks as a whole disc would. Its lines already cut the
@@ -165,25 +153,75 @@ fn blocked(
         Some(o) => o,
         None => octree.as_ref(),
     };
-    lines.par_extend(
-        misses
-            .dirs
+    let cast = |hits: &mut CandidateHits, i: usize| -> Sight {
+        let none = Sight {
+            first: NO_SPLAT,
+            block: None,
+        };
+        let Some(&p) = points.get(i) else {
+            let k = i - points.len();
+            let ray = Ray {
+                origin: misses.origin(k),
+                dir: misses.dirs[k],
+            };
+            past.intersect(&ray, 0.0, f32::INFINITY, hits);
+            return hits.nearest().map_or(none, |h| Sight {
+                first: h.id,
+                block: Some((h.id, Vec2::new(h.u, h.v))),
+            });
+        };
+        let Some((ray, d)) = sight_line(vp.at(i), p) else {
+            return none;
+        };
+        let t_max = d - margin;
+        if t_max <= 0.0 {
+            return none;
+        }
+        octree.intersect(&ray, 0.0, t_max, hits);
+        let Some(h) = hits.nearest() else {
+            return none;
+        };
+        let depth = d - h.t;
+        let cos = splats[h.id as usize].normal.dot(ray.dir).abs();
+        let blocks = depth > margin && (depth * cos > margin || depth > MARGIN_ALONG * margin);
+        let (first, q) = (h.id, (h.id, Vec2::new(h.u, h.v)));
+        if !blocks {
+            return Sight { first, block: None };
+        }
+        octree.intersect(&ray, d - margin, d + margin, hits);
+        Sight {
+            first,
+            block: (!hits.is_empty()).then_some(q),
+        }
+    };
+    let init = || CandidateHits::new(0.0);
+    match only {
+        Some(lines) => lines
             .par_iter()
-            .enumerate()
             .with_min_len(512)
-            .map_init(
-                || CandidateHits::new(0.0),
-                |hits, (k, &dir)| {
-                    let ray = Ray {
-                        origin: misses.origin(k),
-                        dir,
-                    };
-                    past.intersect(&ray, 0.0, f32::INFINITY, hits);
-                    hits.nearest().map(|h| (h.id, Vec2::new(h.u, h.v)))
-                },
-            ),
-    );
-    lines
+            .map_init(init, |hits, &i| cast(hits, i as usize))
+            .collect(),
+        None => (0..points.len() + misses.dirs.len())
+            .into_par_iter()
+            .with_min_len(512)
+            .map_init(init, cast)
+            .collect(),
+    }
+}
+
+/// The lines whose [`Sight`] may differ once the splats marked `changed`
+/// have shrunk: those blocked, and those whose first splat is one of them.
+/// Every other line keeps its sight, because a shrink only takes hits
+/// away: a line that met no splat meets none, and one whose first splat
+/// is unchanged meets it first again, blocks or not as before, and (not
+/// blocking) stays unblocked.
+fn to_recast(sights: &[Sight], changed: &[bool]) -> Vec<u32> {
+    sights
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.block.is_some() || (s.first != NO_SPLAT && changed[s.first as usize]))
+        .map(|(i, _)| i as u32)
+        .collect()
 }
 
 /// The octree over `splats`' discs that trimming casts lines of sight
@@ -373,15 +411,22 @@ pub fn trim(
     if splats.is_empty() || points.is_empty() {
         return report;
     }
-    let tree = build_tree(points);
+    // The points' tree, for the holes a shrink would open; built when
+    // something is first shrunk.
+    let mut tree: Option<PointTree> = None;
     // Splats a shrink would have holed (see [`opened_holes`]): kept whole,
     // never shrunk again.
     let mut kept = vec![false; splats.len()];
+    // Each pass casts only the lines a shrink of the pass before can have
+    // changed ([`to_recast`]); the first casts them all.
+    let mut sights = blocked(splats, points, viewpoint, misses, margin, None);
     for pass in 0..PASSES {
-        let b = blocked(splats, points, viewpoint, misses, margin);
-        let count = b.iter().flatten().count();
+        let count = sights.iter().filter(|s| s.block.is_some()).count();
         if pass == 0 {
-            report.misses_blocked = b[points.len()..].iter().flatten().count();
+            report.misses_blocked = sights[points.len()..]
+                .iter()
+                .filter(|s| s.block.is_some())
+                .count();
             report.blocked = count - report.misses_blocked;
             if report.blocked as f64 > IMPLAUSIBLE * points.len() as f64 {
                 report.skipped = true;
@@ -396,8 +441,8 @@ pub fn trim(
         // One shrink per splat per pass, away from its most central
         // violation (the one that needs the largest cut).
         let mut worst: Vec<Option<(Vec2, usize)>> = vec![None; splats.len()];
-        for (i, v) in b.into_iter().enumerate() {
-            let Some((id, q)) = v else { continue };
+        for (i, s) in sights.iter().enumerate() {
+            let Some((id, q)) = s.block else { continue };
             let w = &mut worst[id as usize];
             if !kept[id as usize] && w.is_none_or(|(o, _)| q.length() < o.length()) {
                 *w = Some((q, i));
@@ -415,29 +460,35 @@ pub fn trim(
             report.still_blocked = count;
             return report;
         }
-        let holes = opened_holes(splats, &cut, points, &tree, viewpoint, misses, margin);
+        let tree = tree.get_or_insert_with(|| build_tree(points));
+        let holes = opened_holes(splats, &cut, points, tree, viewpoint, misses, margin);
+        let mut changed = vec![false; splats.len()];
         for (&(id, before, _), hole) in cut.iter().zip(holes) {
             if hole {
                 splats[id] = before;
                 kept[id] = true;
                 report.kept_whole += 1;
             } else {
+                changed[id] = true;
                 report.shrunk += 1;
             }
         }
+        let again = to_recast(&sights, &changed);
+        let recast = blocked(splats, points, viewpoint, misses, margin, Some(&again));
+        for (&i, s) in again.iter().zip(recast) {
+            sights[i as usize] = s;
+        }
     }
-    report.still_blocked = blocked(splats, points, viewpoint, misses, margin)
-        .iter()
-        .flatten()
-        .count();
+    report.still_blocked = sights.iter().filter(|s| s.block.is_some()).count();
     report
 }
 
 /// Free-space trimming, the pipeline's stage after growth
 /// ([`crate::pipeline::generate`]): when the parameters carry a viewpoint,
 /// `splats` (generated from `cloud` with `params`, `report` their report)
-/// are trimmed against the cloud's lines of sight (its outliers left out,
-/// as generation leaves them out). `None` without a viewpoint.
+/// are trimmed against the cloud's lines of sight, those of `outliers`
+/// (indices into `cloud`: the points generation left out as statistical
+/// outliers) left out. `None` without a viewpoint.
 ///
 /// # Errors
 /// A viewpoint that is not finite.
@@ -446,6 +497,7 @@ pub(crate) fn trim_free_space(
     params: &SplatParams,
     splats: &mut [Splat],
     report: &mut SplatReport,
+    outliers: &[u32],
     progress: Option<crate::progress::Progress<'_>>,
 ) -> Result<Option<TrimReport>> {
     let Some(vp) = crate::splat::viewpoints_of(cloud, params) else {
@@ -467,11 +519,10 @@ pub(crate) fn trim_free_space(
         }));
     }
     crate::progress::notify(progress, "free space", 0.0);
-    let flags = if params.remove_outliers {
-        outliers::find(&cloud.positions, report.k.max(1), Some(&vp))
-    } else {
-        vec![false; cloud.len()]
-    };
+    let mut flags = vec![false; cloud.len()];
+    for &i in outliers {
+        flags[i as usize] = true;
+    }
     let drop: Vec<bool> = cloud
         .positions
         .iter()
@@ -646,5 +697,51 @@ mod tests {
         );
         assert_eq!(r.still_blocked, 0, "{r:?}");
         assert!(holes(&splats) > 0);
+    }
+
+    /// Recasting only the lines [`to_recast`] names after shrinks gives
+    /// every line the sight casting them all again gives: the blocked
+    /// lines, and one whose first splat, at a grazing angle and not
+    /// blocking, was shrunk off it, uncovering a blocking one behind.
+    #[test]
+    fn recasting_the_lines_a_shrink_touched_is_casting_them_all() {
+        let (mut splats, mut points) = scene(Vec3::new(0.03, 0.02, -0.5));
+        // Outside the square: its line passes beside it.
+        let p = Vec3::new(2.0, 0.0, -1.0);
+        let (ray, d) = sight_line(EYE, p).unwrap();
+        splats.extend(Splat::disc(p, Vec3::Z, 0.02));
+        let grazing = splats.len();
+        let tilted = Vec3::new(1.0, 0.0, 0.1);
+        splats.extend(Splat::disc(ray.at(d - 0.009), tilted, 0.05));
+        splats.extend(Splat::disc(ray.at(d - 0.007), Vec3::Z, 0.05));
+        points.push(p);
+        let line = points.len() - 1;
+        let (vp, misses) = (Viewpoints::One(EYE), Misses::default());
+        let before = blocked(&splats, &points, &vp, &misses, MARGIN, None);
+        assert_eq!(before[line].first, grazing as u32);
+        assert_eq!(before[line].block, None);
+        let blocked_before = before.iter().filter(|s| s.block.is_some()).count();
+        assert_eq!(blocked_before, 1);
+        let mut changed = vec![false; splats.len()];
+        shrink_away(&mut splats[grazing], Vec2::ZERO);
+        changed[grazing] = true;
+        for s in &before {
+            if let Some((id, q)) = s.block {
+                shrink_away(&mut splats[id as usize], q);
+                changed[id as usize] = true;
+            }
+        }
+        let all = blocked(&splats, &points, &vp, &misses, MARGIN, None);
+        let again = to_recast(&before, &changed);
+        let mut partial = before.clone();
+        let recast = blocked(&splats, &points, &vp, &misses, MARGIN, Some(&again));
+        for (&i, s) in again.iter().zip(recast) {
+            partial[i as usize] = s;
+        }
+        assert_eq!(partial, all);
+        assert_eq!(all[line].first, grazing as u32 + 1);
+        assert!(all[line].block.is_some());
+        // The blocked line and the grazing splat's, of 1,682.
+        assert_eq!(again.len(), 2, "{} lines", points.len());
     }
 }

@@ -17,14 +17,15 @@
 //! 6. colour fields, where the cloud has colours and the parameters ask
 //!    for them (`colors`, [`crate::splat::color`]).
 //!
-//! Stages 1–4 are [`crate::splat::generate_with_progress`]. Reading comes
+//! Stages 1–4 are [`crate::splat::generate_with_progress`]; trimming leaves
+//! out the lines of sight of the points stage 1 left out as outliers. Reading comes
 //! before (the caller's `read` seconds) and the held-out check after
 //! (`validate::holdout`, which grows its own splats through this entry).
 
 use crate::freespace::{TrimReport, trim_free_space};
 use crate::progress::{Progress, notify};
 use crate::splat::color::{ColorField, fit_cloud};
-use crate::splat::{PointCloud, Splat, SplatParams, SplatReport, generate_with_progress};
+use crate::splat::{PointCloud, Splat, SplatParams, SplatReport, generate_stages};
 use crate::{Error, Result};
 use std::time::Instant;
 
@@ -77,10 +78,10 @@ fn run(
     colours: bool,
     progress: Option<Progress<'_>>,
 ) -> Result<Generated> {
-    let (mut splats, mut report) =
-        generate_with_progress(cloud, params, progress).map_err(Error::from)?;
+    let (mut splats, mut report, outliers) =
+        generate_stages(cloud, params, progress).map_err(Error::from)?;
     let t0 = Instant::now();
-    let trim = trim_free_space(cloud, params, &mut splats, &mut report, progress)?;
+    let trim = trim_free_space(cloud, params, &mut splats, &mut report, &outliers, progress)?;
     let t1 = Instant::now();
     let (color_fields, constant_color_fields) =
         if colours && params.color_fields && cloud.colors.is_some() {

@@ -502,6 +502,17 @@ pub fn generate_with_progress(
     params: &SplatParams,
     progress: Option<Progress<'_>>,
 ) -> Result<(Vec<Splat>, SplatReport), GenerateError> {
+    generate_stages(cloud, params, progress).map(|(splats, report, _)| (splats, report))
+}
+
+/// [`generate_with_progress`], and the points it left out as statistical
+/// outliers (indices into `cloud`, ascending): free-space trimming leaves
+/// the same points' lines of sight out.
+pub(crate) fn generate_stages(
+    cloud: &PointCloud,
+    params: &SplatParams,
+    progress: Option<Progress<'_>>,
+) -> Result<(Vec<Splat>, SplatReport, Vec<u32>), GenerateError> {
     let t0 = Instant::now();
     check_params(params)?;
     let raw = cloud;
@@ -513,7 +524,8 @@ pub fn generate_with_progress(
     let (cloud, params) = (&unit_cloud, &unit_params);
     let mut report = start_report(cloud);
     notify(progress, "neighbours", 0.0);
-    let w = graph_stage(cloud, raw, params, &mut report)?;
+    let mut w = graph_stage(cloud, raw, params, &mut report)?;
+    let outliers = std::mem::take(&mut w.outliers);
     let t1 = Instant::now();
     notify(progress, "normals", 0.0);
     let surface = surface_stage(w, cloud, params, &frame, &mut report);
@@ -538,7 +550,7 @@ pub fn generate_with_progress(
         colors: 0.0,
         total: (t4 - t0).as_secs_f64(),
     };
-    Ok((splats, report))
+    Ok((splats, report, outliers))
 }
 
 /// The first stage: the cloud (in the unit frame; `raw` as read) cleaned,
@@ -984,6 +996,7 @@ fn neighbours(
         k,
         tree,
         knn,
+        outliers: Vec::new(),
     })
 }
 
@@ -1132,6 +1145,9 @@ struct Work {
     tree: super::knn::PointTree,
     /// The neighbourhood graph of §2.
     knn: Knn,
+    /// The points left out as statistical outliers (indices into the
+    /// cloud, ascending).
+    outliers: Vec<u32>,
 }
 
 /// Leaves out the statistical outliers (with their colours and scanners)
@@ -1143,6 +1159,8 @@ fn drop_outliers(w: &mut Work, report: &mut SplatReport) {
     let out = outliers::flag(&w.points, &w.knn, w.sights.as_ref());
     let count = out.iter().filter(|&&o| o).count();
     if count > 0 && n - count > w.k {
+        w.outliers = w.order.iter().zip(&out).filter(|(_, o)| **o).map(|(&i, _)| i).collect();
+        w.outliers.sort_unstable();
         retain_unflagged(&mut w.order, &out);
         retain_unflagged(&mut w.points, &out);
         if let Some(s) = w.sights.as_mut() {

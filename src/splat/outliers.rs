@@ -81,10 +81,9 @@ pub fn find(points: &[Vec3], k: usize, viewpoint: Option<&Viewpoints>) -> Vec<bo
     let tree = build_tree(points);
     // Queried in Morton order: the same graph, each query bounded by a near
     // one's. As read, a scan's points follow its lines, not space: on the
-    // noisy scan (free-space trimming's call) this graph took 0.23-0.36 s
-    // (three runs, loaded machine), more than generation's whole graph
-    // stage; the whole `splat` now runs at 0.957x the CPU (paired runs in
-    // turns, docs/notes/generation.md, "Issue 54, eighth session").
+    // noisy scan this graph took 0.23-0.36 s (three runs, loaded machine),
+    // more than generation's whole graph stage (docs/notes/generation.md,
+    // "Issue 54, eighth session").
     let order = morton_order(points);
     flag(points, &Knn::build_in_order(&tree, points, k, &order), viewpoint)
 }
