@@ -5,7 +5,7 @@ use super::denoise;
 use super::field;
 use super::frame::{UnitFrame, first_unusable};
 use super::grow::{GrowInput, grow_all};
-use super::holes::{median_radius, on_splat, uncovered_large};
+use super::holes::{Measured, median_radius, on_splat, uncovered_large_measured};
 use super::knn::{Knn, MortonGrid, build_tree};
 use super::normals;
 use super::outliers;
@@ -530,10 +530,11 @@ pub(crate) fn generate_stages(
     notify(progress, "normals", 0.0);
     let surface = surface_stage(w, cloud, params, &frame, &mut report);
     let t2 = Instant::now();
-    let (mut splats, covered, elliptical) = growth_stage(&surface, params, progress, &mut report);
+    let (mut splats, covered, elliptical, measured) =
+        growth_stage(&surface, params, progress, &mut report);
     let t3 = Instant::now();
     notify(progress, "normal fields", 0.0);
-    fields_stage(&mut splats, &covered, &surface, params, &mut report);
+    fields_stage(&mut splats, (&covered, &measured), &surface, params, &mut report);
     report.elliptical_splats = elliptical;
     // Back to the cloud's units, and nothing that single precision cannot
     // hold leaves here.
@@ -735,14 +736,14 @@ fn faces_and_creases(
 
 /// The third stage: splats grown over the surface (§2.1–2.2), clipped
 /// where faces end, crease lines met across, and no disc left over a hole
-/// (`splat::holes`). The splats, which points they cover, and how many
-/// are elliptical.
+/// (`splat::holes`). The splats, which points they cover, how many are
+/// elliptical, and the covered shares measured of the large ones.
 fn growth_stage(
     s: &Surface,
     params: &SplatParams,
     progress: Option<Progress<'_>>,
     report: &mut SplatReport,
-) -> (Vec<Splat>, Vec<bool>, usize) {
+) -> (Vec<Splat>, Vec<bool>, usize, Measured) {
     let n = s.points.len();
     let input = GrowInput {
         points: &s.points,
@@ -784,7 +785,7 @@ fn growth_stage(
     // No disc over a hole: large splats their points cover less than half
     // of shrunk to what they cover, the points they leave bare given
     // splats of their own (`splat::holes`).
-    let holes = super::holes::shrink_uncovered(
+    let (holes, measured) = super::holes::shrink_uncovered_measured(
         &mut splats,
         &mut covered,
         (&s.points, &s.normals, s.colors.as_deref()),
@@ -795,14 +796,14 @@ fn growth_stage(
     );
     report.shrunk_over_holes = holes.shrunk;
     report.added_for_holes = holes.added;
-    (splats, covered, grown.elliptical)
+    (splats, covered, grown.elliptical, measured)
 }
 
 /// The fourth stage: normal fields (§4.1, eq. 4) fitted, and what the
 /// report measures of the splats (coverage, sizes, large splats over holes).
 fn fields_stage(
     splats: &mut [Splat],
-    covered: &[bool],
+    (covered, measured): (&[bool], &Measured),
     s: &Surface,
     params: &SplatParams,
     report: &mut SplatReport,
@@ -820,7 +821,8 @@ fn fields_stage(
     report.clipped = splats.iter().filter(|s| s.is_clipped()).count();
     report.largest_over_spacing = largest_over_spacing(splats, &s.tree, &s.knn);
     report.hollow_large_splats = hollow_large(splats, &s.tree);
-    report.uncovered_large_splats = uncovered_large(splats, &s.tree, &s.knn, s.knn.k > params.k);
+    report.uncovered_large_splats =
+        uncovered_large_measured(splats, measured, &s.tree, &s.knn, s.knn.k > params.k);
     report.mean_radius = splats
         .iter()
         .map(|s| 0.5 * f64::from(s.radii.x + s.radii.y))

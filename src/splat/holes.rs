@@ -104,23 +104,57 @@ pub(crate) fn median_radius(splats: &[Splat]) -> f32 {
     *radii.select_nth_unstable_by(mid, f32::total_cmp).1
 }
 
-/// Whether `s` is large (over [`UNCOVERED_LARGE`] times `median`) and
-/// covers less than half its kept disc.
-fn uncovered(s: &Splat, median: f32, tree: &PointTree, knn: &Knn, scan_lines: bool) -> bool {
-    s.radii.max_element() > UNCOVERED_LARGE * median
-        && covered_share(s, tree, knn, scan_lines) < 0.5
-}
-
 /// How many splats wider than [`UNCOVERED_LARGE`] times the median radius
 /// have less than half their kept disc covered by points
 /// ([`covered_share`]; `scan_lines` as there).
 #[must_use]
 pub fn uncovered_large(splats: &[Splat], tree: &PointTree, knn: &Knn, scan_lines: bool) -> usize {
+    uncovered_large_measured(splats, &Measured::default(), tree, knn, scan_lines)
+}
+
+/// [`uncovered_large`], taking a splat's share from `measured` where it was
+/// measured on the same disc (centre, axes, radii and clip lines; its
+/// normal field may have been fitted since).
+pub(crate) fn uncovered_large_measured(
+    splats: &[Splat],
+    measured: &Measured,
+    tree: &PointTree,
+    knn: &Knn,
+    scan_lines: bool,
+) -> usize {
     let median = median_radius(splats);
     splats
         .par_iter()
-        .filter(|s| uncovered(s, median, tree, knn, scan_lines))
+        .enumerate()
+        .filter(|(i, s)| {
+            s.radii.max_element() > UNCOVERED_LARGE * median
+                && measured
+                    .share_of(*i, s)
+                    .unwrap_or_else(|| covered_share(s, tree, knn, scan_lines))
+                    < 0.5
+        })
         .count()
+}
+
+/// The covered shares [`shrink_uncovered`] measured of the splats it left
+/// as they were, by splat index (ascending), each with the splat it
+/// measured.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Measured(Vec<(u32, Splat, f32)>);
+
+impl Measured {
+    /// The share measured of splat `i`, if `s` has the disc it was
+    /// measured on.
+    fn share_of(&self, i: usize, s: &Splat) -> Option<f32> {
+        let k = self.0.binary_search_by_key(&i, |m| m.0 as usize).ok()?;
+        let (_, was, share) = &self.0[k];
+        let same = was.center == s.center
+            && was.u_axis == s.u_axis
+            && was.v_axis == s.v_axis
+            && was.radii == s.radii
+            && was.clip == s.clip;
+        same.then_some(*share)
+    }
 }
 
 /// Does `p` lie on `s`: within `epsilon` of its plane, inside its disc and
@@ -251,25 +285,58 @@ pub fn shrink_uncovered(
     scan_lines: bool,
     epsilon: f32,
 ) -> Shrunk {
+    shrink_uncovered_measured(splats, covered, (points, normals, colors), tree, knn, scan_lines, epsilon).0
+}
+
+/// [`shrink_uncovered`], and the covered shares it measured of the large
+/// splats it left as they were ([`uncovered_large_measured`] takes them).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn shrink_uncovered_measured(
+    splats: &mut Vec<Splat>,
+    covered: &mut [bool],
+    (points, normals, colors): (&[Vec3], &[Vec3], Option<&[Vec3]>),
+    tree: &PointTree,
+    knn: &Knn,
+    scan_lines: bool,
+    epsilon: f32,
+) -> (Shrunk, Measured) {
     let median = median_radius(splats);
-    let found: Vec<(usize, Splat)> = splats
+    // Each large splat's disc sampled once: its share, and the splat it is
+    // shrunk to where it covers less than half.
+    let large: Vec<(u32, f32, Option<Splat>)> = splats
         .par_iter()
         .enumerate()
-        .filter(|(_, s)| uncovered(s, median, tree, knn, scan_lines))
-        .filter_map(|(i, s)| {
-            let (shift, scale) = covered_part(&cover_samples(s, tree, knn, scan_lines))?;
-            let mut t = reframed(s, shift, scale);
-            for _ in 0..SHRINK_STEPS {
-                if covered_share(&t, tree, knn, scan_lines) >= SHRUNK_COVERS {
-                    break;
-                }
-                t = reframed(&t, Vec2::ZERO, SHRINK);
-            }
-            Some((i, t))
+        .filter(|(_, s)| s.radii.max_element() > UNCOVERED_LARGE * median)
+        .map(|(i, s)| {
+            let samples = cover_samples(s, tree, knn, scan_lines);
+            let covers = share(&samples);
+            let to = (covers < 0.5)
+                .then(|| covered_part(&samples))
+                .flatten()
+                .map(|(shift, scale)| {
+                    let mut t = reframed(s, shift, scale);
+                    for _ in 0..SHRINK_STEPS {
+                        if covered_share(&t, tree, knn, scan_lines) >= SHRUNK_COVERS {
+                            break;
+                        }
+                        t = reframed(&t, Vec2::ZERO, SHRINK);
+                    }
+                    t
+                });
+            (i as u32, covers, to)
         })
         .collect();
+    let mut measured = Vec::new();
+    let mut found: Vec<(usize, Splat)> = Vec::new();
+    for (i, covers, to) in large {
+        match to {
+            Some(t) => found.push((i as usize, t)),
+            None => measured.push((i, splats[i as usize], covers)),
+        }
+    }
+    let measured = Measured(measured);
     if found.is_empty() {
-        return Shrunk::default();
+        return (Shrunk::default(), measured);
     }
     // The points the old discs held: growth's marks cleared, to be tested
     // against the splats as they are now.
@@ -337,5 +404,5 @@ pub fn shrink_uncovered(
         added: added.len(),
     };
     splats.extend(added);
-    out
+    (out, measured)
 }
