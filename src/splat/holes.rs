@@ -288,19 +288,17 @@ pub fn shrink_uncovered(
     shrink_uncovered_measured(splats, covered, (points, normals, colors), tree, knn, scan_lines, epsilon).0
 }
 
-/// [`shrink_uncovered`], and the covered shares it measured of the large
-/// splats it left as they were ([`uncovered_large_measured`] takes them).
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn shrink_uncovered_measured(
-    splats: &mut Vec<Splat>,
-    covered: &mut [bool],
-    (points, normals, colors): (&[Vec3], &[Vec3], Option<&[Vec3]>),
+/// Samples the disc of each splat wider than [`UNCOVERED_LARGE`] times
+/// `median` once: the splats that cover less than half of it, each with the
+/// splat it shrinks to ([`covered_part`], then by [`SHRINK`] while under
+/// [`SHRUNK_COVERS`]), and the shares of the others.
+fn measure_large(
+    splats: &[Splat],
+    median: f32,
     tree: &PointTree,
     knn: &Knn,
     scan_lines: bool,
-    epsilon: f32,
-) -> (Shrunk, Measured) {
-    let median = median_radius(splats);
+) -> (Vec<(usize, Splat)>, Measured) {
     // Each large splat's disc sampled once: its share, and the splat it is
     // shrunk to where it covers less than half.
     let large: Vec<(u32, f32, Option<Splat>)> = splats
@@ -334,7 +332,23 @@ pub(crate) fn shrink_uncovered_measured(
             None => measured.push((i, splats[i as usize], covers)),
         }
     }
-    let measured = Measured(measured);
+    (found, Measured(measured))
+}
+
+/// [`shrink_uncovered`], and the covered shares it measured of the large
+/// splats it left as they were ([`uncovered_large_measured`] takes them).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn shrink_uncovered_measured(
+    splats: &mut Vec<Splat>,
+    covered: &mut [bool],
+    (points, normals, colors): (&[Vec3], &[Vec3], Option<&[Vec3]>),
+    tree: &PointTree,
+    knn: &Knn,
+    scan_lines: bool,
+    epsilon: f32,
+) -> (Shrunk, Measured) {
+    let median = median_radius(splats);
+    let (found, measured) = measure_large(splats, median, tree, knn, scan_lines);
     if found.is_empty() {
         return (Shrunk::default(), measured);
     }
