@@ -319,7 +319,7 @@ pub const FACE_HOLDS: f32 = 0.9;
 pub const FACE_TURN_DEG: f32 = 10.0;
 
 /// Without the flat-face rules, a normal turns onto one of two planes
-/// only where the two score (MSAC's score, [`FacePlane::fit`]) at least
+/// only where the two score (MSAC's score, a plane's `fit`) at least
 /// this share of its wide neighbourhood together ([`face_normals`]). On
 /// 200k points sampled from the bunny's scanned mesh, normals estimated,
 /// the two planes found at its rough facets (the base's rim, the ears)
