@@ -661,7 +661,10 @@ fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
     // no path).
     let len = lanes.xs.len().div_ceil(8) * 8;
     let mut offsets = vec![f32::NAN; 3 * len];
-    let (mut planes, mut held) = (Vec::new(), Vec::new());
+    // Room for the most planes through one first point (the first's), so
+    // the list is not regrown plane by plane.
+    let most = near.len().saturating_sub(1) * near.len().saturating_sub(2) / 2;
+    let (mut planes, mut held) = (Vec::with_capacity(most), Vec::with_capacity(most));
     for (a, &pa) in near.iter().enumerate() {
         let (dx, rest) = offsets.split_at_mut(len);
         let (dy, dz) = rest.split_at_mut(len);
@@ -947,12 +950,17 @@ impl FaceSearch<'_> {
             None
         };
         // The neighbours (not the point) whose offsets `keep`.
+        // Counted first, so that the list kept (until `smooth_flat`) is
+        // made once at its size, not regrown point by point.
         let on = |keep: &dyn Fn(Vec3) -> bool| -> Vec<u32> {
-            near.iter()
-                .zip(wide.iter())
-                .filter(|(_, d)| keep(**d))
-                .map(|(&j, _)| j as u32)
-                .collect()
+            let mut face = Vec::with_capacity(wide.iter().filter(|d| keep(**d)).count());
+            face.extend(
+                near.iter()
+                    .zip(wide.iter())
+                    .filter(|(_, d)| keep(**d))
+                    .map(|(&j, _)| j as u32),
+            );
+            face
         };
         if held >= flat_at || tilted.is_some() {
             if !self.flat_faces {
@@ -1016,11 +1024,8 @@ impl FaceSearch<'_> {
         if first.held <= held + 1 {
             return None;
         }
-        let rest: Vec<Vec3> = all
-            .iter()
-            .copied()
-            .filter(|d| !first.holds(*d, tol))
-            .collect();
+        let mut rest = Vec::with_capacity(all.len());
+        rest.extend(all.iter().copied().filter(|d| !first.holds(*d, tol)));
         // Two faces, or one smooth surface curving past the plane's
         // reach: the quadric fits it at least as closely as the two
         // planes (MSAC's score of each, the second's at most one a
@@ -1195,11 +1200,8 @@ fn smooth_flat(normals: &mut [Vec3], flat: &[Option<(Kind, Vec<u32>)>], agree: f
 /// than from the k nearest: range noise tilts the plane of a few
 /// neighbours, and the splats' normals and fields (§4) carry it.
 fn wide_plane(offsets: &[Vec3], n0: Vec3, tol: f32) -> Option<Vec3> {
-    let held: Vec<Vec3> = offsets
-        .iter()
-        .copied()
-        .filter(|d| n0.dot(*d).abs() <= tol)
-        .collect();
+    let mut held = Vec::with_capacity(offsets.len());
+    held.extend(offsets.iter().copied().filter(|d| n0.dot(*d).abs() <= tol));
     if super::denoise::curvature_f(&held, n0)? >= FLAT_F {
         return None;
     }
