@@ -621,9 +621,10 @@ fn surface_stage(
     // The face search's least tolerance (`faces_and_creases`): points
     // whose planes hold their neighbourhoods within it are settled while
     // their normals are estimated.
-    let settle_tol = (params.creases != Creases::Off).then_some(normals::FACE_TOL_EPS * epsilon);
+    let settle =
+        (params.creases != Creases::Off).then(|| settling(&w, cloud.normals.is_none(), epsilon));
     let (mut nrm, fixed, to_estimate, mut settled) =
-        normals_of(&mut w, cloud, params, settle_tol, report);
+        normals_of(&mut w, cloud, params, settle, report);
     let Work {
         mut points,
         colors,
@@ -679,6 +680,24 @@ fn surface_stage(
     // No stage after reads the wide rows.
     surface.knn.wide = None;
     surface
+}
+
+/// The settling test of the normals' estimate (`normals::Settling`), at
+/// the face search's least tolerance: a quarter `ϵ`. Its quadric is left
+/// out where a guess at the noise (`denoise::guess_noise`) says the
+/// flat-face rules will be on, so that no settled point is read
+/// (`normals::SETTLE_QUADRIC_NOISE`; guessed only where no normal is
+/// given); no output depends on it.
+fn settling(w: &Work, guess: bool, epsilon: f32) -> normals::Settling {
+    let tol = normals::FACE_TOL_EPS * epsilon;
+    let noisy = guess
+        && w.points.len() > w.k
+        && normals::FACE_TOL_NOISE * denoise::guess_noise(&w.points, &w.knn) as f32
+            >= normals::SETTLE_QUADRIC_NOISE * tol;
+    normals::Settling {
+        tol,
+        quadric: !noisy,
+    }
 }
 
 /// With creases on: each point's normal from its own face where an edge is
@@ -1194,7 +1213,7 @@ fn normals_of(
     w: &mut Work,
     cloud: &PointCloud,
     params: &SplatParams,
-    settle_tol: Option<f32>,
+    settle: Option<normals::Settling>,
     report: &mut SplatReport,
 ) -> (Vec<Vec3>, Vec<bool>, usize, Vec<bool>) {
     let n = w.points.len();
@@ -1228,7 +1247,7 @@ fn normals_of(
             settled: settled_here,
             queries,
             ..
-        } = normals::estimate_multiscale(&w.points, &w.tree, &w.knn, w.sights.as_ref(), settle_tol);
+        } = normals::estimate_multiscale(&w.points, &w.tree, &w.knn, w.sights.as_ref(), settle);
         settled = settled_here;
         report.queries.normals = queries;
         if (collinear * 20 > n || wide * 5 > n) && w.k < params.k * normals::WIDE_FACTOR {
@@ -1270,7 +1289,7 @@ fn normals_of(
         // of the points it does not skip only; it queries the others,
         // settled here, where noise turns its flat-face rules on.
         let searched = |i: usize| !fixed[i] && settled.get(i) != Some(&true);
-        w.knn.keep_wide(|i| settle_tol.is_some() && searched(i));
+        w.knn.keep_wide(|i| settle.is_some() && searched(i));
         for i in 0..n {
             if !fixed[i] {
                 nrm[i] = est[i];
