@@ -319,6 +319,18 @@ fn the_glass_bunny_rims_get_no_false_creases() {
     assert!(clipped < 600, "{clipped}");
 }
 
+/// `scenes/bunny.toml` (under `root`) at 400x300, checked to say `model`
+/// (the text the caller replaces).
+fn bunny_at_400x300(root: &Path, model: &str) -> String {
+    let text = std::fs::read_to_string(root.join("bunny.toml")).unwrap();
+    assert!(
+        text.contains(model),
+        "scenes/bunny.toml no longer says `{model}`"
+    );
+    text.replace("width = 800", "width = 400")
+        .replace("height = 600", "height = 300")
+}
+
 /// The bundled bunny (scenes/bunny.toml: 200k samples of a scanned mesh
 /// whose facets turn their normals by 30–60° along 1.4 % of its edges),
 /// rendered at 400x300 against its mesh: crease clipping takes the facets
@@ -328,14 +340,7 @@ fn the_glass_bunny_rims_get_no_false_creases() {
 fn the_smooth_bunny_gets_no_false_creases() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
     let model = "samples = 200000\nseed = 1";
-    let text = std::fs::read_to_string(root.join("bunny.toml")).unwrap();
-    assert!(
-        text.contains(model),
-        "scenes/bunny.toml no longer says `{model}`"
-    );
-    let text = text
-        .replace("width = 800", "width = 400")
-        .replace("height = 600", "height = 300");
+    let text = bunny_at_400x300(&root, model);
     let figures = |creases: bool| {
         let t = text.replace(
             model,
@@ -384,14 +389,7 @@ fn the_estimated_bunny_keeps_its_smooth_normals() {
     let points = dir.join("bunny-points.ply");
     splatray::io::write_points(&points, &cloud).unwrap();
     let model = "mesh = \"data/bunny-mesh.ply\"\nsamples = 200000\nseed = 1";
-    let text = std::fs::read_to_string(root.join("bunny.toml")).unwrap();
-    assert!(
-        text.contains(model),
-        "scenes/bunny.toml no longer says `{model}`"
-    );
-    let text = text
-        .replace("width = 800", "width = 400")
-        .replace("height = 600", "height = 300");
+    let text = bunny_at_400x300(&root, model);
     let psnr = |creases: bool| {
         let t = text.replace(
             model,

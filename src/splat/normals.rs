@@ -1934,11 +1934,6 @@ mod tests {
         let tree = build_tree(&pts);
         let plain = Knn::build(&tree, &pts, 12);
         let mut wide = Knn::build_wide(&tree, &pts, 12, 49);
-        let bits = |v: &[Vec3]| {
-            v.iter()
-                .map(|n| n.to_array().map(f32::to_bits))
-                .collect::<Vec<_>>()
-        };
         let fixed = vec![false; pts.len()];
         for settle in [None, Some(Settling::at(0.004))] {
             let a = estimate_multiscale(&pts, &tree, &plain, None, settle);
@@ -1972,6 +1967,11 @@ mod tests {
             let searched = if flat == FlatFaces::Off { unsettled } else { pts.len() };
             assert_eq!((a.queries, b.queries), (searched, 0), "{flat:?}");
         }
+    }
+
+    /// Normals as their bits, to compare bit for bit.
+    fn bits(v: &[Vec3]) -> Vec<[u32; 3]> {
+        v.iter().map(|n| n.to_array().map(f32::to_bits)).collect()
     }
 
     /// A box's corner (three faces, their edges) and a quarter of a wide
@@ -2028,11 +2028,6 @@ mod tests {
                 FlatFaces::Off,
                 &[],
             );
-            let bits = |v: &[Vec3]| {
-                v.iter()
-                    .map(|n| n.to_array().map(f32::to_bits))
-                    .collect::<Vec<_>>()
-            };
             assert_eq!(bits(&with), bits(&without), "tol {face_tol}");
             assert_eq!(
                 (a.turned, a.searched),
@@ -2078,11 +2073,6 @@ mod tests {
             quadric: false,
         };
         let without = estimate_multiscale(&pts, &tree, &knn, None, Some(planes_only));
-        let bits = |v: &[Vec3]| {
-            v.iter()
-                .map(|n| n.to_array().map(f32::to_bits))
-                .collect::<Vec<_>>()
-        };
         assert_eq!(bits(&without.normals), bits(&with.normals));
         let count = |s: &[bool]| s.iter().filter(|&&s| s).count();
         let (all, by_planes) = (count(&with.settled), count(&without.settled));
