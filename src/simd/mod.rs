@@ -14,7 +14,9 @@
 //! near a plane ([`count_within`], the normals stage's hottest loop) is
 //! dispatched the same way, and counts the same points on every path; so
 //! are the normal equations of generation's quadric fits
-//! ([`normal_equations6`]), the same sums bit for bit.
+//! ([`normal_equations6`]), the same sums bit for bit, and the scan of
+//! the neighbour search's bounded queries ([`keys_within`]), the same
+//! points.
 //!
 //! The path is AVX2 where the CPU runs it ([`default_path`] says why not
 //! AVX-512), or the one named by [`SIMD_VAR`] (`portable`, `avx2`,
@@ -26,9 +28,11 @@
 
 mod count;
 mod lsq;
+mod near;
 mod tri;
 pub use count::count_within;
 pub use lsq::{Row6, normal_equations6};
+pub use near::keys_within;
 pub use tri::{SURE, Shear, TRI_LANES, TriColumns, tri_masks, tri_masks_sheared};
 
 /// Asks the CPU to bring the cache lines `x` lies in (up to its first 192

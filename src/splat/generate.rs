@@ -938,7 +938,7 @@ fn clean_and_thin(
             (params.thin, why)
         } else {
             let (auto, at_least) = (super::thin::AUTO_CELL_EPS, super::thin::AUTO_POINTS);
-            if super::thin::typical_cell_count(&order, world, auto * epsilon) < at_least {
+            if super::thin::typical_cell_count(&order, raw.positions.len(), world, auto * epsilon) < at_least {
                 return order;
             }
             let why = format!(
@@ -1313,16 +1313,23 @@ fn normals_of(
 /// The diagonal of the box holding all but the 0.1 % most extreme of
 /// `order`'s points along each axis: `ϵ`'s scale before outliers are known
 /// (a few far outliers would widen the plain bounding box, and the cells of
-/// [`super::thin`] with it).
+/// [`super::thin`] with it). The quantiles are of the coordinates' values,
+/// whatever their order, so the points are read in memory order (`order`'s
+/// indices are distinct) rather than `order`'s, whose loads miss the cache.
 fn robust_diagonal(positions: &[Vec3], order: &[u32]) -> f64 {
     let n = order.len();
     let cut = n / 1000;
+    let mut member = vec![false; positions.len()];
+    for &i in order {
+        member[i as usize] = true;
+    }
     let mut axis: Vec<f32> = Vec::with_capacity(n);
     let mut d2 = 0.0f64;
     let coords: [fn(&Vec3) -> f32; 3] = [|p| p.x, |p| p.y, |p| p.z];
     for coord in coords {
         axis.clear();
-        axis.extend(order.iter().map(|&i| coord(&positions[i as usize])));
+        let kept = positions.iter().zip(&member).filter(|e| *e.1);
+        axis.extend(kept.map(|(p, _)| coord(p)));
         let (_, lo, _) = axis.select_nth_unstable_by(cut, f32::total_cmp);
         let lo = f64::from(*lo);
         let (_, hi, _) = axis.select_nth_unstable_by(n - 1 - cut, f32::total_cmp);

@@ -625,6 +625,8 @@ struct Cache {
     fills: usize,
     /// Its radius over the radius of the query that filled it.
     reach: f32,
+    /// The SIMD path of its scan ([`Cache::within`]).
+    isa: crate::simd::Isa,
 }
 
 impl Default for Cache {
@@ -641,6 +643,7 @@ impl Default for Cache {
             off: false,
             fills: 0,
             reach: 0.0,
+            isa: crate::config::current().simd,
         }
     }
 }
@@ -771,38 +774,15 @@ impl Cache {
     }
 
     /// The cached points within squared distance `bound` of `q`, as keys
-    /// into `keys` (at least as long as the cache); returns how many.
+    /// into `keys` (at least 8 longer than the cache), in no order;
+    /// returns how many. Eight points at a time, on the process's SIMD
+    /// path ([`crate::simd::keys_within`]: the same points and distances
+    /// on every path).
     fn within(&self, q: [f32; 3], bound: f32, keys: &mut [u64]) -> usize {
         let range = self.reach_of(q, bound);
         let (x, y, z) = (&self.x[range.clone()], &self.y[range.clone()], &self.z[range.clone()]);
         let items = &self.items[range];
-        // Eight distances at a time (in lanes), then their keys without a
-        // branch on the bound (half the points pass it, at random): every
-        // key is written, and the next one lands after it only where it
-        // passed.
-        let mut len = 0;
-        let lanes = x.len() / 8 * 8;
-        for at in (0..lanes).step_by(8) {
-            let lane = |v: &[f32]| -> [f32; 8] { v[at..at + 8].try_into().unwrap_or_default() };
-            let (cx, cy, cz) = (lane(x), lane(y), lane(z));
-            let mut d = [0f32; 8];
-            for l in 0..8 {
-                d[l] = dist_sq([cx[l], cy[l], cz[l]], q);
-            }
-            let out = &mut keys[len..len + 8];
-            let mut n = 0;
-            for (l, &d) in d.iter().enumerate() {
-                out[n & 7] = key(d, items[at + l]);
-                n += usize::from(d <= bound);
-            }
-            len += n;
-        }
-        for j in lanes..x.len() {
-            let d = dist_sq([x[j], y[j], z[j]], q);
-            keys[len] = key(d, items[j]);
-            len += usize::from(d <= bound);
-        }
-        len
+        crate::simd::keys_within([x, y, z], items, q, bound, self.isa, keys)
     }
 }
 
@@ -887,8 +867,8 @@ impl<'t> Nearest<'t> {
                 );
                 len = self.keys.len();
             } else {
-                if self.keys.len() < self.cache.items.len() {
-                    self.keys.resize(self.cache.items.len(), 0);
+                if self.keys.len() < self.cache.items.len() + 8 {
+                    self.keys.resize(self.cache.items.len() + 8, 0);
                 }
                 len = self.cache.within(q, self.bound, &mut self.keys);
             }
@@ -1048,7 +1028,7 @@ mod tests {
         let (mut scanned, mut cached) = (0usize, 0usize);
         for pts in [lattice, scattered] {
             let tree = build_tree(&pts);
-            let mut keys = vec![0u64; pts.len()];
+            let mut keys = vec![0u64; pts.len() + 8];
             for c in 0..12 {
                 let centre = pts[c * pts.len() / 12].to_array();
                 let mut cache = Cache::default();

@@ -38,8 +38,20 @@ const SAMPLE: usize = 4096;
 /// holds (the point itself included): the median over about [`SAMPLE`]
 /// points taken at even steps through `indices`, each counted against
 /// every point. Costs one pass over the points, a binary search each.
+///
+/// The count is a sum, so the pass reads the points in the order of their
+/// indices (`indices` are distinct and below `len`, in any order), not in
+/// `indices`' own: a cloud's points in Morton order are scattered through
+/// memory as read, and that pass's loads missed the cache (10 % of the
+/// graph stage of the 2M bunny sample, docs/notes/generation.md,
+/// "fourteenth session").
 #[must_use]
-pub fn typical_cell_count(indices: &[u32], world: impl Fn(u32) -> DVec3 + Sync, cell: f64) -> usize {
+pub fn typical_cell_count(
+    indices: &[u32],
+    len: usize,
+    world: impl Fn(u32) -> DVec3 + Sync,
+    cell: f64,
+) -> usize {
     if !(cell.is_finite() && cell > 0.0) || indices.is_empty() {
         return 0;
     }
@@ -49,12 +61,18 @@ pub fn typical_cell_count(indices: &[u32], world: impl Fn(u32) -> DVec3 + Sync, 
     let mut probes = sampled.clone();
     probes.sort_unstable();
     probes.dedup();
-    let counts = indices
-        .par_chunks(1 << 14)
-        .map(|chunk| {
+    let mut member = vec![false; len];
+    for &i in indices {
+        member[i as usize] = true;
+    }
+    const CHUNK: usize = 1 << 14;
+    let counts = member
+        .par_chunks(CHUNK)
+        .enumerate()
+        .map(|(c, chunk)| {
             let mut counts = vec![0usize; probes.len()];
-            for &i in chunk {
-                if let Ok(at) = probes.binary_search(&key(i)) {
+            for (j, _) in chunk.iter().enumerate().filter(|e| *e.1) {
+                if let Ok(at) = probes.binary_search(&key((c * CHUNK + j) as u32)) {
                     counts[at] += 1;
                 }
             }
@@ -191,15 +209,30 @@ mod tests {
             .map(|i| DVec3::new((i % 100) as f64 * 0.1 + 0.05, (i / 100) as f64 * 0.1 + 0.05, 0.5))
             .collect();
         let idx: Vec<u32> = (0..grid.len() as u32).collect();
-        assert_eq!(typical_cell_count(&idx, |i| grid[i as usize], 1.0), 100);
-        assert_eq!(typical_cell_count(&idx, |i| grid[i as usize], 0.05), 1);
+        assert_eq!(typical_cell_count(&idx, idx.len(), |i| grid[i as usize], 1.0), 100);
+        assert_eq!(typical_cell_count(&idx, idx.len(), |i| grid[i as usize], 0.05), 1);
         // Three quarters of the points in one cell: it is the typical one.
         let mut lumped = grid.clone();
         for p in lumped.iter_mut().take(7_500) {
             *p = DVec3::new(0.5, 0.5, 0.5) + (*p - DVec3::new(5.0, 5.0, 0.5)) * 1e-3;
         }
-        assert_eq!(typical_cell_count(&idx, |i| lumped[i as usize], 1.0), 7_500);
-        assert_eq!(typical_cell_count(&[], |i| grid[i as usize], 1.0), 0);
+        assert_eq!(typical_cell_count(&idx, idx.len(), |i| lumped[i as usize], 1.0), 7_500);
+        assert_eq!(typical_cell_count(&[], 0, |i| grid[i as usize], 1.0), 0);
+        // Some of the points, scattered through memory (a stride of 7 mod
+        // the length): the count is over those only, as a brute-force
+        // count of each sampled point's cell finds it.
+        let some: Vec<u32> = (0..6_000u32).map(|i| i * 7 % 10_000).collect();
+        for cell in [0.35, 1.0, 2.5] {
+            let key = |i: u32| (lumped[i as usize] / cell).floor();
+            let stride = some.len().div_ceil(super::SAMPLE);
+            let mut held: Vec<usize> = (some.iter().step_by(stride))
+                .map(|&s| some.iter().filter(|&&i| key(i) == key(s)).count())
+                .collect();
+            let mid = held.len() / 2;
+            let want = *held.select_nth_unstable(mid).1;
+            let got = typical_cell_count(&some, lumped.len(), |i| lumped[i as usize], cell);
+            assert_eq!(got, want, "cell {cell}");
+        }
     }
 
     #[test]
