@@ -1330,10 +1330,13 @@ pub fn orient(
     let across = |i: usize, j: usize| {
         sheets[i].across(points[j] - points[i]) && sheets[j].across(points[i] - points[j])
     };
-    let sorted = edges_by_weight(points, knn, normals, &across);
     let mut parent: Vec<u32> = (0..n as u32).collect();
-    let tree_edges = spanning_forest(&sorted, knn, &mut parent, &across);
-    drop(sorted);
+    // Two blocks a thread (a thread slowed by other work holds up less); one
+    // block on one thread, where the blocks' Kruskal would be done twice.
+    let threads = rayon::current_num_threads();
+    let blocks = if threads > 1 { 2 * threads } else { 1 };
+    let blocks = blocks.min(n / FOREST_BLOCK_MIN).max(1);
+    let tree_edges = spanning_forest(points, knn, normals, &across, &mut parent, blocks);
     let (deg, adj) = adjacency(n, &tree_edges);
     // Roots: one per tree.
     let axis = root_axis(points, normals);
@@ -1387,50 +1390,32 @@ pub fn orient(
     }
 }
 
-/// The undirected edges of the kNN graph (a mutual pair once, as the
-/// directed edge `i * k + slot` from the lower index), bucket-sorted by
-/// [`edge_weight`] in 4096 buckets.
-fn edges_by_weight(
+/// The buckets [`edge_weight`]s are sorted into (Kruskal's order).
+const BUCKETS: usize = 4096;
+
+/// [`edge_bucket`] of a directed edge left out: the second of a mutual pair.
+const NO_EDGE: u16 = u16::MAX;
+
+/// The fewest points a block of [`spanning_forest`] holds.
+const FOREST_BLOCK_MIN: usize = 1 << 15;
+
+/// The bucket of the directed kNN edge `e` (`i * k + slot`): its
+/// [`edge_weight`] in [`BUCKETS`] steps, or [`NO_EDGE`] for the edge from
+/// the higher index of a mutual pair (one undirected edge, kept once) and
+/// for a point's edge to itself.
+fn edge_bucket(
     points: &[Vec3],
     knn: &Knn,
     normals: &[Vec3],
-    across: &(impl Fn(usize, usize) -> bool + Sync),
-) -> Vec<u32> {
-    const BUCKETS: usize = 4096;
-    const NO_EDGE: u16 = u16::MAX;
-    let (n, k) = (points.len(), knn.k);
-    let bucket_of: Vec<u16> = (0..n * k)
-        .into_par_iter()
-        .with_min_len(4096)
-        .map(|e| {
-            let (i, j) = (e / k, knn.idx[e] as usize);
-            // A mutual pair is one undirected edge: keep it once.
-            if j < i && knn.of(j).contains(&(i as u32)) || i == j {
-                return NO_EDGE;
-            }
-            let w = edge_weight(normals[i], normals[j], points[j] - points[i], across(i, j));
-            ((w * (BUCKETS - 1) as f32 / 2.0) as usize).min(BUCKETS - 1) as u16
-        })
-        .collect();
-    let mut start = vec![0usize; BUCKETS + 1];
-    for &b in &bucket_of {
-        if b != NO_EDGE {
-            start[b as usize + 1] += 1;
-        }
+    across: &impl Fn(usize, usize) -> bool,
+    e: usize,
+) -> u16 {
+    let (i, j) = (e / knn.k, knn.idx[e] as usize);
+    if j < i && knn.of(j).contains(&(i as u32)) || i == j {
+        return NO_EDGE;
     }
-    for b in 0..BUCKETS {
-        start[b + 1] += start[b];
-    }
-    let mut sorted = vec![0u32; start[BUCKETS]];
-    let mut fill = start.clone();
-    for (e, &b) in bucket_of.iter().enumerate() {
-        if b == NO_EDGE {
-            continue;
-        }
-        sorted[fill[b as usize]] = e as u32;
-        fill[b as usize] += 1;
-    }
-    sorted
+    let w = edge_weight(normals[i], normals[j], points[j] - points[i], across(i, j));
+    ((w * (BUCKETS - 1) as f32 / 2.0) as usize).min(BUCKETS - 1) as u16
 }
 
 /// The root of `x`'s set in the union-find forest `parent` (path halving).
@@ -1443,34 +1428,163 @@ fn find(parent: &mut [u32], mut x: u32) -> u32 {
     x
 }
 
-/// Kruskal over the `sorted` edges: the minimum spanning forest's edges
-/// `(i, j, whether they lie on two sheets facing apart)`, with `parent`
-/// (every point its own set on entry) left as the union-find of its trees.
+/// One step of Kruskal: joins the sets of `i` and `j` in the union-find
+/// `parent` (union by `size`, the larger set's root kept, `i`'s on a tie),
+/// or returns false where they are one set already.
+fn join(parent: &mut [u32], size: &mut [u32], i: u32, j: u32) -> bool {
+    let (ri, rj) = (find(parent, i), find(parent, j));
+    if ri == rj {
+        return false;
+    }
+    let (big, small) = if size[ri as usize] >= size[rj as usize] {
+        (ri, rj)
+    } else {
+        (rj, ri)
+    };
+    parent[small as usize] = big;
+    size[big as usize] += size[small as usize];
+    true
+}
+
+/// The edges of one block of points that can be in the minimum spanning
+/// forest, in Kruskal's order: the directed edges from its points,
+/// bucket-sorted by [`edge_bucket`] (ties by edge), those to points of other
+/// blocks all kept, those within the block only where Kruskal over the
+/// block's own edges takes them (any other closes a cycle of earlier edges,
+/// so the whole graph's forest leaves it out too).
+struct Block {
+    /// The kept edges, bucket by bucket.
+    edges: Vec<u32>,
+    /// Where each bucket's kept edges start in `edges` (and end).
+    start: Vec<u32>,
+}
+
+impl Block {
+    /// The block of the points from `lo` on, as many as `parent` holds:
+    /// their union-find (local indices, each point its own set on entry
+    /// whatever it held), left as the block's forest.
+    fn of(
+        (points, knn, normals): (&[Vec3], &Knn, &[Vec3]),
+        across: &impl Fn(usize, usize) -> bool,
+        lo: usize,
+        parent: &mut [u32],
+    ) -> Block {
+        let (hi, k) = (lo + parent.len(), knn.k);
+        for (x, p) in parent.iter_mut().enumerate() {
+            *p = x as u32;
+        }
+        let bucket: Vec<u16> = (lo * k..hi * k)
+            .map(|e| edge_bucket(points, knn, normals, across, e))
+            .collect();
+        let mut start = vec![0u32; BUCKETS + 1];
+        for &b in bucket.iter().filter(|&&b| b != NO_EDGE) {
+            start[b as usize + 1] += 1;
+        }
+        for b in 0..BUCKETS {
+            start[b + 1] += start[b];
+        }
+        let mut sorted = vec![0u32; start[BUCKETS] as usize];
+        let mut fill = start.clone();
+        for (e, &b) in (lo * k..).zip(&bucket) {
+            if b != NO_EDGE {
+                sorted[fill[b as usize] as usize] = e as u32;
+                fill[b as usize] += 1;
+            }
+        }
+        drop(bucket);
+        let mut size = vec![1u32; parent.len()];
+        let mut edges = Vec::with_capacity(parent.len());
+        let mut kept = vec![0u32; BUCKETS + 1];
+        // The whole graph in one block: done when its forest is one tree.
+        let whole = lo == 0 && hi * k == knn.idx.len();
+        let mut joined = 0;
+        for b in 0..BUCKETS {
+            for &e in &sorted[start[b] as usize..start[b + 1] as usize] {
+                let (i, j) = (e as usize / k, knn.idx[e as usize] as usize);
+                if !(lo..hi).contains(&j) {
+                    edges.push(e);
+                } else if join(parent, &mut size, (i - lo) as u32, (j - lo) as u32) {
+                    edges.push(e);
+                    joined += 1;
+                    if whole && joined + 1 == parent.len() {
+                        break;
+                    }
+                }
+            }
+            kept[b + 1] = edges.len() as u32;
+            if whole && joined + 1 == parent.len() {
+                kept[b + 1..].fill(edges.len() as u32);
+                break;
+            }
+        }
+        Block {
+            edges,
+            start: kept,
+        }
+    }
+}
+
+/// Kruskal's minimum spanning forest of the kNN graph's undirected edges
+/// (a mutual pair once, as the directed edge `i * k + slot` from the lower
+/// index), bucket-sorted by [`edge_weight`] in [`BUCKETS`] buckets, ties by
+/// edge: the forest's edges `(i, j, whether they lie on two sheets facing
+/// apart)` in the order Kruskal takes them, with `parent` (every point its
+/// own set on entry) left as the union-find of its trees.
+///
+/// The points are cut into `blocks` runs of the (Morton) order, each run's
+/// own edges reduced to its forest in parallel ([`Block`]); Kruskal then
+/// runs over what the blocks kept, in the same order. Under that total
+/// order the forest is unique, and the blocks leave out only edges it
+/// leaves out, so the forest, the order its edges are taken in, and every
+/// union (its two sets, which root stays) are those of Kruskal over every
+/// edge, for any number of blocks.
 fn spanning_forest(
-    sorted: &[u32],
+    points: &[Vec3],
     knn: &Knn,
+    normals: &[Vec3],
+    across: &(impl Fn(usize, usize) -> bool + Sync),
     parent: &mut [u32],
-    across: &impl Fn(usize, usize) -> bool,
+    blocks: usize,
 ) -> Vec<(u32, u32, bool)> {
     let (n, k) = (parent.len(), knn.k);
+    let blocks = blocks.clamp(1, n.max(1));
+    let mut parts: Vec<(usize, &mut [u32])> = Vec::with_capacity(blocks);
+    let mut rest: &mut [u32] = parent;
+    for b in 0..blocks {
+        let (lo, hi) = (b * n / blocks, (b + 1) * n / blocks);
+        let (part, tail) = std::mem::take(&mut rest).split_at_mut(hi - lo);
+        parts.push((lo, part));
+        rest = tail;
+    }
+    let found: Vec<Block> = parts
+        .into_par_iter()
+        .map(|(lo, part)| Block::of((points, knn, normals), across, lo, part))
+        .collect();
+    let edge = |e: u32| {
+        let (i, j) = ((e as usize / k) as u32, knn.idx[e as usize]);
+        (i, j, across(i as usize, j as usize))
+    };
+    if blocks == 1 {
+        // One block: its kept edges are the forest, its union-find the
+        // whole one.
+        return found[0].edges.iter().map(|&e| edge(e)).collect();
+    }
+    for (i, p) in parent.iter_mut().enumerate() {
+        *p = i as u32;
+    }
     let mut size = vec![1u32; n];
     let mut tree_edges: Vec<(u32, u32, bool)> = Vec::with_capacity(n);
-    for &e in sorted {
-        let (i, j) = ((e as usize / k) as u32, knn.idx[e as usize]);
-        let (ri, rj) = (find(parent, i), find(parent, j));
-        if ri == rj {
-            continue;
-        }
-        let (big, small) = if size[ri as usize] >= size[rj as usize] {
-            (ri, rj)
-        } else {
-            (rj, ri)
-        };
-        parent[small as usize] = big;
-        size[big as usize] += size[small as usize];
-        tree_edges.push((i, j, across(i as usize, j as usize)));
-        if tree_edges.len() == n - 1 {
-            break;
+    'buckets: for b in 0..BUCKETS {
+        for block in &found {
+            for &e in &block.edges[block.start[b] as usize..block.start[b + 1] as usize] {
+                let (i, j) = ((e as usize / k) as u32, knn.idx[e as usize]);
+                if join(parent, &mut size, i, j) {
+                    tree_edges.push(edge(e));
+                    if tree_edges.len() == n - 1 {
+                        break 'buckets;
+                    }
+                }
+            }
         }
     }
     tree_edges
@@ -1559,14 +1673,17 @@ impl Sheet {
 }
 
 /// `h` sorted by height as a stable sort by `total_cmp` orders it (ties in
-/// their order before), by one integer key each: the height's bits mapped
-/// to an unsigned order that is `total_cmp`'s, then the position.
+/// their order before): a few by their ranks ([`RANK_MAX`]), more by one
+/// integer key each, the height's bits mapped to an unsigned order that is
+/// `total_cmp`'s, then the position.
 fn sort_heights(h: &mut [(f32, u32)]) {
     /// The most sorted with buffers on the stack (a wide neighbourhood of
     /// the default `k` holds 49); more take them from the heap.
     const STACK: usize = 64;
     let n = h.len();
-    if n <= STACK {
+    if n <= RANK_MAX {
+        sort_heights_by_rank(h);
+    } else if n <= STACK {
         let mut keys = [0u64; STACK];
         let mut was = [(0f32, 0u32); STACK];
         sort_heights_by_keys(h, &mut keys[..n], &mut was[..n]);
@@ -1575,18 +1692,45 @@ fn sort_heights(h: &mut [(f32, u32)]) {
     }
 }
 
+/// The most heights [`sort_heights`] places by counting ranks (a graph row
+/// of the default `k` and its point hold 13): below it, counting takes
+/// fewer steps than sorting the keys, and no branch.
+const RANK_MAX: usize = 16;
+
+/// [`sort_heights`] of at most [`RANK_MAX`] heights: each placed at its
+/// rank, the count of those ordered before it (by `total_cmp`'s order, the
+/// ones before it on a tie), which is its place in the stable sort.
+fn sort_heights_by_rank(h: &mut [(f32, u32)]) {
+    let n = h.len();
+    let mut keys = [0u32; RANK_MAX];
+    let mut was = [(0f32, 0u32); RANK_MAX];
+    for (k, x) in keys.iter_mut().zip(h.iter()) {
+        *k = total_order(x.0);
+    }
+    was[..n].copy_from_slice(h);
+    let keys = &keys[..n];
+    for (i, &x) in was[..n].iter().enumerate() {
+        let at = keys[i];
+        let before = keys[..i].iter().filter(|&&k| k <= at).count()
+            + keys[i + 1..].iter().filter(|&&k| k < at).count();
+        h[before] = x;
+    }
+}
+
+/// `x`'s bits mapped to an unsigned integer in `f32::total_cmp`'s order.
+fn total_order(x: f32) -> u32 {
+    let b = x.to_bits();
+    if b & 0x8000_0000 == 0 {
+        b | 0x8000_0000
+    } else {
+        !b
+    }
+}
+
 /// [`sort_heights`] with buffers `keys` and `was` as long as `h`.
 fn sort_heights_by_keys(h: &mut [(f32, u32)], keys: &mut [u64], was: &mut [(f32, u32)]) {
-    let order = |x: f32| {
-        let b = x.to_bits();
-        if b & 0x8000_0000 == 0 {
-            b | 0x8000_0000
-        } else {
-            !b
-        }
-    };
     for (j, (k, x)) in keys.iter_mut().zip(h.iter()).enumerate() {
-        *k = (u64::from(order(x.0)) << 32) | j as u64;
+        *k = (u64::from(total_order(x.0)) << 32) | j as u64;
     }
     was.copy_from_slice(h);
     keys.sort_unstable();
@@ -1885,7 +2029,7 @@ mod tests {
             f32::NAN,
             -f32::NAN,
         ];
-        for len in [0, 1, 2, 7, 49, 257, 300] {
+        for len in [0, 1, 2, 7, 13, 16, 17, 49, 257, 300] {
             for _ in 0..20 {
                 let h: Vec<(f32, u32)> = (0..len)
                     .map(|j| (pool[(rng.next_u64() % pool.len() as u64) as usize], j))
@@ -1993,6 +2137,86 @@ mod tests {
             });
         }
         pts
+    }
+
+    /// Kruskal as it was before the blocks: every undirected edge
+    /// bucket-sorted at once, then one pass over them all.
+    fn spanning_forest_reference(
+        points: &[Vec3],
+        knn: &Knn,
+        normals: &[Vec3],
+        across: &impl Fn(usize, usize) -> bool,
+        parent: &mut [u32],
+    ) -> Vec<(u32, u32, bool)> {
+        let (n, k) = (points.len(), knn.k);
+        let mut sorted: Vec<(u16, u32)> = (0..n * k)
+            .map(|e| (edge_bucket(points, knn, normals, across, e), e as u32))
+            .filter(|&(b, _)| b != NO_EDGE)
+            .collect();
+        sorted.sort_by_key(|&(b, _)| b);
+        let mut size = vec![1u32; n];
+        let mut tree_edges = Vec::new();
+        for &(_, e) in &sorted {
+            let (i, j) = ((e as usize / k) as u32, knn.idx[e as usize]);
+            if join(parent, &mut size, i, j) {
+                tree_edges.push((i, j, across(i as usize, j as usize)));
+            }
+        }
+        tree_edges
+    }
+
+    #[test]
+    fn the_blocks_forest_is_kruskals_over_every_edge() {
+        // A corner and a curved wall, a thin plate's two faces (edges
+        // across two sheets) and a far cluster (a second tree), in the
+        // order made and shuffled (many edges between blocks).
+        let mut pts = corner_and_curve();
+        let mut rng = crate::rng::SplitMix64::new(5);
+        let mut u = || (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
+        // The plate's faces on jittered grids of spacing 0.03, 0.04 apart.
+        for a in 0..34 {
+            for b in 0..34 {
+                for z in [0.0, 0.04] {
+                    let (x, y) = (a as f32 + 0.3 * u(), b as f32 + 0.3 * u());
+                    pts.push(Vec3::new(6.0 + 0.03 * x, 0.03 * y, 2.0 + z));
+                }
+            }
+        }
+        for _ in 0..300 {
+            pts.push(Vec3::new(20.0 + 0.3 * u(), 20.0 + 0.3 * u(), 20.0 + 0.01 * u()));
+        }
+        let mut shuffled = pts.clone();
+        for i in (1..shuffled.len()).rev() {
+            shuffled.swap(i, (u() * i as f32) as usize);
+        }
+        for pts in [pts, shuffled] {
+            let tree = build_tree(&pts);
+            let knn = Knn::build(&tree, &pts, 12);
+            let normals = estimate(&pts, &knn);
+            let sheets = own_sheets(&pts, &knn, &normals);
+            assert!(sheets.iter().any(|s| *s != Sheet::ALL));
+            let across = |i: usize, j: usize| {
+                sheets[i].across(pts[j] - pts[i]) && sheets[j].across(pts[i] - pts[j])
+            };
+            let n = pts.len();
+            let mut want_parent: Vec<u32> = (0..n as u32).collect();
+            let want =
+                spanning_forest_reference(&pts, &knn, &normals, &across, &mut want_parent);
+            assert!(want.len() < n - 1, "not a forest of two trees or more");
+            assert!(want.iter().any(|e| e.2), "no edge across two sheets");
+            for blocks in [1, 2, 3, 7, 64] {
+                let mut parent: Vec<u32> = (0..n as u32).collect();
+                let got = spanning_forest(&pts, &knn, &normals, &across, &mut parent, blocks);
+                assert_eq!(got, want, "{blocks} blocks");
+                for i in 0..n as u32 {
+                    assert_eq!(
+                        find(&mut parent, i),
+                        find(&mut want_parent, i),
+                        "{blocks} blocks: the root of point {i}'s tree"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
