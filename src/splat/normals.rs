@@ -1673,17 +1673,14 @@ impl Sheet {
 }
 
 /// `h` sorted by height as a stable sort by `total_cmp` orders it (ties in
-/// their order before): a few by their ranks ([`RANK_MAX`]), more by one
-/// integer key each, the height's bits mapped to an unsigned order that is
-/// `total_cmp`'s, then the position.
+/// their order before), by one integer key each: the height's bits mapped
+/// to an unsigned order that is `total_cmp`'s, then the position.
 fn sort_heights(h: &mut [(f32, u32)]) {
     /// The most sorted with buffers on the stack (a wide neighbourhood of
     /// the default `k` holds 49); more take them from the heap.
     const STACK: usize = 64;
     let n = h.len();
-    if n <= RANK_MAX {
-        sort_heights_by_rank(h);
-    } else if n <= STACK {
+    if n <= STACK {
         let mut keys = [0u64; STACK];
         let mut was = [(0f32, 0u32); STACK];
         sort_heights_by_keys(h, &mut keys[..n], &mut was[..n]);
@@ -1692,45 +1689,18 @@ fn sort_heights(h: &mut [(f32, u32)]) {
     }
 }
 
-/// The most heights [`sort_heights`] places by counting ranks (a graph row
-/// of the default `k` and its point hold 13): below it, counting takes
-/// fewer steps than sorting the keys, and no branch.
-const RANK_MAX: usize = 16;
-
-/// [`sort_heights`] of at most [`RANK_MAX`] heights: each placed at its
-/// rank, the count of those ordered before it (by `total_cmp`'s order, the
-/// ones before it on a tie), which is its place in the stable sort.
-fn sort_heights_by_rank(h: &mut [(f32, u32)]) {
-    let n = h.len();
-    let mut keys = [0u32; RANK_MAX];
-    let mut was = [(0f32, 0u32); RANK_MAX];
-    for (k, x) in keys.iter_mut().zip(h.iter()) {
-        *k = total_order(x.0);
-    }
-    was[..n].copy_from_slice(h);
-    let keys = &keys[..n];
-    for (i, &x) in was[..n].iter().enumerate() {
-        let at = keys[i];
-        let before = keys[..i].iter().filter(|&&k| k <= at).count()
-            + keys[i + 1..].iter().filter(|&&k| k < at).count();
-        h[before] = x;
-    }
-}
-
-/// `x`'s bits mapped to an unsigned integer in `f32::total_cmp`'s order.
-fn total_order(x: f32) -> u32 {
-    let b = x.to_bits();
-    if b & 0x8000_0000 == 0 {
-        b | 0x8000_0000
-    } else {
-        !b
-    }
-}
-
 /// [`sort_heights`] with buffers `keys` and `was` as long as `h`.
 fn sort_heights_by_keys(h: &mut [(f32, u32)], keys: &mut [u64], was: &mut [(f32, u32)]) {
+    let order = |x: f32| {
+        let b = x.to_bits();
+        if b & 0x8000_0000 == 0 {
+            b | 0x8000_0000
+        } else {
+            !b
+        }
+    };
     for (j, (k, x)) in keys.iter_mut().zip(h.iter()).enumerate() {
-        *k = (u64::from(total_order(x.0)) << 32) | j as u64;
+        *k = (u64::from(order(x.0)) << 32) | j as u64;
     }
     was.copy_from_slice(h);
     keys.sort_unstable();
@@ -2029,7 +1999,7 @@ mod tests {
             f32::NAN,
             -f32::NAN,
         ];
-        for len in [0, 1, 2, 7, 13, 16, 17, 49, 257, 300] {
+        for len in [0, 1, 2, 7, 49, 257, 300] {
             for _ in 0..20 {
                 let h: Vec<(f32, u32)> = (0..len)
                     .map(|j| (pool[(rng.next_u64() % pool.len() as u64) as usize], j))
