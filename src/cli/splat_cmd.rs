@@ -180,8 +180,10 @@ fn print_heldout(p: &PointsOutcome) {
             None => "over the whole cloud".into(),
         };
         eprintln!(
-            "splatray: held-out coverage {:.4}: splats grown without {:.0} % of the points hold {} of the {} tested (within {:.3e} of a splat's plane; {} held-out outliers not tested), {whre}: {:.2} s, {:.0} % of generation",
+            "splatray: held-out coverage {:.4} (95 % interval {:.4}-{:.4}): splats grown without {:.0} % of the points hold {} of the {} tested (within {:.3e} of a splat's plane; {} held-out outliers not tested), {whre}: {:.2} s, {:.0} % of generation",
             h.coverage,
+            h.interval[0],
+            h.interval[1],
             100.0 * h.fraction,
             h.found,
             h.tested,
