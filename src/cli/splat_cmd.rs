@@ -173,8 +173,9 @@ fn print_heldout(p: &PointsOutcome) {
     } else if let Some(h) = &p.report.heldout_coverage {
         let whre = match p.report.heldout_windows.as_ref().filter(|w| w.windows > 0) {
             Some(w) => format!(
-                "in {} windows holding {:.1} % of the cloud",
+                "in {} window{} holding {:.1} % of the cloud",
                 w.windows,
+                if w.windows == 1 { "" } else { "s" },
                 100.0 * w.share
             ),
             None => "over the whole cloud".into(),
