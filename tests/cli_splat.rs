@@ -53,15 +53,28 @@ fn sample_then_splat_with_report() {
     // (The grown-from `coverage` is 1 by construction: the held-out one is
     // checked.)
     assert!(json["coverage"].is_number());
-    // The held-out coverage (10 % by default), printed and in the report.
-    // Not 1 by construction: 5,000 points on the bunny leave some held-out
-    // points (in the ears) off the splats grown without them (0.96 here).
+    // The held-out coverage (10 % by default), printed and in the report,
+    // measured in windows holding at most 8 % of the cloud (400 points):
+    // a few dozen points tested, so it carries its 95 % interval. Not 1 by
+    // construction: 5,000 points on the bunny leave some held-out points
+    // off the splats grown without them (the whole cloud's regrowth,
+    // `--holdout-full`: 0.9522 of 502); measured 0.9286 of 14, interval
+    // 0.685-0.987, which holds it.
     let h = &json["heldout_coverage"];
     let hc = h["coverage"].as_f64().unwrap();
-    // Measured 0.9602 (seed fixed by the flags): within 0.02 of it.
-    assert!((0.94..=0.98).contains(&hc), "{h}");
     let tested = h["tested"].as_u64().unwrap();
-    assert!((350..650).contains(&tested), "{h}");
+    assert!((8..60).contains(&tested), "{h}");
+    assert!(
+        json["heldout_windows"]["points"].as_u64().unwrap() <= 400,
+        "{json}"
+    );
+    let (lo, hi) = (
+        h["interval"][0].as_f64().unwrap(),
+        h["interval"][1].as_f64().unwrap(),
+    );
+    assert!(lo <= hc && hc <= hi && lo <= 0.9522 && 0.9522 <= hi, "{h}");
+    assert!(hi - lo > 0.1 && hc < 1.0, "{h}");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("95 % interval"));
     assert!(String::from_utf8_lossy(&out.stderr).contains("held-out coverage"));
     assert_eq!(json["k"].as_u64(), Some(10));
     for key in ["read", "knn", "normals", "grow", "fit", "total"] {

@@ -173,15 +173,18 @@ fn print_heldout(p: &PointsOutcome) {
     } else if let Some(h) = &p.report.heldout_coverage {
         let whre = match p.report.heldout_windows.as_ref().filter(|w| w.windows > 0) {
             Some(w) => format!(
-                "in {} windows holding {:.1} % of the cloud",
+                "in {} window{} holding {:.1} % of the cloud",
                 w.windows,
+                if w.windows == 1 { "" } else { "s" },
                 100.0 * w.share
             ),
             None => "over the whole cloud".into(),
         };
         eprintln!(
-            "splatray: held-out coverage {:.4}: splats grown without {:.0} % of the points hold {} of the {} tested (within {:.3e} of a splat's plane; {} held-out outliers not tested), {whre}: {:.2} s, {:.0} % of generation",
+            "splatray: held-out coverage {:.4} (95 % interval {:.4}-{:.4}): splats grown without {:.0} % of the points hold {} of the {} tested (within {:.3e} of a splat's plane; {} held-out outliers not tested), {whre}: {:.2} s, {:.0} % of generation",
             h.coverage,
+            h.interval[0],
+            h.interval[1],
             100.0 * h.fraction,
             h.found,
             h.tested,

@@ -6,7 +6,7 @@
 
 use crate::pipeline::{Generated, generate_uncoloured};
 use crate::rng::SplitMix64;
-use crate::splat::{PointCloud, SplatParams, count_on_splats, outliers};
+use crate::splat::{PointCloud, SplatParams, SplatReport, count_on_splats, outliers};
 use crate::{Error, Result};
 use glam::Vec3;
 
@@ -44,8 +44,16 @@ pub fn split(cloud: &PointCloud, params: &SplatParams, fraction: f32, seed: u64)
             "hold-out fraction {fraction} must be in (0, 0.5]"
         )));
     }
+    let keep: Vec<bool> = (0..cloud.len())
+        .map(|i| !held_out(seed, i, fraction))
+        .collect();
+    Ok(split_kept(cloud, params, &keep))
+}
+
+/// [`split`] with the points to keep marked in `keep` (the others held
+/// out), the outlier test run on `cloud`.
+fn split_kept(cloud: &PointCloud, params: &SplatParams, keep: &[bool]) -> Split {
     let n = cloud.len();
-    let keep: Vec<bool> = (0..n).map(|i| !held_out(seed, i, fraction)).collect();
     let rejected = if params.remove_outliers {
         outliers::find(
             &cloud.positions,
@@ -57,7 +65,7 @@ pub fn split(cloud: &PointCloud, params: &SplatParams, fraction: f32, seed: u64)
     };
     let train = PointCloud {
         skipped: cloud.skipped.clone(),
-        ..cloud.subset(&keep)
+        ..cloud.subset(keep)
     };
     let held: Vec<usize> = (0..n).filter(|&i| !keep[i]).collect();
     let test: Vec<Vec3> = held
@@ -65,12 +73,12 @@ pub fn split(cloud: &PointCloud, params: &SplatParams, fraction: f32, seed: u64)
         .filter(|&&i| !rejected[i])
         .map(|&i| cloud.positions[i])
         .collect();
-    Ok(Split {
+    Split {
         train,
         held_out: held.len(),
         held_out_outliers: held.len() - test.len(),
         test,
-    })
+    }
 }
 
 /// What the held-out coverage measured.
@@ -86,6 +94,10 @@ pub struct HeldOutCoverage {
     pub found: usize,
     /// `found / tested`.
     pub coverage: f64,
+    /// The Wilson score interval of `coverage` at 95 % ([`wilson`]): how
+    /// far the share of all such points lying on a splat may be from it,
+    /// given that only `tested` were tested.
+    pub interval: [f64; 2],
     /// How far from a splat's plane a point may lie: ϵ, plus three times
     /// the measured noise where the cloud was moved onto its local
     /// surfaces (held-out points keep their noise).
@@ -109,57 +121,93 @@ pub fn heldout_coverage(
     let Generated { splats, report, .. } = generate_uncoloured(&s.train, params, None)?;
     let tolerance = report.cover_tolerance();
     let found = count_on_splats(&s.test, &splats, tolerance as f32);
-    Ok(HeldOutCoverage {
+    Ok(HeldOutCoverage::new(
         fraction,
-        tested: s.test.len(),
-        outliers: s.held_out_outliers,
-        found,
-        coverage: if s.test.is_empty() {
-            1.0
-        } else {
-            found as f64 / s.test.len() as f64
-        },
+        (s.test.len(), found),
+        s.held_out_outliers,
         tolerance,
-    })
+    ))
+}
+
+impl HeldOutCoverage {
+    /// `found` of `tested` held-out points lying on a splat (a coverage of
+    /// 1 with none tested), with its interval.
+    fn new(fraction: f32, (tested, found): (usize, usize), outliers: usize, tolerance: f64) -> Self {
+        HeldOutCoverage {
+            fraction,
+            tested,
+            outliers,
+            found,
+            coverage: if tested == 0 {
+                1.0
+            } else {
+                found as f64 / tested as f64
+            },
+            interval: wilson(found, tested),
+            tolerance,
+        }
+    }
+}
+
+/// The Wilson score interval at 95 % (`z` = 1.96) of a share measured as
+/// `found` of `tested`: `(p + z²/2n ± z √(p(1-p)/n + z²/4n²)) / (1 + z²/n)`
+/// with `p = found / tested`, `n = tested`; `[0, 1]` with none tested.
+/// Unlike `p ± z √(p(1-p)/n)` it stays within `[0, 1]` and does not
+/// shrink to a point at `p = 1`: 40 of 40 gives `[0.912, 1]`.
+#[must_use]
+pub fn wilson(found: usize, tested: usize) -> [f64; 2] {
+    if tested == 0 {
+        return [0.0, 1.0];
+    }
+    let z2 = 1.96f64 * 1.96;
+    let n = tested as f64;
+    let p = found.min(tested) as f64 / n;
+    let centre = p + z2 / (2.0 * n);
+    let half = (z2 * (p * (1.0 - p) / n + z2 / (4.0 * n * n))).sqrt();
+    let d = 1.0 + z2 / n;
+    [
+        ((centre - half) / d).clamp(0.0, p),
+        ((centre + half) / d).clamp(p, 1.0),
+    ]
 }
 
 /// The held-out points the windows' cores should hold in all: windows
-/// grow (their share by [`WINDOW_GROWTH`]) until they do, so a cloud's
-/// check tests enough points to tell a coverage of 0.99 from 1 (five
-/// misses), as far as [`MAX_SHARE`] allows.
+/// grow (their share by [`WINDOW_GROWTH`]) until they do, so a large
+/// cloud's check tests enough points to tell a coverage of 0.99 from 1
+/// (five misses), as far as [`MAX_SHARE`] allows.
 pub const MIN_TESTED: usize = 500;
 
-/// The most of the cloud the windows hold in all, or [`MAX_POINTS`] if
-/// more: regrowing splats from them costs about that share of generation
-/// (a budget of 15 %), and a cloud's windows stop growing there even when
-/// they test fewer points than [`MIN_TESTED`]. A cloud of under
-/// `MAX_POINTS / MAX_SHARE` (about 170k) points may take more than that
-/// share, at most [`MAX_POINTS`] points in all: on `milk.pcd` (12,575
-/// points) 12 % of the cloud tested 39 points, not 545, for 0.13 s less
-/// (coverage 1.000 against 0.989, whose interval those 39 cannot tell
-/// from 0.9).
-pub const MAX_SHARE: f64 = 0.12;
+/// The most of the cloud the windows hold in all, at every size:
+/// regrowing splats from them costs about that share of generation or a
+/// little more (a small window's edges look like creases), so the check
+/// stays within 15 % of it. At 10 % a 5,000-point bunny sample's check
+/// took 17 % of generation's instructions. A small cloud's windows stop
+/// here with fewer than [`MIN_TESTED`] points tested, and the coverage
+/// carries its [`wilson`] interval.
+pub const MAX_SHARE: f64 = 0.08;
 
-/// See [`MAX_SHARE`]: regrowing splats from 20,000 points takes about
-/// 0.3 s on one core here.
-pub const MAX_POINTS: usize = 20_000;
-
-/// Windows holding more than this share of the cloud in all cost about
-/// as much as the whole cloud: it is measured whole instead (only a cloud
-/// of under `2 MAX_POINTS` points gets there).
-pub const WHOLE_FROM_SHARE: f64 = 0.5;
+/// The windows' halo, in `ϵ`: a held-out point's verdict reads only the
+/// splats whose discs hold it, not their normal fields (which the halo of
+/// tiles, [`crate::tiled::HALO_EPS`], also covers). Measured against the
+/// whole cloud's regrowth without the same held-out points, on six clouds
+/// at this budget: the windows' verdicts differed from it on 2 of 1,062
+/// tested points with a halo of 12 `ϵ`, 3 of 1,560 with 6, 2 of 1,619 with
+/// 4 and 3 of 1,771 with 3; growth's order, not the halo, sets them apart.
+/// Where the whole cloud's splats are wider on average (a sparse cloud:
+/// `bunny-scan.ply`'s mean radius is 19 `ϵ`), the halo is their mean
+/// radius: with 4 `ϵ` its windows tested 13 of 16 on a splat against 188
+/// of 193 over the whole cloud.
+pub const WINDOW_HALO_EPS: f64 = 4.0;
 
 /// See [`MIN_TESTED`].
 pub const WINDOW_GROWTH: f64 = 1.4;
 
 /// Windows taken, each holding with its halo at least [`WINDOW_SHARE`] of
-/// the cloud: in all about 6 % on a large cloud, so the coverage costs
-/// under 10 % of generation.
+/// the cloud: in all about 6 % on a large cloud.
 pub const WINDOWS: usize = 4;
 
 /// See [`WINDOWS`].
 pub const WINDOW_SHARE: f64 = 0.015;
-
 
 /// Where the held-out coverage was measured.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -223,20 +271,25 @@ fn in_core(windows: &[Window], p: Vec3) -> bool {
 /// [`heldout_coverage`] measured in [`WINDOWS`] windows rather than over
 /// the whole cloud, at every size. Each window is a box around a point
 /// picked by `seed`, large enough to hold [`WINDOW_SHARE`] of the cloud;
-/// its outer [`crate::tiled::HALO_EPS`] `ϵ` are its halo (at least 2 `ϵ` of
-/// core are kept), so the splats over its core grow as they would in the
-/// whole cloud. While the cores would hold fewer than [`MIN_TESTED`]
-/// held-out points, the windows' share grows by [`WINDOW_GROWTH`], as far
-/// as the budget allows ([`MAX_SHARE`] of the cloud or [`MAX_POINTS`]
-/// points, the more); where they would then hold over
-/// [`WHOLE_FROM_SHARE`] of the cloud (a small cloud), the coverage is
-/// measured whole. Where four windows of the least share are already over
-/// the budget (a thin or long cloud, whose halos are most of each window),
-/// one window of the budget is taken, and where that one is over it too,
-/// nothing is measured (an error that says so). Splats are regrown from
+/// its outer [`WINDOW_HALO_EPS`] `ϵ` (or the whole cloud's mean splat
+/// radius, if wider) are its halo (at least 2 `ϵ` of core are kept), so the splats over its core grow as they would in the whole
+/// cloud. While the cores would hold fewer than [`MIN_TESTED`] held-out
+/// points, the windows' share grows by [`WINDOW_GROWTH`], as far as
+/// [`MAX_SHARE`] of the cloud allows (a last step to about that share
+/// where the next one would pass it). Where the budget stops them, one
+/// window of the budget is taken instead if its core holds over twice as
+/// many points (a small or sparse cloud, whose four windows are mostly
+/// halo), and where that one is over the budget too, nothing is measured
+/// (an error that says so). The held-out points are the whole
+/// cloud's ([`split`] with `seed`: those [`heldout_coverage`] would test),
+/// the outlier test run on the windows' points. Splats are regrown from
 /// the windows' points without the held-out ones, with the whole cloud's
-/// `epsilon` (absolute, in the cloud's units), and the held-out points of
-/// the windows' cores are tested against them.
+/// `ϵ` (`whole`: the report of the cloud's own generation; absolute, in
+/// the cloud's units), and the held-out points of the windows' cores are
+/// tested against them within the whole cloud's tolerance
+/// ([`SplatReport::cover_tolerance`]): a window's few points measure the
+/// noise less well (`bunny-scan.ply`: 1.8e-3 in its windows against
+/// 4.2e-4 over the cloud).
 ///
 /// # Errors
 /// As [`split`] and [`generate_uncoloured`]; and a cloud too thin for a
@@ -246,71 +299,34 @@ pub fn heldout_coverage_windows(
     params: &SplatParams,
     fraction: f32,
     seed: u64,
-    epsilon: f64,
+    whole: &SplatReport,
 ) -> Result<(HeldOutCoverage, Windows)> {
+    let epsilon = whole.epsilon;
     let n = cloud.len();
-    let pos = &cloud.positions;
-    let halo = (crate::tiled::HALO_EPS * epsilon) as f32;
-    let whole = || {
-        heldout_coverage(cloud, params, fraction, seed).map(|h| {
-            (
-                h,
-                Windows {
-                    windows: 0,
-                    points: n,
-                    share: 1.0,
-                },
-            )
-        })
-    };
-    if n == 0 || fraction.is_nan() || fraction <= 0.0 {
-        return whole();
+    if n == 0 || !(fraction > 0.0 && fraction <= 0.5) {
+        return heldout_coverage(cloud, params, fraction, seed).map(|h| {
+            let all = Windows {
+                windows: 0,
+                points: n,
+                share: 1.0,
+            };
+            (h, all)
+        });
     }
-    let budget = ((MAX_SHARE * n as f64) as usize).max(MAX_POINTS);
-    let held_of = |w: &[bool]| w.iter().filter(|&&w| w).count();
-    let min_core = 2.0 * epsilon as f32;
-    let mut share = WINDOW_SHARE;
-    let mut fits: Option<(Vec<Window>, Vec<bool>)> = None;
-    loop {
-        let (windows, in_window) = pick_windows(pos, seed, (WINDOWS, share), halo, min_core);
-        let held = held_of(&in_window);
-        if held as f64 > WHOLE_FROM_SHARE * n as f64 && held <= budget {
-            return whole();
-        }
-        if held > budget {
-            break;
-        }
-        let cores = pos.iter().filter(|p| in_core(&windows, **p)).count();
-        fits = Some((windows, in_window));
-        if cores as f64 * f64::from(fraction) >= MIN_TESTED as f64 {
-            break;
-        }
-        share *= WINDOW_GROWTH;
-    }
-    let (windows, in_window) = match fits {
-        Some(f) => f,
-        None => {
-            let one = pick_windows(pos, seed, (1, MAX_SHARE), halo, min_core);
-            let held = held_of(&one.1);
-            if held > budget {
-                return Err(Error::invalid(format!(
-                    "no window fits the check's budget (the smallest holds {:.0} % of the \
-                     {n} points, over {:.0} %): --holdout-full measures it over the whole cloud",
-                    100.0 * held as f64 / n as f64,
-                    100.0 * budget as f64 / n as f64
-                )));
-            }
-            one
-        }
-    };
+    let halo = (WINDOW_HALO_EPS * epsilon).max(whole.mean_radius);
+    let (windows, in_window) = fit_windows(&cloud.positions, fraction, seed, (epsilon, halo))?;
+    let keep: Vec<bool> = (0..n)
+        .filter(|&i| in_window[i])
+        .map(|i| !held_out(seed, i, fraction))
+        .collect();
     let local = cloud.subset(&in_window);
     let windowed = SplatParams {
         epsilon_abs: Some(epsilon),
         ..params.clone()
     };
-    let s = split(&local, &windowed, fraction, seed)?;
-    let Generated { splats, report, .. } = generate_uncoloured(&s.train, &windowed, None)?;
-    let tolerance = report.cover_tolerance();
+    let s = split_kept(&local, &windowed, &keep);
+    let Generated { splats, .. } = generate_uncoloured(&s.train, &windowed, None)?;
+    let tolerance = whole.cover_tolerance();
     let test: Vec<Vec3> = s
         .test
         .iter()
@@ -318,23 +334,92 @@ pub fn heldout_coverage_windows(
         .filter(|p| in_core(&windows, *p))
         .collect();
     let found = count_on_splats(&test, &splats, tolerance as f32);
+    let tested = (test.len(), found);
     Ok((
-        HeldOutCoverage {
-            fraction,
-            tested: test.len(),
-            outliers: s.held_out_outliers,
-            found,
-            coverage: if test.is_empty() {
-                1.0
-            } else {
-                found as f64 / test.len() as f64
-            },
-            tolerance,
-        },
+        HeldOutCoverage::new(fraction, tested, s.held_out_outliers, tolerance),
         Windows {
             windows: windows.len(),
             points: local.len(),
             share: local.len() as f64 / n as f64,
         },
     ))
+}
+
+/// The windows of [`heldout_coverage_windows`] for the points `pos` (with
+/// `ϵ` and the halo's width), and which points they hold with their halos.
+fn fit_windows(
+    pos: &[Vec3],
+    fraction: f32,
+    seed: u64,
+    (epsilon, halo): (f64, f64),
+) -> Result<(Vec<Window>, Vec<bool>)> {
+    let n = pos.len();
+    let halo = halo as f32;
+    let min_core = 2.0 * epsilon as f32;
+    let pick = |count, share| pick_windows(pos, seed, (count, share), halo, min_core);
+    let held_of = |w: &[bool]| w.iter().filter(|&&w| w).count();
+    let budget = (MAX_SHARE * n as f64) as usize;
+    let mut share = WINDOW_SHARE;
+    let mut fit = None;
+    loop {
+        let w = pick(WINDOWS, share);
+        let held = held_of(&w.1);
+        if held > budget {
+            break;
+        }
+        let cores = pos.iter().filter(|p| in_core(&w.0, **p)).count();
+        if cores as f64 * f64::from(fraction) >= MIN_TESTED as f64 {
+            return Ok(w);
+        }
+        fit = Some((share, held, w));
+        share *= WINDOW_GROWTH;
+    }
+    let four = fit.map(|(share, held, w)| {
+        // The step past the budget overshot: one to about the budget
+        // (the windows' points grow about as their share).
+        let last = pick(WINDOWS, share * budget as f64 / held.max(1) as f64);
+        if held_of(&last.1) <= budget { last } else { w }
+    });
+    // A small or sparse cloud's four windows are mostly halo: one window
+    // of the budget is taken where its core holds over twice as many
+    // points (a window holding a share of the points holds a few more:
+    // ties, and its core of at least 2 `ϵ`).
+    let one = pick(1, 0.9 * MAX_SHARE);
+    let held = held_of(&one.1);
+    let cores = |w: &(Vec<Window>, Vec<bool>)| pos.iter().filter(|p| in_core(&w.0, **p)).count();
+    match four {
+        Some(f) if held > budget || cores(&one) <= 2 * cores(&f) => Ok(f),
+        _ if held <= budget => Ok(one),
+        _ => Err(Error::invalid(format!(
+            "no window fits the check's budget (the smallest holds {:.0} % of the \
+             {n} points, over {:.0} %): --holdout-full measures it over the whole cloud",
+            100.0 * held as f64 / n as f64,
+            100.0 * budget as f64 / n as f64
+        ))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The interval against values worked by hand from its formula (5 of
+    /// 10: 0.2366-0.7634, the textbook case), at the ends, and with none
+    /// tested.
+    #[test]
+    fn wilson_interval() {
+        let near = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).abs() < 1e-4 && (a[1] - b[1]).abs() < 1e-4;
+        assert!(near(wilson(5, 10), [0.2366, 0.7634]), "{:?}", wilson(5, 10));
+        assert!(near(wilson(40, 40), [0.9124, 1.0]), "{:?}", wilson(40, 40));
+        assert!(near(wilson(539, 545), [0.9762, 0.9949]), "{:?}", wilson(539, 545));
+        assert!(near(wilson(0, 20), [0.0, 0.1611]), "{:?}", wilson(0, 20));
+        assert_eq!(wilson(0, 0), [0.0, 1.0]);
+        // It narrows as more points are tested, about as 1 / sqrt(n).
+        let width = |f, n| {
+            let [lo, hi] = wilson(f, n);
+            hi - lo
+        };
+        assert!(width(90, 100) > 1.8 * width(900, 1000));
+        assert!(width(90, 100) < 3.5 * width(900, 1000));
+    }
 }

@@ -223,7 +223,7 @@ fn points(
     let (splats, mut generation, trim) = (generated.splats, generated.report, generated.trim);
     let (fields, zero_fields) = (generated.color_fields, generated.constant_color_fields);
     let colors_seconds = generation.seconds.colors;
-    let heldout = HeldOut::measure(req, &cloud, &params, generation.epsilon, progress);
+    let heldout = HeldOut::measure(req, &cloud, &params, &generation, progress);
     generation.seconds.read = read;
     generation.seconds.total += read;
     let bytes = encode_splats_with(
@@ -290,13 +290,13 @@ struct HeldOut {
 
 impl HeldOut {
     /// Measures it (nothing with a held-out fraction of 0): over the whole
-    /// cloud with `holdout_full`, else in windows; `epsilon` is the
-    /// generation's, in the cloud's units.
+    /// cloud with `holdout_full`, else in windows; `generation` is the
+    /// report of the cloud's own generation (its `ϵ` and tolerance).
     fn measure(
         req: &SplatRequest,
         cloud: &PointCloud,
         params: &SplatParams,
-        epsilon: f64,
+        generation: &SplatReport,
         progress: Option<Progress<'_>>,
     ) -> HeldOut {
         let mut out = HeldOut {
@@ -311,7 +311,7 @@ impl HeldOut {
             let measured = if req.holdout_full {
                 heldout_coverage(cloud, params, req.holdout, 1)
             } else {
-                heldout_coverage_windows(cloud, params, req.holdout, 1, epsilon).map(|(h, w)| {
+                heldout_coverage_windows(cloud, params, req.holdout, 1, generation).map(|(h, w)| {
                     out.windows = Some(w);
                     h
                 })
