@@ -925,9 +925,15 @@ fn clean_and_thin(
         }
     }
     if order.len() > 3 && (params.thin > 0.0 || params.auto_thin) {
+        // The kept points as a mask, made once where a pass reads them.
+        let member = std::cell::OnceCell::new();
+        let member = || member.get_or_init(|| super::thin::members(&order, raw.positions.len()));
         let epsilon = match params.epsilon_abs {
             Some(e) => e,
-            None => f64::from(params.epsilon_rel) * robust_diagonal(&raw.positions, &order),
+            None => {
+                let diagonal = robust_diagonal(&raw.positions, member(), order.len());
+                f64::from(params.epsilon_rel) * diagonal
+            }
         };
         let world = |i: u32| raw.origin + raw.positions[i as usize].as_dvec3();
         let (cell, why) = if params.thin > 0.0 {
@@ -938,7 +944,7 @@ fn clean_and_thin(
             (params.thin, why)
         } else {
             let (auto, at_least) = (super::thin::AUTO_CELL_EPS, super::thin::AUTO_POINTS);
-            if super::thin::typical_cell_count(&order, raw.positions.len(), world, auto * epsilon) < at_least {
+            if super::thin::typical_cell_count(&order, member(), world, auto * epsilon) < at_least {
                 return order;
             }
             let why = format!(
@@ -1314,21 +1320,17 @@ fn normals_of(
 /// `order`'s points along each axis: `ϵ`'s scale before outliers are known
 /// (a few far outliers would widen the plain bounding box, and the cells of
 /// [`super::thin`] with it). The quantiles are of the coordinates' values,
-/// whatever their order, so the points are read in memory order (`order`'s
-/// indices are distinct) rather than `order`'s, whose loads miss the cache.
-fn robust_diagonal(positions: &[Vec3], order: &[u32]) -> f64 {
-    let n = order.len();
+/// whatever their order, so the points are read in memory order (`member`:
+/// the `n` kept points as a mask, [`super::thin::members`]) rather than
+/// Morton order, whose loads miss the cache.
+fn robust_diagonal(positions: &[Vec3], member: &[bool], n: usize) -> f64 {
     let cut = n / 1000;
-    let mut member = vec![false; positions.len()];
-    for &i in order {
-        member[i as usize] = true;
-    }
     let mut axis: Vec<f32> = Vec::with_capacity(n);
     let mut d2 = 0.0f64;
     let coords: [fn(&Vec3) -> f32; 3] = [|p| p.x, |p| p.y, |p| p.z];
     for coord in coords {
         axis.clear();
-        let kept = positions.iter().zip(&member).filter(|e| *e.1);
+        let kept = positions.iter().zip(member).filter(|e| *e.1);
         axis.extend(kept.map(|(p, _)| coord(p)));
         let (_, lo, _) = axis.select_nth_unstable_by(cut, f32::total_cmp);
         let lo = f64::from(*lo);

@@ -40,15 +40,14 @@ const SAMPLE: usize = 4096;
 /// every point. Costs one pass over the points, a binary search each.
 ///
 /// The count is a sum, so the pass reads the points in the order of their
-/// indices (`indices` are distinct and below `len`, in any order), not in
-/// `indices`' own: a cloud's points in Morton order are scattered through
-/// memory as read, and that pass's loads missed the cache (10 % of the
-/// graph stage of the 2M bunny sample, docs/notes/generation.md,
-/// "fourteenth session").
+/// indices (`member`: [`members`] of `indices`), not in `indices`' own: a
+/// cloud's points in Morton order are scattered through memory as read,
+/// and that pass's loads missed the cache (10 % of the graph stage of the
+/// 2M bunny sample, docs/notes/generation.md, "fourteenth session").
 #[must_use]
 pub fn typical_cell_count(
     indices: &[u32],
-    len: usize,
+    member: &[bool],
     world: impl Fn(u32) -> DVec3 + Sync,
     cell: f64,
 ) -> usize {
@@ -61,10 +60,6 @@ pub fn typical_cell_count(
     let mut probes = sampled.clone();
     probes.sort_unstable();
     probes.dedup();
-    let mut member = vec![false; len];
-    for &i in indices {
-        member[i as usize] = true;
-    }
     const CHUNK: usize = 1 << 14;
     let counts = member
         .par_chunks(CHUNK)
@@ -91,6 +86,17 @@ pub fn typical_cell_count(
         .collect();
     let mid = held.len() / 2;
     *held.select_nth_unstable(mid).1
+}
+
+/// Which of `len` points `indices` (distinct, each below `len`) names: the
+/// same points as a mask, to read them in memory order.
+#[must_use]
+pub fn members(indices: &[u32], len: usize) -> Vec<bool> {
+    let mut member = vec![false; len];
+    for &i in indices {
+        member[i as usize] = true;
+    }
+    member
 }
 
 /// Bits per axis of a packed cell key.
@@ -203,21 +209,21 @@ mod tests {
 
     #[test]
     fn a_typical_cell_is_counted() {
-        use super::typical_cell_count;
+        use super::{members, typical_cell_count};
         // A 100 x 100 grid 0.1 apart in cells 1 wide: 100 points a cell.
         let grid: Vec<DVec3> = (0..10_000)
             .map(|i| DVec3::new((i % 100) as f64 * 0.1 + 0.05, (i / 100) as f64 * 0.1 + 0.05, 0.5))
             .collect();
         let idx: Vec<u32> = (0..grid.len() as u32).collect();
-        assert_eq!(typical_cell_count(&idx, idx.len(), |i| grid[i as usize], 1.0), 100);
-        assert_eq!(typical_cell_count(&idx, idx.len(), |i| grid[i as usize], 0.05), 1);
+        assert_eq!(typical_cell_count(&idx, &members(&idx, idx.len()), |i| grid[i as usize], 1.0), 100);
+        assert_eq!(typical_cell_count(&idx, &members(&idx, idx.len()), |i| grid[i as usize], 0.05), 1);
         // Three quarters of the points in one cell: it is the typical one.
         let mut lumped = grid.clone();
         for p in lumped.iter_mut().take(7_500) {
             *p = DVec3::new(0.5, 0.5, 0.5) + (*p - DVec3::new(5.0, 5.0, 0.5)) * 1e-3;
         }
-        assert_eq!(typical_cell_count(&idx, idx.len(), |i| lumped[i as usize], 1.0), 7_500);
-        assert_eq!(typical_cell_count(&[], 0, |i| grid[i as usize], 1.0), 0);
+        assert_eq!(typical_cell_count(&idx, &members(&idx, idx.len()), |i| lumped[i as usize], 1.0), 7_500);
+        assert_eq!(typical_cell_count(&[], &[], |i| grid[i as usize], 1.0), 0);
         // Some of the points, scattered through memory (a stride of 7 mod
         // the length): the count is over those only, as a brute-force
         // count of each sampled point's cell finds it.
@@ -230,7 +236,7 @@ mod tests {
                 .collect();
             let mid = held.len() / 2;
             let want = *held.select_nth_unstable(mid).1;
-            let got = typical_cell_count(&some, lumped.len(), |i| lumped[i as usize], cell);
+            let got = typical_cell_count(&some, &members(&some, lumped.len()), |i| lumped[i as usize], cell);
             assert_eq!(got, want, "cell {cell}");
         }
     }

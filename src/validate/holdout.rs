@@ -358,6 +358,7 @@ fn fit_windows(
     let min_core = 2.0 * epsilon as f32;
     let pick = |count, share| pick_windows(pos, seed, (count, share), halo, min_core);
     let held_of = |w: &[bool]| w.iter().filter(|&&w| w).count();
+    let cores = |w: &(Vec<Window>, Vec<bool>)| pos.iter().filter(|p| in_core(&w.0, **p)).count();
     let budget = (MAX_SHARE * n as f64) as usize;
     let mut share = WINDOW_SHARE;
     let mut fit = None;
@@ -367,8 +368,7 @@ fn fit_windows(
         if held > budget {
             break;
         }
-        let cores = pos.iter().filter(|p| in_core(&w.0, **p)).count();
-        if cores as f64 * f64::from(fraction) >= MIN_TESTED as f64 {
+        if cores(&w) as f64 * f64::from(fraction) >= MIN_TESTED as f64 {
             return Ok(w);
         }
         fit = Some((share, held, w));
@@ -386,7 +386,6 @@ fn fit_windows(
     // ties, and its core of at least 2 `ϵ`).
     let one = pick(1, 0.9 * MAX_SHARE);
     let held = held_of(&one.1);
-    let cores = |w: &(Vec<Window>, Vec<bool>)| pos.iter().filter(|p| in_core(&w.0, **p)).count();
     match four {
         Some(f) if held > budget || cores(&one) <= 2 * cores(&f) => Ok(f),
         _ if held <= budget => Ok(one),
