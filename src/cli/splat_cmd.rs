@@ -41,10 +41,9 @@ pub struct SplatArgs {
     #[arg(long, default_value_t = 0.1)]
     pub holdout: f32,
     /// Measure the held-out coverage over the whole cloud (splats grown a
-    /// second time from all but the held-out points) instead of in four
-    /// windows (about 6 % of a large cloud, more of a small one so that at
-    /// least 500 points are tested; a cloud so small that they would hold
-    /// half of it is measured whole anyway).
+    /// second time from all but the held-out points) instead of in up to
+    /// four windows, which hold at most 8 % of the cloud at every size (a
+    /// small cloud's test few points: the line gives the 95 % interval).
     #[arg(long)]
     pub holdout_full: bool,
     /// When the input is a Gaussian splat file (2DGS or 3DGS layout, read
