@@ -30,7 +30,7 @@ mod count;
 mod lsq;
 mod near;
 mod tri;
-pub use count::count_within;
+pub use count::{count_within, held_within};
 pub use lsq::{Row6, normal_equations6};
 pub use near::keys_within;
 pub use tri::{SURE, Shear, TRI_LANES, TriColumns, tri_masks, tri_masks_sheared};

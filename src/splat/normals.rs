@@ -640,6 +640,8 @@ struct Lanes {
     xs: Vec<f32>,
     ys: Vec<f32>,
     zs: Vec<f32>,
+    /// The process's SIMD path, for the held sets and the triples' counts.
+    isa: crate::simd::Isa,
 }
 
 impl Lanes {
@@ -648,6 +650,7 @@ impl Lanes {
             xs: pts.iter().map(|d| d.x).collect(),
             ys: pts.iter().map(|d| d.y).collect(),
             zs: pts.iter().map(|d| d.z).collect(),
+            isa: crate::config::current().simd,
         }
     }
 
@@ -683,27 +686,21 @@ impl Lanes {
 
     /// Which of the points (up to [`HELD_BITS`]) lie within `tol` of the
     /// plane through `origin` with unit `normal`, as a bit set: the test of
-    /// [`Lanes::count`], point by point, without a branch.
+    /// [`Lanes::count`], point by point, without a branch, on the
+    /// process's SIMD path ([`crate::simd::held_within`]: the same
+    /// differences, products and sums, eight points at a time on AVX2).
     fn held_set(&self, normal: Vec3, origin: Vec3, tol: f32) -> HeldSet {
-        let (nx, ny, nz) = (normal.x, normal.y, normal.z);
-        let (ox, oy, oz) = (origin.x, origin.y, origin.z);
         let mut set = [0u64; HELD_BITS / 64];
-        let chunks = self
-            .xs
-            .chunks(64)
-            .zip(self.ys.chunks(64))
-            .zip(self.zs.chunks(64));
-        for (word, ((xs, ys), zs)) in set.iter_mut().zip(chunks) {
-            *word = xs
-                .iter()
-                .zip(ys)
-                .zip(zs)
-                .enumerate()
-                .fold(0u64, |bits, (j, ((x, y), z))| {
-                    let h = (nx * (x - ox)) + (ny * (y - oy)) + (nz * (z - oz));
-                    bits | (u64::from(h.abs() <= tol) << j)
-                });
-        }
+        crate::simd::held_within(
+            &self.xs,
+            &self.ys,
+            &self.zs,
+            normal.to_array(),
+            origin.to_array(),
+            tol,
+            self.isa,
+            &mut set,
+        );
         set
     }
 }
@@ -717,7 +714,7 @@ impl Lanes {
 /// ([`crate::simd::count_within`]: the same products and sums, eight
 /// points at a time on AVX2).
 fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
-    let isa = crate::config::current().simd;
+    let isa = lanes.isa;
     let mut best: Vec<FacePlane> = Vec::with_capacity(FACE_REFITS + 1);
     // The offsets padded with NaN to a multiple of eight lanes (counted by
     // no path).
