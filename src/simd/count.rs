@@ -100,6 +100,124 @@ fn avx2_count(dx: &[f32], dy: &[f32], dz: &[f32], normals: &[[f32; 3]], tol: f32
     }
 }
 
+/// Which of the points `(xs[i], ys[i], zs[i])` lie within `tol` of the
+/// plane through `origin` with normal `normal`, as bits (point `i` at bit
+/// `i % 64` of `out[i / 64]`; the points past `64 · out.len()` are not
+/// tested, and the words past the last point are zero), on the path `isa`
+/// (as [`count_within`]'s). Every path takes, point by point, the height
+/// `h = (n_x (x - o_x) + n_y (y - o_y)) + n_z (z - o_z)` and `|h| <= tol`
+/// (no fused multiply-add; NaN is not within), so every path sets the same
+/// bits. The three slices must be equally long.
+#[inline]
+#[allow(clippy::too_many_arguments)] // a plane, its points and the path
+pub fn held_within(
+    xs: &[f32],
+    ys: &[f32],
+    zs: &[f32],
+    normal: [f32; 3],
+    origin: [f32; 3],
+    tol: f32,
+    isa: Isa,
+    out: &mut [u64],
+) {
+    let n = xs.len().min(64 * out.len());
+    let (xs, ys, zs) = (&xs[..n], &ys[..n], &zs[..n]);
+    match isa {
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx2 | Isa::Avx512 if Isa::Avx2.supported() => {
+            // SAFETY: the guard checked that the CPU runs AVX2.
+            unsafe { avx2_held(xs, ys, zs, normal, origin, tol, out) }
+        }
+        _ => portable_held(xs, ys, zs, normal, origin, tol, out),
+    }
+}
+
+/// The portable loop of [`held_within`], each word's points folded into
+/// its bits without a branch.
+fn portable_held(
+    xs: &[f32],
+    ys: &[f32],
+    zs: &[f32],
+    normal: [f32; 3],
+    origin: [f32; 3],
+    tol: f32,
+    out: &mut [u64],
+) {
+    let ([nx, ny, nz], [ox, oy, oz]) = (normal, origin);
+    out.fill(0);
+    let chunks = xs.chunks(64).zip(ys.chunks(64)).zip(zs.chunks(64));
+    for (word, ((xs, ys), zs)) in out.iter_mut().zip(chunks) {
+        *word = xs
+            .iter()
+            .zip(ys)
+            .zip(zs)
+            .enumerate()
+            .fold(0u64, |bits, (j, ((x, y), z))| {
+                let h = (nx * (x - ox)) + (ny * (y - oy)) + (nz * (z - oz));
+                bits | (u64::from(h.abs() <= tol) << j)
+            });
+    }
+}
+
+/// [`held_within`] on AVX2: eight points a step, the rest (past the last
+/// multiple of eight) by the portable loop's test.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn avx2_held(
+    xs: &[f32],
+    ys: &[f32],
+    zs: &[f32],
+    normal: [f32; 3],
+    origin: [f32; 3],
+    tol: f32,
+    out: &mut [u64],
+) {
+    use std::arch::x86_64::*;
+    let n = xs.len();
+    let (ys, zs) = (&ys[..n], &zs[..n]);
+    let wide = n - n % 8;
+    out.fill(0);
+    let (tol8, sign) = (_mm256_set1_ps(tol), _mm256_set1_ps(-0.0));
+    let (nx, ny, nz) = (
+        _mm256_set1_ps(normal[0]),
+        _mm256_set1_ps(normal[1]),
+        _mm256_set1_ps(normal[2]),
+    );
+    let (ox, oy, oz) = (
+        _mm256_set1_ps(origin[0]),
+        _mm256_set1_ps(origin[1]),
+        _mm256_set1_ps(origin[2]),
+    );
+    let mut i = 0;
+    while i < wide {
+        // SAFETY: `i + 8 <= wide <= n`, and `ys` and `zs` are `n` long (cut
+        // above), so each unaligned load reads eight floats inside its slice.
+        let (x, y, z) = unsafe {
+            (
+                _mm256_loadu_ps(xs.as_ptr().add(i)),
+                _mm256_loadu_ps(ys.as_ptr().add(i)),
+                _mm256_loadu_ps(zs.as_ptr().add(i)),
+            )
+        };
+        let h = _mm256_add_ps(
+            _mm256_add_ps(
+                _mm256_mul_ps(nx, _mm256_sub_ps(x, ox)),
+                _mm256_mul_ps(ny, _mm256_sub_ps(y, oy)),
+            ),
+            _mm256_mul_ps(nz, _mm256_sub_ps(z, oz)),
+        );
+        let within = _mm256_cmp_ps::<_CMP_LE_OQ>(_mm256_andnot_ps(sign, h), tol8);
+        let bits = u64::from(_mm256_movemask_ps(within) as u32 & 0xff);
+        out[i / 64] |= bits << (i % 64);
+        i += 8;
+    }
+    let ([nx, ny, nz], [ox, oy, oz]) = (normal, origin);
+    for j in wide..n {
+        let h = (nx * (xs[j] - ox)) + (ny * (ys[j] - oy)) + (nz * (zs[j] - oz));
+        out[j / 64] |= u64::from(h.abs() <= tol) << (j % 64);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -151,5 +269,61 @@ mod tests {
             }
         }
         assert!(checked >= 71 * 12);
+    }
+
+    /// Random points about a random origin (some on the bound `tol`
+    /// exactly, signed zeros, NaN and infinite components), every length
+    /// from 0 to 140 into sets of one to three words: every path this CPU
+    /// runs sets the bits of the portable loop, and none past the points.
+    #[test]
+    fn every_path_holds_what_the_portable_loop_holds() {
+        let mut rng = SplitMix64::new(12);
+        let mut f = |s: f32| (rng.next_f64() as f32 * 2.0 - 1.0) * s;
+        let tol = 0.25f32;
+        let mut held = 0;
+        for len in 0..141 {
+            let origin = [f(0.5), f(0.5), f(0.5)];
+            let mut d = [vec![0f32; len], vec![0f32; len], vec![0f32; len]];
+            for i in 0..len {
+                for (a, col) in d.iter_mut().enumerate() {
+                    col[i] = origin[a] + f(1.0);
+                    match (i * 7 + a + len) % 29 {
+                        0 => col[i] = f32::NAN,
+                        1 => col[i] = f32::NEG_INFINITY,
+                        2 => col[i] = -0.0,
+                        _ => {}
+                    }
+                }
+                if i % 5 == 1 {
+                    // Exactly on the bound along the x axis.
+                    (d[0][i], d[1][i], d[2][i]) = (origin[0] + tol, origin[1], origin[2]);
+                }
+            }
+            for r in 0..8 {
+                let normal = if r == 0 {
+                    [1.0, 0.0, 0.0]
+                } else {
+                    glam::Vec3::new(f(1.0), f(1.0), f(1.0))
+                        .normalize_or_zero()
+                        .to_array()
+                };
+                for words in 1..4 {
+                    let mut want = vec![u64::MAX; words];
+                    portable_held(&d[0], &d[1], &d[2], normal, origin, tol, &mut want);
+                    let kept = len.min(64 * words);
+                    for (w, bits) in want.iter().enumerate() {
+                        let past = kept.saturating_sub(64 * w).min(64);
+                        assert!(past == 64 || bits >> past == 0, "bits past the points");
+                    }
+                    held += want.iter().map(|w| w.count_ones()).sum::<u32>();
+                    for isa in super::super::available() {
+                        let mut got = vec![u64::MAX; words];
+                        held_within(&d[0], &d[1], &d[2], normal, origin, tol, isa, &mut got);
+                        assert_eq!(got, want, "{isa} at {len}, {words} words");
+                    }
+                }
+            }
+        }
+        assert!(held > 1000, "only {held} held");
     }
 }

@@ -13,6 +13,8 @@
 //! path this CPU runs and compares). The face search's count of the points
 //! near a plane ([`count_within`], the normals stage's hottest loop) is
 //! dispatched the same way, and counts the same points on every path; so
+//! are the sets of the points its refitted planes hold ([`held_within`]),
+//! the same bits; so
 //! are the normal equations of generation's quadric fits
 //! ([`normal_equations6`]), the same sums bit for bit, and the scan of
 //! the neighbour search's bounded queries ([`keys_within`]), the same
@@ -30,7 +32,7 @@ mod count;
 mod lsq;
 mod near;
 mod tri;
-pub use count::count_within;
+pub use count::{count_within, held_within};
 pub use lsq::{Row6, normal_equations6};
 pub use near::keys_within;
 pub use tri::{SURE, Shear, TRI_LANES, TriColumns, tri_masks, tri_masks_sheared};

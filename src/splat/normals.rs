@@ -640,6 +640,8 @@ struct Lanes {
     xs: Vec<f32>,
     ys: Vec<f32>,
     zs: Vec<f32>,
+    /// The process's SIMD path, for the held sets and the triples' counts.
+    isa: crate::simd::Isa,
 }
 
 impl Lanes {
@@ -648,6 +650,7 @@ impl Lanes {
             xs: pts.iter().map(|d| d.x).collect(),
             ys: pts.iter().map(|d| d.y).collect(),
             zs: pts.iter().map(|d| d.z).collect(),
+            isa: crate::config::current().simd,
         }
     }
 
@@ -683,27 +686,21 @@ impl Lanes {
 
     /// Which of the points (up to [`HELD_BITS`]) lie within `tol` of the
     /// plane through `origin` with unit `normal`, as a bit set: the test of
-    /// [`Lanes::count`], point by point, without a branch.
+    /// [`Lanes::count`], point by point, without a branch, on the
+    /// process's SIMD path ([`crate::simd::held_within`]: the same
+    /// differences, products and sums, eight points at a time on AVX2).
     fn held_set(&self, normal: Vec3, origin: Vec3, tol: f32) -> HeldSet {
-        let (nx, ny, nz) = (normal.x, normal.y, normal.z);
-        let (ox, oy, oz) = (origin.x, origin.y, origin.z);
         let mut set = [0u64; HELD_BITS / 64];
-        let chunks = self
-            .xs
-            .chunks(64)
-            .zip(self.ys.chunks(64))
-            .zip(self.zs.chunks(64));
-        for (word, ((xs, ys), zs)) in set.iter_mut().zip(chunks) {
-            *word = xs
-                .iter()
-                .zip(ys)
-                .zip(zs)
-                .enumerate()
-                .fold(0u64, |bits, (j, ((x, y), z))| {
-                    let h = (nx * (x - ox)) + (ny * (y - oy)) + (nz * (z - oz));
-                    bits | (u64::from(h.abs() <= tol) << j)
-                });
-        }
+        crate::simd::held_within(
+            &self.xs,
+            &self.ys,
+            &self.zs,
+            normal.to_array(),
+            origin.to_array(),
+            tol,
+            self.isa,
+            &mut set,
+        );
         set
     }
 }
@@ -717,7 +714,7 @@ impl Lanes {
 /// ([`crate::simd::count_within`]: the same products and sums, eight
 /// points at a time on AVX2).
 fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
-    let isa = crate::config::current().simd;
+    let isa = lanes.isa;
     let mut best: Vec<FacePlane> = Vec::with_capacity(FACE_REFITS + 1);
     // The offsets padded with NaN to a multiple of eight lanes (counted by
     // no path).
@@ -873,6 +870,8 @@ pub fn face_normals(
         flat_faces,
         strong,
         searched: AtomicUsize::new(0),
+        spare_second: true,
+        spared: AtomicUsize::new(0),
     };
     let new: Vec<Option<(Vec3, Kind, Vec<u32>)>> = (0..n)
         .into_par_iter()
@@ -947,6 +946,12 @@ struct FaceSearch<'a> {
     strong: bool,
     /// Neighbourhoods searched for two faces so far.
     searched: AtomicUsize,
+    /// Whether the second plane's search is spared where it cannot turn
+    /// the normal ([`FaceSearch::kept_whatever_second`]; off only to test
+    /// it).
+    spare_second: bool,
+    /// Second planes' searches spared so far.
+    spared: AtomicUsize,
 }
 
 /// One thread's buffers for [`FaceSearch::face_at`]: the bounded query
@@ -1096,6 +1101,12 @@ impl FaceSearch<'_> {
         if q >= first.fit + rest.len() as f32 {
             return None;
         }
+        // Without the flat-face rules only a turned normal is an answer:
+        // where no second plane can turn it, none is searched.
+        if self.spare_second && self.kept_whatever_second(first, rest.len(), all.len(), n0) {
+            self.spared.fetch_add(1, Ordering::Relaxed);
+            return None;
+        }
         // (A plane holds at most all of the rest: too few fix no second.)
         let second = (rest.len() >= FACE_MIN_POINTS)
             .then(|| face_plane(&rest, tol))
@@ -1136,6 +1147,29 @@ impl FaceSearch<'_> {
 }
 
 impl FaceSearch<'_> {
+    /// Whether, without the flat-face rules, a point whose first plane
+    /// `first` leaves `rest` of its neighbourhood of `n` keeps its normal
+    /// `n0` whatever the second plane (`edge_face`'s), so that the second
+    /// need not be searched. A kept normal is all a search gives without
+    /// those rules (no face list is read), and here it is kept either way:
+    /// a second plane found scores at most one a point of the rest (MSAC's
+    /// terms are at most 1, and their `f32` sum stays at most its count),
+    /// so the two together score under [`TWO_FACES_HOLD`] and
+    /// [`FaceSearch::faces_hold`] turns nothing; with none found, the
+    /// point's own face is `first`, which turns by no more than
+    /// [`FACE_TURN_DEG`] (the test `face_at` makes of it, bit for bit).
+    fn kept_whatever_second(&self, first: FacePlane, rest: usize, n: usize, n0: Vec3) -> bool {
+        if self.flat_faces || first.fit + rest as f32 >= TWO_FACES_HOLD * n as f32 {
+            return false;
+        }
+        let fitted = if first.normal.dot(n0) < 0.0 {
+            -first.normal
+        } else {
+            first.normal
+        };
+        fitted.dot(n0) >= FACE_TURN_DEG.to_radians().cos()
+    }
+
     /// Whether a point's two planes, found (`second`) and scoring `two`
     /// together (MSAC's score, [`FacePlane::fit`]) over its neighbourhood
     /// of `n`, are two faces at an edge rather than a scanned mesh's rough
@@ -2107,6 +2141,84 @@ mod tests {
             });
         }
         pts
+    }
+
+    /// A faceted height field over the unit square: 4,000 points on the
+    /// triangles of a 10 × 10 grid (each cell cut along its diagonal) whose
+    /// corners rise by up to 0.03, so neighbouring facets meet at up to
+    /// about 20° (a scanned mesh's rough facets, not a solid's edges).
+    fn facets() -> Vec<Vec3> {
+        let mut rng = crate::rng::SplitMix64::new(5);
+        let mut u = || (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
+        let corners: Vec<f32> = (0..121).map(|_| 0.03 * u()).collect();
+        let z = |i: usize, j: usize| corners[i * 11 + j];
+        (0..4000)
+            .map(|_| {
+                let (x, y) = (u(), u());
+                let (i, j) = (((x * 10.0) as usize).min(9), ((y * 10.0) as usize).min(9));
+                let (a, b) = (x * 10.0 - i as f32, y * 10.0 - j as f32);
+                let h = if a >= b {
+                    z(i, j) + a * (z(i + 1, j) - z(i, j)) + b * (z(i + 1, j + 1) - z(i + 1, j))
+                } else {
+                    z(i, j) + b * (z(i, j + 1) - z(i, j)) + a * (z(i + 1, j + 1) - z(i, j + 1))
+                };
+                Vec3::new(x, y, h)
+            })
+            .collect()
+    }
+
+    /// Without the flat-face rules, sparing the second plane's search
+    /// ([`FaceSearch::kept_whatever_second`]) changes no point's answer
+    /// but a kept normal's (the same normal, its empty face list unread):
+    /// every point of a faceted height field and of the corner and curve,
+    /// searched with it and without, at two tolerances.
+    #[test]
+    fn sparing_the_second_plane_changes_no_normal() {
+        let (mut spared, mut turned) = (0, 0);
+        for pts in [facets(), corner_and_curve()] {
+            let tree = build_tree(&pts);
+            let knn = Knn::build(&tree, &pts, 12);
+            let mut nrm = estimate_multiscale(&pts, &tree, &knn, None, None).normals;
+            orient(&pts, &knn, &mut nrm, &vec![false; pts.len()], None);
+            for tol in [0.002, 0.004] {
+                let search = |spare_second| FaceSearch {
+                    points: &pts,
+                    tree: &tree,
+                    knn: &knn,
+                    old: &nrm,
+                    tol,
+                    m: (knn.k * WIDE_FACTOR + 1).min(pts.len()),
+                    flat_faces: false,
+                    strong: false,
+                    searched: AtomicUsize::new(0),
+                    spare_second,
+                    spared: AtomicUsize::new(0),
+                };
+                let (with, without) = (search(true), search(false));
+                let tally = crate::splat::knn::Tally::default();
+                let (mut a, mut b) = (FaceScratch::new(&tally), FaceScratch::new(&tally));
+                // A kept normal is no answer: the point keeps its normal.
+                let answer = |r: Option<(Vec3, Kind, Vec<u32>)>, i: usize| match r {
+                    Some((n, Kind::Kept, face)) => {
+                        assert_eq!(n.to_array(), nrm[i].to_array(), "a kept normal moved");
+                        assert!(face.is_empty(), "a face list without the rules");
+                        None
+                    }
+                    r => r.map(|(n, kind, _)| (n.to_array().map(f32::to_bits), kind)),
+                };
+                for i in 0..pts.len() {
+                    let x = answer(with.face_at(&mut a, i), i);
+                    let y = answer(without.face_at(&mut b, i), i);
+                    assert_eq!(x, y, "point {i} at {tol}");
+                    turned += usize::from(y.is_some());
+                }
+                assert_eq!(without.spared.into_inner(), 0);
+                spared += with.spared.into_inner();
+            }
+        }
+        eprintln!("{spared} second searches spared, {turned} normals turned");
+        assert!(spared >= 100, "{spared} spared");
+        assert!(turned >= 100, "{turned} turned");
     }
 
     /// Kruskal as it was before the blocks: every undirected edge
