@@ -1672,41 +1672,68 @@ impl Sheet {
     }
 }
 
-/// `h` sorted by height as a stable sort by `total_cmp` orders it (ties in
-/// their order before), by one integer key each: the height's bits mapped
-/// to an unsigned order that is `total_cmp`'s, then the position.
-fn sort_heights(h: &mut [(f32, u32)]) {
-    /// The most sorted with buffers on the stack (a wide neighbourhood of
-    /// the default `k` holds 49); more take them from the heap.
-    const STACK: usize = 64;
-    let n = h.len();
-    if n <= STACK {
-        let mut keys = [0u64; STACK];
-        let mut was = [(0f32, 0u32); STACK];
-        sort_heights_by_keys(h, &mut keys[..n], &mut was[..n]);
+/// `total_cmp`'s order of `f32` as the order of `u32` (a bijection: every
+/// bit pattern its own key, [`from_order_key`] its inverse).
+fn order_key(x: f32) -> u32 {
+    let b = x.to_bits();
+    if b & 0x8000_0000 == 0 {
+        b | 0x8000_0000
     } else {
-        sort_heights_by_keys(h, &mut vec![0; n], &mut vec![(0.0, 0); n]);
+        !b
     }
 }
 
-/// [`sort_heights`] with buffers `keys` and `was` as long as `h`.
-fn sort_heights_by_keys(h: &mut [(f32, u32)], keys: &mut [u64], was: &mut [(f32, u32)]) {
-    let order = |x: f32| {
-        let b = x.to_bits();
-        if b & 0x8000_0000 == 0 {
-            b | 0x8000_0000
-        } else {
-            !b
-        }
-    };
-    for (j, (k, x)) in keys.iter_mut().zip(h.iter()).enumerate() {
-        *k = (u64::from(order(x.0)) << 32) | j as u64;
-    }
-    was.copy_from_slice(h);
+/// The `f32` whose [`order_key`] is `k`.
+fn from_order_key(k: u32) -> f32 {
+    f32::from_bits(if k & 0x8000_0000 != 0 {
+        k & 0x7fff_ffff
+    } else {
+        !k
+    })
+}
+
+/// The key of the height `x` at position `q` of [`sort_heights`]' list:
+/// its [`order_key`] above the position, so that the keys' order is a
+/// stable sort's by `total_cmp` (ties in their order before).
+fn height_key(x: f32, q: usize) -> u64 {
+    (u64::from(order_key(x)) << 32) | q as u64
+}
+
+/// The heights of `keys` ([`height_key`]s of the point itself at position
+/// 0 and of `neighbours[q - 1]` at position `q`) sorted, written to `h` as
+/// `(height, neighbour)` with `u32::MAX` for the point: the order a stable
+/// sort by `total_cmp` gives, the heights bit for bit. Returns the point's
+/// place in `h`.
+fn sort_heights(keys: &mut [u64], neighbours: &[u32], h: &mut Vec<(f32, u32)>) -> usize {
     keys.sort_unstable();
-    for (x, k) in h.iter_mut().zip(keys.iter()) {
-        *x = was[(k & 0xffff_ffff) as usize];
+    h.clear();
+    let mut me = 0;
+    h.extend(keys.iter().enumerate().map(|(x, &k)| {
+        let q = (k & 0xffff_ffff) as usize;
+        let id = if q == 0 {
+            me = x;
+            u32::MAX
+        } else {
+            neighbours[q - 1]
+        };
+        (from_order_key((k >> 32) as u32), id)
+    }));
+    me
+}
+
+/// The widest gap `h[g].0 - h[g - 1].0` for `g` in `from..=to` (and
+/// `1..h.len()`), the last of equal ones (as `max_by` with `total_cmp`
+/// takes it): `(gap, g)`, or `None` for no such `g`.
+fn widest_gap(h: &[(f32, u32)], from: usize, to: usize) -> Option<(f32, usize)> {
+    let (from, to) = (from.max(1), to.min(h.len().saturating_sub(1)));
+    let mut best: Option<(f32, usize)> = None;
+    for (w, g) in h.get(from - 1..=to)?.windows(2).zip(from..) {
+        let gap = w[1].0 - w[0].0;
+        if best.is_none_or(|b| b.0.total_cmp(&gap).is_le()) {
+            best = Some((gap, g));
+        }
     }
+    best
 }
 
 /// A gap in the heights splits two sheets only when it is this many times
@@ -1736,35 +1763,37 @@ pub fn sheet_of(
     neighbours: &[u32],
     h: &mut Vec<(f32, u32)>,
 ) -> Option<(Sheet, Vec3)> {
-    // The heights, and the nearest neighbour's distance (not 0) as the
-    // square root of the least squared distance: the least of the roots,
-    // since the root is correctly rounded and keeps their order.
-    h.clear();
-    h.reserve(neighbours.len() + 1);
-    h.push((0.0, u32::MAX));
+    // The heights' keys, and the nearest neighbour's distance (not 0) as
+    // the square root of the least squared distance: the least of the
+    // roots, since the root is correctly rounded and keeps their order.
+    /// The most heights keyed on the stack (a wide neighbourhood of the
+    /// default `k` holds 48); more take a buffer from the heap.
+    const STACK: usize = 64;
+    let n = neighbours.len() + 1;
+    let (mut stack, mut heap) = ([0u64; STACK], Vec::new());
+    let keys: &mut [u64] = if n <= STACK {
+        &mut stack[..n]
+    } else {
+        heap.resize(n, 0);
+        &mut heap
+    };
+    keys[0] = height_key(0.0, 0);
     let mut d1_sq = f32::INFINITY;
-    for &j in neighbours {
+    for ((key, &j), q) in keys[1..].iter_mut().zip(neighbours).zip(1..) {
         let o = points[j as usize] - p;
         let d = o.length_squared();
         d1_sq = if d > 0.0 && d < d1_sq { d } else { d1_sq };
-        h.push((normal.dot(o), j));
+        *key = height_key(normal.dot(o), q);
     }
     let d1 = if d1_sq < f32::INFINITY {
         d1_sq.sqrt()
     } else {
         f32::MAX
     };
-    sort_heights(h);
-    let me = h.iter().position(|x| x.1 == u32::MAX)?;
-    let widest = |range: std::ops::RangeInclusive<usize>| {
-        range
-            .filter(|&g| g >= 1 && g < h.len())
-            .map(|g| (h[g].0 - h[g - 1].0, g))
-            .max_by(|a, b| a.0.total_cmp(&b.0))
-    };
+    let me = sort_heights(keys, neighbours, h);
     // A gap between h[g-1] and h[g]: below the point g <= me, above g > me.
-    let below = widest(SHEET_MIN..=me);
-    let above = widest(me + 1..=h.len().saturating_sub(SHEET_MIN));
+    let below = widest_gap(h, SHEET_MIN, me);
+    let above = widest_gap(h, me + 1, h.len().saturating_sub(SHEET_MIN));
     let lo_g = below.map_or(0, |b| b.1);
     let hi_g = above.map_or(h.len(), |a| a.1);
     let own = &h[lo_g..hi_g];
@@ -1980,8 +2009,9 @@ mod tests {
         assert_eq!(compared, 400);
     }
 
-    /// [`sort_heights`] orders as the stable sort by `total_cmp` does:
-    /// negative and positive zeros, ties, infinities and NaNs of both signs.
+    /// [`sort_heights`] orders as the stable sort by `total_cmp` does, the
+    /// heights bit for bit and the point itself found: negative and
+    /// positive zeros, ties, infinities and NaNs of both signs.
     #[test]
     fn heights_sort_as_the_stable_sort() {
         let mut rng = crate::rng::SplitMix64::new(7);
@@ -1999,18 +2029,62 @@ mod tests {
             f32::NAN,
             -f32::NAN,
         ];
-        for len in [0, 1, 2, 7, 49, 257, 300] {
+        for len in [0u32, 1, 2, 7, 13, 48, 49, 257, 300] {
             for _ in 0..20 {
                 let h: Vec<(f32, u32)> = (0..len)
                     .map(|j| (pool[(rng.next_u64() % pool.len() as u64) as usize], j))
                     .collect();
+                // Position 0 is the point itself, the others neighbours.
+                let h: Vec<(f32, u32)> = h
+                    .into_iter()
+                    .map(|(x, q)| (x, if q == 0 { u32::MAX } else { 1000 + q }))
+                    .collect();
                 let mut want = h.clone();
                 want.sort_by(|a, b| a.0.total_cmp(&b.0));
-                let mut got = h.clone();
-                sort_heights(&mut got);
+                let neighbours: Vec<u32> = (1..len).map(|q| 1000 + q).collect();
+                let mut keys: Vec<u64> = h
+                    .iter()
+                    .enumerate()
+                    .map(|(q, x)| height_key(x.0, q))
+                    .collect();
+                let mut got = Vec::new();
+                let me = sort_heights(&mut keys, &neighbours, &mut got);
+                if len > 0 {
+                    assert_eq!(got[me].1, u32::MAX);
+                }
                 let bits =
                     |v: &[(f32, u32)]| v.iter().map(|x| (x.0.to_bits(), x.1)).collect::<Vec<_>>();
                 assert_eq!(bits(&got), bits(&want), "len {len}");
+            }
+        }
+    }
+
+    /// [`widest_gap`] finds the gap the iterator it replaced found (the
+    /// last of equal widest, by `total_cmp`) over every range, ties and
+    /// empty ranges among them.
+    #[test]
+    fn widest_gap_is_the_iterators() {
+        let mut rng = crate::rng::SplitMix64::new(11);
+        for len in [1usize, 2, 3, 5, 14, 48] {
+            for _ in 0..20 {
+                let mut h: Vec<(f32, u32)> = (0..len)
+                    .map(|j| ((rng.next_u64() % 6) as f32 * 0.25, j as u32))
+                    .collect();
+                h.sort_by(|a, b| a.0.total_cmp(&b.0));
+                for from in 0..len + 2 {
+                    for to in 0..len + 2 {
+                        let want = (from..=to)
+                            .filter(|&g| g >= 1 && g < h.len())
+                            .map(|g| (h[g].0 - h[g - 1].0, g))
+                            .max_by(|a, b| a.0.total_cmp(&b.0));
+                        let got = widest_gap(&h, from, to);
+                        assert_eq!(
+                            got.map(|g| (g.0.to_bits(), g.1)),
+                            want.map(|g| (g.0.to_bits(), g.1)),
+                            "len {len}, {from}..={to}"
+                        );
+                    }
+                }
             }
         }
     }
