@@ -1399,18 +1399,18 @@ const NO_EDGE: u16 = u16::MAX;
 /// The fewest points a block of [`spanning_forest`] holds.
 const FOREST_BLOCK_MIN: usize = 1 << 15;
 
-/// The bucket of the directed kNN edge `e` (`i * k + slot`): its
-/// [`edge_weight`] in [`BUCKETS`] steps, or [`NO_EDGE`] for the edge from
-/// the higher index of a mutual pair (one undirected edge, kept once) and
-/// for a point's edge to itself.
+/// The bucket of the directed kNN edge `e` from point `i` (`e = i * k +
+/// slot`): its [`edge_weight`] in [`BUCKETS`] steps, or [`NO_EDGE`] for the
+/// edge from the higher index of a mutual pair (one undirected edge, kept
+/// once) and for a point's edge to itself.
 fn edge_bucket(
     points: &[Vec3],
     knn: &Knn,
     normals: &[Vec3],
     across: &impl Fn(usize, usize) -> bool,
-    e: usize,
+    (i, e): (usize, usize),
 ) -> u16 {
-    let (i, j) = (e / knn.k, knn.idx[e] as usize);
+    let j = knn.idx[e] as usize;
     if j < i && knn.of(j).contains(&(i as u32)) || i == j {
         return NO_EDGE;
     }
@@ -1473,9 +1473,11 @@ impl Block {
         for (x, p) in parent.iter_mut().enumerate() {
             *p = x as u32;
         }
-        let bucket: Vec<u16> = (lo * k..hi * k)
-            .map(|e| edge_bucket(points, knn, normals, across, e))
-            .collect();
+        // Each point's edges in turn (no division to find an edge's point).
+        let mut bucket: Vec<u16> = Vec::with_capacity((hi - lo) * k);
+        for i in lo..hi {
+            bucket.extend((i * k..(i + 1) * k).map(|e| edge_bucket(points, knn, normals, across, (i, e))));
+        }
         let mut start = vec![0u32; BUCKETS + 1];
         for &b in bucket.iter().filter(|&&b| b != NO_EDGE) {
             start[b as usize + 1] += 1;
@@ -2194,7 +2196,7 @@ mod tests {
     ) -> Vec<(u32, u32, bool)> {
         let (n, k) = (points.len(), knn.k);
         let mut sorted: Vec<(u16, u32)> = (0..n * k)
-            .map(|e| (edge_bucket(points, knn, normals, across, e), e as u32))
+            .map(|e| (edge_bucket(points, knn, normals, across, (e / k, e)), e as u32))
             .filter(|&(b, _)| b != NO_EDGE)
             .collect();
         sorted.sort_by_key(|&(b, _)| b);
