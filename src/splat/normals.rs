@@ -1723,6 +1723,22 @@ fn sort_heights(keys: &mut [u64], neighbours: &[u32], h: &mut Vec<(f32, u32)>) -
     me
 }
 
+/// The [`height_key`]s into `keys` (one longer than `neighbours`) of the
+/// heights along `normal` above `p`, the point's own (0) first and then its
+/// `neighbours`'; returns the least positive squared distance from `p` to a
+/// neighbour (infinite for none).
+fn key_heights(points: &[Vec3], p: Vec3, normal: Vec3, neighbours: &[u32], keys: &mut [u64]) -> f32 {
+    keys[0] = height_key(0.0, 0);
+    let mut d1_sq = f32::INFINITY;
+    for ((key, &j), q) in keys[1..].iter_mut().zip(neighbours).zip(1..) {
+        let o = points[j as usize] - p;
+        let d = o.length_squared();
+        d1_sq = if d > 0.0 && d < d1_sq { d } else { d1_sq };
+        *key = height_key(normal.dot(o), q);
+    }
+    d1_sq
+}
+
 /// The widest gap `h[g].0 - h[g - 1].0` for `g` in `from..=to` (and
 /// `1..h.len()`), the last of equal ones (as `max_by` with `total_cmp`
 /// takes it): `(gap, g)`, or `None` for no such `g`.
@@ -1779,14 +1795,7 @@ pub fn sheet_of(
         heap.resize(n, 0);
         &mut heap
     };
-    keys[0] = height_key(0.0, 0);
-    let mut d1_sq = f32::INFINITY;
-    for ((key, &j), q) in keys[1..].iter_mut().zip(neighbours).zip(1..) {
-        let o = points[j as usize] - p;
-        let d = o.length_squared();
-        d1_sq = if d > 0.0 && d < d1_sq { d } else { d1_sq };
-        *key = height_key(normal.dot(o), q);
-    }
+    let d1_sq = key_heights(points, p, normal, neighbours, keys);
     let d1 = if d1_sq < f32::INFINITY {
         d1_sq.sqrt()
     } else {
@@ -1809,7 +1818,19 @@ pub fn sheet_of(
             points[x.1 as usize]
         }
     };
-    let (c, _, vecs) = plane_fit(own.iter().map(at));
+    // The own side's points in the heights' order, gathered once for the
+    // fit's two passes and their heights.
+    let (mut on_stack, mut on_heap) = ([Vec3::ZERO; STACK], Vec::new());
+    let own_points: &mut [Vec3] = if own.len() <= STACK {
+        &mut on_stack[..own.len()]
+    } else {
+        on_heap.resize(own.len(), Vec3::ZERO);
+        &mut on_heap
+    };
+    for (q, x) in own_points.iter_mut().zip(own) {
+        *q = at(x);
+    }
+    let (c, _, vecs) = plane_fit(own_points.iter().copied());
     let m = vecs[0].as_vec3();
     if !m.is_finite() || m.length_squared() < 0.5 {
         return None;
@@ -1819,8 +1840,8 @@ pub fn sheet_of(
     let height = |x: &(f32, u32)| m.dot(at(x) - c);
     // The own side's heights along the refitted normal, each taken once
     // (in place of the sorted heights, read no more).
-    for x in &mut h[lo_g..hi_g] {
-        x.0 = height(x);
+    for (x, q) in h[lo_g..hi_g].iter_mut().zip(own_points.iter()) {
+        x.0 = m.dot(*q - c);
     }
     let own = &h[lo_g..hi_g];
     let count = own.len() as f32;
