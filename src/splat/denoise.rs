@@ -35,13 +35,16 @@ pub fn fit_all(points: &[Vec3], normals: &[Vec3], knn: &Knn) -> Vec<Option<Local
     (0..points.len())
         .into_par_iter()
         .with_min_len(1024)
-        .map_init(Vec::new, |nb, i| {
-            // The point's own side only: the far face of a thin plate has
-            // its normals turned the other way.
-            nb.clear();
-            nb.extend(same_facing(knn, normals, i));
-            fit(points, normals[i], i, nb)
-        })
+        .map_init(
+            || (Vec::new(), Vec::new()),
+            |(nb, rows), i| {
+                // The point's own side only: the far face of a thin plate
+                // has its normals turned the other way.
+                nb.clear();
+                nb.extend(same_facing(knn, normals, i));
+                fit(points, normals[i], i, nb, rows)
+            },
+        )
         .collect()
 }
 
@@ -69,7 +72,7 @@ pub fn guess_noise(points: &[Vec3], knn: &Knn) -> f64 {
             );
             let m = vecs[0].as_vec3();
             (m.is_finite() && vals[1] > COLLINEAR * vals[2]).then_some(())?;
-            fit(points, m, i, nb).map(|l| l.sd)
+            fit(points, m, i, nb, &mut Vec::new()).map(|l| l.sd)
         })
         .collect();
     if sds.is_empty() {
@@ -93,7 +96,15 @@ fn same_facing<'a>(
         .filter(move |&j| normals[j as usize].dot(normals[i]) > 0.0)
 }
 
-fn fit(points: &[Vec3], n: Vec3, i: usize, nb: &[u32]) -> Option<Local> {
+/// The quadratic fit of point `i` (normal `n`) over its neighbours `nb`,
+/// `samples` a buffer for its least-squares rows.
+fn fit(
+    points: &[Vec3],
+    n: Vec3,
+    i: usize,
+    nb: &[u32],
+    samples: &mut Vec<([f64; 6], f64)>,
+) -> Option<Local> {
     let n = n.as_dvec3().try_normalize()?;
     let p = points[i].as_dvec3();
     let u = n.any_orthonormal_vector();
@@ -107,15 +118,17 @@ fn fit(points: &[Vec3], n: Vec3, i: usize, nb: &[u32]) -> Option<Local> {
     if scale.is_nan() || scale <= 0.0 || nb.len() + 1 < MIN_POINTS {
         return None;
     }
-    let samples: Vec<([f64; 6], f64)> = std::iter::once(p)
-        .chain(nb.iter().map(|&j| points[j as usize].as_dvec3()))
-        .map(|q| {
-            let d: DVec3 = (q - p) / scale;
-            let (x, y, h) = (d.dot(u), d.dot(v), d.dot(n));
-            ([1.0, x, y, x * x, x * y, y * y], h)
-        })
-        .collect();
-    let (ata, atb) = normal_equations(&samples);
+    samples.clear();
+    samples.extend(
+        std::iter::once(p)
+            .chain(nb.iter().map(|&j| points[j as usize].as_dvec3()))
+            .map(|q| {
+                let d: DVec3 = (q - p) / scale;
+                let (x, y, h) = (d.dot(u), d.dot(v), d.dot(n));
+                ([1.0, x, y, x * x, x * y, y * y], h)
+            }),
+    );
+    let (ata, atb) = normal_equations(samples);
     let coef = solve6(ata, atb)?;
     let ssr: f64 = samples
         .iter()

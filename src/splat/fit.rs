@@ -301,18 +301,29 @@ fn mirrored_sums(rows: &[([f64; 6], f64)]) -> ([[f64; 6]; 6], [f64; 6]) {
 pub(crate) fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
     let norm = a.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
     for col in 0..6 {
-        let piv = (col..6).max_by(|&r, &s| a[r][col].abs().total_cmp(&a[s][col].abs()))?;
-        if a[piv][col].abs() <= 1e-10 * norm {
+        // The last of the largest by `total_cmp` (as `max_by` takes it).
+        let (mut piv, mut big) = (col, a[col][col].abs());
+        for r in col + 1..6 {
+            let v = a[r][col].abs();
+            if big.total_cmp(&v).is_le() {
+                (piv, big) = (r, v);
+            }
+        }
+        if big <= 1e-10 * norm {
             return None;
         }
         a.swap(col, piv);
         b.swap(col, piv);
-        for r in col + 1..6 {
-            let f = a[r][col] / a[col][col];
-            for c in col..6 {
-                a[r][c] -= f * a[col][c];
+        let b_col = b[col];
+        let (top, below) = a.split_at_mut(col + 1);
+        let pivot = &top[col];
+        for (row, br) in below.iter_mut().zip(&mut b[col + 1..]) {
+            let f = row[col] / pivot[col];
+            // Column `col` below the pivot is read no more: not updated.
+            for (x, p) in row[col + 1..].iter_mut().zip(&pivot[col + 1..]) {
+                *x -= f * p;
             }
-            b[r] -= f * b[col];
+            *br -= f * b_col;
         }
     }
     let mut x = [0f64; 6];

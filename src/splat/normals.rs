@@ -1433,18 +1433,18 @@ const NO_EDGE: u16 = u16::MAX;
 /// The fewest points a block of [`spanning_forest`] holds.
 const FOREST_BLOCK_MIN: usize = 1 << 15;
 
-/// The bucket of the directed kNN edge `e` (`i * k + slot`): its
-/// [`edge_weight`] in [`BUCKETS`] steps, or [`NO_EDGE`] for the edge from
-/// the higher index of a mutual pair (one undirected edge, kept once) and
-/// for a point's edge to itself.
+/// The bucket of the directed kNN edge `e` from point `i` (`e = i * k +
+/// slot`): its [`edge_weight`] in [`BUCKETS`] steps, or [`NO_EDGE`] for the
+/// edge from the higher index of a mutual pair (one undirected edge, kept
+/// once) and for a point's edge to itself.
 fn edge_bucket(
     points: &[Vec3],
     knn: &Knn,
     normals: &[Vec3],
     across: &impl Fn(usize, usize) -> bool,
-    e: usize,
+    (i, e): (usize, usize),
 ) -> u16 {
-    let (i, j) = (e / knn.k, knn.idx[e] as usize);
+    let j = knn.idx[e] as usize;
     if j < i && knn.of(j).contains(&(i as u32)) || i == j {
         return NO_EDGE;
     }
@@ -1507,9 +1507,11 @@ impl Block {
         for (x, p) in parent.iter_mut().enumerate() {
             *p = x as u32;
         }
-        let bucket: Vec<u16> = (lo * k..hi * k)
-            .map(|e| edge_bucket(points, knn, normals, across, e))
-            .collect();
+        // Each point's edges in turn (no division to find an edge's point).
+        let mut bucket: Vec<u16> = Vec::with_capacity((hi - lo) * k);
+        for i in lo..hi {
+            bucket.extend((i * k..(i + 1) * k).map(|e| edge_bucket(points, knn, normals, across, (i, e))));
+        }
         let mut start = vec![0u32; BUCKETS + 1];
         for &b in bucket.iter().filter(|&&b| b != NO_EDGE) {
             start[b as usize + 1] += 1;
@@ -1706,41 +1708,84 @@ impl Sheet {
     }
 }
 
-/// `h` sorted by height as a stable sort by `total_cmp` orders it (ties in
-/// their order before), by one integer key each: the height's bits mapped
-/// to an unsigned order that is `total_cmp`'s, then the position.
-fn sort_heights(h: &mut [(f32, u32)]) {
-    /// The most sorted with buffers on the stack (a wide neighbourhood of
-    /// the default `k` holds 49); more take them from the heap.
-    const STACK: usize = 64;
-    let n = h.len();
-    if n <= STACK {
-        let mut keys = [0u64; STACK];
-        let mut was = [(0f32, 0u32); STACK];
-        sort_heights_by_keys(h, &mut keys[..n], &mut was[..n]);
+/// `total_cmp`'s order of `f32` as the order of `u32` (a bijection: every
+/// bit pattern its own key, [`from_order_key`] its inverse).
+fn order_key(x: f32) -> u32 {
+    let b = x.to_bits();
+    if b & 0x8000_0000 == 0 {
+        b | 0x8000_0000
     } else {
-        sort_heights_by_keys(h, &mut vec![0; n], &mut vec![(0.0, 0); n]);
+        !b
     }
 }
 
-/// [`sort_heights`] with buffers `keys` and `was` as long as `h`.
-fn sort_heights_by_keys(h: &mut [(f32, u32)], keys: &mut [u64], was: &mut [(f32, u32)]) {
-    let order = |x: f32| {
-        let b = x.to_bits();
-        if b & 0x8000_0000 == 0 {
-            b | 0x8000_0000
-        } else {
-            !b
-        }
-    };
-    for (j, (k, x)) in keys.iter_mut().zip(h.iter()).enumerate() {
-        *k = (u64::from(order(x.0)) << 32) | j as u64;
-    }
-    was.copy_from_slice(h);
+/// The `f32` whose [`order_key`] is `k`.
+fn from_order_key(k: u32) -> f32 {
+    f32::from_bits(if k & 0x8000_0000 != 0 {
+        k & 0x7fff_ffff
+    } else {
+        !k
+    })
+}
+
+/// The key of the height `x` at position `q` of [`sort_heights`]' list:
+/// its [`order_key`] above the position, so that the keys' order is a
+/// stable sort's by `total_cmp` (ties in their order before).
+fn height_key(x: f32, q: usize) -> u64 {
+    (u64::from(order_key(x)) << 32) | q as u64
+}
+
+/// The heights of `keys` ([`height_key`]s of the point itself at position
+/// 0 and of `neighbours[q - 1]` at position `q`) sorted, written to `h` as
+/// `(height, neighbour)` with `u32::MAX` for the point: the order a stable
+/// sort by `total_cmp` gives, the heights bit for bit. Returns the point's
+/// place in `h`.
+fn sort_heights(keys: &mut [u64], neighbours: &[u32], h: &mut Vec<(f32, u32)>) -> usize {
     keys.sort_unstable();
-    for (x, k) in h.iter_mut().zip(keys.iter()) {
-        *x = was[(k & 0xffff_ffff) as usize];
+    h.clear();
+    let mut me = 0;
+    h.extend(keys.iter().enumerate().map(|(x, &k)| {
+        let q = (k & 0xffff_ffff) as usize;
+        let id = if q == 0 {
+            me = x;
+            u32::MAX
+        } else {
+            neighbours[q - 1]
+        };
+        (from_order_key((k >> 32) as u32), id)
+    }));
+    me
+}
+
+/// The [`height_key`]s into `keys` (one longer than `neighbours`) of the
+/// heights along `normal` above `p`, the point's own (0) first and then its
+/// `neighbours`'; returns the least positive squared distance from `p` to a
+/// neighbour (infinite for none).
+fn key_heights(points: &[Vec3], p: Vec3, normal: Vec3, neighbours: &[u32], keys: &mut [u64]) -> f32 {
+    keys[0] = height_key(0.0, 0);
+    let mut d1_sq = f32::INFINITY;
+    for ((key, &j), q) in keys[1..].iter_mut().zip(neighbours).zip(1..) {
+        let o = points[j as usize] - p;
+        let d = o.length_squared();
+        d1_sq = if d > 0.0 && d < d1_sq { d } else { d1_sq };
+        *key = height_key(normal.dot(o), q);
     }
+    d1_sq
+}
+
+/// The widest gap `h[g].0 - h[g - 1].0` for `g` in `from..=to` (and
+/// `1..h.len()`), the last of equal ones (as `max_by` with `total_cmp`
+/// takes it): `(gap, g)`, or `None` for no such `g`.
+fn widest_gap(h: &[(f32, u32)], from: usize, to: usize) -> Option<(f32, usize)> {
+    let (from, to) = (from.max(1), to.min(h.len().saturating_sub(1)));
+    let mut best: Option<(f32, usize)> = None;
+    for (w, g) in h.get(from - 1..=to)?.windows(2).zip(from..) {
+        let gap = w[1].0 - w[0].0;
+        if best.is_none_or(|b| b.0.total_cmp(&gap).is_le()) {
+            best = Some((gap, g));
+        }
+    }
+    best
 }
 
 /// A gap in the heights splits two sheets only when it is this many times
@@ -1770,35 +1815,30 @@ pub fn sheet_of(
     neighbours: &[u32],
     h: &mut Vec<(f32, u32)>,
 ) -> Option<(Sheet, Vec3)> {
-    // The heights, and the nearest neighbour's distance (not 0) as the
-    // square root of the least squared distance: the least of the roots,
-    // since the root is correctly rounded and keeps their order.
-    h.clear();
-    h.reserve(neighbours.len() + 1);
-    h.push((0.0, u32::MAX));
-    let mut d1_sq = f32::INFINITY;
-    for &j in neighbours {
-        let o = points[j as usize] - p;
-        let d = o.length_squared();
-        d1_sq = if d > 0.0 && d < d1_sq { d } else { d1_sq };
-        h.push((normal.dot(o), j));
-    }
+    // The heights' keys, and the nearest neighbour's distance (not 0) as
+    // the square root of the least squared distance: the least of the
+    // roots, since the root is correctly rounded and keeps their order.
+    /// The most heights keyed on the stack (a wide neighbourhood of the
+    /// default `k` holds 48); more take a buffer from the heap.
+    const STACK: usize = 64;
+    let n = neighbours.len() + 1;
+    let (mut stack, mut heap) = ([0u64; STACK], Vec::new());
+    let keys: &mut [u64] = if n <= STACK {
+        &mut stack[..n]
+    } else {
+        heap.resize(n, 0);
+        &mut heap
+    };
+    let d1_sq = key_heights(points, p, normal, neighbours, keys);
     let d1 = if d1_sq < f32::INFINITY {
         d1_sq.sqrt()
     } else {
         f32::MAX
     };
-    sort_heights(h);
-    let me = h.iter().position(|x| x.1 == u32::MAX)?;
-    let widest = |range: std::ops::RangeInclusive<usize>| {
-        range
-            .filter(|&g| g >= 1 && g < h.len())
-            .map(|g| (h[g].0 - h[g - 1].0, g))
-            .max_by(|a, b| a.0.total_cmp(&b.0))
-    };
+    let me = sort_heights(keys, neighbours, h);
     // A gap between h[g-1] and h[g]: below the point g <= me, above g > me.
-    let below = widest(SHEET_MIN..=me);
-    let above = widest(me + 1..=h.len().saturating_sub(SHEET_MIN));
+    let below = widest_gap(h, SHEET_MIN, me);
+    let above = widest_gap(h, me + 1, h.len().saturating_sub(SHEET_MIN));
     let lo_g = below.map_or(0, |b| b.1);
     let hi_g = above.map_or(h.len(), |a| a.1);
     let own = &h[lo_g..hi_g];
@@ -1812,7 +1852,19 @@ pub fn sheet_of(
             points[x.1 as usize]
         }
     };
-    let (c, _, vecs) = plane_fit(own.iter().map(at));
+    // The own side's points in the heights' order, gathered once for the
+    // fit's two passes and their heights.
+    let (mut on_stack, mut on_heap) = ([Vec3::ZERO; STACK], Vec::new());
+    let own_points: &mut [Vec3] = if own.len() <= STACK {
+        &mut on_stack[..own.len()]
+    } else {
+        on_heap.resize(own.len(), Vec3::ZERO);
+        &mut on_heap
+    };
+    for (q, x) in own_points.iter_mut().zip(own) {
+        *q = at(x);
+    }
+    let (c, _, vecs) = plane_fit(own_points.iter().copied());
     let m = vecs[0].as_vec3();
     if !m.is_finite() || m.length_squared() < 0.5 {
         return None;
@@ -1822,8 +1874,8 @@ pub fn sheet_of(
     let height = |x: &(f32, u32)| m.dot(at(x) - c);
     // The own side's heights along the refitted normal, each taken once
     // (in place of the sorted heights, read no more).
-    for x in &mut h[lo_g..hi_g] {
-        x.0 = height(x);
+    for (x, q) in h[lo_g..hi_g].iter_mut().zip(own_points.iter()) {
+        x.0 = m.dot(*q - c);
     }
     let own = &h[lo_g..hi_g];
     let count = own.len() as f32;
@@ -2014,8 +2066,9 @@ mod tests {
         assert_eq!(compared, 400);
     }
 
-    /// [`sort_heights`] orders as the stable sort by `total_cmp` does:
-    /// negative and positive zeros, ties, infinities and NaNs of both signs.
+    /// [`sort_heights`] orders as the stable sort by `total_cmp` does, the
+    /// heights bit for bit and the point itself found: negative and
+    /// positive zeros, ties, infinities and NaNs of both signs.
     #[test]
     fn heights_sort_as_the_stable_sort() {
         let mut rng = crate::rng::SplitMix64::new(7);
@@ -2033,18 +2086,62 @@ mod tests {
             f32::NAN,
             -f32::NAN,
         ];
-        for len in [0, 1, 2, 7, 49, 257, 300] {
+        for len in [0u32, 1, 2, 7, 13, 48, 49, 257, 300] {
             for _ in 0..20 {
                 let h: Vec<(f32, u32)> = (0..len)
                     .map(|j| (pool[(rng.next_u64() % pool.len() as u64) as usize], j))
                     .collect();
+                // Position 0 is the point itself, the others neighbours.
+                let h: Vec<(f32, u32)> = h
+                    .into_iter()
+                    .map(|(x, q)| (x, if q == 0 { u32::MAX } else { 1000 + q }))
+                    .collect();
                 let mut want = h.clone();
                 want.sort_by(|a, b| a.0.total_cmp(&b.0));
-                let mut got = h.clone();
-                sort_heights(&mut got);
+                let neighbours: Vec<u32> = (1..len).map(|q| 1000 + q).collect();
+                let mut keys: Vec<u64> = h
+                    .iter()
+                    .enumerate()
+                    .map(|(q, x)| height_key(x.0, q))
+                    .collect();
+                let mut got = Vec::new();
+                let me = sort_heights(&mut keys, &neighbours, &mut got);
+                if len > 0 {
+                    assert_eq!(got[me].1, u32::MAX);
+                }
                 let bits =
                     |v: &[(f32, u32)]| v.iter().map(|x| (x.0.to_bits(), x.1)).collect::<Vec<_>>();
                 assert_eq!(bits(&got), bits(&want), "len {len}");
+            }
+        }
+    }
+
+    /// [`widest_gap`] finds the gap the iterator it replaced found (the
+    /// last of equal widest, by `total_cmp`) over every range, ties and
+    /// empty ranges among them.
+    #[test]
+    fn widest_gap_is_the_iterators() {
+        let mut rng = crate::rng::SplitMix64::new(11);
+        for len in [1usize, 2, 3, 5, 14, 48] {
+            for _ in 0..20 {
+                let mut h: Vec<(f32, u32)> = (0..len)
+                    .map(|j| ((rng.next_u64() % 6) as f32 * 0.25, j as u32))
+                    .collect();
+                h.sort_by(|a, b| a.0.total_cmp(&b.0));
+                for from in 0..len + 2 {
+                    for to in 0..len + 2 {
+                        let want = (from..=to)
+                            .filter(|&g| g >= 1 && g < h.len())
+                            .map(|g| (h[g].0 - h[g - 1].0, g))
+                            .max_by(|a, b| a.0.total_cmp(&b.0));
+                        let got = widest_gap(&h, from, to);
+                        assert_eq!(
+                            got.map(|g| (g.0.to_bits(), g.1)),
+                            want.map(|g| (g.0.to_bits(), g.1)),
+                            "len {len}, {from}..={to}"
+                        );
+                    }
+                }
             }
         }
     }
@@ -2232,7 +2329,7 @@ mod tests {
     ) -> Vec<(u32, u32, bool)> {
         let (n, k) = (points.len(), knn.k);
         let mut sorted: Vec<(u16, u32)> = (0..n * k)
-            .map(|e| (edge_bucket(points, knn, normals, across, e), e as u32))
+            .map(|e| (edge_bucket(points, knn, normals, across, (e / k, e)), e as u32))
             .filter(|&(b, _)| b != NO_EDGE)
             .collect();
         sorted.sort_by_key(|&(b, _)| b);
