@@ -568,6 +568,12 @@ const OUTER_EXT: f32 = 0.9;
 /// (about 1e-7 each).
 const EXT_MARGIN: f32 = 1e-4;
 
+/// [`Lines::crease`]'s room below the least jump that passes its test:
+/// `acos` of the mean normals' dot product, at most the cosine of
+/// [`CREASE_JUMP_DEG`], is at least that angle but for a few `f32`
+/// roundings (about 1e-7 of it each).
+const JUMP_MARGIN: f32 = 1e-3;
+
 /// [`Lines::rim_side`] tests only the own face's points farthest out where
 /// the face has at least this many inside the disc (a dense cloud's large
 /// splats); a smaller one is passed over whole, cheaper than ordering it.
@@ -672,6 +678,10 @@ struct Lines<'a> {
     /// The point spacing, in radii.
     spacing: f32,
     jump_cos: f32,
+    /// The least jump (radians) between the sides' mean normals that
+    /// passes the test against `jump_cos`, less [`JUMP_MARGIN`] of it for
+    /// `acos`' rounding ([`Lines::crease`]).
+    least_jump: f32,
     /// The normals of `own`, in its order, taken the first time a crease
     /// needs them.
     own_normals: Vec<Vec3>,
@@ -706,6 +716,7 @@ impl<'a> Lines<'a> {
             frame: *f,
             spacing,
             jump_cos: CREASE_JUMP_DEG.to_radians().cos(),
+            least_jump: CREASE_JUMP_DEG.to_radians().cos().acos() * (1.0 - JUMP_MARGIN),
             own_normals: Vec::new(),
             by_reach: Vec::new(),
             rim: Vec::new(),
@@ -923,6 +934,28 @@ impl<'a> Lines<'a> {
         if c_across < CREASE_COHERENCE || along(&self.across) < CREASE_LENGTH * chord {
             return None;
         }
+        // Two of the tests below, taken first where they need only the side
+        // across (the own side's rim is a pass over the whole face; on a
+        // smooth cloud's facets nine in ten candidates end here, before
+        // it): a rise no steeper than the least jump the rim's test lets
+        // through allows ([`CREASE_STEEP`]), and a rise that fails however
+        // the sides' coherence sets the rise it needs. Each implies the
+        // later test's verdict (the same values), so nothing else changes.
+        let steep = rise_angle(&self.across, w);
+        if steep < CREASE_STEEP * self.least_jump {
+            return None;
+        }
+        let (c, slope) = crease_at(&self.across, w, ext, spacing);
+        let r = self.r;
+        let falls = |rise: f32| ((1.0 - c) * r).abs() < slope.abs() * rise * inp.epsilon;
+        let least_rise = if c_across >= CREASE_PLANES {
+            CREASE_RISE_EPS_PLANES.min(CREASE_RISE_EPS)
+        } else {
+            CREASE_RISE_EPS
+        };
+        if falls(least_rise) {
+            return None;
+        }
         let (m_rim, c_rim, along_rim) = self.rim_side(w, ext);
         let across = &self.across;
         if m_rim.dot(m_across) > self.jump_cos
@@ -937,16 +970,15 @@ impl<'a> Lines<'a> {
         // A face across, not facets of one surface: its points
         // rise from the plane at an angle that goes with the jump.
         let jump = m_rim.dot(m_across).clamp(-1.0, 1.0).acos();
-        if rise_angle(across, w) < CREASE_STEEP * jump {
+        if steep < CREASE_STEEP * jump {
             return None;
         }
-        let (c, slope) = crease_at(across, w, ext, spacing);
         let rise = if c_rim.min(c_across) >= CREASE_PLANES {
             CREASE_RISE_EPS_PLANES
         } else {
             CREASE_RISE_EPS
         };
-        if ((1.0 - c) * self.r).abs() < slope.abs() * rise * inp.epsilon {
+        if falls(rise) {
             return None;
         }
         // Facets of one smooth surface, not two faces: below
