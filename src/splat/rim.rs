@@ -446,6 +446,10 @@ pub(super) fn clip_lines(
             lines.line_with(w, exts[k]).map(|l| (step * k as f32, l))
         })
         .collect();
+    if candidates.is_empty() {
+        // Nearly every search on a smooth surface: `best` finds nothing.
+        return Clipped::NONE;
+    }
     let Some((first, cut)) = lines.best(&candidates, &[]) else {
         return Clipped::NONE;
     };
@@ -564,6 +568,17 @@ const OUTER_EXT: f32 = 0.9;
 /// (about 1e-7 each).
 const EXT_MARGIN: f32 = 1e-4;
 
+/// [`Lines::crease`]'s room below the least jump that passes its test:
+/// `acos` of the mean normals' dot product, at most the cosine of
+/// [`CREASE_JUMP_DEG`], is at least that angle but for a few `f32`
+/// roundings (about 1e-7 of it each).
+const JUMP_MARGIN: f32 = 1e-3;
+
+/// [`Lines::rim_side`] tests only the own face's points farthest out where
+/// the face has at least this many inside the disc (a dense cloud's large
+/// splats); a smaller one is passed over whole, cheaper than ordering it.
+const RIM_BY_REACH: usize = 128;
+
 /// Points' normalised coordinates in lanes (x's and y's apart), for
 /// counts over them that the compiler vectorises.
 #[derive(Default)]
@@ -582,6 +597,49 @@ impl FromIterator<Vec2> for Lanes {
     fn from_iter<I: IntoIterator<Item = Vec2>>(it: I) -> Self {
         let (xs, ys) = it.into_iter().map(|q| (q.x, q.y)).unzip();
         Lanes { xs, ys }
+    }
+}
+
+/// Points' normalised coordinates in lanes ([`Lanes`]), grouped by the
+/// octant of their direction from the centre ([`octant`]): octant `o`'s
+/// points are `starts[o]..starts[o + 1]`, in their order within it.
+struct Octants {
+    lanes: Lanes,
+    starts: [usize; 9],
+}
+
+impl Octants {
+    fn of(pts: &[Near]) -> Self {
+        let mut starts = [0usize; 9];
+        for m in pts {
+            starts[octant(m.q) + 1] += 1;
+        }
+        for o in 0..8 {
+            starts[o + 1] += starts[o];
+        }
+        let mut at = starts;
+        let (mut xs, mut ys) = (vec![0f32; pts.len()], vec![0f32; pts.len()]);
+        for m in pts {
+            let o = octant(m.q);
+            (xs[at[o]], ys[at[o]]) = (m.q.x, m.q.y);
+            at[o] += 1;
+        }
+        Octants {
+            lanes: Lanes { xs, ys },
+            starts,
+        }
+    }
+}
+
+/// The octant (0 to 7, counter-clockwise from `+x`, 45° each) of the
+/// direction of `q` from the centre; any octant for NaN.
+fn octant(q: Vec2) -> usize {
+    let (x, y) = (q.x, q.y);
+    match (y >= 0.0, x > 0.0) {
+        (true, true) => usize::from(y >= x),
+        (true, false) => 2 + usize::from(-x >= y),
+        (false, false) => 4 + usize::from(-y >= -x),
+        (false, true) => 6 + usize::from(x >= -y),
     }
 }
 
@@ -607,8 +665,9 @@ struct Lines<'a> {
     other: &'a [Near],
     /// The face's points just past the rim that the neighbourhood graph
     /// met while gathering `own`, each in the tree's ball ([`Frame::reach`]):
-    /// some of `beyond`, known without asking the tree; in lanes.
-    ring: Lanes,
+    /// some of `beyond`, known without asking the tree; in lanes, by
+    /// octant.
+    ring: Octants,
     /// The face's points (from the whole cloud) just past the rim, asked of
     /// the tree the first time a border's count needs more than `ring`; in
     /// lanes.
@@ -619,9 +678,19 @@ struct Lines<'a> {
     /// The point spacing, in radii.
     spacing: f32,
     jump_cos: f32,
+    /// The least jump (radians) between the sides' mean normals that
+    /// passes the test against `jump_cos`, less [`JUMP_MARGIN`] of it for
+    /// `acos`' rounding ([`Lines::crease`]).
+    least_jump: f32,
     /// The normals of `own`, in its order, taken the first time a crease
     /// needs them.
     own_normals: Vec<Vec3>,
+    /// The squared distances of `own`'s points from the centre, each with
+    /// its place in `own`, farthest first; taken with `own_normals`
+    /// ([`Lines::rim_side`]).
+    by_reach: Vec<(f32, u32)>,
+    /// Scratch: the places in `own` of a crease's rim points.
+    rim: Vec<u32>,
     /// Scratch: the points across a crease.
     across: Vec<Near>,
 }
@@ -641,13 +710,16 @@ impl<'a> Lines<'a> {
             r: f.r,
             own,
             other,
-            ring: Lanes::of(ring),
+            ring: Octants::of(ring),
             beyond: None,
             other_lanes: Lanes::of(other),
             frame: *f,
             spacing,
             jump_cos: CREASE_JUMP_DEG.to_radians().cos(),
+            least_jump: CREASE_JUMP_DEG.to_radians().cos().acos() * (1.0 - JUMP_MARGIN),
             own_normals: Vec::new(),
+            by_reach: Vec::new(),
+            rim: Vec::new(),
             across: Vec::new(),
         }
     }
@@ -727,14 +799,11 @@ impl<'a> Lines<'a> {
             // order the points are counted in: the graph's `ring`, part of
             // `beyond`, is counted first, and where its count reaches that
             // share (inside a surface, nearly always) the tree is not asked.
+            // The ring is counted from the octant before `w`'s round the
+            // turn ([`Octants`]), where the band's points lie.
             let whole = (band - ext) * 2.0 * half / (spacing * spacing);
-            let reaches = |lanes: &Lanes| {
-                let mut count = 0u32;
-                for (xs, ys) in lanes
-                    .xs
-                    .chunks(BEYOND_CHUNK)
-                    .zip(lanes.ys.chunks(BEYOND_CHUNK))
-                {
+            let reaches = |mut count: u32, xs: &[f32], ys: &[f32]| {
+                for (xs, ys) in xs.chunks(BEYOND_CHUNK).zip(ys.chunks(BEYOND_CHUNK)) {
                     count += xs
                         .iter()
                         .zip(ys)
@@ -750,8 +819,12 @@ impl<'a> Lines<'a> {
                 }
                 Ok(count)
             };
-            reaches(&self.ring).ok()?;
-            let count = reaches(self.beyond()).ok()?;
+            let from = self.ring.starts[(octant(w) + 7) % 8];
+            let (xs, ys) = (&self.ring.lanes.xs, &self.ring.lanes.ys);
+            let first = reaches(0, &xs[from..], &ys[from..]).ok()?;
+            reaches(first, &xs[..from], &ys[..from]).ok()?;
+            let beyond = self.beyond();
+            let count = reaches(0, &beyond.xs, &beyond.ys).ok()?;
             // The band's area outside the disc (a grid's share of
             // it), over spacing²: what a face going on puts there.
             const N: usize = 8;
@@ -778,22 +851,60 @@ impl<'a> Lines<'a> {
     /// The own face's side of a crease along `w` past its last point at
     /// `ext`: of its points along the rim (from 1.5 spacings short of it),
     /// the unit mean normal, the coherence ([`mean_normal`]'s, the same sum
-    /// in the same order) and their extent along the line. One pass over
-    /// `own`, the points not gathered.
+    /// in the same order) and their extent along the line. The points not
+    /// gathered.
+    ///
+    /// Where the rim starts past the centre (`from > 0`), a point nearer
+    /// the centre than `from` (by [`EXT_MARGIN`], against rounding: `w·q`
+    /// rounds to within a few `f32` units of `|w||q|`) cannot reach it
+    /// along any direction: only the points of `own` farthest out, found
+    /// in `by_reach` (where `own` holds at least [`RIM_BY_REACH`]), are
+    /// tested, and those kept are summed in `own`'s
+    /// order, so the sums are those of a pass over the whole of `own`.
     fn rim_side(&mut self, w: Vec2, ext: f32) -> (Vec3, f32, f32) {
         if self.own_normals.len() != self.own.len() {
             let normals = self.s.normals;
             self.own_normals = self.own.iter().map(|m| normals[m.j as usize]).collect();
+            self.by_reach.clear();
+            if self.own.len() >= RIM_BY_REACH {
+                self.by_reach
+                    .extend((0u32..).zip(self.own).map(|(k, m)| (m.q.length_squared(), k)));
+            }
+            if self.by_reach.iter().all(|(d2, _)| d2.is_finite()) {
+                self.by_reach.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
+            } else {
+                self.by_reach.clear();
+            }
         }
         let from = ext - 1.5 * self.spacing;
         let (mut sum, mut count) = (Vec3::ZERO, 0usize);
         let (mut lo, mut hi) = (f32::MAX, f32::MIN);
-        for (m, &n) in self.own.iter().zip(&self.own_normals) {
-            if w.dot(m.q) >= from {
-                sum += n;
-                count += 1;
-                let x = w.perp_dot(m.q);
-                (lo, hi) = (lo.min(x), hi.max(x));
+        let mut take = |q: Vec2, n: Vec3| {
+            sum += n;
+            count += 1;
+            let x = w.perp_dot(q);
+            (lo, hi) = (lo.min(x), hi.max(x));
+        };
+        if from > 0.0 && !self.by_reach.is_empty() {
+            let bound = from * from * (1.0 - EXT_MARGIN);
+            let far = self.by_reach.partition_point(|&(d2, _)| d2 >= bound);
+            let own = self.own;
+            self.rim.clear();
+            self.rim.extend(
+                self.by_reach[..far]
+                    .iter()
+                    .filter(|&&(_, k)| w.dot(own[k as usize].q) >= from)
+                    .map(|&(_, k)| k),
+            );
+            self.rim.sort_unstable();
+            for &k in &self.rim {
+                take(own[k as usize].q, self.own_normals[k as usize]);
+            }
+        } else {
+            for (m, &n) in self.own.iter().zip(&self.own_normals) {
+                if w.dot(m.q) >= from {
+                    take(m.q, n);
+                }
             }
         }
         (
@@ -823,6 +934,28 @@ impl<'a> Lines<'a> {
         if c_across < CREASE_COHERENCE || along(&self.across) < CREASE_LENGTH * chord {
             return None;
         }
+        // Two of the tests below, taken first where they need only the side
+        // across (the own side's rim is a pass over the whole face; on a
+        // smooth cloud's facets nine in ten candidates end here, before
+        // it): a rise no steeper than the least jump the rim's test lets
+        // through allows ([`CREASE_STEEP`]), and a rise that fails however
+        // the sides' coherence sets the rise it needs. Each implies the
+        // later test's verdict (the same values), so nothing else changes.
+        let steep = rise_angle(&self.across, w);
+        if steep < CREASE_STEEP * self.least_jump {
+            return None;
+        }
+        let (c, slope) = crease_at(&self.across, w, ext, spacing);
+        let r = self.r;
+        let falls = |rise: f32| ((1.0 - c) * r).abs() < slope.abs() * rise * inp.epsilon;
+        let least_rise = if c_across >= CREASE_PLANES {
+            CREASE_RISE_EPS_PLANES.min(CREASE_RISE_EPS)
+        } else {
+            CREASE_RISE_EPS
+        };
+        if falls(least_rise) {
+            return None;
+        }
         let (m_rim, c_rim, along_rim) = self.rim_side(w, ext);
         let across = &self.across;
         if m_rim.dot(m_across) > self.jump_cos
@@ -837,16 +970,15 @@ impl<'a> Lines<'a> {
         // A face across, not facets of one surface: its points
         // rise from the plane at an angle that goes with the jump.
         let jump = m_rim.dot(m_across).clamp(-1.0, 1.0).acos();
-        if rise_angle(across, w) < CREASE_STEEP * jump {
+        if steep < CREASE_STEEP * jump {
             return None;
         }
-        let (c, slope) = crease_at(across, w, ext, spacing);
         let rise = if c_rim.min(c_across) >= CREASE_PLANES {
             CREASE_RISE_EPS_PLANES
         } else {
             CREASE_RISE_EPS
         };
-        if ((1.0 - c) * self.r).abs() < slope.abs() * rise * inp.epsilon {
+        if falls(rise) {
             return None;
         }
         // Facets of one smooth surface, not two faces: below
