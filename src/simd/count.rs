@@ -65,32 +65,20 @@ fn avx2_count(dx: &[f32], dy: &[f32], dz: &[f32], normals: &[[f32; 3]], tol: f32
     use std::arch::x86_64::*;
     let n = dx.len();
     let wide = n - n % 8;
-    let (tol8, sign) = (_mm256_set1_ps(tol), _mm256_set1_ps(-0.0));
+    let tol8 = _mm256_set1_ps(tol);
     for (o, &normal) in out.iter_mut().zip(normals) {
-        let (nx, ny, nz) = (
-            _mm256_set1_ps(normal[0]),
-            _mm256_set1_ps(normal[1]),
-            _mm256_set1_ps(normal[2]),
-        );
+        let [nx, ny, nz] = splat3(normal);
         let mut count = 0u32;
         let mut i = 0;
         while i < wide {
             // SAFETY: `i + 8 <= wide <= n`, and `dy` and `dz` are `n` long
-            // (`count_within` cut them), so each unaligned load reads eight
-            // floats inside its slice.
-            let (x, y, z) = unsafe {
-                (
-                    _mm256_loadu_ps(dx.as_ptr().add(i)),
-                    _mm256_loadu_ps(dy.as_ptr().add(i)),
-                    _mm256_loadu_ps(dz.as_ptr().add(i)),
-                )
-            };
+            // (`count_within` cut them).
+            let [x, y, z] = unsafe { load8(dx, dy, dz, i) };
             let h = _mm256_add_ps(
                 _mm256_add_ps(_mm256_mul_ps(nx, x), _mm256_mul_ps(ny, y)),
                 _mm256_mul_ps(nz, z),
             );
-            let within = _mm256_cmp_ps::<_CMP_LE_OQ>(_mm256_andnot_ps(sign, h), tol8);
-            count += (_mm256_movemask_ps(within) as u32).count_ones();
+            count += within8(h, tol8).count_ones();
             i += 8;
         }
         if wide < n {
@@ -177,28 +165,13 @@ fn avx2_held(
     let (ys, zs) = (&ys[..n], &zs[..n]);
     let wide = n - n % 8;
     out.fill(0);
-    let (tol8, sign) = (_mm256_set1_ps(tol), _mm256_set1_ps(-0.0));
-    let (nx, ny, nz) = (
-        _mm256_set1_ps(normal[0]),
-        _mm256_set1_ps(normal[1]),
-        _mm256_set1_ps(normal[2]),
-    );
-    let (ox, oy, oz) = (
-        _mm256_set1_ps(origin[0]),
-        _mm256_set1_ps(origin[1]),
-        _mm256_set1_ps(origin[2]),
-    );
+    let tol8 = _mm256_set1_ps(tol);
+    let ([nx, ny, nz], [ox, oy, oz]) = (splat3(normal), splat3(origin));
     let mut i = 0;
     while i < wide {
         // SAFETY: `i + 8 <= wide <= n`, and `ys` and `zs` are `n` long (cut
-        // above), so each unaligned load reads eight floats inside its slice.
-        let (x, y, z) = unsafe {
-            (
-                _mm256_loadu_ps(xs.as_ptr().add(i)),
-                _mm256_loadu_ps(ys.as_ptr().add(i)),
-                _mm256_loadu_ps(zs.as_ptr().add(i)),
-            )
-        };
+        // above).
+        let [x, y, z] = unsafe { load8(xs, ys, zs, i) };
         let h = _mm256_add_ps(
             _mm256_add_ps(
                 _mm256_mul_ps(nx, _mm256_sub_ps(x, ox)),
@@ -206,9 +179,7 @@ fn avx2_held(
             ),
             _mm256_mul_ps(nz, _mm256_sub_ps(z, oz)),
         );
-        let within = _mm256_cmp_ps::<_CMP_LE_OQ>(_mm256_andnot_ps(sign, h), tol8);
-        let bits = u64::from(_mm256_movemask_ps(within) as u32 & 0xff);
-        out[i / 64] |= bits << (i % 64);
+        out[i / 64] |= u64::from(within8(h, tol8)) << (i % 64);
         i += 8;
     }
     let ([nx, ny, nz], [ox, oy, oz]) = (normal, origin);
@@ -216,6 +187,46 @@ fn avx2_held(
         let h = (nx * (xs[j] - ox)) + (ny * (ys[j] - oy)) + (nz * (zs[j] - oz));
         out[j / 64] |= u64::from(h.abs() <= tol) << (j % 64);
     }
+}
+
+/// Eight lanes of each of `v`'s three components.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn splat3(v: [f32; 3]) -> [std::arch::x86_64::__m256; 3] {
+    use std::arch::x86_64::_mm256_set1_ps;
+    [_mm256_set1_ps(v[0]), _mm256_set1_ps(v[1]), _mm256_set1_ps(v[2])]
+}
+
+/// The eight points from `i` on of the three coordinate slices, unaligned.
+///
+/// # Safety
+/// `i + 8` is at most the length of each of `xs`, `ys` and `zs`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn load8(xs: &[f32], ys: &[f32], zs: &[f32], i: usize) -> [std::arch::x86_64::__m256; 3] {
+    use std::arch::x86_64::_mm256_loadu_ps;
+    // SAFETY: by the caller's bound each load reads eight floats inside its
+    // slice.
+    unsafe {
+        [
+            _mm256_loadu_ps(xs.as_ptr().add(i)),
+            _mm256_loadu_ps(ys.as_ptr().add(i)),
+            _mm256_loadu_ps(zs.as_ptr().add(i)),
+        ]
+    }
+}
+
+/// The lanes of `h` at most `tol8` in magnitude (NaN is not), as the low
+/// eight bits: `|h| <= tol`, the portable loops' test.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn within8(h: std::arch::x86_64::__m256, tol8: std::arch::x86_64::__m256) -> u32 {
+    use std::arch::x86_64::*;
+    let magnitude = _mm256_andnot_ps(_mm256_set1_ps(-0.0), h);
+    _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(magnitude, tol8)) as u32
 }
 
 #[cfg(test)]
