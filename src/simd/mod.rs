@@ -18,7 +18,8 @@
 //! are the normal equations of generation's quadric fits
 //! ([`normal_equations6`]), the same sums bit for bit, and the scan of
 //! the neighbour search's bounded queries ([`keys_within`]), the same
-//! points.
+//! points, and the sorts of its neighbourhoods' keys ([`sort_keys`]), the
+//! same order.
 //!
 //! The path is AVX2 where the CPU runs it ([`default_path`] says why not
 //! AVX-512), or the one named by [`SIMD_VAR`] (`portable`, `avx2`,
@@ -31,10 +32,12 @@
 mod count;
 mod lsq;
 mod near;
+mod sort;
 mod tri;
 pub use count::{count_within, held_within};
 pub use lsq::{Row6, normal_equations6};
 pub use near::keys_within;
+pub use sort::{SORT_NETWORK_MAX, SORT_NETWORK_MIN, sort_keys};
 pub use tri::{SURE, Shear, TRI_LANES, TriColumns, tri_masks, tri_masks_sheared};
 
 /// Asks the CPU to bring the cache lines `x` lies in (up to its first 192

@@ -896,7 +896,7 @@ impl<'t> Nearest<'t> {
             least_first(keys, m, key(self.bound / BOUND_GROWTH_SQ, u32::MAX));
         }
         let keys = &mut keys[..len.min(m)];
-        keys.sort_unstable();
+        crate::simd::sort_keys(keys, self.cache.isa);
         self.found.extend(
             keys.iter()
                 .map(|&k| (f32::from_bits((k >> 32) as u32), k as u32)),

@@ -1741,7 +1741,7 @@ fn height_key(x: f32, q: usize) -> u64 {
 /// sort by `total_cmp` gives, the heights bit for bit. Returns the point's
 /// place in `h`.
 fn sort_heights(keys: &mut [u64], neighbours: &[u32], h: &mut Vec<(f32, u32)>) -> usize {
-    keys.sort_unstable();
+    crate::simd::sort_keys(keys, crate::config::current().simd);
     h.clear();
     let mut me = 0;
     h.extend(keys.iter().enumerate().map(|(x, &k)| {
