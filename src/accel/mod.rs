@@ -189,6 +189,15 @@ pub trait Fan: Send + Sync {
     /// nothing skipped gets an empty window, and its occlusion is false,
     /// whatever its span. False when it may hit, or is not known.
     fn misses(&self, ray: &Ray) -> bool;
+
+    /// [`Fan::misses`] of each of `rays` into `out` (one per ray): one
+    /// call for a run of rays, so a backend's test runs in a loop of its
+    /// own rather than through a call per ray.
+    fn misses_each(&self, rays: &[Ray], out: &mut [bool]) {
+        for (o, r) in out.iter_mut().zip(rays) {
+            *o = self.misses(r);
+        }
+    }
 }
 
 pub use crate::config::PACKETS_VAR;

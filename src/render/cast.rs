@@ -291,9 +291,15 @@ impl Order {
         if n < ORDER_MIN || u32::try_from(n).is_err() {
             return None;
         }
+        // Stopped as soon as one ray in eight is known to share.
         let bits = |r: &Ray| r.origin.to_array().map(f32::to_bits);
-        let shared = rays.windows(2).filter(|w| bits(&w[0]) == bits(&w[1])).count();
-        if shared * 8 >= n {
+        let enough = n.div_ceil(8);
+        let shared = rays
+            .windows(2)
+            .filter(|w| bits(&w[0]) == bits(&w[1]))
+            .take(enough)
+            .count();
+        if shared >= enough {
             return None;
         }
         let keys = keys(rays);
@@ -382,15 +388,19 @@ fn batches(
         }
         return;
     };
-    let mut left = [0u16; CHUNK];
-    let mut k = 0;
-    for i in piece {
-        if fan.misses(&rays[i]) {
-            trace(&[i as u16], true);
-        } else {
-            left[k] = i as u16;
-            k += 1;
-        }
+    // The fan's answers in one call, then the rays split without
+    // branches: those it knows to miss handed at once.
+    let mut miss = [false; CHUNK];
+    fan.misses_each(&rays[piece.clone()], &mut miss[..piece.len()]);
+    let (mut left, mut missed) = ([0u16; CHUNK], [0u16; CHUNK]);
+    let (mut k, mut m) = (0, 0);
+    for (i, &x) in piece.zip(&miss) {
+        (left[k], missed[m]) = (i as u16, i as u16);
+        k += usize::from(!x);
+        m += usize::from(x);
+    }
+    if m > 0 {
+        trace(&missed[..m], true);
     }
     if packets {
         by_octant(rays, &left[..k], |idx| trace(idx, false));
@@ -409,11 +419,25 @@ const FAN_RUN: usize = 4096;
 /// fan, in order (built in parallel).
 fn fans<'b>(backend: &'b dyn Backend, rays: &[Ray]) -> Vec<(Range<usize>, Box<dyn Fan + 'b>)> {
     let bits = |r: &Ray| r.origin.to_array().map(f32::to_bits);
+    // Whether all rays of each chunk of [`CHUNK`] leave its first ray's
+    // origin (found in parallel): a run steps over such chunks whole.
+    let whole: Vec<bool> = rays
+        .par_chunks(CHUNK)
+        .map(|c| c.iter().all(|r| bits(r) == bits(&c[0])))
+        .collect();
     let mut runs = Vec::new();
     let mut start = 0;
     while start < rays.len() {
         let o = bits(&rays[start]);
-        let len = 1 + rays[start + 1..].iter().take_while(|r| bits(r) == o).count();
+        let mut end = start + 1;
+        while end < rays.len() && bits(&rays[end]) == o {
+            end += if end % CHUNK == 0 && whole[end / CHUNK] {
+                CHUNK.min(rays.len() - end)
+            } else {
+                1
+            };
+        }
+        let len = end - start;
         if len >= FAN_RUN {
             runs.push(start..start + len);
         }

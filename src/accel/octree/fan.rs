@@ -35,6 +35,7 @@ use crate::accel::Fan;
 use crate::geometry::Ray;
 use crate::primitive::{Pack, Primitive};
 use glam::{DVec3, Vec3};
+use rayon::prelude::*;
 
 /// A ball's radius grows by this fraction of `|c| + R` (about 170 ulps of
 /// f32), covering the exact test's rounding.
@@ -193,50 +194,66 @@ impl Coverage {
     }
 
     /// Marks the cells each primitive's ball covers (a difference array
-    /// summed along both axes); `None` when a ball straddles the plane
-    /// `p·w = 0` (or is not finite).
+    /// summed along both axes; the rectangles found in parallel, the rows
+    /// summed in parallel: the fan is built before any of its run's rays
+    /// is traced); `None` when a ball straddles the plane `p·w = 0` (or is
+    /// not finite).
     fn cover<P: Primitive>(&mut self, prims: &[P]) -> Option<()> {
         let [nx, ny] = self.n;
-        let o = Vec3::from_array(self.origin.map(f32::from_bits)).as_dvec3();
+        let rects = prims
+            .par_iter()
+            .map(|prim| self.rectangle(prim))
+            .collect::<Option<Vec<_>>>()?;
         let mut diff = vec![0i32; (nx + 1) * (ny + 1)];
-        for prim in prims {
-            let c = prim.center().as_dvec3() - o;
-            let r = prim.half_extent().as_dvec3().length();
-            let r = r + MARGIN * (c.length() + r);
-            let (cu, cv, cw) = (c.dot(self.u), c.dot(self.v), c.dot(self.w));
-            // Wholly behind: no ray of the fan (`d·w > 0`, `t >= 0`) meets
-            // it. NaN compares false: no fan.
-            if cw < -r {
-                continue;
-            }
-            let in_front = cw > 1.01 * r;
-            if !in_front {
-                return None;
-            }
-            let (Some([i0, i1]), Some([j0, j1])) = (self.span(cu, cw, r, 0), self.span(cv, cw, r, 1))
-            else {
-                continue;
-            };
-            let at = |i: usize, j: usize| i + (nx + 1) * j;
+        let at = |i: usize, j: usize| i + (nx + 1) * j;
+        for [i0, i1, j0, j1] in rects.into_iter().flatten() {
             diff[at(i0, j0)] += 1;
             diff[at(i1 + 1, j0)] -= 1;
             diff[at(i0, j1 + 1)] -= 1;
             diff[at(i1 + 1, j1 + 1)] += 1;
         }
-        for j in 0..=ny {
+        diff.par_chunks_mut(nx + 1).for_each(|row| {
             for i in 1..=nx {
-                diff[i + (nx + 1) * j] += diff[i - 1 + (nx + 1) * j];
+                row[i] += row[i - 1];
             }
-        }
+        });
         for j in 1..=ny {
-            for i in 0..=nx {
-                diff[i + (nx + 1) * j] += diff[i + (nx + 1) * (j - 1)];
+            let (done, row) = diff.split_at_mut((nx + 1) * j);
+            for (x, &below) in row[..=nx].iter_mut().zip(&done[(nx + 1) * (j - 1)..]) {
+                *x += below;
             }
         }
-        self.covered = (0..nx * ny)
-            .map(|c| u8::from(diff[c % nx + (nx + 1) * (c / nx)] != 0))
+        self.covered = diff
+            .chunks_exact(nx + 1)
+            .take(ny)
+            .flat_map(|row| row[..nx].iter().map(|&c| u8::from(c != 0)))
             .collect();
         Some(())
+    }
+
+    /// The cells `[i0, i1, j0, j1]` of `prim`'s ball, `Some(None)` when it
+    /// lies wholly behind or beside the grid, `None` when it straddles the
+    /// plane `p·w = 0` (or is not finite).
+    fn rectangle<P: Primitive>(&self, prim: &P) -> Option<Option<[usize; 4]>> {
+        let o = Vec3::from_array(self.origin.map(f32::from_bits)).as_dvec3();
+        let c = prim.center().as_dvec3() - o;
+        let r = prim.half_extent().as_dvec3().length();
+        let r = r + MARGIN * (c.length() + r);
+        let (cu, cv, cw) = (c.dot(self.u), c.dot(self.v), c.dot(self.w));
+        // Wholly behind: no ray of the fan (`d·w > 0`, `t >= 0`) meets
+        // it. NaN compares false: no fan.
+        if cw < -r {
+            return Some(None);
+        }
+        let in_front = cw > 1.01 * r;
+        if !in_front {
+            return None;
+        }
+        let (Some([i0, i1]), Some([j0, j1])) = (self.span(cu, cw, r, 0), self.span(cv, cw, r, 1))
+        else {
+            return Some(None);
+        };
+        Some(Some([i0, i1, j0, j1]))
     }
 }
 
@@ -245,21 +262,38 @@ impl Fan for Coverage {
     /// no ball covers.
     #[inline]
     fn misses(&self, ray: &Ray) -> bool {
-        if ray.origin.to_array().map(f32::to_bits) != self.origin {
-            return false;
+        self.misses_one(ray)
+    }
+
+    /// [`Coverage::misses_one`] inlined in the loop, without branches.
+    fn misses_each(&self, rays: &[Ray], out: &mut [bool]) {
+        for (o, r) in out.iter_mut().zip(rays) {
+            *o = self.misses_one(r);
         }
+    }
+}
+
+impl Coverage {
+    /// [`Fan::misses`], its conditions combined without branches (the
+    /// cell read at 0 when the direction lies outside the grid).
+    #[inline(always)]
+    fn misses_one(&self, ray: &Ray) -> bool {
+        let here = ray.origin.to_array().map(f32::to_bits) == self.origin;
         let d = ray.dir.as_dvec3();
         let z = d.dot(self.w);
         // NaN compares false. A direction inside the grid lies within
         // about 75° of `w` ([`MIN_COS`]).
         let ahead = z > 0.0;
-        if !ahead {
-            return false;
-        }
         let inv = 1.0 / z;
         let i = self.coord(d.dot(self.u) * inv, 0);
         let j = self.coord(d.dot(self.v) * inv, 1);
         let inside = |i: f64, a: usize| i >= 0.0 && i < self.n[a] as f64;
-        inside(i, 0) && inside(j, 1) && self.covered[i as usize + self.n[0] * j as usize] == 0
+        let within = here & ahead & inside(i, 0) & inside(j, 1);
+        let cell = if within {
+            i as usize + self.n[0] * j as usize
+        } else {
+            0
+        };
+        within & (self.covered[cell] == 0)
     }
 }
