@@ -43,6 +43,9 @@ pub struct SplatScene {
 /// (28 bytes a ray: 112 MB).
 const KEEP_RAYS: usize = 1 << 22;
 
+/// Rows a parallel task of [`SplatScene::convert`] converts.
+const CONVERT: usize = 4096;
+
 impl SplatScene {
     /// `scene` (its splats and triangles, shading modes and windows) in
     /// `backend` (a registry name); its world frame is its own plus
@@ -87,25 +90,37 @@ impl SplatScene {
     }
 
     /// Rows of six numbers to rays and direction lengths, written straight
-    /// into their vectors in parallel (no per-chunk lists joined and
-    /// unzipped: that was a quarter of a camera-ray `cast_rays` call,
-    /// `docs/notes/backends.md`, "Issue 55, round 2"); the first bad row
-    /// is reported.
+    /// into their vectors in parallel, in chunks of [`CONVERT`] rows (no
+    /// per-chunk lists joined and unzipped: that was a quarter of a
+    /// camera-ray `cast_rays` call, `docs/notes/backends.md`, "Issue 55,
+    /// round 2"; nor a parallel unzip, whose pairs went through memory:
+    /// a fifth of a camera `occluded` call's misses, "seventeenth
+    /// session"); the first bad row is reported.
     fn convert<T: Copy + Into<f64> + Sync>(&self, v: &[T]) -> PyResult<(Vec<Ray>, Vec<f32>)> {
+        let n = v.len() / 6;
         let bad = AtomicUsize::new(usize::MAX);
         // The kept buffers (a call running beside this one finds none
         // and allocates); a poisoned lock still holds plain vectors.
+        // Sized once: a call as long as the last writes over its rays.
         let (mut rays, mut lens) =
             std::mem::take(&mut *self.scratch.lock().unwrap_or_else(|p| p.into_inner()));
-        v.par_chunks_exact(6)
+        rays.resize(n, Ray::new(Vec3::ZERO, Vec3::X));
+        lens.resize(n, 1.0);
+        rays.par_chunks_mut(CONVERT)
+            .zip(lens.par_chunks_mut(CONVERT))
+            .zip(v.par_chunks(6 * CONVERT))
             .enumerate()
-            .map(|(i, r)| {
-                self.ray(r).unwrap_or_else(|_| {
-                    bad.fetch_min(i, Ordering::Relaxed);
-                    (Ray::new(Vec3::ZERO, Vec3::X), 1.0)
-                })
-            })
-            .unzip_into_vecs(&mut rays, &mut lens);
+            .for_each(|(c, ((rays, lens), v))| {
+                let rows = rays.iter_mut().zip(lens.iter_mut()).zip(v.chunks_exact(6));
+                for (i, ((ray, len), r)) in rows.enumerate() {
+                    match self.ray(r) {
+                        Ok((r, l)) => (*ray, *len) = (r, l),
+                        Err(_) => {
+                            bad.fetch_min(c * CONVERT + i, Ordering::Relaxed);
+                        }
+                    }
+                }
+            });
         match bad.into_inner() {
             usize::MAX => Ok((rays, lens)),
             i => {
@@ -125,7 +140,7 @@ impl SplatScene {
 
     /// One row as a ray in the scene's frame and its direction's length,
     /// or what is wrong with it.
-    #[inline]
+    #[inline(always)]
     fn ray<T: Copy + Into<f64>>(&self, r: &[T]) -> Result<(Ray, f32), &'static str> {
         let r: [f64; 6] = std::array::from_fn(|k| r[k].into());
         if r.iter().any(|x| !x.is_finite()) {
