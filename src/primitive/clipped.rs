@@ -42,6 +42,11 @@ impl Primitive for ClippedDisc {
         self.disc.half_extent()
     }
 
+    /// The whole disc's: conservative for the clipped part.
+    fn bounding_radius(&self) -> f32 {
+        self.disc.bounding_radius()
+    }
+
     fn coarse_half_extent(&self) -> Vec3 {
         self.disc.coarse_half_extent()
     }

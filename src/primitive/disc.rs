@@ -65,6 +65,16 @@ impl Primitive for Disc {
         (a * a + b * b).map(f32::sqrt)
     }
 
+    /// The ellipse's greatest semi-axis: the largest singular value of
+    /// the semi-axes `(a, b)` (`r_u u`, `r_v v`; `max(r_u, r_v)` when they
+    /// are orthogonal), where the box's ball is `sqrt(r_u² + r_v²)`.
+    fn bounding_radius(&self) -> f32 {
+        let (a, b) = self.axes();
+        let (aa, bb, ab) = (a.length_squared(), b.length_squared(), a.dot(b));
+        let spread = ((aa - bb) * (aa - bb) + 4.0 * ab * ab).sqrt();
+        (0.5 * (aa + bb + spread)).sqrt()
+    }
+
     /// The box of the bounding square `c ± r_u u ± r_v v` (§3.1).
     fn coarse_half_extent(&self) -> Vec3 {
         let (a, b) = self.axes();
@@ -596,6 +606,11 @@ mod tests {
                 h.cmple(sq * (1.0 + 1e-6)).all(),
                 "tight {h} within square {sq}"
             );
+            // The ball: the greater radius, within the box's ball.
+            let r = d.bounding_radius();
+            let major = s.radii.x.max(s.radii.y);
+            assert!((r - major).abs() <= 1e-5 * major, "radius {r} for radii {}", s.radii);
+            assert!(r <= h.length(), "radius {r} beyond the box's ball {}", h.length());
             for k in 0..64 {
                 let phi = k as f32 * std::f32::consts::TAU / 64.0;
                 let p = s.u_axis * (s.radii.x * phi.cos()) + s.v_axis * (s.radii.y * phi.sin());
@@ -603,6 +618,7 @@ mod tests {
                     p.abs().cmple(h * (1.0 + 1e-5) + 1e-6).all(),
                     "{p} outside {h}"
                 );
+                assert!(p.length() <= r * (1.0 + 1e-5), "{p} beyond {r}");
             }
         }
     }

@@ -74,6 +74,13 @@ pub trait Primitive: Copy + Send + Sync + 'static {
     /// centred at [`Primitive::center`].
     fn half_extent(&self) -> Vec3;
 
+    /// Radius of a ball around [`Primitive::center`] holding every point
+    /// `intersect` can return (up to rounding, which the backends pad):
+    /// the tight box's circumscribed ball by default.
+    fn bounding_radius(&self) -> f32 {
+        self.half_extent().length()
+    }
+
     /// Half extents of a coarser box for a cheaper, looser overlap test (the
     /// report's bounding square of a splat, §3.1); the tight box by default.
     fn coarse_half_extent(&self) -> Vec3 {

@@ -21,8 +21,10 @@
 //! Why the answers are the octree's, bit for bit (`docs/DESIGN.md`, "The
 //! backend contract", rule 1): only a ray that no primitive's ball can
 //! hold a hit of is answered as a miss; every other ray goes to the
-//! backend as before. `R` is the radius of the primitive's box
-//! (`|half_extent|`) grown by [`MARGIN`] of `|c| + R`: a hit the f32 test
+//! backend as before. `R` is the primitive's
+//! [`Primitive::bounding_radius`] (a disc's greatest semi-axis, about
+//! 0.71 of its box's ball, so fewer rays near a silhouette are left to the
+//! octree) grown by [`MARGIN`] of `|c| + R`: a hit the f32 test
 //! [`Primitive::intersect`] accepts lies on the ray within a few ulps of
 //! `|c| + R` of the true primitive (its `t` and point are rounded, not the
 //! ray), far inside that margin. Rectangles are padded by [`PAD`] for the
@@ -237,7 +239,7 @@ impl Coverage {
     fn rectangle<P: Primitive>(&self, prim: &P) -> Option<Option<[usize; 4]>> {
         let o = Vec3::from_array(self.origin.map(f32::from_bits)).as_dvec3();
         let c = prim.center().as_dvec3() - o;
-        let r = prim.half_extent().as_dvec3().length();
+        let r = f64::from(prim.bounding_radius());
         let r = r + MARGIN * (c.length() + r);
         let (cu, cv, cw) = (c.dot(self.u), c.dot(self.v), c.dot(self.w));
         // Wholly behind: no ray of the fan (`d·w > 0`, `t >= 0`) meets
