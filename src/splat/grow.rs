@@ -143,6 +143,12 @@ struct Grower<'a> {
     other: Vec<Near>,
     ring: Vec<Near>,
     stack: Vec<u32>,
+    /// [`Grower::enclosing`]'s points in lanes.
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+    /// The buffers of growths done with ([`Grower::give_back`]), for the
+    /// next [`Grower::run`].
+    spare: Vec<(Vec<(u32, f32)>, Vec<u32>)>,
 }
 
 impl Grower<'_> {
@@ -166,9 +172,14 @@ impl Grower<'_> {
         self.stamp[i] = round;
         self.heap.push(Reverse(i as u64));
         let max_d2 = max_d * max_d;
+        // The buffers of an earlier growth, where one was given back.
+        let (mut accepted, mut visited) = self.spare.pop().unwrap_or_default();
+        accepted.clear();
+        visited.clear();
+        visited.push(i as u32);
         let mut g = Growth {
-            accepted: Vec::new(),
-            visited: vec![i as u32],
+            accepted,
+            visited,
             h_min: 0.0,
             h_max: 0.0,
             h_sum: 0.0,
@@ -208,12 +219,17 @@ impl Grower<'_> {
         g
     }
 
+    /// Keep the buffers of a growth done with for the next [`Grower::run`].
+    fn give_back(&mut self, g: Growth) {
+        self.spare.push((g.accepted, g.visited));
+    }
+
     /// The smallest circle, in the metric `(a, b, aspect)` around seed `i`,
     /// holding the seed, the points `growth` took and the seed's same-facing
     /// `k` neighbours (all within `r`): its centre's offset from the seed and
     /// its radius (at most `r`).
     fn enclosing(
-        &self,
+        &mut self,
         i: usize,
         growth: &Growth,
         a: Vec3,
@@ -227,23 +243,29 @@ impl Grower<'_> {
             let d = inp.points[q] - p;
             Vec2::new(a.dot(d) / aspect, b.dot(d))
         };
-        let mut pts: Vec<Vec2> = vec![Vec2::ZERO];
-        pts.extend(growth.accepted.iter().map(|&(j, _)| metric(j as usize)));
-        pts.extend(
-            inp.knn
-                .of(i)
-                .iter()
-                .filter(|&&q| inp.normals[q as usize].dot(n) > 0.0)
-                .map(|&q| metric(q as usize)),
-        );
+        // The points in lanes (x's and y's apart, the grower's buffers).
+        let (mut xs, mut ys) = (std::mem::take(&mut self.xs), std::mem::take(&mut self.ys));
+        xs.clear();
+        ys.clear();
+        xs.push(0.0);
+        ys.push(0.0);
+        let same_facing = inp.knn.of(i).iter().filter(|&&q| inp.normals[q as usize].dot(n) > 0.0);
+        let taken = growth.accepted.iter().map(|&(j, _)| j);
+        for q in taken.chain(same_facing.copied()) {
+            let m = metric(q as usize);
+            xs.push(m.x);
+            ys.push(m.y);
+        }
         // A fixed shuffle per seed: the incremental algorithm's expected
         // linear time, and the same splats on every run.
         let mut rng = crate::rng::SplitMix64::new(i as u64);
-        for k in (1..pts.len()).rev() {
+        for k in (1..xs.len()).rev() {
             let m = (rng.next_u64() % (k as u64 + 1)) as usize;
-            pts.swap(k, m);
+            xs.swap(k, m);
+            ys.swap(k, m);
         }
-        let (c, rad) = min_circle(&pts);
+        let (c, rad) = min_circle(&xs, &ys);
+        (self.xs, self.ys) = (xs, ys);
         if !c.is_finite() || !rad.is_finite() || rad >= r {
             return (Vec2::ZERO, r);
         }
@@ -450,35 +472,90 @@ fn plane_height(growth: &Growth) -> f32 {
     mean.clamp(growth.h_min, mid)
 }
 
-/// The smallest circle holding `pts` (Welzl's incremental algorithm,
-/// expected linear time for points in random order): centre and radius.
-fn min_circle(pts: &[Vec2]) -> (Vec2, f32) {
-    let inside = |c: Vec2, r: f32, q: Vec2| q.distance(c) <= r * (1.0 + 1e-6);
-    let Some(&first) = pts.first() else {
+/// The smallest circle holding the points `(xs[k], ys[k])` (Welzl's
+/// incremental algorithm, expected linear time for points in random
+/// order): centre and radius.
+///
+/// Each loop scans on to the first point outside its circle
+/// ([`first_outside`]), the same tests in the same order as one point a
+/// step, so the same circles.
+fn min_circle(xs: &[f32], ys: &[f32]) -> (Vec2, f32) {
+    let n = xs.len().min(ys.len());
+    let (xs, ys) = (&xs[..n], &ys[..n]);
+    let pt = |k: usize| Vec2::new(xs[k], ys[k]);
+    if n == 0 {
         return (Vec2::ZERO, 0.0);
-    };
-    let (mut c, mut r) = (first, 0.0f32);
-    for i in 1..pts.len() {
-        if inside(c, r, pts[i]) {
-            continue;
-        }
-        (c, r) = (pts[i], 0.0);
-        for j in 0..i {
-            if inside(c, r, pts[j]) {
-                continue;
+    }
+    let (mut c, mut r) = (pt(0), 0.0f32);
+    let mut from_i = 1;
+    while let Some(i) = first_outside(xs, ys, from_i..n, c, r) {
+        (c, r) = (pt(i), 0.0);
+        let mut from_j = 0;
+        while let Some(j) = first_outside(xs, ys, from_j..i, c, r) {
+            c = 0.5 * (pt(i) + pt(j));
+            r = 0.5 * pt(i).distance(pt(j));
+            let mut from_k = 0;
+            while let Some(k) = first_outside(xs, ys, from_k..j, c, r) {
+                (c, r) = circumcircle(pt(i), pt(j), pt(k)).unwrap_or((c, r.max(c.distance(pt(k)))));
+                from_k = k + 1;
             }
-            c = 0.5 * (pts[i] + pts[j]);
-            r = 0.5 * pts[i].distance(pts[j]);
-            for k in 0..j {
-                if inside(c, r, pts[k]) {
-                    continue;
-                }
-                (c, r) =
-                    circumcircle(pts[i], pts[j], pts[k]).unwrap_or((c, r.max(c.distance(pts[k]))));
-            }
+            from_j = j + 1;
         }
+        from_i = i + 1;
     }
     (c, r)
+}
+
+/// [`first_outside`] tests this many points at once.
+const CIRCLE_LANES: usize = 8;
+
+/// The first point of `range` outside the circle `(c, r)` by
+/// [`min_circle`]'s test, `|q - c| <= r (1 + 1e-6)` with `|q - c|` the
+/// square root of `d² = dx² + dy²` in `f32`.
+///
+/// A point with `d²` at most `t²` (`t = r (1 + 1e-6)`, squared exactly in
+/// `f64`, rounded down to `f32`) passes: the square root of `d² <= t²` is
+/// at most `t`, and rounding it to nearest keeps it at most `t` (a float).
+/// So a run of [`CIRCLE_LANES`] points all of whose `d²` pass (counted
+/// without a branch, in lanes) holds no point outside; a run with one that
+/// does not is tested point by point, by the square root itself. The
+/// result is the one-point-a-step test's, bit for bit (NaN fails both).
+fn first_outside(
+    xs: &[f32],
+    ys: &[f32],
+    range: std::ops::Range<usize>,
+    c: Vec2,
+    r: f32,
+) -> Option<usize> {
+    let t = r * (1.0 + 1e-6);
+    let sure = f32_at_most(f64::from(t) * f64::from(t));
+    let inside = |x: f32, y: f32| Vec2::new(x, y).distance(c) <= t;
+    let (xs, ys) = (&xs[range.clone()], &ys[range.clone()]);
+    let mut base = range.start;
+    let mut runs = xs.chunks_exact(CIRCLE_LANES).zip(ys.chunks_exact(CIRCLE_LANES));
+    for (rx, ry) in &mut runs {
+        let mut out = 0u32;
+        for (&x, &y) in rx.iter().zip(ry) {
+            let (dx, dy) = (x - c.x, y - c.y);
+            out |= u32::from(!(dx * dx + dy * dy <= sure));
+        }
+        if out != 0 {
+            if let Some(k) = rx.iter().zip(ry).position(|(&x, &y)| !inside(x, y)) {
+                return Some(base + k);
+            }
+        }
+        base += CIRCLE_LANES;
+    }
+    let tail = xs.len() - xs.len() % CIRCLE_LANES;
+    (xs[tail..].iter().zip(&ys[tail..]))
+        .position(|(&x, &y)| !inside(x, y))
+        .map(|k| base + k)
+}
+
+/// The largest `f32` at most `v` (NaN for NaN).
+fn f32_at_most(v: f64) -> f32 {
+    let x = v as f32;
+    if f64::from(x) > v { x.next_down() } else { x }
 }
 
 /// The circle through three points; `None` when they are collinear.
@@ -758,6 +835,9 @@ impl<'a> Grower<'a> {
             other: Vec::new(),
             ring: Vec::new(),
             stack: Vec::new(),
+            xs: Vec::new(),
+            ys: Vec::new(),
+            spare: Vec::new(),
         }
     }
 
@@ -782,7 +862,7 @@ impl<'a> Grower<'a> {
         if inp.ellipses
             && let Some((e, f, rv)) = g.elliptical(i, (tu, tv), &growth, max_d, r)
         {
-            growth = e;
+            g.give_back(std::mem::replace(&mut growth, e));
             frame = f;
             r = rv;
         }
@@ -807,9 +887,10 @@ impl<'a> Grower<'a> {
                 .map_or(0.0, |a| a.1.sqrt())
                 .max(g.cover_radius(i, a, b, aspect));
             if r0.is_nan() || r0 <= 0.0 || r0 >= r {
+                g.give_back(smaller);
                 break;
             }
-            growth = smaller;
+            g.give_back(std::mem::replace(&mut growth, smaller));
             (shift, r, hc, clip) = g.shape(i, &growth, frame, r0);
         }
         let clip = clip.lines;
@@ -820,6 +901,7 @@ impl<'a> Grower<'a> {
             + b * shift.y;
         let color = mean_color(inp.colors, &growth);
         let marks = density_marks(inp, i, &growth, frame, shift, r, hc, clip);
+        g.give_back(growth);
         let splat = Splat {
             center,
             normal: n,
@@ -877,7 +959,12 @@ impl Grower<'_> {
         let e = self.run(i, a, b, aspect, max_d);
         let e_r = e.accepted.last().map_or(0.0, |a| a.1.sqrt());
         let rv = e_r.max(self.cover_radius(i, a, b, aspect));
-        (aspect * rv * rv > r * r * 1.05).then_some((e, (a, b, aspect), rv))
+        if aspect * rv * rv > r * r * 1.05 {
+            Some((e, (a, b, aspect), rv))
+        } else {
+            self.give_back(e);
+            None
+        }
     }
 }
 
