@@ -143,7 +143,8 @@ struct Grower<'a> {
     other: Vec<Near>,
     ring: Vec<Near>,
     stack: Vec<u32>,
-    /// [`Grower::enclosing`]'s points in lanes.
+    /// [`Grower::enclosing`]'s points, and in lanes.
+    pts: Vec<Vec2>,
     xs: Vec<f32>,
     ys: Vec<f32>,
     /// The buffers of growths done with ([`Grower::give_back`]), for the
@@ -243,27 +244,31 @@ impl Grower<'_> {
             let d = inp.points[q] - p;
             Vec2::new(a.dot(d) / aspect, b.dot(d))
         };
-        // The points in lanes (x's and y's apart, the grower's buffers).
-        let (mut xs, mut ys) = (std::mem::take(&mut self.xs), std::mem::take(&mut self.ys));
-        xs.clear();
-        ys.clear();
-        xs.push(0.0);
-        ys.push(0.0);
-        let same_facing = inp.knn.of(i).iter().filter(|&&q| inp.normals[q as usize].dot(n) > 0.0);
-        let taken = growth.accepted.iter().map(|&(j, _)| j);
-        for q in taken.chain(same_facing.copied()) {
-            let m = metric(q as usize);
-            xs.push(m.x);
-            ys.push(m.y);
-        }
+        let mut pts = std::mem::take(&mut self.pts);
+        pts.clear();
+        pts.push(Vec2::ZERO);
+        pts.extend(growth.accepted.iter().map(|&(j, _)| metric(j as usize)));
+        pts.extend(
+            inp.knn
+                .of(i)
+                .iter()
+                .filter(|&&q| inp.normals[q as usize].dot(n) > 0.0)
+                .map(|&q| metric(q as usize)),
+        );
         // A fixed shuffle per seed: the incremental algorithm's expected
         // linear time, and the same splats on every run.
         let mut rng = crate::rng::SplitMix64::new(i as u64);
-        for k in (1..xs.len()).rev() {
+        for k in (1..pts.len()).rev() {
             let m = (rng.next_u64() % (k as u64 + 1)) as usize;
-            xs.swap(k, m);
-            ys.swap(k, m);
+            pts.swap(k, m);
         }
+        // In lanes (x's and y's apart), for `min_circle`'s runs.
+        let (mut xs, mut ys) = (std::mem::take(&mut self.xs), std::mem::take(&mut self.ys));
+        xs.clear();
+        ys.clear();
+        xs.extend(pts.iter().map(|q| q.x));
+        ys.extend(pts.iter().map(|q| q.y));
+        self.pts = pts;
         let (c, rad) = min_circle(&xs, &ys);
         (self.xs, self.ys) = (xs, ys);
         if !c.is_finite() || !rad.is_finite() || rad >= r {
@@ -520,6 +525,7 @@ const CIRCLE_LANES: usize = 8;
 /// without a branch, in lanes) holds no point outside; a run with one that
 /// does not is tested point by point, by the square root itself. The
 /// result is the one-point-a-step test's, bit for bit (NaN fails both).
+#[inline]
 fn first_outside(
     xs: &[f32],
     ys: &[f32],
@@ -528,28 +534,26 @@ fn first_outside(
     r: f32,
 ) -> Option<usize> {
     let t = r * (1.0 + 1e-6);
-    let sure = f32_at_most(f64::from(t) * f64::from(t));
-    let inside = |x: f32, y: f32| Vec2::new(x, y).distance(c) <= t;
-    let (xs, ys) = (&xs[range.clone()], &ys[range.clone()]);
-    let mut base = range.start;
-    let mut runs = xs.chunks_exact(CIRCLE_LANES).zip(ys.chunks_exact(CIRCLE_LANES));
-    for (rx, ry) in &mut runs {
-        let mut out = 0u32;
-        for (&x, &y) in rx.iter().zip(ry) {
-            let (dx, dy) = (x - c.x, y - c.y);
-            out |= u32::from(!(dx * dx + dy * dy <= sure));
-        }
-        if out != 0 {
-            if let Some(k) = rx.iter().zip(ry).position(|(&x, &y)| !inside(x, y)) {
-                return Some(base + k);
+    let inside = |k: usize| Vec2::new(xs[k], ys[k]).distance(c) <= t;
+    let mut from = range.start;
+    if range.len() >= CIRCLE_LANES {
+        let sure = f32_at_most(f64::from(t) * f64::from(t));
+        while from + CIRCLE_LANES <= range.end {
+            let run = from..from + CIRCLE_LANES;
+            let mut out = 0u32;
+            for (&x, &y) in xs[run.clone()].iter().zip(&ys[run.clone()]) {
+                let (dx, dy) = (x - c.x, y - c.y);
+                out |= u32::from(!(dx * dx + dy * dy <= sure));
             }
+            if out != 0
+                && let Some(k) = run.clone().find(|&k| !inside(k))
+            {
+                return Some(k);
+            }
+            from = run.end;
         }
-        base += CIRCLE_LANES;
     }
-    let tail = xs.len() - xs.len() % CIRCLE_LANES;
-    (xs[tail..].iter().zip(&ys[tail..]))
-        .position(|(&x, &y)| !inside(x, y))
-        .map(|k| base + k)
+    (from..range.end).find(|&k| !inside(k))
 }
 
 /// The largest `f32` at most `v` (NaN for NaN).
@@ -835,6 +839,7 @@ impl<'a> Grower<'a> {
             other: Vec::new(),
             ring: Vec::new(),
             stack: Vec::new(),
+            pts: Vec::new(),
             xs: Vec::new(),
             ys: Vec::new(),
             spare: Vec::new(),
