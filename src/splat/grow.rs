@@ -129,6 +129,10 @@ struct Growth {
     h_sum: f64,
 }
 
+/// A growth's buffers, kept for the next ([`Growth::accepted`],
+/// [`Growth::visited`]).
+type GrowthBuffers = (Vec<(u32, f32)>, Vec<u32>);
+
 struct Grower<'a> {
     inp: &'a GrowInput<'a>,
     stamp: Vec<u32>,
@@ -149,7 +153,7 @@ struct Grower<'a> {
     ys: Vec<f32>,
     /// The buffers of growths done with ([`Grower::give_back`]), for the
     /// next [`Grower::run`].
-    spare: Vec<(Vec<(u32, f32)>, Vec<u32>)>,
+    spare: Vec<GrowthBuffers>,
 }
 
 impl Grower<'_> {
@@ -541,6 +545,8 @@ fn first_outside(
         while from + CIRCLE_LANES <= range.end {
             let run = from..from + CIRCLE_LANES;
             let mut out = 0u32;
+            // Not `<=` (NaN counts as outside): one compare a lane.
+            #[allow(clippy::neg_cmp_op_on_partial_ord)]
             for (&x, &y) in xs[run.clone()].iter().zip(&ys[run.clone()]) {
                 let (dx, dy) = (x - c.x, y - c.y);
                 out |= u32::from(!(dx * dx + dy * dy <= sure));

@@ -619,7 +619,7 @@ fn coarse_exts(own: &[Near]) -> [f32; CLIP_DIRECTIONS] {
 
 /// [`fold_exts`] takes this many directions at once.
 const EXT_LANES: usize = 8;
-const _: () = assert!(CLIP_DIRECTIONS % EXT_LANES == 0);
+const _: () = assert!(CLIP_DIRECTIONS.is_multiple_of(EXT_LANES));
 
 /// Fold the points `qs`, in their order, into the extents `ext` along
 /// [`coarse_dirs`]: `ext[k] = max(ext[k], w_k·q)`, the same products, sum
