@@ -785,6 +785,8 @@ struct Lines<'a> {
     rim: Vec<u32>,
     /// Scratch: the points across a crease.
     across: Vec<Near>,
+    /// [`Lines::line_at`]'s lines so far, by the angle's bits.
+    at: Vec<(u32, Option<ClipLine>)>,
 }
 
 impl<'a> Lines<'a> {
@@ -813,6 +815,7 @@ impl<'a> Lines<'a> {
             by_reach: Vec::new(),
             rim: Vec::new(),
             across: Vec::new(),
+            at: Vec::new(),
         }
     }
 
@@ -836,11 +839,19 @@ impl<'a> Lines<'a> {
     }
 
     /// The line cutting the disc in direction `t` (radians), if the face
-    /// ends there.
+    /// ends there. A function of `t` alone for one splat (what
+    /// [`Lines::line_with`] takes once and keeps is the same whenever
+    /// taken): kept by `t`'s bits, for [`Lines::best`]'s later calls,
+    /// which mostly refine round the same coarse direction again.
     fn line_at(&mut self, t: f32) -> Option<ClipLine> {
+        if let Some(&(_, l)) = self.at.iter().find(|(bits, _)| *bits == t.to_bits()) {
+            return l;
+        }
         let w = Vec2::new(t.cos(), t.sin());
         let ext = self.own.iter().map(|m| w.dot(m.q)).fold(f32::MIN, f32::max);
-        self.line_with(w, ext)
+        let l = self.line_with(w, ext);
+        self.at.push((t.to_bits(), l));
+        l
     }
 
     /// [`Lines::line_at`] along the unit `w`, the own face's farthest
