@@ -129,6 +129,10 @@ struct Growth {
     h_sum: f64,
 }
 
+/// A growth's buffers, kept for the next ([`Growth::accepted`],
+/// [`Growth::visited`]).
+type GrowthBuffers = (Vec<(u32, f32)>, Vec<u32>);
+
 struct Grower<'a> {
     inp: &'a GrowInput<'a>,
     stamp: Vec<u32>,
@@ -143,6 +147,13 @@ struct Grower<'a> {
     other: Vec<Near>,
     ring: Vec<Near>,
     stack: Vec<u32>,
+    /// [`Grower::enclosing`]'s points, and in lanes.
+    pts: Vec<Vec2>,
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+    /// The buffers of growths done with ([`Grower::give_back`]), for the
+    /// next [`Grower::run`].
+    spare: Vec<GrowthBuffers>,
 }
 
 impl Grower<'_> {
@@ -166,9 +177,14 @@ impl Grower<'_> {
         self.stamp[i] = round;
         self.heap.push(Reverse(i as u64));
         let max_d2 = max_d * max_d;
+        // The buffers of an earlier growth, where one was given back.
+        let (mut accepted, mut visited) = self.spare.pop().unwrap_or_default();
+        accepted.clear();
+        visited.clear();
+        visited.push(i as u32);
         let mut g = Growth {
-            accepted: Vec::new(),
-            visited: vec![i as u32],
+            accepted,
+            visited,
             h_min: 0.0,
             h_max: 0.0,
             h_sum: 0.0,
@@ -208,12 +224,17 @@ impl Grower<'_> {
         g
     }
 
+    /// Keep the buffers of a growth done with for the next [`Grower::run`].
+    fn give_back(&mut self, g: Growth) {
+        self.spare.push((g.accepted, g.visited));
+    }
+
     /// The smallest circle, in the metric `(a, b, aspect)` around seed `i`,
     /// holding the seed, the points `growth` took and the seed's same-facing
     /// `k` neighbours (all within `r`): its centre's offset from the seed and
     /// its radius (at most `r`).
     fn enclosing(
-        &self,
+        &mut self,
         i: usize,
         growth: &Growth,
         a: Vec3,
@@ -227,7 +248,9 @@ impl Grower<'_> {
             let d = inp.points[q] - p;
             Vec2::new(a.dot(d) / aspect, b.dot(d))
         };
-        let mut pts: Vec<Vec2> = vec![Vec2::ZERO];
+        let mut pts = std::mem::take(&mut self.pts);
+        pts.clear();
+        pts.push(Vec2::ZERO);
         pts.extend(growth.accepted.iter().map(|&(j, _)| metric(j as usize)));
         pts.extend(
             inp.knn
@@ -243,7 +266,15 @@ impl Grower<'_> {
             let m = (rng.next_u64() % (k as u64 + 1)) as usize;
             pts.swap(k, m);
         }
-        let (c, rad) = min_circle(&pts);
+        // In lanes (x's and y's apart), for `min_circle`'s runs.
+        let (mut xs, mut ys) = (std::mem::take(&mut self.xs), std::mem::take(&mut self.ys));
+        xs.clear();
+        ys.clear();
+        xs.extend(pts.iter().map(|q| q.x));
+        ys.extend(pts.iter().map(|q| q.y));
+        self.pts = pts;
+        let (c, rad) = min_circle(&xs, &ys);
+        (self.xs, self.ys) = (xs, ys);
         if !c.is_finite() || !rad.is_finite() || rad >= r {
             return (Vec2::ZERO, r);
         }
@@ -450,35 +481,91 @@ fn plane_height(growth: &Growth) -> f32 {
     mean.clamp(growth.h_min, mid)
 }
 
-/// The smallest circle holding `pts` (Welzl's incremental algorithm,
-/// expected linear time for points in random order): centre and radius.
-fn min_circle(pts: &[Vec2]) -> (Vec2, f32) {
-    let inside = |c: Vec2, r: f32, q: Vec2| q.distance(c) <= r * (1.0 + 1e-6);
-    let Some(&first) = pts.first() else {
+/// The smallest circle holding the points `(xs[k], ys[k])` (Welzl's
+/// incremental algorithm, expected linear time for points in random
+/// order): centre and radius.
+///
+/// Each loop scans on to the first point outside its circle
+/// ([`first_outside`]), the same tests in the same order as one point a
+/// step, so the same circles.
+fn min_circle(xs: &[f32], ys: &[f32]) -> (Vec2, f32) {
+    let n = xs.len().min(ys.len());
+    let (xs, ys) = (&xs[..n], &ys[..n]);
+    let pt = |k: usize| Vec2::new(xs[k], ys[k]);
+    if n == 0 {
         return (Vec2::ZERO, 0.0);
-    };
-    let (mut c, mut r) = (first, 0.0f32);
-    for i in 1..pts.len() {
-        if inside(c, r, pts[i]) {
-            continue;
-        }
-        (c, r) = (pts[i], 0.0);
-        for j in 0..i {
-            if inside(c, r, pts[j]) {
-                continue;
+    }
+    let (mut c, mut r) = (pt(0), 0.0f32);
+    let mut from_i = 1;
+    while let Some(i) = first_outside(xs, ys, from_i..n, c, r) {
+        (c, r) = (pt(i), 0.0);
+        let mut from_j = 0;
+        while let Some(j) = first_outside(xs, ys, from_j..i, c, r) {
+            c = 0.5 * (pt(i) + pt(j));
+            r = 0.5 * pt(i).distance(pt(j));
+            let mut from_k = 0;
+            while let Some(k) = first_outside(xs, ys, from_k..j, c, r) {
+                (c, r) = circumcircle(pt(i), pt(j), pt(k)).unwrap_or((c, r.max(c.distance(pt(k)))));
+                from_k = k + 1;
             }
-            c = 0.5 * (pts[i] + pts[j]);
-            r = 0.5 * pts[i].distance(pts[j]);
-            for k in 0..j {
-                if inside(c, r, pts[k]) {
-                    continue;
-                }
-                (c, r) =
-                    circumcircle(pts[i], pts[j], pts[k]).unwrap_or((c, r.max(c.distance(pts[k]))));
-            }
+            from_j = j + 1;
         }
+        from_i = i + 1;
     }
     (c, r)
+}
+
+/// [`first_outside`] tests this many points at once.
+const CIRCLE_LANES: usize = 8;
+
+/// The first point of `range` outside the circle `(c, r)` by
+/// [`min_circle`]'s test, `|q - c| <= r (1 + 1e-6)` with `|q - c|` the
+/// square root of `d² = dx² + dy²` in `f32`.
+///
+/// A point with `d²` at most `t²` (`t = r (1 + 1e-6)`, squared exactly in
+/// `f64`, rounded down to `f32`) passes: the square root of `d² <= t²` is
+/// at most `t`, and rounding it to nearest keeps it at most `t` (a float).
+/// So a run of [`CIRCLE_LANES`] points all of whose `d²` pass (counted
+/// without a branch, in lanes) holds no point outside; a run with one that
+/// does not is tested point by point, by the square root itself. The
+/// result is the one-point-a-step test's, bit for bit (NaN fails both).
+#[inline]
+fn first_outside(
+    xs: &[f32],
+    ys: &[f32],
+    range: std::ops::Range<usize>,
+    c: Vec2,
+    r: f32,
+) -> Option<usize> {
+    let t = r * (1.0 + 1e-6);
+    let inside = |k: usize| Vec2::new(xs[k], ys[k]).distance(c) <= t;
+    let mut from = range.start;
+    if range.len() >= CIRCLE_LANES {
+        let sure = f32_at_most(f64::from(t) * f64::from(t));
+        while from + CIRCLE_LANES <= range.end {
+            let run = from..from + CIRCLE_LANES;
+            let mut out = 0u32;
+            // Not `<=` (NaN counts as outside): one compare a lane.
+            #[allow(clippy::neg_cmp_op_on_partial_ord)]
+            for (&x, &y) in xs[run.clone()].iter().zip(&ys[run.clone()]) {
+                let (dx, dy) = (x - c.x, y - c.y);
+                out |= u32::from(!(dx * dx + dy * dy <= sure));
+            }
+            if out != 0
+                && let Some(k) = run.clone().find(|&k| !inside(k))
+            {
+                return Some(k);
+            }
+            from = run.end;
+        }
+    }
+    (from..range.end).find(|&k| !inside(k))
+}
+
+/// The largest `f32` at most `v` (NaN for NaN).
+fn f32_at_most(v: f64) -> f32 {
+    let x = v as f32;
+    if f64::from(x) > v { x.next_down() } else { x }
 }
 
 /// The circle through three points; `None` when they are collinear.
@@ -758,6 +845,10 @@ impl<'a> Grower<'a> {
             other: Vec::new(),
             ring: Vec::new(),
             stack: Vec::new(),
+            pts: Vec::new(),
+            xs: Vec::new(),
+            ys: Vec::new(),
+            spare: Vec::new(),
         }
     }
 
@@ -782,7 +873,7 @@ impl<'a> Grower<'a> {
         if inp.ellipses
             && let Some((e, f, rv)) = g.elliptical(i, (tu, tv), &growth, max_d, r)
         {
-            growth = e;
+            g.give_back(std::mem::replace(&mut growth, e));
             frame = f;
             r = rv;
         }
@@ -807,9 +898,10 @@ impl<'a> Grower<'a> {
                 .map_or(0.0, |a| a.1.sqrt())
                 .max(g.cover_radius(i, a, b, aspect));
             if r0.is_nan() || r0 <= 0.0 || r0 >= r {
+                g.give_back(smaller);
                 break;
             }
-            growth = smaller;
+            g.give_back(std::mem::replace(&mut growth, smaller));
             (shift, r, hc, clip) = g.shape(i, &growth, frame, r0);
         }
         let clip = clip.lines;
@@ -820,6 +912,7 @@ impl<'a> Grower<'a> {
             + b * shift.y;
         let color = mean_color(inp.colors, &growth);
         let marks = density_marks(inp, i, &growth, frame, shift, r, hc, clip);
+        g.give_back(growth);
         let splat = Splat {
             center,
             normal: n,
@@ -877,7 +970,12 @@ impl Grower<'_> {
         let e = self.run(i, a, b, aspect, max_d);
         let e_r = e.accepted.last().map_or(0.0, |a| a.1.sqrt());
         let rv = e_r.max(self.cover_radius(i, a, b, aspect));
-        (aspect * rv * rv > r * r * 1.05).then_some((e, (a, b, aspect), rv))
+        if aspect * rv * rv > r * r * 1.05 {
+            Some((e, (a, b, aspect), rv))
+        } else {
+            self.give_back(e);
+            None
+        }
     }
 }
 

@@ -332,26 +332,92 @@ fn disc_polygon() -> &'static [Vec2] {
 /// The convex polygon `poly` (counter-clockwise) cut to the side of `l`
 /// it keeps (Sutherland–Hodgman, one edge).
 fn clip_polygon(poly: &[Vec2], l: ClipLine) -> Vec<Vec2> {
-    let f = |q: Vec2| l.a * q.x + l.b * q.y - l.d;
     let mut out = Vec::with_capacity(poly.len() + 2);
+    clip_polygon_into(poly, l, &mut out);
+    out
+}
+
+/// The index after `k` round a polygon of `n` vertices (`(k + 1) % n`
+/// without the division).
+fn next_vertex(k: usize, n: usize) -> usize {
+    if k + 1 == n { 0 } else { k + 1 }
+}
+
+/// [`clip_polygon`] into `out` (cleared first): each vertex's side
+/// `f(q) = a·x + b·y - d` taken once and carried to the next edge (the
+/// same products in the same order, so the same bits as taken twice).
+fn clip_polygon_into(poly: &[Vec2], l: ClipLine, out: &mut Vec<Vec2>) {
+    out.clear();
+    let f = |q: Vec2| l.a * q.x + l.b * q.y - l.d;
+    let Some(&first) = poly.first() else {
+        return;
+    };
+    let n = poly.len();
+    let mut fp = f(first);
     for (k, &p) in poly.iter().enumerate() {
-        let q = poly[(k + 1) % poly.len()];
-        let (fp, fq) = (f(p), f(q));
+        let q = poly[next_vertex(k, n)];
+        let fq = f(q);
         if fp <= 0.0 {
             out.push(p);
         }
         if (fp <= 0.0) != (fq <= 0.0) {
             out.push(p + (q - p) * (fp / (fp - fq)));
         }
+        fp = fq;
     }
-    out
+}
+
+/// `polygon_area(&clip_polygon(poly, l))`, bit for bit, without the
+/// clipped polygon: its vertices are visited in [`clip_polygon`]'s order
+/// and the shoelace's terms summed in [`polygon_area`]'s, a term between
+/// two of `poly`'s own vertices, consecutive there, read from `edges`
+/// (`edges[k]` is `poly[k]`'s term with the next vertex, the same
+/// product). The sum starts from zero of either sign: only a zero's sign
+/// can differ from `sum`'s, and the area is its absolute value.
+fn clipped_area(poly: &[Vec2], edges: &[f32], l: ClipLine) -> f32 {
+    let f = |q: Vec2| l.a * q.x + l.b * q.y - l.d;
+    let Some(&start) = poly.first() else {
+        return polygon_area(&[]);
+    };
+    let n = poly.len();
+    // The first vertex kept, the last (with its index in `poly`, if one
+    // of its own), the sum so far.
+    let mut first: Option<Vec2> = None;
+    let (mut last, mut last_k) = (Vec2::ZERO, usize::MAX);
+    let mut sum = 0f32;
+    let mut take = |v: Vec2, k: usize| {
+        if first.is_none() {
+            first = Some(v);
+        } else if k != usize::MAX && last_k != usize::MAX && next_vertex(last_k, n) == k {
+            sum += edges[last_k];
+        } else {
+            sum += last.perp_dot(v);
+        }
+        (last, last_k) = (v, k);
+    };
+    let mut fp = f(start);
+    for (k, &p) in poly.iter().enumerate() {
+        let q = poly[next_vertex(k, n)];
+        let fq = f(q);
+        if fp <= 0.0 {
+            take(p, k);
+        }
+        if (fp <= 0.0) != (fq <= 0.0) {
+            take(p + (q - p) * (fp / (fp - fq)), usize::MAX);
+        }
+        fp = fq;
+    }
+    if let Some(v) = first {
+        sum += last.perp_dot(v);
+    }
+    0.5 * sum.abs()
 }
 
 /// The area of a simple polygon (shoelace).
 fn polygon_area(poly: &[Vec2]) -> f32 {
     let n = poly.len();
     0.5 * (0..n)
-        .map(|k| poly[k].perp_dot(poly[(k + 1) % n]))
+        .map(|k| poly[k].perp_dot(poly[next_vertex(k, n)]))
         .sum::<f32>()
         .abs()
 }
@@ -529,33 +595,53 @@ fn coarse_dirs() -> &'static ([f32; CLIP_DIRECTIONS], [f32; CLIP_DIRECTIONS]) {
 /// have equal bits); where an extent is not positive (a zero's sign would
 /// follow the order), every point is folded again in order.
 fn coarse_exts(own: &[Near]) -> [f32; CLIP_DIRECTIONS] {
-    let (xs, ys) = coarse_dirs();
-    let fold = |ext: &mut [f32; CLIP_DIRECTIONS], q: Vec2| {
-        for ((e, wx), wy) in ext.iter_mut().zip(xs).zip(ys) {
-            *e = e.max((wx * q.x) + (wy * q.y));
-        }
-    };
     let mut ext = [f32::MIN; CLIP_DIRECTIONS];
     let outer = |m: &&Near| m.q.length_squared() >= OUTER_EXT * OUTER_EXT;
-    for m in own.iter().filter(outer) {
-        fold(&mut ext, m.q);
-    }
+    let mut qs: Vec<Vec2> = own.iter().filter(outer).map(|m| m.q).collect();
+    fold_exts(&mut ext, &qs);
     let least = ext.iter().copied().fold(f32::INFINITY, f32::min);
     if least > 0.0 && least.is_finite() {
         let below = least * least * (1.0 - EXT_MARGIN);
-        for m in own {
-            let d2 = m.q.length_squared();
-            if d2 < OUTER_EXT * OUTER_EXT && d2 >= below {
-                fold(&mut ext, m.q);
-            }
-        }
+        qs.clear();
+        qs.extend(own.iter().map(|m| m.q).filter(|q| {
+            let d2 = q.length_squared();
+            d2 < OUTER_EXT * OUTER_EXT && d2 >= below
+        }));
+        fold_exts(&mut ext, &qs);
         return ext;
     }
     ext = [f32::MIN; CLIP_DIRECTIONS];
-    for m in own {
-        fold(&mut ext, m.q);
-    }
+    qs.clear();
+    qs.extend(own.iter().map(|m| m.q));
+    fold_exts(&mut ext, &qs);
     ext
+}
+
+/// [`fold_exts`] takes this many directions at once.
+const EXT_LANES: usize = 8;
+const _: () = assert!(CLIP_DIRECTIONS.is_multiple_of(EXT_LANES));
+
+/// Fold the points `qs`, in their order, into the extents `ext` along
+/// [`coarse_dirs`]: `ext[k] = max(ext[k], w_k·q)`, the same products, sum
+/// and maximum as one point at a time over every direction, so the same
+/// bits; [`EXT_LANES`] directions at a time over all the points, which
+/// keeps their extents in registers.
+fn fold_exts(ext: &mut [f32; CLIP_DIRECTIONS], qs: &[Vec2]) {
+    let (xs, ys) = coarse_dirs();
+    let lanes = ext.chunks_exact_mut(EXT_LANES);
+    for ((e, wx), wy) in lanes.zip(xs.chunks_exact(EXT_LANES)).zip(ys.chunks_exact(EXT_LANES)) {
+        let mut acc = [0f32; EXT_LANES];
+        acc.copy_from_slice(e);
+        let (mut wxs, mut wys) = ([0f32; EXT_LANES], [0f32; EXT_LANES]);
+        wxs.copy_from_slice(wx);
+        wys.copy_from_slice(wy);
+        for q in qs {
+            for ((a, wx), wy) in acc.iter_mut().zip(wxs).zip(wys) {
+                *a = a.max((wx * q.x) + (wy * q.y));
+            }
+        }
+        e.copy_from_slice(&acc);
+    }
 }
 
 /// [`coarse_exts`] folds first the points at least this far from the
@@ -648,9 +734,15 @@ fn octant(q: Vec2) -> usize {
 /// ([`Lines::line_with`]): from a spacing short of it to two past it, within
 /// the disc's chord. Every test taken (no branch), so that a count over
 /// lanes vectorises.
+///
+/// Taken component by component (`w·q`, then `q - w s` and its squared
+/// length), the products and sums glam's `dot`, `*`, `-` and
+/// `length_squared` take, in their order: the same bits, and a loop the
+/// compiler vectorises (over `Vec2`s it did not).
 fn across(q: Vec2, w: Vec2, ext: f32, spacing: f32) -> bool {
-    let s = w.dot(q);
-    (s >= ext - spacing) & (s <= ext + 2.0 * spacing) & ((q - w * s).length_squared() <= 1.0)
+    let s = (w.x * q.x) + (w.y * q.y);
+    let (x, y) = (q.x - w.x * s, q.y - w.y * s);
+    (s >= ext - spacing) & (s <= ext + 2.0 * spacing) & ((x * x) + (y * y) <= 1.0)
 }
 
 /// The candidate lines of one splat ([`clip_lines`]), direction by
@@ -693,6 +785,8 @@ struct Lines<'a> {
     rim: Vec<u32>,
     /// Scratch: the points across a crease.
     across: Vec<Near>,
+    /// [`Lines::line_at`]'s lines so far, by the angle's bits.
+    at: Vec<(u32, Option<ClipLine>)>,
 }
 
 impl<'a> Lines<'a> {
@@ -721,6 +815,7 @@ impl<'a> Lines<'a> {
             by_reach: Vec::new(),
             rim: Vec::new(),
             across: Vec::new(),
+            at: Vec::new(),
         }
     }
 
@@ -744,11 +839,19 @@ impl<'a> Lines<'a> {
     }
 
     /// The line cutting the disc in direction `t` (radians), if the face
-    /// ends there.
+    /// ends there. A function of `t` alone for one splat (what
+    /// [`Lines::line_with`] takes once and keeps is the same whenever
+    /// taken): kept by `t`'s bits, for [`Lines::best`]'s later calls,
+    /// which mostly refine round the same coarse direction again.
     fn line_at(&mut self, t: f32) -> Option<ClipLine> {
+        if let Some(&(_, l)) = self.at.iter().find(|(bits, _)| *bits == t.to_bits()) {
+            return l;
+        }
         let w = Vec2::new(t.cos(), t.sin());
         let ext = self.own.iter().map(|m| w.dot(m.q)).fold(f32::MIN, f32::max);
-        self.line_with(w, ext)
+        let l = self.line_with(w, ext);
+        self.at.push((t.to_bits(), l));
+        l
     }
 
     /// [`Lines::line_at`] along the unit `w`, the own face's farthest
@@ -1010,7 +1113,10 @@ impl<'a> Lines<'a> {
             .iter()
             .fold(disc_polygon().to_vec(), |poly, k| clip_polygon(&poly, *k));
         let whole = polygon_area(&base);
-        let cut = |l: &ClipLine| whole - polygon_area(&clip_polygon(&base, *l));
+        let edges: Vec<f32> = (0..base.len())
+            .map(|k| base[k].perp_dot(base[next_vertex(k, base.len())]))
+            .collect();
+        let cut = |l: &ClipLine| whole - clipped_area(&base, &edges, *l);
         let (t, coarse) = lines
             .iter()
             .map(|(t, l)| (*t, (*l, cut(l))))
@@ -1044,6 +1150,81 @@ fn more(x: &(ClipLine, f32), y: &(ClipLine, f32)) -> std::cmp::Ordering {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// [`clip_polygon`] and [`clipped_area`] against the one-pass forms
+    /// they replace (each side taken twice, `%` for the next vertex, the
+    /// clipped polygon built and its area summed by `Iterator::sum`), bit
+    /// for bit: the disc's polygon and the polygons one and two lines keep
+    /// of it, cut by lines through it, past it, through its vertices and
+    /// along its edges.
+    #[test]
+    fn clipped_areas_are_the_clipped_polygons_areas() {
+        let old_clip = |poly: &[Vec2], l: ClipLine| {
+            let f = |q: Vec2| l.a * q.x + l.b * q.y - l.d;
+            let mut out = Vec::new();
+            for (k, &p) in poly.iter().enumerate() {
+                let q = poly[(k + 1) % poly.len()];
+                let (fp, fq) = (f(p), f(q));
+                if fp <= 0.0 {
+                    out.push(p);
+                }
+                if (fp <= 0.0) != (fq <= 0.0) {
+                    out.push(p + (q - p) * (fp / (fp - fq)));
+                }
+            }
+            out
+        };
+        let old_area = |poly: &[Vec2]| {
+            let n = poly.len();
+            0.5 * (0..n)
+                .map(|k| poly[k].perp_dot(poly[(k + 1) % n]))
+                .sum::<f32>()
+                .abs()
+        };
+        let mut rng = crate::rng::SplitMix64::new(54);
+        let mut unit = || (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
+        let mut lines = Vec::new();
+        for k in 0..400 {
+            let t = std::f32::consts::TAU * unit();
+            let d = match k % 4 {
+                0 => 2.4 * unit() - 1.2,
+                1 => 1.0,
+                2 => (std::f32::consts::PI / 128.0).cos(),
+                _ => 0.0,
+            };
+            let t = if k % 8 == 5 { std::f32::consts::TAU * (k / 8) as f32 / 128.0 } else { t };
+            lines.push(ClipLine { a: t.cos(), b: t.sin(), d });
+        }
+        let mut bases = vec![disc_polygon().to_vec(), Vec::new()];
+        for k in 0..20 {
+            let once = old_clip(disc_polygon(), lines[k]);
+            bases.push(old_clip(&once, lines[k + 20]));
+            bases.push(once);
+        }
+        let mut compared = 0usize;
+        for base in &bases {
+            let edges: Vec<f32> = (0..base.len())
+                .map(|k| base[k].perp_dot(base[next_vertex(k, base.len())]))
+                .collect();
+            assert_eq!(old_area(base).to_bits(), polygon_area(base).to_bits());
+            for &l in &lines {
+                let old = old_clip(base, l);
+                let new = clip_polygon(base, l);
+                assert_eq!(old.len(), new.len());
+                for (a, b) in old.iter().zip(&new) {
+                    assert_eq!((a.x.to_bits(), a.y.to_bits()), (b.x.to_bits(), b.y.to_bits()));
+                }
+                assert_eq!(
+                    old_area(&old).to_bits(),
+                    clipped_area(base, &edges, l).to_bits(),
+                    "{l:?} on a base of {} vertices",
+                    base.len()
+                );
+                compared += 1;
+            }
+        }
+        assert_eq!(compared, 42 * 400);
+    }
 
     /// [`coarse_exts`] gives, bit for bit, the farthest extent
     /// [`Lines::line_at`] folds along each coarse direction: points spread
