@@ -344,9 +344,8 @@ pub fn estimate_multiscale(
                         // Two sheets (a thin plate's faces) in the wide
                         // neighbourhood: the normal of the point's own.
                         ids.clear();
-                        for part in wide_items.split(|&j| j as usize == i) {
-                            ids.extend_from_slice(part);
-                        }
+                        let parts = wide_items.split(|&j| j as usize == i);
+                        parts.for_each(|part| ids.extend_from_slice(part));
                         let sheet = if one_sheet(points, points[i], ids, spread_sq) {
                             None
                         } else {
