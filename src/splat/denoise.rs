@@ -111,10 +111,13 @@ fn fit(
     let v = n.cross(u);
     // Scale the coordinates by the neighbourhood's size so the normal
     // equations are well conditioned at any scale.
+    // The root of the largest square: the largest length bit for bit
+    // (as in `height_rows`).
     let scale = nb
         .iter()
-        .map(|&j| (points[j as usize].as_dvec3() - p).length())
-        .fold(0.0f64, f64::max);
+        .map(|&j| (points[j as usize].as_dvec3() - p).length_squared())
+        .fold(0.0f64, f64::max)
+        .sqrt();
     if scale.is_nan() || scale <= 0.0 || nb.len() + 1 < MIN_POINTS {
         return None;
     }

@@ -199,12 +199,10 @@ impl Settle {
         // The face search's offsets, the point first (`FaceSearch::face_at`).
         all.clear();
         all.push(Vec3::ZERO);
-        all.extend(
-            items
-                .iter()
-                .filter(|&&j| j as usize != i)
-                .map(|&j| points[j as usize] - points[i]),
-        );
+        // All but `i` (the runs between its places, each sized up front).
+        for part in items.split(|&j| j as usize == i) {
+            all.extend(part.iter().map(|&j| points[j as usize] - points[i]));
+        }
         super::fit::quadric_fit(all, c, tol)
             .is_some_and(|q| q >= FACE_SMOOTH_EXACT * all.len() as f32)
     }
@@ -346,7 +344,8 @@ pub fn estimate_multiscale(
                         // Two sheets (a thin plate's faces) in the wide
                         // neighbourhood: the normal of the point's own.
                         ids.clear();
-                        ids.extend(wide_items.iter().copied().filter(|&j| j as usize != i));
+                        let parts = wide_items.split(|&j| j as usize == i);
+                        parts.for_each(|part| ids.extend_from_slice(part));
                         let sheet = if one_sheet(points, points[i], ids, spread_sq) {
                             None
                         } else {
