@@ -68,6 +68,25 @@ type Mask = u32;
 /// Eight lanes as two SIMD registers (lanes 0–3, 4–7).
 type Wide = [Vec4; 2];
 
+/// Packs of a leaf's first filter call for an any-hit packet (issue 55):
+/// a ray that stops in a leaf's first packs had the filter's lanes of
+/// the rest of the call computed for nothing. The answer does not depend
+/// on it (whether some accepted hit lies within the fixed cutoff).
+/// Measured on the 128,894 occluded camera rays of the 200k bunny, one
+/// thread, CPU over 16 (5 pairs each, noisy): 4 0.935, 8 0.959, 2 0.969,
+/// 1 0.956. Later calls take [`LEAF_CHUNK`].
+const FIRST_ANY_HIT_CHUNK: usize = 4;
+
+/// Packs of a leaf's first filter call for visitor `V`.
+#[inline(always)]
+fn first_chunk<P: Primitive, V: Visitor<P>>() -> usize {
+    if V::FIXED_CUTOFF {
+        FIRST_ANY_HIT_CHUNK
+    } else {
+        LEAF_CHUNK
+    }
+}
+
 /// `a` as two registers.
 #[inline(always)]
 fn wide(a: &[f32; PACKET]) -> Wide {
@@ -371,7 +390,11 @@ impl<P: Primitive> Tree<P> {
         if self.shared {
             // The leaf's entries, LEAF_CHUNK a call wherever their packs
             // lie.
-            for entries in self.entries[range].chunks(LEAF_CHUNK) {
+            let mut start = range.start;
+            let mut size = first_chunk::<P, V>();
+            while start < range.end {
+                let end = (start + size).min(range.end);
+                let entries = &self.entries[start..end];
                 let mut at = [0; LEAF_CHUNK];
                 let mut lanes = [0; LEAF_CHUNK];
                 for (j, &e) in entries.iter().enumerate() {
@@ -380,14 +403,18 @@ impl<P: Primitive> Tree<P> {
                 if !chunk(&at[..entries.len()], &lanes[..entries.len()]) {
                     break;
                 }
+                (start, size) = (end, LEAF_CHUNK);
             }
         } else {
-            for start in range.clone().step_by(LEAF_CHUNK) {
-                let end = (start + LEAF_CHUNK).min(range.end);
+            let mut start = range.start;
+            let mut size = first_chunk::<P, V>();
+            while start < range.end {
+                let end = (start + size).min(range.end);
                 let at: [u32; LEAF_CHUNK] = std::array::from_fn(|j| (start + j) as u32);
                 if !chunk(&at[..end - start], &[u32::MAX; LEAF_CHUNK][..end - start]) {
                     break;
                 }
+                (start, size) = (end, LEAF_CHUNK);
             }
         }
         stopped
