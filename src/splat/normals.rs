@@ -2263,7 +2263,7 @@ mod tests {
 
     /// The face search's plane is the same, bit for bit, as every candidate
     /// refitted twice and ranked by a full stable sort would give: on 400
-    /// neighbourhoods of 49 points (two faces meeting at 20-90°, a curved
+    /// neighbourhoods of 49 points, every tenth of 300 (two faces meeting at 20-90°, a curved
     /// patch, noise from none to a tolerance, points snapped to a coarse
     /// grid so that many planes hold equally many).
     #[test]
@@ -2277,7 +2277,9 @@ mod tests {
             let snap = case % 3 == 0;
             let tol = 0.1;
             let mut pts = vec![Vec3::ZERO];
-            while pts.len() < 49 {
+            // Every tenth past `HELD_BITS` (no held sets kept).
+            let n = if case % 10 == 9 { 300 } else { 49 };
+            while pts.len() < n {
                 let (x, y) = (2.0 * uniform() - 1.0, 2.0 * uniform() - 1.0);
                 let z = if case % 5 == 4 {
                     0.3 * (x * x + y * y)
@@ -2309,6 +2311,40 @@ mod tests {
         }
         // Every case fixes a plane (none is collinear): all 400 compared.
         assert_eq!(compared, 400);
+    }
+
+    /// [`Lanes::score`] is the sum, point by point, of MSAC's terms as
+    /// `normal.dot(d - origin)` gives them, bit for bit, and at most the
+    /// count of points the plane holds ([`Best::offer`]'s bound): 2,000
+    /// planes through a point of a scattered cloud of 200.
+    #[test]
+    fn lanes_score_is_the_sum_and_at_most_held() {
+        let mut rng = crate::rng::SplitMix64::new(17);
+        let mut uniform = || (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
+        let pts: Vec<Vec3> = (0..200)
+            .map(|_| Vec3::new(uniform(), uniform(), 0.1 * uniform()))
+            .collect();
+        let lanes = Lanes::of(&pts);
+        let mut terms = vec![0.0; pts.len()];
+        let mut bounded = 0;
+        for case in 0..2000 {
+            let tol = [0.01, 0.05, 0.2][case % 3];
+            let normal = Vec3::new(uniform() - 0.5, uniform() - 0.5, 1.0).normalize();
+            let origin = pts[case % pts.len()];
+            let want = pts
+                .iter()
+                .map(|d| (1.0 - (normal.dot(*d - origin) / tol).powi(2)).max(0.0))
+                .sum::<f32>();
+            let got = lanes.score(normal, origin, tol, &mut terms);
+            assert_eq!(got.to_bits(), want.to_bits(), "case {case}");
+            let held = lanes.count(normal, origin, tol);
+            assert!(got <= held as f32, "case {case}: {got} > {held}");
+            bounded += usize::from(got < held as f32);
+        }
+        // 1,996 of the 2,000 score strictly less than they hold (each holds
+        // its origin, whose term is 1).
+        eprintln!("scored below the count held: {bounded} of 2,000");
+        assert!(bounded >= 1990, "{bounded}");
     }
 
     /// [`sort_heights`] orders as the stable sort by `total_cmp` does, the
