@@ -333,7 +333,7 @@ fn disc_polygon() -> &'static [Vec2] {
 /// it keeps (Sutherland–Hodgman, one edge).
 fn clip_polygon(poly: &[Vec2], l: ClipLine) -> Vec<Vec2> {
     let mut out = Vec::with_capacity(poly.len() + 2);
-    clip_polygon_into(poly, l, &mut out);
+    clip_walk(poly, l, |v, _| out.push(v));
     out
 }
 
@@ -343,11 +343,13 @@ fn next_vertex(k: usize, n: usize) -> usize {
     if k + 1 == n { 0 } else { k + 1 }
 }
 
-/// [`clip_polygon`] into `out` (cleared first): each vertex's side
-/// `f(q) = a·x + b·y - d` taken once and carried to the next edge (the
-/// same products in the same order, so the same bits as taken twice).
-fn clip_polygon_into(poly: &[Vec2], l: ClipLine, out: &mut Vec<Vec2>) {
-    out.clear();
+/// The vertices of [`clip_polygon`]'s result, in its order, each handed
+/// to `visit` with its index in `poly` (`usize::MAX` for a vertex made
+/// where an edge crosses `l`): the one clipping loop behind both the
+/// polygon and [`clipped_area`]. Each vertex's side `f(q) = a·x + b·y -
+/// d` is taken once and carried to the next edge (the same products in
+/// the same order, so the same bits as taken twice).
+fn clip_walk(poly: &[Vec2], l: ClipLine, mut visit: impl FnMut(Vec2, usize)) {
     let f = |q: Vec2| l.a * q.x + l.b * q.y - l.d;
     let Some(&first) = poly.first() else {
         return;
@@ -358,34 +360,30 @@ fn clip_polygon_into(poly: &[Vec2], l: ClipLine, out: &mut Vec<Vec2>) {
         let q = poly[next_vertex(k, n)];
         let fq = f(q);
         if fp <= 0.0 {
-            out.push(p);
+            visit(p, k);
         }
         if (fp <= 0.0) != (fq <= 0.0) {
-            out.push(p + (q - p) * (fp / (fp - fq)));
+            visit(p + (q - p) * (fp / (fp - fq)), usize::MAX);
         }
         fp = fq;
     }
 }
 
 /// `polygon_area(&clip_polygon(poly, l))`, bit for bit, without the
-/// clipped polygon: its vertices are visited in [`clip_polygon`]'s order
-/// and the shoelace's terms summed in [`polygon_area`]'s, a term between
-/// two of `poly`'s own vertices, consecutive there, read from `edges`
-/// (`edges[k]` is `poly[k]`'s term with the next vertex, the same
-/// product). The sum starts from zero of either sign: only a zero's sign
-/// can differ from `sum`'s, and the area is its absolute value.
+/// clipped polygon: [`clip_walk`]'s vertices, the shoelace's terms summed
+/// in [`polygon_area`]'s order, a term between two of `poly`'s own
+/// vertices, consecutive there, read from `edges` (`edges[k]` is
+/// `poly[k]`'s term with the next vertex, the same product). The sum
+/// starts from zero of either sign: only a zero's sign can differ from
+/// `sum`'s, and the area is its absolute value.
 fn clipped_area(poly: &[Vec2], edges: &[f32], l: ClipLine) -> f32 {
-    let f = |q: Vec2| l.a * q.x + l.b * q.y - l.d;
-    let Some(&start) = poly.first() else {
-        return polygon_area(&[]);
-    };
     let n = poly.len();
     // The first vertex kept, the last (with its index in `poly`, if one
     // of its own), the sum so far.
     let mut first: Option<Vec2> = None;
     let (mut last, mut last_k) = (Vec2::ZERO, usize::MAX);
     let mut sum = 0f32;
-    let mut take = |v: Vec2, k: usize| {
+    clip_walk(poly, l, |v, k| {
         if first.is_none() {
             first = Some(v);
         } else if k != usize::MAX && last_k != usize::MAX && next_vertex(last_k, n) == k {
@@ -394,19 +392,7 @@ fn clipped_area(poly: &[Vec2], edges: &[f32], l: ClipLine) -> f32 {
             sum += last.perp_dot(v);
         }
         (last, last_k) = (v, k);
-    };
-    let mut fp = f(start);
-    for (k, &p) in poly.iter().enumerate() {
-        let q = poly[next_vertex(k, n)];
-        let fq = f(q);
-        if fp <= 0.0 {
-            take(p, k);
-        }
-        if (fp <= 0.0) != (fq <= 0.0) {
-            take(p + (q - p) * (fp / (fp - fq)), usize::MAX);
-        }
-        fp = fq;
-    }
+    });
     if let Some(v) = first {
         sum += last.perp_dot(v);
     }
