@@ -652,9 +652,18 @@ struct Seeded {
     elliptical: bool,
 }
 
-/// One region's splats, their seeds, its deferred seeds and its count of
+/// One region's splats, their seeds, its deferred seeds (with the splat
+/// of each the region grew before deferring it) and its count of
 /// elliptical splats.
-type RegionGrown = (Vec<Splat>, Vec<u32>, Vec<u32>, usize);
+type RegionGrown = (Vec<Splat>, Vec<u32>, Deferred, usize);
+
+/// Seeds deferred by a phase of [`grow_in_regions`] (ascending), and for
+/// each the splat the phase grew from it, if it grew one (a seed held back
+/// with another's points is not grown). A seed's splat is a function of
+/// the seed alone (`Grower::seed` reads the cloud, not which points are
+/// taken), so the next phase commits that splat where the seed is still
+/// free instead of growing it again.
+type Deferred = (Vec<u32>, Vec<Option<Seeded>>);
 
 /// Clouds of at least this many points grow their splats in
 /// [`GROWTH_REGIONS`] regions at once.
@@ -712,9 +721,9 @@ fn grow_in_regions(inp: &GrowInput<'_>, regions: usize, progress: impl Fn(usize)
     // through it, not at its ends.
     let all: Vec<u32> = (0..n_pts as u32).collect();
     let runs: Vec<usize> = (0..=regions).map(|r| r * n_pts / regions).collect();
-    let deferred = grow_phase(
+    let (deferred, mut grown) = grow_phase(
         inp,
-        &all,
+        (&all, &mut []),
         &runs,
         &mut active,
         &mut covered,
@@ -722,9 +731,9 @@ fn grow_in_regions(inp: &GrowInput<'_>, regions: usize, progress: impl Fn(usize)
         &|k| progress(done.fetch_add(k, std::sync::atomic::Ordering::Relaxed) + k),
     );
     drop(all);
-    let rest = grow_phase(
+    let (rest, _) = grow_phase(
         inp,
-        &deferred,
+        (&deferred, &mut grown),
         &[0, n_pts],
         &mut active,
         &mut covered,
@@ -739,42 +748,47 @@ fn grow_in_regions(inp: &GrowInput<'_>, regions: usize, progress: impl Fn(usize)
 
 /// One phase of [`grow_in_regions`]: the `candidates` (ascending) as seeds
 /// in order, each run `bounds[r]..bounds[r + 1]` of the points on its own
-/// and all at once; the splats go to `out` run by run. Returns the seeds
-/// deferred (ascending): those whose splat would mark a point of another
-/// run, and the points such a splat would take.
+/// and all at once; the splats go to `out` run by run. A candidate with a
+/// splat grown before (`candidates.1`, empty for none: see [`Deferred`])
+/// takes it rather than growing it again. Returns the seeds deferred: those
+/// whose splat would mark a point of another run, and the points such a
+/// splat would take.
 fn grow_phase(
     inp: &GrowInput<'_>,
-    candidates: &[u32],
+    candidates: (&[u32], &mut [Option<Seeded>]),
     bounds: &[usize],
     active: &mut [bool],
     covered: &mut [bool],
     out: &mut Grown,
     progress: &(dyn Fn(usize) + Sync),
-) -> Vec<u32> {
-    if candidates.is_empty() {
-        return Vec::new();
+) -> Deferred {
+    if candidates.0.is_empty() {
+        return (Vec::new(), Vec::new());
     }
     // Each run with its own slices of the marks and of the candidates.
     let mut parts = Vec::with_capacity(bounds.len() - 1);
     {
-        let (mut act, mut cov, mut cand) = (active, covered, candidates);
+        let (mut act, mut cov, (mut cand, mut pre)) = (active, covered, candidates);
         for w in bounds.windows(2) {
             let len = w[1] - w[0];
             let (a, rest_a) = act.split_at_mut(len);
             let (c, rest_c) = cov.split_at_mut(len);
             let k = cand.partition_point(|&i| (i as usize) < w[1]);
+            let (p, rest_p) = pre.split_at_mut(k.min(pre.len()));
             act = rest_a;
             cov = rest_c;
-            parts.push((w[0], a, c, &cand[..k]));
+            pre = rest_p;
+            parts.push((w[0], a, c, (&cand[..k], p)));
             cand = &cand[k..];
         }
     }
     let grown: Vec<RegionGrown> = parts
         .into_par_iter()
-        .map(|(lo, active, covered, cand)| {
+        .map(|(lo, active, covered, (cand, pre))| {
             let hi = lo + active.len();
             let mut g = Grower::new(inp);
-            let (mut splats, mut deferred, mut elliptical) = (Vec::new(), Vec::new(), 0usize);
+            let (mut splats, mut elliptical) = (Vec::new(), 0usize);
+            let mut deferred: Deferred = (Vec::new(), Vec::new());
             let mut held = vec![false; active.len()];
             let mut seeds = Vec::new();
             for (k, &i) in cand.iter().enumerate() {
@@ -786,10 +800,14 @@ fn grow_phase(
                     continue;
                 }
                 if held[i - lo] {
-                    deferred.push(i as u32);
+                    deferred.0.push(i as u32);
+                    deferred.1.push(pre.get_mut(k).and_then(Option::take));
                     continue;
                 }
-                let s = g.seed(i);
+                let s = match pre.get_mut(k).and_then(Option::take) {
+                    Some(s) => s,
+                    None => g.seed(i),
+                };
                 if s.marks
                     .iter()
                     .any(|&(j, _)| !(lo..hi).contains(&(j as usize)))
@@ -797,12 +815,13 @@ fn grow_phase(
                     // The points it would take wait for it too: they are
                     // not grown here (each would most likely be deferred
                     // in turn), only considered again, in order, later.
-                    deferred.push(i as u32);
                     for &(j, off) in &s.marks {
                         if off && (lo..hi).contains(&(j as usize)) {
                             held[j as usize - lo] = true;
                         }
                     }
+                    deferred.0.push(i as u32);
+                    deferred.1.push(Some(s));
                     continue;
                 }
                 for &(j, off) in &s.marks {
@@ -819,11 +838,12 @@ fn grow_phase(
             (splats, seeds, deferred, elliptical)
         })
         .collect();
-    let mut deferred = Vec::new();
+    let mut deferred: Deferred = (Vec::new(), Vec::new());
     for (s, i, d, e) in grown {
         out.splats.extend(s);
         out.seeds.extend(i);
-        deferred.extend(d);
+        deferred.0.extend(d.0);
+        deferred.1.extend(d.1);
         out.elliptical += e;
     }
     deferred
@@ -1186,9 +1206,12 @@ mod tests {
         let inp = sheet_input(&p, &n, &knn, &tree);
         let mut g = Grower::new(&inp);
         let mut active = vec![true; p.len()];
-        for &i in &split.seeds {
+        for (k, &i) in split.seeds.iter().enumerate() {
             assert!(active[i as usize], "seed {i} was taken by an earlier splat");
             let s = g.seed(i as usize);
+            // The splat is its seed's, bit for bit, whether the last phase
+            // grew it or took it from the phase that deferred it.
+            assert_eq!(format!("{:?}", s.splat), format!("{:?}", split.splats[k]));
             for (j, off) in s.marks {
                 if off {
                     active[j as usize] = false;
