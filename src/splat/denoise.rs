@@ -55,9 +55,10 @@ pub const NOISE_GUESS_POINTS: usize = 4096;
 /// median scatter measures: the same quadratic fit (over each point's whole
 /// graph row) at about [`NOISE_GUESS_POINTS`] points spread through the
 /// cloud's order, each over the plane fitted to its row (the normal up to
-/// its sign). Generation takes no output from it: it only judges whether
-/// a test that pays where the noise is low is worth running
-/// (`normals::Settling::quadric`).
+/// its sign). Generation no longer calls it: it judged whether the
+/// settling test's quadric (`normals::Settling::quadric`), which paid where
+/// the noise is low, was worth running, and generation now leaves that
+/// quadric out everywhere (issue 54, seventeenth session).
 #[must_use]
 pub fn guess_noise(points: &[Vec3], knn: &Knn) -> f64 {
     let n = points.len();

@@ -116,11 +116,10 @@ pub const SETTLE_QUADRIC_HELD: f32 = 0.5;
 /// Either way no output changes: a point the quadric would settle keeps its
 /// normal in the face search too (without flat-face rules, at a tolerance
 /// from `tol` up, its quadric scores as high). Settling only spares that
-/// search and lets the point's wide row go early. Where noise will turn the
-/// flat-face rules on, [`face_normals`] reads no settled point and the
-/// quadric's fit is spent for nothing (on a noisy torus, 162,746 fits, 5 %
-/// of a whole `splat`); generation leaves it out where a guess at the noise
-/// ([`super::denoise::guess_noise`]) says so ([`SETTLE_QUADRIC_NOISE`]).
+/// search and lets the point's wide row go early. Generation leaves the
+/// quadric out: the sparse face search ([`sparse_faces`]) tries the same
+/// quadric at the few settled points it would choose, and where noise
+/// turns the flat-face rules on no settled point is read.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Settling {
     /// The tolerance of the settling test.
@@ -137,14 +136,6 @@ impl Settling {
     }
 }
 
-/// Generation leaves out the settling test's quadric ([`Settling`]) where
-/// the guessed noise's tolerance ([`FACE_TOL_NOISE`] times it) is at least
-/// this many times the settling tolerance: the flat-face rules will be on
-/// ([`FlatFaces::from_tolerances`] turns them on from 1), with room for the
-/// guess's error. In between, the quadric is tried as before (a cloud
-/// guessed noisy but found quiet keeps the rows of the points it would
-/// have settled until the face search, and searches them there).
-pub const SETTLE_QUADRIC_NOISE: f32 = 1.5;
 
 /// How many of `items` (not `i`) the plane through point `i` with unit
 /// normal `c` holds within `tol`.
