@@ -2,7 +2,7 @@
 //! hit, shared by every backend (`docs/DESIGN.md`, "The backend contract";
 //! report §3.2 and §4.3).
 
-use crate::accel::{Candidate, CandidateHits, MAX_CANDIDATES};
+use crate::accel::{Candidate, CandidateHits};
 use crate::geometry::Ray;
 use crate::names::Named;
 use crate::splat::{NormalField, Splat};
@@ -266,49 +266,31 @@ pub fn resolve_models(
     let front = faces_front(first_splat, ray);
     let far = first.t + window.min(hits.xi());
     // The candidates that blend (within the surface's window, not passed
-    // over, facing the same side, on the same face), nearest first, each
-    // with its `|(u, v)|`, taken once.
-    let mut same_side = [(*first, 0.0f32); MAX_CANDIDATES];
-    let mut count = 0;
+    // over, facing the same side, on the same face), nearest first, in
+    // one pass: the winner, the least by `(|(u, v)|, t, id)` and the first
+    // of equals (`min_by`'s fold, an unordered pair counting as equal),
+    // and eq. (5)'s sum, each in candidate order; `|(u, v)|` taken once.
+    let key = |(c, r): &(Candidate, f32)| (*r, c.t, c.id);
+    let mut winner: Option<(Candidate, f32)> = None;
+    let mut sum = Vec3::ZERO;
+    let mut blended = 0u32;
     for (i, c) in all.iter().enumerate().skip(k) {
         if far.is_nan() || c.t > far {
             break;
         }
         let s = &splats[c.id as usize];
-        if faces_front(s, ray) == front && same_face(first_splat, s) && (i == k || !over(c)) {
-            same_side[count] = (*c, c.radial());
-            count += 1;
+        if faces_front(s, ray) != front || !same_face(first_splat, s) || (i != k && over(c)) {
+            continue;
         }
-    }
-    let same_side = &same_side[..count];
-    // The least by `(|(u, v)|, t, id)`, the first of equals (`min_by`'s
-    // fold, an unordered pair counting as equal).
-    let key = |(c, r): &(Candidate, f32)| (*r, c.t, c.id);
-    let winner = same_side
-        .iter()
-        .copied()
-        .reduce(|a, b| {
-            if key(&a).partial_cmp(&key(&b)) == Some(std::cmp::Ordering::Greater) {
-                b
-            } else {
-                a
+        let b = (*c, c.radial());
+        winner = match winner {
+            Some(a) if key(&a).partial_cmp(&key(&b)) != Some(std::cmp::Ordering::Greater) => {
+                Some(a)
             }
-        })?
-        .0;
-    let ws = &splats[winner.id as usize];
-    let own = || match mode {
-        ShadingMode::Phong => ws.field_normal(winner.u, winner.v),
-        _ => ws.normal,
-    };
-    let mut blended = 0u32;
-    let normal = if mode == ShadingMode::Flat {
-        blended = 1;
-        own()
-    } else {
-        let mut sum = Vec3::ZERO;
-        for (c, r) in same_side {
-            let s = &splats[c.id as usize];
-            let w = (1.0 - r).max(0.0);
+            _ => Some(b),
+        };
+        if mode != ShadingMode::Flat {
+            let w = (1.0 - b.1).max(0.0);
             let n = match mode {
                 ShadingMode::Phong => s.field_normal(c.u, c.v),
                 _ => s.normal,
@@ -316,6 +298,17 @@ pub fn resolve_models(
             sum += w * n;
             blended += 1;
         }
+    }
+    let winner = winner?.0;
+    let ws = &splats[winner.id as usize];
+    let own = || match mode {
+        ShadingMode::Phong => ws.field_normal(winner.u, winner.v),
+        _ => ws.normal,
+    };
+    let normal = if mode == ShadingMode::Flat {
+        blended = 1;
+        own()
+    } else {
         sum.try_normalize().unwrap_or_else(own)
     };
     Some(Resolved::Hit(SurfaceHit {
