@@ -160,7 +160,7 @@ pub fn beyond_silhouette_at(s: &Splat, u: f32, v: f32, d: Vec3) -> bool {
 /// run side by side instead of one after another behind data-dependent
 /// branches (issue 55, eighteenth session).
 #[must_use]
-pub fn beyond_silhouette_x4(s: [&Splat; 4], u: Vec4, v: Vec4, d: Vec3) -> u32 {
+pub fn beyond_silhouette_x4(s: [&Splat; 4], u: Vec4, v: Vec4, d: Vec3) -> (u32, [Vec3; 4]) {
     let lane = |f: &dyn Fn(&Splat) -> f32| Vec4::new(f(s[0]), f(s[1]), f(s[2]), f(s[3]));
     let (xc, yc) = (lane(&|s| s.field.xc), lane(&|s| s.field.yc));
     let (alpha, beta) = (lane(&|s| s.field.alpha), lane(&|s| s.field.beta));
@@ -207,7 +207,11 @@ pub fn beyond_silhouette_x4(s: [&Splat; 4], u: Vec4, v: Vec4, d: Vec3) -> u32 {
     let quad = no_root | roots;
     let lined = qa.cmpeq(zero);
     let curved = (lined & line) | (!lined & quad);
-    (!flat & (flip | curved)).bitmask()
+    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    let rcp = one / len;
+    let unit = [n[0] * rcp, n[1] * rcp, n[2] * rcp];
+    let normals = std::array::from_fn(|k| Vec3::new(unit[0][k], unit[1][k], unit[2][k]));
+    ((!flat & (flip | curved)).bitmask(), normals)
 }
 
 // A bit per candidate in `passed_over`.
@@ -225,6 +229,8 @@ fn passed_over(
     ray: &Ray,
     splats: &[Splat],
     model: &impl Fn(u32) -> (ShadingMode, f32),
+    normals: &mut [Vec3; 8],
+    have: &mut u32,
 ) -> u32 {
     let mut over = 0;
     for (g, four) in all.chunks(4).enumerate() {
@@ -240,7 +246,12 @@ fn passed_over(
         let s = std::array::from_fn(|k| &splats[c(k).id as usize]);
         let u = Vec4::new(c(0).u, c(1).u, c(2).u, c(3).u);
         let v = Vec4::new(c(0).v, c(1).v, c(2).v, c(3).v);
-        over |= (beyond_silhouette_x4(s, u, v, ray.dir) & phong) << (4 * g);
+        let (b, ns) = beyond_silhouette_x4(s, u, v, ray.dir);
+        over |= (b & phong) << (4 * g);
+        if g < 2 {
+            normals[4 * g..4 * g + 4].copy_from_slice(&ns);
+            *have |= ((1 << four.len()) - 1) << (4 * g);
+        }
     }
     over
 }
@@ -347,7 +358,9 @@ pub fn resolve_models(
         }
     }
     // Whether each candidate is passed over (bit `i` for candidate `i`).
-    let over = passed_over(all, ray, splats, &model);
+    let mut normals = [Vec3::ZERO; 8];
+    let mut have = 0;
+    let over = passed_over(all, ray, splats, &model, &mut normals, &mut have);
     let k = (!over).trailing_zeros() as usize;
     if k >= all.len() {
         return Some(Resolved::Beyond(all.last()?.t.next_up()));
@@ -387,6 +400,7 @@ pub fn resolve_models(
         if mode != ShadingMode::Flat {
             let w = (1.0 - b.1).max(0.0);
             let n = match mode {
+                ShadingMode::Phong if have & (1 << i) != 0 => normals[i],
                 ShadingMode::Phong => s.field_normal(c.u, c.v),
                 _ => s.normal,
             };
@@ -553,10 +567,12 @@ mod tests {
             if round % 101 == 0 {
                 u.w = f32::NAN;
             }
-            let got = beyond_silhouette_x4(std::array::from_fn(|k| &splats[k]), u, v, d);
+            let (got, normals) = beyond_silhouette_x4(std::array::from_fn(|k| &splats[k]), u, v, d);
             for k in 0..4 {
                 let want = beyond_silhouette_at(&splats[k], u[k], v[k], d);
                 assert_eq!(got >> k & 1 == 1, want, "round {round} lane {k}");
+                let n = splats[k].field_normal(u[k], v[k]).to_array().map(f32::to_bits);
+                assert_eq!(normals[k].to_array().map(f32::to_bits), n, "round {round} lane {k}");
                 over += usize::from(want);
                 total += 1;
                 let f = &splats[k].field;
