@@ -48,42 +48,6 @@ pub fn fit_all(points: &[Vec3], normals: &[Vec3], knn: &Knn) -> Vec<Option<Local
         .collect()
 }
 
-/// [`guess_noise`] fits at most about this many points.
-pub const NOISE_GUESS_POINTS: usize = 4096;
-
-/// A guess, before any normal is estimated, at the noise [`fit_all`]'s
-/// median scatter measures: the same quadratic fit (over each point's whole
-/// graph row) at about [`NOISE_GUESS_POINTS`] points spread through the
-/// cloud's order, each over the plane fitted to its row (the normal up to
-/// its sign). Generation no longer calls it: it judged whether the
-/// settling test's quadric (`normals::Settling::quadric`), which paid where
-/// the noise is low, was worth running, and generation now leaves that
-/// quadric out everywhere (issue 54, seventeenth session).
-#[must_use]
-pub fn guess_noise(points: &[Vec3], knn: &Knn) -> f64 {
-    let n = points.len();
-    let step = n.div_ceil(NOISE_GUESS_POINTS).max(1);
-    let mut sds: Vec<f32> = (0..n.div_ceil(step))
-        .into_par_iter()
-        .filter_map(|s| {
-            let i = s * step;
-            let nb = knn.of(i);
-            let (_, vals, vecs) = plane_fit(
-                std::iter::once(points[i]).chain(nb.iter().map(|&j| points[j as usize])),
-            );
-            let m = vecs[0].as_vec3();
-            (m.is_finite() && vals[1] > COLLINEAR * vals[2]).then_some(())?;
-            fit(points, m, i, nb, &mut Vec::new()).map(|l| l.sd)
-        })
-        .collect();
-    if sds.is_empty() {
-        return 0.0;
-    }
-    let mid = sds.len() / 2;
-    let (_, m, _) = sds.select_nth_unstable_by(mid, f32::total_cmp);
-    f64::from(*m)
-}
-
 /// Point `i`'s graph neighbours whose normals face its way: a surface's
 /// own side, not the far face of a thin plate.
 fn same_facing<'a>(
@@ -304,33 +268,6 @@ mod tests {
                 assert!(after < 0.5 * before, "{after} vs {before}");
             } else {
                 assert!(after < 1e-3 * pts.len() as f32 * 1e-3, "{after}");
-            }
-        }
-    }
-
-    /// The guess from a sample (before normals) agrees with the median
-    /// scatter `fit_all` measures: near 0 on the clean cap, within a
-    /// quarter of it under noise.
-    #[test]
-    fn the_guessed_noise_is_the_measured_one() {
-        for sigma in [0.0f32, 0.002] {
-            let (pts, nrm) = cap(sigma);
-            let knn = Knn::build(&build_tree(&pts), &pts, 12);
-            let mut sd: Vec<f32> = fit_all(&pts, &nrm, &knn)
-                .into_iter()
-                .flatten()
-                .map(|f| f.sd)
-                .collect();
-            sd.sort_by(f32::total_cmp);
-            let measured = f64::from(sd[sd.len() / 2]);
-            let guess = guess_noise(&pts, &knn);
-            if sigma == 0.0 {
-                assert!(guess < 2e-6, "clean sphere guessed {guess}");
-            } else {
-                assert!(
-                    (guess / measured - 1.0).abs() < 0.25,
-                    "guessed {guess}, measured {measured}"
-                );
             }
         }
     }

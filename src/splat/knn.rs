@@ -70,8 +70,8 @@ pub struct Wide {
 }
 
 impl Wide {
-    /// Point `i`'s tail, where kept.
-    fn tail(&self, i: usize) -> Option<&[u32]> {
+    /// Which kept tail is point `i`'s, where kept.
+    fn row(&self, i: usize) -> Option<usize> {
         let r = match &self.slot {
             None => i,
             Some(slot) => match slot.get(i) {
@@ -79,7 +79,12 @@ impl Wide {
                 _ => return None,
             },
         };
-        self.tail.get(r * self.t..(r + 1) * self.t)
+        ((r + 1) * self.t <= self.tail.len()).then_some(r)
+    }
+
+    /// Point `i`'s tail, where kept.
+    fn tail(&self, i: usize) -> Option<&[u32]> {
+        self.row(i).map(|r| &self.tail[r * self.t..(r + 1) * self.t])
     }
 }
 
@@ -274,14 +279,9 @@ impl Knn {
             if !keep(i) {
                 continue;
             }
-            let Some(r) = w.slot.as_ref().map_or(Some(i), |old| {
-                old.get(i).filter(|&&r| r != u32::MAX).map(|&r| r as usize)
-            }) else {
+            let Some(r) = w.row(i) else {
                 continue;
             };
-            if (r + 1) * w.t > w.tail.len() {
-                continue;
-            }
             w.tail.copy_within(r * w.t..(r + 1) * w.t, kept * w.t);
             *s = kept as u32;
             kept += 1;

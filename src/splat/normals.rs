@@ -136,7 +136,6 @@ impl Settling {
     }
 }
 
-
 /// How many of `items` (not `i`) the plane through point `i` with unit
 /// normal `c` holds within `tol`.
 fn held_by(points: &[Vec3], i: usize, c: Vec3, items: &[u32], tol: f32) -> usize {
@@ -2254,9 +2253,9 @@ mod tests {
 
     /// The face search's plane is the same, bit for bit, as every candidate
     /// refitted twice and ranked by a full stable sort would give: on 400
-    /// neighbourhoods of 49 points, every tenth of 300 (two faces meeting at 20-90°, a curved
-    /// patch, noise from none to a tolerance, points snapped to a coarse
-    /// grid so that many planes hold equally many).
+    /// neighbourhoods of 49 points, every tenth of 300 (two faces meeting
+    /// at 20-90°, a curved patch, noise from none to a tolerance, points
+    /// snapped to a coarse grid so that many planes hold equally many).
     #[test]
     fn face_plane_matches_the_exhaustive_search() {
         let mut rng = crate::rng::SplitMix64::new(54);

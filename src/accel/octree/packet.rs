@@ -387,35 +387,26 @@ impl<P: Primitive> Tree<P> {
             }
             true
         };
-        if self.shared {
-            // The leaf's entries, LEAF_CHUNK a call wherever their packs
-            // lie.
-            let mut start = range.start;
-            let mut size = first_chunk::<P, V>();
-            while start < range.end {
-                let end = (start + size).min(range.end);
-                let entries = &self.entries[start..end];
-                let mut at = [0; LEAF_CHUNK];
-                let mut lanes = [0; LEAF_CHUNK];
-                for (j, &e) in entries.iter().enumerate() {
+        // The leaf's packs, LEAF_CHUNK a call ([`first_chunk`] the
+        // first): the shared layout's entries wherever their packs lie
+        // (with the lanes each references), the copies' packs in order.
+        let mut start = range.start;
+        let mut size = first_chunk::<P, V>();
+        while start < range.end {
+            let end = (start + size).min(range.end);
+            let mut at = [0; LEAF_CHUNK];
+            let mut lanes = [u32::MAX; LEAF_CHUNK];
+            if self.shared {
+                for (j, &e) in self.entries[start..end].iter().enumerate() {
                     (at[j], lanes[j]) = (e & ENTRY_PACK, e >> ENTRY_MASK_SHIFT);
                 }
-                if !chunk(&at[..entries.len()], &lanes[..entries.len()]) {
-                    break;
-                }
-                (start, size) = (end, LEAF_CHUNK);
+            } else {
+                at = std::array::from_fn(|j| (start + j) as u32);
             }
-        } else {
-            let mut start = range.start;
-            let mut size = first_chunk::<P, V>();
-            while start < range.end {
-                let end = (start + size).min(range.end);
-                let at: [u32; LEAF_CHUNK] = std::array::from_fn(|j| (start + j) as u32);
-                if !chunk(&at[..end - start], &[u32::MAX; LEAF_CHUNK][..end - start]) {
-                    break;
-                }
-                (start, size) = (end, LEAF_CHUNK);
+            if !chunk(&at[..end - start], &lanes[..end - start]) {
+                break;
             }
+            (start, size) = (end, LEAF_CHUNK);
         }
         stopped
     }
