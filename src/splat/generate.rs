@@ -683,7 +683,7 @@ fn surface_stage(
 
 /// The settling test of the normals' estimate (`normals::Settling`), at
 /// the face search's least tolerance: a quarter `ϵ`, the plane's count
-/// alone. Its quadric is left out: where the flat-face rules are off the
+/// alone, no quadric tried: where the flat-face rules are off the
 /// face search is sparse (`normals::face_normals`), and the points it
 /// chooses try that quadric first themselves (the same fit up to the
 /// normal's sign, at a tolerance as large or larger: the same answer);
@@ -693,10 +693,7 @@ fn surface_stage(
 /// plane searches; `docs/notes/generation.md`, issue 54, seventeenth
 /// session).
 fn settling(epsilon: f32) -> normals::Settling {
-    normals::Settling {
-        tol: normals::FACE_TOL_EPS * epsilon,
-        quadric: false,
-    }
+    normals::Settling::at(normals::FACE_TOL_EPS * epsilon)
 }
 
 /// With creases on: each point's normal from its own face where an edge is

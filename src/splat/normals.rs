@@ -100,39 +100,27 @@ fn one_sheet(points: &[Vec3], p: Vec3, neighbours: &[u32], spread_sq: f64) -> bo
     d1_sq.is_some_and(|d| spread_sq < SHEET_SKIP * f64::from(d))
 }
 
-/// Where a point's plane holds at least this share of its wide
-/// neighbourhood within the settling tolerance (not the [`FACE_HOLDS`]
-/// that settles it), [`estimate_multiscale`] tries the face search's
-/// quadric on its face neighbourhood: a curved noise-free surface's
-/// points, not a noisy scan's (whose plane holds about a third within a
-/// quarter `ϵ`, and whose quadric would be fitted in vain: its points are
-/// moved onto their surfaces, which unsettles them).
-pub const SETTLE_QUADRIC_HELD: f32 = 0.5;
-
 /// [`estimate_multiscale`]'s settling test: the face search's least
-/// tolerance, and whether the quadric is tried where the plane alone does
-/// not settle a point ([`SETTLE_QUADRIC_HELD`]).
+/// tolerance, at which a point's plane alone settles it.
 ///
-/// Either way no output changes: a point the quadric would settle keeps its
-/// normal in the face search too (without flat-face rules, at a tolerance
-/// from `tol` up, its quadric scores as high). Settling only spares that
-/// search and lets the point's wide row go early. Generation leaves the
-/// quadric out: the sparse face search ([`sparse_faces`]) tries the same
-/// quadric at the few settled points it would choose, and where noise
-/// turns the flat-face rules on no settled point is read.
+/// No output changes: a settled point keeps its normal in the face search
+/// too. Settling only spares that search and lets the point's wide row go
+/// early. (A quadric over the face neighbourhood could settle the points
+/// of curved noise-free surfaces too; generation leaves it out: the
+/// sparse face search ([`sparse_faces`]) tries the same quadric at the
+/// few points it chooses, and where noise turns the flat-face rules on no
+/// settled point is read.)
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Settling {
     /// The tolerance of the settling test.
     pub tol: f32,
-    /// Whether the quadric is tried.
-    pub quadric: bool,
 }
 
 impl Settling {
-    /// At `tol`, the quadric tried.
+    /// At `tol`.
     #[must_use]
     pub fn at(tol: f32) -> Settling {
-        Settling { tol, quadric: true }
+        Settling { tol }
     }
 }
 
@@ -148,53 +136,18 @@ fn held_by(points: &[Vec3], i: usize, c: Vec3, items: &[u32], tol: f32) -> usize
 }
 
 /// The settling test of [`estimate_multiscale`]: at tolerance `tol`, a
-/// point's plane holding `flat_at` of its `wide` nearest, or holding
-/// `quadric_at` of them and the quadric over the face search's
-/// neighbourhood scoring [`FACE_SMOOTH_EXACT`].
+/// point's plane holding `flat_at` of its `wide` nearest.
 struct Settle {
     tol: f32,
     wide: usize,
     flat_at: usize,
-    quadric_at: f32,
 }
 
 impl Settle {
-    /// The test of `s` over the `wide` nearest, settling at `flat_at` of
-    /// them, its quadric (where tried) from [`SETTLE_QUADRIC_HELD`] of the
-    /// face search's `face_wide`.
-    fn new(s: Settling, wide: usize, flat_at: usize, face_wide: usize) -> Settle {
-        Settle {
-            tol: s.tol,
-            wide,
-            flat_at,
-            quadric_at: if s.quadric {
-                SETTLE_QUADRIC_HELD * face_wide as f32
-            } else {
-                f32::INFINITY
-            },
-        }
-    }
-
     /// Whether point `i` with normal `c` and the face search's
-    /// neighbourhood `items` (nearest first; `all` scratch) is settled.
-    fn settles(&self, points: &[Vec3], i: usize, c: Vec3, items: &[u32], all: &mut Vec<Vec3>) -> bool {
-        let tol = self.tol;
-        let held = held_by(points, i, c, &items[..self.wide.min(items.len())], tol);
-        if held >= self.flat_at {
-            return true;
-        }
-        if (held as f32) < self.quadric_at {
-            return false;
-        }
-        // The face search's offsets, the point first (`FaceSearch::face_at`).
-        all.clear();
-        all.push(Vec3::ZERO);
-        // All but `i` (the runs between its places, each sized up front).
-        for part in items.split(|&j| j as usize == i) {
-            all.extend(part.iter().map(|&j| points[j as usize] - points[i]));
-        }
-        super::fit::quadric_fit(all, c, tol)
-            .is_some_and(|q| q >= FACE_SMOOTH_EXACT * all.len() as f32)
+    /// neighbourhood `items` (nearest first) is settled.
+    fn settles(&self, points: &[Vec3], i: usize, c: Vec3, items: &[u32]) -> bool {
+        held_by(points, i, c, &items[..self.wide.min(items.len())], self.tol) >= self.flat_at
     }
 }
 
@@ -250,14 +203,7 @@ enum Scale {
 /// count at any tolerance from `settle_tol` up, for the normal up to its
 /// sign, so `face_normals` would find it on one face. The wide query asks
 /// for that neighbourhood (its first [`WIDE_FACTOR`]·k are the wide one,
-/// nearest first, ties by index), and where the plane holds half of it
-/// ([`SETTLE_QUADRIC_HELD`]) a point is settled too, where the quadric is
-/// tried, where the face search's quadric over it scores
-/// [`FACE_SMOOTH_EXACT`] at `settle_tol`:
-/// MSAC's score only grows with the tolerance (each term, each rounding
-/// monotonic), and the fit is the same up to signs for the normal either
-/// way round, so without flat-face rules `face_normals` would find it one
-/// smooth surface and keep its normal, as it would skip it.
+/// nearest first, ties by index).
 ///
 /// Where `knn` holds wide rows of the face search's size
 /// ([`Knn::build_wide`]), they are read instead of queried: the same
@@ -278,7 +224,11 @@ pub fn estimate_multiscale(
     let face_m = (knn.k * WIDE_FACTOR + 1).min(n);
     let face_wide = face_m.saturating_sub(1);
     let flat_at = (FACE_HOLDS * face_wide as f32).ceil() as usize;
-    let bar = settle.map(|s| Settle::new(s, first, flat_at, face_wide));
+    let bar = settle.map(|s| Settle {
+        tol: s.tol,
+        wide: first,
+        flat_at,
+    });
     let tally = super::knn::Tally::default();
     let out: Vec<(Vec3, Scale, bool)> = (0..n)
         .into_par_iter()
@@ -290,10 +240,9 @@ pub fn estimate_multiscale(
                     Vec::new(),
                     super::knn::Nearest::counted(&tally),
                     Vec::new(),
-                    Vec::new(),
                 )
             },
-            |(ids, heights, nearest, items, all), i| {
+            |(ids, heights, nearest, items), i| {
                 let nb = knn.of(i);
                 let sight = viewpoint.and_then(|v| (v.at(i) - points[i]).try_normalize());
                 let small = fitted_normal(
@@ -301,10 +250,7 @@ pub fn estimate_multiscale(
                     sight,
                 );
                 let guess = (small.unwrap_or(Vec3::Z), Scale::Degenerate, false);
-                let settled = |c: Vec3, items: &[u32], all: &mut Vec<Vec3>| {
-                    bar.as_ref()
-                        .is_some_and(|bar| bar.settles(points, i, c, items, all))
-                };
+                let settled = |c: Vec3, items: &[u32]| bar.as_ref().is_some_and(|bar| bar.settles(points, i, c, items));
                 let mut m = first;
                 loop {
                     let Some(q) = NonZero::new(m) else {
@@ -349,7 +295,7 @@ pub fn estimate_multiscale(
                                 None => (wide, Scale::WideForCollinear),
                             },
                         };
-                        return (normal, scale, m == first && settled(normal, items, all));
+                        return (normal, scale, m == first && settled(normal, items));
                     }
                     if m >= WIDE_MAX.min(n) {
                         return guess;
@@ -2870,50 +2816,10 @@ mod tests {
             })
             .count();
         eprintln!("{settled} settled, {planar} by their planes");
-        // Measured: 2,320 of 3,000 settled, 600 of the curve's 750 by its
-        // quadric (1,720 by their planes).
+        // Measured: 1,720 of 3,000 settled, all by their planes (the
+        // curve's points not).
         assert!(planar > 1600, "{planar}");
-        assert!(settled > planar + 500, "{settled} {planar}");
-    }
-
-    /// Without its quadric ([`Settling::quadric`] false, as generation runs
-    /// it where noise will turn the flat-face rules on) the settling test
-    /// settles the points their planes hold alone, fewer, and the face
-    /// search then turns the same normals bit for bit: it keeps those the
-    /// quadric would have settled.
-    #[test]
-    fn settling_without_the_quadric_changes_no_normal() {
-        let pts = corner_and_curve();
-        let tree = build_tree(&pts);
-        let knn = Knn::build(&tree, &pts, 12);
-        let tol = 0.004;
-        let with = estimate_multiscale(&pts, &tree, &knn, None, Some(Settling::at(tol)));
-        let planes_only = Settling {
-            tol,
-            quadric: false,
-        };
-        let without = estimate_multiscale(&pts, &tree, &knn, None, Some(planes_only));
-        assert_eq!(bits(&without.normals), bits(&with.normals));
-        let count = |s: &[bool]| s.iter().filter(|&&s| s).count();
-        let (all, by_planes) = (count(&with.settled), count(&without.settled));
-        assert!(
-            without.settled.iter().zip(&with.settled).all(|(&p, &q)| !p || q),
-            "settled without the quadric only"
-        );
-        // Measured: 2,320 and 1,720 (`settled_points_are_those_the_face_search_leaves`).
-        assert!(by_planes > 1600 && all > by_planes + 500, "{all} {by_planes}");
-        let mut nrm = with.normals.clone();
-        let fixed = vec![false; pts.len()];
-        orient(&pts, &knn, &mut nrm, &fixed, None);
-        for face_tol in [tol, 2.0 * tol] {
-            let (mut a, mut b) = (nrm.clone(), nrm.clone());
-            let fa = full_faces(&pts, &tree, &knn, &mut a, &fixed, face_tol, &with.settled);
-            let fb = full_faces(&pts, &tree, &knn, &mut b, &fixed, face_tol, &without.settled);
-            assert_eq!(bits(&a), bits(&b), "tol {face_tol}");
-            assert_eq!((fa.turned, fa.searched), (fb.turned, fb.searched));
-            assert!(fa.turned > 0, "no edge turned a normal");
-            assert_eq!(fa.queries + all, fb.queries + by_planes, "tol {face_tol}");
-        }
+        assert_eq!(settled, planar);
     }
 
     /// The flat-face rules follow the noise's tolerance against ϵ's: off
