@@ -1104,6 +1104,7 @@ fn sparse_faces(
     for &i in &round {
         state[i as usize] = CHOSEN;
     }
+    let into = Incoming::build(knn, asked, n);
     let mut out: Vec<Option<(Vec3, Kind, Vec<u32>)>> = vec![None; n];
     while !round.is_empty() {
         let found: Vec<Option<(Vec3, Kind, Vec<u32>)>> = round
@@ -1114,12 +1115,19 @@ fn sparse_faces(
                 |scratch, &i| search.face_at(scratch, i as usize),
             )
             .collect();
+        // The asked points next to a point found at an edge this round,
+        // either way along the graph: its own neighbours and the asked
+        // points that list it (`into`). One found in an earlier round
+        // chose every free point next to it then, and a point once chosen
+        // is never free again, so these are all the free points next to
+        // any point at an edge, as a pass over every asked point's
+        // neighbours finds them.
         let mut next = Vec::new();
         for (&i, f) in round.iter().zip(found) {
             let i = i as usize;
             if f.is_some() {
                 state[i] = EDGE;
-                for &j in knn.of(i) {
+                for &j in knn.of(i).iter().chain(into.of(i)) {
                     if state[j as usize] == FREE {
                         state[j as usize] = CHOSEN;
                         next.push(j);
@@ -1128,17 +1136,46 @@ fn sparse_faces(
             }
             out[i] = f;
         }
-        for &j in asked {
-            let near_edge = || knn.of(j as usize).iter().any(|&h| state[h as usize] == EDGE);
-            if state[j as usize] == FREE && near_edge() {
-                state[j as usize] = CHOSEN;
-                next.push(j);
-            }
-        }
         next.sort_unstable();
         round = next;
     }
     out
+}
+
+/// The graph's edges turned round, into the asked points only: for each
+/// point `h`, the asked points `j` whose neighbours (`knn.of(j)`) hold
+/// it, in `asked`'s order ([`sparse_faces`]).
+struct Incoming {
+    /// Point `h`'s are `items[starts[h]..starts[h + 1]]`.
+    starts: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl Incoming {
+    fn build(knn: &Knn, asked: &[u32], n: usize) -> Incoming {
+        let mut starts = vec![0u32; n + 1];
+        for &j in asked {
+            for &h in knn.of(j as usize) {
+                starts[h as usize + 1] += 1;
+            }
+        }
+        for h in 0..n {
+            starts[h + 1] += starts[h];
+        }
+        let mut at = starts.clone();
+        let mut items = vec![0u32; starts[n] as usize];
+        for &j in asked {
+            for &h in knn.of(j as usize) {
+                items[at[h as usize] as usize] = j;
+                at[h as usize] += 1;
+            }
+        }
+        Incoming { starts, items }
+    }
+
+    fn of(&self, h: usize) -> &[u32] {
+        &self.items[self.starts[h] as usize..self.starts[h + 1] as usize]
+    }
 }
 
 /// What [`face_normals`] did.
