@@ -1024,6 +1024,15 @@ impl<'a> Lines<'a> {
                 .fold((f32::MAX, f32::MIN), |(lo, hi), x| (lo.min(x), hi.max(x)));
             hi - lo
         };
+        // Where the two faces meet, first: a line there not inside the
+        // disc is no line ([`Lines::line_with`]), whatever the tests below
+        // say (a function of the points across alone, taken before the
+        // normals are read).
+        let (c, slope) = crease_at(&self.across, w, ext, spacing);
+        let inside = c > -1.0 && c < 1.0;
+        if !inside {
+            return None;
+        }
         // The side across first (a few points): where it fails, the own
         // face's side along the rim is not gathered.
         let (m_across, c_across) = mean_normal(&self.across, inp.normals);
@@ -1041,7 +1050,6 @@ impl<'a> Lines<'a> {
         if steep < CREASE_STEEP * self.least_jump {
             return None;
         }
-        let (c, slope) = crease_at(&self.across, w, ext, spacing);
         let r = self.r;
         let falls = |rise: f32| ((1.0 - c) * r).abs() < slope.abs() * rise * inp.epsilon;
         let least_rise = if c_across >= CREASE_PLANES {
