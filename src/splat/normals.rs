@@ -1017,18 +1017,32 @@ fn searched_faces(faces: &FaceInput<'_>, normals: &mut [Vec3], sparse: bool) -> 
     // A point settled on one face keeps its normal: with no flat-face
     // rules, all `face_at` would find.
     let asked = |i: usize| !fixed[i] && (flat_faces || settled.get(i) != Some(&true));
-    let new = if flat_faces || !sparse {
-        (0..n)
-            .into_par_iter()
-            .with_min_len(512)
-            .map_init(|| FaceScratch::new(&tally), |scratch, i| {
-                asked(i).then(|| search.face_at(scratch, i)).flatten()
-            })
-            .collect()
-    } else {
+    if !flat_faces && sparse {
+        // Only turned or kept normals are answers: no face lists, no flat
+        // faces, so the answers found are taken as they are, not spread
+        // over the cloud first.
         let asked: Vec<u32> = (0..n).filter(|&i| asked(i)).map(|i| i as u32).collect();
-        sparse_faces(&search, &asked, &tally)
-    };
+        let found = sparse_faces(&search, &asked, &tally);
+        let searched = search.searched.into_inner();
+        let mut turned = 0;
+        for (i, m, kind) in found {
+            normals[i as usize] = m;
+            turned += usize::from(kind == Kind::Turned);
+        }
+        return FaceNormals {
+            queries: tally.get(),
+            turned,
+            flat: vec![false; n],
+            searched,
+        };
+    }
+    let new: Vec<Option<(Vec3, Kind, Vec<u32>)>> = (0..n)
+        .into_par_iter()
+        .with_min_len(512)
+        .map_init(|| FaceScratch::new(&tally), |scratch, i| {
+            asked(i).then(|| search.face_at(scratch, i)).flatten()
+        })
+        .collect();
     let searched = search.searched.into_inner();
     let mut changed = 0;
     let mut flat: Vec<Option<(Kind, Vec<u32>)>> = Vec::with_capacity(n);
@@ -1078,12 +1092,13 @@ fn searched_faces(faces: &FaceInput<'_>, normals: &mut [Vec3], sparse: bool) -> 
 /// would answer nothing; as the first set does not depend on `asked`,
 /// settling a point (`Estimated::settled`) changes no answer. Each point's
 /// answer is `face_at`'s and each round is chosen from the answers before,
-/// so nothing depends on the threads.
+/// so nothing depends on the threads. The answers (each point found at an
+/// edge, its normal and its kind), in the order found.
 fn sparse_faces(
     search: &FaceSearch<'_>,
     asked: &[u32],
     tally: &super::knn::Tally,
-) -> Vec<Option<(Vec3, Kind, Vec<u32>)>> {
+) -> Vec<(u32, Vec3, Kind)> {
     // Each point's state: not asked, asked and not chosen, chosen, or
     // searched with two faces found.
     const OUT: u8 = 0;
@@ -1105,7 +1120,7 @@ fn sparse_faces(
         state[i as usize] = CHOSEN;
     }
     let into = Incoming::build(knn, asked, n);
-    let mut out: Vec<Option<(Vec3, Kind, Vec<u32>)>> = vec![None; n];
+    let mut out = Vec::new();
     while !round.is_empty() {
         let found: Vec<Option<(Vec3, Kind, Vec<u32>)>> = round
             .par_iter()
@@ -1124,17 +1139,17 @@ fn sparse_faces(
         // neighbours finds them.
         let mut next = Vec::new();
         for (&i, f) in round.iter().zip(found) {
-            let i = i as usize;
-            if f.is_some() {
-                state[i] = EDGE;
-                for &j in knn.of(i).iter().chain(into.of(i)) {
-                    if state[j as usize] == FREE {
-                        state[j as usize] = CHOSEN;
-                        next.push(j);
-                    }
+            let Some((m, kind, _)) = f else {
+                continue;
+            };
+            state[i as usize] = EDGE;
+            for &j in knn.of(i as usize).iter().chain(into.of(i as usize)) {
+                if state[j as usize] == FREE {
+                    state[j as usize] = CHOSEN;
+                    next.push(j);
                 }
             }
-            out[i] = f;
+            out.push((i, m, kind));
         }
         next.sort_unstable();
         round = next;
