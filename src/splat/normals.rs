@@ -963,18 +963,32 @@ fn searched_faces(faces: &FaceInput<'_>, normals: &mut [Vec3], sparse: bool) -> 
     // A point settled on one face keeps its normal: with no flat-face
     // rules, all `face_at` would find.
     let asked = |i: usize| !fixed[i] && (flat_faces || settled.get(i) != Some(&true));
-    let new = if flat_faces || !sparse {
-        (0..n)
-            .into_par_iter()
-            .with_min_len(512)
-            .map_init(|| FaceScratch::new(&tally), |scratch, i| {
-                asked(i).then(|| search.face_at(scratch, i)).flatten()
-            })
-            .collect()
-    } else {
+    if !flat_faces && sparse {
+        // Only turned or kept normals are answers: no face lists, no flat
+        // faces, so the answers found are taken as they are, not spread
+        // over the cloud first.
         let asked: Vec<u32> = (0..n).filter(|&i| asked(i)).map(|i| i as u32).collect();
-        sparse_faces(&search, &asked, &tally)
-    };
+        let found = sparse_faces(&search, &asked, &tally);
+        let searched = search.searched.into_inner();
+        let mut turned = 0;
+        for (i, m, kind) in found {
+            normals[i as usize] = m;
+            turned += usize::from(kind == Kind::Turned);
+        }
+        return FaceNormals {
+            queries: tally.get(),
+            turned,
+            flat: vec![false; n],
+            searched,
+        };
+    }
+    let new: Vec<Option<(Vec3, Kind, Vec<u32>)>> = (0..n)
+        .into_par_iter()
+        .with_min_len(512)
+        .map_init(|| FaceScratch::new(&tally), |scratch, i| {
+            asked(i).then(|| search.face_at(scratch, i)).flatten()
+        })
+        .collect();
     let searched = search.searched.into_inner();
     let mut changed = 0;
     let mut flat: Vec<Option<(Kind, Vec<u32>)>> = Vec::with_capacity(n);
@@ -1024,12 +1038,13 @@ fn searched_faces(faces: &FaceInput<'_>, normals: &mut [Vec3], sparse: bool) -> 
 /// would answer nothing; as the first set does not depend on `asked`,
 /// settling a point (`Estimated::settled`) changes no answer. Each point's
 /// answer is `face_at`'s and each round is chosen from the answers before,
-/// so nothing depends on the threads.
+/// so nothing depends on the threads. The answers (each point found at an
+/// edge, its normal and its kind), in the order found.
 fn sparse_faces(
     search: &FaceSearch<'_>,
     asked: &[u32],
     tally: &super::knn::Tally,
-) -> Vec<Option<(Vec3, Kind, Vec<u32>)>> {
+) -> Vec<(u32, Vec3, Kind)> {
     // Each point's state: not asked, asked and not chosen, chosen, or
     // searched with two faces found.
     const OUT: u8 = 0;
@@ -1050,7 +1065,8 @@ fn sparse_faces(
     for &i in &round {
         state[i as usize] = CHOSEN;
     }
-    let mut out: Vec<Option<(Vec3, Kind, Vec<u32>)>> = vec![None; n];
+    let into = Incoming::build(knn, asked, n);
+    let mut out = Vec::new();
     while !round.is_empty() {
         let found: Vec<Option<(Vec3, Kind, Vec<u32>)>> = round
             .par_iter()
@@ -1060,31 +1076,67 @@ fn sparse_faces(
                 |scratch, &i| search.face_at(scratch, i as usize),
             )
             .collect();
+        // The asked points next to a point found at an edge this round,
+        // either way along the graph: its own neighbours and the asked
+        // points that list it (`into`). One found in an earlier round
+        // chose every free point next to it then, and a point once chosen
+        // is never free again, so these are all the free points next to
+        // any point at an edge, as a pass over every asked point's
+        // neighbours finds them.
         let mut next = Vec::new();
         for (&i, f) in round.iter().zip(found) {
-            let i = i as usize;
-            if f.is_some() {
-                state[i] = EDGE;
-                for &j in knn.of(i) {
-                    if state[j as usize] == FREE {
-                        state[j as usize] = CHOSEN;
-                        next.push(j);
-                    }
+            let Some((m, kind, _)) = f else {
+                continue;
+            };
+            state[i as usize] = EDGE;
+            for &j in knn.of(i as usize).iter().chain(into.of(i as usize)) {
+                if state[j as usize] == FREE {
+                    state[j as usize] = CHOSEN;
+                    next.push(j);
                 }
             }
-            out[i] = f;
-        }
-        for &j in asked {
-            let near_edge = || knn.of(j as usize).iter().any(|&h| state[h as usize] == EDGE);
-            if state[j as usize] == FREE && near_edge() {
-                state[j as usize] = CHOSEN;
-                next.push(j);
-            }
+            out.push((i, m, kind));
         }
         next.sort_unstable();
         round = next;
     }
     out
+}
+
+/// The graph's edges turned round, into the asked points only: for each
+/// point `h`, the asked points `j` whose neighbours (`knn.of(j)`) hold
+/// it, in `asked`'s order ([`sparse_faces`]).
+struct Incoming {
+    /// Point `h`'s are `items[starts[h]..starts[h + 1]]`.
+    starts: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl Incoming {
+    fn build(knn: &Knn, asked: &[u32], n: usize) -> Incoming {
+        let mut starts = vec![0u32; n + 1];
+        for &j in asked {
+            for &h in knn.of(j as usize) {
+                starts[h as usize + 1] += 1;
+            }
+        }
+        for h in 0..n {
+            starts[h + 1] += starts[h];
+        }
+        let mut at = starts.clone();
+        let mut items = vec![0u32; starts[n] as usize];
+        for &j in asked {
+            for &h in knn.of(j as usize) {
+                items[at[h as usize] as usize] = j;
+                at[h as usize] += 1;
+            }
+        }
+        Incoming { starts, items }
+    }
+
+    fn of(&self, h: usize) -> &[u32] {
+        &self.items[self.starts[h] as usize..self.starts[h + 1] as usize]
+    }
 }
 
 /// What [`face_normals`] did.

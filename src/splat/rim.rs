@@ -870,6 +870,19 @@ impl<'a> Lines<'a> {
     /// the face's points past the rim in it. The line's offset.
     fn border(&mut self, w: Vec2, ext: f32) -> Option<f32> {
         let spacing = self.spacing;
+        // Points spread evenly (one per spacing²) along a chord
+        // of length L lie a mean spacing²/L short of a straight
+        // border: the line stands there, never farther than
+        // CLIP_GAP_SPACINGS. Where that is not inside the disc (the face
+        // reaches the rim along `w`) no line is drawn whether the band is
+        // open or not: taken first, it spares the band's count (the tree
+        // asked for `beyond` is the same whenever it is asked).
+        let chord = 2.0 * (1.0 - ext * ext).max(0.0).sqrt();
+        let gap = (spacing * spacing / chord.max(spacing)).min(CLIP_GAP_SPACINGS * spacing);
+        let inside = ext + gap < 1.0;
+        if !inside {
+            return None;
+        }
         let band = ext + BORDER_SPACINGS * spacing;
         let open = band < 1.0 || {
             let half = (1.0 - ext * ext)
@@ -928,13 +941,7 @@ impl<'a> Lines<'a> {
             let expected = outside * (band - ext) * 2.0 * half / (spacing * spacing);
             (count as f32) < BORDER_FILL * expected
         };
-        // Points spread evenly (one per spacing²) along a chord
-        // of length L lie a mean spacing²/L short of a straight
-        // border: the line stands there, never farther than
-        // CLIP_GAP_SPACINGS.
-        let chord = 2.0 * (1.0 - ext * ext).max(0.0).sqrt();
-        let gap = (spacing * spacing / chord.max(spacing)).min(CLIP_GAP_SPACINGS * spacing);
-        (open && ext + gap < 1.0).then_some(ext + gap)
+        open.then_some(ext + gap)
     }
 
     /// The own face's side of a crease along `w` past its last point at
@@ -1017,6 +1024,15 @@ impl<'a> Lines<'a> {
                 .fold((f32::MAX, f32::MIN), |(lo, hi), x| (lo.min(x), hi.max(x)));
             hi - lo
         };
+        // Where the two faces meet, first: a line there not inside the
+        // disc is no line ([`Lines::line_with`]), whatever the tests below
+        // say (a function of the points across alone, taken before the
+        // normals are read).
+        let (c, slope) = crease_at(&self.across, w, ext, spacing);
+        let inside = c > -1.0 && c < 1.0;
+        if !inside {
+            return None;
+        }
         // The side across first (a few points): where it fails, the own
         // face's side along the rim is not gathered.
         let (m_across, c_across) = mean_normal(&self.across, inp.normals);
@@ -1034,7 +1050,6 @@ impl<'a> Lines<'a> {
         if steep < CREASE_STEEP * self.least_jump {
             return None;
         }
-        let (c, slope) = crease_at(&self.across, w, ext, spacing);
         let r = self.r;
         let falls = |rise: f32| ((1.0 - c) * r).abs() < slope.abs() * rise * inp.epsilon;
         let least_rise = if c_across >= CREASE_PLANES {
