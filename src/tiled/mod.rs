@@ -12,6 +12,9 @@
 //! 3. **Spill** (a second streaming pass): each point is appended to the
 //!    file of every tile whose core-plus-halo box holds it (positions as
 //!    f32 offsets from the tile's centre, normals and colours carried).
+//!    The inputs are decoded once, a file a thread, when the budget
+//!    holds their points ([`inputs`]): the survey and the spill replay
+//!    them. A new plan of one tile run whole keeps its spill in memory.
 //! 4. **Generate**, tile by tile: the tile's points become a cloud, splats
 //!    are generated as for any cloud ([`crate::pipeline::generate`]: outliers,
 //!    normals, orientation, growth, fields, free-space trimming) with the
