@@ -289,6 +289,61 @@ fn stages_run_apart_give_the_same_bytes() {
     assert!(std::fs::read(&staged).unwrap() == std::fs::read(&whole).unwrap());
 }
 
+/// The inputs decoded once and kept in memory (they fit a share of the
+/// budget) give the bytes of the inputs streamed from disk twice (a budget
+/// too small to keep them, planned to the same tiles), in three files read
+/// in order; and a plan of one tile, whose spill stays in memory in one
+/// run, gives the bytes of its spill file read back by the stages run apart.
+#[test]
+fn inputs_kept_and_a_tile_spilled_in_memory_give_the_bytes_of_the_disk() {
+    let dir = scratch("tiled-kept");
+    let mesh = read_mesh(&data("bunny-mesh.ply")).unwrap();
+    let inputs: Vec<PathBuf> = (0..3u64)
+        .map(|k| {
+            let mut c = sample_mesh(&mesh, 40_000, 2e-4, 11 + k);
+            c.normals = None;
+            let p = dir.join(format!("part-{k}.ply"));
+            write_points(&p, &c).unwrap();
+            p
+        })
+        .collect();
+    let params = SplatParams::default();
+    let run = |name: &str, opts: TiledOptions| {
+        let out = dir.join(name);
+        let r = generate_tiled(&inputs, &params, &opts, &out, None).unwrap();
+        (std::fs::read(&out).unwrap_or_default(), r)
+    };
+    // Kept: 120,000 points of 50 bytes at most in an 8 GB budget.
+    let (kept, rk) = run("kept.ply", options(dir.join("w-kept")));
+    // 30,000 points a tile by the budget (the program's 256 MiB and 320
+    // bytes a point): the 120,000 points are not kept.
+    let mut small = options(dir.join("w-disk"));
+    small.max_memory = (256 << 20) + 30_000 * 320;
+    small.tiling.tile_points = None;
+    let (disk, rd) = run("disk.ply", small);
+    assert!(rk.tiles.len() >= 4, "{} tiles", rk.tiles.len());
+    assert_eq!(rk.tiles.len(), rd.tiles.len());
+    assert_eq!((rk.spilled, rk.splats), (rd.spilled, rd.splats));
+    assert!(kept == disk, "kept inputs change the bytes");
+    // One tile: in memory in one run, through its spill file in stages.
+    let mut one = options(dir.join("w-one"));
+    one.tiling.tile_points = None;
+    let (whole, rw) = run("one.ply", one.clone());
+    assert_eq!(rw.tiles.len(), 1);
+    assert_eq!(rw.spilled, 120_000);
+    let mut staged = one;
+    staged.work = dir.join("w-staged");
+    let mut apart = Vec::new();
+    for stage in [Stage::Plan, Stage::Tile(0), Stage::Merge] {
+        staged.tiling.stage = stage;
+        apart = run("staged.ply", staged.clone()).0;
+    }
+    assert!(
+        !whole.is_empty() && whole == apart,
+        "the in-memory tile changes the bytes"
+    );
+}
+
 /// `splatray terrain` makes a georeferenced airborne survey as LAZ tiles
 /// with its exact surface; the same seed, the same bytes. The folder of
 /// tiles splats in tiles (LAZ streamed) to within 2 % of the splats of the

@@ -217,7 +217,13 @@ fn batches(
     let header = reader.header();
     let promised = header.number_of_points();
     let with_color = header.point_format().has_color;
-    let batch_points = (BATCH_BYTES / u64::from(header.point_format().len()).max(1)).max(1);
+    // At most a stream's batch: the decoder's buffers for a read (the
+    // `las` crate's points, some 100 bytes each) stay small, so threads
+    // decoding files at once (`tiled`) leave little with the allocator: a
+    // whole 225,000-point file a read left the 3.6M-point survey's peak
+    // 95 MB higher with two decoding threads.
+    let batch_points = (BATCH_BYTES / u64::from(header.point_format().len()).max(1))
+        .clamp(1, BATCH as u64);
     let cap = usize::try_from(batch_points.min(1 << 20)).unwrap_or(0);
     let mut world: Vec<DVec3> = Vec::with_capacity(cap);
     let mut colors: Vec<Vec3> = Vec::with_capacity(if with_color { cap } else { 0 });

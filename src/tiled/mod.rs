@@ -12,6 +12,9 @@
 //! 3. **Spill** (a second streaming pass): each point is appended to the
 //!    file of every tile whose core-plus-halo box holds it (positions as
 //!    f32 offsets from the tile's centre, normals and colours carried).
+//!    The inputs are decoded once, a file a thread, when the budget
+//!    holds their points ([`inputs`]): the survey and the spill replay
+//!    them. A new plan of one tile run whole keeps its spill in memory.
 //! 4. **Generate**, tile by tile: the tile's points become a cloud, splats
 //!    are generated as for any cloud ([`crate::pipeline::generate`]: outliers,
 //!    normals, orientation, growth, fields, free-space trimming) with the
@@ -41,6 +44,7 @@
 //! generation) and [`merge`] (orientation across tiles and the one output
 //! file); [`report`] holds what a run reports.
 
+mod inputs;
 mod merge;
 mod plan;
 mod report;
@@ -55,7 +59,7 @@ use crate::splat::SplatParams;
 use glam::DVec3;
 use merge::{merge, reconcile};
 use plan::{check_space, clear_work, found_plan, new_plan, no_plan, stamp};
-use spill::{remove_spills, spill, spills_whole};
+use spill::{remove_spills, spill, spill_in_memory, spills_whole};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use tile::run_tiles;
@@ -262,13 +266,20 @@ pub fn generate_tiled(
     if !resumed && matches!(opts.tiling.stage, Stage::Tile(_) | Stage::Merge) {
         return Err(no_plan(work));
     }
+    // The inputs decoded once, in parallel, when the budget holds their
+    // points at `BYTES_PER_POINT` (kept, they take at most
+    // `inputs::KEPT_BYTES_PER_POINT` each): the survey and the spill replay
+    // them instead of reading the files twice.
+    let mut kept = None;
     let plan = match old {
         Some(p) => p,
         None => {
             // A different plan: nothing in the folder is reusable.
             clear_work(work)?;
+            kept = inputs::keep_inputs(inputs, size.bytes / BYTES_PER_POINT);
             new_plan(
                 inputs,
+                kept.as_ref(),
                 params,
                 opts,
                 stamps,
@@ -290,6 +301,11 @@ pub fn generate_tiled(
     report.origin = plan.origin;
     report.layout.cores.clone_from(&plan.tiles);
     report.layout.bounds = Some(plan.survey.bounds);
+    // A new plan of one tile, generated here and now: its spill stays in
+    // memory, the cloud `read_spill` would give (no spill file to resume:
+    // a rerun spills again).
+    let in_memory = !resumed && opts.tiling.stage == Stage::All && plan.tiles.len() == 1;
+    let mut held = None;
     let counts_file = work.join("spilled.json");
     let spilled: Option<Vec<(u64, u64)>> = std::fs::read_to_string(&counts_file)
         .ok()
@@ -321,14 +337,22 @@ pub fn generate_tiled(
                 )?;
             }
             let t1 = Instant::now();
-            let c = spill(inputs, &plan, work, progress)?;
-            report.seconds.spill = t1.elapsed().as_secs_f64();
-            let json =
-                serde_json::to_string(&c).map_err(|e| data_err(&counts_file, e.to_string()))?;
-            crate::io::write_text(&counts_file, &json)?;
-            c
+            if in_memory {
+                let (cloud, c) = spill_in_memory(inputs, kept.take(), &plan, work, progress)?;
+                report.seconds.spill = t1.elapsed().as_secs_f64();
+                held = Some(cloud);
+                vec![c]
+            } else {
+                let c = spill(inputs, kept.as_ref(), &plan, work, progress)?;
+                report.seconds.spill = t1.elapsed().as_secs_f64();
+                let json = serde_json::to_string(&c)
+                    .map_err(|e| data_err(&counts_file, e.to_string()))?;
+                crate::io::write_text(&counts_file, &json)?;
+                c
+            }
         }
     };
+    drop(kept);
     report.spilled = counts.iter().map(|c| c.0).sum();
     let t2 = Instant::now();
     let n = plan.tiles.len();
@@ -340,7 +364,7 @@ pub fn generate_tiled(
             format!("--tile {t}: the plan has tiles 0 to {}", n - 1),
         ));
     }
-    run_tiles(&plan, params, opts, &counts, progress, &mut report)?;
+    run_tiles(&plan, params, opts, &counts, held, progress, &mut report)?;
     report.seconds.generate = t2.elapsed().as_secs_f64();
     if matches!(opts.tiling.stage, Stage::All | Stage::Merge) {
         let t3 = Instant::now();

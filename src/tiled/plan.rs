@@ -3,7 +3,8 @@
 
 use super::report::{Box3, TiledReport};
 use super::{HALO_EPS, TiledOptions, data_err, io_err};
-use crate::io::{IoError, stream_points};
+use super::inputs::{Kept, replay};
+use crate::io::IoError;
 use crate::progress::{Progress, notify};
 use crate::rng::SplitMix64;
 use crate::splat::SplatParams;
@@ -146,6 +147,7 @@ pub(super) fn stamp(path: &Path) -> Result<InputStamp, IoError> {
 
 pub(super) fn survey(
     inputs: &[PathBuf],
+    kept: Option<&Kept>,
     progress: Option<Progress<'_>>,
 ) -> Result<Survey, IoError> {
     let mut lo = DVec3::splat(f64::INFINITY);
@@ -161,7 +163,7 @@ pub(super) fn survey(
     let mut scans: Option<Vec<[f64; 3]>> = Some(Vec::new());
     let mut scan_offsets = Vec::with_capacity(inputs.len());
     for (k, path) in inputs.iter().enumerate() {
-        let info = stream_points(path, |b| {
+        let info = replay(kept, k, path, |b| {
             every_normal &= b
                 .normals
                 .is_some_and(|n| n.iter().all(|v| v.try_normalize().is_some()));
@@ -313,7 +315,7 @@ pub(super) fn free_space(dir: &Path) -> Option<u64> {
     Some(v.f_bavail.saturating_mul(v.f_frsize))
 }
 
-/// A new plan for `inputs`: the survey, the tiles of at most `size`'s
+/// A new plan for `inputs` (replayed from `kept` when there): the survey, the tiles of at most `size`'s
 /// points with their halos, and the spill it will write, estimated from the
 /// survey's sample and checked against the work folder's free disk; the
 /// survey's seconds (since `t0`), the estimate and its warnings go to
@@ -321,6 +323,7 @@ pub(super) fn free_space(dir: &Path) -> Option<u64> {
 #[allow(clippy::too_many_arguments)]
 pub(super) fn new_plan(
     inputs: &[PathBuf],
+    kept: Option<&Kept>,
     params: &SplatParams,
     opts: &TiledOptions,
     stamps: Vec<InputStamp>,
@@ -331,7 +334,7 @@ pub(super) fn new_plan(
     report: &mut TiledReport,
 ) -> Result<Plan, IoError> {
     let work = &opts.work;
-    let s = survey(inputs, progress)?;
+    let s = survey(inputs, kept, progress)?;
     let target = size.points(s.every_normal);
     report.seconds.survey = t0.elapsed().as_secs_f64();
     let diagonal = (DVec3::from(s.bounds.hi) - DVec3::from(s.bounds.lo)).length();

@@ -3,8 +3,9 @@
 
 use super::plan::{Plan, record_bytes};
 use super::report::Box3;
+use super::inputs::{Kept, replay};
 use super::{io_err, tile_bytes_per_point};
-use crate::io::{IoError, IoErrorKind, stream_points};
+use crate::io::{IoError, IoErrorKind};
 use crate::progress::{Progress, notify};
 use crate::splat::PointCloud;
 use glam::{DVec3, Vec3};
@@ -21,11 +22,12 @@ use std::path::{Path, PathBuf};
 /// As above.
 pub(super) fn spill(
     inputs: &[PathBuf],
+    kept: Option<&Kept>,
     plan: &Plan,
     work: &Path,
     progress: Option<Progress<'_>>,
 ) -> Result<Vec<(u64, u64)>, IoError> {
-    let r = spill_files(inputs, plan, work, progress);
+    let r = spill_files(inputs, kept, plan, work, progress);
     if r.is_err() {
         remove_spills(work, plan.tiles.len());
     }
@@ -64,19 +66,69 @@ fn spill_write_err(work: &Path, t: usize, e: &std::io::Error) -> IoError {
 
 fn spill_files(
     inputs: &[PathBuf],
+    kept: Option<&Kept>,
     plan: &Plan,
     work: &Path,
     progress: Option<Progress<'_>>,
 ) -> Result<Vec<(u64, u64)>, IoError> {
-    let n = plan.tiles.len();
-    let centres: Vec<DVec3> = plan.tiles.iter().map(Box3::centre).collect();
-    let grown: Vec<Box3> = plan.tiles.iter().map(|b| b.grown(plan.halo)).collect();
-    let mut writers = Vec::with_capacity(n);
-    for t in 0..n {
+    let mut writers = Vec::with_capacity(plan.tiles.len());
+    for t in 0..plan.tiles.len() {
         let p = spill_path(work, t);
         let f = std::fs::File::create(&p).map_err(|e| io_err(&p, e))?;
         writers.push(BufWriter::with_capacity(1 << 16, f));
     }
+    let counts = spill_into(inputs, kept, plan, &mut writers, progress, |t, e| {
+        spill_write_err(work, t, e)
+    })?;
+    for (t, w) in writers.into_iter().enumerate() {
+        w.into_inner()
+            .map_err(|e| spill_write_err(work, t, e.error()))?
+            .sync_all()
+            .map_err(|e| spill_write_err(work, t, &e))?;
+    }
+    Ok(counts)
+}
+
+/// The spill of a plan of one tile kept in memory, for the tile generated
+/// in this process: the records its spill file would hold, read back as
+/// [`read_spill`] reads the file (the same cloud, no file written), and
+/// its (points, core points).
+///
+/// # Errors
+/// An input that does not read, or too little memory for the tile.
+pub(super) fn spill_in_memory(
+    inputs: &[PathBuf],
+    kept: Option<Kept>,
+    plan: &Plan,
+    work: &Path,
+    progress: Option<Progress<'_>>,
+) -> Result<(PointCloud, (u64, u64)), IoError> {
+    let mut bytes = vec![Vec::new()];
+    let counts = spill_into(inputs, kept.as_ref(), plan, &mut bytes, progress, |_, e| {
+        io_err(work, std::io::Error::new(e.kind(), e.to_string()))
+    })?;
+    drop(kept);
+    let p = spill_path(work, 0);
+    let rb = record_bytes(&plan.survey) as u64;
+    check_tile_memory(plan, &p, 0, bytes[0].len() as u64 / rb)?;
+    let cloud = parse_spill(plan, &p, 0, &bytes[0][..], bytes[0].len() as u64)?;
+    Ok((cloud, counts[0]))
+}
+
+/// Appends every point of `inputs` (replayed from `kept` when there) to
+/// `writers[t]` for every tile `t` whose core or halo holds it; returns each
+/// tile's (points, core points). A failed write is `write_err(t, e)`.
+fn spill_into<W: Write>(
+    inputs: &[PathBuf],
+    kept: Option<&Kept>,
+    plan: &Plan,
+    writers: &mut [W],
+    progress: Option<Progress<'_>>,
+    write_err: impl Fn(usize, &std::io::Error) -> IoError,
+) -> Result<Vec<(u64, u64)>, IoError> {
+    let n = plan.tiles.len();
+    let centres: Vec<DVec3> = plan.tiles.iter().map(Box3::centre).collect();
+    let grown: Vec<Box3> = plan.tiles.iter().map(|b| b.grown(plan.halo)).collect();
     let mut counts = vec![(0u64, 0u64); n];
     let mut near = Vec::new();
     let mut rec = Vec::with_capacity(36);
@@ -88,7 +140,7 @@ fn spill_files(
     let mut failed: Option<IoError> = None;
     for (k, path) in inputs.iter().enumerate() {
         let first_scan = plan.survey.scan_offsets.get(k).copied().unwrap_or(0);
-        let streamed = stream_points(path, |b| {
+        let streamed = replay(kept, k, path, |b| {
             for (i, &p) in b.world.iter().enumerate() {
                 near.clear();
                 plan.tree.near(p, plan.halo, &mut near);
@@ -118,7 +170,7 @@ fn spill_files(
                         rec.extend_from_slice(&(scan as u16).to_le_bytes());
                     }
                     if let Err(e) = writers[t].write_all(&rec) {
-                        failed = Some(spill_write_err(work, t, &e));
+                        failed = Some(write_err(t, &e));
                         return Err(e.to_string());
                     }
                     counts[t].0 += 1;
@@ -140,12 +192,6 @@ fn spill_files(
         }
         streamed?;
     }
-    for (t, w) in writers.into_iter().enumerate() {
-        w.into_inner()
-            .map_err(|e| spill_write_err(work, t, e.error()))?
-            .sync_all()
-            .map_err(|e| spill_write_err(work, t, &e))?;
-    }
     Ok(counts)
 }
 
@@ -153,16 +199,37 @@ pub(super) fn spill_path(work: &Path, t: usize) -> PathBuf {
     work.join(format!("spill-{t:05}.bin"))
 }
 
+/// Refuses tile `t` of `points` points (spill file `p`) when the memory
+/// this process may use cannot generate it.
+fn check_tile_memory(plan: &Plan, p: &Path, t: usize, points: u64) -> Result<(), IoError> {
+    crate::memory::check(
+        &format!("tile {t}"),
+        points * tile_bytes_per_point(plan.survey.every_normal),
+    )
+    .map_err(|e| IoError::new(p, IoErrorKind::Memory(e)))
+}
+
 /// The tile's points as a cloud centred on the tile.
 pub(super) fn read_spill(plan: &Plan, work: &Path, t: usize) -> Result<PointCloud, IoError> {
     let p = spill_path(work, t);
     let rb = record_bytes(&plan.survey);
     let bytes = std::fs::metadata(&p).map_err(|e| io_err(&p, e))?.len();
-    crate::memory::check(&format!("tile {t}"), bytes / rb as u64 * tile_bytes_per_point(plan.survey.every_normal),
-    )
-        .map_err(|e| IoError::new(&p, IoErrorKind::Memory(e)))?;
-    let mut r =
+    check_tile_memory(plan, &p, t, bytes / rb as u64)?;
+    let r =
         BufReader::with_capacity(1 << 20, std::fs::File::open(&p).map_err(|e| io_err(&p, e))?);
+    parse_spill(plan, &p, t, r, bytes)
+}
+
+/// Tile `t`'s spill records, `bytes` of them read from `r` (the file `p`
+/// or its bytes in memory), as a cloud centred on the tile.
+fn parse_spill(
+    plan: &Plan,
+    p: &Path,
+    t: usize,
+    mut r: impl Read,
+    bytes: u64,
+) -> Result<PointCloud, IoError> {
+    let rb = record_bytes(&plan.survey);
     let n = (bytes / rb as u64) as usize;
     let (with_n, with_c) = (plan.survey.normals, plan.survey.colors);
     let with_s = !plan.survey.scans.is_empty();
@@ -176,7 +243,7 @@ pub(super) fn read_spill(plan: &Plan, work: &Path, t: usize) -> Result<PointClou
         Vec3::new(f(0), f(4), f(8))
     };
     for _ in 0..n {
-        r.read_exact(&mut rec).map_err(|e| io_err(&p, e))?;
+        r.read_exact(&mut rec).map_err(|e| io_err(p, e))?;
         positions.push(v3(&rec[0..12]));
         let mut at = 12;
         if with_n {

@@ -11,7 +11,7 @@ use super::{
 use crate::io::{IoError, encode_splats_layout, write_bytes};
 use crate::progress::{Progress, notify};
 use crate::splat::color::ColorField;
-use crate::splat::{Splat, SplatParams};
+use crate::splat::{PointCloud, Splat, SplatParams};
 use glam::DVec3;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -28,18 +28,23 @@ pub(super) fn tile_report_path(work: &Path, t: usize) -> PathBuf {
     work.join(format!("tile-{t:05}.json"))
 }
 
-/// Generates tile `t` and writes its kept splats (centres as offsets from
-/// the plan's origin) and its summary.
+/// Generates tile `t` (its cloud `held` in memory, else read from its
+/// spill file) and writes its kept splats (centres as offsets from the
+/// plan's origin) and its summary.
 pub(super) fn generate_tile(
     plan: &Plan,
     params: &SplatParams,
     work: &Path,
     t: usize,
     counts: (u64, u64),
+    held: Option<PointCloud>,
     progress: Option<Progress<'_>>,
 ) -> Result<TileSummary, IoError> {
     let t0 = Instant::now();
-    let cloud = read_spill(plan, work, t)?;
+    let cloud = match held {
+        Some(c) => c,
+        None => read_spill(plan, work, t)?,
+    };
     let mut summary = TileSummary {
         points: counts.0,
         core_points: counts.1,
@@ -120,7 +125,8 @@ pub(super) fn generate_tile(
 }
 
 /// Generates this run's tiles of `plan` (`counts`: each tile's spilled
-/// points and core points), up to [`TILES_IN_FLIGHT`] at once when the
+/// points and core points; `held`: a plan of one tile's cloud, spilled in
+/// memory), up to [`TILES_IN_FLIGHT`] at once when the
 /// largest fit the memory budget together, and puts every tile's summary in
 /// `report`: made now, finished before (resumed), or only planned.
 pub(super) fn run_tiles(
@@ -128,9 +134,11 @@ pub(super) fn run_tiles(
     params: &SplatParams,
     opts: &TiledOptions,
     counts: &[(u64, u64)],
+    held: Option<PointCloud>,
     progress: Option<Progress<'_>>,
     report: &mut TiledReport,
 ) -> Result<(), IoError> {
+    let held = std::sync::Mutex::new(held);
     let work = &opts.work;
     let n = plan.tiles.len();
     // This run's tiles, up to TILES_IN_FLIGHT at a time when the largest
@@ -164,7 +172,16 @@ pub(super) fn run_tiles(
                     let tile_progress = |stage: &str, f: f64| {
                         notify(progress, &format!("tile {}/{n}: {stage}", t + 1), f);
                     };
-                    let r = generate_tile(plan, params, work, t, counts[t], Some(&tile_progress));
+                    let cloud = held.lock().ok().and_then(|mut h| h.take());
+                    let r = generate_tile(
+                        plan,
+                        params,
+                        work,
+                        t,
+                        counts[t],
+                        cloud,
+                        Some(&tile_progress),
+                    );
                     let failed = r.is_err();
                     if let Ok(mut slot) = made[t].lock() {
                         *slot = Some(r);
