@@ -599,6 +599,8 @@ struct Surface {
     strong: bool,
     /// Creases searched.
     creases: bool,
+    /// Seen from a scanner (a viewpoint, or each point's scanner).
+    scanned: bool,
     /// `ϵ` in the unit frame.
     epsilon: f32,
 }
@@ -663,6 +665,7 @@ fn surface_stage(
         settled,
         strong: false,
         creases: params.creases.found(knn.k > params.k),
+        scanned: sights.is_some(),
         knn,
         epsilon,
     };
@@ -773,6 +776,7 @@ fn growth_stage(
         density: params.density,
         ellipses: params.ellipses,
         creases: s.creases,
+        scanned: s.scanned,
         on_face: &s.on_face,
     };
     let grown = grow_all(&input, |i| {

@@ -65,6 +65,10 @@ pub struct GrowInput<'a> {
     /// Clip each splat where its own face's points end (a crease, a
     /// corner, a border): see [`Grower::clip_lines`].
     pub creases: bool,
+    /// The cloud was seen from a scanner (a viewpoint, or each point's
+    /// scanner): a border line is kept off a small splat's rounded edge
+    /// ([`rim::BORDER_RISE`]).
+    pub scanned: bool,
     /// The points on a flat face fitted whole (`splat::planes`; empty when
     /// none was): a splat seeded on one grows to at most
     /// [`FACE_RADIUS_FACTOR`] times its seed's k-th neighbour distance.
@@ -449,6 +453,7 @@ impl Grower<'_> {
             tree: inp.tree,
             epsilon: inp.epsilon,
             face_cos: self.face_cos,
+            scanned: inp.scanned,
         };
         let clipped = rim::clip_lines(&surface, &f, (&own, &other, &ring), spacing);
         (self.own, self.other, self.ring, self.stack) = (own, other, ring, stack);
@@ -1093,6 +1098,7 @@ mod tests {
             density: 0.5,
             ellipses: true,
             creases: true,
+            scanned: false,
             on_face: &[],
         }
     }
