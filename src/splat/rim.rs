@@ -1019,7 +1019,7 @@ impl<'a> Lines<'a> {
                 && w.perp_dot(m.q).abs() <= half
                 && m.h.abs() <= BORDER_RISE * past + flat
         })
-     }
+    }
 
     /// The own face's side of a crease along `w` past its last point at
     /// `ext`: of its points along the rim (from 1.5 spacings short of it),
