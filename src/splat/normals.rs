@@ -250,7 +250,10 @@ pub fn estimate_multiscale(
                     sight,
                 );
                 let guess = (small.unwrap_or(Vec3::Z), Scale::Degenerate, false);
-                let settled = |c: Vec3, items: &[u32]| bar.as_ref().is_some_and(|bar| bar.settles(points, i, c, items));
+                let settled = |c: Vec3, items: &[u32]| {
+                    bar.as_ref()
+                        .is_some_and(|bar| bar.settles(points, i, c, items))
+                };
                 let mut m = first;
                 loop {
                     let Some(q) = NonZero::new(m) else {

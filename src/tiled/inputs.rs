@@ -28,7 +28,9 @@ impl Layout {
     }
     /// Bytes of one record.
     fn bytes(self) -> usize {
-        24 + 12 * usize::from(self.normals) + 12 * usize::from(self.colors) + 2 * usize::from(self.scans)
+        24 + 12 * usize::from(self.normals)
+            + 12 * usize::from(self.colors)
+            + 2 * usize::from(self.scans)
     }
 }
 

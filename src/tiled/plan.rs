@@ -315,11 +315,11 @@ pub(super) fn free_space(dir: &Path) -> Option<u64> {
     Some(v.f_bavail.saturating_mul(v.f_frsize))
 }
 
-/// A new plan for `inputs` (replayed from `kept` when there): the survey, the tiles of at most `size`'s
-/// points with their halos, and the spill it will write, estimated from the
-/// survey's sample and checked against the work folder's free disk; the
-/// survey's seconds (since `t0`), the estimate and its warnings go to
-/// `report`.
+/// A new plan for `inputs` (replayed from `kept` when there): the survey,
+/// the tiles of at most `size`'s points with their halos, and the spill it
+/// will write, estimated from the survey's sample and checked against the
+/// work folder's free disk; the survey's seconds (since `t0`), the
+/// estimate and its warnings go to `report`.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn new_plan(
     inputs: &[PathBuf],
