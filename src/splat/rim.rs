@@ -742,6 +742,24 @@ impl Octants {
     }
 }
 
+/// The points of the cloud in the ball of `f`'s [`Frame::reach`], asked
+/// of the tree the first time (`ball` keeps them), in the tree's order.
+fn ball_of<'b>(
+    ball: &'b mut Option<Vec<u32>>,
+    s: &Surface<'_>,
+    f: &Frame,
+    spacing: f32,
+) -> &'b [u32] {
+    ball.get_or_insert_with(|| {
+        let reach = f.reach(spacing);
+        s.tree
+            .within_unsorted::<kiddo::SquaredEuclidean>(&reach.centre.to_array(), reach.ball2)
+            .into_iter()
+            .map(|q| q.item)
+            .collect()
+    })
+}
+
 /// The octant (0 to 7, counter-clockwise from `+x`, 45° each) of the
 /// direction of `q` from the centre; any octant for NaN.
 fn octant(q: Vec2) -> usize {
@@ -790,9 +808,12 @@ struct Lines<'a> {
     /// lanes.
     beyond: Option<Lanes>,
     /// The points of the cloud in the ball of [`Frame::reach`] whose
-    /// normals turn by under [`BORDER_BEND_DEG`], asked of the tree the
-    /// first time a border is found ([`Lines::goes_on`]).
+    /// normals turn by under [`BORDER_BEND_DEG`], from `ball`, the first
+    /// time a border is found ([`Lines::goes_on`]).
     all: Option<Vec<Near>>,
+    /// Every point of the cloud in the ball of [`Frame::reach`], asked of
+    /// the tree once, the first time `beyond` or `all` needs it.
+    ball: Option<Vec<u32>>,
     /// `other` in lanes.
     other_lanes: Lanes,
     frame: Frame,
@@ -836,6 +857,7 @@ impl<'a> Lines<'a> {
             ring: Octants::of(ring),
             beyond: None,
             all: None,
+            ball: None,
             other_lanes: Lanes::of(other),
             frame: *f,
             spacing,
@@ -855,13 +877,12 @@ impl<'a> Lines<'a> {
     /// of the tree once, when first needed.
     fn beyond(&mut self) -> &Lanes {
         let (s, f, spacing) = (self.s, self.frame, self.spacing);
+        let ball = &mut self.ball;
         self.beyond.get_or_insert_with(|| {
-            let reach = f.reach(spacing);
-            s.tree
-                .within_unsorted::<kiddo::SquaredEuclidean>(&reach.centre.to_array(), reach.ball2)
-                .into_iter()
-                .filter(|q| s.normals[q.item as usize].dot(f.n) > s.face_cos)
-                .map(|q| f.near(s.points, q.item as usize))
+            ball_of(ball, s, &f, spacing)
+                .iter()
+                .filter(|&&j| s.normals[j as usize].dot(f.n) > s.face_cos)
+                .map(|&j| f.near(s.points, j as usize))
                 .filter(Near::past_rim)
                 .map(|m| m.q)
                 .collect()
@@ -999,14 +1020,13 @@ impl<'a> Lines<'a> {
         if !s.scanned || spacing < BORDER_SMALL {
             return false;
         }
+        let ball = &mut self.ball;
         let all = self.all.get_or_insert_with(|| {
-            let reach = f.reach(spacing);
             let bend_cos = BORDER_BEND_DEG.to_radians().cos();
-            s.tree
-                .within_unsorted::<kiddo::SquaredEuclidean>(&reach.centre.to_array(), reach.ball2)
-                .into_iter()
-                .filter(|q| s.normals[q.item as usize].dot(f.n) >= bend_cos)
-                .map(|q| f.near(s.points, q.item as usize))
+            ball_of(ball, s, &f, spacing)
+                .iter()
+                .filter(|&&j| s.normals[j as usize].dot(f.n) >= bend_cos)
+                .map(|&j| f.near(s.points, j as usize))
                 .collect()
         });
         let half = (0.5 * chord).max(BORDER_HALF_SPACINGS * spacing);
