@@ -194,20 +194,21 @@ enum Scale {
 /// Where the wide neighbourhood holds two sheets (a thin plate's faces),
 /// the normal of the point's own ([`sheet_of`], not asked where the wide
 /// plane's least eigenvalue says one sheet: [`SHEET_SKIP`]).
-#[must_use]
 ///
 /// With `settle` ([`Settling`], at tolerance `settle_tol`), each point
-/// whose chosen normal's plane holds, within it, at least [`FACE_HOLDS`] of the neighbourhood [`face_normals`] will
-/// look at (its [`WIDE_FACTOR`]·k + 1 nearest, of which the wide one here
-/// holds all but the farthest) is marked settled: a lower bound on that
-/// count at any tolerance from `settle_tol` up, for the normal up to its
-/// sign, so `face_normals` would find it on one face. The wide query asks
+/// whose chosen normal's plane holds, within it, at least [`FACE_HOLDS`]
+/// of the neighbourhood [`face_normals`] will look at (its
+/// [`WIDE_FACTOR`]·k + 1 nearest, of which the wide one here holds all but
+/// the farthest) is marked settled: a lower bound on that count at any
+/// tolerance from `settle_tol` up, for the normal up to its sign, so
+/// `face_normals` would find it on one face. The wide query asks
 /// for that neighbourhood (its first [`WIDE_FACTOR`]·k are the wide one,
 /// nearest first, ties by index).
 ///
 /// Where `knn` holds wide rows of the face search's size
 /// ([`Knn::build_wide`]), they are read instead of queried: the same
 /// neighbourhoods, nearest first, ties by index.
+#[must_use]
 pub fn estimate_multiscale(
     points: &[Vec3],
     tree: &super::knn::PointTree,
@@ -250,10 +251,6 @@ pub fn estimate_multiscale(
                     sight,
                 );
                 let guess = (small.unwrap_or(Vec3::Z), Scale::Degenerate, false);
-                let settled = |c: Vec3, items: &[u32]| {
-                    bar.as_ref()
-                        .is_some_and(|bar| bar.settles(points, i, c, items))
-                };
                 let mut m = first;
                 loop {
                     let Some(q) = NonZero::new(m) else {
@@ -298,7 +295,8 @@ pub fn estimate_multiscale(
                                 None => (wide, Scale::WideForCollinear),
                             },
                         };
-                        return (normal, scale, m == first && settled(normal, items));
+                        let settles = |b: &Settle| b.settles(points, i, normal, items);
+                        return (normal, scale, m == first && bar.as_ref().is_some_and(settles));
                     }
                     if m >= WIDE_MAX.min(n) {
                         return guess;
