@@ -180,15 +180,18 @@ fn a_viewpoint_seeing_backs_of_surfaces_is_not_the_scanners() {
 
 /// The bundled `milk.pcd` (a carton with rounded edges, scanned from its
 /// `VIEWPOINT`) held out at seeds 1-5, creases found and whole discs: the
-/// lines of sight with creases miss at most a few more held-out points
-/// than whole discs, and meet as many within a few. Measured (creases /
-/// whole discs, rays of about 1,280 a seed): misses 2/3/5/3/3 (16) against
-/// 3/1/2/1/1 (8), consistent 1270/1273/1253/1228/1250 against
-/// 1271/1275/1251/1232/1251 (on - off: -1/-2/+2/-4/-1). Before a scanned
-/// small splat's border needed its band free of a bending surface
-/// (`splat::rim::BORDER_RISE`), creases missed 3/5/7/6/5 (26) and met
-/// 1269/1271/1250/1224/1250 (seed 4: 8 fewer); `docs/notes/generation.md`,
-/// issue 54, nineteenth session.
+/// lines of sight with creases miss at most two more held-out points than
+/// whole discs, and meet as many within a few. Measured (creases / whole
+/// discs, rays of about 1,280 a seed): misses 0/1/4/2/3 (10) against
+/// 3/1/2/1/1 (8), consistent 1272/1275/1250/1229/1250 against
+/// 1271/1275/1251/1232/1251 (on - off: +1/0/-1/-3/-1). With every border's
+/// line at most 0.15 spacings past the last point (no
+/// `splat::rim::CLIP_GAP_SCANNED_SPACINGS`), creases missed 2/3/5/3/3
+/// (16) and met 1270/1273/1253/1228/1250 (-1/-2/+2/-4/-1); before a
+/// scanned small splat's border needed its band free of a bending surface
+/// (`splat::rim::BORDER_RISE`), 3/5/7/6/5 (26) and 1269/1271/1250/1224/1250
+/// (seed 4: 8 fewer); `docs/notes/generation.md`, issue 54, nineteenth and
+/// twentieth sessions.
 #[test]
 fn milk_lines_of_sight_with_creases_nearly_as_whole_discs() {
     let cloud = read_points(&data("milk.pcd")).unwrap();
@@ -212,14 +215,14 @@ fn milk_lines_of_sight_with_creases_nearly_as_whole_discs() {
         let (on, off) = (run(seed, Creases::Auto), run(seed, Creases::Off));
         assert!(on.generation.clipped > 0, "{seed}: {:?}", on.generation);
         assert!(
-            on.consistent + 4 >= off.consistent,
+            on.consistent + 3 >= off.consistent,
             "seed {seed}: consistent {} against {}",
             on.consistent,
             off.consistent
         );
         misses += on.miss;
     }
-    assert!(misses <= 16, "{misses} misses");
+    assert!(misses <= 10, "{misses} misses");
 }
 
 fn sphere(n: usize, r: f32, seed: u64) -> Vec<Vec3> {
