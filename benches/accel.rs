@@ -2,9 +2,13 @@
 //! the same splats and rays: the octree (as registered, whose default layout
 //! depends on the size; each of its two leaf layouts, copies and shared
 //! packs; and the report's bounding-square overlap test, §3.1),
-//! Embree 4 user-geometry discs, and (a row for comparison, not a backend)
+//! Embree 4 user-geometry discs, and (rows for comparison, not backends)
 //! Embree's native oriented discs with every hit confirmed by the shared
-//! disc test. The brute-force oracle is left out (quadratic).
+//! disc test (`embree-native`, no rules: it stops at the first disc met),
+//! and the same discs deciding each hit with the backends' rules in
+//! Embree's filter (`embree-native-rules`: the exact span, the self-hit and
+//! pass-over rules; asserted to find the octree's blocked shadow rays).
+//! The brute-force oracle is left out (quadratic).
 //!
 //! Then the triangle rows (issue 57): the bundled bunny mesh's 69,666
 //! triangles on the octree and on Embree's user geometry (both deciding
@@ -55,8 +59,10 @@ use criterion::{Criterion, SamplingMode, Throughput};
 use glam::Vec3;
 use rayon::prelude::*;
 use splatray::accel::octree::{Octree, OctreeParams};
-use splatray::accel::{Backend, BuildStats, Candidate, CandidateHits, PACKET, backends, registry};
-use splatray::embree::{Device, NativeDiscScene, TriangleScene};
+use splatray::accel::{
+    Backend, BuildStats, Candidate, CandidateHits, PACKET, Skip, backends, registry,
+};
+use splatray::embree::{Device, DiscFilter, NativeDiscScene, QueryFilteredDiscs, TriangleScene};
 use splatray::primitive::{Disc, Triangle};
 use splatray::scene::SceneScale;
 use splatray::splat::Splat;
@@ -94,6 +100,10 @@ fn builders() -> Vec<(&'static str, Build)> {
     out.push((
         "embree-native",
         Box::new(|d: &[Disc]| Box::new(Native::new(d)) as Box<dyn Backend>),
+    ));
+    out.push((
+        "embree-native-rules",
+        Box::new(|d: &[Disc]| Box::new(NativeRules::new(d)) as Box<dyn Backend>),
     ));
     out
 }
@@ -138,6 +148,101 @@ impl Backend for Native {
 
     fn occluded_from(&self, q: &Query) -> bool {
         self.scene.occluded(&q.ray, q.t_min, q.t_max)
+    }
+
+    fn stats(&self) -> &BuildStats {
+        &self.stats
+    }
+}
+
+/// Embree's native discs with the backends' rules: each query's hits
+/// decided in Embree's argument filter (`splatray::embree::QueryFilteredDiscs`)
+/// by the shared disc test on the query's exact span, the self-hit rule
+/// (`accel::Departure`) and the pass-over rule (`accel::PassOver`), as
+/// Embree's user geometry decides them in its callbacks
+/// (`accel::embree`): the renderer's query on Embree's own discs. The
+/// closest kept hit only, so a benchmark row, not a backend.
+struct NativeRules {
+    scene: QueryFilteredDiscs,
+    stats: BuildStats,
+}
+
+impl NativeRules {
+    fn new(discs: &[Disc]) -> NativeRules {
+        let device = Device::new().expect("an Embree device");
+        let start = Instant::now();
+        let scene = QueryFilteredDiscs::new(&device, discs).expect("native discs");
+        let stats = BuildStats {
+            build_seconds: start.elapsed().as_secs_f64(),
+            memory_bytes: scene.memory_bytes(),
+            ..BuildStats::default()
+        };
+        NativeRules { scene, stats }
+    }
+}
+
+/// One query's rules, as the filter asks them: the splat the ray leaves
+/// passed by its id, then the shared disc test on the query's exact span,
+/// then the self-hit and pass-over rules on the hit (what
+/// `accel::embree`'s occluded callback asks).
+struct Rules<'a, 'q>(&'a Query<'q>);
+
+impl DiscFilter for Rules<'_, '_> {
+    #[inline]
+    fn keeps(&self, prim: u32, disc: &Disc, ray: &splatray::accel::Ray) -> bool {
+        use splatray::primitive::Primitive;
+        let q = self.0;
+        if q.from.is_some_and(|d| d.id == prim) {
+            return false;
+        }
+        disc.intersect(ray, q.t_min, q.t_max)
+            .is_some_and(|h| !q.secondary().skips(ray.dir, prim, disc, &h))
+    }
+}
+
+/// The span Embree traverses for a query's exact span, as `accel::embree`
+/// widens it (its `traversal_span`: each finite end moved out by 2⁻¹² of
+/// its size and the origin's largest coordinate), so that a hit whose
+/// rounded `t` Embree puts just outside the span still reaches the filter.
+fn traversal_span(q: &Query) -> (f32, f32) {
+    let m = q.ray.origin.abs().max_element();
+    let slack = 1.0 / 4096.0;
+    let lo = if q.t_min > 0.0 && q.t_min.is_finite() {
+        (q.t_min - (q.t_min + m) * slack).max(0.0)
+    } else {
+        q.t_min
+    };
+    let hi = if q.t_max.is_finite() {
+        q.t_max + (q.t_max.abs() + m) * slack
+    } else {
+        q.t_max
+    };
+    (lo, hi)
+}
+
+impl Backend for NativeRules {
+    fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
+        hits.clear();
+        if q.meets_nothing() {
+            return;
+        }
+        let (lo, hi) = traversal_span(q);
+        if let Some((id, t)) = self.scene.intersect(&q.ray, lo, hi, &Rules(q)) {
+            hits.offer(Candidate {
+                id,
+                t,
+                u: 0.0,
+                v: 0.0,
+            });
+        }
+    }
+
+    fn occluded_from(&self, q: &Query) -> bool {
+        if q.meets_nothing() {
+            return false;
+        }
+        let (lo, hi) = traversal_span(q);
+        self.scene.occluded(&q.ray, lo, hi, &Rules(q))
     }
 
     fn stats(&self) -> &BuildStats {
@@ -209,6 +314,8 @@ struct Scene {
     scale: SceneScale,
     primary: Vec<Query<'static>>,
     shadow: Vec<Query<'static>>,
+    /// Shadow rays the octree finds blocked (the renderer's rules).
+    blocked: usize,
 }
 
 fn scene(n: usize) -> Scene {
@@ -243,11 +350,13 @@ fn scene(n: usize) -> Scene {
             })
         })
         .collect();
+    let blocked = shadow.par_iter().filter(|q| probe.occluded_from(q)).count();
     Scene {
         discs,
         scale,
         primary,
         shadow,
+        blocked,
     }
 }
 
@@ -281,7 +390,7 @@ fn seconds(f: &mut dyn FnMut()) -> f64 {
 /// discs have no packet row).
 fn summary(scenes: &[(usize, Scene)], rounds: usize, only: Option<&[String]>) {
     eprintln!(
-        "\n{:>9} {:>17} {:>8} {:>9} {:>8} {:>10} {:>9} {:>11} {:>11} {:>8} {:>8} {:>8} {:>8}",
+        "\n{:>9} {:>19} {:>8} {:>9} {:>8} {:>10} {:>9} {:>11} {:>11} {:>8} {:>8} {:>8} {:>8}",
         "splats",
         "backend",
         "build s",
@@ -313,6 +422,25 @@ fn summary(scenes: &[(usize, Scene)], rounds: usize, only: Option<&[String]>) {
                 (name, build_s, b)
             })
             .collect();
+        // Shadow rays blocked, per row: every row under the renderer's
+        // rules finds the octree's count; the plain native discs (no
+        // rules) stop on more.
+        let blocked: Vec<(&str, usize)> = built
+            .iter()
+            .map(|(name, _, b)| (*name, shadow(b.as_ref(), &sc.shadow)))
+            .collect();
+        eprintln!(
+            "{n} splats: {} shadow rays, blocked under the rules (the octree's count) {}; per row: {blocked:?}",
+            sc.shadow.len(),
+            sc.blocked
+        );
+        assert!(
+            blocked
+                .iter()
+                .all(|&(name, k)| name == "embree-native" || k == sc.blocked),
+            "a row under the rules disagrees with the octree: {blocked:?} against {}",
+            sc.blocked
+        );
         let rays = Rays {
             primary: &sc.primary,
             shadow: &sc.shadow,
@@ -405,7 +533,7 @@ fn rows(label: &str, built: &[Built], rays: &Rays, reference: &str, rounds: usiz
                 (*name).to_string()
             };
             eprintln!(
-                "{:>9} {:>17} {:>8.3} {:>9} {:>8} {:>10.2} {:>9.1} {:>11.3e} {:>11.3e} {:>8.3} {:>8.3} {:>8.3} {:>8.3}",
+                "{:>9} {:>19} {:>8.3} {:>9} {:>8} {:>10.2} {:>9.1} {:>11.3e} {:>11.3e} {:>8.3} {:>8.3} {:>8.3} {:>8.3}",
                 label,
                 label_b,
                 build_s,

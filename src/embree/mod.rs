@@ -15,8 +15,10 @@
 //! * [`TriangleScene`] (`triangles`): triangle meshes in Embree's own BVH
 //!   (ground truth);
 //! * `NativeDiscScene` (`discs`): Embree's built-in discs, for the
-//!   benchmark that sets them against user geometry; compiled with the
-//!   `native-discs` feature (the benchmarks and tests turn it on).
+//!   benchmark that sets them against user geometry, and
+//!   `QueryFilteredDiscs`, the same discs with each query's own filter
+//!   (Embree's argument filter); compiled with the `native-discs` feature
+//!   (the benchmarks and tests turn it on).
 //!
 //! Raw Embree types never leave this module.
 
@@ -27,7 +29,7 @@ mod triangles;
 mod user;
 
 #[cfg(any(test, feature = "native-discs"))]
-pub use discs::NativeDiscScene;
+pub use discs::{DiscFilter, NativeDiscScene, QueryFilteredDiscs};
 pub use triangles::{TriangleHit, TriangleScene};
 pub use user::{UserGeometry, UserScene};
 
