@@ -969,12 +969,10 @@ impl<'a> Lines<'a> {
         if !inside {
             return None;
         }
+        // The band's half-width along the chord (both counts below).
+        let half = (0.5 * chord).max(BORDER_HALF_SPACINGS * spacing);
         let band = ext + BORDER_SPACINGS * spacing;
         let open = band < 1.0 || {
-            let half = (1.0 - ext * ext)
-                .max(0.0)
-                .sqrt()
-                .max(BORDER_HALF_SPACINGS * spacing);
             // What a face going on puts in the whole band (over
             // spacing²): `expected` below with the outside's share 1, the
             // same products in the same order, so never less than it (each
@@ -1027,13 +1025,13 @@ impl<'a> Lines<'a> {
             let expected = outside * (band - ext) * 2.0 * half / (spacing * spacing);
             (count as f32) < BORDER_FILL * expected
         };
-        if !open || self.goes_on(w, ext, chord) {
+        if !open || self.goes_on(w, ext, half) {
             return None;
         }
         // A scanned small splat's rounded edge ends short of the next
         // row: the line stands there (CLIP_GAP_SCANNED_SPACINGS, never
         // short of `gap`: where that line is not inside, neither is this).
-        if self.s.scanned && spacing >= BORDER_SMALL {
+        if self.scanned_small() {
             let (rim_n, _, _) = self.rim_side(w, ext);
             if rim_n.dot(self.frame.n) <= CLIP_GAP_TURN_DEG.to_radians().cos() {
                 let wide = ext + CLIP_GAP_SCANNED_SPACINGS * spacing;
@@ -1043,17 +1041,23 @@ impl<'a> Lines<'a> {
         Some(ext + gap)
     }
 
+    /// A small splat ([`BORDER_SMALL`]) of a scanned cloud
+    /// ([`Surface::scanned`]): where the border rules for scans apply.
+    fn scanned_small(&self) -> bool {
+        self.s.scanned && self.spacing >= BORDER_SMALL
+    }
+
     /// Whether, on a small splat ([`BORDER_SMALL`]), a point of any face
     /// turned by under [`BORDER_BEND_DEG`] lies in a border's band along
-    /// `w` past the own face's last point at `ext` (`chord` long across the
-    /// disc there), rising from the plane no steeper than [`BORDER_RISE`]:
-    /// the surface goes on past it, bending. The whole cloud round the rim,
-    /// asked of the tree once, when first needed.
-    fn goes_on(&mut self, w: Vec2, ext: f32, chord: f32) -> bool {
-        let (s, f, spacing) = (self.s, self.frame, self.spacing);
-        if !s.scanned || spacing < BORDER_SMALL {
+    /// `w` past the own face's last point at `ext` (`half` either side of
+    /// the chord's middle), rising from the plane no steeper than
+    /// [`BORDER_RISE`]: the surface goes on past it, bending. The whole
+    /// cloud round the rim, asked of the tree once, when first needed.
+    fn goes_on(&mut self, w: Vec2, ext: f32, half: f32) -> bool {
+        if !self.scanned_small() {
             return false;
         }
+        let (s, f, spacing) = (self.s, self.frame, self.spacing);
         let ball = &mut self.ball;
         let all = self.all.get_or_insert_with(|| {
             let bend_cos = BORDER_BEND_DEG.to_radians().cos();
@@ -1063,7 +1067,6 @@ impl<'a> Lines<'a> {
                 .map(|&j| f.near(s.points, j as usize))
                 .collect()
         });
-        let half = (0.5 * chord).max(BORDER_HALF_SPACINGS * spacing);
         let band = BORDER_SPACINGS * spacing;
         let flat = 0.5 * s.epsilon / f.r;
         all.iter().any(|m| {
