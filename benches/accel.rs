@@ -200,34 +200,13 @@ impl DiscFilter for Rules<'_, '_> {
     }
 }
 
-/// The span Embree traverses for a query's exact span, as `accel::embree`
-/// widens it (its `traversal_span`: each finite end moved out by 2⁻¹² of
-/// its size and the origin's largest coordinate), so that a hit whose
-/// rounded `t` Embree puts just outside the span still reaches the filter.
-fn traversal_span(q: &Query) -> (f32, f32) {
-    let m = q.ray.origin.abs().max_element();
-    let slack = 1.0 / 4096.0;
-    let lo = if q.t_min > 0.0 && q.t_min.is_finite() {
-        (q.t_min - (q.t_min + m) * slack).max(0.0)
-    } else {
-        q.t_min
-    };
-    let hi = if q.t_max.is_finite() {
-        q.t_max + (q.t_max.abs() + m) * slack
-    } else {
-        q.t_max
-    };
-    (lo, hi)
-}
-
 impl Backend for NativeRules {
     fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
         hits.clear();
         if q.meets_nothing() {
             return;
         }
-        let (lo, hi) = traversal_span(q);
-        if let Some((id, t)) = self.scene.intersect(&q.ray, lo, hi, &Rules(q)) {
+        if let Some((id, t)) = self.scene.intersect(&q.ray, q.t_min, q.t_max, &Rules(q)) {
             hits.offer(Candidate {
                 id,
                 t,
@@ -241,8 +220,7 @@ impl Backend for NativeRules {
         if q.meets_nothing() {
             return false;
         }
-        let (lo, hi) = traversal_span(q);
-        self.scene.occluded(&q.ray, lo, hi, &Rules(q))
+        self.scene.occluded(&q.ray, q.t_min, q.t_max, &Rules(q))
     }
 
     fn stats(&self) -> &BuildStats {

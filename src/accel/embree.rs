@@ -3,50 +3,15 @@
 //! of each ray; the FFI is in [`crate::embree`].
 
 use super::{Backend, BuildStats, Candidate, CandidateHits, PACKET, Query, Secondary, Skip};
-use crate::embree::{Device, EmbreeError, UserGeometry, UserScene};
+use crate::embree::{
+    Device, EmbreeError, UserGeometry, UserScene, traversal_end, traversal_span,
+};
 use crate::geometry::Ray;
 use crate::primitive::Primitive;
 use std::time::Instant;
 
 /// The primitives as Embree sees them, addressed by primitive id.
 struct Primitives<P>(Vec<P>);
-
-/// How far past the query's span Embree traverses, relative to the span's
-/// ends and the ray origin's largest coordinate: 2⁻¹².
-///
-/// The span `[t_min, t_max]` is exact, and tested in the callbacks on the
-/// `t` the primitive's intersection rounds (as the octree and the oracle
-/// test it). Embree culls a box whose interval along the ray misses the
-/// span it traverses; on a splat whose normal is an axis the box is a slab
-/// a few ulps thick, and a hit's rounded `t` can lie just past the box's
-/// exit (by a few ulps of the origin's coordinates over the ray's slope
-/// through the slab). A span that starts at that very `t` (the resolver
-/// gathering again from a candidate, [`crate::resolve::Resolved::Beyond`])
-/// then lost the hit on Embree alone. Traversing a slightly wider span
-/// costs a few more exact tests near its ends and changes no answer.
-const SPAN_SLACK: f32 = 1.0 / 4096.0;
-
-/// The span Embree traverses for the exact span `[t_min, t_max]` of `ray`:
-/// each finite end moved out by [`SPAN_SLACK`] of its size and the origin's,
-/// a start at or below 0 kept (Embree takes `tnear >= 0`).
-fn traversal_span(ray: &Ray, t_min: f32, t_max: f32) -> (f32, f32) {
-    let m = ray.origin.abs().max_element();
-    let lo = if t_min > 0.0 && t_min.is_finite() {
-        (t_min - (t_min + m) * SPAN_SLACK).max(0.0)
-    } else {
-        t_min
-    };
-    (lo, traversal_end(ray, t_max))
-}
-
-/// The far end Embree traverses to for the exact far end `t`.
-fn traversal_end(ray: &Ray, t: f32) -> f32 {
-    if t.is_finite() {
-        t + (t.abs() + ray.origin.abs().max_element()) * SPAN_SLACK
-    } else {
-        t
-    }
-}
 
 /// What one ray's query carries to the intersect callback.
 struct Gather<'q> {

@@ -4,7 +4,7 @@
 
 use super::scene::{
     RayHitSlot, RayQueryContext, SceneHandle, embree_ray, embree_rayhit, intersect_arguments,
-    new_buffers, new_geometry, occluded_arguments, ray_of, ray_query_context,
+    new_buffers, new_geometry, occluded_arguments, ray_of, ray_query_context, traversal_span,
 };
 use super::{Device, EmbreeError};
 use crate::geometry::Ray;
@@ -278,7 +278,9 @@ impl QueryFilteredDiscs {
     }
 
     /// The closest hit in `[t_min, t_max]` that `filter` keeps: the disc's
-    /// index and Embree's distance.
+    /// index and Embree's distance. The span is the query's exact one:
+    /// Embree traverses it widened as the user-geometry backend does
+    /// (`accel::embree`'s span slack), and `filter` tests the exact span.
     #[must_use]
     pub fn intersect<F: DiscFilter>(
         &self,
@@ -290,7 +292,8 @@ impl QueryFilteredDiscs {
         let mut ctx = self.context(filter);
         let mut args = intersect_arguments((&mut ctx as *mut FilterContext<F>).cast());
         args.filter = Some(query_filter::<F>);
-        let mut slot = embree_rayhit(ray, t_min, t_max);
+        let (lo, hi) = traversal_span(ray, t_min, t_max);
+        let mut slot = embree_rayhit(ray, lo, hi);
         // SAFETY: committed scene; `ctx`, `slot` and `args` live across the
         // call, the context and the slot with the layout and room Embree
         // 4.3+ uses; `args.context` points at the repr(C) `FilterContext<F>`
@@ -307,13 +310,15 @@ impl QueryFilteredDiscs {
         (h.geomID != sys::RTC_INVALID_GEOMETRY_ID).then_some((h.primID, slot.rayhit.ray.tfar))
     }
 
-    /// True when a hit in `[t_min, t_max]` that `filter` keeps exists.
+    /// True when a hit in `[t_min, t_max]` that `filter` keeps exists (the
+    /// span widened for traversal as in [`QueryFilteredDiscs::intersect`]).
     #[must_use]
     pub fn occluded<F: DiscFilter>(&self, ray: &Ray, t_min: f32, t_max: f32, filter: &F) -> bool {
         let mut ctx = self.context(filter);
         let mut args = occluded_arguments((&mut ctx as *mut FilterContext<F>).cast());
         args.filter = Some(query_filter::<F>);
-        let mut r = embree_ray(ray, t_min, t_max);
+        let (lo, hi) = traversal_span(ray, t_min, t_max);
+        let mut r = embree_ray(ray, lo, hi);
         // SAFETY: committed scene; `ctx`, `r` and `args` live across the
         // call; `args.context` points at the repr(C) `FilterContext<F>`
         // that `query_filter::<F>`, the argument filter set with it, reads.

@@ -30,6 +30,7 @@ mod user;
 
 #[cfg(any(test, feature = "native-discs"))]
 pub use discs::{DiscFilter, NativeDiscScene, QueryFilteredDiscs};
+pub(crate) use scene::{traversal_end, traversal_span};
 pub use triangles::{TriangleHit, TriangleScene};
 pub use user::{UserGeometry, UserScene};
 
