@@ -702,8 +702,11 @@ fn a_tile_takes_the_bytes_a_point_it_is_planned_at() {
 
 /// Tiles of a cloud far denser than `ϵ` needs (1M bunny points at 6
 /// times the default `ϵ`: a typical point's cell 0.25 `ϵ` wide holds
-/// about 14) are thinned unasked, each alike, and the run says how many
-/// points it left out; `--thin 0` keeps every point.
+/// about 14, 1 `ϵ` wide some 200) are thinned unasked at the widest cell,
+/// 1 `ϵ`, each alike, and the run says how many points it left out; their
+/// splats stay within the halo (growth's neighbour cap reads the thinned
+/// cells' spacing as dense: `grow::THINNED_KTH_CELLS`); `--thin 0` keeps
+/// every point.
 #[test]
 fn a_tiled_cloud_far_denser_than_epsilon_needs_is_thinned_and_says_so() {
     let dir = scratch("tiled-thin");
@@ -744,20 +747,26 @@ fn a_tiled_cloud_far_denser_than_epsilon_needs_is_thinned_and_says_so() {
             thinned_tiles,
             tiles.len(),
             r["spilled"].as_u64().unwrap(),
+            r["past_halo"].as_u64().unwrap(),
         )
     };
-    let (err, thinned, thinned_tiles, tiles, spilled) = run("auto", &[]);
-    eprintln!("{thinned} of {spilled} spilled points thinned in {thinned_tiles} of {tiles} tiles");
+    let (err, thinned, thinned_tiles, tiles, spilled, past) = run("auto", &[]);
+    eprintln!(
+        "{thinned} of {spilled} spilled points thinned in {thinned_tiles} of {tiles} tiles, {past} splats past the halo"
+    );
     assert!(tiles > 1, "{tiles} tiles");
     assert_eq!(thinned_tiles, tiles);
-    assert!(thinned > spilled / 2, "{thinned} of {spilled}");
+    // Measured THINNED of SPILLED (at 0.25 `ϵ`: 1,924,229 of 2,212,559).
+    assert!(thinned > spilled / 100 * 97, "{thinned} of {spilled}");
+    // Measured PAST.
+    assert!(past <= 10, "{past} splats past the halo");
     assert!(
         err.contains(&format!(
             "note: thinned {thinned} of the {spilled} spilled points"
         )),
         "{err}"
     );
-    let (err, thinned, _, _, _) = run("whole", &["--thin", "0"]);
+    let (err, thinned, _, _, _, _) = run("whole", &["--thin", "0"]);
     assert_eq!(thinned, 0);
     assert!(!err.contains("thinned"), "{err}");
 }

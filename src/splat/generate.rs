@@ -71,9 +71,10 @@ pub struct SplatParams {
     /// denser (see [`super::thin`]; default [`super::thin::CELL_EPS`]);
     /// 0 keeps every point, or thins unasked with `auto_thin`.
     pub thin: f64,
-    /// With `thin` 0: thin at [`super::thin::AUTO_CELL_EPS`] a cloud whose
-    /// typical point's cell holds [`super::thin::AUTO_POINTS`] or more
-    /// points (default on; `--thin 0` turns it off).
+    /// With `thin` 0: thin a cloud whose typical point's cell holds
+    /// [`super::thin::AUTO_POINTS`] or more points, at the widest such cell
+    /// of [`super::thin::AUTO_CELL_EPS`] ε, twice and four times that
+    /// (default on; `--thin 0` turns it off).
     pub auto_thin: bool,
     /// Fit a linear colour field to each splat of a coloured cloud
     /// ([`super::color`], by [`super::color::fit_cloud`], the step after
@@ -563,8 +564,9 @@ fn graph_stage(
     params: &SplatParams,
     report: &mut SplatReport,
 ) -> Result<Work, GenerateError> {
-    let order = clean_and_thin(cloud, raw, params, report);
+    let (order, thinned) = clean_and_thin(cloud, raw, params, report);
     let mut w = neighbours(cloud, params, order, report)?;
+    w.thinned = thinned;
     if params.remove_outliers {
         drop_outliers(&mut w, report);
     }
@@ -603,6 +605,9 @@ struct Surface {
     scanned: bool,
     /// `ϵ` in the unit frame.
     epsilon: f32,
+    /// The width of the cells the cloud was thinned in, in the unit frame
+    /// (0: not thinned; `grow::GrowInput::thinned`).
+    thinned: f32,
 }
 
 /// The second stage: normals, denoising, and with creases each point's
@@ -632,6 +637,7 @@ fn surface_stage(
         mut tree,
         mut knn,
         sights,
+        thinned,
         ..
     } = w;
     if !params.creases.found(knn.k > params.k) || to_estimate == 0 {
@@ -668,6 +674,7 @@ fn surface_stage(
         scanned: sights.is_some(),
         knn,
         epsilon,
+        thinned: (thinned * f64::from(epsilon)) as f32,
     };
     if params.creases == Creases::Auto && !surface.creases {
         report.warnings.push(
@@ -778,6 +785,7 @@ fn growth_stage(
         creases: s.creases,
         scanned: s.scanned,
         on_face: &s.on_face,
+        thinned: s.thinned,
     };
     let grown = grow_all(&input, |i| {
         notify(progress, "growing splats", i as f64 / n as f64);
@@ -903,15 +911,16 @@ fn start_report(cloud: &PointCloud) -> SplatReport {
 /// them: finite, not duplicates, and with `params.thin`, one per cell
 /// `thin` ε wide (cells in the cloud's own units, `raw`, so tiles and the
 /// whole cloud cut alike), or unasked (`params.auto_thin`) one per cell
-/// [`super::thin::AUTO_CELL_EPS`] ε wide when a typical point's cell holds
+/// of the widest of [`super::thin::AUTO_LEVELS`] widths from
+/// [`super::thin::AUTO_CELL_EPS`] ε up whose typical point's cell holds
 /// [`super::thin::AUTO_POINTS`] or more; what was left out is counted in
-/// the report.
+/// the report. With the cell's width in ε (0 where nothing was thinned).
 fn clean_and_thin(
     unit: &PointCloud,
     raw: &PointCloud,
     params: &SplatParams,
     report: &mut SplatReport,
-) -> Vec<u32> {
+) -> (Vec<u32>, f64) {
     let (mut order, non_finite, dupes) = clean_order(&unit.positions);
     for (why, count) in [
         ("non-finite coordinates", non_finite),
@@ -943,10 +952,12 @@ fn clean_and_thin(
             );
             (params.thin, why)
         } else {
-            let (auto, at_least) = (super::thin::AUTO_CELL_EPS, super::thin::AUTO_POINTS);
-            if super::thin::typical_cell_count(&order, member(), world, auto * epsilon) < at_least {
-                return order;
-            }
+            let (finest, at_least) = (super::thin::AUTO_CELL_EPS, super::thin::AUTO_POINTS);
+            let held = super::thin::typical_cell_counts(&order, member(), world, finest * epsilon);
+            let Some(level) = (0..held.len()).rev().find(|&l| held[l] >= at_least) else {
+                return (order, 0.0);
+            };
+            let auto = finest * f64::from(1u32 << level);
             let why = format!(
                 "denser than epsilon needs (a typical point's cell {auto} epsilon wide held {at_least} or more): one point kept per cell; --thin 0 keeps every point"
             );
@@ -959,9 +970,10 @@ fn clean_and_thin(
                 reason: why,
                 count: before - order.len(),
             });
+            return (order, cell);
         }
     }
-    order
+    (order, 0.0)
 }
 
 /// The kept points of the (unit) cloud with their viewpoints and colours,
@@ -1024,6 +1036,7 @@ fn neighbours(
         tree,
         knn,
         outliers: Vec::new(),
+        thinned: 0.0,
     })
 }
 
@@ -1175,6 +1188,9 @@ struct Work {
     /// The points left out as statistical outliers (indices into the
     /// cloud, ascending).
     outliers: Vec<u32>,
+    /// The width in ε of the cells the cloud was thinned in (0: not
+    /// thinned).
+    thinned: f64,
 }
 
 /// Leaves out the statistical outliers (with their colours and scanners)

@@ -22,6 +22,20 @@ pub const MAX_RADIUS_FACTOR: f32 = 12.0;
 /// 21,732 splats, 10M 39,146 with the neighbour cap alone, 26,896 with this.
 pub const MAX_RADIUS_EPS: f32 = 8.0;
 
+/// In a thinned cloud (one point per cell `w` wide, `splat::thin`), a
+/// seed whose k-th neighbour lies within this many `w` is capped at
+/// [`MAX_RADIUS_EPS`] `ϵ` alone: its neighbour distance is the cells', not
+/// the surface's sampling. On a plane with one point per cell (a point per
+/// `w²` or less of area) the 12th neighbour lies within about
+/// `√(12/π) w` ≈ 1.95 `w`, within 2.8 `w` on a border; the neighbour cap
+/// would let such a seed's splat grow to 12 × 2 `w`, 24 `ϵ` at `w` = `ϵ`,
+/// three times the dense surface's 8 `ϵ` and past a tile's halo (12 `ϵ`,
+/// `tiled`): the 3.6M survey thinned at 0.5 `ϵ` grew 6,588 splats with
+/// 1,900 reaching past it, against 8,354 and 5 unthinned. A seed whose
+/// neighbours lie farther was sparse before thinning too, and keeps the
+/// neighbour cap.
+pub const THINNED_KTH_CELLS: f32 = 3.0;
+
 /// A splat seeded on a flat face fitted whole (`splat::planes`) grows to at
 /// most this many times its seed's k-th neighbour distance (or
 /// [`MAX_RADIUS_EPS`] `ϵ`): nothing in eq. (1) stops it on a plane, and a
@@ -73,6 +87,9 @@ pub struct GrowInput<'a> {
     /// none was): a splat seeded on one grows to at most
     /// [`FACE_RADIUS_FACTOR`] times its seed's k-th neighbour distance.
     pub on_face: &'a [bool],
+    /// The width of the cells the cloud was thinned in (0: not thinned):
+    /// see [`THINNED_KTH_CELLS`].
+    pub thinned: f32,
 }
 
 /// With [`GrowInput::creases`], a point whose normal turns from the seed's
@@ -890,7 +907,11 @@ impl<'a> Grower<'a> {
         } else {
             MAX_RADIUS_FACTOR
         };
-        let max_d = (factor * d_k).max(MAX_RADIUS_EPS * inp.epsilon);
+        let max_d = if d_k <= THINNED_KTH_CELLS * inp.thinned {
+            MAX_RADIUS_EPS * inp.epsilon
+        } else {
+            (factor * d_k).max(MAX_RADIUS_EPS * inp.epsilon)
+        };
         let mut growth = g.run(i, tu, tv, 1.0, max_d);
         let grown_r = growth.accepted.last().map_or(0.0, |a| a.1.sqrt()); // eq. (3)
         let mut frame = (tu, tv, 1.0f32);
@@ -1100,6 +1121,7 @@ mod tests {
             creases: true,
             scanned: false,
             on_face: &[],
+            thinned: 0.0,
         }
     }
 

@@ -21,23 +21,49 @@ use rayon::prelude::*;
 /// Cell width in `ϵ`.
 pub const CELL_EPS: f64 = 0.5;
 
-/// Cell width in `ϵ` of the thinning a cloud gets unasked
-/// ([`typical_cell_count`]): at 100M points sampled from the bunny mesh,
-/// thinning at 0.25 `ϵ` cost nothing against the mesh (31.93 → 31.99 dB);
-/// at 10M noisy points, whose typical cell holds about 3, it cost 0.5 dB.
+/// The finest cell width in `ϵ` of the thinning a cloud gets unasked
+/// ([`typical_cell_counts`]): the cells tried are this, twice and four
+/// times it ([`AUTO_LEVELS`]). At 100M points sampled from the bunny mesh,
+/// thinning at 0.25 `ϵ` cost nothing against the mesh (31.93 → 31.99 dB).
 pub const AUTO_CELL_EPS: f64 = 0.25;
 
-/// A cloud is thinned unasked when the cell [`AUTO_CELL_EPS`] `ϵ` wide of
-/// a typical point holds at least this many points.
+/// How many cell widths the unasked rule tries: [`AUTO_CELL_EPS`] `ϵ`
+/// doubled each level, 0.25, 0.5 and 1 `ϵ`.
+pub const AUTO_LEVELS: usize = 3;
+
+/// A cloud is thinned unasked at the widest of the [`AUTO_LEVELS`] cells
+/// whose cell around a typical point holds at least this many points (and
+/// not at all when none does).
+///
+/// Why the widest: growth (§2.1, eq. 1) stops a splat where its points leave
+/// the `ϵ` slab, and the density rule (§2.2) seeds by coverage, so what a
+/// splat needs of its points is that they sample its disc, whose radius is
+/// several `ϵ` (3.9 `ϵ` on average on the bunny, up to
+/// [`super::grow::MAX_RADIUS_EPS`]): one point per cell 1 `ϵ` wide still
+/// gives a splat of the mean radius about 48 points, four times the
+/// `k` = 12 its normals and field are fitted from. A cell holding 8 or
+/// more keeps an eighth or less. Measured against the meshes and the
+/// surveys' exact surfaces, close views included (`docs/notes/generation.md`,
+/// "Issue 54, twenty-first session"): the 2M bunny sample (a typical cell
+/// 1, 3 and 9 points at 0.25, 0.5, 1 `ϵ`: thinned at 1 `ϵ`) and the 3.6M
+/// survey (2, 8, 29) lost nothing; 2M noisy bunny samples (noise 0.08 and
+/// 0.31 `ϵ`) gained. Clouds whose typical 1 `ϵ` cell holds fewer than 8
+/// (the 200k bunny 2, the default survey 3, the noisy scan 1) are left
+/// whole, as before.
 pub const AUTO_POINTS: usize = 8;
 
-/// Points sampled by [`typical_cell_count`].
+/// Points sampled by [`typical_cell_counts`].
 const SAMPLE: usize = 4096;
 
-/// How many points the cell `cell` wide of a typical point of `indices`
-/// holds (the point itself included): the median over about [`SAMPLE`]
-/// points taken at even steps through `indices`, each counted against
-/// every point. Costs one pass over the points, a binary search each.
+/// How many points the cell around a typical point of `indices` holds (the
+/// point itself included), for cells `cell`, 2 `cell`, 4 `cell`, …
+/// ([`AUTO_LEVELS`] widths) wide: at each width the median over about
+/// [`SAMPLE`] points taken at even steps through `indices`, each counted
+/// against every point. One pass over the points: the cells are aligned
+/// to the coordinates' zero, so a cell twice as wide holds whole cells of
+/// the finer width (a coarser key is the finer one halved, `>> 1`, exactly:
+/// `x / (2w)` is `(x / w) / 2` in floating point), and a point outside
+/// every sampled widest cell, most points, costs one binary search.
 ///
 /// The count is a sum, so the pass reads the points in the order of their
 /// indices (`member`: [`members`] of `indices`), not in `indices`' own: a
@@ -45,47 +71,64 @@ const SAMPLE: usize = 4096;
 /// and that pass's loads missed the cache (10 % of the graph stage of the
 /// 2M bunny sample, docs/notes/generation.md, "fourteenth session").
 #[must_use]
-pub fn typical_cell_count(
+pub fn typical_cell_counts(
     indices: &[u32],
     member: &[bool],
     world: impl Fn(u32) -> DVec3 + Sync,
     cell: f64,
-) -> usize {
+) -> [usize; AUTO_LEVELS] {
     if !(cell.is_finite() && cell > 0.0) || indices.is_empty() {
-        return 0;
+        return [0; AUTO_LEVELS];
     }
     let key = |i: u32| cell_of(world(i), cell);
     let stride = indices.len().div_ceil(SAMPLE).max(1);
-    let sampled: Vec<[i64; 3]> = indices.iter().step_by(stride).map(|&i| key(i)).collect();
-    let mut probes = sampled.clone();
-    probes.sort_unstable();
-    probes.dedup();
+    let fine: Vec<[i64; 3]> = indices.iter().step_by(stride).map(|&i| key(i)).collect();
+    let probes: Vec<Vec<[i64; 3]>> = (0..AUTO_LEVELS)
+        .map(|l| {
+            let mut p: Vec<[i64; 3]> = fine.iter().map(|&k| coarser(k, l)).collect();
+            p.sort_unstable();
+            p.dedup();
+            p
+        })
+        .collect();
     const CHUNK: usize = 1 << 14;
+    let zero = || probes.iter().map(|p| vec![0usize; p.len()]).collect::<Vec<_>>();
     let counts = member
         .par_chunks(CHUNK)
         .enumerate()
         .map(|(c, chunk)| {
-            let mut counts = vec![0usize; probes.len()];
+            let mut counts = zero();
             for (j, _) in chunk.iter().enumerate().filter(|e| *e.1) {
-                if let Ok(at) = probes.binary_search(&key((c * CHUNK + j) as u32)) {
-                    counts[at] += 1;
+                let k = key((c * CHUNK + j) as u32);
+                // Widest first: a point outside a sampled cell is outside
+                // every sampled cell it holds.
+                for l in (0..AUTO_LEVELS).rev() {
+                    match probes[l].binary_search(&coarser(k, l)) {
+                        Ok(at) => counts[l][at] += 1,
+                        Err(_) => break,
+                    }
                 }
             }
             counts
         })
-        .reduce(
-            || vec![0usize; probes.len()],
-            |mut a, b| {
-                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-                a
-            },
-        );
-    let mut held: Vec<usize> = sampled
-        .iter()
-        .map(|k| counts[probes.binary_search(k).unwrap_or(0)])
-        .collect();
-    let mid = held.len() / 2;
-    *held.select_nth_unstable(mid).1
+        .reduce(zero, |mut a, b| {
+            for (x, y) in a.iter_mut().zip(b) {
+                x.iter_mut().zip(y).for_each(|(x, y)| *x += y);
+            }
+            a
+        });
+    std::array::from_fn(|l| {
+        let mut held: Vec<usize> = (fine.iter())
+            .map(|&k| counts[l][probes[l].binary_search(&coarser(k, l)).unwrap_or(0)])
+            .collect();
+        let mid = held.len() / 2;
+        *held.select_nth_unstable(mid).1
+    })
+}
+
+/// The key of the cell `2^level` times as wide holding cell `k`.
+fn coarser(k: [i64; 3], level: usize) -> [i64; 3] {
+    k.map(|c| c >> level)
 }
 
 /// Which of `len` points `indices` (distinct, each below `len`) names: the
@@ -209,35 +252,47 @@ mod tests {
 
     #[test]
     fn a_typical_cell_is_counted() {
-        use super::{members, typical_cell_count};
-        // A 100 x 100 grid 0.1 apart in cells 1 wide: 100 points a cell.
+        use super::{AUTO_LEVELS, members, typical_cell_counts};
+        // A 100 x 100 grid 0.1 apart in cells 1 wide: 100 points a cell;
+        // cells 2 wide hold 400; cells 4 wide 40 x 40 where both axes fall
+        // in [0, 4) or [4, 8) (64 % of the points), fewer past 8: a typical
+        // point's holds 1600. Cells 0.05 wide hold one point, 0.1 one, 0.2
+        // two by two.
         let grid: Vec<DVec3> = (0..10_000)
             .map(|i| DVec3::new((i % 100) as f64 * 0.1 + 0.05, (i / 100) as f64 * 0.1 + 0.05, 0.5))
             .collect();
         let idx: Vec<u32> = (0..grid.len() as u32).collect();
-        assert_eq!(typical_cell_count(&idx, &members(&idx, idx.len()), |i| grid[i as usize], 1.0), 100);
-        assert_eq!(typical_cell_count(&idx, &members(&idx, idx.len()), |i| grid[i as usize], 0.05), 1);
+        let all = members(&idx, idx.len());
+        assert_eq!(typical_cell_counts(&idx, &all, |i| grid[i as usize], 1.0), [100, 400, 1600]);
+        assert_eq!(typical_cell_counts(&idx, &all, |i| grid[i as usize], 0.05), [1, 1, 4]);
         // Three quarters of the points in one cell: it is the typical one.
         let mut lumped = grid.clone();
         for p in lumped.iter_mut().take(7_500) {
             *p = DVec3::new(0.5, 0.5, 0.5) + (*p - DVec3::new(5.0, 5.0, 0.5)) * 1e-3;
         }
-        assert_eq!(typical_cell_count(&idx, &members(&idx, idx.len()), |i| lumped[i as usize], 1.0), 7_500);
-        assert_eq!(typical_cell_count(&[], &[], |i| grid[i as usize], 1.0), 0);
+        assert_eq!(typical_cell_counts(&idx, &all, |i| lumped[i as usize], 1.0)[0], 7_500);
+        assert_eq!(typical_cell_counts(&[], &[], |i| grid[i as usize], 1.0), [0; AUTO_LEVELS]);
         // Some of the points, scattered through memory (a stride of 7 mod
-        // the length): the count is over those only, as a brute-force
-        // count of each sampled point's cell finds it.
+        // the length), some cells straddling zero: the count is over those
+        // only, at every width, as a brute-force count of each sampled
+        // point's cell finds it.
+        let shifted: Vec<DVec3> = lumped.iter().map(|p| *p - DVec3::new(3.3, 2.2, 0.0)).collect();
         let some: Vec<u32> = (0..6_000u32).map(|i| i * 7 % 10_000).collect();
-        for cell in [0.35, 1.0, 2.5] {
-            let key = |i: u32| (lumped[i as usize] / cell).floor();
-            let stride = some.len().div_ceil(super::SAMPLE);
-            let mut held: Vec<usize> = (some.iter().step_by(stride))
-                .map(|&s| some.iter().filter(|&&i| key(i) == key(s)).count())
-                .collect();
-            let mid = held.len() / 2;
-            let want = *held.select_nth_unstable(mid).1;
-            let got = typical_cell_count(&some, &members(&some, lumped.len()), |i| lumped[i as usize], cell);
-            assert_eq!(got, want, "cell {cell}");
+        for cloud in [&lumped, &shifted] {
+            for cell in [0.35, 1.0, 2.5] {
+                let got = typical_cell_counts(&some, &members(&some, cloud.len()), |i| cloud[i as usize], cell);
+                for (level, got) in got.into_iter().enumerate() {
+                    let width = cell * f64::from(1u32 << level);
+                    let key = |i: u32| (cloud[i as usize] / width).floor();
+                    let stride = some.len().div_ceil(super::SAMPLE);
+                    let mut held: Vec<usize> = (some.iter().step_by(stride))
+                        .map(|&s| some.iter().filter(|&&i| key(i) == key(s)).count())
+                        .collect();
+                    let mid = held.len() / 2;
+                    let want = *held.select_nth_unstable(mid).1;
+                    assert_eq!(got, want, "cell {cell}, level {level}");
+                }
+            }
         }
     }
 
