@@ -756,10 +756,10 @@ fn a_tiled_cloud_far_denser_than_epsilon_needs_is_thinned_and_says_so() {
     );
     assert!(tiles > 1, "{tiles} tiles");
     assert_eq!(thinned_tiles, tiles);
-    // Measured THINNED of SPILLED (at 0.25 `ϵ`: 1,924,229 of 2,212,559).
-    assert!(thinned > spilled / 100 * 97, "{thinned} of {spilled}");
-    // Measured PAST.
-    assert!(past <= 10, "{past} splats past the halo");
+    // Measured 2,192,376 of 2,212,559 (at 0.25 `ϵ`: 1,924,229).
+    assert!(thinned > spilled / 100 * 98, "{thinned} of {spilled}");
+    // Measured 0.
+    assert!(past <= 2, "{past} splats past the halo");
     assert!(
         err.contains(&format!(
             "note: thinned {thinned} of the {spilled} spilled points"

@@ -44,8 +44,9 @@ pub struct SplatOptions {
     #[arg(long, conflicts_with = "viewpoint")]
     pub no_viewpoint: bool,
     /// Where the cloud is denser than ϵ needs, keep one point per cell this
-    /// many ϵ wide (default: 0.25 where a typical point's cell that wide
-    /// holds 8 or more points, else every point; 0: every point).
+    /// many ϵ wide (default: the widest of 0.25, 0.5 and 1 whose typical
+    /// point's cell holds 8 or more points, else every point; 0: every
+    /// point).
     #[arg(long)]
     pub thin: Option<f64>,
 }
