@@ -702,11 +702,12 @@ fn a_tile_takes_the_bytes_a_point_it_is_planned_at() {
 
 /// Tiles of a cloud far denser than `ϵ` needs (1M bunny points at 6
 /// times the default `ϵ`: a typical point's cell 0.25 `ϵ` wide holds
-/// about 14, 1 `ϵ` wide some 200) are thinned unasked at the widest cell,
-/// 1 `ϵ`, each alike, and the run says how many points it left out; their
-/// splats stay within the halo (growth's neighbour cap reads the thinned
-/// cells' spacing as dense: `grow::THINNED_KTH_CELLS`); `--thin 0` keeps
-/// every point.
+/// about 14, 1 `ϵ` wide some 200) are thinned unasked at 0.25 `ϵ`, the
+/// widest cell an `ϵ` that coarse is given (`thin::AUTO_WIDE_EPS_REL`),
+/// each alike, and the run says how many points it left out; their splats
+/// stay within the halo (growth's neighbour cap reads the thinned cells'
+/// spacing as dense: `grow::THINNED_KTH_CELLS`); `--thin 0` keeps every
+/// point.
 #[test]
 fn a_tiled_cloud_far_denser_than_epsilon_needs_is_thinned_and_says_so() {
     let dir = scratch("tiled-thin");
@@ -756,8 +757,8 @@ fn a_tiled_cloud_far_denser_than_epsilon_needs_is_thinned_and_says_so() {
     );
     assert!(tiles > 1, "{tiles} tiles");
     assert_eq!(thinned_tiles, tiles);
-    // Measured 2,192,376 of 2,212,559 (at 0.25 `ϵ`: 1,924,229).
-    assert!(thinned > spilled / 100 * 98, "{thinned} of {spilled}");
+    // Measured 1,924,229 of 2,212,559 (at 1 `ϵ`: 2,192,376).
+    assert!(thinned > spilled / 100 * 85, "{thinned} of {spilled}");
     // Measured 0.
     assert!(past <= 2, "{past} splats past the halo");
     assert!(

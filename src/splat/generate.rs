@@ -74,7 +74,8 @@ pub struct SplatParams {
     /// With `thin` 0: thin a cloud whose typical point's cell holds
     /// [`super::thin::AUTO_POINTS`] or more points, at the widest such cell
     /// of [`super::thin::AUTO_CELL_EPS`] ε, twice and four times that
-    /// (default on; `--thin 0` turns it off).
+    /// that `epsilon_rel` allows ([`super::thin::auto_level`]; default on;
+    /// `--thin 0` turns it off).
     pub auto_thin: bool,
     /// Fit a linear colour field to each splat of a coloured cloud
     /// ([`super::color`], by [`super::color::fit_cloud`], the step after
@@ -913,8 +914,9 @@ fn start_report(cloud: &PointCloud) -> SplatReport {
 /// whole cloud cut alike), or unasked (`params.auto_thin`) one per cell
 /// of the widest of [`super::thin::AUTO_LEVELS`] widths from
 /// [`super::thin::AUTO_CELL_EPS`] ε up whose typical point's cell holds
-/// [`super::thin::AUTO_POINTS`] or more; what was left out is counted in
-/// the report. With the cell's width in ε (0 where nothing was thinned).
+/// [`super::thin::AUTO_POINTS`] or more and that `epsilon_rel` allows
+/// ([`super::thin::auto_level`]); what was left out is counted in the
+/// report. With the cell's width in ε (0 where nothing was thinned).
 fn clean_and_thin(
     unit: &PointCloud,
     raw: &PointCloud,
@@ -954,7 +956,7 @@ fn clean_and_thin(
         } else {
             let (finest, at_least) = (super::thin::AUTO_CELL_EPS, super::thin::AUTO_POINTS);
             let held = super::thin::typical_cell_counts(&order, member(), world, finest * epsilon);
-            let Some(level) = (0..held.len()).rev().find(|&l| held[l] >= at_least) else {
+            let Some(level) = super::thin::auto_level(&held, params.epsilon_rel) else {
                 return (order, 0.0);
             };
             let auto = finest * f64::from(1u32 << level);

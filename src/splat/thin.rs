@@ -32,8 +32,8 @@ pub const AUTO_CELL_EPS: f64 = 0.25;
 pub const AUTO_LEVELS: usize = 3;
 
 /// A cloud is thinned unasked at the widest of the [`AUTO_LEVELS`] cells
-/// whose cell around a typical point holds at least this many points (and
-/// not at all when none does).
+/// whose cell around a typical point holds at least this many points and
+/// that [`AUTO_WIDE_EPS_REL`] allows (and not at all when none does).
 ///
 /// Why the widest: growth (§2.1, eq. 1) stops a splat where its points leave
 /// the `ϵ` slab, and the density rule (§2.2) seeds by coverage, so what a
@@ -53,6 +53,33 @@ pub const AUTO_LEVELS: usize = 3;
 /// typical 1 `ϵ` cell holds fewer than 8 (the 200k bunny 2, the default
 /// survey 3, the noisy scan 1) are left whole, as before.
 pub const AUTO_POINTS: usize = 8;
+
+/// A cell wider than [`AUTO_CELL_EPS`] `ϵ`, `c ϵ`, is tried only where
+/// `c²` times `ϵ` relative to the diagonal (`epsilon_rel`) is at most this,
+/// the default `ϵ`'s: growth (§2.1, eq. 1) stops a splat where a surface of
+/// curvature radius `R` leaves the `ϵ` slab, about `√(2Rϵ)` from its
+/// centre, so a splat holds about `2πR / (c² ϵ)` of the points kept one a
+/// cell, fewer as `c² ϵ` grows. The wider cells were measured at the
+/// default `ϵ` (where every view gained); a sweep of 50,000 bunny points
+/// at `ϵ` 0.05 of the diagonal, thinned at 1 `ϵ`, grew 166 splats with a
+/// Phong normal error of 7.7° against 454 and 5.8° thinned at 0.25 `ϵ`
+/// (`tests/sweep.rs`). So 1 `ϵ` at the default, 0.5 `ϵ` up to 0.008, the
+/// finest alone past that.
+pub const AUTO_WIDE_EPS_REL: f32 = 0.002;
+
+/// The level of [`typical_cell_counts`]' widths to thin at unasked: the
+/// widest whose typical cell holds [`AUTO_POINTS`] or more and that
+/// [`AUTO_WIDE_EPS_REL`] allows at `epsilon_rel`; `None` when none does.
+#[must_use]
+pub fn auto_level(held: &[usize; AUTO_LEVELS], epsilon_rel: f32) -> Option<usize> {
+    let allowed = |l: usize| {
+        let c = AUTO_CELL_EPS * f64::from(1u32 << l);
+        l == 0 || c * c * f64::from(epsilon_rel) <= f64::from(AUTO_WIDE_EPS_REL)
+    };
+    (0..AUTO_LEVELS)
+        .rev()
+        .find(|&l| held[l] >= AUTO_POINTS && allowed(l))
+}
 
 /// Points sampled by [`typical_cell_counts`].
 const SAMPLE: usize = 4096;
@@ -250,6 +277,21 @@ mod tests {
             .collect();
         let k2 = keep(&idx, p.len(), |i| far[i as usize], 1.0).unwrap();
         assert_eq!(k, k2);
+    }
+
+    #[test]
+    fn wider_cells_are_tried_only_where_epsilon_is_fine_enough() {
+        use super::auto_level;
+        // The 2M bunny sample at the default ϵ: 1, 3 and 9 a cell.
+        assert_eq!(auto_level(&[1, 3, 9], 0.002), Some(2));
+        assert_eq!(auto_level(&[1, 3, 7], 0.002), None);
+        assert_eq!(auto_level(&[8, 30, 100], 0.001), Some(2));
+        // Coarser ϵ: 0.5 ϵ up to 0.008, then the finest alone.
+        assert_eq!(auto_level(&[8, 30, 100], 0.004), Some(1));
+        assert_eq!(auto_level(&[8, 30, 100], 0.008), Some(1));
+        assert_eq!(auto_level(&[8, 30, 100], 0.0081), Some(0));
+        assert_eq!(auto_level(&[8, 30, 100], 0.05), Some(0));
+        assert_eq!(auto_level(&[7, 30, 100], 0.05), None);
     }
 
     #[test]
