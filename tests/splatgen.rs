@@ -552,6 +552,25 @@ fn thinning_keeps_the_surface_and_every_point_on_it() {
     );
 }
 
+/// Mean angle (degrees) between the normal a ray would see (the splat's
+/// Phong field, eq. 4, at 2,000 probe points on the unit sphere, every
+/// splat over them) and the sphere's.
+fn sphere_normal_error(splats: &[Splat]) -> f64 {
+    let (mut sum, mut tested) = (0f64, 0usize);
+    for q in sphere(2000, Vec3::ZERO, 1.0, 0.7) {
+        for s in splats {
+            let d = q - s.center;
+            let (u, v) = (d.dot(s.u_axis) / s.radii.x, d.dot(s.v_axis) / s.radii.y);
+            if u * u + v * v <= 1.0 && d.dot(s.normal).abs() <= s.radii.x {
+                sum += f64::from(angle(s.field_normal(u, v), q).to_degrees());
+                tested += 1;
+            }
+        }
+    }
+    assert!(tested > 2000, "{tested}");
+    sum / tested as f64
+}
+
 /// Thinning unasked: a unit sphere of 160k points at `ϵ` 0.03 of its
 /// diagonal (a typical point's cell 0.25 `ϵ` wide holds about 9, 1 `ϵ`
 /// wide about 140) is thinned at 0.25 `ϵ`, the widest cell an `ϵ` that
@@ -569,24 +588,6 @@ fn a_cloud_far_denser_than_epsilon_needs_is_thinned_unasked() {
         auto_thin: false,
         ..base.clone()
     };
-    // Mean angle (degrees) between the normal a ray would see (the splat's
-    // Phong field, eq. 4, at probe points on the sphere, every splat over
-    // them) and the sphere's.
-    let error = |splats: &[Splat]| {
-        let (mut sum, mut tested) = (0f64, 0usize);
-        for q in sphere(2000, Vec3::ZERO, 1.0, 0.7) {
-            for s in splats {
-                let d = q - s.center;
-                let (u, v) = (d.dot(s.u_axis) / s.radii.x, d.dot(s.v_axis) / s.radii.y);
-                if u * u + v * v <= 1.0 && d.dot(s.normal).abs() <= s.radii.x {
-                    sum += f64::from(angle(s.field_normal(u, v), q).to_degrees());
-                    tested += 1;
-                }
-            }
-        }
-        assert!(tested > 2000, "{tested}");
-        sum / tested as f64
-    };
     let dense = cloud(sphere(160_000, Vec3::ZERO, 1.0, 0.0));
     let thinned = |rep: &splatray::splat::SplatReport, cell: &str| -> usize {
         (rep.skipped_points.iter())
@@ -596,7 +597,7 @@ fn a_cloud_far_denser_than_epsilon_needs_is_thinned_unasked() {
     };
     let (auto, rep) = generate(&dense, &base).unwrap();
     let (whole, whole_rep) = generate(&dense, &off).unwrap();
-    let (e_auto, e_whole) = (error(&auto), error(&whole));
+    let (e_auto, e_whole) = (sphere_normal_error(&auto), sphere_normal_error(&whole));
     let dropped = thinned(&rep, "cell 0.25 epsilon wide");
     eprintln!(
         "160k: thinned {dropped}, {} splats (normal error {e_auto:.4}°) against {} ({e_whole:.4}°)",
@@ -640,22 +641,7 @@ fn a_cloud_far_denser_than_its_splats_need_is_thinned_at_one_epsilon() {
         .filter(|s| s.reason.contains("cell 1 epsilon wide"))
         .map(|s| s.count)
         .sum();
-    let error = |splats: &[Splat]| {
-        let (mut sum, mut tested) = (0f64, 0usize);
-        for q in sphere(2000, Vec3::ZERO, 1.0, 0.7) {
-            for s in splats {
-                let d = q - s.center;
-                let (u, v) = (d.dot(s.u_axis) / s.radii.x, d.dot(s.v_axis) / s.radii.y);
-                if u * u + v * v <= 1.0 && d.dot(s.normal).abs() <= s.radii.x {
-                    sum += f64::from(angle(s.field_normal(u, v), q).to_degrees());
-                    tested += 1;
-                }
-            }
-        }
-        assert!(tested > 2000, "{tested}");
-        sum / tested as f64
-    };
-    let (e_auto, e_whole) = (error(&auto), error(&whole));
+    let (e_auto, e_whole) = (sphere_normal_error(&auto), sphere_normal_error(&whole));
     eprintln!(
         "3.2M: thinned {dropped}, {} splats (normal error {e_auto:.4}°) against {} ({e_whole:.4}°)",
         auto.len(),
