@@ -74,7 +74,7 @@ pub struct SplatParams {
     /// With `thin` 0: thin a cloud whose typical point's cell holds
     /// [`super::thin::AUTO_POINTS`] or more points, at the widest such cell
     /// of [`super::thin::AUTO_CELL_EPS`] ε, twice and four times that
-    /// that `epsilon_rel` allows ([`super::thin::auto_level`]; default on;
+    /// that `epsilon_rel` allows ([`super::thin::auto_cell`]; default on;
     /// `--thin 0` turns it off).
     pub auto_thin: bool,
     /// Fit a linear colour field to each splat of a coloured cloud
@@ -915,7 +915,7 @@ fn start_report(cloud: &PointCloud) -> SplatReport {
 /// of the widest of [`super::thin::AUTO_LEVELS`] widths from
 /// [`super::thin::AUTO_CELL_EPS`] ε up whose typical point's cell holds
 /// [`super::thin::AUTO_POINTS`] or more and that `epsilon_rel` allows
-/// ([`super::thin::auto_level`]); what was left out is counted in the
+/// ([`super::thin::auto_cell`]); what was left out is counted in the
 /// report. With the cell's width in ε (0 where nothing was thinned).
 fn clean_and_thin(
     unit: &PointCloud,
@@ -954,12 +954,12 @@ fn clean_and_thin(
             );
             (params.thin, why)
         } else {
-            let (finest, at_least) = (super::thin::AUTO_CELL_EPS, super::thin::AUTO_POINTS);
-            let held = super::thin::typical_cell_counts(&order, member(), world, finest * epsilon);
-            let Some(level) = super::thin::auto_level(&held, params.epsilon_rel) else {
+            let finest = super::thin::AUTO_CELL_EPS * epsilon;
+            let held = super::thin::typical_cell_counts(&order, member(), world, finest);
+            let Some(auto) = super::thin::auto_cell(&held, params.epsilon_rel) else {
                 return (order, 0.0);
             };
-            let auto = finest * f64::from(1u32 << level);
+            let at_least = super::thin::AUTO_POINTS;
             let why = format!(
                 "denser than epsilon needs (a typical point's cell {auto} epsilon wide held {at_least} or more): one point kept per cell; --thin 0 keeps every point"
             );

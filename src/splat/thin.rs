@@ -67,18 +67,19 @@ pub const AUTO_POINTS: usize = 8;
 /// finest alone past that.
 pub const AUTO_WIDE_EPS_REL: f32 = 0.002;
 
-/// The level of [`typical_cell_counts`]' widths to thin at unasked: the
-/// widest whose typical cell holds [`AUTO_POINTS`] or more and that
-/// [`AUTO_WIDE_EPS_REL`] allows at `epsilon_rel`; `None` when none does.
+/// The cell width in `ϵ` to thin at unasked, of [`typical_cell_counts`]'
+/// widths: the widest whose typical cell holds [`AUTO_POINTS`] or more and
+/// that [`AUTO_WIDE_EPS_REL`] allows at `epsilon_rel`; `None` when none
+/// does.
 #[must_use]
-pub fn auto_level(held: &[usize; AUTO_LEVELS], epsilon_rel: f32) -> Option<usize> {
-    let allowed = |l: usize| {
-        let c = AUTO_CELL_EPS * f64::from(1u32 << l);
-        l == 0 || c * c * f64::from(epsilon_rel) <= f64::from(AUTO_WIDE_EPS_REL)
-    };
+pub fn auto_cell(held: &[usize; AUTO_LEVELS], epsilon_rel: f32) -> Option<f64> {
+    let width = |l: usize| AUTO_CELL_EPS * f64::from(1u32 << l);
+    let allowed =
+        |l: usize| l == 0 || width(l).powi(2) * f64::from(epsilon_rel) <= f64::from(AUTO_WIDE_EPS_REL);
     (0..AUTO_LEVELS)
         .rev()
         .find(|&l| held[l] >= AUTO_POINTS && allowed(l))
+        .map(width)
 }
 
 /// Points sampled by [`typical_cell_counts`].
@@ -281,17 +282,17 @@ mod tests {
 
     #[test]
     fn wider_cells_are_tried_only_where_epsilon_is_fine_enough() {
-        use super::auto_level;
+        use super::auto_cell;
         // The 2M bunny sample at the default ϵ: 1, 3 and 9 a cell.
-        assert_eq!(auto_level(&[1, 3, 9], 0.002), Some(2));
-        assert_eq!(auto_level(&[1, 3, 7], 0.002), None);
-        assert_eq!(auto_level(&[8, 30, 100], 0.001), Some(2));
+        assert_eq!(auto_cell(&[1, 3, 9], 0.002), Some(1.0));
+        assert_eq!(auto_cell(&[1, 3, 7], 0.002), None);
+        assert_eq!(auto_cell(&[8, 30, 100], 0.001), Some(1.0));
         // Coarser ϵ: 0.5 ϵ up to 0.008, then the finest alone.
-        assert_eq!(auto_level(&[8, 30, 100], 0.004), Some(1));
-        assert_eq!(auto_level(&[8, 30, 100], 0.008), Some(1));
-        assert_eq!(auto_level(&[8, 30, 100], 0.0081), Some(0));
-        assert_eq!(auto_level(&[8, 30, 100], 0.05), Some(0));
-        assert_eq!(auto_level(&[7, 30, 100], 0.05), None);
+        assert_eq!(auto_cell(&[8, 30, 100], 0.004), Some(0.5));
+        assert_eq!(auto_cell(&[8, 30, 100], 0.008), Some(0.5));
+        assert_eq!(auto_cell(&[8, 30, 100], 0.0081), Some(0.25));
+        assert_eq!(auto_cell(&[8, 30, 100], 0.05), Some(0.25));
+        assert_eq!(auto_cell(&[7, 30, 100], 0.05), None);
     }
 
     #[test]
