@@ -45,8 +45,9 @@ pub struct SplatOptions {
     pub no_viewpoint: bool,
     /// Where the cloud is denser than ϵ needs, keep one point per cell this
     /// many ϵ wide (default: the widest of 0.25, 0.5 and 1 whose typical
-    /// point's cell holds 8 or more points, 0.5 only at `--epsilon` 0.008
-    /// or finer and 1 at 0.002 or finer, else every point; 0: every point).
+    /// point's cell holds 8 or more points, 5 or more at 1, 0.5 only at
+    /// `--epsilon` 0.008 or finer and 1 at 0.002 or finer, else every point;
+    /// 0: every point).
     #[arg(long)]
     pub thin: Option<f64>,
 }

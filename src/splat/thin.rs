@@ -50,9 +50,25 @@ pub const AUTO_LEVELS: usize = 3;
 /// 8, 29) 0.4–1.2 dB; 10M bunny samples with noise 0.08 `ϵ` (2, 10, 43)
 /// 1.3–2.6 dB, normal error 2.60° → 1.51°: twelve neighbours a third of
 /// `ϵ` apart fit normals to a patch far smaller than a splat. Clouds whose
-/// typical 1 `ϵ` cell holds fewer than 8 (the 200k bunny 2, the default
-/// survey 3, the noisy scan 1) are left whole, as before.
+/// typical 1 `ϵ` cell holds fewer than [`AUTO_POINTS_WIDEST`] are left
+/// whole.
 pub const AUTO_POINTS: usize = 8;
+
+/// The widest cell, 1 `ϵ`, needs only this many points in a typical
+/// point's cell, not [`AUTO_POINTS`]: a kept point per `ϵ`² still gives a
+/// splat of the mean radius about 48 points (see [`AUTO_POINTS`]), so what
+/// bounds the count is where the grid's one-a-cell kept set is no better
+/// than the cloud. Measured against the meshes, close views included
+/// (`docs/notes/generation.md`, "Issue 54, twenty-second session"): 1M
+/// bunny samples (5 a cell) gained at every view (+0.94 / +1.25 / +0.20 dB,
+/// normal error 2.03° → 1.55°), 2M with noise 0.31 `ϵ` (7) +0.79 to +2.05
+/// dB; at 4 a scan of a gable block (raster, densest near the scanner)
+/// lost 0.21 dB from the scanner and its eave's seam grew 608 → 677
+/// pixels; at 3 the 450k bunny gained and the default survey moved ±0.05
+/// dB; at 2 the far view lost (300k bunny −0.39 dB, the 200k −0.12 dB).
+/// So 5: the 200k bunny, the default survey, the scans and the solids'
+/// 300k samples are left whole.
+pub const AUTO_POINTS_WIDEST: usize = 5;
 
 /// A cell wider than [`AUTO_CELL_EPS`] `ϵ`, `c ϵ`, is tried only where
 /// `c²` times `ϵ` relative to the diagonal (`epsilon_rel`) is at most this,
@@ -68,7 +84,7 @@ pub const AUTO_POINTS: usize = 8;
 pub const AUTO_WIDE_EPS_REL: f32 = 0.002;
 
 /// The cell width in `ϵ` to thin at unasked, of [`typical_cell_counts`]'
-/// widths: the widest whose typical cell holds [`AUTO_POINTS`] or more and
+/// widths: the widest whose typical cell holds [`auto_points`] or more and
 /// that [`AUTO_WIDE_EPS_REL`] allows at `epsilon_rel`; `None` when none
 /// does.
 #[must_use]
@@ -78,8 +94,20 @@ pub fn auto_cell(held: &[usize; AUTO_LEVELS], epsilon_rel: f32) -> Option<f64> {
         |l: usize| l == 0 || width(l).powi(2) * f64::from(epsilon_rel) <= f64::from(AUTO_WIDE_EPS_REL);
     (0..AUTO_LEVELS)
         .rev()
-        .find(|&l| held[l] >= AUTO_POINTS && allowed(l))
+        .find(|&l| held[l] >= auto_points(width(l)) && allowed(l))
         .map(width)
+}
+
+/// How many points a typical point's cell `cell` `ϵ` wide must hold for
+/// the unasked rule to thin at that width: [`AUTO_POINTS_WIDEST`] for the
+/// widest, [`AUTO_POINTS`] for the finer.
+#[must_use]
+pub fn auto_points(cell: f64) -> usize {
+    if cell >= AUTO_CELL_EPS * f64::from(1u32 << (AUTO_LEVELS - 1)) {
+        AUTO_POINTS_WIDEST
+    } else {
+        AUTO_POINTS
+    }
 }
 
 /// Points sampled by [`typical_cell_counts`].
@@ -285,7 +313,16 @@ mod tests {
         use super::auto_cell;
         // The 2M bunny sample at the default ϵ: 1, 3 and 9 a cell.
         assert_eq!(auto_cell(&[1, 3, 9], 0.002), Some(1.0));
-        assert_eq!(auto_cell(&[1, 3, 7], 0.002), None);
+        // 2M bunny samples with noise 0.31 ϵ (1, 2, 7) and 1M clean ones
+        // (1, 2, 5) at 1 ϵ; the gable scan (1, 2, 4), the default survey
+        // (1, 1, 3) and the 200k bunny (1, 1, 2) whole.
+        assert_eq!(auto_cell(&[1, 2, 7], 0.002), Some(1.0));
+        assert_eq!(auto_cell(&[1, 2, 5], 0.002), Some(1.0));
+        assert_eq!(auto_cell(&[1, 2, 4], 0.002), None);
+        assert_eq!(auto_cell(&[1, 1, 3], 0.002), None);
+        // Coarser ϵ keeps 1 ϵ out whatever the count.
+        assert_eq!(auto_cell(&[1, 2, 7], 0.004), None);
+        assert_eq!(auto_cell(&[1, 8, 30], 0.004), Some(0.5));
         assert_eq!(auto_cell(&[8, 30, 100], 0.001), Some(1.0));
         // Coarser ϵ: 0.5 ϵ up to 0.008, then the finest alone.
         assert_eq!(auto_cell(&[8, 30, 100], 0.004), Some(0.5));
