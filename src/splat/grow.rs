@@ -786,7 +786,7 @@ fn grow_speculated(
     progress: impl Fn(usize) + Sync,
 ) -> Grown {
     let pre = speculate(inp, chunks, &progress);
-    let (out, _) = commit_in_order(inp, pre);
+    let (out, _) = commit_in_order(inp, pre, chunks - 1);
     progress(inp.points.len());
     out
 }
@@ -835,10 +835,16 @@ fn speculate(
 /// else grown here. A seed's splat is a function of the seed alone
 /// ([`Deferred`]), so `pre` decides only how many splats are grown here
 /// (returned with the growth): those of seeds `pre` lacks, where another
-/// run's splats changed which points are free.
-fn commit_in_order(inp: &GrowInput<'_>, pre: Vec<(u32, Seeded)>) -> (Grown, usize) {
+/// run's splats changed which points are free. Each such seed is grown
+/// with as many as `ahead` others at once ([`lookahead`]), kept in case
+/// they seed in turn.
+fn commit_in_order(
+    inp: &GrowInput<'_>,
+    pre: Vec<(u32, Seeded)>,
+    ahead: usize,
+) -> (Grown, usize) {
     let n_pts = inp.points.len();
-    let mut g = Grower::new(inp);
+    let mut growers: Vec<Grower> = (0..=ahead).map(|_| Grower::new(inp)).collect();
     let (mut active, mut covered) = (vec![true; n_pts], vec![false; n_pts]);
     let mut out = Grown {
         splats: Vec::new(),
@@ -846,18 +852,32 @@ fn commit_in_order(inp: &GrowInput<'_>, pre: Vec<(u32, Seeded)>) -> (Grown, usiz
         elliptical: 0,
         seeds: Vec::new(),
     };
-    let (mut pre, mut grown) = (pre.into_iter().peekable(), 0);
+    let (pre_idx, mut pre): (Vec<u32>, Vec<Option<Seeded>>) =
+        pre.into_iter().map(|(i, s)| (i, Some(s))).unzip();
+    let mut side = std::collections::BTreeMap::new();
+    let (mut at, mut grown) = (0, 0);
     for i in 0..n_pts {
-        while pre.next_if(|(j, _)| (*j as usize) < i).is_some() {}
+        at += pre_idx[at..].partition_point(|&j| (j as usize) < i);
+        while side.first_key_value().is_some_and(|(&j, _)| (j as usize) < i) {
+            side.pop_first();
+        }
         if !active[i] {
             continue;
         }
-        let s = match pre.next_if(|(j, _)| *j as usize == i) {
-            Some((_, s)) => s,
-            None => {
-                grown += 1;
-                g.seed(i)
-            }
+        let s = if pre_idx.get(at) == Some(&(i as u32)) {
+            pre[at].take().expect("each speculated splat is taken once")
+        } else if let Some(s) = side.remove(&(i as u32)) {
+            s
+        } else {
+            let want = lookahead(inp, i, (&pre_idx[at..], &side), &active, ahead);
+            grown += want.len();
+            let mut new: Vec<(u32, Seeded)> = want
+                .into_par_iter()
+                .zip(growers.par_iter_mut())
+                .map(|(j, g)| (j, g.seed(j as usize)))
+                .collect();
+            side.extend(new.drain(1..));
+            new.pop().expect("the seed itself").1
         };
         for &(j, off) in &s.marks {
             covered[j as usize] = true;
@@ -872,6 +892,40 @@ fn commit_in_order(inp: &GrowInput<'_>, pre: Vec<(u32, Seeded)>) -> (Grown, usiz
     }
     out.covered = covered;
     (out, grown)
+}
+
+/// Points after `i` that [`commit_in_order`] looks at next, searched in it
+/// this far on.
+const LOOKAHEAD_SPAN: usize = 256;
+
+/// Seed `i` (active, its splat not grown) and the first `ahead` points
+/// after it, within [`LOOKAHEAD_SPAN`], that are active, have no splat
+/// grown (in `grown`: the speculated seeds from `i` on and those grown
+/// ahead) and are not among `i`'s neighbours (which its splat most likely
+/// takes): the seeds whose splats are grown at once.
+fn lookahead(
+    inp: &GrowInput<'_>,
+    i: usize,
+    grown: (&[u32], &std::collections::BTreeMap<u32, Seeded>),
+    active: &[bool],
+    ahead: usize,
+) -> Vec<u32> {
+    let near = inp.knn.of(i);
+    let mut want = vec![i as u32];
+    for j in (i + 1..active.len()).take(LOOKAHEAD_SPAN) {
+        if want.len() > ahead {
+            break;
+        }
+        let j = j as u32;
+        if active[j as usize]
+            && grown.0.binary_search(&j).is_err()
+            && !grown.1.contains_key(&j)
+            && !near.contains(&j)
+        {
+            want.push(j);
+        }
+    }
+    want
 }
 
 /// One phase of [`grow_in_regions`]: the `candidates` (ascending) as seeds
@@ -1337,10 +1391,14 @@ mod tests {
         let tree = build_tree(&p);
         let knn = Knn::build(&tree, &p, 12);
         let inp = sheet_input(&p, &n, &knn, &tree);
-        let (serial, none) = commit_in_order(&inp, Vec::new());
+        let (serial, none) = commit_in_order(&inp, Vec::new(), 0);
         assert_eq!(none, serial.splats.len());
         for chunks in [1, 2, 3, 7] {
-            let (spec, grown) = commit_in_order(&inp, speculate(&inp, chunks, &|_| {}));
+            let pre = speculate(&inp, chunks, &|_| {});
+            let (spec, grown) = commit_in_order(&inp, pre, chunks - 1);
+            let (ahead, _) = commit_in_order(&inp, Vec::new(), chunks - 1);
+            assert_eq!(bits(&serial), bits(&ahead));
+            assert_eq!(serial.covered, ahead.covered);
             assert_eq!(serial.seeds, spec.seeds);
             assert_eq!(bits(&serial), bits(&spec));
             assert_eq!(serial.covered, spec.covered);
