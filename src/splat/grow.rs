@@ -729,7 +729,7 @@ fn grow_in_regions(inp: &GrowInput<'_>, regions: usize, progress: impl Fn(usize)
     let regions = regions.clamp(1, n_pts.max(1));
     let chunks = rayon::current_num_threads().min(n_pts / SPECULATED_MIN);
     if regions == 1 && chunks > 1 {
-        return grow_speculated(inp, chunks, progress);
+        return grow_speculated(inp, (chunks, SPECULATED_RUN), progress).0;
     }
     let mut active = vec![true; n_pts];
     let mut covered = vec![false; n_pts];
@@ -776,52 +776,79 @@ fn grow_in_regions(inp: &GrowInput<'_>, regions: usize, progress: impl Fn(usize)
 /// have their seeds' splats grown speculatively ([`grow_speculated`]).
 const SPECULATED_MIN: usize = 4096;
 
-/// Growth in one region (the serial greedy of §2.2), its splats grown on
-/// `chunks` threads first ([`speculate`]) and the seeds then committed in
+/// The points a run of [`speculate`] takes in one round: the speculated
+/// splats (and the points each marks) held at once are those of
+/// `threads` such runs, whatever the cloud's size.
+const SPECULATED_RUN: usize = 1 << 16;
+
+/// Growth in one region (the serial greedy of §2.2) in rounds of
+/// `threads` runs of `run` points of the point order: each round's splats
+/// grown on the threads first ([`speculate`]), then its seeds committed in
 /// order on the calling thread ([`commit_in_order`]): the serial growth's
-/// splats bit for bit, whatever `chunks` is.
+/// splats bit for bit, whatever `threads` and `run` are. Returns also the
+/// splats the in-order passes grew.
 fn grow_speculated(
     inp: &GrowInput<'_>,
-    chunks: usize,
+    (threads, run): (usize, usize),
     progress: impl Fn(usize) + Sync,
-) -> Grown {
-    let pre = speculate(inp, chunks, &progress);
-    let (out, _) = commit_in_order(inp, pre, chunks - 1);
-    progress(inp.points.len());
-    out
+) -> (Grown, usize) {
+    let n_pts = inp.points.len();
+    let mut growers: Vec<Grower> = (0..threads).map(|_| Grower::new(inp)).collect();
+    let mut state = Committed {
+        active: vec![true; n_pts],
+        grown: Grown {
+            splats: Vec::new(),
+            covered: vec![false; n_pts],
+            elliptical: 0,
+            seeds: Vec::new(),
+        },
+    };
+    let (round, mut grown) = (threads * run, 0);
+    for lo in (0..n_pts).step_by(round) {
+        let hi = (lo + round).min(n_pts);
+        let runs = threads.min((hi - lo).div_ceil(SPECULATED_MIN)).max(1);
+        let pre = speculate((lo, hi, runs), &state.active, &mut growers);
+        grown += commit_in_order(inp, (lo, hi), pre, &mut state, &mut growers);
+        progress(hi);
+    }
+    (state.grown, grown)
 }
 
-/// The splats of `chunks` runs of the point order, grown at once, each run
-/// seeding in order as if no other run had splats (a splat's marks outside
-/// its run are dropped): every seed and its splat, ascending.
+/// [`grow_speculated`]'s state: which points are still free, and the
+/// growth so far.
+struct Committed {
+    active: Vec<bool>,
+    grown: Grown,
+}
+
+/// The splats of `runs` runs of the points `lo..hi`, grown at once, each
+/// run seeding in order from the points `active` says are free, as if no
+/// other run had splats (a splat's marks outside its run are dropped):
+/// every seed and its splat, ascending. The first run's are the serial
+/// growth's.
 fn speculate(
-    inp: &GrowInput<'_>,
-    chunks: usize,
-    progress: &(impl Fn(usize) + Sync),
+    (lo, hi, runs): (usize, usize, usize),
+    active: &[bool],
+    growers: &mut [Grower<'_>],
 ) -> Vec<(u32, Seeded)> {
-    let n_pts = inp.points.len();
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    let grown: Vec<Vec<(u32, Seeded)>> = (0..chunks)
-        .into_par_iter()
-        .map(|c| {
-            let (lo, hi) = (c * n_pts / chunks, (c + 1) * n_pts / chunks);
-            let mut g = Grower::new(inp);
-            let mut active = vec![true; hi - lo];
+    let grown: Vec<Vec<(u32, Seeded)>> = growers[..runs]
+        .par_iter_mut()
+        .enumerate()
+        .map(|(c, g)| {
+            let (lo, hi) = (lo + c * (hi - lo) / runs, lo + (c + 1) * (hi - lo) / runs);
+            let mut free = active[lo..hi].to_vec();
             let mut seeds = Vec::new();
             for i in lo..hi {
-                if (i - lo) % 65536 == 65535 {
-                    progress(done.fetch_add(65536, std::sync::atomic::Ordering::Relaxed) + 65536);
-                }
-                if !active[i - lo] {
+                if !free[i - lo] {
                     continue;
                 }
                 let s = g.seed(i);
                 for &(j, off) in &s.marks {
                     if off && (lo..hi).contains(&(j as usize)) {
-                        active[j as usize - lo] = false;
+                        free[j as usize - lo] = false;
                     }
                 }
-                active[i - lo] = false;
+                free[i - lo] = false;
                 seeds.push((i as u32, s));
             }
             seeds
@@ -830,33 +857,27 @@ fn speculate(
     grown.into_iter().flatten().collect()
 }
 
-/// The serial greedy growth of §2.2 (one region), every point in order: an
-/// active one seeds, with its splat from `pre` (seeds ascending) if there,
-/// else grown here. A seed's splat is a function of the seed alone
-/// ([`Deferred`]), so `pre` decides only how many splats are grown here
-/// (returned with the growth): those of seeds `pre` lacks, where another
+/// The serial greedy growth of §2.2 (one region) over the points `lo..hi`
+/// in order: an active one seeds, with its splat from `pre` (seeds
+/// ascending) if there, else grown here. A seed's splat is a function of
+/// the seed alone ([`Deferred`]), so `pre` decides only how many splats
+/// are grown here (returned): those of seeds `pre` lacks, where another
 /// run's splats changed which points are free. Each such seed is grown
-/// with as many as `ahead` others at once ([`lookahead`]), kept in case
-/// they seed in turn.
+/// with as many as `growers.len() - 1` others at once ([`lookahead`]),
+/// kept in case they seed in turn.
 fn commit_in_order(
     inp: &GrowInput<'_>,
+    (lo, hi): (usize, usize),
     pre: Vec<(u32, Seeded)>,
-    ahead: usize,
-) -> (Grown, usize) {
-    let n_pts = inp.points.len();
-    let mut growers: Vec<Grower> = (0..=ahead).map(|_| Grower::new(inp)).collect();
-    let (mut active, mut covered) = (vec![true; n_pts], vec![false; n_pts]);
-    let mut out = Grown {
-        splats: Vec::new(),
-        covered: Vec::new(),
-        elliptical: 0,
-        seeds: Vec::new(),
-    };
+    state: &mut Committed,
+    growers: &mut [Grower<'_>],
+) -> usize {
+    let (active, out) = (&mut state.active, &mut state.grown);
     let (pre_idx, mut pre): (Vec<u32>, Vec<Option<Seeded>>) =
         pre.into_iter().map(|(i, s)| (i, Some(s))).unzip();
     let mut side = std::collections::BTreeMap::new();
     let (mut at, mut grown) = (0, 0);
-    for i in 0..n_pts {
+    for i in lo..hi {
         at += pre_idx[at..].partition_point(|&j| (j as usize) < i);
         while side.first_key_value().is_some_and(|(&j, _)| (j as usize) < i) {
             side.pop_first();
@@ -869,7 +890,8 @@ fn commit_in_order(
         } else if let Some(s) = side.remove(&(i as u32)) {
             s
         } else {
-            let want = lookahead(inp, i, (&pre_idx[at..], &side), &active, ahead);
+            let ahead = growers.len() - 1;
+            let want = lookahead(inp, (i, hi), (&pre_idx[at..], &side), active, ahead);
             grown += want.len();
             let mut new: Vec<(u32, Seeded)> = want
                 .into_par_iter()
@@ -880,7 +902,7 @@ fn commit_in_order(
             new.pop().expect("the seed itself").1
         };
         for &(j, off) in &s.marks {
-            covered[j as usize] = true;
+            out.covered[j as usize] = true;
             if off {
                 active[j as usize] = false;
             }
@@ -890,8 +912,7 @@ fn commit_in_order(
         out.splats.push(s.splat);
         out.seeds.push(i as u32);
     }
-    out.covered = covered;
-    (out, grown)
+    grown
 }
 
 /// Points after `i` that [`commit_in_order`] looks at next, searched in it
@@ -899,20 +920,20 @@ fn commit_in_order(
 const LOOKAHEAD_SPAN: usize = 256;
 
 /// Seed `i` (active, its splat not grown) and the first `ahead` points
-/// after it, within [`LOOKAHEAD_SPAN`], that are active, have no splat
+/// after it, within [`LOOKAHEAD_SPAN`] and before `hi`, that are active, have no splat
 /// grown (in `grown`: the speculated seeds from `i` on and those grown
 /// ahead) and are not among `i`'s neighbours (which its splat most likely
 /// takes): the seeds whose splats are grown at once.
 fn lookahead(
     inp: &GrowInput<'_>,
-    i: usize,
+    (i, hi): (usize, usize),
     grown: (&[u32], &std::collections::BTreeMap<u32, Seeded>),
     active: &[bool],
     ahead: usize,
 ) -> Vec<u32> {
     let near = inp.knn.of(i);
     let mut want = vec![i as u32];
-    for j in (i + 1..active.len()).take(LOOKAHEAD_SPAN) {
+    for j in (i + 1..hi).take(LOOKAHEAD_SPAN) {
         if want.len() > ahead {
             break;
         }
@@ -1391,22 +1412,21 @@ mod tests {
         let tree = build_tree(&p);
         let knn = Knn::build(&tree, &p, 12);
         let inp = sheet_input(&p, &n, &knn, &tree);
-        let (serial, none) = commit_in_order(&inp, Vec::new(), 0);
-        assert_eq!(none, serial.splats.len());
-        for chunks in [1, 2, 3, 7] {
-            let pre = speculate(&inp, chunks, &|_| {});
-            let (spec, grown) = commit_in_order(&inp, pre, chunks - 1);
-            let (ahead, _) = commit_in_order(&inp, Vec::new(), chunks - 1);
-            assert_eq!(bits(&serial), bits(&ahead));
-            assert_eq!(serial.covered, ahead.covered);
+        let (serial, none) = grow_speculated(&inp, (1, p.len()), |_| {});
+        assert_eq!(none, 0);
+        for (threads, run) in [(2, 40_000), (3, 40_000), (7, 40_000), (2, 5_000), (3, 7_000)] {
+            let (spec, grown) = grow_speculated(&inp, (threads, run), |_| {});
             assert_eq!(serial.seeds, spec.seeds);
             assert_eq!(bits(&serial), bits(&spec));
             assert_eq!(serial.covered, spec.covered);
             assert_eq!(serial.elliptical, spec.elliptical);
-            eprintln!("{chunks} runs: {grown} of {} splats grown in order", spec.splats.len());
-            // One run is the serial growth itself; more runs' speculation
-            // misses seeds next to the earlier runs' splats.
-            assert_eq!(grown == 0, chunks == 1, "{chunks} runs, {grown} grown");
+            eprintln!(
+                "{threads} threads, runs of {run}: {grown} of {} splats grown in order",
+                spec.splats.len()
+            );
+            // More than one run's speculation misses seeds next to the
+            // earlier runs' splats.
+            assert!(grown > 0, "{threads} threads, runs of {run}: none grown");
         }
     }
 
