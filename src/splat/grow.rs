@@ -727,6 +727,10 @@ pub fn grow_all(inp: &GrowInput<'_>, progress: impl Fn(usize) + Sync) -> Grown {
 fn grow_in_regions(inp: &GrowInput<'_>, regions: usize, progress: impl Fn(usize) + Sync) -> Grown {
     let n_pts = inp.points.len();
     let regions = regions.clamp(1, n_pts.max(1));
+    let chunks = rayon::current_num_threads().min(n_pts / SPECULATED_MIN);
+    if regions == 1 && chunks > 1 {
+        return grow_speculated(inp, (chunks, SPECULATED_RUN), progress).0;
+    }
     let mut active = vec![true; n_pts];
     let mut covered = vec![false; n_pts];
     let done = std::sync::atomic::AtomicUsize::new(0);
@@ -766,6 +770,183 @@ fn grow_in_regions(inp: &GrowInput<'_>, regions: usize, progress: impl Fn(usize)
     progress(n_pts);
     out.covered = covered;
     out
+}
+
+/// Clouds grown in one region with at least this many points a thread
+/// have their seeds' splats grown speculatively ([`grow_speculated`]).
+const SPECULATED_MIN: usize = 4096;
+
+/// The points a run of [`speculate`] takes in one round: the speculated
+/// splats (and the points each marks) held at once are those of
+/// `threads` such runs, whatever the cloud's size.
+const SPECULATED_RUN: usize = 1 << 16;
+
+/// Growth in one region (the serial greedy of §2.2) in rounds of
+/// `threads` runs of `run` points of the point order: each round's splats
+/// grown on the threads first ([`speculate`]), then its seeds committed in
+/// order on the calling thread ([`commit_in_order`]): the serial growth's
+/// splats bit for bit, whatever `threads` and `run` are. Returns also the
+/// splats the in-order passes grew.
+fn grow_speculated(
+    inp: &GrowInput<'_>,
+    (threads, run): (usize, usize),
+    progress: impl Fn(usize) + Sync,
+) -> (Grown, usize) {
+    let n_pts = inp.points.len();
+    let mut growers: Vec<Grower> = (0..threads).map(|_| Grower::new(inp)).collect();
+    let mut state = Committed {
+        active: vec![true; n_pts],
+        grown: Grown {
+            splats: Vec::new(),
+            covered: vec![false; n_pts],
+            elliptical: 0,
+            seeds: Vec::new(),
+        },
+    };
+    let (round, mut grown) = (threads * run, 0);
+    for lo in (0..n_pts).step_by(round) {
+        let hi = (lo + round).min(n_pts);
+        let runs = threads.min((hi - lo).div_ceil(SPECULATED_MIN)).max(1);
+        let pre = speculate((lo, hi, runs), &state.active, &mut growers);
+        grown += commit_in_order(inp, (lo, hi), pre, &mut state, &mut growers);
+        progress(hi);
+    }
+    (state.grown, grown)
+}
+
+/// [`grow_speculated`]'s state: which points are still free, and the
+/// growth so far.
+struct Committed {
+    active: Vec<bool>,
+    grown: Grown,
+}
+
+/// The splats of `runs` runs of the points `lo..hi`, grown at once, each
+/// run seeding in order from the points `active` says are free, as if no
+/// other run had splats (a splat's marks outside its run are dropped):
+/// every seed and its splat, ascending. The first run's are the serial
+/// growth's.
+fn speculate(
+    (lo, hi, runs): (usize, usize, usize),
+    active: &[bool],
+    growers: &mut [Grower<'_>],
+) -> Vec<(u32, Seeded)> {
+    let grown: Vec<Vec<(u32, Seeded)>> = growers[..runs]
+        .par_iter_mut()
+        .enumerate()
+        .map(|(c, g)| {
+            let (lo, hi) = (lo + c * (hi - lo) / runs, lo + (c + 1) * (hi - lo) / runs);
+            let mut free = active[lo..hi].to_vec();
+            let mut seeds = Vec::new();
+            for i in lo..hi {
+                if !free[i - lo] {
+                    continue;
+                }
+                let s = g.seed(i);
+                for &(j, off) in &s.marks {
+                    if off && (lo..hi).contains(&(j as usize)) {
+                        free[j as usize - lo] = false;
+                    }
+                }
+                free[i - lo] = false;
+                seeds.push((i as u32, s));
+            }
+            seeds
+        })
+        .collect();
+    grown.into_iter().flatten().collect()
+}
+
+/// The serial greedy growth of §2.2 (one region) over the points `lo..hi`
+/// in order: an active one seeds, with its splat from `pre` (seeds
+/// ascending) if there, else grown here. A seed's splat is a function of
+/// the seed alone ([`Deferred`]), so `pre` decides only how many splats
+/// are grown here (returned): those of seeds `pre` lacks, where another
+/// run's splats changed which points are free. Each such seed is grown
+/// with as many as `growers.len() - 1` others at once ([`lookahead`]),
+/// kept in case they seed in turn.
+fn commit_in_order(
+    inp: &GrowInput<'_>,
+    (lo, hi): (usize, usize),
+    pre: Vec<(u32, Seeded)>,
+    state: &mut Committed,
+    growers: &mut [Grower<'_>],
+) -> usize {
+    let (active, out) = (&mut state.active, &mut state.grown);
+    let (pre_idx, mut pre): (Vec<u32>, Vec<Option<Seeded>>) =
+        pre.into_iter().map(|(i, s)| (i, Some(s))).unzip();
+    let mut side = std::collections::BTreeMap::new();
+    let (mut at, mut grown) = (0, 0);
+    for i in lo..hi {
+        at += pre_idx[at..].partition_point(|&j| (j as usize) < i);
+        while side.first_key_value().is_some_and(|(&j, _)| (j as usize) < i) {
+            side.pop_first();
+        }
+        if !active[i] {
+            continue;
+        }
+        let s = if pre_idx.get(at) == Some(&(i as u32)) {
+            pre[at].take().expect("each speculated splat is taken once")
+        } else if let Some(s) = side.remove(&(i as u32)) {
+            s
+        } else {
+            let ahead = growers.len() - 1;
+            let want = lookahead(inp, (i, hi), (&pre_idx[at..], &side), active, ahead);
+            grown += want.len();
+            let mut new: Vec<(u32, Seeded)> = want
+                .into_par_iter()
+                .zip(growers.par_iter_mut())
+                .map(|(j, g)| (j, g.seed(j as usize)))
+                .collect();
+            side.extend(new.drain(1..));
+            new.pop().expect("the seed itself").1
+        };
+        for &(j, off) in &s.marks {
+            out.covered[j as usize] = true;
+            if off {
+                active[j as usize] = false;
+            }
+        }
+        active[i] = false;
+        out.elliptical += usize::from(s.elliptical);
+        out.splats.push(s.splat);
+        out.seeds.push(i as u32);
+    }
+    grown
+}
+
+/// Points after `i` that [`commit_in_order`] looks at next, searched in it
+/// this far on.
+const LOOKAHEAD_SPAN: usize = 256;
+
+/// Seed `i` (active, its splat not grown) and the first `ahead` points
+/// after it, within [`LOOKAHEAD_SPAN`] and before `hi`, that are active, have no splat
+/// grown (in `grown`: the speculated seeds from `i` on and those grown
+/// ahead) and are not among `i`'s neighbours (which its splat most likely
+/// takes): the seeds whose splats are grown at once.
+fn lookahead(
+    inp: &GrowInput<'_>,
+    (i, hi): (usize, usize),
+    grown: (&[u32], &std::collections::BTreeMap<u32, Seeded>),
+    active: &[bool],
+    ahead: usize,
+) -> Vec<u32> {
+    let near = inp.knn.of(i);
+    let mut want = vec![i as u32];
+    for j in (i + 1..hi).take(LOOKAHEAD_SPAN) {
+        if want.len() > ahead {
+            break;
+        }
+        let j = j as u32;
+        if active[j as usize]
+            && grown.0.binary_search(&j).is_err()
+            && !grown.1.contains_key(&j)
+            && !near.contains(&j)
+        {
+            want.push(j);
+        }
+    }
+    want
 }
 
 /// One phase of [`grow_in_regions`]: the `candidates` (ascending) as seeds
@@ -1220,6 +1401,33 @@ mod tests {
         assert_eq!(one.seeds, three.seeds);
         assert_eq!(bits(&one), bits(&three));
         assert_eq!(one.covered, three.covered);
+    }
+
+    /// One region's growth speculated in runs and committed in order: the
+    /// serial growth's seeds, splats and cover, bit for bit, for any number
+    /// of runs, though the runs' speculation was wrong for some seeds.
+    #[test]
+    fn speculated_growth_is_the_serial_growth() {
+        let (p, n) = sheet(40_000);
+        let tree = build_tree(&p);
+        let knn = Knn::build(&tree, &p, 12);
+        let inp = sheet_input(&p, &n, &knn, &tree);
+        let (serial, none) = grow_speculated(&inp, (1, p.len()), |_| {});
+        assert_eq!(none, 0);
+        for (threads, run) in [(2, 40_000), (3, 40_000), (7, 40_000), (2, 5_000), (3, 7_000)] {
+            let (spec, grown) = grow_speculated(&inp, (threads, run), |_| {});
+            assert_eq!(serial.seeds, spec.seeds);
+            assert_eq!(bits(&serial), bits(&spec));
+            assert_eq!(serial.covered, spec.covered);
+            assert_eq!(serial.elliptical, spec.elliptical);
+            eprintln!(
+                "{threads} threads, runs of {run}: {grown} of {} splats grown in order",
+                spec.splats.len()
+            );
+            // More than one run's speculation misses seeds next to the
+            // earlier runs' splats.
+            assert!(grown > 0, "{threads} threads, runs of {run}: none grown");
+        }
     }
 
     #[test]
