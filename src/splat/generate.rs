@@ -72,7 +72,7 @@ pub struct SplatParams {
     /// 0 keeps every point, or thins unasked with `auto_thin`.
     pub thin: f64,
     /// With `thin` 0: thin a cloud whose typical point's cell holds
-    /// [`super::thin::auto_points`] or more points, at the widest such cell
+    /// [`super::thin::AUTO_POINTS_AT`] or more points, at the widest such cell
     /// of [`super::thin::AUTO_CELL_EPS`] ε, twice and four times that
     /// that `epsilon_rel` allows ([`super::thin::auto_cell`]; default on;
     /// `--thin 0` turns it off).
@@ -914,7 +914,7 @@ fn start_report(cloud: &PointCloud) -> SplatReport {
 /// whole cloud cut alike), or unasked (`params.auto_thin`) one per cell
 /// of the widest of [`super::thin::AUTO_LEVELS`] widths from
 /// [`super::thin::AUTO_CELL_EPS`] ε up whose typical point's cell holds
-/// [`super::thin::auto_points`] or more and that `epsilon_rel` allows
+/// [`super::thin::AUTO_POINTS_AT`] or more and that `epsilon_rel` allows
 /// ([`super::thin::auto_cell`]); what was left out is counted in the
 /// report. With the cell's width in ε (0 where nothing was thinned).
 fn clean_and_thin(
@@ -956,10 +956,9 @@ fn clean_and_thin(
         } else {
             let finest = super::thin::AUTO_CELL_EPS * epsilon;
             let held = super::thin::typical_cell_counts(&order, member(), world, finest);
-            let Some(auto) = super::thin::auto_cell(&held, params.epsilon_rel) else {
+            let Some((auto, at_least)) = super::thin::auto_cell(&held, params.epsilon_rel) else {
                 return (order, 0.0);
             };
-            let at_least = super::thin::auto_points(auto);
             let why = format!(
                 "denser than epsilon needs (a typical point's cell {auto} epsilon wide held {at_least} or more): one point kept per cell; --thin 0 keeps every point"
             );

@@ -83,31 +83,24 @@ pub const AUTO_POINTS_WIDEST: usize = 5;
 /// finest alone past that.
 pub const AUTO_WIDE_EPS_REL: f32 = 0.002;
 
+/// How many points a typical point's cell must hold for the unasked rule
+/// to thin at each of [`typical_cell_counts`]' widths: [`AUTO_POINTS`] at
+/// the finer, [`AUTO_POINTS_WIDEST`] at 1 `ϵ`.
+pub const AUTO_POINTS_AT: [usize; AUTO_LEVELS] = [AUTO_POINTS, AUTO_POINTS, AUTO_POINTS_WIDEST];
+
 /// The cell width in `ϵ` to thin at unasked, of [`typical_cell_counts`]'
-/// widths: the widest whose typical cell holds [`auto_points`] or more and
-/// that [`AUTO_WIDE_EPS_REL`] allows at `epsilon_rel`; `None` when none
-/// does.
+/// widths, and the count ([`AUTO_POINTS_AT`]) its typical cell reached:
+/// the widest whose typical cell holds that many or more and that
+/// [`AUTO_WIDE_EPS_REL`] allows at `epsilon_rel`; `None` when none does.
 #[must_use]
-pub fn auto_cell(held: &[usize; AUTO_LEVELS], epsilon_rel: f32) -> Option<f64> {
+pub fn auto_cell(held: &[usize; AUTO_LEVELS], epsilon_rel: f32) -> Option<(f64, usize)> {
     let width = |l: usize| AUTO_CELL_EPS * f64::from(1u32 << l);
     let allowed =
         |l: usize| l == 0 || width(l).powi(2) * f64::from(epsilon_rel) <= f64::from(AUTO_WIDE_EPS_REL);
     (0..AUTO_LEVELS)
         .rev()
-        .find(|&l| held[l] >= auto_points(width(l)) && allowed(l))
-        .map(width)
-}
-
-/// How many points a typical point's cell `cell` `ϵ` wide must hold for
-/// the unasked rule to thin at that width: [`AUTO_POINTS_WIDEST`] for the
-/// widest, [`AUTO_POINTS`] for the finer.
-#[must_use]
-pub fn auto_points(cell: f64) -> usize {
-    if cell >= AUTO_CELL_EPS * f64::from(1u32 << (AUTO_LEVELS - 1)) {
-        AUTO_POINTS_WIDEST
-    } else {
-        AUTO_POINTS
-    }
+        .find(|&l| held[l] >= AUTO_POINTS_AT[l] && allowed(l))
+        .map(|l| (width(l), AUTO_POINTS_AT[l]))
 }
 
 /// Points sampled by [`typical_cell_counts`].
@@ -312,23 +305,23 @@ mod tests {
     fn wider_cells_are_tried_only_where_epsilon_is_fine_enough() {
         use super::auto_cell;
         // The 2M bunny sample at the default ϵ: 1, 3 and 9 a cell.
-        assert_eq!(auto_cell(&[1, 3, 9], 0.002), Some(1.0));
+        assert_eq!(auto_cell(&[1, 3, 9], 0.002).map(|c| c.0), Some(1.0));
         // 2M bunny samples with noise 0.31 ϵ (1, 2, 7) and 1M clean ones
         // (1, 2, 5) at 1 ϵ; the gable scan (1, 2, 4), the default survey
         // (1, 1, 3) and the 200k bunny (1, 1, 2) whole.
-        assert_eq!(auto_cell(&[1, 2, 7], 0.002), Some(1.0));
-        assert_eq!(auto_cell(&[1, 2, 5], 0.002), Some(1.0));
+        assert_eq!(auto_cell(&[1, 2, 7], 0.002).map(|c| c.0), Some(1.0));
+        assert_eq!(auto_cell(&[1, 2, 5], 0.002), Some((1.0, 5)));
         assert_eq!(auto_cell(&[1, 2, 4], 0.002), None);
         assert_eq!(auto_cell(&[1, 1, 3], 0.002), None);
         // Coarser ϵ keeps 1 ϵ out whatever the count.
         assert_eq!(auto_cell(&[1, 2, 7], 0.004), None);
-        assert_eq!(auto_cell(&[1, 8, 30], 0.004), Some(0.5));
-        assert_eq!(auto_cell(&[8, 30, 100], 0.001), Some(1.0));
+        assert_eq!(auto_cell(&[1, 8, 30], 0.004), Some((0.5, 8)));
+        assert_eq!(auto_cell(&[8, 30, 100], 0.001).map(|c| c.0), Some(1.0));
         // Coarser ϵ: 0.5 ϵ up to 0.008, then the finest alone.
-        assert_eq!(auto_cell(&[8, 30, 100], 0.004), Some(0.5));
-        assert_eq!(auto_cell(&[8, 30, 100], 0.008), Some(0.5));
-        assert_eq!(auto_cell(&[8, 30, 100], 0.0081), Some(0.25));
-        assert_eq!(auto_cell(&[8, 30, 100], 0.05), Some(0.25));
+        assert_eq!(auto_cell(&[8, 30, 100], 0.004).map(|c| c.0), Some(0.5));
+        assert_eq!(auto_cell(&[8, 30, 100], 0.008).map(|c| c.0), Some(0.5));
+        assert_eq!(auto_cell(&[8, 30, 100], 0.0081).map(|c| c.0), Some(0.25));
+        assert_eq!(auto_cell(&[8, 30, 100], 0.05).map(|c| c.0), Some(0.25));
         assert_eq!(auto_cell(&[7, 30, 100], 0.05), None);
     }
 
