@@ -1504,9 +1504,8 @@ mod tests {
                 three += usize::from(got as usize >= CREASE_MIN_POINTS);
             }
         }
-        // Measured: 2,949 directions with a point across, 2,087 with three
-        // or more (of 11,520).
-        eprintln!("COUNTS {nonzero} {three}");
-        assert!(nonzero > 2000 && three > 1000, "{nonzero} {three}");
+        // Both kinds of count occur: measured 4,841 directions with a point
+        // across and 1,270 with three or more (of 11,520).
+        assert!(nonzero >= 4500 && three >= 1200, "{nonzero} {three}");
     }
 }
