@@ -71,33 +71,46 @@ fn fitted_plane(
 }
 
 /// A neighbourhood whose points' squared heights about a plane sum to less
-/// than this many times the squared distance from the point to its nearest
-/// neighbour holds one sheet: [`sheet_of`] is not asked. A second sheet
-/// [`sheet_of`] confirms lies at least that distance across a gap, with
-/// at least [`SHEET_MIN`] points beyond it, so along the sheets' normal
-/// the heights' squares sum to about [`SHEET_MIN`] times the squared
-/// distance or more (2.8 times for 3 of 48 points). On the thin-plate
-/// test's plates (0.8 to 3 spacings thick) the points whose neighbourhood
-/// holds two sheets measured 4.0 times or more on graph rows and 11.8 on
-/// wide rows. Not a proof (the least squares plane may tilt further on a
-/// neighbourhood of few points): a rule, held by the thin-plate tests,
-/// that spares the smooth surface's sorts and refits. At 1 rather than
-/// 0.25 it cut a further 4 % of a run's instructions on the 200k bunny
-/// sample (12.44 G to 11.93 G, callgrind, one thread) with no splat file
-/// changed (docs/notes/generation.md, sixteenth session).
-pub const SHEET_SKIP: f64 = 1.0;
+/// than [`sheet_skip`] times the squared distance from the point to its
+/// nearest neighbour holds one sheet: [`sheet_of`] is not asked. Not a
+/// proof (the least squares plane may tilt further on a neighbourhood of
+/// few points): a rule, held by the thin-plate tests, that spares the
+/// smooth surface's sorts and refits.
+///
+/// A second sheet [`sheet_of`] confirms lies at least that distance `d₁`
+/// across a gap from the point's own side, with at least [`SHEET_MIN`]
+/// points beyond it and at least a quarter of the `n` heights (and 4) on
+/// the point's side. Two groups of `a` and `o` points whose means lie `g`
+/// apart along a direction scatter about their joint mean along it by at
+/// least their between-groups sum `a·o/(a + o)·g²`, least for the fewest
+/// points: along the sheets' normal the squared heights sum to at least
+/// [`sheet_skip`]`(n)·d₁²` (2.4 for 48 heights, the wide neighbourhood;
+/// 1.71 for 13, a graph row of 12). The sixteenth session's factor of 1
+/// left that half unused: on the 200k bunny sample 161,110 neighbourhoods
+/// were asked and 620 held two sheets, none of them under 4 times.
+/// The thin-plate test's plates (0.8 to 3 spacings thick) measured 4.0
+/// times or more on graph rows and 11.8 on wide rows where two sheets
+/// lie (docs/notes/generation.md, sixteenth and twenty-third sessions).
+#[must_use]
+pub fn sheet_skip(n: usize) -> f64 {
+    let a = SHEET_MIN as f64;
+    let o = n.div_ceil(4).max(4) as f64;
+    a * o / (a + o)
+}
 
 /// Whether a neighbourhood of `neighbours` about `p` whose squared heights
-/// about a plane sum to `spread_sq` holds one sheet ([`SHEET_SKIP`]): the
-/// least positive squared distance to a neighbour, taken as the first
-/// positive one (they come nearest first), and none (every neighbour at
-/// `p`, or a non-finite sum) asks [`sheet_of`].
+/// about a plane sum to `spread_sq` holds one sheet ([`sheet_skip`] of the
+/// neighbours and the point): the least positive squared distance to a
+/// neighbour, taken as the first positive one (they come nearest first),
+/// and none (every neighbour at `p`, or a non-finite sum) asks
+/// [`sheet_of`].
 fn one_sheet(points: &[Vec3], p: Vec3, neighbours: &[u32], spread_sq: f64) -> bool {
     let d1_sq = neighbours
         .iter()
         .map(|&j| (points[j as usize] - p).length_squared())
         .find(|&d| d > 0.0);
-    d1_sq.is_some_and(|d| spread_sq < SHEET_SKIP * f64::from(d))
+    let skip = sheet_skip(neighbours.len() + 1);
+    d1_sq.is_some_and(|d| spread_sq < skip * f64::from(d))
 }
 
 /// [`estimate_multiscale`]'s settling test: the face search's least
@@ -193,7 +206,7 @@ enum Scale {
 /// where the small is collinear or they differ by over [`DISAGREE_DEG`].
 /// Where the wide neighbourhood holds two sheets (a thin plate's faces),
 /// the normal of the point's own ([`sheet_of`], not asked where the wide
-/// plane's least eigenvalue says one sheet: [`SHEET_SKIP`]).
+/// plane's least eigenvalue says one sheet: [`sheet_skip`]).
 ///
 /// With `settle` ([`Settling`], at tolerance `settle_tol`), each point
 /// whose chosen normal's plane holds, within it, at least [`FACE_HOLDS`]
@@ -2189,7 +2202,7 @@ pub fn sheet_of(
 
 /// For every point, its own sheet among its graph neighbours
 /// ([`sheet_of`] with its normal; one sheet where the neighbours' heights
-/// along it are within [`SHEET_SKIP`]).
+/// along it are within [`sheet_skip`]).
 #[must_use]
 pub fn own_sheets(points: &[Vec3], knn: &Knn, normals: &[Vec3]) -> Vec<Sheet> {
     (0..points.len())
@@ -2545,7 +2558,7 @@ mod tests {
 
     /// A jittered plate's two faces `t` apart (a 1 × 1 square, points
     /// `s` apart on each face), or with `t` = 0 one face bent into a
-    /// cylinder of radius 2: the neighbourhoods [`SHEET_SKIP`] judges.
+    /// cylinder of radius 2: the neighbourhoods [`sheet_skip`] judges.
     fn plate_or_curve(t: f32, s: f32, seed: u64) -> Vec<Vec3> {
         let mut rng = crate::rng::SplitMix64::new(seed);
         let mut u = || (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32 - 0.5;
