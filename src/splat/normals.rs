@@ -1200,6 +1200,8 @@ struct FaceScratch<'t> {
     near: Vec<usize>,
     wide: Vec<Vec3>,
     all: Vec<Vec3>,
+    /// A face list gathered ([`kept_near`]).
+    face: Vec<u32>,
 }
 
 impl<'t> FaceScratch<'t> {
@@ -1210,8 +1212,23 @@ impl<'t> FaceScratch<'t> {
             near: Vec::new(),
             wide: Vec::new(),
             all: Vec::new(),
+            face: Vec::new(),
         }
     }
+}
+
+/// The neighbours `near` (not the point) whose offsets `wide` `keep`: a
+/// point's face list, kept until `smooth_flat`. Gathered into `buf` in one
+/// pass, then copied out at its size (not regrown point by point).
+fn kept_near(near: &[usize], wide: &[Vec3], buf: &mut Vec<u32>, keep: impl Fn(Vec3) -> bool) -> Vec<u32> {
+    buf.clear();
+    buf.extend(
+        near.iter()
+            .zip(wide)
+            .filter(|(_, d)| keep(**d))
+            .map(|(&j, _)| j as u32),
+    );
+    buf.to_vec()
 }
 
 impl FaceSearch<'_> {
@@ -1227,6 +1244,7 @@ impl FaceSearch<'_> {
             near,
             wide,
             all,
+            face,
         } = scratch;
         // The graph's wide row where it keeps one of this size, else the
         // same neighbourhood queried.
@@ -1254,25 +1272,13 @@ impl FaceSearch<'_> {
         } else {
             None
         };
-        // The neighbours (not the point) whose offsets `keep`.
-        // Counted first, so that the list kept (until `smooth_flat`) is
-        // made once at its size, not regrown point by point.
-        let on = |keep: &dyn Fn(Vec3) -> bool| -> Vec<u32> {
-            let mut face = Vec::with_capacity(wide.iter().filter(|d| keep(**d)).count());
-            face.extend(
-                near.iter()
-                    .zip(wide.iter())
-                    .filter(|(_, d)| keep(**d))
-                    .map(|(&j, _)| j as u32),
-            );
-            face
-        };
         if held >= flat_at || tilted.is_some() {
             if !self.flat_faces {
                 return None;
             }
             let m = wide_plane(wide, tilted.unwrap_or(n0), tol)?;
-            return Some((m, Kind::Flat, on(&|d| m.dot(d).abs() <= tol)));
+            let face = kept_near(near, wide, face, |d| m.dot(d).abs() <= tol);
+            return Some((m, Kind::Flat, face));
         }
         // The point and its neighbours, nearest first.
         all.clear();
@@ -1289,7 +1295,7 @@ impl FaceSearch<'_> {
         // Its neighbours on that face, whose flat normals it takes up
         // (`smooth_flat`, run with the flat-face rules only).
         let face = if self.flat_faces {
-            on(&|d| own.holds(d, tol))
+            kept_near(near, wide, face, |d| own.holds(d, tol))
         } else {
             Vec::new()
         };
@@ -1602,7 +1608,7 @@ fn smooth_flat(normals: &mut [Vec3], flat: &[Option<(Kind, Vec<u32>)>], agree: f
 /// than from the k nearest: range noise tilts the plane of a few
 /// neighbours, and the splats' normals and fields (§4) carry it.
 fn wide_plane(offsets: &[Vec3], n0: Vec3, tol: f32) -> Option<Vec3> {
-    let mut held = Vec::with_capacity(offsets.len());
+    let mut held = Vec::with_capacity(offsets.len() + 1);
     held.extend(offsets.iter().copied().filter(|d| n0.dot(*d).abs() <= tol));
     if super::denoise::curvature_f(&held, n0)? >= FLAT_F {
         return None;
@@ -1610,13 +1616,18 @@ fn wide_plane(offsets: &[Vec3], n0: Vec3, tol: f32) -> Option<Vec3> {
     let mut m = n0;
     let mut origin = Vec3::ZERO;
     for _ in 0..2 {
-        let held = std::iter::once(Vec3::ZERO)
-            .chain(offsets.iter().copied())
-            .filter(|d| m.dot(*d - origin).abs() <= tol);
-        if held.clone().count() < FACE_MIN_POINTS {
+        // The points the plane holds, gathered once for the count and the
+        // fit's two passes (the same points in the same order).
+        held.clear();
+        held.extend(
+            std::iter::once(Vec3::ZERO)
+                .chain(offsets.iter().copied())
+                .filter(|d| m.dot(*d - origin).abs() <= tol),
+        );
+        if held.len() < FACE_MIN_POINTS {
             return None;
         }
-        let (centre, vals, vecs) = plane_fit(held);
+        let (centre, vals, vecs) = plane_fit(held.iter().copied());
         let normal = vecs[0].as_vec3();
         if !(normal.is_finite() && normal.length_squared() > 0.5 && vals[1] > COLLINEAR * vals[2]) {
             return None;
