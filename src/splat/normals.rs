@@ -1222,12 +1222,11 @@ impl<'t> FaceScratch<'t> {
 /// pass, then copied out at its size (not regrown point by point).
 fn kept_near(near: &[usize], wide: &[Vec3], buf: &mut Vec<u32>, keep: impl Fn(Vec3) -> bool) -> Vec<u32> {
     buf.clear();
-    buf.extend(
-        near.iter()
-            .zip(wide)
-            .filter(|(_, d)| keep(**d))
-            .map(|(&j, _)| j as u32),
-    );
+    for (&j, &d) in near.iter().zip(wide) {
+        if keep(d) {
+            buf.push(j as u32);
+        }
+    }
     buf.to_vec()
 }
 
@@ -1609,7 +1608,11 @@ fn smooth_flat(normals: &mut [Vec3], flat: &[Option<(Kind, Vec<u32>)>], agree: f
 /// neighbours, and the splats' normals and fields (§4) carry it.
 fn wide_plane(offsets: &[Vec3], n0: Vec3, tol: f32) -> Option<Vec3> {
     let mut held = Vec::with_capacity(offsets.len() + 1);
-    held.extend(offsets.iter().copied().filter(|d| n0.dot(*d).abs() <= tol));
+    for &d in offsets {
+        if n0.dot(d).abs() <= tol {
+            held.push(d);
+        }
+    }
     if super::denoise::curvature_f(&held, n0)? >= FLAT_F {
         return None;
     }
@@ -1619,11 +1622,15 @@ fn wide_plane(offsets: &[Vec3], n0: Vec3, tol: f32) -> Option<Vec3> {
         // The points the plane holds, gathered once for the count and the
         // fit's two passes (the same points in the same order).
         held.clear();
-        held.extend(
-            std::iter::once(Vec3::ZERO)
-                .chain(offsets.iter().copied())
-                .filter(|d| m.dot(*d - origin).abs() <= tol),
-        );
+        // The point itself (at the origin) first, then its neighbours.
+        if m.dot(Vec3::ZERO - origin).abs() <= tol {
+            held.push(Vec3::ZERO);
+        }
+        for &d in offsets {
+            if m.dot(d - origin).abs() <= tol {
+                held.push(d);
+            }
+        }
         if held.len() < FACE_MIN_POINTS {
             return None;
         }
