@@ -71,33 +71,46 @@ fn fitted_plane(
 }
 
 /// A neighbourhood whose points' squared heights about a plane sum to less
-/// than this many times the squared distance from the point to its nearest
-/// neighbour holds one sheet: [`sheet_of`] is not asked. A second sheet
-/// [`sheet_of`] confirms lies at least that distance across a gap, with
-/// at least [`SHEET_MIN`] points beyond it, so along the sheets' normal
-/// the heights' squares sum to about [`SHEET_MIN`] times the squared
-/// distance or more (2.8 times for 3 of 48 points). On the thin-plate
-/// test's plates (0.8 to 3 spacings thick) the points whose neighbourhood
-/// holds two sheets measured 4.0 times or more on graph rows and 11.8 on
-/// wide rows. Not a proof (the least squares plane may tilt further on a
-/// neighbourhood of few points): a rule, held by the thin-plate tests,
-/// that spares the smooth surface's sorts and refits. At 1 rather than
-/// 0.25 it cut a further 4 % of a run's instructions on the 200k bunny
-/// sample (12.44 G to 11.93 G, callgrind, one thread) with no splat file
-/// changed (docs/notes/generation.md, sixteenth session).
-pub const SHEET_SKIP: f64 = 1.0;
+/// than [`sheet_skip`] times the squared distance from the point to its
+/// nearest neighbour holds one sheet: [`sheet_of`] is not asked. Not a
+/// proof (the least squares plane may tilt further on a neighbourhood of
+/// few points): a rule, held by the thin-plate tests, that spares the
+/// smooth surface's sorts and refits.
+///
+/// A second sheet [`sheet_of`] confirms lies at least that distance `d₁`
+/// across a gap from the point's own side, with at least [`SHEET_MIN`]
+/// points beyond it and at least a quarter of the `n` heights (and 4) on
+/// the point's side. Two groups of `a` and `o` points whose means lie `g`
+/// apart along a direction scatter about their joint mean along it by at
+/// least their between-groups sum `a·o/(a + o)·g²`, least for the fewest
+/// points: along the sheets' normal the squared heights sum to at least
+/// [`sheet_skip`]`(n)·d₁²` (2.4 for 48 heights, the wide neighbourhood;
+/// 1.71 for 13, a graph row of 12). The sixteenth session's factor of 1
+/// left that half unused: on the 200k bunny sample 161,110 neighbourhoods
+/// were asked and 620 held two sheets, none of them under 4 times.
+/// The thin-plate test's plates (0.8 to 3 spacings thick) measured 4.0
+/// times or more on graph rows and 11.8 on wide rows where two sheets
+/// lie (docs/notes/generation.md, sixteenth and twenty-third sessions).
+#[must_use]
+pub fn sheet_skip(n: usize) -> f64 {
+    let a = SHEET_MIN as f64;
+    let o = n.div_ceil(4).max(4) as f64;
+    a * o / (a + o)
+}
 
 /// Whether a neighbourhood of `neighbours` about `p` whose squared heights
-/// about a plane sum to `spread_sq` holds one sheet ([`SHEET_SKIP`]): the
-/// least positive squared distance to a neighbour, taken as the first
-/// positive one (they come nearest first), and none (every neighbour at
-/// `p`, or a non-finite sum) asks [`sheet_of`].
+/// about a plane sum to `spread_sq` holds one sheet ([`sheet_skip`] of the
+/// neighbours and the point): the least positive squared distance to a
+/// neighbour, taken as the first positive one (they come nearest first),
+/// and none (every neighbour at `p`, or a non-finite sum) asks
+/// [`sheet_of`].
 fn one_sheet(points: &[Vec3], p: Vec3, neighbours: &[u32], spread_sq: f64) -> bool {
     let d1_sq = neighbours
         .iter()
         .map(|&j| (points[j as usize] - p).length_squared())
         .find(|&d| d > 0.0);
-    d1_sq.is_some_and(|d| spread_sq < SHEET_SKIP * f64::from(d))
+    let skip = sheet_skip(neighbours.len() + 1);
+    d1_sq.is_some_and(|d| spread_sq < skip * f64::from(d))
 }
 
 /// [`estimate_multiscale`]'s settling test: the face search's least
@@ -193,7 +206,7 @@ enum Scale {
 /// where the small is collinear or they differ by over [`DISAGREE_DEG`].
 /// Where the wide neighbourhood holds two sheets (a thin plate's faces),
 /// the normal of the point's own ([`sheet_of`], not asked where the wide
-/// plane's least eigenvalue says one sheet: [`SHEET_SKIP`]).
+/// plane's least eigenvalue says one sheet: [`sheet_skip`]).
 ///
 /// With `settle` ([`Settling`], at tolerance `settle_tol`), each point
 /// whose chosen normal's plane holds, within it, at least [`FACE_HOLDS`]
@@ -1187,6 +1200,8 @@ struct FaceScratch<'t> {
     near: Vec<usize>,
     wide: Vec<Vec3>,
     all: Vec<Vec3>,
+    /// A face list gathered ([`kept_near`]).
+    face: Vec<u32>,
 }
 
 impl<'t> FaceScratch<'t> {
@@ -1197,8 +1212,22 @@ impl<'t> FaceScratch<'t> {
             near: Vec::new(),
             wide: Vec::new(),
             all: Vec::new(),
+            face: Vec::new(),
         }
     }
+}
+
+/// The neighbours `near` (not the point) whose offsets `wide` `keep`: a
+/// point's face list, kept until `smooth_flat`. Gathered into `buf` in one
+/// pass, then copied out at its size (not regrown point by point).
+fn kept_near(near: &[usize], wide: &[Vec3], buf: &mut Vec<u32>, keep: impl Fn(Vec3) -> bool) -> Vec<u32> {
+    buf.clear();
+    for (&j, &d) in near.iter().zip(wide) {
+        if keep(d) {
+            buf.push(j as u32);
+        }
+    }
+    buf.to_vec()
 }
 
 impl FaceSearch<'_> {
@@ -1214,6 +1243,7 @@ impl FaceSearch<'_> {
             near,
             wide,
             all,
+            face,
         } = scratch;
         // The graph's wide row where it keeps one of this size, else the
         // same neighbourhood queried.
@@ -1241,25 +1271,13 @@ impl FaceSearch<'_> {
         } else {
             None
         };
-        // The neighbours (not the point) whose offsets `keep`.
-        // Counted first, so that the list kept (until `smooth_flat`) is
-        // made once at its size, not regrown point by point.
-        let on = |keep: &dyn Fn(Vec3) -> bool| -> Vec<u32> {
-            let mut face = Vec::with_capacity(wide.iter().filter(|d| keep(**d)).count());
-            face.extend(
-                near.iter()
-                    .zip(wide.iter())
-                    .filter(|(_, d)| keep(**d))
-                    .map(|(&j, _)| j as u32),
-            );
-            face
-        };
         if held >= flat_at || tilted.is_some() {
             if !self.flat_faces {
                 return None;
             }
             let m = wide_plane(wide, tilted.unwrap_or(n0), tol)?;
-            return Some((m, Kind::Flat, on(&|d| m.dot(d).abs() <= tol)));
+            let face = kept_near(near, wide, face, |d| m.dot(d).abs() <= tol);
+            return Some((m, Kind::Flat, face));
         }
         // The point and its neighbours, nearest first.
         all.clear();
@@ -1276,7 +1294,7 @@ impl FaceSearch<'_> {
         // Its neighbours on that face, whose flat normals it takes up
         // (`smooth_flat`, run with the flat-face rules only).
         let face = if self.flat_faces {
-            on(&|d| own.holds(d, tol))
+            kept_near(near, wide, face, |d| own.holds(d, tol))
         } else {
             Vec::new()
         };
@@ -1589,21 +1607,34 @@ fn smooth_flat(normals: &mut [Vec3], flat: &[Option<(Kind, Vec<u32>)>], agree: f
 /// than from the k nearest: range noise tilts the plane of a few
 /// neighbours, and the splats' normals and fields (§4) carry it.
 fn wide_plane(offsets: &[Vec3], n0: Vec3, tol: f32) -> Option<Vec3> {
-    let mut held = Vec::with_capacity(offsets.len());
-    held.extend(offsets.iter().copied().filter(|d| n0.dot(*d).abs() <= tol));
+    let mut held = Vec::with_capacity(offsets.len() + 1);
+    for &d in offsets {
+        if n0.dot(d).abs() <= tol {
+            held.push(d);
+        }
+    }
     if super::denoise::curvature_f(&held, n0)? >= FLAT_F {
         return None;
     }
     let mut m = n0;
     let mut origin = Vec3::ZERO;
     for _ in 0..2 {
-        let held = std::iter::once(Vec3::ZERO)
-            .chain(offsets.iter().copied())
-            .filter(|d| m.dot(*d - origin).abs() <= tol);
-        if held.clone().count() < FACE_MIN_POINTS {
+        // The points the plane holds, gathered once for the count and the
+        // fit's two passes (the same points in the same order).
+        held.clear();
+        // The point itself (at the origin) first, then its neighbours.
+        if m.dot(Vec3::ZERO - origin).abs() <= tol {
+            held.push(Vec3::ZERO);
+        }
+        for &d in offsets {
+            if m.dot(d - origin).abs() <= tol {
+                held.push(d);
+            }
+        }
+        if held.len() < FACE_MIN_POINTS {
             return None;
         }
-        let (centre, vals, vecs) = plane_fit(held);
+        let (centre, vals, vecs) = plane_fit(held.iter().copied());
         let normal = vecs[0].as_vec3();
         if !(normal.is_finite() && normal.length_squared() > 0.5 && vals[1] > COLLINEAR * vals[2]) {
             return None;
@@ -2189,7 +2220,7 @@ pub fn sheet_of(
 
 /// For every point, its own sheet among its graph neighbours
 /// ([`sheet_of`] with its normal; one sheet where the neighbours' heights
-/// along it are within [`SHEET_SKIP`]).
+/// along it are within [`sheet_skip`]).
 #[must_use]
 pub fn own_sheets(points: &[Vec3], knn: &Knn, normals: &[Vec3]) -> Vec<Sheet> {
     (0..points.len())
@@ -2545,7 +2576,7 @@ mod tests {
 
     /// A jittered plate's two faces `t` apart (a 1 × 1 square, points
     /// `s` apart on each face), or with `t` = 0 one face bent into a
-    /// cylinder of radius 2: the neighbourhoods [`SHEET_SKIP`] judges.
+    /// cylinder of radius 2: the neighbourhoods [`sheet_skip`] judges.
     fn plate_or_curve(t: f32, s: f32, seed: u64) -> Vec<Vec3> {
         let mut rng = crate::rng::SplitMix64::new(seed);
         let mut u = || (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32 - 0.5;
