@@ -56,6 +56,14 @@ pub fn flag(points: &[Vec3], knn: &Knn, viewpoint: Option<&Viewpoints>) -> Vec<b
             if scaled[i] > GLOBAL_RATIO * global {
                 return true;
             }
+            // The floor first: it needs no neighbour, and about nine
+            // points in ten (those under the 90th percentile) fail it (on
+            // the 200k bunny the medians took 215 M instructions, a
+            // tenth of the graph's queries).
+            let over_floor = scaled[i] > LOCAL_FLOOR * global;
+            if !over_floor {
+                return false;
+            }
             let mut d: Vec<f32> = knn
                 .of(i)
                 .iter()
@@ -66,7 +74,7 @@ pub fn flag(points: &[Vec3], knn: &Knn, viewpoint: Option<&Viewpoints>) -> Vec<b
             }
             let mid = d.len() / 2;
             let m = *d.select_nth_unstable_by(mid, f32::total_cmp).1;
-            knn.kth_distance[i] > LOCAL_RATIO * m && scaled[i] > LOCAL_FLOOR * global
+            knn.kth_distance[i] > LOCAL_RATIO * m
         })
         .collect()
 }
@@ -86,4 +94,64 @@ pub fn find(points: &[Vec3], k: usize, viewpoint: Option<&Viewpoints>) -> Vec<bo
     // "Issue 54, eighth session").
     let order = morton_order(points);
     flag(points, &Knn::build_in_order(&tree, points, k, &order), viewpoint)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// [`flag`] against the test as written in full for every point (the
+    /// median of the neighbours' k-th distances, then both floors): the
+    /// same flags on a jittered sheet with a few points lifted off it
+    /// (local outliers), a far cluster (global ones), and with a scanner;
+    /// and some of each kind are flagged.
+    #[test]
+    fn the_floor_first_flags_what_the_whole_test_flags() {
+        let mut s = 0x2545_f491_u32;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 17;
+            s ^= s << 5;
+            s as f32 / u32::MAX as f32
+        };
+        let mut pts: Vec<Vec3> = (0..3600)
+            .map(|i| {
+                let (x, y) = ((i % 60) as f32, (i / 60) as f32);
+                Vec3::new(x + 0.3 * next(), y + 0.3 * next(), 0.05 * next())
+            })
+            .collect();
+        for i in (0..3600).step_by(97) {
+            pts[i].z += 4.0 + 3.0 * next();
+        }
+        pts.extend((0..5).map(|i| Vec3::new(200.0 + i as f32 * 9.0, 200.0, 50.0)));
+        let tree = build_tree(&pts);
+        let knn = Knn::build(&tree, &pts, 12);
+        let sights = Viewpoints::One(Vec3::new(30.0, 30.0, 40.0));
+        for viewpoint in [None, Some(&sights)] {
+            let got = flag(&pts, &knn, viewpoint);
+            let scaled: Vec<f32> = (0..pts.len())
+                .map(|i| match viewpoint {
+                    Some(vp) => knn.kth_distance[i] / (pts[i] - vp.at(i)).length().max(f32::MIN_POSITIVE),
+                    None => knn.kth_distance[i],
+                })
+                .collect();
+            let mut sorted = scaled.clone();
+            sorted.sort_by(f32::total_cmp);
+            let global = sorted[(pts.len() - 1) * 9 / 10];
+            let want: Vec<bool> = (0..pts.len())
+                .map(|i| {
+                    let mut d: Vec<f32> = knn.of(i).iter().map(|&j| knn.kth_distance[j as usize]).collect();
+                    d.sort_by(f32::total_cmp);
+                    let m = d[d.len() / 2];
+                    scaled[i] > GLOBAL_RATIO * global
+                        || (knn.kth_distance[i] > LOCAL_RATIO * m && scaled[i] > LOCAL_FLOOR * global)
+                })
+                .collect();
+            assert_eq!(got, want);
+            let lifted = (0..3600).step_by(97).filter(|&i| got[i]).count();
+            // Measured: 8 of the 38 lifted points without the scanner, 12
+            // with it.
+            assert!(lifted >= 6 && got[3600..].iter().all(|&f| f), "{lifted}");
+        }
+    }
 }
