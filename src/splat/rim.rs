@@ -555,10 +555,6 @@ pub(super) fn clip_lines(
     let (xs, ys) = coarse_dirs();
     let candidates: Vec<(f32, ClipLine)> = (0..CLIP_DIRECTIONS)
         .filter_map(|k| {
-            // One or two points across: no line ([`Lines::line_counted`]).
-            if (1..CREASE_MIN_POINTS as u32).contains(&counts[k]) {
-                return None;
-            }
             let w = Vec2::new(xs[k], ys[k]);
             lines
                 .line_counted(w, exts[k], counts[k])
