@@ -381,7 +381,7 @@ impl Grower<'_> {
         }
         let hc = plane_height(growth);
         let clip = if inp.creases {
-            self.clip_lines(i, a, b, aspect, shift, r, hc)
+            self.clip_lines(i, growth, (a, b, aspect), shift, r, hc)
         } else {
             Clipped::NONE
         };
@@ -397,13 +397,11 @@ impl Grower<'_> {
     /// through that face, with the points of other faces it meets on the
     /// way and those of its own face it meets past the rim (a border's
     /// count takes them before it asks the kd-tree for the rest).
-    #[allow(clippy::too_many_arguments)]
     fn clip_lines(
         &mut self,
         i: usize,
-        a: Vec3,
-        b: Vec3,
-        aspect: f32,
+        growth: &Growth,
+        (a, b, aspect): (Vec3, Vec3, f32),
         shift: Vec2,
         r: f32,
         hc: f32,
@@ -423,15 +421,20 @@ impl Grower<'_> {
             r,
             hc,
         };
-        self.round = self.round.wrapping_add(1);
-        if self.round == 0 {
-            self.stamp.fill(0);
-            self.round = 1;
-        }
-        let round = self.round;
         let d_k = inp.knn.kth_distance[i].max(f32::MIN_POSITIVE);
         let spacing = d_k * (std::f32::consts::PI / inp.knn.k.max(1) as f32).sqrt() / r;
         let reach = f.reach(spacing);
+        let surface = rim::Surface {
+            points: inp.points,
+            normals: inp.normals,
+            tree: inp.tree,
+            epsilon: inp.epsilon,
+            face_cos: self.face_cos,
+            scanned: inp.scanned,
+        };
+        if self.quiet(growth, &surface, &f, spacing) {
+            return Clipped::NONE;
+        }
         // The buffers are the grower's, kept from seed to seed.
         let (mut own, mut other, mut ring, mut stack) = (
             std::mem::take(&mut self.own),
@@ -443,6 +446,7 @@ impl Grower<'_> {
         other.clear();
         ring.clear();
         stack.clear();
+        let round = self.next_round();
         own.push(f.near(inp.points, i));
         stack.push(i as u32);
         self.stamp[i] = round;
@@ -464,17 +468,95 @@ impl Grower<'_> {
                 }
             }
         }
-        let surface = rim::Surface {
-            points: inp.points,
-            normals: inp.normals,
-            tree: inp.tree,
-            epsilon: inp.epsilon,
-            face_cos: self.face_cos,
-            scanned: inp.scanned,
-        };
         let clipped = rim::clip_lines(&surface, &f, (&own, &other, &ring), spacing);
         (self.own, self.other, self.ring, self.stack) = (own, other, ring, stack);
         clipped
+    }
+}
+
+impl Grower<'_> {
+    /// A new traversal's stamp (every stamp cleared when the count wraps).
+    fn next_round(&mut self) -> u32 {
+        self.round = self.round.wrapping_add(1);
+        if self.round == 0 {
+            self.stamp.fill(0);
+            self.round = 1;
+        }
+        self.round
+    }
+
+    /// Whether the splat `f` surely has no clip line, shown from what its
+    /// `growth` met, without [`Grower::clip_lines`]' traversal: the same
+    /// sets that traversal gathers, where they can be shown the same, have
+    /// no candidate line ([`rim::no_candidate`]). `false` asks for the
+    /// traversal (never a different answer, only a slower one).
+    ///
+    /// The growth met its seed and every graph neighbour of the points it
+    /// took (`visited`), and took them through one another from the seed.
+    /// Where none of the met points turns onto another face, every point
+    /// taken lies inside the disc, and every met point inside it that was
+    /// not taken has all its neighbours met too, the traversal from the
+    /// seed through the own face inside the disc reaches exactly the met
+    /// points inside it (each is a neighbour of a point taken, the points
+    /// taken reach one another, and nothing it expands leads past the met
+    /// points) and meets no other face. Its ring past the rim is then some
+    /// of the met points past it: a ring is only counted before the tree
+    /// is asked for the whole (`rim::Lines::border`), so any part of it
+    /// gives the same verdict. Without another face, a candidate needs a
+    /// border, whose verdict rests on the extents and counts alone, not
+    /// on the points' order, but for a scanned cloud's small splats
+    /// (`rim::Lines::rim_side`'s sums): those are not answered here.
+    fn quiet(&mut self, growth: &Growth, s: &rim::Surface, f: &rim::Frame, spacing: f32) -> bool {
+        let inp = self.inp;
+        let Some((&seed, met)) = growth.visited.split_first() else {
+            return false;
+        };
+        if (s.scanned && spacing >= rim::BORDER_SMALL)
+            || met.iter().any(|&q| inp.normals[q as usize].dot(f.n) <= self.face_cos)
+        {
+            return false;
+        }
+        let mut seen = self.next_round();
+        let took = self.next_round();
+        if took < seen {
+            seen = self.next_round();
+        }
+        for &q in met {
+            self.stamp[q as usize] = seen;
+        }
+        for &(j, _) in &growth.accepted {
+            self.stamp[j as usize] = took;
+        }
+        let reach = f.reach(spacing);
+        let (mut own, mut ring) = (std::mem::take(&mut self.own), std::mem::take(&mut self.ring));
+        own.clear();
+        ring.clear();
+        own.push(f.near(inp.points, seed as usize));
+        let mut sure = true;
+        for &q in met {
+            let m = f.near(inp.points, q as usize);
+            let taken = self.stamp[q as usize] == took;
+            if m.q.length_squared() <= 1.0 {
+                let stamp = &self.stamp;
+                sure = taken
+                    || inp.knn.of(q as usize).iter().all(|&x| {
+                        let t = stamp[x as usize];
+                        t == seen || t == took
+                    });
+                own.push(m);
+            } else {
+                sure = !taken;
+                if m.past_rim() && reach.surely_holds(inp.points[q as usize]) {
+                    ring.push(m);
+                }
+            }
+            if !sure {
+                break;
+            }
+        }
+        let quiet = sure && rim::no_candidate(s, f, (&own, &[], &ring), spacing);
+        (self.own, self.ring) = (own, ring);
+        quiet
     }
 }
 

@@ -613,6 +613,25 @@ pub(super) fn clip_lines(
     }
 }
 
+/// Whether [`clip_lines`] finds no candidate line at all along its
+/// coarse directions (and so draws none) for the same sets.
+#[must_use]
+pub(super) fn no_candidate(
+    s: &Surface,
+    f: &Frame,
+    (own, other, ring): (&[Near], &[Near], &[Near]),
+    spacing: f32,
+) -> bool {
+    let mut lines = Lines::new(s, f, own, other, ring, spacing);
+    let exts = coarse_exts(own);
+    let counts = coarse_counts(&lines.other_lanes, &exts, spacing);
+    let (xs, ys) = coarse_dirs();
+    (0..CLIP_DIRECTIONS).all(|k| {
+        let w = Vec2::new(xs[k], ys[k]);
+        lines.line_counted(w, exts[k], counts[k]).is_none()
+    })
+}
+
 /// The [`CLIP_DIRECTIONS`] coarse directions of [`clip_lines`], `(cos t,
 /// sin t)` at `t = k·τ/CLIP_DIRECTIONS` as [`Lines::line_at`] makes them,
 /// made once.
