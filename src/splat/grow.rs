@@ -1446,7 +1446,7 @@ mod tests {
         // Measured: 3,572 seeds, 649 walks spared, 2,772 clipped (the
         // discs are wide: most reach the square's edges, the hole or the wall).
         assert_eq!(walk.spared, 0);
-assert!(quick.spared >= 600, "{} of {seeds}", quick.spared);
+        assert!(quick.spared >= 600, "{} of {seeds}", quick.spared);
         assert!(clipped >= 2_700, "{clipped} of {seeds}");
     }
 
