@@ -67,36 +67,15 @@ pub fn plane_fit(points: impl Iterator<Item = Vec3> + Clone) -> (DVec3, [f64; 3]
 }
 
 /// The centroid of `points` and their covariance about it (unnormalised),
-/// accumulated in `f64`: the matrix [`plane_fit`] solves. The first pass
-/// keeps up to [`GATHERED`] points for the second (the same points in the
-/// same order, so the same sums bit for bit), where a chain of index reads
-/// would run again; more run the iterator twice.
+/// accumulated in `f64`: the matrix [`plane_fit`] solves.
 fn covariance(points: impl Iterator<Item = Vec3> + Clone) -> (DVec3, [[f64; 3]; 3]) {
-    let mut kept = [Vec3::ZERO; GATHERED];
     let mut c = DVec3::ZERO;
-    let mut n = 0usize;
+    let mut n = 0f64;
     for p in points.clone() {
-        if let Some(k) = kept.get_mut(n) {
-            *k = p;
-        }
         c += p.as_dvec3();
-        n += 1;
+        n += 1.0;
     }
-    c /= (n as f64).max(1.0);
-    let m = if n <= GATHERED {
-        scatter(kept[..n].iter().copied(), c)
-    } else {
-        scatter(points, c)
-    };
-    (c, m)
-}
-
-/// The most points [`covariance`] keeps on the stack between its passes
-/// (a wide neighbourhood of the default `k` holds 48, with the point 49).
-const GATHERED: usize = 64;
-
-/// The unnormalised covariance of `points` about `c` (both triangles).
-fn scatter(points: impl Iterator<Item = Vec3>, c: DVec3) -> [[f64; 3]; 3] {
+    c /= n.max(1.0);
     let mut m = [[0f64; 3]; 3];
     for p in points {
         let d = p.as_dvec3() - c;
@@ -110,7 +89,7 @@ fn scatter(points: impl Iterator<Item = Vec3>, c: DVec3) -> [[f64; 3]; 3] {
     m[1][0] = m[0][1];
     m[2][0] = m[0][2];
     m[2][1] = m[1][2];
-    m
+    (c, m)
 }
 
 /// Below this gap between the two smallest eigenvalues, as a fraction of
