@@ -53,11 +53,6 @@ pub fn fit_all(points: &[Vec3], normals: &[Vec3], knn: &Knn) -> Vec<Option<Local
 /// this share of the points above the middle.
 pub const BOUND_SLACK: f64 = 0.01;
 
-/// [`quiet_noise`] bounds every point only where a sample's bound is
-/// within this many times the noise asked for (a noisy cloud's is far
-/// above: the noisy scan's 4.5 times, the bunny sample's 0.82).
-pub const SAMPLE_FAR: f64 = 2.0;
-
 /// About how many points [`quiet_noise`] fits for the figure it reports.
 pub const NOISE_SAMPLE: usize = 8192;
 
@@ -85,8 +80,9 @@ pub fn quiet_noise(
     let asked: Vec<usize> = (0..points.len()).filter(|&i| !skip[i]).collect();
     let stride = (asked.len() / NOISE_SAMPLE).max(1);
     let sample: Vec<usize> = asked.iter().copied().step_by(stride).collect();
-    // The bound of the sample first: far above (a noisy cloud), no answer
-    // without bounding every point.
+    // The bound of the sample first: above (a noisy cloud: the noisy
+    // scan's 4.5 times the noise asked for, the bunny sample's 0.82), no
+    // answer without bounding every point.
     let bound = |at: &[usize]| {
         let mut upper: Vec<f64> = at
             .par_iter()
@@ -100,7 +96,7 @@ pub fn quiet_noise(
             .1
             .to_owned()
     };
-    if asked.is_empty() || !(bound(&sample) <= SAMPLE_FAR * below && bound(&asked) <= below) {
+    if asked.is_empty() || !(bound(&sample) <= below && (stride == 1 || bound(&asked) <= below)) {
         return None;
     }
     let mut sd: Vec<f32> = sample
