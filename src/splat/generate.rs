@@ -1068,6 +1068,13 @@ fn onto_local_surfaces(
     knn: &Knn,
     report: &mut SplatReport,
 ) -> bool {
+    if to_estimate > 0 {
+        let quiet = quiet_noise(report.epsilon);
+        if let Some(noise) = denoise::quiet_noise(points, nrm, knn, fixed, quiet) {
+            report.noise = noise;
+            return false;
+        }
+    }
     let local = if to_estimate > 0 {
         denoise::fit_all(points, nrm, knn)
     } else {
@@ -1101,6 +1108,22 @@ fn onto_local_surfaces(
         report.noise / report.epsilon
     ));
     true
+}
+
+/// Below this share of what its first reader reads it against, the noise
+/// is read by no rule ([`quiet_noise`]).
+pub const QUIET_MARGIN: f64 = 0.8;
+
+/// The noise under which no output reads it, at `epsilon`, by
+/// [`QUIET_MARGIN`]: the points are not moved ([`NOISE_PROJECT`]), the
+/// face tolerance is `ϵ`'s ([`normals::FACE_TOL_EPS`] over
+/// [`normals::FACE_TOL_NOISE`], and the flat-face rules off), and the
+/// free-space margin `ϵ`'s (`freespace::MARGIN_EPS` over `MARGIN_NOISE`).
+/// Below it only the report's figure reads the noise.
+fn quiet_noise(epsilon: f64) -> f64 {
+    let face = f64::from(normals::FACE_TOL_EPS / normals::FACE_TOL_NOISE);
+    let margin = f64::from(crate::freespace::MARGIN_EPS / crate::freespace::MARGIN_NOISE);
+    QUIET_MARGIN * epsilon * NOISE_PROJECT.min(face).min(margin)
 }
 
 /// The largest splat radius over the local point spacing (the k-th
