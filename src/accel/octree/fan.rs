@@ -169,14 +169,48 @@ impl Coverage {
         })
     }
 
-    /// The cells `[i0, i1]` along axis `a` of a ball wholly in front
-    /// (centre `cx` across, `cw` along `w`, radius `r`), or `None` when its
-    /// span misses the grid.
-    fn span(&self, cx: f64, cw: f64, r: f64, a: usize) -> Option<[usize; 2]> {
+    /// The span in `x = p·e / p·w` of a ball wholly in front (centre
+    /// `cx` across along `e`, `cw` along `w`, radius `r`): the tangents'
+    /// slopes (module doc).
+    fn ball_span(cx: f64, cw: f64, r: f64) -> [f64; 2] {
         let den = cw * cw - r * r;
         let rho2 = cx * cx + cw * cw;
         let s = r * (rho2 - r * r).sqrt();
-        let (x0, x1) = ((cx * cw - s) / den, (cx * cw + s) / den);
+        [(cx * cw - s) / den, (cx * cw + s) / den]
+    }
+
+    /// The span in `x = p·e / p·w` of every point within `delta` of the
+    /// ellipse `c + α a + β b` (`α² + β² <= 1`, `c` from the origin, the
+    /// ellipse and that margin wholly in front: `c·w > |(a·w, b·w)| +
+    /// delta`). The ellipse's boundary `(k0 + k1 cos θ + k2 sin θ) / (l0 +
+    /// l1 cos θ + l2 sin θ)` (`k = (c, a, b)·e`, `l = (c, a, b)·w`) reaches
+    /// `x` exactly when `|k0 - x l0| <= |(k1 - x l1, k2 - x l2)|`: the
+    /// span is between the roots of `(l0² - l1² - l2²) x² - 2 (k0 l0 - k1
+    /// l1 - k2 l2) x + (k0² - k1² - k2²)`, the discriminant raised by a
+    /// bound on its rounding (its square root otherwise loses half the
+    /// digits near a double root). A point within `delta` of the ellipse
+    /// moves `x` by at most `delta |∇x|`, `|∇x| = |e - x w| / p·w <= (1 +
+    /// X) / zmin` over that margin (`zmin` the least `p·w` there, `X` the
+    /// most `|x|`). The f64 rounding of the rest is far inside [`PAD`].
+    fn ellipse_span(c: DVec3, [a, b]: [DVec3; 2], e: DVec3, w: DVec3, delta: f64) -> [f64; 2] {
+        let k = [c.dot(e), a.dot(e), b.dot(e)];
+        let l = [c.dot(w), a.dot(w), b.dot(w)];
+        let qa = l[0] * l[0] - l[1] * l[1] - l[2] * l[2];
+        let qb = k[0] * l[0] - k[1] * l[1] - k[2] * l[2];
+        let qc = k[0] * k[0] - k[1] * k[1] - k[2] * k[2];
+        let sb = (k[0] * l[0]).abs() + (k[1] * l[1]).abs() + (k[2] * l[2]).abs();
+        let (sa, sc) = (l[0] * l[0] + l[1] * l[1] + l[2] * l[2], k[0] * k[0] + k[1] * k[1] + k[2] * k[2]);
+        let rounding = 1e-14 * (sb * sb + sa * sc);
+        let s = ((qb * qb - qa * qc).max(0.0) + rounding).sqrt();
+        let zmin = l[0] - (l[1] * l[1] + l[2] * l[2]).sqrt() - delta;
+        let most = (k[0].abs() + (k[1] * k[1] + k[2] * k[2]).sqrt() + delta) / zmin;
+        let pad = delta * (1.0 + most) / zmin;
+        [(qb - s) / qa - pad, (qb + s) / qa + pad]
+    }
+
+    /// The cells `[i0, i1]` along axis `a` of the span `[x0, x1]`, or
+    /// `None` when it misses the grid.
+    fn cells(&self, [x0, x1]: [f64; 2], a: usize) -> Option<[usize; 2]> {
         let pad = PAD * (1.0 + x0.abs() + x1.abs());
         let (i0, i1) = (self.coord(x0 - pad, a), self.coord(x1 + pad, a));
         // NaN compares false: kept, at every cell of the axis.
@@ -251,7 +285,15 @@ impl Coverage {
         if !in_front {
             return None;
         }
-        let (Some([i0, i1]), Some([j0, j1])) = (self.span(cu, cw, r, 0), self.span(cv, cw, r, 1))
+        let spans = match prim.semi_axes() {
+            Some((a, b)) => {
+                let ab = [a.as_dvec3(), b.as_dvec3()];
+                let delta = r - f64::from(prim.bounding_radius());
+                [self.u, self.v].map(|e| Self::ellipse_span(c, ab, e, self.w, delta))
+            }
+            None => [Self::ball_span(cu, cw, r), Self::ball_span(cv, cw, r)],
+        };
+        let (Some([i0, i1]), Some([j0, j1])) = (self.cells(spans[0], 0), self.cells(spans[1], 1))
         else {
             return Some(None);
         };
