@@ -27,7 +27,11 @@
 //! octree) grown by [`MARGIN`] of `|c| + R`: a hit the f32 test
 //! [`Primitive::intersect`] accepts lies on the ray within a few ulps of
 //! `|c| + R` of the true primitive (its `t` and point are rounded, not the
-//! ray), far inside that margin. Rectangles are padded by [`PAD`] for the
+//! ray), far inside that margin. A primitive that is an ellipse
+//! ([`Primitive::semi_axes`]: a disc) covers instead the rectangle of the
+//! points within that margin of its ellipse (`Coverage::ellipse_span`),
+//! far narrower than the ball's for a disc seen edge-on at a silhouette.
+//! Rectangles are padded by [`PAD`] for the
 //! f64 arithmetic of the rectangles and of the rays' gnomonic
 //! coordinates, and a ray's cell is found with the same monotone
 //! operations as the rectangles' cells.
@@ -339,5 +343,48 @@ impl Coverage {
             0
         };
         within & (self.covered[cell] == 0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+
+    /// Every rim point of random tilted ellipses in front lies in its
+    /// [`Coverage::ellipse_span`] on both axes, and the span is no wider
+    /// than the ball's; edge-on along an axis, it is far narrower.
+    #[test]
+    fn ellipse_spans_hold_the_rim_and_beat_the_ball() {
+        let mut rng = SplitMix64::new(24);
+        let mut r = |a: f64, b: f64| a + (b - a) * f64::from(rng.next_f32());
+        let (u, v, w) = (DVec3::X, DVec3::Y, DVec3::Z);
+        let (mut narrower, mut cases) = (0, 0);
+        for _ in 0..2000 {
+            let c = DVec3::new(r(-2.0, 2.0), r(-2.0, 2.0), r(1.0, 4.0));
+            let n = DVec3::new(r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0)).normalize();
+            let a = n.any_orthonormal_vector() * r(0.01, 0.5);
+            let b = n.cross(a).normalize() * r(0.01, 0.5);
+            let big = a.length().max(b.length());
+            if c.dot(w) <= 1.02 * big {
+                continue;
+            }
+            cases += 1;
+            for (k, e) in [u, v].into_iter().enumerate() {
+                let [x0, x1] = Coverage::ellipse_span(c, [a, b], e, w, 0.0);
+                let [b0, b1] = Coverage::ball_span(c.dot(e), c.dot(w), big);
+                assert!(x0 >= b0 - 1e-12 && x1 <= b1 + 1e-12, "{k}: {x0} {x1} in {b0} {b1}");
+                narrower += usize::from(x1 - x0 < 0.5 * (b1 - b0));
+                for i in 0..256 {
+                    let t = f64::from(i) / 256.0 * std::f64::consts::TAU;
+                    let p = c + a * t.cos() + b * t.sin();
+                    let x = p.dot(e) / p.dot(w);
+                    assert!(x >= x0 - 1e-12 && x <= x1 + 1e-12, "{x} not in {x0} {x1}");
+                }
+            }
+        }
+        // Measured: all 2,000 in front, 1,430 of their 4,000 spans under
+        // half the ball's.
+        assert!(cases == 2000 && narrower > 1300, "{cases} {narrower}");
     }
 }
