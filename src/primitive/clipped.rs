@@ -47,6 +47,11 @@ impl Primitive for ClippedDisc {
         self.disc.bounding_radius()
     }
 
+    /// The whole disc's: conservative for the clipped part.
+    fn semi_axes(&self) -> Option<(Vec3, Vec3)> {
+        self.disc.semi_axes()
+    }
+
     fn coarse_half_extent(&self) -> Vec3 {
         self.disc.coarse_half_extent()
     }

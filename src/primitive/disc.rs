@@ -75,6 +75,12 @@ impl Primitive for Disc {
         (0.5 * (aa + bb + spread)).sqrt()
     }
 
+    /// `r_u u` and `r_v v`: the accepted points are `c + α a + β b`,
+    /// `α² + β² <= 1` (`α = p·u_scaled`, `β = p·v_scaled`).
+    fn semi_axes(&self) -> Option<(Vec3, Vec3)> {
+        Some(self.axes())
+    }
+
     /// The box of the bounding square `c ± r_u u ± r_v v` (§3.1).
     fn coarse_half_extent(&self) -> Vec3 {
         let (a, b) = self.axes();

@@ -81,6 +81,14 @@ pub trait Primitive: Copy + Send + Sync + 'static {
         self.half_extent().length()
     }
 
+    /// Semi-axes `(a, b)` of an ellipse `center + α a + β b`, `α² + β² <=
+    /// 1`, holding every point `intersect` can return (up to rounding), for
+    /// a bound tighter than the ball's seen edge-on; `None` (the default)
+    /// when the primitive is no such ellipse.
+    fn semi_axes(&self) -> Option<(Vec3, Vec3)> {
+        None
+    }
+
     /// Half extents of a coarser box for a cheaper, looser overlap test (the
     /// report's bounding square of a splat, §3.1); the tight box by default.
     fn coarse_half_extent(&self) -> Vec3 {

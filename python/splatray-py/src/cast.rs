@@ -111,14 +111,18 @@ impl SplatScene {
             .zip(v.par_chunks(6 * CONVERT))
             .enumerate()
             .for_each(|(c, ((rays, lens), v))| {
+                // Every row converted without a branch, the checks folded
+                // into one flag; a chunk with a bad row looks for it.
                 let rows = rays.iter_mut().zip(lens.iter_mut()).zip(v.chunks_exact(6));
-                for (i, ((ray, len), r)) in rows.enumerate() {
-                    match self.ray(r) {
-                        Ok((r, l)) => (*ray, *len) = (r, l),
-                        Err(_) => {
-                            bad.fetch_min(c * CONVERT + i, Ordering::Relaxed);
-                        }
-                    }
+                let mut good = true;
+                for ((ray, len), r) in rows {
+                    let (r, l, ok) = self.ray_unchecked(r);
+                    (*ray, *len) = (r, l);
+                    good &= ok;
+                }
+                if !good {
+                    let first = v.chunks_exact(6).position(|r| self.ray(r).is_err());
+                    bad.fetch_min(c * CONVERT + first.unwrap_or(0), Ordering::Relaxed);
                 }
             });
         match bad.into_inner() {
@@ -136,6 +140,20 @@ impl SplatScene {
         if rays.capacity() <= KEEP_RAYS {
             *self.scratch.lock().unwrap_or_else(|p| p.into_inner()) = (rays, lens);
         }
+    }
+
+    /// [`SplatScene::ray`]'s ray and length (the same operations), and
+    /// whether the row passes its checks, without a branch (a row that
+    /// fails gets some ray).
+    #[inline(always)]
+    fn ray_unchecked<T: Copy + Into<f64>>(&self, r: &[T]) -> (Ray, f32, bool) {
+        let r: [f64; 6] = std::array::from_fn(|k| r[k].into());
+        let finite = r.iter().fold(true, |a, x| a & x.is_finite());
+        let d = Vec3::new(r[3] as f32, r[4] as f32, r[5] as f32);
+        let len = d.length();
+        let origin = (DVec3::new(r[0], r[1], r[2]) - self.to_internal).as_vec3();
+        let ok = finite & (len > 0.0) & len.is_finite() & origin.is_finite();
+        (Ray::new(origin, d), len, ok)
     }
 
     /// One row as a ray in the scene's frame and its direction's length,

@@ -27,7 +27,11 @@
 //! octree) grown by [`MARGIN`] of `|c| + R`: a hit the f32 test
 //! [`Primitive::intersect`] accepts lies on the ray within a few ulps of
 //! `|c| + R` of the true primitive (its `t` and point are rounded, not the
-//! ray), far inside that margin. Rectangles are padded by [`PAD`] for the
+//! ray), far inside that margin. A primitive that is an ellipse
+//! ([`Primitive::semi_axes`]: a disc) covers instead the rectangle of the
+//! points within that margin of its ellipse (`Coverage::ellipse_span`),
+//! far narrower than the ball's for a disc seen edge-on at a silhouette.
+//! Rectangles are padded by [`PAD`] for the
 //! f64 arithmetic of the rectangles and of the rays' gnomonic
 //! coordinates, and a ray's cell is found with the same monotone
 //! operations as the rectangles' cells.
@@ -169,14 +173,48 @@ impl Coverage {
         })
     }
 
-    /// The cells `[i0, i1]` along axis `a` of a ball wholly in front
-    /// (centre `cx` across, `cw` along `w`, radius `r`), or `None` when its
-    /// span misses the grid.
-    fn span(&self, cx: f64, cw: f64, r: f64, a: usize) -> Option<[usize; 2]> {
+    /// The span in `x = p·e / p·w` of a ball wholly in front (centre
+    /// `cx` across along `e`, `cw` along `w`, radius `r`): the tangents'
+    /// slopes (module doc).
+    fn ball_span(cx: f64, cw: f64, r: f64) -> [f64; 2] {
         let den = cw * cw - r * r;
         let rho2 = cx * cx + cw * cw;
         let s = r * (rho2 - r * r).sqrt();
-        let (x0, x1) = ((cx * cw - s) / den, (cx * cw + s) / den);
+        [(cx * cw - s) / den, (cx * cw + s) / den]
+    }
+
+    /// The span in `x = p·e / p·w` of every point within `delta` of the
+    /// ellipse `c + α a + β b` (`α² + β² <= 1`, `c` from the origin, the
+    /// ellipse and that margin wholly in front: `c·w > |(a·w, b·w)| +
+    /// delta`). The ellipse's boundary `(k0 + k1 cos θ + k2 sin θ) / (l0 +
+    /// l1 cos θ + l2 sin θ)` (`k = (c, a, b)·e`, `l = (c, a, b)·w`) reaches
+    /// `x` exactly when `|k0 - x l0| <= |(k1 - x l1, k2 - x l2)|`: the
+    /// span is between the roots of `(l0² - l1² - l2²) x² - 2 (k0 l0 - k1
+    /// l1 - k2 l2) x + (k0² - k1² - k2²)`, the discriminant raised by a
+    /// bound on its rounding (its square root otherwise loses half the
+    /// digits near a double root). A point within `delta` of the ellipse
+    /// moves `x` by at most `delta |∇x|`, `|∇x| = |e - x w| / p·w <= (1 +
+    /// X) / zmin` over that margin (`zmin` the least `p·w` there, `X` the
+    /// most `|x|`). The f64 rounding of the rest is far inside [`PAD`].
+    fn ellipse_span(c: DVec3, [a, b]: [DVec3; 2], e: DVec3, w: DVec3, delta: f64) -> [f64; 2] {
+        let k = [c.dot(e), a.dot(e), b.dot(e)];
+        let l = [c.dot(w), a.dot(w), b.dot(w)];
+        let qa = l[0] * l[0] - l[1] * l[1] - l[2] * l[2];
+        let qb = k[0] * l[0] - k[1] * l[1] - k[2] * l[2];
+        let qc = k[0] * k[0] - k[1] * k[1] - k[2] * k[2];
+        let sb = (k[0] * l[0]).abs() + (k[1] * l[1]).abs() + (k[2] * l[2]).abs();
+        let (sa, sc) = (l[0] * l[0] + l[1] * l[1] + l[2] * l[2], k[0] * k[0] + k[1] * k[1] + k[2] * k[2]);
+        let rounding = 1e-14 * (sb * sb + sa * sc);
+        let s = ((qb * qb - qa * qc).max(0.0) + rounding).sqrt();
+        let zmin = l[0] - (l[1] * l[1] + l[2] * l[2]).sqrt() - delta;
+        let most = (k[0].abs() + (k[1] * k[1] + k[2] * k[2]).sqrt() + delta) / zmin;
+        let pad = delta * (1.0 + most) / zmin;
+        [(qb - s) / qa - pad, (qb + s) / qa + pad]
+    }
+
+    /// The cells `[i0, i1]` along axis `a` of the span `[x0, x1]`, or
+    /// `None` when it misses the grid.
+    fn cells(&self, [x0, x1]: [f64; 2], a: usize) -> Option<[usize; 2]> {
         let pad = PAD * (1.0 + x0.abs() + x1.abs());
         let (i0, i1) = (self.coord(x0 - pad, a), self.coord(x1 + pad, a));
         // NaN compares false: kept, at every cell of the axis.
@@ -251,7 +289,15 @@ impl Coverage {
         if !in_front {
             return None;
         }
-        let (Some([i0, i1]), Some([j0, j1])) = (self.span(cu, cw, r, 0), self.span(cv, cw, r, 1))
+        let spans = match prim.semi_axes() {
+            Some((a, b)) => {
+                let ab = [a.as_dvec3(), b.as_dvec3()];
+                let delta = r - f64::from(prim.bounding_radius());
+                [self.u, self.v].map(|e| Self::ellipse_span(c, ab, e, self.w, delta))
+            }
+            None => [Self::ball_span(cu, cw, r), Self::ball_span(cv, cw, r)],
+        };
+        let (Some([i0, i1]), Some([j0, j1])) = (self.cells(spans[0], 0), self.cells(spans[1], 1))
         else {
             return Some(None);
         };
@@ -297,5 +343,48 @@ impl Coverage {
             0
         };
         within & (self.covered[cell] == 0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+
+    /// Every rim point of random tilted ellipses in front lies in its
+    /// [`Coverage::ellipse_span`] on both axes, and the span is no wider
+    /// than the ball's; edge-on along an axis, it is far narrower.
+    #[test]
+    fn ellipse_spans_hold_the_rim_and_beat_the_ball() {
+        let mut rng = SplitMix64::new(24);
+        let mut r = |a: f64, b: f64| a + (b - a) * f64::from(rng.next_f32());
+        let (u, v, w) = (DVec3::X, DVec3::Y, DVec3::Z);
+        let (mut narrower, mut cases) = (0, 0);
+        for _ in 0..2000 {
+            let c = DVec3::new(r(-2.0, 2.0), r(-2.0, 2.0), r(1.0, 4.0));
+            let n = DVec3::new(r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0)).normalize();
+            let a = n.any_orthonormal_vector() * r(0.01, 0.5);
+            let b = n.cross(a).normalize() * r(0.01, 0.5);
+            let big = a.length().max(b.length());
+            if c.dot(w) <= 1.02 * big {
+                continue;
+            }
+            cases += 1;
+            for (k, e) in [u, v].into_iter().enumerate() {
+                let [x0, x1] = Coverage::ellipse_span(c, [a, b], e, w, 0.0);
+                let [b0, b1] = Coverage::ball_span(c.dot(e), c.dot(w), big);
+                assert!(x0 >= b0 - 1e-12 && x1 <= b1 + 1e-12, "{k}: {x0} {x1} in {b0} {b1}");
+                narrower += usize::from(x1 - x0 < 0.5 * (b1 - b0));
+                for i in 0..256 {
+                    let t = f64::from(i) / 256.0 * std::f64::consts::TAU;
+                    let p = c + a * t.cos() + b * t.sin();
+                    let x = p.dot(e) / p.dot(w);
+                    assert!(x >= x0 - 1e-12 && x <= x1 + 1e-12, "{x} not in {x0} {x1}");
+                }
+            }
+        }
+        // Measured: all 2,000 in front, 1,430 of their 4,000 spans under
+        // half the ball's.
+        assert!(cases == 2000 && narrower > 1300, "{cases} {narrower}");
     }
 }
