@@ -276,7 +276,9 @@ pub struct SplatReport {
     /// points whose normals were estimated of the standard deviation of each
     /// one's same-facing neighbourhood about its fitted quadratic height
     /// field (range noise; see [`super::denoise`]), in the cloud's units; 0
-    /// when every normal was given.
+    /// when every normal was given. Where a bound proves it below every rule
+    /// that reads it, the median of a stride sample of about
+    /// [`super::denoise::NOISE_SAMPLE`] points (`denoise::quiet_noise`).
     pub noise: f64,
     /// The error threshold `ϵ` used, in the cloud's units
     /// ([`SplatParams::epsilon_rel`] times the diagonal, or
