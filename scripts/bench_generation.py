@@ -17,7 +17,10 @@ Clouds (made once into --work, default target/bench-generation):
   survey-3.6m           `terrain --size 600 --tiles 4` (with --large);
   noisy-scan            the solids scanned from one station, 1000 x 750
                         rays, range noise of half a spacing and 0.2 %
-                        outliers (`sample --scan-from`).
+                        outliers (`sample --scan-from`);
+  sphere, torus         200k points uniform on a unit sphere and on a torus
+                        (radii 1 and 0.35): clouds with no crease, where
+                        creases should cost next to nothing.
 """
 import argparse
 import json
@@ -109,9 +112,31 @@ def make_clouds(bin_, work, names):
                      "--scan-at", "0,0.2,0", "--rays", "1000,750", "--range-noise-spacing", "0.5",
                      "--outliers", "0.002", "-o", path, "--seed", "1"])
             out[name] = path
+        elif name in ("sphere", "torus"):
+            path = work / f"{name}.ply"
+            if not path.exists():
+                write_ply_xyz(path, smooth_cloud(name, 200_000))
+            out[name] = path
         else:
             sys.exit(f"bench_generation: no cloud named {name}")
     return out
+
+
+def smooth_cloud(name, n):
+    """n points uniform on a unit sphere, or on a torus (radii 1, 0.35)."""
+    rng = np.random.default_rng(3)
+    if name == "sphere":
+        v = rng.normal(size=(n, 3))
+        return v / np.linalg.norm(v, axis=1)[:, None]
+    parts, have = [], 0
+    while have < n:
+        u, w = rng.uniform(0, 2 * np.pi, (2, 2 * n))
+        keep = rng.uniform(0, 1, 2 * n) < (1 + 0.35 * np.cos(w)) / 1.35
+        u, w = u[keep], w[keep]
+        ring = 1 + 0.35 * np.cos(w)
+        parts.append(np.stack([ring * np.cos(u), ring * np.sin(u), 0.35 * np.sin(w)], 1))
+        have += len(u)
+    return np.concatenate(parts)[:n]
 
 
 O3D = """
@@ -157,7 +182,7 @@ def main():
     ap.add_argument("--large", action="store_true", help="also the 3.6M-point survey")
     ap.add_argument("--work", default=str(ROOT / "target/bench-generation"))
     a = ap.parse_args()
-    names = ["bunny-200k", "bunny-2m", "survey", "noisy-scan"] + (["survey-3.6m"] if a.large else [])
+    names = ["bunny-200k", "bunny-2m", "survey", "noisy-scan", "sphere"] + (["survey-3.6m"] if a.large else [])
     if a.only:
         names = a.only.split(",")
     clouds = make_clouds(a.bin, Path(a.work), names)
