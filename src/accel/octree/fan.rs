@@ -313,20 +313,39 @@ impl Fan for Coverage {
         self.misses_one(ray)
     }
 
-    /// [`Coverage::misses_one`] inlined in the loop, without branches.
+    /// [`Coverage::misses_one`] inlined in the loop, without branches;
+    /// the origin checked once for the whole slice when every ray leaves
+    /// the fan's (the pieces of a run do), then a loop without it.
     fn misses_each(&self, rays: &[Ray], out: &mut [bool]) {
-        for (o, r) in out.iter_mut().zip(rays) {
-            *o = self.misses_one(r);
+        if rays.iter().all(|r| self.leaves_here(r)) {
+            for (o, r) in out.iter_mut().zip(rays) {
+                *o = self.misses_from_here(r);
+            }
+        } else {
+            for (o, r) in out.iter_mut().zip(rays) {
+                *o = self.misses_one(r);
+            }
         }
     }
 }
 
 impl Coverage {
-    /// [`Fan::misses`], its conditions combined without branches (the
-    /// cell read at 0 when the direction lies outside the grid).
+    /// [`Fan::misses`], its conditions combined without branches.
     #[inline(always)]
     fn misses_one(&self, ray: &Ray) -> bool {
-        let here = ray.origin.to_array().map(f32::to_bits) == self.origin;
+        self.leaves_here(ray) & self.misses_from_here(ray)
+    }
+
+    /// Whether `ray` leaves the fan's origin, bit for bit.
+    #[inline(always)]
+    fn leaves_here(&self, ray: &Ray) -> bool {
+        ray.origin.to_array().map(f32::to_bits) == self.origin
+    }
+
+    /// [`Fan::misses`] of a ray leaving the fan's origin, without branches
+    /// (the cell read at 0 when the direction lies outside the grid).
+    #[inline(always)]
+    fn misses_from_here(&self, ray: &Ray) -> bool {
         let d = ray.dir.as_dvec3();
         let z = d.dot(self.w);
         // NaN compares false. A direction inside the grid lies within
@@ -336,9 +355,11 @@ impl Coverage {
         let i = self.coord(d.dot(self.u) * inv, 0);
         let j = self.coord(d.dot(self.v) * inv, 1);
         let inside = |i: f64, a: usize| i >= 0.0 && i < self.n[a] as f64;
-        let within = here & ahead & inside(i, 0) & inside(j, 1);
+        let within = ahead & inside(i, 0) & inside(j, 1);
+        // Within, `0 <= i < n[0] <= MAX_CELLS` (the same for `j`): `as
+        // u32` truncates as `as usize` does, without its path past 2^63.
         let cell = if within {
-            i as usize + self.n[0] * j as usize
+            i as u32 as usize + self.n[0] * j as u32 as usize
         } else {
             0
         };
