@@ -313,18 +313,10 @@ impl Fan for Coverage {
         self.misses_one(ray)
     }
 
-    /// [`Coverage::misses_one`] inlined in the loop, without branches;
-    /// the origin checked once for the whole slice when every ray leaves
-    /// the fan's (the pieces of a run do), then a loop without it.
+    /// [`Coverage::misses_one`] inlined in the loop, without branches.
     fn misses_each(&self, rays: &[Ray], out: &mut [bool]) {
-        if rays.iter().all(|r| self.leaves_here(r)) {
-            for (o, r) in out.iter_mut().zip(rays) {
-                *o = self.misses_from_here(r);
-            }
-        } else {
-            for (o, r) in out.iter_mut().zip(rays) {
-                *o = self.misses_one(r);
-            }
+        for (o, r) in out.iter_mut().zip(rays) {
+            *o = self.misses_one(r);
         }
     }
 }
