@@ -550,16 +550,9 @@ pub(super) fn clip_lines(
 ) -> Clipped {
     let mut lines = Lines::new(s, f, own, other, ring, spacing);
     let step = std::f32::consts::TAU / CLIP_DIRECTIONS as f32;
-    let exts = coarse_exts(own);
-    let counts = coarse_counts(&lines.other_lanes, &exts, spacing);
-    let (xs, ys) = coarse_dirs();
-    let candidates: Vec<(f32, ClipLine)> = (0..CLIP_DIRECTIONS)
-        .filter_map(|k| {
-            let w = Vec2::new(xs[k], ys[k]);
-            lines
-                .line_counted(w, exts[k], counts[k])
-                .map(|l| (step * k as f32, l))
-        })
+    let candidates: Vec<(f32, ClipLine)> = lines
+        .coarse_lines()
+        .filter_map(|(k, l)| l.map(|l| (step * k as f32, l)))
         .collect();
     if candidates.is_empty() {
         // Nearly every search on a smooth surface: `best` finds nothing.
@@ -622,14 +615,9 @@ pub(super) fn no_candidate(
     (own, other, ring): (&[Near], &[Near], &[Near]),
     spacing: f32,
 ) -> bool {
-    let mut lines = Lines::new(s, f, own, other, ring, spacing);
-    let exts = coarse_exts(own);
-    let counts = coarse_counts(&lines.other_lanes, &exts, spacing);
-    let (xs, ys) = coarse_dirs();
-    (0..CLIP_DIRECTIONS).all(|k| {
-        let w = Vec2::new(xs[k], ys[k]);
-        lines.line_counted(w, exts[k], counts[k]).is_none()
-    })
+    Lines::new(s, f, own, other, ring, spacing)
+        .coarse_lines()
+        .all(|(_, l)| l.is_none())
 }
 
 /// The [`CLIP_DIRECTIONS`] coarse directions of [`clip_lines`], `(cos t,
@@ -997,6 +985,20 @@ impl<'a> Lines<'a> {
             .map(|(&x, &y)| u32::from(across(Vec2::new(x, y), w, ext, spacing)))
             .sum();
         self.line_counted(w, ext, count)
+    }
+
+    /// Each coarse direction's candidate line ([`clip_lines`]), in the
+    /// directions' order `k` (`t = k·τ/CLIP_DIRECTIONS`): the own face's
+    /// extents ([`coarse_exts`]) and the counts across ([`coarse_counts`])
+    /// taken once for all of them, each line found as it is asked for.
+    fn coarse_lines(&mut self) -> impl Iterator<Item = (usize, Option<ClipLine>)> + '_ {
+        let exts = coarse_exts(self.own);
+        let counts = coarse_counts(&self.other_lanes, &exts, self.spacing);
+        let (xs, ys) = coarse_dirs();
+        (0..CLIP_DIRECTIONS).map(move |k| {
+            let w = Vec2::new(xs[k], ys[k]);
+            (k, self.line_counted(w, exts[k], counts[k]))
+        })
     }
 
     /// [`Lines::line_with`] with the count of `other`'s points across
