@@ -544,20 +544,24 @@ impl Grower<'_> {
         own.push(f.near(inp.points, seed as usize));
         let mut sure = true;
         for &q in met {
-            let m = f.near(inp.points, q as usize);
             let taken = self.stamp[q as usize] == took;
-            if m.q.length_squared() <= 1.0 {
-                let stamp = &self.stamp;
-                sure = taken
-                    || inp.knn.of(q as usize).iter().all(|&x| {
-                        let t = stamp[x as usize];
-                        t == seen || t == took
-                    });
-                own.push(m);
-            } else {
-                sure = !taken;
-                if m.past_rim() && reach.surely_holds(inp.points[q as usize]) {
-                    ring.push(m);
+            // The heights of the points inside are not taken: no_candidate
+            // does not read them.
+            match f.near_inside(inp.points, q as usize) {
+                Ok(m) => {
+                    let stamp = &self.stamp;
+                    sure = taken
+                        || inp.knn.of(q as usize).iter().all(|&x| {
+                            let t = stamp[x as usize];
+                            t == seen || t == took
+                        });
+                    own.push(m);
+                }
+                Err(m) => {
+                    sure = !taken;
+                    if m.past_rim() && reach.surely_holds(inp.points[q as usize]) {
+                        ring.push(m);
+                    }
                 }
             }
             if !sure {
