@@ -1454,10 +1454,10 @@ fn most_cut(
     order.sort_unstable_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
     let mut most: Option<(usize, (ClipLine, f32))> = None;
     for (d, k) in order {
-        if let Some((_, (_, c))) = most {
-            if segment_bound(d) < f64::from(c) {
-                break;
-            }
+        if let Some((_, (_, c))) = most
+            && segment_bound(d) < f64::from(c)
+        {
+            break;
         }
         let l = lines[k].1;
         let x = (l, cut(&l));
