@@ -61,7 +61,8 @@ pub fn sym_eigen3(m: [[f64; 3]; 3]) -> ([f64; 3], [DVec3; 3]) {
 /// centroid in `f64`: (centroid, eigenvalues ascending, eigenvectors).
 #[must_use]
 pub fn plane_fit(points: impl Iterator<Item = Vec3> + Clone) -> (DVec3, [f64; 3], [DVec3; 3]) {
-    let (c, _, vals, vecs) = plane_fit_moments(points);
+    let (c, m) = covariance(points);
+    let (vals, vecs) = plane_eigen3(m);
     (c, vals, vecs)
 }
 

@@ -66,17 +66,34 @@ struct Moments {
 }
 
 /// [`fitted_normal`] with the plane's least eigenvalue: the sum of the
-/// points' squared heights about their least-squares plane (§2.1), and
-/// the fit's [`Moments`].
+/// points' squared heights about their least-squares plane (§2.1).
 fn fitted_plane(
+    points: impl Iterator<Item = Vec3> + Clone,
+    sight: Option<Vec3>,
+) -> Option<(Vec3, f64)> {
+    let (_, vals, vecs) = plane_fit(points);
+    accepted(vals, vecs, sight).map(|n| (n, vals[0]))
+}
+
+/// [`fitted_plane`] with the fit's [`Moments`], for [`Settle::bounded`]:
+/// taken only where settling is asked.
+fn fitted_plane_moments(
     points: impl Iterator<Item = Vec3> + Clone,
     sight: Option<Vec3>,
 ) -> Option<(Vec3, f64, Moments)> {
     let (centroid, cov, vals, vecs) = plane_fit_moments(points);
+    accepted(vals, vecs, sight).map(|n| (n, vals[0], Moments { centroid, cov }))
+}
+
+/// The normal of a plane fit with eigenvalues `vals` (ascending) and
+/// eigenvectors `vecs`, unless it failed, is collinear or edge-on to
+/// `sight` ([`fitted_normal`]).
+#[inline]
+fn accepted(vals: [f64; 3], vecs: [DVec3; 3], sight: Option<Vec3>) -> Option<Vec3> {
     let n = vecs[0].as_vec3();
     let edge_on = sight.is_some_and(|s| n.dot(s).abs() < EDGE_ON);
     (n.is_finite() && n.length_squared() > 0.5 && vals[1] > COLLINEAR * vals[2] && !edge_on)
-        .then_some((n, vals[0], Moments { centroid, cov }))
+        .then_some(n)
 }
 
 /// A neighbourhood whose points' squared heights about a plane sum to less
@@ -341,9 +358,13 @@ pub fn estimate_multiscale(
                         items.extend(found.iter().map(|f| f.item));
                     }
                     let wide_items = &items[..m.min(items.len())];
-                    if let Some((wide, spread_sq, fit)) =
-                        fitted_plane(wide_items.iter().map(|&j| points[j as usize]), sight)
-                    {
+                    let at = wide_items.iter().map(|&j| points[j as usize]);
+                    // The moments only where settling asks for them.
+                    let fitted = match bar {
+                        Some(_) => fitted_plane_moments(at, sight).map(|(n, s, f)| (n, s, Some(f))),
+                        None => fitted_plane(at, sight).map(|(n, s)| (n, s, None)),
+                    };
+                    if let Some((wide, spread_sq, fit)) = fitted {
                         // Two sheets (a thin plate's faces) in the wide
                         // neighbourhood: the normal of the point's own.
                         ids.clear();
@@ -362,8 +383,10 @@ pub fn estimate_multiscale(
                                 None => (wide, Scale::WideForCollinear),
                             },
                         };
-                        let settles = |b: &Settle| b.settles(points, i, normal, items, &fit);
-                        return (normal, scale, m == first && bar.as_ref().is_some_and(settles));
+                        let settles =
+                            |(b, f): (&Settle, &Moments)| b.settles(points, i, normal, items, f);
+                        let asked = bar.as_ref().zip(fit.as_ref());
+                        return (normal, scale, m == first && asked.is_some_and(settles));
                     }
                     if m >= WIDE_MAX.min(n) {
                         return guess;
@@ -2675,7 +2698,7 @@ mod tests {
                 items.clear();
                 assert!(knn.wide_into(i, 49, &mut items));
                 let wide = &items[..48];
-                let (n, spread, _) = fitted_plane(wide.iter().map(|&j| pts[j as usize]), None)
+                let (n, spread) = fitted_plane(wide.iter().map(|&j| pts[j as usize]), None)
                     .expect("a plate's neighbourhood is no line");
                 let ids: Vec<u32> = wide[1..].to_vec();
                 let skip = one_sheet(&pts, pts[i], &ids, spread);
@@ -3291,7 +3314,7 @@ mod tests {
                 order.truncate(48);
                 order.sort_by(|a, b| d(a).partial_cmp(&d(b)).unwrap());
                 let at = |ids: &[u32]| ids.iter().map(|&j| pts[j as usize]).collect::<Vec<_>>();
-                let Some((wide, _, fit)) = fitted_plane(at(&order).into_iter(), None) else {
+                let Some((wide, _, fit)) = fitted_plane_moments(at(&order).into_iter(), None) else {
                     continue;
                 };
                 let small = fitted_normal(at(&order[..13]).into_iter(), None);
