@@ -59,10 +59,12 @@ fn fitted_normal(points: impl Iterator<Item = Vec3> + Clone, sight: Option<Vec3>
 }
 
 /// The centroid of a fitted neighbourhood and its covariance about it
-/// (unnormalised, `f64`): [`Settle::bounded`]'s sums of squared heights.
+/// (unnormalised, `f64`): [`Settle::bounded`]'s sums of squared heights;
+/// and the least eigenvalue, the least such sum about any plane.
 struct Moments {
     centroid: DVec3,
     cov: [[f64; 3]; 3],
+    least: f64,
 }
 
 /// [`fitted_normal`] with the plane's least eigenvalue: the sum of the
@@ -82,7 +84,22 @@ fn fitted_plane_moments(
     sight: Option<Vec3>,
 ) -> Option<(Vec3, f64, Moments)> {
     let (centroid, cov, vals, vecs) = plane_fit_moments(points);
-    accepted(vals, vecs, sight).map(|n| (n, vals[0], Moments { centroid, cov }))
+    accepted(vals, vecs, sight).map(|n| (n, vals[0], Moments { centroid, cov, least: vals[0] }))
+}
+
+/// [`fitted_plane`], with the fit's [`Moments`] only where `moments`
+/// (settling asks for them).
+#[inline]
+fn fitted_wide(
+    points: impl Iterator<Item = Vec3> + Clone,
+    sight: Option<Vec3>,
+    moments: bool,
+) -> Option<(Vec3, f64, Option<Moments>)> {
+    if moments {
+        fitted_plane_moments(points, sight).map(|(n, s, f)| (n, s, Some(f)))
+    } else {
+        fitted_plane(points, sight).map(|(n, s)| (n, s, None))
+    }
 }
 
 /// The normal of a plane fit with eigenvalues `vals` (ascending) and
@@ -215,6 +232,13 @@ impl Settle {
         let Some(misses) = len.checked_sub(1).and_then(|s| s.checked_sub(self.flat_at)) else {
             return false;
         };
+        // No plane's sum is under the least eigenvalue's: at or past
+        // `(misses + 1)·tol²` (over the bound's `(misses + 1)·(tol − e)²`)
+        // the bound cannot hold (a crease's edge), and is not taken.
+        let tol = f64::from(self.tol);
+        if fit.least >= (misses + 1) as f64 * tol * tol {
+            return false;
+        }
         let (m, c) = (&fit.cov, c.as_dvec3());
         let o = fit.centroid - p.as_dvec3();
         let mc = DVec3::new(
@@ -228,7 +252,7 @@ impl Settle {
         // Σ|q − p|², at least the farthest's squared distance.
         let extent_sq = m[0][0] + m[1][1] + m[2][2] + n * o.length_squared();
         let extent = extent_sq.sqrt();
-        let a = f64::from(self.tol) - HEIGHT_ROUNDING * extent;
+        let a = tol - HEIGHT_ROUNDING * extent;
         let far = f64::from(p.abs().max_element()) + extent;
         let slack = SUM_ROUNDING * (extent_sq + n * extent * far);
         a > 0.0 && sum_sq + slack < (misses + 1) as f64 * a * a
@@ -359,12 +383,7 @@ pub fn estimate_multiscale(
                     }
                     let wide_items = &items[..m.min(items.len())];
                     let at = wide_items.iter().map(|&j| points[j as usize]);
-                    // The moments only where settling asks for them.
-                    let fitted = match bar {
-                        Some(_) => fitted_plane_moments(at, sight).map(|(n, s, f)| (n, s, Some(f))),
-                        None => fitted_plane(at, sight).map(|(n, s)| (n, s, None)),
-                    };
-                    if let Some((wide, spread_sq, fit)) = fitted {
+                    if let Some((wide, spread_sq, fit)) = fitted_wide(at, sight, bar.is_some()) {
                         // Two sheets (a thin plate's faces) in the wide
                         // neighbourhood: the normal of the point's own.
                         ids.clear();
