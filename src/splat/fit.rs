@@ -66,6 +66,17 @@ pub fn plane_fit(points: impl Iterator<Item = Vec3> + Clone) -> (DVec3, [f64; 3]
     (c, vals, vecs)
 }
 
+/// [`plane_fit`] with the matrix it solves: (centroid, covariance about
+/// it (unnormalised), eigenvalues ascending, eigenvectors).
+#[must_use]
+pub fn plane_fit_moments(
+    points: impl Iterator<Item = Vec3> + Clone,
+) -> (DVec3, [[f64; 3]; 3], [f64; 3], [DVec3; 3]) {
+    let (c, m) = covariance(points);
+    let (vals, vecs) = plane_eigen3(m);
+    (c, m, vals, vecs)
+}
+
 /// The centroid of `points` and their covariance about it (unnormalised),
 /// accumulated in `f64`: the matrix [`plane_fit`] solves.
 fn covariance(points: impl Iterator<Item = Vec3> + Clone) -> (DVec3, [[f64; 3]; 3]) {

@@ -3,8 +3,9 @@
 //! spanning tree of the neighbourhood graph (Hoppe et al. 1992).
 
 pub use super::fit::{COLLINEAR, plane_fit, sym_eigen3};
+use super::fit::plane_fit_moments;
 use super::knn::Knn;
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -57,6 +58,15 @@ fn fitted_normal(points: impl Iterator<Item = Vec3> + Clone, sight: Option<Vec3>
     fitted_plane(points, sight).map(|f| f.0)
 }
 
+/// The centroid of a fitted neighbourhood and its covariance about it
+/// (unnormalised, `f64`): [`Settle::bounded`]'s sums of squared heights;
+/// and the least eigenvalue, the least such sum about any plane.
+struct Moments {
+    centroid: DVec3,
+    cov: [[f64; 3]; 3],
+    least: f64,
+}
+
 /// [`fitted_normal`] with the plane's least eigenvalue: the sum of the
 /// points' squared heights about their least-squares plane (§2.1).
 fn fitted_plane(
@@ -64,10 +74,43 @@ fn fitted_plane(
     sight: Option<Vec3>,
 ) -> Option<(Vec3, f64)> {
     let (_, vals, vecs) = plane_fit(points);
+    accepted(vals, vecs, sight).map(|n| (n, vals[0]))
+}
+
+/// [`fitted_plane`] with the fit's [`Moments`], for [`Settle::bounded`]:
+/// taken only where settling is asked.
+fn fitted_plane_moments(
+    points: impl Iterator<Item = Vec3> + Clone,
+    sight: Option<Vec3>,
+) -> Option<(Vec3, f64, Moments)> {
+    let (centroid, cov, vals, vecs) = plane_fit_moments(points);
+    accepted(vals, vecs, sight).map(|n| (n, vals[0], Moments { centroid, cov, least: vals[0] }))
+}
+
+/// [`fitted_plane`], with the fit's [`Moments`] only where `moments`
+/// (settling asks for them).
+#[inline]
+fn fitted_wide(
+    points: impl Iterator<Item = Vec3> + Clone,
+    sight: Option<Vec3>,
+    moments: bool,
+) -> Option<(Vec3, f64, Option<Moments>)> {
+    if moments {
+        fitted_plane_moments(points, sight).map(|(n, s, f)| (n, s, Some(f)))
+    } else {
+        fitted_plane(points, sight).map(|(n, s)| (n, s, None))
+    }
+}
+
+/// The normal of a plane fit with eigenvalues `vals` (ascending) and
+/// eigenvectors `vecs`, unless it failed, is collinear or edge-on to
+/// `sight` ([`fitted_normal`]).
+#[inline]
+fn accepted(vals: [f64; 3], vecs: [DVec3; 3], sight: Option<Vec3>) -> Option<Vec3> {
     let n = vecs[0].as_vec3();
     let edge_on = sight.is_some_and(|s| n.dot(s).abs() < EDGE_ON);
     (n.is_finite() && n.length_squared() > 0.5 && vals[1] > COLLINEAR * vals[2] && !edge_on)
-        .then_some((n, vals[0]))
+        .then_some(n)
 }
 
 /// A neighbourhood whose points' squared heights about a plane sum to less
@@ -156,11 +199,63 @@ struct Settle {
     flat_at: usize,
 }
 
+/// [`Settle::bounded`]'s room for the `f32` heights' rounding in
+/// [`held_by`], a share of the farthest neighbour's distance: a height
+/// `fl(c·fl(q − p))` is within about `4·2⁻²⁴·|c|·|q − p|` (2.4e-7 of
+/// `|q − p|`) of `c·(q − p)`; this is four times that.
+const HEIGHT_ROUNDING: f64 = 1e-6;
+
+/// [`Settle::bounded`]'s room for the `f64` sums' rounding, a share of the
+/// neighbourhood's squared extent (their errors are about 1e-14 of it).
+const SUM_ROUNDING: f64 = 1e-9;
+
 impl Settle {
     /// Whether point `i` with normal `c` and the face search's
-    /// neighbourhood `items` (nearest first) is settled.
-    fn settles(&self, points: &[Vec3], i: usize, c: Vec3, items: &[u32]) -> bool {
-        held_by(points, i, c, &items[..self.wide.min(items.len())], self.tol) >= self.flat_at
+    /// neighbourhood `items` (nearest first) is settled, where the plane
+    /// fit of the first [`Settle::wide`] of `items` had moments `fit`.
+    fn settles(&self, points: &[Vec3], i: usize, c: Vec3, items: &[u32], fit: &Moments) -> bool {
+        let held = &items[..self.wide.min(items.len())];
+        self.bounded(points[i], c, held.len(), fit) || held_by(points, i, c, held, self.tol) >= self.flat_at
+    }
+
+    /// A bound that proves [`held_by`] reaches `flat_at` without the count,
+    /// where the heights are small (a smooth patch: no crease, nothing to
+    /// search). The `len` points of the fit, `p` among them or not, hold
+    /// at least `len − 1` others; a point the count leaves out is more than
+    /// `tol − e` off the plane through `p` (`e` the heights' rounding), so
+    /// with the squared heights summing to `S`, fewer than `S / (tol − e)²`
+    /// are left out (Markov). `S = cᵀMc + len·(c·(μ − p))²` from the fit's
+    /// covariance `M` about its centroid `μ`: no pass over the points.
+    /// False where it does not prove it (or anything is not finite): the
+    /// count then answers.
+    fn bounded(&self, p: Vec3, c: Vec3, len: usize, fit: &Moments) -> bool {
+        let Some(misses) = len.checked_sub(1).and_then(|s| s.checked_sub(self.flat_at)) else {
+            return false;
+        };
+        // No plane's sum is under the least eigenvalue's: at or past
+        // `(misses + 1)·tol²` (over the bound's `(misses + 1)·(tol − e)²`)
+        // the bound cannot hold (a crease's edge), and is not taken.
+        let tol = f64::from(self.tol);
+        if fit.least >= (misses + 1) as f64 * tol * tol {
+            return false;
+        }
+        let (m, c) = (&fit.cov, c.as_dvec3());
+        let o = fit.centroid - p.as_dvec3();
+        let mc = DVec3::new(
+            m[0][0] * c.x + m[0][1] * c.y + m[0][2] * c.z,
+            m[1][0] * c.x + m[1][1] * c.y + m[1][2] * c.z,
+            m[2][0] * c.x + m[2][1] * c.y + m[2][2] * c.z,
+        );
+        let n = len as f64;
+        let h = c.dot(o);
+        let sum_sq = c.dot(mc) + n * h * h;
+        // Σ|q − p|², at least the farthest's squared distance.
+        let extent_sq = m[0][0] + m[1][1] + m[2][2] + n * o.length_squared();
+        let extent = extent_sq.sqrt();
+        let a = tol - HEIGHT_ROUNDING * extent;
+        let far = f64::from(p.abs().max_element()) + extent;
+        let slack = SUM_ROUNDING * (extent_sq + n * extent * far);
+        a > 0.0 && sum_sq + slack < (misses + 1) as f64 * a * a
     }
 }
 
@@ -287,9 +382,8 @@ pub fn estimate_multiscale(
                         items.extend(found.iter().map(|f| f.item));
                     }
                     let wide_items = &items[..m.min(items.len())];
-                    if let Some((wide, spread_sq)) =
-                        fitted_plane(wide_items.iter().map(|&j| points[j as usize]), sight)
-                    {
+                    let at = wide_items.iter().map(|&j| points[j as usize]);
+                    if let Some((wide, spread_sq, fit)) = fitted_wide(at, sight, bar.is_some()) {
                         // Two sheets (a thin plate's faces) in the wide
                         // neighbourhood: the normal of the point's own.
                         ids.clear();
@@ -308,8 +402,10 @@ pub fn estimate_multiscale(
                                 None => (wide, Scale::WideForCollinear),
                             },
                         };
-                        let settles = |b: &Settle| b.settles(points, i, normal, items);
-                        return (normal, scale, m == first && bar.as_ref().is_some_and(settles));
+                        let settles =
+                            |(b, f): (&Settle, &Moments)| b.settles(points, i, normal, items, f);
+                        let asked = bar.as_ref().zip(fit.as_ref());
+                        return (normal, scale, m == first && asked.is_some_and(settles));
                     }
                     if m >= WIDE_MAX.min(n) {
                         return guess;
@@ -1068,13 +1164,18 @@ fn sparse_faces(
     const CHOSEN: u8 = 2;
     const EDGE: u8 = 3;
     let (n, knn) = (search.points.len(), search.knn);
+    // Nothing asked (every point settled: a smooth cloud), nothing found.
+    let Some(&last) = asked.iter().max() else {
+        return Vec::new();
+    };
     let mut state = vec![OUT; n];
     for &i in asked {
         state[i as usize] = FREE;
     }
-    // The first set, from the graph alone.
+    // The first set, from the graph alone: a point's place in it rests on
+    // the points before it only, so it is taken up to the last one asked.
     let mut first = vec![false; n];
-    for i in 0..n {
+    for i in 0..=last as usize {
         first[i] = !knn.of(i).iter().any(|&j| first[j as usize]);
     }
     let mut round: Vec<u32> = asked.iter().copied().filter(|&i| first[i as usize]).collect();
@@ -3205,5 +3306,54 @@ mod tests {
         // Measured: 5.14° before and without, 0.02° with (3,580 of 3,600
         // points flat).
         assert!(mean(&before) > 4.0 && mean(&on) < 0.1, "{}", mean(&on));
+    }
+
+    /// Settling's bound ([`Settle::bounded`]) answers only where the count
+    /// agrees: on ridges (a crease at x = 0.5), noise-free and noisy, and a
+    /// flat sheet whose noise puts many heights at the tolerance, at every
+    /// point's 48 nearest (brute force) with its wide plane's normal and
+    /// its 13 nearest's, every point the bound settles is settled by the
+    /// count; and on the smooth parts it answers nearly all.
+    #[test]
+    fn the_settling_bound_settles_only_what_the_count_settles() {
+        let settle = Settle {
+            tol: 0.004,
+            wide: 48,
+            flat_at: 44,
+        };
+        let mut flat_noise = ridge(0.0, 0.004);
+        flat_noise.truncate(3000);
+        let mut counts = Vec::new();
+        for pts in [ridge(0.5, 0.0), ridge(0.5, 0.001), ridge(0.0, 0.002), flat_noise] {
+            let (mut bounded, mut counted) = (0, 0);
+            for (i, &p) in pts.iter().enumerate() {
+                let mut order: Vec<u32> = (0..pts.len() as u32).collect();
+                let d = |j: &u32| ((pts[*j as usize] - p).length_squared(), *j);
+                order.select_nth_unstable_by(48, |a, b| d(a).partial_cmp(&d(b)).unwrap());
+                order.truncate(48);
+                order.sort_by(|a, b| d(a).partial_cmp(&d(b)).unwrap());
+                let at = |ids: &[u32]| ids.iter().map(|&j| pts[j as usize]).collect::<Vec<_>>();
+                let Some((wide, _, fit)) = fitted_plane_moments(at(&order).into_iter(), None) else {
+                    continue;
+                };
+                let small = fitted_normal(at(&order[..13]).into_iter(), None);
+                for c in [Some(wide), small].into_iter().flatten() {
+                    let by_bound = settle.bounded(p, c, order.len(), &fit);
+                    let by_count = held_by(&pts, i, c, &order, settle.tol) >= settle.flat_at;
+                    assert!(by_count || !by_bound, "point {i}: the bound settles, the count does not");
+                    assert_eq!(settle.settles(&pts, i, c, &order, &fit), by_count);
+                    bounded += usize::from(by_bound);
+                    counted += usize::from(by_count);
+                }
+            }
+            counts.push((bounded, counted));
+        }
+        // Measured (bounded, counted): (11,069, 11,183) noise-free, (10,748,
+        // 11,183) noisy, (976, 10,987) on the sheet with noise at half the
+        // tolerance, (0, 621) at the tolerance (the count alone settles).
+        let [a, b, c, d] = counts[..] else { panic!() };
+        assert!(a.0 >= 11_000 && b.0 >= 10_700 && a.1 >= 11_100 && b.1 >= 11_100, "{counts:?}");
+        assert!((900..1_100).contains(&c.0) && c.1 >= 10_900, "{counts:?}");
+        assert!(d.0 == 0 && d.1 >= 600, "{counts:?}");
     }
 }
