@@ -766,7 +766,7 @@ mod x86 {
         let [ox, oy, oz] = origin.map(|x| _mm256_set1_ps(x));
         let rim = _mm256_set1_ps(RIM);
         let sign = _mm256_set1_ps(-0.0);
-        let mut vals: [LaneValues; RAYS] = [[[0.0; 8]; 3]; RAYS];
+        let mut vals: LaneValues = [[0.0; 8]; 3];
         for (j, p) in packs.iter().enumerate() {
             let p = p.as_ref();
             // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
@@ -791,9 +791,6 @@ mod x86 {
             );
             let num = avx2_dot([nx, ny, nz], [ocx, ocy, ocz]);
             let neg = _mm256_xor_ps(num, sign);
-            // Every active ray's lanes and values first (the rays' chains
-            // overlap, as in `avx2_masks_rays`), then the rays' decisions.
-            let mut masks = [0u32; RAYS];
             let mut left = active;
             while left != 0 {
                 let k = left.trailing_zeros() as usize;
@@ -805,21 +802,17 @@ mod x86 {
                 let [u, v] = avx2_uv(p, [ocx, ocy, ocz], [dx, dy, dz], t);
                 let r2 = _mm256_add_ps(_mm256_mul_ps(u, u), _mm256_mul_ps(v, v));
                 let on = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(r2, rim), in_range);
-                masks[k] = _mm256_movemask_ps(_mm256_and_ps(on, near)) as u32;
-                for (row, x) in vals[k].iter_mut().zip([t, u, v]) {
+                let m = _mm256_movemask_ps(_mm256_and_ps(on, near)) as u32;
+                if m == 0 {
+                    continue;
+                }
+                for (row, x) in vals.iter_mut().zip([t, u, v]) {
                     // SAFETY: `row` is 8 f32; the store is unaligned.
                     unsafe { _mm256_storeu_ps(row.as_mut_ptr(), x) };
                 }
-            }
-            let mut left = active;
-            while left != 0 {
-                let k = left.trailing_zeros() as usize;
-                left &= left - 1;
-                if masks[k] != 0 {
-                    match each(j, k, masks[k], &vals[k]) {
-                        Some(t) => t_max[k] = t,
-                        None => active &= !(1 << k),
-                    }
+                match each(j, k, m, &vals) {
+                    Some(t) => t_max[k] = t,
+                    None => active &= !(1 << k),
                 }
             }
             if active == 0 {
