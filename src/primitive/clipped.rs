@@ -173,36 +173,6 @@ impl Pack<ClippedDisc> for ClippedPack {
     ) {
         super::disc::pack_masks_rays(packs, rays, active, isa, out, any);
     }
-
-    const VALUES: bool = true;
-
-    /// [`DiscPack`]'s lanes and values of the packs `packs[at[j]]`.
-    #[inline]
-    fn values_rays_at(
-        packs: &[Self],
-        at: &[u32],
-        rays: &PackRays,
-        active: u32,
-        isa: simd::Isa,
-        each: impl FnMut(usize, usize, u32, &simd::LaneValues) -> Option<f32>,
-    ) -> u32 {
-        super::disc::pack_values_rays_at(packs, at, rays, active, isa, each)
-    }
-
-    /// The disc's hit from the filter's values
-    /// ([`DiscPack`]'s `values_hit`), kept on the kept side of the clip
-    /// lines: [`ClippedDisc::intersect`] on its own operands.
-    #[inline(always)]
-    fn values_hit(
-        vals: &simd::LaneValues,
-        lane: usize,
-        id: u32,
-        side: &ClipTable,
-        t_max: f32,
-    ) -> Option<Hit> {
-        let hit = <DiscPack as Pack<Disc>>::values_hit(vals, lane, id, &(), t_max)?;
-        side.clip(id).keeps(hit.u, hit.v).then_some(hit)
-    }
 }
 
 /// The clip lines of the clipped splats alone, by primitive id: per 64

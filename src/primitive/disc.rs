@@ -313,37 +313,6 @@ impl Pack<Disc> for DiscPack {
     ) {
         pack_masks_rays(packs, rays, active, isa, out, any);
     }
-
-    const VALUES: bool = true;
-
-    /// [`pack_values_rays_at`].
-    #[inline]
-    fn values_rays_at(
-        packs: &[Self],
-        at: &[u32],
-        rays: &PackRays,
-        active: u32,
-        isa: simd::Isa,
-        each: impl FnMut(usize, usize, u32, &simd::LaneValues) -> Option<f32>,
-    ) -> u32 {
-        pack_values_rays_at(packs, at, rays, active, isa, each)
-    }
-
-    /// Eq. (1)'s `t` within `t_max` and eq. (2)'s `u² + v² <= 1` of the
-    /// filter's values: [`Disc::intersect`]'s tests on its own operands
-    /// (`t >= t_min` and a finite `t` passed the filter; `n·d == 0` gives
-    /// a `t` not finite).
-    #[inline(always)]
-    fn values_hit(
-        vals: &simd::LaneValues,
-        lane: usize,
-        _id: u32,
-        (): &(),
-        t_max: f32,
-    ) -> Option<Hit> {
-        let (t, u, v) = (vals[0][lane], vals[1][lane], vals[2][lane]);
-        (t <= t_max && u * u + v * v <= 1.0).then_some(Hit { t, u, v })
-    }
 }
 
 /// [`simd::disc_masks`] of the disc packs `packs` hold (a [`DiscPack`]
@@ -419,44 +388,6 @@ pub(super) fn pack_masks_rays_at<C: AsRef<DiscPack>>(
         let (o, a) = (&mut out[c * AT_CHUNK..], &mut any[c * AT_CHUNK..]);
         pack_masks_rays(&refs[..at.len()], rays, active, isa, o, a);
     }
-}
-
-/// [`simd::disc_values_rays`] of the disc packs `packs[at[j]]` hold,
-/// [`AT_CHUNK`] a call read in place: [`Pack::values_rays_at`] of
-/// [`DiscPack`] and of packs that filter by their discs.
-#[inline]
-pub(super) fn pack_values_rays_at<C: AsRef<DiscPack>>(
-    packs: &[C],
-    at: &[u32],
-    rays: &PackRays,
-    active: u32,
-    isa: simd::Isa,
-    mut each: impl FnMut(usize, usize, u32, &simd::LaneValues) -> Option<f32>,
-) -> u32 {
-    let mut active = active;
-    let mut t_max = rays.t_max;
-    for (c, at) in at.chunks(AT_CHUNK).enumerate() {
-        let refs: [&C; AT_CHUNK] = std::array::from_fn(|j| &packs[at[j.min(at.len() - 1)] as usize]);
-        active = simd::disc_values_rays(
-            &refs[..at.len()],
-            rays.origin,
-            &rays.dir,
-            &rays.t_min,
-            t_max,
-            rays.cone.as_ref(),
-            active,
-            isa,
-            |j, k, m, vals| {
-                let t = each(c * AT_CHUNK + j, k, m, vals)?;
-                t_max[k] = t;
-                Some(t)
-            },
-        );
-        if active == 0 {
-            break;
-        }
-    }
-    active
 }
 
 #[cfg(test)]

@@ -295,45 +295,6 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
             j += n;
         }
     }
-
-    /// True when [`Pack::values_rays_at`] hands on the filter's values
-    /// (then the exact test is [`Pack::values_hit`]).
-    const VALUES: bool = false;
-
-    /// For each pack `packs[at[j]]` (or `packs[at[0] + j]` when `at` is
-    /// consecutive, `shared` false) and each active ray, the lanes
-    /// [`Pack::masks_rays`] passes and the values they were decided by,
-    /// as [`crate::simd::disc_values_rays`]; returns the rays left.
-    /// Only where [`Pack::VALUES`].
-    #[inline]
-    fn values_rays_at(
-        packs: &[Self],
-        at: &[u32],
-        rays: &PackRays,
-        active: u32,
-        isa: crate::simd::Isa,
-        each: impl FnMut(usize, usize, u32, &crate::simd::LaneValues) -> Option<f32>,
-    ) -> u32 {
-        let _ = (packs, at, rays, isa, each);
-        unreachable!("values_rays_at of a pack without VALUES ({active})")
-    }
-
-    /// [`Primitive::intersect`] of `lane` (id `id`, what `side` holds of
-    /// it), decided from the values the
-    /// filter passed it with ([`Pack::values_rays_at`], `t >= t_min`
-    /// already tested there) in `[t_min, t_max]`: the same hit, bit for
-    /// bit. Only where [`Pack::VALUES`].
-    #[inline]
-    fn values_hit(
-        vals: &crate::simd::LaneValues,
-        lane: usize,
-        id: u32,
-        side: &Self::Side,
-        t_max: f32,
-    ) -> Option<Hit> {
-        let _ = (vals, lane, id, side, t_max);
-        unreachable!("values_hit of a pack without VALUES")
-    }
 }
 
 /// Each active ray `k`'s masks of `packs` by `masks(chunk, ray k, k, out)`,

@@ -344,73 +344,6 @@ pub fn disc_masks_rays<C: AsRef<DiscColumns>>(
     }
 }
 
-/// The plane parameter `t` and the local `(u, v)` of each lane's hit
-/// point, as [`disc_masks_rays`] computed them for one ray and pack:
-/// `[t, u, v][lane]`.
-pub type LaneValues = [[f32; LANES]; 3];
-
-/// [`disc_masks_rays`]'s lanes handed on with the values they were
-/// decided by: for each pack `j` in order and each ray `k` of `active` in
-/// order, when ray `k`'s mask `m` of pack `j` is not zero,
-/// `each(j, k, m, vals)` with `vals` the `t`, `u`, `v` the filter
-/// computed for those lanes — bit for bit those of
-/// [`crate::primitive::Disc::intersect`] (the same operations in the same
-/// order, eqs. (1)-(2)), so a lane passed with `t <= t_max` and
-/// `u² + v² <= 1` is exactly a lane `intersect` hits in `[t_min, t_max]`.
-/// `each` returns ray `k`'s new `t_max` for the packs after (never wider:
-/// the filter only tightens) or `None` when the ray is done; the call
-/// ends when no ray is left. The same lanes and values on every path
-/// (AVX-512 runs the AVX2 kernel, as [`disc_masks_rays`]).
-// The packet's fields as the kernels take them.
-#[allow(clippy::too_many_arguments)]
-#[inline]
-pub fn disc_values_rays<C: AsRef<DiscColumns>>(
-    packs: &[C],
-    origin: [f32; 3],
-    dirs: &[[f32; 3]; RAYS],
-    t_min: &[f32; RAYS],
-    mut t_max: [f32; RAYS],
-    cone: Option<&Cone>,
-    mut active: u32,
-    isa: Isa,
-    mut each: impl FnMut(usize, usize, u32, &LaneValues) -> Option<f32>,
-) -> u32 {
-    active &= (1 << RAYS) - 1;
-    match isa {
-        #[cfg(target_arch = "x86_64")]
-        Isa::Avx2 | Isa::Avx512 if Isa::Avx2.supported() => {
-            // SAFETY: the guard checked that the CPU runs AVX2.
-            unsafe { x86::avx2_values_rays(packs, origin, dirs, t_min, t_max, cone, active, &mut each) }
-        }
-        _ => {
-            for (j, pack) in packs.iter().enumerate() {
-                let pack = pack.as_ref();
-                let near = cone.map_or(u32::MAX, |c| portable_cone(pack, origin, c));
-                if near == 0 {
-                    continue;
-                }
-                let mut left = active;
-                while left != 0 {
-                    let k = left.trailing_zeros() as usize;
-                    left &= left - 1;
-                    let (m, vals) = portable_values(pack, origin, dirs[k], t_min[k], t_max[k]);
-                    let m = m & near;
-                    if m != 0 {
-                        match each(j, k, m, &vals) {
-                            Some(t) => t_max[k] = t,
-                            None => active &= !(1 << k),
-                        }
-                    }
-                }
-                if active == 0 {
-                    break;
-                }
-            }
-            active
-        }
-    }
-}
-
 /// The lanes of `p` not dropped by the cone test of [`disc_masks_rays`]:
 /// with `w = c - o`, `h = |w × a|` and `s = w·a`, `h cos - s sin` is at
 /// most the distance from the centre to the cone (that of the half-space
@@ -476,55 +409,9 @@ fn portable_mask(p: &DiscColumns, origin: [f32; 3], dir: [f32; 3], t_min: f32, t
     half(0) | half(1) << 4
 }
 
-/// [`portable_mask`] with the `t`, `u`, `v` it computed (lanes of a
-/// half out of range hold whatever the half's skipped rim test left: 0).
-#[inline]
-fn portable_values(
-    p: &DiscColumns,
-    origin: [f32; 3],
-    dir: [f32; 3],
-    t_min: f32,
-    t_max: f32,
-) -> (u32, LaneValues) {
-    use glam::Vec4;
-    let mut vals = [[0.0; LANES]; 3];
-    let mut half = |h: usize| {
-        let col = |k: usize| Vec4::from_slice(&p.cols[k][4 * h..4 * h + 4]);
-        let [ox, oy, oz] = origin.map(Vec4::splat);
-        let [dx, dy, dz] = dir.map(Vec4::splat);
-        let (nx, ny, nz) = (col(NORMAL), col(NORMAL + 1), col(NORMAL + 2));
-        let (cx, cy, cz) = (col(CENTER), col(CENTER + 1), col(CENTER + 2));
-        let denom = nx * dx + ny * dy + nz * dz;
-        let (ocx, ocy, ocz) = (ox - cx, oy - cy, oz - cz);
-        let num = nx * ocx + ny * ocy + nz * ocz;
-        let t = -num / denom;
-        let in_range = (t.cmpge(Vec4::splat(t_min))
-            & t.cmple(Vec4::splat(t_max))
-            & t.abs().cmplt(Vec4::INFINITY))
-        .bitmask();
-        if in_range == 0 {
-            return 0;
-        }
-        let (ux, uy, uz) = (col(U_SCALED), col(U_SCALED + 1), col(U_SCALED + 2));
-        let (vx, vy, vz) = (col(V_SCALED), col(V_SCALED + 1), col(V_SCALED + 2));
-        let (px, py, pz) = (ocx + dx * t, ocy + dy * t, ocz + dz * t);
-        let u = px * ux + py * uy + pz * uz;
-        let v = px * vx + py * vy + pz * vz;
-        let r2 = u * u + v * v;
-        for (row, x) in vals.iter_mut().zip([t, u, v]) {
-            x.write_to_slice(&mut row[4 * h..4 * h + 4]);
-        }
-        r2.cmple(Vec4::splat(RIM)).bitmask() & in_range
-    };
-    let m = half(0) | half(1) << 4;
-    (m, vals)
-}
-
 #[cfg(target_arch = "x86_64")]
 mod x86 {
-    use super::{
-        CENTER, CONE_SLACK, Cone, DiscColumns, LaneValues, NORMAL, RAYS, RIM, U_SCALED, V_SCALED,
-    };
+    use super::{CENTER, CONE_SLACK, Cone, DiscColumns, NORMAL, RAYS, RIM, U_SCALED, V_SCALED};
     use std::arch::x86_64::*;
 
     /// `a · b` lane by lane, `(a_x b_x + a_y b_y) + a_z b_z` as the portable
@@ -559,15 +446,6 @@ mod x86 {
     #[inline]
     #[target_feature(enable = "avx2")]
     fn avx2_rim2(p: &DiscColumns, oc: [__m256; 3], d: [__m256; 3], t: __m256) -> __m256 {
-        let [u, v] = avx2_uv(p, oc, d, t);
-        _mm256_add_ps(_mm256_mul_ps(u, u), _mm256_mul_ps(v, v))
-    }
-
-    /// `(u, v)` of the points `(o - c) + d t` in each disc's scaled axes,
-    /// the operations in the portable filter's order.
-    #[inline]
-    #[target_feature(enable = "avx2")]
-    fn avx2_uv(p: &DiscColumns, oc: [__m256; 3], d: [__m256; 3], t: __m256) -> [__m256; 2] {
         // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
         // (`DiscColumns` is 64-byte aligned, each column 32 bytes).
         let col = |k: usize| unsafe { _mm256_load_ps(p.cols[k].as_ptr()) };
@@ -584,7 +462,7 @@ mod x86 {
             _mm256_add_ps(_mm256_mul_ps(px, vx), _mm256_mul_ps(py, vy)),
             _mm256_mul_ps(pz, vz),
         );
-        [u, v]
+        _mm256_add_ps(_mm256_mul_ps(u, u), _mm256_mul_ps(v, v))
     }
 
     /// [`super::disc_masks`] with one pack per 256-bit register.
@@ -666,7 +544,39 @@ mod x86 {
             let near = match cone {
                 None => _mm256_castsi256_ps(_mm256_set1_epi32(-1)),
                 Some(cone) => {
-                    let near = avx2_cone(p, [ox, oy, oz], cone);
+                    let [ax, ay, az] = cone.axis.map(|x| _mm256_set1_ps(x));
+                    let (wx, wy, wz) = (
+                        _mm256_sub_ps(cx, ox),
+                        _mm256_sub_ps(cy, oy),
+                        _mm256_sub_ps(cz, oz),
+                    );
+                    let cross = |a: __m256, b: __m256, c: __m256, d: __m256| {
+                        _mm256_sub_ps(_mm256_mul_ps(a, b), _mm256_mul_ps(c, d))
+                    };
+                    let (qx, qy, qz) = (
+                        cross(wy, az, wz, ay),
+                        cross(wz, ax, wx, az),
+                        cross(wx, ay, wy, ax),
+                    );
+                    let h = _mm256_sqrt_ps(avx2_dot([qx, qy, qz], [qx, qy, qz]));
+                    let s = avx2_dot([wx, wy, wz], [ax, ay, az]);
+                    let dist = _mm256_sub_ps(
+                        _mm256_mul_ps(h, _mm256_set1_ps(cone.cos)),
+                        _mm256_mul_ps(s, _mm256_set1_ps(cone.sin)),
+                    );
+                    let u = [col(U_SCALED), col(U_SCALED + 1), col(U_SCALED + 2)];
+                    let v = [col(V_SCALED), col(V_SCALED + 1), col(V_SCALED + 2)];
+                    let m = _mm256_min_ps(avx2_dot(u, u), avx2_dot(v, v));
+                    let r = _mm256_div_ps(_mm256_set1_ps(1.0), _mm256_sqrt_ps(m));
+                    let l1 = _mm256_add_ps(
+                        _mm256_add_ps(_mm256_andnot_ps(sign, wx), _mm256_andnot_ps(sign, wy)),
+                        _mm256_andnot_ps(sign, wz),
+                    );
+                    let bound = _mm256_add_ps(
+                        r,
+                        _mm256_mul_ps(_mm256_add_ps(l1, r), _mm256_set1_ps(CONE_SLACK)),
+                    );
+                    let near = _mm256_cmp_ps::<_CMP_NGT_UQ>(dist, bound);
                     if _mm256_movemask_ps(near) == 0 {
                         continue;
                     }
@@ -699,127 +609,6 @@ mod x86 {
                 *any |= u32::from(m != 0) << k;
             }
         }
-    }
-
-    /// The lanes `portable_cone` keeps (all ones), the same operations.
-    #[inline]
-    #[target_feature(enable = "avx2")]
-    fn avx2_cone(p: &DiscColumns, o: [__m256; 3], cone: &Cone) -> __m256 {
-        let [ox, oy, oz] = o;
-        let sign = _mm256_set1_ps(-0.0);
-        // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
-        // (`DiscColumns` is 64-byte aligned, each column 32 bytes).
-        let col = |k: usize| unsafe { _mm256_load_ps(p.cols[k].as_ptr()) };
-        let (cx, cy, cz) = (col(CENTER), col(CENTER + 1), col(CENTER + 2));
-            let [ax, ay, az] = cone.axis.map(|x| _mm256_set1_ps(x));
-            let (wx, wy, wz) = (
-                _mm256_sub_ps(cx, ox),
-                _mm256_sub_ps(cy, oy),
-                _mm256_sub_ps(cz, oz),
-            );
-            let cross = |a: __m256, b: __m256, c: __m256, d: __m256| {
-                _mm256_sub_ps(_mm256_mul_ps(a, b), _mm256_mul_ps(c, d))
-            };
-            let (qx, qy, qz) = (
-                cross(wy, az, wz, ay),
-                cross(wz, ax, wx, az),
-                cross(wx, ay, wy, ax),
-            );
-            let h = _mm256_sqrt_ps(avx2_dot([qx, qy, qz], [qx, qy, qz]));
-            let s = avx2_dot([wx, wy, wz], [ax, ay, az]);
-            let dist = _mm256_sub_ps(
-                _mm256_mul_ps(h, _mm256_set1_ps(cone.cos)),
-                _mm256_mul_ps(s, _mm256_set1_ps(cone.sin)),
-            );
-            let u = [col(U_SCALED), col(U_SCALED + 1), col(U_SCALED + 2)];
-            let v = [col(V_SCALED), col(V_SCALED + 1), col(V_SCALED + 2)];
-            let m = _mm256_min_ps(avx2_dot(u, u), avx2_dot(v, v));
-            let r = _mm256_div_ps(_mm256_set1_ps(1.0), _mm256_sqrt_ps(m));
-            let l1 = _mm256_add_ps(
-                _mm256_add_ps(_mm256_andnot_ps(sign, wx), _mm256_andnot_ps(sign, wy)),
-                _mm256_andnot_ps(sign, wz),
-            );
-            let bound = _mm256_add_ps(
-                r,
-                _mm256_mul_ps(_mm256_add_ps(l1, r), _mm256_set1_ps(CONE_SLACK)),
-            );
-        _mm256_cmp_ps::<_CMP_NGT_UQ>(dist, bound)
-    }
-
-    /// [`super::disc_values_rays`]: [`avx2_masks_rays`]'s operations, each
-    /// ray's `t`, `u`, `v` handed to `each` with its lanes.
-    ///
-    /// # Safety
-    /// The CPU must run AVX2.
-    #[target_feature(enable = "avx2")]
-    #[allow(clippy::too_many_arguments)]
-    pub(super) unsafe fn avx2_values_rays<C: AsRef<DiscColumns>>(
-        packs: &[C],
-        origin: [f32; 3],
-        dirs: &[[f32; 3]; RAYS],
-        t_min: &[f32; RAYS],
-        mut t_max: [f32; RAYS],
-        cone: Option<&Cone>,
-        mut active: u32,
-        each: &mut impl FnMut(usize, usize, u32, &LaneValues) -> Option<f32>,
-    ) -> u32 {
-        let [ox, oy, oz] = origin.map(|x| _mm256_set1_ps(x));
-        let rim = _mm256_set1_ps(RIM);
-        let sign = _mm256_set1_ps(-0.0);
-        let mut vals: LaneValues = [[0.0; 8]; 3];
-        for (j, p) in packs.iter().enumerate() {
-            let p = p.as_ref();
-            // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
-            // (`DiscColumns` is 64-byte aligned, each column 32 bytes).
-            let col = |k: usize| unsafe { _mm256_load_ps(p.cols[k].as_ptr()) };
-            let near = match cone {
-                None => _mm256_castsi256_ps(_mm256_set1_epi32(-1)),
-                Some(cone) => {
-                    let near = avx2_cone(p, [ox, oy, oz], cone);
-                    if _mm256_movemask_ps(near) == 0 {
-                        continue;
-                    }
-                    near
-                }
-            };
-            let (cx, cy, cz) = (col(CENTER), col(CENTER + 1), col(CENTER + 2));
-            let (nx, ny, nz) = (col(NORMAL), col(NORMAL + 1), col(NORMAL + 2));
-            let (ocx, ocy, ocz) = (
-                _mm256_sub_ps(ox, cx),
-                _mm256_sub_ps(oy, cy),
-                _mm256_sub_ps(oz, cz),
-            );
-            let num = avx2_dot([nx, ny, nz], [ocx, ocy, ocz]);
-            let neg = _mm256_xor_ps(num, sign);
-            let mut left = active;
-            while left != 0 {
-                let k = left.trailing_zeros() as usize;
-                left &= left - 1;
-                let [dx, dy, dz] = dirs[k].map(|x| _mm256_set1_ps(x));
-                let denom = avx2_dot([nx, ny, nz], [dx, dy, dz]);
-                let t = _mm256_div_ps(neg, denom);
-                let in_range = avx2_in_range(t, _mm256_set1_ps(t_min[k]), _mm256_set1_ps(t_max[k]));
-                let [u, v] = avx2_uv(p, [ocx, ocy, ocz], [dx, dy, dz], t);
-                let r2 = _mm256_add_ps(_mm256_mul_ps(u, u), _mm256_mul_ps(v, v));
-                let on = _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(r2, rim), in_range);
-                let m = _mm256_movemask_ps(_mm256_and_ps(on, near)) as u32;
-                if m == 0 {
-                    continue;
-                }
-                for (row, x) in vals.iter_mut().zip([t, u, v]) {
-                    // SAFETY: `row` is 8 f32; the store is unaligned.
-                    unsafe { _mm256_storeu_ps(row.as_mut_ptr(), x) };
-                }
-                match each(j, k, m, &vals) {
-                    Some(t) => t_max[k] = t,
-                    None => active &= !(1 << k),
-                }
-            }
-            if active == 0 {
-                break;
-            }
-        }
-        active
     }
 
     /// [`super::disc_masks`] with two packs per 512-bit register (the last
@@ -1087,43 +876,6 @@ mod tests {
                     for ps in [std::slice::from_ref(pack), &three[..]] {
                         assert_eq!(masks(ps, c, isa), coned, "{isa}, ray {r}, cone");
                     }
-                }
-                // The values path: the same lanes, and each lane's values
-                // give `intersect`'s hit bit for bit.
-                for isa in available() {
-                    let mut got = [0; RAYS];
-                    let left = disc_values_rays(
-                        &three[..],
-                        origin,
-                        &dirs,
-                        &t_min,
-                        t_max,
-                        c,
-                        active,
-                        isa,
-                        |j, k, m, vals| {
-                            if j == 2 {
-                                got[k] = m;
-                                let ray = crate::geometry::Ray {
-                                    origin: origin.into(),
-                                    dir: dirs[k].into(),
-                                };
-                                for l in 0..LANES {
-                                    let want = pack.get(l, 0, &()).intersect(&ray, t_min[k], t_max[k]);
-                                    let bits = |h: Option<crate::primitive::Hit>| {
-                                        h.map(|h| [h.t, h.u, h.v].map(f32::to_bits))
-                                    };
-                                    let have = (m & (1 << l) != 0)
-                                        .then(|| DiscColumns::values_hit(vals, l, 0, &(), t_max[k]))
-                                        .flatten();
-                                    assert_eq!(bits(have), bits(want), "{isa}, ray {r}/{k}, lane {l}");
-                                }
-                            }
-                            Some(t_max[k])
-                        },
-                    );
-                    assert_eq!(left, active, "{isa}, ray {r}: no ray stops");
-                    assert_eq!(got, coned, "{isa}, ray {r}: the values path's lanes");
                 }
                 for k in 0..RAYS {
                     if active & (1 << k) == 0 {

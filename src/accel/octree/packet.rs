@@ -335,9 +335,6 @@ impl<P: Primitive> Tree<P> {
         let preps: [Option<<P::Pack as Pack<P>>::Prep>; PACKET] =
             std::array::from_fn(|k| vis[k].as_ref().map(|v| *v.prep()));
         let range = node.first as usize..(node.first + node.meta) as usize;
-        if <P::Pack as Pack<P>>::VALUES {
-            return self.leaf_values(range, &mut rays, vis, active);
-        }
         let l = lanes::<P>();
         let mut stopped = 0;
         // The packs `at` (lanes `lanes[j]` of pack `at[j]`; at most
@@ -412,67 +409,6 @@ impl<P: Primitive> Tree<P> {
             (start, size) = (end, LEAF_CHUNK);
         }
         stopped
-    }
-
-    /// [`Tree::leaf_packet`] of the leaf's packs `range` for a pack that
-    /// hands on its filter's values ([`Pack::VALUES`]): each lane passed
-    /// decided from the `t`, `u`, `v` the filter computed
-    /// ([`Visitor::lane_values`]) in the same order, pack after pack, ray
-    /// after ray, lane after lane; returns the rays whose visitor stopped.
-    #[inline(always)]
-    fn leaf_values<V: Visitor<P>>(
-        &self,
-        range: std::ops::Range<usize>,
-        rays: &mut PackRays,
-        vis: &mut [Option<V>; PACKET],
-        active: Mask,
-    ) -> Mask {
-        let l = lanes::<P>();
-        let mut left = active;
-        let mut start = range.start;
-        let mut size = first_chunk::<P, V>();
-        while start < range.end && left != 0 {
-            let end = (start + size).min(range.end);
-            let mut at = [0; LEAF_CHUNK];
-            let mut lanes = [u32::MAX; LEAF_CHUNK];
-            if self.shared {
-                for (j, &e) in self.entries[start..end].iter().enumerate() {
-                    (at[j], lanes[j]) = (e & ENTRY_PACK, e >> ENTRY_MASK_SHIFT);
-                }
-            } else {
-                at = std::array::from_fn(|j| (start + j) as u32);
-            }
-            let at = &at[..end - start];
-            let each = |j: usize, k: usize, m: u32, vals: &crate::simd::LaneValues| {
-                let p = at[j] as usize;
-                let (pack, ids) = (&self.packs[p], &self.pack_ids[p * l..(p + 1) * l]);
-                // No visitor: nothing to decide, no lane passed (NaN).
-                let Some(v) = vis[k].as_mut() else {
-                    return Some(f32::NAN);
-                };
-                let mut m = m & lanes[j];
-                while m != 0 {
-                    let lane = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    let id = ids[lane];
-                    if v.lane_values(vals, lane, id, &self.side, || pack.get(lane, id, &self.side)) {
-                        return None;
-                    }
-                }
-                Some(v.filter().t_max)
-            };
-            left = P::Pack::values_rays_at(&self.packs, at, rays, left, self.isa, each);
-            let mut k_left = left;
-            while k_left != 0 {
-                let k = k_left.trailing_zeros() as usize;
-                k_left &= k_left - 1;
-                if let Some(v) = vis[k].as_ref() {
-                    rays.t_max[k] = v.filter().t_max;
-                }
-            }
-            (start, size) = (end, LEAF_CHUNK);
-        }
-        active & !left
     }
 
     /// The subtree of node `index` (cell `lo`, edge `size`) for the rays of

@@ -401,17 +401,6 @@ pub(super) trait Visitor<P: Primitive> {
     /// Decides one lane the filter passed, primitive `prim` with id `id`,
     /// with the exact test; true stops the traversal.
     fn lane(&mut self, prim: P, id: u32) -> bool;
-    /// [`Visitor::lane`] of `lane`, decided from the values the filter
-    /// passed it with ([`Pack::values_hit`]); `prim` rebuilds the
-    /// primitive (for the skip rule alone). The same decision.
-    fn lane_values(
-        &mut self,
-        vals: &crate::simd::LaneValues,
-        lane: usize,
-        id: u32,
-        side: &<P::Pack as Pack<P>>::Side,
-        prim: impl FnOnce() -> P,
-    ) -> bool;
 
     /// Tests the lanes set in `lanes(j)` of each pack `j` of a leaf's
     /// `packs` (`ids`: pack after pack), filtered on the SIMD path `isa`, [`CHUNK`] packs
@@ -520,22 +509,6 @@ impl<'a, P: Primitive, S: Skip> Query<'a, P, S> {
         prim.intersect(self.ray, self.lanes.t_min, cut)
             .filter(|h| !self.skip.skips(self.ray.dir, id, prim, h))
     }
-
-    /// [`Query::hit`] from the filter's values of `lane`
-    /// ([`Pack::values_hit`]), `prim` rebuilt for the skip rule.
-    #[inline(always)]
-    fn hit_values(
-        &self,
-        vals: &crate::simd::LaneValues,
-        lane: usize,
-        id: u32,
-        side: &<P::Pack as Pack<P>>::Side,
-        cut: f32,
-        prim: impl FnOnce() -> P,
-    ) -> Option<Hit> {
-        <P::Pack as Pack<P>>::values_hit(vals, lane, id, side, cut)
-            .filter(|h| !self.skip.skips(self.ray.dir, id, &prim(), h))
-    }
 }
 
 /// `intersect`: gathers the candidate window, leaving out what `skip`
@@ -598,27 +571,6 @@ impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, P, S> {
         }
         false
     }
-
-    #[inline(always)]
-    fn lane_values(
-        &mut self,
-        vals: &crate::simd::LaneValues,
-        lane: usize,
-        id: u32,
-        side: &<P::Pack as Pack<P>>::Side,
-        prim: impl FnOnce() -> P,
-    ) -> bool {
-        if let Some(h) = self.query.hit_values(vals, lane, id, side, self.cut, prim) {
-            let c = Candidate {
-                id,
-                t: h.t,
-                u: h.u,
-                v: h.v,
-            };
-            self.cut = self.hits.offer(c).min(self.query.lanes.t_max);
-        }
-        false
-    }
 }
 
 /// `occluded`: stops at the first hit that `skip` does not skip.
@@ -651,18 +603,5 @@ impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, P, S> {
     #[inline(always)]
     fn lane(&mut self, prim: P, id: u32) -> bool {
         self.0.hit(&prim, id, self.0.lanes.t_max).is_some()
-    }
-
-    #[inline(always)]
-    fn lane_values(
-        &mut self,
-        vals: &crate::simd::LaneValues,
-        lane: usize,
-        id: u32,
-        side: &<P::Pack as Pack<P>>::Side,
-        prim: impl FnOnce() -> P,
-    ) -> bool {
-        let cut = self.0.lanes.t_max;
-        self.0.hit_values(vals, lane, id, side, cut, prim).is_some()
     }
 }
