@@ -5,7 +5,7 @@
 pub use super::fit::{COLLINEAR, plane_fit, sym_eigen3};
 use super::fit::plane_fit_moments;
 use super::knn::Knn;
-use glam::{DVec3, Vec3};
+use glam::{DMat3, DVec3, Vec3};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -241,11 +241,8 @@ impl Settle {
         }
         let (m, c) = (&fit.cov, c.as_dvec3());
         let o = fit.centroid - p.as_dvec3();
-        let mc = DVec3::new(
-            m[0][0] * c.x + m[0][1] * c.y + m[0][2] * c.z,
-            m[1][0] * c.x + m[1][1] * c.y + m[1][2] * c.z,
-            m[2][0] * c.x + m[2][1] * c.y + m[2][2] * c.z,
-        );
+        // The covariance is symmetric: its rows are its columns.
+        let mc = DMat3::from_cols_array_2d(m) * c;
         let n = len as f64;
         let h = c.dot(o);
         let sum_sq = c.dot(mc) + n * h * h;

@@ -1405,15 +1405,8 @@ impl<'a> Lines<'a> {
     /// the border at the other.
     fn best(&mut self, lines: &[(f32, ClipLine)], kept: &[ClipLine]) -> Option<(ClipLine, usize)> {
         let step = std::f32::consts::TAU / CLIP_DIRECTIONS as f32;
-        let base = kept
-            .iter()
-            .fold(disc_polygon().to_vec(), |poly, k| clip_polygon(&poly, *k));
-        let whole = polygon_area(&base);
-        let edges: Vec<f32> = (0..base.len())
-            .map(|k| base[k].perp_dot(base[next_vertex(k, base.len())]))
-            .collect();
-        let cut = |l: &ClipLine| whole - clipped_area(&base, &edges, *l);
-        let (t, coarse) = most_cut(lines, cut)?;
+        let cut = cut_of_kept(kept);
+        let (t, coarse) = most_cut(lines, &cut)?;
         let fine = (-REFINE_STEPS..=REFINE_STEPS)
             .filter(|&j| j != 0)
             .filter_map(|j| {
@@ -1432,6 +1425,19 @@ impl<'a> Lines<'a> {
             .count();
         Some((l, cuts))
     }
+}
+
+/// The area a line cuts away of what the lines `kept` keep of the disc
+/// (as a polygon): [`Lines::best`]'s measure, the kept part clipped once.
+fn cut_of_kept(kept: &[ClipLine]) -> impl Fn(&ClipLine) -> f32 {
+    let base = kept
+        .iter()
+        .fold(disc_polygon().to_vec(), |poly, k| clip_polygon(&poly, *k));
+    let whole = polygon_area(&base);
+    let edges: Vec<f32> = (0..base.len())
+        .map(|k| base[k].perp_dot(base[next_vertex(k, base.len())]))
+        .collect();
+    move |l: &ClipLine| whole - clipped_area(&base, &edges, *l)
 }
 
 /// Of the lines found in `lines` (direction, line), the one `cut` says
@@ -1657,17 +1663,11 @@ mod tests {
             let kept: Vec<ClipLine> = (0..case % 3)
                 .map(|_| line(std::f32::consts::TAU * uniform(), 0.5 + 0.5 * uniform()))
                 .collect();
-            let base = kept
-                .iter()
-                .fold(disc_polygon().to_vec(), |poly, k| clip_polygon(&poly, *k));
-            let whole = polygon_area(&base);
-            let edges: Vec<f32> = (0..base.len())
-                .map(|k| base[k].perp_dot(base[next_vertex(k, base.len())]))
-                .collect();
+            let area = cut_of_kept(&kept);
             let calls = std::cell::Cell::new(0usize);
             let cut = |l: &ClipLine| {
                 calls.set(calls.get() + 1);
-                whole - clipped_area(&base, &edges, *l)
+                area(l)
             };
             let want = lines
                 .iter()
