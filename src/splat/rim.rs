@@ -248,11 +248,12 @@ impl Frame {
     }
 
     /// [`Frame::near`] of a point inside the disc (`|q| ≤ 1`) with its
-    /// height left at zero, for [`no_candidate`]'s own face (whose heights
-    /// it never reads: it is asked with no other face and never for a
-    /// scanned cloud's small splat, where [`Lines::goes_on`] and
-    /// [`Lines::rim_side`] would); `Err` with the whole [`Frame::near`] of
-    /// a point past the rim. The same `q`, bit for bit.
+    /// height left at zero, for a quiet splat's own face ([`clip_lines`]'
+    /// `quiet`), whose heights are never read: with no other face there is
+    /// no crease ([`Lines::crease`]), and a scanned cloud's small splat,
+    /// where [`Lines::goes_on`] and [`Lines::rim_side`] would read them, is
+    /// never quiet. `Err` with the whole [`Frame::near`] of a point past
+    /// the rim. The same `q`, bit for bit.
     pub(super) fn near_inside(&self, points: &[Vec3], q: usize) -> Result<Near, Near> {
         let d = points[q] - self.p;
         let m = Near {
@@ -563,17 +564,22 @@ impl Clipped {
 /// first line, and the one cutting away the most of what the first
 /// keeps the second (a corner); then the first is chosen again, as the
 /// one cutting the most of what the second keeps.
+///
+/// `quiet`: the sets are [`super::grow`]'s quiet ones (no other face, not
+/// a scanned cloud's small splat, `own`'s heights not taken): the
+/// extents are taken with [`fold_reaching`] first ([`coarse_exts`]).
 #[must_use]
 pub(super) fn clip_lines(
     s: &Surface,
     f: &Frame,
     (own, other, ring): (&[Near], &[Near], &[Near]),
     spacing: f32,
+    quiet: bool,
 ) -> Clipped {
     let mut lines = Lines::new(s, f, own, other, ring, spacing);
     let step = std::f32::consts::TAU / CLIP_DIRECTIONS as f32;
     let candidates: Vec<(f32, ClipLine)> = lines
-        .coarse_lines(false)
+        .coarse_lines(quiet)
         .filter_map(|(k, l)| l.map(|l| (step * k as f32, l)))
         .collect();
     if candidates.is_empty() {
@@ -628,20 +634,6 @@ pub(super) fn clip_lines(
     }
 }
 
-/// Whether [`clip_lines`] finds no candidate line at all along its
-/// coarse directions (and so draws none) for the same sets.
-#[must_use]
-pub(super) fn no_candidate(
-    s: &Surface,
-    f: &Frame,
-    (own, other, ring): (&[Near], &[Near], &[Near]),
-    spacing: f32,
-) -> bool {
-    Lines::new(s, f, own, other, ring, spacing)
-        .coarse_lines(true)
-        .all(|(_, l)| l.is_none())
-}
-
 /// The [`CLIP_DIRECTIONS`] coarse directions of [`clip_lines`], `(cos t,
 /// sin t)` at `t = k·τ/CLIP_DIRECTIONS` as [`Lines::line_at`] makes them,
 /// made once.
@@ -674,7 +666,7 @@ fn coarse_dirs() -> &'static ([f32; CLIP_DIRECTIONS], [f32; CLIP_DIRECTIONS]) {
 /// follow the order), every point is folded again in order.
 ///
 /// With `reaching` the outer points are folded by [`fold_reaching`]
-/// first (the same bits where it answers): for [`no_candidate`], whose
+/// first (the same bits where it answers): for [`clip_lines`]' quiet sets, whose
 /// faces fill their discs; a face ending inside the disc (at a crease)
 /// would fold twice.
 fn coarse_exts(own: &[Near], reaching: bool) -> [f32; CLIP_DIRECTIONS] {
