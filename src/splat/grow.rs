@@ -1484,13 +1484,14 @@ mod tests {
             clipped += usize::from(b.splat.is_clipped());
         }
         let seeds = p.len().div_ceil(7);
-        // Measured: 3,572 seeds, 649 walks spared, 2,772 clipped (the
-        // discs are wide: most reach the square's edges, the hole or the wall).
+        // Measured: 3,572 seeds, 2,662 walks spared (649 before the quiet
+        // sets were walked on and chose lines), 1,846 of those seeds
+        // clipped from the quiet sets, 2,772 clipped in all (the discs are
+        // wide: most reach the square's edges, the hole or the wall).
         assert_eq!(walk.spared, 0);
-        assert!(quick.spared >= 600, "{} of {seeds}", quick.spared);
-        assert!(quiet_clipped >= 1, "{quiet_clipped} of {clipped}");
+        assert!(quick.spared >= 2_600, "{} of {seeds}", quick.spared);
+        assert!(quiet_clipped >= 1_800, "{quiet_clipped} of {clipped}");
         assert!(clipped >= 2_700, "{clipped} of {seeds}");
-        eprintln!("spared {} quiet_clipped {quiet_clipped} clipped {clipped}", quick.spared);
     }
 
     fn grow(points: &[Vec3], normals: &[Vec3], regions: usize, threads: usize) -> Grown {

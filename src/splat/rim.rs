@@ -1141,20 +1141,27 @@ impl<'a> Lines<'a> {
             // The ring is counted from the octant before `w`'s round the
             // turn ([`Octants`]), where the band's points lie.
             let whole = (band - ext) * 2.0 * half / (spacing * spacing);
+            //
+            // Each chunk's test is taken component by component (glam's
+            // `dot` and `perp_dot`, the same products and sums in their
+            // order: the same bits) over slices of one length, which the
+            // compiler vectorises (the chunks zipped over `Vec2`s it did
+            // not).
             let reaches = |mut count: u32, xs: &[f32], ys: &[f32]| {
-                for (xs, ys) in xs.chunks(BEYOND_CHUNK).zip(ys.chunks(BEYOND_CHUNK)) {
-                    count += xs
-                        .iter()
-                        .zip(ys)
-                        .map(|(&x, &y)| {
-                            let q = Vec2::new(x, y);
-                            let s = w.dot(q);
-                            u32::from((s > ext) & (s <= band) & (w.perp_dot(q).abs() <= half))
-                        })
-                        .sum::<u32>();
+                let n = xs.len().min(ys.len());
+                let mut k = 0;
+                while k < n {
+                    let e = (k + BEYOND_CHUNK).min(n);
+                    let in_band = xs[k..e].iter().zip(&ys[k..e]).map(|(&x, &y)| {
+                        let s = (w.x * x) + (w.y * y);
+                        let p = (w.x * y) - (w.y * x);
+                        u32::from((s > ext) & (s <= band) & (p.abs() <= half))
+                    });
+                    count += in_band.sum::<u32>();
                     if count as f32 >= BORDER_FILL * whole {
                         return Err(());
                     }
+                    k = e;
                 }
                 Ok(count)
             };
@@ -1399,11 +1406,15 @@ impl<'a> Lines<'a> {
         let step = std::f32::consts::TAU / CLIP_DIRECTIONS as f32;
         let cut = cut_of_kept(kept);
         let (t, coarse) = most_cut(lines, &cut)?;
+        // A turned line whose bound ([`segment_bound`]) is below the coarse
+        // line's cut cuts strictly less than it: it is never chosen (were
+        // the most of the turned ones above the coarse, it would be above
+        // this one too), and its cut is not taken.
         let fine = (-REFINE_STEPS..=REFINE_STEPS)
             .filter(|&j| j != 0)
             .filter_map(|j| {
                 let l = self.line_at(t + step * j as f32 / (2 * REFINE_STEPS) as f32)?;
-                Some((l, cut(&l)))
+                (segment_bound(l.d) >= f64::from(coarse.1)).then(|| (l, cut(&l)))
             })
             .max_by(more);
         let (l, _) = match fine {
