@@ -91,11 +91,13 @@ pub fn quiet_noise(
             .map(|&i| zero_quadric(points, normals, knn, i))
             .collect()
     };
+    // Not a number is not within `below`.
+    let within = |u: f64| u <= below;
     if asked.is_empty() {
         return None;
     }
     let mut upper = bounds(&sample);
-    if !(order_stat(&mut upper.clone()) <= below) {
+    if !within(order_stat(&mut upper.clone())) {
         return None;
     }
     if stride > 1 {
@@ -104,7 +106,7 @@ pub fn quiet_noise(
             .filter_map(|(k, &i)| (k % stride != 0).then_some(i))
             .collect();
         upper.extend(bounds(&rest));
-        if !(order_stat(&mut upper) <= below) {
+        if !within(order_stat(&mut upper)) {
             return None;
         }
     }
