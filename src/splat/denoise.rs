@@ -85,28 +85,29 @@ pub fn quiet_noise(
     // answer without bounding every point. Each point is bounded once: the
     // sample's bounds are kept for the whole cloud's (the order statistic
     // does not depend on the order the bounds come in).
-    let bounds = |at: &[usize]| -> Vec<f64> {
-        at.par_iter()
-            .with_min_len(1024)
-            .map(|&i| zero_quadric(points, normals, knn, i))
-            .collect()
-    };
     // Not a number is not within `below`.
     let within = |u: f64| u <= below;
     if asked.is_empty() {
         return None;
     }
-    let mut upper = bounds(&sample);
+    let upper: Vec<f64> = (sample.par_iter().with_min_len(1024))
+        .map(|&i| zero_quadric(points, normals, knn, i))
+        .collect();
     if !within(order_stat(&mut upper.clone())) {
         return None;
     }
     if stride > 1 {
-        // The rest of the points: every one not in the sample's stride.
-        let rest: Vec<usize> = (asked.iter().enumerate())
-            .filter_map(|(k, &i)| (k % stride != 0).then_some(i))
+        // Every point's, the sample's (each `stride`th) as they were.
+        let mut all: Vec<f64> = (asked.par_iter().enumerate().with_min_len(1024))
+            .map(|(k, &i)| {
+                if k % stride == 0 {
+                    upper[k / stride]
+                } else {
+                    zero_quadric(points, normals, knn, i)
+                }
+            })
             .collect();
-        upper.extend(bounds(&rest));
-        if !within(order_stat(&mut upper)) {
+        if !within(order_stat(&mut all)) {
             return None;
         }
     }
