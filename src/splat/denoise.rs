@@ -82,22 +82,34 @@ pub fn quiet_noise(
     let sample: Vec<usize> = asked.iter().copied().step_by(stride).collect();
     // The bound of the sample first: above (a noisy cloud: the noisy
     // scan's 4.5 times the noise asked for, the bunny sample's 0.82), no
-    // answer without bounding every point.
-    let bound = |at: &[usize]| {
-        let mut upper: Vec<f64> = at
-            .par_iter()
-            .with_min_len(1024)
-            .map(|&i| zero_quadric(points, normals, knn, i))
-            .collect();
-        let len = upper.len();
-        let at = (len / 2 + (BOUND_SLACK * len as f64).ceil() as usize).min(len.max(1) - 1);
-        upper
-            .select_nth_unstable_by(at, f64::total_cmp)
-            .1
-            .to_owned()
-    };
-    if asked.is_empty() || !(bound(&sample) <= below && (stride == 1 || bound(&asked) <= below)) {
+    // answer without bounding every point. Each point is bounded once: the
+    // sample's bounds are kept for the whole cloud's (the order statistic
+    // does not depend on the order the bounds come in).
+    // Not a number is not within `below`.
+    let within = |u: f64| u <= below;
+    if asked.is_empty() {
         return None;
+    }
+    let upper: Vec<f64> = (sample.par_iter().with_min_len(1024))
+        .map(|&i| zero_quadric(points, normals, knn, i))
+        .collect();
+    if !within(order_stat(&mut upper.clone())) {
+        return None;
+    }
+    if stride > 1 {
+        // Every point's, the sample's (each `stride`th) as they were.
+        let mut all: Vec<f64> = (asked.par_iter().enumerate().with_min_len(1024))
+            .map(|(k, &i)| {
+                if k % stride == 0 {
+                    upper[k / stride]
+                } else {
+                    zero_quadric(points, normals, knn, i)
+                }
+            })
+            .collect();
+        if !within(order_stat(&mut all)) {
+            return None;
+        }
     }
     let mut sd: Vec<f32> = sample
         .into_par_iter()
@@ -117,6 +129,14 @@ pub fn quiet_noise(
     let mid = sd.len() / 2;
     let (_, m, _) = sd.select_nth_unstable_by(mid, f32::total_cmp);
     Some(f64::from(*m))
+}
+
+/// [`quiet_noise`]'s order statistic of the bounds `upper` ([`BOUND_SLACK`]
+/// of them above the middle); it reorders them.
+fn order_stat(upper: &mut [f64]) -> f64 {
+    let len = upper.len();
+    let at = (len / 2 + (BOUND_SLACK * len as f64).ceil() as usize).min(len.max(1) - 1);
+    *upper.select_nth_unstable_by(at, f64::total_cmp).1
 }
 
 /// [`quiet_noise`]'s bound at point `i`: the scatter its [`fit`] leaves
