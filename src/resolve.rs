@@ -161,6 +161,64 @@ pub fn beyond_silhouette_at(s: &Splat, u: f32, v: f32, d: Vec3) -> bool {
 /// branches (issue 55, eighteenth session).
 #[must_use]
 pub fn beyond_silhouette_x4(s: [&Splat; 4], u: Vec4, v: Vec4, d: Vec3) -> (u32, [Vec3; 4]) {
+    x4(s, None, u, v, d)
+}
+
+/// The constants of a splat's height field in [`beyond_silhouette_at`]
+/// (eq. 4's field as a surface over the splat's plane): `a = α / (2 r_u)`,
+/// `b = β / (2 r_v)` and `h_0 = (α r_u + β r_v) / 8`, computed once a
+/// splat by the test's own operations (the same bits), where the test
+/// divides three times a candidate. 12 bytes a splat; a table of them
+/// ([`silhouettes`]) is built only where a caller resolves many windows
+/// (`cast_rays`, a render) and handed to [`resolve_models_kept`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Silhouette {
+    /// `α / (2 r_u)`.
+    pub a: f32,
+    /// `β / (2 r_v)`.
+    pub b: f32,
+    /// `(α r_u + β r_v) / 8`.
+    pub h0: f32,
+}
+
+impl Silhouette {
+    /// Splat `s`'s constants, as [`beyond_silhouette_x4`] computes them.
+    #[must_use]
+    #[inline]
+    pub fn of(s: &Splat) -> Silhouette {
+        let f = &s.field;
+        let (ru, rv) = (s.radii.x, s.radii.y);
+        Silhouette {
+            a: f.alpha / (2.0 * ru),
+            b: f.beta / (2.0 * rv),
+            h0: (f.alpha * ru + f.beta * rv) / 8.0,
+        }
+    }
+}
+
+/// Every splat's [`Silhouette`], in the splats' order.
+#[must_use]
+pub fn silhouettes(splats: &[Splat]) -> Vec<Silhouette> {
+    splats.iter().map(Silhouette::of).collect()
+}
+
+/// [`beyond_silhouette_x4`] with lane `k`'s height-field constants `c[k]`
+/// taken as kept ([`Silhouette::of`] of `s[k]`): the same bits.
+#[must_use]
+pub fn beyond_silhouette_x4_kept(
+    s: [&Splat; 4],
+    c: [&Silhouette; 4],
+    u: Vec4,
+    v: Vec4,
+    d: Vec3,
+) -> (u32, [Vec3; 4]) {
+    x4(s, Some(c), u, v, d)
+}
+
+/// [`beyond_silhouette_x4`], the height-field constants computed (`None`,
+/// three divisions of four lanes) or kept ([`Silhouette`]).
+#[inline(always)]
+fn x4(s: [&Splat; 4], c: Option<[&Silhouette; 4]>, u: Vec4, v: Vec4, d: Vec3) -> (u32, [Vec3; 4]) {
     let lane = |f: &dyn Fn(&Splat) -> f32| Vec4::new(f(s[0]), f(s[1]), f(s[2]), f(s[3]));
     let (xc, yc) = (lane(&|s| s.field.xc), lane(&|s| s.field.yc));
     let (alpha, beta) = (lane(&|s| s.field.alpha), lane(&|s| s.field.beta));
@@ -183,8 +241,18 @@ pub fn beyond_silhouette_x4(s: [&Splat; 4], u: Vec4, v: Vec4, d: Vec3) -> (u32, 
     let flip = dot(&n).cmplt(zero) ^ dot(&na).cmplt(zero);
     let (ru, rv) = (lane(&|s| s.radii.x), lane(&|s| s.radii.y));
     let two = Vec4::splat(2.0);
-    let (a, b) = (alpha / (two * ru), beta / (two * rv));
-    let h0 = (alpha * ru + beta * rv) / Vec4::splat(8.0);
+    // `Silhouette::of`'s operations, lane by lane.
+    let (a, b, h0) = match c {
+        None => (
+            alpha / (two * ru),
+            beta / (two * rv),
+            (alpha * ru + beta * rv) / Vec4::splat(8.0),
+        ),
+        Some(c) => {
+            let kept = |f: &dyn Fn(&Silhouette) -> f32| Vec4::new(f(c[0]), f(c[1]), f(c[2]), f(c[3]));
+            (kept(&|c| c.a), kept(&|c| c.b), kept(&|c| c.h0))
+        }
+    };
     let (x, y) = (u * ru, v * rv);
     // `d.dot(axis)`: `d` on the left.
     let dotd = |a: &[Vec4; 3]| dx * a[0] + dy * a[1] + dz * a[2];
@@ -228,6 +296,7 @@ fn passed_over(
     all: &[Candidate],
     ray: &Ray,
     splats: &[Splat],
+    kept: Option<&[Silhouette]>,
     model: &impl Fn(u32) -> (ShadingMode, f32),
     normals: &mut [Vec3; 8],
     have: &mut u32,
@@ -246,7 +315,13 @@ fn passed_over(
         let s = std::array::from_fn(|k| &splats[c(k).id as usize]);
         let u = Vec4::new(c(0).u, c(1).u, c(2).u, c(3).u);
         let v = Vec4::new(c(0).v, c(1).v, c(2).v, c(3).v);
-        let (b, ns) = beyond_silhouette_x4(s, u, v, ray.dir);
+        let (b, ns) = match kept {
+            Some(t) => {
+                let k = std::array::from_fn(|k| &t[c(k).id as usize]);
+                x4(s, Some(k), u, v, ray.dir)
+            }
+            None => x4(s, None, u, v, ray.dir),
+        };
         over |= (b & phong) << (4 * g);
         if g < 2 {
             normals[4 * g..4 * g + 4].copy_from_slice(&ns);
@@ -346,6 +421,22 @@ pub fn resolve_models(
     splats: &[Splat],
     model: impl Fn(u32) -> (ShadingMode, f32),
 ) -> Option<Resolved> {
+    resolve_models_kept(hits, ray, splats, None, model)
+}
+
+/// [`resolve_models`] with the splats' silhouette constants kept
+/// (`kept`, [`silhouettes`] of `splats`) or, `None`, computed a candidate
+/// at a time: the same answer, bit for bit.
+///
+/// Panics if `kept` has no entry for a candidate's splat.
+#[must_use]
+pub fn resolve_models_kept(
+    hits: &CandidateHits,
+    ray: &Ray,
+    splats: &[Splat],
+    kept: Option<&[Silhouette]>,
+    model: impl Fn(u32) -> (ShadingMode, f32),
+) -> Option<Resolved> {
     let all = hits.as_slice();
     let nearest = all.first()?;
     // The window's splats are read below one after another, each read
@@ -360,7 +451,7 @@ pub fn resolve_models(
     // Whether each candidate is passed over (bit `i` for candidate `i`).
     let mut normals = [Vec3::ZERO; 8];
     let mut have = 0;
-    let over = passed_over(all, ray, splats, &model, &mut normals, &mut have);
+    let over = passed_over(all, ray, splats, kept, &model, &mut normals, &mut have);
     let k = (!over).trailing_zeros() as usize;
     if k >= all.len() {
         return Some(Resolved::Beyond(all.last()?.t.next_up()));
