@@ -168,10 +168,13 @@ pub fn beyond_silhouette_x4(s: [&Splat; 4], u: Vec4, v: Vec4, d: Vec3) -> (u32, 
 /// (eq. 4's field as a surface over the splat's plane): `a = α / (2 r_u)`,
 /// `b = β / (2 r_v)` and `h_0 = (α r_u + β r_v) / 8`, computed once a
 /// splat by the test's own operations (the same bits), where the test
-/// divides three times a candidate. 12 bytes a splat; a table of them
+/// divides three times a candidate; and whether the splat is shaded
+/// [`ShadingMode::Phong`] (the resolver's model, asked once a splat). 16
+/// bytes a splat, four lanes loaded at once; a table of them
 /// ([`silhouettes`]) is built only where a caller resolves many windows
-/// (`cast_rays`, a render) and handed to [`resolve_models_kept`].
+/// (the Python `cast_rays`) and handed to [`resolve_models_kept`].
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C, align(16))]
 pub struct Silhouette {
     /// `α / (2 r_u)`.
     pub a: f32,
@@ -179,27 +182,39 @@ pub struct Silhouette {
     pub b: f32,
     /// `(α r_u + β r_v) / 8`.
     pub h0: f32,
+    /// 1 when the splat is shaded [`ShadingMode::Phong`], else 0.
+    pub phong: u32,
 }
 
 impl Silhouette {
-    /// Splat `s`'s constants, as [`beyond_silhouette_x4`] computes them.
+    /// Splat `s`'s constants, as [`beyond_silhouette_x4`] computes them,
+    /// and its shading mode's `phong` bit.
     #[must_use]
     #[inline]
-    pub fn of(s: &Splat) -> Silhouette {
+    pub fn of(s: &Splat, phong: bool) -> Silhouette {
         let f = &s.field;
         let (ru, rv) = (s.radii.x, s.radii.y);
         Silhouette {
             a: f.alpha / (2.0 * ru),
             b: f.beta / (2.0 * rv),
             h0: (f.alpha * ru + f.beta * rv) / 8.0,
+            phong: u32::from(phong),
         }
+    }
+
+    /// The four fields as lanes (`phong` by its bits).
+    #[inline(always)]
+    fn lanes(&self) -> Vec4 {
+        Vec4::new(self.a, self.b, self.h0, f32::from_bits(self.phong))
     }
 }
 
-/// Every splat's [`Silhouette`], in the splats' order.
+/// Every splat's [`Silhouette`], in the splats' order, splat `id` shaded
+/// as `model(id)` says (the model [`resolve_models_kept`] is given).
 #[must_use]
-pub fn silhouettes(splats: &[Splat]) -> Vec<Silhouette> {
-    splats.iter().map(Silhouette::of).collect()
+pub fn silhouettes(splats: &[Splat], model: impl Fn(u32) -> ShadingMode) -> Vec<Silhouette> {
+    let phong = |i: usize| model(i as u32) == ShadingMode::Phong;
+    splats.iter().enumerate().map(|(i, s)| Silhouette::of(s, phong(i))).collect()
 }
 
 /// [`beyond_silhouette_x4`] with lane `k`'s height-field constants `c[k]`
@@ -219,19 +234,20 @@ pub fn beyond_silhouette_x4_kept(
 /// three divisions of four lanes) or kept ([`Silhouette`]).
 #[inline(always)]
 fn x4(s: [&Splat; 4], c: Option<[&Silhouette; 4]>, u: Vec4, v: Vec4, d: Vec3) -> (u32, [Vec3; 4]) {
-    let lane = |f: &dyn Fn(&Splat) -> f32| Vec4::new(f(s[0]), f(s[1]), f(s[2]), f(s[3]));
-    let (xc, yc) = (lane(&|s| s.field.xc), lane(&|s| s.field.yc));
-    let (alpha, beta) = (lane(&|s| s.field.alpha), lane(&|s| s.field.beta));
+    // Four fields of each splat (neighbours in its record: a load each),
+    // transposed: lane `k` of each from `s[k]`.
+    let rows = |f: &dyn Fn(&Splat) -> Vec4| {
+        let m = glam::Mat4::from_cols(f(s[0]), f(s[1]), f(s[2]), f(s[3])).transpose();
+        [m.x_axis, m.y_axis, m.z_axis, m.w_axis]
+    };
+    let f = |s: &Splat| s.field;
+    let [xc, yc, alpha, beta] = rows(&|s| Vec4::new(f(s).xc, f(s).yc, f(s).alpha, f(s).beta));
     let zero = Vec4::ZERO;
     let flat = xc.cmpeq(zero) & yc.cmpeq(zero) & alpha.cmpeq(zero) & beta.cmpeq(zero);
-    let axis = |f: &dyn Fn(&Splat) -> Vec3| {
-        [
-            lane(&|s| f(s).x),
-            lane(&|s| f(s).y),
-            lane(&|s| f(s).z),
-        ]
-    };
-    let (ua, va, na) = (axis(&|s| s.u_axis), axis(&|s| s.v_axis), axis(&|s| s.normal));
+    let [n0, n1, n2, u0] = rows(&|s| s.normal.extend(s.u_axis.x));
+    let [u1, u2, v0, v1] = rows(&|s| Vec4::new(s.u_axis.y, s.u_axis.z, s.v_axis.x, s.v_axis.y));
+    let [v2, ru, rv, _] = rows(&|s| Vec4::new(s.v_axis.z, s.radii.x, s.radii.y, 0.0));
+    let (ua, va, na) = ([u0, u1, u2], [v0, v1, v2], [n0, n1, n2]);
     let (dx, dy, dz) = (Vec4::splat(d.x), Vec4::splat(d.y), Vec4::splat(d.z));
     // `s.u_axis * (xc + alpha u) + s.v_axis * (yc + beta v) + s.normal`,
     // then `n.dot(d)` and `s.normal.dot(d)`: `(x x' + y y') + z z'`.
@@ -239,7 +255,6 @@ fn x4(s: [&Splat; 4], c: Option<[&Silhouette; 4]>, u: Vec4, v: Vec4, d: Vec3) ->
     let n: [Vec4; 3] = std::array::from_fn(|k| ua[k] * fu + va[k] * fv + na[k]);
     let dot = |a: &[Vec4; 3]| a[0] * dx + a[1] * dy + a[2] * dz;
     let flip = dot(&n).cmplt(zero) ^ dot(&na).cmplt(zero);
-    let (ru, rv) = (lane(&|s| s.radii.x), lane(&|s| s.radii.y));
     let two = Vec4::splat(2.0);
     // `Silhouette::of`'s operations, lane by lane.
     let (a, b, h0) = match c {
@@ -249,8 +264,10 @@ fn x4(s: [&Splat; 4], c: Option<[&Silhouette; 4]>, u: Vec4, v: Vec4, d: Vec3) ->
             (alpha * ru + beta * rv) / Vec4::splat(8.0),
         ),
         Some(c) => {
-            let kept = |f: &dyn Fn(&Silhouette) -> f32| Vec4::new(f(c[0]), f(c[1]), f(c[2]), f(c[3]));
-            (kept(&|c| c.a), kept(&|c| c.b), kept(&|c| c.h0))
+            // Four records, transposed: lane `k` of each from `c[k]`.
+            let t = glam::Mat4::from_cols(c[0].lanes(), c[1].lanes(), c[2].lanes(), c[3].lanes())
+                .transpose();
+            (t.x_axis, t.y_axis, t.z_axis)
         }
     };
     let (x, y) = (u * ru, v * rv);
@@ -303,25 +320,24 @@ fn passed_over(
 ) -> u32 {
     let mut over = 0;
     for (g, four) in all.chunks(4).enumerate() {
+        // Lanes past the last candidate repeat it (their bits unused).
+        let c = |k: usize| &four[k.min(four.len() - 1)];
         let mut phong = 0;
-        for (k, c) in four.iter().enumerate() {
-            phong |= u32::from(model(c.id).0 == ShadingMode::Phong) << k;
+        let k: Option<[&Silhouette; 4]> = kept.map(|t| std::array::from_fn(|k| &t[c(k).id as usize]));
+        for (i, c) in four.iter().enumerate() {
+            let p = match k {
+                Some(k) => k[i].phong,
+                None => u32::from(model(c.id).0 == ShadingMode::Phong),
+            };
+            phong |= p << i;
         }
         if phong == 0 {
             continue;
         }
-        // Lanes past the last candidate repeat it (their bits unused).
-        let c = |k: usize| &four[k.min(four.len() - 1)];
         let s = std::array::from_fn(|k| &splats[c(k).id as usize]);
         let u = Vec4::new(c(0).u, c(1).u, c(2).u, c(3).u);
         let v = Vec4::new(c(0).v, c(1).v, c(2).v, c(3).v);
-        let (b, ns) = match kept {
-            Some(t) => {
-                let k = std::array::from_fn(|k| &t[c(k).id as usize]);
-                x4(s, Some(k), u, v, ray.dir)
-            }
-            None => x4(s, None, u, v, ray.dir),
-        };
+        let (b, ns) = x4(s, k, u, v, ray.dir);
         over |= (b & phong) << (4 * g);
         if g < 2 {
             normals[4 * g..4 * g + 4].copy_from_slice(&ns);
@@ -424,9 +440,10 @@ pub fn resolve_models(
     resolve_models_kept(hits, ray, splats, None, model)
 }
 
-/// [`resolve_models`] with the splats' silhouette constants kept
-/// (`kept`, [`silhouettes`] of `splats`) or, `None`, computed a candidate
-/// at a time: the same answer, bit for bit.
+/// [`resolve_models`] with the splats' silhouette constants and Phong
+/// bits kept (`kept`, [`silhouettes`] of `splats` and `model`'s shading
+/// modes) or, `None`, computed and asked a candidate at a time: the same
+/// answer, bit for bit.
 ///
 /// Panics if `kept` has no entry for a candidate's splat.
 #[must_use]

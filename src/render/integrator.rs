@@ -202,8 +202,9 @@ pub struct SplatSurfaces<'a> {
     pub scene: &'a Scene,
     /// The acceleration backend.
     pub backend: &'a dyn Backend,
-    /// The splats' silhouette constants ([`crate::resolve::silhouettes`]
-    /// of `scene.splats`), where the caller keeps them; `None` computes
+    /// The splats' silhouette constants and Phong bits
+    /// ([`crate::resolve::silhouettes`] of `scene.splats` and
+    /// `scene.shading_for`), where the caller keeps them; `None` computes
     /// them a candidate at a time (the same hits).
     pub kept: Option<&'a [Silhouette]>,
 }

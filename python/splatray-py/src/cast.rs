@@ -40,7 +40,7 @@ pub struct SplatScene {
     scratch: Mutex<(Vec<Ray>, Vec<f32>)>,
     /// The splats' silhouette constants for the resolver, built on the
     /// first call that resolves windows (`cast_rays`,
-    /// `count_intersections`; 12 bytes a splat), none for `occluded`.
+    /// `count_intersections`; 16 bytes a splat), none for `occluded`.
     kept: OnceLock<Vec<Silhouette>>,
 }
 
@@ -79,7 +79,11 @@ impl SplatScene {
     /// [`SplatScene::surfaces`] with the resolver's kept constants.
     fn resolving(&self) -> SplatSurfaces<'_> {
         SplatSurfaces {
-            kept: Some(self.kept.get_or_init(|| silhouettes(&self.scene.splats))),
+            kept: Some(
+                self.kept.get_or_init(|| {
+                    silhouettes(&self.scene.splats, |id| self.scene.shading_for(id))
+                }),
+            ),
             ..self.surfaces()
         }
     }
