@@ -676,6 +676,17 @@ mod tests {
                 u.w = f32::NAN;
             }
             let (got, normals) = beyond_silhouette_x4(std::array::from_fn(|k| &splats[k]), u, v, d);
+            let kept: [Silhouette; 4] = std::array::from_fn(|k| Silhouette::of(&splats[k], true));
+            let (got_kept, normals_kept) = beyond_silhouette_x4_kept(
+                std::array::from_fn(|k| &splats[k]),
+                std::array::from_fn(|k| &kept[k]),
+                u,
+                v,
+                d,
+            );
+            assert_eq!(got_kept, got, "round {round}: kept constants");
+            let bits = |n: [Vec3; 4]| n.map(|n| n.to_array().map(f32::to_bits));
+            assert_eq!(bits(normals_kept), bits(normals), "round {round}: kept constants");
             for k in 0..4 {
                 let want = beyond_silhouette_at(&splats[k], u[k], v[k], d);
                 assert_eq!(got >> k & 1 == 1, want, "round {round} lane {k}");
@@ -694,6 +705,57 @@ mod tests {
         // 36,422 of 80,000 lanes passed over, 20,144 line cases).
         assert!((34_000..39_000).contains(&over), "{over} of {total}");
         assert!(lined >= 19_000, "{lined} line cases");
+    }
+
+    #[test]
+    fn kept_constants_resolve_as_computed() {
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut rnd = move || {
+            state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        };
+        // 64 splats near the plane z = 0, a third flat, a third with a
+        // tilted field, a third curved; shading by id, Phong for most.
+        let splats: Vec<Splat> = (0..64)
+            .map(|i| {
+                let c = Vec3::new(rnd(), rnd(), 0.05 * rnd());
+                let n = Vec3::new(0.3 * rnd(), 0.3 * rnd(), 1.0);
+                let mut s = Splat::disc(c, n, 0.3 + 0.5 * rnd().abs()).unwrap();
+                s.radii.y *= 0.4 + 0.6 * rnd().abs();
+                if i % 3 > 0 {
+                    s.field.xc = 0.3 * rnd();
+                    s.field.yc = 0.3 * rnd();
+                }
+                if i % 3 == 2 {
+                    s.field.alpha = 3.0 * rnd();
+                    s.field.beta = 3.0 * rnd();
+                }
+                s
+            })
+            .collect();
+        let modes = [ShadingMode::Phong, ShadingMode::Blended, ShadingMode::Flat];
+        let model = |id: u32| (modes[usize::from(id % 7 == 0) + usize::from(id % 11 == 0)], 0.08);
+        let kept = silhouettes(&splats, |id| model(id).0);
+        let (mut hit, mut beyond) = (0, 0);
+        for round in 0..5_000 {
+            let ray = Ray::new(Vec3::new(rnd(), rnd(), 3.0), Vec3::new(0.2 * rnd(), 0.2 * rnd(), -1.0));
+            let mut hits = CandidateHits::new(0.1);
+            for _ in 0..1 + round % 12 {
+                let id = ((rnd() + 1.0) * 32.0) as u32 % 64;
+                let t = 3.0 + 0.1 * rnd();
+                hits.offer(Candidate { id, t, u: 1.1 * rnd(), v: 1.1 * rnd() });
+            }
+            let want = resolve_models(&hits, &ray, &splats, model);
+            let got = resolve_models_kept(&hits, &ray, &splats, Some(&kept), model);
+            assert_eq!(format!("{got:?}"), format!("{want:?}"), "round {round}");
+            match want {
+                Some(Resolved::Hit(_)) => hit += 1,
+                Some(Resolved::Beyond(_)) => beyond += 1,
+                None => {}
+            }
+        }
+        // Both answers are common (measured: 4,038 hits, 962 beyond).
+        assert!(hit >= 3_800 && beyond >= 850, "{hit} hits, {beyond} beyond");
     }
 
     #[test]
