@@ -734,7 +734,10 @@ mod tests {
             })
             .collect();
         let modes = [ShadingMode::Phong, ShadingMode::Blended, ShadingMode::Flat];
-        let model = |id: u32| (modes[usize::from(id % 7 == 0) + usize::from(id % 11 == 0)], 0.08);
+        let model = |id: u32| {
+            let m = usize::from(id.is_multiple_of(7)) + usize::from(id.is_multiple_of(11));
+            (modes[m], 0.08)
+        };
         let kept = silhouettes(&splats, |id| model(id).0);
         let (mut hit, mut beyond) = (0, 0);
         for round in 0..5_000 {
