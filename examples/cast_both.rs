@@ -85,6 +85,7 @@ fn run() -> Result<()> {
         let surfaces = SplatSurfaces {
             scene: &scene,
             backend: &*backend,
+            kept: None,
         };
         let mut a = Answers {
             t: vec![0.0; rays.len()],

@@ -78,6 +78,7 @@ fn batch_casts_are_one_ray_at_a_time_bit_for_bit() {
         let s = SplatSurfaces {
             scene: &scene,
             backend: backend.as_ref(),
+            kept: None,
         };
         // Measured: 727 of 8444 on the octree.
         agrees(name, &s, &rays, &lens);

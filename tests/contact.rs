@@ -80,6 +80,7 @@ fn a_coarse_floor_renders_as_well_as_a_fine_one() {
             splats: SplatSurfaces {
                 scene: &coarse,
                 backend: backend.as_ref(),
+                kept: None,
             },
             radius: true,
         },
@@ -178,6 +179,7 @@ fn the_shadow_reaches_the_contact() {
             splats: SplatSurfaces {
                 scene: &scene,
                 backend: backend.as_ref(),
+                kept: None,
             },
             radius: true,
         },
@@ -378,6 +380,7 @@ fn a_lit_noisy_plane_does_not_shadow_itself() {
             &SplatSurfaces {
                 scene: &scene,
                 backend: backend.as_ref(),
+                kept: None,
             },
             None,
         );
@@ -388,6 +391,7 @@ fn a_lit_noisy_plane_does_not_shadow_itself() {
                 splats: SplatSurfaces {
                     scene: &scene,
                     backend: backend.as_ref(),
+                    kept: None,
                 },
                 radius: false,
             },

@@ -6,7 +6,9 @@
 
 use crate::accel::{Backend, CandidateHits, Departure, PACKET, Query, Ray};
 use crate::progress::{Progress, notify};
-use crate::resolve::{Resolved, SurfaceHit, resolve_models, resolve_with_triangles};
+use crate::resolve::{
+    Resolved, Silhouette, SurfaceHit, resolve_models_kept, resolve_with_triangles,
+};
 use crate::scene::{Light, Material, Scene};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -200,6 +202,11 @@ pub struct SplatSurfaces<'a> {
     pub scene: &'a Scene,
     /// The acceleration backend.
     pub backend: &'a dyn Backend,
+    /// The splats' silhouette constants and Phong bits
+    /// ([`crate::resolve::silhouettes`] of `scene.splats` and
+    /// `scene.shading_for`), where the caller keeps them; `None` computes
+    /// them a candidate at a time (the same hits).
+    pub kept: Option<&'a [Silhouette]>,
 }
 
 impl SplatSurfaces<'_> {
@@ -211,7 +218,7 @@ impl SplatSurfaces<'_> {
         let sc = self.scene;
         let model = |id| (sc.shading_for(id), sc.xi_for(id));
         if sc.triangles.tris.is_empty() {
-            return resolve_models(hits, ray, &sc.splats, model);
+            return resolve_models_kept(hits, ray, &sc.splats, self.kept, model);
         }
         resolve_with_triangles(hits, ray, &sc.splats, model, |c| sc.triangle_hit(c, ray))
     }
@@ -747,7 +754,11 @@ impl Tracer<'_> {
 /// rayon; reports stage `render` to `progress` as rows are done.
 #[must_use]
 pub fn render(scene: &Scene, backend: &dyn Backend, progress: Option<Progress<'_>>) -> Frame {
-    render_surfaces(scene, &SplatSurfaces { scene, backend }, progress)
+    render_surfaces(scene, &SplatSurfaces {
+            scene,
+            backend,
+            kept: None,
+        }, progress)
 }
 
 /// Renders rows `rows` of the scene's camera view: a frame as wide as the
@@ -761,7 +772,11 @@ pub fn render_rows(
     rows: std::ops::Range<u32>,
     progress: Option<Progress<'_>>,
 ) -> Frame {
-    render_surfaces_rows(scene, &SplatSurfaces { scene, backend }, rows, progress)
+    render_surfaces_rows(scene, &SplatSurfaces {
+            scene,
+            backend,
+            kept: None,
+        }, rows, progress)
 }
 
 /// Renders the scene's camera, lights and materials against any

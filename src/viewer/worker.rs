@@ -402,6 +402,7 @@ impl Worker {
             let surf = SplatSurfaces {
                 scene: &self.scene,
                 backend: b,
+                kept: None,
             };
             let mut h2 = CandidateHits::new(self.scene.options.scale.xi);
             let hit = surf

@@ -17,9 +17,10 @@ use rayon::prelude::*;
 use splatray::accel::{Backend, CandidateHits, Ray};
 use splatray::render::cast::{CastOutputs, cast_rays, occluded};
 use splatray::render::integrator::{SplatSurfaces, Surfaces};
+use splatray::resolve::{Silhouette, silhouettes};
 use splatray::scene::Scene;
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Mutex, OnceLock};
 use std::time::Instant;
 
 /// Splats, and triangles beside them, in one acceleration backend, for
@@ -37,6 +38,10 @@ pub struct SplatScene {
     /// camera rays (`docs/notes/backends.md`, "Issue 55, seventh
     /// session"). Kept up to [`KEEP_RAYS`] rays.
     scratch: Mutex<(Vec<Ray>, Vec<f32>)>,
+    /// The splats' silhouette constants for the resolver, built on the
+    /// first call that resolves windows (`cast_rays`,
+    /// `count_intersections`; 16 bytes a splat), none for `occluded`.
+    kept: OnceLock<Vec<Silhouette>>,
 }
 
 /// The most rays whose conversion buffers a scene keeps between calls
@@ -59,6 +64,7 @@ impl SplatScene {
             to_internal,
             name: info.name,
             scratch: Mutex::default(),
+            kept: OnceLock::new(),
         })
     }
 
@@ -66,6 +72,19 @@ impl SplatScene {
         SplatSurfaces {
             scene: &self.scene,
             backend: self.backend.as_ref(),
+            kept: None,
+        }
+    }
+
+    /// [`SplatScene::surfaces`] with the resolver's kept constants.
+    fn resolving(&self) -> SplatSurfaces<'_> {
+        SplatSurfaces {
+            kept: Some(
+                self.kept.get_or_init(|| {
+                    silhouettes(&self.scene.splats, |id| self.scene.shading_for(id))
+                }),
+            ),
+            ..self.surfaces()
         }
     }
 
@@ -340,7 +359,7 @@ impl SplatScene {
             let mut ids = splat_ids.then(|| vec![0u32; n]);
             let mut nrm = normals.then(|| vec![0.0f32; 3 * n]);
             cast_rays(
-                &self.surfaces(),
+                &self.resolving(),
                 &rays,
                 &lens,
                 CastOutputs {
@@ -376,7 +395,7 @@ impl SplatScene {
     ) -> PyResult<Bound<'py, PyAny>> {
         let (rays, _) = self.rays(rays)?;
         let counts = py.detach(|| {
-            let s = self.surfaces();
+            let s = self.resolving();
             let xi = self.scene.options.scale.xi;
             rays.par_iter()
                 .map_init(
@@ -443,7 +462,7 @@ impl SplatScene {
                 ids: Some(&mut ids),
                 normals: Some(&mut nrm),
             };
-            cast_rays(&self.surfaces(), &rays, &lens, out);
+            cast_rays(&self.resolving(), &rays, &lens, out);
             (t0.elapsed().as_secs_f64(), process_cpu() - c0)
         }))
     }
