@@ -203,7 +203,7 @@ pub struct SplatSurfaces<'a> {
     /// The acceleration backend.
     pub backend: &'a dyn Backend,
     /// The splats' silhouette constants and Phong bits
-    /// ([`crate::resolve::silhouettes`] of `scene.splats` and
+    /// (`resolve::silhouettes` of `scene.splats` and
     /// `scene.shading_for`), where the caller keeps them; `None` computes
     /// them a candidate at a time (the same hits).
     pub kept: Option<&'a [Silhouette]>,
