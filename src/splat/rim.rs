@@ -1173,14 +1173,18 @@ impl<'a> Lines<'a> {
             let count = reaches(0, &beyond.xs, &beyond.ys).ok()?;
             // The band's area outside the disc (a grid's share of
             // it), over spacing²: what a face going on puts there.
+            // Cell `k`'s `s` is a function of its column `k % N` alone
+            // and `t` of its row `k / N`: each taken once, by the same
+            // operations (the same bits).
             const N: usize = 8;
-            let outside = (0..N * N)
-                .filter(|k| {
-                    let s = ext + (band - ext) * ((k % N) as f32 + 0.5) / N as f32;
-                    let t = half * (2.0 * ((k / N) as f32 + 0.5) / N as f32 - 1.0);
-                    s * s + t * t > 1.0
-                })
-                .count() as f32
+            let ss: [f32; N] =
+                std::array::from_fn(|i| ext + (band - ext) * (i as f32 + 0.5) / N as f32);
+            let ts: [f32; N] =
+                std::array::from_fn(|j| half * (2.0 * (j as f32 + 0.5) / N as f32 - 1.0));
+            let outside = ts
+                .iter()
+                .map(|t| ss.iter().filter(|&&s| s * s + t * t > 1.0).count())
+                .sum::<usize>() as f32
                 / (N * N) as f32;
             let expected = outside * (band - ext) * 2.0 * half / (spacing * spacing);
             (count as f32) < BORDER_FILL * expected
