@@ -581,6 +581,15 @@ mod tests {
     use super::*;
     use crate::accel::Candidate;
 
+    /// Uniform numbers in `[-1, 1)` from a linear congruential sequence
+    /// started at `seed`, for the random tests.
+    fn uniform(mut state: u64) -> impl FnMut() -> f32 {
+        move || {
+            state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        }
+    }
+
     /// Two parallel splats facing the ray, 0.05 apart: the nearer hit near
     /// its rim, the farther near its centre.
     fn two_layers() -> (Vec<Splat>, CandidateHits, Ray) {
@@ -638,11 +647,7 @@ mod tests {
     /// and beyond the rim, directions with zero components, and a NaN `u`.
     #[test]
     fn four_silhouette_tests_at_once_answer_as_one() {
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
-        let mut rnd = move || {
-            state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
-            ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-        };
+        let mut rnd = uniform(0x2545_f491_4f6c_dd1d_u64);
         let (mut over, mut total, mut lined) = (0, 0, 0);
         for round in 0..20_000 {
             let splats: [Splat; 4] = std::array::from_fn(|k| {
@@ -709,11 +714,7 @@ mod tests {
 
     #[test]
     fn kept_constants_resolve_as_computed() {
-        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut rnd = move || {
-            state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
-            ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-        };
+        let mut rnd = uniform(0x9e37_79b9_7f4a_7c15_u64);
         // 64 splats near the plane z = 0, a third flat, a third with a
         // tilted field, a third curved; shading by id, Phong for most.
         let splats: Vec<Splat> = (0..64)

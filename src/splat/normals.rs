@@ -191,6 +191,18 @@ fn height(c: Vec3, p: Vec3, x: f32, y: f32, z: f32) -> f32 {
     (c.x * (x - p.x)) + (c.y * (y - p.y)) + (c.z * (z - p.z))
 }
 
+/// The coordinates of up to [`HELD_BLOCK`] points `block` by axis, lanes
+/// past its end not a number (never held: [`block_held`]).
+#[inline(always)]
+fn gathered(points: &[Vec3], block: &[u32]) -> [[f32; HELD_BLOCK]; 3] {
+    let mut at = [[f32::NAN; HELD_BLOCK]; 3];
+    for (k, &j) in block.iter().enumerate().take(HELD_BLOCK) {
+        let q = points[j as usize];
+        (at[0][k], at[1][k], at[2][k]) = (q.x, q.y, q.z);
+    }
+    at
+}
+
 /// How many of a block's gathered coordinates `at` lie within `tol` of the
 /// plane ([`height`]); a lane that is not a number is not.
 #[inline(always)]
@@ -221,12 +233,7 @@ fn holds_at_least(points: &[Vec3], i: usize, c: Vec3, items: &[u32], tol: f32, n
     let blocks = items.chunks_exact(HELD_BLOCK);
     let rest = blocks.remainder();
     for block in blocks {
-        let mut at = [[0f32; HELD_BLOCK]; 3];
-        for (k, &j) in block.iter().enumerate().take(HELD_BLOCK) {
-            let q = points[j as usize];
-            (at[0][k], at[1][k], at[2][k]) = (q.x, q.y, q.z);
-        }
-        let here = block_held(c, p, tol, &at);
+        let here = block_held(c, p, tol, &gathered(points, block));
         (held, missed) = (held + here, missed + HELD_BLOCK - here);
         if held >= need + own_in {
             return true;
@@ -235,12 +242,7 @@ fn holds_at_least(points: &[Vec3], i: usize, c: Vec3, items: &[u32], tol: f32, n
             return false;
         }
     }
-    let mut at = [[f32::NAN; HELD_BLOCK]; 3];
-    for (k, &j) in rest.iter().enumerate().take(HELD_BLOCK) {
-        let q = points[j as usize];
-        (at[0][k], at[1][k], at[2][k]) = (q.x, q.y, q.z);
-    }
-    held + block_held(c, p, tol, &at) >= need + own_in
+    held + block_held(c, p, tol, &gathered(points, rest)) >= need + own_in
 }
 
 /// The settling test of [`estimate_multiscale`]: at tolerance `tol`, a
@@ -386,11 +388,7 @@ fn far_heights(points: &[Vec3], i: usize, c: Vec3, far: &[u32], tol: f32, e: f32
     let own_held = usize::from(height(c, p, p.x, p.y, p.z).abs() <= tol);
     let (mut held, mut sq) = (0, [0f32; HELD_BLOCK]);
     for block in far.chunks(HELD_BLOCK) {
-        let mut at = [[f32::NAN; HELD_BLOCK]; 3];
-        for (k, &j) in block.iter().enumerate().take(HELD_BLOCK) {
-            let q = points[j as usize];
-            (at[0][k], at[1][k], at[2][k]) = (q.x, q.y, q.z);
-        }
+        let at = gathered(points, block);
         let lanes = at[0].iter().zip(&at[1]).zip(&at[2]);
         for (s, ((&x, &y), &z)) in sq.iter_mut().zip(lanes) {
             let h = height(c, p, x, y, z).abs();
