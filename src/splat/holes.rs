@@ -173,22 +173,25 @@ impl<'a> Nearby<'a> {
             }
             let at = near.cell_of(*p);
             near.starts[at + 1] += 1;
-            cells.push(at);
+            cells.push(at as u32);
         }
         for k in 1..near.starts.len() {
             near.starts[k] += near.starts[k - 1];
         }
         let mut next = near.starts.clone();
         for (f, &at) in found.iter().zip(&cells) {
+            let at = at as usize;
             near.items[next[at] as usize] = f.item;
             next[at] += 1;
         }
         Some(near)
     }
 
-    /// The cell coordinates of a place `a` along an axis (clamped).
+    /// The cell coordinates of a place `a` along an axis (clamped: the
+    /// cast saturates, below 0 and not a number to 0, and rounds toward
+    /// zero, so it floors what it keeps).
     fn index(&self, a: f32) -> usize {
-        (((a + self.reach) / self.cell).floor().max(0.0) as usize).min(self.side - 1)
+        (((a + self.reach) / self.cell) as usize).min(self.side - 1)
     }
 
     /// The cell of point `p`.
