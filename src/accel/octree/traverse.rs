@@ -180,7 +180,8 @@ impl<P: Primitive> Tree<P> {
             } else {
                 (&mut tz, &mut left_z, sz, dz)
             };
-            let within = *t <= visitor.cutoff() && *t <= exit;
+            // A fixed cutoff is at least `exit` (`traverse` clipped it).
+            let within = (V::FIXED_CUTOFF || *t <= visitor.cutoff()) && *t <= exit;
             if !within || *left == 0 {
                 return false;
             }
