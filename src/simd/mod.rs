@@ -40,6 +40,43 @@ pub use near::keys_within;
 pub use sort::{SORT_NETWORK_MAX, SORT_NETWORK_MIN, sort_keys};
 pub use tri::{SURE, Shear, TRI_LANES, TriColumns, tri_masks, tri_masks_sheared};
 
+/// The sides of 8 points `(xs[i], ys[i])` of a line `a·x + b·y = d`: bit
+/// `i` set where `a·x + b·y − d ≤ 0` (not a number: not set). The same
+/// products, sum and difference per lane, in the same order, as the scalar
+/// `a * x + b * y - d` (no fused multiply-add), so the same bits and
+/// sides; baseline x86-64 (SSE) compares the 8 lanes and takes their
+/// signs in two instructions each, which the compiler did not find
+/// (`crate::splat::rim`'s clipped areas).
+#[inline(always)]
+pub fn side_mask8(xs: &[f32; 8], ys: &[f32; 8], (a, b, d): (f32, f32, f32)) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{
+            _mm_add_ps, _mm_cmple_ps, _mm_loadu_ps, _mm_movemask_ps, _mm_mul_ps, _mm_set1_ps,
+            _mm_setzero_ps, _mm_sub_ps,
+        };
+        // SAFETY: unaligned loads of 4 floats at offsets 0 and 4 of two
+        // 8-float arrays, within the references' own memory; SSE is part
+        // of baseline x86-64.
+        unsafe {
+            let (va, vb, vd) = (_mm_set1_ps(a), _mm_set1_ps(b), _mm_set1_ps(d));
+            let side = |k: usize| {
+                let x = _mm_loadu_ps(xs.as_ptr().add(k));
+                let y = _mm_loadu_ps(ys.as_ptr().add(k));
+                let f = _mm_sub_ps(_mm_add_ps(_mm_mul_ps(va, x), _mm_mul_ps(vb, y)), vd);
+                _mm_movemask_ps(_mm_cmple_ps(f, _mm_setzero_ps())) as u32
+            };
+            side(0) | (side(4) << 4)
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        (0..8)
+            .map(|i| u32::from(a * xs[i] + b * ys[i] - d <= 0.0) << i)
+            .sum()
+    }
+}
+
 /// Asks the CPU to bring the cache lines `x` lies in (up to its first 192
 /// bytes, and its last byte's) into the caches, without waiting for them:
 /// a hint that changes no value, for records a loop will read soon after

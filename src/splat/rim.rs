@@ -482,6 +482,126 @@ fn clipped_area(poly: &[Vec2], edges: &[f32], l: ClipLine) -> f32 {
     0.5 * sum.abs()
 }
 
+/// A convex polygon (counter-clockwise) with its shoelace terms and its
+/// vertices' coordinates in lanes, for the areas [`Lines::best`]'s lines
+/// keep of it ([`Base::clipped_area`]).
+struct Base {
+    poly: Vec<Vec2>,
+    /// `edges[k]`: `poly[k]`'s shoelace term with the next vertex.
+    edges: Vec<f32>,
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+}
+
+/// [`Base::clipped_area`] takes the sides of at most this many vertices
+/// in its masks (a disc polygon cut by two lines has at most 132); a
+/// larger polygon is walked ([`clipped_area`]).
+const MASKED_VERTICES: usize = 256;
+
+impl Base {
+    fn of(poly: Vec<Vec2>) -> Self {
+        let n = poly.len();
+        let edges = (0..n)
+            .map(|k| poly[k].perp_dot(poly[next_vertex(k, n)]))
+            .collect();
+        // Padded to whole lanes of 8 with vertices on no side (not a
+        // number: never kept, and past `n`, never read).
+        let pad = n.next_multiple_of(8) - n;
+        let (xs, ys) = poly
+            .iter()
+            .map(|q| (q.x, q.y))
+            .chain(std::iter::repeat_n((f32::NAN, f32::NAN), pad))
+            .unzip();
+        Base {
+            poly,
+            edges,
+            xs,
+            ys,
+        }
+    }
+
+    /// [`clipped_area`] of the polygon, bit for bit: the same vertices
+    /// visited in the same order and the same terms summed in it, but each
+    /// vertex's side `a·x + b·y - d ≤ 0` taken in lanes into bit masks (the
+    /// same products and sums in their order: the same bits), and the
+    /// walk taken by runs of vertices kept and not: a run kept adds its
+    /// consecutive terms from `edges`, a run not kept adds nothing, and a
+    /// crossing is made only where the side changes, from the two
+    /// vertices' sides taken again (the same bits).
+    fn clipped_area(&self, l: ClipLine) -> f32 {
+        let (poly, edges) = (&self.poly, &self.edges);
+        let n = poly.len();
+        if n > MASKED_VERTICES {
+            return clipped_area(poly, edges, l);
+        }
+        let mut masks = [0u64; MASKED_VERTICES / 64];
+        let lanes = self.xs.chunks_exact(8).zip(self.ys.chunks_exact(8));
+        for (c, (xs, ys)) in lanes.enumerate() {
+            let (Ok(xs), Ok(ys)) = (xs.try_into(), ys.try_into()) else {
+                unreachable!("chunks of 8");
+            };
+            let m = crate::simd::side_mask8(xs, ys, (l.a, l.b, l.d));
+            masks[c >> 3] |= u64::from(m) << (8 * (c & 7));
+        }
+        let kept = |k: usize| (masks[k >> 6] >> (k & 63)) & 1 != 0;
+        // The first index from `k` on whose side is `side` (`n` if none).
+        let next_side = |k: usize, side: bool| {
+            let word = |c: usize| if side { masks[c] } else { !masks[c] };
+            let mut c = k >> 6;
+            let mut m = word(c) & (!0u64 << (k & 63));
+            while m == 0 {
+                c += 1;
+                if c * 64 >= n {
+                    return n;
+                }
+                m = word(c);
+            }
+            (c * 64 + m.trailing_zeros() as usize).min(n)
+        };
+        let f = |q: Vec2| l.a * q.x + l.b * q.y - l.d;
+        // The first vertex visited, the last, the sum so far.
+        let mut first: Option<Vec2> = None;
+        let mut last = Vec2::ZERO;
+        let mut sum = 0f32;
+        let mut k = 0;
+        while k < n {
+            let side = kept(k);
+            let end = next_side(k, !side);
+            if side {
+                let p = poly[k];
+                if first.is_none() {
+                    first = Some(p);
+                } else {
+                    sum += last.perp_dot(p);
+                }
+                for &e in &edges[k..end - 1] {
+                    sum += e;
+                }
+                last = poly[end - 1];
+            }
+            // The crossing on the run's last edge, if the side changes.
+            let j = end - 1;
+            let next = next_vertex(j, n);
+            if next != 0 || kept(0) != side {
+                let (p, q) = (poly[j], poly[next]);
+                let (fp, fq) = (f(p), f(q));
+                let v = p + (q - p) * (fp / (fp - fq));
+                if first.is_none() {
+                    first = Some(v);
+                } else {
+                    sum += last.perp_dot(v);
+                }
+                last = v;
+            }
+            k = end;
+        }
+        if let Some(v) = first {
+            sum += last.perp_dot(v);
+        }
+        0.5 * sum.abs()
+    }
+}
+
 /// The area of a simple polygon (shoelace).
 fn polygon_area(poly: &[Vec2]) -> f32 {
     let n = poly.len();
@@ -921,6 +1041,16 @@ fn octant(q: Vec2) -> usize {
     }
 }
 
+/// [`Lines::border`]'s chord across the disc at the own face's last point
+/// `ext`, the gap its line stands past that point, and whether the line is
+/// then inside the disc (`spacing` in radii).
+#[inline(always)]
+fn border_gap(ext: f32, spacing: f32) -> (f32, f32, bool) {
+    let chord = 2.0 * (1.0 - ext * ext).max(0.0).sqrt();
+    let gap = (spacing * spacing / chord.max(spacing)).min(CLIP_GAP_SPACINGS * spacing);
+    (chord, gap, ext + gap < 1.0)
+}
+
 /// Whether the point at `q` (normalised splat coordinates) lies across a
 /// candidate line along `w` past the own face's last point at `ext`
 /// ([`Lines::line_with`]): from a spacing short of it to two past it, within
@@ -1080,8 +1210,18 @@ impl<'a> Lines<'a> {
     ) -> impl Iterator<Item = (usize, Option<ClipLine>)> + '_ {
         let exts = coarse_exts(self.own, reaching);
         let counts = coarse_counts(&self.other_lanes, &exts, self.spacing);
+        // Where no point lies across, a border's line: none where its gap
+        // is not inside the disc, taken here for every direction in lanes
+        // (the same operations per lane: the same verdict as
+        // [`Lines::border`]'s), which spares those directions the call.
+        let spacing = self.spacing;
+        let inside: [bool; CLIP_DIRECTIONS] =
+            std::array::from_fn(|k| border_gap(exts[k], spacing).2);
         let (xs, ys) = coarse_dirs();
         (0..CLIP_DIRECTIONS).map(move |k| {
+            if counts[k] == 0 && !inside[k] {
+                return (k, None);
+            }
             let w = Vec2::new(xs[k], ys[k]);
             (k, self.line_counted(w, exts[k], counts[k]))
         })
@@ -1116,9 +1256,7 @@ impl<'a> Lines<'a> {
         // reaches the rim along `w`) no line is drawn whether the band is
         // open or not: taken first, it spares the band's count (the tree
         // asked for `beyond` is the same whenever it is asked).
-        let chord = 2.0 * (1.0 - ext * ext).max(0.0).sqrt();
-        let gap = (spacing * spacing / chord.max(spacing)).min(CLIP_GAP_SPACINGS * spacing);
-        let inside = ext + gap < 1.0;
+        let (chord, gap, inside) = border_gap(ext, spacing);
         if !inside {
             return None;
         }
@@ -1437,14 +1575,12 @@ impl<'a> Lines<'a> {
 /// The area a line cuts away of what the lines `kept` keep of the disc
 /// (as a polygon): [`Lines::best`]'s measure, the kept part clipped once.
 fn cut_of_kept(kept: &[ClipLine]) -> impl Fn(&ClipLine) -> f32 {
-    let base = kept
-        .iter()
-        .fold(disc_polygon().to_vec(), |poly, k| clip_polygon(&poly, *k));
-    let whole = polygon_area(&base);
-    let edges: Vec<f32> = (0..base.len())
-        .map(|k| base[k].perp_dot(base[next_vertex(k, base.len())]))
-        .collect();
-    move |l: &ClipLine| whole - clipped_area(&base, &edges, *l)
+    let base = Base::of(
+        kept.iter()
+            .fold(disc_polygon().to_vec(), |poly, k| clip_polygon(&poly, *k)),
+    );
+    let whole = polygon_area(&base.poly);
+    move |l: &ClipLine| whole - base.clipped_area(*l)
 }
 
 /// Of the lines found in `lines` (direction, line), the one `cut` says
@@ -1565,6 +1701,7 @@ mod tests {
                 .map(|k| base[k].perp_dot(base[next_vertex(k, base.len())]))
                 .collect();
             assert_eq!(old_area(base).to_bits(), polygon_area(base).to_bits());
+            let masked = Base::of(base.clone());
             for &l in &lines {
                 let old = old_clip(base, l);
                 let new = clip_polygon(base, l);
@@ -1576,6 +1713,12 @@ mod tests {
                     old_area(&old).to_bits(),
                     clipped_area(base, &edges, l).to_bits(),
                     "{l:?} on a base of {} vertices",
+                    base.len()
+                );
+                assert_eq!(
+                    old_area(&old).to_bits(),
+                    masked.clipped_area(l).to_bits(),
+                    "masked: {l:?} on a base of {} vertices",
                     base.len()
                 );
                 compared += 1;
