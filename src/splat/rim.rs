@@ -1210,18 +1210,8 @@ impl<'a> Lines<'a> {
     ) -> impl Iterator<Item = (usize, Option<ClipLine>)> + '_ {
         let exts = coarse_exts(self.own, reaching);
         let counts = coarse_counts(&self.other_lanes, &exts, self.spacing);
-        // Where no point lies across, a border's line: none where its gap
-        // is not inside the disc, taken here for every direction in lanes
-        // (the same operations per lane: the same verdict as
-        // [`Lines::border`]'s), which spares those directions the call.
-        let spacing = self.spacing;
-        let inside: [bool; CLIP_DIRECTIONS] =
-            std::array::from_fn(|k| border_gap(exts[k], spacing).2);
         let (xs, ys) = coarse_dirs();
         (0..CLIP_DIRECTIONS).map(move |k| {
-            if counts[k] == 0 && !inside[k] {
-                return (k, None);
-            }
             let w = Vec2::new(xs[k], ys[k]);
             (k, self.line_counted(w, exts[k], counts[k]))
         })
