@@ -1737,11 +1737,6 @@ mod tests {
         assert_eq!(compared, 42 * 400);
     }
 
-    /// [`coarse_exts`] gives, bit for bit, the farthest extent
-    /// [`Lines::line_at`] folds along each coarse direction: points spread
-    /// over the disc, on its rim, snapped to a coarse grid (ties between
-    /// points, zeros of both signs), on one side of a line through the
-    /// centre (extents of zero and below) and a single point at the centre.
     /// [`far_gap`]'s one-sum test says "not inside" only where
     /// [`border_gap`] does, over extents and spacings round the rim.
     #[test]
@@ -1765,6 +1760,11 @@ mod tests {
         assert!(spared > 1_250_000 && taken < 50, "{spared} {taken}");
     }
 
+    /// [`coarse_exts`] gives, bit for bit, the farthest extent
+    /// [`Lines::line_at`] folds along each coarse direction: points spread
+    /// over the disc, on its rim, snapped to a coarse grid (ties between
+    /// points, zeros of both signs), on one side of a line through the
+    /// centre (extents of zero and below) and a single point at the centre.
     #[test]
     fn coarse_exts_are_each_directions_fold() {
         let mut rng = crate::rng::SplitMix64::new(54);
