@@ -10,7 +10,7 @@
 //! holds. The centre-based rule of growth (`grow::HOLLOW_SHARE`) catches a
 //! ring round an empty middle, not a disc whose centre sits on its seed.
 
-use super::knn::{Knn, PointTree};
+use super::knn::{Knn, PointTree, dist_sq};
 use crate::data::Splat;
 use glam::{Vec2, Vec3};
 use kiddo::SquaredEuclidean;
@@ -230,13 +230,6 @@ impl<'a> Nearby<'a> {
         }
         (best <= bound && !tie).then_some((best, item))
     }
-}
-
-/// The tree's squared distance (`SquaredEuclidean`'s sum, in its order).
-#[inline]
-fn dist_sq(a: [f32; 3], b: [f32; 3]) -> f32 {
-    let (dx, dy, dz) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
-    dx * dx + dy * dy + dz * dz
 }
 
 /// The share of `s`'s kept (clipped) disc that points cover: of a grid of

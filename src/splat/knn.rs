@@ -713,7 +713,7 @@ const SHELLS: usize = 32;
 
 /// The tree's squared distance (`SquaredEuclidean`'s sum, in its order).
 #[inline]
-fn dist_sq(a: [f32; 3], b: [f32; 3]) -> f32 {
+pub(crate) fn dist_sq(a: [f32; 3], b: [f32; 3]) -> f32 {
     let (dx, dy, dz) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
     dx * dx + dy * dy + dz * dz
 }
