@@ -144,6 +144,13 @@ struct Growth {
     accepted: Vec<(u32, f32)>,
     /// Every point reached by the traversal (accepted or not).
     visited: Vec<u32>,
+    /// With creases, the metric coordinates `(a·d / aspect, b·d)` of
+    /// `visited`'s points after the seed, in its order (`d` a point's
+    /// offset from the seed), as the traversal took them; for
+    /// [`Grower::quiet`], whose frame is this growth's.
+    at: Vec<Vec2>,
+    /// The frame `(a, b, aspect)` grown in.
+    frame: (Vec3, Vec3, f32),
     h_min: f32,
     h_max: f32,
     /// Sum of the accepted points' heights `h_j` (eq. 1), for their mean.
@@ -152,7 +159,7 @@ struct Growth {
 
 /// A growth's buffers, kept for the next ([`Growth::accepted`],
 /// [`Growth::visited`]).
-type GrowthBuffers = (Vec<(u32, f32)>, Vec<u32>);
+type GrowthBuffers = (Vec<(u32, f32)>, Vec<u32>, Vec<Vec2>);
 
 struct Grower<'a> {
     inp: &'a GrowInput<'a>,
@@ -181,6 +188,10 @@ struct Grower<'a> {
     /// How many walks [`Grower::quiet`] spared (for the tests).
     #[cfg(test)]
     spared: usize,
+    /// How many of [`Grower::quiet`]'s passes took the growth's metric
+    /// coordinates ([`Growth::at`]; for the tests).
+    #[cfg(test)]
+    kept: usize,
 }
 
 impl Grower<'_> {
@@ -191,6 +202,17 @@ impl Grower<'_> {
     /// distance exceeds `max_d`. Points whose normal faces away from `n`
     /// (the other side of a thin sheet) are passed over, never taken.
     fn run(&mut self, i: usize, a: Vec3, b: Vec3, aspect: f32, max_d: f32) -> Growth {
+        if self.inp.creases {
+            self.run_keeping::<true>(i, a, b, aspect, max_d)
+        } else {
+            self.run_keeping::<false>(i, a, b, aspect, max_d)
+        }
+    }
+
+    /// [`Grower::run`], keeping the visited points' metric coordinates
+    /// ([`Growth::at`]) where `KEEP` (with creases: a loop of its own
+    /// without them).
+    fn run_keeping<const KEEP: bool>(&mut self, i: usize, a: Vec3, b: Vec3, aspect: f32, max_d: f32) -> Growth {
         let inp = self.inp;
         let p = inp.points[i];
         let n = inp.normals[i];
@@ -205,13 +227,16 @@ impl Grower<'_> {
         self.heap.push(Reverse(i as u64));
         let max_d2 = max_d * max_d;
         // The buffers of an earlier growth, where one was given back.
-        let (mut accepted, mut visited) = self.spare.pop().unwrap_or_default();
+        let (mut accepted, mut visited, mut at) = self.spare.pop().unwrap_or_default();
         accepted.clear();
         visited.clear();
+        at.clear();
         visited.push(i as u32);
         let mut g = Growth {
             accepted,
             visited,
+            at,
+            frame: (a, b, aspect),
             h_min: 0.0,
             h_max: 0.0,
             h_sum: 0.0,
@@ -243,6 +268,9 @@ impl Grower<'_> {
                 g.visited.push(q as u32);
                 let d = inp.points[q] - p;
                 let (x, y) = (a.dot(d) / aspect, b.dot(d));
+                if KEEP {
+                    g.at.push(Vec2::new(x, y));
+                }
                 let qd2 = x * x + y * y;
                 self.heap
                     .push(Reverse((u64::from(qd2.to_bits()) << 32) | q as u64));
@@ -253,7 +281,7 @@ impl Grower<'_> {
 
     /// Keep the buffers of a growth done with for the next [`Grower::run`].
     fn give_back(&mut self, g: Growth) {
-        self.spare.push((g.accepted, g.visited));
+        self.spare.push((g.accepted, g.visited, g.at));
     }
 
     /// The smallest circle, in the metric `(a, b, aspect)` around seed `i`,
@@ -554,10 +582,22 @@ impl Grower<'_> {
         stack.clear();
         own.push(f.near(inp.points, seed as usize));
         let mut sure = true;
-        for &q in met {
+        // The growth's metric coordinates, where it grew in this frame (the
+        // same operations as `near_inside`'s: the same `q`).
+        let kept = growth.at.len() == met.len() && frame_bits(growth.frame) == frame_bits((f.a, f.b, f.aspect));
+        #[cfg(test)]
+        {
+            self.kept += usize::from(kept);
+        }
+        for (k, &q) in met.iter().enumerate() {
             // The heights of the points inside are not taken: nothing reads
             // them without another face.
-            match f.near_inside(inp.points, q as usize) {
+            let near = if kept {
+                f.near_inside_at(inp.points, q as usize, growth.at[k])
+            } else {
+                f.near_inside(inp.points, q as usize)
+            };
+            match near {
                 Ok(m) => {
                     if self.stamp[q as usize] != took {
                         stack.push(q);
@@ -605,6 +645,14 @@ impl Grower<'_> {
         (self.own, self.ring, self.stack) = (own, ring, stack);
         clipped
     }
+}
+
+/// A frame `(a, b, aspect)`'s bits, to tell one frame from another
+/// (`==` on floats takes `-0` for `0`).
+fn frame_bits((a, b, aspect): (Vec3, Vec3, f32)) -> [u32; 7] {
+    let [ax, ay, az] = a.to_array().map(f32::to_bits);
+    let [bx, by, bz] = b.to_array().map(f32::to_bits);
+    [ax, ay, az, bx, by, bz, aspect.to_bits()]
 }
 
 /// The height of a splat's plane over its seed `i`, along the seed's normal:
@@ -1204,6 +1252,8 @@ impl<'a> Grower<'a> {
             shortcut: true,
             #[cfg(test)]
             spared: 0,
+            #[cfg(test)]
+            kept: 0,
         }
     }
 
@@ -1490,6 +1540,9 @@ mod tests {
         // wide: most reach the square's edges, the hole or the wall).
         assert_eq!(walk.spared, 0);
         assert!(quick.spared >= 2_600, "{} of {seeds}", quick.spared);
+        // Every quiet pass took the growth's coordinates (the frame is the
+        // growth's, round or elliptical): at least one a walk spared.
+        assert!(quick.kept >= quick.spared, "{} {}", quick.kept, quick.spared);
         assert!(quiet_clipped >= 1_800, "{quiet_clipped} of {clipped}");
         assert!(clipped >= 2_700, "{clipped} of {seeds}");
     }

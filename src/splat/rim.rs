@@ -256,14 +256,23 @@ impl Frame {
     /// the rim. The same `q`, bit for bit.
     pub(super) fn near_inside(&self, points: &[Vec3], q: usize) -> Result<Near, Near> {
         let d = points[q] - self.p;
+        self.near_inside_at(points, q, Vec2::new(self.a.dot(d) / self.aspect, self.b.dot(d)))
+    }
+
+    /// [`Frame::near_inside`] given the point's metric coordinates
+    /// `(a·d / aspect, b·d)` (`d` its offset from the seed), as the growth
+    /// took them ([`super::grow`]): the same operations, so the same `q`.
+    #[inline(always)]
+    pub(super) fn near_inside_at(&self, points: &[Vec3], q: usize, xy: Vec2) -> Result<Near, Near> {
         let m = Near {
-            q: (Vec2::new(self.a.dot(d) / self.aspect, self.b.dot(d)) - self.shift) / self.r,
+            q: (xy - self.shift) / self.r,
             h: 0.0,
             j: q as u32,
         };
         if m.q.length_squared() <= 1.0 {
             return Ok(m);
         }
+        let d = points[q] - self.p;
         Err(Near {
             h: (self.n.dot(d) - self.hc) / self.r,
             ..m
@@ -868,7 +877,7 @@ fn fold_reaching(ext: &mut [f32; CLIP_DIRECTIONS], qs: &[Vec2]) -> bool {
             let lanes = lo..lo + EXT_LANES;
             let e = ext[lanes.clone()].iter_mut();
             for ((a, wx), wy) in e.zip(&xs[lanes.clone()]).zip(&ys[lanes]) {
-                *a = a.max((wx * q.x) + (wy * q.y));
+                *a = at_least((wx * q.x) + (wy * q.y), *a);
             }
         }
     }
@@ -883,7 +892,12 @@ const _: () = assert!(CLIP_DIRECTIONS.is_multiple_of(EXT_LANES));
 /// [`coarse_dirs`]: `ext[k] = max(ext[k], w_k·q)`, the same products, sum
 /// and maximum as one point at a time over every direction, so the same
 /// bits; [`EXT_LANES`] directions at a time over all the points, which
-/// keeps their extents in registers.
+/// keeps their extents in registers. The maximum is [`at_least`] with the
+/// extent as the floor: an extent is never NaN (it starts at `f32::MIN`
+/// and only takes a product above it), so it is `f32::max`'s, of two
+/// zeros the extent as `f32::max` keeps it (the test
+/// `coarse_exts_are_each_directions_fold` folds signed zeros), without
+/// its NaN test and blend (3 of 7 instructions a lane group).
 fn fold_exts(ext: &mut [f32; CLIP_DIRECTIONS], qs: &[Vec2]) {
     let (xs, ys) = coarse_dirs();
     let lanes = ext.chunks_exact_mut(EXT_LANES);
@@ -895,7 +909,7 @@ fn fold_exts(ext: &mut [f32; CLIP_DIRECTIONS], qs: &[Vec2]) {
         wys.copy_from_slice(wy);
         for q in qs {
             for ((a, wx), wy) in acc.iter_mut().zip(wxs).zip(wys) {
-                *a = a.max((wx * q.x) + (wy * q.y));
+                *a = at_least((wx * q.x) + (wy * q.y), *a);
             }
         }
         e.copy_from_slice(&acc);
@@ -982,7 +996,9 @@ impl FromIterator<Vec2> for Lanes {
 
 /// Points' normalised coordinates in lanes ([`Lanes`]), grouped by the
 /// octant of their direction from the centre ([`octant`]): octant `o`'s
-/// points are `starts[o]..starts[o + 1]`, in their order within it.
+/// points are `starts[o]..starts[o + 1]`, in their order within it. The
+/// lanes hold the points twice over (`starts[8]` of them, then the same
+/// again), so that [`Octants::round_from`] is one slice.
 struct Octants {
     lanes: Lanes,
     starts: [usize; 9],
@@ -998,16 +1014,27 @@ impl Octants {
             starts[o + 1] += starts[o];
         }
         let mut at = starts;
-        let (mut xs, mut ys) = (vec![0f32; pts.len()], vec![0f32; pts.len()]);
+        let n = pts.len();
+        let (mut xs, mut ys) = (vec![0f32; 2 * n], vec![0f32; 2 * n]);
         for m in pts {
             let o = octant(m.q);
             (xs[at[o]], ys[at[o]]) = (m.q.x, m.q.y);
             at[o] += 1;
         }
+        xs.copy_within(..n, n);
+        ys.copy_within(..n, n);
         Octants {
             lanes: Lanes { xs, ys },
             starts,
         }
+    }
+
+    /// Every point once, from octant `o`'s first round the turn to the
+    /// point before it.
+    fn round_from(&self, o: usize) -> (&[f32], &[f32]) {
+        let (from, n) = (self.starts[o], self.starts[8]);
+        let (xs, ys) = (&self.lanes.xs, &self.lanes.ys);
+        (&xs[from..from + n], &ys[from..from + n])
     }
 }
 
@@ -1044,11 +1071,32 @@ fn octant(q: Vec2) -> usize {
 /// [`Lines::border`]'s chord across the disc at the own face's last point
 /// `ext`, the gap its line stands past that point, and whether the line is
 /// then inside the disc (`spacing` in radii).
+///
+/// The maximum and minimum are [`at_least`] and [`at_most`]: `f32::max`'s
+/// and `f32::min`'s values here (`1 − ext²` is never `−0`; a NaN
+/// `spacing` makes the gap NaN either way), without their NaN handling.
 #[inline(always)]
 fn border_gap(ext: f32, spacing: f32) -> (f32, f32, bool) {
-    let chord = 2.0 * (1.0 - ext * ext).max(0.0).sqrt();
-    let gap = (spacing * spacing / chord.max(spacing)).min(CLIP_GAP_SPACINGS * spacing);
+    let chord = 2.0 * at_least(1.0 - ext * ext, 0.0).sqrt();
+    let gap = at_most(spacing * spacing / at_least(chord, spacing), CLIP_GAP_SPACINGS * spacing);
     (chord, gap, ext + gap < 1.0)
+}
+
+/// `x.max(floor)` for a `floor` that is not NaN, as one `maxss`: `x` where
+/// it is above `floor`, else `floor` (a NaN `x` gives `floor`, as
+/// `f32::max` does); of two zeros, `floor`. `f32::max` adds a test and a
+/// blend for a NaN `floor`.
+#[inline(always)]
+fn at_least(x: f32, floor: f32) -> f32 {
+    if x > floor { x } else { floor }
+}
+
+/// `x.min(cap)` for a `cap` that is not NaN, as one `minss`: `x` where it
+/// is below `cap`, else `cap` (a NaN `x` gives `cap`, as `f32::min` does);
+/// of two zeros, `cap`.
+#[inline(always)]
+fn at_most(x: f32, cap: f32) -> f32 {
+    if x < cap { x } else { cap }
 }
 
 /// An extent `from` near the rim and [`border_gap`]'s gap there, at most
@@ -1059,7 +1107,7 @@ fn border_gap(ext: f32, spacing: f32) -> (f32, f32, bool) {
 /// (NaN says nothing: the full test is taken). `from` stands the largest
 /// gap short of the rim, where the gap mostly is that largest one.
 fn far_gap(spacing: f32) -> (f32, f32) {
-    let from = (1.0 - CLIP_GAP_SPACINGS * spacing).max(0.0);
+    let from = at_least(1.0 - CLIP_GAP_SPACINGS * spacing, 0.0);
     (from, border_gap(from, spacing).1)
 }
 
@@ -1271,7 +1319,7 @@ impl<'a> Lines<'a> {
             return None;
         }
         // The band's half-width along the chord (both counts below).
-        let half = (0.5 * chord).max(BORDER_HALF_SPACINGS * spacing);
+        let half = at_least(0.5 * chord, BORDER_HALF_SPACINGS * spacing);
         let band = ext + BORDER_SPACINGS * spacing;
         let open = band < 1.0 || {
             // What a face going on puts in the whole band (over
@@ -1286,8 +1334,9 @@ impl<'a> Lines<'a> {
             // order the points are counted in: the graph's `ring`, part of
             // `beyond`, is counted first, and where its count reaches that
             // share (inside a surface, nearly always) the tree is not asked.
-            // The ring is counted from the octant before `w`'s round the
-            // turn ([`Octants`]), where the band's points lie.
+            // The ring is counted in one pass from the octant before `w`'s
+            // round the turn ([`Octants::round_from`]), where the band's
+            // points lie.
             let whole = (band - ext) * 2.0 * half / (spacing * spacing);
             //
             // Each chunk's test is taken component by component (glam's
@@ -1313,10 +1362,8 @@ impl<'a> Lines<'a> {
                 }
                 Ok(count)
             };
-            let from = self.ring.starts[(octant(w) + 7) % 8];
-            let (xs, ys) = (&self.ring.lanes.xs, &self.ring.lanes.ys);
-            let first = reaches(0, &xs[from..], &ys[from..]).ok()?;
-            reaches(first, &xs[..from], &ys[..from]).ok()?;
+            let (xs, ys) = self.ring.round_from((octant(w) + 7) % 8);
+            reaches(0, xs, ys).ok()?;
             let beyond = self.beyond();
             let count = reaches(0, &beyond.xs, &beyond.ys).ok()?;
             // The band's area outside the disc (a grid's share of
@@ -1735,6 +1782,93 @@ mod tests {
             }
         }
         assert_eq!(compared, 42 * 400);
+    }
+
+    /// [`border_gap`] with [`at_least`] and [`at_most`] against its
+    /// form with `f32::max` and `f32::min`, bit for bit: extents over the
+    /// disc and past it, at and near `±1`, `±0`, NaN and infinities, and
+    /// spacings from tiny to past the radius (the sides of a NaN `spacing`
+    /// are NaN either way: the gap's bits are not compared, only that it
+    /// is NaN, and the line is never inside); and the two helpers against
+    /// `f32::max` and `f32::min` over pairs of such values.
+    #[test]
+    fn border_gap_is_its_max_min_form() {
+        let old = |ext: f32, spacing: f32| {
+            let chord = 2.0 * (1.0 - ext * ext).max(0.0).sqrt();
+            let gap = (spacing * spacing / chord.max(spacing)).min(CLIP_GAP_SPACINGS * spacing);
+            (chord, gap, ext + gap < 1.0)
+        };
+        let mut exts: Vec<f32> = (0..=4000).map(|j| -1.2 + 0.0006 * j as f32).collect();
+        exts.extend([0.0, -0.0, 1.0, -1.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY]);
+        exts.extend([1.0f32, -1.0].map(|x| f32::from_bits(x.to_bits() - 1)));
+        let mut spacings: Vec<f32> = (0..200).map(|i| 1e-6 * 1.1f32.powi(i)).collect();
+        spacings.extend([0.0, f32::MIN_POSITIVE, f32::INFINITY, f32::NAN]);
+        let mut compared = 0;
+        for &spacing in &spacings {
+            for &ext in &exts {
+                let (got, want) = (border_gap(ext, spacing), old(ext, spacing));
+                assert_eq!(got.0.to_bits(), want.0.to_bits(), "{ext} {spacing}");
+                assert_eq!(got.2, want.2, "{ext} {spacing}");
+                if want.1.is_nan() {
+                    assert!(got.1.is_nan(), "{ext} {spacing}");
+                } else {
+                    assert_eq!(got.1.to_bits(), want.1.to_bits(), "{ext} {spacing}");
+                }
+                compared += 1;
+            }
+            let (from, least) = far_gap(spacing);
+            let want = (1.0 - CLIP_GAP_SPACINGS * spacing).max(0.0);
+            assert_eq!(from.to_bits(), want.to_bits(), "{spacing}");
+            let want = old(want, spacing).1;
+            assert!(least.to_bits() == want.to_bits() || (least.is_nan() && want.is_nan()));
+        }
+        assert_eq!(compared, 204 * 4010);
+        // The helpers: equal to `f32::max`/`f32::min` wherever the floor
+        // (cap) is not NaN, but for two zeros of unlike signs.
+        let values: Vec<f32> = exts.iter().chain(&spacings).copied().collect();
+        for &x in &values {
+            for &y in values.iter().filter(|y| !y.is_nan()) {
+                if x == 0.0 && y == 0.0 && x.to_bits() != y.to_bits() {
+                    continue;
+                }
+                assert_eq!(at_least(x, y).to_bits(), x.max(y).to_bits(), "{x} {y}");
+                assert_eq!(at_most(x, y).to_bits(), x.min(y).to_bits(), "{x} {y}");
+            }
+        }
+    }
+
+    /// [`Octants::round_from`]: every point once, from the octant's first
+    /// round the turn, for rings of 0 to 60 points (some on the axes and
+    /// diagonals) and every octant.
+    #[test]
+    fn octants_round_from_holds_every_point_once() {
+        let mut rng = crate::rng::SplitMix64::new(5428);
+        let mut uniform = || (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
+        for n in 0..=60 {
+            let pts: Vec<Near> = (0..n)
+                .map(|j| {
+                    let t = std::f32::consts::TAU * uniform();
+                    let mut q = Vec2::new(t.cos(), t.sin()) * (1.0 + uniform());
+                    if j % 5 == 0 {
+                        q = (q * 2.0).round() / 2.0;
+                    }
+                    Near { q, h: 0.0, j }
+                })
+                .collect();
+            let ring = Octants::of(&pts);
+            let mut want: Vec<(u32, u32)> = pts.iter().map(|m| (m.q.x.to_bits(), m.q.y.to_bits())).collect();
+            want.sort_unstable();
+            for o in 0..8 {
+                let (xs, ys) = ring.round_from(o);
+                assert_eq!((xs.len(), ys.len()), (pts.len(), pts.len()));
+                let mut got: Vec<(u32, u32)> = xs.iter().zip(ys).map(|(x, y)| (x.to_bits(), y.to_bits())).collect();
+                if ring.starts[o] < ring.starts[o + 1] {
+                    assert_eq!(octant(Vec2::new(xs[0], ys[0])), o, "{n} {o}");
+                }
+                got.sort_unstable();
+                assert_eq!(got, want, "{n} {o}");
+            }
+        }
     }
 
     /// [`far_gap`]'s one-sum test says "not inside" only where
