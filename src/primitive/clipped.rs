@@ -139,6 +139,12 @@ impl Pack<ClippedDisc> for ClippedPack {
         super::disc::pack_masks(packs, ray, isa, out);
     }
 
+    /// [`DiscPack`]'s masks of the met packs in one call.
+    #[inline]
+    fn masks_met(packs: &[Self], met: u32, ray: &PackRay, (): &(), isa: simd::Isa, out: &mut [u32]) {
+        super::disc::pack_masks_met(packs, met, ray, isa, out);
+    }
+
     /// [`DiscPack`]'s masks of the packs `packs[at[j]]` in one call.
     #[inline]
     fn masks_at(packs: &[Self], at: &[u32], ray: &PackRay, isa: simd::Isa, out: &mut [u32]) {

@@ -277,6 +277,12 @@ impl Pack<Disc> for DiscPack {
         pack_masks(packs, ray, isa, out);
     }
 
+    /// [`simd::disc_masks_met`]: the met packs' masks in one call.
+    #[inline]
+    fn masks_met(packs: &[Self], met: u32, ray: &PackRay, (): &(), isa: simd::Isa, out: &mut [u32]) {
+        pack_masks_met(packs, met, ray, isa, out);
+    }
+
     /// [`simd::disc_masks`] of the packs `packs[at[j]]` in one call
     /// ([`pack_masks_at`]).
     #[inline]
@@ -327,6 +333,20 @@ pub(super) fn pack_masks<C: AsRef<DiscPack>>(
     out: &mut [u32],
 ) {
     simd::disc_masks(packs, ray.origin, ray.dir, ray.t_min, ray.t_max, isa, out);
+}
+
+/// [`simd::disc_masks_met`] of the disc packs `packs` hold, as
+/// [`pack_masks`]: [`Pack::masks_met`] of [`DiscPack`] and of packs that
+/// filter by their discs.
+#[inline]
+pub(super) fn pack_masks_met<C: AsRef<DiscPack>>(
+    packs: &[C],
+    met: u32,
+    ray: &PackRay,
+    isa: simd::Isa,
+    out: &mut [u32],
+) {
+    simd::disc_masks_met(packs, met, ray.origin, ray.dir, ray.t_min, ray.t_max, isa, out);
 }
 
 /// [`simd::disc_masks_rays`] of the disc packs `packs` hold, as
@@ -447,6 +467,50 @@ mod tests {
             }
         }
         assert!(hits > 1000, "the rays should often hit: {hits}");
+    }
+
+    #[test]
+    fn masks_met_are_the_masks_of_the_met_packs_on_every_path() {
+        // 16 packs of discs around the origin, rays from outside and inside
+        // them, sets of met packs (none, all, runs, scattered): on every
+        // SIMD path each met pack's mask is its own, the other slots are
+        // left as they were.
+        let mut rng = SplitMix64::new(0x55_0028);
+        let mut rnd = || rng.next_f32() - 0.5;
+        let packs: Vec<DiscPack> = (0..16)
+            .map(|_| {
+                let discs: [Option<Disc>; LANES] = std::array::from_fn(|_| {
+                    let (c, n) = (Vec3::new(rnd(), rnd(), rnd()), Vec3::new(rnd(), rnd(), rnd()));
+                    Splat::disc(c, n, 0.15 + 0.2 * rnd().abs()).map(|s| s.disc_geometry())
+                });
+                DiscPack::from_fn(|l| discs[l])
+            })
+            .collect();
+        let mut passed = 0;
+        for trial in 0..200u32 {
+            let origin = Vec3::new(rnd(), rnd(), rnd()) * if trial % 2 == 0 { 0.6 } else { 6.0 };
+            let dir = Vec3::new(rnd(), rnd(), rnd()) * 0.8 - origin;
+            let t_max = if trial % 4 == 0 { 5.0 } else { f32::INFINITY };
+            let ray = PackRay::new(&Ray::new(origin, dir), 0.0, t_max);
+            let met = match trial % 5 {
+                0 => 0,
+                1 => 0xffff,
+                2 => 0x0ff0,
+                _ => (rnd().abs() * 65536.0) as u32 & 0xffff,
+            };
+            for isa in simd::available() {
+                let mut want = vec![0; 16];
+                DiscPack::masks(&packs, &ray, isa, &mut want);
+                let mut got = vec![0xdead; 16];
+                DiscPack::masks_met(&packs, met, &ray, &(), isa, &mut got);
+                for j in 0..16 {
+                    let expect = if met & 1 << j != 0 { want[j] } else { 0xdead };
+                    assert_eq!(got[j], expect, "{isa:?} trial {trial} pack {j}");
+                }
+                passed += want.iter().filter(|&&m| m != 0).count();
+            }
+        }
+        assert!(passed > 100, "{passed}");
     }
 
     #[test]

@@ -221,6 +221,28 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
         Self::masks(packs, ray, isa, out);
     }
 
+    /// [`Pack::masks_prepped`] of the packs `packs[j]` for each bit `j` set
+    /// in `met` into `out[j]` (the other slots left as they are): the same
+    /// masks. Here: one call per run of consecutive bits; a pack with a
+    /// SIMD filter takes them all in one call.
+    #[inline]
+    fn masks_met(
+        packs: &[Self],
+        met: u32,
+        ray: &PackRay,
+        prep: &Self::Prep,
+        isa: crate::simd::Isa,
+        out: &mut [u32],
+    ) {
+        let mut m = met;
+        while m != 0 {
+            let j = m.trailing_zeros() as usize;
+            let n = (m >> j).trailing_ones() as usize;
+            Self::masks_prepped(&packs[j..j + n], ray, prep, isa, &mut out[j..j + n]);
+            m &= !(((1u64 << (j + n)) - 1) as u32);
+        }
+    }
+
     /// [`Pack::may_hit`] of each of `packs` for each ray `k` set in
     /// `active` into `out[j][k]` (0 for the other rays), and the rays whose
     /// mask is not zero into `rays[j]` (bit `k`; `out` and `rays` at least

@@ -255,6 +255,39 @@ pub fn disc_masks<C: AsRef<DiscColumns>>(
     }
 }
 
+/// [`disc_masks`] of the packs `packs[j]` for each bit `j` set in `met`
+/// into `out[j]`, the other slots of `out` left as they are: each the mask
+/// [`disc_masks`] gives the pack (a leaf's packs whose box the ray meets,
+/// `crate::accel::octree`). `packs` and `out` must reach the highest bit.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn disc_masks_met<C: AsRef<DiscColumns>>(
+    packs: &[C],
+    met: u32,
+    origin: [f32; 3],
+    dir: [f32; 3],
+    t_min: f32,
+    t_max: f32,
+    isa: Isa,
+    out: &mut [u32],
+) {
+    match isa {
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx2 if Isa::Avx2.supported() => {
+            // SAFETY: the guard checked that the CPU runs AVX2.
+            unsafe { x86::avx2_masks_met(packs, met, origin, dir, (t_min, t_max), out) }
+        }
+        _ => {
+            let mut m = met;
+            while m != 0 {
+                let j = m.trailing_zeros() as usize;
+                m &= m - 1;
+                disc_masks(&packs[j..=j], origin, dir, t_min, t_max, isa, &mut out[j..=j]);
+            }
+        }
+    }
+}
+
 /// Rays per call of [`disc_masks_rays`] (a packet, `crate::accel::PACKET`).
 pub const RAYS: usize = 8;
 
@@ -502,6 +535,34 @@ mod x86 {
         _mm256_add_ps(_mm256_mul_ps(u, u), _mm256_mul_ps(v, v))
     }
 
+    /// One pack's mask of [`super::disc_masks`] (the ray's origin, direction
+    /// and span broadcast): the pack in one 256-bit register.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn avx2_mask(p: &DiscColumns, o: [__m256; 3], d: [__m256; 3], tmin: __m256, tmax: __m256) -> u32 {
+        // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
+        // (`DiscColumns` is 64-byte aligned, each column 32 bytes).
+        let col = |k: usize| unsafe { _mm256_load_ps(p.cols[k].as_ptr()) };
+        let (nx, ny, nz) = (col(NORMAL), col(NORMAL + 1), col(NORMAL + 2));
+        let (cx, cy, cz) = (col(CENTER), col(CENTER + 1), col(CENTER + 2));
+        let denom = avx2_dot([nx, ny, nz], d);
+        let (ocx, ocy, ocz) = (
+            _mm256_sub_ps(o[0], cx),
+            _mm256_sub_ps(o[1], cy),
+            _mm256_sub_ps(o[2], cz),
+        );
+        let num = avx2_dot([nx, ny, nz], [ocx, ocy, ocz]);
+        let t = _mm256_div_ps(_mm256_xor_ps(num, _mm256_set1_ps(-0.0)), denom);
+        let in_range = avx2_in_range(t, tmin, tmax);
+        let in_range = _mm256_movemask_ps(in_range) as u32;
+        if in_range == 0 {
+            return 0;
+        }
+        let r2 = avx2_rim2(p, [ocx, ocy, ocz], d, t);
+        let on = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(r2, _mm256_set1_ps(RIM))) as u32;
+        on & in_range
+    }
+
     /// [`super::disc_masks`] with one pack per 256-bit register.
     ///
     /// # Safety
@@ -515,36 +576,34 @@ mod x86 {
         t_max: f32,
         out: &mut [u32],
     ) {
-        let [ox, oy, oz] = origin.map(|x| _mm256_set1_ps(x));
-        let [dx, dy, dz] = dir.map(|x| _mm256_set1_ps(x));
-        let tmin = _mm256_set1_ps(t_min);
-        let tmax = _mm256_set1_ps(t_max);
-        let rim = _mm256_set1_ps(RIM);
-        let sign = _mm256_set1_ps(-0.0);
+        let o = origin.map(|x| _mm256_set1_ps(x));
+        let d = dir.map(|x| _mm256_set1_ps(x));
+        let (tmin, tmax) = (_mm256_set1_ps(t_min), _mm256_set1_ps(t_max));
         for (p, m) in packs.iter().zip(out.iter_mut()) {
-            let p = p.as_ref();
-            // SAFETY: `cols[k]` is 8 f32 at a 32-byte aligned address
-            // (`DiscColumns` is 64-byte aligned, each column 32 bytes).
-            let col = |k: usize| unsafe { _mm256_load_ps(p.cols[k].as_ptr()) };
-            let (nx, ny, nz) = (col(NORMAL), col(NORMAL + 1), col(NORMAL + 2));
-            let (cx, cy, cz) = (col(CENTER), col(CENTER + 1), col(CENTER + 2));
-            let denom = avx2_dot([nx, ny, nz], [dx, dy, dz]);
-            let (ocx, ocy, ocz) = (
-                _mm256_sub_ps(ox, cx),
-                _mm256_sub_ps(oy, cy),
-                _mm256_sub_ps(oz, cz),
-            );
-            let num = avx2_dot([nx, ny, nz], [ocx, ocy, ocz]);
-            let t = _mm256_div_ps(_mm256_xor_ps(num, sign), denom);
-            let in_range = avx2_in_range(t, tmin, tmax);
-            let in_range = _mm256_movemask_ps(in_range) as u32;
-            if in_range == 0 {
-                *m = 0;
-                continue;
-            }
-            let r2 = avx2_rim2(p, [ocx, ocy, ocz], [dx, dy, dz], t);
-            let on = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(r2, rim)) as u32;
-            *m = on & in_range;
+            *m = avx2_mask(p.as_ref(), o, d, tmin, tmax);
+        }
+    }
+
+    /// [`super::disc_masks_met`] with one pack per 256-bit register.
+    ///
+    /// # Safety
+    /// The CPU must run AVX2.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn avx2_masks_met<C: AsRef<DiscColumns>>(
+        packs: &[C],
+        mut met: u32,
+        origin: [f32; 3],
+        dir: [f32; 3],
+        (t_min, t_max): (f32, f32),
+        out: &mut [u32],
+    ) {
+        let o = origin.map(|x| _mm256_set1_ps(x));
+        let d = dir.map(|x| _mm256_set1_ps(x));
+        let (tmin, tmax) = (_mm256_set1_ps(t_min), _mm256_set1_ps(t_max));
+        while met != 0 {
+            let j = met.trailing_zeros() as usize;
+            met &= met - 1;
+            out[j] = avx2_mask(packs[j].as_ref(), o, d, tmin, tmax);
         }
     }
 

@@ -3,8 +3,8 @@
 //! leaf packs, flattening.
 
 use super::{
-    ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Layout, LeafBox, NO_PRIMITIVE, Node, Octree,
-    OctreeParams, OverlapTest, Tree, child_lo, lanes,
+    BOX_GROUP, ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Layout, LeafBox, NO_PRIMITIVE, Node,
+    Octree, OctreeParams, OverlapTest, PackBoxes, Tree, child_lo, lanes,
 };
 use crate::accel::BuildStats;
 use crate::primitive::{Pack, Primitive};
@@ -179,21 +179,23 @@ fn finish<P: Primitive>(
     let cube = &s.cube;
     let references: usize = s.leaf_refs.iter().map(|&c| c as usize).sum();
     assert!(references < INTERIOR as usize, "too many references");
-    let (packs, pack_ids, entries, leaf_entries) = if shared {
+    let mut leaf_boxes = content_boxes(&s.sorted, &s.chunks, s.leaves, cube.pad);
+    clip_to_cells(&s.root, cube.lo, cube.size, cube.pad, &mut leaf_boxes);
+    let (packs, pack_ids, entries, leaf_entries, pack_boxes) = if shared {
         let (perm, lowest) = leaf_set_order(&s.chunks, s.sorted.len());
         let (stored, positions) = copy_small_groups::<P>(&s.chunks, &s.leaf_refs, &perm, &lowest);
         let (packs, pack_ids) = shared_packs(&s.sorted, &s.order, &stored);
         let (entries, leaf_entries) = leaf_entries::<P>(&positions, &s.leaf_refs);
-        (packs, pack_ids, entries, leaf_entries)
+        (packs, pack_ids, entries, leaf_entries, Vec::new())
     } else {
-        let (packs, pack_ids) = fill_packs(&s.sorted, &s.order, &s.chunks, &s.leaf_packs);
+        let pack_keys = copies_keys::<P>(&s.chunks, &s.leaf_packs);
+        let (packs, pack_ids) = fill_packs(&s.sorted, &s.order, &pack_keys);
+        let pack_boxes = pack_boxes(&s.sorted, &pack_keys, &s.leaf_packs, &leaf_boxes, cube.pad);
         // A leaf's packs are contiguous: no entries.
-        (packs, pack_ids, Vec::new(), s.leaf_packs)
+        (packs, pack_ids, Vec::new(), s.leaf_packs, pack_boxes)
     };
-    let mut leaf_boxes = content_boxes(&s.sorted, &s.chunks, s.leaves, cube.pad);
     drop(s.sorted);
     drop(s.chunks);
-    clip_to_cells(&s.root, cube.lo, cube.size, cube.pad, &mut leaf_boxes);
     let leaf_start = prefix_sums(&leaf_entries);
     let (nodes, boxes) = flatten(s.root, &leaf_start, &leaf_entries, &leaf_boxes);
     let nonempty = nodes
@@ -207,6 +209,7 @@ fn finish<P: Primitive>(
         boxes,
         packs,
         pack_ids,
+        pack_boxes,
         side: std::sync::Arc::clone(side),
         entries,
         shared,
@@ -232,6 +235,7 @@ impl<P: Primitive> Tree<P> {
             + std::mem::size_of_val(self.pack_ids.as_slice())
             + std::mem::size_of_val(self.entries.as_slice())
             + std::mem::size_of_val(self.boxes.as_slice())
+            + std::mem::size_of_val(self.pack_boxes.as_slice())
             + self
                 .grid
                 .as_ref()
@@ -418,22 +422,27 @@ fn keys_by_leaf(chunks: &[Vec<u64>], slots: &[u32], stride: u32, len: usize) -> 
     keys
 }
 
-/// Step 4, [`Layout::Copies`]: the references sorted by leaf, each leaf's
-/// padded to whole packs, then the packs and their lanes' ids.
-fn fill_packs<P: Primitive>(
-    sorted: &[(P, Vec3)],
-    order: &[u32],
-    chunks: &[Vec<u64>],
-    leaf_packs: &[u32],
-) -> (Vec<P::Pack>, Vec<u32>) {
+/// Step 4, [`Layout::Copies`]: the references' keys sorted by leaf, each
+/// leaf's padded to whole packs ([`NO_PRIMITIVE`] on padding).
+fn copies_keys<P: Primitive>(chunks: &[Vec<u64>], leaf_packs: &[u32]) -> Vec<u32> {
     let lanes = lanes::<P>();
     let total = leaf_packs.iter().map(|&c| c as usize).sum::<usize>();
-    let pack_keys = keys_by_leaf(
+    keys_by_leaf(
         chunks,
         &prefix_sums(leaf_packs),
         lanes as u32,
         total * lanes,
-    );
+    )
+}
+
+/// Step 4, [`Layout::Copies`], continued: the packs of the keys
+/// `pack_keys` ([`copies_keys`]) and their lanes' ids.
+fn fill_packs<P: Primitive>(
+    sorted: &[(P, Vec3)],
+    order: &[u32],
+    pack_keys: &[u32],
+) -> (Vec<P::Pack>, Vec<u32>) {
+    let lanes = lanes::<P>();
     let packs: Vec<P::Pack> = pack_keys
         .par_chunks(lanes)
         .map(|keys| {
@@ -454,6 +463,53 @@ fn fill_packs<P: Primitive>(
         })
         .collect();
     (packs, pack_ids)
+}
+
+/// Step 4, [`Layout::Copies`], last: each pack's box
+/// ([`super::Tree::pack_boxes`]), the box around its lanes' padded
+/// footprints (those of [`content_boxes`]) clipped to its leaf's content
+/// box, [`BOX_GROUP`] packs to a group (the last group's spare lanes empty
+/// boxes). A hit of a lane inside the leaf's box lies in the lane's
+/// footprint, hence in the pack's box (with a padding's margin, as for the
+/// leaves); a hit outside the leaf's box lies in another leaf holding the
+/// primitive, which the ray visits as it would without the boxes.
+fn pack_boxes<P: Primitive>(
+    sorted: &[(P, Vec3)],
+    pack_keys: &[u32],
+    leaf_packs: &[u32],
+    leaf_boxes: &[LeafBox],
+    pad: f32,
+) -> Vec<PackBoxes> {
+    let leaf_of: Vec<u32> = leaf_packs
+        .iter()
+        .enumerate()
+        .flat_map(|(l, &c)| std::iter::repeat_n(l as u32, c as usize))
+        .collect();
+    let boxes: Vec<LeafBox> = pack_keys
+        .par_chunks(lanes::<P>())
+        .zip(leaf_of.par_iter())
+        .map(|(keys, &l)| {
+            let mut b = EMPTY_BOX;
+            for &k in keys.iter().filter(|&&k| k != NO_PRIMITIVE) {
+                let (p, e) = &sorted[k as usize];
+                let (c, e) = (p.center(), *e + Vec3::splat(pad));
+                b = [b[0].min(c - e), b[1].max(c + e)];
+            }
+            let leaf = leaf_boxes[l as usize];
+            [b[0].max(leaf[0]), b[1].min(leaf[1])]
+        })
+        .collect();
+    boxes
+        .chunks(BOX_GROUP)
+        .map(|g| {
+            let col = |k: usize, a: usize| {
+                glam::Vec4::from_array(std::array::from_fn(|i| {
+                    g.get(i).map_or(EMPTY_BOX[k][a], |b| b[k][a])
+                }))
+            };
+            [col(0, 0), col(0, 1), col(0, 2), col(1, 0), col(1, 1), col(1, 2)]
+        })
+        .collect()
 }
 
 /// Step 4, [`Layout::Shared`]: the order the primitives are stored in,

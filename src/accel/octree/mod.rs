@@ -201,6 +201,13 @@ const INTERIOR: u32 = 1 << 31;
 /// A box as its lower and upper corners.
 type LeafBox = [Vec3; 2];
 
+/// Packs per [`PackBoxes`].
+const BOX_GROUP: usize = 4;
+
+/// The boxes of [`BOX_GROUP`] consecutive packs as six columns, one lane
+/// a pack: lower x, y, z, then upper x, y, z.
+type PackBoxes = [glam::Vec4; 6];
+
 /// Primitive id of a padding lane.
 const NO_PRIMITIVE: u32 = u32::MAX;
 
@@ -275,6 +282,13 @@ struct Tree<P: Primitive> {
     packs: Vec<P::Pack>,
     /// Primitive id of each lane of `packs` ([`NO_PRIMITIVE`] on padding).
     pack_ids: Vec<u32>,
+    /// [`Layout::Copies`]: the packs' boxes, [`BOX_GROUP`] consecutive
+    /// packs to a [`PackBoxes`] (pack `i` in lane `i % BOX_GROUP` of group
+    /// `i / BOX_GROUP`): each the box around its lanes' padded footprints
+    /// clipped to its leaf's content box. A single ray skips the filter of
+    /// a pack whose box it misses within its window, as it skips a leaf.
+    /// Empty with [`Layout::Shared`].
+    pack_boxes: Vec<PackBoxes>,
     /// What the packs' lanes leave out of their primitives
     /// ([`Pack::Side`], by global id: for clipped discs the clip lines of
     /// the clipped ones alone), one table for every part.
