@@ -469,6 +469,21 @@ mod tests {
         assert!(hits > 1000, "the rays should often hit: {hits}");
     }
 
+    /// `n` packs of random discs around the origin (centres and normals in
+    /// the cube of side 1, radii 0.15 to 0.25; a degenerate draw leaves its
+    /// lane empty), drawn from `rnd` in a fixed order.
+    fn random_packs(n: usize, rnd: &mut impl FnMut() -> f32) -> Vec<DiscPack> {
+        (0..n)
+            .map(|_| {
+                let discs: [Option<Disc>; LANES] = std::array::from_fn(|_| {
+                    let (c, n) = (Vec3::new(rnd(), rnd(), rnd()), Vec3::new(rnd(), rnd(), rnd()));
+                    Splat::disc(c, n, 0.15 + 0.2 * rnd().abs()).map(|s| s.disc_geometry())
+                });
+                DiscPack::from_fn(|l| discs[l])
+            })
+            .collect()
+    }
+
     #[test]
     fn masks_met_are_the_masks_of_the_met_packs_on_every_path() {
         // 16 packs of discs around the origin, rays from outside and inside
@@ -477,15 +492,7 @@ mod tests {
         // left as they were.
         let mut rng = SplitMix64::new(0x55_0028);
         let mut rnd = || rng.next_f32() - 0.5;
-        let packs: Vec<DiscPack> = (0..16)
-            .map(|_| {
-                let discs: [Option<Disc>; LANES] = std::array::from_fn(|_| {
-                    let (c, n) = (Vec3::new(rnd(), rnd(), rnd()), Vec3::new(rnd(), rnd(), rnd()));
-                    Splat::disc(c, n, 0.15 + 0.2 * rnd().abs()).map(|s| s.disc_geometry())
-                });
-                DiscPack::from_fn(|l| discs[l])
-            })
-            .collect();
+        let packs = random_packs(16, &mut rnd);
         let mut passed = 0;
         for trial in 0..200u32 {
             let origin = Vec3::new(rnd(), rnd(), rnd()) * if trial % 2 == 0 { 0.6 } else { 6.0 };
@@ -521,15 +528,7 @@ mod tests {
         // ray and per ray of a packet, are each pack's own.
         let mut rng = SplitMix64::new(0x55_0004);
         let mut rnd = || rng.next_f32() - 0.5;
-        let packs: Vec<DiscPack> = (0..40)
-            .map(|_| {
-                let discs: [Option<Disc>; LANES] = std::array::from_fn(|_| {
-                    let (c, n) = (Vec3::new(rnd(), rnd(), rnd()), Vec3::new(rnd(), rnd(), rnd()));
-                    Splat::disc(c, n, 0.15 + 0.2 * rnd().abs()).map(|s| s.disc_geometry())
-                });
-                DiscPack::from_fn(|l| discs[l])
-            })
-            .collect();
+        let packs = random_packs(40, &mut rnd);
         let origin = Vec3::new(0.3, 2.5, 4.0);
         let mut set = 0;
         for trial in 0..60 {
