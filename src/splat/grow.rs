@@ -1174,7 +1174,7 @@ struct WaveStats {
     spins: usize,
 }
 
-/// Cells of [`wave_lags`]' grid a side, in the cloud's mean `k`-th
+/// Cells of [`wave_last`]' grid a side, in the cloud's mean `k`-th
 /// neighbour distance: run 1 waits for run 0 to have decided every point
 /// of its own cell and the 26 round it.
 const WAVE_CELL: f32 = 6.0;
@@ -1212,7 +1212,7 @@ fn grow_wavefront(
         conflict: AtomicUsize::new(usize::MAX),
         done: AtomicUsize::new(0),
     };
-    let (mut out, (kept, stats)) = rayon::join(
+    let (mut out, (kept, covered, stats)) = rayon::join(
         || {
             let first = wave_first(inp, &wave);
             progress(m);
@@ -1220,10 +1220,10 @@ fn grow_wavefront(
         },
         || wave_second(inp, &wave, lags),
     );
+    for (c, by) in out.covered.iter_mut().zip(&covered) {
+        *c |= *by != u32::MAX;
+    }
     for (i, s) in kept {
-        for &(j, _) in &s.marks {
-            out.covered[j as usize] = true;
-        }
         out.elliptical += usize::from(s.elliptical);
         out.splats.push(s.splat);
         out.seeds.push(i);
@@ -1266,14 +1266,20 @@ fn wave_first(inp: &GrowInput<'_>, wave: &Wave) -> Grown {
     out
 }
 
-/// [`grow_wavefront`]'s run 1: its seeds and their splats, ascending, as
-/// the serial growth has them.
-fn wave_second(inp: &GrowInput<'_>, wave: &Wave, lags: &[u32]) -> (Vec<(u32, Seeded)>, WaveStats) {
+/// [`grow_wavefront`]'s run 1: its seeds and their splats (marks dropped),
+/// ascending, as the serial growth has them, and for every point the
+/// first of them that covers it (`u32::MAX`: none).
+fn wave_second(inp: &GrowInput<'_>, wave: &Wave, lags: &[u32]) -> WaveRun {
     let (n, m) = (inp.points.len(), wave.m);
     let mut g = Grower::new(inp);
     let mut st = WaveStats::default();
-    // Run 1's points its own kept seeds took (or are).
-    let mut own = vec![false; n - m];
+    // For each of run 1's points, the first kept seed that took it (or is
+    // it), and for every point the first that covers it (`u32::MAX`:
+    // none). Seeds are kept in ascending order and a roll-back drops
+    // those from a point on, so these are all a roll-back needs: no
+    // seed's marks are held (a run's worth of them cost 50 B a point).
+    let mut own = vec![u32::MAX; n - m];
+    let mut cover = vec![u32::MAX; n];
     let mut kept: Vec<(u32, Seeded)> = Vec::new();
     let mut i = m;
     loop {
@@ -1281,12 +1287,12 @@ fn wave_second(inp: &GrowInput<'_>, wave: &Wave, lags: &[u32]) -> (Vec<(u32, See
             if wave.conflict.load(Relaxed) < i {
                 let c = wave.conflict.swap(usize::MAX, SeqCst);
                 if c < i {
-                    i = wave_roll_back(wave, c, (&mut own, &mut kept), &mut st);
+                    i = wave_roll_back(wave, c, (&mut own, &mut cover, &mut kept), &mut st);
                     continue;
                 }
             }
             let at = i - m;
-            if own[at] {
+            if own[at] != u32::MAX {
                 i += 1;
                 continue;
             }
@@ -1310,14 +1316,18 @@ fn wave_second(inp: &GrowInput<'_>, wave: &Wave, lags: &[u32]) -> (Vec<(u32, See
                 i += 1;
                 continue;
             }
-            let s = g.seed(i);
+            let mut s = g.seed(i);
+            let seed = i as u32;
             for &(j, off) in &s.marks {
-                if off && j as usize >= m {
-                    own[j as usize - m] = true;
+                let j = j as usize;
+                cover[j] = cover[j].min(seed);
+                if off && j >= m {
+                    own[j - m] = own[j - m].min(seed);
                 }
             }
-            own[at] = true;
-            kept.push((i as u32, s));
+            own[at] = own[at].min(seed);
+            s.marks = Vec::new();
+            kept.push((seed, s));
             i += 1;
         }
         // Run 0 done: its marks are final (no conflict is reported from
@@ -1336,10 +1346,14 @@ fn wave_second(inp: &GrowInput<'_>, wave: &Wave, lags: &[u32]) -> (Vec<(u32, See
         else {
             break;
         };
-        i = wave_roll_back(wave, c, (&mut own, &mut kept), &mut st);
+        i = wave_roll_back(wave, c, (&mut own, &mut cover, &mut kept), &mut st);
     }
-    (kept, st)
+    (kept, cover, st)
 }
+
+/// [`wave_second`]'s result: the kept seeds, the first seed covering each
+/// point, and what run 1 did.
+type WaveRun = (Vec<(u32, Seeded)>, Vec<u32>, WaveStats);
 
 /// One turn of run 1's wait for run 0 (the `turn`-th): a spin at first,
 /// then a yield of the core, then a sleep (a wait can be long: run 1's
@@ -1355,11 +1369,13 @@ fn wave_wait(turn: usize) {
 }
 
 /// Drop run 1's kept seeds from point `c` on (run 0 took `c`) and make
-/// `own` again the marks of the seeds left: where run 1 goes on from.
+/// `own` and `cover` again those of the seeds left (a first seed from `c`
+/// on is a dropped one: no kept seed took the point): where run 1 goes on
+/// from.
 fn wave_roll_back(
     wave: &Wave,
     c: usize,
-    (own, kept): (&mut [bool], &mut Vec<(u32, Seeded)>),
+    (own, cover, kept): (&mut [u32], &mut [u32], &mut Vec<(u32, Seeded)>),
     st: &mut WaveStats,
 ) -> usize {
     let m = wave.m;
@@ -1369,19 +1385,15 @@ fn wave_roll_back(
     for (s, _) in kept.drain(k..) {
         wave.seeded[s as usize - m].store(false, SeqCst);
     }
-    // Only the points from `c` on are read again.
-    own[c - m..].fill(false);
-    for (_, seeded) in kept.iter() {
-        for &(j, off) in &seeded.marks {
-            if off && j as usize >= c {
-                own[j as usize - m] = true;
-            }
+    for by in own.iter_mut().chain(cover.iter_mut()) {
+        if *by as usize >= c {
+            *by = u32::MAX;
         }
     }
     c
 }
 
-/// [`grow_wavefront`]'s split point `m` and its lags ([`wave_lags`]).
+/// [`grow_wavefront`]'s split point `m` and its lags ([`wave_last`]).
 /// Run 1's first points wait for the run-0 points round them, and next
 /// to a point in the point order (Morton's) most often lies the point
 /// before it: split at the middle, run 1 would wait for run 0's end. The
@@ -1394,26 +1406,30 @@ fn wave_split(inp: &GrowInput<'_>) -> (usize, Vec<u32>) {
     let (pts, n) = (inp.points, inp.points.len());
     let grid = wave_grid(inp);
     let range = n * WAVE_SPLIT_RANGE.0 / 100..n * WAVE_SPLIT_RANGE.1 / 100;
-    let mut jumps: Vec<(f32, usize)> = range
-        .clone()
-        .filter(|&m| m > 0)
-        .map(|m| (-pts[m].distance_squared(pts[m - 1]), m))
-        .collect();
-    let k = WAVE_SPLITS.min(jumps.len());
-    if k > 0 {
-        jumps.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
-    }
-    let mut best = (usize::MAX, n / 2, Vec::new());
-    for m in std::iter::once(n / 2).chain(jumps[..k].iter().map(|j| j.1)) {
-        let lags = wave_lags(&grid, m);
-        let end = (lags.iter().enumerate())
-            .map(|(k, &l)| l as usize + (n - m - k))
-            .fold(m, usize::max);
-        if end < best.0 {
-            best = (end, m, lags);
+    // The WAVE_SPLITS largest jumps (squared distances' bits order as the
+    // distances do), held in a heap of that size, not a list of them all.
+    let mut jumps = BinaryHeap::with_capacity(WAVE_SPLITS + 1);
+    for m in range.filter(|&m| m > 0) {
+        jumps.push(Reverse((pts[m].distance_squared(pts[m - 1]).to_bits(), m)));
+        if jumps.len() > WAVE_SPLITS {
+            jumps.pop();
         }
     }
-    (best.1, best.2)
+    let mut tried: Vec<usize> = jumps.into_iter().map(|Reverse((_, m))| m).collect();
+    tried.sort_unstable();
+    let mut best = (usize::MAX, n / 2);
+    for m in std::iter::once(n / 2).chain(tried) {
+        let last = wave_last(&grid, m);
+        let end = (grid.cell[m..].iter().enumerate())
+            .map(|(k, &c)| last[c as usize] as usize + (n - m - k))
+            .fold(m, usize::max);
+        if end < best.0 {
+            best = (end, m);
+        }
+    }
+    let last = wave_last(&grid, best.1);
+    let lags = grid.cell[best.1..].iter().map(|&c| last[c as usize]).collect();
+    (best.1, lags)
 }
 
 /// Splits [`wave_split`] tries besides the middle.
@@ -1422,7 +1438,7 @@ const WAVE_SPLITS: usize = 24;
 /// Where [`wave_split`] looks for its splits, in per cent of the points.
 const WAVE_SPLIT_RANGE: (usize, usize) = (25, 75);
 
-/// [`wave_lags`]' grid: each point's cell and the cells a side.
+/// [`wave_last`]' grid: each point's cell and the cells a side.
 struct WaveGrid {
     cell: Vec<u32>,
     dims: [usize; 3],
@@ -1456,11 +1472,11 @@ fn wave_grid(inp: &GrowInput<'_>) -> WaveGrid {
     }
 }
 
-/// For each point of run 1 (`m..`), how many of run 0's points
-/// [`grow_wavefront`]'s run 1 waits to see decided before it decides it:
-/// one past the last of run 0's points in the grid cells round its own
-/// (its 3×3×3 block).
-fn wave_lags(grid: &WaveGrid, m: usize) -> Vec<u32> {
+/// For each grid cell, how many of run 0's points (`..m`)
+/// [`grow_wavefront`]'s run 1 waits to see decided before it decides a
+/// point of that cell (its lag): one past the last of run 0's points in
+/// the cells round it (its 3×3×3 block).
+fn wave_last(grid: &WaveGrid, m: usize) -> Vec<u32> {
     let [dx, dy, dz] = grid.dims;
     let mut last = vec![0u32; dx * dy * dz];
     for (i, &c) in grid.cell[..m].iter().enumerate() {
@@ -1479,7 +1495,7 @@ fn wave_lags(grid: &WaveGrid, m: usize) -> Vec<u32> {
             }
         }
     }
-    grid.cell[m..].iter().map(|&c| last[c as usize]).collect()
+    last
 }
 
 /// One phase of [`grow_in_regions`]: the `candidates` (ascending) as seeds
@@ -2029,7 +2045,7 @@ mod tests {
 
     /// Two halves of the point order grown at once ([`grow_wavefront`]):
     /// the serial growth's seeds, splats and cover, bit for bit, with the
-    /// second run waiting on the first ([`wave_lags`]) and without (so
+    /// second run waiting on the first ([`wave_last`]) and without (so
     /// that the first run takes its seeds: conflicts, roll-backs), on two
     /// threads and on one (the runs one after the other), on a sheet in
     /// row order and in the reverse order.
