@@ -7,8 +7,17 @@ use glam::{Vec2, Vec3};
 
 /// Splat cover factor over the equal-area radius: discs of the equal-area
 /// radius leave holes between lattice points; 1.35× closes them on a
-/// Fibonacci lattice and on a square grid.
+/// Fibonacci lattice away from its poles and on a square grid.
 const COVER: f32 = 1.35;
+
+/// The lattice's first and last few points sit farther apart than the rest
+/// (the first at `y = 1 - 1/n`, not on the pole): with `COVER` alone a pin
+/// hole stays open within a few degrees of a pole, its farthest point 1.005
+/// radii from every disc centre at 4,000 splats, 1.034 at 100, 1.06 at 50.
+/// The `POLE_SPLATS` discs at each end are `POLE_COVER` wider, which closes
+/// it from 50 splats up (farthest point 0.986 radii at 50, 0.929 at 1,500).
+const POLE_SPLATS: usize = 3;
+const POLE_COVER: f32 = 1.1;
 
 /// `n` splats on the sphere `|p - center| = radius`, centred on a Fibonacci
 /// lattice, tangent to the sphere, with outward normals.
@@ -21,10 +30,12 @@ const COVER: f32 = 1.35;
 #[must_use]
 pub fn sphere(center: Vec3, radius: f32, n: usize) -> Vec<Splat> {
     let n = n.max(1);
-    let r = COVER * 2.0 * radius / (n as f32).sqrt();
+    let spaced = COVER * 2.0 * radius / (n as f32).sqrt();
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     (0..n)
         .map(|i| {
+            let pole = i < POLE_SPLATS || i + POLE_SPLATS >= n;
+            let r = if pole { spaced * POLE_COVER } else { spaced };
             let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
             let ring = (1.0 - y * y).max(0.0).sqrt();
             let phi = golden * i as f64;
@@ -161,6 +172,47 @@ mod tests {
                     "splat {sp:?} at ({u},{v}): got {got}, exact {exact}"
                 );
             }
+        }
+    }
+
+    /// A radial ray from outside toward every direction of a fine grid
+    /// within 14 lattice spacings of either pole meets a splat, for lattices
+    /// from 50 to 1,500 splats: the pole holes are closed (a conformance
+    /// seed once sent a ray 2.6° off the pole through the 1,500-splat
+    /// sphere onto the floor below).
+    #[test]
+    fn sphere_has_no_hole_at_its_poles() {
+        let c = Vec3::new(0.1, 0.5, 0.05);
+        for n in [50, 100, 500, 1500] {
+            let s = sphere(c, 0.5, n);
+            let cap = 14.0 * 2.0 / (n as f32).sqrt();
+            let mut worst = 0.0f32;
+            for pole in [1.0f32, -1.0] {
+                for a in 0..80 {
+                    let theta = cap * a as f32 / 79.0;
+                    for b in 0..240 {
+                        let phi = std::f32::consts::TAU * b as f32 / 240.0;
+                        let d = Vec3::new(
+                            theta.sin() * phi.cos(),
+                            pole * theta.cos(),
+                            theta.sin() * phi.sin(),
+                        );
+                        let (o, dir) = (c + d * 1.5, -d);
+                        let nearest = s
+                            .iter()
+                            .filter(|sp| sp.normal.dot(d) > 0.5)
+                            .map(|sp| {
+                                let t = sp.normal.dot(sp.center - o) / sp.normal.dot(dir);
+                                (o + dir * t - sp.center).length() / sp.radii.x
+                            })
+                            .fold(f32::INFINITY, f32::min);
+                        worst = worst.max(nearest);
+                    }
+                }
+            }
+            // Measured 0.986 at 50 splats, 0.950 at 100, 0.934 at 500,
+            // 0.929 at 1,500; 1.059 at 50 before the pole discs widened.
+            assert!(worst < 0.995, "{n} splats: a polar ray passes {worst} radii from every disc");
         }
     }
 
