@@ -323,6 +323,22 @@ impl Order {
     }
 }
 
+/// A cell index's bits spread to every third bit (bit `b` to bit `3b`):
+/// one axis's share of a Morton index over [`ORDER_CELLS`] cells.
+const SPREAD: [u32; ORDER_CELLS as usize] = {
+    let mut t = [0u32; ORDER_CELLS as usize];
+    let mut c = 0;
+    while c < t.len() {
+        let mut b = 0;
+        while b < ORDER_CELLS.trailing_zeros() {
+            t[c] |= ((c as u32) >> b & 1) << (3 * b);
+            b += 1;
+        }
+        c += 1;
+    }
+    t
+};
+
 /// Each ray's key in [`Order`]: the Morton index of the cell of a grid of
 /// [`ORDER_CELLS`]³ over the rays' origins holding its origin, then its
 /// direction's signs ([`octant`]).
@@ -345,9 +361,7 @@ fn keys(rays: &[Ray]) -> Vec<u16> {
         let mut k = 0u32;
         for a in 0..3 {
             let c = (((o[a] - lo[a]) * scale[a]) as u32).min(ORDER_CELLS - 1);
-            for b in 0..ORDER_CELLS.trailing_zeros() {
-                k |= (c >> b & 1) << (3 * b + a as u32);
-            }
+            k |= SPREAD[c as usize] << a;
         }
         (k << 3) | octant(r) as u32
     };
@@ -548,6 +562,32 @@ fn octant(r: &Ray) -> usize {
 mod tests {
     use super::*;
     use crate::rng::SplitMix64;
+
+    /// The table's Morton index is the bit-by-bit interleave of the
+    /// three cells, for every cell of the grid.
+    #[test]
+    fn spread_cells_interleave_bit_by_bit() {
+        let bits = ORDER_CELLS.trailing_zeros();
+        let mut distinct = std::collections::HashSet::new();
+        for x in 0..ORDER_CELLS {
+            for y in 0..ORDER_CELLS {
+                for z in 0..ORDER_CELLS {
+                    let mut want = 0u32;
+                    for (a, c) in [x, y, z].into_iter().enumerate() {
+                        for b in 0..bits {
+                            want |= (c >> b & 1) << (3 * b + a as u32);
+                        }
+                    }
+                    let got = SPREAD[x as usize]
+                        | SPREAD[y as usize] << 1
+                        | SPREAD[z as usize] << 2;
+                    assert_eq!(got, want, "cell ({x}, {y}, {z})");
+                    distinct.insert(got);
+                }
+            }
+        }
+        assert_eq!(distinct.len(), ORDER_CELLS.pow(3) as usize);
+    }
 
     #[test]
     fn scattered_rays_are_ordered_by_origin_cell_and_signs() {
