@@ -43,6 +43,16 @@ pub fn sort_keys(keys: &mut [u64], isa: Isa) {
     }
 }
 
+/// Whether [`sort_keys`] sorts `a` keys and `b` keys with the same
+/// network on the path `isa` (so sorting the longer costs what the shorter
+/// costs): both 17 to 32, or both 33 to 64, on a path with networks.
+#[must_use]
+pub fn same_network(a: usize, b: usize, isa: Isa) -> bool {
+    let networks = matches!(isa, Isa::Avx2 | Isa::Avx512) && Isa::Avx2.supported();
+    let net = |n: usize| (SORT_NETWORK_MIN..=SORT_NETWORK_MAX).contains(&n).then_some(n <= 32);
+    networks && net(a).is_some() && net(a) == net(b)
+}
+
 #[cfg(target_arch = "x86_64")]
 mod x86 {
     use std::arch::x86_64::*;
@@ -185,6 +195,21 @@ mod tests {
     /// random keys, keys with many ties, keys at 0 and `u64::MAX` (the
     /// padding's own value), already sorted and reversed runs: every path
     /// this CPU runs gives `sort_unstable`'s answer bit for bit.
+    /// Lengths share a network only where both are sorted by the same
+    /// one: 17 to 32, or 33 to 64, on a path that has networks.
+    #[test]
+    fn lengths_share_a_network_only_within_one() {
+        for isa in super::super::available() {
+            let nets = matches!(isa, Isa::Avx2 | Isa::Avx512);
+            assert_eq!(same_network(17, 32, isa), nets);
+            assert_eq!(same_network(33, 64, isa), nets);
+            assert_eq!(same_network(49, 60, isa), nets);
+            for (a, b) in [(16, 17), (32, 33), (64, 65), (13, 14), (49, 70), (0, 0)] {
+                assert!(!same_network(a, b, isa), "{a} {b} {isa:?}");
+            }
+        }
+    }
+
     #[test]
     fn every_path_sorts_as_the_standard_sort() {
         let mut rng = SplitMix64::new(54);
