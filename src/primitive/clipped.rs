@@ -145,6 +145,40 @@ impl Pack<ClippedDisc> for ClippedPack {
         super::disc::pack_masks_met(packs, met, ray, isa, out);
     }
 
+    const LANE_HITS: bool = true;
+
+    /// [`DiscPack`]'s masks and lanes' answers of the met packs in one
+    /// call.
+    #[inline(always)]
+    fn hits_met(
+        packs: &[Self],
+        met: u32,
+        ray: &PackRay,
+        (): &(),
+        isa: simd::Isa,
+        out: &mut [u32],
+        hits: &mut simd::LaneHits<'_>,
+    ) {
+        super::disc::pack_hits_met(packs, met, ray, isa, out, hits);
+    }
+
+    /// The disc's hit ([`super::disc::lane_disc_hit`]) kept as
+    /// [`ClippedDisc::intersect`] keeps it: on the kept side of the clip
+    /// lines of `id` ([`ClipTable::clip`]).
+    #[inline(always)]
+    fn lane_hit(
+        &self,
+        _lane: usize,
+        id: u32,
+        side: &ClipTable,
+        _ray: &Ray,
+        (_t_min, cut): (f32, f32),
+        tuv: (f32, f32, f32),
+    ) -> Option<Hit> {
+        let hit = super::disc::lane_disc_hit(cut, tuv)?;
+        side.clip_ref(id).keeps(hit.u, hit.v).then_some(hit)
+    }
+
     /// [`DiscPack`]'s masks of the packs `packs[at[j]]` in one call.
     #[inline]
     fn masks_at(packs: &[Self], at: &[u32], ray: &PackRay, isa: simd::Isa, out: &mut [u32]) {

@@ -283,6 +283,37 @@ impl Pack<Disc> for DiscPack {
         pack_masks_met(packs, met, ray, isa, out);
     }
 
+    const LANE_HITS: bool = true;
+
+    /// [`simd::disc_hits_met`]: the met packs' masks and lanes' answers
+    /// in one call.
+    #[inline(always)]
+    fn hits_met(
+        packs: &[Self],
+        met: u32,
+        ray: &PackRay,
+        (): &(),
+        isa: simd::Isa,
+        out: &mut [u32],
+        hits: &mut simd::LaneHits<'_>,
+    ) {
+        pack_hits_met(packs, met, ray, isa, out, hits);
+    }
+
+    /// [`lane_disc_hit`].
+    #[inline(always)]
+    fn lane_hit(
+        &self,
+        _lane: usize,
+        _id: u32,
+        (): &(),
+        _ray: &Ray,
+        (_t_min, cut): (f32, f32),
+        tuv: (f32, f32, f32),
+    ) -> Option<Hit> {
+        lane_disc_hit(cut, tuv)
+    }
+
     /// [`simd::disc_masks`] of the packs `packs[at[j]]` in one call
     /// ([`pack_masks_at`]).
     #[inline]
@@ -347,6 +378,31 @@ pub(super) fn pack_masks_met<C: AsRef<DiscPack>>(
     out: &mut [u32],
 ) {
     simd::disc_masks_met(packs, met, ray.origin, ray.dir, ray.t_min, ray.t_max, isa, out);
+}
+
+/// [`simd::disc_hits_met`] of the disc packs `packs` hold, as
+/// [`pack_masks_met`].
+#[inline(always)]
+pub(super) fn pack_hits_met<C: AsRef<DiscPack>>(
+    packs: &[C],
+    met: u32,
+    ray: &PackRay,
+    isa: simd::Isa,
+    out: &mut [u32],
+    hits: &mut simd::LaneHits<'_>,
+) {
+    let span = (ray.t_min, ray.t_max);
+    simd::disc_hits_met(packs, met, ray.origin, ray.dir, span, isa, out, hits);
+}
+
+/// [`Disc::intersect`]'s answer within `[t_min, cut]` for a lane the
+/// disc filter passed with `(t, u, v)` ([`simd::disc_hits_met`], the same
+/// operations) for a span `[t_min, t_max]`, `t_max >= cut`: the filter
+/// found `t` finite and at least `t_min`, so the hit is the lane's when
+/// `t <= cut` and `u * u + v * v <= 1` (the exact rim), bit for bit.
+#[inline(always)]
+pub(super) fn lane_disc_hit(cut: f32, (t, u, v): (f32, f32, f32)) -> Option<Hit> {
+    (t <= cut && u * u + v * v <= 1.0).then_some(Hit { t, u, v })
 }
 
 /// [`simd::disc_masks_rays`] of the disc packs `packs` hold, as

@@ -243,6 +243,50 @@ pub trait Pack<P>: Copy + Send + Sync + 'static {
         }
     }
 
+    /// True when [`Pack::hits_met`] keeps the lanes' answers (a pack with
+    /// the disc filter); else `hits_met` is never called.
+    const LANE_HITS: bool = false;
+
+    /// [`Pack::masks_met`] (the same masks into `out`) with each met pack
+    /// `j`'s lanes' `(t, u, v)` into `hits` slot `j`, from which
+    /// [`Pack::lane_hit`] decides a lane as [`Primitive::intersect`] does;
+    /// only where [`Pack::LANE_HITS`] (here: the masks alone).
+    #[inline]
+    fn hits_met(
+        packs: &[Self],
+        met: u32,
+        ray: &PackRay,
+        prep: &Self::Prep,
+        isa: crate::simd::Isa,
+        out: &mut [u32],
+        hits: &mut crate::simd::LaneHits<'_>,
+    ) {
+        let _ = hits;
+        Self::masks_met(packs, met, ray, prep, isa, out);
+    }
+
+    /// The hit [`Primitive::intersect`] finds on lane `lane` (id `id`,
+    /// `side` as in [`Pack::get`]) within `[t_min, cut]`, given that
+    /// [`Pack::hits_met`] passed the lane with `(t, u, v)` for a span
+    /// `[t_min, t_max]` with `t_max >= cut`: bit for bit `intersect`'s
+    /// answer. Only where [`Pack::LANE_HITS`] (here: `intersect` itself).
+    #[inline]
+    fn lane_hit(
+        &self,
+        lane: usize,
+        id: u32,
+        side: &Self::Side,
+        ray: &Ray,
+        (t_min, cut): (f32, f32),
+        tuv: (f32, f32, f32),
+    ) -> Option<Hit>
+    where
+        P: Primitive,
+    {
+        let _ = tuv;
+        self.get(lane, id, side).intersect(ray, t_min, cut)
+    }
+
     /// [`Pack::may_hit`] of each of `packs` for each ray `k` set in
     /// `active` into `out[j][k]` (0 for the other rays), and the rays whose
     /// mask is not zero into `rays[j]` (bit `k`; `out` and `rays` at least

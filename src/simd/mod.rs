@@ -30,11 +30,13 @@
 //! how the registry's `octree-<path>` variants force each one.
 
 mod count;
+mod hits;
 mod lsq;
 mod near;
 mod sort;
 mod tri;
 pub use count::{count_within, held_within};
+pub use hits::{HITS_PACKS, HitSlots, LaneHits, disc_hits_met};
 pub use lsq::{Row6, normal_equations6};
 pub use near::keys_within;
 pub use sort::{SORT_NETWORK_MAX, SORT_NETWORK_MIN, same_network, sort_keys};
