@@ -155,18 +155,9 @@ fn portable_hits(
 
 #[cfg(target_arch = "x86_64")]
 mod x86 {
+    use super::super::x86::{avx2_dot as dot, avx2_in_range};
     use super::{CENTER, DiscColumns, LANES, LaneHits, NORMAL, RIM, U_SCALED, V_SCALED};
     use std::arch::x86_64::*;
-
-    /// `a · b` lane by lane, `(a_x b_x + a_y b_y) + a_z b_z`.
-    #[inline]
-    #[target_feature(enable = "avx2")]
-    fn dot(a: [__m256; 3], b: [__m256; 3]) -> __m256 {
-        _mm256_add_ps(
-            _mm256_add_ps(_mm256_mul_ps(a[0], b[0]), _mm256_mul_ps(a[1], b[1])),
-            _mm256_mul_ps(a[2], b[2]),
-        )
-    }
 
     /// One pack: the mask of `super::super`'s `avx2_mask` and the lanes'
     /// `(t, u, v)`, the same operations (the rim test whatever `t`'s range).
@@ -189,15 +180,8 @@ mod x86 {
             _mm256_sub_ps(o[1], col(CENTER + 1)),
             _mm256_sub_ps(o[2], col(CENTER + 2)),
         ];
-        let sign = _mm256_set1_ps(-0.0);
-        let t = _mm256_div_ps(_mm256_xor_ps(dot(n, oc), sign), denom);
-        let in_range = _mm256_and_ps(
-            _mm256_and_ps(
-                _mm256_cmp_ps::<_CMP_GE_OQ>(t, tmin),
-                _mm256_cmp_ps::<_CMP_LE_OQ>(t, tmax),
-            ),
-            _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_andnot_ps(sign, t), _mm256_set1_ps(f32::INFINITY)),
-        );
+        let t = _mm256_div_ps(_mm256_xor_ps(dot(n, oc), _mm256_set1_ps(-0.0)), denom);
+        let in_range = avx2_in_range(t, tmin, tmax);
         let mut tuv = [[0.0f32; LANES]; 3];
         let store = |c: &mut [f32; LANES], x: __m256| {
             // SAFETY: `c` is 8 f32 (an unaligned store).

@@ -490,7 +490,7 @@ mod x86 {
     /// filter adds.
     #[inline]
     #[target_feature(enable = "avx2")]
-    fn avx2_dot(a: [__m256; 3], b: [__m256; 3]) -> __m256 {
+    pub(super) fn avx2_dot(a: [__m256; 3], b: [__m256; 3]) -> __m256 {
         _mm256_add_ps(
             _mm256_add_ps(_mm256_mul_ps(a[0], b[0]), _mm256_mul_ps(a[1], b[1])),
             _mm256_mul_ps(a[2], b[2]),
