@@ -35,11 +35,13 @@ mod lsq;
 mod near;
 mod sort;
 mod tri;
+mod triples;
 pub use count::{count_within, held_within};
 pub use hits::{HITS_PACKS, HitSlots, LaneHits, disc_hits_met};
 pub use lsq::{Row6, normal_equations6};
 pub use near::keys_within;
 pub use sort::{SORT_NETWORK_MAX, SORT_NETWORK_MIN, same_network, sort_keys};
+pub use triples::triple_normals;
 pub use tri::{SURE, Shear, TRI_LANES, TriColumns, tri_masks, tri_masks_sheared};
 
 /// The sides of 8 points `(xs[i], ys[i])` of a line `a·x + b·y = d`: bit

@@ -1021,9 +1021,11 @@ impl Lanes {
 /// holding the most, most first, ties in the order of the triples. The
 /// offsets of `lanes`' points from each triple's first point are taken
 /// once for all the triples through it (the differences `Lanes::count`
-/// takes, bit for bit), and counted on the process's SIMD path
-/// ([`crate::simd::count_within`]: the same products and sums, eight
-/// points at a time on AVX2).
+/// takes, bit for bit), the planes through it made on the process's SIMD
+/// path ([`crate::simd::triple_normals`]: glam's cross product, lengths
+/// and normalisation lane by lane, eight pairs at a time on AVX2) and
+/// counted on it ([`crate::simd::count_within`]: the same products and
+/// sums, eight points at a time on AVX2).
 fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
     let isa = lanes.isa;
     let mut best: Vec<FacePlane> = Vec::with_capacity(FACE_REFITS + 1);
@@ -1040,18 +1042,11 @@ fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
         let (dy, dz) = rest.split_at_mut(len);
         lanes.offsets_from(pa, dx, dy, dz);
         // The planes through `pa` and two later points, in order.
+        // (`near` leads `lanes`' points: the offsets of the later ones are
+        // `pb - pa` bit for bit.) Triples nearly in line fix no plane.
         planes.clear();
-        for (b, &pb) in near.iter().enumerate().skip(a + 1) {
-            for &pc in &near[b + 1..] {
-                let (u, v) = (pb - pa, pc - pa);
-                let c = u.cross(v);
-                // Triples nearly in line fix no plane.
-                if c.length_squared() < 0.04 * u.length_squared() * v.length_squared() {
-                    continue;
-                }
-                planes.push(c.normalize().to_array());
-            }
-        }
+        let m = near.len() - 1 - a;
+        crate::simd::triple_normals(&dx[a + 1..], &dy[a + 1..], &dz[a + 1..], m, isa, &mut planes);
         held.resize(planes.len(), 0);
         crate::simd::count_within(dx, dy, dz, &planes, tol, isa, &mut held);
         // After every candidate holding as many (a stable order): past the

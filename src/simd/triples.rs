@@ -1,0 +1,196 @@
+//! The planes through a point and two later points, eight pairs at a time:
+//! the triples of the face search's planes (`crate::splat::normals`, its
+//! `triple_planes`), one first point's planes a call.
+//!
+//! Every path takes, for each triple, the operations of the portable loop
+//! in its order (glam's `cross`, `length_squared` and `normalize` written
+//! out: `c = u × v`, `|c|² = (c_x c_x + c_y c_y) + c_z c_z`, the test
+//! `|c|² < (0.04 |u|²) |v|²`, then `c · (1 / √|c|²)`; no fused
+//! multiply-add, and square root and division are correctly rounded per
+//! lane), so every path keeps the same triples and gives the same normals
+//! bit for bit, in the same order.
+
+use super::Isa;
+
+/// The unit normals of the planes through the origin and two of the
+/// offsets `(xs[j], ys[j], zs[j])`, `j < m` (a first point's offsets to the
+/// points after it), pushed to `out` in the order of the pairs `(b, c)`,
+/// `b < c` (by `b`, then by `c`): for each pair `u` the offset `b` and `v`
+/// the offset `c`, `u × v` normalised, except where `|u × v|² < 0.04 |u|²
+/// |v|²` (the two nearly in line with the origin; not a number is kept).
+/// On the path `isa` (AVX-512 takes the AVX2 kernel; a path the CPU does
+/// not run is replaced by the portable loop, which gives the same). The
+/// slices must each be at least `m` long; the kernels may read (never
+/// keep) the floats past `m` up to each slice's end.
+#[inline]
+pub fn triple_normals(xs: &[f32], ys: &[f32], zs: &[f32], m: usize, isa: Isa, out: &mut Vec<[f32; 3]>) {
+    assert!(xs.len().min(ys.len()).min(zs.len()) >= m, "fewer than {m} offsets");
+    match isa {
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx2 | Isa::Avx512 if Isa::Avx2.supported() => {
+            // SAFETY: the guard checked that the CPU runs AVX2.
+            unsafe { avx2_triples(xs, ys, zs, m, out) }
+        }
+        _ => portable_triples(xs, ys, zs, m, out),
+    }
+}
+
+/// The portable loop of [`triple_normals`]: glam's vector operations, one
+/// triple at a time.
+fn portable_triples(xs: &[f32], ys: &[f32], zs: &[f32], m: usize, out: &mut Vec<[f32; 3]>) {
+    use glam::Vec3;
+    let at = |j: usize| Vec3::new(xs[j], ys[j], zs[j]);
+    for b in 0..m {
+        let u = at(b);
+        for c in b + 1..m {
+            let v = at(c);
+            let n = u.cross(v);
+            // Triples nearly in line fix no plane.
+            if n.length_squared() < 0.04 * u.length_squared() * v.length_squared() {
+                continue;
+            }
+            out.push(n.normalize().to_array());
+        }
+    }
+}
+
+/// [`triple_normals`] on AVX2: for each `b`, the pairs `(b, c)` eight `c`
+/// at a time (the last group's lanes past `m` computed, not kept), the
+/// kept lanes pushed in order. The portable loop's operations lane by
+/// lane.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn avx2_triples(xs: &[f32], ys: &[f32], zs: &[f32], m: usize, out: &mut Vec<[f32; 3]>) {
+    use std::arch::x86_64::*;
+    let one = _mm256_set1_ps(1.0);
+    for b in 0..m {
+        let (ux, uy, uz) = (xs[b], ys[b], zs[b]);
+        // `0.04 * u.length_squared()`, the bound's first product.
+        let bound = 0.04 * ((ux * ux) + (uy * uy) + (uz * uz));
+        let (bx, by, bz, bb) = (
+            _mm256_set1_ps(ux),
+            _mm256_set1_ps(uy),
+            _mm256_set1_ps(uz),
+            _mm256_set1_ps(bound),
+        );
+        let mut c = b + 1;
+        while c < m {
+            let (vx, vy, vz) = (lanes8(xs, c), lanes8(ys, c), lanes8(zs, c));
+            // `u.cross(v)`.
+            let nx = _mm256_sub_ps(_mm256_mul_ps(by, vz), _mm256_mul_ps(vy, bz));
+            let ny = _mm256_sub_ps(_mm256_mul_ps(bz, vx), _mm256_mul_ps(vz, bx));
+            let nz = _mm256_sub_ps(_mm256_mul_ps(bx, vy), _mm256_mul_ps(vx, by));
+            let nn = sum_squares(nx, ny, nz);
+            let vv = sum_squares(vx, vy, vz);
+            // Kept unless `nn < bound * vv` (not a number: kept).
+            let keep = _mm256_cmp_ps::<_CMP_NLT_UQ>(nn, _mm256_mul_ps(bb, vv));
+            let r = _mm256_div_ps(one, _mm256_sqrt_ps(nn));
+            let mut cols = [[0f32; 8]; 3];
+            for (col, v) in cols.iter_mut().zip([_mm256_mul_ps(nx, r), _mm256_mul_ps(ny, r), _mm256_mul_ps(nz, r)]) {
+                // SAFETY: `col` is eight floats, the width of the store.
+                unsafe { _mm256_storeu_ps(col.as_mut_ptr(), v) };
+            }
+            let valid = (1u32 << (m - c).min(8)) - 1;
+            let mut bits = _mm256_movemask_ps(keep) as u32 & valid;
+            while bits != 0 {
+                let l = bits.trailing_zeros() as usize;
+                out.push([cols[0][l], cols[1][l], cols[2][l]]);
+                bits &= bits - 1;
+            }
+            c += 8;
+        }
+    }
+}
+
+/// `(x x + y y) + z z`, lane by lane (glam's `length_squared`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn sum_squares(
+    x: std::arch::x86_64::__m256,
+    y: std::arch::x86_64::__m256,
+    z: std::arch::x86_64::__m256,
+) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::{_mm256_add_ps, _mm256_mul_ps};
+    _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(x, x), _mm256_mul_ps(y, y)), _mm256_mul_ps(z, z))
+}
+
+/// The eight floats of `s` from `at` on, zeros past its end.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn lanes8(s: &[f32], at: usize) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::_mm256_loadu_ps;
+    if let Some(eight) = s.get(at..at + 8) {
+        // SAFETY: `eight` is eight floats, the width of the load.
+        unsafe { _mm256_loadu_ps(eight.as_ptr()) }
+    } else {
+        let mut pad = [0f32; 8];
+        let rest = &s[at.min(s.len())..];
+        pad[..rest.len()].copy_from_slice(rest);
+        // SAFETY: `pad` is eight floats, the width of the load.
+        unsafe { _mm256_loadu_ps(pad.as_ptr()) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+
+    /// The normals' bits, for comparisons that tell NaN and signed zeros
+    /// apart.
+    fn bits(normals: &[[f32; 3]]) -> Vec<[u32; 3]> {
+        normals.iter().map(|n| n.map(f32::to_bits)).collect()
+    }
+
+    /// Sets of 0 to 14 offsets (random, repeated points, points in line
+    /// with the origin and with each other, zeros, offsets far from the
+    /// origin whose products overflow, exact ties of the in-line bound),
+    /// read from slices exactly as long and with readable floats past `m`:
+    /// every path this CPU runs pushes the portable loop's normals, bit
+    /// for bit, in its order.
+    #[test]
+    fn every_path_gives_the_portable_loops_normals() {
+        let mut rng = SplitMix64::new(32);
+        let mut f = |s: f32| (rng.next_f64() as f32 * 2.0 - 1.0) * s;
+        let (mut pushed, mut skipped, mut nan) = (0, 0, 0);
+        for set in 0..3000 {
+            let m = set % 15;
+            let scale = [1.0, 1e-3, 3e3, 1e18, 2e19][set % 5];
+            let shift = if set % 7 == 3 { 1e6 } else { 0.0 };
+            let mut d = [vec![0f32; m + 9], vec![0f32; m + 9], vec![0f32; m + 9]];
+            for j in 0..m + 9 {
+                let p = [f(scale) + shift, f(scale), f(scale) - shift];
+                let kind = (j * 5 + set) % 11;
+                for (a, col) in d.iter_mut().enumerate() {
+                    col[j] = match kind {
+                        // A repeated point.
+                        0 if j > 0 => col[j - 1],
+                        // In line with the origin and the point before.
+                        1 if j > 0 => col[j - 1] * 3.0,
+                        // The origin itself.
+                        2 => 0.0,
+                        // On the axes: exact products and ties.
+                        3 => [1.0, 0.0, 0.0][a] * scale,
+                        4 => [0.0, 1.0, 0.0][a] * scale,
+                        _ => p[a],
+                    };
+                }
+            }
+            let mut want = Vec::new();
+            portable_triples(&d[0][..m], &d[1][..m], &d[2][..m], m, &mut want);
+            skipped += m * m.saturating_sub(1) / 2 - want.len();
+            pushed += want.len();
+            nan += want.iter().filter(|n| n.iter().any(|x| x.is_nan())).count();
+            for isa in super::super::available() {
+                for len in [m, m + 9] {
+                    let mut got = vec![[9.0; 3]];
+                    triple_normals(&d[0][..len], &d[1][..len], &d[2][..len], m, isa, &mut got);
+                    assert_eq!(bits(&got[1..]), bits(&want), "{isa} at set {set}, {m} offsets, {len} long");
+                }
+            }
+        }
+        assert!(pushed > 50_000 && skipped > 5_000 && nan > 500, "{pushed} pushed, {skipped} skipped, {nan} NaN");
+    }
+}
