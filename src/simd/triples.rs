@@ -54,17 +54,47 @@ fn portable_triples(xs: &[f32], ys: &[f32], zs: &[f32], m: usize, out: &mut Vec<
     }
 }
 
-/// [`triple_normals`] on AVX2: for each `b`, the pairs `(b, c)` eight `c`
-/// at a time (the last group's lanes past `m` computed, not kept), the
-/// kept lanes pushed in order. The portable loop's operations lane by
-/// lane.
+/// [`triple_normals`] on AVX2 where each slice holds 7 floats past `m`
+/// (a step's last lanes read in place), else on the offsets copied into
+/// zero-padded room of [`PADDED`] floats (up to `PADDED - 7` offsets; more
+/// take the portable loop).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn avx2_triples(xs: &[f32], ys: &[f32], zs: &[f32], m: usize, out: &mut Vec<[f32; 3]>) {
+    if xs.len().min(ys.len()).min(zs.len()) >= m + 7 {
+        // SAFETY: each slice holds `m + 7` floats.
+        unsafe { avx2_pairs([xs.as_ptr(), ys.as_ptr(), zs.as_ptr()], m, out) }
+    } else if m + 7 <= PADDED {
+        let mut room = [[0f32; PADDED]; 3];
+        for (r, s) in room.iter_mut().zip([xs, ys, zs]) {
+            r[..m].copy_from_slice(&s[..m]);
+        }
+        let [x, y, z] = &room;
+        // SAFETY: each row holds `PADDED >= m + 7` floats.
+        unsafe { avx2_pairs([x.as_ptr(), y.as_ptr(), z.as_ptr()], m, out) }
+    } else {
+        portable_triples(xs, ys, zs, m, out);
+    }
+}
+
+/// Room for [`avx2_triples`]' copied offsets.
+const PADDED: usize = 32;
+
+/// [`triple_normals`] on AVX2 over the offsets at `d` (x, y and z): for
+/// each `b`, the pairs `(b, c)` eight `c` at a time (the last step's lanes
+/// past `m` computed, not kept), the kept lanes written in order. The
+/// portable loop's operations lane by lane.
+///
+/// # Safety
+/// Each of the three pointers reads `m + 7` floats.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn avx2_pairs(d: [*const f32; 3], m: usize, out: &mut Vec<[f32; 3]>) {
     use std::arch::x86_64::*;
     let one = _mm256_set1_ps(1.0);
     for b in 0..m {
-        let (ux, uy, uz) = (xs[b], ys[b], zs[b]);
+        // SAFETY: `b < m`, within the caller's bound.
+        let [ux, uy, uz] = d.map(|p| unsafe { *p.add(b) });
         // `0.04 * u.length_squared()`, the bound's first product.
         let bound = 0.04 * ((ux * ux) + (uy * uy) + (uz * uz));
         let (bx, by, bz, bb) = (
@@ -75,7 +105,8 @@ fn avx2_triples(xs: &[f32], ys: &[f32], zs: &[f32], m: usize, out: &mut Vec<[f32
         );
         let mut c = b + 1;
         while c < m {
-            let (vx, vy, vz) = (lanes8(xs, c), lanes8(ys, c), lanes8(zs, c));
+            // SAFETY: `c + 8 <= m + 7`, within the caller's bound.
+            let [vx, vy, vz] = d.map(|p| unsafe { _mm256_loadu_ps(p.add(c)) });
             // `u.cross(v)`.
             let nx = _mm256_sub_ps(_mm256_mul_ps(by, vz), _mm256_mul_ps(vy, bz));
             let ny = _mm256_sub_ps(_mm256_mul_ps(bz, vx), _mm256_mul_ps(vz, bx));
@@ -85,21 +116,62 @@ fn avx2_triples(xs: &[f32], ys: &[f32], zs: &[f32], m: usize, out: &mut Vec<[f32
             // Kept unless `nn < bound * vv` (not a number: kept).
             let keep = _mm256_cmp_ps::<_CMP_NLT_UQ>(nn, _mm256_mul_ps(bb, vv));
             let r = _mm256_div_ps(one, _mm256_sqrt_ps(nn));
-            let mut cols = [[0f32; 8]; 3];
-            for (col, v) in cols.iter_mut().zip([_mm256_mul_ps(nx, r), _mm256_mul_ps(ny, r), _mm256_mul_ps(nz, r)]) {
-                // SAFETY: `col` is eight floats, the width of the store.
-                unsafe { _mm256_storeu_ps(col.as_mut_ptr(), v) };
-            }
-            let valid = (1u32 << (m - c).min(8)) - 1;
-            let mut bits = _mm256_movemask_ps(keep) as u32 & valid;
-            while bits != 0 {
-                let l = bits.trailing_zeros() as usize;
-                out.push([cols[0][l], cols[1][l], cols[2][l]]);
-                bits &= bits - 1;
+            let valid = (m - c).min(8);
+            let bits = _mm256_movemask_ps(keep) as u32 & ((1u32 << valid) - 1);
+            let n = [_mm256_mul_ps(nx, r), _mm256_mul_ps(ny, r), _mm256_mul_ps(nz, r)];
+            // Room for eight 16-byte stores from the end on.
+            out.reserve(9);
+            let len = out.len();
+            // SAFETY: the capacity holds `len + 9` normals, and the stores
+            // reach at most 16 bytes past the `len + 7`th's start.
+            unsafe {
+                let kept = store_kept(out.as_mut_ptr().add(len).cast(), n, bits, valid);
+                out.set_len(len + kept);
             }
             c += 8;
         }
     }
+}
+
+/// The lanes of `n` (x, y and z) whose bit is set in `bits`, written in
+/// order from `p` as three floats each (each lane's store writes four at
+/// the end of those kept so far, its fourth overwritten by the next; a lane
+/// not kept is overwritten by the next too); the lanes past the first
+/// four are stored only where `valid` (the lanes that may be kept) exceeds
+/// four. Returns how many were kept.
+///
+/// # Safety
+/// `p` writes 25 floats.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn store_kept(p: *mut f32, n: [std::arch::x86_64::__m256; 3], bits: u32, valid: usize) -> usize {
+    use std::arch::x86_64::*;
+    let [x, y, z] = n;
+    // Lane `l`'s `(x, y, z, z)` in the 128-bit half `l / 4` of `l % 4`'s.
+    let (xy_lo, xy_hi) = (_mm256_unpacklo_ps(x, y), _mm256_unpackhi_ps(x, y));
+    let (zz_lo, zz_hi) = (_mm256_unpacklo_ps(z, z), _mm256_unpackhi_ps(z, z));
+    let four = [
+        _mm256_shuffle_ps::<0x44>(xy_lo, zz_lo),
+        _mm256_shuffle_ps::<0xEE>(xy_lo, zz_lo),
+        _mm256_shuffle_ps::<0x44>(xy_hi, zz_hi),
+        _mm256_shuffle_ps::<0xEE>(xy_hi, zz_hi),
+    ];
+    let mut k = 0;
+    for (l, v) in four.iter().enumerate() {
+        // SAFETY: `k <= l < 4`, so the store ends by float `3 l + 4`,
+        // within the caller's bound.
+        unsafe { _mm_storeu_ps(p.add(3 * k), _mm256_castps256_ps128(*v)) };
+        k += ((bits >> l) & 1) as usize;
+    }
+    if valid > 4 {
+        for (l, v) in four.iter().enumerate() {
+            // SAFETY: as above, `k <= l + 4 < 8`.
+            unsafe { _mm_storeu_ps(p.add(3 * k), _mm256_extractf128_ps::<1>(*v)) };
+            k += ((bits >> (l + 4)) & 1) as usize;
+        }
+    }
+    k
 }
 
 /// `(x x + y y) + z z`, lane by lane (glam's `length_squared`).
@@ -113,24 +185,6 @@ fn sum_squares(
 ) -> std::arch::x86_64::__m256 {
     use std::arch::x86_64::{_mm256_add_ps, _mm256_mul_ps};
     _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(x, x), _mm256_mul_ps(y, y)), _mm256_mul_ps(z, z))
-}
-
-/// The eight floats of `s` from `at` on, zeros past its end.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-fn lanes8(s: &[f32], at: usize) -> std::arch::x86_64::__m256 {
-    use std::arch::x86_64::_mm256_loadu_ps;
-    if let Some(eight) = s.get(at..at + 8) {
-        // SAFETY: `eight` is eight floats, the width of the load.
-        unsafe { _mm256_loadu_ps(eight.as_ptr()) }
-    } else {
-        let mut pad = [0f32; 8];
-        let rest = &s[at.min(s.len())..];
-        pad[..rest.len()].copy_from_slice(rest);
-        // SAFETY: `pad` is eight floats, the width of the load.
-        unsafe { _mm256_loadu_ps(pad.as_ptr()) }
-    }
 }
 
 #[cfg(test)]
