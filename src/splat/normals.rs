@@ -1036,7 +1036,9 @@ fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
     // Room for the most planes through one first point (the first's), so
     // the list is not regrown plane by plane.
     let most = near.len().saturating_sub(1) * near.len().saturating_sub(2) / 2;
-    let (mut planes, mut held) = (Vec::with_capacity(most), Vec::with_capacity(most));
+    // (With the room `triple_normals` asks for its last eight lanes'
+    // stores.)
+    let (mut planes, mut held) = (Vec::with_capacity(most + 9), Vec::with_capacity(most));
     for (a, &pa) in near.iter().enumerate() {
         let (dx, rest) = offsets.split_at_mut(len);
         let (dy, dz) = rest.split_at_mut(len);
