@@ -805,7 +805,7 @@ mod tests {
             })
             .collect();
         let model = |id: u32| {
-            let m = [ShadingMode::Phong, ShadingMode::Blended][usize::from(id % 5 == 0)];
+            let m = [ShadingMode::Phong, ShadingMode::Blended][usize::from(id.is_multiple_of(5))];
             (m, 0.1)
         };
         let kept = silhouettes(&splats, |id| model(id).0);
