@@ -299,13 +299,23 @@ fn x4(s: [&Splat; 4], c: Option<[&Silhouette; 4]>, u: Vec4, v: Vec4, d: Vec3) ->
     ((!flat & (flip | curved)).bitmask(), normals)
 }
 
+/// The most candidates of a group of four that [`passed_over`] tests one
+/// at a time ([`beyond_silhouette_at`]) rather than four-wide: a group of
+/// one or two pays for the four lanes' loads, transposes and normals
+/// (about 490 instructions a group on the bunny's box rays) where the
+/// scalar test costs about a hundred a candidate (issue 55,
+/// thirty-second session).
+const SCALAR_MAX: usize = 2;
+
 // A bit per candidate in `passed_over`.
 const _: () = assert!(MAX_CANDIDATES <= 32, "a bit per candidate");
 
 /// Which candidates of a window are passed over, bit `i` for `all[i]`
 /// (at most [`MAX_CANDIDATES`], 32): a [`ShadingMode::Phong`] splat's hit
 /// beyond its field's silhouette ([`beyond_silhouette`]), tested four at
-/// a time ([`beyond_silhouette_x4`], the same bits). Every candidate is
+/// a time ([`beyond_silhouette_x4`], the same bits), or one at a time in
+/// a group of at most [`SCALAR_MAX`] (its normals then not kept in
+/// `normals`, `have` unset). Every candidate is
 /// tested, where the resolver needs the answer only up to the first
 /// kept one and for those that would blend: the test is pure, so the
 /// answers are the same, and the tests overlap.
@@ -332,6 +342,16 @@ fn passed_over(
             phong |= p << i;
         }
         if phong == 0 {
+            continue;
+        }
+        if four.len() <= SCALAR_MAX {
+            // A candidate at a time: the scalar test's bits, its normal
+            // left for the resolver to compute if it blends.
+            for (i, c) in four.iter().enumerate() {
+                let s = &splats[c.id as usize];
+                let b = phong >> i & 1 != 0 && beyond_silhouette_at(s, c.u, c.v, ray.dir);
+                over |= u32::from(b) << (4 * g + i);
+            }
             continue;
         }
         let s = std::array::from_fn(|k| &splats[c(k).id as usize]);
@@ -760,6 +780,76 @@ mod tests {
         }
         // Both answers are common (measured: 4,038 hits, 962 beyond).
         assert!(hit >= 3_800 && beyond >= 850, "{hit} hits, {beyond} beyond");
+    }
+
+    /// `passed_over`'s answer is the four-wide test's on every group,
+    /// whether it ran a group four-wide or a candidate at a time (groups
+    /// of at most [`SCALAR_MAX`]), with and without kept constants; a
+    /// group tested four-wide keeps its normals (the field's, bit for
+    /// bit), one tested a candidate at a time none.
+    #[test]
+    fn small_groups_tested_one_at_a_time_answer_as_four_wide() {
+        let mut rnd = uniform(0x51_7cc1_b727_220a_u64);
+        let splats: Vec<Splat> = (0..32)
+            .map(|i| {
+                let n = Vec3::new(0.3 * rnd(), 0.3 * rnd(), 1.0);
+                let mut s = Splat::disc(Vec3::new(rnd(), rnd(), 0.05 * rnd()), n, 0.5).unwrap();
+                s.radii.y *= 0.4 + 0.6 * rnd().abs();
+                if i % 4 > 0 {
+                    s.field.xc = 0.3 * rnd();
+                    s.field.yc = 0.3 * rnd();
+                    s.field.alpha = 3.0 * rnd();
+                    s.field.beta = 3.0 * rnd();
+                }
+                s
+            })
+            .collect();
+        let model = |id: u32| {
+            let m = [ShadingMode::Phong, ShadingMode::Blended][usize::from(id.is_multiple_of(5))];
+            (m, 0.1)
+        };
+        let kept = silhouettes(&splats, |id| model(id).0);
+        let (mut scalar, mut over) = (0, 0);
+        for round in 0..4_000 {
+            let d = Vec3::new(0.5 * rnd(), 0.5 * rnd(), -1.0);
+            let all: Vec<Candidate> = (0..1 + round % 10)
+                .map(|_| {
+                    let id = ((rnd() + 1.0) * 16.0) as u32 % 32;
+                    Candidate { id, t: 3.0, u: 1.1 * rnd(), v: 1.1 * rnd() }
+                })
+                .collect();
+            let ray = Ray::new(Vec3::new(rnd(), rnd(), 3.0), d);
+            let mut want = 0;
+            for (g, four) in all.chunks(4).enumerate() {
+                let c = |k: usize| &four[k.min(four.len() - 1)];
+                let s = std::array::from_fn(|k| &splats[c(k).id as usize]);
+                let u = Vec4::new(c(0).u, c(1).u, c(2).u, c(3).u);
+                let v = Vec4::new(c(0).v, c(1).v, c(2).v, c(3).v);
+                let phong = (0..four.len())
+                    .map(|i| u32::from(model(c(i).id).0 == ShadingMode::Phong) << i)
+                    .sum::<u32>();
+                want |= (beyond_silhouette_x4(s, u, v, ray.dir).0 & phong) << (4 * g);
+            }
+            for k in [None, Some(kept.as_slice())] {
+                let (mut normals, mut have) = ([Vec3::ZERO; 8], 0u32);
+                let got = passed_over(&all, &ray, &splats, k, &model, &mut normals, &mut have);
+                assert_eq!(got, want, "round {round}");
+                for (i, c) in all.iter().enumerate().take(8) {
+                    let n = splats[c.id as usize].field_normal(c.u, c.v);
+                    let group = all.chunks(4).nth(i / 4).unwrap();
+                    let phong = group.iter().any(|c| model(c.id).0 == ShadingMode::Phong);
+                    let four_wide = phong && group.len() > SCALAR_MAX;
+                    assert_eq!(have >> i & 1 == 1, four_wide, "round {round} candidate {i}");
+                    if four_wide {
+                        assert_eq!(normals[i].to_array().map(f32::to_bits), n.to_array().map(f32::to_bits));
+                    }
+                }
+            }
+            scalar += all.chunks(4).filter(|g| g.len() <= SCALAR_MAX).count();
+            over += want.count_ones();
+        }
+        // Both kinds of group and both answers are common.
+        assert!(scalar >= 1_000 && over >= 1_000, "{scalar} groups one at a time, {over} passed over");
     }
 
     #[test]

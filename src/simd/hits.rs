@@ -81,7 +81,7 @@ impl<'a> LaneHits<'a> {
 /// mask has `t` finite in `[t_min, t_max]` and `u² + v²` within the
 /// relaxed rim; `intersect` with a nearer end `cut` hits it exactly when
 /// `t <= cut` and `u * u + v * v <= 1`.
-#[inline]
+#[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub fn disc_hits_met<C: AsRef<DiscColumns>>(
     packs: &[C],
