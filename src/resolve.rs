@@ -848,8 +848,9 @@ mod tests {
             scalar += all.chunks(4).filter(|g| g.len() <= SCALAR_MAX).count();
             over += want.count_ones();
         }
-        // Both kinds of group and both answers are common.
-        assert!(scalar >= 1_000 && over >= 1_000, "{scalar} groups one at a time, {over} passed over");
+        // Both kinds of group and both answers are common (measured: 2,400
+        // groups one at a time, 4,858 candidates passed over).
+        assert!(scalar >= 2_200 && over >= 4_400, "{scalar} groups one at a time, {over} passed over");
     }
 
     #[test]

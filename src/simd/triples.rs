@@ -245,6 +245,7 @@ mod tests {
                 }
             }
         }
-        assert!(pushed > 50_000 && skipped > 5_000 && nan > 500, "{pushed} pushed, {skipped} skipped, {nan} NaN");
+        // Measured: 84,803 pushed, 6,197 skipped, 24,252 NaN.
+        assert!(pushed > 80_000 && skipped > 5_500 && nan > 22_000, "{pushed} pushed, {skipped} skipped, {nan} NaN");
     }
 }
