@@ -111,8 +111,9 @@ unsafe fn avx2_pairs(d: [*const f32; 3], m: usize, out: &mut Vec<[f32; 3]>) {
             let nx = _mm256_sub_ps(_mm256_mul_ps(by, vz), _mm256_mul_ps(vy, bz));
             let ny = _mm256_sub_ps(_mm256_mul_ps(bz, vx), _mm256_mul_ps(vz, bx));
             let nz = _mm256_sub_ps(_mm256_mul_ps(bx, vy), _mm256_mul_ps(vx, by));
-            let nn = sum_squares(nx, ny, nz);
-            let vv = sum_squares(vx, vy, vz);
+            // glam's `length_squared`: `(x x + y y) + z z`.
+            let nn = super::x86::avx2_dot([nx, ny, nz], [nx, ny, nz]);
+            let vv = super::x86::avx2_dot([vx, vy, vz], [vx, vy, vz]);
             // Kept unless `nn < bound * vv` (not a number: kept).
             let keep = _mm256_cmp_ps::<_CMP_NLT_UQ>(nn, _mm256_mul_ps(bb, vv));
             let r = _mm256_div_ps(one, _mm256_sqrt_ps(nn));
@@ -172,19 +173,6 @@ unsafe fn store_kept(p: *mut f32, n: [std::arch::x86_64::__m256; 3], bits: u32, 
         }
     }
     k
-}
-
-/// `(x x + y y) + z z`, lane by lane (glam's `length_squared`).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-fn sum_squares(
-    x: std::arch::x86_64::__m256,
-    y: std::arch::x86_64::__m256,
-    z: std::arch::x86_64::__m256,
-) -> std::arch::x86_64::__m256 {
-    use std::arch::x86_64::{_mm256_add_ps, _mm256_mul_ps};
-    _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(x, x), _mm256_mul_ps(y, y)), _mm256_mul_ps(z, z))
 }
 
 #[cfg(test)]
