@@ -1247,9 +1247,8 @@ fn drop_outliers(w: &mut Work, report: &mut SplatReport) {
             count,
         });
         report.used_points = n - count;
-        w.tree = build_tree(&w.points);
         let keep: Vec<bool> = out.iter().map(|&o| !o).collect();
-        w.knn.retain(&keep, &w.tree, &w.points);
+        w.tree = w.knn.retain_building(&keep, &w.points);
         report.queries.graph += w.knn.queries;
     }
 }

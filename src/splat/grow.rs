@@ -956,8 +956,14 @@ fn grow_in_regions(inp: &GrowInput<'_>, regions: usize, progress: impl Fn(usize)
 }
 
 /// Clouds grown in one region with at least this many points a thread
-/// have their seeds' splats grown speculatively ([`grow_speculated`]).
-const SPECULATED_MIN: usize = 4096;
+/// have their seeds' splats grown speculatively ([`grow_speculated`]), or
+/// on two threads by the wavefront ([`grow_wavefront`]). At 4096 the
+/// held-out check's windows of the noisy scan (7,424 points to grow) grew
+/// on the calling thread alone: 239 M instructions while the workers
+/// waited; at 2048 its calling thread runs 877 M against 1,113 M at two
+/// threads, the same output (docs/notes/generation.md, issue 54,
+/// thirty-third session).
+const SPECULATED_MIN: usize = 2048;
 
 /// The points a run of [`speculate`] takes in one round: the speculated
 /// splats (and the points each marks) held at once are those of
@@ -1417,12 +1423,21 @@ fn wave_split(inp: &GrowInput<'_>) -> (usize, Vec<u32>) {
     }
     let mut tried: Vec<usize> = jumps.into_iter().map(|Reverse((_, m))| m).collect();
     tried.sort_unstable();
+    tried.insert(0, n / 2);
+    // Each split's end on the threads (the calling thread alone ran them
+    // before, while the workers waited); the first of the least kept, as
+    // the serial loop kept it.
+    let ends: Vec<usize> = tried
+        .par_iter()
+        .map(|&m| {
+            let last = wave_last(&grid, m);
+            (grid.cell[m..].iter().enumerate())
+                .map(|(k, &c)| last[c as usize] as usize + (n - m - k))
+                .fold(m, usize::max)
+        })
+        .collect();
     let mut best = (usize::MAX, n / 2);
-    for m in std::iter::once(n / 2).chain(tried) {
-        let last = wave_last(&grid, m);
-        let end = (grid.cell[m..].iter().enumerate())
-            .map(|(k, &c)| last[c as usize] as usize + (n - m - k))
-            .fold(m, usize::max);
+    for (&m, &end) in tried.iter().zip(&ends) {
         if end < best.0 {
             best = (end, m);
         }
@@ -2081,6 +2096,22 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A cloud of a few thousand points (the held-out check's windows)
+    /// has two threads' worth of points ([`SPECULATED_MIN`] a thread) and
+    /// grows by the wavefront on two: the serial growth's seeds, splats
+    /// and cover, bit for bit.
+    #[test]
+    fn a_small_cloud_grows_on_two_threads_as_on_one() {
+        let (p, n) = sheet(5_000);
+        assert_eq!(p.len() / SPECULATED_MIN, 2, "{} points", p.len());
+        let one = grow(&p, &n, 1, 1);
+        let two = grow(&p, &n, 1, 2);
+        assert_eq!(one.seeds, two.seeds);
+        assert_eq!(bits(&one), bits(&two));
+        assert_eq!(one.covered, two.covered);
+        assert_eq!(one.elliptical, two.elliptical);
     }
 
     #[test]

@@ -332,6 +332,32 @@ impl Knn {
     /// peak memory of a cloud with outliers: the wide rows alone take
     /// 148 B a point (a survey's tile peaked at 480 B a point with both).
     pub fn retain(&mut self, keep: &[bool], tree: &PointTree, points: &[Vec3]) {
+        match self.compact_kept(keep, points) {
+            Some((again, m)) => self.requery(&again, tree, points, m),
+            None => self.rebuild(tree, points),
+        }
+    }
+
+    /// [`Knn::retain`] with the kd-tree over the kept `points` built
+    /// beside the kept rows' move (which reads no tree): the same graph,
+    /// and the tree, which the caller keeps. The calling thread built the
+    /// tree alone before, while the workers waited (kiddo's build is
+    /// serial).
+    #[must_use]
+    pub fn retain_building(&mut self, keep: &[bool], points: &[Vec3]) -> PointTree {
+        let (tree, kept) = rayon::join(|| build_tree(points), || self.compact_kept(keep, points));
+        match kept {
+            Some((again, m)) => self.requery(&again, &tree, points, m),
+            None => self.rebuild(&tree, points),
+        }
+        tree
+    }
+
+    /// [`Knn::retain`]'s first part, which reads no tree: the kept rows
+    /// moved down and renumbered, and which kept points are to be queried
+    /// again (with the wide rows' size, 0 for none); `None` where the
+    /// graph is to be built afresh ([`Knn::rebuild`]).
+    fn compact_kept(&mut self, keep: &[bool], points: &[Vec3]) -> Option<(Vec<bool>, usize)> {
         let k = self.k.clamp(1, points.len().saturating_sub(1).max(1));
         let mut new_of = vec![u32::MAX; keep.len()];
         let mut kept_old = Vec::with_capacity(points.len());
@@ -342,17 +368,8 @@ impl Knn {
         let whole = self.wide.as_ref().filter(|w| w.slot.is_none());
         let m = whole.map_or(0, |w| w.m.min(points.len()));
         if k != self.k || kept_old.len() != points.len() || whole.is_some_and(|w| w.m != m) {
-            // Fewer points than a neighbourhood (or a caller's mismatch):
-            // built afresh, the old graph dropped first.
-            let wide = whole.is_some();
-            self.idx = Vec::new();
-            self.wide = None;
-            *self = if wide {
-                Knn::build_wide(tree, points, k, m)
-            } else {
-                Knn::build(tree, points, k)
-            };
-            return;
+            // Fewer points than a neighbourhood (or a caller's mismatch).
+            return None;
         }
         if whole.is_none() {
             self.wide = None;
@@ -366,7 +383,22 @@ impl Knn {
             })
             .collect();
         self.compact(&kept_old, &new_of, &again);
-        self.requery(&again, tree, points, m);
+        Some((again, m))
+    }
+
+    /// This graph built afresh over `points` (with wide rows where it had
+    /// every point's), the old one dropped first: [`Knn::retain`] where
+    /// fewer points are kept than a neighbourhood holds.
+    fn rebuild(&mut self, tree: &PointTree, points: &[Vec3]) {
+        let k = self.k.clamp(1, points.len().saturating_sub(1).max(1));
+        let whole = self.wide.as_ref().filter(|w| w.slot.is_none());
+        let m = whole.map(|w| w.m.min(points.len()));
+        self.idx = Vec::new();
+        self.wide = None;
+        *self = match m {
+            Some(m) => Knn::build_wide(tree, points, k, m),
+            None => Knn::build(tree, points, k),
+        };
     }
 
     /// [`Knn::retain`]'s move of the kept rows down to their new places,
@@ -1210,6 +1242,15 @@ mod tests {
                     .count();
                 assert_eq!(got.queries, touched);
                 assert_eq!(want.queries, left.len());
+                // With the tree built beside the rows' move: the same
+                // graph, the same queries, and a tree as the one built
+                // alone.
+                let mut beside = all.clone();
+                let built = beside.retain_building(&keep, &left);
+                assert_eq!(beside.idx, want.idx);
+                assert_eq!(beside.kth_distance, want.kth_distance);
+                assert_eq!(beside.queries, touched);
+                assert!(built == tree);
             }
         }
     }
@@ -1261,6 +1302,13 @@ mod tests {
                 assert_eq!(bits(&got), bits(&want));
                 for i in 0..left.len() {
                     assert_eq!(row(&got, i, 49), row(&want, i, 49), "{i}");
+                }
+                let mut beside = wide.clone();
+                assert!(beside.retain_building(&keep, &left) == tree);
+                assert_eq!(beside.idx, want.idx);
+                assert_eq!(bits(&beside), bits(&want));
+                for i in 0..left.len() {
+                    assert_eq!(row(&beside, i, 49), row(&want, i, 49), "{i}");
                 }
                 let touched = (0..n)
                     .filter(|&i| keep[i] && row(&wide, i, 49).unwrap().iter().any(|&j| drop[j as usize]))
