@@ -353,12 +353,14 @@ fn fit_windows(
     seed: u64,
     (epsilon, halo): (f64, f64),
 ) -> Result<(Vec<Window>, Vec<bool>)> {
+    use rayon::prelude::*;
     let n = pos.len();
     let halo = halo as f32;
     let min_core = 2.0 * epsilon as f32;
     let pick = |count, share| pick_windows(pos, seed, (count, share), halo, min_core);
-    let held_of = |w: &[bool]| w.iter().filter(|&&w| w).count();
-    let cores = |w: &(Vec<Window>, Vec<bool>)| pos.iter().filter(|p| in_core(&w.0, **p)).count();
+    // Counted on the threads (each a pass over the cloud).
+    let held_of = |w: &[bool]| w.par_iter().filter(|&&w| w).count();
+    let cores = |w: &(Vec<Window>, Vec<bool>)| pos.par_iter().filter(|p| in_core(&w.0, **p)).count();
     let budget = (MAX_SHARE * n as f64) as usize;
     let mut share = WINDOW_SHARE;
     let mut fit = None;
