@@ -106,6 +106,14 @@ pub fn beyond_silhouette(c: &Candidate, s: &Splat, ray: &Ray) -> bool {
 #[must_use]
 #[inline]
 pub fn beyond_silhouette_at(s: &Splat, u: f32, v: f32, d: Vec3) -> bool {
+    beyond_at(s, None, u, v, d)
+}
+
+/// [`beyond_silhouette_at`] with the height-field constants `a`, `b` and
+/// `h_0` computed (`None`) or kept (`Some`, [`Silhouette::of`] of `s`:
+/// the same operations, so the same bits).
+#[inline(always)]
+fn beyond_at(s: &Splat, kept: Option<&Silhouette>, u: f32, v: f32, d: Vec3) -> bool {
     let f = &s.field;
     if *f == NormalField::FLAT {
         // The plane itself: every disc hit is on it.
@@ -117,8 +125,14 @@ pub fn beyond_silhouette_at(s: &Splat, u: f32, v: f32, d: Vec3) -> bool {
         return true;
     }
     let (ru, rv) = (s.radii.x, s.radii.y);
-    let (a, b) = (f.alpha / (2.0 * ru), f.beta / (2.0 * rv));
-    let h0 = (f.alpha * ru + f.beta * rv) / 8.0;
+    let (a, b, h0) = match kept {
+        Some(k) => (k.a, k.b, k.h0),
+        None => (
+            f.alpha / (2.0 * ru),
+            f.beta / (2.0 * rv),
+            (f.alpha * ru + f.beta * rv) / 8.0,
+        ),
+    };
     let (x, y) = (u * ru, v * rv);
     let (du, dv, dn) = (d.dot(s.u_axis), d.dot(s.v_axis), d.dot(s.normal));
     let qa = a * du * du + b * dv * dv;
@@ -319,6 +333,7 @@ const _: () = assert!(MAX_CANDIDATES <= 32, "a bit per candidate");
 /// tested, where the resolver needs the answer only up to the first
 /// kept one and for those that would blend: the test is pure, so the
 /// answers are the same, and the tests overlap.
+#[inline(always)]
 fn passed_over(
     all: &[Candidate],
     ray: &Ray,
@@ -349,7 +364,7 @@ fn passed_over(
             // left for the resolver to compute if it blends.
             for (i, c) in four.iter().enumerate() {
                 let s = &splats[c.id as usize];
-                let b = phong >> i & 1 != 0 && beyond_silhouette_at(s, c.u, c.v, ray.dir);
+                let b = phong >> i & 1 != 0 && beyond_at(s, k.map(|k| k[i]), c.u, c.v, ray.dir);
                 over |= u32::from(b) << (4 * g + i);
             }
             continue;
@@ -466,8 +481,62 @@ pub fn resolve_models(
 /// answer, bit for bit.
 ///
 /// Panics if `kept` has no entry for a candidate's splat.
+///
+/// Compiled for AVX where the process's SIMD path is a wide one
+/// ([`crate::simd::vex`]: the same operations, so the same bits).
 #[must_use]
 pub fn resolve_models_kept(
+    hits: &CandidateHits,
+    ray: &Ray,
+    splats: &[Splat],
+    kept: Option<&[Silhouette]>,
+    model: impl Fn(u32) -> (ShadingMode, f32),
+) -> Option<Resolved> {
+    resolve_on(crate::config::current().simd, hits, ray, splats, kept, model)
+}
+
+/// [`resolve_models_kept`] on the SIMD path `isa` (every path the same
+/// bits).
+#[must_use]
+pub fn resolve_on(
+    isa: crate::simd::Isa,
+    hits: &CandidateHits,
+    ray: &Ray,
+    splats: &[Splat],
+    kept: Option<&[Silhouette]>,
+    model: impl Fn(u32) -> (ShadingMode, f32),
+) -> Option<Resolved> {
+    let r = Resolve {
+        hits,
+        ray,
+        splats,
+        kept,
+        model,
+    };
+    crate::simd::vex(isa, r)
+}
+
+/// [`resolve_in`]'s arguments, the work [`crate::simd::vex`] runs.
+struct Resolve<'a, M> {
+    hits: &'a CandidateHits,
+    ray: &'a Ray,
+    splats: &'a [Splat],
+    kept: Option<&'a [Silhouette]>,
+    model: M,
+}
+
+impl<M: Fn(u32) -> (ShadingMode, f32)> crate::simd::Kernel for Resolve<'_, M> {
+    type Out = Option<Resolved>;
+
+    #[inline(always)]
+    fn run(self) -> Option<Resolved> {
+        resolve_in(self.hits, self.ray, self.splats, self.kept, self.model)
+    }
+}
+
+/// [`resolve_models_kept`]'s body, inlined into each path's function.
+#[inline(always)]
+fn resolve_in(
     hits: &CandidateHits,
     ray: &Ray,
     splats: &[Splat],
