@@ -141,8 +141,16 @@ pub fn vex<K: Kernel>(isa: Isa, k: K) -> K::Out {
             // SAFETY: the guard checked that the CPU runs AVX2, so AVX.
             unsafe { on_avx(k) }
         }
-        _ => k.run(),
+        _ => as_built(k),
     }
+}
+
+/// [`vex`]'s baseline path, a function of its own so that the dispatch
+/// around it stays a few instructions (inlined, its frame and saved
+/// registers were paid on the AVX path too).
+#[inline(never)]
+fn as_built<K: Kernel>(k: K) -> K::Out {
+    k.run()
 }
 
 /// [`vex`]'s AVX path: `k.run()` inlined and compiled with AVX enabled.
