@@ -878,7 +878,7 @@ mod tests {
     /// and without kept constants.
     #[test]
     fn every_simd_path_resolves_the_same_bits() {
-        let mut rnd = uniform(0x33b_5eed_0dd_f00d_u64);
+        let mut rnd = uniform(0x0033_b5ee_d0dd_f00d_u64);
         let mut counts = [0u32; 3];
         for (far, graze) in [(0.0, false), (0.0, true), (1.0e4, false), (1.0e4, true)] {
             let splats: Vec<Splat> = (0..24)
