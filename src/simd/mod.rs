@@ -113,6 +113,53 @@ pub fn prefetch<T>(x: &T) {
     let _ = x;
 }
 
+/// A piece of work [`vex`] runs: `run` must be `#[inline(always)]`, so
+/// that it is compiled into each path's function (a closure is not
+/// inlined into a larger function and would keep the baseline's code).
+pub trait Kernel {
+    /// What the work answers.
+    type Out;
+    /// Does the work.
+    fn run(self) -> Self::Out;
+}
+
+/// `k.run()`, compiled for AVX (three-operand VEX forms, no fused
+/// multiply-add: the `fma` feature is not enabled) where `isa` is a wide
+/// path the CPU runs, else as built (baseline SSE2). The same IEEE
+/// operations in the same order on either path, so the same bits: only
+/// their encoding, register copies and spills differ. For 4-wide glam
+/// code whose two-operand SSE2 form spends a third of its instructions on
+/// copies and spills (the resolver's four-wide silhouette test,
+/// `crate::resolve`; issue 55, thirty-third session). One call's worth of
+/// work (a window), not a short one called in a loop: the AVX path is a
+/// call.
+#[inline(always)]
+pub fn vex<K: Kernel>(isa: Isa, k: K) -> K::Out {
+    match isa {
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx2 | Isa::Avx512 if Isa::Avx2.supported() => {
+            // SAFETY: the guard checked that the CPU runs AVX2, so AVX.
+            unsafe { on_avx(k) }
+        }
+        _ => as_built(k),
+    }
+}
+
+/// [`vex`]'s baseline path, a function of its own so that the dispatch
+/// around it stays a few instructions (inlined, its frame and saved
+/// registers were paid on the AVX path too).
+#[inline(never)]
+fn as_built<K: Kernel>(k: K) -> K::Out {
+    k.run()
+}
+
+/// [`vex`]'s AVX path: `k.run()` inlined and compiled with AVX enabled.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn on_avx<K: Kernel>(k: K) -> K::Out {
+    k.run()
+}
+
 /// The environment variable that forces a path for the whole process
 /// (read by `crate::config`).
 pub const SIMD_VAR: &str = "SPLATRAY_SIMD";
