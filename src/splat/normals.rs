@@ -2903,7 +2903,7 @@ mod tests {
                     let on = match kind {
                         0 => false,
                         1 => true,
-                        _ => rng.next_u64() % (kind as u64) == 0,
+                        _ => rng.next_u64().is_multiple_of(kind as u64),
                     };
                     set[j / 64] |= u64::from(on) << (j % 64);
                 }
@@ -2913,8 +2913,9 @@ mod tests {
                 gathered += got.len();
             }
         }
-        // Measured: every point of the all-set sets and about 3/4 of them in the random ones.
-        assert!(gathered > 40_000, "{gathered}");
+        // Every point of the all-set sets (32,896) and about a half and a
+        // third of the random ones: measured 60,250.
+        assert!(gathered >= 60_000, "{gathered}");
     }
 
     /// [`Lanes::score`] is the sum, point by point, of MSAC's terms as
