@@ -125,14 +125,7 @@ fn beyond_at(s: &Splat, kept: Option<&Silhouette>, u: f32, v: f32, d: Vec3) -> b
         return true;
     }
     let (ru, rv) = (s.radii.x, s.radii.y);
-    let (a, b, h0) = match kept {
-        Some(k) => (k.a, k.b, k.h0),
-        None => (
-            f.alpha / (2.0 * ru),
-            f.beta / (2.0 * rv),
-            (f.alpha * ru + f.beta * rv) / 8.0,
-        ),
-    };
+    let Silhouette { a, b, h0, .. } = kept.copied().unwrap_or_else(|| Silhouette::of(s, false));
     let (x, y) = (u * ru, v * rv);
     let (du, dv, dn) = (d.dot(s.u_axis), d.dot(s.v_axis), d.dot(s.normal));
     let qa = a * du * du + b * dv * dv;
@@ -691,6 +684,15 @@ mod tests {
 
     /// Uniform numbers in `[-1, 1)` from a linear congruential sequence
     /// started at `seed`, for the random tests.
+    /// A random linear field on `s`: centre within 0.3, slopes within 3,
+    /// drawn in that order.
+    fn random_field(s: &mut Splat, rnd: &mut impl FnMut() -> f32) {
+        s.field.xc = 0.3 * rnd();
+        s.field.yc = 0.3 * rnd();
+        s.field.alpha = 3.0 * rnd();
+        s.field.beta = 3.0 * rnd();
+    }
+
     fn uniform(mut state: u64) -> impl FnMut() -> f32 {
         move || {
             state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
@@ -769,10 +771,7 @@ mod tests {
                         s.field.yc = rnd();
                     }
                     _ => {
-                        s.field.xc = 0.3 * rnd();
-                        s.field.yc = 0.3 * rnd();
-                        s.field.alpha = 3.0 * rnd();
-                        s.field.beta = 3.0 * rnd();
+                        random_field(&mut s, &mut rnd);
                     }
                 }
                 s
@@ -887,10 +886,7 @@ mod tests {
                     let c = Vec3::new(far + rnd(), far - rnd(), far + 0.05 * rnd());
                     let mut s = Splat::disc(c, n, 0.5).unwrap();
                     if i % 3 > 0 {
-                        s.field.xc = 0.3 * rnd();
-                        s.field.yc = 0.3 * rnd();
-                        s.field.alpha = 3.0 * rnd();
-                        s.field.beta = 3.0 * rnd();
+                        random_field(&mut s, &mut rnd);
                     }
                     s
                 })
@@ -946,10 +942,7 @@ mod tests {
                 let mut s = Splat::disc(Vec3::new(rnd(), rnd(), 0.05 * rnd()), n, 0.5).unwrap();
                 s.radii.y *= 0.4 + 0.6 * rnd().abs();
                 if i % 4 > 0 {
-                    s.field.xc = 0.3 * rnd();
-                    s.field.yc = 0.3 * rnd();
-                    s.field.alpha = 3.0 * rnd();
-                    s.field.beta = 3.0 * rnd();
+                    random_field(&mut s, &mut rnd);
                 }
                 s
             })
