@@ -752,19 +752,51 @@ impl FacePlane {
 /// through the slab, than the face's own plane holds within the noise);
 /// `None`
 /// when no three are spread enough to fix a plane.
+#[cfg(test)]
 fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
-    let lanes = Lanes::of(pts);
-    let candidates = triple_planes(&pts[..FACE_TRIPLES.min(pts.len())], &lanes, tol);
-    let mut best = Best::new(pts.len());
+    face_plane_in(pts, tol, &mut PlaneRoom::default())
+}
+
+/// A thread's room for [`face_plane`]'s lists and buffers, kept from one
+/// search to the next so that a search allocates nothing: each is cleared
+/// or filled anew before it is read, so a search in used room is the search
+/// in fresh room.
+#[derive(Default)]
+struct PlaneRoom {
+    lanes: Lanes,
+    triples: TripleRoom,
+    refits: Refits,
+    /// [`Best`]'s terms.
+    terms: Vec<f32>,
+    seen: Vec<HeldSet>,
+    done: Vec<HeldSet>,
+}
+
+/// [`face_plane`] in the thread's `room`.
+fn face_plane_in(pts: &[Vec3], tol: f32, room: &mut PlaneRoom) -> Option<FacePlane> {
+    let PlaneRoom {
+        lanes,
+        triples,
+        refits,
+        terms,
+        seen,
+        done,
+    } = room;
+    lanes.fill(pts);
+    let lanes = &*lanes;
+    let candidates = triple_planes_in(&pts[..FACE_TRIPLES.min(pts.len())], lanes, tol, triples);
+    terms.clear();
+    terms.resize(pts.len(), 0.0);
+    let mut best = Best { plane: None, terms };
     if pts.len() > HELD_BITS {
         // No sets kept: each candidate refitted twice to the points it
         // holds, tested again each time.
-        for &f in &candidates {
-            let once = refit(&lanes, held_by(pts, f, tol), tol, false);
+        for &f in candidates {
+            let once = refit(lanes, held_by(pts, f, tol), tol, false);
             if let Some((once, _)) = once {
-                let twice = refit(&lanes, held_by(pts, once, tol), tol, false);
+                let twice = refit(lanes, held_by(pts, once, tol), tol, false);
                 if let Some((twice, _)) = twice {
-                    best.offer(&lanes, twice, tol);
+                    best.offer(lanes, twice, tol);
                 }
             }
         }
@@ -775,18 +807,18 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
     // the same points as one before it refits to the same plane (and loses
     // the tie), a refit holding what its candidate held refits to itself,
     // and a set refitted before refits as it did then (`Refits`).
-    let mut refits = Refits::default();
-    let mut seen: Vec<HeldSet> = Vec::with_capacity(FACE_REFITS);
+    refits.clear();
+    seen.clear();
     // The sets whose refit was already a result: a later refit of the same
     // set is the same plane, and loses the tie.
-    let mut done: Vec<HeldSet> = Vec::with_capacity(FACE_REFITS);
-    for &f in &candidates {
+    done.clear();
+    for &f in candidates {
         let set = lanes.held_set(f.normal, f.origin, tol);
         if seen.contains(&set) {
             continue;
         }
         seen.push(set);
-        let Some((once, now)) = refits.of(pts, &lanes, set, tol) else {
+        let Some((once, now)) = refits.of(pts, lanes, set, tol) else {
             continue;
         };
         let result = if now == set {
@@ -796,12 +828,12 @@ fn face_plane(pts: &[Vec3], tol: f32) -> Option<FacePlane> {
             continue;
         } else {
             done.push(now);
-            match refits.of(pts, &lanes, now, tol) {
+            match refits.of(pts, lanes, now, tol) {
                 Some((twice, _)) => twice,
                 None => continue,
             }
         };
-        best.offer(&lanes, result, tol);
+        best.offer(lanes, result, tol);
     }
     best.plane
 }
@@ -863,6 +895,12 @@ impl Default for Refits {
 }
 
 impl Refits {
+    /// Empty, for the next search (its room kept).
+    fn clear(&mut self) {
+        self.sets.clear();
+        self.planes.clear();
+    }
+
     /// The refit of the points of `pts` in `set` ([`refit`]).
     fn of(&mut self, pts: &[Vec3], lanes: &Lanes, set: HeldSet, tol: f32) -> Option<(FacePlane, HeldSet)> {
         if let Some(k) = self.sets.iter().position(|s| *s == set) {
@@ -896,19 +934,13 @@ fn gather_set<'a>(pts: &[Vec3], set: &HeldSet, room: &'a mut [Vec3]) -> &'a [Vec
 
 /// The best of [`face_plane`]'s results so far: the highest MSAC score,
 /// the first of equal scores.
-struct Best {
+struct Best<'r> {
     plane: Option<FacePlane>,
     /// Room for the score's terms, point by point.
-    terms: Vec<f32>,
+    terms: &'r mut [f32],
 }
 
-impl Best {
-    fn new(n: usize) -> Best {
-        Best {
-            plane: None,
-            terms: vec![0.0; n],
-        }
-    }
+impl Best<'_> {
 
     /// `f` scored and kept where it scores more than the best so far. A
     /// score is a sum of terms in [0, 1], nonzero only for points the
@@ -920,7 +952,7 @@ impl Best {
         if self.plane.is_some_and(|b| b.fit >= f.held as f32) {
             return;
         }
-        let fit = lanes.score(f.normal, f.origin, tol, &mut self.terms);
+        let fit = lanes.score(f.normal, f.origin, tol, self.terms);
         match self.plane {
             Some(b) if b.fit >= fit => {}
             _ => self.plane = Some(FacePlane { fit, ..f }),
@@ -938,6 +970,12 @@ struct Lanes {
     isa: crate::simd::Isa,
 }
 
+impl Default for Lanes {
+    fn default() -> Lanes {
+        Lanes::of(&[])
+    }
+}
+
 impl Lanes {
     fn of(pts: &[Vec3]) -> Lanes {
         Lanes {
@@ -946,6 +984,18 @@ impl Lanes {
             zs: pts.iter().map(|d| d.z).collect(),
             isa: crate::config::current().simd,
         }
+    }
+
+    /// `pts` by coordinate, in the room of lanes used before
+    /// ([`Lanes::of`]'s lanes).
+    fn fill(&mut self, pts: &[Vec3]) {
+        self.xs.clear();
+        self.xs.extend(pts.iter().map(|d| d.x));
+        self.ys.clear();
+        self.ys.extend(pts.iter().map(|d| d.y));
+        self.zs.clear();
+        self.zs.extend(pts.iter().map(|d| d.z));
+        self.isa = crate::config::current().simd;
     }
 
     /// How many lie within `tol` of the plane through `origin` with unit
@@ -1024,19 +1074,45 @@ impl Lanes {
 /// and normalisation lane by lane, eight pairs at a time on AVX2) and
 /// counted on it ([`crate::simd::count_within`]: the same products and
 /// sums, eight points at a time on AVX2).
+#[cfg(test)]
 fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
+    triple_planes_in(near, lanes, tol, &mut TripleRoom::default()).to_vec()
+}
+
+/// [`triple_planes`]' lists, kept from one search to the next
+/// ([`PlaneRoom`]).
+#[derive(Default)]
+struct TripleRoom {
+    best: Vec<FacePlane>,
+    offsets: Vec<f32>,
+    planes: Vec<[f32; 3]>,
+    held: Vec<u32>,
+}
+
+/// [`triple_planes`] in `room`, the list left in it.
+fn triple_planes_in<'r>(near: &[Vec3], lanes: &Lanes, tol: f32, room: &'r mut TripleRoom) -> &'r [FacePlane] {
     let isa = lanes.isa;
-    let mut best: Vec<FacePlane> = Vec::with_capacity(FACE_REFITS + 1);
+    let TripleRoom {
+        best,
+        offsets,
+        planes,
+        held,
+    } = room;
+    best.clear();
     // The offsets padded with NaN to a multiple of eight lanes (counted by
     // no path).
     let len = lanes.xs.len().div_ceil(8) * 8;
-    let mut offsets = vec![f32::NAN; 3 * len];
+    offsets.clear();
+    offsets.resize(3 * len, f32::NAN);
     // Room for the most planes through one first point (the first's), so
     // the list is not regrown plane by plane.
     let most = near.len().saturating_sub(1) * near.len().saturating_sub(2) / 2;
     // (With the room `triple_normals` asks for its last eight lanes'
     // stores.)
-    let (mut planes, mut held) = (Vec::with_capacity(most + 9), Vec::with_capacity(most));
+    planes.clear();
+    planes.reserve(most + 9);
+    held.clear();
+    held.reserve(most);
     for (a, &pa) in near.iter().enumerate() {
         let (dx, rest) = offsets.split_at_mut(len);
         let (dy, dz) = rest.split_at_mut(len);
@@ -1046,13 +1122,13 @@ fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
         // `pb - pa` bit for bit.) Triples nearly in line fix no plane.
         planes.clear();
         let m = near.len() - 1 - a;
-        crate::simd::triple_normals(&dx[a + 1..], &dy[a + 1..], &dz[a + 1..], m, isa, &mut planes);
+        crate::simd::triple_normals(&dx[a + 1..], &dy[a + 1..], &dz[a + 1..], m, isa, planes);
         held.resize(planes.len(), 0);
-        crate::simd::count_within(dx, dy, dz, &planes, tol, isa, &mut held);
+        crate::simd::count_within(dx, dy, dz, planes, tol, isa, held);
         // After every candidate holding as many (a stable order): past the
         // last of a full list (holding `floor` or fewer), not kept.
         let mut floor = (best.len() == FACE_REFITS).then(|| best[FACE_REFITS - 1].held);
-        for (&normal, &held) in planes.iter().zip(&held) {
+        for (&normal, &held) in planes.iter().zip(held.iter()) {
             let held = held as usize;
             if floor.is_some_and(|f| f >= held) {
                 continue;
@@ -1458,6 +1534,10 @@ struct FaceScratch<'t> {
     /// The second round's points of [`wide_plane`] (its first round's
     /// are gathered into `all`, not yet read on that path).
     again: Vec<Vec3>,
+    /// The neighbours the first face plane leaves ([`FaceSearch::edge_face`]).
+    rest: Vec<Vec3>,
+    /// [`face_plane`]'s room.
+    planes: PlaneRoom,
 }
 
 impl<'t> FaceScratch<'t> {
@@ -1470,6 +1550,8 @@ impl<'t> FaceScratch<'t> {
             all: Vec::new(),
             face: Vec::new(),
             again: Vec::new(),
+            rest: Vec::new(),
+            planes: PlaneRoom::default(),
         }
     }
 }
@@ -1524,6 +1606,8 @@ impl FaceSearch<'_> {
             all,
             face,
             again,
+            rest,
+            planes,
         } = scratch;
         // The graph's wide row where it keeps one of this size, else the
         // same neighbourhood queried.
@@ -1559,7 +1643,7 @@ impl FaceSearch<'_> {
         all.clear();
         all.push(Vec3::ZERO);
         all.extend(wide.iter().copied());
-        let (fitted, own, fold) = self.edge_face(all, wide, near, n0, held)?;
+        let (fitted, own, fold) = self.edge_face(all, wide, near, n0, held, rest, planes)?;
         let turned = fitted.dot(n0) < FACE_TURN_DEG.to_radians().cos();
         // Without the flat-face rules a kept normal is an answer only to
         // spread the sparse search, and a curved surface's fold spreads
@@ -1590,7 +1674,9 @@ impl FaceSearch<'_> {
     /// rest. `None` where one smooth surface fits as well as the two
     /// planes; else the normal of the point's own face (the nearer plane),
     /// that plane, and where a second plane was found how the two meet
-    /// ([`Fold`]).
+    /// ([`Fold`]). `rest` and `room` are the thread's room for the
+    /// second plane's points and the plane searches.
+    #[allow(clippy::too_many_arguments)] // the point's neighbourhood and the thread's room
     fn edge_face(
         &self,
         all: &[Vec3],
@@ -1598,6 +1684,8 @@ impl FaceSearch<'_> {
         near: &[usize],
         n0: Vec3,
         held: usize,
+        rest: &mut Vec<Vec3>,
+        room: &mut PlaneRoom,
     ) -> Option<(Vec3, FacePlane, Option<Fold>)> {
         let tol = self.tol;
         // One smooth surface curving past the plane's reach: the
@@ -1613,12 +1701,12 @@ impl FaceSearch<'_> {
             return None;
         }
         self.searched.fetch_add(1, Ordering::Relaxed);
-        let first = face_plane(all, tol)?;
+        let first = face_plane_in(all, tol, room)?;
         // (The current plane, through the point, holds it too.)
         if first.held <= held + 1 {
             return None;
         }
-        let mut rest = Vec::with_capacity(all.len());
+        rest.clear();
         rest.extend(all.iter().copied().filter(|d| !first.holds(*d, tol)));
         // Two faces, or one smooth surface curving past the plane's
         // reach: the quadric fits it at least as closely as the two
@@ -1636,7 +1724,7 @@ impl FaceSearch<'_> {
         }
         // (A plane holds at most all of the rest: too few fix no second.)
         let second = (rest.len() >= FACE_MIN_POINTS)
-            .then(|| face_plane(&rest, tol))
+            .then(|| face_plane_in(rest, tol, room))
             .flatten()
             .filter(|f| f.held >= FACE_MIN_POINTS);
         let two = first.fit + second.map_or(0.0, |f| f.fit);
