@@ -1618,7 +1618,17 @@ impl FaceSearch<'_> {
         }
         gather_wide(ids, i, self.points, near, wide);
         let holds = |c: Vec3| wide.iter().filter(|d| c.dot(**d).abs() <= tol).count();
-        let held = holds(n0);
+        // With the flat-face rules most points are flat on `n0`'s plane:
+        // the points it holds are gathered as `wide_plane`'s first round
+        // gathers them (into `all`), and counted from that gather (an
+        // offset less the origin at the point is the offset, bit for bit,
+        // so the test is `holds`').
+        let (held, own) = if self.flat_faces {
+            let own = held_by_plane(wide, n0, Vec3::ZERO, tol, all);
+            (all.len() - usize::from(own), own)
+        } else {
+            (holds(n0), false)
+        };
         let flat_at = (FACE_HOLDS * wide.len() as f32).ceil() as usize;
         // A normal tilted by the noise tilts its plane off the flat face
         // the point lies on: the plane fitted to the whole neighbourhood
@@ -1635,7 +1645,10 @@ impl FaceSearch<'_> {
             if !self.flat_faces {
                 return None;
             }
-            let m = wide_plane(wide, tilted.unwrap_or(n0), tol, [all, again])?;
+            let m = match tilted {
+                Some(m) => wide_plane(wide, m, tol, [all, again])?,
+                None => wide_rounds_from(wide, n0, tol, own, [all, again])?.0,
+            };
             let face = kept_near(near, wide, face, |d| m.dot(d).abs() <= tol);
             return Some((m, Kind::Flat, face));
         }
@@ -1988,6 +2001,14 @@ fn wide_plane(offsets: &[Vec3], n0: Vec3, tol: f32, bufs: [&mut Vec<Vec3>; 2]) -
 fn wide_rounds(offsets: &[Vec3], n0: Vec3, tol: f32, bufs: [&mut Vec<Vec3>; 2]) -> Option<(Vec3, bool)> {
     let [held, again] = bufs;
     let own = held_by_plane(offsets, n0, Vec3::ZERO, tol, held);
+    wide_rounds_from(offsets, n0, tol, own, [held, again])
+}
+
+/// [`wide_rounds`] from its first round's points, gathered into `bufs[0]`
+/// by [`held_by_plane`] (`offsets` held by `n0`'s plane through the point;
+/// `own` whether it holds the point).
+fn wide_rounds_from(offsets: &[Vec3], n0: Vec3, tol: f32, own: bool, bufs: [&mut Vec<Vec3>; 2]) -> Option<(Vec3, bool)> {
+    let [held, again] = bufs;
     if super::denoise::curvature_f(&held[usize::from(own)..], n0)? >= FLAT_F {
         return None;
     }
