@@ -2953,6 +2953,9 @@ mod tests {
         let mut rng = crate::rng::SplitMix64::new(54);
         let mut uniform = || (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
         let mut compared = 0;
+        // One room through all the cases, as a thread keeps it: a search
+        // after one of 300 points finds what a search in fresh room finds.
+        let mut room = PlaneRoom::default();
         for case in 0..400 {
             let angle = (20.0 + 70.0 * uniform()).to_radians();
             let noise = [0.0, 0.05, 0.2, 1.0][case % 4];
@@ -2978,6 +2981,9 @@ mod tests {
             }
             pts[1..].sort_by(|a, b| a.length_squared().total_cmp(&b.length_squared()));
             let (got, want) = (face_plane(&pts, tol), face_plane_reference(&pts, tol));
+            let kept = face_plane_in(&pts, tol, &mut room);
+            let bits = |f: Option<FacePlane>| f.map(|f| (f.normal, f.origin, f.held, f.fit.to_bits()));
+            assert_eq!(bits(kept), bits(got), "case {case}: the kept room's search");
             match (got, want) {
                 (Some(g), Some(w)) => {
                     assert_eq!(
