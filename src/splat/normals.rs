@@ -784,7 +784,7 @@ fn face_plane_in(pts: &[Vec3], tol: f32, room: &mut PlaneRoom) -> Option<FacePla
     } = room;
     lanes.fill(pts);
     let lanes = &*lanes;
-    let candidates = triple_planes_in(&pts[..FACE_TRIPLES.min(pts.len())], lanes, tol, triples);
+    let candidates = triple_planes(&pts[..FACE_TRIPLES.min(pts.len())], lanes, tol, triples);
     terms.clear();
     terms.resize(pts.len(), 0.0);
     let mut best = Best { plane: None, terms };
@@ -1073,24 +1073,9 @@ impl Lanes {
 /// path ([`crate::simd::triple_normals`]: glam's cross product, lengths
 /// and normalisation lane by lane, eight pairs at a time on AVX2) and
 /// counted on it ([`crate::simd::count_within`]: the same products and
-/// sums, eight points at a time on AVX2).
-#[cfg(test)]
-fn triple_planes(near: &[Vec3], lanes: &Lanes, tol: f32) -> Vec<FacePlane> {
-    triple_planes_in(near, lanes, tol, &mut TripleRoom::default()).to_vec()
-}
-
-/// [`triple_planes`]' lists, kept from one search to the next
-/// ([`PlaneRoom`]).
-#[derive(Default)]
-struct TripleRoom {
-    best: Vec<FacePlane>,
-    offsets: Vec<f32>,
-    planes: Vec<[f32; 3]>,
-    held: Vec<u32>,
-}
-
-/// [`triple_planes`] in `room`, the list left in it.
-fn triple_planes_in<'r>(near: &[Vec3], lanes: &Lanes, tol: f32, room: &'r mut TripleRoom) -> &'r [FacePlane] {
+/// sums, eight points at a time on AVX2). Made in the thread's `room`
+/// ([`TripleRoom`]), the list left in it.
+fn triple_planes<'r>(near: &[Vec3], lanes: &Lanes, tol: f32, room: &'r mut TripleRoom) -> &'r [FacePlane] {
     let isa = lanes.isa;
     let TripleRoom {
         best,
@@ -1148,6 +1133,16 @@ fn triple_planes_in<'r>(near: &[Vec3], lanes: &Lanes, tol: f32, room: &'r mut Tr
         }
     }
     best
+}
+
+/// [`triple_planes`]' lists, kept from one search to the next
+/// ([`PlaneRoom`]).
+#[derive(Default)]
+struct TripleRoom {
+    best: Vec<FacePlane>,
+    offsets: Vec<f32>,
+    planes: Vec<[f32; 3]>,
+    held: Vec<u32>,
 }
 
 /// [`face_plane`] keeps the set of points a plane holds for neighbourhoods
