@@ -941,7 +941,6 @@ struct Best<'r> {
 }
 
 impl Best<'_> {
-
     /// `f` scored and kept where it scores more than the best so far. A
     /// score is a sum of terms in [0, 1], nonzero only for points the
     /// plane holds (`|h| < tol`, the test of its `held` count), so it is at
@@ -972,22 +971,23 @@ struct Lanes {
 
 impl Default for Lanes {
     fn default() -> Lanes {
-        Lanes::of(&[])
+        Lanes {
+            xs: Vec::new(),
+            ys: Vec::new(),
+            zs: Vec::new(),
+            isa: crate::config::current().simd,
+        }
     }
 }
 
 impl Lanes {
     fn of(pts: &[Vec3]) -> Lanes {
-        Lanes {
-            xs: pts.iter().map(|d| d.x).collect(),
-            ys: pts.iter().map(|d| d.y).collect(),
-            zs: pts.iter().map(|d| d.z).collect(),
-            isa: crate::config::current().simd,
-        }
+        let mut lanes = Lanes::default();
+        lanes.fill(pts);
+        lanes
     }
 
-    /// `pts` by coordinate, in the room of lanes used before
-    /// ([`Lanes::of`]'s lanes).
+    /// `pts` by coordinate, in the room of lanes used before.
     fn fill(&mut self, pts: &[Vec3]) {
         self.xs.clear();
         self.xs.extend(pts.iter().map(|d| d.x));
