@@ -981,6 +981,7 @@ impl Default for Lanes {
 }
 
 impl Lanes {
+    #[cfg(test)]
     fn of(pts: &[Vec3]) -> Lanes {
         let mut lanes = Lanes::default();
         lanes.fill(pts);
