@@ -1178,6 +1178,8 @@ struct WaveStats {
     /// Points run 1 waited at for run 0, and the turns it waited.
     waits: usize,
     spins: usize,
+    /// Splats grown ahead while waiting ([`Ahead`]), and of those taken up.
+    ahead: (usize, usize),
 }
 
 /// Cells of [`wave_last`]' grid a side, in the cloud's mean `k`-th
@@ -1287,6 +1289,7 @@ fn wave_second(inp: &GrowInput<'_>, wave: &Wave, lags: &[u32]) -> WaveRun {
     let mut own = vec![u32::MAX; n - m];
     let mut cover = vec![u32::MAX; n];
     let mut kept: Vec<(u32, Seeded)> = Vec::new();
+    let mut ahead = Ahead::default();
     let mut i = m;
     loop {
         while i < n {
@@ -1305,10 +1308,13 @@ fn wave_second(inp: &GrowInput<'_>, wave: &Wave, lags: &[u32]) -> WaveRun {
             let lag = lags.get(at).map_or(0, |&l| l as usize);
             if wave.done.load(Acquire) < lag {
                 st.waits += 1;
+                ahead.start(i, m, n);
                 let mut turn = 0;
                 while wave.done.load(Acquire) < lag {
-                    wave_wait(turn);
-                    turn += 1;
+                    if !ahead.step(&mut g, wave, &own) {
+                        wave_wait(turn);
+                        turn += 1;
+                    }
                 }
                 st.spins += turn;
             }
@@ -1322,7 +1328,7 @@ fn wave_second(inp: &GrowInput<'_>, wave: &Wave, lags: &[u32]) -> WaveRun {
                 i += 1;
                 continue;
             }
-            let mut s = g.seed(i);
+            let mut s = ahead.take(i).unwrap_or_else(|| g.seed(i));
             let seed = i as u32;
             for &(j, off) in &s.marks {
                 let j = j as usize;
@@ -1354,7 +1360,95 @@ fn wave_second(inp: &GrowInput<'_>, wave: &Wave, lags: &[u32]) -> WaveRun {
         };
         i = wave_roll_back(wave, c, (&mut own, &mut cover, &mut kept), &mut st);
     }
+    st.ahead = (ahead.made, ahead.used);
     (kept, cover, st)
+}
+
+/// Splats [`Ahead`] holds at most (their marks with them: about 1 kB
+/// each on a scan, so a few MB at most).
+const AHEAD_MOST: usize = 4096;
+
+/// What [`wave_second`] does while it waits for run 0: it grows the
+/// splats of the points ahead of it, in order, as the serial growth would
+/// if run 0 took none of them beyond what it has marked so far (each point
+/// that neither run 0, run 1's kept seeds nor the splats grown ahead have
+/// taken seeds one). Run 1 then takes a seed's splat from here instead of
+/// growing it again: a seed's splat is a function of the seed alone
+/// ([`Deferred`]), so what it takes is what it would have grown, bit for
+/// bit, whatever run 0 took meanwhile. A guess that run 0 spoils costs
+/// only the time run 1 would have spent waiting.
+///
+/// Run 1 waits at its first points for the run-0 points round them, the
+/// last of run 0's in the Morton order (the split model, [`wave_split`],
+/// has run 1 end at 0.81 of the points on a 200k bunny sample): those
+/// waits are where this grows.
+#[derive(Default)]
+struct Ahead {
+    /// The next of run 1's points to consider.
+    next: usize,
+    /// Run 1's points taken by the splats grown ahead in this guess: those
+    /// whose entry is `round` (allocated at the first wait).
+    taken: Vec<u32>,
+    round: u32,
+    /// The splats grown ahead, by seed, ascending.
+    held: std::collections::VecDeque<(u32, Seeded)>,
+    /// Splats grown ahead, and of those taken up by run 1.
+    made: usize,
+    used: usize,
+}
+
+impl Ahead {
+    /// Run 1 waits at point `i` (run 1 being points `m..n`). With nothing
+    /// held from `i` on, the last guess is spent: a new one starts at `i`.
+    fn start(&mut self, i: usize, m: usize, n: usize) {
+        while self.held.front().is_some_and(|&(s, _)| (s as usize) < i) {
+            self.held.pop_front();
+        }
+        if self.held.is_empty() {
+            if self.taken.is_empty() {
+                self.taken = vec![0; n - m];
+            }
+            self.round += 1;
+            self.next = i;
+        }
+    }
+
+    /// Consider the next point ahead: false when there is none or enough
+    /// are held (then run 1 waits as it did).
+    fn step(&mut self, g: &mut Grower<'_>, wave: &Wave, own: &[u32]) -> bool {
+        let m = wave.m;
+        let at = self.next.wrapping_sub(m);
+        if self.held.len() >= AHEAD_MOST || at >= own.len() {
+            return false;
+        }
+        self.next += 1;
+        if own[at] != u32::MAX || self.taken[at] == self.round || wave.marked[at].load(Relaxed) {
+            return true;
+        }
+        let s = g.seed(self.next - 1);
+        for &(j, off) in &s.marks {
+            let j = j as usize;
+            if off && j >= m {
+                self.taken[j - m] = self.round;
+            }
+        }
+        self.held.push_back(((self.next - 1) as u32, s));
+        self.made += 1;
+        true
+    }
+
+    /// The splat grown ahead for seed `i`, if there is one (those held for
+    /// points before it are dropped: run 1 passed them).
+    fn take(&mut self, i: usize) -> Option<Seeded> {
+        while self.held.front().is_some_and(|&(s, _)| (s as usize) < i) {
+            self.held.pop_front();
+        }
+        if self.held.front().is_some_and(|&(s, _)| s as usize == i) {
+            self.used += 1;
+            return self.held.pop_front().map(|(_, s)| s);
+        }
+        None
+    }
 }
 
 /// [`wave_second`]'s result: the kept seeds, the first seed covering each
@@ -2101,6 +2195,59 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// What [`Ahead`] grows, with nothing taken by run 0, is the serial
+    /// growth of run 1's points alone: the same seeds in the same order,
+    /// each splat and its marks the same to the bit (their `Debug` text,
+    /// which gives every float to the bit); and run 1 takes up each of them
+    /// by its seed, once.
+    #[test]
+    fn splats_grown_ahead_are_run_ones_own() {
+        let (p, n) = sheet(10_000);
+        let tree = build_tree(&p);
+        let knn = Knn::build(&tree, &p, 12);
+        let inp = sheet_input(&p, &n, &knn, &tree);
+        let (m, len) = (p.len() / 2, p.len());
+        let wave = Wave {
+            m,
+            marked: (m..len).map(|_| AtomicBool::new(false)).collect(),
+            seeded: (m..len).map(|_| AtomicBool::new(false)).collect(),
+            conflict: AtomicUsize::new(usize::MAX),
+            done: AtomicUsize::new(0),
+        };
+        let own = vec![u32::MAX; len - m];
+        let mut g = Grower::new(&inp);
+        let mut ahead = Ahead::default();
+        ahead.start(m, m, len);
+        while ahead.step(&mut g, &wave, &own) {}
+        let key = |s: &Seeded| format!("{:?} {:?} {}", s.splat, s.marks, s.elliptical);
+        let mut serial = Vec::new();
+        let mut active = vec![true; len];
+        let mut g = Grower::new(&inp);
+        for i in m..len {
+            if active[i] {
+                let s = g.seed(i);
+                for &(j, off) in &s.marks {
+                    if off {
+                        active[j as usize] = false;
+                    }
+                }
+                serial.push((i as u32, key(&s)));
+            }
+        }
+        assert!(serial.len() < AHEAD_MOST, "{} seeds: the cap would stop it", serial.len());
+        let grown: Vec<(u32, String)> = ahead.held.iter().map(|(i, s)| (*i, key(s))).collect();
+        assert_eq!(grown.len(), serial.len());
+        assert!(grown == serial, "a splat grown ahead differs from the serial one");
+        assert_eq!(ahead.made, serial.len());
+        for (i, k) in &serial {
+            let i = *i as usize;
+            assert!(ahead.take(i - 1).is_none(), "point {} is no seed", i - 1);
+            assert_eq!(&key(&ahead.take(i).expect("held")), k);
+        }
+        assert_eq!(ahead.used, serial.len());
+        assert!(ahead.held.is_empty());
     }
 
     /// A cloud of a few thousand points (the held-out check's windows)
