@@ -1153,9 +1153,119 @@ struct Wave {
     /// Run 0's points decided (seeded or passed over), all their marks
     /// published.
     done: AtomicUsize,
+    /// The point run 1 is at (published as it goes, for [`Helper`];
+    /// `usize::MAX` before it starts, `n` once it is done).
+    at: AtomicUsize,
+    /// Splats grown by each run for the other's points ([`Helper`]): for
+    /// run 0's points, for run 1's.
+    help: [Help; 2],
+}
+
+/// Splats one run of [`grow_wavefront`] grew for the other's points
+/// ([`Helper`]), by seed, and the least point they were grown from
+/// (`usize::MAX`: none yet).
+#[derive(Default)]
+struct Help {
+    held: std::sync::Mutex<std::collections::BTreeMap<u32, Packed>>,
+    from: AtomicUsize,
+}
+
+impl Help {
+    fn new() -> Help {
+        Help {
+            from: AtomicUsize::new(usize::MAX),
+            ..Help::default()
+        }
+    }
+
+    /// The splat grown for seed `i`, if one was (those for points before
+    /// `i` are dropped: the run passed them).
+    fn take(&self, i: usize) -> Option<Seeded> {
+        if i < self.from.load(Relaxed) {
+            return None;
+        }
+        let mut held = self.held.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        while let Some(e) = held.first_entry()
+            && (*e.key() as usize) < i
+        {
+            e.remove();
+        }
+        held.remove(&(i as u32)).map(Packed::unpack)
+    }
+
+    /// Holds `s`, grown for seed `i`, unless [`HELP_MOST`] are held:
+    /// whether it is held.
+    fn put(&self, i: usize, s: Seeded) -> bool {
+        let s = Packed::pack(s);
+        let mut held = self.held.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        held.len() < HELP_MOST && held.insert(i as u32, s).is_none()
+    }
+
+    /// Whether [`HELP_MOST`] splats are held.
+    fn full(&self) -> bool {
+        self.held.lock().unwrap_or_else(std::sync::PoisonError::into_inner).len() >= HELP_MOST
+    }
+}
+
+/// A [`Seeded`] held for later ([`Ahead`], [`Help`]): its marks one `u32`
+/// each (the flag in the top bit) in a slice of their length, half the
+/// bytes or less of the vector growth left (a bunny sample's held splats
+/// raised the peak by about 4 MB).
+struct Packed {
+    splat: Splat,
+    marks: Box<[u32]>,
+    elliptical: bool,
+}
+
+impl Packed {
+    const OFF: u32 = 1 << 31;
+
+    fn pack(s: Seeded) -> Packed {
+        debug_assert!(s.marks.iter().all(|&(j, _)| j < Self::OFF));
+        Packed {
+            splat: s.splat,
+            marks: s.marks.iter().map(|&(j, off)| j | if off { Self::OFF } else { 0 }).collect(),
+            elliptical: s.elliptical,
+        }
+    }
+
+    fn unpack(self) -> Seeded {
+        Seeded {
+            splat: self.splat,
+            marks: self.marks.iter().map(|&m| (m & !Self::OFF, m & Self::OFF != 0)).collect(),
+            elliptical: self.elliptical,
+        }
+    }
 }
 
 impl Wave {
+    /// The shared state of a wavefront split at `m` of `n` points.
+    fn new(m: usize, n: usize) -> Wave {
+        Wave {
+            m,
+            marked: (m..n).map(|_| AtomicBool::new(false)).collect(),
+            seeded: (m..n).map(|_| AtomicBool::new(false)).collect(),
+            conflict: AtomicUsize::new(usize::MAX),
+            done: AtomicUsize::new(0),
+            at: AtomicUsize::new(usize::MAX),
+            help: [Help::new(), Help::new()],
+        }
+    }
+
+    /// [`Helper::step`] for run `r`'s points, by the other run.
+    fn help(&self, r: usize, h: &mut Helper, g: &mut Grower<'_>) -> bool {
+        if r == 0 {
+            h.step(g, &self.help[0], (self.done.load(Relaxed), self.m), |_| true)
+        } else {
+            // Not before run 1 starts: on one thread it runs after run 0,
+            // and would find most of its splats grown by guesswork.
+            let at = self.at.load(Relaxed);
+            let n = g.inp.points.len();
+            let free = |j: usize| !self.marked[j - self.m].load(Relaxed);
+            at != usize::MAX && h.step(g, &self.help[1], (at, n), free)
+        }
+    }
+
     /// Run 0 takes run 1's point `j`. The flag is set before `seeded` is
     /// read and run 1 sets `seeded` before it reads the flag (both
     /// sequentially consistent), so one of the two sees the other: a seed
@@ -1180,6 +1290,9 @@ struct WaveStats {
     spins: usize,
     /// Splats grown ahead while waiting ([`Ahead`]), and of those taken up.
     ahead: (usize, usize),
+    /// Splats each run grew for the other ([`Helper`]), and of those taken
+    /// up: for run 0's points, for run 1's.
+    helped: [(usize, usize); 2],
 }
 
 /// Cells of [`wave_last`]' grid a side, in the cloud's mean `k`-th
@@ -1213,21 +1326,20 @@ fn grow_wavefront(
     progress: impl Fn(usize) + Sync,
 ) -> (Grown, WaveStats) {
     let n = inp.points.len();
-    let wave = Wave {
-        m,
-        marked: (m..n).map(|_| AtomicBool::new(false)).collect(),
-        seeded: (m..n).map(|_| AtomicBool::new(false)).collect(),
-        conflict: AtomicUsize::new(usize::MAX),
-        done: AtomicUsize::new(0),
-    };
-    let (mut out, (kept, covered, stats)) = rayon::join(
+    let wave = Wave::new(m, n);
+    let ((mut out, helped), (kept, covered, mut stats)) = rayon::join(
         || {
-            let first = wave_first(inp, &wave);
+            let mut g = Grower::new(inp);
+            let (first, used) = wave_first(&mut g, &wave);
             progress(m);
-            first
+            let mut h = Helper::default();
+            while wave.help(1, &mut h, &mut g) {}
+            (first, (h.made, used))
         },
         || wave_second(inp, &wave, lags),
     );
+    stats.helped[1].0 = helped.0;
+    stats.helped[0].1 = helped.1;
     for (c, by) in out.covered.iter_mut().zip(&covered) {
         *c |= *by != u32::MAX;
     }
@@ -1241,10 +1353,10 @@ fn grow_wavefront(
 }
 
 /// [`grow_wavefront`]'s run 0: the serial growth of its points, its marks
-/// on run 1's published ([`Wave::mark`]) and its progress with them.
-fn wave_first(inp: &GrowInput<'_>, wave: &Wave) -> Grown {
-    let (n, m) = (inp.points.len(), wave.m);
-    let mut g = Grower::new(inp);
+/// on run 1's published ([`Wave::mark`]) and its progress with them; and
+/// how many splats run 1 grew for it it took up ([`Helper`]).
+fn wave_first(g: &mut Grower<'_>, wave: &Wave) -> (Grown, usize) {
+    let (n, m) = (g.inp.points.len(), wave.m);
     let mut active = vec![true; m];
     let mut out = Grown {
         splats: Vec::new(),
@@ -1252,9 +1364,16 @@ fn wave_first(inp: &GrowInput<'_>, wave: &Wave) -> Grown {
         elliptical: 0,
         seeds: Vec::new(),
     };
+    let mut used = 0;
     for i in 0..m {
         if active[i] {
-            let s = g.seed(i);
+            let s = match wave.help[0].take(i) {
+                Some(s) => {
+                    used += 1;
+                    s
+                }
+                None => g.seed(i),
+            };
             for &(j, off) in &s.marks {
                 let j = j as usize;
                 out.covered[j] = true;
@@ -1271,7 +1390,7 @@ fn wave_first(inp: &GrowInput<'_>, wave: &Wave) -> Grown {
         }
         wave.done.store(i + 1, Release);
     }
-    out
+    (out, used)
 }
 
 /// [`grow_wavefront`]'s run 1: its seeds and their splats (marks dropped),
@@ -1290,7 +1409,9 @@ fn wave_second(inp: &GrowInput<'_>, wave: &Wave, lags: &[u32]) -> WaveRun {
     let mut cover = vec![u32::MAX; n];
     let mut kept: Vec<(u32, Seeded)> = Vec::new();
     let mut ahead = Ahead::default();
+    let mut helper = Helper::default();
     let mut i = m;
+    wave.at.store(m, Relaxed);
     loop {
         while i < n {
             if wave.conflict.load(Relaxed) < i {
@@ -1305,13 +1426,14 @@ fn wave_second(inp: &GrowInput<'_>, wave: &Wave, lags: &[u32]) -> WaveRun {
                 i += 1;
                 continue;
             }
+            wave.at.store(i, Relaxed);
             let lag = lags.get(at).map_or(0, |&l| l as usize);
             if wave.done.load(Acquire) < lag {
                 st.waits += 1;
                 ahead.start(i, m, n);
                 let mut turn = 0;
                 while wave.done.load(Acquire) < lag {
-                    if !ahead.step(&mut g, wave, &own) {
+                    if !ahead.step(&mut g, wave, &own) && !wave.help(0, &mut helper, &mut g) {
                         wave_wait(turn);
                         turn += 1;
                     }
@@ -1328,7 +1450,11 @@ fn wave_second(inp: &GrowInput<'_>, wave: &Wave, lags: &[u32]) -> WaveRun {
                 i += 1;
                 continue;
             }
-            let mut s = ahead.take(i).unwrap_or_else(|| g.seed(i));
+            let mut s = match ahead.take(i) {
+                Some(s) => s,
+                None => (wave.help[1].take(i).inspect(|_| st.helped[1].1 += 1))
+                    .unwrap_or_else(|| g.seed(i)),
+            };
             let seed = i as u32;
             for &(j, off) in &s.marks {
                 let j = j as usize;
@@ -1347,8 +1473,10 @@ fn wave_second(inp: &GrowInput<'_>, wave: &Wave, lags: &[u32]) -> WaveRun {
         // acted on), is where to go on from.
         let mut turn = 0;
         while wave.done.load(Acquire) < m {
-            wave_wait(turn);
-            turn += 1;
+            if !wave.help(0, &mut helper, &mut g) {
+                wave_wait(turn);
+                turn += 1;
+            }
         }
         wave.conflict.store(usize::MAX, SeqCst);
         let Some(c) = kept
@@ -1360,13 +1488,100 @@ fn wave_second(inp: &GrowInput<'_>, wave: &Wave, lags: &[u32]) -> WaveRun {
         };
         i = wave_roll_back(wave, c, (&mut own, &mut cover, &mut kept), &mut st);
     }
+    wave.at.store(n, Relaxed);
     st.ahead = (ahead.made, ahead.used);
+    st.helped[0].0 = helper.made;
     (kept, cover, st)
 }
 
-/// Splats [`Ahead`] holds at most (their marks with them: about 1 kB
-/// each on a scan, so a few MB at most).
-const AHEAD_MOST: usize = 4096;
+/// The fewest points a run has left for the other to grow splats for
+/// ([`Helper`]).
+const HELP_MIN: usize = 1024;
+
+/// The most splats grown for the other run held at once ([`Help`]).
+const HELP_MOST: usize = 1024;
+
+/// What one run of [`grow_wavefront`] does when it would wait for the
+/// other (run 1 for run 0's lags, with nothing more to grow ahead of
+/// itself, [`Ahead`]; run 0 once it is done and run 1 is not): it grows
+/// the splats of the other's points, in order, from the middle of those
+/// it has left, as the serial growth would if the other's splats before
+/// that middle took none of them. Run 0's marks on run 1's points count
+/// as they stand (final once it is done); only where the other's splats
+/// before the middle reach past it can the guess go wrong, and a greedy
+/// chain that went wrong most often falls in step again within a few
+/// splats (in Morton order). The other run takes a seed's splat from here
+/// when it has none of its own ([`Help::take`]): a seed's splat is a
+/// function of the seed alone ([`Deferred`]), so what it takes is what it
+/// would have grown. When the other run catches up, or the guess is done,
+/// the next guess starts at the middle of what is left between the other
+/// run and the guesses done, down to [`HELP_MIN`] points.
+#[derive(Default)]
+struct Helper {
+    /// The current guess: the points `from..upto`, the next to consider
+    /// (`upto` 0: none yet).
+    from: usize,
+    upto: usize,
+    next: usize,
+    /// The first point of the last guess done (every point from it on has
+    /// been guessed); `None`: none done.
+    done: Option<usize>,
+    /// Of the guess's points, those its splats took.
+    taken: Vec<bool>,
+    /// Splats grown.
+    made: usize,
+}
+
+impl Helper {
+    /// Consider the next point for the run at point `at` whose points end
+    /// at `end` (the points `free` says no splat of the other run took):
+    /// false when there is nothing to grow for it.
+    fn step(
+        &mut self,
+        g: &mut Grower<'_>,
+        help: &Help,
+        (at, end): (usize, usize),
+        free: impl Fn(usize) -> bool,
+    ) -> bool {
+        if self.upto > 0 && self.next >= self.upto {
+            self.done = Some(self.from);
+        }
+        if self.upto == 0 || self.next <= at || self.next >= self.upto {
+            let upto = self.done.unwrap_or(end).min(end);
+            if upto.saturating_sub(at) < HELP_MIN {
+                return false;
+            }
+            self.from = at + (upto - at) / 2;
+            (self.upto, self.next) = (upto, self.from);
+            self.taken.clear();
+            self.taken.resize(upto - self.from, false);
+            help.from.fetch_min(self.from, Relaxed);
+        }
+        if help.full() {
+            // The other run takes them up (or passes them) as it goes.
+            std::thread::yield_now();
+            return true;
+        }
+        let j = self.next;
+        self.next += 1;
+        if self.taken[j - self.from] || !free(j) {
+            return true;
+        }
+        let s = g.seed(j);
+        for &(k, off) in &s.marks {
+            let k = k as usize;
+            if off && (j..self.upto).contains(&k) {
+                self.taken[k - self.from] = true;
+            }
+        }
+        self.made += usize::from(help.put(j, s));
+        true
+    }
+}
+
+/// Splats [`Ahead`] holds at most (their marks with them, [`Packed`]: a
+/// few hundred bytes each, so well under 1 MB).
+const AHEAD_MOST: usize = 1024;
 
 /// What [`wave_second`] does while it waits for run 0: it grows the
 /// splats of the points ahead of it, in order, as the serial growth would
@@ -1391,7 +1606,7 @@ struct Ahead {
     taken: Vec<u32>,
     round: u32,
     /// The splats grown ahead, by seed, ascending.
-    held: std::collections::VecDeque<(u32, Seeded)>,
+    held: std::collections::VecDeque<(u32, Packed)>,
     /// Splats grown ahead, and of those taken up by run 1.
     made: usize,
     used: usize,
@@ -1432,7 +1647,7 @@ impl Ahead {
                 self.taken[j - m] = self.round;
             }
         }
-        self.held.push_back(((self.next - 1) as u32, s));
+        self.held.push_back(((self.next - 1) as u32, Packed::pack(s)));
         self.made += 1;
         true
     }
@@ -1445,7 +1660,7 @@ impl Ahead {
         }
         if self.held.front().is_some_and(|&(s, _)| s as usize == i) {
             self.used += 1;
-            return self.held.pop_front().map(|(_, s)| s);
+            return self.held.pop_front().map(|(_, s)| s.unpack());
         }
         None
     }
@@ -2191,10 +2406,46 @@ mod tests {
                     assert!(st.conflicts >= 1 && st.dropped >= 1, "{st:?}");
                 }
                 if threads == 1 {
-                    assert_eq!((st.conflicts, st.waits), (0, 0));
+                    assert_eq!((st.conflicts, st.waits, st.helped[1].0), (0, 0, 0));
                 }
             }
         }
+    }
+
+    /// Run 0, once done, grows splats for the second half of run 1's
+    /// points, then the second half of the first, and so on ([`Helper`]);
+    /// run 1 then takes them up by seed and its
+    /// seeds and splats are still the serial growth's, bit for bit. The
+    /// runs one after the other on this thread, run 1 not started when run
+    /// 0 helps (so it helps from the middle of run 1's points to the end);
+    /// the sheet's points in Morton order, as generation orders a cloud.
+    #[test]
+    fn splats_run_zero_grows_for_run_one_are_the_serial_ones() {
+        let (p, n) = sheet(40_000);
+        let order = crate::splat::knn::morton_order(&p);
+        let (p, n): (Vec<Vec3>, Vec<Vec3>) = order.iter().map(|&i| (p[i as usize], n[i as usize])).unzip();
+        let tree = build_tree(&p);
+        let knn = Knn::build(&tree, &p, 12);
+        let inp = sheet_input(&p, &n, &knn, &tree);
+        let (serial, _) = grow_speculated(&inp, (1, p.len()), |_| {});
+        let (m, lags) = wave_split(&inp);
+        let wave = Wave::new(m, p.len());
+        let mut g = Grower::new(&inp);
+        let (first, _) = wave_first(&mut g, &wave);
+        wave.at.store(m, Relaxed);
+        let mut h = Helper::default();
+        while wave.help(1, &mut h, &mut g) {}
+        let made = h.made;
+        let (kept, _, st) = wave_second(&inp, &wave, &lags);
+        eprintln!("split {m} of {}: {made} grown for run 1, {st:?}", p.len());
+        // Measured: 303 grown, 193 taken up (with one guess from the
+        // middle of run 1's points).
+        assert!(made > 100 && st.helped[1].1 * 2 > made, "{made} grown, {st:?}");
+        let seeds: Vec<u32> = first.seeds.iter().copied().chain(kept.iter().map(|k| k.0)).collect();
+        assert_eq!(serial.seeds, seeds);
+        let key = |s: &Splat| format!("{s:?}");
+        let splats: Vec<String> = first.splats.iter().chain(kept.iter().map(|k| &k.1.splat)).map(key).collect();
+        assert!(serial.splats.iter().map(key).eq(splats), "a splat differs from the serial one");
     }
 
     /// What [`Ahead`] grows, with nothing taken by run 0, is the serial
@@ -2209,13 +2460,7 @@ mod tests {
         let knn = Knn::build(&tree, &p, 12);
         let inp = sheet_input(&p, &n, &knn, &tree);
         let (m, len) = (p.len() / 2, p.len());
-        let wave = Wave {
-            m,
-            marked: (m..len).map(|_| AtomicBool::new(false)).collect(),
-            seeded: (m..len).map(|_| AtomicBool::new(false)).collect(),
-            conflict: AtomicUsize::new(usize::MAX),
-            done: AtomicUsize::new(0),
-        };
+        let wave = Wave::new(m, len);
         let own = vec![u32::MAX; len - m];
         let mut g = Grower::new(&inp);
         let mut ahead = Ahead::default();
@@ -2237,7 +2482,9 @@ mod tests {
             }
         }
         assert!(serial.len() < AHEAD_MOST, "{} seeds: the cap would stop it", serial.len());
-        let grown: Vec<(u32, String)> = ahead.held.iter().map(|(i, s)| (*i, key(s))).collect();
+        let grown: Vec<(u32, String)> = (ahead.held.iter())
+            .map(|(i, s)| (*i, key(&Packed::unpack(Packed { marks: s.marks.clone(), ..*s }))))
+            .collect();
         assert_eq!(grown.len(), serial.len());
         assert!(grown == serial, "a splat grown ahead differs from the serial one");
         assert_eq!(ahead.made, serial.len());
