@@ -1558,8 +1558,9 @@ impl Helper {
             help.from.fetch_min(self.from, Relaxed);
         }
         if help.full() {
-            // The other run takes them up (or passes them) as it goes.
-            std::thread::yield_now();
+            // The other run takes them up (or passes them) as it goes: a
+            // sleep of the longest wait's turn, not a spin on the core.
+            wave_wait(usize::MAX);
             return true;
         }
         let j = self.next;
