@@ -2420,10 +2420,10 @@ mod tests {
     /// Run 0, once done, grows splats for the second half of run 1's
     /// points, then the second half of the first, and so on ([`Helper`]);
     /// run 1 then takes them up by seed and its seeds and splats are still
-    /// the serial growth's, bit for bit. The
-    /// runs one after the other on this thread, run 1 not started when run
-    /// 0 helps (so it helps from the middle of run 1's points to the end);
-    /// the sheet's points in Morton order, as generation orders a cloud.
+    /// the serial growth's, bit for bit. The runs one after the other on
+    /// this thread, run 1 not started when run 0 helps (so it helps from
+    /// the middle of run 1's points to the end); the sheet's points in
+    /// Morton order, as generation orders a cloud.
     #[test]
     fn splats_run_zero_grows_for_run_one_are_the_serial_ones() {
         let (p, n) = sheet(40_000);
@@ -2443,8 +2443,8 @@ mod tests {
         let made = h.made;
         let (kept, _, st) = wave_second(&inp, &wave, &lags);
         eprintln!("split {m} of {}: {made} grown for run 1, {st:?}", p.len());
-        // Measured: 629 grown, 403 taken up.
-        assert!(made > 100 && st.helped[1].1 * 2 > made, "{made} grown, {st:?}");
+        // Measured: 629 grown, 403 taken up (one thread: the same each run).
+        assert!(made > 560 && st.helped[1].1 > 360, "{made} grown, {st:?}");
         let seeds: Vec<u32> = first.seeds.iter().copied().chain(kept.iter().map(|k| k.0)).collect();
         assert_eq!(serial.seeds, seeds);
         let key = |s: &Splat| format!("{s:?}");
