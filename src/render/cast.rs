@@ -30,9 +30,10 @@
 use super::integrator::SplatSurfaces;
 use crate::accel::{Backend, CandidateHits, Fan, PACKET, PassOver, Query, Ray};
 use crate::resolve::SurfaceHit;
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
 use std::ops::Range;
+use std::sync::atomic::{AtomicU32, AtomicUsize, Ordering};
 
 /// Rays per parallel task.
 pub const CHUNK: usize = 512;
@@ -137,12 +138,14 @@ pub fn occluded(
     if let Some(order) = Order::of(rays) {
         // One at a time, in the order's sequence, then back in place.
         let mut got = vec![false; n];
-        got.par_chunks_mut(CHUNK).enumerate().for_each(|(c, got)| {
-            let chunk = order.gather(c, rays, lens);
-            for (g, (ray, len)) in got.iter_mut().zip(chunk.iter()) {
-                *g = backend.occluded_from(&query(ray, len));
-            }
-        });
+        got.par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each_init(GatheredRays::new, |buf, (c, got)| {
+                let chunk = order.gather(c, rays, lens, buf);
+                for (g, (ray, len)) in got.iter_mut().zip(chunk.iter()) {
+                    *g = backend.occluded_from(&query(ray, len));
+                }
+            });
         out[..n]
             .par_iter_mut()
             .zip(&order.at)
@@ -208,9 +211,9 @@ fn cast_in_order(
     let n = rays.len();
     let xi = surfaces.scene.options.scale.xi;
     let mut got = vec![(0.0f32, 0u32, [0.0f32; 3]); n];
-    got.par_chunks_mut(CHUNK).enumerate().for_each(|(c, got)| {
+    got.par_chunks_mut(CHUNK).enumerate().for_each_init(GatheredRays::new, |buf, (c, got)| {
         let mut hits = CandidateHits::new(xi);
-        let chunk = order.gather(c, rays, lens);
+        let chunk = order.gather(c, rays, lens, buf);
         for (g, (ray, len)) in got.iter_mut().zip(chunk.iter()) {
             let q = Query::new(ray, 0.0, f32::INFINITY);
             *g = answer(surfaces.surface_hit(q, &mut hits), len);
@@ -267,13 +270,18 @@ impl Order {
     /// where reading each ray as it is traced waited on memory for every
     /// one (a fifth of the call; `docs/notes/backends.md`, "Issue 55,
     /// twelfth session").
-    fn gather(&self, c: usize, rays: &[Ray], lens: &[f32]) -> GatheredRays {
+    ///
+    /// Into `got`, a buffer a task reuses chunk after chunk (one made and
+    /// returned per chunk was copied whole on its way out).
+    fn gather<'g>(
+        &self,
+        c: usize,
+        rays: &[Ray],
+        lens: &[f32],
+        got: &'g mut GatheredRays,
+    ) -> &'g GatheredRays {
         let idx = &self.ray[c * CHUNK..self.ray.len().min((c + 1) * CHUNK)];
-        let mut got = GatheredRays {
-            rays: [Ray::new(Vec3::ZERO, Vec3::X); CHUNK],
-            lens: [0.0; CHUNK],
-            len: idx.len(),
-        };
+        got.len = idx.len();
         for (k, &i) in idx.iter().enumerate() {
             got.rays[k] = rays[i as usize];
             got.lens[k] = lens[i as usize];
@@ -286,41 +294,82 @@ impl Order {
     /// one ray in eight or more leaves its predecessor's origin (bit for
     /// bit), as runs of camera or scanner rays do (packets and fans take
     /// those in the batch's order).
+    ///
+    /// A counting sort by key, stable, in parallel: each task of
+    /// [`ORDER_TASK`] rays counts its keys, the places are handed out key
+    /// by key and, within a key, task by task (so in the batch's order),
+    /// and each task then places its rays. Every step but the short walk
+    /// over the counts runs on the threads (it was one serial loop over the
+    /// batch, the call's only one: `docs/notes/backends.md`, "Issue 55,
+    /// thirty-ninth session").
     fn of(rays: &[Ray]) -> Option<Order> {
         let n = rays.len();
-        if n < ORDER_MIN || u32::try_from(n).is_err() {
+        if n < ORDER_MIN || u32::try_from(n).is_err() || shares_origins(rays) {
             return None;
         }
-        // Stopped as soon as one ray in eight is known to share.
-        let bits = |r: &Ray| r.origin.to_array().map(f32::to_bits);
-        let enough = n.div_ceil(8);
-        let shared = rays
-            .windows(2)
-            .filter(|w| bits(&w[0]) == bits(&w[1]))
-            .take(enough)
-            .count();
-        if shared >= enough {
-            return None;
-        }
-        let keys = keys(rays);
-        // A counting sort by key (stable).
-        let mut start = vec![0u32; (ORDER_CELLS.pow(3) * 8) as usize];
-        for &k in &keys {
-            start[usize::from(k)] += 1;
-        }
+        let key = key_of(rays);
+        let buckets = (ORDER_CELLS.pow(3) * 8) as usize;
+        let mut keys = vec![0u16; n];
+        let mut firsts: Vec<Vec<u32>> = keys
+            .par_chunks_mut(ORDER_TASK)
+            .zip(rays.par_chunks(ORDER_TASK))
+            .map(|(ks, rs)| {
+                let mut count = vec![0u32; buckets];
+                for (k, r) in ks.iter_mut().zip(rs) {
+                    *k = key(r);
+                    count[usize::from(*k)] += 1;
+                }
+                count
+            })
+            .collect();
         let mut sum = 0;
-        for s in &mut start {
-            (*s, sum) = (sum, sum + *s);
+        for b in 0..buckets {
+            for task in &mut firsts {
+                (task[b], sum) = (sum, sum + task[b]);
+            }
         }
-        let (mut ray, mut at) = (vec![0u32; n], vec![0u32; n]);
-        for (i, &k) in keys.iter().enumerate() {
-            let s = &mut start[usize::from(k)];
-            at[i] = *s;
-            ray[*s as usize] = i as u32;
-            *s += 1;
-        }
+        let ray: Vec<AtomicU32> = (0..n).into_par_iter().map(|_| AtomicU32::new(0)).collect();
+        let mut at = vec![0u32; n];
+        at.par_chunks_mut(ORDER_TASK)
+            .zip(keys.par_chunks(ORDER_TASK))
+            .zip(firsts.par_iter_mut())
+            .enumerate()
+            .for_each(|(t, ((at, ks), next))| {
+                for (j, (a, &k)) in at.iter_mut().zip(ks).enumerate() {
+                    let place = &mut next[usize::from(k)];
+                    *a = *place;
+                    ray[*place as usize].store((t * ORDER_TASK + j) as u32, Ordering::Relaxed);
+                    *place += 1;
+                }
+            });
+        let ray = ray.into_iter().map(AtomicU32::into_inner).collect();
         Some(Order { ray, at })
     }
+}
+
+/// Rays a task of [`Order::of`] counts and places.
+const ORDER_TASK: usize = 1 << 17;
+
+/// Rays a task of [`shares_origins`] compares.
+const SHARE_TASK: usize = 1 << 14;
+
+/// Whether one ray in eight or more of `rays` leaves its predecessor's
+/// origin (bit for bit). In parallel, in tasks of [`SHARE_TASK`]
+/// neighbours; a task started once enough are found adds nothing (a
+/// camera's batch stops after about an eighth of its rays).
+fn shares_origins(rays: &[Ray]) -> bool {
+    let bits = |r: &Ray| r.origin.to_array().map(f32::to_bits);
+    let pairs = rays.len().saturating_sub(1);
+    let enough = rays.len().div_ceil(8);
+    let found = AtomicUsize::new(0);
+    (0..pairs.div_ceil(SHARE_TASK)).into_par_iter().for_each(|t| {
+        if found.load(Ordering::Relaxed) < enough {
+            let task = t * SHARE_TASK..pairs.min((t + 1) * SHARE_TASK);
+            let shared = task.filter(|&i| bits(&rays[i]) == bits(&rays[i + 1])).count();
+            found.fetch_add(shared, Ordering::Relaxed);
+        }
+    });
+    found.into_inner() >= enough
 }
 
 /// A cell index's bits spread to every third bit (bit `b` to bit `3b`):
@@ -341,31 +390,32 @@ const SPREAD: [u32; ORDER_CELLS as usize] = {
 
 /// Each ray's key in [`Order`]: the Morton index of the cell of a grid of
 /// [`ORDER_CELLS`]³ over the rays' origins holding its origin, then its
-/// direction's signs ([`octant`]).
-fn keys(rays: &[Ray]) -> Vec<u16> {
+/// direction's signs ([`octant`]). The function giving it, made from the
+/// box of the batch's origins.
+fn key_of(rays: &[Ray]) -> impl Fn(&Ray) -> u16 + Sync + use<> {
     let (lo, hi) = rays
-        .par_iter()
-        .map(|r| (r.origin, r.origin))
+        .par_chunks(ORDER_MIN)
+        .map(|c| {
+            c.iter().fold((Vec3A::INFINITY, Vec3A::NEG_INFINITY), |(lo, hi), r| {
+                let o = Vec3A::from(r.origin);
+                (lo.min(o), hi.max(o))
+            })
+        })
         .reduce(
-            || (Vec3::INFINITY, Vec3::NEG_INFINITY),
+            || (Vec3A::INFINITY, Vec3A::NEG_INFINITY),
             |a, b| (a.0.min(b.0), a.1.max(b.1)),
         );
     // Cells per unit on each axis (0 across a flat or unbounded
     // extent: one cell); NaN and values out of range saturate into
     // the grid.
-    let scale = (Vec3::splat(ORDER_CELLS as f32) / (hi - lo)).to_array();
-    let scale = scale.map(|s| if s.is_finite() { s } else { 0.0 });
-    let lo = lo.to_array();
-    let key = |r: &Ray| {
-        let o = r.origin.to_array();
-        let mut k = 0u32;
-        for a in 0..3 {
-            let c = (((o[a] - lo[a]) * scale[a]) as u32).min(ORDER_CELLS - 1);
-            k |= SPREAD[c as usize] << a;
-        }
-        (k << 3) | octant(r) as u32
-    };
-    rays.par_iter().map(|r| key(r) as u16).collect()
+    let scale = Vec3A::splat(ORDER_CELLS as f32) / (hi - lo);
+    let scale = Vec3A::select(scale.is_finite_mask(), scale, Vec3A::ZERO);
+    move |r: &Ray| {
+        let c = ((Vec3A::from(r.origin) - lo) * scale).to_array();
+        let cell = |x: f32| SPREAD[(x as u32).min(ORDER_CELLS - 1) as usize];
+        let k = cell(c[0]) | cell(c[1]) << 1 | cell(c[2]) << 2;
+        ((k << 3) | octant(r) as u32) as u16
+    }
 }
 
 /// A chunk's rays and their lengths, copied in [`Order`]'s sequence.
@@ -376,6 +426,15 @@ struct GatheredRays {
 }
 
 impl GatheredRays {
+    /// An empty buffer, on the heap (14 kB).
+    fn new() -> Box<GatheredRays> {
+        Box::new(GatheredRays {
+            rays: [Ray::new(Vec3::ZERO, Vec3::X); CHUNK],
+            lens: [0.0; CHUNK],
+            len: 0,
+        })
+    }
+
     /// Each ray with its direction's length, in order.
     fn iter(&self) -> impl Iterator<Item = (Ray, f32)> + '_ {
         self.rays[..self.len].iter().copied().zip(self.lens[..self.len].iter().copied())
@@ -589,28 +648,30 @@ mod tests {
         assert_eq!(distinct.len(), ORDER_CELLS.pow(3) as usize);
     }
 
-    #[test]
-    fn scattered_rays_are_ordered_by_origin_cell_and_signs() {
-        let mut rng = SplitMix64::new(12);
+    /// `n` rays from origins scattered over a box, directions mixed.
+    fn scattered(n: usize, seed: u64) -> Vec<Ray> {
+        let mut rng = SplitMix64::new(seed);
         let mut r = |a: f32, b: f32| a + (b - a) * rng.next_f32();
-        let mut rays: Vec<Ray> = (0..5000)
+        (0..n)
             .map(|_| {
                 let o = Vec3::new(r(-1.0, 1.0), r(0.0, 4.0), r(-2.0, 2.0));
                 Ray::new(o, Vec3::new(r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0)))
             })
-            .collect();
-        let order = Order::of(&rays).expect("5000 scattered rays are ordered");
-        // A permutation and its inverse.
+            .collect()
+    }
+
+    /// `order` is a permutation of `rays` and its inverse, sorted by key
+    /// with the batch's order kept among equal keys; rays of one key head
+    /// the same way from within a 16th of the origins' extent on each axis.
+    fn assert_ordered(rays: &[Ray], order: &Order) {
         let mut seen = vec![false; rays.len()];
         for (k, &i) in order.ray.iter().enumerate() {
             assert!(!seen[i as usize]);
             seen[i as usize] = true;
             assert_eq!(order.at[i as usize] as usize, k);
         }
-        // Sorted by key, the batch's order kept among equal keys; rays of
-        // one key head the same way from within a 16th of the origins'
-        // extent on each axis.
-        let keys = keys(&rays);
+        let key = key_of(rays);
+        let keys: Vec<u16> = rays.iter().map(&key).collect();
         let extent = Vec3::new(2.0, 4.0, 4.0);
         for w in order.ray.windows(2) {
             let (i, j) = (w[0] as usize, w[1] as usize);
@@ -623,12 +684,45 @@ mod tests {
             }
         }
         assert!(order.ray.iter().enumerate().any(|(k, &i)| i as usize != k));
+    }
+
+    #[test]
+    fn scattered_rays_are_ordered_by_origin_cell_and_signs() {
+        let mut rays = scattered(5000, 12);
+        let order = Order::of(&rays).expect("5000 scattered rays are ordered");
+        assert_ordered(&rays, &order);
         // Too few rays, or runs sharing an origin: no order.
         assert!(Order::of(&rays[..ORDER_MIN - 1]).is_none());
         for i in (0..rays.len()).step_by(4) {
             let o = rays[i].origin;
             rays[i + 1].origin = o;
         }
+        assert!(Order::of(&rays).is_none());
+    }
+
+    /// A batch of several of `Order::of`'s tasks is one stable sort, and
+    /// its tasks count the rays sharing their predecessor's origin as one
+    /// loop would: a batch with one pair short of an eighth sharing is
+    /// ordered, with one more it is not.
+    #[test]
+    fn a_batch_of_many_tasks_is_ordered_as_one() {
+        let n = 2 * ORDER_TASK + 12_345;
+        let mut rays = scattered(n, 5);
+        assert_ordered(&rays, &Order::of(&rays).expect("scattered rays are ordered"));
+        // The pairs `(i, i + 1)` made to share, spread over every task of
+        // `shares_origins` and across their ends.
+        let enough = n.div_ceil(8);
+        let step = (n - 1) / enough;
+        let pairs: Vec<usize> = (0..enough).map(|k| k * step).collect();
+        assert!(pairs.iter().any(|&i| i % SHARE_TASK == SHARE_TASK - 1));
+        for &i in &pairs[..enough - 1] {
+            rays[i + 1].origin = rays[i].origin;
+        }
+        assert!(!shares_origins(&rays));
+        assert!(Order::of(&rays).is_some());
+        let last = pairs[enough - 1];
+        rays[last + 1].origin = rays[last].origin;
+        assert!(shares_origins(&rays));
         assert!(Order::of(&rays).is_none());
     }
 
