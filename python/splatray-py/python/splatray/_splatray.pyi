@@ -3,6 +3,8 @@
 from os import PathLike
 from typing import Callable, Optional, Sequence, TypedDict, Union
 
+from typing_extensions import Required
+
 import numpy as np
 import numpy.typing as npt
 
@@ -109,8 +111,8 @@ def splat(
     False --no-creases: whole discs, None the default: clipped but in a cloud
     sampled along scan lines)."""
 
-class CastResult(TypedDict):
-    t_hit: npt.NDArray[np.float32]
+class CastResult(TypedDict, total=False):
+    t_hit: Required[npt.NDArray[np.float32]]
     splat_ids: npt.NDArray[np.uint32]
     normals: npt.NDArray[np.float32]
 
@@ -137,11 +139,12 @@ class SplatScene:
         """The splats' count: ids below it are splats, from it on triangles."""
     @property
     def triangles(self) -> int: ...
-    def cast_rays(self, rays: ArrayF) -> CastResult:
+    def cast_rays(self, rays: ArrayF, splat_ids: bool = True, normals: bool = True) -> CastResult:
         """rays (N, 6) float32/float64: origin, direction (any length), in
         the splats' coordinates. t_hit in units of the direction's length
         (inf: miss), splat_ids (INVALID_ID: miss; a triangle from
-        first_triangle on), resolved shading normals."""
+        first_triangle on), resolved shading normals; the last two only
+        when asked for (both are by default)."""
     def count_intersections(self, rays: ArrayF, limit: int = 1024) -> npt.NDArray[np.int32]: ...
     def occluded(self, rays: ArrayF, tnear: float = 0.0, tfar: float = ...) -> npt.NDArray[np.bool_]: ...
 
