@@ -299,9 +299,9 @@ impl Order {
     /// [`ORDER_TASK`] rays counts its keys, the places are handed out key
     /// by key and, within a key, task by task (so in the batch's order),
     /// and each task then places its rays. Every step but the short walk
-    /// over the counts runs on the threads (it was one serial loop over the
-    /// batch, the call's only one: `docs/notes/backends.md`, "Issue 55,
-    /// thirty-ninth session").
+    /// over the counts runs on the threads (it ran on the calling thread
+    /// alone, while the workers waited: `docs/notes/backends.md`, "Issue
+    /// 55, thirty-ninth session").
     fn of(rays: &[Ray]) -> Option<Order> {
         let n = rays.len();
         if n < ORDER_MIN || u32::try_from(n).is_err() || shares_origins(rays) {
