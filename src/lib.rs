@@ -109,7 +109,7 @@ pub use render::output::write_image;
 pub use resolve::ShadingMode;
 
 // Casting rays on a chosen backend.
-pub use accel::{Backend, CandidateHits, Fan, Ray};
+pub use accel::{Backend, CandidateHits, FAN_ELSEWHERE, FAN_MISS, Fan, Ray};
 pub use render::cast::{CastOutputs, cast_rays};
 pub use render::integrator::SplatSurfaces;
 

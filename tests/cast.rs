@@ -81,8 +81,70 @@ fn batch_casts_are_one_ray_at_a_time_bit_for_bit() {
             kept: None,
         };
         // Measured: 727 of 8444 on the octree.
-        agrees(name, &s, &rays, &lens);
-        agrees(&format!("{name}, scattered"), &s, &apart, &apart_lens);
+        let span = (0.1, 2.0);
+        agrees(name, &s, (&rays, &lens), span, (None, None));
+        let (apart, apart_lens) = (&apart, &apart_lens);
+        agrees(
+            &format!("{name}, scattered"),
+            &s,
+            (apart, apart_lens),
+            span,
+            (None, None),
+        );
+    }
+}
+
+/// Issue 55's fans in a batch: a camera's rays on the bundled bunny
+/// (clipped splats among them), in which the octree's fan answers most
+/// misses and orders the rest by direction, give the one-ray-at-a-time
+/// answers on every backend, row after row, column after column and
+/// shuffled (each window of rays sorted by the fan's keys, whatever its
+/// order).
+#[test]
+fn camera_batches_through_a_fan_are_one_ray_at_a_time() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let mut bunny = splatray::scene::load_scene(&root.join("bunny.toml"), None).unwrap();
+    let n = bunny.material_of.iter().take_while(|&&m| m == 0).count();
+    bunny.splats.truncate(n);
+    bunny.material_of.truncate(n);
+    let (eye, at) = (Vec3::new(1.5, 1.1, 4.4), Vec3::new(0.0, -0.1, 0.0));
+    let rows = fan_rays(eye, at, 5);
+    assert!(fan_misses(&bunny, &rows, "bunny").is_some(), "a fan");
+    let (w, h) = (240, 180);
+    let columns: Vec<Ray> = (0..w * h)
+        .map(|k| rows[(k % h) * w + k / h])
+        .chain(rows[w * h..].iter().copied())
+        .collect();
+    let mut shuffled = rows.clone();
+    let mut rng = SplitMix64::new(55);
+    for i in (1..shuffled.len()).rev() {
+        shuffled.swap(i, rng.below(i + 1));
+    }
+    for name in common::renderers() {
+        let info = splatray::accel::registry::find(name).unwrap();
+        let backend = info.build_splats(&bunny.splats).unwrap();
+        let s = SplatSurfaces {
+            scene: &bunny,
+            backend: backend.as_ref(),
+            kept: None,
+        };
+        for (order, rays) in [
+            ("rows", &rows),
+            ("columns", &columns),
+            ("shuffled", &shuffled),
+        ] {
+            let lens: Vec<f32> = rays.iter().map(|r| r.dir.length()).collect();
+            // Measured: 7,334 of 47,200 hit, and as many are occluded
+            // within the span, on every backend and in every order.
+            let least = (Some(7_000), Some(7_000));
+            agrees(
+                &format!("{name}, fan {order}"),
+                &s,
+                (rays, &lens),
+                (0.1, 8.0),
+                least,
+            );
+        }
     }
 }
 
@@ -105,9 +167,16 @@ fn scattered() -> (Vec<Ray>, Vec<f32>) {
 
 /// `cast_rays` and `occluded` of the batch `rays` (directions of length
 /// `lens`) on `s` against one ray at a time, bit for bit, with every
-/// output and with the distance alone; a third or more of the rays hit,
-/// a twentieth or more are occluded within the span.
-fn agrees(name: &str, s: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32]) {
+/// output and with the distance alone, and occlusion within `span`; more
+/// than `least.0` of the rays hit (a third: `None`), more than `least.1`
+/// are occluded (a twentieth: `None`), and not all.
+fn agrees(
+    name: &str,
+    s: &SplatSurfaces<'_>,
+    (rays, lens): (&[Ray], &[f32]),
+    span: (f32, f32),
+    least: (Option<usize>, Option<usize>),
+) {
     let (scene, backend) = (s.scene, s.backend);
     let n = rays.len();
     // One ray at a time.
@@ -117,7 +186,10 @@ fn agrees(name: &str, s: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32]) {
         .map(|r| s.surface_hit(Query::new(*r, 0.0, f32::INFINITY), &mut h))
         .collect();
     let hits = want.iter().filter(|w| w.is_some()).count();
-    assert!(hits > n / 3 && hits < n, "{name}: {hits} of {n} hit");
+    assert!(
+        hits > least.0.unwrap_or(n / 3) && hits < n,
+        "{name}: {hits} of {n} hit"
+    );
     let (mut t, mut ids, mut normals) = (vec![0.0; n], vec![0; n], vec![0.0; 3 * n]);
     cast_rays(
         s,
@@ -162,7 +234,6 @@ fn agrees(name: &str, s: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32]) {
     );
     // Occlusion within a span, against one query at a time.
     let pass = scene.has_phong().then_some(scene as &dyn PassOver);
-    let span = (0.1f32, 2.0f32);
     let mut blocked = vec![false; n];
     occluded(s, rays, lens, span, &mut blocked);
     let mut some = 0;
@@ -178,7 +249,10 @@ fn agrees(name: &str, s: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32]) {
         assert_eq!(blocked[i], one, "{name}: ray {i} occluded");
         some += usize::from(one);
     }
-    assert!(some > n / 20 && some < n, "{name}: {some} of {n} occluded");
+    assert!(
+        some > least.1.unwrap_or(n / 20) && some < n,
+        "{name}: {some} of {n} occluded"
+    );
 }
 
 /// Rays from `eye`: a 240×180 pinhole grid looking at `at` (the run's
@@ -271,9 +345,12 @@ fn fans_say_only_true_misses() {
     let check = |scene: &Scene, rays: &[Ray], what: &str| {
         let (said, missed) =
             fan_misses(scene, rays, what).unwrap_or_else(|| panic!("{what}: no fan"));
-        // Of the camera grid's 43,200 rays and 4,000 others.
+        // Of the camera grid's 43,200 rays and 4,000 others. Measured:
+        // 35,336 of 39,807 (bunny), 35,236 (offset), 30,656 of 35,759
+        // (blobby): 0.86-0.89, where the grid alone said 0.78-0.80 (the
+        // rays outside it, behind or past every ball's reach, now said).
         assert!(
-            said * 3 > missed * 2 && missed > 20_000,
+            said * 20 > missed * 17 && missed > 20_000,
             "{what}: {said} of {missed} misses said"
         );
     };

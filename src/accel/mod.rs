@@ -190,15 +190,27 @@ pub trait Fan: Send + Sync {
     /// whatever its span. False when it may hit, or is not known.
     fn misses(&self, ray: &Ray) -> bool;
 
-    /// [`Fan::misses`] of each of `rays` into `out` (one per ray): one
-    /// call for a run of rays, so a backend's test runs in a loop of its
-    /// own rather than through a call per ray.
-    fn misses_each(&self, rays: &[Ray], out: &mut [bool]) {
-        for (o, r) in out.iter_mut().zip(rays) {
-            *o = self.misses(r);
+    /// Each of `rays`' key into `keys` (one per ray): [`FAN_MISS`] where
+    /// [`Fan::misses`] holds, [`FAN_ELSEWHERE`] for a ray whose direction
+    /// the fan holds no place for, else a key that rays of neighbouring
+    /// directions share, neighbouring keys for neighbouring places (the
+    /// default: 0 for every ray that may hit). Rays taken key by key make
+    /// packets of neighbouring directions whatever the run's order (issue
+    /// 55). One call for many rays, so a backend's test runs in a loop of
+    /// its own.
+    fn keys_each(&self, rays: &[Ray], keys: &mut [u32]) {
+        for (k, r) in keys.iter_mut().zip(rays) {
+            *k = if self.misses(r) { FAN_MISS } else { 0 };
         }
     }
 }
+
+/// [`Fan::keys_each`]'s key of a ray its fan knows to miss.
+pub const FAN_MISS: u32 = u32::MAX;
+
+/// [`Fan::keys_each`]'s key of a ray whose direction its fan holds no
+/// place for (outside the octree's grid).
+pub const FAN_ELSEWHERE: u32 = u32::MAX - 1;
 
 pub use crate::config::PACKETS_VAR;
 

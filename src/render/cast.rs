@@ -13,7 +13,9 @@
 //! its [`Fan`] knows to miss everything are answered so without a
 //! traversal (issue 55: the octree's fan, the directions in which no
 //! splat's bounding ball lies, takes most of a camera's rays that miss
-//! an object in view). When the backend prefers packets
+//! an object in view), and the others are traced in windows of 8192 by
+//! the fan's keys, so that a packet holds neighbouring directions
+//! whatever the order of the batch. When the backend prefers packets
 //! ([`crate::accel::use_packets`]), the batch finds its packets itself:
 //! runs of consecutive rays leaving one origin (a camera's or a scanner's
 //! rays, in any order of directions) are split by their directions' signs
@@ -28,7 +30,7 @@
 //! only when asked for.
 
 use super::integrator::SplatSurfaces;
-use crate::accel::{Backend, CandidateHits, Fan, PACKET, PassOver, Query, Ray};
+use crate::accel::{Backend, CandidateHits, FAN_ELSEWHERE, FAN_MISS, Fan, PACKET, PassOver, Query, Ray};
 use crate::resolve::SurfaceHit;
 use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
@@ -59,53 +61,116 @@ pub fn cast_rays(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: 
     if let Some(order) = Order::of(rays) {
         return cast_in_order(surfaces, rays, lens, out, &order);
     }
-    let xi = surfaces.scene.options.scale.xi;
     let packets = crate::accel::use_packets(surfaces.backend);
     let fans = fans(surfaces.backend, rays);
-    let ids = slots(out.ids.map(|v| &mut v[..n]), 1, n);
-    let normals = slots(out.normals.map(|v| &mut v[..3 * n]), 3, n);
-    out.t[..n]
-        .par_chunks_mut(CHUNK)
+    let CastOutputs { t, ids, normals } = out;
+    let (t, mut ids, mut normals) = (&mut t[..n], ids.map(|v| &mut v[..n]), normals.map(|v| &mut v[..3 * n]));
+    for (run, fan) in &fans {
+        let (rays, lens, m) = (&rays[run.clone()], &lens[run.clone()], run.len());
+        let ids = slots(ids.as_deref_mut().map(|v| &mut v[run.clone()]), 1, m, FAN_WINDOW);
+        let normals = slots(
+            normals.as_deref_mut().map(|v| &mut v[3 * run.start..3 * run.end]),
+            3,
+            m,
+            FAN_WINDOW,
+        );
+        t[run.clone()]
+            .par_chunks_mut(FAN_WINDOW)
+            .zip(ids)
+            .zip(normals)
+            .enumerate()
+            .for_each_init(
+                || (Caster::new(surfaces), FanScratch::default()),
+                |(caster, scratch), (c, ((t, ids), normals))| {
+                    let range = c * FAN_WINDOW..c * FAN_WINDOW + t.len();
+                    let (rays, lens) = (&rays[range.clone()], &lens[range]);
+                    let mut out = Writer { t, ids, normals, lens };
+                    fan_window(fan.as_ref(), rays, packets, scratch, &mut |idx, miss| {
+                        if miss {
+                            idx.iter().for_each(|&i| out.put(usize::from(i), None));
+                        } else {
+                            caster.trace(rays, idx, &mut |i, f| out.put(i, f));
+                        }
+                    });
+                },
+            );
+    }
+    // The rays of no fan's run, chunk by chunk in place.
+    let ids = slots(ids, 1, n, CHUNK);
+    let normals = slots(normals, 3, n, CHUNK);
+    t.par_chunks_mut(CHUNK)
         .zip(ids)
         .zip(normals)
         .enumerate()
-        .for_each(|(c, ((t, mut ids), mut normals))| {
+        .for_each(|(c, ((t, ids), normals))| {
             let range = c * CHUNK..(c * CHUNK + t.len());
             let (rays, lens) = (&rays[range.clone()], &lens[range.clone()]);
-            let mut write = |i: usize, f: Option<SurfaceHit>| {
-                let (tt, id, nn) = answer(f, lens[i]);
-                t[i] = tt;
-                if let Some(ids) = ids.as_deref_mut() {
-                    ids[i] = id;
-                }
-                if let Some(normals) = normals.as_deref_mut() {
-                    normals[3 * i..3 * i + 3].copy_from_slice(&nn);
-                }
-            };
-            let mut hits: [CandidateHits; PACKET] = std::array::from_fn(|_| CandidateHits::new(xi));
-            let query = |i: usize| Query::new(rays[i], 0.0, f32::INFINITY);
-            let mut found = [None; PACKET];
-            // A ray known to miss, a lone ray, or a packet.
-            let mut trace = |idx: &[u16], miss: bool| match idx {
-                _ if miss => idx.iter().for_each(|&i| write(usize::from(i), None)),
-                &[i] => {
-                    let i = usize::from(i);
-                    write(i, surfaces.surface_hit(query(i), &mut hits[0]));
-                }
-                _ => {
-                    let m = idx.len();
-                    let qs: [Query; PACKET] =
-                        std::array::from_fn(|k| query(usize::from(idx[k.min(m - 1)])));
-                    surfaces.surface_hits(&qs[..m], &mut hits[..m], &mut found[..m]);
-                    for (&i, f) in idx.iter().zip(&found) {
-                        write(usize::from(i), *f);
-                    }
-                }
-            };
-            pieces(&fans, range, |piece, fan| {
-                batches(rays, piece, fan, packets, &mut trace);
+            let mut out = Writer { t, ids, normals, lens };
+            let mut caster = Caster::new(surfaces);
+            gaps(&fans, range, |piece| {
+                batches(rays, piece, packets, &mut |idx| {
+                    caster.trace(rays, idx, &mut |i, f| out.put(i, f));
+                });
             });
         });
+}
+
+/// Where a task of [`cast_rays`] writes its rays' answers: the outputs'
+/// slots of its rays, and their directions' lengths.
+struct Writer<'o, 'l> {
+    t: &'o mut [f32],
+    ids: Option<&'o mut [u32]>,
+    normals: Option<&'o mut [f32]>,
+    lens: &'l [f32],
+}
+
+impl Writer<'_, '_> {
+    /// Ray `i`'s answer ([`answer`]) into its slots.
+    fn put(&mut self, i: usize, f: Option<SurfaceHit>) {
+        let (t, id, n) = answer(f, self.lens[i]);
+        self.t[i] = t;
+        if let Some(ids) = self.ids.as_deref_mut() {
+            ids[i] = id;
+        }
+        if let Some(normals) = self.normals.as_deref_mut() {
+            normals[3 * i..3 * i + 3].copy_from_slice(&n);
+        }
+    }
+}
+
+/// A task's windows for [`cast_rays`]: one per packet slot, made once per
+/// task, none per ray.
+struct Caster<'s, 'a> {
+    surfaces: &'s SplatSurfaces<'a>,
+    hits: [CandidateHits; PACKET],
+    found: [Option<SurfaceHit>; PACKET],
+}
+
+impl<'s, 'a> Caster<'s, 'a> {
+    fn new(surfaces: &'s SplatSurfaces<'a>) -> Self {
+        let xi = surfaces.scene.options.scale.xi;
+        Caster {
+            surfaces,
+            hits: std::array::from_fn(|_| CandidateHits::new(xi)),
+            found: [None; PACKET],
+        }
+    }
+
+    /// The rays `idx` of `rays` (one, or a packet of one origin and
+    /// direction signs) resolved, each answer handed to `write` by index.
+    fn trace(&mut self, rays: &[Ray], idx: &[u16], write: &mut impl FnMut(usize, Option<SurfaceHit>)) {
+        let query = |i: u16| Query::new(rays[usize::from(i)], 0.0, f32::INFINITY);
+        if let &[i] = idx {
+            write(usize::from(i), self.surfaces.surface_hit(query(i), &mut self.hits[0]));
+            return;
+        }
+        let m = idx.len();
+        let qs: [Query; PACKET] = std::array::from_fn(|k| query(idx[k.min(m - 1)]));
+        self.surfaces.surface_hits(&qs[..m], &mut self.hits[..m], &mut self.found[..m]);
+        for (&i, f) in idx.iter().zip(&self.found) {
+            write(usize::from(i), *f);
+        }
+    }
 }
 
 /// Whether each ray of `rays` (directions of length `lens`) meets a
@@ -153,37 +218,59 @@ pub fn occluded(
         return;
     }
     let packets = crate::accel::use_packets(backend);
+    // The rays `idx` of `rays` (one, or a packet), each answer handed to
+    // `write` by index.
+    let trace = |rays: &[Ray], lens: &[f32], idx: &[u16], write: &mut dyn FnMut(usize, bool)| {
+        if let &[i] = idx {
+            let i = usize::from(i);
+            write(i, backend.occluded_from(&query(rays[i], lens[i])));
+            return;
+        }
+        let m = idx.len();
+        let qs: [Query; PACKET] = std::array::from_fn(|k| {
+            let i = usize::from(idx[k.min(m - 1)]);
+            query(rays[i], lens[i])
+        });
+        let mut got = [false; PACKET];
+        backend.occluded_packet(&qs[..m], &mut got[..m]);
+        for (&i, g) in idx.iter().zip(&got) {
+            write(usize::from(i), *g);
+        }
+    };
     // A fan's misses hold from `t >= 0` only.
     let fans = if t_near >= 0.0 {
         fans(backend, rays)
     } else {
         Vec::new()
     };
-    out[..n]
-        .par_chunks_mut(CHUNK)
-        .enumerate()
-        .for_each(|(c, out)| {
-            let range = c * CHUNK..(c * CHUNK + out.len());
-            let (rays, lens) = (&rays[range.clone()], &lens[range.clone()]);
-            let query = |i: usize| query(rays[i], lens[i]);
-            let mut got = [false; PACKET];
-            let mut trace = |idx: &[u16], miss: bool| match idx {
-                _ if miss => idx.iter().for_each(|&i| out[usize::from(i)] = false),
-                &[i] => out[usize::from(i)] = backend.occluded_from(&query(usize::from(i))),
-                _ => {
-                    let m = idx.len();
-                    let qs: [Query; PACKET] =
-                        std::array::from_fn(|k| query(usize::from(idx[k.min(m - 1)])));
-                    backend.occluded_packet(&qs[..m], &mut got[..m]);
-                    for (&i, g) in idx.iter().zip(&got) {
-                        out[usize::from(i)] = *g;
+    let out = &mut out[..n];
+    for (run, fan) in &fans {
+        let (rays, lens) = (&rays[run.clone()], &lens[run.clone()]);
+        out[run.clone()]
+            .par_chunks_mut(FAN_WINDOW)
+            .enumerate()
+            .for_each_init(FanScratch::default, |scratch, (c, out)| {
+                let range = c * FAN_WINDOW..c * FAN_WINDOW + out.len();
+                let (rays, lens) = (&rays[range.clone()], &lens[range]);
+                fan_window(fan.as_ref(), rays, packets, scratch, &mut |idx, miss| {
+                    if miss {
+                        idx.iter().for_each(|&i| out[usize::from(i)] = false);
+                    } else {
+                        trace(rays, lens, idx, &mut |i, g| out[i] = g);
                     }
-                }
-            };
-            pieces(&fans, range, |piece, fan| {
-                batches(rays, piece, fan, packets, &mut trace);
+                });
+            });
+    }
+    // The rays of no fan's run, chunk by chunk in place.
+    out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
+        let range = c * CHUNK..(c * CHUNK + out.len());
+        let (rays, lens) = (&rays[range.clone()], &lens[range.clone()]);
+        gaps(&fans, range, |piece| {
+            batches(rays, piece, packets, &mut |idx| {
+                trace(rays, lens, idx, &mut |i, g| out[i] = g);
             });
         });
+    });
 }
 
 /// A ray's answer in [`CastOutputs`]' terms: its distance in units of its
@@ -219,15 +306,22 @@ fn cast_in_order(
             *g = answer(surfaces.surface_hit(q, &mut hits), len);
         }
     });
-    let ids = slots(out.ids.map(|v| &mut v[..n]), 1, n);
-    let normals = slots(out.normals.map(|v| &mut v[..3 * n]), 3, n);
+    place(&order.at, &got, out);
+}
+
+/// The answers `got`, in an order's sequence, written in place: ray `j`'s
+/// is `got[at[j]]`.
+fn place(at: &[u32], got: &[(f32, u32, [f32; 3])], out: CastOutputs<'_>) {
+    let n = at.len();
+    let ids = slots(out.ids.map(|v| &mut v[..n]), 1, n, CHUNK);
+    let normals = slots(out.normals.map(|v| &mut v[..3 * n]), 3, n, CHUNK);
     out.t[..n]
         .par_chunks_mut(CHUNK)
         .zip(ids)
         .zip(normals)
         .enumerate()
         .for_each(|(c, ((t, mut ids), mut normals))| {
-            for (j, &k) in order.at[c * CHUNK..c * CHUNK + t.len()].iter().enumerate() {
+            for (j, &k) in at[c * CHUNK..c * CHUNK + t.len()].iter().enumerate() {
                 let (tt, id, nn) = got[k as usize];
                 t[j] = tt;
                 if let Some(ids) = ids.as_deref_mut() {
@@ -442,43 +536,13 @@ impl GatheredRays {
 }
 
 /// The rays `piece` of a chunk (indices into `rays`, the chunk's) to
-/// `trace`: with a `fan`, the rays it knows to miss flagged so, one at a
-/// time, the others in packets of one origin and direction signs
-/// ([`by_octant`]); without, in the packets [`for_each_packet`] finds;
-/// without `packets`, one at a time.
-fn batches(
-    rays: &[Ray],
-    piece: Range<usize>,
-    fan: Option<&dyn Fan>,
-    packets: bool,
-    trace: &mut impl FnMut(&[u16], bool),
-) {
-    let Some(fan) = fan else {
-        if packets {
-            for_each_packet(rays, piece, |idx| trace(idx, false));
-        } else {
-            piece.for_each(|i| trace(&[i as u16], false));
-        }
-        return;
-    };
-    // The fan's answers in one call, then the rays split without
-    // branches: those it knows to miss handed at once.
-    let mut miss = [false; CHUNK];
-    fan.misses_each(&rays[piece.clone()], &mut miss[..piece.len()]);
-    let (mut left, mut missed) = ([0u16; CHUNK], [0u16; CHUNK]);
-    let (mut k, mut m) = (0, 0);
-    for (i, &x) in piece.zip(&miss) {
-        (left[k], missed[m]) = (i as u16, i as u16);
-        k += usize::from(!x);
-        m += usize::from(x);
-    }
-    if m > 0 {
-        trace(&missed[..m], true);
-    }
+/// `trace`: in the packets [`for_each_packet`] finds, or, without
+/// `packets`, one at a time.
+fn batches(rays: &[Ray], piece: Range<usize>, packets: bool, trace: &mut impl FnMut(&[u16])) {
     if packets {
-        by_octant(rays, &left[..k], |idx| trace(idx, false));
+        for_each_packet(rays, piece, trace);
     } else {
-        left[..k].iter().for_each(|&i| trace(&[i], false));
+        piece.for_each(|i| trace(&[i as u16]));
     }
 }
 
@@ -524,38 +588,120 @@ fn fans<'b>(backend: &'b dyn Backend, rays: &[Ray]) -> Vec<(Range<usize>, Box<dy
         .collect()
 }
 
-/// The chunk `range` of a batch cut by the runs of `fans` (sorted, not
-/// overlapping): each piece (relative to the chunk's start, in order)
-/// handed to `each` with the fan of its run, or `None` between runs.
-fn pieces(
-    fans: &[(Range<usize>, Box<dyn Fan + '_>)],
-    range: Range<usize>,
-    mut each: impl FnMut(Range<usize>, Option<&dyn Fan>),
+/// Rays of a fan's run a task takes at once ([`fan_window`]): eight rows
+/// of a 1024-pixel-wide camera's rays, 192 kB of rays (they stay in the
+/// core's cache from the fan's test to their traversal).
+const FAN_WINDOW: usize = 8192;
+
+/// What [`fan_window`] keeps between windows (a task's).
+#[derive(Default)]
+struct FanScratch {
+    keys: Vec<u32>,
+    missed: Vec<u16>,
+    left: Vec<u16>,
+    elsewhere: Vec<u16>,
+    sorted: Vec<u16>,
+    count: Vec<u32>,
+}
+
+/// The rays of a window of a fan's run (at most [`FAN_WINDOW`]; indices
+/// into `rays`, the window's) to `trace`: the rays the fan knows to miss
+/// flagged so, at once; the others in their keys' order
+/// ([`Fan::keys_each`], stable; those it holds no place for last), in
+/// packets of one direction's signs ([`by_octant`]), or one at a time
+/// without `packets`. So a packet holds rays of neighbouring directions
+/// whatever the window's own order: taken row after row, a camera's
+/// packets were strips of 8×1 pixels, and one cut past a gap of misses
+/// joined rays from both sides of it (`docs/notes/backends.md`, "Issue
+/// 55, fortieth session").
+///
+/// The keys are sorted by counting where they span at most four times
+/// the window's rays (rows of a camera's image: a few rows of the fan's
+/// blocks); otherwise (a batch in another order) the window's order is
+/// kept.
+fn fan_window(
+    fan: &dyn Fan,
+    rays: &[Ray],
+    packets: bool,
+    s: &mut FanScratch,
+    trace: &mut impl FnMut(&[u16], bool),
 ) {
+    let n = rays.len();
+    debug_assert!(n <= FAN_WINDOW);
+    s.keys.resize(n, 0);
+    fan.keys_each(rays, &mut s.keys);
+    s.missed.clear();
+    s.left.clear();
+    s.elsewhere.clear();
+    let (mut lo, mut hi) = (u32::MAX, 0);
+    for (i, &k) in s.keys.iter().enumerate() {
+        if k == FAN_MISS {
+            s.missed.push(i as u16);
+        } else if k == FAN_ELSEWHERE {
+            s.elsewhere.push(i as u16);
+        } else {
+            s.left.push(i as u16);
+            (lo, hi) = (lo.min(k), hi.max(k));
+        }
+    }
+    if !s.missed.is_empty() {
+        trace(&s.missed, true);
+    }
+    let order = if s.left.len() > PACKET && ((hi - lo) as usize) < 4 * n {
+        let span = (hi - lo) as usize + 1;
+        s.count.clear();
+        s.count.resize(span + 1, 0);
+        for &i in &s.left {
+            s.count[(s.keys[usize::from(i)] - lo) as usize + 1] += 1;
+        }
+        for b in 0..span {
+            s.count[b + 1] += s.count[b];
+        }
+        s.sorted.resize(s.left.len(), 0);
+        for &i in &s.left {
+            let place = &mut s.count[(s.keys[usize::from(i)] - lo) as usize];
+            s.sorted[*place as usize] = i;
+            *place += 1;
+        }
+        &s.sorted
+    } else {
+        &s.left
+    };
+    for order in [order, &s.elsewhere] {
+        if packets {
+            by_octant(rays, order, |idx| trace(idx, false));
+        } else {
+            order.iter().for_each(|&i| trace(&[i], false));
+        }
+    }
+}
+
+/// The pieces of the chunk `range` of a batch that lie in none of the
+/// runs of `fans` (sorted, not overlapping), each handed to `each`
+/// relative to the chunk's start, in order.
+fn gaps(fans: &[(Range<usize>, Box<dyn Fan + '_>)], range: Range<usize>, mut each: impl FnMut(Range<usize>)) {
     let mut at = range.start;
     let first = fans.partition_point(|(run, _)| run.end <= at);
-    for (run, fan) in &fans[first..] {
+    for (run, _) in &fans[first..] {
         if run.start >= range.end {
             break;
         }
         if run.start > at {
-            each(at - range.start..run.start - range.start, None);
+            each(at - range.start..run.start - range.start);
         }
-        let end = run.end.min(range.end);
-        each(at.max(run.start) - range.start..end - range.start, Some(fan.as_ref()));
-        at = end;
+        at = run.end.min(range.end);
     }
     if at < range.end {
-        each(at - range.start..range.end - range.start, None);
+        each(at - range.start..range.end - range.start);
     }
 }
 
-/// An optional output cut into the chunks of [`CHUNK`] rays (`per` slots
-/// a ray), or a `None` per chunk: one list per call, none per ray.
-fn slots<T: Send>(out: Option<&mut [T]>, per: usize, n: usize) -> Vec<Option<&mut [T]>> {
+/// An optional output of `n` rays cut into chunks of `chunk` rays (`per`
+/// slots a ray), or a `None` per chunk: one list per call, none per ray.
+fn slots<T: Send>(out: Option<&mut [T]>, per: usize, n: usize, chunk: usize) -> Vec<Option<&mut [T]>> {
     match out {
-        Some(v) => v.chunks_mut(per * CHUNK).map(Some).collect(),
-        None => (0..n.div_ceil(CHUNK)).map(|_| None).collect(),
+        Some(v) => v.chunks_mut(per * chunk).map(Some).collect(),
+        None => (0..n.div_ceil(chunk)).map(|_| None).collect(),
     }
 }
 

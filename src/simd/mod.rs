@@ -19,7 +19,8 @@
 //! ([`normal_equations6`]), the same sums bit for bit, and the scan of
 //! the neighbour search's bounded queries ([`keys_within`]), the same
 //! points, and the sorts of its neighbourhoods' keys ([`sort_keys`]), the
-//! same order.
+//! same order; so are the cells of a camera's fan that its rays fall in
+//! ([`gnomonic_cells`]), the same cells.
 //!
 //! The path is AVX2 where the CPU runs it ([`default_path`] says why not
 //! AVX-512), or the one named by [`SIMD_VAR`] (`portable`, `avx2`,
@@ -30,6 +31,7 @@
 //! how the registry's `octree-<path>` variants force each one.
 
 mod count;
+mod fan;
 mod hits;
 mod lsq;
 mod near;
@@ -37,6 +39,7 @@ mod sort;
 mod tri;
 mod triples;
 pub use count::{count_within, held_within};
+pub use fan::{BEYOND, GnomonicGrid, NO_CELL, gnomonic_cell, gnomonic_cells};
 pub use hits::{HITS_PACKS, HitSlots, LaneHits, disc_hits_met};
 pub use lsq::{Row6, normal_equations6};
 pub use near::keys_within;

@@ -35,9 +35,21 @@
 //! f64 arithmetic of the rectangles and of the rays' gnomonic
 //! coordinates, and a ray's cell is found with the same monotone
 //! operations as the rectangles' cells.
+//!
+//! The grid spans a sample of the run's directions; a ray outside it is
+//! known to miss where its coordinates lie past every rectangle's, unclipped
+//! by the grid (the balls' reach), or where it does not point in front
+//! (`d·w <= 0`) while no ball lies behind. The rays' cells are found four
+//! at a time on the octree's SIMD path (`crate::simd::gnomonic_cells`), and
+//! the grid's `u` follows the run's first step (a camera's row), so that
+//! the rays of a row read one row of the grid's bits. A ray's key
+//! ([`Fan::keys_each`]) is its block of 2×2 cells: the batch traces the
+//! rays that may hit block by block, in packets of neighbouring
+//! directions (`crate::render::cast`; issue 55, fortieth session).
 
 use super::{NO_PRIMITIVE, Octree, lanes};
-use crate::accel::Fan;
+use crate::accel::{FAN_ELSEWHERE, FAN_MISS, Fan};
+use crate::simd::{BEYOND, GnomonicGrid, Isa, NO_CELL, gnomonic_cell, gnomonic_cells};
 use crate::geometry::Ray;
 use crate::primitive::{Pack, Primitive};
 use glam::{DVec3, Vec3};
@@ -68,6 +80,10 @@ const RAYS_PER_CELL: f64 = 4.0;
 /// Most cells of a grid.
 const MAX_CELLS: usize = 1 << 20;
 
+/// Cells along each side of a block of [`Fan::keys_each`]: about 16 rays
+/// ([`RAYS_PER_CELL`] a cell), two packets of neighbouring directions.
+const BLOCK: usize = 2;
+
 /// The cells of the gnomonic plane of one origin that some primitive's
 /// ball covers (module doc).
 pub(super) struct Coverage {
@@ -81,8 +97,19 @@ pub(super) struct Coverage {
     lo: [f64; 2],
     scale: f64,
     n: [usize; 2],
-    /// Per cell (`i + n[0] j`): 1 when some ball covers it.
-    covered: Vec<u8>,
+    /// Per cell (`i + n[0] j`), bit `at % 64` of word `at / 64`: set
+    /// when some ball covers it (a bit, not a byte: the rays' reads of the
+    /// grid stay in the core's nearest cache).
+    covered: Vec<u64>,
+    /// The least and most coordinates in cells, on both axes, of the
+    /// balls in front (past the grid too): a direction in front outside
+    /// them meets none.
+    far: [f64; 4],
+    /// Whether some ball lies wholly behind (a direction not in front may
+    /// meet it).
+    behind: bool,
+    /// The SIMD path of the rays' cells (the octree's).
+    isa: Isa,
 }
 
 impl<P: Primitive> Octree<P> {
@@ -94,7 +121,7 @@ impl<P: Primitive> Octree<P> {
         if rays.len() < MIN_RAYS.max(self.count) || !origin.is_finite() {
             return None;
         }
-        let mut fan = Coverage::frame(origin, rays)?;
+        let mut fan = Coverage::frame(origin, rays, self.simd())?;
         fan.cover(&self.primitives())?;
         Some(fan)
     }
@@ -121,15 +148,25 @@ impl Coverage {
     /// The basis and the grid (nothing covered yet): `w` the mean of a sample
     /// of the rays' unit directions, the grid over the sample's gnomonic
     /// extent grown by a sixteenth each way, sized for [`RAYS_PER_CELL`].
-    fn frame(origin: Vec3, rays: &[Ray]) -> Option<Coverage> {
-        let step = rays.len().div_ceil(SAMPLE).max(1);
+    fn frame(origin: Vec3, rays: &[Ray], isa: Isa) -> Option<Coverage> {
+        // An odd step: a camera's rows of an even width are sampled at
+        // every column, not at the same few.
+        let step = rays.len().div_ceil(SAMPLE) | 1;
         let sample = || rays.iter().step_by(step).map(|r| r.dir.as_dvec3());
         let w = sample()
             .filter(|d| d.is_finite() && *d != DVec3::ZERO)
             .map(DVec3::normalize)
             .sum::<DVec3>()
             .try_normalize()?;
-        let u = w.any_orthonormal_vector();
+        // `u` along the step from the first ray to the next, where they
+        // differ (a camera's row, so that a row of rays keeps to a row of
+        // cells: their reads of the grid run on), else any.
+        let along = |r: &[Ray]| {
+            let [a, b] = [r.first()?, r.get(1)?].map(|r| r.dir.as_dvec3().try_normalize());
+            let step = b? - a?;
+            (step - w * step.dot(w)).try_normalize()
+        };
+        let u = along(rays).unwrap_or_else(|| w.any_orthonormal_vector());
         let v = w.cross(u);
         let mut lo = [f64::INFINITY; 2];
         let mut hi = [f64::NEG_INFINITY; 2];
@@ -170,6 +207,9 @@ impl Coverage {
             scale,
             n: n(scale),
             covered: Vec::new(),
+            far: [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY],
+            behind: false,
+            isa,
         })
     }
 
@@ -212,11 +252,16 @@ impl Coverage {
         [(qb - s) / qa - pad, (qb + s) / qa + pad]
     }
 
-    /// The cells `[i0, i1]` along axis `a` of the span `[x0, x1]`, or
-    /// `None` when it misses the grid.
-    fn cells(&self, [x0, x1]: [f64; 2], a: usize) -> Option<[usize; 2]> {
+    /// The span `[x0, x1]` on axis `a` in cells ([`Coverage::coord`]),
+    /// grown by [`PAD`].
+    fn reach(&self, [x0, x1]: [f64; 2], a: usize) -> [f64; 2] {
         let pad = PAD * (1.0 + x0.abs() + x1.abs());
-        let (i0, i1) = (self.coord(x0 - pad, a), self.coord(x1 + pad, a));
+        [self.coord(x0 - pad, a), self.coord(x1 + pad, a)]
+    }
+
+    /// The cells `[i0, i1]` along axis `a` of the reach `[r0, r1]`
+    /// ([`Coverage::reach`]), or `None` when it misses the grid.
+    fn cells(&self, [i0, i1]: [f64; 2], a: usize) -> Option<[usize; 2]> {
         // NaN compares false: kept, at every cell of the axis.
         if i1 < 0.0 || i0 >= self.n[a] as f64 {
             return None;
@@ -240,13 +285,29 @@ impl Coverage {
     /// not finite).
     fn cover<P: Primitive>(&mut self, prims: &[P]) -> Option<()> {
         let [nx, ny] = self.n;
-        let rects = prims
+        let seen = prims
             .par_iter()
             .map(|prim| self.rectangle(prim))
             .collect::<Option<Vec<_>>>()?;
+        let mut rects = Vec::with_capacity(seen.len());
+        for s in seen {
+            match s {
+                Seen::Behind => self.behind = true,
+                Seen::Front(reach, cells) => {
+                    // A reach not a number holds every direction.
+                    let low = |x: f64| if x.is_nan() { f64::NEG_INFINITY } else { x };
+                    let high = |x: f64| if x.is_nan() { f64::INFINITY } else { x };
+                    for a in [0, 2] {
+                        self.far[a] = self.far[a].min(low(reach[a]));
+                        self.far[a + 1] = self.far[a + 1].max(high(reach[a + 1]));
+                    }
+                    rects.extend(cells);
+                }
+            }
+        }
         let mut diff = vec![0i32; (nx + 1) * (ny + 1)];
         let at = |i: usize, j: usize| i + (nx + 1) * j;
-        for [i0, i1, j0, j1] in rects.into_iter().flatten() {
+        for [i0, i1, j0, j1] in rects {
             diff[at(i0, j0)] += 1;
             diff[at(i1 + 1, j0)] -= 1;
             diff[at(i0, j1 + 1)] -= 1;
@@ -263,27 +324,29 @@ impl Coverage {
                 *x += below;
             }
         }
-        self.covered = diff
-            .chunks_exact(nx + 1)
-            .take(ny)
-            .flat_map(|row| row[..nx].iter().map(|&c| u8::from(c != 0)))
-            .collect();
+        let mut covered = vec![0u64; (nx * ny).div_ceil(64)];
+        let cells = diff.chunks_exact(nx + 1).take(ny).flat_map(|row| &row[..nx]);
+        for (at, _) in cells.enumerate().filter(|(_, c)| **c != 0) {
+            covered[at / 64] |= 1 << (at % 64);
+        }
+        self.covered = covered;
         Some(())
     }
 
-    /// The cells `[i0, i1, j0, j1]` of `prim`'s ball, `Some(None)` when it
-    /// lies wholly behind or beside the grid, `None` when it straddles the
-    /// plane `p·w = 0` (or is not finite).
-    fn rectangle<P: Primitive>(&self, prim: &P) -> Option<Option<[usize; 4]>> {
+    /// What the fan sees of `prim`'s ball: wholly behind, or in front with
+    /// its reach `[i0, i1, j0, j1]` in cells ([`Coverage::reach`]) and the
+    /// cells it covers (`None` beside the grid); `None` when it straddles
+    /// the plane `p·w = 0` (or is not finite).
+    fn rectangle<P: Primitive>(&self, prim: &P) -> Option<Seen> {
         let o = Vec3::from_array(self.origin.map(f32::from_bits)).as_dvec3();
         let c = prim.center().as_dvec3() - o;
         let r = f64::from(prim.bounding_radius());
         let r = r + MARGIN * (c.length() + r);
         let (cu, cv, cw) = (c.dot(self.u), c.dot(self.v), c.dot(self.w));
-        // Wholly behind: no ray of the fan (`d·w > 0`, `t >= 0`) meets
-        // it. NaN compares false: no fan.
+        // Wholly behind: no ray of the fan in front (`d·w > 0`, `t >= 0`)
+        // meets it. NaN compares false: no fan.
         if cw < -r {
-            return Some(None);
+            return Some(Seen::Behind);
         }
         let in_front = cw > 1.01 * r;
         if !in_front {
@@ -297,65 +360,91 @@ impl Coverage {
             }
             None => [Self::ball_span(cu, cw, r), Self::ball_span(cv, cw, r)],
         };
-        let (Some([i0, i1]), Some([j0, j1])) = (self.cells(spans[0], 0), self.cells(spans[1], 1))
-        else {
-            return Some(None);
+        let [[i0, i1], [j0, j1]] = [0, 1].map(|a| self.reach(spans[a], a));
+        let cells = match (self.cells([i0, i1], 0), self.cells([j0, j1], 1)) {
+            (Some([i0, i1]), Some([j0, j1])) => Some([i0, i1, j0, j1]),
+            _ => None,
         };
-        Some(Some([i0, i1, j0, j1]))
+        Some(Seen::Front([i0, i1, j0, j1], cells))
     }
+}
+
+/// What [`Coverage::rectangle`] finds of a primitive's ball.
+enum Seen {
+    /// Wholly behind the plane through the origin across `w`.
+    Behind,
+    /// Wholly in front: its reach in cells, and the cells it covers
+    /// (`None`: beside the grid).
+    Front([f64; 4], Option<[usize; 4]>),
 }
 
 impl Fan for Coverage {
     /// True when `ray` leaves the fan's origin within the grid in a cell
-    /// no ball covers.
+    /// no ball covers, or outside the grid where no ball reaches.
     #[inline]
     fn misses(&self, ray: &Ray) -> bool {
-        self.misses_one(ray)
+        let cell = gnomonic_cell(&self.grid(), ray);
+        self.leaves_here(ray) & self.empty(cell)
     }
 
-    /// [`Coverage::misses_one`] inlined in the loop, without branches.
-    fn misses_each(&self, rays: &[Ray], out: &mut [bool]) {
-        for (o, r) in out.iter_mut().zip(rays) {
-            *o = self.misses_one(r);
+    /// [`FAN_MISS`] where [`Fan::misses`] holds, [`FAN_ELSEWHERE`] for a
+    /// ray outside the grid, else the block of [`BLOCK`]² cells holding
+    /// the ray's cell, row after row of blocks. The cells of [`RUN`] rays
+    /// at a time on the octree's SIMD path ([`gnomonic_cells`]).
+    fn keys_each(&self, rays: &[Ray], keys: &mut [u32]) {
+        let grid = self.grid();
+        // At most `MAX_CELLS` cells: every block's key is far below
+        // `FAN_ELSEWHERE`.
+        let cols = self.n[0].div_ceil(BLOCK) as u32;
+        let mut cells = [[0u32; 2]; RUN];
+        for (rays, keys) in rays.chunks(RUN).zip(keys.chunks_mut(RUN)) {
+            gnomonic_cells(&grid, rays, self.isa, &mut cells);
+            for ((k, r), &cell) in keys.iter_mut().zip(rays).zip(&cells) {
+                let [i, j] = cell.map(|x| x / BLOCK as u32);
+                *k = if self.leaves_here(r) & self.empty(cell) {
+                    FAN_MISS
+                } else if cell[0] == NO_CELL {
+                    FAN_ELSEWHERE
+                } else {
+                    j * cols + i
+                };
+            }
         }
     }
 }
 
-impl Coverage {
-    /// [`Fan::misses`], its conditions combined without branches.
-    #[inline(always)]
-    fn misses_one(&self, ray: &Ray) -> bool {
-        self.leaves_here(ray) & self.misses_from_here(ray)
-    }
+/// Rays whose cells [`Coverage::keys_each`] finds in one call.
+const RUN: usize = 256;
 
+impl Coverage {
     /// Whether `ray` leaves the fan's origin, bit for bit.
     #[inline(always)]
     fn leaves_here(&self, ray: &Ray) -> bool {
         ray.origin.to_array().map(f32::to_bits) == self.origin
     }
 
-    /// [`Fan::misses`] of a ray leaving the fan's origin, without branches
-    /// (the cell read at 0 when the direction lies outside the grid).
+    /// Whether `cell` ([`gnomonic_cell`]) is one no ball covers, or
+    /// outside the grid beyond every ball's reach (the grid's first cell
+    /// read, and not taken, outside it).
     #[inline(always)]
-    fn misses_from_here(&self, ray: &Ray) -> bool {
-        let d = ray.dir.as_dvec3();
-        let z = d.dot(self.w);
-        // NaN compares false. A direction inside the grid lies within
-        // about 75° of `w` ([`MIN_COS`]).
-        let ahead = z > 0.0;
-        let inv = 1.0 / z;
-        let i = self.coord(d.dot(self.u) * inv, 0);
-        let j = self.coord(d.dot(self.v) * inv, 1);
-        let inside = |i: f64, a: usize| i >= 0.0 && i < self.n[a] as f64;
-        let within = ahead & inside(i, 0) & inside(j, 1);
-        // Within, `0 <= i < n[0] <= MAX_CELLS` (the same for `j`): `as
-        // u32` truncates as `as usize` does, without its path past 2^63.
-        let cell = if within {
-            i as u32 as usize + self.n[0] * j as u32 as usize
-        } else {
-            0
-        };
-        within & (self.covered[cell] == 0)
+    fn empty(&self, [i, j]: [u32; 2]) -> bool {
+        let within = i != NO_CELL;
+        let at = if within { i as usize + self.n[0] * j as usize } else { 0 };
+        (within & (self.covered[at / 64] >> (at % 64) & 1 == 0)) | (j == BEYOND)
+    }
+
+    /// The grid as the SIMD module takes it.
+    fn grid(&self) -> GnomonicGrid {
+        GnomonicGrid {
+            u: self.u.to_array(),
+            v: self.v.to_array(),
+            w: self.w.to_array(),
+            lo: self.lo,
+            scale: self.scale,
+            n: self.n,
+            reach: self.far,
+            behind: self.behind,
+        }
     }
 }
 
