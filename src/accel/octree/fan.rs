@@ -161,10 +161,13 @@ impl Coverage {
         // `u` along the step from the first ray to the next, where they
         // differ (a camera's row, so that a row of rays keeps to a row of
         // cells: their reads of the grid run on), else any.
+        // Taken off `w` twice: a step nearly along `w` leaves, after one
+        // pass, a part along `w` far above the rounding the spans' `PAD`
+        // covers.
+        let off_w = |x: DVec3| (x - w * x.dot(w)).try_normalize();
         let along = |r: &[Ray]| {
             let [a, b] = [r.first()?, r.get(1)?].map(|r| r.dir.as_dvec3().try_normalize());
-            let step = b? - a?;
-            (step - w * step.dot(w)).try_normalize()
+            off_w(off_w(b? - a?)?)
         };
         let u = along(rays).unwrap_or_else(|| w.any_orthonormal_vector());
         let v = w.cross(u);
