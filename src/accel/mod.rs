@@ -206,11 +206,11 @@ pub trait Fan: Send + Sync {
 }
 
 /// [`Fan::keys_each`]'s key of a ray its fan knows to miss.
-pub const FAN_MISS: u32 = u32::MAX;
+pub const FAN_MISS: u32 = crate::simd::KEY_MISS;
 
 /// [`Fan::keys_each`]'s key of a ray whose direction its fan holds no
 /// place for (outside the octree's grid).
-pub const FAN_ELSEWHERE: u32 = u32::MAX - 1;
+pub const FAN_ELSEWHERE: u32 = crate::simd::KEY_ELSEWHERE;
 
 pub use crate::config::PACKETS_VAR;
 

@@ -20,7 +20,7 @@
 //! the neighbour search's bounded queries ([`keys_within`]), the same
 //! points, and the sorts of its neighbourhoods' keys ([`sort_keys`]), the
 //! same order; so are the cells of a camera's fan that its rays fall in
-//! ([`gnomonic_cells`]), the same cells.
+//! ([`gnomonic_keys`]), the same keys.
 //!
 //! The path is AVX2 where the CPU runs it ([`default_path`] says why not
 //! AVX-512), or the one named by [`SIMD_VAR`] (`portable`, `avx2`,
@@ -39,7 +39,7 @@ mod sort;
 mod tri;
 mod triples;
 pub use count::{count_within, held_within};
-pub use fan::{BEYOND, GnomonicGrid, NO_CELL, gnomonic_cell, gnomonic_cells};
+pub use fan::{FanBits, GnomonicGrid, KEY_ELSEWHERE, KEY_MISS, gnomonic_key, gnomonic_keys};
 pub use hits::{HITS_PACKS, HitSlots, LaneHits, disc_hits_met};
 pub use lsq::{Row6, normal_equations6};
 pub use near::keys_within;

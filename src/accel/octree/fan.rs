@@ -39,8 +39,8 @@
 //! The grid spans a sample of the run's directions; a ray outside it is
 //! known to miss where its coordinates lie past every rectangle's, unclipped
 //! by the grid (the balls' reach), or where it does not point in front
-//! (`d·w <= 0`) while no ball lies behind. The rays' cells are found four
-//! at a time on the octree's SIMD path (`crate::simd::gnomonic_cells`), and
+//! (`d·w <= 0`) while no ball lies behind. The rays' keys are found four
+//! at a time on the octree's SIMD path (`crate::simd::gnomonic_keys`), and
 //! the grid's `u` follows the run's first step (a camera's row), so that
 //! the rays of a row read one row of the grid's bits. A ray's key
 //! ([`Fan::keys_each`]) is its block of 2×2 cells: the batch traces the
@@ -48,8 +48,8 @@
 //! directions (`crate::render::cast`; issue 55, fortieth session).
 
 use super::{NO_PRIMITIVE, Octree, lanes};
-use crate::accel::{FAN_ELSEWHERE, FAN_MISS, Fan};
-use crate::simd::{BEYOND, GnomonicGrid, Isa, NO_CELL, gnomonic_cell, gnomonic_cells};
+use crate::accel::{FAN_MISS, Fan};
+use crate::simd::{FanBits, GnomonicGrid, Isa, gnomonic_key, gnomonic_keys};
 use crate::geometry::Ray;
 use crate::primitive::{Pack, Primitive};
 use glam::{DVec3, Vec3};
@@ -80,10 +80,6 @@ const RAYS_PER_CELL: f64 = 4.0;
 /// Most cells of a grid.
 const MAX_CELLS: usize = 1 << 20;
 
-/// Cells along each side of a block of [`Fan::keys_each`]: about 16 rays
-/// ([`RAYS_PER_CELL`] a cell), two packets of neighbouring directions.
-const BLOCK: usize = 2;
-
 /// The cells of the gnomonic plane of one origin that some primitive's
 /// ball covers (module doc).
 pub(super) struct Coverage {
@@ -97,10 +93,10 @@ pub(super) struct Coverage {
     lo: [f64; 2],
     scale: f64,
     n: [usize; 2],
-    /// Per cell (`i + n[0] j`), bit `at % 64` of word `at / 64`: set
+    /// Per cell (`i + n[0] j`), bit `at % 32` of word `at / 32`: set
     /// when some ball covers it (a bit, not a byte: the rays' reads of the
     /// grid stay in the core's nearest cache).
-    covered: Vec<u64>,
+    covered: Vec<u32>,
     /// The least and most coordinates in cells, on both axes, of the
     /// balls in front (past the grid too): a direction in front outside
     /// them meets none.
@@ -327,10 +323,10 @@ impl Coverage {
                 *x += below;
             }
         }
-        let mut covered = vec![0u64; (nx * ny).div_ceil(64)];
+        let mut covered = vec![0u32; (nx * ny).div_ceil(32)];
         let cells = diff.chunks_exact(nx + 1).take(ny).flat_map(|row| &row[..nx]);
         for (at, _) in cells.enumerate().filter(|(_, c)| **c != 0) {
-            covered[at / 64] |= 1 << (at % 64);
+            covered[at / 32] |= 1 << (at % 32);
         }
         self.covered = covered;
         Some(())
@@ -386,54 +382,28 @@ impl Fan for Coverage {
     /// no ball covers, or outside the grid where no ball reaches.
     #[inline]
     fn misses(&self, ray: &Ray) -> bool {
-        let cell = gnomonic_cell(&self.grid(), ray);
-        self.leaves_here(ray) & self.empty(cell)
+        gnomonic_key(&self.grid(), &self.bits(), ray) == FAN_MISS
     }
 
     /// [`FAN_MISS`] where [`Fan::misses`] holds, [`FAN_ELSEWHERE`] for a
-    /// ray outside the grid, else the block of [`BLOCK`]² cells holding
-    /// the ray's cell, row after row of blocks. The cells of [`RUN`] rays
-    /// at a time on the octree's SIMD path ([`gnomonic_cells`]).
+    /// ray outside the grid, else the block of 2×2 cells holding the ray's
+    /// cell, row after row of blocks: on the octree's SIMD path
+    /// ([`gnomonic_keys`]).
     fn keys_each(&self, rays: &[Ray], keys: &mut [u32]) {
-        let grid = self.grid();
-        // At most `MAX_CELLS` cells: every block's key is far below
-        // `FAN_ELSEWHERE`.
-        let cols = self.n[0].div_ceil(BLOCK) as u32;
-        let mut cells = [[0u32; 2]; RUN];
-        for (rays, keys) in rays.chunks(RUN).zip(keys.chunks_mut(RUN)) {
-            gnomonic_cells(&grid, rays, self.isa, &mut cells);
-            for ((k, r), &cell) in keys.iter_mut().zip(rays).zip(&cells) {
-                let [i, j] = cell.map(|x| x / BLOCK as u32);
-                *k = if self.leaves_here(r) & self.empty(cell) {
-                    FAN_MISS
-                } else if cell[0] == NO_CELL {
-                    FAN_ELSEWHERE
-                } else {
-                    j * cols + i
-                };
-            }
-        }
+        gnomonic_keys(&self.grid(), &self.bits(), rays, self.isa, keys);
     }
 }
 
-/// Rays whose cells [`Coverage::keys_each`] finds in one call.
-const RUN: usize = 256;
-
 impl Coverage {
-    /// Whether `ray` leaves the fan's origin, bit for bit.
-    #[inline(always)]
-    fn leaves_here(&self, ray: &Ray) -> bool {
-        ray.origin.to_array().map(f32::to_bits) == self.origin
-    }
-
-    /// Whether `cell` ([`gnomonic_cell`]) is one no ball covers, or
-    /// outside the grid beyond every ball's reach (the grid's first cell
-    /// read, and not taken, outside it).
-    #[inline(always)]
-    fn empty(&self, [i, j]: [u32; 2]) -> bool {
-        let within = i != NO_CELL;
-        let at = if within { i as usize + self.n[0] * j as usize } else { 0 };
-        (within & (self.covered[at / 64] >> (at % 64) & 1 == 0)) | (j == BEYOND)
+    /// The grid's bits and the eye as the SIMD module takes them.
+    fn bits(&self) -> FanBits<'_> {
+        FanBits {
+            covered: &self.covered,
+            origin: self.origin,
+            // At most `MAX_CELLS` cells: every block's key is far below
+            // `FAN_ELSEWHERE`.
+            cols: self.n[0].div_ceil(2) as u32,
+        }
     }
 
     /// The grid as the SIMD module takes it.
