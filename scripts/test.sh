@@ -49,10 +49,22 @@ python3 scripts/api_count.py --max 150 target/doc/splatray
 echo "== cargo bench --no-run"
 cargo bench --no-run -q
 
+# The command line `cargo test` built (with the tests' features), run
+# below where `cargo run` would compile the library once more without
+# them (about 100 s on 2 cores).
+bin=$(cargo test --release --no-run --message-format=json 2>/dev/null | python3 -c '
+import json, sys
+for line in sys.stdin:
+    m = json.loads(line)
+    t = m.get("target", {})
+    if m.get("reason") == "compiler-artifact" and t.get("kind") == ["bin"] and not m["profile"]["test"]:
+        print(m["executable"])' | grep '/splatray$' | head -n 1)
+[ -x "$bin" ] || { echo "test.sh: cargo test built no splatray binary ('$bin')" >&2; exit 1; }
+
 # What this CPU runs, from `splatray info`'s machine-readable lines: a line
 # missing, empty or naming something unknown stops the run here (no pass
 # silently runs zero times).
-info=$(cargo run --release -q -- info)
+info=$("$bin" info)
 info_line() {
     local v
     v=$(printf '%s\n' "$info" | sed -n "s/^$1: //p")
@@ -81,7 +93,7 @@ done
 echo "== examples"
 ex=$(mktemp -d)
 trap 'rm -rf "$ex"' EXIT
-cargo run --release -q -- render scenes/data/milk.pcd --width 160 --height 120 \
+"$bin" render scenes/data/milk.pcd --width 160 --height 120 \
     -o "$ex/cli.png" --save-scene "$ex/milk.toml"
 cargo run --release -q --example cloud_to_image -- "$ex/milk.toml" "$ex/example.png"
 cmp "$ex/cli.png" "$ex/example.png" || { echo "test.sh: cloud_to_image's image differs from render's" >&2; exit 1; }
