@@ -203,6 +203,14 @@ pub trait Fan: Send + Sync {
             *k = if self.misses(r) { FAN_MISS } else { 0 };
         }
     }
+
+    /// A backend answering the queries of this fan's run exactly as the
+    /// backend that made the fan does, bit for bit, from what the fan
+    /// knows of its directions (the octree's: each block of directions'
+    /// own list of primitives); `None` (the default): that backend.
+    fn backend(&self) -> Option<&dyn Backend> {
+        None
+    }
 }
 
 /// [`Fan::keys_each`]'s key of a ray its fan knows to miss.

@@ -66,6 +66,11 @@ pub fn cast_rays(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: 
     let CastOutputs { t, ids, normals } = out;
     let (t, mut ids, mut normals) = (&mut t[..n], ids.map(|v| &mut v[..n]), normals.map(|v| &mut v[..3 * n]));
     for (run, fan) in &fans {
+        // The fan's own answers where it has them (the same hits).
+        let surfaces = &SplatSurfaces {
+            backend: fan.backend().unwrap_or(surfaces.backend),
+            ..*surfaces
+        };
         let (rays, lens, m) = (&rays[run.clone()], &lens[run.clone()], run.len());
         let ids = slots(ids.as_deref_mut().map(|v| &mut v[run.clone()]), 1, m, FAN_WINDOW);
         let normals = slots(
@@ -218,9 +223,13 @@ pub fn occluded(
         return;
     }
     let packets = crate::accel::use_packets(backend);
-    // The rays `idx` of `rays` (one, or a packet), each answer handed to
-    // `write` by index.
-    let trace = |rays: &[Ray], lens: &[f32], idx: &[u16], write: &mut dyn FnMut(usize, bool)| {
+    // The rays `idx` of `rays` (one, or a packet) asked of `backend`, each
+    // answer handed to `write` by index.
+    let trace = |backend: &dyn Backend,
+                 rays: &[Ray],
+                 lens: &[f32],
+                 idx: &[u16],
+                 write: &mut dyn FnMut(usize, bool)| {
         if let &[i] = idx {
             let i = usize::from(i);
             write(i, backend.occluded_from(&query(rays[i], lens[i])));
@@ -245,6 +254,8 @@ pub fn occluded(
     };
     let out = &mut out[..n];
     for (run, fan) in &fans {
+        // The fan's own answers where it has them (the same answers).
+        let backend = fan.backend().unwrap_or(backend);
         let (rays, lens) = (&rays[run.clone()], &lens[run.clone()]);
         out[run.clone()]
             .par_chunks_mut(FAN_WINDOW)
@@ -256,7 +267,7 @@ pub fn occluded(
                     if miss {
                         idx.iter().for_each(|&i| out[usize::from(i)] = false);
                     } else {
-                        trace(rays, lens, idx, &mut |i, g| out[i] = g);
+                        trace(backend, rays, lens, idx, &mut |i, g| out[i] = g);
                     }
                 });
             });
@@ -267,7 +278,7 @@ pub fn occluded(
         let (rays, lens) = (&rays[range.clone()], &lens[range.clone()]);
         gaps(&fans, range, |piece| {
             batches(rays, piece, packets, &mut |idx| {
-                trace(rays, lens, idx, &mut |i, g| out[i] = g);
+                trace(backend, rays, lens, idx, &mut |i, g| out[i] = g);
             });
         });
     });

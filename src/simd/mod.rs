@@ -39,7 +39,7 @@ mod sort;
 mod tri;
 mod triples;
 pub use count::{count_within, held_within};
-pub use fan::{FanBits, GnomonicGrid, KEY_ELSEWHERE, KEY_MISS, gnomonic_key, gnomonic_keys};
+pub use fan::{FanBits, GnomonicGrid, KEY_ELSEWHERE, KEY_MISS, NO_CELL, gnomonic_cell, gnomonic_key, gnomonic_keys};
 pub use hits::{HITS_PACKS, HitSlots, LaneHits, disc_hits_met};
 pub use lsq::{Row6, normal_equations6};
 pub use near::keys_within;

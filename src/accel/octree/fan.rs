@@ -47,6 +47,7 @@
 //! rays that may hit block by block, in packets of neighbouring
 //! directions (`crate::render::cast`; issue 55, fortieth session).
 
+use super::bins::Binned;
 use super::{NO_PRIMITIVE, Octree, lanes};
 use crate::accel::{FAN_MISS, Fan};
 use crate::simd::{FanBits, GnomonicGrid, Isa, gnomonic_key, gnomonic_keys};
@@ -57,7 +58,7 @@ use rayon::prelude::*;
 
 /// A ball's radius grows by this fraction of `|c| + R` (about 170 ulps of
 /// f32), covering the exact test's rounding.
-const MARGIN: f64 = 1e-5;
+pub(super) const MARGIN: f64 = 1e-5;
 
 /// Rectangles grow by this fraction of `1 + |x0| + |x1|` each way,
 /// covering the f64 arithmetic of rectangles and rays' cells.
@@ -84,7 +85,7 @@ const MAX_CELLS: usize = 1 << 20;
 /// ball covers (module doc).
 pub(super) struct Coverage {
     /// The origin's bits.
-    origin: [u32; 3],
+    pub(super) origin: [u32; 3],
     u: DVec3,
     v: DVec3,
     w: DVec3,
@@ -92,7 +93,7 @@ pub(super) struct Coverage {
     /// cells per axis.
     lo: [f64; 2],
     scale: f64,
-    n: [usize; 2],
+    pub(super) n: [usize; 2],
     /// Per cell (`i + n[0] j`), bit `at % 32` of word `at / 32`: set
     /// when some ball covers it (a bit, not a byte: the rays' reads of the
     /// grid stay in the core's nearest cache).
@@ -105,38 +106,53 @@ pub(super) struct Coverage {
     /// meet it).
     behind: bool,
     /// The SIMD path of the rays' cells (the octree's).
-    isa: Isa,
+    pub(super) isa: Isa,
 }
 
 impl<P: Primitive> Octree<P> {
-    /// The coverage of the rays `rays` (sharing their first ray's
-    /// origin), or `None` when it would not pay ([`MIN_RAYS`]) or a ball
-    /// straddles the plane through the origin across the rays.
-    pub(super) fn build_fan(&self, rays: &[Ray]) -> Option<Coverage> {
+    /// The fan of the rays `rays` (sharing their first ray's origin): the
+    /// coverage with each block's list of primitives ([`Binned`]) where
+    /// the lists are short enough, else the coverage alone; `None` when
+    /// it would not pay ([`MIN_RAYS`]) or a ball straddles the plane
+    /// through the origin across the rays.
+    pub(super) fn build_fan(&self, rays: &[Ray]) -> Option<Box<dyn Fan + '_>> {
+        Some(match self.lists_or_coverage(rays)? {
+            Ok(binned) => Box::new(binned),
+            Err(coverage) => Box::new(coverage),
+        })
+    }
+
+    /// [`Octree::build_fan`]'s fan: the lists, or the coverage alone.
+    pub(super) fn lists_or_coverage(&self, rays: &[Ray]) -> Option<Result<Binned<'_, P>, Coverage>> {
         let origin = rays.first()?.origin;
         if rays.len() < MIN_RAYS.max(self.count) || !origin.is_finite() {
             return None;
         }
         let mut fan = Coverage::frame(origin, rays, self.simd())?;
-        fan.cover(&self.primitives())?;
-        Some(fan)
+        let (ids, prims) = self.primitives();
+        let cells = fan.cover(&prims)?;
+        Some(match super::bins::Lists::of(&fan, &cells, &prims, rays.len()) {
+            Some(lists) => Ok(Binned::new(self, fan, lists, &ids, &prims)),
+            None => Err(fan),
+        })
     }
 
-    /// Every primitive held, once.
-    fn primitives(&self) -> Vec<P> {
+    /// Every primitive held, once, and its id.
+    fn primitives(&self) -> (Vec<u32>, Vec<P>) {
         let mut seen = vec![false; self.count];
-        let mut out = Vec::with_capacity(seen.len());
+        let (mut ids, mut out) = (Vec::with_capacity(seen.len()), Vec::with_capacity(seen.len()));
         let l = lanes::<P>();
         for tree in &self.parts {
             for (p, pack) in tree.packs.iter().enumerate() {
                 for (lane, &id) in tree.pack_ids[p * l..(p + 1) * l].iter().enumerate() {
                     if id != NO_PRIMITIVE && !std::mem::replace(&mut seen[id as usize], true) {
+                        ids.push(id);
                         out.push(pack.get(lane, id, &tree.side));
                     }
                 }
             }
         }
-        out
+        (ids, out)
     }
 }
 
@@ -280,16 +296,17 @@ impl Coverage {
     /// Marks the cells each primitive's ball covers (a difference array
     /// summed along both axes; the rectangles found in parallel, the rows
     /// summed in parallel: the fan is built before any of its run's rays
-    /// is traced); `None` when a ball straddles the plane `p·w = 0` (or is
-    /// not finite).
-    fn cover<P: Primitive>(&mut self, prims: &[P]) -> Option<()> {
+    /// is traced), and gives each primitive's cells `[i0, i1, j0, j1]`
+    /// (`None`: behind, or beside the grid); `None` when a ball straddles
+    /// the plane `p·w = 0` (or is not finite).
+    fn cover<P: Primitive>(&mut self, prims: &[P]) -> Option<Vec<Option<[usize; 4]>>> {
         let [nx, ny] = self.n;
         let seen = prims
             .par_iter()
             .map(|prim| self.rectangle(prim))
             .collect::<Option<Vec<_>>>()?;
         let mut rects = Vec::with_capacity(seen.len());
-        for s in seen {
+        for &s in &seen {
             match s {
                 Seen::Behind => self.behind = true,
                 Seen::Front(reach, cells) => {
@@ -306,7 +323,7 @@ impl Coverage {
         }
         let mut diff = vec![0i32; (nx + 1) * (ny + 1)];
         let at = |i: usize, j: usize| i + (nx + 1) * j;
-        for [i0, i1, j0, j1] in rects {
+        for &[i0, i1, j0, j1] in &rects {
             diff[at(i0, j0)] += 1;
             diff[at(i1 + 1, j0)] -= 1;
             diff[at(i0, j1 + 1)] -= 1;
@@ -329,7 +346,11 @@ impl Coverage {
             covered[at / 32] |= 1 << (at % 32);
         }
         self.covered = covered;
-        Some(())
+        let cells = seen.iter().map(|s| match s {
+            Seen::Front(_, cells) => *cells,
+            Seen::Behind => None,
+        });
+        Some(cells.collect())
     }
 
     /// What the fan sees of `prim`'s ball: wholly behind, or in front with
@@ -369,6 +390,7 @@ impl Coverage {
 }
 
 /// What [`Coverage::rectangle`] finds of a primitive's ball.
+#[derive(Clone, Copy)]
 enum Seen {
     /// Wholly behind the plane through the origin across `w`.
     Behind,
@@ -407,7 +429,7 @@ impl Coverage {
     }
 
     /// The grid as the SIMD module takes it.
-    fn grid(&self) -> GnomonicGrid {
+    pub(super) fn grid(&self) -> GnomonicGrid {
         GnomonicGrid {
             u: self.u.to_array(),
             v: self.v.to_array(),

@@ -65,6 +65,7 @@
 //! neighbour then contains the whole ray. A NaN ray visits cells but never
 //! hits anything.
 
+mod bins;
 mod build;
 mod fan;
 mod packet;
@@ -428,7 +429,6 @@ impl<P: Primitive> Backend for Octree<P> {
     /// many as the primitives.
     fn fan(&self, rays: &[crate::geometry::Ray]) -> Option<Box<dyn super::Fan + '_>> {
         self.build_fan(rays)
-            .map(|f| Box::new(f) as Box<dyn super::Fan>)
     }
 
     fn stats(&self) -> &BuildStats {

@@ -1,0 +1,536 @@
+//! A fan's blocks of directions, each with its own list of the
+//! primitives a ray along it may meet (issue 55): a camera's ray is
+//! tested against its block's list instead of descending the octree.
+//!
+//! The fan ([`Coverage`], `fan`'s module doc) finds for each primitive the
+//! rectangle of the gnomonic plane holding every direction along which the
+//! f32 test [`Primitive::intersect`] can accept a hit of it at `t >= 0`
+//! from the fan's origin: a ray leaving that origin (bit for bit) whose
+//! direction lies in a cell of the grid meets at `t >= 0` only primitives
+//! whose rectangle holds that cell. So each block of 2×2 cells (the
+//! fan's key) lists the primitives whose rectangle meets it, copied into
+//! packs as a leaf's are, and such a ray's query is the brute-force
+//! oracle's over its block's list: every primitive it can hit is there,
+//! each decided by the leaves' own filter and exact test
+//! ([`Visitor::packs_met`]), and the window does not depend on the order
+//! hits are offered ([`CandidateHits`]). The answers are the octree's bit
+//! for bit (`docs/DESIGN.md`, "The backend contract", rule 1); a ray
+//! leaving elsewhere, from `t < 0`, outside the grid, or in a block whose
+//! list is long ([`MAX_LIST`]) is the octree's own.
+//!
+//! The lists are built for the run, after the coverage: the rectangles'
+//! blocks counted, the lists filled primitive by primitive, the packs
+//! filled in parallel. On the bunny's 1024² camera rays a block lists
+//! about 29 splats (16 rays a block), where a ray that may hit descended
+//! about 1,700 instructions of the octree (`docs/notes/backends.md`, "Issue
+//! 55, forty-second session").
+
+use super::fan::{Coverage, MARGIN};
+use super::traverse::{AnyHit, Gather, Visitor};
+use super::{NO_PRIMITIVE, Octree, lanes};
+use crate::accel::{Backend, BuildStats, CandidateHits, Fan, NoSkip, PACKET, Query};
+use crate::geometry::Ray;
+use crate::primitive::{Pack, Primitive};
+use crate::simd::{GnomonicGrid, NO_CELL, gnomonic_cell};
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// Most primitives a block lists: a ray of a block with more is traced
+/// by the octree (a list is tested whole; the octree stops at the
+/// window's end).
+const MAX_LIST: usize = 128;
+
+/// Cells per block along each axis.
+const BLOCK: usize = 4;
+
+/// Most list entries in all, per ray of the run: beyond it the lists are
+/// not built (their memory and building would not pay).
+const MAX_ENTRIES_PER_RAY: usize = 1;
+
+/// The blocks' lists of a fan, as indices into the primitives the fan was
+/// covered with ([`Lists::of`]).
+pub(super) struct Lists {
+    /// Blocks per row (the fan's key: `j / 2 * cols + i / 2`).
+    cols: usize,
+    /// Per block, the first of its packs; the last entry ends the last
+    /// block's.
+    first: Vec<u32>,
+    /// Per block, whether its list is too long to be kept ([`MAX_LIST`]).
+    long: Vec<bool>,
+    /// Per lane of the packs, block after block: the index of the
+    /// primitive, [`NO_PRIMITIVE`] on padding; each block's nearest first.
+    slots: Vec<u32>,
+    /// Per pack, a bound below the distance from the origin of every
+    /// point its lanes' exact tests can accept ([`Lists::of`]).
+    near: Vec<f32>,
+}
+
+impl Lists {
+    /// The lists of the fan `cov`, each primitive `k` of `prims` in every
+    /// block its cells `cells[k]` (`[i0, i1, j0, j1]`, [`Coverage`]'s)
+    /// meet, for a run of `rays` rays; `None` when they would hold more
+    /// than [`MAX_ENTRIES_PER_RAY`] entries a ray.
+    ///
+    /// Each list runs from the primitive nearest the origin to the
+    /// farthest by `|c| - R` (its centre's distance less its ball's
+    /// radius grown by the fan's [`MARGIN`], as its rectangle's): a point
+    /// the exact test accepts lies within that margin of the primitive, so
+    /// no nearer to the origin than that. A pack's bound is its first
+    /// lane's, rounded down to f32.
+    pub(super) fn of<P: Primitive>(
+        cov: &Coverage,
+        cells: &[Option<[usize; 4]>],
+        prims: &[P],
+        rays: usize,
+    ) -> Option<Lists> {
+        let l = lanes::<P>();
+        let cols = cov.n[0].div_ceil(BLOCK);
+        let blocks = cols * cov.n[1].div_ceil(BLOCK);
+        let span = |[i0, i1, j0, j1]: [usize; 4]| (i0 / BLOCK..=i1 / BLOCK, j0 / BLOCK..=j1 / BLOCK);
+        let entries: usize = cells
+            .iter()
+            .flatten()
+            .map(|&c| {
+                let (i, j) = span(c);
+                i.count() * j.count()
+            })
+            .sum();
+        if entries > MAX_ENTRIES_PER_RAY * rays {
+            return None;
+        }
+        // Bands of rows of blocks, each counted and filled by one task
+        // (every task reads every primitive's cells, writes only its own).
+        let rows = cov.n[1].div_ceil(BLOCK);
+        let band = rows.div_ceil(4 * rayon::current_num_threads()).max(1);
+        let within = |c: [usize; 4], r0: usize, r1: usize| {
+            let (i, j) = span(c);
+            (i, *j.start().max(&r0)..(*j.end() + 1).min(r1))
+        };
+        let mut count = vec![0u32; blocks];
+        count.par_chunks_mut(band * cols).enumerate().for_each(|(k, count)| {
+            let r0 = k * band;
+            let r1 = r0 + count.len() / cols;
+            for &c in cells.iter().flatten() {
+                let (i, j) = within(c, r0, r1);
+                for bj in j {
+                    for bi in i.clone() {
+                        count[(bj - r0) * cols + bi] += 1;
+                    }
+                }
+            }
+        });
+        let long: Vec<bool> = count.iter().map(|&c| c as usize > MAX_LIST).collect();
+        let mut first = Vec::with_capacity(blocks + 1);
+        let mut at = 0u32;
+        for (&c, &long) in count.iter().zip(&long) {
+            first.push(at);
+            if !long {
+                at += (c as usize).div_ceil(l) as u32;
+            }
+        }
+        first.push(at);
+        // The primitives in front, nearest first.
+        let o = DVec3::from_array(cov.origin.map(f32::from_bits).map(f64::from));
+        let bound = |p: &P| {
+            let c = p.center().as_dvec3() - o;
+            let r = f64::from(p.bounding_radius());
+            c.length() - (r + MARGIN * (c.length() + r))
+        };
+        let near: Vec<f64> = prims.par_iter().map(bound).collect();
+        // Bounds in front are positive (`|c| > R` there): their bits sort
+        // as they do.
+        let mut order: Vec<(u64, u32)> = (0..prims.len() as u32)
+            .filter(|&k| cells[k as usize].is_some())
+            .map(|k| (near[k as usize].max(0.0).to_bits(), k))
+            .collect();
+        order.sort_unstable();
+        let mut slots = vec![NO_PRIMITIVE; at as usize * l];
+        let mut pack_near = vec![f32::INFINITY; at as usize];
+        let mut pieces = Vec::new();
+        let (mut rest, mut rest_near) = (&mut slots[..], &mut pack_near[..]);
+        for r0 in (0..rows).step_by(band) {
+            let r1 = (r0 + band).min(rows);
+            let packs = (first[r1 * cols] - first[r0 * cols]) as usize;
+            let (s, r) = std::mem::take(&mut rest).split_at_mut(packs * l);
+            let (n, rn) = std::mem::take(&mut rest_near).split_at_mut(packs);
+            (rest, rest_near) = (r, rn);
+            pieces.push((r0, r1, s, n));
+        }
+        pieces.into_par_iter().for_each(|(r0, r1, slots, pack_near)| {
+            let base = first[r0 * cols];
+            let mut next: Vec<u32> = first[r0 * cols..r1 * cols].iter().map(|&f| (f - base) * l as u32).collect();
+            for &(_, k) in &order {
+                let Some(c) = cells[k as usize] else {
+                    continue;
+                };
+                let (i, j) = within(c, r0, r1);
+                for bj in j {
+                    for bi in i.clone() {
+                        let b = bj * cols + bi;
+                        if long[b] {
+                            continue;
+                        }
+                        let slot = &mut next[b - r0 * cols];
+                        let at = *slot as usize;
+                        if at.is_multiple_of(l) {
+                            pack_near[at / l] = down(near[k as usize]);
+                        }
+                        slots[at] = k;
+                        *slot += 1;
+                    }
+                }
+            }
+        });
+        Some(Lists {
+            cols,
+            first,
+            long,
+            slots,
+            near: pack_near,
+        })
+    }
+}
+
+/// The greatest f32 at most `x` (NaN: minus infinity, a bound that stops
+/// nothing).
+fn down(x: f64) -> f32 {
+    if x.is_nan() {
+        return f32::NEG_INFINITY;
+    }
+    let y = x as f32;
+    if f64::from(y) > x { y.next_down() } else { y }
+}
+
+/// A fan whose blocks hold their lists of primitives, and the backend that
+/// answers its run's rays from them (module doc).
+pub(super) struct Binned<'a, P: Primitive> {
+    oct: &'a Octree<P>,
+    cov: Coverage,
+    grid: GnomonicGrid,
+    cols: usize,
+    first: Vec<u32>,
+    long: Vec<bool>,
+    /// The lists' primitives, packs block after block.
+    packs: Vec<P::Pack>,
+    /// The primitive id of each lane of `packs`.
+    ids: Vec<u32>,
+    /// Per pack, the bound below its lanes' hits' distances from the
+    /// origin ([`Lists::of`]).
+    near: Vec<f32>,
+}
+
+impl<'a, P: Primitive> Binned<'a, P> {
+    /// The lists `lists` of the fan `cov` of `oct`, made of the primitives
+    /// `prims` (ids `ids`) the fan was covered with.
+    pub(super) fn new(oct: &'a Octree<P>, cov: Coverage, lists: Lists, ids: &[u32], prims: &[P]) -> Self {
+        let l = lanes::<P>();
+        let Lists {
+            cols,
+            first,
+            long,
+            mut slots,
+            near,
+        } = lists;
+        let packs = slots
+            .par_chunks(l)
+            .map(|s| {
+                <P::Pack as Pack<P>>::from_fn(|lane| (s[lane] != NO_PRIMITIVE).then(|| prims[s[lane] as usize]))
+            })
+            .collect();
+        slots.par_iter_mut().for_each(|k| {
+            if *k != NO_PRIMITIVE {
+                *k = ids[*k as usize];
+            }
+        });
+        Binned {
+            oct,
+            grid: cov.grid(),
+            cov,
+            cols,
+            first,
+            long,
+            packs,
+            ids: slots,
+            near,
+        }
+    }
+
+    /// The block whose list answers `q`: a ray leaving the fan's origin
+    /// from `t_min >= 0`, its direction in a cell of the grid, in a block
+    /// with a list; `None` for the octree.
+    #[inline]
+    fn block(&self, q: &Query) -> Option<usize> {
+        // A NaN `t_min` is not at least 0.
+        let from_zero = q.t_min.partial_cmp(&0.0).is_some_and(std::cmp::Ordering::is_ge);
+        if !from_zero || q.ray.origin.to_array().map(f32::to_bits) != self.cov.origin {
+            return None;
+        }
+        let [i, j] = gnomonic_cell(&self.grid, &q.ray);
+        if i == NO_CELL {
+            return None;
+        }
+        let b = j as usize / BLOCK * self.cols + i as usize / BLOCK;
+        (!self.long[b]).then_some(b)
+    }
+
+    /// Block `b`'s list to `visitor` for the ray `ray`, pack after pack,
+    /// nearest first, each filtered with the window's end as it stands, up
+    /// to the first pack whose bound lies past that end; true when the
+    /// visitor stopped.
+    #[inline]
+    fn visit<V: Visitor<P>>(&self, b: usize, ray: &Ray, visitor: &mut V) -> bool {
+        let l = lanes::<P>();
+        let (p0, p1) = (self.first[b] as usize, self.first[b + 1] as usize);
+        let side = &*self.oct.parts[0].side;
+        // `|d|`, and a margin far above the rounding of `t |d|` here and of
+        // the hit's `t` (a point within the bound's margin of the
+        // primitive lies on the ray at `t |d|` from the origin).
+        let len = ray.dir.as_dvec3().length() * (1.0 + 1e-9);
+        for p in p0..p1 {
+            if f64::from(self.near[p]) > f64::from(visitor.cutoff()) * len {
+                break;
+            }
+            let one = |_: usize, _: usize, _: f32| 1;
+            if visitor.packs_met(&self.packs[p..=p], &self.ids[p * l..(p + 1) * l], one, self.cov.isa, side) {
+                return true;
+            }
+        }
+        false
+    }
+}
+
+impl<P: Primitive> Fan for Binned<'_, P> {
+    #[inline]
+    fn misses(&self, ray: &Ray) -> bool {
+        self.cov.misses(ray)
+    }
+
+    fn keys_each(&self, rays: &[Ray], keys: &mut [u32]) {
+        self.cov.keys_each(rays, keys);
+    }
+
+    fn backend(&self) -> Option<&dyn Backend> {
+        Some(self)
+    }
+}
+
+impl<P: Primitive> Binned<'_, P> {
+    /// The block whose list answers the closest-hit query `q`
+    /// ([`Binned::block`]; nothing skipped).
+    #[inline]
+    fn gathers(&self, q: &Query) -> Option<usize> {
+        match (&q.from, q.pass) {
+            (None, None) => self.block(q),
+            _ => None,
+        }
+    }
+
+    /// The occlusion query `q`'s block ([`Binned::block`]; a pass-over
+    /// rule, no departure).
+    #[inline]
+    fn occludes(&self, q: &Query) -> Option<usize> {
+        if q.from.is_none() { self.block(q) } else { None }
+    }
+
+    /// [`Backend::intersect_from`] of `q` from block `b`'s list.
+    #[inline]
+    fn gather(&self, b: usize, q: &Query, hits: &mut CandidateHits) {
+        hits.clear();
+        if !q.meets_nothing() {
+            self.visit(b, &q.ray, &mut Gather::new(&q.ray, q.t_min, q.t_max, NoSkip, hits));
+        }
+    }
+
+    /// [`Backend::occluded_from`] of `q` from block `b`'s list.
+    #[inline]
+    fn any_hit(&self, b: usize, q: &Query) -> bool {
+        if q.meets_nothing() {
+            return false;
+        }
+        match q.pass {
+            None => self.visit(b, &q.ray, &mut AnyHit::new(&q.ray, q.t_min, q.t_max, NoSkip)),
+            Some(_) => self.visit(b, &q.ray, &mut AnyHit::new(&q.ray, q.t_min, q.t_max, q.secondary())),
+        }
+    }
+
+    /// Each of `qs`' block by `which`, or `None` when some query has none
+    /// (or there are more than [`PACKET`]).
+    #[inline]
+    fn blocks(&self, qs: &[Query], which: impl Fn(&Query) -> Option<usize>) -> Option<[usize; PACKET]> {
+        let mut bs = [0; PACKET];
+        if qs.len() > PACKET {
+            return None;
+        }
+        for (b, q) in bs.iter_mut().zip(qs) {
+            *b = which(q)?;
+        }
+        Some(bs)
+    }
+}
+
+impl<P: Primitive> Backend for Binned<'_, P> {
+    fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
+        match self.gathers(q) {
+            Some(b) => self.gather(b, q, hits),
+            None => self.oct.intersect_from(q, hits),
+        }
+    }
+
+    fn occluded_from(&self, q: &Query) -> bool {
+        match self.occludes(q) {
+            Some(b) => self.any_hit(b, q),
+            None => self.oct.occluded_from(q),
+        }
+    }
+
+    fn stats(&self) -> &BuildStats {
+        self.oct.stats()
+    }
+
+    /// Each query from its list when every one of `qs` has one, else the
+    /// octree's packets.
+    fn intersect_packet(&self, qs: &[Query], hits: &mut [CandidateHits]) {
+        let Some(bs) = self.blocks(qs, |q| self.gathers(q)) else {
+            return self.oct.intersect_packet(qs, hits);
+        };
+        for ((q, h), &b) in qs.iter().zip(hits.iter_mut()).zip(&bs) {
+            self.gather(b, q, h);
+        }
+    }
+
+    /// Each query from its list when every one of `qs` has one, else the
+    /// octree's packets.
+    fn occluded_packet(&self, qs: &[Query], out: &mut [bool]) {
+        let Some(bs) = self.blocks(qs, |q| self.occludes(q)) else {
+            return self.oct.occluded_packet(qs, out);
+        };
+        for ((q, o), &b) in qs.iter().zip(out.iter_mut()).zip(&bs) {
+            *o = self.any_hit(b, q);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{Octree, OctreeParams};
+    use crate::accel::{Backend, CandidateHits, Query};
+    use crate::geometry::Ray;
+    use crate::primitive::{Clip, ClipLine, ClippedDisc, Disc, Primitive};
+    use crate::rng::SplitMix64;
+    use crate::splat::Splat;
+    use glam::Vec3;
+
+    /// 4,000 small discs on a bumpy sphere, a few wide ones across it.
+    fn discs() -> Vec<Disc> {
+        let n = 4_000;
+        (0..n)
+            .map(|i| {
+                let z = 1.0 - (2 * i + 1) as f32 / n as f32;
+                let phi = i as f32 * 2.399_963;
+                let s = (1.0 - z * z).sqrt();
+                let d = Vec3::new(s * phi.cos(), s * phi.sin(), z);
+                let r = 1.0 + 0.15 * (5.0 * d.x).sin() * (4.0 * d.y).cos();
+                let radius = if i % 1000 == 7 { 0.6 } else { 0.06 };
+                Splat::disc(d * r, d, radius).unwrap().disc_geometry()
+            })
+            .collect()
+    }
+
+    /// A camera's rays from `eye` towards the origin (`side`² of them,
+    /// directions not unit), then a tenth as many from the eye in random
+    /// directions (a third behind it, the others around and past the
+    /// camera's view), a few of them from elsewhere.
+    fn rays(eye: Vec3, side: usize) -> Vec<Ray> {
+        let fwd = -eye.normalize();
+        let right = fwd.cross(Vec3::Y).normalize();
+        let up = right.cross(fwd);
+        let mut rays: Vec<Ray> = (0..side * side)
+            .map(|k| {
+                let s = |i: usize| 0.4 * ((i as f32 + 0.5) / side as f32 * 2.0 - 1.0);
+                Ray::new(eye, (fwd + right * s(k % side) + up * s(k / side)) * 1.7)
+            })
+            .collect();
+        let mut rng = SplitMix64::new(42);
+        let mut r = || rng.next_f32() * 2.0 - 1.0;
+        for k in 0..side * side / 10 {
+            let d = if k % 3 == 0 { -fwd + Vec3::new(r(), r(), r()) } else { fwd + Vec3::new(r(), r(), r()) * 0.5 };
+            let o = if k % 20 == 0 { eye + Vec3::new(r(), r(), r()) } else { eye };
+            rays.push(Ray::new(o, d));
+        }
+        rays
+    }
+
+    /// The window as bits: ids, `t`, `u`, `v`, and whether it overflowed.
+    fn bits(h: &CandidateHits) -> (Vec<[u32; 4]>, bool) {
+        let c = h.as_slice().iter().map(|c| [c.id, c.t.to_bits(), c.u.to_bits(), c.v.to_bits()]);
+        (c.collect(), h.overflowed())
+    }
+
+    /// Every query of `rays` over spans `[0, inf)`, `[0.5, 2]` and `[1, 1]`
+    /// asked of the lists and of the octree: the same windows bit for bit
+    /// one at a time and in packets of 8, the same occlusion; the number of
+    /// queries the lists answered, and of windows not empty.
+    fn compare<P: Primitive>(oct: &Octree<P>, rays: &[Ray]) -> (usize, usize) {
+        let binned = match oct.lists_or_coverage(rays) {
+            Some(Ok(b)) => b,
+            _ => panic!("no lists"),
+        };
+        let (mut listed, mut found) = (0, 0);
+        let xi = 0.05;
+        let (mut a, mut b) = (CandidateHits::new(xi), CandidateHits::new(xi));
+        for (t_min, t_max) in [(0.0, f32::INFINITY), (0.5, 2.0), (1.0, 1.0)] {
+            for ray in rays {
+                let q = Query::new(*ray, t_min, t_max);
+                listed += usize::from(binned.gathers(&q).is_some());
+                binned.intersect_from(&q, &mut a);
+                oct.intersect_from(&q, &mut b);
+                assert_eq!(bits(&a), bits(&b), "{ray:?} {t_min} {t_max}");
+                found += usize::from(!a.is_empty());
+                assert_eq!(binned.occluded_from(&q), oct.occluded_from(&q), "{ray:?}");
+            }
+            for packet in rays.chunks(8) {
+                let qs: Vec<Query> = packet.iter().map(|r| Query::new(*r, t_min, t_max)).collect();
+                let mut got = vec![CandidateHits::new(xi); qs.len()];
+                binned.intersect_packet(&qs, &mut got);
+                let mut occluded = vec![false; qs.len()];
+                binned.occluded_packet(&qs, &mut occluded);
+                for ((q, g), o) in qs.iter().zip(&got).zip(occluded) {
+                    oct.intersect_from(q, &mut b);
+                    assert_eq!(bits(g), bits(&b));
+                    assert_eq!(o, oct.occluded_from(q));
+                }
+            }
+        }
+        (listed, found)
+    }
+
+    /// On the bumpy sphere's 4,000 discs, whole and with clip lines on every
+    /// third, seen by 22,500 camera rays and 2,250 more from the eye
+    /// (some behind it, some from elsewhere): the lists' windows and
+    /// occlusion are the octree's bit for bit, and they answer most rays.
+    #[test]
+    fn block_lists_answer_as_the_octree_bit_for_bit() {
+        let discs = discs();
+        let clipped: Vec<ClippedDisc> = discs
+            .iter()
+            .enumerate()
+            .map(|(i, &disc)| {
+                let a = i as f32 * 0.7;
+                let line = ClipLine { a: a.cos(), b: a.sin(), d: 0.3 };
+                ClippedDisc { disc, clip: if i % 3 == 0 { Clip::one(line) } else { Clip::NONE } }
+            })
+            .collect();
+        let rays = rays(Vec3::new(0.9, 0.7, 3.6), 150);
+        let params = OctreeParams::default();
+        let whole = compare(&Octree::new(&discs, &params), &rays);
+        let cut = compare(&Octree::new(&clipped, &params), &rays);
+        eprintln!("queries listed, windows not empty (whole, clipped): {whole:?} {cut:?}");
+        // Measured: 35,409 of the 74,250 queries answered from the lists
+        // (the others outside the grid, behind, from elsewhere or in
+        // blocks of more than `MAX_LIST`), 9,571 and 9,545 windows not
+        // empty.
+        for (listed, found) in [whole, cut] {
+            assert!(listed > 34_000 && found > 9_000, "{listed} {found}");
+        }
+    }
+}
