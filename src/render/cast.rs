@@ -15,7 +15,9 @@
 //! splat's bounding ball lies, takes most of a camera's rays that miss
 //! an object in view), and the others are traced in windows of 8192 by
 //! the fan's keys, so that a packet holds neighbouring directions
-//! whatever the order of the batch. When the backend prefers packets
+//! whatever the order of the batch, by the fan's own backend where it has
+//! one ([`Fan::backend`]: the octree's answers a ray from the list of
+//! splats of its block of directions). When the backend prefers packets
 //! ([`crate::accel::use_packets`]), the batch finds its packets itself:
 //! runs of consecutive rays leaving one origin (a camera's or a scanner's
 //! rays, in any order of directions) are split by their directions' signs

@@ -25,7 +25,7 @@
 //! about 1,700 instructions of the octree (`docs/notes/backends.md`, "Issue
 //! 55, forty-second session").
 
-use super::fan::{Coverage, MARGIN};
+use super::fan::{Coverage, MARGIN, MIN_RAYS};
 use super::traverse::{AnyHit, Gather, Visitor};
 use super::{NO_PRIMITIVE, Octree, lanes};
 use crate::accel::{Backend, BuildStats, CandidateHits, Fan, NoSkip, PACKET, Query};
@@ -46,6 +46,53 @@ const BLOCK: usize = 4;
 /// Most list entries in all, per ray of the run: beyond it the lists are
 /// not built (their memory and building would not pay).
 const MAX_ENTRIES_PER_RAY: usize = 1;
+
+impl<P: Primitive> Octree<P> {
+    /// The fan of the rays `rays` (sharing their first ray's origin): the
+    /// coverage with each block's list of primitives ([`Binned`]) where
+    /// the lists are short enough, else the coverage alone; `None` when
+    /// it would not pay ([`MIN_RAYS`]) or a ball straddles the plane
+    /// through the origin across the rays.
+    pub(super) fn build_fan(&self, rays: &[Ray]) -> Option<Box<dyn Fan + '_>> {
+        Some(match self.lists_or_coverage(rays)? {
+            Ok(binned) => Box::new(binned),
+            Err(coverage) => Box::new(coverage),
+        })
+    }
+
+    /// [`Octree::build_fan`]'s fan: the lists, or the coverage alone.
+    pub(super) fn lists_or_coverage(&self, rays: &[Ray]) -> Option<Result<Binned<'_, P>, Coverage>> {
+        let origin = rays.first()?.origin;
+        if rays.len() < MIN_RAYS.max(self.count) || !origin.is_finite() {
+            return None;
+        }
+        let mut fan = Coverage::frame(origin, rays, self.simd())?;
+        let (ids, prims) = self.primitives();
+        let cells = fan.cover(&prims)?;
+        Some(match Lists::of(&fan, &cells, &prims, rays.len()) {
+            Some(lists) => Ok(Binned::new(self, fan, lists, &ids, &prims)),
+            None => Err(fan),
+        })
+    }
+
+    /// Every primitive held, once, and its id.
+    fn primitives(&self) -> (Vec<u32>, Vec<P>) {
+        let mut seen = vec![false; self.count];
+        let (mut ids, mut out) = (Vec::with_capacity(seen.len()), Vec::with_capacity(seen.len()));
+        let l = lanes::<P>();
+        for tree in &self.parts {
+            for (p, pack) in tree.packs.iter().enumerate() {
+                for (lane, &id) in tree.pack_ids[p * l..(p + 1) * l].iter().enumerate() {
+                    if id != NO_PRIMITIVE && !std::mem::replace(&mut seen[id as usize], true) {
+                        ids.push(id);
+                        out.push(pack.get(lane, id, &tree.side));
+                    }
+                }
+            }
+        }
+        (ids, out)
+    }
+}
 
 /// The blocks' lists of a fan, as indices into the primitives the fan was
 /// covered with ([`Lists::of`]).

@@ -45,14 +45,14 @@
 //! the rays of a row read one row of the grid's bits. A ray's key
 //! ([`Fan::keys_each`]) is its block of 2×2 cells: the batch traces the
 //! rays that may hit block by block, in packets of neighbouring
-//! directions (`crate::render::cast`; issue 55, fortieth session).
+//! directions (`crate::render::cast`; issue 55, fortieth session). The
+//! same rectangles give each block of cells its list of primitives, from
+//! which the rays that may hit are answered (`bins`).
 
-use super::bins::Binned;
-use super::{NO_PRIMITIVE, Octree, lanes};
 use crate::accel::{FAN_MISS, Fan};
 use crate::simd::{FanBits, GnomonicGrid, Isa, gnomonic_key, gnomonic_keys};
 use crate::geometry::Ray;
-use crate::primitive::{Pack, Primitive};
+use crate::primitive::Primitive;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
@@ -70,7 +70,7 @@ const MIN_COS: f64 = 0.25;
 
 /// Fewest rays in a run for which a fan is built, and the least ratio of
 /// rays to primitives: fewer do not pay for visiting every primitive.
-const MIN_RAYS: usize = 4096;
+pub(super) const MIN_RAYS: usize = 4096;
 
 /// Rays sampled for the run's mean direction and the grid's extent.
 const SAMPLE: usize = 4096;
@@ -109,58 +109,11 @@ pub(super) struct Coverage {
     pub(super) isa: Isa,
 }
 
-impl<P: Primitive> Octree<P> {
-    /// The fan of the rays `rays` (sharing their first ray's origin): the
-    /// coverage with each block's list of primitives ([`Binned`]) where
-    /// the lists are short enough, else the coverage alone; `None` when
-    /// it would not pay ([`MIN_RAYS`]) or a ball straddles the plane
-    /// through the origin across the rays.
-    pub(super) fn build_fan(&self, rays: &[Ray]) -> Option<Box<dyn Fan + '_>> {
-        Some(match self.lists_or_coverage(rays)? {
-            Ok(binned) => Box::new(binned),
-            Err(coverage) => Box::new(coverage),
-        })
-    }
-
-    /// [`Octree::build_fan`]'s fan: the lists, or the coverage alone.
-    pub(super) fn lists_or_coverage(&self, rays: &[Ray]) -> Option<Result<Binned<'_, P>, Coverage>> {
-        let origin = rays.first()?.origin;
-        if rays.len() < MIN_RAYS.max(self.count) || !origin.is_finite() {
-            return None;
-        }
-        let mut fan = Coverage::frame(origin, rays, self.simd())?;
-        let (ids, prims) = self.primitives();
-        let cells = fan.cover(&prims)?;
-        Some(match super::bins::Lists::of(&fan, &cells, &prims, rays.len()) {
-            Some(lists) => Ok(Binned::new(self, fan, lists, &ids, &prims)),
-            None => Err(fan),
-        })
-    }
-
-    /// Every primitive held, once, and its id.
-    fn primitives(&self) -> (Vec<u32>, Vec<P>) {
-        let mut seen = vec![false; self.count];
-        let (mut ids, mut out) = (Vec::with_capacity(seen.len()), Vec::with_capacity(seen.len()));
-        let l = lanes::<P>();
-        for tree in &self.parts {
-            for (p, pack) in tree.packs.iter().enumerate() {
-                for (lane, &id) in tree.pack_ids[p * l..(p + 1) * l].iter().enumerate() {
-                    if id != NO_PRIMITIVE && !std::mem::replace(&mut seen[id as usize], true) {
-                        ids.push(id);
-                        out.push(pack.get(lane, id, &tree.side));
-                    }
-                }
-            }
-        }
-        (ids, out)
-    }
-}
-
 impl Coverage {
     /// The basis and the grid (nothing covered yet): `w` the mean of a sample
     /// of the rays' unit directions, the grid over the sample's gnomonic
     /// extent grown by a sixteenth each way, sized for [`RAYS_PER_CELL`].
-    fn frame(origin: Vec3, rays: &[Ray], isa: Isa) -> Option<Coverage> {
+    pub(super) fn frame(origin: Vec3, rays: &[Ray], isa: Isa) -> Option<Coverage> {
         // An odd step: a camera's rows of an even width are sampled at
         // every column, not at the same few.
         let step = rays.len().div_ceil(SAMPLE) | 1;
@@ -299,7 +252,7 @@ impl Coverage {
     /// is traced), and gives each primitive's cells `[i0, i1, j0, j1]`
     /// (`None`: behind, or beside the grid); `None` when a ball straddles
     /// the plane `p·w = 0` (or is not finite).
-    fn cover<P: Primitive>(&mut self, prims: &[P]) -> Option<Vec<Option<[usize; 4]>>> {
+    pub(super) fn cover<P: Primitive>(&mut self, prims: &[P]) -> Option<Vec<Option<[usize; 4]>>> {
         let [nx, ny] = self.n;
         let seen = prims
             .par_iter()
