@@ -40,9 +40,9 @@ def module_of(src: Path, f: Path) -> tuple:
 
 
 def strip_comments(text: str) -> str:
-    # A file's unit tests (`#[cfg(test)] mod tests`, at its end) are not
+    # A file's unit tests (`#[cfg(test)] mod tests`, `pub(super)` or not, at its end) are not
     # part of the library's graph.
-    text = re.split(r"#\[cfg\(test\)\]\s*mod\s", text)[0]
+    text = re.split(r"#\[cfg\(test\)\]\s*(?:pub(?:\([^)]*\))?\s+)?mod\s", text)[0]
     text = re.sub(r"/\*.*?\*/", "", text, flags=re.S)
     text = re.sub(r"//[^\n]*", "", text)
     # String literals can hold `::` (messages); blank them out.

@@ -462,28 +462,17 @@ impl<P: Primitive> Backend for Binned<'_, P> {
 
 #[cfg(test)]
 mod tests {
+    use super::super::traverse::tests::{bumpy, clipped_thirds};
     use super::super::{Octree, OctreeParams};
     use crate::accel::{Backend, CandidateHits, Query};
     use crate::geometry::Ray;
-    use crate::primitive::{Clip, ClipLine, ClippedDisc, Disc, Primitive};
+    use crate::primitive::{Disc, Primitive};
     use crate::rng::SplitMix64;
-    use crate::splat::Splat;
     use glam::Vec3;
 
     /// 4,000 small discs on a bumpy sphere, a few wide ones across it.
     fn discs() -> Vec<Disc> {
-        let n = 4_000;
-        (0..n)
-            .map(|i| {
-                let z = 1.0 - (2 * i + 1) as f32 / n as f32;
-                let phi = i as f32 * 2.399_963;
-                let s = (1.0 - z * z).sqrt();
-                let d = Vec3::new(s * phi.cos(), s * phi.sin(), z);
-                let r = 1.0 + 0.15 * (5.0 * d.x).sin() * (4.0 * d.y).cos();
-                let radius = if i % 1000 == 7 { 0.6 } else { 0.06 };
-                Splat::disc(d * r, d, radius).unwrap().disc_geometry()
-            })
-            .collect()
+        bumpy(4_000, |i| if i % 1000 == 7 { 0.6 } else { 0.06 })
     }
 
     /// A camera's rays from `eye` towards the origin (`side`² of them,
@@ -561,15 +550,7 @@ mod tests {
     #[test]
     fn block_lists_answer_as_the_octree_bit_for_bit() {
         let discs = discs();
-        let clipped: Vec<ClippedDisc> = discs
-            .iter()
-            .enumerate()
-            .map(|(i, &disc)| {
-                let a = i as f32 * 0.7;
-                let line = ClipLine { a: a.cos(), b: a.sin(), d: 0.3 };
-                ClippedDisc { disc, clip: if i % 3 == 0 { Clip::one(line) } else { Clip::NONE } }
-            })
-            .collect();
+        let clipped = clipped_thirds(&discs);
         let rays = rays(Vec3::new(0.9, 0.7, 3.6), 150);
         let params = OctreeParams::default();
         let whole = compare(&Octree::new(&discs, &params), &rays);

@@ -809,7 +809,7 @@ impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, P, S> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::super::{Layout, Octree, OctreeParams, Tree};
     use super::{AnyHit, Gather, RayCtx, Visitor};
     use crate::accel::{CandidateHits, NoSkip, Skip};
@@ -886,15 +886,7 @@ mod tests {
     #[test]
     fn lanes_decided_from_the_filter_gather_the_exact_tests_windows_bit_for_bit() {
         let discs = blob();
-        let clipped: Vec<ClippedDisc> = discs
-            .iter()
-            .enumerate()
-            .map(|(i, &disc)| {
-                let a = i as f32 * 0.7;
-                let line = ClipLine { a: a.cos(), b: a.sin(), d: 0.3 };
-                ClippedDisc { disc, clip: if i % 3 == 0 { Clip::one(line) } else { Clip::NONE } }
-            })
-            .collect();
+        let clipped = clipped_thirds(&discs);
         let params = OctreeParams { layout: Layout::Copies, ..OctreeParams::default() };
         // The rays of `pack_boxes_skip_packs_and_keep_every_answer_bit_for_bit`
         // (the same seed and order), whose whole discs' windows it counted.
@@ -957,7 +949,12 @@ mod tests {
     /// 16,000 discs on a bumpy closed surface about the unit sphere (a
     /// Fibonacci lattice), overlapping, normals along the radius.
     fn blob() -> Vec<Disc> {
-        let n = 16_000;
+        bumpy(16_000, |_| 0.03)
+    }
+
+    /// `n` discs on [`blob`]'s bumpy surface, disc `i` of radius
+    /// `radius(i)`.
+    pub(in crate::accel::octree) fn bumpy(n: usize, radius: impl Fn(usize) -> f32) -> Vec<Disc> {
         (0..n)
             .map(|i| {
                 let z = 1.0 - (2 * i + 1) as f32 / n as f32;
@@ -965,7 +962,20 @@ mod tests {
                 let s = (1.0 - z * z).sqrt();
                 let d = Vec3::new(s * phi.cos(), s * phi.sin(), z);
                 let r = 1.0 + 0.15 * (5.0 * d.x).sin() * (4.0 * d.y).cos();
-                Splat::disc(d * r, d, 0.03).unwrap().disc_geometry()
+                Splat::disc(d * r, d, radius(i)).unwrap().disc_geometry()
+            })
+            .collect()
+    }
+
+    /// `discs` with a clip line on every third.
+    pub(in crate::accel::octree) fn clipped_thirds(discs: &[Disc]) -> Vec<ClippedDisc> {
+        discs
+            .iter()
+            .enumerate()
+            .map(|(i, &disc)| {
+                let a = i as f32 * 0.7;
+                let line = ClipLine { a: a.cos(), b: a.sin(), d: 0.3 };
+                ClippedDisc { disc, clip: if i % 3 == 0 { Clip::one(line) } else { Clip::NONE } }
             })
             .collect()
     }
