@@ -27,14 +27,13 @@
 //! camera `cast_rays` call takes 0.71 of the octree's instructions
 //! (`docs/notes/backends.md`, "Issue 55, forty-second session").
 
-use super::fan::{Coverage, MARGIN, MIN_RAYS};
+use super::fan::{Coverage, MIN_RAYS};
 use super::traverse::{AnyHit, Gather, Visitor};
 use super::{NO_PRIMITIVE, Octree, lanes};
 use crate::accel::{Backend, BuildStats, CandidateHits, Fan, NoSkip, PACKET, Query};
 use crate::geometry::Ray;
 use crate::primitive::{Pack, Primitive};
 use crate::simd::{GnomonicGrid, NO_CELL, gnomonic_cell};
-use glam::DVec3;
 use rayon::prelude::*;
 
 /// Most primitives a block lists: a ray of a block with more is traced
@@ -122,8 +121,8 @@ impl Lists {
     /// than [`MAX_ENTRIES_PER_RAY`] entries a ray.
     ///
     /// Each list runs from the primitive nearest the origin to the
-    /// farthest by `|c| - R` (its centre's distance less its ball's
-    /// radius grown by the fan's [`MARGIN`], as its rectangle's): a point
+    /// farthest by `|c| - R` (its centre's distance less the radius of
+    /// its ball as the fan grows it, [`Coverage::ball`]): a point
     /// the exact test accepts lies within that margin of the primitive, so
     /// no nearer to the origin than that. A pack's bound is its first
     /// lane's, rounded down to f32.
@@ -179,19 +178,16 @@ impl Lists {
             }
         }
         first.push(at);
-        // The primitives in front, nearest first.
-        let o = DVec3::from_array(cov.origin.map(f32::from_bits).map(f64::from));
+        // The primitives in front, nearest first. A bound is at least 0
+        // (a hit's distance is), so its bits sort as it does.
         let bound = |p: &P| {
-            let c = p.center().as_dvec3() - o;
-            let r = f64::from(p.bounding_radius());
-            c.length() - (r + MARGIN * (c.length() + r))
+            let (c, r) = cov.ball(p);
+            (c.length() - r).max(0.0)
         };
         let near: Vec<f64> = prims.par_iter().map(bound).collect();
-        // Bounds in front are positive (`|c| > R` there): their bits sort
-        // as they do.
         let mut order: Vec<(u64, u32)> = (0..prims.len() as u32)
             .filter(|&k| cells[k as usize].is_some())
-            .map(|k| (near[k as usize].max(0.0).to_bits(), k))
+            .map(|k| (near[k as usize].to_bits(), k))
             .collect();
         order.sort_unstable();
         let mut slots = vec![NO_PRIMITIVE; at as usize * l];

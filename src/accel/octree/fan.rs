@@ -58,7 +58,7 @@ use rayon::prelude::*;
 
 /// A ball's radius grows by this fraction of `|c| + R` (about 170 ulps of
 /// f32), covering the exact test's rounding.
-pub(super) const MARGIN: f64 = 1e-5;
+const MARGIN: f64 = 1e-5;
 
 /// Rectangles grow by this fraction of `1 + |x0| + |x1|` each way,
 /// covering the f64 arithmetic of rectangles and rays' cells.
@@ -306,15 +306,22 @@ impl Coverage {
         Some(cells.collect())
     }
 
+    /// `prim`'s ball as the fan takes it: its centre from the origin, and
+    /// its [`Primitive::bounding_radius`] grown by [`MARGIN`] of `|c| +
+    /// R` (module doc).
+    pub(super) fn ball<P: Primitive>(&self, prim: &P) -> (DVec3, f64) {
+        let o = Vec3::from_array(self.origin.map(f32::from_bits)).as_dvec3();
+        let c = prim.center().as_dvec3() - o;
+        let r = f64::from(prim.bounding_radius());
+        (c, r + MARGIN * (c.length() + r))
+    }
+
     /// What the fan sees of `prim`'s ball: wholly behind, or in front with
     /// its reach `[i0, i1, j0, j1]` in cells ([`Coverage::reach`]) and the
     /// cells it covers (`None` beside the grid); `None` when it straddles
     /// the plane `p·w = 0` (or is not finite).
     fn rectangle<P: Primitive>(&self, prim: &P) -> Option<Seen> {
-        let o = Vec3::from_array(self.origin.map(f32::from_bits)).as_dvec3();
-        let c = prim.center().as_dvec3() - o;
-        let r = f64::from(prim.bounding_radius());
-        let r = r + MARGIN * (c.length() + r);
+        let (c, r) = self.ball(prim);
         let (cu, cv, cw) = (c.dot(self.u), c.dot(self.v), c.dot(self.w));
         // Wholly behind: no ray of the fan in front (`d·w > 0`, `t >= 0`)
         // meets it. NaN compares false: no fan.
