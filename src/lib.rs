@@ -13,7 +13,7 @@
 //! | make splats | [`generate`] with [`GenerationOptions`] → [`Generated`] ([`Splat`]s and what generation found) |
 //! | build a scene | [`load_scene`] (a TOML file), [`parse_scene_file`] + [`build_scene`], [`splats_scene`] (splats and a [`Camera`]) → [`Scene`] |
 //! | render | [`render`] → [`Frame`] ([`RayCounts`]), [`write_image`] |
-//! | cast rays on a chosen backend | [`backend_names`], [`build_backend`] → a [`Backend`], [`SplatSurfaces`], [`cast_rays`] ([`Ray`], [`CastOutputs`]) |
+//! | cast rays on a chosen backend | [`backend_names`], [`build_backend`] → a [`Backend`], [`SplatSurfaces`], [`cast_rays`] ([`Ray`], [`CastOutputs`]) or [`cast_rays_owned`] ([`CastAnswers`]) |
 //! | compare backends | [`compare`] ([`CompareOptions`]) → [`Compared`]: a [`CompareReport`] ([`BackendRun`], [`Agreement`], [`TruthReport`], [`NamedTruthErrors`], [`TruthErrors`], [`ErrorBudget`]) and the frames |
 //! | speed against error | [`sweep`] ([`SweepRequest`]) → [`SweepResult`]: [`SweepRow`]s and a [`MeshRow`] ([`BackendFigures`]) |
 //! | the command line | [`run_cli`] |
@@ -110,7 +110,7 @@ pub use resolve::ShadingMode;
 
 // Casting rays on a chosen backend.
 pub use accel::{Backend, CandidateHits, FAN_ELSEWHERE, FAN_MISS, Fan, Ray};
-pub use render::cast::{CastOutputs, cast_rays};
+pub use render::cast::{CastAnswers, CastOutputs, cast_rays, cast_rays_owned};
 pub use render::integrator::SplatSurfaces;
 
 // Comparing backends, speed against error.

@@ -8,7 +8,7 @@ mod common;
 
 use glam::Vec3;
 use splatray::accel::{CandidateHits, PassOver, Query, Ray};
-use splatray::render::cast::{CastOutputs, cast_rays, occluded};
+use splatray::render::cast::{CastOutputs, cast_rays, cast_rays_owned, occluded};
 use splatray::render::integrator::SplatSurfaces;
 use splatray::rng::SplitMix64;
 use splatray::scene::{Scene, build_scene, parse_scene_str};
@@ -215,6 +215,24 @@ fn agrees(
             "{name}: ray {i}"
         );
     }
+    // Outputs made for the call (written as misses first, a fan's misses
+    // then left): the same bits; and the distance with the normals alone.
+    let own = cast_rays_owned(s, rays, lens, (true, true));
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&own.t), bits(&t), "{name}: owned t");
+    assert_eq!(own.ids.as_deref(), Some(&ids[..]), "{name}: owned ids");
+    assert_eq!(
+        own.normals.as_deref().map(bits),
+        Some(bits(&normals)),
+        "{name}: owned normals"
+    );
+    let part = cast_rays_owned(s, rays, lens, (false, true));
+    assert!(
+        part.ids.is_none()
+            && part.normals.as_deref().map(bits) == Some(bits(&normals))
+            && bits(&part.t) == bits(&t),
+        "{name}: owned, no ids"
+    );
     // The distance alone: the same distances.
     let mut t_only = vec![0.0; n];
     cast_rays(

@@ -15,7 +15,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use rayon::prelude::*;
 use splatray::accel::{Backend, CandidateHits, Ray};
-use splatray::render::cast::{CastOutputs, cast_rays, occluded};
+use splatray::render::cast::{CastAnswers, cast_rays_owned, occluded};
 use splatray::render::integrator::{SplatSurfaces, Surfaces};
 use splatray::resolve::{Silhouette, silhouettes};
 use splatray::scene::Scene;
@@ -353,23 +353,11 @@ impl SplatScene {
         normals: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
         let (rays, lens) = self.rays(rays)?;
-        let n = rays.len();
-        let (t, ids, nrm) = py.detach(|| {
-            let mut t = vec![0.0f32; n];
-            let mut ids = splat_ids.then(|| vec![0u32; n]);
-            let mut nrm = normals.then(|| vec![0.0f32; 3 * n]);
-            cast_rays(
-                &self.resolving(),
-                &rays,
-                &lens,
-                CastOutputs {
-                    t: &mut t,
-                    ids: ids.as_deref_mut(),
-                    normals: nrm.as_deref_mut(),
-                },
-            );
-            (t, ids, nrm)
-        });
+        let CastAnswers {
+            t,
+            ids,
+            normals: nrm,
+        } = py.detach(|| cast_rays_owned(&self.resolving(), &rays, &lens, (splat_ids, normals)));
         self.keep(rays, lens);
         // The vectors are handed to numpy as they are (no copy).
         let d = pyo3::types::PyDict::new(py);
@@ -454,16 +442,11 @@ impl SplatScene {
     fn _cast_seconds(&self, py: Python<'_>, rays: &Bound<'_, PyAny>) -> PyResult<(f64, f64)> {
         let (rays, lens) = self.rays(rays)?;
         Ok(py.detach(|| {
-            let n = rays.len();
-            let (mut t, mut ids, mut nrm) = (vec![0.0; n], vec![0; n], vec![0.0; 3 * n]);
             let (t0, c0) = (Instant::now(), process_cpu());
-            let out = CastOutputs {
-                t: &mut t,
-                ids: Some(&mut ids),
-                normals: Some(&mut nrm),
-            };
-            cast_rays(&self.resolving(), &rays, &lens, out);
-            (t0.elapsed().as_secs_f64(), process_cpu() - c0)
+            let answers = cast_rays_owned(&self.resolving(), &rays, &lens, (true, true));
+            let took = (t0.elapsed().as_secs_f64(), process_cpu() - c0);
+            drop(answers);
+            took
         }))
     }
 }
