@@ -99,7 +99,9 @@ fn batch_casts_are_one_ray_at_a_time_bit_for_bit() {
 /// misses and orders the rest by direction, give the one-ray-at-a-time
 /// answers on every backend, row after row, column after column and
 /// shuffled (each window of rays sorted by the fan's keys, whatever its
-/// order).
+/// order), and with rays from elsewhere inside the run (which the fan
+/// takes whole, sampling its origins): a mutant whose keys take every ray
+/// as leaving the eye fails here.
 #[test]
 fn camera_batches_through_a_fan_are_one_ray_at_a_time() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
@@ -120,6 +122,30 @@ fn camera_batches_through_a_fan_are_one_ray_at_a_time() {
     for i in (1..shuffled.len()).rev() {
         shuffled.swap(i, rng.below(i + 1));
     }
+    // Rows with three rays of every 512 after the first 512 leaving
+    // elsewhere (a ulp off the eye, or from points 2 and 3 before the
+    // bunny's middle along their directions, so that directions the eye's
+    // fan knows to miss meet the bunny), between the rays a fan's run
+    // samples: the run goes on over them.
+    let strays: Vec<Ray> = rows
+        .iter()
+        .enumerate()
+        .map(|(k, r)| {
+            let through = |s: f32| Ray {
+                origin: at - s * r.dir.normalize(),
+                ..*r
+            };
+            match (k >= 512).then_some(k % 512) {
+                Some(100) => Ray {
+                    origin: Vec3::new(eye.x.next_up(), eye.y, eye.z),
+                    ..*r
+                },
+                Some(200) => through(2.0),
+                Some(300) => through(3.0),
+                _ => *r,
+            }
+        })
+        .collect();
     for name in common::renderers() {
         let info = splatray::accel::registry::find(name).unwrap();
         let backend = info.build_splats(&bunny.splats).unwrap();
@@ -132,6 +158,7 @@ fn camera_batches_through_a_fan_are_one_ray_at_a_time() {
             ("rows", &rows),
             ("columns", &columns),
             ("shuffled", &shuffled),
+            ("strays", &strays),
         ] {
             let lens: Vec<f32> = rays.iter().map(|r| r.dir.length()).collect();
             // Measured: 7,334 of 47,200 hit, and as many are occluded
