@@ -8,7 +8,8 @@
 //! rays from scattered origins (issue 55's random rays) is traced in the
 //! order of its origins' cells instead (`Order`), so consecutive rays
 //! meet the same nodes and splats while they are in the caches. A run of at
-//! least 4096 consecutive rays leaving one origin (a camera's) is
+//! least 4096 consecutive rays leaving one origin (a camera's; found by
+//! sampling, the fan checking each ray's origin) is
 //! first shown to the backend ([`crate::accel::Backend::fan`]): the rays
 //! its [`Fan`] knows to miss everything are answered so without a
 //! traversal (issue 55: the octree's fan, the directions in which no
@@ -29,7 +30,8 @@
 //! candidate windows (`docs/DESIGN.md`, "The backend contract"), resolved
 //! by the same resolver (§3.2, eq. 5), and a fan's misses are rays that
 //! window would leave empty. Outputs other than the distance are written
-//! only when asked for.
+//! only when asked for; [`cast_rays_owned`] makes them, written as misses
+//! in parallel first.
 
 use super::integrator::SplatSurfaces;
 use crate::accel::{Backend, CandidateHits, FAN_ELSEWHERE, FAN_MISS, Fan, PACKET, PassOver, Query, Ray};
