@@ -80,6 +80,8 @@ pub struct CastAnswers {
 /// one thread (the allocator's zeroing of reused memory) and a fan's
 /// windows wrote their misses over them: 4.5 % of a camera call's time
 /// (issue 55, forty-third session).
+///
+/// Panics if `lens` is shorter than `rays`.
 pub fn cast_rays_owned(
     surfaces: &SplatSurfaces<'_>,
     rays: &[Ray],
@@ -88,17 +90,26 @@ pub fn cast_rays_owned(
 ) -> CastAnswers {
     let n = rays.len();
     let (t, id, normal) = answer(None, 1.0);
-    let mut a = CastAnswers {
-        t: filled(t, n),
-        ids: ids.then(|| filled(id, n)),
-        normals: normals.then(|| filled(normal[0], 3 * n)),
-    };
+    let order = Order::of(rays);
+    // The outputs written while the fans are built (the fill runs at the
+    // memory's pace, the build's serial parts leave a core idle).
+    let (mut a, fans) = rayon::join(
+        || CastAnswers {
+            t: filled(t, n),
+            ids: ids.then(|| filled(id, n)),
+            normals: normals.then(|| filled(normal[0], 3 * n)),
+        },
+        || match order {
+            Some(_) => Vec::new(),
+            None => fans(surfaces.backend, rays),
+        },
+    );
     let out = CastOutputs {
         t: &mut a.t,
         ids: a.ids.as_deref_mut(),
         normals: a.normals.as_deref_mut(),
     };
-    cast_into(surfaces, rays, lens, out, true);
+    cast_planned(surfaces, (rays, lens), out, true, (order, fans));
     a
 }
 
@@ -112,13 +123,32 @@ fn filled<T: Clone + Send>(v: T, m: usize) -> Vec<T> {
 /// [`cast_rays`], whose outputs already hold a miss's answer in every
 /// slot where `missed`.
 fn cast_into(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: CastOutputs<'_>, missed: bool) {
+    let order = Order::of(rays);
+    let fans = match order {
+        Some(_) => Vec::new(),
+        None => fans(surfaces.backend, rays),
+    };
+    cast_planned(surfaces, (rays, lens), out, missed, (order, fans));
+}
+
+/// The runs of a batch of one origin, each with its fan ([`fans`]).
+type Fans<'b> = Vec<(Range<usize>, Box<dyn Fan + 'b>)>;
+
+/// [`cast_into`] of a batch whose order ([`Order::of`]) or, without one,
+/// whose fans are found.
+fn cast_planned(
+    surfaces: &SplatSurfaces<'_>,
+    (rays, lens): (&[Ray], &[f32]),
+    out: CastOutputs<'_>,
+    missed: bool,
+    (order, fans): (Option<Order>, Fans<'_>),
+) {
     let n = rays.len();
     assert!(lens.len() >= n && out.t.len() >= n, "an output per ray");
-    if let Some(order) = Order::of(rays) {
+    if let Some(order) = order {
         return cast_in_order(surfaces, rays, lens, out, &order);
     }
     let packets = crate::accel::use_packets(surfaces.backend);
-    let fans = fans(surfaces.backend, rays);
     let CastOutputs { t, ids, normals } = out;
     let (t, mut ids, mut normals) = (&mut t[..n], ids.map(|v| &mut v[..n]), normals.map(|v| &mut v[..3 * n]));
     for (run, fan) in &fans {
@@ -645,7 +675,7 @@ const FAN_SAMPLE: usize = 64;
 /// answered as its own, since a fan answers only the rays leaving its
 /// origin (its keys and lists look at each ray's) and hands the others
 /// to its backend.
-fn fans<'b>(backend: &'b dyn Backend, rays: &[Ray]) -> Vec<(Range<usize>, Box<dyn Fan + 'b>)> {
+fn fans<'b>(backend: &'b dyn Backend, rays: &[Ray]) -> Fans<'b> {
     let bits = |r: &Ray| r.origin.to_array().map(f32::to_bits);
     // Whether each chunk of [`CHUNK`] is taken whole: a run steps over
     // such chunks.
