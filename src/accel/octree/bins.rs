@@ -67,8 +67,10 @@ impl<P: Primitive> Octree<P> {
         if rays.len() < MIN_RAYS.max(self.count) || !origin.is_finite() {
             return None;
         }
-        let mut fan = Coverage::frame(origin, rays, self.simd())?;
-        let (ids, prims) = self.primitives();
+        // The frame (from the rays) and the primitives (from the tree),
+        // each on one thread.
+        let (fan, (ids, prims)) = rayon::join(|| Coverage::frame(origin, rays, self.simd()), || self.primitives());
+        let mut fan = fan?;
         let cells = fan.cover(&prims)?;
         Some(match Lists::of(&fan, &cells, &prims, rays.len()) {
             Some(lists) => Ok(Binned::new(self, fan, lists, &ids, &prims)),
@@ -189,7 +191,8 @@ impl Lists {
             .filter(|&k| cells[k as usize].is_some())
             .map(|k| (near[k as usize].to_bits(), k))
             .collect();
-        order.sort_unstable();
+        // Keys unique (an index each): the one order, found in parallel.
+        order.par_sort_unstable();
         let mut slots = vec![NO_PRIMITIVE; at as usize * l];
         let mut pack_near = vec![f32::INFINITY; at as usize];
         let mut pieces = Vec::new();
