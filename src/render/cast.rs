@@ -60,7 +60,9 @@ pub struct CastOutputs<'a> {
 ///
 /// Panics if `lens` or an output is shorter than the rays ask.
 pub fn cast_rays(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: CastOutputs<'_>) {
-    cast_into(surfaces, rays, lens, out, false);
+    let order = Order::of(rays);
+    let fans = unordered_fans(order.as_ref(), surfaces.backend, rays);
+    cast_planned(surfaces, (rays, lens), out, false, (order, fans));
 }
 
 /// [`cast_rays`]' answers in outputs of their own: `t`, and the splat ids
@@ -99,10 +101,7 @@ pub fn cast_rays_owned(
             ids: ids.then(|| filled(id, n)),
             normals: normals.then(|| filled(normal[0], 3 * n)),
         },
-        || match order {
-            Some(_) => Vec::new(),
-            None => fans(surfaces.backend, rays),
-        },
+        || unordered_fans(order.as_ref(), surfaces.backend, rays),
     );
     let out = CastOutputs {
         t: &mut a.t,
@@ -120,22 +119,21 @@ fn filled<T: Clone + Send>(v: T, m: usize) -> Vec<T> {
     out
 }
 
-/// [`cast_rays`], whose outputs already hold a miss's answer in every
-/// slot where `missed`.
-fn cast_into(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: CastOutputs<'_>, missed: bool) {
-    let order = Order::of(rays);
-    let fans = match order {
-        Some(_) => Vec::new(),
-        None => fans(surfaces.backend, rays),
-    };
-    cast_planned(surfaces, (rays, lens), out, missed, (order, fans));
-}
-
 /// The runs of a batch of one origin, each with its fan ([`fans`]).
 type Fans<'b> = Vec<(Range<usize>, Box<dyn Fan + 'b>)>;
 
-/// [`cast_into`] of a batch whose order ([`Order::of`]) or, without one,
-/// whose fans are found.
+/// The fans of a batch that has no `order` (a batch traced in its
+/// origins' order has none).
+fn unordered_fans<'b>(order: Option<&Order>, backend: &'b dyn Backend, rays: &[Ray]) -> Fans<'b> {
+    match order {
+        Some(_) => Vec::new(),
+        None => fans(backend, rays),
+    }
+}
+
+/// [`cast_rays`] of a batch whose order ([`Order::of`]) or, without one,
+/// whose fans are found, into outputs that already hold a miss's answer
+/// in every slot where `missed`.
 fn cast_planned(
     surfaces: &SplatSurfaces<'_>,
     (rays, lens): (&[Ray], &[f32]),

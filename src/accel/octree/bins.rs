@@ -71,8 +71,8 @@ impl<P: Primitive> Octree<P> {
         // each on one thread.
         let (fan, (ids, prims)) = rayon::join(|| Coverage::frame(origin, rays, self.simd()), || self.primitives());
         let mut fan = fan?;
-        let cells = fan.cover(&prims)?;
-        Some(match Lists::of(&fan, &cells, &prims, rays.len()) {
+        let (cells, near) = fan.cover(&prims)?;
+        Some(match Lists::of::<P>(&fan, (&cells, &near), rays.len()) {
             Some(lists) => Ok(Binned::new(self, fan, lists, &ids, &prims)),
             None => Err(fan),
         })
@@ -117,21 +117,21 @@ pub(super) struct Lists {
 }
 
 impl Lists {
-    /// The lists of the fan `cov`, each primitive `k` of `prims` in every
-    /// block its cells `cells[k]` (`[i0, i1, j0, j1]`, [`Coverage`]'s)
-    /// meet, for a run of `rays` rays; `None` when they would hold more
-    /// than [`MAX_ENTRIES_PER_RAY`] entries a ray.
+    /// The lists of the fan `cov`, each primitive `k` (of packs of `P`) in
+    /// every block its cells `cells[k]` (`[i0, i1, j0, j1]`, what
+    /// [`Coverage::cover`] gave with `near`) meet, for a run of `rays`
+    /// rays; `None` when they would hold more than
+    /// [`MAX_ENTRIES_PER_RAY`] entries a ray.
     ///
     /// Each list runs from the primitive nearest the origin to the
-    /// farthest by `|c| - R` (its centre's distance less the radius of
-    /// its ball as the fan grows it, [`Coverage::ball`]): a point
-    /// the exact test accepts lies within that margin of the primitive, so
-    /// no nearer to the origin than that. A pack's bound is its first
-    /// lane's, rounded down to f32.
+    /// farthest by `near[k]`, `|c| - R` (its centre's distance less the
+    /// radius of its ball as the fan grows it): a point the exact test
+    /// accepts lies within that margin of the primitive, so no nearer to
+    /// the origin than that. A pack's bound is its first lane's, rounded
+    /// down to f32.
     pub(super) fn of<P: Primitive>(
         cov: &Coverage,
-        cells: &[Option<[usize; 4]>],
-        prims: &[P],
+        (cells, near): (&[Option<[usize; 4]>], &[f64]),
         rays: usize,
     ) -> Option<Lists> {
         let l = lanes::<P>();
@@ -182,12 +182,7 @@ impl Lists {
         first.push(at);
         // The primitives in front, nearest first. A bound is at least 0
         // (a hit's distance is), so its bits sort as it does.
-        let bound = |p: &P| {
-            let (c, r) = cov.ball(p);
-            (c.length() - r).max(0.0)
-        };
-        let near: Vec<f64> = prims.par_iter().map(bound).collect();
-        let mut order: Vec<(u64, u32)> = (0..prims.len() as u32)
+        let mut order: Vec<(u64, u32)> = (0..cells.len() as u32)
             .filter(|&k| cells[k as usize].is_some())
             .map(|k| (near[k as usize].to_bits(), k))
             .collect();

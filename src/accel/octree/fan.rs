@@ -250,9 +250,11 @@ impl Coverage {
     /// summed along both axes; the rectangles found in parallel, the rows
     /// summed in parallel: the fan is built before any of its run's rays
     /// is traced), and gives each primitive's cells `[i0, i1, j0, j1]`
-    /// (`None`: behind, or beside the grid); `None` when a ball straddles
-    /// the plane `p·w = 0` (or is not finite).
-    pub(super) fn cover<P: Primitive>(&mut self, prims: &[P]) -> Option<Vec<Option<[usize; 4]>>> {
+    /// (`None`: behind, or beside the grid) and, in front, its ball's
+    /// least distance from the origin, `|c| - R` at least 0 (infinite
+    /// behind); `None` when a ball straddles the plane `p·w = 0` (or is
+    /// not finite).
+    pub(super) fn cover<P: Primitive>(&mut self, prims: &[P]) -> Option<Covered> {
         let [nx, ny] = self.n;
         let seen = prims
             .par_iter()
@@ -262,7 +264,7 @@ impl Coverage {
         for &s in &seen {
             match s {
                 Seen::Behind => self.behind = true,
-                Seen::Front(reach, cells) => {
+                Seen::Front(reach, cells, _) => {
                     // A reach not a number holds every direction.
                     let low = |x: f64| if x.is_nan() { f64::NEG_INFINITY } else { x };
                     let high = |x: f64| if x.is_nan() { f64::INFINITY } else { x };
@@ -299,17 +301,16 @@ impl Coverage {
             covered[at / 32] |= 1 << (at % 32);
         }
         self.covered = covered;
-        let cells = seen.iter().map(|s| match s {
-            Seen::Front(_, cells) => *cells,
-            Seen::Behind => None,
-        });
-        Some(cells.collect())
+        Some(seen.iter().map(|s| match s {
+            Seen::Front(_, cells, near) => (*cells, *near),
+            Seen::Behind => (None, f64::INFINITY),
+        }).unzip())
     }
 
     /// `prim`'s ball as the fan takes it: its centre from the origin, and
     /// its [`Primitive::bounding_radius`] grown by [`MARGIN`] of `|c| +
     /// R` (module doc).
-    pub(super) fn ball<P: Primitive>(&self, prim: &P) -> (DVec3, f64) {
+    fn ball<P: Primitive>(&self, prim: &P) -> (DVec3, f64) {
         let o = Vec3::from_array(self.origin.map(f32::from_bits)).as_dvec3();
         let c = prim.center().as_dvec3() - o;
         let r = f64::from(prim.bounding_radius());
@@ -345,18 +346,22 @@ impl Coverage {
             (Some([i0, i1]), Some([j0, j1])) => Some([i0, i1, j0, j1]),
             _ => None,
         };
-        Some(Seen::Front([i0, i1, j0, j1], cells))
+        Some(Seen::Front([i0, i1, j0, j1], cells, (c.length() - r).max(0.0)))
     }
 }
+
+/// What [`Coverage::cover`] gives: each primitive's cells, and its ball's
+/// least distance from the origin.
+pub(super) type Covered = (Vec<Option<[usize; 4]>>, Vec<f64>);
 
 /// What [`Coverage::rectangle`] finds of a primitive's ball.
 #[derive(Clone, Copy)]
 enum Seen {
     /// Wholly behind the plane through the origin across `w`.
     Behind,
-    /// Wholly in front: its reach in cells, and the cells it covers
-    /// (`None`: beside the grid).
-    Front([f64; 4], Option<[usize; 4]>),
+    /// Wholly in front: its reach in cells, the cells it covers (`None`:
+    /// beside the grid), and its ball's least distance from the origin.
+    Front([f64; 4], Option<[usize; 4]>, f64),
 }
 
 impl Fan for Coverage {
