@@ -93,14 +93,28 @@ pub fn cast_rays_owned(
     let n = rays.len();
     let (t, id, normal) = answer(None, 1.0);
     let order = Order::of(rays);
+    // Allocated here, on the caller's thread: a vector allocated on one of
+    // the pool's threads comes from that thread's arena, and the caller
+    // freeing it there kept a batch's outputs more in the process (peak
+    // memory 20 MB higher casting 1M rays three times).
+    let mut a = CastAnswers {
+        t: Vec::with_capacity(n),
+        ids: ids.then(|| Vec::with_capacity(n)),
+        normals: normals.then(|| Vec::with_capacity(3 * n)),
+    };
     // The outputs written while the fans are built (the fill runs at the
     // memory's pace, the build's serial parts leave a core idle).
-    let (mut a, fans) = rayon::join(
-        || CastAnswers {
-            t: filled(t, n),
-            ids: ids.then(|| filled(id, n)),
-            normals: normals.then(|| filled(normal[0], 3 * n)),
-        },
+    let fill = |a: &mut CastAnswers| {
+        fill(&mut a.t, t, n);
+        if let Some(v) = &mut a.ids {
+            fill(v, id, n);
+        }
+        if let Some(v) = &mut a.normals {
+            fill(v, normal[0], 3 * n);
+        }
+    };
+    let ((), fans) = rayon::join(
+        || fill(&mut a),
         || unordered_fans(order.as_ref(), surfaces.backend, rays),
     );
     let out = CastOutputs {
@@ -112,11 +126,9 @@ pub fn cast_rays_owned(
     a
 }
 
-/// `m` copies of `v`, written in parallel.
-fn filled<T: Clone + Send>(v: T, m: usize) -> Vec<T> {
-    let mut out = Vec::with_capacity(m);
-    out.par_extend(rayon::iter::repeat_n(v, m));
-    out
+/// `m` copies of `x` appended to `v`, written in parallel.
+fn fill<T: Clone + Send>(v: &mut Vec<T>, x: T, m: usize) {
+    v.par_extend(rayon::iter::repeat_n(x, m));
 }
 
 /// The runs of a batch of one origin, each with its fan ([`fans`]).
