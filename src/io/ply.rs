@@ -501,22 +501,27 @@ fn cloud_from_rows(
     cloud_from_world(world, normals, colors)
 }
 
-/// A binary little-endian vertex element of scalar properties that comes
-/// first in its file: its records are read in place, in parallel, with the
-/// values [`PointRow`] would take (a property's last-named slot wins, as it
-/// does there; the slots are [`PointRow`]'s nine).
-struct VertexColumns<'a> {
+/// Each property of a vertex element: its name, offset in a record and
+/// type ([`Records::of`]).
+pub(crate) type Properties<'f> = Vec<(&'f str, usize, Scalar)>;
+
+/// The records of a binary little-endian vertex element of scalar
+/// properties that comes first in its file, read in place (in parallel by
+/// the callers): the point reader's [`VertexColumns`] and the splat
+/// file's reader (`super::splat_ply`).
+pub(crate) struct Records<'a> {
     body: &'a [u8],
-    count: usize,
+    /// Records in the element.
+    pub(crate) count: usize,
     record: usize,
-    /// (offset in the record, type, a colour's normalisation) of each slot.
-    slots: [Option<(usize, Scalar, bool)>; 9],
 }
 
-impl<'a> VertexColumns<'a> {
+impl<'a> Records<'a> {
     /// `None` when the file is not such a file (ascii, big-endian, a list
     /// property, another element first): it is read row by row instead.
-    fn of(file: &PlyFile<'a>) -> Option<VertexColumns<'a>> {
+    /// With the records, each property's name, offset in a record and type,
+    /// in the header's order.
+    pub(crate) fn of<'f>(file: &'f PlyFile<'a>) -> Option<(Records<'a>, Properties<'f>)> {
         if file.header.encoding != Encoding::BinaryLittleEndian {
             return None;
         }
@@ -524,35 +529,66 @@ impl<'a> VertexColumns<'a> {
         if name != "vertex" {
             return None;
         }
-        let mut slots = [None; 9];
+        let mut props = Vec::with_capacity(def.properties.len());
         let mut record = 0;
         for (name, p) in &def.properties {
             let PropertyType::Scalar(t) = &p.data_type else {
                 return None;
             };
             let s = Scalar::of(t);
-            if let Some((slot, color)) = point_slot(name) {
-                slots[slot] = Some((record, s, color));
-            }
+            props.push((name.as_str(), record, s));
             record += s.size();
         }
         let bytes = *file.cursor.get_ref();
         let start = usize::try_from(file.cursor.position()).ok()?;
         let len = def.count.checked_mul(record)?;
         let body = bytes.get(start..start.checked_add(len)?)?;
-        Some(VertexColumns {
-            body,
-            count: def.count,
-            record,
-            slots,
-        })
+        Some((
+            Records {
+                body,
+                count: def.count,
+                record,
+            },
+            props,
+        ))
+    }
+
+    /// The bytes of record `r` from `offset` on.
+    #[inline]
+    pub(crate) fn at(&self, r: usize, offset: usize) -> &'a [u8] {
+        &self.body[r * self.record + offset..]
+    }
+}
+
+/// A binary little-endian vertex element of scalar properties that comes
+/// first in its file ([`Records`]): its records are read in place, in
+/// parallel, with the values [`PointRow`] would take (a property's
+/// last-named slot wins, as it does there; the slots are [`PointRow`]'s
+/// nine).
+struct VertexColumns<'a> {
+    records: Records<'a>,
+    /// (offset in the record, type, a colour's normalisation) of each slot.
+    slots: [Option<(usize, Scalar, bool)>; 9],
+}
+
+impl<'a> VertexColumns<'a> {
+    /// `None` when the file is not such a file ([`Records::of`]).
+    fn of(file: &PlyFile<'a>) -> Option<VertexColumns<'a>> {
+        let (records, props) = Records::of(file)?;
+        let mut slots = [None; 9];
+        for (name, offset, s) in props {
+            if let Some((slot, color)) = point_slot(name) {
+                slots[slot] = Some((offset, s, color));
+            }
+        }
+        Some(VertexColumns { records, slots })
     }
 
     /// Slot `i` of every record (NaN where the file has no such property).
     fn column(&self, i: usize) -> impl Fn(usize) -> f64 + Sync + '_ {
         move |r| match self.slots[i] {
-            Some((o, s, false)) => s.read(&self.body[r * self.record + o..]),
-            Some((o, s, true)) => s.unit(&self.body[r * self.record + o..]),
+            Some((o, s, false)) => s.read(self.records.at(r, o)),
+            Some((o, s, true)) => s.unit(self.records.at(r, o)),
             None => f64::NAN,
         }
     }
@@ -563,15 +599,16 @@ impl<'a> VertexColumns<'a> {
             let (x, y, z) = (self.column(a), self.column(a + 1), self.column(a + 2));
             move |r: usize| DVec3::new(x(r), y(r), z(r))
         };
-        let world: Vec<DVec3> = (0..self.count).into_par_iter().map(v3(0)).collect();
+        let count = self.records.count;
+        let world: Vec<DVec3> = (0..count).into_par_iter().map(v3(0)).collect();
         let normals = with_normals.then(|| {
             let n = v3(3);
-            (0..self.count).into_par_iter().map(|r| n(r).as_vec3()).collect()
+            (0..count).into_par_iter().map(|r| n(r).as_vec3()).collect()
         });
         let colors = with_colors.then(|| {
             let c = v3(6);
             let lin = |x: f64| srgb_to_linear(if x.is_finite() { x as f32 } else { 0.0 });
-            (0..self.count)
+            (0..count)
                 .into_par_iter()
                 .map(|r| {
                     let c = c(r);
@@ -715,7 +752,7 @@ pub(crate) fn read_mesh_full(bytes: &[u8]) -> Result<MeshRead, IoErrorKind> {
 
 /// A scalar type of a binary little-endian PLY.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Scalar {
+pub(crate) enum Scalar {
     I8,
     U8,
     I16,
@@ -760,7 +797,7 @@ impl Scalar {
             Scalar::F64 => 8,
         }
     }
-    fn read(self, b: &[u8]) -> f64 {
+    pub(crate) fn read(self, b: &[u8]) -> f64 {
         let a = |n: usize| -> [u8; 8] {
             let mut x = [0u8; 8];
             x[..n].copy_from_slice(&b[..n]);
