@@ -47,7 +47,9 @@
 //! run: the backends take turns pass by pass, and each ratio is the median
 //! over the passes of the two speeds in the same pass.
 //! `SPLATRAY_BENCH_PAIRS=k` sets the passes (3 by default) and skips
-//! criterion; `SPLATRAY_BENCH_ONLY=octree,embree` keeps only the rows named.
+//! criterion; `SPLATRAY_BENCH_ONLY=octree,embree` keeps only the rows named;
+//! `SPLATRAY_BENCH_SPLATS=FILE.ply` takes a splat file's discs instead of
+//! the blobby surface's sizes (the camera framing them).
 //! "MB" is what each structure holds: everything the octree keeps, and for
 //! Embree the bytes its device memory monitor saw it keep for the scene.
 
@@ -299,17 +301,47 @@ struct Scene {
 fn scene(n: usize) -> Scene {
     // The splats live as long as the run: the shadow queries' pass-over
     // rule refers to them.
-    let splats: &'static [Splat] = Box::leak(blobby_splats(n, 0x5eed_2007).into_boxed_slice());
+    let splats = blobby_splats(n, 0x5eed_2007);
+    scene_of(
+        splats,
+        (Vec3::new(0.7, 1.1, 4.0), Vec3::ZERO),
+        Vec3::new(5.0, 6.0, 3.0),
+    )
+}
+
+/// The scene of a splat file's splats (`SPLATRAY_BENCH_SPLATS`, their
+/// discs; clip lines are not traced): the camera looks at their box's
+/// centre from in front, above and to the right, and the light stands
+/// higher, as the triangle rows' do for the mesh.
+fn file_scene(path: &str) -> (usize, Scene) {
+    let set = splatray::io::read_splats(std::path::Path::new(path))
+        .expect("SPLATRAY_BENCH_SPLATS: a splat file");
+    let (lo, hi) = set.splats.iter().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), s| (lo.min(s.center), hi.max(s.center)),
+    );
+    let (c, size) = ((lo + hi) * 0.5, (hi - lo).max_element());
+    let n = set.splats.len();
+    let eye = c + Vec3::new(0.3, 0.4, 1.4) * size;
+    (
+        n,
+        scene_of(set.splats, (eye, c), c + Vec3::new(1.5, 2.5, 1.0) * size),
+    )
+}
+
+/// The scene of `splats`: `W`x`H` camera rays from `eye` towards `at`, and
+/// the shadow rays of their Phong hits towards a point `light`.
+fn scene_of(splats: Vec<Splat>, (eye, at): (Vec3, Vec3), light: Vec3) -> Scene {
+    let splats: &'static [Splat] = Box::leak(splats.into_boxed_slice());
     let curved: &'static Curved<'static> = Box::leak(Box::new(Curved(splats)));
     let scale = SceneScale::from_diagonal(diagonal(splats));
-    let primary = camera_queries(Vec3::new(0.7, 1.1, 4.0), Vec3::ZERO, W, H);
+    let primary = camera_queries(eye, at, W, H);
     // Shadow rays from the Phong hits of the primary rays (found by the
     // octree; the agreement suite shows every backend finds the same), as
     // the renderer traces them: leaving the hit's splat and passing hits
     // beyond Phong splats' curved silhouettes.
     let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
     let probe = Octree::new(&discs, &OctreeParams::default());
-    let light = Vec3::new(5.0, 6.0, 3.0);
     let shadow: Vec<Query<'static>> = primary
         .par_iter()
         .filter_map(|q| {
@@ -677,7 +709,10 @@ fn triangle_rows(rounds: usize, only: Option<&[String]>) {
 }
 
 fn main() {
-    let scenes: Vec<(usize, Scene)> = sizes().into_iter().map(|n| (n, scene(n))).collect();
+    let scenes: Vec<(usize, Scene)> = match std::env::var("SPLATRAY_BENCH_SPLATS") {
+        Ok(path) => vec![file_scene(&path)],
+        Err(_) => sizes().into_iter().map(|n| (n, scene(n))).collect(),
+    };
     let only: Option<Vec<String>> = std::env::var("SPLATRAY_BENCH_ONLY")
         .ok()
         .map(|v| v.split(',').map(|x| x.trim().to_string()).collect());
