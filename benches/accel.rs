@@ -299,8 +299,6 @@ struct Scene {
 }
 
 fn scene(n: usize) -> Scene {
-    // The splats live as long as the run: the shadow queries' pass-over
-    // rule refers to them.
     let splats = blobby_splats(n, 0x5eed_2007);
     scene_of(
         splats,
@@ -314,8 +312,10 @@ fn scene(n: usize) -> Scene {
 /// centre from in front, above and to the right, and the light stands
 /// higher, as the triangle rows' do for the mesh.
 fn file_scene(path: &str) -> (usize, Scene) {
-    let set = splatray::io::read_splats(std::path::Path::new(path))
-        .expect("SPLATRAY_BENCH_SPLATS: a splat file");
+    let set = splatray::io::read_splats(std::path::Path::new(path)).unwrap_or_else(|e| {
+        eprintln!("SPLATRAY_BENCH_SPLATS: {e}");
+        std::process::exit(2)
+    });
     let (lo, hi) = set.splats.iter().fold(
         (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
         |(lo, hi), s| (lo.min(s.center), hi.max(s.center)),
@@ -332,6 +332,8 @@ fn file_scene(path: &str) -> (usize, Scene) {
 /// The scene of `splats`: `W`x`H` camera rays from `eye` towards `at`, and
 /// the shadow rays of their Phong hits towards a point `light`.
 fn scene_of(splats: Vec<Splat>, (eye, at): (Vec3, Vec3), light: Vec3) -> Scene {
+    // The splats live as long as the run: the shadow queries' pass-over
+    // rule refers to them.
     let splats: &'static [Splat] = Box::leak(splats.into_boxed_slice());
     let curved: &'static Curved<'static> = Box::leak(Box::new(Curved(splats)));
     let scale = SceneScale::from_diagonal(diagonal(splats));
