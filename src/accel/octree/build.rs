@@ -327,6 +327,7 @@ fn split_by_centres<P: Primitive>(
     let splitter = Splitter {
         codes: &codes,
         max_leaf: params.max_leaf.max(1),
+        deep_leaf: params.deep_leaf.max(1),
         max_depth: params.max_depth.min(MORTON_BITS),
     };
     let mut root = if n == 0 {
@@ -820,6 +821,7 @@ fn octant_at(code: u64, depth: u32) -> usize {
 struct Splitter<'a> {
     codes: &'a [u64],
     max_leaf: usize,
+    deep_leaf: usize,
     max_depth: u32,
 }
 
@@ -831,7 +833,12 @@ impl Splitter<'_> {
             end: end as u32,
             id: 0,
         };
-        if end - begin <= self.max_leaf
+        let most = if depth >= super::GRID_LEVEL {
+            self.deep_leaf
+        } else {
+            self.max_leaf
+        };
+        if end - begin <= most
             || depth >= self.max_depth
             || self.codes[begin] == self.codes[end - 1]
         {

@@ -127,8 +127,14 @@ pub const AUTO_MAX_COPIES_BYTES: usize = 512 << 20;
 /// Build parameters of the [`Octree`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OctreeParams {
-    /// A leaf holding more centres than this is split (§3.1).
+    /// A cell above level 4 (the top-level grid's) holding more centres
+    /// than this is split (§3.1).
     pub max_leaf: usize,
+    /// A cell at level 4 (a cell of the top-level grid) or deeper
+    /// holding more centres than this is split: the deep leaves
+    /// may be larger, since a ray reaches them along the grid and skips
+    /// the packs whose boxes it misses.
+    pub deep_leaf: usize,
     /// Deepest level (root = 0), at most 21. Guarantees termination when many
     /// primitives share a centre.
     pub max_depth: u32,
@@ -142,7 +148,7 @@ pub struct OctreeParams {
 }
 
 impl Default for OctreeParams {
-    /// `max_leaf = 96`, `max_depth = 16`, exact overlap test (measured
+    /// `max_leaf = 96`, `deep_leaf = 256`, `max_depth = 16`, exact overlap test (measured
     /// better than the bounding square: see `docs/notes/README.md`), copies
     /// in the leaves up to [`AUTO_MAX_COPIES_BYTES`], shared packs beyond.
     ///
@@ -154,9 +160,20 @@ impl Default for OctreeParams {
     /// (1.48x), 1.20 / 1.31 (1.62x), 1.70 / 1.67 (1.44x); 96 gave
     /// 1.05 / 1.31 (1.28x), 1.21 / 1.32 (1.38x), 1.73 / 1.83 (1.23x)
     /// (`docs/notes/README.md`, issue 25).
+    ///
+    /// 256 centres a deep leaf (level 4 and below; issue 55,
+    /// `docs/notes/backends.md`, forty-sixth session): fewer copies where
+    /// the scene is large, the same tree where it is small. Against 96
+    /// everywhere, one thread, camera rays, one ray at a time: the
+    /// blobby surface at 35k splats 3.8 MB against 3.9 at the same speed;
+    /// at 100k 8.7 against 11.8 MB, 250k 22.6 against 29.2, both at the
+    /// same speed; the 1.53M-splat clipped bunny's discs 123.2 against
+    /// 167.4 MB and 3.5 % faster. 256 at every level instead was 13 %
+    /// slower at 35k and 3 % at 100k.
     fn default() -> Self {
         OctreeParams {
             max_leaf: 96,
+            deep_leaf: 256,
             max_depth: 16,
             overlap: OverlapTest::Exact,
             layout: Layout::Auto {

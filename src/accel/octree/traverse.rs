@@ -229,7 +229,7 @@ impl<P: Primitive> Tree<P> {
     /// [`super::Layout::Copies`] the packs whose box the ray misses within
     /// its window are left out of the filter ([`met_packs`]).
     #[inline(always)]
-    fn leaf_of_ray<V: Visitor<P>>(&self, node: super::Node, ctx: &RayCtx, visitor: &mut V) -> bool {
+    pub(super) fn leaf_of_ray<V: Visitor<P>>(&self, node: super::Node, ctx: &RayCtx, visitor: &mut V) -> bool {
         if self.shared {
             return self.leaf(node, visitor);
         }
