@@ -111,17 +111,19 @@ pub enum Layout {
     /// and 4; round `octree-perf4` for the Morton order).
     Shared,
     /// [`Layout::Copies`] while the copies' packs would take at most this
-    /// many bytes, [`Layout::Shared`] beyond: the copies are 10–20 %
-    /// faster up to 2M splats, but at 4M the shared layout is within 0–10 %
-    /// of them in a quarter of the memory (the benchmark in docs/results.md).
+    /// many bytes, [`Layout::Shared`] beyond: the copies are faster at
+    /// every size measured (at 4M the shared layout runs at 0.69 / 0.62 of
+    /// their primary / shadow rays in 0.61 of their memory: the benchmark
+    /// in docs/results.md).
     Auto {
         /// Most bytes of packs and ids the copies may take.
         max_copies_bytes: usize,
     },
 }
 
-/// The default [`Layout::Auto`] bound: copies up to 512 MiB (about 4.5M
-/// splats of the benchmark's surface with the default `max_leaf`).
+/// The default [`Layout::Auto`] bound: copies up to 512 MiB (about 6M
+/// splats of the benchmark's surface with the default leaf bounds: 360.3
+/// MB at 4M).
 pub const AUTO_MAX_COPIES_BYTES: usize = 512 << 20;
 
 /// Build parameters of the [`Octree`].
