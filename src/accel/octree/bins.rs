@@ -456,7 +456,7 @@ impl<P: Primitive> Backend for Binned<'_, P> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::traverse::tests::{bumpy, clipped_thirds};
+    use super::super::traverse::tests::{bits, bumpy, clipped_thirds, packet_answers};
     use super::super::{Octree, OctreeParams};
     use crate::accel::{Backend, CandidateHits, Query};
     use crate::geometry::Ray;
@@ -493,12 +493,6 @@ mod tests {
         rays
     }
 
-    /// The window as bits: ids, `t`, `u`, `v`, and whether it overflowed.
-    fn bits(h: &CandidateHits) -> (Vec<[u32; 4]>, bool) {
-        let c = h.as_slice().iter().map(|c| [c.id, c.t.to_bits(), c.u.to_bits(), c.v.to_bits()]);
-        (c.collect(), h.overflowed())
-    }
-
     /// Every query of `rays` over spans `[0, inf)`, `[0.5, 2]` and `[1, 1]`
     /// asked of the lists and of the octree: the same windows bit for bit
     /// one at a time and in packets of 8, the same occlusion; the number of
@@ -523,10 +517,7 @@ mod tests {
             }
             for packet in rays.chunks(8) {
                 let qs: Vec<Query> = packet.iter().map(|r| Query::new(*r, t_min, t_max)).collect();
-                let mut got = vec![CandidateHits::new(xi); qs.len()];
-                binned.intersect_packet(&qs, &mut got);
-                let mut occluded = vec![false; qs.len()];
-                binned.occluded_packet(&qs, &mut occluded);
+                let (got, occluded) = packet_answers(&binned, &qs, xi);
                 for ((q, g), o) in qs.iter().zip(&got).zip(occluded) {
                     oct.intersect_from(q, &mut b);
                     assert_eq!(bits(g), bits(&b));

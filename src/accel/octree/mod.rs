@@ -132,10 +132,10 @@ pub struct OctreeParams {
     /// A cell above level 4 (the top-level grid's) holding more centres
     /// than this is split (§3.1).
     pub max_leaf: usize,
-    /// A cell at level 4 (a cell of the top-level grid) or deeper
-    /// holding more centres than this is split: the deep leaves
-    /// may be larger, since a ray reaches them along the grid and skips
-    /// the packs whose boxes it misses.
+    /// A cell at level 4 (a cell of the top-level grid) or deeper holding
+    /// more centres than this is split: the deep leaves may be larger,
+    /// since a ray reaches them along the grid and skips the packs whose
+    /// boxes it misses.
     pub deep_leaf: usize,
     /// Deepest level (root = 0), at most 21. Guarantees termination when many
     /// primitives share a centre.
@@ -150,9 +150,10 @@ pub struct OctreeParams {
 }
 
 impl Default for OctreeParams {
-    /// `max_leaf = 96`, `deep_leaf = 256`, `max_depth = 16`, exact overlap test (measured
-    /// better than the bounding square: see `docs/notes/README.md`), copies
-    /// in the leaves up to [`AUTO_MAX_COPIES_BYTES`], shared packs beyond.
+    /// `max_leaf = 96`, `deep_leaf = 256`, `max_depth = 16`, exact overlap
+    /// test (measured better than the bounding square: see
+    /// `docs/notes/README.md`), copies in the leaves up to
+    /// [`AUTO_MAX_COPIES_BYTES`], shared packs beyond.
     ///
     /// 96 centres a leaf: with 8-disc packs filtered a leaf at a time, large
     /// leaves cost little in the leaf and save descents and copies. The

@@ -4,9 +4,10 @@
 //! test of §3.2 lane by lane, the same IEEE operations as the single ray's,
 //! so a ray takes part in a node exactly when its own traversal would let
 //! it in with the same window), with a mask of the rays still active; in a
-//! leaf every active ray runs the single ray's leaf code (the SIMD filter of
-//! its path, then [`crate::primitive::Primitive::intersect`] and the
-//! self-hit rule per lane).
+//! leaf every active ray runs the single ray's leaf code (with the copies'
+//! layout, only the packs whose boxes it meets; the SIMD filter of its
+//! path, then [`crate::primitive::Primitive::intersect`] and the self-hit
+//! rule per lane).
 //!
 //! Rays sharing an origin (a shadow batch leaving one hit toward a sphere
 //! light's samples, the primary rays of one eye; the integrator's batches)
@@ -18,9 +19,8 @@
 //! ray's lanes are then decided in the single ray's order, pack after pack
 //! and lane after lane, the packs of a leaf filtered in runs of
 //! [`LEAF_CHUNK`] per call (with the copies' layout, only the packs whose
-//! boxes the packet's [`Spread`] meets: `met_packs_spread`). A packet
-//! without a shared origin runs each ray's own leaf code, which leaves
-//! out the packs whose boxes the ray misses. Above the leaves such a packet (with a finite
+//! boxes the packet's [`Spread`] meets: `met_packs_spread`). Above the
+//! leaves such a packet (with a finite
 //! origin and finite `1 / dir`) descends by its [`Spread`]
 //! ([`Tree::visit_spread`]): each interior node's box and child cells
 //! tested once for the whole packet with an interval holding every ray's
@@ -309,7 +309,9 @@ impl<P: Primitive> Tree<P> {
     /// pack filtered once for all of them ([`Pack::masks_rays`], the lanes
     /// each ray's own filter passes), then each ray's lanes decided by its
     /// visitor, pack after pack and lane after lane as in
-    /// [`Tree::leaf`]; returns the rays whose visitor stopped.
+    /// [`Tree::leaf`]; with the copies' layout and a `spread` (the
+    /// packet's, and the greatest cutoff of its rays or more), only the
+    /// packs whose boxes it meets. Returns the rays whose visitor stopped.
     // The leaf, the packet and its state.
     #[allow(clippy::too_many_arguments)]
     fn leaf_packet<V: Visitor<P>>(
@@ -831,18 +833,12 @@ impl<P: Primitive> Octree<P> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::traverse::tests::{bumpy, clipped_thirds};
+    use super::super::traverse::tests::{bits, bumpy, clipped_thirds, packet_answers};
     use super::super::{Octree, OctreeParams};
     use crate::accel::{Backend, CandidateHits, Query};
     use crate::geometry::Ray;
     use crate::primitive::Primitive;
     use glam::Vec3;
-
-    /// The window as bits: ids, `t`, `u`, `v`, and whether it overflowed.
-    fn bits(h: &CandidateHits) -> (Vec<[u32; 4]>, bool) {
-        let c = h.as_slice().iter().map(|c| [c.id, c.t.to_bits(), c.u.to_bits(), c.v.to_bits()]);
-        (c.collect(), h.overflowed())
-    }
 
     /// Every packet over spans `[t_min, inf)` and `[t_min, 3]`: the
     /// windows and occlusion of [`Backend::intersect_packet`] and
@@ -855,10 +851,7 @@ mod tests {
         for t_max in [f32::INFINITY, 3.0] {
             for packet in packets {
                 let qs: Vec<Query> = packet.iter().map(|r| Query::new(*r, t_min, t_max)).collect();
-                let mut got = vec![CandidateHits::new(xi); qs.len()];
-                oct.intersect_packet(&qs, &mut got);
-                let mut occluded = vec![false; qs.len()];
-                oct.occluded_packet(&qs, &mut occluded);
+                let (got, occluded) = packet_answers(oct, &qs, xi);
                 for ((q, g), o) in qs.iter().zip(&got).zip(occluded) {
                     oct.intersect_from(q, &mut one);
                     assert_eq!(bits(g), bits(&one), "{:?} {t_max}", q.ray);

@@ -967,6 +967,26 @@ pub(super) mod tests {
             .collect()
     }
 
+    /// The window as bits: ids, `t`, `u`, `v`, and whether it overflowed.
+    pub(in crate::accel::octree) fn bits(h: &CandidateHits) -> (Vec<[u32; 4]>, bool) {
+        let c = h.as_slice().iter().map(|c| [c.id, c.t.to_bits(), c.u.to_bits(), c.v.to_bits()]);
+        (c.collect(), h.overflowed())
+    }
+
+    /// `qs` asked of `b` as one packet: the windows (`xi`) and the
+    /// occlusion.
+    pub(in crate::accel::octree) fn packet_answers<B: crate::accel::Backend + ?Sized>(
+        b: &B,
+        qs: &[crate::accel::Query],
+        xi: f32,
+    ) -> (Vec<CandidateHits>, Vec<bool>) {
+        let mut got = vec![CandidateHits::new(xi); qs.len()];
+        b.intersect_packet(qs, &mut got);
+        let mut occluded = vec![false; qs.len()];
+        b.occluded_packet(qs, &mut occluded);
+        (got, occluded)
+    }
+
     /// `discs` with a clip line on every third.
     pub(in crate::accel::octree) fn clipped_thirds(discs: &[Disc]) -> Vec<ClippedDisc> {
         discs
