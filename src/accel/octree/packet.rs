@@ -409,10 +409,12 @@ impl<P: Primitive> Tree<P> {
             let end = (start + size).min(range.end);
             let mut at = [0; LEAF_CHUNK];
             let mut lanes = [u32::MAX; LEAF_CHUNK];
-            if self.shared {
+            // The packs this call filters: `n` of them in `at`.
+            let n = if self.shared {
                 for (j, &e) in self.entries[start..end].iter().enumerate() {
                     (at[j], lanes[j]) = (e & ENTRY_PACK, e >> ENTRY_MASK_SHIFT);
                 }
+                end - start
             } else if let Some((sp, far)) = spread {
                 // The copies' packs whose boxes the packet meets.
                 let mut met = met_packs_spread(&self.pack_boxes, start, end - start, sp, far);
@@ -422,15 +424,12 @@ impl<P: Primitive> Tree<P> {
                     met &= met - 1;
                     n += 1;
                 }
-                if n > 0 && !chunk(&at[..n], &lanes[..n]) {
-                    break;
-                }
-                (start, size) = (end, LEAF_CHUNK);
-                continue;
+                n
             } else {
                 at = std::array::from_fn(|j| (start + j) as u32);
-            }
-            if !chunk(&at[..end - start], &lanes[..end - start]) {
+                end - start
+            };
+            if n > 0 && !chunk(&at[..n], &lanes[..n]) {
                 break;
             }
             (start, size) = (end, LEAF_CHUNK);
