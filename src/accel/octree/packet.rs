@@ -47,9 +47,9 @@
 //! [`MIN_PACKET`] rays; a packet that thins out to [`LONE`] active rays
 //! or fewer hands each to the single ray's descent at that node.
 
-use super::traverse::{AnyHit, Gather, RayCtx, Visitor};
+use super::traverse::{AnyHit, Gather, RayCtx, Visitor, met_in_groups};
 use super::{
-    BOX_GROUP, ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Node, Octree, PackBoxes, Tree, child_lo, lanes,
+    ENTRY_MASK_SHIFT, ENTRY_PACK, INTERIOR, Node, Octree, PackBoxes, Tree, child_lo, lanes,
 };
 use crate::accel::{CandidateHits, NoSkip, PACKET, Query, Skip};
 use crate::primitive::{Pack, PackRays, Primitive};
@@ -541,15 +541,13 @@ impl<P: Primitive> Tree<P> {
 /// Bit `j` set when the packet of `sp` may meet the box of pack
 /// `first + j` (`j < len <= 16`) of `boxes` ([`Tree::pack_boxes`]) within
 /// `[sp.t_min, far]`: the interval of [`Spread`], holding every ray's own,
-/// against [`BOX_GROUP`] packs a register; a pack no ray of the packet
+/// against [`super::BOX_GROUP`] packs a register; a pack no ray of the packet
 /// meets within its window holds no lane its exact test could decide
 /// (the single ray's [`super::traverse`] `met_packs`).
 #[inline(always)]
 fn met_packs_spread(boxes: &[PackBoxes], first: usize, len: usize, sp: &Spread, far: f32) -> u32 {
-    let (g0, g1) = (first / BOX_GROUP, (first + len - 1) / BOX_GROUP);
     let (o, lo, hi) = (sp.o.to_array(), sp.inv_lo.to_array(), sp.inv_hi.to_array());
-    let mut met = 0u32;
-    for (k, b) in boxes[g0..=g1].iter().enumerate() {
+    met_in_groups(boxes, first, len, |b| {
         let (mut near, mut exit) = (Vec4::splat(sp.t_min), Vec4::splat(far));
         for a in 0..3 {
             // The least and greatest parameters at a plane (`Spread::at`).
@@ -563,9 +561,8 @@ fn met_packs_spread(boxes: &[PackBoxes], first: usize, len: usize, sp: &Spread, 
             near = near.max(l0.min(l1));
             exit = exit.min(h0.max(h1));
         }
-        met |= near.cmple(exit).bitmask() << (BOX_GROUP * k);
-    }
-    (met >> (first % BOX_GROUP)) & ((1 << len) - 1)
+        near.cmple(exit).bitmask()
+    })
 }
 
 /// The greatest cutoff of the rays of `active` (`-inf` for none; a NaN

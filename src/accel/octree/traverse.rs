@@ -445,20 +445,35 @@ pub(super) fn min4(t: f32, v: Vec3) -> f32 {
 /// a pack.
 #[inline(always)]
 fn met_packs(boxes: &[PackBoxes], first: usize, len: usize, ctx: &RayCtx, cut: f32) -> u32 {
-    let (g0, g1) = (first / BOX_GROUP, (first + len - 1) / BOX_GROUP);
     let [ox, oy, oz] = ctx.origin_a.to_array().map(Vec4::splat);
     let [ix, iy, iz] = ctx.inv_dir_a.to_array().map(Vec4::splat);
     let (t_min, cut) = (Vec4::splat(ctx.t_min), Vec4::splat(cut));
-    let mut met = 0u32;
-    for (k, b) in boxes[g0..=g1].iter().enumerate() {
+    met_in_groups(boxes, first, len, |b| {
         let (ax, bx) = ((b[0] - ox) * ix, (b[3] - ox) * ix);
         let (ay, by) = ((b[1] - oy) * iy, (b[4] - oy) * iy);
         let (az, bz) = ((b[2] - oz) * iz, (b[5] - oz) * iz);
         let near = ax.min(bx).max(ay.min(by)).max(az.min(bz)).max(t_min);
         let far = ax.max(bx).min(ay.max(by)).min(az.max(bz)).min(cut);
-        met |= near.cmple(far).bitmask() << (BOX_GROUP * k);
+        near.cmple(far).bitmask()
+    })
+}
+
+/// Bit `j` set when `met` finds pack `first + j` (`j < len <= 16`) of
+/// `boxes` met: `met` answers the [`BOX_GROUP`] packs of a group at once
+/// (bit `l` for its lane `l`), each group of the run asked once.
+#[inline(always)]
+pub(super) fn met_in_groups(
+    boxes: &[PackBoxes],
+    first: usize,
+    len: usize,
+    met: impl Fn(&PackBoxes) -> u32,
+) -> u32 {
+    let (g0, g1) = (first / BOX_GROUP, (first + len - 1) / BOX_GROUP);
+    let mut bits = 0u32;
+    for (k, b) in boxes[g0..=g1].iter().enumerate() {
+        bits |= met(b) << (BOX_GROUP * k);
     }
-    (met >> (first % BOX_GROUP)) & ((1 << len) - 1)
+    (bits >> (first % BOX_GROUP)) & ((1 << len) - 1)
 }
 
 /// What a traversal does in the leaves.
