@@ -367,17 +367,22 @@ fn fan_misses(scene: &Scene, rays: &[Ray], what: &str) -> Option<(usize, usize)>
 /// `Backend::fan`): no ray said to miss hits anything, on the bundled
 /// bunny's splats (some clipped), the same 10⁴ away from the coordinates'
 /// origin, and blobby splats a third clipped; rays in every direction;
-/// two thirds of the misses or more are said. An eye inside some splats'
-/// bounding balls (on the bunny) or beside the floor's gets no fan.
+/// two thirds of the misses or more are said. With the floor, whose
+/// splats run beside the eye's plane outside the view, a fan too. An eye
+/// inside some splats' bounding balls (on the bunny) gets no fan.
 #[test]
 fn fans_say_only_true_misses() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
     let scene = splatray::scene::load_scene(&root.join("bunny.toml"), None).unwrap();
     let (eye, at) = (Vec3::new(1.5, 1.1, 4.4), Vec3::new(0.0, -0.1, 0.0));
-    assert!(
-        fan_misses(&scene, &fan_rays(eye, at, 1), "bunny and floor").is_none(),
-        "the floor's splats straddle the eye's plane"
-    );
+    // The floor's splats across the eye's plane lie outside the cone of
+    // the camera's directions: a fan, each miss it says a true one.
+    let (said, missed) = fan_misses(&scene, &fan_rays(eye, at, 1), "bunny and floor")
+        .expect("a fan with the floor beside the eye's plane");
+    eprintln!("bunny and floor: {said} of {missed} misses said");
+    // Measured: 13,670 of 19,443 (none outside the grid: the floor's
+    // splats reach every direction there).
+    assert!(said > 13_000 && missed > 19_000, "{said} of {missed}");
     // The bunny alone (the first model's splats).
     let mut bunny = scene.clone();
     let n = bunny.material_of.iter().take_while(|&&m| m == 0).count();

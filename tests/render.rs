@@ -160,10 +160,18 @@ max_depth = 12
 }
 
 /// The two backends see the same candidates, so the same scene renders to
-/// the same image, AOVs included.
+/// the same image, AOVs included, one sample a pixel and four; the octree
+/// answers the camera's rays from its fan's lists (`Backend::fan`), which
+/// the brute-force backend has none of.
 #[test]
 fn backends_render_identical_images() {
-    let sc = scene(
+    for spp in [1, 4] {
+        backends_render_identical_images_at(spp);
+    }
+}
+
+fn backends_render_identical_images_at(spp: u32) {
+    let mut sc = scene(
         r#"
 background = [0.1, 0.1, 0.2]
 [camera]
@@ -188,6 +196,19 @@ intensity = 30
 samples = 4
 "#,
     );
+    sc.camera.spp = spp;
+    let cam = &sc.camera;
+    let rays: Vec<_> = (0..cam.height)
+        .flat_map(|y| (0..cam.width).map(move |x| cam.ray(x as f32 + 0.5, y as f32 + 0.5)))
+        .collect();
+    let oct = splatray::accel::registry::find("octree")
+        .unwrap()
+        .build_scene(&sc)
+        .unwrap();
+    let fan = oct
+        .fan(&rays)
+        .expect("the octree makes a fan for the camera");
+    assert!(fan.backend().is_some(), "the fan holds its blocks' lists");
     let a = render_with(&sc, "brute");
     assert!(a.rays.refraction > 0 && a.rays.reflection > 0 && a.rays.shadow > 0);
     for info in splatray::accel::registry::renderers() {

@@ -168,6 +168,14 @@ pub trait Backend: Send + Sync {
         None
     }
 
+    /// Whether [`Backend::fan`] may pay for a run of `rays` rays: false
+    /// (the default) where it certainly gives `None`, so a caller need not
+    /// make the run's rays to ask.
+    fn fan_pays(&self, rays: usize) -> bool {
+        let _ = rays;
+        false
+    }
+
     /// [`Backend::occluded_from`] for a batch: `out[i]` is its answer for
     /// `qs[i]`. The default asks one query at a time.
     ///

@@ -4,7 +4,7 @@
 //! maximum depth. It sees only the [`Backend`] trait and the shared
 //! resolver, so every backend renders with identical shading.
 
-use crate::accel::{Backend, CandidateHits, Departure, PACKET, Query, Ray};
+use crate::accel::{Backend, CandidateHits, Departure, Fan, PACKET, Query, Ray};
 use crate::progress::{Progress, notify};
 use crate::resolve::{
     Resolved, Silhouette, SurfaceHit, resolve_models_kept, resolve_with_triangles,
@@ -194,6 +194,24 @@ pub trait Surfaces: Sync {
             *o = self.occluded(ray, from, *t_max);
         }
     }
+
+    /// What the backend these surfaces trace through knows once about a
+    /// run of `rays` camera rays leaving one origin ([`Backend::fan`]),
+    /// which `make` makes only where it may pay ([`Backend::fan_pays`]);
+    /// `None` (the default) where there is no such backend or it would
+    /// not pay.
+    fn fan(&self, rays: usize, make: &dyn Fn() -> Vec<Ray>) -> Option<Box<dyn Fan + '_>> {
+        let _ = (rays, make);
+        None
+    }
+
+    /// These surfaces traced through `backend` in place of their own
+    /// (a fan's [`Fan::backend`], which answers every query as theirs
+    /// does); `None` (the default): not possible.
+    fn through<'s>(&'s self, backend: &'s dyn Backend) -> Option<Box<dyn Surfaces + 's>> {
+        let _ = backend;
+        None
+    }
 }
 
 /// The splats of a scene through one backend and the shared resolver.
@@ -368,11 +386,25 @@ impl Surfaces for SplatSurfaces<'_> {
             self.backend.occluded_packet(&qs[..rays.len()], out);
         }
     }
+
+    fn fan(&self, rays: usize, make: &dyn Fn() -> Vec<Ray>) -> Option<Box<dyn Fan + '_>> {
+        if !self.backend.fan_pays(rays) {
+            return None;
+        }
+        self.backend.fan(&make())
+    }
+
+    fn through<'s>(&'s self, backend: &'s dyn Backend) -> Option<Box<dyn Surfaces + 's>> {
+        Some(Box::new(SplatSurfaces { backend, ..*self }))
+    }
 }
 
 struct Tracer<'a> {
     scene: &'a Scene,
     surfaces: &'a dyn Surfaces,
+    /// What the camera rays are traced against: `surfaces`, or `surfaces`
+    /// through their backend's fan ([`camera_fan`]), with the same hits.
+    camera: &'a dyn Surfaces,
     /// Hand the surfaces coherent batches ([`Surfaces::packets`]).
     packets: bool,
 }
@@ -711,10 +743,10 @@ impl Tracer<'_> {
                 }
                 let mut hits = [None; PACKET];
                 if batched {
-                    self.surfaces
+                    self.camera
                         .hits(&rays[..R * np], &mut batch_hits, &mut hits[..R * np]);
                 } else {
-                    hits[0] = self.intersect(&rays[0], None, s);
+                    hits[0] = self.camera.hit(&rays[0], None, &mut s.hits);
                 }
                 for (r, row) in rows.iter_mut().enumerate() {
                     for p in 0..np {
@@ -802,12 +834,15 @@ fn render_surfaces_rows(
     let cam = &scene.camera;
     let rows = rows.start.min(cam.height)..rows.end.min(cam.height);
     let h = rows.len();
+    let start = Instant::now();
+    let fan = camera_fan(cam, rows.clone(), surfaces);
+    let through = fan.as_ref().and_then(|f| surfaces.through(f.backend()?));
     let tracer = Tracer {
         scene,
         surfaces,
+        camera: through.as_deref().unwrap_or(surfaces),
         packets: surfaces.packets(),
     };
-    let start = Instant::now();
     let rows_done = AtomicUsize::new(0);
     let new_row = || Frame::with_capacity(cam.width, 1);
     // With packets, rows in pairs (their pixels in 4×2 tiles, each tile's
@@ -850,6 +885,25 @@ fn render_surfaces_rows(
     }
     frame.seconds = start.elapsed().as_secs_f64();
     frame
+}
+
+/// The fan of the camera rays of `rows` (their pixel centres, row by
+/// row: one origin, the camera's) where `surfaces`' backend makes one
+/// ([`Surfaces::fan`]); the rays are dropped once it is made. A fan answers
+/// every query as its backend does, bit for bit, so the image is the same
+/// with or without it.
+fn camera_fan<'s>(
+    cam: &crate::scene::Camera,
+    rows: std::ops::Range<u32>,
+    surfaces: &'s dyn Surfaces,
+) -> Option<Box<dyn Fan + 's>> {
+    let n = rows.len() * cam.width as usize;
+    let make = || {
+        rows.clone()
+            .flat_map(|y| (0..cam.width).map(move |x| cam.ray(x as f32 + 0.5, y as f32 + 0.5)))
+            .collect()
+    };
+    surfaces.fan(n, &make)
 }
 
 #[cfg(test)]

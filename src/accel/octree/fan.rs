@@ -15,8 +15,12 @@
 //! grid its rectangle meets is marked. A ray's direction is one point of
 //! that plane: one cell; a ray starting at `t >= 0` in a cell no rectangle
 //! meets hits nothing. A ball wholly behind (`c·w < -R`) is met by no ray
-//! of the fan; a run with a ball the plane `p·w = 0` cuts (the origin
-//! inside or beside it) gets no fan.
+//! of the fan. A ball the plane `p·w = 0` cuts but lying outside the cone
+//! of the grid's directions (`|c_⊥| - R > tan θ (c·w + R)`, `θ` the
+//! grid's widest angle from `w`: a floor under or beside the eye) is met
+//! by no ray the grid takes; the fan then claims no miss outside the grid.
+//! A run with a ball the plane cuts inside that cone (the origin inside or
+//! beside it) gets no fan.
 //!
 //! Why the answers are the octree's, bit for bit (`docs/DESIGN.md`, "The
 //! backend contract", rule 1): only a ray that no primitive's ball can
@@ -105,6 +109,10 @@ pub(super) struct Coverage {
     /// Whether some ball lies wholly behind (a direction not in front may
     /// meet it).
     behind: bool,
+    /// The most `|p_⊥| / p·w` of a direction in the grid (`p_⊥` across
+    /// `w`), with a margin: the tangent of the cone holding every ray the
+    /// grid takes.
+    cone: f64,
     /// The SIMD path of the rays' cells (the octree's).
     pub(super) isa: Isa,
 }
@@ -166,7 +174,11 @@ impl Coverage {
         while n(scale)[0] * n(scale)[1] > MAX_CELLS {
             scale *= 0.9;
         }
+        let cells_n = n(scale);
+        let most = |a: usize| lo[a].abs().max((lo[a] + cells_n[a] as f64 / scale).abs());
+        let cone = 1.001 * most(0).hypot(most(1)) + 1e-9;
         Some(Coverage {
+            cone,
             origin: origin.to_array().map(f32::to_bits),
             u,
             v,
@@ -252,8 +264,8 @@ impl Coverage {
     /// is traced), and gives each primitive's cells `[i0, i1, j0, j1]`
     /// (`None`: behind, or beside the grid) and, in front, its ball's
     /// least distance from the origin, `|c| - R` at least 0 (infinite
-    /// behind); `None` when a ball straddles the plane `p·w = 0` (or is
-    /// not finite).
+    /// behind); `None` when a ball straddles the plane `p·w = 0` inside the
+    /// grid's cone (or is not finite).
     pub(super) fn cover<P: Primitive>(&mut self, prims: &[P]) -> Option<Covered> {
         let [nx, ny] = self.n;
         let seen = prims
@@ -264,6 +276,11 @@ impl Coverage {
         for &s in &seen {
             match s {
                 Seen::Behind => self.behind = true,
+                // No direction outside the grid is known to miss.
+                Seen::Aside => {
+                    self.behind = true;
+                    self.far = [f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY];
+                }
                 Seen::Front(reach, cells, _) => {
                     // A reach not a number holds every direction.
                     let low = |x: f64| if x.is_nan() { f64::NEG_INFINITY } else { x };
@@ -303,7 +320,7 @@ impl Coverage {
         self.covered = covered;
         Some(seen.iter().map(|s| match s {
             Seen::Front(_, cells, near) => (*cells, *near),
-            Seen::Behind => (None, f64::INFINITY),
+            Seen::Behind | Seen::Aside => (None, f64::INFINITY),
         }).unzip())
     }
 
@@ -319,8 +336,9 @@ impl Coverage {
 
     /// What the fan sees of `prim`'s ball: wholly behind, or in front with
     /// its reach `[i0, i1, j0, j1]` in cells ([`Coverage::reach`]) and the
-    /// cells it covers (`None` beside the grid); `None` when it straddles
-    /// the plane `p·w = 0` (or is not finite).
+    /// cells it covers (`None` beside the grid), or across the plane `p·w
+    /// = 0` outside the grid's cone; `None` when it straddles that plane
+    /// inside the cone (or is not finite).
     fn rectangle<P: Primitive>(&self, prim: &P) -> Option<Seen> {
         let (c, r) = self.ball(prim);
         let (cu, cv, cw) = (c.dot(self.u), c.dot(self.v), c.dot(self.w));
@@ -331,7 +349,11 @@ impl Coverage {
         }
         let in_front = cw > 1.01 * r;
         if !in_front {
-            return None;
+            // Across the plane, outside the grid's cone: every point `p` of
+            // the ball has `|p_⊥| >= |c_⊥| - r > cone (c·w + r) >= cone
+            // p·w`, so no ray the grid takes meets it (NaN: no fan).
+            let across = cu.hypot(cv);
+            return (across - r > self.cone * (cw + r)).then_some(Seen::Aside);
         }
         let spans = match prim.semi_axes() {
             Some((a, b)) => {
@@ -362,6 +384,10 @@ enum Seen {
     /// Wholly in front: its reach in cells, the cells it covers (`None`:
     /// beside the grid), and its ball's least distance from the origin.
     Front([f64; 4], Option<[usize; 4]>, f64),
+    /// Across the plane, but outside the cone of the grid's directions:
+    /// met by no ray the grid takes (a floor beside or under the eye).
+    /// The rays outside the grid are then the backend's.
+    Aside,
 }
 
 impl Fan for Coverage {

@@ -451,6 +451,10 @@ impl<P: Primitive> Backend for Octree<P> {
         self.build_fan(rays)
     }
 
+    fn fan_pays(&self, rays: usize) -> bool {
+        rays >= fan::MIN_RAYS.max(self.count)
+    }
+
     fn stats(&self) -> &BuildStats {
         &self.stats
     }
