@@ -197,10 +197,7 @@ samples = 4
 "#,
     );
     sc.camera.spp = spp;
-    let cam = &sc.camera;
-    let rays: Vec<_> = (0..cam.height)
-        .flat_map(|y| (0..cam.width).map(move |x| cam.ray(x as f32 + 0.5, y as f32 + 0.5)))
-        .collect();
+    let rays = sc.camera.pixel_rays(0..sc.camera.height);
     let oct = splatray::accel::registry::find("octree")
         .unwrap()
         .build_scene(&sc)

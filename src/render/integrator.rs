@@ -898,12 +898,7 @@ fn camera_fan<'s>(
     surfaces: &'s dyn Surfaces,
 ) -> Option<Box<dyn Fan + 's>> {
     let n = rows.len() * cam.width as usize;
-    let make = || {
-        rows.clone()
-            .flat_map(|y| (0..cam.width).map(move |x| cam.ray(x as f32 + 0.5, y as f32 + 0.5)))
-            .collect()
-    };
-    surfaces.fan(n, &make)
+    surfaces.fan(n, &|| cam.pixel_rays(rows.clone()))
 }
 
 #[cfg(test)]

@@ -212,6 +212,14 @@ impl Camera {
         };
         crate::accel::Ray::new(self.origin, self.forward + self.right * sx + self.up * sy)
     }
+
+    /// The primary rays through the pixel centres of image rows `rows`,
+    /// row after row.
+    #[must_use]
+    pub fn pixel_rays(&self, rows: std::ops::Range<u32>) -> Vec<crate::accel::Ray> {
+        rows.flat_map(|y| (0..self.width).map(move |x| self.ray(x as f32 + 0.5, y as f32 + 0.5)))
+            .collect()
+    }
 }
 
 /// Scene-relative tolerances (`docs/DESIGN.md`, "Tolerances"): never

@@ -551,8 +551,9 @@ mod tests {
                 discs.push(disc(c, Vec3::Y, 0.15));
             }
         }
+        let step = |k: usize| 0.1 * k as f32 - 0.2;
         let pad: Vec<Vec3> = (0..25)
-            .map(|k| eye + right * 1.5 + Vec3::new(0.0, 0.1 * (k / 5) as f32 - 0.2, 0.0) + fwd * (0.1 * (k % 5) as f32 - 0.2))
+            .map(|k| eye + right * 1.5 + Vec3::Y * step(k / 5) + fwd * step(k % 5))
             .collect();
         discs.extend(pad.iter().map(|&c| disc(c, -right, 0.08)));
         let mut rays = rays(eye, 150);
