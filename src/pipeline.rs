@@ -19,14 +19,18 @@
 //!
 //! Stages 1–4 are [`crate::splat::generate_with_progress`]; trimming leaves
 //! out the lines of sight of the points stage 1 left out as outliers. Reading comes
-//! before (the caller's `read` seconds) and the held-out check after
-//! (`validate::holdout`, which grows its own splats through this entry).
+//! before (the caller's `read` seconds). The held-out check
+//! (`validate::holdout`, which grows its own splats through this entry)
+//! reads only what stages 1–3 set, so [`generate_beside`] runs it beside
+//! stages 4–6 once the splats are grown: its serial parts fill the cores
+//! that theirs leave idle.
 
 use crate::freespace::{TrimReport, trim_free_space};
 use crate::progress::{Progress, notify};
 use crate::splat::color::{ColorField, fit_cloud};
-use crate::splat::{PointCloud, Splat, SplatParams, SplatReport, generate_stages};
+use crate::splat::{Grown, PointCloud, Splat, SplatParams, SplatReport, generate_stages};
 use crate::{Error, Result};
+use std::sync::Mutex;
 use std::time::Instant;
 
 /// What `generate` made.
@@ -55,7 +59,65 @@ pub fn generate(
     params: &SplatParams,
     progress: Option<Progress<'_>>,
 ) -> Result<Generated> {
-    run(cloud, params, true, progress)
+    run(cloud, params, true, progress, None)
+}
+
+/// What [`generate_beside`] ran beside the pipeline.
+#[derive(Clone, Debug)]
+pub struct Beside<R> {
+    /// Its answer (`None`: generation failed before the splats were grown).
+    pub value: Option<R>,
+    /// The wall seconds the pipeline waited for it after its own last stage.
+    pub waited: f64,
+}
+
+impl<R> Beside<R> {
+    /// Nothing ran beside.
+    #[must_use]
+    pub fn none() -> Beside<R> {
+        Beside {
+            value: None,
+            waited: 0.0,
+        }
+    }
+}
+
+/// [`generate`], with `beside` run once the splats are grown, on the same
+/// threads as the stages after growth, given the report as it will end
+/// for everything those stages leave alone (`ϵ`, the noise, the diagonal
+/// and the splats' mean radius, in the cloud's units; see
+/// [`crate::splat::generate_with_progress`]). The progress names `stage`
+/// while the pipeline waits for it.
+///
+/// # Errors
+/// As [`generate`] (the value `beside` made is then dropped).
+pub fn generate_beside<R: Send>(
+    cloud: &PointCloud,
+    params: &SplatParams,
+    progress: Option<Progress<'_>>,
+    stage: &str,
+    beside: impl Fn(&SplatReport) -> R + Sync,
+) -> Result<(Generated, Beside<R>)> {
+    let value = Mutex::new(None);
+    let (generated, done) = rayon::scope(|s| {
+        let (beside, value) = (&beside, &value);
+        let grown = |whole: &SplatReport| {
+            let whole = whole.clone();
+            s.spawn(move |_| {
+                let r = beside(&whole);
+                *value.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = Some(r);
+            });
+        };
+        let generated = run(cloud, params, true, progress, Some(&grown as Grown<'_>));
+        let pending = value.lock().map_or(true, |v| v.is_none());
+        if generated.is_ok() && pending {
+            notify(progress, stage, 0.0);
+        }
+        (generated, Instant::now())
+    });
+    let waited = done.elapsed().as_secs_f64();
+    let value = value.into_inner().unwrap_or_else(std::sync::PoisonError::into_inner);
+    Ok((generated?, Beside { value, waited }))
 }
 
 /// [`generate`] without its last stage, the colour fields: for checks that
@@ -69,7 +131,7 @@ pub fn generate_uncoloured(
     params: &SplatParams,
     progress: Option<Progress<'_>>,
 ) -> Result<Generated> {
-    run(cloud, params, false, progress)
+    run(cloud, params, false, progress, None)
 }
 
 fn run(
@@ -77,9 +139,10 @@ fn run(
     params: &SplatParams,
     colours: bool,
     progress: Option<Progress<'_>>,
+    grown: Option<Grown<'_>>,
 ) -> Result<Generated> {
     let (mut splats, mut report, outliers) =
-        generate_stages(cloud, params, progress).map_err(Error::from)?;
+        generate_stages(cloud, params, progress, grown).map_err(Error::from)?;
     let t0 = Instant::now();
     let trim = trim_free_space(cloud, params, &mut splats, &mut report, &outliers, progress)?;
     let t1 = Instant::now();

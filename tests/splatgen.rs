@@ -409,6 +409,48 @@ fn held_out_coverage_can_fail() {
     assert!(h.coverage < 0.5, "{h:?}");
 }
 
+/// `pipeline::generate_beside` runs its check beside the stages after
+/// growth, handing it the report as generation ends it for what the
+/// held-out check reads (`ϵ`, the noise, the diagonal, the mean radius,
+/// hence the tolerance), bit for bit, and makes `generate`'s splats. On a
+/// clean sample and on a noisy one whose points are moved onto their
+/// surfaces (the tolerance then takes the noise), both without normals.
+#[test]
+fn the_check_beside_generation_reads_the_report_generation_ends_with() {
+    use splatray::pipeline::{generate as pipeline_generate, generate_beside};
+    let mesh = read_mesh(&common::data("bunny-mesh.ply")).unwrap();
+    let params = SplatParams::default();
+    for (sigma, moved) in [(0.0, false), (0.002, true)] {
+        let mut c = sample_mesh(&mesh, 20_000, sigma, 5);
+        c.normals = None;
+        let read = |r: &splatray::splat::SplatReport| {
+            [
+                r.epsilon,
+                r.noise,
+                r.bbox_diagonal,
+                r.mean_radius,
+                r.cover_tolerance(),
+            ]
+            .map(f64::to_bits)
+        };
+        let (g, beside) = generate_beside(&c, &params, None, "check", read).unwrap();
+        let r = &g.report;
+        eprintln!(
+            "sigma {sigma}: {} splats, noise / epsilon {:.2}, waited {:.4} s",
+            r.splats,
+            r.noise / r.epsilon,
+            beside.waited
+        );
+        assert_eq!(r.moved_onto_surfaces(), moved, "{r:?}");
+        assert!(r.mean_radius > 0.0);
+        assert_eq!(beside.value, Some(read(r)));
+        assert!(beside.waited >= 0.0);
+        let plain = pipeline_generate(&c, &params, None).unwrap();
+        assert_eq!(plain.splats, g.splats);
+        assert_eq!(read(&plain.report), read(r));
+    }
+}
+
 /// The windowed held-out coverage (the default at every size) regrows
 /// splats from four windows and tests the held-out points of their cores:
 /// on a 200k bunny sample the windows grow until their cores hold at

@@ -180,7 +180,7 @@ fn print_heldout(p: &PointsOutcome) {
             None => "over the whole cloud".into(),
         };
         eprintln!(
-            "splatray: held-out coverage {:.4} (95 % interval {:.4}-{:.4}): splats grown without {:.0} % of the points hold {} of the {} tested (within {:.3e} of a splat's plane; {} held-out outliers not tested), {whre}: {:.2} s, {:.0} % of generation",
+            "splatray: held-out coverage {:.4} (95 % interval {:.4}-{:.4}): splats grown without {:.0} % of the points hold {} of the {} tested (within {:.3e} of a splat's plane; {} held-out outliers not tested), {whre}: {:.2} s beside the stages after growth ({:.0} % of generation), {:.2} s waited for after them",
             h.coverage,
             h.interval[0],
             h.interval[1],
@@ -190,7 +190,8 @@ fn print_heldout(p: &PointsOutcome) {
             h.tolerance,
             h.outliers,
             p.heldout_seconds,
-            100.0 * p.heldout_seconds / total.max(1e-9)
+            100.0 * p.heldout_seconds / total.max(1e-9),
+            p.heldout_waited
         );
     }
     if let Some(e) = &p.heldout_failed {

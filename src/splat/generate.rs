@@ -506,16 +506,26 @@ pub fn generate_with_progress(
     params: &SplatParams,
     progress: Option<Progress<'_>>,
 ) -> Result<(Vec<Splat>, SplatReport), GenerateError> {
-    generate_stages(cloud, params, progress).map(|(splats, report, _)| (splats, report))
+    generate_stages(cloud, params, progress, None).map(|(splats, report, _)| (splats, report))
 }
+
+/// What [`generate_stages`] hands its caller once the splats are grown:
+/// the report as it will be in the cloud's units for every figure set by
+/// then (`ϵ`, the noise, the diagonal) and the splats' mean radius, which
+/// no later stage changes. A check that regrows splats with the cloud's
+/// `ϵ` and tolerance (the held-out check) can start from it while the
+/// fields are fitted.
+pub(crate) type Grown<'a> = &'a (dyn Fn(&SplatReport) + Sync);
 
 /// [`generate_with_progress`], and the points it left out as statistical
 /// outliers (indices into `cloud`, ascending): free-space trimming leaves
-/// the same points' lines of sight out.
+/// the same points' lines of sight out. `grown`, if given, is called once
+/// the splats are grown ([`Grown`]).
 pub(crate) fn generate_stages(
     cloud: &PointCloud,
     params: &SplatParams,
     progress: Option<Progress<'_>>,
+    grown: Option<Grown<'_>>,
 ) -> Result<(Vec<Splat>, SplatReport, Vec<u32>), GenerateError> {
     let t0 = Instant::now();
     check_params(params)?;
@@ -536,6 +546,12 @@ pub(crate) fn generate_stages(
     let t2 = Instant::now();
     let (mut splats, covered, elliptical, measured) =
         growth_stage(&surface, params, progress, &mut report);
+    if let Some(grown) = grown {
+        let mut whole = report.clone();
+        whole.mean_radius = mean_radius(&splats);
+        lengths_from_unit(&frame, &mut whole);
+        grown(&whole);
+    }
     let t3 = Instant::now();
     notify(progress, "normal fields", 0.0);
     fields_stage(&mut splats, (&covered, &measured), &surface, params, &mut report);
@@ -853,11 +869,16 @@ fn fields_stage(
     report.hollow_large_splats = hollow_large(splats, &s.tree);
     report.uncovered_large_splats =
         uncovered_large_measured(splats, measured, &s.tree, &s.knn, s.knn.k > params.k);
-    report.mean_radius = splats
+    report.mean_radius = mean_radius(splats);
+}
+
+/// The splats' mean radius (the mean of each splat's two).
+fn mean_radius(splats: &[Splat]) -> f64 {
+    splats
         .iter()
         .map(|s| 0.5 * f64::from(s.radii.x + s.radii.y))
         .sum::<f64>()
-        / splats.len().max(1) as f64;
+        / splats.len().max(1) as f64
 }
 
 /// The cloud and parameters in the unit frame `frame` (positions,
@@ -1182,10 +1203,7 @@ fn from_unit(
             frame.scale
         )));
     }
-    report.epsilon = frame.length_from_unit(report.epsilon);
-    report.noise = frame.length_from_unit(report.noise);
-    report.bbox_diagonal = frame.length_from_unit(report.bbox_diagonal);
-    report.mean_radius = frame.length_from_unit(report.mean_radius);
+    lengths_from_unit(frame, report);
     if frame.scale < f64::from(f32::MIN_POSITIVE) {
         report.warnings.push(format!(
             "the cloud spans only {:e} units, below single precision's normal range: its positions are coarsely quantised",
@@ -1193,6 +1211,15 @@ fn from_unit(
         ));
     }
     Ok(())
+}
+
+/// The report's lengths (`ϵ`, the noise, the diagonal, the mean radius)
+/// from the unit frame `frame` to the cloud's units.
+fn lengths_from_unit(frame: &UnitFrame, report: &mut SplatReport) {
+    report.epsilon = frame.length_from_unit(report.epsilon);
+    report.noise = frame.length_from_unit(report.noise);
+    report.bbox_diagonal = frame.length_from_unit(report.bbox_diagonal);
+    report.mean_radius = frame.length_from_unit(report.mean_radius);
 }
 
 /// The cleaned points in Morton order with what the stages read of them.

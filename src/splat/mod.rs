@@ -33,6 +33,6 @@ pub use generate::{
     StageSeconds, count_on_splats, coverage, generate, generate_with_progress, hollow_large,
     viewpoints_of,
 };
-pub(crate) use generate::generate_stages;
+pub(crate) use generate::{Grown, generate_stages};
 pub use holes::{COVER_SPACINGS, UNCOVERED_LARGE, covered_share, on_splat, uncovered_large};
 pub use options::GenerationOptions;

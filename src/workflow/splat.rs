@@ -9,6 +9,7 @@
 //! typed, serialisable report: the command line only parses and prints.
 
 use crate::freespace::TrimReport;
+use crate::pipeline::Beside;
 use crate::io::{
     Batch, Format, RADIUS_PER_SIGMA, Source, encode_splats, encode_splats_with, file_layout,
     is_piped,
@@ -98,8 +99,10 @@ pub struct PointsReport {
     pub heldout_coverage: Option<HeldOutCoverage>,
     /// Where it was measured (absent when measured over the whole cloud).
     pub heldout_windows: Option<Windows>,
-    /// What measuring it took.
+    /// What measuring it took (beside the stages after growth).
     pub heldout_seconds: Option<f64>,
+    /// The wall seconds generation waited for it after its own last stage.
+    pub heldout_waited: Option<f64>,
     /// The linear colour fields (absent: constant colours).
     pub color_fields: Option<ColorFields>,
 }
@@ -129,6 +132,8 @@ pub struct PointsOutcome {
     pub heldout_failed: Option<String>,
     /// Seconds the held-out pass took (also when it failed).
     pub heldout_seconds: f64,
+    /// Seconds generation waited for it after its own last stage.
+    pub heldout_waited: f64,
 }
 
 /// What `--report` writes for a Gaussian input.
@@ -218,12 +223,19 @@ fn points(
     let cloud = source.read_points()?;
     let read = t0.elapsed().as_secs_f64();
     let params = req.generation.params(&cloud);
-    let generated = crate::pipeline::generate(&cloud, &params, progress)
-        .map_err(|e| e.context(source.path().display()))?;
+    // The held-out check beside the stages after growth (it reads what
+    // growth leaves: `pipeline::generate_beside`).
+    let measure = |whole: &SplatReport| HeldOut::measure(req, &cloud, &params, whole);
+    let (generated, beside) = if req.holdout > 0.0 {
+        crate::pipeline::generate_beside(&cloud, &params, progress, "held-out coverage", measure)
+    } else {
+        crate::pipeline::generate(&cloud, &params, progress).map(|g| (g, Beside::none()))
+    }
+    .map_err(|e| e.context(source.path().display()))?;
     let (splats, mut generation, trim) = (generated.splats, generated.report, generated.trim);
     let (fields, zero_fields) = (generated.color_fields, generated.constant_color_fields);
     let colors_seconds = generation.seconds.colors;
-    let heldout = HeldOut::measure(req, &cloud, &params, &generation, progress);
+    let heldout = beside.value.unwrap_or_else(HeldOut::none);
     generation.seconds.read = read;
     generation.seconds.total += read;
     let bytes = encode_splats_with(
@@ -235,6 +247,7 @@ fn points(
     let report = PointsReport {
         generation,
         heldout_seconds: heldout.coverage.is_some().then_some(heldout.seconds),
+        heldout_waited: heldout.coverage.is_some().then_some(beside.waited),
         heldout_coverage: heldout.coverage,
         heldout_windows: heldout.windows,
         color_fields: (!fields.is_empty()).then_some(ColorFields {
@@ -250,6 +263,7 @@ fn points(
         trim,
         heldout_failed: heldout.failed,
         heldout_seconds: heldout.seconds,
+        heldout_waited: beside.waited,
     })
 }
 
@@ -289,25 +303,29 @@ struct HeldOut {
 }
 
 impl HeldOut {
+    /// Nothing measured.
+    fn none() -> HeldOut {
+        HeldOut {
+            coverage: None,
+            windows: None,
+            failed: None,
+            seconds: 0.0,
+        }
+    }
+
     /// Measures it (nothing with a held-out fraction of 0): over the whole
     /// cloud with `holdout_full`, else in windows; `generation` is the
-    /// report of the cloud's own generation (its `ϵ` and tolerance).
+    /// report of the cloud's own generation (its `ϵ`, mean radius and
+    /// tolerance, as growth leaves them).
     fn measure(
         req: &SplatRequest,
         cloud: &PointCloud,
         params: &SplatParams,
         generation: &SplatReport,
-        progress: Option<Progress<'_>>,
     ) -> HeldOut {
-        let mut out = HeldOut {
-            coverage: None,
-            windows: None,
-            failed: None,
-            seconds: 0.0,
-        };
+        let mut out = HeldOut::none();
         let t = Instant::now();
         if req.holdout > 0.0 {
-            notify(progress, "held-out coverage", 0.0);
             let measured = if req.holdout_full {
                 heldout_coverage(cloud, params, req.holdout, 1)
             } else {
