@@ -2169,6 +2169,9 @@ const BUCKETS: usize = 4096;
 /// [`edge_bucket`] of a directed edge left out: the second of a mutual pair.
 const NO_EDGE: u16 = u16::MAX;
 
+/// Points whose edges' buckets [`spanning_forest`] finds in one piece.
+const BUCKET_POINTS: usize = 1024;
+
 /// The fewest points a block of [`spanning_forest`] holds.
 const FOREST_BLOCK_MIN: usize = 1 << 15;
 
@@ -2236,20 +2239,12 @@ impl Block {
     /// The block of the points from `lo` on, as many as `parent` holds:
     /// their union-find (local indices, each point its own set on entry
     /// whatever it held), left as the block's forest.
-    fn of(
-        (points, knn, normals): (&[Vec3], &Knn, &[Vec3]),
-        across: &impl Fn(usize, usize) -> bool,
-        lo: usize,
-        parent: &mut [u32],
-    ) -> Block {
+    /// `bucket` holds the [`edge_bucket`]s of the block's points' edges,
+    /// point after point.
+    fn of(knn: &Knn, bucket: &[u16], lo: usize, parent: &mut [u32]) -> Block {
         let (hi, k) = (lo + parent.len(), knn.k);
         for (x, p) in parent.iter_mut().enumerate() {
             *p = x as u32;
-        }
-        // Each point's edges in turn (no division to find an edge's point).
-        let mut bucket: Vec<u16> = Vec::with_capacity((hi - lo) * k);
-        for i in lo..hi {
-            bucket.extend((i * k..(i + 1) * k).map(|e| edge_bucket(points, knn, normals, across, (i, e))));
         }
         let mut start = vec![0u32; BUCKETS + 1];
         for &b in bucket.iter().filter(|&&b| b != NO_EDGE) {
@@ -2260,13 +2255,12 @@ impl Block {
         }
         let mut sorted = vec![0u32; start[BUCKETS] as usize];
         let mut fill = start.clone();
-        for (e, &b) in (lo * k..).zip(&bucket) {
+        for (e, &b) in (lo * k..).zip(bucket) {
             if b != NO_EDGE {
                 sorted[fill[b as usize] as usize] = e as u32;
                 fill[b as usize] += 1;
             }
         }
-        drop(bucket);
         let mut size = vec![1u32; parent.len()];
         let mut edges = Vec::with_capacity(parent.len());
         let mut kept = vec![0u32; BUCKETS + 1];
@@ -2331,10 +2325,26 @@ fn spanning_forest(
         parts.push((lo, part));
         rest = tail;
     }
+    // Every edge's bucket first, in pieces of the same cost on every thread
+    // (a block's own took as long as its sort and Kruskal together, and
+    // three blocks on two threads left one idle for a block's time).
+    let mut bucket = vec![NO_EDGE; n * k];
+    bucket
+        .par_chunks_mut(BUCKET_POINTS * k.max(1))
+        .enumerate()
+        .for_each(|(c, chunk)| {
+            // Each point's edges in turn (no division to find an edge's point).
+            for (i, row) in (c * BUCKET_POINTS..).zip(chunk.chunks_mut(k)) {
+                for (e, b) in (i * k..).zip(row) {
+                    *b = edge_bucket(points, knn, normals, across, (i, e));
+                }
+            }
+        });
     let found: Vec<Block> = parts
         .into_par_iter()
-        .map(|(lo, part)| Block::of((points, knn, normals), across, lo, part))
+        .map(|(lo, part)| Block::of(knn, &bucket[lo * k..(lo + part.len()) * k], lo, part))
         .collect();
+    drop(bucket);
     let edge = |e: u32| {
         let (i, j) = ((e as usize / k) as u32, knn.idx[e as usize]);
         (i, j, across(i as usize, j as usize))
