@@ -853,6 +853,10 @@ fn render_surfaces_rows(
         .step_by(step)
         .collect::<Vec<_>>()
         .into_par_iter()
+        // Each row (pair) a piece of its own: a model leaves some rows far
+        // dearer than others, and a run of rows split no further kept one
+        // thread busy alone at the end.
+        .with_max_len(1)
         .flat_map_iter(|y| {
             let mut s = Scratch {
                 hits: CandidateHits::new(scene.options.scale.xi),

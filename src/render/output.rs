@@ -9,6 +9,7 @@ use crate::names::Named;
 use crate::{Error, Result};
 use glam::Vec3;
 use image::{ImageBuffer, ImageFormat, Rgb};
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 use crate::io::linear_to_srgb8 as srgb;
@@ -18,8 +19,8 @@ use crate::io::linear_to_srgb8 as srgb;
 pub fn to_srgb8(frame: &Frame) -> ImageBuffer<Rgb<u8>, Vec<u8>> {
     let data = frame
         .rgb
-        .iter()
-        .flat_map(|c| [srgb(c.x), srgb(c.y), srgb(c.z)])
+        .par_iter()
+        .flat_map_iter(|c| [srgb(c.x), srgb(c.y), srgb(c.z)])
         .collect();
     ImageBuffer::from_raw(frame.width, frame.height, data).unwrap_or_default()
 }

@@ -16,8 +16,10 @@ use crate::resolve::ShadingMode;
 use crate::scene::SceneScale;
 use crate::splat::Splat;
 use crate::splat::color::ColorField;
+use crate::splat::standoff::Standoff;
 use crate::{Error, Result};
 use glam::{DMat3, DVec3, Mat3, Vec2, Vec3};
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// Loads a scene file: parses it, builds every model's splats, resolves
@@ -118,7 +120,12 @@ fn build_scene_within(
         .iter()
         .map(|l| light(l, shift))
         .collect::<Result<Vec<_>, _>>()?;
-    let (offset, diagonal) = recentre(&mut models.splats, &mut models.triangles.tris);
+    // Each model's standoff, from copies, beside the re-centring (both
+    // mostly serial passes over every splat).
+    let (standoff, (offset, diagonal)) = rayon::join(
+        || models.standoff.iter().map(Standoff::measure).collect::<Vec<_>>(),
+        || recentre(&mut models.splats, &mut models.triangles.tris),
+    );
     if !diagonal.is_finite() || diagonal > MAX_EXTENT {
         return Err(Error::invalid(format!(
             "the models span {:.2e} once placed, beyond the {MAX_EXTENT:e} the renderer's f32 \
@@ -128,7 +135,7 @@ fn build_scene_within(
     }
     let lights = lights.into_iter().map(|l| moved(l, offset)).collect();
     let camera = scene_camera(c, shift, offset)?;
-    let (options, xi_of) = render_options(&file.render, diagonal, &models.standoff)?;
+    let (options, xi_of) = render_options(&file.render, diagonal, &standoff)?;
     Ok(Scene {
         splats: models.splats,
         triangles: models.triangles,
@@ -202,8 +209,9 @@ pub fn scene_camera(c: &CameraSpec, shift: DVec3, offset: Vec3) -> Result<Camera
 /// One line when the splats span more than the renderer's f32 geometry
 /// holds.
 pub fn splats_scene(mut splats: Vec<Splat>, camera: Camera) -> Result<Scene> {
-    let standoff = crate::splat::standoff::standoff(&splats);
-    let (offset, diagonal) = recentre(&mut splats, &mut []);
+    let standoff = Standoff::of(&splats);
+    let (standoff, (offset, diagonal)) =
+        rayon::join(|| standoff.measure(), || recentre(&mut splats, &mut []));
     if !diagonal.is_finite() || diagonal > MAX_EXTENT {
         return Err(Error::invalid(format!(
             "the splats span {diagonal:e}, beyond the {MAX_EXTENT:e} the renderer's f32 geometry holds"
@@ -281,8 +289,9 @@ struct Models {
     material_of: Vec<u16>,
     materials: Vec<Material>,
     shading_of: Vec<Option<ShadingMode>>,
-    /// Each model's splat standoff (`splat::standoff`).
-    standoff: Vec<f32>,
+    /// What each model's splat standoff is measured from
+    /// (`splat::standoff`).
+    standoff: Vec<Standoff>,
     /// The diagonal of the placed splats' centres, in f64 (for a message
     /// when f32 cannot hold it).
     span: f64,
@@ -343,13 +352,20 @@ fn load_models(
         }
         let s = &mut src.splats;
         m.transform.apply(s, src.origin, shift);
-        for sp in s.iter() {
-            let c = sp.center.as_dvec3();
-            let r = f64::from(sp.radii.max_element());
-            lo = lo.min(c - r);
-            hi = hi.max(c + r);
-        }
-        if let Some(bad) = s.iter().position(|sp| !placed_ok(sp)) {
+        // The span is for a message: its length is the same whichever
+        // zero (+0 or -0) a tie leaves in the box.
+        let (l, h) = s
+            .par_iter()
+            .map(|sp| {
+                let (c, r) = (sp.center.as_dvec3(), f64::from(sp.radii.max_element()));
+                (c - r, c + r)
+            })
+            .reduce(
+                || (DVec3::INFINITY, DVec3::NEG_INFINITY),
+                |(a, b), (c, d)| (a.min(c), b.max(d)),
+            );
+        (lo, hi) = (lo.min(l), hi.max(h));
+        if let Some(bad) = s.par_iter().position_first(|sp| !placed_ok(sp)) {
             return Err(in_model(Error::invalid(format!(
                 "splat {} is not finite once placed (transform.scale {}, translate {:?}): \
                  beyond what the renderer's f32 geometry holds",
@@ -358,7 +374,7 @@ fn load_models(
                 m.transform.translate
             ))));
         }
-        out.standoff.push(crate::splat::standoff::standoff(s));
+        out.standoff.push(Standoff::of(s));
         out.materials.push(material(&m.material).map_err(in_model)?);
         out.shading_of.push(m.material.shading);
         out.material_of.extend(std::iter::repeat_n(mid, s.len()));
@@ -372,7 +388,12 @@ fn load_models(
                 out.color_fields.append(&mut src.color_fields);
             }
         }
-        out.splats.append(s);
+        if out.splats.is_empty() {
+            // The first model's splats kept where they are (not copied).
+            std::mem::swap(&mut out.splats, s);
+        } else {
+            out.splats.append(s);
+        }
     }
     out.shift = shift.unwrap_or(DVec3::ZERO);
     out.span = if lo.x <= hi.x {
@@ -961,13 +982,13 @@ impl TransformSpec {
     pub fn apply(&self, splats: &mut [Splat], origin: DVec3, shift: DVec3) {
         let rot = self.rotation();
         let base = self.world_of(origin) - shift;
-        for s in splats {
+        splats.par_iter_mut().for_each(|s| {
             s.center = self.point_at(base, rot, s.center);
             s.normal = (rot * s.normal).normalize();
             s.u_axis = (rot * s.u_axis).normalize();
             s.v_axis = (rot * s.v_axis).normalize();
             s.radii *= self.scale;
-        }
+        });
     }
 }
 
@@ -992,9 +1013,7 @@ fn recentre(splats: &mut [Splat], tris: &mut [Triangle]) -> (Vec3, f32) {
     } else {
         (Vec3::ZERO, 1.0)
     };
-    for s in splats {
-        s.center -= offset;
-    }
+    splats.par_iter_mut().for_each(|s| s.center -= offset);
     for t in tris {
         t.v = t.v.map(|v| v - offset);
     }

@@ -29,28 +29,62 @@ const SAMPLES: usize = 20_000;
 /// scene around the model. Fewer than two splats: 0.
 #[must_use]
 pub fn standoff(splats: &[Splat]) -> f32 {
-    if splats.len() < 2 {
-        return 0.0;
+    Standoff::of(splats).measure()
+}
+
+/// What [`standoff`] reads of the splats, copied: every centre and the
+/// measured splats' normals. It is measured from these alone, so the
+/// splats may move meanwhile (a scene re-centres them while it is
+/// measured: `scene::load`).
+#[derive(Clone, Debug, Default)]
+pub struct Standoff {
+    centres: Vec<Vec3>,
+    /// The splats measured (every `stride`-th), with their normals.
+    measured: Vec<(u32, Vec3)>,
+}
+
+impl Standoff {
+    /// The copies [`standoff`] measures `splats` from.
+    #[must_use]
+    pub fn of(splats: &[Splat]) -> Standoff {
+        if splats.len() < 2 {
+            return Standoff::default();
+        }
+        let stride = splats.len().div_ceil(SAMPLES);
+        Standoff {
+            centres: splats.par_iter().map(|s| s.center).collect(),
+            measured: (0..splats.len())
+                .step_by(stride)
+                .map(|i| (i as u32, splats[i].normal))
+                .collect(),
+        }
     }
-    let centres: Vec<Vec3> = splats.iter().map(|s| s.center).collect();
-    let tree = build_tree(&centres);
-    let stride = splats.len().div_ceil(SAMPLES);
-    let nearest = NonZero::new(NEIGHBOURS + 1).unwrap_or(NonZero::<usize>::MIN);
-    let mut largest: Vec<f32> = (0..splats.len())
-        .into_par_iter()
-        .step_by(stride)
-        .map(|i| {
-            let s = &splats[i];
-            tree.nearest_n::<SquaredEuclidean>(&s.center.to_array(), nearest)
-                .into_iter()
-                .filter(|nb| nb.item as usize != i)
-                .map(|nb| s.normal.dot(centres[nb.item as usize] - s.center).abs())
-                .filter(|d| d.is_finite())
-                .fold(0.0, f32::max)
-        })
-        .collect();
-    let mid = largest.len() / 2;
-    *largest.select_nth_unstable_by(mid, f32::total_cmp).1
+
+    /// The standoff ([`standoff`]).
+    #[must_use]
+    pub fn measure(&self) -> f32 {
+        if self.centres.len() < 2 {
+            return 0.0;
+        }
+        let centres = &self.centres;
+        let tree = build_tree(centres);
+        let nearest = NonZero::new(NEIGHBOURS + 1).unwrap_or(NonZero::<usize>::MIN);
+        let mut largest: Vec<f32> = self
+            .measured
+            .par_iter()
+            .map(|&(i, normal)| {
+                let c = centres[i as usize];
+                tree.nearest_n::<SquaredEuclidean>(&c.to_array(), nearest)
+                    .into_iter()
+                    .filter(|nb| nb.item != i)
+                    .map(|nb| normal.dot(centres[nb.item as usize] - c).abs())
+                    .filter(|d| d.is_finite())
+                    .fold(0.0, f32::max)
+            })
+            .collect();
+        let mid = largest.len() / 2;
+        *largest.select_nth_unstable_by(mid, f32::total_cmp).1
+    }
 }
 
 #[cfg(test)]
