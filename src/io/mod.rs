@@ -139,30 +139,31 @@ const READ_PIECE: usize = 8 << 20;
 /// copying it out of the page cache and faulting its buffer's pages in
 /// took one core 0.13 s for a 170 MB splat file.
 fn read_whole(path: &Path) -> std::io::Result<Vec<u8>> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path)?;
+    let mut bytes = Vec::new();
     #[cfg(unix)]
     {
         use rayon::prelude::*;
+        use std::io::{Seek, SeekFrom};
         use std::os::unix::fs::FileExt;
-        let file = std::fs::File::open(path)?;
         let meta = file.metadata()?;
         let len = meta.len();
         if let Ok(n) = usize::try_from(len)
             && meta.is_file()
             && len >= PARALLEL_READ_MIN
         {
-            let mut bytes = vec![0u8; n];
+            bytes = vec![0u8; n];
             bytes
                 .par_chunks_mut(READ_PIECE)
                 .enumerate()
                 .try_for_each(|(i, piece)| file.read_exact_at(piece, (i * READ_PIECE) as u64))?;
-            // Grown since its length was read: the rest as it is now.
-            let mut rest = &file;
-            std::io::Seek::seek(&mut rest, std::io::SeekFrom::Start(len))?;
-            std::io::Read::read_to_end(&mut rest, &mut bytes)?;
-            return Ok(bytes);
+            file.seek(SeekFrom::Start(len))?;
         }
     }
-    std::fs::read(path)
+    // The whole file, or what it grew by since its pieces' length was read.
+    file.read_to_end(&mut bytes)?;
+    Ok(bytes)
 }
 
 /// Read a point cloud from a `.ply`, `.pcd`, `.xyz`, `.txt`, `.las`, `.laz` or `.e57` file; files
