@@ -212,10 +212,11 @@ pub trait Fan: Send + Sync {
         }
     }
 
-    /// A backend answering the queries of this fan's run exactly as the
-    /// backend that made the fan does, bit for bit, from what the fan
-    /// knows of its directions (the octree's: each block of directions'
-    /// own list of primitives); `None` (the default): that backend.
+    /// A backend answering every query exactly as the backend that made
+    /// the fan does, bit for bit, those of this fan's run (and the octree's
+    /// shadow rays toward its origin) from what the fan knows of its
+    /// directions (the octree's: each block of directions' own list of
+    /// primitives); `None` (the default): that backend.
     fn backend(&self) -> Option<&dyn Backend> {
         None
     }

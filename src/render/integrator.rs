@@ -402,8 +402,10 @@ impl Surfaces for SplatSurfaces<'_> {
 struct Tracer<'a> {
     scene: &'a Scene,
     surfaces: &'a dyn Surfaces,
-    /// What the camera rays are traced against: `surfaces`, or `surfaces`
-    /// through their backend's fan ([`camera_fan`]), with the same hits.
+    /// What the camera rays and the shadow rays are traced against:
+    /// `surfaces`, or `surfaces` through their backend's fan
+    /// ([`camera_fan`]), with the same hits and occlusion (its lists
+    /// answer the shadow rays toward a light at the eye, a headlight).
     camera: &'a dyn Surfaces,
     /// Hand the surfaces coherent batches ([`Surfaces::packets`]).
     packets: bool,
@@ -467,7 +469,7 @@ impl Tracer<'_> {
         s.rays.shadow += 1;
         let (ray, d) = shadow_ray(from, dir, dist);
         !self
-            .surfaces
+            .camera
             .occluded(&ray, from, d - self.surfaces.eps_self())
     }
 
@@ -498,7 +500,7 @@ impl Tracer<'_> {
             }
         }
         let mut occluded = [false; PACKET];
-        self.surfaces
+        self.camera
             .occluded_batch(&rays[..traced], from, &mut occluded[..traced]);
         s.rays.shadow += traced as u64;
         let mut next = 0;

@@ -113,6 +113,9 @@ pub(super) struct Coverage {
     /// `w`), with a margin: the tangent of the cone holding every ray the
     /// grid takes.
     cone: f64,
+    /// The least distance from the origin of any primitive's ball (behind,
+    /// beside or in front): no point nearer the origin holds a hit.
+    near_min: f64,
     /// The SIMD path of the rays' cells (the octree's).
     pub(super) isa: Isa,
 }
@@ -189,6 +192,7 @@ impl Coverage {
             covered: Vec::new(),
             far: [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY],
             behind: false,
+            near_min: f64::INFINITY,
             isa,
         })
     }
@@ -258,6 +262,62 @@ impl Coverage {
         (x - self.lo[a]) * self.scale
     }
 
+    /// Where a ray leaving anywhere (a shadow ray) meets primitives only
+    /// in directions of the grid, when its span ends within half of
+    /// [`Coverage::near_min`] of the origin (a shadow ray toward a light
+    /// at the fan's origin: a headlight): the cells ([`Coverage::coord`])
+    /// of the two ends of a part of `[t_min, t_max]` holding every hit,
+    /// and a bound on the distance from the origin of its points; `None`
+    /// where the span does not end that near, the part leaves the front
+    /// of the origin, or the margin would not cover the rounding (below).
+    ///
+    /// Why the part holds every hit, and its ends every direction of one:
+    /// a hit the f32 test accepts at `t` lies within the grown ball of its
+    /// primitive (module doc), so at least `near_min` from the origin;
+    /// a point at `t` lies within `|x(t_max)| + (t_max - t) |d|` of it, so
+    /// the part stops where that bound falls under `near_min` (less a
+    /// millionth, far above the f64 rounding). A run of a straight line
+    /// lies wholly in front when both its ends do (`p·w` is linear along
+    /// it), and the gnomonic projection maps it onto the segment between
+    /// its ends' projections. The ball's margin, `MARGIN (|c| + R) >=
+    /// MARGIN near_min`, is the rounding's bound for the rays of the fan;
+    /// a ray leaving elsewhere rounds with the coordinates it works with
+    /// (its origin's, the primitive's, its length): taken only while
+    /// `near_min` is at least an eighth of their sum, so that margin is
+    /// still about 20 ulps of it.
+    pub(super) fn toward(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<([[f64; 2]; 2], f64)> {
+        let apex = Vec3::from_array(self.origin.map(f32::from_bits));
+        // The cheap test first (NaN compares false).
+        let end = ray.origin + ray.dir * t_max - apex;
+        let half = 0.5 * self.near_min;
+        if !(t_min.is_finite() && f64::from(end.length_squared()) < half * half) {
+            return None;
+        }
+        let o = ray.origin.as_dvec3() - apex.as_dvec3();
+        let d = ray.dir.as_dvec3();
+        let len = d.length();
+        let (t0, tm) = (f64::from(t_min), f64::from(t_max));
+        let far = (o + d * tm).length();
+        let t1 = tm - (self.near_min * (1.0 - 1e-6) - far) / len;
+        if !t0.partial_cmp(&t1).is_some_and(std::cmp::Ordering::is_le) {
+            return None;
+        }
+        let mut cells = [[0.0; 2]; 2];
+        for (cell, t) in cells.iter_mut().zip([t0, t1]) {
+            let x = o + d * t;
+            let z = x.dot(self.w);
+            let least = 1e-6 * (x.x.abs() + x.y.abs() + x.z.abs());
+            if !z.partial_cmp(&least).is_some_and(std::cmp::Ordering::is_gt) {
+                return None;
+            }
+            *cell = [self.coord(x.dot(self.u) / z, 0), self.coord(x.dot(self.v) / z, 1)];
+        }
+        let reach = (far + (tm - t0) * len) * (1.0 + 1e-9);
+        let from = f64::from(ray.origin.length()) * (1.0 + 1e-6);
+        let coordinates = apex.as_dvec3().length() + from + reach + tm * len;
+        (8.0 * self.near_min >= coordinates).then_some((cells, reach))
+    }
+
     /// Marks the cells each primitive's ball covers (a difference array
     /// summed along both axes; the rectangles found in parallel, the rows
     /// summed in parallel: the fan is built before any of its run's rays
@@ -275,13 +335,18 @@ impl Coverage {
         let mut rects = Vec::with_capacity(seen.len());
         for &s in &seen {
             match s {
-                Seen::Behind => self.behind = true,
+                Seen::Behind(least) => {
+                    self.behind = true;
+                    self.near_min = self.near_min.min(least);
+                }
                 // No direction outside the grid is known to miss.
-                Seen::Aside => {
+                Seen::Aside(least) => {
+                    self.near_min = self.near_min.min(least);
                     self.behind = true;
                     self.far = [f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY];
                 }
-                Seen::Front(reach, cells, _) => {
+                Seen::Front(reach, cells, least) => {
+                    self.near_min = self.near_min.min(least);
                     // A reach not a number holds every direction.
                     let low = |x: f64| if x.is_nan() { f64::NEG_INFINITY } else { x };
                     let high = |x: f64| if x.is_nan() { f64::INFINITY } else { x };
@@ -320,7 +385,7 @@ impl Coverage {
         self.covered = covered;
         Some(seen.iter().map(|s| match s {
             Seen::Front(_, cells, near) => (*cells, *near),
-            Seen::Behind | Seen::Aside => (None, f64::INFINITY),
+            Seen::Behind(_) | Seen::Aside(_) => (None, f64::INFINITY),
         }).unzip())
     }
 
@@ -342,10 +407,11 @@ impl Coverage {
     fn rectangle<P: Primitive>(&self, prim: &P) -> Option<Seen> {
         let (c, r) = self.ball(prim);
         let (cu, cv, cw) = (c.dot(self.u), c.dot(self.v), c.dot(self.w));
+        let least = (c.length() - r).max(0.0);
         // Wholly behind: no ray of the fan in front (`d·w > 0`, `t >= 0`)
         // meets it. NaN compares false: no fan.
         if cw < -r {
-            return Some(Seen::Behind);
+            return Some(Seen::Behind(least));
         }
         let in_front = cw > 1.01 * r;
         if !in_front {
@@ -353,7 +419,7 @@ impl Coverage {
             // the ball has `|p_⊥| >= |c_⊥| - r > cone (c·w + r) >= cone
             // p·w`, so no ray the grid takes meets it (NaN: no fan).
             let across = cu.hypot(cv);
-            return (across - r > self.cone * (cw + r)).then_some(Seen::Aside);
+            return (across - r > self.cone * (cw + r)).then_some(Seen::Aside(least));
         }
         let spans = match prim.semi_axes() {
             Some((a, b)) => {
@@ -368,7 +434,7 @@ impl Coverage {
             (Some([i0, i1]), Some([j0, j1])) => Some([i0, i1, j0, j1]),
             _ => None,
         };
-        Some(Seen::Front([i0, i1, j0, j1], cells, (c.length() - r).max(0.0)))
+        Some(Seen::Front([i0, i1, j0, j1], cells, least))
     }
 }
 
@@ -379,15 +445,16 @@ pub(super) type Covered = (Vec<Option<[usize; 4]>>, Vec<f64>);
 /// What [`Coverage::rectangle`] finds of a primitive's ball.
 #[derive(Clone, Copy)]
 enum Seen {
-    /// Wholly behind the plane through the origin across `w`.
-    Behind,
+    /// Wholly behind the plane through the origin across `w` (with its
+    /// ball's least distance from the origin, as the others).
+    Behind(f64),
     /// Wholly in front: its reach in cells, the cells it covers (`None`:
     /// beside the grid), and its ball's least distance from the origin.
     Front([f64; 4], Option<[usize; 4]>, f64),
     /// Across the plane, but outside the cone of the grid's directions:
     /// met by no ray the grid takes (a floor beside or under the eye).
     /// The rays outside the grid are then the backend's.
-    Aside,
+    Aside(f64),
 }
 
 impl Fan for Coverage {
