@@ -176,6 +176,17 @@ pub trait Backend: Send + Sync {
         false
     }
 
+    /// A backend answering every query exactly as this one does, bit for
+    /// bit, that knows once the rays along `dir` (its bits: the shadow
+    /// rays of a directional light, about `rays` of them) and answers
+    /// their occlusion from that (the octree's: each cell of a grid across
+    /// `dir` with its list of primitives); `None` (the default, and where
+    /// it would not pay): this one.
+    fn parallel(&self, dir: glam::Vec3, rays: usize) -> Option<Box<dyn Backend + '_>> {
+        let _ = (dir, rays);
+        None
+    }
+
     /// [`Backend::occluded_from`] for a batch: `out[i]` is its answer for
     /// `qs[i]`. The default asks one query at a time.
     ///

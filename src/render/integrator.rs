@@ -205,6 +205,15 @@ pub trait Surfaces: Sync {
         None
     }
 
+    /// What the backend these surfaces trace through knows once about the
+    /// `rays` shadow rays along `dir` of a directional light
+    /// ([`Backend::parallel`]); `None` (the default) where there is no
+    /// such backend or it would not pay.
+    fn parallel(&self, dir: Vec3, rays: usize) -> Option<Box<dyn Backend + '_>> {
+        let _ = (dir, rays);
+        None
+    }
+
     /// These surfaces traced through `backend` in place of their own
     /// (a fan's [`Fan::backend`], which answers every query as theirs
     /// does); `None` (the default): not possible.
@@ -394,6 +403,10 @@ impl Surfaces for SplatSurfaces<'_> {
         self.backend.fan(&make())
     }
 
+    fn parallel(&self, dir: Vec3, rays: usize) -> Option<Box<dyn Backend + '_>> {
+        self.backend.parallel(dir, rays)
+    }
+
     fn through<'s>(&'s self, backend: &'s dyn Backend) -> Option<Box<dyn Surfaces + 's>> {
         Some(Box::new(SplatSurfaces { backend, ..*self }))
     }
@@ -407,6 +420,11 @@ struct Tracer<'a> {
     /// ([`camera_fan`]), with the same hits and occlusion (its lists
     /// answer the shadow rays toward a light at the eye, a headlight).
     camera: &'a dyn Surfaces,
+    /// Per light of the scene, what its shadow rays are traced against
+    /// where not `camera`: a directional light's, `surfaces` through their
+    /// backend's lists along it ([`Surfaces::parallel`]), with the same
+    /// occlusion.
+    lit: Vec<Option<&'a dyn Surfaces>>,
     /// Hand the surfaces coherent batches ([`Surfaces::packets`]).
     packets: bool,
 }
@@ -464,13 +482,12 @@ impl Tracer<'_> {
         self.surfaces.hit(ray, from, &mut s.hits)
     }
 
-    /// Is the light at distance `dist` along `dir` visible from the hit?
-    fn visible(&self, from: &ShadeHit, dir: Vec3, dist: f32, s: &mut Scratch) -> bool {
+    /// Is the light at distance `dist` along `dir` visible from the hit,
+    /// its shadow ray traced against `through`?
+    fn visible(&self, through: &dyn Surfaces, from: &ShadeHit, dir: Vec3, dist: f32, s: &mut Scratch) -> bool {
         s.rays.shadow += 1;
         let (ray, d) = shadow_ray(from, dir, dist);
-        !self
-            .camera
-            .occluded(&ray, from, d - self.surfaces.eps_self())
+        !through.occluded(&ray, from, d - self.surfaces.eps_self())
     }
 
     /// The light samples `(l, d, e)` of one hit (see [`Tracer::direct`]):
@@ -551,17 +568,19 @@ impl Tracer<'_> {
         };
         // Whether the light at distance `d` along `l` is seen from the hit:
         // its shadow ray, traced alone, only when it faces `n`.
-        let seen = |l: Vec3, d: f32, s: &mut Scratch| n.dot(l) > 0.0 && self.visible(hit, l, d, s);
-        for light in &self.scene.lights {
+        let seen = |through: Option<&dyn Surfaces>, l: Vec3, d: f32, s: &mut Scratch| {
+            n.dot(l) > 0.0 && self.visible(through.unwrap_or(self.camera), hit, l, d, s)
+        };
+        for (light, &through) in self.scene.lights.iter().zip(&self.lit) {
             match *light {
                 Light::Point { position, power } => {
                     let to = position - p;
                     let d2 = to.length_squared();
                     let d = d2.sqrt();
-                    add(to / d, power / d2, seen(to / d, d, s));
+                    add(to / d, power / d2, seen(through, to / d, d, s));
                 }
                 Light::Directional { direction, power } => {
-                    add(-direction, power, seen(-direction, f32::INFINITY, s));
+                    add(-direction, power, seen(through, -direction, f32::INFINITY, s));
                 }
                 Light::Sphere {
                     position,
@@ -594,7 +613,7 @@ impl Tracer<'_> {
                             let d2 = to.length_squared();
                             let d = d2.sqrt();
                             if !self.packets {
-                                add(to / d, power * (share / d2), seen(to / d, d, s));
+                                add(to / d, power * (share / d2), seen(through, to / d, d, s));
                                 continue;
                             }
                             batch[len] = (to / d, d, power * (share / d2));
@@ -839,10 +858,20 @@ fn render_surfaces_rows(
     let start = Instant::now();
     let fan = camera_fan(cam, rows.clone(), surfaces);
     let through = fan.as_ref().and_then(|f| surfaces.through(f.backend()?));
+    // A directional light's shadow rays, about one a camera sample.
+    let samples = h * cam.width as usize * cam.spp as usize;
+    let along: Vec<_> = (scene.lights.iter())
+        .map(|light| match *light {
+            Light::Directional { direction, .. } => surfaces.parallel(-direction, samples),
+            _ => None,
+        })
+        .collect();
+    let lit: Vec<_> = along.iter().map(|b| surfaces.through(b.as_deref()?)).collect();
     let tracer = Tracer {
         scene,
         surfaces,
         camera: through.as_deref().unwrap_or(surfaces),
+        lit: lit.iter().map(|s| s.as_deref()).collect(),
         packets: surfaces.packets(),
     };
     let rows_done = AtomicUsize::new(0);

@@ -92,7 +92,7 @@ impl<P: Primitive> Octree<P> {
     }
 
     /// Every primitive held, once, and its id.
-    fn primitives(&self) -> (Vec<u32>, Vec<P>) {
+    pub(super) fn primitives(&self) -> (Vec<u32>, Vec<P>) {
         let mut seen = vec![false; self.count];
         let (mut ids, mut out) = (Vec::with_capacity(seen.len()), Vec::with_capacity(seen.len()));
         let l = lanes::<P>();

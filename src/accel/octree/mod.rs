@@ -69,6 +69,7 @@ mod bins;
 mod build;
 mod fan;
 mod packet;
+mod parallel;
 mod parts;
 mod traverse;
 
@@ -453,6 +454,14 @@ impl<P: Primitive> Backend for Octree<P> {
 
     fn fan_pays(&self, rays: usize) -> bool {
         rays >= fan::MIN_RAYS.max(self.count)
+    }
+
+    /// The primitives' shadows along `dir` filed in a grid's cells, each
+    /// cell's list answering the rays along it (`parallel`), for at least
+    /// 4096 rays and as many as the primitives, and at most one list entry
+    /// a ray.
+    fn parallel(&self, dir: Vec3, rays: usize) -> Option<Box<dyn Backend + '_>> {
+        Some(Box::new(self.build_parallel(dir, rays)?))
     }
 
     fn stats(&self) -> &BuildStats {
