@@ -858,11 +858,12 @@ fn render_surfaces_rows(
     let start = Instant::now();
     let fan = camera_fan(cam, rows.clone(), surfaces);
     let through = fan.as_ref().and_then(|f| surfaces.through(f.backend()?));
-    // A directional light's shadow rays, about one a camera sample.
-    let samples = h * cam.width as usize * cam.spp as usize;
+    // A directional light's shadow rays: one a camera sample, so at least
+    // one a pixel (the lists' memory is bounded by the rays told).
+    let pixels = h * cam.width as usize;
     let along: Vec<_> = (scene.lights.iter())
         .map(|light| match *light {
-            Light::Directional { direction, .. } => surfaces.parallel(-direction, samples),
+            Light::Directional { direction, .. } => surfaces.parallel(-direction, pixels),
             _ => None,
         })
         .collect();

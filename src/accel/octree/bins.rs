@@ -34,9 +34,9 @@
 //! (`docs/notes/backends.md`, "Issue 55, forty-second session").
 
 use super::fan::Coverage;
-use super::traverse::{AnyHit, Gather, Visitor};
+use super::traverse::{AnyHit, Gather, RunsAnyHit, Visitor, occluded_by};
 use super::{NO_PRIMITIVE, Octree, lanes};
-use crate::accel::{Backend, BuildStats, CandidateHits, Fan, NoSkip, PACKET, Query};
+use crate::accel::{Backend, BuildStats, CandidateHits, Fan, NoSkip, PACKET, Query, Skip};
 use crate::geometry::Ray;
 use crate::primitive::{Pack, Primitive};
 use crate::simd::{GnomonicGrid, NO_CELL, gnomonic_cell};
@@ -430,21 +430,6 @@ impl<P: Primitive> Binned<'_, P> {
         }
     }
 
-    /// [`Backend::occluded_from`] of `q` from block `b`'s list, up to
-    /// `reach` where given; what it skips as the octree's.
-    #[inline]
-    fn any_hit(&self, (b, reach): (usize, Option<f64>), q: &Query) -> bool {
-        if q.meets_nothing() {
-            return false;
-        }
-        let (ray, t_min, t_max) = (&q.ray, q.t_min, q.t_max);
-        match (&q.from, q.pass) {
-            (None, None) => self.visit(b, ray, reach, &mut AnyHit::new(ray, t_min, t_max, NoSkip)),
-            (Some(d), None) => self.visit(b, ray, reach, &mut AnyHit::new(ray, t_min, t_max, d)),
-            _ => self.visit(b, ray, reach, &mut AnyHit::new(ray, t_min, t_max, q.secondary())),
-        }
-    }
-
     /// Each of `qs`' block by `which`, or `None` when some query has none
     /// (or there are more than [`PACKET`]).
     #[inline]
@@ -460,6 +445,17 @@ impl<P: Primitive> Binned<'_, P> {
     }
 }
 
+/// A block's list, its ray and the reach its list stops at (where
+/// given), for [`occluded_by`].
+struct InBlock<'l, 'a, P: Primitive>(&'l Binned<'a, P>, &'l Ray, (usize, Option<f64>));
+
+impl<P: Primitive> RunsAnyHit<P> for InBlock<'_, '_, P> {
+    fn run<S: Skip>(&self, visitor: &mut AnyHit<'_, P, S>) -> bool {
+        let (b, reach) = self.2;
+        self.0.visit(b, self.1, reach, visitor)
+    }
+}
+
 impl<P: Primitive> Backend for Binned<'_, P> {
     fn intersect_from(&self, q: &Query, hits: &mut CandidateHits) {
         match self.gathers(q) {
@@ -470,7 +466,7 @@ impl<P: Primitive> Backend for Binned<'_, P> {
 
     fn occluded_from(&self, q: &Query) -> bool {
         match self.occludes(q) {
-            Some(b) => self.any_hit(b, q),
+            Some(at) => occluded_by(q, &InBlock(self, &q.ray, at)),
             None => self.oct.occluded_from(q),
         }
     }
@@ -497,7 +493,7 @@ impl<P: Primitive> Backend for Binned<'_, P> {
             return self.oct.occluded_packet(qs, out);
         };
         for ((q, o), &b) in qs.iter().zip(out.iter_mut()).zip(&bs) {
-            *o = self.any_hit(b, q);
+            *o = occluded_by(q, &InBlock(self, &q.ray, b));
         }
     }
 }

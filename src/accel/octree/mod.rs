@@ -458,8 +458,7 @@ impl<P: Primitive> Backend for Octree<P> {
 
     /// The primitives' shadows along `dir` filed in a grid's cells, each
     /// cell's list answering the rays along it (`parallel`), for at least
-    /// 4096 rays and as many as the primitives, and at most one list entry
-    /// a ray.
+    /// 4096 rays and 12 a primitive, and at most one list entry a ray.
     fn parallel(&self, dir: Vec3, rays: usize) -> Option<Box<dyn Backend + '_>> {
         Some(Box::new(self.build_parallel(dir, rays)?))
     }

@@ -823,6 +823,27 @@ impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, P, S> {
     }
 }
 
+/// Where an [`AnyHit`] visitor is run: a list of primitives ([`occluded_by`]).
+pub(super) trait RunsAnyHit<P: Primitive> {
+    /// Runs `visitor` over the primitives; true when it stopped at a hit.
+    fn run<S: Skip>(&self, visitor: &mut AnyHit<'_, P, S>) -> bool;
+}
+
+/// The occlusion query `q` through `runs`, skipping what the octree skips
+/// for it: nothing, the departure's surface, or that and the pass-over
+/// rule ([`crate::accel::Query::secondary`]).
+pub(super) fn occluded_by<P: Primitive>(q: &crate::accel::Query, runs: &impl RunsAnyHit<P>) -> bool {
+    if q.meets_nothing() {
+        return false;
+    }
+    let (ray, t_min, t_max) = (&q.ray, q.t_min, q.t_max);
+    match (&q.from, q.pass) {
+        (None, None) => runs.run(&mut AnyHit::new(ray, t_min, t_max, crate::accel::NoSkip)),
+        (Some(d), None) => runs.run(&mut AnyHit::new(ray, t_min, t_max, d)),
+        _ => runs.run(&mut AnyHit::new(ray, t_min, t_max, q.secondary())),
+    }
+}
+
 #[cfg(test)]
 pub(super) mod tests {
     use super::super::{Layout, Octree, OctreeParams, Tree};
