@@ -183,16 +183,8 @@ impl Lists {
                 }
             }
         });
-        let long: Vec<bool> = count.iter().map(|&c| c as usize > MAX_LIST).collect();
-        let mut first = Vec::with_capacity(blocks + 1);
-        let mut at = 0u32;
-        for (&c, &long) in count.iter().zip(&long) {
-            first.push(at);
-            if !long {
-                at += (c as usize).div_ceil(l) as u32;
-            }
-        }
-        first.push(at);
+        let (long, first) = pack_starts(&count, l);
+        let at = first[blocks];
         // The primitives in front, nearest first. A bound is at least 0
         // (a hit's distance is), so its bits sort as it does.
         let mut order: Vec<(u64, u32)> = (0..cells.len() as u32)
@@ -246,6 +238,23 @@ impl Lists {
             near: pack_near,
         })
     }
+}
+
+/// Per list, from its count of primitives, whether it is too long to be
+/// kept ([`MAX_LIST`]), and where each list's packs of `l` lanes start (the
+/// last entry ends the last list's; a long list holds none).
+pub(super) fn pack_starts(count: &[u32], l: usize) -> (Vec<bool>, Vec<u32>) {
+    let long: Vec<bool> = count.iter().map(|&c| c as usize > MAX_LIST).collect();
+    let mut first = Vec::with_capacity(count.len() + 1);
+    let mut at = 0u32;
+    for (&c, &long) in count.iter().zip(&long) {
+        first.push(at);
+        if !long {
+            at += (c as usize).div_ceil(l) as u32;
+        }
+    }
+    first.push(at);
+    (long, first)
 }
 
 /// The greatest f32 at most `x` (NaN: minus infinity, a bound that stops

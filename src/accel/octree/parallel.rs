@@ -31,8 +31,10 @@
 //! any-hit test does not depend on the order (each candidate is kept or
 //! skipped on its own), so the answer is the octree's. A ray along
 //! another direction, from `t_min < 0`, from far outside the scene, or in
-//! a cell whose list is long ([`MAX_LIST`]) is the octree's own.
+//! a cell whose list is long (as a camera fan's block's, `bins`) is the
+//! octree's own.
 
+use super::bins::pack_starts;
 use super::traverse::{AnyHit, RunsAnyHit, Visitor, occluded_by};
 use super::{NO_PRIMITIVE, Octree, lanes};
 use crate::accel::{Backend, BuildStats, CandidateHits, PACKET, Query, Skip};
@@ -55,10 +57,6 @@ const MAX_CELLS: usize = 1 << 20;
 
 /// Primitives a cell, on the mean, the grid is sized for.
 const PRIMS_PER_CELL: f64 = 2.0;
-
-/// Most primitives a cell lists: a ray of a cell with more is traced by
-/// the octree.
-const MAX_LIST: usize = 128;
 
 /// Most list entries in all, per ray the render expects along the light:
 /// beyond it the lists are not built (their memory and building would not
@@ -232,16 +230,8 @@ fn fill<P: Primitive>(n: [usize; 2], shadows: &[Shadow]) -> (Vec<u32>, Vec<bool>
             }
         }
     }
-    let long: Vec<bool> = count.iter().map(|&c| c as usize > MAX_LIST).collect();
-    let mut first = Vec::with_capacity(cells + 1);
-    let mut at = 0u32;
-    for (&c, &long) in count.iter().zip(&long) {
-        first.push(at);
-        if !long {
-            at += (c as usize).div_ceil(l) as u32;
-        }
-    }
-    first.push(at);
+    let (long, first) = pack_starts(&count, l);
+    let at = first[cells];
     // Highest top first; ties by index (the keys are unique).
     let mut order: Vec<(f64, u32)> = shadows.iter().enumerate().map(|(k, s)| (s.1, k as u32)).collect();
     order.par_sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
