@@ -509,7 +509,7 @@ impl<P: Primitive> Backend for Binned<'_, P> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::traverse::tests::{bits, bumpy, clipped_thirds, packet_answers};
+    use super::super::traverse::tests::{bits, bumpy, clipped_thirds, packet_answers, same_occlusion};
     use super::super::{Octree, OctreeParams};
     use crate::accel::{Backend, CandidateHits, Departure, Query};
     use crate::geometry::Ray;
@@ -688,23 +688,7 @@ mod tests {
                 });
             }
         }
-        let (mut listed, mut occluded, mut both) = (0, 0, 0);
-        for q in &qs {
-            let l = binned.toward(q).is_some();
-            let o = oct.occluded_from(q);
-            listed += usize::from(l);
-            occluded += usize::from(o);
-            both += usize::from(l && o);
-            assert_eq!(binned.occluded_from(q), o, "{q:?}");
-        }
-        for packet in qs.chunks(8) {
-            let mut out = [false; 8];
-            binned.occluded_packet(packet, &mut out);
-            for (q, o) in packet.iter().zip(out) {
-                assert_eq!(o, oct.occluded_from(q), "{q:?}");
-            }
-        }
-        [qs.len(), listed, occluded, both]
+        same_occlusion(&binned, oct, &qs, |q| binned.toward(q).is_some())
     }
 
     /// The bumpy sphere's 4,000 small discs, whole and with clip lines on

@@ -113,6 +113,8 @@ pub(super) struct Coverage {
     /// `w`), with a margin: the tangent of the cone holding every ray the
     /// grid takes.
     cone: f64,
+    /// The origin's distance from the world's.
+    apex_len: f64,
     /// The least distance from the origin of any primitive's ball (behind,
     /// beside or in front): no point nearer the origin holds a hit.
     near_min: f64,
@@ -170,14 +172,7 @@ impl Coverage {
             lo[a] = (lo[a] - grow).max(-limit);
             hi[a] = (hi[a] + grow).min(limit);
         }
-        let area = (hi[0] - lo[0]) * (hi[1] - lo[1]);
-        let cells = (rays.len() as f64 / RAYS_PER_CELL).clamp(1.0, MAX_CELLS as f64);
-        let mut scale = (cells / area).sqrt();
-        let n = |scale: f64| [0, 1].map(|a| (((hi[a] - lo[a]) * scale).ceil() as usize).max(1));
-        while n(scale)[0] * n(scale)[1] > MAX_CELLS {
-            scale *= 0.9;
-        }
-        let cells_n = n(scale);
+        let (scale, cells_n) = grid_size(lo, hi, rays.len() as f64 / RAYS_PER_CELL);
         let most = |a: usize| lo[a].abs().max((lo[a] + cells_n[a] as f64 / scale).abs());
         let cone = 1.001 * most(0).hypot(most(1)) + 1e-9;
         Some(Coverage {
@@ -188,11 +183,12 @@ impl Coverage {
             w,
             lo,
             scale,
-            n: n(scale),
+            n: cells_n,
             covered: Vec::new(),
             far: [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY],
             behind: false,
             near_min: f64::INFINITY,
+            apex_len: origin.as_dvec3().length(),
             isa,
         })
     }
@@ -314,7 +310,7 @@ impl Coverage {
         }
         let reach = (far + (tm - t0) * len) * (1.0 + 1e-9);
         let from = f64::from(ray.origin.length()) * (1.0 + 1e-6);
-        let coordinates = apex.as_dvec3().length() + from + reach + tm * len;
+        let coordinates = self.apex_len + from + reach + tm * len;
         (8.0 * self.near_min >= coordinates).then_some((cells, reach))
     }
 
@@ -436,6 +432,18 @@ impl Coverage {
         };
         Some(Seen::Front([i0, i1, j0, j1], cells, least))
     }
+}
+
+/// A uniform grid over `[lo, hi]` of about `cells` square cells (at least
+/// 1, at most [`MAX_CELLS`]): its cells per unit and cells per axis.
+pub(super) fn grid_size(lo: [f64; 2], hi: [f64; 2], cells: f64) -> (f64, [usize; 2]) {
+    let area = ((hi[0] - lo[0]) * (hi[1] - lo[1])).max(f64::MIN_POSITIVE);
+    let mut scale = (cells.clamp(1.0, MAX_CELLS as f64) / area).sqrt();
+    let n = |scale: f64| [0, 1].map(|a| (((hi[a] - lo[a]) * scale).ceil() as usize).max(1));
+    while n(scale)[0] * n(scale)[1] > MAX_CELLS {
+        scale *= 0.9;
+    }
+    (scale, n(scale))
 }
 
 /// What [`Coverage::cover`] gives: each primitive's cells, and its ball's

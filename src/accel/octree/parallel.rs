@@ -35,6 +35,7 @@
 //! octree's own.
 
 use super::bins::pack_starts;
+use super::fan::grid_size;
 use super::traverse::{AnyHit, RunsAnyHit, Visitor, occluded_by};
 use super::{NO_PRIMITIVE, Octree, lanes};
 use crate::accel::{Backend, BuildStats, CandidateHits, PACKET, Query, Skip};
@@ -49,11 +50,8 @@ const MARGIN: f64 = 1e-5;
 
 /// How far inside its cell, in cells, a ray's origin falls for the cell's
 /// list to answer it, beyond the drift of its hits (far above the f64
-/// rounding of the projections; cells number at most [`MAX_CELLS`]).
+/// rounding of the projections; cells number at most 2^20).
 const EDGE: f64 = 1e-6;
-
-/// Most cells of a grid.
-const MAX_CELLS: usize = 1 << 20;
 
 /// Primitives a cell, on the mean, the grid is sized for.
 const PRIMS_PER_CELL: f64 = 2.0;
@@ -87,6 +85,12 @@ pub(super) struct Parallel<'a, P: Primitive> {
     n: [usize; 2],
     /// The scene's size: the most `|c| + R` of its primitives.
     size: f64,
+    /// The rays' `|d|`.
+    len: f64,
+    /// How far inside its cell a ray's origin falls ([`EDGE`], and a hit
+    /// lies within about twice the size of the origin, so `t |d|` times
+    /// the basis' rounding is far below the rest), in cells.
+    edge: f64,
     /// Per cell, the first of its packs; the last entry ends the last
     /// cell's.
     first: Vec<u32>,
@@ -160,14 +164,7 @@ impl<P: Primitive> Octree<P> {
         if spans.is_empty() {
             return None;
         }
-        let area = ((hi[0] - lo[0]) * (hi[1] - lo[1])).max(f64::MIN_POSITIVE);
-        let cells = (prims.len() as f64 / PRIMS_PER_CELL).clamp(1.0, MAX_CELLS as f64);
-        let mut scale = (cells / area).sqrt();
-        let count = |scale: f64| [0, 1].map(|a| (((hi[a] - lo[a]) * scale).ceil() as usize).max(1));
-        while count(scale)[0] * count(scale)[1] > MAX_CELLS {
-            scale *= 0.9;
-        }
-        let n = count(scale);
+        let (scale, n) = grid_size(lo, hi, prims.len() as f64 / PRIMS_PER_CELL);
         let cell = |x: f64, a: usize| {
             let at = (x - lo[a]) * scale;
             if at > 0.0 { (at as usize).min(n[a] - 1) } else { 0 }
@@ -206,6 +203,8 @@ impl<P: Primitive> Octree<P> {
             scale,
             n,
             size,
+            len: dir.as_dvec3().length(),
+            edge: EDGE + 1e-12 * size * scale,
             first,
             long,
             packs,
@@ -283,12 +282,9 @@ impl<P: Primitive> Parallel<'_, P> {
         if !o.length().partial_cmp(&self.size).is_some_and(std::cmp::Ordering::is_le) {
             return None;
         }
-        // A hit lies within about twice the size of the origin, so `t |d|`
-        // times the basis' rounding is far below this.
-        let edge = EDGE + 1e-12 * self.size * self.scale;
         let axis = |x: f64, a: usize| {
             let at = (x - self.lo[a]) * self.scale;
-            let (lo, hi) = (at - edge, at + edge);
+            let (lo, hi) = (at - self.edge, at + self.edge);
             if !(lo >= 0.0 && hi < self.n[a] as f64) {
                 return None;
             }
@@ -296,8 +292,7 @@ impl<P: Primitive> Parallel<'_, P> {
             (c0 == c1).then_some(c0)
         };
         let c = axis(o.dot(self.v), 1)? * self.n[0] + axis(o.dot(self.u), 0)?;
-        let d = q.ray.dir.as_dvec3();
-        let height = o.dot(self.w) + f64::from(q.t_min) * d.length() - 1e-12 * self.size;
+        let height = o.dot(self.w) + f64::from(q.t_min) * self.len - 1e-12 * self.size;
         (!self.long[c]).then_some((c, height))
     }
 
@@ -365,7 +360,7 @@ impl<P: Primitive> Backend for Parallel<'_, P> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::traverse::tests::{bumpy, clipped_thirds};
+    use super::super::traverse::tests::{bumpy, clipped_thirds, same_occlusion};
     use super::super::{Octree, OctreeParams};
     use crate::accel::{Backend, CandidateHits, Departure, Query};
     use crate::geometry::Ray;
@@ -406,23 +401,7 @@ mod tests {
         }
         // A render's rays (one a pixel of 1024²).
         let lists = oct.build_parallel(dir, 1 << 20).expect("lists");
-        let (mut listed, mut occluded, mut both) = (0, 0, 0);
-        for q in &qs {
-            let l = lists.cell(q).is_some();
-            let o = oct.occluded_from(q);
-            listed += usize::from(l);
-            occluded += usize::from(o);
-            both += usize::from(l && o);
-            assert_eq!(lists.occluded_from(q), o, "{q:?}");
-        }
-        for packet in qs.chunks(8) {
-            let mut out = [false; 8];
-            lists.occluded_packet(packet, &mut out);
-            for (q, o) in packet.iter().zip(out) {
-                assert_eq!(o, oct.occluded_from(q), "{q:?}");
-            }
-        }
-        [qs.len(), listed, occluded, both]
+        same_occlusion(&lists, oct, &qs, |q| lists.cell(q).is_some())
     }
 
     /// The bumpy sphere's 4,000 small discs, whole and with clip lines on

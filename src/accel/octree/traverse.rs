@@ -1023,6 +1023,34 @@ pub(super) mod tests {
         (got, occluded)
     }
 
+    /// `qs` asked of `lists` and of `oct`, one at a time and in packets
+    /// of 8: the same occlusion, bit for bit. Gives the queries, those
+    /// `listed` says the lists answer, those occluded, and those both.
+    pub(in crate::accel::octree) fn same_occlusion<P: Primitive, B: crate::accel::Backend>(
+        lists: &B,
+        oct: &Octree<P>,
+        qs: &[crate::accel::Query],
+        listed: impl Fn(&crate::accel::Query) -> bool,
+    ) -> [usize; 4] {
+        use crate::accel::Backend;
+        let [mut from_lists, mut occluded, mut both] = [0; 3];
+        for q in qs {
+            let (l, o) = (listed(q), oct.occluded_from(q));
+            from_lists += usize::from(l);
+            occluded += usize::from(o);
+            both += usize::from(l && o);
+            assert_eq!(lists.occluded_from(q), o, "{q:?}");
+        }
+        for packet in qs.chunks(8) {
+            let mut out = [false; 8];
+            lists.occluded_packet(packet, &mut out);
+            for (q, o) in packet.iter().zip(out) {
+                assert_eq!(o, oct.occluded_from(q), "{q:?}");
+            }
+        }
+        [qs.len(), from_lists, occluded, both]
+    }
+
     /// `discs` with a clip line on every third.
     pub(in crate::accel::octree) fn clipped_thirds(discs: &[Disc]) -> Vec<ClippedDisc> {
         discs
