@@ -14,9 +14,20 @@ use std::path::Path;
 /// Renders the bundled bunny at `size` with `backend` and the environment
 /// variable `env` set, to `out`; the image's bytes (the run must succeed).
 fn render_bunny(env: (&str, &str), size: (&str, &str), backend: &str, out: &Path) -> Vec<u8> {
+    render_scene("scenes/bunny.toml", env, size, backend, out)
+}
+
+/// [`render_bunny`] of the bundled scene `scene`.
+fn render_scene(
+    scene: &str,
+    env: (&str, &str),
+    size: (&str, &str),
+    backend: &str,
+    out: &Path,
+) -> Vec<u8> {
     let o = bin()
         .env(env.0, env.1)
-        .args(["render", "scenes/bunny.toml", "--width", size.0])
+        .args(["render", scene, "--width", size.0])
         .args(["--height", size.1, "--backend", backend, "-o"])
         .arg(out)
         .output()
@@ -94,26 +105,32 @@ fn a_path_that_cannot_run_is_a_one_line_error() {
 
 /// The integrator's batches (`SPLATRAY_PACKETS`, `accel::use_packets`):
 /// the bundled bunny (a sphere light: the shadow rays of each hit go as
-/// one batch) renders to the same bytes with packets forced on and off,
-/// on both renderers; any other value is a one-line error before any work.
+/// one batch; a directional light: those of a screen tile's hits) and the
+/// glass scene (a point light's shadow rays from a tile's hits, and from
+/// the hits that mirrors and glass lead to, which go one at a time) render
+/// to the same bytes with packets forced on and off, on both renderers;
+/// any other value is a one-line error before any work.
 #[test]
 fn packets_on_and_off_render_the_bunny_to_the_same_bytes() {
     let dir = scratch("packets");
     for backend in common::renderers() {
-        let mut images = Vec::new();
-        for mode in ["on", "off"] {
-            let out = dir.join(format!("bunny-{backend}-{mode}.png"));
-            images.push(render_bunny(
-                (PACKETS_VAR, mode),
-                ("96", "72"),
-                backend,
-                &out,
-            ));
+        for scene in ["bunny", "glass"] {
+            let mut images = Vec::new();
+            for mode in ["on", "off"] {
+                let out = dir.join(format!("{scene}-{backend}-{mode}.png"));
+                images.push(render_scene(
+                    &format!("scenes/{scene}.toml"),
+                    (PACKETS_VAR, mode),
+                    ("96", "72"),
+                    backend,
+                    &out,
+                ));
+            }
+            assert!(
+                images[0] == images[1],
+                "{scene}, {backend}: packets change the image"
+            );
         }
-        assert!(
-            images[0] == images[1],
-            "{backend}: packets change the image"
-        );
     }
     let err = refused((PACKETS_VAR, "maybe"), &dir.join("never.png"));
     assert!(err.contains(PACKETS_VAR), "{err}");

@@ -186,11 +186,12 @@ pub trait Surfaces: Sync {
         }
     }
 
-    /// [`Surfaces::occluded`] of shadow rays `(ray, t_max)` all leaving the
-    /// hit `from` (toward the samples of one sphere light), into `out`.
-    /// The default asks one at a time.
-    fn occluded_batch(&self, rays: &[(Ray, f32)], from: &ShadeHit, out: &mut [bool]) {
-        for ((ray, t_max), o) in rays.iter().zip(out.iter_mut()) {
+    /// [`Surfaces::occluded`] of shadow rays `(ray, t_max, from)`, each
+    /// leaving its hit `from` (toward the samples of one sphere light from
+    /// one hit, or toward one light from the hits of a screen tile), into
+    /// `out`. The default asks one at a time.
+    fn occluded_batch(&self, rays: &[(Ray, f32, &ShadeHit)], out: &mut [bool]) {
+        for ((ray, t_max, from), o) in rays.iter().zip(out.iter_mut()) {
             *o = self.occluded(ray, from, *t_max);
         }
     }
@@ -386,10 +387,10 @@ impl Surfaces for SplatSurfaces<'_> {
     }
 
     /// One [`Backend::occluded_packet`] call per [`PACKET`] rays.
-    fn occluded_batch(&self, rays: &[(Ray, f32)], from: &ShadeHit, out: &mut [bool]) {
+    fn occluded_batch(&self, rays: &[(Ray, f32, &ShadeHit)], out: &mut [bool]) {
         for (rays, out) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
             let qs: [Query; PACKET] = std::array::from_fn(|k| {
-                let (ray, t_max) = rays[k.min(rays.len() - 1)];
+                let (ray, t_max, from) = rays[k.min(rays.len() - 1)];
                 self.shadow(&ray, from, t_max)
             });
             self.backend.occluded_packet(&qs[..rays.len()], out);
@@ -437,6 +438,37 @@ struct Scratch {
     /// `Frame::light_lit`): weights of all, facing and lit light samples,
     /// tallied by `direct` at depth 0.
     light: [f32; 3],
+    /// Whether the shadow ray toward light `i` of the tile's hit `k` is
+    /// occluded, at `k` × lights + `i` ([`Tracer::shadows_ahead`]).
+    occluded: Vec<bool>,
+    /// The tile's hit `k` whose answers in `occluded` the next
+    /// [`Tracer::direct`] takes.
+    ahead: Option<usize>,
+}
+
+/// The facing normal of `hit`: its normal, turned toward the side the ray came from.
+fn facing(hit: &ShadeHit) -> Vec3 {
+    if hit.surface.front {
+        hit.surface.normal
+    } else {
+        -hit.surface.normal
+    }
+}
+
+/// The direction `l` toward a point or directional `light` from `p`, the
+/// light's distance (`inf` for a directional light) and the irradiance it
+/// brings; `None` for a sphere light.
+fn toward(light: &Light, p: Vec3) -> Option<(Vec3, f32, Vec3)> {
+    match *light {
+        Light::Point { position, power } => {
+            let to = position - p;
+            let d2 = to.length_squared();
+            let d = d2.sqrt();
+            Some((to / d, d, power / d2))
+        }
+        Light::Directional { direction, power } => Some((-direction, f32::INFINITY, power)),
+        Light::Sphere { .. } => None,
+    }
 }
 
 /// The shadow ray from the hit `from` to the light at distance `dist`
@@ -507,18 +539,18 @@ impl Tracer<'_> {
             origin: from.surface.shadow_origin,
             dir: Vec3::Z,
         };
-        let mut rays = [(none, 0.0f32); PACKET];
+        let mut rays = [(none, 0.0f32, from); PACKET];
         let mut traced = 0;
         for &(l, d, _) in batch {
             if n.dot(l) > 0.0 {
                 let (ray, d) = shadow_ray(from, l, d);
-                rays[traced] = (ray, d - eps);
+                rays[traced] = (ray, d - eps, from);
                 traced += 1;
             }
         }
         let mut occluded = [false; PACKET];
         self.camera
-            .occluded_batch(&rays[..traced], from, &mut occluded[..traced]);
+            .occluded_batch(&rays[..traced], &mut occluded[..traced]);
         s.rays.shadow += traced as u64;
         let mut next = 0;
         for &(l, _, e) in batch {
@@ -571,66 +603,131 @@ impl Tracer<'_> {
         let seen = |through: Option<&dyn Surfaces>, l: Vec3, d: f32, s: &mut Scratch| {
             n.dot(l) > 0.0 && self.visible(through.unwrap_or(self.camera), hit, l, d, s)
         };
-        for (light, &through) in self.scene.lights.iter().zip(&self.lit) {
-            match *light {
-                Light::Point { position, power } => {
-                    let to = position - p;
+        // The hit's shadow rays toward its point and directional lights
+        // where they were traced with those of its screen tile
+        // ([`Tracer::shadows_ahead`]).
+        let ahead = s.ahead.take();
+        let lights = self.scene.lights.len();
+        for (i, (light, &through)) in self.scene.lights.iter().zip(&self.lit).enumerate() {
+            if let Some((l, d, e)) = toward(light, p) {
+                let visible = match ahead.filter(|_| self.traced_ahead(i)) {
+                    Some(k) => n.dot(l) > 0.0 && !s.occluded[k * lights + i],
+                    None => seen(through, l, d, s),
+                };
+                add(l, e, visible);
+                continue;
+            }
+            let Light::Sphere {
+                position,
+                radius,
+                power,
+                samples,
+            } = *light
+            else {
+                continue;
+            };
+            // Stratified points on the disc of the sphere facing `p`.
+            let axis = (p - position).normalize_or_zero();
+            let (a, b) = crate::splat::tangent_frame(if axis == Vec3::ZERO {
+                Vec3::Z
+            } else {
+                axis
+            });
+            let k = (samples as f32).sqrt().ceil() as u32;
+            let share = 1.0 / (k * k) as f32;
+            // With packets, up to `PACKET` samples are drawn (the
+            // same draws in the same order), their shadow rays
+            // traced as one batch from the one hit, then added in
+            // order: the same sums as one at a time.
+            let mut batch = [(Vec3::ZERO, 0.0f32, Vec3::ZERO); PACKET];
+            let mut len = 0;
+            for i in 0..k {
+                for j in 0..k {
+                    let r = radius * ((i as f32 + s.rng.next_f32()) / k as f32).sqrt();
+                    let phi =
+                        std::f32::consts::TAU * (j as f32 + s.rng.next_f32()) / k as f32;
+                    let q = position + a * (r * phi.cos()) + b * (r * phi.sin());
+                    let to = q - p;
                     let d2 = to.length_squared();
                     let d = d2.sqrt();
-                    add(to / d, power / d2, seen(through, to / d, d, s));
-                }
-                Light::Directional { direction, power } => {
-                    add(-direction, power, seen(through, -direction, f32::INFINITY, s));
-                }
-                Light::Sphere {
-                    position,
-                    radius,
-                    power,
-                    samples,
-                } => {
-                    // Stratified points on the disc of the sphere facing `p`.
-                    let axis = (p - position).normalize_or_zero();
-                    let (a, b) = crate::splat::tangent_frame(if axis == Vec3::ZERO {
-                        Vec3::Z
-                    } else {
-                        axis
-                    });
-                    let k = (samples as f32).sqrt().ceil() as u32;
-                    let share = 1.0 / (k * k) as f32;
-                    // With packets, up to `PACKET` samples are drawn (the
-                    // same draws in the same order), their shadow rays
-                    // traced as one batch from the one hit, then added in
-                    // order: the same sums as one at a time.
-                    let mut batch = [(Vec3::ZERO, 0.0f32, Vec3::ZERO); PACKET];
-                    let mut len = 0;
-                    for i in 0..k {
-                        for j in 0..k {
-                            let r = radius * ((i as f32 + s.rng.next_f32()) / k as f32).sqrt();
-                            let phi =
-                                std::f32::consts::TAU * (j as f32 + s.rng.next_f32()) / k as f32;
-                            let q = position + a * (r * phi.cos()) + b * (r * phi.sin());
-                            let to = q - p;
-                            let d2 = to.length_squared();
-                            let d = d2.sqrt();
-                            if !self.packets {
-                                add(to / d, power * (share / d2), seen(through, to / d, d, s));
-                                continue;
-                            }
-                            batch[len] = (to / d, d, power * (share / d2));
-                            len += 1;
-                            if len == PACKET {
-                                self.shadow_batch(hit, n, &batch[..len], s, &mut add);
-                                len = 0;
-                            }
-                        }
+                    if !self.packets {
+                        add(to / d, power * (share / d2), seen(through, to / d, d, s));
+                        continue;
                     }
-                    if len > 0 {
+                    batch[len] = (to / d, d, power * (share / d2));
+                    len += 1;
+                    if len == PACKET {
                         self.shadow_batch(hit, n, &batch[..len], s, &mut add);
+                        len = 0;
                     }
                 }
             }
+            if len > 0 {
+                self.shadow_batch(hit, n, &batch[..len], s, &mut add);
+            }
         }
         (sum, tally)
+    }
+
+    /// Whether the shadow rays toward light `i` of a screen tile's hits are
+    /// traced together ([`Tracer::shadows_ahead`]): not those of a light
+    /// with lists of its own (`lit`), which answer one at a time.
+    fn traced_ahead(&self, i: usize) -> bool {
+        self.lit[i].is_none()
+    }
+
+    /// The shadow rays toward each point and directional light of the
+    /// camera samples `hits` (a screen tile's) that [`Tracer::direct`]
+    /// shades first (diffuse and Phong surfaces), traced as one batch a
+    /// light ([`Surfaces::occluded_batch`]) into `s.occluded` (light `i`
+    /// of hit `k` at `k` × lights + `i`); `shades[k]` tells which hits
+    /// have them. The same rays, answers and counts as one at a time.
+    fn shadows_ahead(&self, hits: &[Option<ShadeHit>], s: &mut Scratch, shades: &mut [bool; PACKET]) {
+        let lights = self.scene.lights.len();
+        let eps = self.surfaces.eps_self();
+        for (k, hit) in hits.iter().enumerate() {
+            shades[k] = hit.is_some_and(|h| {
+                matches!(
+                    self.scene.materials[h.material as usize],
+                    Material::Diffuse { .. } | Material::Phong { .. }
+                )
+            });
+        }
+        // A hit that shades, to fill the batch's unused places.
+        let Some(first) = (hits.iter().zip(shades.iter()))
+            .find_map(|(h, &sh)| h.as_ref().filter(|_| sh))
+        else {
+            return;
+        };
+        for (i, light) in self.scene.lights.iter().enumerate() {
+            if !self.traced_ahead(i) {
+                continue;
+            }
+            let mut rays = [(Ray::new(Vec3::ZERO, Vec3::Z), 0.0f32, first); PACKET];
+            let mut at = [0usize; PACKET];
+            let mut traced = 0;
+            for (k, hit) in hits.iter().enumerate() {
+                let Some(hit) = hit.as_ref().filter(|_| shades[k]) else {
+                    continue;
+                };
+                let Some((l, d, _)) = toward(light, hit.surface.point) else {
+                    continue;
+                };
+                if facing(hit).dot(l) > 0.0 {
+                    let (ray, d) = shadow_ray(hit, l, d);
+                    rays[traced] = (ray, d - eps, hit);
+                    at[traced] = k;
+                    traced += 1;
+                }
+            }
+            let mut occluded = [false; PACKET];
+            self.camera
+                .occluded_batch(&rays[..traced], &mut occluded[..traced]);
+            s.rays.shadow += traced as u64;
+            for (&k, &o) in at.iter().zip(&occluded).take(traced) {
+                s.occluded[k * lights + i] = o;
+            }
+        }
     }
 
     fn shade(&self, ray: &Ray, hit: Option<ShadeHit>, depth: u32, s: &mut Scratch) -> Vec3 {
@@ -638,11 +735,7 @@ impl Tracer<'_> {
             return self.scene.background;
         };
         let sc = self.scene;
-        let n = if hit.surface.front {
-            hit.surface.normal
-        } else {
-            -hit.surface.normal
-        };
+        let n = facing(&hit);
         let material = sc.materials[hit.material as usize];
         let deeper = depth + 1 < sc.options.max_depth;
         match material {
@@ -763,9 +856,11 @@ impl Tracer<'_> {
                     }
                 }
                 let mut hits = [None; PACKET];
+                let mut ahead = [false; PACKET];
                 if batched {
                     self.camera
                         .hits(&rays[..R * np], &mut batch_hits, &mut hits[..R * np]);
+                    self.shadows_ahead(&hits[..R * np], s, &mut ahead);
                 } else {
                     hits[0] = self.camera.hit(&rays[0], None, &mut s.hits);
                 }
@@ -784,6 +879,7 @@ impl Tracer<'_> {
                             }));
                         }
                         s.light = [0.0; 3];
+                        s.ahead = ahead[r * np + p].then_some(r * np + p);
                         sums[r][p] += self.shade(ray, hit, 0, s);
                         if i == 0 {
                             let [all, facing, lit] = s.light;
@@ -895,6 +991,8 @@ fn render_surfaces_rows(
                 rays: RayCounts::default(),
                 rng: Rng::new(y as u32, 0, 0),
                 light: [0.0; 3],
+                occluded: vec![false; PACKET * scene.lights.len()],
+                ahead: None,
             };
             let mut pair = [new_row(), new_row()];
             let n = if !tracer.packets {

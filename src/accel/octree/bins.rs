@@ -34,7 +34,7 @@
 //! (`docs/notes/backends.md`, "Issue 55, forty-second session").
 
 use super::fan::Coverage;
-use super::traverse::{AnyHit, Gather, RunsAnyHit, Visitor, occluded_by};
+use super::traverse::{AnyHit, Gather, RunsAnyHit, Visitor, occluded_by, occluded_split};
 use super::{NO_PRIMITIVE, Octree, lanes};
 use crate::accel::{Backend, BuildStats, CandidateHits, Fan, NoSkip, PACKET, Query, Skip};
 use crate::geometry::Ray;
@@ -495,15 +495,12 @@ impl<P: Primitive> Backend for Binned<'_, P> {
         }
     }
 
-    /// Each query from its list when every one of `qs` has one, else the
-    /// octree's packets.
+    /// The queries up to the first without a list from their lists, the
+    /// rest as one packet of the octree's ([`occluded_split`]).
     fn occluded_packet(&self, qs: &[Query], out: &mut [bool]) {
-        let Some(bs) = self.blocks(qs, |q| self.occludes(q)) else {
-            return self.oct.occluded_packet(qs, out);
-        };
-        for ((q, o), &b) in qs.iter().zip(out.iter_mut()).zip(&bs) {
-            *o = occluded_by(q, &InBlock(self, &q.ray, b));
-        }
+        occluded_split(self.oct, qs, out, |q| {
+            Some(occluded_by(q, &InBlock(self, &q.ray, self.occludes(q)?)))
+        });
     }
 }
 

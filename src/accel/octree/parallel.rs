@@ -36,9 +36,9 @@
 
 use super::bins::pack_starts;
 use super::fan::grid_size;
-use super::traverse::{AnyHit, RunsAnyHit, Visitor, occluded_by};
+use super::traverse::{AnyHit, RunsAnyHit, Visitor, occluded_by, occluded_split};
 use super::{NO_PRIMITIVE, Octree, lanes};
-use crate::accel::{Backend, BuildStats, CandidateHits, PACKET, Query, Skip};
+use crate::accel::{Backend, BuildStats, CandidateHits, Query, Skip};
 use crate::primitive::{Pack, Primitive};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -345,16 +345,10 @@ impl<P: Primitive> Backend for Parallel<'_, P> {
         self.oct.intersect_packet(qs, hits);
     }
 
-    /// Each query from its list when every one of `qs` has one, else the
-    /// octree's packets.
+    /// The queries up to the first without a list from their lists, the
+    /// rest as one packet of the octree's ([`occluded_split`]).
     fn occluded_packet(&self, qs: &[Query], out: &mut [bool]) {
-        let mut at = [(0, 0.0); PACKET];
-        if qs.len() > PACKET || qs.iter().zip(&mut at).any(|(q, a)| self.cell(q).map(|c| *a = c).is_none()) {
-            return self.oct.occluded_packet(qs, out);
-        }
-        for ((q, o), &a) in qs.iter().zip(out.iter_mut()).zip(&at) {
-            *o = occluded_by(q, &InCell(self, a));
-        }
+        occluded_split(self.oct, qs, out, |q| Some(occluded_by(q, &InCell(self, self.cell(q)?))));
     }
 }
 

@@ -844,6 +844,25 @@ pub(super) fn occluded_by<P: Primitive>(q: &crate::accel::Query, runs: &impl Run
     }
 }
 
+/// [`crate::accel::Backend::occluded_packet`] of lists over the octree
+/// `oct`: the queries `list` answers (`Some`) from it up to the first it
+/// cannot, that one and the rest as one packet of the octree's (the same
+/// answers as one at a time, so the same whichever answers; a batch whose
+/// first query has no list costs one question).
+pub(super) fn occluded_split<P: Primitive>(
+    oct: &Octree<P>,
+    qs: &[crate::accel::Query],
+    out: &mut [bool],
+    list: impl Fn(&crate::accel::Query) -> Option<bool>,
+) {
+    for (k, (q, o)) in qs.iter().zip(out.iter_mut()).enumerate() {
+        match list(q) {
+            Some(a) => *o = a,
+            None => return crate::accel::Backend::occluded_packet(oct, &qs[k..], &mut out[k..]),
+        }
+    }
+}
+
 #[cfg(test)]
 pub(super) mod tests {
     use super::super::{Layout, Octree, OctreeParams, Tree};
