@@ -428,6 +428,11 @@ struct Tracer<'a> {
     lit: Vec<Option<&'a dyn Surfaces>>,
     /// Hand the surfaces coherent batches ([`Surfaces::packets`]).
     packets: bool,
+    /// Per light, whether the shadow rays of a screen tile's hits toward
+    /// it are traced together ([`Tracer::shadows_ahead`]): not where lists
+    /// answer them one at a time, a directional light's with lists of its
+    /// own (`lit`) and a light at the eye's through the camera's fan.
+    ahead: Vec<bool>,
 }
 
 struct Scratch {
@@ -610,7 +615,7 @@ impl Tracer<'_> {
         let lights = self.scene.lights.len();
         for (i, (light, &through)) in self.scene.lights.iter().zip(&self.lit).enumerate() {
             if let Some((l, d, e)) = toward(light, p) {
-                let visible = match ahead.filter(|_| self.traced_ahead(i)) {
+                let visible = match ahead.filter(|_| self.ahead[i]) {
                     Some(k) => n.dot(l) > 0.0 && !s.occluded[k * lights + i],
                     None => seen(through, l, d, s),
                 };
@@ -669,13 +674,6 @@ impl Tracer<'_> {
         (sum, tally)
     }
 
-    /// Whether the shadow rays toward light `i` of a screen tile's hits are
-    /// traced together ([`Tracer::shadows_ahead`]): not those of a light
-    /// with lists of its own (`lit`), which answer one at a time.
-    fn traced_ahead(&self, i: usize) -> bool {
-        self.lit[i].is_none()
-    }
-
     /// The shadow rays toward each point and directional light of the
     /// camera samples `hits` (a screen tile's) that [`Tracer::direct`]
     /// shades first (diffuse and Phong surfaces), traced as one batch a
@@ -700,7 +698,7 @@ impl Tracer<'_> {
             return;
         };
         for (i, light) in self.scene.lights.iter().enumerate() {
-            if !self.traced_ahead(i) {
+            if !self.ahead[i] {
                 continue;
             }
             let mut rays = [(Ray::new(Vec3::ZERO, Vec3::Z), 0.0f32, first); PACKET];
@@ -860,7 +858,9 @@ impl Tracer<'_> {
                 if batched {
                     self.camera
                         .hits(&rays[..R * np], &mut batch_hits, &mut hits[..R * np]);
-                    self.shadows_ahead(&hits[..R * np], s, &mut ahead);
+                    if self.ahead.contains(&true) {
+                        self.shadows_ahead(&hits[..R * np], s, &mut ahead);
+                    }
                 } else {
                     hits[0] = self.camera.hit(&rays[0], None, &mut s.hits);
                 }
@@ -964,12 +964,22 @@ fn render_surfaces_rows(
         })
         .collect();
     let lit: Vec<_> = along.iter().map(|b| surfaces.through(b.as_deref()?)).collect();
+    // A light at the eye (within `eps_self`: the same point written twice
+    // may round apart), whose shadow rays a fan's lists answer.
+    let near = scene.options.scale.eps_self;
+    let at_eye = |light: &Light| {
+        matches!(*light, Light::Point { position, .. } if position.distance(cam.origin) <= near)
+    };
+    let ahead = (scene.lights.iter().zip(&lit))
+        .map(|(light, l)| l.is_none() && !(through.is_some() && at_eye(light)))
+        .collect();
     let tracer = Tracer {
         scene,
         surfaces,
         camera: through.as_deref().unwrap_or(surfaces),
         lit: lit.iter().map(|s| s.as_deref()).collect(),
         packets: surfaces.packets(),
+        ahead,
     };
     let rows_done = AtomicUsize::new(0);
     let new_row = || Frame::with_capacity(cam.width, 1);
