@@ -429,9 +429,10 @@ struct Tracer<'a> {
     /// Hand the surfaces coherent batches ([`Surfaces::packets`]).
     packets: bool,
     /// Per light, whether the shadow rays of a screen tile's hits toward
-    /// it are traced together ([`Tracer::shadows_ahead`]): not where lists
-    /// answer them one at a time, a directional light's with lists of its
-    /// own (`lit`) and a light at the eye's through the camera's fan.
+    /// it are traced together ([`Tracer::shadows_ahead`]): a point or
+    /// directional light's, but not where lists answer them one at a time,
+    /// a directional light's with lists of its own (`lit`) and a light at
+    /// the eye's through the camera's fan.
     ahead: Vec<bool>,
 }
 
@@ -627,61 +628,56 @@ impl Tracer<'_> {
                     let d2 = to.length_squared();
                     let d = d2.sqrt();
                     add(to / d, power / d2, lit(to / d, d, s));
-                    continue;
                 }
                 Light::Directional { direction, power } => {
                     add(-direction, power, lit(-direction, f32::INFINITY, s));
-                    continue;
                 }
-                Light::Sphere { .. } => {}
-            }
-            let Light::Sphere {
-                position,
-                radius,
-                power,
-                samples,
-            } = *light
-            else {
-                continue;
-            };
-            // Stratified points on the disc of the sphere facing `p`.
-            let axis = (p - position).normalize_or_zero();
-            let (a, b) = crate::splat::tangent_frame(if axis == Vec3::ZERO {
-                Vec3::Z
-            } else {
-                axis
-            });
-            let k = (samples as f32).sqrt().ceil() as u32;
-            let share = 1.0 / (k * k) as f32;
-            // With packets, up to `PACKET` samples are drawn (the
-            // same draws in the same order), their shadow rays
-            // traced as one batch from the one hit, then added in
-            // order: the same sums as one at a time.
-            let mut batch = [(Vec3::ZERO, 0.0f32, Vec3::ZERO); PACKET];
-            let mut len = 0;
-            for i in 0..k {
-                for j in 0..k {
-                    let r = radius * ((i as f32 + s.rng.next_f32()) / k as f32).sqrt();
-                    let phi =
-                        std::f32::consts::TAU * (j as f32 + s.rng.next_f32()) / k as f32;
-                    let q = position + a * (r * phi.cos()) + b * (r * phi.sin());
-                    let to = q - p;
-                    let d2 = to.length_squared();
-                    let d = d2.sqrt();
-                    if !self.packets {
-                        add(to / d, power * (share / d2), seen(through, to / d, d, s));
-                        continue;
+                Light::Sphere {
+                    position,
+                    radius,
+                    power,
+                    samples,
+                } => {
+                    // Stratified points on the disc of the sphere facing `p`.
+                    let axis = (p - position).normalize_or_zero();
+                    let (a, b) = crate::splat::tangent_frame(if axis == Vec3::ZERO {
+                        Vec3::Z
+                    } else {
+                        axis
+                    });
+                    let k = (samples as f32).sqrt().ceil() as u32;
+                    let share = 1.0 / (k * k) as f32;
+                    // With packets, up to `PACKET` samples are drawn (the
+                    // same draws in the same order), their shadow rays
+                    // traced as one batch from the one hit, then added in
+                    // order: the same sums as one at a time.
+                    let mut batch = [(Vec3::ZERO, 0.0f32, Vec3::ZERO); PACKET];
+                    let mut len = 0;
+                    for i in 0..k {
+                        for j in 0..k {
+                            let r = radius * ((i as f32 + s.rng.next_f32()) / k as f32).sqrt();
+                            let phi =
+                                std::f32::consts::TAU * (j as f32 + s.rng.next_f32()) / k as f32;
+                            let q = position + a * (r * phi.cos()) + b * (r * phi.sin());
+                            let to = q - p;
+                            let d2 = to.length_squared();
+                            let d = d2.sqrt();
+                            if !self.packets {
+                                add(to / d, power * (share / d2), seen(through, to / d, d, s));
+                                continue;
+                            }
+                            batch[len] = (to / d, d, power * (share / d2));
+                            len += 1;
+                            if len == PACKET {
+                                self.shadow_batch(hit, n, &batch[..len], s, &mut add);
+                                len = 0;
+                            }
+                        }
                     }
-                    batch[len] = (to / d, d, power * (share / d2));
-                    len += 1;
-                    if len == PACKET {
+                    if len > 0 {
                         self.shadow_batch(hit, n, &batch[..len], s, &mut add);
-                        len = 0;
                     }
                 }
-            }
-            if len > 0 {
-                self.shadow_batch(hit, n, &batch[..len], s, &mut add);
             }
         }
         (sum, tally)
@@ -984,7 +980,9 @@ fn render_surfaces_rows(
         matches!(*light, Light::Point { position, .. } if position.distance(cam.origin) <= near)
     };
     let ahead = (scene.lights.iter().zip(&lit))
-        .map(|(light, l)| l.is_none() && !(through.is_some() && at_eye(light)))
+        .map(|(light, l)| {
+            !matches!(light, Light::Sphere { .. }) && l.is_none() && !(through.is_some() && at_eye(light))
+        })
         .collect();
     let tracer = Tracer {
         scene,
