@@ -24,7 +24,11 @@
 //! origin and finite `1 / dir`) descends by its [`Spread`]
 //! ([`Tree::visit_spread`]): each interior node's box and child cells
 //! tested once for the whole packet with an interval holding every ray's
-//! own, each ray's own interval tested only at a leaf. Any-hit packets
+//! own, each ray's own interval tested only at a leaf. A packet whose
+//! rays leave several finite origins (a screen tile's shadow rays toward
+//! one light) descends the same way by its [`Scatter`], the bounds of its
+//! slab parameters over the box of its origins, each ray then taking a
+//! leaf with its own leaf code ([`Tree::leaf_rays`]). Any-hit packets
 //! walk the parts in index order, as [`Octree::any_hit`] does
 //! (closest-hit packets by the first ray's entry).
 //!
@@ -123,6 +127,9 @@ struct Lanes<'q> {
     /// With a shared finite origin and finite `1 / dir` on every lane: the
     /// bounds of the packet's slab parameters ([`Spread`]).
     spread: Option<Spread>,
+    /// With finite origins that differ and finite `1 / dir` on every
+    /// lane: the bounds of the packet's slab parameters ([`Scatter`]).
+    scatter: Option<Scatter>,
 }
 
 /// The extremes of a packet's rays sharing a finite origin `o` whose
@@ -141,16 +148,35 @@ struct Spread {
     t_min: f32,
 }
 
-impl Spread {
+/// The extremes of a packet's rays leaving several finite origins (a
+/// screen tile's shadow rays toward one light) whose `1 / dir` are
+/// finite, per axis: at a plane `x` a ray's slab parameter is
+/// `(x - o) inv`, monotone in `o` for a fixed `inv` and in `inv` for a
+/// fixed `x - o` (rounding is monotone), so over the box of the origins
+/// and the range of `inv` its least and greatest lie at the corners. As
+/// with [`Spread`], a cell's interval for the packet holds every ray's
+/// own.
+#[derive(Clone, Copy, Debug)]
+struct Scatter {
+    o_lo: Vec3A,
+    o_hi: Vec3A,
+    inv_lo: Vec3A,
+    inv_hi: Vec3A,
+    /// The least `t_min`.
+    t_min: f32,
+}
+
+/// The bounds of a packet's slab parameters a descent tests each
+/// interior node with, once for the whole packet ([`Tree::visit_spread`]).
+trait Interval {
+    /// The least `t_min` of the rays.
+    fn t_min(&self) -> f32;
     /// The least and greatest slab parameters of the rays at the planes
     /// `x` (per axis).
-    #[inline(always)]
-    fn at(&self, x: Vec3A) -> (Vec3A, Vec3A) {
-        let d = x - self.o;
-        let (a, b) = (d * self.inv_lo, d * self.inv_hi);
-        let up = d.cmpge(Vec3A::ZERO);
-        (Vec3A::select(up, a, b), Vec3A::select(up, b, a))
-    }
+    fn at(&self, x: Vec3A) -> (Vec3A, Vec3A);
+    /// The shared origin's spread, whose leaves take each pack once for
+    /// every ray ([`Tree::leaf_packet`]).
+    fn shared(&self) -> Option<&Spread>;
 
     /// The least near and the greatest far parameter of the slabs between
     /// the planes `a` and `b` (per axis).
@@ -159,6 +185,48 @@ impl Spread {
         let (a_lo, a_hi) = self.at(a);
         let (b_lo, b_hi) = self.at(b);
         (a_lo.min(b_lo), a_hi.max(b_hi))
+    }
+}
+
+impl Interval for Spread {
+    #[inline(always)]
+    fn t_min(&self) -> f32 {
+        self.t_min
+    }
+
+    #[inline(always)]
+    fn at(&self, x: Vec3A) -> (Vec3A, Vec3A) {
+        let d = x - self.o;
+        let (a, b) = (d * self.inv_lo, d * self.inv_hi);
+        let up = d.cmpge(Vec3A::ZERO);
+        (Vec3A::select(up, a, b), Vec3A::select(up, b, a))
+    }
+
+    #[inline(always)]
+    fn shared(&self) -> Option<&Spread> {
+        Some(self)
+    }
+}
+
+impl Interval for Scatter {
+    #[inline(always)]
+    fn t_min(&self) -> f32 {
+        self.t_min
+    }
+
+    /// The four corners' products: `x - o` runs over `[x - o_hi, x -
+    /// o_lo]`, `inv` over `[inv_lo, inv_hi]` (finite, so no NaN).
+    #[inline(always)]
+    fn at(&self, x: Vec3A) -> (Vec3A, Vec3A) {
+        let (d_lo, d_hi) = (x - self.o_hi, x - self.o_lo);
+        let (a, b) = (d_lo * self.inv_lo, d_lo * self.inv_hi);
+        let (c, d) = (d_hi * self.inv_lo, d_hi * self.inv_hi);
+        (a.min(b).min(c.min(d)), a.max(b).max(c.max(d)))
+    }
+
+    #[inline(always)]
+    fn shared(&self) -> Option<&Spread> {
+        None
     }
 }
 
@@ -190,18 +258,32 @@ impl<'q> Lanes<'q> {
         let t_min = wide(&std::array::from_fn(|k| q(k).t_min));
         let finite = |v: Vec4| v.abs().cmplt(Vec4::INFINITY).all();
         let origin = qs[0].ray.origin;
-        let spread = (shared
-            && origin.is_finite()
-            && t_min.iter().all(|w| !w.is_nan_mask().any())
-            && inv.iter().all(|w| finite(w[0]) && finite(w[1])))
-        .then(|| Spread {
+        let o = [0, 1, 2].map(|a| wide(&std::array::from_fn(|k| q(k).ray.origin[a])));
+        let bounded = t_min.iter().all(|w| !w.is_nan_mask().any())
+            && inv.iter().all(|w| finite(w[0]) && finite(w[1]));
+        let (inv_lo, inv_hi) = (
+            Vec3A::from_array(inv.map(|w| w[0].min(w[1]).min_element())),
+            Vec3A::from_array(inv.map(|w| w[0].max(w[1]).max_element())),
+        );
+        let least_t_min = t_min[0].min(t_min[1]).min_element();
+        let spread = (shared && bounded && origin.is_finite()).then(|| Spread {
             o: origin.into(),
-            inv_lo: Vec3A::from_array(inv.map(|w| w[0].min(w[1]).min_element())),
-            inv_hi: Vec3A::from_array(inv.map(|w| w[0].max(w[1]).max_element())),
-            t_min: t_min[0].min(t_min[1]).min_element(),
+            inv_lo,
+            inv_hi,
+            t_min: least_t_min,
+        });
+        let scatter = (!shared
+            && bounded
+            && o.iter().all(|w| finite(w[0]) && finite(w[1])))
+        .then(|| Scatter {
+            o_lo: Vec3A::from_array(o.map(|w| w[0].min(w[1]).min_element())),
+            o_hi: Vec3A::from_array(o.map(|w| w[0].max(w[1]).max_element())),
+            inv_lo,
+            inv_hi,
+            t_min: least_t_min,
         });
         Some(Lanes {
-            o: [0, 1, 2].map(|a| wide(&std::array::from_fn(|k| q(k).ray.origin[a]))),
+            o,
             inv,
             t_min,
             qs,
@@ -209,6 +291,7 @@ impl<'q> Lanes<'q> {
             origin: shared.then(|| origin.to_array()),
             cone,
             spread,
+            scatter,
         })
     }
 
@@ -437,6 +520,29 @@ impl<P: Primitive> Tree<P> {
         stopped
     }
 
+    /// The leaf `node` for each ray of `active`, with its own constants
+    /// ([`Tree::leaf_of_ray`]); returns the rays whose visitor stopped.
+    #[inline(always)]
+    fn leaf_rays<V: Visitor<P>>(
+        &self,
+        node: Node,
+        l: &Lanes,
+        vis: &mut [Option<V>; PACKET],
+        mut active: Mask,
+    ) -> Mask {
+        let mut stopped = 0;
+        while active != 0 {
+            let k = active.trailing_zeros() as usize;
+            active &= active - 1;
+            if let Some(v) = vis[k].as_mut()
+                && self.leaf_of_ray(node, &l.ctx(k), v)
+            {
+                stopped |= 1 << k;
+            }
+        }
+        stopped
+    }
+
     /// The subtree of node `index` (cell `lo`, edge `size`) for the rays of
     /// `active`, whose cutoffs are `cut` now, front to back in the
     /// packet's order; returns the rays whose visitor stopped (any-hit
@@ -479,16 +585,7 @@ impl<P: Primitive> Tree<P> {
                 let spread = l.spread.as_ref().map(|sp| (sp, reach(&cut, active)));
                 return self.leaf_packet(node, origin, l.cone(), spread, vis, active);
             }
-            while active != 0 {
-                let k = active.trailing_zeros() as usize;
-                active &= active - 1;
-                if let Some(v) = vis[k].as_mut()
-                    && self.leaf_of_ray(node, &l.ctx(k), v)
-                {
-                    stopped |= 1 << k;
-                }
-            }
-            return stopped;
+            return self.leaf_rays(node, l, vis, active);
         }
         // Slab parameters of the padded lower and upper halves on each
         // axis, for every ray: the single ray's arithmetic. Per half and
@@ -592,13 +689,13 @@ impl<P: Primitive> Tree<P> {
     /// meets it; there it meets no leaf, or the leaf's own test drops it.
     // The node, the packet and its state.
     #[allow(clippy::too_many_arguments)]
-    fn visit_spread<V: Visitor<P>>(
+    fn visit_spread<V: Visitor<P>, S: Interval>(
         &self,
         index: usize,
         lo: Vec3,
         size: f32,
         l: &Lanes,
-        sp: &Spread,
+        sp: &S,
         vis: &mut [Option<V>; PACKET],
         active: Mask,
         mut cut: Wide,
@@ -613,13 +710,17 @@ impl<P: Primitive> Tree<P> {
             if active == 0 {
                 return 0;
             }
-            let origin = l.origin.expect("a spread has a shared origin");
-            return self.leaf_packet(node, origin, l.cone(), Some((sp, far)), vis, active);
+            return match (sp.shared(), l.origin) {
+                (Some(sp), Some(origin)) => {
+                    self.leaf_packet(node, origin, l.cone(), Some((sp, far)), vis, active)
+                }
+                _ => self.leaf_rays(node, l, vis, active),
+            };
         }
         let [blo, bhi] = self.boxes[index];
         let (near, exit) = sp.slab(Vec3A::from(blo), Vec3A::from(bhi));
-        // NaN compares false (none is expected: finite origin and `inv`).
-        let entry = super::traverse::max4(sp.t_min, near.into());
+        // NaN compares false (none is expected: finite origins and `inv`).
+        let entry = super::traverse::max4(sp.t_min(), near.into());
         let meets = entry <= super::traverse::min4(far, exit.into());
         if !meets {
             return 0;
@@ -633,7 +734,7 @@ impl<P: Primitive> Tree<P> {
         let (open, entries) = super::traverse::children(
             (lower_near.into(), lower_far.into()),
             (upper_near.into(), upper_far.into()),
-            sp.t_min,
+            sp.t_min(),
             far,
             mask,
         );
@@ -707,22 +808,12 @@ impl<P: Primitive> Octree<P> {
                 continue;
             }
             let cut = cutoffs(vis);
-            let s = match &l.spread {
-                Some(sp) => {
-                    let far = reach(&cut, active);
-                    tree.visit_spread(
-                        0,
-                        tree.root_lo,
-                        tree.root_size,
-                        l,
-                        sp,
-                        vis,
-                        active,
-                        cut,
-                        far,
-                    )
-                }
-                None => tree.visit_packet(0, tree.root_lo, tree.root_size, l, vis, active, cut),
+            let (lo, size) = (tree.root_lo, tree.root_size);
+            let far = reach(&cut, active);
+            let s = match (&l.spread, &l.scatter) {
+                (Some(sp), _) => tree.visit_spread(0, lo, size, l, sp, vis, active, cut, far),
+                (None, Some(sc)) => tree.visit_spread(0, lo, size, l, sc, vis, active, cut, far),
+                (None, None) => tree.visit_packet(0, lo, size, l, vis, active, cut),
             };
             stopped |= s;
             active &= !s;
@@ -866,7 +957,8 @@ mod tests {
     /// `deep_leaf`. Packets of 8 camera rays from one eye (whose leaves
     /// leave out the packs the packet's spread misses) and of 8 rays from
     /// points on the sphere toward a light (each ray's own leaf code, its
-    /// packs' boxes) answer as one ray at a time, bit for bit.
+    /// packs' boxes, below the descent of their [`super::Scatter`]) answer
+    /// as one ray at a time, bit for bit.
     #[test]
     fn deep_leaves_answer_in_packets_as_one_ray_at_a_time() {
         let discs = bumpy(150_000, |i| if i % 5000 == 7 { 0.2 } else { 0.012 });
