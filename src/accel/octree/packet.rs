@@ -24,9 +24,9 @@
 //! origin and finite `1 / dir`) descends by its [`Spread`]
 //! ([`Tree::visit_spread`]): each interior node's box and child cells
 //! tested once for the whole packet with an interval holding every ray's
-//! own, each ray's own interval tested only at a leaf. A packet whose
-//! rays leave several finite origins (a screen tile's shadow rays toward
-//! one light) descends the same way by its [`Scatter`], the bounds of its
+//! own, each ray's own interval tested only at a leaf. An any-hit packet
+//! whose rays leave several finite origins (a screen tile's shadow rays
+//! toward one light) descends the same way by its [`Scatter`], the bounds of its
 //! slab parameters over the box of its origins, each ray then taking a
 //! leaf with its own leaf code ([`Tree::leaf_rays`]). Any-hit packets
 //! walk the parts in index order, as [`Octree::any_hit`] does
@@ -64,15 +64,15 @@ use std::cell::OnceCell;
 /// A packet of several origins descends by its [`Scatter`] through the
 /// cells whose edge is at least this many times the widest extent of the
 /// box of its origins, below them ray by ray ([`Tree::visit_packet`]):
-/// where cells are not much wider than that box, the prism it sweeps meets
-/// far more of them than the rays do. On 1M discs of a bumpy sphere
-/// (`shadow rays of 8 neighbouring pixels' hits toward a light, one
-/// thread), the descent by the scatter alone entered 7.3 times the
-/// interior nodes the rays' own descent did and took 1.45 times as long;
-/// with this bound, 0.93 times as long (2 as good, 16 0.97). The 1.53M
-/// bunny's render at 4 samples a pixel: 0.95 of the time without the
-/// scatter, 2 the same, 16 0.97 (`docs/notes/backends.md`, "Issue 55,
-/// fifty-first session").
+/// where cells are not much wider than that box, the prism the box sweeps
+/// along the rays meets far more of them than the rays do. The accel
+/// benchmark's shadow packets (8 neighbouring hits' rays toward a point
+/// light) at 1M splats ran at 2.02 of Embree's packets before the scatter,
+/// 0.78 with it unbounded and 2.12 with this bound (35k: 0.96, 0.92,
+/// 1.03). Counted on 1M discs of a bumpy sphere, the unbounded scatter
+/// entered 7.3 times the interior nodes of a descent testing each ray at
+/// every node; a bound of 2 ran as fast as 4, 16 about 3 % slower
+/// (`docs/notes/backends.md`, "Issue 55, fifty-first session").
 const SCATTER_CELLS: f32 = 4.0;
 
 /// Fewest rays traced as a packet; smaller batches go one at a time.
@@ -301,20 +301,19 @@ impl<'q> Lanes<'q> {
             inv_hi,
             t_min: least_t_min,
         });
-        let scatter = (!shared
-            && bounded
-            && o.iter().all(|w| finite(w[0]) && finite(w[1])))
-        .then(|| {
-            let o_lo = Vec3A::from_array(o.map(|w| w[0].min(w[1]).min_element()));
-            let o_hi = Vec3A::from_array(o.map(|w| w[0].max(w[1]).max_element()));
-            Scatter {
+        let (o_lo, o_hi) = (
+            Vec3A::from_array(o.map(|w| w[0].min(w[1]).min_element())),
+            Vec3A::from_array(o.map(|w| w[0].max(w[1]).max_element())),
+        );
+        let finite_o = o.iter().all(|w| finite(w[0]) && finite(w[1]));
+        let scatter = (!shared && bounded && finite_o).then(|| Scatter {
             width: (o_hi - o_lo).max_element() * SCATTER_CELLS,
             o_lo,
             o_hi,
             inv_lo,
             inv_hi,
             t_min: least_t_min,
-        }});
+        });
         Some(Lanes {
             o,
             inv,
@@ -555,7 +554,9 @@ impl<P: Primitive> Tree<P> {
 
     /// The leaf `node` for each ray of `active`, with its own constants
     /// ([`Tree::leaf_of_ray`]); returns the rays whose visitor stopped.
-    #[inline(always)]
+    /// One copy for both descents that call it (inlined into each, the
+    /// stripped Python module was 107 kB larger).
+    #[inline(never)]
     fn leaf_rays<V: Visitor<P>>(
         &self,
         node: Node,
@@ -845,8 +846,11 @@ impl<P: Primitive> Octree<P> {
             let far = reach(&cut, active);
             let s = match (&l.spread, &l.scatter) {
                 (Some(sp), _) => tree.visit_spread(0, lo, size, l, sp, vis, active, cut, far),
-                (None, Some(sc)) => tree.visit_spread(0, lo, size, l, sc, vis, active, cut, far),
-                (None, None) => tree.visit_packet(0, lo, size, l, vis, active, cut),
+                // Shadow rays only (any-hit), where it was measured.
+                (None, Some(sc)) if V::FIXED_CUTOFF => {
+                    tree.visit_spread(0, lo, size, l, sc, vis, active, cut, far)
+                }
+                _ => tree.visit_packet(0, lo, size, l, vis, active, cut),
             };
             stopped |= s;
             active &= !s;
@@ -987,12 +991,12 @@ mod tests {
     /// A [`super::Scatter`]'s bounds hold every ray's own slab parameter
     /// at a plane, `(x - o) inv` as the ray's descent computes it: packets
     /// of 8 rays from origins in boxes of several sizes, directions in
-    /// cones of several widths (one octant), planes near and far.
+    /// cones of several widths (a packet's in one octant, every octant),
+    /// planes near and far.
     #[test]
     fn a_scatter_holds_each_rays_slab_parameter() {
         use super::Interval;
         let mut rng = crate::rng::SplitMix64::new(55);
-        let mut tested = 0;
         for _ in 0..4_000 {
             let (spread, width) = (rng.range(0.0, 0.5), [1e-4, 1e-2, 0.3][rng.below(3)]);
             let (centre, axis) = (rng.unit() * 3.0, rng.unit().abs() + Vec3::splat(0.05));
@@ -1012,11 +1016,9 @@ mod tests {
                     let t = (x - r.origin) * r.dir.recip();
                     let within = t.cmpge(lo.into()) & t.cmple(hi.into());
                     assert!(within.all(), "{t} not in {lo}..{hi}");
-                    tested += 1;
                 }
             }
         }
-        assert_eq!(tested, 4_000 * 8 * 8);
     }
 
     /// 150,000 discs on the bumpy sphere (a few wide ones), whole and with
@@ -1079,7 +1081,8 @@ mod tests {
         };
         // Far and near the surface (the near light's rays spread).
         let (far, near) = (neighbours(light), neighbours(Vec3::new(0.45, 0.4, 1.5)));
-        // Most of them descend by their scatter down to the grid's cells.
+        // Most of them descend by their scatter down to the grid's cells
+        // (measured: 285 and 283 of 321).
         let grid_cell = whole.parts[0].root_size / 16.0;
         let scattered = |packets: &[Vec<Ray>]| {
             let fits = |rays: &&Vec<Ray>| {
@@ -1090,7 +1093,6 @@ mod tests {
             (packets.iter().filter(fits).count(), packets.len())
         };
         let (sf, sn) = (scattered(&far), scattered(&near));
-        eprintln!("scattered {sf:?} {sn:?}");
         assert!(sf.0 * 10 > sf.1 * 8 && sn.0 * 10 > sn.1 * 5, "{sf:?} {sn:?}");
         let cut = Octree::new(&clipped_thirds(&discs), &params);
         let found = [
