@@ -3,8 +3,10 @@
 use glam::Vec3;
 
 /// A ray `origin + t * dir`. `dir` is expected to be unit length, so `t` is a
-/// distance; nothing here divides by its length.
+/// distance; nothing here divides by its length. Six `f32` in this order
+/// (`crate::simd`'s conversion of rows writes them so).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
 pub struct Ray {
     /// Ray origin.
     pub origin: Vec3,

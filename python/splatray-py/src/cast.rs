@@ -19,6 +19,7 @@ use splatray::render::cast::{CastAnswers, cast_rays_owned, occluded};
 use splatray::render::integrator::{SplatSurfaces, Surfaces};
 use splatray::resolve::{Silhouette, silhouettes};
 use splatray::scene::Scene;
+use splatray::simd::{rays_from_f32_rows, rays_from_rows};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, OnceLock};
 use std::time::Instant;
@@ -96,16 +97,16 @@ impl SplatScene {
             && a.shape()[1] == 6
             && let Ok(v) = a.as_slice()
         {
-            return self.convert(v);
+            return self.convert(v, rays_from_f32_rows);
         }
         if let Ok(a) = rays.extract::<PyReadonlyArray2<'_, f64>>()
             && a.shape()[1] == 6
             && let Ok(v) = a.as_slice()
         {
-            return self.convert(v);
+            return self.convert(v, rays_from_rows);
         }
         // Anything else: checked (and its error said) as any array.
-        self.convert(&rows::<f64>(rays, "rays", 6, true)?)
+        self.convert(&rows::<f64>(rays, "rays", 6, true)?, rays_from_rows)
     }
 
     /// Rows of six numbers to rays and direction lengths, written straight
@@ -115,7 +116,11 @@ impl SplatScene {
     /// round 2"; nor a parallel unzip, whose pairs went through memory:
     /// a fifth of a camera `occluded` call's misses, "seventeenth
     /// session"); the first bad row is reported.
-    fn convert<T: Copy + Into<f64> + Sync>(&self, v: &[T]) -> PyResult<(Vec<Ray>, Vec<f32>)> {
+    fn convert<T: Copy + Into<f64> + Sync>(
+        &self,
+        v: &[T],
+        conv: impl Fn(&[T], DVec3, &mut [Ray], &mut [f32]) -> bool + Sync,
+    ) -> PyResult<(Vec<Ray>, Vec<f32>)> {
         let n = v.len() / 6;
         let bad = AtomicUsize::new(usize::MAX);
         // The kept buffers (a call running beside this one finds none
@@ -132,14 +137,7 @@ impl SplatScene {
             .for_each(|(c, ((rays, lens), v))| {
                 // Every row converted without a branch, the checks folded
                 // into one flag; a chunk with a bad row looks for it.
-                let rows = rays.iter_mut().zip(lens.iter_mut()).zip(v.chunks_exact(6));
-                let mut good = true;
-                for ((ray, len), r) in rows {
-                    let (r, l, ok) = self.ray_unchecked(r);
-                    (*ray, *len) = (r, l);
-                    good &= ok;
-                }
-                if !good {
+                if !conv(v, self.to_internal, rays, lens) {
                     let first = v.chunks_exact(6).position(|r| self.ray(r).is_err());
                     bad.fetch_min(c * CONVERT + first.unwrap_or(0), Ordering::Relaxed);
                 }
@@ -159,20 +157,6 @@ impl SplatScene {
         if rays.capacity() <= KEEP_RAYS {
             *self.scratch.lock().unwrap_or_else(|p| p.into_inner()) = (rays, lens);
         }
-    }
-
-    /// [`SplatScene::ray`]'s ray and length (the same operations), and
-    /// whether the row passes its checks, without a branch (a row that
-    /// fails gets some ray).
-    #[inline(always)]
-    fn ray_unchecked<T: Copy + Into<f64>>(&self, r: &[T]) -> (Ray, f32, bool) {
-        let r: [f64; 6] = std::array::from_fn(|k| r[k].into());
-        let finite = r.iter().fold(true, |a, x| a & x.is_finite());
-        let d = Vec3::new(r[3] as f32, r[4] as f32, r[5] as f32);
-        let len = d.length();
-        let origin = (DVec3::new(r[0], r[1], r[2]) - self.to_internal).as_vec3();
-        let ok = finite & (len > 0.0) & len.is_finite() & origin.is_finite();
-        (Ray::new(origin, d), len, ok)
     }
 
     /// One row as a ray in the scene's frame and its direction's length,
