@@ -33,6 +33,37 @@ impl Ray {
     }
 }
 
+/// Rays read one at a time by index: a slice of rays, or a batch's rows
+/// converted as they are read (`render::cast`), so that a fan can sample
+/// a run of rays that was never written out whole.
+pub trait RaySet: Sync {
+    /// How many rays.
+    fn len(&self) -> usize;
+
+    /// Ray `i` (below [`RaySet::len`]).
+    fn ray(&self, i: usize) -> Ray;
+
+    /// Ray `i`'s origin (its [`RaySet::ray`]'s, perhaps without the rest).
+    fn origin(&self, i: usize) -> Vec3 {
+        self.ray(i).origin
+    }
+
+    /// Whether there are none.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+impl RaySet for &[Ray] {
+    fn len(&self) -> usize {
+        <[Ray]>::len(self)
+    }
+
+    fn ray(&self, i: usize) -> Ray {
+        self[i]
+    }
+}
+
 /// A right-handed orthonormal tangent frame `(u, v)` for unit normal `n`
 /// (Duff et al. 2017, branchless).
 #[must_use]

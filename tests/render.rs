@@ -203,7 +203,7 @@ samples = 4
         .build_scene(&sc)
         .unwrap();
     let fan = oct
-        .fan(&rays)
+        .fan(&rays.as_slice())
         .expect("the octree makes a fan for the camera");
     assert!(fan.backend().is_some(), "the fan holds its blocks' lists");
     let a = render_with(&sc, "brute");

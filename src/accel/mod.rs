@@ -17,7 +17,7 @@ mod pass;
 pub mod registry;
 mod window;
 
-pub use crate::geometry::Ray;
+pub use crate::geometry::{Ray, RaySet};
 pub use departure::{
     Departure, NoSkip, SAME_SURFACE_COS, SAME_SURFACE_HEIGHT, SAME_SURFACE_RIM, Skip, WAY_OUT_COS,
 };
@@ -163,7 +163,7 @@ pub trait Backend: Send + Sync {
     /// certainly hit nothing ([`Fan`]; the octree's, `octree`'s module
     /// doc). `None` (the default, and when the run would not pay): every
     /// ray is traced.
-    fn fan(&self, rays: &[Ray]) -> Option<Box<dyn Fan + '_>> {
+    fn fan(&self, rays: &dyn RaySet) -> Option<Box<dyn Fan + '_>> {
         let _ = rays;
         None
     }
@@ -221,6 +221,20 @@ pub trait Fan: Send + Sync {
         for (k, r) in keys.iter_mut().zip(rays) {
             *k = if self.misses(r) { FAN_MISS } else { 0 };
         }
+    }
+
+    /// [`Fan::keys_each`] of rows not yet made rays (a window of a
+    /// caller's rows converted only where the fan does not know them to
+    /// miss): `rows` holds, as [`Ray`]s in layout only, each row's origin
+    /// as given and its direction before normalising; a row whose
+    /// origin's bits are `origin` converts to a ray leaving the fan's
+    /// origin. A row gets [`FAN_MISS`] only where the ray it converts to
+    /// would (a row that is not a ray may get any key: the caller tells
+    /// such rows). False (the default) where the fan cannot key rows:
+    /// `keys` then holds nothing.
+    fn keys_of_rows(&self, rows: &[Ray], origin: [u32; 3], keys: &mut [u32]) -> bool {
+        let _ = (rows, origin, keys);
+        false
     }
 
     /// A backend answering every query exactly as the backend that made

@@ -34,15 +34,22 @@
 //! in parallel first.
 
 use super::integrator::SplatSurfaces;
-use crate::accel::{Backend, CandidateHits, FAN_ELSEWHERE, FAN_MISS, Fan, PACKET, PassOver, Query, Ray};
+use crate::accel::{Backend, CandidateHits, FAN_ELSEWHERE, FAN_MISS, Fan, PACKET, PassOver, Query, Ray, RaySet};
 use crate::resolve::SurfaceHit;
-use glam::{Vec3, Vec3A};
+use crate::simd::{RowNumber, ray_from_row};
+use glam::{DVec3, Vec3, Vec3A};
 use rayon::prelude::*;
 use std::ops::Range;
 use std::sync::atomic::{AtomicU32, AtomicUsize, Ordering};
 
 /// Rays per parallel task.
 pub const CHUNK: usize = 512;
+
+/// Pairs of neighbouring rows of which [`RayRows::scattered`] looks at one.
+const ROW_SAMPLE: usize = 16;
+
+/// Rows a parallel task of [`RayRows::convert_all`] converts.
+const CONVERT: usize = 4096;
 
 /// Where [`cast_rays`] writes its answers, one slot per ray.
 pub struct CastOutputs<'a> {
@@ -61,8 +68,247 @@ pub struct CastOutputs<'a> {
 /// Panics if `lens` or an output is shorter than the rays ask.
 pub fn cast_rays(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: CastOutputs<'_>) {
     let order = Order::of(rays);
-    let fans = unordered_fans(order.as_ref(), surfaces.backend, rays);
-    cast_planned(surfaces, (rays, lens), out, false, (order, fans));
+    let fans = unordered_fans(order.as_ref(), surfaces.backend, &rays);
+    cast_planned(surfaces, &Held { rays, lens }, out, false, (order, fans));
+}
+
+/// A batch's rays as rows of six numbers (origin, then direction) in a
+/// frame `shift` from the scene's (the shift subtracted in `f64`), read
+/// where the cast needs them: a camera's windows convert their own rows as
+/// they trace them ([`cast_rows_owned`]), so the batch is never written
+/// out as rays (a call converting 1M rows first spent 5 ms of 32 on it,
+/// `docs/notes/backends.md`, "Issue 55, fifty-second session").
+pub struct RayRows<'a, T> {
+    rows: &'a [T],
+    shift: DVec3,
+    /// The first row found not to be a ray (`usize::MAX`: none).
+    bad: AtomicUsize,
+}
+
+impl<'a, T: RowNumber> RayRows<'a, T> {
+    /// The rows `rows` (six numbers each; a shorter tail is left out).
+    #[must_use]
+    pub fn new(rows: &'a [T], shift: DVec3) -> Self {
+        RayRows {
+            rows,
+            shift,
+            bad: AtomicUsize::new(usize::MAX),
+        }
+    }
+
+    /// The rows from `start` converted into `rays` and `lens` (as many as
+    /// `rays` holds), without a branch; false where one is not a ray: it
+    /// gets a ray of NaN direction (which meets nothing) and the first
+    /// such row's index is kept ([`RayRows::first_bad`]).
+    ///
+    /// # Panics
+    /// If the rows from `start` are fewer than `rays`, or `lens` is shorter.
+    pub fn convert(&self, start: usize, rays: &mut [Ray], lens: &mut [f32]) -> bool {
+        let m = rays.len();
+        let rows = &self.rows[6 * start..6 * (start + m)];
+        let good = T::rays(rows, self.shift, rays, lens);
+        if !good {
+            let rows = rows.as_chunks::<6>().0;
+            let bad = |i: &usize| !ray_from_row(&rows[*i], self.shift).2;
+            for i in (0..m).filter(bad) {
+                rays[i] = Ray {
+                    origin: Vec3::ZERO,
+                    dir: Vec3::NAN,
+                };
+            }
+            self.bad.fetch_min(start + (0..m).find(bad).unwrap_or(0), Ordering::Relaxed);
+        }
+        good
+    }
+
+    /// The first row found not to be a ray by the conversions so far.
+    #[must_use]
+    pub fn first_bad(&self) -> Option<usize> {
+        Some(self.bad.load(Ordering::Relaxed)).filter(|&i| i != usize::MAX)
+    }
+
+    /// Whether the rows are put in order ([`Order::wanted`]), judged on
+    /// every [`ROW_SAMPLE`]th pair of neighbours and their origins' numbers
+    /// as given (a full pass converting every origin cost 4 % of a call
+    /// casting 1M box rays): an order only moves the work, never an answer.
+    fn scattered(&self) -> bool {
+        let n = self.len();
+        let same = |i: usize| (0..3).all(|k| self.rows[6 * i + k].into().to_bits() == self.rows[6 * i + 6 + k].into().to_bits());
+        let pairs = (0..n.saturating_sub(1)).step_by(ROW_SAMPLE);
+        let shared = pairs.clone().filter(|&i| same(i)).count();
+        n >= ORDER_MIN && u32::try_from(n).is_ok() && shared < pairs.count().div_ceil(8)
+    }
+
+    /// Every row converted into `rays` and `lens` (resized to the rows;
+    /// their memory reused), in parallel; false where one is not a ray.
+    pub fn convert_all(&self, rays: &mut Vec<Ray>, lens: &mut Vec<f32>) -> bool {
+        let n = self.len();
+        rays.resize(n, Ray { origin: Vec3::ZERO, dir: Vec3::X });
+        lens.resize(n, 1.0);
+        rays.par_chunks_mut(CONVERT)
+            .zip(lens.par_chunks_mut(CONVERT))
+            .enumerate()
+            .for_each(|(c, (rays, lens))| {
+                self.convert(c * CONVERT, rays, lens);
+            });
+        self.first_bad().is_none()
+    }
+}
+
+impl<T: RowNumber> RaySet for RayRows<'_, T> {
+    fn len(&self) -> usize {
+        self.rows.len() / 6
+    }
+
+    fn ray(&self, i: usize) -> Ray {
+        let mut ray = [Ray { origin: Vec3::ZERO, dir: Vec3::X }];
+        self.convert(i, &mut ray, &mut [0.0]);
+        ray[0]
+    }
+
+    fn origin(&self, i: usize) -> Vec3 {
+        let r: [f64; 3] = std::array::from_fn(|k| self.rows[6 * i + k].into());
+        (DVec3::from_array(r) - self.shift).as_vec3()
+    }
+}
+
+/// A batch's rays as [`cast_planned`] takes them: one at a time (the fans'
+/// samples) and a range at a time (its windows' and chunks' traces).
+trait Batch: RaySet {
+    /// The rays of `range` and their directions' lengths: the held ones,
+    /// or rows converted into `buf`.
+    fn range<'s>(&'s self, range: Range<usize>, buf: &'s mut Converted) -> (&'s [Ray], &'s [f32]);
+
+    /// The rays of `range`, a window of the run from ray `first` whose fan
+    /// is `fan`, with their lengths ([`Batch::range`]) and their keys
+    /// ([`Fan::keys_each`]) into `keys`; a ray keyed [`FAN_MISS`] may be
+    /// left unset (rows the fan keys before they are converted).
+    fn keyed<'s>(
+        &'s self,
+        (range, first): (Range<usize>, usize),
+        fan: &dyn Fan,
+        buf: &'s mut Converted,
+        keys: &mut Vec<u32>,
+    ) -> (&'s [Ray], &'s [f32]) {
+        let _ = first;
+        let (rays, lens) = self.range(range, buf);
+        keys.resize(rays.len(), 0);
+        fan.keys_each(rays, keys);
+        (rays, lens)
+    }
+}
+
+/// A task's rays converted from rows ([`Batch::range`]).
+#[derive(Default)]
+struct Converted {
+    rays: Vec<Ray>,
+    lens: Vec<f32>,
+}
+
+/// Rays and their directions' lengths, held.
+struct Held<'a> {
+    rays: &'a [Ray],
+    lens: &'a [f32],
+}
+
+impl RaySet for Held<'_> {
+    fn len(&self) -> usize {
+        self.rays.len()
+    }
+
+    fn ray(&self, i: usize) -> Ray {
+        self.rays[i]
+    }
+}
+
+impl Batch for Held<'_> {
+    fn range<'s>(&'s self, range: Range<usize>, _: &'s mut Converted) -> (&'s [Ray], &'s [f32]) {
+        (&self.rays[range.clone()], &self.lens[range])
+    }
+}
+
+impl<T: RowNumber> Batch for RayRows<'_, T> {
+    fn range<'s>(&'s self, range: Range<usize>, buf: &'s mut Converted) -> (&'s [Ray], &'s [f32]) {
+        let m = range.len();
+        buf.rays.resize(m, Ray { origin: Vec3::ZERO, dir: Vec3::X });
+        buf.lens.resize(m, 1.0);
+        self.convert(range.start, &mut buf.rays, &mut buf.lens);
+        (&buf.rays, &buf.lens)
+    }
+
+    /// The rows keyed as they are where the fan can ([`Fan::keys_of_rows`]:
+    /// `f32` rows), and only those it does not know to miss converted
+    /// (most of a camera's rays miss: converting them took about a tenth
+    /// of a camera `cast_rays` call, `docs/notes/backends.md`, "Issue 55,
+    /// fifty-third session"). A row keyed a miss is a ray (its direction
+    /// one, `crate::simd::gnomonic_key`; its origin's bits the fan's first
+    /// row's, which is one): any other is converted, so the call still
+    /// names the first row that is not a ray.
+    fn keyed<'s>(
+        &'s self,
+        (range, first): (Range<usize>, usize),
+        fan: &dyn Fan,
+        buf: &'s mut Converted,
+        keys: &mut Vec<u32>,
+    ) -> (&'s [Ray], &'s [f32]) {
+        let m = range.len();
+        let rows = &self.rows[6 * range.start..6 * range.end];
+        let origin = T::as_rays(&self.rows[6 * first..6 * first + 6]).map(|r| r[0].origin.to_array().map(f32::to_bits));
+        keys.resize(m, 0);
+        let (Some(raw), Some(origin)) = (T::as_rays(rows), origin) else {
+            return self.range_keyed(range, fan, buf, keys);
+        };
+        if !fan.keys_of_rows(raw, origin, keys) {
+            return self.range_keyed(range, fan, buf, keys);
+        }
+        buf.rays.resize(m, Ray { origin: Vec3::ZERO, dir: Vec3::X });
+        buf.lens.resize(m, 1.0);
+        let rows = rows.as_chunks::<6>().0;
+        for (i, _) in keys.iter().enumerate().filter(|(_, k)| **k != FAN_MISS) {
+            let (ray, len, ok) = ray_from_row(&rows[i], self.shift);
+            (buf.rays[i], buf.lens[i]) = (ray, len);
+            if !ok {
+                buf.rays[i] = Ray {
+                    origin: Vec3::ZERO,
+                    dir: Vec3::NAN,
+                };
+                self.bad.fetch_min(range.start + i, Ordering::Relaxed);
+            }
+        }
+        (&buf.rays, &buf.lens)
+    }
+}
+
+impl<T: RowNumber> RayRows<'_, T> {
+    /// [`Batch::keyed`]'s default: every row converted, then keyed.
+    fn range_keyed<'s>(
+        &'s self,
+        range: Range<usize>,
+        fan: &dyn Fan,
+        buf: &'s mut Converted,
+        keys: &mut [u32],
+    ) -> (&'s [Ray], &'s [f32]) {
+        let (rays, lens) = self.range(range, buf);
+        fan.keys_each(rays, keys);
+        (rays, lens)
+    }
+}
+
+/// A run of a batch's rays, as rays of their own (a fan's).
+struct Part<'a>(&'a dyn RaySet, Range<usize>);
+
+impl RaySet for Part<'_> {
+    fn len(&self) -> usize {
+        self.1.len()
+    }
+
+    fn ray(&self, i: usize) -> Ray {
+        self.0.ray(self.1.start + i)
+    }
+
+    fn origin(&self, i: usize) -> Vec3 {
+        self.0.origin(self.1.start + i)
+    }
 }
 
 /// [`cast_rays`]' answers in outputs of their own: `t`, and the splat ids
@@ -88,11 +334,50 @@ pub fn cast_rays_owned(
     surfaces: &SplatSurfaces<'_>,
     rays: &[Ray],
     lens: &[f32],
-    (ids, normals): (bool, bool),
+    want: (bool, bool),
 ) -> CastAnswers {
-    let n = rays.len();
+    owned(surfaces, &Held { rays, lens }, want, Order::of(rays))
+}
+
+/// [`cast_rays_owned`] of the rays `rows`: a batch traced in its own
+/// order (a camera's rays) with each window converting its rows as it
+/// takes them, one put in order ([`cast_rays`]: rays from scattered
+/// origins) converted whole into `buf` first (whose memory a caller keeps
+/// from call to call).
+///
+/// # Errors
+/// The index of the first row that is not a ray (checked before any is
+/// cast where the batch is converted whole; else the answers are dropped).
+pub fn cast_rows_owned<T: RowNumber>(
+    surfaces: &SplatSurfaces<'_>,
+    rows: &RayRows<'_, T>,
+    want: (bool, bool),
+    buf: &mut (Vec<Ray>, Vec<f32>),
+) -> Result<CastAnswers, usize> {
+    let answers = if rows.scattered() {
+        if !rows.convert_all(&mut buf.0, &mut buf.1) {
+            return Err(rows.first_bad().unwrap_or(0));
+        }
+        let (rays, lens) = (&buf.0, &buf.1);
+        owned(surfaces, &Held { rays, lens }, want, Some(Order::build(rays)))
+    } else {
+        owned(surfaces, rows, want, None)
+    };
+    match rows.first_bad() {
+        Some(i) => Err(i),
+        None => Ok(answers),
+    }
+}
+
+/// [`cast_rays_owned`] of `batch` (traced in `order` where it has one).
+fn owned(
+    surfaces: &SplatSurfaces<'_>,
+    batch: &dyn Batch,
+    (ids, normals): (bool, bool),
+    order: Option<Order>,
+) -> CastAnswers {
+    let n = batch.len();
     let (t, id, normal) = answer(None, 1.0);
-    let order = Order::of(rays);
     // Allocated here, on the caller's thread: a vector allocated on one of
     // the pool's threads comes from that thread's arena, and the caller
     // freeing it there kept a batch's outputs more in the process (peak
@@ -115,14 +400,14 @@ pub fn cast_rays_owned(
     };
     let ((), fans) = rayon::join(
         || fill(&mut a),
-        || unordered_fans(order.as_ref(), surfaces.backend, rays),
+        || unordered_fans(order.as_ref(), surfaces.backend, batch),
     );
     let out = CastOutputs {
         t: &mut a.t,
         ids: a.ids.as_deref_mut(),
         normals: a.normals.as_deref_mut(),
     };
-    cast_planned(surfaces, (rays, lens), out, true, (order, fans));
+    cast_planned(surfaces, batch, out, true, (order, fans));
     a
 }
 
@@ -136,7 +421,7 @@ type Fans<'b> = Vec<(Range<usize>, Box<dyn Fan + 'b>)>;
 
 /// The fans of a batch that has no `order` (a batch traced in its
 /// origins' order has none).
-fn unordered_fans<'b>(order: Option<&Order>, backend: &'b dyn Backend, rays: &[Ray]) -> Fans<'b> {
+fn unordered_fans<'b>(order: Option<&Order>, backend: &'b dyn Backend, rays: &dyn RaySet) -> Fans<'b> {
     match order {
         Some(_) => Vec::new(),
         None => fans(backend, rays),
@@ -148,14 +433,16 @@ fn unordered_fans<'b>(order: Option<&Order>, backend: &'b dyn Backend, rays: &[R
 /// in every slot where `missed`.
 fn cast_planned(
     surfaces: &SplatSurfaces<'_>,
-    (rays, lens): (&[Ray], &[f32]),
+    batch: &dyn Batch,
     out: CastOutputs<'_>,
     missed: bool,
     (order, fans): (Option<Order>, Fans<'_>),
 ) {
-    let n = rays.len();
-    assert!(lens.len() >= n && out.t.len() >= n, "an output per ray");
+    let n = batch.len();
+    assert!(out.t.len() >= n, "an output per ray");
     if let Some(order) = order {
+        let mut buf = Converted::default();
+        let (rays, lens) = batch.range(0..n, &mut buf);
         return cast_in_order(surfaces, rays, lens, out, &order);
     }
     let packets = crate::accel::use_packets(surfaces.backend);
@@ -167,7 +454,7 @@ fn cast_planned(
             backend: fan.backend().unwrap_or(surfaces.backend),
             ..*surfaces
         };
-        let (rays, lens, m) = (&rays[run.clone()], &lens[run.clone()], run.len());
+        let m = run.len();
         let ids = slots(ids.as_deref_mut().map(|v| &mut v[run.clone()]), 1, m, FAN_WINDOW);
         let normals = slots(
             normals.as_deref_mut().map(|v| &mut v[3 * run.start..3 * run.end]),
@@ -181,10 +468,11 @@ fn cast_planned(
             .zip(normals)
             .enumerate()
             .for_each_init(
-                || (Caster::new(surfaces), FanScratch::default()),
-                |(caster, scratch), (c, ((t, ids), normals))| {
-                    let range = c * FAN_WINDOW..c * FAN_WINDOW + t.len();
-                    let (rays, lens) = (&rays[range.clone()], &lens[range]);
+                || (Caster::new(surfaces), FanScratch::default(), Converted::default()),
+                |(caster, scratch, buf), (c, ((t, ids), normals))| {
+                    let start = run.start + c * FAN_WINDOW;
+                    let window = (start..start + t.len(), run.start);
+                    let (rays, lens) = batch.keyed(window, fan.as_ref(), buf, &mut scratch.keys);
                     let mut out = Writer { t, ids, normals, lens };
                     // Every slot a miss's first ([`answer`]), in one pass
                     // of stores: the fan's misses, most of a camera's
@@ -193,7 +481,7 @@ fn cast_planned(
                     if !missed {
                         out.misses();
                     }
-                    fan_window(fan.as_ref(), rays, packets, scratch, &mut |idx| {
+                    keyed_window(rays, packets, scratch, &mut |idx| {
                         caster.trace(rays, idx, &mut |i, f| out.put(i, f));
                     });
                 },
@@ -206,9 +494,12 @@ fn cast_planned(
         .zip(ids)
         .zip(normals)
         .enumerate()
-        .for_each(|(c, ((t, ids), normals))| {
+        .for_each_init(Converted::default, |buf, (c, ((t, ids), normals))| {
             let range = c * CHUNK..(c * CHUNK + t.len());
-            let (rays, lens) = (&rays[range.clone()], &lens[range.clone()]);
+            if !has_gap(&fans, &range) {
+                return;
+            }
+            let (rays, lens) = batch.range(range.clone(), buf);
             let mut out = Writer { t, ids, normals, lens };
             let mut caster = Caster::new(surfaces);
             gaps(&fans, range, |piece| {
@@ -297,15 +588,51 @@ impl<'s, 'a> Caster<'s, 'a> {
 /// fans as [`cast_rays`] forms them; the answers of one ray at a time.
 ///
 /// Panics if `lens` or `out` is shorter than `rays`.
-pub fn occluded(
+pub fn occluded(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], span: (f32, f32), out: &mut [bool]) {
+    assert!(lens.len() >= rays.len(), "a length per ray");
+    occluded_planned(surfaces, &Held { rays, lens }, span, out, Order::of(rays));
+}
+
+/// [`occluded`] of the rays `rows`, as [`cast_rows_owned`] takes them: a
+/// batch traced in its own order with each window converting only the
+/// rows its fan does not know to miss, one put in order converted whole
+/// into `buf` first.
+///
+/// # Errors
+/// The index of the first row that is not a ray (`out` then holds
+/// nothing to rely on).
+///
+/// # Panics
+/// If `out` is shorter than the rows.
+pub fn occluded_rows<T: RowNumber>(
     surfaces: &SplatSurfaces<'_>,
-    rays: &[Ray],
-    lens: &[f32],
+    rows: &RayRows<'_, T>,
+    span: (f32, f32),
+    out: &mut [bool],
+    buf: &mut (Vec<Ray>, Vec<f32>),
+) -> Result<(), usize> {
+    if rows.scattered() {
+        if !rows.convert_all(&mut buf.0, &mut buf.1) {
+            return Err(rows.first_bad().unwrap_or(0));
+        }
+        let (rays, lens) = (&buf.0, &buf.1);
+        occluded_planned(surfaces, &Held { rays, lens }, span, out, Some(Order::build(rays)));
+    } else {
+        occluded_planned(surfaces, rows, span, out, None);
+    }
+    rows.first_bad().map_or(Ok(()), Err)
+}
+
+/// [`occluded`] of `batch` (traced in `order` where it has one).
+fn occluded_planned(
+    surfaces: &SplatSurfaces<'_>,
+    batch: &dyn Batch,
     (t_near, t_far): (f32, f32),
     out: &mut [bool],
+    order: Option<Order>,
 ) {
-    let n = rays.len();
-    assert!(lens.len() >= n && out.len() >= n, "an output per ray");
+    let n = batch.len();
+    assert!(out.len() >= n, "an output per ray");
     let scene = surfaces.scene;
     let backend = surfaces.backend;
     let pass = scene.has_phong().then_some(scene as &dyn PassOver);
@@ -316,8 +643,10 @@ pub fn occluded(
         from: None,
         pass,
     };
-    if let Some(order) = Order::of(rays) {
+    if let Some(order) = order {
         // One at a time, in the order's sequence, then back in place.
+        let mut buf = Converted::default();
+        let (rays, lens) = batch.range(0..n, &mut buf);
         let mut got = vec![false; n];
         got.par_chunks_mut(CHUNK)
             .enumerate()
@@ -359,7 +688,7 @@ pub fn occluded(
     };
     // A fan's misses hold from `t >= 0` only.
     let fans = if t_near >= 0.0 {
-        fans(backend, rays)
+        fans(backend, batch)
     } else {
         Vec::new()
     };
@@ -367,25 +696,31 @@ pub fn occluded(
     for (run, fan) in &fans {
         // The fan's own answers where it has them (the same answers).
         let backend = fan.backend().unwrap_or(backend);
-        let (rays, lens) = (&rays[run.clone()], &lens[run.clone()]);
         out[run.clone()]
             .par_chunks_mut(FAN_WINDOW)
             .enumerate()
-            .for_each_init(FanScratch::default, |scratch, (c, out)| {
-                let range = c * FAN_WINDOW..c * FAN_WINDOW + out.len();
-                let (rays, lens) = (&rays[range.clone()], &lens[range]);
-                // Every answer a miss's first (the fan's misses are then
-                // written).
-                out.fill(false);
-                fan_window(fan.as_ref(), rays, packets, scratch, &mut |idx| {
-                    trace(backend, rays, lens, idx, &mut |i, g| out[i] = g);
-                });
-            });
+            .for_each_init(
+                || (FanScratch::default(), Converted::default()),
+                |(scratch, buf), (c, out)| {
+                    let start = run.start + c * FAN_WINDOW;
+                    let window = (start..start + out.len(), run.start);
+                    let (rays, lens) = batch.keyed(window, fan.as_ref(), buf, &mut scratch.keys);
+                    // Every answer a miss's first (the fan's misses are then
+                    // written).
+                    out.fill(false);
+                    keyed_window(rays, packets, scratch, &mut |idx| {
+                        trace(backend, rays, lens, idx, &mut |i, g| out[i] = g);
+                    });
+                },
+            );
     }
     // The rays of no fan's run, chunk by chunk in place.
-    out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
+    out.par_chunks_mut(CHUNK).enumerate().for_each_init(Converted::default, |buf, (c, out)| {
         let range = c * CHUNK..(c * CHUNK + out.len());
-        let (rays, lens) = (&rays[range.clone()], &lens[range.clone()]);
+        if !has_gap(&fans, &range) {
+            return;
+        }
+        let (rays, lens) = batch.range(range.clone(), buf);
         gaps(&fans, range, |piece| {
             batches(rays, piece, packets, &mut |idx| {
                 trace(backend, rays, lens, idx, &mut |i, g| out[i] = g);
@@ -479,6 +814,13 @@ struct Order {
 }
 
 impl Order {
+    /// Whether a batch of `rays` is put in order: at least [`ORDER_MIN`]
+    /// of them, not sharing their origins ([`shares_origins`]).
+    fn wanted(rays: &impl RaySet) -> bool {
+        let n = rays.len();
+        n >= ORDER_MIN && u32::try_from(n).is_ok() && !shares_origins(rays)
+    }
+
     /// The rays (and their lengths) of chunk `c` of the order ([`CHUNK`]
     /// rays from `c * CHUNK`), copied in order, all read before any is
     /// traced: their loads from the batch's scattered places overlap,
@@ -518,10 +860,12 @@ impl Order {
     /// alone, while the workers waited: `docs/notes/backends.md`, "Issue
     /// 55, thirty-ninth session").
     fn of(rays: &[Ray]) -> Option<Order> {
+        Order::wanted(&rays).then(|| Order::build(rays))
+    }
+
+    /// [`Order::of`] `rays`, asked for.
+    fn build(rays: &[Ray]) -> Order {
         let n = rays.len();
-        if n < ORDER_MIN || u32::try_from(n).is_err() || shares_origins(rays) {
-            return None;
-        }
         let key = key_of(rays);
         let buckets = (ORDER_CELLS.pow(3) * 8) as usize;
         let mut keys = vec![0u16; n];
@@ -558,7 +902,7 @@ impl Order {
                 }
             });
         let ray = ray.into_iter().map(AtomicU32::into_inner).collect();
-        Some(Order { ray, at })
+        Order { ray, at }
     }
 }
 
@@ -572,15 +916,15 @@ const SHARE_TASK: usize = 1 << 14;
 /// origin (bit for bit). In parallel, in tasks of [`SHARE_TASK`]
 /// neighbours; a task started once enough are found adds nothing (a
 /// camera's batch stops after about an eighth of its rays).
-fn shares_origins(rays: &[Ray]) -> bool {
-    let bits = |r: &Ray| r.origin.to_array().map(f32::to_bits);
+fn shares_origins(rays: &impl RaySet) -> bool {
+    let bits = |i: usize| rays.origin(i).to_array().map(f32::to_bits);
     let pairs = rays.len().saturating_sub(1);
     let enough = rays.len().div_ceil(8);
     let found = AtomicUsize::new(0);
     (0..pairs.div_ceil(SHARE_TASK)).into_par_iter().for_each(|t| {
         if found.load(Ordering::Relaxed) < enough {
             let task = t * SHARE_TASK..pairs.min((t + 1) * SHARE_TASK);
-            let shared = task.filter(|&i| bits(&rays[i]) == bits(&rays[i + 1])).count();
+            let shared = task.filter(|&i| bits(i) == bits(i + 1)).count();
             found.fetch_add(shared, Ordering::Relaxed);
         }
     });
@@ -685,25 +1029,27 @@ const FAN_SAMPLE: usize = 64;
 /// answered as its own, since a fan answers only the rays leaving its
 /// origin (its keys and lists look at each ray's) and hands the others
 /// to its backend.
-fn fans<'b>(backend: &'b dyn Backend, rays: &[Ray]) -> Fans<'b> {
-    let bits = |r: &Ray| r.origin.to_array().map(f32::to_bits);
+fn fans<'b>(backend: &'b dyn Backend, rays: &dyn RaySet) -> Fans<'b> {
+    let bits = |i: usize| rays.origin(i).to_array().map(f32::to_bits);
+    let n = rays.len();
     // Whether each chunk of [`CHUNK`] is taken whole: a run steps over
     // such chunks.
-    let whole: Vec<bool> = rays
-        .par_chunks(CHUNK)
+    let whole: Vec<bool> = (0..n.div_ceil(CHUNK))
+        .into_par_iter()
         .map(|c| {
-            let o = bits(&c[0]);
-            c.iter().step_by(FAN_SAMPLE).all(|r| bits(r) == o) && bits(&c[c.len() - 1]) == o
+            let (first, last) = (c * CHUNK, n.min(c * CHUNK + CHUNK) - 1);
+            let o = bits(first);
+            (first..=last).step_by(FAN_SAMPLE).all(|i| bits(i) == o) && bits(last) == o
         })
         .collect();
     let mut runs = Vec::new();
     let mut start = 0;
-    while start < rays.len() {
-        let o = bits(&rays[start]);
+    while start < n {
+        let o = bits(start);
         let mut end = start + 1;
-        while end < rays.len() && bits(&rays[end]) == o {
+        while end < n && bits(end) == o {
             end += if end % CHUNK == 0 && whole[end / CHUNK] {
-                CHUNK.min(rays.len() - end)
+                CHUNK.min(n - end)
             } else {
                 1
             };
@@ -716,18 +1062,19 @@ fn fans<'b>(backend: &'b dyn Backend, rays: &[Ray]) -> Fans<'b> {
     }
     runs.into_par_iter()
         .filter_map(|run| {
-            let fan = backend.fan(&rays[run.clone()])?;
+            let fan = backend.fan(&Part(rays, run.clone()))?;
             Some((run, fan))
         })
         .collect()
 }
 
-/// Rays of a fan's run a task takes at once ([`fan_window`]): eight rows
+/// Rays of a fan's run a task takes at once ([`keyed_window`]): eight rows
 /// of a 1024-pixel-wide camera's rays, 192 kB of rays (they stay in the
 /// core's cache from the fan's test to their traversal).
 const FAN_WINDOW: usize = 8192;
 
-/// What [`fan_window`] keeps between windows (a task's).
+/// What [`keyed_window`] keeps between windows (a task's): the window's
+/// keys ([`Batch::keyed`]) among them.
 #[derive(Default)]
 struct FanScratch {
     keys: Vec<u32>,
@@ -739,9 +1086,9 @@ struct FanScratch {
 
 /// The rays of a window of a fan's run (at most [`FAN_WINDOW`]; indices
 /// into `rays`, the window's) to `trace`, but for the rays the fan knows
-/// to miss (whose answers the caller writes first, for the whole window):
-/// in their keys' order
-/// ([`Fan::keys_each`], stable; those it holds no place for last), in
+/// to miss (whose answers the caller writes first, for the whole window;
+/// such a ray may be left unset): in their keys' order (`s.keys`,
+/// [`Batch::keyed`]'s; stable; those it holds no place for last), in
 /// packets of one direction's signs ([`by_octant`]), or one at a time
 /// without `packets`. So a packet holds rays of neighbouring directions
 /// whatever the window's own order: taken row after row, a camera's
@@ -753,17 +1100,9 @@ struct FanScratch {
 /// the window's rays (rows of a camera's image: a few rows of the fan's
 /// blocks); otherwise (a batch in another order) the window's order is
 /// kept.
-fn fan_window(
-    fan: &dyn Fan,
-    rays: &[Ray],
-    packets: bool,
-    s: &mut FanScratch,
-    trace: &mut impl FnMut(&[u16]),
-) {
+fn keyed_window(rays: &[Ray], packets: bool, s: &mut FanScratch, trace: &mut impl FnMut(&[u16])) {
     let n = rays.len();
-    debug_assert!(n <= FAN_WINDOW);
-    s.keys.resize(n, 0);
-    fan.keys_each(rays, &mut s.keys);
+    debug_assert!(n <= FAN_WINDOW && s.keys.len() == n);
     s.left.clear();
     s.elsewhere.clear();
     let (mut lo, mut hi) = (u32::MAX, 0);
@@ -802,6 +1141,14 @@ fn fan_window(
             order.iter().for_each(|&i| trace(&[i]));
         }
     }
+}
+
+/// Whether some of the chunk `range` of a batch lies in none of the runs
+/// of `fans` ([`gaps`]).
+fn has_gap(fans: &[(Range<usize>, Box<dyn Fan + '_>)], range: &Range<usize>) -> bool {
+    let mut any = false;
+    gaps(fans, range.clone(), |_| any = true);
+    any
 }
 
 /// The pieces of the chunk `range` of a batch that lie in none of the
@@ -992,11 +1339,11 @@ mod tests {
         for &i in &pairs[..enough - 1] {
             rays[i + 1].origin = rays[i].origin;
         }
-        assert!(!shares_origins(&rays));
+        assert!(!shares_origins(&rays.as_slice()));
         assert!(Order::of(&rays).is_some());
         let last = pairs[enough - 1];
         rays[last + 1].origin = rays[last].origin;
-        assert!(shares_origins(&rays));
+        assert!(shares_origins(&rays.as_slice()));
         assert!(Order::of(&rays).is_none());
     }
 

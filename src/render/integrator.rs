@@ -401,7 +401,7 @@ impl Surfaces for SplatSurfaces<'_> {
         if !self.backend.fan_pays(rays) {
             return None;
         }
-        self.backend.fan(&make())
+        self.backend.fan(&make().as_slice())
     }
 
     fn parallel(&self, dir: Vec3, rays: usize) -> Option<Box<dyn Backend + '_>> {

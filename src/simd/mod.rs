@@ -44,7 +44,7 @@ pub use fan::{FanBits, GnomonicGrid, KEY_ELSEWHERE, KEY_MISS, NO_CELL, gnomonic_
 pub use hits::{HITS_PACKS, HitSlots, LaneHits, disc_hits_met};
 pub use lsq::{Row6, normal_equations6};
 pub use near::keys_within;
-pub use rows::{ray_from_row, rays_from_f32_rows, rays_from_rows};
+pub use rows::{RowNumber, ray_from_row, rays_from_f32_rows, rays_from_rows, rows_as_rays};
 pub use sort::{SORT_NETWORK_MAX, SORT_NETWORK_MIN, same_network, sort_keys};
 pub use triples::triple_normals;
 pub use tri::{SURE, Shear, TRI_LANES, TriColumns, tri_masks, tri_masks_sheared};

@@ -51,6 +51,55 @@ pub fn rays_from_rows<T: Copy + Into<f64>>(rows: &[T], shift: DVec3, rays: &mut 
     good
 }
 
+/// A number a ray array's rows may hold, converted on its fastest path.
+pub trait RowNumber: Copy + Into<f64> + Sync {
+    /// [`rays_from_rows`] of rows of this type.
+    fn rays(rows: &[Self], shift: DVec3, rays: &mut [Ray], lens: &mut [f32]) -> bool;
+
+    /// The rows as they are, read as [`Ray`]s number for number (origin,
+    /// then direction, neither shifted nor normalised), where the type
+    /// is `f32` ([`rows_as_rays`]); `None` for another.
+    fn as_rays(rows: &[Self]) -> Option<&[Ray]>;
+}
+
+impl RowNumber for f32 {
+    fn rays(rows: &[f32], shift: DVec3, rays: &mut [Ray], lens: &mut [f32]) -> bool {
+        rays_from_f32_rows(rows, shift, rays, lens)
+    }
+
+    fn as_rays(rows: &[f32]) -> Option<&[Ray]> {
+        Some(rows_as_rays(rows))
+    }
+}
+
+impl RowNumber for f64 {
+    fn rays(rows: &[f64], shift: DVec3, rays: &mut [Ray], lens: &mut [f32]) -> bool {
+        rays_from_rows(rows, shift, rays, lens)
+    }
+
+    fn as_rays(_: &[f64]) -> Option<&[Ray]> {
+        None
+    }
+}
+
+// `Ray` is six `f32` in a row, nothing between them (`rows_as_rays`).
+const _: () = assert!(size_of::<Ray>() == 24 && align_of::<Ray>() == align_of::<f32>());
+
+/// `f32` rows of six numbers read in place as [`Ray`]s, number for number
+/// (a shorter tail left out): the rays of the rows' numbers before
+/// [`ray_from_row`] shifts and normalises them (a fan keys them so,
+/// `crate::accel::Fan::keys_of_rows`).
+#[must_use]
+pub fn rows_as_rays(rows: &[f32]) -> &[Ray] {
+    let n = rows.len() / 6;
+    // SAFETY: `Ray` is `#[repr(C)]` of two `Vec3`, each `#[repr(C)]` of
+    // three `f32`: 24 bytes with `f32`'s alignment and no padding (asserted
+    // above), so `n` rays are exactly the first `6 n` numbers of `rows`,
+    // which it holds, aligned as they are; every bit pattern is an `f32`,
+    // and the rays borrow `rows` for its lifetime (shared, not mutable).
+    unsafe { std::slice::from_raw_parts(rows.as_ptr().cast::<Ray>(), n) }
+}
+
 /// [`rays_from_rows`] of `f32` rows: four a step on SSE2, the rest one
 /// at a time.
 ///

@@ -15,12 +15,13 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use rayon::prelude::*;
 use splatray::accel::{Backend, CandidateHits, Ray};
-use splatray::render::cast::{CastAnswers, cast_rays_owned, occluded};
+use splatray::render::cast::{
+    CastAnswers, RayRows, cast_rays_owned, cast_rows_owned, occluded_rows,
+};
 use splatray::render::integrator::{SplatSurfaces, Surfaces};
 use splatray::resolve::{Silhouette, silhouettes};
 use splatray::scene::Scene;
-use splatray::simd::{rays_from_f32_rows, rays_from_rows};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use splatray::simd::RowNumber;
 use std::sync::{Mutex, OnceLock};
 use std::time::Instant;
 
@@ -45,12 +46,15 @@ pub struct SplatScene {
     kept: OnceLock<Vec<Silhouette>>,
 }
 
+/// A ray array's rows of six numbers, as its memory holds them.
+enum Rows<'a> {
+    F32(&'a [f32]),
+    F64(&'a [f64]),
+}
+
 /// The most rays whose conversion buffers a scene keeps between calls
 /// (28 bytes a ray: 112 MB).
 const KEEP_RAYS: usize = 1 << 22;
-
-/// Rows a parallel task of [`SplatScene::convert`] converts.
-const CONVERT: usize = 4096;
 
 impl SplatScene {
     /// `scene` (its splats and triangles, shading modes and windows) in
@@ -93,62 +97,98 @@ impl SplatScene {
     /// (`t` is reported in units of it, as Open3D does); converted in
     /// parallel, straight from the array's memory when it is contiguous.
     fn rays(&self, rays: &Bound<'_, PyAny>) -> PyResult<(Vec<Ray>, Vec<f32>)> {
+        self.with_rows(rays, |s: &Self, v: Rows<'_>| match v {
+            Rows::F32(v) => s.convert(v),
+            Rows::F64(v) => s.convert(v),
+        })
+    }
+
+    /// `f` of the array `rays`' rows of six numbers: straight from its
+    /// memory when it is a contiguous `float32` or `float64` array, else
+    /// checked (and its error said) as any array and copied.
+    fn with_rows<R>(
+        &self,
+        rays: &Bound<'_, PyAny>,
+        f: impl FnOnce(&Self, Rows<'_>) -> PyResult<R>,
+    ) -> PyResult<R> {
         if let Ok(a) = rays.extract::<PyReadonlyArray2<'_, f32>>()
             && a.shape()[1] == 6
             && let Ok(v) = a.as_slice()
         {
-            return self.convert(v, rays_from_f32_rows);
+            return f(self, Rows::F32(v));
         }
         if let Ok(a) = rays.extract::<PyReadonlyArray2<'_, f64>>()
             && a.shape()[1] == 6
             && let Ok(v) = a.as_slice()
         {
-            return self.convert(v, rays_from_rows);
+            return f(self, Rows::F64(v));
         }
-        // Anything else: checked (and its error said) as any array.
-        self.convert(&rows::<f64>(rays, "rays", 6, true)?, rays_from_rows)
+        f(self, Rows::F64(&rows::<f64>(rays, "rays", 6, true)?))
+    }
+
+    /// `cast_rays`' answers for the rows `v` (`cast_rows_owned`: a
+    /// camera's converted window by window as they are traced, scattered
+    /// rays converted whole first, into the kept buffers).
+    fn cast_rows<T: RowNumber>(
+        &self,
+        py: Python<'_>,
+        v: &[T],
+        want: (bool, bool),
+    ) -> PyResult<CastAnswers> {
+        let rows = RayRows::new(v, self.to_internal);
+        let mut buf = self.take();
+        let answers = py.detach(|| cast_rows_owned(&self.resolving(), &rows, want, &mut buf));
+        self.keep(buf.0, buf.1);
+        answers.map_err(|i| self.row_error(v, i))
+    }
+
+    /// `occluded`'s answers for the rows `v` over `span` (`occluded_rows`:
+    /// a camera's converted window by window, only the rows its fan does
+    /// not know to miss; scattered rays converted whole first, into the
+    /// kept buffers).
+    fn occluded_rows<T: RowNumber>(
+        &self,
+        py: Python<'_>,
+        v: &[T],
+        span: (f32, f32),
+    ) -> PyResult<Vec<bool>> {
+        let rows = RayRows::new(v, self.to_internal);
+        let mut buf = self.take();
+        let got = py.detach(|| {
+            let mut out = vec![false; v.len() / 6];
+            occluded_rows(&self.surfaces(), &rows, span, &mut out, &mut buf).map(|()| out)
+        });
+        self.keep(buf.0, buf.1);
+        got.map_err(|i| self.row_error(v, i))
+    }
+
+    /// The error of row `i` of `v`, which is not a ray.
+    fn row_error<T: Copy + Into<f64>>(&self, v: &[T], i: usize) -> PyErr {
+        let why = self.ray(&v[6 * i..6 * i + 6]).err().unwrap_or("is wrong");
+        PyValueError::new_err(format!("rays: row {i} {why}"))
     }
 
     /// Rows of six numbers to rays and direction lengths, written straight
-    /// into their vectors in parallel, in chunks of [`CONVERT`] rows (no
+    /// into their vectors in parallel (`RayRows::convert_all`; no
     /// per-chunk lists joined and unzipped: that was a quarter of a
     /// camera-ray `cast_rays` call, `docs/notes/backends.md`, "Issue 55,
     /// round 2"; nor a parallel unzip, whose pairs went through memory:
     /// a fifth of a camera `occluded` call's misses, "seventeenth
     /// session"); the first bad row is reported.
-    fn convert<T: Copy + Into<f64> + Sync>(
-        &self,
-        v: &[T],
-        conv: impl Fn(&[T], DVec3, &mut [Ray], &mut [f32]) -> bool + Sync,
-    ) -> PyResult<(Vec<Ray>, Vec<f32>)> {
-        let n = v.len() / 6;
-        let bad = AtomicUsize::new(usize::MAX);
-        // The kept buffers (a call running beside this one finds none
-        // and allocates); a poisoned lock still holds plain vectors.
-        // Sized once: a call as long as the last writes over its rays.
-        let (mut rays, mut lens) =
-            std::mem::take(&mut *self.scratch.lock().unwrap_or_else(|p| p.into_inner()));
-        rays.resize(n, Ray::new(Vec3::ZERO, Vec3::X));
-        lens.resize(n, 1.0);
-        rays.par_chunks_mut(CONVERT)
-            .zip(lens.par_chunks_mut(CONVERT))
-            .zip(v.par_chunks(6 * CONVERT))
-            .enumerate()
-            .for_each(|(c, ((rays, lens), v))| {
-                // Every row converted without a branch, the checks folded
-                // into one flag; a chunk with a bad row looks for it.
-                if !conv(v, self.to_internal, rays, lens) {
-                    let first = v.chunks_exact(6).position(|r| self.ray(r).is_err());
-                    bad.fetch_min(c * CONVERT + first.unwrap_or(0), Ordering::Relaxed);
-                }
-            });
-        match bad.into_inner() {
-            usize::MAX => Ok((rays, lens)),
-            i => {
-                let why = self.ray(&v[6 * i..6 * i + 6]).err().unwrap_or("is wrong");
-                Err(PyValueError::new_err(format!("rays: row {i} {why}")))
-            }
+    fn convert<T: RowNumber>(&self, v: &[T]) -> PyResult<(Vec<Ray>, Vec<f32>)> {
+        let rows = RayRows::new(v, self.to_internal);
+        let (mut rays, mut lens) = self.take();
+        match rows.convert_all(&mut rays, &mut lens) {
+            true => Ok((rays, lens)),
+            false => Err(self.row_error(v, rows.first_bad().unwrap_or(0))),
         }
+    }
+
+    /// The kept buffers (a call running beside this one finds none and
+    /// allocates); a poisoned lock still holds plain vectors. Sized once:
+    /// a call as long as the last writes over its rays.
+    fn take(&self) -> (Vec<Ray>, Vec<f32>) {
+        std::mem::take(&mut *self.scratch.lock().unwrap_or_else(|p| p.into_inner()))
     }
 
     /// Keeps a call's converted `rays` and `lens` for the next call's
@@ -336,13 +376,15 @@ impl SplatScene {
         splat_ids: bool,
         normals: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (rays, lens) = self.rays(rays)?;
+        let want = (splat_ids, normals);
         let CastAnswers {
             t,
             ids,
             normals: nrm,
-        } = py.detach(|| cast_rays_owned(&self.resolving(), &rays, &lens, (splat_ids, normals)));
-        self.keep(rays, lens);
+        } = self.with_rows(rays, |s: &Self, v: Rows<'_>| match v {
+            Rows::F32(v) => s.cast_rows(py, v, want),
+            Rows::F64(v) => s.cast_rows(py, v, want),
+        })?;
         // The vectors are handed to numpy as they are (no copy).
         let d = pyo3::types::PyDict::new(py);
         d.set_item("t_hit", vector(py, t))?;
@@ -410,13 +452,10 @@ impl SplatScene {
                 "tnear {tnear} and tfar {tfar} must satisfy 0 <= tnear <= tfar"
             )));
         }
-        let (rays, lens) = self.rays(rays)?;
-        let out = py.detach(|| {
-            let mut out = vec![false; rays.len()];
-            occluded(&self.surfaces(), &rays, &lens, (tnear, tfar), &mut out);
-            out
-        });
-        self.keep(rays, lens);
+        let out = self.with_rows(rays, |s: &Self, v: Rows<'_>| match v {
+            Rows::F32(v) => s.occluded_rows(py, v, (tnear, tfar)),
+            Rows::F64(v) => s.occluded_rows(py, v, (tnear, tfar)),
+        })?;
         Ok(vector(py, out))
     }
 

@@ -37,7 +37,7 @@ use super::fan::Coverage;
 use super::traverse::{AnyHit, Gather, RunsAnyHit, Visitor, occluded_by, occluded_split};
 use super::{NO_PRIMITIVE, Octree, lanes};
 use crate::accel::{Backend, BuildStats, CandidateHits, Fan, NoSkip, PACKET, Query, Skip};
-use crate::geometry::Ray;
+use crate::geometry::{Ray, RaySet};
 use crate::primitive::{Pack, Primitive};
 use crate::simd::{GnomonicGrid, NO_CELL, gnomonic_cell};
 use rayon::prelude::*;
@@ -67,7 +67,7 @@ impl<P: Primitive> Octree<P> {
     /// it would not pay ([`Backend::fan_pays`]) or a ball straddles the
     /// plane through the origin across the rays inside the cone of their
     /// directions (`fan`'s module doc).
-    pub(super) fn build_fan(&self, rays: &[Ray]) -> Option<Box<dyn Fan + '_>> {
+    pub(super) fn build_fan(&self, rays: &dyn RaySet) -> Option<Box<dyn Fan + '_>> {
         Some(match self.lists_or_coverage(rays)? {
             Ok(binned) => Box::new(binned),
             Err(coverage) => Box::new(coverage),
@@ -75,8 +75,8 @@ impl<P: Primitive> Octree<P> {
     }
 
     /// [`Octree::build_fan`]'s fan: the lists, or the coverage alone.
-    pub(super) fn lists_or_coverage(&self, rays: &[Ray]) -> Option<Result<Binned<'_, P>, Coverage>> {
-        let origin = rays.first()?.origin;
+    pub(super) fn lists_or_coverage(&self, rays: &dyn RaySet) -> Option<Result<Binned<'_, P>, Coverage>> {
+        let origin = (!rays.is_empty()).then(|| rays.ray(0).origin)?;
         if !self.fan_pays(rays.len()) || !origin.is_finite() {
             return None;
         }
@@ -403,6 +403,10 @@ impl<P: Primitive> Fan for Binned<'_, P> {
         self.cov.keys_each(rays, keys);
     }
 
+    fn keys_of_rows(&self, rows: &[Ray], origin: [u32; 3], keys: &mut [u32]) -> bool {
+        self.cov.keys_of_rows(rows, origin, keys)
+    }
+
     fn backend(&self) -> Option<&dyn Backend> {
         Some(self)
     }
@@ -548,7 +552,7 @@ mod tests {
     /// one at a time and in packets of 8, the same occlusion; the number of
     /// queries the lists answered, and of windows not empty.
     fn compare<P: Primitive>(oct: &Octree<P>, rays: &[Ray]) -> (usize, usize) {
-        let binned = match oct.lists_or_coverage(rays) {
+        let binned = match oct.lists_or_coverage(&rays) {
             Some(Ok(b)) => b,
             _ => panic!("no lists"),
         };
@@ -615,7 +619,7 @@ mod tests {
         // Measured: 34,221 of the 74,475 queries answered from the lists,
         // 16,801 windows not empty.
         assert!(listed > 33_500 && found > 16_000, "{listed} {found}");
-        let fan = oct.build_fan(&rays).expect("a fan with the floor under the eye");
+        let fan = oct.build_fan(&rays.as_slice()).expect("a fan with the floor under the eye");
         let mut h = CandidateHits::new(0.05);
         let (mut misses, mut at_pad) = (0, 0);
         for ray in &rays {
@@ -643,7 +647,7 @@ mod tests {
         eprintln!("camera rays meeting the disc: {seen}");
         // Measured: 35 camera rays.
         assert!(seen > 30, "{seen}");
-        assert!(oct.build_fan(camera).is_none());
+        assert!(oct.build_fan(&camera).is_none());
     }
 
     /// Shadow rays from where the camera rays of `rays` (the first
@@ -659,7 +663,7 @@ mod tests {
         camera: usize,
         normal: impl Fn(u32) -> Vec3,
     ) -> [usize; 4] {
-        let binned = match oct.lists_or_coverage(rays) {
+        let binned = match oct.lists_or_coverage(&rays) {
             Some(Ok(b)) => b,
             _ => panic!("no lists"),
         };

@@ -40,6 +40,19 @@
 //! coordinates, and a ray's cell is found with the same monotone
 //! operations as the rectangles' cells.
 //!
+//! **Rows.** A caller's rows of numbers may be keyed before they are
+//! made rays ([`Fan::keys_of_rows`]), their directions `d` as given: the
+//! conversion's direction `d fl(1 / |d|)` rounds each component once, so
+//! it lies within an angle of `2^-24 √3` (about 1.1e-7) of `d`, and a
+//! point the converted ray's f32 test accepts at a distance `L <= |c| +
+//! R` from the origin lies within `1.1e-7 L` of the line along `d`: with
+//! the test's own rounding (a few ulps), far inside [`MARGIN`] (1e-5 of
+//! `|c| + R`). So the line along `d` meets the grown ball (or the points
+//! within the margin of the ellipse) wherever the converted ray hits the
+//! primitive, and `d`'s key is [`FAN_MISS`] only where the converted
+//! ray's hits nothing; a row's origin is the fan's where its bits are the
+//! fan's row's (the conversion is a function of the numbers).
+//!
 //! The grid spans a sample of the run's directions; a ray outside it is
 //! known to miss where its coordinates lie past every rectangle's, unclipped
 //! by the grid (the balls' reach), or where it does not point in front
@@ -55,7 +68,7 @@
 
 use crate::accel::{FAN_MISS, Fan};
 use crate::simd::{FanBits, GnomonicGrid, Isa, gnomonic_key, gnomonic_keys};
-use crate::geometry::Ray;
+use crate::geometry::{Ray, RaySet};
 use crate::primitive::Primitive;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -126,11 +139,11 @@ impl Coverage {
     /// The basis and the grid (nothing covered yet): `w` the mean of a sample
     /// of the rays' unit directions, the grid over the sample's gnomonic
     /// extent grown by a sixteenth each way, sized for [`RAYS_PER_CELL`].
-    pub(super) fn frame(origin: Vec3, rays: &[Ray], isa: Isa) -> Option<Coverage> {
+    pub(super) fn frame(origin: Vec3, rays: &dyn RaySet, isa: Isa) -> Option<Coverage> {
         // An odd step: a camera's rows of an even width are sampled at
         // every column, not at the same few.
         let step = rays.len().div_ceil(SAMPLE) | 1;
-        let sample = || rays.iter().step_by(step).map(|r| r.dir.as_dvec3());
+        let sample = || (0..rays.len()).step_by(step).map(|i| rays.ray(i).dir.as_dvec3());
         let w = sample()
             .filter(|d| d.is_finite() && *d != DVec3::ZERO)
             .map(DVec3::normalize)
@@ -143,8 +156,8 @@ impl Coverage {
         // pass, a part along `w` far above the rounding the spans' `PAD`
         // covers.
         let off_w = |x: DVec3| (x - w * x.dot(w)).try_normalize();
-        let along = |r: &[Ray]| {
-            let [a, b] = [r.first()?, r.get(1)?].map(|r| r.dir.as_dvec3().try_normalize());
+        let along = |r: &dyn RaySet| {
+            let [a, b] = [0, 1].map(|i| (i < r.len()).then(|| r.ray(i).dir.as_dvec3().try_normalize()).flatten());
             off_w(off_w(b? - a?)?)
         };
         let u = along(rays).unwrap_or_else(|| w.any_orthonormal_vector());
@@ -479,6 +492,13 @@ impl Fan for Coverage {
     /// ([`gnomonic_keys`]).
     fn keys_each(&self, rays: &[Ray], keys: &mut [u32]) {
         gnomonic_keys(&self.grid(), &self.bits(), rays, self.isa, keys);
+    }
+
+    /// The same keys, of rows not yet normalised (module doc, "Rows").
+    fn keys_of_rows(&self, rows: &[Ray], origin: [u32; 3], keys: &mut [u32]) -> bool {
+        let bits = FanBits { origin, ..self.bits() };
+        gnomonic_keys(&self.grid(), &bits, rows, self.isa, keys);
+        true
     }
 }
 

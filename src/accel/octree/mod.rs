@@ -448,7 +448,7 @@ impl<P: Primitive> Backend for Octree<P> {
     /// The directions from the rays' origin in which no primitive's
     /// bounding ball lies (`fan`), for a run of at least 4096 rays and as
     /// many as the primitives.
-    fn fan(&self, rays: &[crate::geometry::Ray]) -> Option<Box<dyn super::Fan + '_>> {
+    fn fan(&self, rays: &dyn crate::geometry::RaySet) -> Option<Box<dyn super::Fan + '_>> {
         self.build_fan(rays)
     }
 
