@@ -216,13 +216,7 @@ fn camera_rows_cast_as_their_windows_convert_them() {
             kept: None,
         };
         let want = cast_rays_owned(&s, &rays, &lens, (true, true));
-        let got = cast_rows_owned(
-            &s,
-            &RayRows::new(&rows, shift),
-            (true, true),
-            &mut Default::default(),
-        )
-        .unwrap();
+        let got = cast_rows(&s, &rows, shift, (true, true)).unwrap();
         // Measured: 7,392 of 47,200 hit.
         let hits = want.t.iter().filter(|t| t.is_finite()).count();
         assert!(hits > 7_000, "{name}: {hits} hit");
@@ -243,12 +237,7 @@ fn camera_rows_cast_as_their_windows_convert_them() {
         kept: None,
     };
     assert!(!whole(&rows).2, "bad rows");
-    let got = cast_rows_owned(
-        &s,
-        &RayRows::new(&rows, shift),
-        (true, false),
-        &mut Default::default(),
-    );
+    let got = cast_rows(&s, &rows, shift, (true, false));
     assert_eq!(got.err(), Some(30_000), "the first row that is not a ray");
     // Rows from scattered origins: put in order, converted whole first.
     let scattered: Vec<f32> = scattered()
@@ -259,13 +248,7 @@ fn camera_rows_cast_as_their_windows_convert_them() {
     let (mut rays, mut lens) = (vec![], vec![]);
     assert!(RayRows::new(&scattered, shift).convert_all(&mut rays, &mut lens));
     let want = cast_rays_owned(&s, &rays, &lens, (true, true));
-    let got = cast_rows_owned(
-        &s,
-        &RayRows::new(&scattered, shift),
-        (true, true),
-        &mut Default::default(),
-    )
-    .unwrap();
+    let got = cast_rows(&s, &scattered, shift, (true, true)).unwrap();
     same_answers(&got, &want, "scattered");
 }
 
@@ -320,18 +303,8 @@ fn rows_keyed_before_they_are_rays_give_the_converted_answers() {
             ..s
         };
         let casts = [
-            cast_rows_owned(
-                &s,
-                &RayRows::new(&rows, shift),
-                (true, true),
-                &mut Default::default(),
-            ),
-            cast_rows_owned(
-                &s,
-                &RayRows::new(&wide, shift),
-                (true, true),
-                &mut Default::default(),
-            ),
+            cast_rows(&s, &rows, shift, (true, true)),
+            cast_rows(&s, &wide, shift, (true, true)),
         ];
         for (got, what) in casts.into_iter().zip(["f32", "f64"]) {
             same_answers(&got.unwrap(), &want, &format!("{name} {what}"));
@@ -371,12 +344,7 @@ fn rows_keyed_before_they_are_rays_give_the_converted_answers() {
         let mut rows = rows.clone();
         let d = Vec3::from_slice(&rows[6 * i + 3..6 * i + 6]);
         rows[6 * i + 3..6 * i + 6].copy_from_slice(&make(d).to_array());
-        let got = cast_rows_owned(
-            &s,
-            &RayRows::new(&rows, shift),
-            (true, false),
-            &mut Default::default(),
-        );
+        let got = cast_rows(&s, &rows, shift, (true, false));
         assert_eq!(got.err(), Some(i), "bad row {k} cast");
         let got = occluded_rows(
             &s,
@@ -399,6 +367,17 @@ fn same_answers(got: &CastAnswers, want: &CastAnswers, what: &str) {
         want.normals.as_deref().map(bits),
         "{what}: normals"
     );
+}
+
+/// `cast_rows_owned` of the rows `rows` in a frame `shift` from the
+/// scene's, with a buffer of its own.
+fn cast_rows<T: splatray::simd::RowNumber>(
+    s: &SplatSurfaces<'_>,
+    rows: &[T],
+    shift: DVec3,
+    want: (bool, bool),
+) -> Result<CastAnswers, usize> {
+    cast_rows_owned(s, &RayRows::new(rows, shift), want, &mut Default::default())
 }
 
 /// The bundled bunny scene's bunny alone (its first model's splats), and

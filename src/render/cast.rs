@@ -111,10 +111,7 @@ impl<'a, T: RowNumber> RayRows<'a, T> {
             let rows = rows.as_chunks::<6>().0;
             let bad = |i: &usize| !ray_from_row(&rows[*i], self.shift).2;
             for i in (0..m).filter(bad) {
-                rays[i] = Ray {
-                    origin: Vec3::ZERO,
-                    dir: Vec3::NAN,
-                };
+                rays[i] = NOT_A_RAY;
             }
             self.bad.fetch_min(start + (0..m).find(bad).unwrap_or(0), Ordering::Relaxed);
         }
@@ -178,6 +175,13 @@ impl<T: RowNumber> RaySet for RayRows<'_, T> {
     }
 }
 
+/// What a row that is not a ray is traced as: a NaN direction meets
+/// nothing ([`RayRows::convert`]).
+const NOT_A_RAY: Ray = Ray {
+    origin: Vec3::ZERO,
+    dir: Vec3::NAN,
+};
+
 /// A batch's rays as [`cast_planned`] takes them: one at a time (the fans'
 /// samples) and a range at a time (its windows' and chunks' traces).
 trait Batch: RaySet {
@@ -197,11 +201,19 @@ trait Batch: RaySet {
         keys: &mut Vec<u32>,
     ) -> (&'s [Ray], &'s [f32]) {
         let _ = first;
-        let (rays, lens) = self.range(range, buf);
-        keys.resize(rays.len(), 0);
-        fan.keys_each(rays, keys);
-        (rays, lens)
+        keyed_by(self.range(range, buf), fan, keys)
     }
+}
+
+/// Rays (and their lengths) keyed by `fan` into `keys` ([`Fan::keys_each`]).
+fn keyed_by<'s>(
+    (rays, lens): (&'s [Ray], &'s [f32]),
+    fan: &dyn Fan,
+    keys: &mut Vec<u32>,
+) -> (&'s [Ray], &'s [f32]) {
+    keys.resize(rays.len(), 0);
+    fan.keys_each(rays, keys);
+    (rays, lens)
 }
 
 /// A task's rays converted from rows ([`Batch::range`]).
@@ -261,42 +273,21 @@ impl<T: RowNumber> Batch for RayRows<'_, T> {
         let rows = &self.rows[6 * range.start..6 * range.end];
         let origin = T::as_rays(&self.rows[6 * first..6 * first + 6]).map(|r| r[0].origin.to_array().map(f32::to_bits));
         keys.resize(m, 0);
-        let (Some(raw), Some(origin)) = (T::as_rays(rows), origin) else {
-            return self.range_keyed(range, fan, buf, keys);
-        };
-        if !fan.keys_of_rows(raw, origin, keys) {
-            return self.range_keyed(range, fan, buf, keys);
+        match (T::as_rays(rows), origin) {
+            (Some(raw), Some(origin)) if fan.keys_of_rows(raw, origin, keys) => {}
+            _ => return keyed_by(self.range(range, buf), fan, keys),
         }
         buf.rays.resize(m, Ray { origin: Vec3::ZERO, dir: Vec3::X });
         buf.lens.resize(m, 1.0);
         let rows = rows.as_chunks::<6>().0;
         for (i, _) in keys.iter().enumerate().filter(|(_, k)| **k != FAN_MISS) {
             let (ray, len, ok) = ray_from_row(&rows[i], self.shift);
-            (buf.rays[i], buf.lens[i]) = (ray, len);
+            (buf.rays[i], buf.lens[i]) = (if ok { ray } else { NOT_A_RAY }, len);
             if !ok {
-                buf.rays[i] = Ray {
-                    origin: Vec3::ZERO,
-                    dir: Vec3::NAN,
-                };
                 self.bad.fetch_min(range.start + i, Ordering::Relaxed);
             }
         }
         (&buf.rays, &buf.lens)
-    }
-}
-
-impl<T: RowNumber> RayRows<'_, T> {
-    /// [`Batch::keyed`]'s default: every row converted, then keyed.
-    fn range_keyed<'s>(
-        &'s self,
-        range: Range<usize>,
-        fan: &dyn Fan,
-        buf: &'s mut Converted,
-        keys: &mut [u32],
-    ) -> (&'s [Ray], &'s [f32]) {
-        let (rays, lens) = self.range(range, buf);
-        fan.keys_each(rays, keys);
-        (rays, lens)
     }
 }
 
