@@ -84,15 +84,22 @@ impl<P: Primitive> Octree<P> {
         // each on one thread.
         let (fan, (ids, prims)) = rayon::join(|| Coverage::frame(origin, rays, self.simd()), || self.primitives());
         let mut fan = fan?;
-        let (cells, near) = fan.cover(&prims)?;
+        let (cells, near) = fan.cover(prims)?;
         Some(match Lists::of::<P>(&fan, (&cells, &near), rays.len()) {
-            Some(lists) => Ok(Binned::new(self, fan, lists, &ids, &prims)),
+            Some(lists) => Ok(Binned::new(self, fan, lists, ids, prims)),
             None => Err(fan),
         })
     }
 
-    /// Every primitive held, once, and its id.
-    pub(super) fn primitives(&self) -> (Vec<u32>, Vec<P>) {
+    /// Every primitive held, once, and its id: found the first time a
+    /// fan asks, and kept (what the tree holds does not change).
+    pub(super) fn primitives(&self) -> (&[u32], &[P]) {
+        let (ids, prims) = self.held.get_or_init(|| self.find_primitives());
+        (ids, prims)
+    }
+
+    /// [`Octree::primitives`], found: each in its first pack's lane.
+    fn find_primitives(&self) -> (Vec<u32>, Vec<P>) {
         let mut seen = vec![false; self.count];
         let (mut ids, mut out) = (Vec::with_capacity(seen.len()), Vec::with_capacity(seen.len()));
         let l = lanes::<P>();
@@ -138,10 +145,10 @@ impl Lists {
     ///
     /// Each list runs from the primitive nearest the origin to the
     /// farthest by `near[k]`, `|c| - R` (its centre's distance less the
-    /// radius of its ball as the fan grows it): a point the exact test
-    /// accepts lies within that margin of the primitive, so no nearer to
-    /// the origin than that. A pack's bound is its first lane's, rounded
-    /// down to f32.
+    /// radius of its ball as the fan grows it) rounded down to f32, ties by
+    /// `k`: a point the exact test accepts lies within that margin of the
+    /// primitive, so no nearer to the origin than that. A pack's bound is
+    /// its first lane's, the least of its lanes'.
     pub(super) fn of<P: Primitive>(
         cov: &Coverage,
         (cells, near): (&[Option<[usize; 4]>], &[f64]),
@@ -162,19 +169,37 @@ impl Lists {
         if entries > MAX_ENTRIES_PER_RAY * rays {
             return None;
         }
+        // The primitives in front, nearest first by their bounds rounded
+        // down to f32 (a pack's bound is its first lane's), ties by index:
+        // a bound is at least 0, so its bits sort as it does. Keys unique
+        // (an index each): the one order, found in parallel, then the
+        // cells and bounds read in that order by every band below.
+        let mut order: Vec<u64> = (0..cells.len() as u32)
+            .filter(|&k| cells[k as usize].is_some())
+            .map(|k| u64::from(down(near[k as usize]).to_bits()) << 32 | u64::from(k))
+            .collect();
+        order.par_sort_unstable();
+        let sorted: Vec<([u32; 4], f32, u32)> = order
+            .iter()
+            .filter_map(|&key| {
+                let k = key as u32;
+                let c = cells[k as usize]?;
+                Some((c.map(|x| x as u32), f32::from_bits((key >> 32) as u32), k))
+            })
+            .collect();
         // Bands of rows of blocks, each counted and filled by one task
         // (every task reads every primitive's cells, writes only its own).
         let rows = cov.n[1].div_ceil(BLOCK);
         let band = rows.div_ceil(4 * rayon::current_num_threads()).max(1);
-        let within = |c: [usize; 4], r0: usize, r1: usize| {
-            let (i, j) = span(c);
+        let within = |c: [u32; 4], r0: usize, r1: usize| {
+            let (i, j) = span(c.map(|x| x as usize));
             (i, *j.start().max(&r0)..(*j.end() + 1).min(r1))
         };
         let mut count = vec![0u32; blocks];
         count.par_chunks_mut(band * cols).enumerate().for_each(|(k, count)| {
             let r0 = k * band;
             let r1 = r0 + count.len() / cols;
-            for &c in cells.iter().flatten() {
+            for &(c, _, _) in &sorted {
                 let (i, j) = within(c, r0, r1);
                 for bj in j {
                     for bi in i.clone() {
@@ -185,14 +210,6 @@ impl Lists {
         });
         let (long, first) = pack_starts(&count, l);
         let at = first[blocks];
-        // The primitives in front, nearest first. A bound is at least 0
-        // (a hit's distance is), so its bits sort as it does.
-        let mut order: Vec<(u64, u32)> = (0..cells.len() as u32)
-            .filter(|&k| cells[k as usize].is_some())
-            .map(|k| (near[k as usize].to_bits(), k))
-            .collect();
-        // Keys unique (an index each): the one order, found in parallel.
-        order.par_sort_unstable();
         let mut slots = vec![NO_PRIMITIVE; at as usize * l];
         let mut pack_near = vec![f32::INFINITY; at as usize];
         let mut pieces = Vec::new();
@@ -208,10 +225,7 @@ impl Lists {
         pieces.into_par_iter().for_each(|(r0, r1, slots, pack_near)| {
             let base = first[r0 * cols];
             let mut next: Vec<u32> = first[r0 * cols..r1 * cols].iter().map(|&f| (f - base) * l as u32).collect();
-            for &(_, k) in &order {
-                let Some(c) = cells[k as usize] else {
-                    continue;
-                };
+            for &(c, bound, k) in &sorted {
                 let (i, j) = within(c, r0, r1);
                 for bj in j {
                     for bi in i.clone() {
@@ -222,7 +236,7 @@ impl Lists {
                         let slot = &mut next[b - r0 * cols];
                         let at = *slot as usize;
                         if at.is_multiple_of(l) {
-                            pack_near[at / l] = down(near[k as usize]);
+                            pack_near[at / l] = bound;
                         }
                         slots[at] = k;
                         *slot += 1;

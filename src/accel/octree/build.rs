@@ -112,6 +112,7 @@ pub(super) fn build<P: Primitive>(
         isa,
         count: n,
         stats,
+        held: std::sync::OnceLock::new(),
     }
 }
 

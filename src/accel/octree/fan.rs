@@ -143,7 +143,9 @@ impl Coverage {
         // An odd step: a camera's rows of an even width are sampled at
         // every column, not at the same few.
         let step = rays.len().div_ceil(SAMPLE) | 1;
-        let sample = || (0..rays.len()).step_by(step).map(|i| rays.ray(i).dir.as_dvec3());
+        // The sample read once (its rays lie far apart in memory).
+        let sampled: Vec<DVec3> = (0..rays.len()).step_by(step).map(|i| rays.ray(i).dir.as_dvec3()).collect();
+        let sample = || sampled.iter().copied();
         let w = sample()
             .filter(|d| d.is_finite() && *d != DVec3::ZERO)
             .map(DVec3::normalize)
@@ -176,7 +178,7 @@ impl Coverage {
                 taken += 1;
             }
         }
-        if taken * 2 < sample().count() {
+        if taken * 2 < sampled.len() {
             return None;
         }
         let limit = (1.0 - MIN_COS * MIN_COS).sqrt() / MIN_COS;
@@ -327,23 +329,19 @@ impl Coverage {
         (8.0 * self.near_min >= coordinates).then_some((cells, reach))
     }
 
-    /// Marks the cells each primitive's ball covers (a difference array
-    /// summed along both axes; the rectangles found in parallel, the rows
-    /// summed in parallel: the fan is built before any of its run's rays
-    /// is traced), and gives each primitive's cells `[i0, i1, j0, j1]`
-    /// (`None`: behind, or beside the grid) and, in front, its ball's
-    /// least distance from the origin, `|c| - R` at least 0 (infinite
-    /// behind); `None` when a ball straddles the plane `p·w = 0` inside the
-    /// grid's cone (or is not finite).
+    /// Marks the cells each primitive's ball covers and gives each
+    /// primitive's cells `[i0, i1, j0, j1]` (`None`: behind, or beside the
+    /// grid) and, in front, its ball's least distance from the origin,
+    /// `|c| - R` at least 0 (infinite behind); `None` when a ball
+    /// straddles the plane `p·w = 0` inside the grid's cone (or is not
+    /// finite). The rectangles are found in parallel, and the grid's words
+    /// of bits in parallel pieces ([`Coverage::mark`]): the fan is built
+    /// before any of its run's rays is traced.
     pub(super) fn cover<P: Primitive>(&mut self, prims: &[P]) -> Option<Covered> {
-        let [nx, ny] = self.n;
-        let seen = prims
-            .par_iter()
-            .map(|prim| self.rectangle(prim))
-            .collect::<Option<Vec<_>>>()?;
+        let seen: Vec<Option<Seen>> = prims.par_iter().map(|prim| self.rectangle(prim)).collect();
         let mut rects = Vec::with_capacity(seen.len());
-        for &s in &seen {
-            match s {
+        for s in &seen {
+            match (*s)? {
                 Seen::Behind(least) => {
                     self.behind = true;
                     self.near_min = self.near_min.min(least);
@@ -367,45 +365,56 @@ impl Coverage {
                 }
             }
         }
-        let mut diff = vec![0i32; (nx + 1) * (ny + 1)];
-        let at = |i: usize, j: usize| i + (nx + 1) * j;
-        for &[i0, i1, j0, j1] in &rects {
-            diff[at(i0, j0)] += 1;
-            diff[at(i1 + 1, j0)] -= 1;
-            diff[at(i0, j1 + 1)] -= 1;
-            diff[at(i1 + 1, j1 + 1)] += 1;
-        }
-        diff.par_chunks_mut(nx + 1).for_each(|row| {
-            for i in 1..=nx {
-                row[i] += row[i - 1];
+        self.covered = Self::mark(self.n, &rects);
+        Some(seen.iter().map(|s| match s {
+            Some(Seen::Front(_, cells, near)) => (*cells, *near),
+            _ => (None, f64::INFINITY),
+        }).unzip())
+    }
+
+    /// The bits of the grid of `[nx, ny]` cells (cell `i + nx j`, bit `at
+    /// % 32` of word `at / 32`) set in the cells of the rectangles `rects`
+    /// (`[i0, i1, j0, j1]`, inclusive, within the grid): in pieces of
+    /// words on the threads, each summing a difference array along the
+    /// rows its words span, over the rectangles that reach them.
+    fn mark([nx, ny]: [usize; 2], rects: &[[usize; 4]]) -> Vec<u32> {
+        let cells = nx * ny;
+        let mut covered = vec![0u32; cells.div_ceil(32)];
+        let piece = covered.len().div_ceil(8 * rayon::current_num_threads()).max(1);
+        covered.par_chunks_mut(piece).enumerate().for_each(|(k, words)| {
+            let (c0, c1) = (32 * k * piece, (32 * (k * piece + words.len())).min(cells));
+            let (ja, jb) = (c0 / nx, (c1 - 1) / nx);
+            let mut diff = vec![0i32; (jb - ja + 1) * (nx + 1)];
+            for &[i0, i1, j0, j1] in rects {
+                for j in j0.max(ja)..=j1.min(jb) {
+                    let row = (j - ja) * (nx + 1);
+                    diff[row + i0] += 1;
+                    diff[row + i1 + 1] -= 1;
+                }
+            }
+            for j in ja..=jb {
+                let row = &diff[(j - ja) * (nx + 1)..][..nx];
+                let mut sum = 0;
+                for (i, d) in row.iter().enumerate() {
+                    sum += d;
+                    let at = i + nx * j;
+                    if sum != 0 && (c0..c1).contains(&at) {
+                        words[at / 32 - c0 / 32] |= 1 << (at % 32);
+                    }
+                }
             }
         });
-        for j in 1..=ny {
-            let (done, row) = diff.split_at_mut((nx + 1) * j);
-            for (x, &below) in row[..=nx].iter_mut().zip(&done[(nx + 1) * (j - 1)..]) {
-                *x += below;
-            }
-        }
-        let mut covered = vec![0u32; (nx * ny).div_ceil(32)];
-        let cells = diff.chunks_exact(nx + 1).take(ny).flat_map(|row| &row[..nx]);
-        for (at, _) in cells.enumerate().filter(|(_, c)| **c != 0) {
-            covered[at / 32] |= 1 << (at % 32);
-        }
-        self.covered = covered;
-        Some(seen.iter().map(|s| match s {
-            Seen::Front(_, cells, near) => (*cells, *near),
-            Seen::Behind(_) | Seen::Aside(_) => (None, f64::INFINITY),
-        }).unzip())
+        covered
     }
 
     /// `prim`'s ball as the fan takes it: its centre from the origin, and
     /// its [`Primitive::bounding_radius`] grown by [`MARGIN`] of `|c| +
     /// R` (module doc).
-    fn ball<P: Primitive>(&self, prim: &P) -> (DVec3, f64) {
+    fn ball<P: Primitive>(&self, prim: &P) -> (DVec3, f64, f64) {
         let o = Vec3::from_array(self.origin.map(f32::from_bits)).as_dvec3();
         let c = prim.center().as_dvec3() - o;
         let r = f64::from(prim.bounding_radius());
-        (c, r + MARGIN * (c.length() + r))
+        (c, r + MARGIN * (c.length() + r), r)
     }
 
     /// What the fan sees of `prim`'s ball: wholly behind, or in front with
@@ -414,7 +423,7 @@ impl Coverage {
     /// = 0` outside the grid's cone; `None` when it straddles that plane
     /// inside the cone (or is not finite).
     fn rectangle<P: Primitive>(&self, prim: &P) -> Option<Seen> {
-        let (c, r) = self.ball(prim);
+        let (c, r, bounding) = self.ball(prim);
         let (cu, cv, cw) = (c.dot(self.u), c.dot(self.v), c.dot(self.w));
         let least = (c.length() - r).max(0.0);
         // Wholly behind: no ray of the fan in front (`d·w > 0`, `t >= 0`)
@@ -433,7 +442,7 @@ impl Coverage {
         let spans = match prim.semi_axes() {
             Some((a, b)) => {
                 let ab = [a.as_dvec3(), b.as_dvec3()];
-                let delta = r - f64::from(prim.bounding_radius());
+                let delta = r - bounding;
                 [self.u, self.v].map(|e| Self::ellipse_span(c, ab, e, self.w, delta))
             }
             None => [Self::ball_span(cu, cw, r), Self::ball_span(cv, cw, r)],
@@ -533,6 +542,43 @@ impl Coverage {
 mod tests {
     use super::*;
     use crate::rng::SplitMix64;
+
+    /// [`Coverage::mark`] sets exactly the bits of the cells some
+    /// rectangle covers, on grids whose rows do and do not end on a word,
+    /// from one cell to tens of thousands, with rectangles of one cell,
+    /// whole rows and columns, the whole grid, none at all, and many
+    /// overlapping: every piece's rows, including those its first and
+    /// last words share with the next piece, summed as one grid would be.
+    #[test]
+    fn marked_cells_are_those_the_rectangles_cover() {
+        let mut rng = SplitMix64::new(11);
+        for (nx, ny, count) in [(1, 1, 1), (1, 1, 0), (7, 3, 5), (32, 8, 40), (33, 65, 200), (509, 516, 3000), (64, 1, 9), (1, 300, 20)] {
+            let mut rects: Vec<[usize; 4]> = (0..count)
+                .map(|_| {
+                    let (a, b) = (rng.below(nx), rng.below(nx));
+                    let (c, d) = (rng.below(ny), rng.below(ny));
+                    // Mostly small, as a splat's.
+                    let (i1, j1) = if rng.below(4) == 0 { (a.max(b), c.max(d)) } else { ((a + 3).min(nx - 1), (c + 2).min(ny - 1)) };
+                    [a.min(b).min(i1), i1, c.min(d).min(j1), j1]
+                })
+                .collect();
+            if count == 5 {
+                rects.push([0, nx - 1, 0, ny - 1]);
+            }
+            let bits = Coverage::mark([nx, ny], &rects);
+            assert_eq!(bits.len(), (nx * ny).div_ceil(32));
+            let mut want = vec![0u32; bits.len()];
+            for &[i0, i1, j0, j1] in &rects {
+                for j in j0..=j1 {
+                    for i in i0..=i1 {
+                        let at = i + nx * j;
+                        want[at / 32] |= 1 << (at % 32);
+                    }
+                }
+            }
+            assert_eq!(bits, want, "{nx} x {ny}, {} rectangles", rects.len());
+        }
+    }
 
     /// Every rim point of random tilted ellipses in front lies in its
     /// [`Coverage::ellipse_span`] on both axes, and the span is no wider

@@ -286,6 +286,9 @@ pub struct Octree<P: Primitive> {
     /// Primitives the tree was built over (ids `0..count`).
     count: usize,
     stats: BuildStats,
+    /// Every primitive held, once, and its id ([`Octree::primitives`]),
+    /// found when a fan is first built and kept for the next.
+    held: std::sync::OnceLock<(Vec<u32>, Vec<P>)>,
 }
 
 /// The octree of §3.1 over one part of the primitives.
