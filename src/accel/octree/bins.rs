@@ -158,48 +158,45 @@ impl Lists {
         let cols = cov.n[0].div_ceil(BLOCK);
         let blocks = cols * cov.n[1].div_ceil(BLOCK);
         let span = |[i0, i1, j0, j1]: [usize; 4]| (i0 / BLOCK..=i1 / BLOCK, j0 / BLOCK..=j1 / BLOCK);
-        let entries: usize = cells
-            .iter()
-            .flatten()
-            .map(|&c| {
-                let (i, j) = span(c);
-                i.count() * j.count()
-            })
-            .sum();
-        if entries > MAX_ENTRIES_PER_RAY * rays {
-            return None;
-        }
         // The primitives in front, nearest first by their bounds rounded
         // down to f32 (a pack's bound is its first lane's), ties by index:
         // a bound is at least 0, so its bits sort as it does. Keys unique
-        // (an index each): the one order, found in parallel, then the
-        // cells and bounds read in that order by every band below.
-        let mut order: Vec<u64> = (0..cells.len() as u32)
-            .filter(|&k| cells[k as usize].is_some())
-            .map(|k| u64::from(down(near[k as usize]).to_bits()) << 32 | u64::from(k))
-            .collect();
-        order.par_sort_unstable();
-        let sorted: Vec<([u32; 4], f32, u32)> = order
-            .iter()
-            .filter_map(|&key| {
-                let k = key as u32;
-                let c = cells[k as usize]?;
-                Some((c.map(|x| x as u32), f32::from_bits((key >> 32) as u32), k))
-            })
-            .collect();
+        // (an index each): one order.
+        let mut order: Vec<u64> = Vec::with_capacity(cells.len());
+        let mut entries = 0;
+        for (k, c) in cells.iter().enumerate() {
+            if let Some(c) = c {
+                let (i, j) = span(*c);
+                entries += (i.end() - i.start() + 1) * (j.end() - j.start() + 1);
+                order.push(u64::from(down(near[k]).to_bits()) << 32 | k as u64);
+            }
+        }
+        if entries > MAX_ENTRIES_PER_RAY * rays {
+            return None;
+        }
+        order.sort_unstable();
         // Bands of rows of blocks, each counted and filled by one task
-        // (every task reads every primitive's cells, writes only its own).
+        // from the primitives whose cells reach its rows, nearest first.
         let rows = cov.n[1].div_ceil(BLOCK);
         let band = rows.div_ceil(4 * rayon::current_num_threads()).max(1);
+        let mut in_band: Vec<Vec<([u32; 4], f32, u32)>> = vec![Vec::new(); rows.div_ceil(band)];
+        for &key in &order {
+            let k = key as u32;
+            if let Some(c) = cells[k as usize] {
+                for prims in &mut in_band[c[2] / BLOCK / band..=c[3] / BLOCK / band] {
+                    prims.push((c.map(|x| x as u32), f32::from_bits((key >> 32) as u32), k));
+                }
+            }
+        }
         let within = |c: [u32; 4], r0: usize, r1: usize| {
             let (i, j) = span(c.map(|x| x as usize));
             (i, *j.start().max(&r0)..(*j.end() + 1).min(r1))
         };
         let mut count = vec![0u32; blocks];
-        count.par_chunks_mut(band * cols).enumerate().for_each(|(k, count)| {
+        count.par_chunks_mut(band * cols).zip(&in_band).enumerate().for_each(|(k, (count, prims))| {
             let r0 = k * band;
             let r1 = r0 + count.len() / cols;
-            for &(c, _, _) in &sorted {
+            for &(c, _, _) in prims {
                 let (i, j) = within(c, r0, r1);
                 for bj in j {
                     for bi in i.clone() {
@@ -222,10 +219,10 @@ impl Lists {
             (rest, rest_near) = (r, rn);
             pieces.push((r0, r1, s, n));
         }
-        pieces.into_par_iter().for_each(|(r0, r1, slots, pack_near)| {
+        pieces.into_par_iter().zip(&in_band).for_each(|((r0, r1, slots, pack_near), prims)| {
             let base = first[r0 * cols];
             let mut next: Vec<u32> = first[r0 * cols..r1 * cols].iter().map(|&f| (f - base) * l as u32).collect();
-            for &(c, bound, k) in &sorted {
+            for &(c, bound, k) in prims {
                 let (i, j) = within(c, r0, r1);
                 for bj in j {
                     for bi in i.clone() {

@@ -143,8 +143,12 @@ impl Coverage {
         // An odd step: a camera's rows of an even width are sampled at
         // every column, not at the same few.
         let step = rays.len().div_ceil(SAMPLE) | 1;
-        // The sample read once (its rays lie far apart in memory).
-        let sampled: Vec<DVec3> = (0..rays.len()).step_by(step).map(|i| rays.ray(i).dir.as_dvec3()).collect();
+        // The sample read once, on the threads (its rays lie far apart in
+        // memory, each a cache miss).
+        let sampled: Vec<DVec3> = (0..rays.len().div_ceil(step))
+            .into_par_iter()
+            .map(|s| rays.ray(s * step).dir.as_dvec3())
+            .collect();
         let sample = || sampled.iter().copied();
         let w = sample()
             .filter(|d| d.is_finite() && *d != DVec3::ZERO)
