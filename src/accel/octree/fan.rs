@@ -413,7 +413,7 @@ impl Coverage {
 
     /// `prim`'s ball as the fan takes it: its centre from the origin, and
     /// its [`Primitive::bounding_radius`] grown by [`MARGIN`] of `|c| +
-    /// R` (module doc).
+    /// R` (module doc); then that radius as it was.
     fn ball<P: Primitive>(&self, prim: &P) -> (DVec3, f64, f64) {
         let o = Vec3::from_array(self.origin.map(f32::from_bits)).as_dvec3();
         let c = prim.center().as_dvec3() - o;
