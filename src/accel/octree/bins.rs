@@ -80,8 +80,8 @@ impl<P: Primitive> Octree<P> {
         if !self.fan_pays(rays.len()) || !origin.is_finite() {
             return None;
         }
-        // The frame (from the rays) and the primitives (from the tree),
-        // each on one thread.
+        // The frame (from the rays) beside the tree's primitives (found
+        // the first time a fan is built, kept after).
         let (fan, (ids, prims)) = rayon::join(|| Coverage::frame(origin, rays, self.simd()), || self.primitives());
         let mut fan = fan?;
         let (cells, near) = fan.cover(prims)?;

@@ -287,7 +287,8 @@ pub struct Octree<P: Primitive> {
     count: usize,
     stats: BuildStats,
     /// Every primitive held, once, and its id ([`Octree::primitives`]),
-    /// found when a fan is first built and kept for the next.
+    /// found when a fan is first built and kept for the next: 4 bytes and
+    /// a primitive each, not in `stats`' build-time memory.
     held: std::sync::OnceLock<(Vec<u32>, Vec<P>)>,
 }
 
