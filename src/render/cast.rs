@@ -69,7 +69,7 @@ pub struct CastOutputs<'a> {
 pub fn cast_rays(surfaces: &SplatSurfaces<'_>, rays: &[Ray], lens: &[f32], out: CastOutputs<'_>) {
     let order = Order::of(rays);
     let fans = unordered_fans(order.as_ref(), surfaces.backend, &rays);
-    cast_planned(surfaces, &Held { rays, lens }, out, false, (order, fans));
+    cast_planned(surfaces, &Held { rays, lens }, out, false, (order, fans), &mut Vec::new());
 }
 
 /// A batch's rays as rows of six numbers (origin, then direction) in a
@@ -308,6 +308,37 @@ impl RaySet for Part<'_> {
     }
 }
 
+/// One ray's answer as [`cast_rays`] writes it: `t` (in units of the
+/// direction's length), the splat id and the normal.
+type Answer = (f32, u32, [f32; 3]);
+
+/// The memory a caller keeps from one call of [`cast_rows_owned`] or
+/// [`occluded_rows`] to the next, so a batch of scattered rays writes into
+/// pages already mapped rather than fresh ones: the rows converted to rays
+/// and their lengths, and the answers in the order traced (20 bytes a
+/// ray). Fresh, a 1M-ray `cast_rays` of random rays mapped and zeroed about
+/// 12,000 pages a call (issue 55, fifty-fifth session).
+#[derive(Default)]
+pub struct CastScratch {
+    rays: Vec<Ray>,
+    lens: Vec<f32>,
+    answers: Vec<Answer>,
+}
+
+impl CastScratch {
+    /// The most rays the held memory serves without growing.
+    #[must_use]
+    pub fn rays_held(&self) -> usize {
+        self.rays.capacity().max(self.answers.capacity())
+    }
+
+    /// The held rays and lengths, taken out (for a caller converting rows
+    /// into them, `RayRows::convert_all`); the answers' memory stays.
+    pub fn take_rays(&mut self) -> (Vec<Ray>, Vec<f32>) {
+        (std::mem::take(&mut self.rays), std::mem::take(&mut self.lens))
+    }
+}
+
 /// [`cast_rays`]' answers in outputs of their own: `t`, and the splat ids
 /// and normals where `ids` and `normals` ask for them.
 pub struct CastAnswers {
@@ -333,14 +364,15 @@ pub fn cast_rays_owned(
     lens: &[f32],
     want: (bool, bool),
 ) -> CastAnswers {
-    owned(surfaces, &Held { rays, lens }, want, Order::of(rays))
+    owned(surfaces, &Held { rays, lens }, want, Order::of(rays), &mut Vec::new())
 }
 
 /// [`cast_rays_owned`] of the rays `rows`: a batch traced in its own
 /// order (a camera's rays) with each window converting its rows as it
 /// takes them, one put in order ([`cast_rays`]: rays from scattered
-/// origins) converted whole into `buf` first (whose memory a caller keeps
-/// from call to call).
+/// origins) converted whole into `buf` first, its answers kept there in
+/// the order traced before they are put in place (`buf`'s memory a caller
+/// keeps from call to call, [`CastScratch`]).
 ///
 /// # Errors
 /// The index of the first row that is not a ray (checked before any is
@@ -349,16 +381,16 @@ pub fn cast_rows_owned<T: RowNumber>(
     surfaces: &SplatSurfaces<'_>,
     rows: &RayRows<'_, T>,
     want: (bool, bool),
-    buf: &mut (Vec<Ray>, Vec<f32>),
+    buf: &mut CastScratch,
 ) -> Result<CastAnswers, usize> {
     let answers = if rows.scattered() {
-        if !rows.convert_all(&mut buf.0, &mut buf.1) {
+        if !rows.convert_all(&mut buf.rays, &mut buf.lens) {
             return Err(rows.first_bad().unwrap_or(0));
         }
-        let (rays, lens) = (&buf.0, &buf.1);
-        owned(surfaces, &Held { rays, lens }, want, Some(Order::build(rays)))
+        let (rays, lens) = (&buf.rays, &buf.lens);
+        owned(surfaces, &Held { rays, lens }, want, Some(Order::build(rays)), &mut buf.answers)
     } else {
-        owned(surfaces, rows, want, None)
+        owned(surfaces, rows, want, None, &mut buf.answers)
     };
     match rows.first_bad() {
         Some(i) => Err(i),
@@ -366,12 +398,14 @@ pub fn cast_rows_owned<T: RowNumber>(
     }
 }
 
-/// [`cast_rays_owned`] of `batch` (traced in `order` where it has one).
+/// [`cast_rays_owned`] of `batch` (traced in `order` where it has one,
+/// its answers in `got` first).
 fn owned(
     surfaces: &SplatSurfaces<'_>,
     batch: &dyn Batch,
     (ids, normals): (bool, bool),
     order: Option<Order>,
+    got: &mut Vec<Answer>,
 ) -> CastAnswers {
     let n = batch.len();
     let (t, id, normal) = answer(None, 1.0);
@@ -404,7 +438,7 @@ fn owned(
         ids: a.ids.as_deref_mut(),
         normals: a.normals.as_deref_mut(),
     };
-    cast_planned(surfaces, batch, out, true, (order, fans));
+    cast_planned(surfaces, batch, out, true, (order, fans), got);
     a
 }
 
@@ -427,20 +461,22 @@ fn unordered_fans<'b>(order: Option<&Order>, backend: &'b dyn Backend, rays: &dy
 
 /// [`cast_rays`] of a batch whose order ([`Order::of`]) or, without one,
 /// whose fans are found, into outputs that already hold a miss's answer
-/// in every slot where `missed`.
+/// in every slot where `missed` (a batch in order answered into `got`
+/// first, [`cast_in_order`]).
 fn cast_planned(
     surfaces: &SplatSurfaces<'_>,
     batch: &dyn Batch,
     out: CastOutputs<'_>,
     missed: bool,
     (order, fans): (Option<Order>, Fans<'_>),
+    got: &mut Vec<Answer>,
 ) {
     let n = batch.len();
     assert!(out.t.len() >= n, "an output per ray");
     if let Some(order) = order {
         let mut buf = Converted::default();
         let (rays, lens) = batch.range(0..n, &mut buf);
-        return cast_in_order(surfaces, rays, lens, out, &order);
+        return cast_in_order(surfaces, (rays, lens), out, &order, got);
     }
     let packets = crate::accel::use_packets(surfaces.backend);
     let CastOutputs { t, ids, normals } = out;
@@ -606,13 +642,13 @@ pub fn occluded_rows<T: RowNumber>(
     rows: &RayRows<'_, T>,
     span: (f32, f32),
     out: &mut [bool],
-    buf: &mut (Vec<Ray>, Vec<f32>),
+    buf: &mut CastScratch,
 ) -> Result<(), usize> {
     if rows.scattered() {
-        if !rows.convert_all(&mut buf.0, &mut buf.1) {
+        if !rows.convert_all(&mut buf.rays, &mut buf.lens) {
             return Err(rows.first_bad().unwrap_or(0));
         }
-        let (rays, lens) = (&buf.0, &buf.1);
+        let (rays, lens) = (&buf.rays, &buf.lens);
         occluded_planned(surfaces, &Held { rays, lens }, span, out, Some(Order::build(rays)));
     } else {
         occluded_planned(surfaces, rows, span, out, None);
@@ -729,7 +765,7 @@ fn occluded_planned(
 /// A ray's answer in [`CastOutputs`]' terms: its distance in units of its
 /// direction's length `len`, its splat id and shading normal (`inf`,
 /// `u32::MAX` and 0 on a miss).
-fn answer(f: Option<SurfaceHit>, len: f32) -> (f32, u32, [f32; 3]) {
+fn answer(f: Option<SurfaceHit>, len: f32) -> Answer {
     match f {
         None => (f32::INFINITY, u32::MAX, [0.0; 3]),
         Some(h) => {
@@ -740,17 +776,24 @@ fn answer(f: Option<SurfaceHit>, len: f32) -> (f32, u32, [f32; 3]) {
 }
 
 /// [`cast_rays`] of a batch of scattered rays one at a time in `order`'s
-/// sequence, the answers kept in that sequence and then written in place.
+/// sequence, the answers kept in that sequence in `got` (its memory the
+/// caller's, [`CastScratch`]; resized to the batch) and then written in
+/// place.
 fn cast_in_order(
     surfaces: &SplatSurfaces<'_>,
-    rays: &[Ray],
-    lens: &[f32],
+    (rays, lens): (&[Ray], &[f32]),
     out: CastOutputs<'_>,
     order: &Order,
+    got: &mut Vec<Answer>,
 ) {
     let n = rays.len();
     let xi = surfaces.scene.options.scale.xi;
-    let mut got = vec![(0.0f32, 0u32, [0.0f32; 3]); n];
+    // Every slot is written below: a kept vector of this length is not
+    // written twice (one of another, in parallel).
+    if got.len() != n {
+        got.clear();
+        fill(got, answer(None, 1.0), n);
+    }
     got.par_chunks_mut(CHUNK).enumerate().for_each_init(GatheredRays::new, |buf, (c, got)| {
         let mut hits = CandidateHits::new(xi);
         let chunk = order.gather(c, rays, lens, buf);
@@ -759,12 +802,12 @@ fn cast_in_order(
             *g = answer(surfaces.surface_hit(q, &mut hits), len);
         }
     });
-    place(&order.at, &got, out);
+    place(&order.at, got, out);
 }
 
 /// The answers `got`, in an order's sequence, written in place: ray `j`'s
 /// is `got[at[j]]`.
-fn place(at: &[u32], got: &[(f32, u32, [f32; 3])], out: CastOutputs<'_>) {
+fn place(at: &[u32], got: &[Answer], out: CastOutputs<'_>) {
     let n = at.len();
     let ids = slots(out.ids.map(|v| &mut v[..n]), 1, n, CHUNK);
     let normals = slots(out.normals.map(|v| &mut v[..3 * n]), 3, n, CHUNK);

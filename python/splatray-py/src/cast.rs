@@ -16,7 +16,7 @@ use pyo3::prelude::*;
 use rayon::prelude::*;
 use splatray::accel::{Backend, CandidateHits, Ray};
 use splatray::render::cast::{
-    CastAnswers, RayRows, cast_rays_owned, cast_rows_owned, occluded_rows,
+    CastAnswers, CastScratch, RayRows, cast_rays_owned, cast_rows_owned, occluded_rows,
 };
 use splatray::render::integrator::{SplatSurfaces, Surfaces};
 use splatray::resolve::{Silhouette, silhouettes};
@@ -34,12 +34,14 @@ pub struct SplatScene {
     /// The scene's frame: world = scene + `to_internal`, subtracted in f64.
     to_internal: DVec3,
     name: &'static str,
-    /// The last call's converted rays and lengths, whose memory the next
-    /// call writes into: fresh vectors are pages the kernel maps and
-    /// zeroes on first touch, a sixth of the CPU of a process casting
-    /// camera rays (`docs/notes/backends.md`, "Issue 55, seventh
-    /// session"). Kept up to [`KEEP_RAYS`] rays.
-    scratch: Mutex<(Vec<Ray>, Vec<f32>)>,
+    /// The last call's converted rays and lengths, and its scattered
+    /// rays' answers in the order traced, whose memory the next call
+    /// writes into: fresh vectors are pages the kernel maps and zeroes on
+    /// first touch, a sixth of the CPU of a process casting camera rays
+    /// (`docs/notes/backends.md`, "Issue 55, seventh session") and about
+    /// 5 % of a `cast_rays` call of random rays ("fifty-fifth session").
+    /// Kept up to [`KEEP_RAYS`] rays.
+    scratch: Mutex<CastScratch>,
     /// The splats' silhouette constants for the resolver, built on the
     /// first call that resolves windows (`cast_rays`,
     /// `count_intersections`; 16 bytes a splat), none for `occluded`.
@@ -52,8 +54,8 @@ enum Rows<'a> {
     F64(&'a [f64]),
 }
 
-/// The most rays whose conversion buffers a scene keeps between calls
-/// (28 bytes a ray: 112 MB).
+/// The most rays whose buffers a scene keeps between calls (28 bytes a
+/// ray converted, 20 more answered in order: 192 MB).
 const KEEP_RAYS: usize = 1 << 22;
 
 impl SplatScene {
@@ -138,7 +140,7 @@ impl SplatScene {
         let rows = RayRows::new(v, self.to_internal);
         let mut buf = self.take();
         let answers = py.detach(|| cast_rows_owned(&self.resolving(), &rows, want, &mut buf));
-        self.keep(buf.0, buf.1);
+        self.keep(buf);
         answers.map_err(|i| self.row_error(v, i))
     }
 
@@ -158,7 +160,7 @@ impl SplatScene {
             let mut out = vec![false; v.len() / 6];
             occluded_rows(&self.surfaces(), &rows, span, &mut out, &mut buf).map(|()| out)
         });
-        self.keep(buf.0, buf.1);
+        self.keep(buf);
         got.map_err(|i| self.row_error(v, i))
     }
 
@@ -177,7 +179,7 @@ impl SplatScene {
     /// session"); the first bad row is reported.
     fn convert<T: RowNumber>(&self, v: &[T]) -> PyResult<(Vec<Ray>, Vec<f32>)> {
         let rows = RayRows::new(v, self.to_internal);
-        let (mut rays, mut lens) = self.take();
+        let (mut rays, mut lens) = self.lock().take_rays();
         match rows.convert_all(&mut rays, &mut lens) {
             true => Ok((rays, lens)),
             false => Err(self.row_error(v, rows.first_bad().unwrap_or(0))),
@@ -187,15 +189,20 @@ impl SplatScene {
     /// The kept buffers (a call running beside this one finds none and
     /// allocates); a poisoned lock still holds plain vectors. Sized once:
     /// a call as long as the last writes over its rays.
-    fn take(&self) -> (Vec<Ray>, Vec<f32>) {
-        std::mem::take(&mut *self.scratch.lock().unwrap_or_else(|p| p.into_inner()))
+    fn take(&self) -> CastScratch {
+        std::mem::take(&mut *self.lock())
     }
 
-    /// Keeps a call's converted `rays` and `lens` for the next call's
-    /// conversion (none beyond [`KEEP_RAYS`] rays).
-    fn keep(&self, rays: Vec<Ray>, lens: Vec<f32>) {
-        if rays.capacity() <= KEEP_RAYS {
-            *self.scratch.lock().unwrap_or_else(|p| p.into_inner()) = (rays, lens);
+    /// The kept buffers' lock (a poisoned one still holds plain vectors).
+    fn lock(&self) -> std::sync::MutexGuard<'_, CastScratch> {
+        self.scratch.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Keeps a call's buffers for the next call (none beyond
+    /// [`KEEP_RAYS`] rays).
+    fn keep(&self, buf: CastScratch) {
+        if buf.rays_held() <= KEEP_RAYS {
+            *self.lock() = buf;
         }
     }
 
