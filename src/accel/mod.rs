@@ -237,6 +237,19 @@ pub trait Fan: Send + Sync {
         false
     }
 
+    /// The window of `q` into `hits` (cleared first), as the backend that
+    /// made the fan gathers it, bit for bit (true); false, `hits` left
+    /// as it was, where the fan cannot answer it (the default): the caller
+    /// asks the backend. `q` is a query of a ray of this fan's run (its
+    /// origin the run's, bit for bit) with nothing skipped, whose key
+    /// ([`Fan::keys_each`], or [`Fan::keys_of_rows`] of the row it was
+    /// converted from) is `key`: the octree's fan answers from the list of
+    /// the key's block without finding the block again.
+    fn gather_keyed(&self, key: u32, q: &Query, hits: &mut CandidateHits) -> bool {
+        let _ = (key, q, hits);
+        false
+    }
+
     /// A backend answering every query exactly as the backend that made
     /// the fan does, bit for bit, those of this fan's run (and the octree's
     /// shadow rays toward its origin) from what the fan knows of its

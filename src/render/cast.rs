@@ -514,8 +514,8 @@ fn cast_planned(
                     if !missed {
                         out.misses();
                     }
-                    keyed_window(rays, packets, scratch, &mut |idx| {
-                        caster.trace(rays, idx, &mut |i, f| out.put(i, f));
+                    keyed_window(rays, packets, scratch, &mut |idx, keys| {
+                        caster.trace(rays, idx, Some((fan.as_ref(), keys)), &mut |i, f| out.put(i, f));
                     });
                 },
             );
@@ -537,7 +537,7 @@ fn cast_planned(
             let mut caster = Caster::new(surfaces);
             gaps(&fans, range, |piece| {
                 batches(rays, piece, packets, &mut |idx| {
-                    caster.trace(rays, idx, &mut |i, f| out.put(i, f));
+                    caster.trace(rays, idx, None, &mut |i, f| out.put(i, f));
                 });
             });
         });
@@ -597,16 +597,38 @@ impl<'s, 'a> Caster<'s, 'a> {
     }
 
     /// The rays `idx` of `rays` (one, or a packet of one origin and
-    /// direction signs) resolved, each answer handed to `write` by index.
-    fn trace(&mut self, rays: &[Ray], idx: &[u16], write: &mut impl FnMut(usize, Option<SurfaceHit>)) {
+    /// direction signs) resolved, each answer handed to `write` by index;
+    /// with `keyed`, rays of a fan's run with their keys (by index), each
+    /// window first gathered by the fan where it can ([`Fan::gather_keyed`]:
+    /// a camera's ray's block found once, when it was keyed).
+    fn trace(
+        &mut self,
+        rays: &[Ray],
+        idx: &[u16],
+        keyed: Option<(&dyn Fan, &[u32])>,
+        write: &mut impl FnMut(usize, Option<SurfaceHit>),
+    ) {
         let query = |i: u16| Query::new(rays[usize::from(i)], 0.0, f32::INFINITY);
-        if let &[i] = idx {
-            write(usize::from(i), self.surfaces.surface_hit(query(i), &mut self.hits[0]));
-            return;
-        }
         let m = idx.len();
         let qs: [Query; PACKET] = std::array::from_fn(|k| query(idx[k.min(m - 1)]));
-        self.surfaces.surface_hits(&qs[..m], &mut self.hits[..m], &mut self.found[..m]);
+        match keyed {
+            None if m == 1 => {
+                write(usize::from(idx[0]), self.surfaces.surface_hit(qs[0], &mut self.hits[0]));
+                return;
+            }
+            None => self.surfaces.surface_hits(&qs[..m], &mut self.hits[..m], &mut self.found[..m]),
+            Some((fan, keys)) => {
+                let backend = self.surfaces.backend;
+                let gather = |qs: &[Query], hits: &mut [CandidateHits]| {
+                    for ((q, h), &i) in qs.iter().zip(hits.iter_mut()).zip(idx) {
+                        if !fan.gather_keyed(keys[usize::from(i)], q, h) {
+                            backend.intersect_from(q, h);
+                        }
+                    }
+                };
+                self.surfaces.surface_hits_gathered(&qs[..m], &mut self.hits[..m], &mut self.found[..m], gather);
+            }
+        }
         for (&i, f) in idx.iter().zip(&self.found) {
             write(usize::from(i), *f);
         }
@@ -741,7 +763,7 @@ fn occluded_planned(
                     // Every answer a miss's first (the fan's misses are then
                     // written).
                     out.fill(false);
-                    keyed_window(rays, packets, scratch, &mut |idx| {
+                    keyed_window(rays, packets, scratch, &mut |idx, _| {
                         trace(backend, rays, lens, idx, &mut |i, g| out[i] = g);
                     });
                 },
@@ -1140,7 +1162,7 @@ struct FanScratch {
 /// the window's rays (rows of a camera's image: a few rows of the fan's
 /// blocks); otherwise (a batch in another order) the window's order is
 /// kept.
-fn keyed_window(rays: &[Ray], packets: bool, s: &mut FanScratch, trace: &mut impl FnMut(&[u16])) {
+fn keyed_window(rays: &[Ray], packets: bool, s: &mut FanScratch, trace: &mut impl FnMut(&[u16], &[u32])) {
     let n = rays.len();
     debug_assert!(n <= FAN_WINDOW && s.keys.len() == n);
     s.left.clear();
@@ -1174,11 +1196,12 @@ fn keyed_window(rays: &[Ray], packets: bool, s: &mut FanScratch, trace: &mut imp
     } else {
         &s.left
     };
+    let keys = &s.keys;
     for order in [order, &s.elsewhere] {
         if packets {
-            by_octant(rays, order, &mut *trace);
+            by_octant(rays, order, |p| trace(p, keys));
         } else {
-            order.iter().for_each(|&i| trace(&[i]));
+            order.iter().for_each(|&i| trace(&[i], keys));
         }
     }
 }

@@ -285,7 +285,21 @@ impl SplatSurfaces<'_> {
         hits: &mut [CandidateHits],
         out: &mut [Option<SurfaceHit>],
     ) {
-        self.backend.intersect_packet(qs, hits);
+        self.surface_hits_gathered(qs, hits, out, |qs, hits| self.backend.intersect_packet(qs, hits));
+    }
+
+    /// [`SplatSurfaces::surface_hits`] with the first windows gathered by
+    /// `gather` (into `hits`, one per query), which must give what
+    /// [`Backend::intersect_packet`] gives (a fan's lists, found once for
+    /// a camera's rays): the same hits.
+    pub fn surface_hits_gathered(
+        &self,
+        qs: &[Query],
+        hits: &mut [CandidateHits],
+        out: &mut [Option<SurfaceHit>],
+        gather: impl FnOnce(&[Query], &mut [CandidateHits]),
+    ) {
+        gather(qs, hits);
         for ((q, h), o) in qs.iter().zip(hits.iter_mut()).zip(out.iter_mut()) {
             *o = match self.resolve(h, &q.ray) {
                 None => None,

@@ -418,6 +418,28 @@ impl<P: Primitive> Fan for Binned<'_, P> {
         self.cov.keys_of_rows(rows, origin, keys)
     }
 
+    /// The key's block's list where [`Binned::block`] would take one (a
+    /// primary query from `t_min >= 0` leaving the origin, a block with a
+    /// list). A row's key may be its converted ray's neighbour block (the
+    /// two directions round apart): the key's list still holds every
+    /// primitive the converted ray can hit, whose rectangle covers the
+    /// row's direction (`fan`'s module doc, "Rows"), so the window is the
+    /// same.
+    fn gather_keyed(&self, key: u32, q: &Query, hits: &mut CandidateHits) -> bool {
+        // The key's block of 2×2 cells (`crate::simd::gnomonic_key`) lies
+        // in one block of `BLOCK`² (both aligned to the grid's corner).
+        let cols = self.cov.n[0].div_ceil(2);
+        let (i, j) = (key as usize % cols, key as usize / cols);
+        let b = j / (BLOCK / 2) * self.cols + i / (BLOCK / 2);
+        let from_zero = q.t_min.partial_cmp(&0.0).is_some_and(std::cmp::Ordering::is_ge);
+        let here = q.ray.origin.to_array().map(f32::to_bits) == self.cov.origin;
+        if !(from_zero && here && q.from.is_none() && q.pass.is_none() && b < self.long.len() && !self.long[b]) {
+            return false;
+        }
+        self.gather(b, q, hits);
+        true
+    }
+
     fn backend(&self) -> Option<&dyn Backend> {
         Some(self)
     }
@@ -521,6 +543,7 @@ impl<P: Primitive> Backend for Binned<'_, P> {
 
 #[cfg(test)]
 mod tests {
+    use super::Binned;
     use super::super::traverse::tests::{bits, bumpy, clipped_thirds, packet_answers, same_occlusion};
     use super::super::{Octree, OctreeParams};
     use crate::accel::{Backend, CandidateHits, Departure, Query};
@@ -589,8 +612,60 @@ mod tests {
                     assert_eq!(o, oct.occluded_from(q));
                 }
             }
+            keyed_windows_are_the_octrees(oct, &binned, rays, (t_min, t_max));
         }
         (listed, found)
+    }
+
+    /// Each ray's window gathered from its key ([`Fan::gather_keyed`]) is
+    /// the octree's, bit for bit, wherever the fan answers: the key of the
+    /// ray (`keys_each`), answered exactly where its block has a list
+    /// ([`Binned::block`]), and of rows whose directions are the ray's
+    /// scaled from 1e-3 to 1e4 (`keys_of_rows`), each then converted as a
+    /// caller converts a row (`crate::simd::ray_from_row`, whose direction
+    /// rounds apart from the row's), answered for nearly as many.
+    fn keyed_windows_are_the_octrees<P: Primitive>(
+        oct: &Octree<P>,
+        binned: &Binned<'_, P>,
+        rays: &[Ray],
+        (t_min, t_max): (f32, f32),
+    ) {
+        use crate::accel::{FAN_ELSEWHERE, Fan};
+        let (mut a, mut b) = (CandidateHits::new(0.05), CandidateHits::new(0.05));
+        let origin = rays[0].origin.to_array().map(f32::to_bits);
+        let mut keys = vec![0u32; rays.len()];
+        // Queries whose block has a list, and those answered by their key.
+        let mut check = |ray: Ray, key: u32, counts: &mut [usize; 2]| {
+            let q = Query::new(ray, t_min, t_max);
+            let listed = key < FAN_ELSEWHERE && binned.block(&q).is_some();
+            let answered = binned.gather_keyed(key, &q, &mut a);
+            if answered {
+                oct.intersect_from(&q, &mut b);
+                assert_eq!(bits(&a), bits(&b), "{ray:?} key {key}");
+            }
+            counts[0] += usize::from(listed);
+            counts[1] += usize::from(answered);
+            listed == answered
+        };
+        binned.keys_each(rays, &mut keys);
+        let mut counts = [0; 2];
+        for (r, &k) in rays.iter().zip(&keys) {
+            assert!(check(*r, k, &mut counts), "{r:?} key {k}: answered where it has no list or not where it has");
+        }
+        assert!(counts[1] > 0, "no window answered by its key");
+        for scale in [1e-3, 0.7, 3.0, 1e4] {
+            let rows: Vec<Ray> = rays.iter().map(|r| Ray { origin: r.origin, dir: r.dir * scale }).collect();
+            assert!(binned.keys_of_rows(&rows, origin, &mut keys), "rows keyed");
+            let mut counts = [0; 2];
+            for (r, &k) in rows.iter().zip(&keys) {
+                let row: [f32; 6] = [r.origin.to_array(), r.dir.to_array()].concat().try_into().unwrap();
+                let (ray, _, ok) = crate::simd::ray_from_row(&row, glam::DVec3::ZERO);
+                if ok {
+                    check(ray, k, &mut counts);
+                }
+            }
+            assert!(counts[1] * 100 >= counts[0] * 99, "scale {scale}: {counts:?}");
+        }
     }
 
     /// The bumpy sphere on a floor of discs that runs under the eye and
