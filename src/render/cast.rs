@@ -1147,7 +1147,8 @@ struct FanScratch {
 }
 
 /// The rays of a window of a fan's run (at most [`FAN_WINDOW`]; indices
-/// into `rays`, the window's) to `trace`, but for the rays the fan knows
+/// into `rays`, the window's) to `trace` with the window's keys (by the
+/// same indices, for [`Fan::gather_keyed`]), but for the rays the fan knows
 /// to miss (whose answers the caller writes first, for the whole window;
 /// such a ray may be left unset): in their keys' order (`s.keys`,
 /// [`Batch::keyed`]'s; stable; those it holds no place for last), in
