@@ -50,6 +50,10 @@ const MAX_LIST: usize = 128;
 /// Cells per block along each axis.
 const BLOCK: usize = 4;
 
+// A fan key's block of 2×2 cells lies in one list's block
+// (`Fan::gather_keyed`).
+const _: () = assert!(BLOCK.is_multiple_of(2), "a key's 2×2 cells in one block");
+
 /// How far inside its block, in cells, both ends of a shadow ray's
 /// projection lie for the block's list to answer it ([`Binned::toward`]):
 /// far above the f64 rounding of the projections (cells number at most
@@ -337,17 +341,30 @@ impl<'a, P: Primitive> Binned<'a, P> {
     /// with a list; `None` for the octree.
     #[inline]
     fn block(&self, q: &Query) -> Option<usize> {
-        // A NaN `t_min` is not at least 0.
-        let from_zero = q.t_min.partial_cmp(&0.0).is_some_and(std::cmp::Ordering::is_ge);
-        if !from_zero || q.ray.origin.to_array().map(f32::to_bits) != self.cov.origin {
+        if !self.leaves_origin(q) {
             return None;
         }
         let [i, j] = gnomonic_cell(&self.grid, &q.ray);
         if i == NO_CELL {
             return None;
         }
-        let b = j as usize / BLOCK * self.cols + i as usize / BLOCK;
-        (!self.long[b]).then_some(b)
+        self.listed([i as usize, j as usize])
+    }
+
+    /// Whether a block's list may answer `q`: its ray leaves the fan's
+    /// origin (bit for bit) from `t_min >= 0` (a NaN `t_min` is not).
+    #[inline(always)]
+    fn leaves_origin(&self, q: &Query) -> bool {
+        let from_zero = q.t_min.partial_cmp(&0.0).is_some_and(std::cmp::Ordering::is_ge);
+        from_zero && q.ray.origin.to_array().map(f32::to_bits) == self.cov.origin
+    }
+
+    /// The block holding cell `[i, j]`, where it keeps its list (`None`
+    /// past the grid's blocks).
+    #[inline(always)]
+    fn listed(&self, [i, j]: [usize; 2]) -> Option<usize> {
+        let b = j / BLOCK * self.cols + i / BLOCK;
+        (b < self.long.len() && !self.long[b]).then_some(b)
     }
 
     /// Block `b`'s list to `visitor` for the ray `ray`, pack after pack,
@@ -426,18 +443,16 @@ impl<P: Primitive> Fan for Binned<'_, P> {
     /// row's direction (`fan`'s module doc, "Rows"), so the window is the
     /// same.
     fn gather_keyed(&self, key: u32, q: &Query, hits: &mut CandidateHits) -> bool {
-        // The key's block of 2×2 cells (`crate::simd::gnomonic_key`) lies
-        // in one block of `BLOCK`² (both aligned to the grid's corner).
-        let cols = self.cov.n[0].div_ceil(2);
-        let (i, j) = (key as usize % cols, key as usize / cols);
-        let b = j / (BLOCK / 2) * self.cols + i / (BLOCK / 2);
-        let from_zero = q.t_min.partial_cmp(&0.0).is_some_and(std::cmp::Ordering::is_ge);
-        let here = q.ray.origin.to_array().map(f32::to_bits) == self.cov.origin;
-        if !(from_zero && here && q.from.is_none() && q.pass.is_none() && b < self.long.len() && !self.long[b]) {
-            return false;
+        // The key's block of 2×2 cells lies in one block of `BLOCK`² (both
+        // aligned to the grid's corner): its lowest cell's.
+        let primary = q.from.is_none() && q.pass.is_none();
+        match (primary && self.leaves_origin(q)).then(|| self.listed(self.cov.key_cell(key))) {
+            Some(Some(b)) => {
+                self.gather(b, q, hits);
+                true
+            }
+            _ => false,
         }
-        self.gather(b, q, hits);
-        true
     }
 
     fn backend(&self) -> Option<&dyn Backend> {

@@ -523,8 +523,21 @@ impl Coverage {
             origin: self.origin,
             // At most `MAX_CELLS` cells: every block's key is far below
             // `FAN_ELSEWHERE`.
-            cols: self.n[0].div_ceil(2) as u32,
+            cols: self.key_cols() as u32,
         }
+    }
+
+    /// A key's blocks of 2×2 cells per row ([`FanBits::cols`]).
+    fn key_cols(&self) -> usize {
+        self.n[0].div_ceil(2)
+    }
+
+    /// The lowest cell `[i, j]` of the block of 2×2 cells a key names
+    /// ([`Fan::keys_each`]'s keys of rays that may hit in the grid; any
+    /// other key gives a cell past the grid's rows).
+    pub(super) fn key_cell(&self, key: u32) -> [usize; 2] {
+        let (key, cols) = (key as usize, self.key_cols());
+        [2 * (key % cols), 2 * (key / cols)]
     }
 
     /// The grid as the SIMD module takes it.
