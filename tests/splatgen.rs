@@ -8,7 +8,9 @@ use glam::{DVec3, Vec3};
 use splatray::io::{PointCloud, read_mesh, read_points, sample_mesh};
 use splatray::splat::knn::{Knn, build_tree};
 use splatray::splat::normals::{estimate, orient, sym_eigen3};
-use splatray::splat::{GenerateError, Splat, SplatParams, count_on_splats, generate, on_splat};
+use splatray::splat::{
+    GenerateError, LeanMode, Splat, SplatParams, count_on_splats, generate, on_splat,
+};
 
 /// `n` points on a Fibonacci sphere around `c` with radius `r`.
 fn sphere(n: usize, c: Vec3, r: f32, phase: f32) -> Vec<Vec3> {
@@ -790,4 +792,91 @@ fn the_graph_is_built_once_and_repaired_around_outliers() {
     assert!(q.graph < rep.input_points + dropped, "{q:?}");
     assert_eq!(q.normals, 0, "{q:?}");
     assert_eq!(q.faces, 0, "{q:?}");
+}
+
+/// The surface of the cube `[-1, 1]³`: `n` points, uniform on its faces.
+fn cube_surface(n: usize, seed: u64) -> Vec<Vec3> {
+    let mut rng = splatray::rng::SplitMix64::new(seed);
+    (0..n)
+        .map(|_| {
+            let face = rng.below(6);
+            let (a, b) = (rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+            let s = if face.is_multiple_of(2) { 1.0 } else { -1.0 };
+            match face / 2 {
+                0 => Vec3::new(s, a, b),
+                1 => Vec3::new(a, s, b),
+                _ => Vec3::new(a, b, s),
+            }
+        })
+        .collect()
+}
+
+fn lean(mode: LeanMode) -> SplatParams {
+    SplatParams {
+        lean: mode,
+        ..SplatParams::default()
+    }
+}
+
+/// Lean growth (`splat::lean`) on a clean unit sphere sampled about as
+/// densely as the 200k bunny: its gate passes, every splat faces out, a
+/// fresh sample lies on the splats, and the fields' normals are as near
+/// the sphere's as the stages' splats'.
+#[test]
+fn lean_growth_serves_a_dense_clean_sphere() {
+    let c = cloud(sphere(150_000, Vec3::ZERO, 1.0, 0.0));
+    let (splats, rep) = generate(&c, &lean(LeanMode::Gated)).unwrap();
+    let l = rep.lean.as_ref().expect("a lean report");
+    assert!(l.used, "{l:?}");
+    assert!(
+        splats
+            .iter()
+            .all(|s| s.normal.dot(s.center.normalize()) > 0.99)
+    );
+    let fresh = sphere(20_000, Vec3::ZERO, 1.0, 0.37);
+    let on = count_on_splats(&fresh, &splats, rep.epsilon as f32);
+    assert!(on == fresh.len(), "{on} of {}", fresh.len());
+    let (stages, _) = generate(&c, &SplatParams::default()).unwrap();
+    let (e_lean, e_stages) = (sphere_normal_error(&splats), sphere_normal_error(&stages));
+    eprintln!(
+        "lean {} splats {e_lean:.4} deg, stages {} splats {e_stages:.4} deg; gate {:?}",
+        splats.len(),
+        stages.len(),
+        l.gate
+    );
+    assert!(
+        e_lean <= e_stages,
+        "lean {e_lean} deg, stages {e_stages} deg"
+    );
+}
+
+/// Where lean growth's gate refuses a cloud (noise, an open border, a
+/// closed cube's edges), the report says why and the splats are the
+/// stages' bit for bit.
+#[test]
+fn lean_growth_refused_grows_the_stages_splats() {
+    let mut rng = splatray::rng::SplitMix64::new(7);
+    let noisy: Vec<Vec3> = sphere(150_000, Vec3::ZERO, 1.0, 0.0)
+        .into_iter()
+        .map(|p| p * (1.0 + 0.002 * rng.next_gaussian() as f32))
+        .collect();
+    let cap: Vec<Vec3> = sphere(150_000, Vec3::ZERO, 1.0, 0.0)
+        .into_iter()
+        .filter(|p| p.y > 0.0)
+        .collect();
+    for (name, pts, why) in [
+        ("noisy sphere", noisy, "scatter"),
+        ("half sphere", cap, "border"),
+        ("cube", cube_surface(200_000, 3), "epsilon off"),
+    ] {
+        let c = cloud(pts);
+        let (splats, rep) = generate(&c, &lean(LeanMode::Gated)).unwrap();
+        let l = rep.lean.as_ref().expect("a lean report");
+        eprintln!("{name}: {l:?}");
+        assert!(!l.used, "{name}: {l:?}");
+        let refused = l.refused.as_deref().unwrap_or("");
+        assert!(refused.contains(why), "{name}: {refused}");
+        let (stages, _) = generate(&c, &SplatParams::default()).unwrap();
+        assert!(splats == stages, "{name}: not the stages' splats");
+    }
 }

@@ -241,6 +241,30 @@ fn print_generated(args: &SplatArgs, p: &PointsOutcome) {
             report.flat_faces, report.face_points
         );
     }
+    if let Some(lean) = &report.lean {
+        let g = &lean.gate;
+        let measured = format!(
+            "{} points sampled: scatter {:.3} epsilon, {:.1} % curving off the growth slab, {:.2} % off the epsilon slab, {:.2} % across a crease, {:.2} % at a border",
+            g.sampled,
+            g.sigma,
+            100.0 * g.hard,
+            100.0 * g.hard_eps,
+            100.0 * g.crease,
+            100.0 * g.border
+        );
+        match &lean.refused {
+            Some(why) => eprintln!(
+                "splatray: note: lean growth refused: {why} ({measured}); the default stages grew the splats"
+            ),
+            None => {
+                eprintln!(
+                    "splatray: lean growth: {measured}; {} outlier seeds; no creases, noise or holes looked for (the gate found none)",
+                    lean.outliers
+                );
+                return;
+            }
+        }
+    }
     eprintln!(
         "splatray: large splats over holes: {} (> {}x median radius, centre farther than half a radius from their points), {} (> {}x, kept disc less than half covered by points; {} shrunk to what their points cover, {} small splats added for the points they left)",
         report.hollow_large_splats,

@@ -87,6 +87,24 @@ pub struct SplatParams {
     /// `Grower::clip_lines` in `grow.rs`). Default [`Creases::Auto`]: on,
     /// but for a cloud sampled along scan lines.
     pub creases: Creases,
+    /// Grow the splats by [`super::lean`] (default [`LeanMode::Off`]).
+    pub lean: LeanMode,
+}
+
+/// When generation grows by [`super::lean`] ([`SplatParams::lean`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LeanMode {
+    /// Never: the stages.
+    #[default]
+    Off,
+    /// Where its gate finds the cloud clean, closed, densely sampled and
+    /// without creases (`--lean`); else the stages, the report saying why.
+    Gated,
+    /// Always, the gate measured but not asked (the held-out check's
+    /// windows of a cloud grown by it: their cut edges are no border of
+    /// the surface).
+    Always,
 }
 
 /// Whether generation finds creases ([`SplatParams::creases`]).
@@ -158,6 +176,7 @@ impl Default for SplatParams {
             auto_thin: true,
             color_fields: true,
             creases: Creases::Auto,
+            lean: LeanMode::Off,
         }
     }
 }
@@ -301,6 +320,23 @@ pub struct SplatReport {
     pub warnings: Vec<String>,
     /// Time per stage.
     pub seconds: StageSeconds,
+    /// Where lean growth was asked for ([`SplatParams::lean`]): what its
+    /// gate found and whether it grew the splats.
+    pub lean: Option<LeanReport>,
+}
+
+/// What lean growth ([`super::lean`]) did.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct LeanReport {
+    /// Whether it grew the splats (else the gate refused the cloud, and
+    /// the stages grew them as without it).
+    pub used: bool,
+    /// Why the gate refused the cloud.
+    pub refused: Option<String>,
+    /// What the gate measured.
+    pub gate: super::lean::Gate,
+    /// Seeds left without a splat as outliers.
+    pub outliers: usize,
 }
 
 impl SplatReport {
@@ -537,6 +573,11 @@ pub(crate) fn generate_stages(
     let (unit_cloud, unit_params) = to_unit(&frame, cloud, params);
     let (cloud, params) = (&unit_cloud, &unit_params);
     let mut report = start_report(cloud);
+    if params.lean != LeanMode::Off
+        && let Some(done) = lean_stages(cloud, params, &frame, &mut report, (progress, grown), t0)?
+    {
+        return Ok(done);
+    }
     notify(progress, "neighbours", 0.0);
     let mut w = graph_stage(cloud, raw, params, &mut report)?;
     let outliers = std::mem::take(&mut w.outliers);
@@ -573,6 +614,97 @@ pub(crate) fn generate_stages(
     };
     Ok((splats, report, outliers))
 }
+
+/// What [`generate_stages`] returns: the splats, the report, the outliers.
+type Stages = (Vec<Splat>, SplatReport, Vec<u32>);
+
+/// [`generate_stages`] by [`super::lean`] (`cloud` in the unit frame), where
+/// its gate passes: the splats in the cloud's units, the report, and no
+/// outliers. `None` where the gate refuses the cloud (`report` then says
+/// why, and the stages run as without it).
+fn lean_stages(
+    cloud: &PointCloud,
+    params: &SplatParams,
+    frame: &UnitFrame,
+    report: &mut SplatReport,
+    (progress, grown): (Option<Progress<'_>>, Option<Grown<'_>>),
+    t0: Instant,
+) -> Result<Option<Stages>, GenerateError> {
+    let points = &cloud.positions;
+    let (lo, hi) = points.iter().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(a, b), p| (a.min(*p), b.max(*p)),
+    );
+    let diagonal = f64::from((hi - lo).length());
+    let epsilon = match params.epsilon_abs {
+        Some(e) => (e / frame.scale) as f32,
+        None => (f64::from(params.epsilon_rel) * diagonal) as f32,
+    };
+    let gated = params.lean == LeanMode::Gated;
+    // A few far points widen the box, and `ϵ` with it, past what the
+    // stages would take (they leave them out as outliers first).
+    let robust = robust_diagonal(points, &vec![true; points.len()], points.len());
+    let spread = (gated && robust < LEAN_SPREAD * diagonal).then(|| {
+        format!(
+            "the bounding box is {:.1} % wider than the box of all but the 0.1 % most extreme points (outliers?)",
+            100.0 * (diagonal / robust - 1.0)
+        )
+    });
+    notify(progress, "lean growth", 0.0);
+    let when = match (gated, spread.is_some()) {
+        (false, _) => super::lean::GrowWhen::Always,
+        (true, false) => super::lean::GrowWhen::Gated,
+        (true, true) => super::lean::GrowWhen::Never,
+    };
+    let lean = super::lean::grow_lean(points, epsilon, when, |f| {
+        notify(progress, "lean growth", f);
+    });
+    let refused = if gated { spread.or_else(|| lean.gate.refusal()) } else { None };
+    report.lean = Some(LeanReport {
+        used: refused.is_none(),
+        refused: refused.clone(),
+        gate: lean.gate,
+        outliers: lean.outliers,
+    });
+    if refused.is_some() {
+        return Ok(None);
+    }
+    let mut splats = lean.splats;
+    report.used_points = points.len();
+    report.splats = splats.len();
+    report.bbox_diagonal = diagonal;
+    report.epsilon = f64::from(epsilon);
+    report.k = super::lean::K0;
+    report.fallback_normal_fields = lean.flat_fields;
+    report.estimated_normals = points.len();
+    // Every point is taken by a splat but the outlier seeds' own.
+    report.coverage = 1.0 - lean.outliers as f64 / points.len().max(1) as f64;
+    report.mean_radius = mean_radius(&splats);
+    if let Some(grown) = grown {
+        let mut whole = report.clone();
+        lengths_from_unit(frame, &mut whole);
+        grown(&whole);
+    }
+    from_unit(frame, &mut splats, report)?;
+    report.origin = cloud.origin.to_array();
+    let [grid, grow, orient, fields] = lean.seconds;
+    report.seconds = StageSeconds {
+        read: 0.0,
+        knn: grid,
+        normals: 0.0,
+        grow: grow + orient,
+        fit: fields,
+        trim: 0.0,
+        colors: 0.0,
+        total: t0.elapsed().as_secs_f64(),
+    };
+    Ok(Some((splats, report.clone(), Vec::new())))
+}
+
+/// Lean growth runs only where the box of all but the 0.1 % most extreme
+/// points along each axis has at least this share of the bounding box's
+/// diagonal.
+const LEAN_SPREAD: f64 = 0.98;
 
 /// The first stage: the cloud (in the unit frame; `raw` as read) cleaned,
 /// thinned and reordered, its neighbourhood graph, its statistical

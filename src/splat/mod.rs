@@ -15,6 +15,7 @@ mod generate;
 pub mod grow;
 pub mod holes;
 pub mod knn;
+pub mod lean;
 pub mod normals;
 mod options;
 pub mod outliers;
@@ -29,7 +30,8 @@ pub mod thin;
 pub use crate::data::robust_centre_size;
 pub use clip::{Clip, ClipLine};
 pub use generate::{
-    Creases, GenerateError, HOLLOW_LARGE, NOISE_PROJECT, Skipped, SplatParams, SplatReport,
+    Creases, GenerateError, HOLLOW_LARGE, LeanMode, LeanReport, NOISE_PROJECT, Skipped, SplatParams,
+    SplatReport,
     StageSeconds, count_on_splats, coverage, generate, generate_with_progress, hollow_large,
     viewpoints_of,
 };

@@ -1,7 +1,7 @@
 //! Splat generation's options as a user gives them, and the one place
 //! they become [`SplatParams`].
 
-use super::generate::{Creases, SplatParams};
+use super::generate::{Creases, LeanMode, SplatParams};
 use crate::data::PointCloud;
 use glam::DVec3;
 
@@ -33,6 +33,9 @@ pub struct GenerationOptions {
     /// Keep one point per cell this many ϵ wide (default: a cloud far
     /// denser than ϵ needs is thinned unasked; 0 keeps every point).
     pub thin: Option<f64>,
+    /// Grow by lean growth where its gate finds the cloud suits it
+    /// (`SplatParams::lean`).
+    pub lean: bool,
 }
 
 impl GenerationOptions {
@@ -69,6 +72,7 @@ impl GenerationOptions {
             scan_viewpoints: !self.no_viewpoint,
             thin: self.thin.unwrap_or(defaults.thin),
             auto_thin: self.thin.is_none(),
+            lean: if self.lean { LeanMode::Gated } else { LeanMode::Off },
             ..defaults
         }
     }

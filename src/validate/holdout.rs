@@ -6,7 +6,7 @@
 
 use crate::pipeline::{Generated, generate_uncoloured};
 use crate::rng::SplitMix64;
-use crate::splat::{PointCloud, SplatParams, SplatReport, count_on_splats, outliers};
+use crate::splat::{LeanMode, PointCloud, SplatParams, SplatReport, count_on_splats, outliers};
 use crate::{Error, Result};
 use glam::Vec3;
 
@@ -320,8 +320,15 @@ pub fn heldout_coverage_windows(
         .map(|i| !held_out(seed, i, fraction))
         .collect();
     let local = cloud.subset(&in_window);
+    // Grown as the whole was: by lean growth without its gate where that
+    // grew the whole (a window's cut edges are no border of the surface).
+    let lean = match &whole.lean {
+        Some(l) if l.used => LeanMode::Always,
+        _ => LeanMode::Off,
+    };
     let windowed = SplatParams {
         epsilon_abs: Some(epsilon),
+        lean,
         ..params.clone()
     };
     let s = split_kept(&local, &windowed, &keep);

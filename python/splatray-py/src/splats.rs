@@ -403,6 +403,7 @@ pub fn splat(
         viewpoint: vp,
         no_viewpoint,
         thin,
+        lean: false,
     }
     .params(cloud);
     let cb = Callback::new(progress);

@@ -74,6 +74,7 @@ pub fn scan_check<'py>(
             viewpoint,
             no_viewpoint,
             thin,
+            lean: false,
         },
         tolerance,
         holdout,

@@ -1,0 +1,781 @@
+//! Lean growth: splats grown seed by seed over a uniform grid of the
+//! points, with no normal a point (issue 54).
+//!
+//! The pipeline's growth (§2.1–2.2, eqs. 1–3) reads a normal at every point,
+//! each fitted to its own neighbourhood, and the normal fields (eq. 4) fit
+//! those normals again. On a clean cloud sampled densely enough, one plane
+//! fit a splat does the same work: a seed's plane is fitted to its
+//! [`K0`] nearest points, the splat takes its neighbours in order of
+//! distance while they stay within [`GROW_EPS`] `ϵ` of that plane (refitted
+//! to the points taken each time their count doubles), and every point it
+//! takes is covered, so it seeds no splat of its own. The splat lies in its
+//! points' least-squares plane (centred where the seed projects onto it);
+//! its radius reaches the first point it did not take, grown by [`SCALE`]
+//! so that neighbouring discs overlap. Its normal field (eq. 4) comes from
+//! a quadric height field fitted to the heights of its points and of those
+//! within [`REACH`] radii: the field's slopes are the quadric's curvatures
+//! along its principal directions, which become the splat's axes.
+//! Orientation follows a spanning tree over overlapping splats, most
+//! parallel first (Prim), from the splat farthest from the centroid facing
+//! away from it.
+//!
+//! It has none of the pipeline's rules for noise, outliers, thin sheets,
+//! creases or real scans, so it runs only where its [`Gate`] finds a cloud
+//! it serves: measured on a stride sample of the points before anything is
+//! grown, the median scatter of a point's nearest about their plane at
+//! most [`GATE_SIGMA`] `ϵ`, at most [`GATE_HARD`] of the points with a
+//! neighbour outside the [`GROW_EPS`] slab, and at most [`GATE_HARD_EPS`]
+//! with one outside the `ϵ` slab (a crease or a corner). Against the mesh,
+//! 200k and 1M points sampled from the bunny rendered 0.3–2.7 dB better
+//! than the pipeline's splats at a sixth of its time; 140k and sparser,
+//! noisy samples and the solids' edges worse, which the gate refuses
+//! (`docs/notes/generation.md`, "Issue 54, fifty-sixth session").
+
+use super::fit::plane_fit;
+use super::grow::MAX_RADIUS_EPS;
+use crate::data::{NormalField, Splat};
+use crate::geometry::tangent_frame;
+use crate::splat::clip::Clip;
+use glam::{Vec2, Vec3};
+use std::collections::BinaryHeap;
+
+/// Points of a seed's first plane fit besides the seed.
+pub const K0: usize = 12;
+
+/// Half-width of the slab a splat's points stay in, in `ϵ`.
+pub const GROW_EPS: f32 = 0.25;
+
+/// A splat's radius over the distance of the first point it did not take.
+pub const SCALE: f32 = 1.1;
+
+/// How far the field's quadric reaches, in splat radii.
+pub const REACH: f32 = 1.3;
+
+/// Grid cell width in `ϵ`.
+pub const CELL_EPS: f32 = 2.0;
+
+/// Most shells of cells a seed's neighbours are gathered from.
+const MAX_SHELL: i32 = 8;
+
+/// Fewest points a quadric is fitted to (else the field is flat).
+const FIELD_MIN: usize = 12;
+
+/// A seed whose [`K0`]-th neighbour lies farther than this many times the
+/// sample's median grows no splat (an outlier): its points seed their own.
+const OUTLIER_SPACINGS: f32 = 4.0;
+
+/// Points the gate samples (every `n / GATE_SAMPLE`-th).
+pub const GATE_SAMPLE: usize = 4096;
+
+/// The gate's bound on the median scatter of a point's nearest about their
+/// plane, in `ϵ`: 0.039 on 200k bunny samples (lean better than the
+/// pipeline), 0.050 at 140k and 0.064 at 100k (worse), 0.14 and 0.26 under
+/// noise of 0.16 and 0.31 `ϵ`.
+pub const GATE_SIGMA: f32 = 0.033;
+
+/// The gate's bound on the share of points with a neighbour outside the
+/// [`GROW_EPS`] slab: 7.9 % of the 200k bunny's seeds, 12.2 % at 140k,
+/// 26 % on the solids (their edges).
+pub const GATE_HARD: f32 = 0.05;
+
+/// The gate's bound on the share with a neighbour outside the `ϵ` slab:
+/// none on the clean bunny samples, 1.3 % on the solids, 6.8 % on a
+/// survey tile.
+pub const GATE_HARD_EPS: f32 = 0.005;
+
+/// A point's nearest straddle a crease where their scatter about their
+/// plane exceeds this share of the [`K0`]-th one's distance: curvature
+/// gives a scatter growing with the square of that distance, a crease with
+/// the distance itself. Over the 200k bunny's sample 0.3 % of the points
+/// (its 99.9th percentile 0.15), the 1M's 0.05 %, the solids' about 3 %.
+pub const CREASE_SCATTER: f32 = 0.12;
+
+/// The gate's bound on the share of points across a crease
+/// ([`CREASE_SCATTER`]).
+pub const GATE_CREASE: f32 = 0.01;
+
+/// The gate's bound on the share of points at a border: a seed at an open
+/// edge grows its disc past the edge (the pipeline's growth encloses its
+/// points instead).
+pub const GATE_BORDER: f32 = 0.002;
+
+/// Neighbours the border test reads.
+pub const GATE_RING: usize = 48;
+
+/// A point is at a border where its [`GATE_RING`] nearest's centroid lies
+/// this many times the farthest one's distance off it, in their plane: a
+/// half disc's lies 0.42 off, a whole disc's about 0.1 at most by chance.
+const BORDER_OFFSET: f32 = 0.3;
+
+/// What the gate measured.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Gate {
+    /// Points sampled.
+    pub sampled: usize,
+    /// Median scatter of a sampled point's nearest about their plane, in `ϵ`.
+    pub sigma: f32,
+    /// Share of sampled points with a neighbour outside the growth slab.
+    pub hard: f32,
+    /// Share with a neighbour outside the `ϵ` slab.
+    pub hard_eps: f32,
+    /// Median distance to the [`K0`]-th neighbour, in `ϵ`.
+    pub spacing: f32,
+    /// Share of sampled points whose nearest scatter about their plane by
+    /// more than [`CREASE_SCATTER`] of their spread (a crease or a corner
+    /// between them).
+    pub crease: f32,
+    /// Share of sampled points at a border (an open edge or a hole's):
+    /// their [`GATE_RING`] nearest lie to one side of them.
+    pub border: f32,
+}
+
+impl Gate {
+    /// Whether lean growth serves this cloud.
+    #[must_use]
+    pub fn passes(&self) -> bool {
+        self.sampled > 0
+            && self.sigma <= GATE_SIGMA
+            && self.hard <= GATE_HARD
+            && self.hard_eps <= GATE_HARD_EPS
+            && self.crease <= GATE_CREASE
+            && self.border <= GATE_BORDER
+    }
+
+    /// Why it does not, in a few words (`None` where it passes).
+    #[must_use]
+    pub fn refusal(&self) -> Option<String> {
+        if self.sampled == 0 {
+            Some("too few points".into())
+        } else if self.sigma > GATE_SIGMA {
+            Some(format!(
+                "the points scatter {:.3} epsilon about their nearest's plane (noise or sparse sampling; lean growth needs at most {GATE_SIGMA})",
+                self.sigma
+            ))
+        } else if self.hard_eps > GATE_HARD_EPS {
+            Some(format!(
+                "{:.1} % of the points have a neighbour epsilon off their plane (creases or corners; at most {:.1} %)",
+                100.0 * self.hard_eps,
+                100.0 * GATE_HARD_EPS
+            ))
+        } else if self.crease > GATE_CREASE {
+            Some(format!(
+                "{:.1} % of the points have nearest that straddle a crease (at most {:.0} %)",
+                100.0 * self.crease,
+                100.0 * GATE_CREASE
+            ))
+        } else if self.hard > GATE_HARD {
+            Some(format!(
+                "{:.1} % of the points curve off their plane within their nearest (at most {:.0} %)",
+                100.0 * self.hard,
+                100.0 * GATE_HARD
+            ))
+        } else if self.border > GATE_BORDER {
+            Some(format!(
+                "{:.2} % of the points lie at an open border or a hole (at most {:.1} %)",
+                100.0 * self.border,
+                100.0 * GATE_BORDER
+            ))
+        } else {
+            None
+        }
+    }
+}
+
+/// The points sorted by grid cell, and the cells by key in a hash table.
+struct Grid {
+    lo: Vec3,
+    h: f32,
+    /// Positions in cell order.
+    pos: Vec<Vec3>,
+    /// Distinct cells' keys, in order, and where their points start (one
+    /// more entry: the end).
+    keys: Vec<u64>,
+    start: Vec<u32>,
+    /// Open addressing: a cell's index plus one, 0 empty.
+    table: Vec<u32>,
+    shift: u32,
+}
+
+/// Bits of a cell coordinate in a key.
+const AXIS_BITS: u32 = 21;
+
+impl Grid {
+    fn build(points: &[Vec3], h: f32) -> Grid {
+        let lo = points.iter().fold(Vec3::splat(f32::INFINITY), |a, p| a.min(*p));
+        let top = (1i32 << AXIS_BITS) - 1;
+        let mut keyed: Vec<(u64, u32)> = points
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| (key_of(cell_of(lo, h, p, top)), i as u32))
+            .collect();
+        keyed.sort_unstable();
+        let pos = keyed.iter().map(|&(_, i)| points[i as usize]).collect();
+        let mut keys = Vec::new();
+        let mut start = Vec::new();
+        for (i, &(k, _)) in keyed.iter().enumerate() {
+            if keys.last() != Some(&k) {
+                keys.push(k);
+                start.push(i as u32);
+            }
+        }
+        start.push(keyed.len() as u32);
+        let bits = (2 * keys.len()).next_power_of_two().trailing_zeros().max(4);
+        let shift = 64 - bits;
+        let mut table = vec![0u32; 1 << bits];
+        for (c, &k) in keys.iter().enumerate() {
+            let mut s = slot(k, shift);
+            while table[s] != 0 {
+                s = (s + 1) & (table.len() - 1);
+            }
+            table[s] = c as u32 + 1;
+        }
+        Grid {
+            lo,
+            h,
+            pos,
+            keys,
+            start,
+            table,
+            shift,
+        }
+    }
+
+    fn cell(&self, p: Vec3) -> [i32; 3] {
+        cell_of(self.lo, self.h, p, (1 << AXIS_BITS) - 1)
+    }
+
+    /// The points of cell `c` (none outside the grid).
+    fn points_of(&self, c: [i32; 3]) -> std::ops::Range<u32> {
+        let top = (1 << AXIS_BITS) - 1;
+        if c.iter().any(|&x| x < 0 || x > top) {
+            return 0..0;
+        }
+        let k = key_of(c);
+        let mut s = slot(k, self.shift);
+        loop {
+            let e = self.table[s];
+            if e == 0 {
+                return 0..0;
+            }
+            let i = e as usize - 1;
+            if self.keys[i] == k {
+                return self.start[i]..self.start[i + 1];
+            }
+            s = (s + 1) & (self.table.len() - 1);
+        }
+    }
+
+    /// The points of the cells at Chebyshev distance `s` from cell `c`.
+    fn shell(&self, c: [i32; 3], s: i32, mut f: impl FnMut(u32)) {
+        for z in c[2] - s..=c[2] + s {
+            for y in c[1] - s..=c[1] + s {
+                let face = (z - c[2]).abs() == s || (y - c[1]).abs() == s;
+                if face {
+                    for x in c[0] - s..=c[0] + s {
+                        self.points_of([x, y, z]).for_each(&mut f);
+                    }
+                } else {
+                    self.points_of([c[0] - s, y, z]).for_each(&mut f);
+                    if s > 0 {
+                        self.points_of([c[0] + s, y, z]).for_each(&mut f);
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn cell_of(lo: Vec3, h: f32, p: Vec3, top: i32) -> [i32; 3] {
+    let c = ((p - lo) / h).floor();
+    // Saturating casts: NaN to 0, beyond the key's range to its ends.
+    [c.x as i32, c.y as i32, c.z as i32].map(|x| x.clamp(0, top))
+}
+
+fn key_of(c: [i32; 3]) -> u64 {
+    c[0] as u64 | (c[1] as u64) << AXIS_BITS | (c[2] as u64) << (2 * AXIS_BITS)
+}
+
+fn slot(k: u64, shift: u32) -> usize {
+    (k.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> shift) as usize
+}
+
+/// A point's neighbours by distance, gathered shell by shell of cells.
+#[derive(Default)]
+struct Near {
+    /// (squared distance, index into the grid's order); sorted.
+    cand: Vec<(f32, u32)>,
+    /// The first `done` of `cand` are the nearest of all (returned).
+    done: usize,
+    shell: i32,
+    /// Every point within this distance has been gathered.
+    sure: f32,
+    centre: Vec3,
+    cell: [i32; 3],
+}
+
+impl Near {
+    fn start(&mut self, g: &Grid, p: Vec3) {
+        self.cand.clear();
+        self.done = 0;
+        self.shell = -1;
+        self.sure = 0.0;
+        self.centre = p;
+        self.cell = g.cell(p);
+        self.widen(g);
+    }
+
+    fn widen(&mut self, g: &Grid) -> bool {
+        if self.shell >= MAX_SHELL {
+            return false;
+        }
+        self.shell += 1;
+        let (p, cand) = (self.centre, &mut self.cand);
+        g.shell(self.cell, self.shell, |j| {
+            cand.push((g.pos[j as usize].distance_squared(p), j));
+        });
+        // The distance from `p` to the gathered block's faces.
+        let q = (p - g.lo) / g.h;
+        let s = self.shell as f32;
+        let c = self.cell;
+        let face = |a: f32, ci: i32| (a - ci as f32 + s).min(ci as f32 + 1.0 + s - a) * g.h;
+        self.sure = face(q.x, c[0]).min(face(q.y, c[1])).min(face(q.z, c[2])).max(0.0);
+        // Those returned lie within the old sure distance: they stay first.
+        // (Distance, index) pairs are distinct, so the order is one.
+        cand[self.done..].sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        true
+    }
+
+    /// The `j`-th nearest (0: the point itself), once every point nearer
+    /// is known; else the `j`-th of those gathered within the last shell.
+    fn get(&mut self, g: &Grid, j: usize) -> Option<(f32, u32)> {
+        loop {
+            if let Some(&c) = self.cand.get(j)
+                && c.0 <= self.sure * self.sure
+            {
+                self.done = self.done.max(j + 1);
+                return Some(c);
+            }
+            if !self.widen(g) {
+                return self.cand.get(j).copied();
+            }
+        }
+    }
+}
+
+/// A grown splat before its field.
+struct Grown {
+    centre: Vec3,
+    normal: Vec3,
+    radius: f32,
+    /// The points it took (indices into the grid's order).
+    members: Vec<u32>,
+    /// The points beyond them within [`REACH`] radii (its field's too).
+    extra: Vec<u32>,
+}
+
+/// What lean growth made.
+#[derive(Clone, Debug)]
+pub struct Lean {
+    /// The splats, or none where the gate refused the cloud.
+    pub splats: Vec<Splat>,
+    /// What the gate measured.
+    pub gate: Gate,
+    /// Seeds left without a splat as outliers.
+    pub outliers: usize,
+    /// Splats whose field stayed flat (too few points, a singular fit).
+    pub flat_fields: usize,
+    /// Seconds: the grid and the gate, growth, orientation, fields.
+    pub seconds: [f64; 4],
+}
+
+/// The gate of a cloud with too few points to sample.
+const NO_GATE: Gate = Gate {
+    sampled: 0,
+    sigma: f32::INFINITY,
+    hard: 1.0,
+    hard_eps: 1.0,
+    spacing: f32::INFINITY,
+    crease: 1.0,
+    border: 1.0,
+};
+
+/// The gate's figures over a stride sample of `g`'s points.
+fn gate(g: &Grid, eps: f32) -> (Gate, f32) {
+    let n = g.pos.len();
+    if n <= K0 {
+        return (NO_GATE, f32::INFINITY);
+    }
+    let stride = n.div_ceil(GATE_SAMPLE).max(1);
+    let mut near = Near::default();
+    let (mut sig, mut dks) = (Vec::new(), Vec::new());
+    let (mut hard, mut hard_eps, mut border) = (0usize, 0usize, 0usize);
+    let mut idx = Vec::with_capacity(GATE_RING + 1);
+    for i in (0..n).step_by(stride) {
+        near.start(g, g.pos[i]);
+        idx.clear();
+        for j in 0..=K0 {
+            match near.get(g, j) {
+                Some(c) => idx.push(c),
+                None => break,
+            }
+        }
+        if idx.len() <= K0 {
+            continue;
+        }
+        let pts = idx.iter().map(|&(_, k)| g.pos[k as usize]);
+        let (c, vals, vecs) = plane_fit(pts.clone());
+        let (c, nrm) = (c.as_vec3(), vecs[0].as_vec3());
+        if !nrm.is_finite() || !c.is_finite() {
+            continue;
+        }
+        sig.push(((vals[0].max(0.0) / idx.len() as f64).sqrt() as f32) / eps);
+        dks.push(idx[K0].0.sqrt() / eps);
+        let off = pts.map(|q| nrm.dot(q - c).abs()).fold(0.0, f32::max);
+        hard += usize::from(off > GROW_EPS * eps);
+        hard_eps += usize::from(off > eps);
+        for j in K0 + 1..=GATE_RING {
+            match near.get(g, j) {
+                Some(c) => idx.push(c),
+                None => break,
+            }
+        }
+        let p = g.pos[i];
+        let ring = idx.iter().map(|&(_, k)| g.pos[k as usize] - p);
+        let mean = ring.map(|d| d - nrm * nrm.dot(d)).sum::<Vec3>() / idx.len() as f32;
+        let far = idx.last().map_or(0.0, |c| c.0.sqrt());
+        border += usize::from(mean.length() > BORDER_OFFSET * far);
+    }
+    let sampled = sig.len();
+    if sampled == 0 {
+        return (NO_GATE, f32::INFINITY);
+    }
+    let median = |v: &mut Vec<f32>| {
+        let m = v.len() / 2;
+        *v.select_nth_unstable_by(m, f32::total_cmp).1
+    };
+    let crease = sig.iter().zip(&dks).filter(|(s, d)| **s > CREASE_SCATTER * **d).count();
+    let spacing = median(&mut dks);
+    let gate = Gate {
+        sampled,
+        sigma: median(&mut sig),
+        hard: hard as f32 / sampled as f32,
+        hard_eps: hard_eps as f32 / sampled as f32,
+        spacing,
+        crease: crease as f32 / sampled as f32,
+        border: border as f32 / sampled as f32,
+    };
+    (gate, spacing * eps)
+}
+
+/// Grows one splat from the point `i` (grid order); `None` where it grows
+/// none (a degenerate fit, an outlier).
+fn grow(g: &Grid, near: &mut Near, i: u32, eps: f32, far: f32) -> Option<Grown> {
+    let p = g.pos[i as usize];
+    near.start(g, p);
+    let mut members = Vec::with_capacity(64);
+    for j in 0..=K0 {
+        let (d2, idx) = near.get(g, j)?;
+        if j == K0 && d2 > far * far {
+            return None;
+        }
+        members.push(idx);
+    }
+    let slab = GROW_EPS * eps;
+    let fit = |m: &[u32]| {
+        let (c, _, vecs) = plane_fit(m.iter().map(|&k| g.pos[k as usize]));
+        (vecs[0].as_vec3(), c.as_vec3())
+    };
+    let within = |n: Vec3, c: Vec3, m: &[u32]| m.iter().all(|&k| n.dot(g.pos[k as usize] - c).abs() <= slab);
+    let (mut n, mut c) = fit(&members);
+    if !n.is_finite() || !c.is_finite() {
+        return None;
+    }
+    if !within(n, c, &members) {
+        // Its nearest already leave the slab (a bend tighter than the
+        // seed's spacing): a splat of them alone.
+        let radius = g.pos[members[K0] as usize].distance(p);
+        let centre = p + n * n.dot(c - p);
+        return Some(Grown {
+            centre,
+            normal: n,
+            radius: radius * SCALE,
+            members,
+            extra: Vec::new(),
+        });
+    }
+    let cap = MAX_RADIUS_EPS * eps;
+    let mut next_fit = 2 * members.len();
+    let mut j = members.len();
+    let stop = loop {
+        let Some((d2, idx)) = near.get(g, j) else {
+            break None;
+        };
+        let q = g.pos[idx as usize];
+        if d2 > near.sure * near.sure || d2.sqrt() > cap || n.dot(q - c).abs() > slab {
+            break Some(d2.sqrt());
+        }
+        members.push(idx);
+        j += 1;
+        if members.len() >= next_fit {
+            let (m, mc) = fit(&members);
+            if !(m.is_finite() && mc.is_finite() && within(m, mc, &members)) {
+                // The refitted plane leaves some of them: stop here.
+                break near.get(g, j).map(|c| c.0.sqrt());
+            }
+            (n, c) = (m, mc);
+            next_fit *= 2;
+        }
+    };
+    let last = members.last().map_or(0.0, |&k| g.pos[k as usize].distance(p));
+    let radius = stop.unwrap_or(last).min(cap).max(last);
+    let centre = p + n * n.dot(c - p);
+    let reach = radius * REACH;
+    let mut extra = Vec::new();
+    while let Some((d2, idx)) = near.get(g, j) {
+        if d2 > reach * reach || d2 > near.sure * near.sure {
+            break;
+        }
+        extra.push(idx);
+        j += 1;
+    }
+    Some(Grown {
+        centre,
+        normal: n,
+        radius: radius * SCALE,
+        members,
+        extra,
+    })
+}
+
+/// Orients the splats' normals along a spanning tree over splats whose
+/// discs meet, most parallel first, from the splat farthest from the
+/// centroid facing away from it (each part of the tree from its own).
+fn orient(splats: &mut [Grown]) {
+    let n = splats.len();
+    if n == 0 {
+        return;
+    }
+    let mean_r = splats.iter().map(|s| s.radius).sum::<f32>() / n as f32;
+    let centres: Vec<Vec3> = splats.iter().map(|s| s.centre).collect();
+    let h = 2.0 * mean_r.max(f32::MIN_POSITIVE);
+    let g = Grid::build(&centres, h);
+    // The grid's order back to splat indices (its sort is by (key, index)).
+    let top = (1 << AXIS_BITS) - 1;
+    let mut order: Vec<(u64, u32)> = centres
+        .iter()
+        .enumerate()
+        .map(|(i, &c)| (key_of(cell_of(g.lo, h, c, top)), i as u32))
+        .collect();
+    order.sort_unstable();
+    let centroid = centres.iter().copied().sum::<Vec3>() / n as f32;
+    let away = |s: &mut Grown| {
+        if s.normal.dot(s.centre - centroid) < 0.0 {
+            s.normal = -s.normal;
+        }
+    };
+    let mut done = vec![false; n];
+    let mut heap = BinaryHeap::new();
+    let reach = (2.0 * splats.iter().map(|s| s.radius).fold(0.0, f32::max) / h).ceil() as i32;
+    let mut by_distance: Vec<u32> = (0..n as u32).collect();
+    by_distance.sort_unstable_by(|&a, &b| {
+        let (da, db) = (centres[a as usize].distance_squared(centroid), centres[b as usize].distance_squared(centroid));
+        db.total_cmp(&da).then(a.cmp(&b))
+    });
+    for &root in &by_distance {
+        let root = root as usize;
+        if done[root] {
+            continue;
+        }
+        away(&mut splats[root]);
+        done[root] = true;
+        let push = |heap: &mut BinaryHeap<(u32, u32, u32)>, s: &[Grown], done: &[bool], a: usize| {
+            let c = g.cell(s[a].centre);
+            for sh in 0..=reach.min(2) {
+                g.shell(c, sh, |pj| {
+                    let b = order[pj as usize].1 as usize;
+                    if !done[b] && s[a].centre.distance(s[b].centre) <= s[a].radius + s[b].radius {
+                        let w = s[a].normal.dot(s[b].normal).abs();
+                        heap.push(((w * 1e6) as u32, u32::MAX - b as u32, a as u32));
+                    }
+                });
+            }
+        };
+        push(&mut heap, splats, &done, root);
+        while let Some((_, b, a)) = heap.pop() {
+            let (a, b) = (a as usize, (u32::MAX - b) as usize);
+            if done[b] {
+                continue;
+            }
+            done[b] = true;
+            if splats[a].normal.dot(splats[b].normal) < 0.0 {
+                splats[b].normal = -splats[b].normal;
+            }
+            push(&mut heap, splats, &done, b);
+        }
+    }
+}
+
+/// The splat of `s` with its normal field (eq. 4) from the quadric
+/// `h = a x² + b x y + c y² + d x + e y + f` fitted to its points' heights
+/// over its plane: the field's slopes along the quadric's principal
+/// directions (its axes) are minus its curvatures times the radius, its
+/// centre `(x_c, y_c)` minus the slopes `(d, e)`.
+fn finish(g: &Grid, s: &Grown) -> (Splat, bool) {
+    let n = s.normal;
+    let (u0, v0) = tangent_frame(n);
+    let mut splat = Splat::disc(s.centre, n, s.radius).unwrap_or(Splat {
+        center: s.centre,
+        normal: Vec3::Z,
+        u_axis: Vec3::X,
+        v_axis: Vec3::Y,
+        radii: Vec2::splat(s.radius),
+        color: Vec3::ONE,
+        field: NormalField::FLAT,
+        clip: Clip::NONE,
+    });
+    let count = s.members.len() + s.extra.len();
+    if count < FIELD_MIN {
+        return (splat, true);
+    }
+    let mut ata = [[0f64; 6]; 6];
+    let mut atb = [0f64; 6];
+    for &k in s.members.iter().chain(&s.extra) {
+        let q = g.pos[k as usize] - s.centre;
+        let (x, y, z) = (f64::from(u0.dot(q)), f64::from(v0.dot(q)), f64::from(n.dot(q)));
+        let row = [x * x, x * y, y * y, x, y, 1.0];
+        for a in 0..6 {
+            for b in a..6 {
+                ata[a][b] += row[a] * row[b];
+            }
+            atb[a] += row[a] * z;
+        }
+    }
+    for a in 1..6 {
+        let (upper, lower) = ata.split_at_mut(a);
+        for (b, row) in upper.iter().enumerate() {
+            lower[0][b] = row[a];
+        }
+    }
+    let Some([a, b, c, d, e, _]) = solve6(ata, atb) else {
+        return (splat, true);
+    };
+    // The Hessian [[2a, b], [b, 2c]]: its eigenvalues and first direction.
+    let th = 0.5 * b.atan2(a - c);
+    let (sn, cs) = th.sin_cos();
+    let root = ((a - c) * (a - c) + b * b).sqrt();
+    let (k1, k2) = (a + c + root, a + c - root);
+    let (du, dv) = (d * cs + e * sn, -d * sn + e * cs);
+    let r = f64::from(s.radius);
+    let field = NormalField {
+        xc: (-du) as f32,
+        yc: (-dv) as f32,
+        alpha: (-k1 * r) as f32,
+        beta: (-k2 * r) as f32,
+    };
+    let u = u0 * cs as f32 + v0 * sn as f32;
+    if ![field.xc, field.yc, field.alpha, field.beta].iter().all(|x| x.is_finite()) || !u.is_finite() {
+        return (splat, true);
+    }
+    splat.u_axis = u;
+    splat.v_axis = n.cross(u);
+    splat.field = field;
+    (splat, false)
+}
+
+/// Solves `m x = r` by Gaussian elimination with partial pivoting; `None`
+/// when a pivot vanishes against the matrix's scale.
+fn solve6(mut m: [[f64; 6]; 6], mut r: [f64; 6]) -> Option<[f64; 6]> {
+    let scale = m.iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()));
+    if !(scale > 0.0 && scale.is_finite()) {
+        return None;
+    }
+    for col in 0..6 {
+        let piv = (col..6).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;
+        if m[piv][col].abs() <= scale * 1e-13 {
+            return None;
+        }
+        m.swap(col, piv);
+        r.swap(col, piv);
+        let (pivot, pr) = (m[col], r[col]);
+        for (row, rr) in m.iter_mut().zip(r.iter_mut()).enumerate().filter(|(i, _)| *i != col).map(|(_, x)| x) {
+            let f = row[col] / pivot[col];
+            for (x, p) in row.iter_mut().zip(&pivot).skip(col) {
+                *x -= f * p;
+            }
+            *rr -= f * pr;
+        }
+    }
+    Some(std::array::from_fn(|i| r[i] / m[i][i]))
+}
+
+/// Whether [`grow_lean`] grows splats after measuring its gate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GrowWhen {
+    /// Where the gate passes.
+    Gated,
+    /// Whatever the gate found.
+    Always,
+    /// Never (the gate's figures alone).
+    Never,
+}
+
+/// Lean growth over `points` at error `eps`: the gate, and the splats
+/// when `when` says so (see the module's documentation). `progress` is told the
+/// share of the points covered.
+#[must_use]
+pub fn grow_lean(points: &[Vec3], eps: f32, when: GrowWhen, progress: impl Fn(f64)) -> Lean {
+    let t0 = std::time::Instant::now();
+    let g = Grid::build(points, CELL_EPS * eps);
+    let (gate, spacing) = gate(&g, eps);
+    let mut lean = Lean {
+        splats: Vec::new(),
+        gate,
+        outliers: 0,
+        flat_fields: 0,
+        seconds: [t0.elapsed().as_secs_f64(), 0.0, 0.0, 0.0],
+    };
+    let grow_now = match when {
+        GrowWhen::Gated => gate.passes(),
+        GrowWhen::Always => true,
+        GrowWhen::Never => false,
+    };
+    if !grow_now {
+        return lean;
+    }
+    let t1 = std::time::Instant::now();
+    let far = OUTLIER_SPACINGS * spacing;
+    let mut covered = vec![false; g.pos.len()];
+    let mut near = Near::default();
+    let mut grown = Vec::new();
+    let step = (g.pos.len() / 64).max(1);
+    for i in 0..g.pos.len() {
+        if i % step == 0 {
+            progress(i as f64 / g.pos.len() as f64);
+        }
+        if covered[i] {
+            continue;
+        }
+        covered[i] = true;
+        match grow(&g, &mut near, i as u32, eps, far) {
+            Some(s) => {
+                for &k in &s.members {
+                    covered[k as usize] = true;
+                }
+                grown.push(s);
+            }
+            None => lean.outliers += 1,
+        }
+    }
+    let t2 = std::time::Instant::now();
+    orient(&mut grown);
+    let t3 = std::time::Instant::now();
+    for s in &grown {
+        let (splat, flat) = finish(&g, s);
+        lean.flat_fields += usize::from(flat);
+        lean.splats.push(splat);
+    }
+    lean.seconds[1] = (t2 - t1).as_secs_f64();
+    lean.seconds[2] = (t3 - t2).as_secs_f64();
+    lean.seconds[3] = t3.elapsed().as_secs_f64();
+    lean
+}
