@@ -820,8 +820,8 @@ fn lean(mode: LeanMode) -> SplatParams {
 
 /// Lean growth (`splat::lean`) on a clean unit sphere sampled about as
 /// densely as the 200k bunny: its gate passes, every splat faces out, a
-/// fresh sample lies on the splats, and the fields' normals are as near
-/// the sphere's as the stages' splats'.
+/// fresh sample lies on the splats, and the fields' normals are nearer
+/// the sphere's than the stages' splats'.
 #[test]
 fn lean_growth_serves_a_dense_clean_sphere() {
     let c = cloud(sphere(150_000, Vec3::ZERO, 1.0, 0.0));
@@ -838,15 +838,14 @@ fn lean_growth_serves_a_dense_clean_sphere() {
     assert!(on == fresh.len(), "{on} of {}", fresh.len());
     let (stages, _) = generate(&c, &SplatParams::default()).unwrap();
     let (e_lean, e_stages) = (sphere_normal_error(&splats), sphere_normal_error(&stages));
-    eprintln!(
-        "lean {} splats {e_lean:.4} deg, stages {} splats {e_stages:.4} deg; gate {:?}",
-        splats.len(),
-        stages.len(),
-        l.gate
-    );
+    // Measured: lean 0.0059° over 3,513 splats, the stages 0.0249° over
+    // 1,567 (lean growth keeps its points within a quarter of `ϵ` of the
+    // plane, so its splats are smaller).
     assert!(
-        e_lean <= e_stages,
-        "lean {e_lean} deg, stages {e_stages} deg"
+        e_lean < 0.35 * e_stages,
+        "lean {e_lean} deg ({} splats), stages {e_stages} deg ({})",
+        splats.len(),
+        stages.len()
     );
 }
 

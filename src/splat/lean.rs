@@ -37,6 +37,7 @@ use crate::data::{NormalField, Splat};
 use crate::geometry::tangent_frame;
 use crate::splat::clip::Clip;
 use glam::{Vec2, Vec3};
+use rayon::prelude::*;
 use std::collections::BinaryHeap;
 
 /// Points of a seed's first plane fit besides the seed.
@@ -187,11 +188,14 @@ struct Grid {
     h: f32,
     /// Positions in cell order.
     pos: Vec<Vec3>,
-    /// Distinct cells' keys, in order, and where their points start (one
-    /// more entry: the end).
+    /// Distinct cells' keys, in order (a row's cells, along x, in a run),
+    /// and where their points start (one more entry: the end).
     keys: Vec<u64>,
     start: Vec<u32>,
-    /// Open addressing: a cell's index plus one, 0 empty.
+    /// Each row's (y, z) key and its first cell (one more entry: the end).
+    rows: Vec<u64>,
+    row_first: Vec<u32>,
+    /// Open addressing over the rows: a row's index plus one, 0 empty.
     table: Vec<u32>,
     shift: u32,
 }
@@ -208,10 +212,9 @@ impl Grid {
             .enumerate()
             .map(|(i, &p)| (key_of(cell_of(lo, h, p, top)), i as u32))
             .collect();
-        keyed.sort_unstable();
+        keyed.par_sort_unstable();
         let pos = keyed.iter().map(|&(_, i)| points[i as usize]).collect();
-        let mut keys = Vec::new();
-        let mut start = Vec::new();
+        let (mut keys, mut start) = (Vec::new(), Vec::new());
         for (i, &(k, _)) in keyed.iter().enumerate() {
             if keys.last() != Some(&k) {
                 keys.push(k);
@@ -219,15 +222,23 @@ impl Grid {
             }
         }
         start.push(keyed.len() as u32);
-        let bits = (2 * keys.len()).next_power_of_two().trailing_zeros().max(4);
+        let (mut rows, mut row_first) = (Vec::new(), Vec::new());
+        for (c, &k) in keys.iter().enumerate() {
+            if rows.last() != Some(&(k >> AXIS_BITS)) {
+                rows.push(k >> AXIS_BITS);
+                row_first.push(c as u32);
+            }
+        }
+        row_first.push(keys.len() as u32);
+        let bits = (2 * rows.len()).next_power_of_two().trailing_zeros().max(4);
         let shift = 64 - bits;
         let mut table = vec![0u32; 1 << bits];
-        for (c, &k) in keys.iter().enumerate() {
+        for (r, &k) in rows.iter().enumerate() {
             let mut s = slot(k, shift);
             while table[s] != 0 {
                 s = (s + 1) & (table.len() - 1);
             }
-            table[s] = c as u32 + 1;
+            table[s] = r as u32 + 1;
         }
         Grid {
             lo,
@@ -235,6 +246,8 @@ impl Grid {
             pos,
             keys,
             start,
+            rows,
+            row_first,
             table,
             shift,
         }
@@ -244,40 +257,58 @@ impl Grid {
         cell_of(self.lo, self.h, p, (1 << AXIS_BITS) - 1)
     }
 
-    /// The points of cell `c` (none outside the grid).
-    fn points_of(&self, c: [i32; 3]) -> std::ops::Range<u32> {
+    /// The cells of row (`y`, `z`) (none outside the grid), as a range of
+    /// indices into `keys`.
+    fn row(&self, y: i32, z: i32) -> std::ops::Range<usize> {
         let top = (1 << AXIS_BITS) - 1;
-        if c.iter().any(|&x| x < 0 || x > top) {
+        if !(0..=top).contains(&y) || !(0..=top).contains(&z) {
             return 0..0;
         }
-        let k = key_of(c);
+        let k = key_of([0, y, z]) >> AXIS_BITS;
         let mut s = slot(k, self.shift);
         loop {
             let e = self.table[s];
             if e == 0 {
                 return 0..0;
             }
-            let i = e as usize - 1;
-            if self.keys[i] == k {
-                return self.start[i]..self.start[i + 1];
+            let r = e as usize - 1;
+            if self.rows[r] == k {
+                return self.row_first[r] as usize..self.row_first[r + 1] as usize;
             }
             s = (s + 1) & (self.table.len() - 1);
         }
+    }
+
+    /// The points of the cells `x0..=x1` of the row whose cells are
+    /// `cells` (contiguous: the cells are in key order).
+    fn span(&self, cells: &std::ops::Range<usize>, x0: i32, x1: i32) -> std::ops::Range<u32> {
+        let x_of = |c: usize| (self.keys[c] & ((1 << AXIS_BITS) - 1)) as i32;
+        let mut a = cells.start;
+        while a < cells.end && x_of(a) < x0 {
+            a += 1;
+        }
+        let mut b = a;
+        while b < cells.end && x_of(b) <= x1 {
+            b += 1;
+        }
+        self.start[a]..self.start[b]
     }
 
     /// The points of the cells at Chebyshev distance `s` from cell `c`.
     fn shell(&self, c: [i32; 3], s: i32, mut f: impl FnMut(u32)) {
         for z in c[2] - s..=c[2] + s {
             for y in c[1] - s..=c[1] + s {
+                let cells = self.row(y, z);
+                if cells.is_empty() {
+                    continue;
+                }
                 let face = (z - c[2]).abs() == s || (y - c[1]).abs() == s;
                 if face {
-                    for x in c[0] - s..=c[0] + s {
-                        self.points_of([x, y, z]).for_each(&mut f);
-                    }
+                    self.span(&cells, c[0] - s, c[0] + s).for_each(&mut f);
                 } else {
-                    self.points_of([c[0] - s, y, z]).for_each(&mut f);
+                    self.span(&cells, c[0] - s, c[0] - s).for_each(&mut f);
                     if s > 0 {
-                        self.points_of([c[0] + s, y, z]).for_each(&mut f);
+                        self.span(&cells, c[0] + s, c[0] + s).for_each(&mut f);
                     }
                 }
             }
@@ -302,10 +333,10 @@ fn slot(k: u64, shift: u32) -> usize {
 /// A point's neighbours by distance, gathered shell by shell of cells.
 #[derive(Default)]
 struct Near {
-    /// (squared distance, index into the grid's order); sorted.
+    /// (squared distance, index into the grid's order): the first `sorted`
+    /// sorted and nearer than all the rest, the rest in no order.
     cand: Vec<(f32, u32)>,
-    /// The first `done` of `cand` are the nearest of all (returned).
-    done: usize,
+    sorted: usize,
     shell: i32,
     /// Every point within this distance has been gathered.
     sure: f32,
@@ -316,7 +347,7 @@ struct Near {
 impl Near {
     fn start(&mut self, g: &Grid, p: Vec3) {
         self.cand.clear();
-        self.done = 0;
+        self.sorted = 0;
         self.shell = -1;
         self.sure = 0.0;
         self.centre = p;
@@ -324,8 +355,13 @@ impl Near {
         self.widen(g);
     }
 
+    /// Gathers the next shell of cells; false at [`MAX_SHELL`], where the
+    /// rest are sorted as they are.
     fn widen(&mut self, g: &Grid) -> bool {
+        let by = |a: &(f32, u32), b: &(f32, u32)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
         if self.shell >= MAX_SHELL {
+            self.cand[self.sorted..].sort_unstable_by(by);
+            self.sorted = self.cand.len();
             return false;
         }
         self.shell += 1;
@@ -333,27 +369,35 @@ impl Near {
         g.shell(self.cell, self.shell, |j| {
             cand.push((g.pos[j as usize].distance_squared(p), j));
         });
-        // The distance from `p` to the gathered block's faces.
+        // The distance from `p` to the gathered block's faces: a point of
+        // a later shell lies at least this far.
         let q = (p - g.lo) / g.h;
         let s = self.shell as f32;
         let c = self.cell;
         let face = |a: f32, ci: i32| (a - ci as f32 + s).min(ci as f32 + 1.0 + s - a) * g.h;
         self.sure = face(q.x, c[0]).min(face(q.y, c[1])).min(face(q.z, c[2])).max(0.0);
-        // Those returned lie within the old sure distance: they stay first.
-        // (Distance, index) pairs are distinct, so the order is one.
-        cand[self.done..].sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        // Those within it are the nearest of all: moved up and sorted
+        // ((distance, index) pairs are distinct, so the order is one).
+        let sure_sq = self.sure * self.sure;
+        let rest = &mut cand[self.sorted..];
+        let mut within = 0;
+        for i in 0..rest.len() {
+            if rest[i].0 <= sure_sq {
+                rest.swap(i, within);
+                within += 1;
+            }
+        }
+        rest[..within].sort_unstable_by(by);
+        self.sorted += within;
         true
     }
 
     /// The `j`-th nearest (0: the point itself), once every point nearer
-    /// is known; else the `j`-th of those gathered within the last shell.
+    /// is known; else the `j`-th of those gathered within [`MAX_SHELL`].
     fn get(&mut self, g: &Grid, j: usize) -> Option<(f32, u32)> {
         loop {
-            if let Some(&c) = self.cand.get(j)
-                && c.0 <= self.sure * self.sure
-            {
-                self.done = self.done.max(j + 1);
-                return Some(c);
+            if j < self.sorted {
+                return Some(self.cand[j]);
             }
             if !self.widen(g) {
                 return self.cand.get(j).copied();
@@ -399,6 +443,50 @@ const NO_GATE: Gate = Gate {
     border: 1.0,
 };
 
+/// What the gate reads of one sampled point.
+struct Sample {
+    /// Scatter of its nearest about their plane, in `ϵ`.
+    sigma: f32,
+    /// Its [`K0`]-th neighbour's distance, in `ϵ`.
+    dk: f32,
+    hard: bool,
+    hard_eps: bool,
+    border: bool,
+}
+
+/// Point `i`'s [`Sample`] (`None`: too few neighbours, a degenerate fit).
+fn sample(g: &Grid, near: &mut Near, i: usize, eps: f32) -> Option<Sample> {
+    near.start(g, g.pos[i]);
+    let mut idx = Vec::with_capacity(GATE_RING + 1);
+    for j in 0..=GATE_RING {
+        match near.get(g, j) {
+            Some(c) => idx.push(c),
+            None => break,
+        }
+    }
+    if idx.len() <= K0 {
+        return None;
+    }
+    let pts = idx[..=K0].iter().map(|&(_, k)| g.pos[k as usize]);
+    let (c, vals, vecs) = plane_fit(pts.clone());
+    let (c, nrm) = (c.as_vec3(), vecs[0].as_vec3());
+    if !nrm.is_finite() || !c.is_finite() {
+        return None;
+    }
+    let off = pts.map(|q| nrm.dot(q - c).abs()).fold(0.0, f32::max);
+    let p = g.pos[i];
+    let ring = idx.iter().map(|&(_, k)| g.pos[k as usize] - p);
+    let mean = ring.map(|d| d - nrm * nrm.dot(d)).sum::<Vec3>() / idx.len() as f32;
+    let far = idx.last().map_or(0.0, |c| c.0.sqrt());
+    Some(Sample {
+        sigma: ((vals[0].max(0.0) / (K0 + 1) as f64).sqrt() as f32) / eps,
+        dk: idx[K0].0.sqrt() / eps,
+        hard: off > GROW_EPS * eps,
+        hard_eps: off > eps,
+        border: mean.length() > BORDER_OFFSET * far,
+    })
+}
+
 /// The gate's figures over a stride sample of `g`'s points.
 fn gate(g: &Grid, eps: f32) -> (Gate, f32) {
     let n = g.pos.len();
@@ -406,45 +494,17 @@ fn gate(g: &Grid, eps: f32) -> (Gate, f32) {
         return (NO_GATE, f32::INFINITY);
     }
     let stride = n.div_ceil(GATE_SAMPLE).max(1);
-    let mut near = Near::default();
-    let (mut sig, mut dks) = (Vec::new(), Vec::new());
-    let (mut hard, mut hard_eps, mut border) = (0usize, 0usize, 0usize);
-    let mut idx = Vec::with_capacity(GATE_RING + 1);
-    for i in (0..n).step_by(stride) {
-        near.start(g, g.pos[i]);
-        idx.clear();
-        for j in 0..=K0 {
-            match near.get(g, j) {
-                Some(c) => idx.push(c),
-                None => break,
-            }
-        }
-        if idx.len() <= K0 {
-            continue;
-        }
-        let pts = idx.iter().map(|&(_, k)| g.pos[k as usize]);
-        let (c, vals, vecs) = plane_fit(pts.clone());
-        let (c, nrm) = (c.as_vec3(), vecs[0].as_vec3());
-        if !nrm.is_finite() || !c.is_finite() {
-            continue;
-        }
-        sig.push(((vals[0].max(0.0) / idx.len() as f64).sqrt() as f32) / eps);
-        dks.push(idx[K0].0.sqrt() / eps);
-        let off = pts.map(|q| nrm.dot(q - c).abs()).fold(0.0, f32::max);
-        hard += usize::from(off > GROW_EPS * eps);
-        hard_eps += usize::from(off > eps);
-        for j in K0 + 1..=GATE_RING {
-            match near.get(g, j) {
-                Some(c) => idx.push(c),
-                None => break,
-            }
-        }
-        let p = g.pos[i];
-        let ring = idx.iter().map(|&(_, k)| g.pos[k as usize] - p);
-        let mean = ring.map(|d| d - nrm * nrm.dot(d)).sum::<Vec3>() / idx.len() as f32;
-        let far = idx.last().map_or(0.0, |c| c.0.sqrt());
-        border += usize::from(mean.length() > BORDER_OFFSET * far);
-    }
+    let samples: Vec<Sample> = (0..n)
+        .step_by(stride)
+        .collect::<Vec<_>>()
+        .par_iter()
+        .map_init(Near::default, |near, &i| sample(g, near, i, eps))
+        .flatten()
+        .collect();
+    let mut sig: Vec<f32> = samples.iter().map(|s| s.sigma).collect();
+    let mut dks: Vec<f32> = samples.iter().map(|s| s.dk).collect();
+    let count = |f: fn(&Sample) -> bool| samples.iter().filter(|s| f(s)).count();
+    let (hard, hard_eps, border) = (count(|s| s.hard), count(|s| s.hard_eps), count(|s| s.border));
     let sampled = sig.len();
     if sampled == 0 {
         return (NO_GATE, f32::INFINITY);
@@ -590,7 +650,7 @@ fn orient(splats: &mut [Grown]) {
         done[root] = true;
         let push = |heap: &mut BinaryHeap<(u32, u32, u32)>, s: &[Grown], done: &[bool], a: usize| {
             let c = g.cell(s[a].centre);
-            for sh in 0..=reach.min(2) {
+            for sh in 0..=reach.min(1) {
                 g.shell(c, sh, |pj| {
                     let b = order[pj as usize].1 as usize;
                     if !done[b] && s[a].centre.distance(s[b].centre) <= s[a].radius + s[b].radius {
@@ -708,6 +768,40 @@ fn solve6(mut m: [[f64; 6]; 6], mut r: [f64; 6]) -> Option<[f64; 6]> {
     Some(std::array::from_fn(|i| r[i] / m[i][i]))
 }
 
+/// Points a slab of the grid's order holds at most: slabs grow at once,
+/// each seeding only from its own points and covering only them (a splat
+/// takes its neighbours across the slab's ends too), so the splats do not
+/// depend on the threads. Each pair of slabs meeting adds a band of
+/// splats seeded twice.
+const SLAB_POINTS: usize = 50_000;
+
+/// The splats seeded from the points `range` of `g`'s order (their
+/// neighbours anywhere), and how many seeds grew none.
+fn grow_slab(g: &Grid, range: std::ops::Range<usize>, eps: f32, far: f32) -> (Vec<Grown>, usize) {
+    let start = range.start;
+    let mut covered = vec![false; range.len()];
+    let mut near = Near::default();
+    let (mut grown, mut outliers) = (Vec::new(), 0);
+    for i in range.clone() {
+        if covered[i - start] {
+            continue;
+        }
+        covered[i - start] = true;
+        match grow(g, &mut near, i as u32, eps, far) {
+            Some(s) => {
+                for &k in &s.members {
+                    if range.contains(&(k as usize)) {
+                        covered[k as usize - start] = true;
+                    }
+                }
+                grown.push(s);
+            }
+            None => outliers += 1,
+        }
+    }
+    (grown, outliers)
+}
+
 /// Whether [`grow_lean`] grows splats after measuring its gate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GrowWhen {
@@ -719,9 +813,9 @@ pub enum GrowWhen {
     Never,
 }
 
-/// Lean growth over `points` at error `eps`: the gate, and the splats
-/// when `when` says so (see the module's documentation). `progress` is told the
-/// share of the points covered.
+/// Lean growth over `points` at error `eps` (see the module's
+/// documentation): the gate, and the splats when `when` says so;
+/// `progress` is told when growth is done, on the calling thread.
 #[must_use]
 pub fn grow_lean(points: &[Vec3], eps: f32, when: GrowWhen, progress: impl Fn(f64)) -> Lean {
     let t0 = std::time::Instant::now();
@@ -744,36 +838,24 @@ pub fn grow_lean(points: &[Vec3], eps: f32, when: GrowWhen, progress: impl Fn(f6
     }
     let t1 = std::time::Instant::now();
     let far = OUTLIER_SPACINGS * spacing;
-    let mut covered = vec![false; g.pos.len()];
-    let mut near = Near::default();
+    let n = g.pos.len();
+    let slabs = n.div_ceil(SLAB_POINTS).max(1);
+    let per_slab: Vec<(Vec<Grown>, usize)> = (0..slabs)
+        .into_par_iter()
+        .map(|s| grow_slab(&g, s * n / slabs..(s + 1) * n / slabs, eps, far))
+        .collect();
     let mut grown = Vec::new();
-    let step = (g.pos.len() / 64).max(1);
-    for i in 0..g.pos.len() {
-        if i % step == 0 {
-            progress(i as f64 / g.pos.len() as f64);
-        }
-        if covered[i] {
-            continue;
-        }
-        covered[i] = true;
-        match grow(&g, &mut near, i as u32, eps, far) {
-            Some(s) => {
-                for &k in &s.members {
-                    covered[k as usize] = true;
-                }
-                grown.push(s);
-            }
-            None => lean.outliers += 1,
-        }
+    for (g_s, outliers) in per_slab {
+        grown.extend(g_s);
+        lean.outliers += outliers;
     }
+    progress(1.0);
     let t2 = std::time::Instant::now();
     orient(&mut grown);
     let t3 = std::time::Instant::now();
-    for s in &grown {
-        let (splat, flat) = finish(&g, s);
-        lean.flat_fields += usize::from(flat);
-        lean.splats.push(splat);
-    }
+    let finished: Vec<(Splat, bool)> = grown.par_iter().map(|s| finish(&g, s)).collect();
+    lean.flat_fields = finished.iter().filter(|f| f.1).count();
+    lean.splats = finished.into_iter().map(|f| f.0).collect();
     lean.seconds[1] = (t2 - t1).as_secs_f64();
     lean.seconds[2] = (t3 - t2).as_secs_f64();
     lean.seconds[3] = t3.elapsed().as_secs_f64();
