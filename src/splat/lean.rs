@@ -17,7 +17,9 @@
 //! along its principal directions, which become the splat's axes.
 //! Orientation follows a spanning tree over overlapping splats, most
 //! parallel first (Prim), from the splat farthest from the centroid facing
-//! away from it.
+//! away from it. Slabs of [`SLAB_POINTS`] of the grid's order grow at once,
+//! each seeding from its own points only, so the splats are the same for
+//! any number of threads.
 //!
 //! It has none of the pipeline's rules for noise, outliers, thin sheets,
 //! creases or real scans, so it runs only where its [`Gate`] finds a cloud
@@ -25,10 +27,12 @@
 //! grown, the median scatter of a point's nearest about their plane at
 //! most [`GATE_SIGMA`] `ϵ`, at most [`GATE_HARD`] of the points with a
 //! neighbour outside the [`GROW_EPS`] slab, and at most [`GATE_HARD_EPS`]
-//! with one outside the `ϵ` slab (a crease or a corner). Against the mesh,
-//! 200k and 1M points sampled from the bunny rendered 0.3–2.7 dB better
-//! than the pipeline's splats at a sixth of its time; 140k and sparser,
-//! noisy samples and the solids' edges worse, which the gate refuses
+//! with one outside the `ϵ` slab, at most [`GATE_CREASE`] across a crease,
+//! at most [`GATE_BORDER`] at a border. Against the mesh, 200k points
+//! sampled from the bunny rendered 0.09 dB under the stages' splats on
+//! average (-1.12 to +1.29 dB a view) at a fifth of the time and less than
+//! half the memory, 1M points 1.2-2.9 dB over them; 140k points and
+//! sparser, noisy samples and the solids are refused
 //! (`docs/notes/generation.md`, "Issue 54, fifty-sixth session").
 
 use super::fit::plane_fit;
@@ -68,20 +72,21 @@ const OUTLIER_SPACINGS: f32 = 4.0;
 /// Points the gate samples (every `n / GATE_SAMPLE`-th).
 pub const GATE_SAMPLE: usize = 4096;
 
-/// The gate's bound on the median scatter of a point's nearest about their
-/// plane, in `ϵ`: 0.039 on 200k bunny samples (lean better than the
-/// pipeline), 0.050 at 140k and 0.064 at 100k (worse), 0.14 and 0.26 under
-/// noise of 0.16 and 0.31 `ϵ`.
+/// The gate's bound on the median scatter of a sampled point's nearest
+/// about their plane, in `ϵ`: 0.028-0.029 on 200k bunny samples (lean about
+/// as good as the stages), 0.039 at 140k and 0.050 at 100k (up to 1.4 dB
+/// worse), 0.14 and 0.26 under noise of 0.16 and 0.31 `ϵ`, 0.076 on a
+/// survey tile, 0.105 on the noisy scan.
 pub const GATE_SIGMA: f32 = 0.033;
 
 /// The gate's bound on the share of points with a neighbour outside the
-/// [`GROW_EPS`] slab: 7.9 % of the 200k bunny's seeds, 12.2 % at 140k,
-/// 26 % on the solids (their edges).
+/// [`GROW_EPS`] slab: 3.4-4.2 % of the 200k bunny samples', 6.9 % at 140k,
+/// 11.4 % at 100k.
 pub const GATE_HARD: f32 = 0.05;
 
 /// The gate's bound on the share with a neighbour outside the `ϵ` slab:
-/// none on the clean bunny samples, 1.3 % on the solids, 6.8 % on a
-/// survey tile.
+/// at most 0.02 % on the clean 200k bunny samples, 0.17 % on the solids,
+/// 0.93 % on a cube's surface (3 `ϵ` spacing), 2.6 % on a survey tile.
 pub const GATE_HARD_EPS: f32 = 0.005;
 
 /// A point's nearest straddle a crease where their scatter about their
@@ -773,7 +778,7 @@ fn solve6(mut m: [[f64; 6]; 6], mut r: [f64; 6]) -> Option<[f64; 6]> {
 /// takes its neighbours across the slab's ends too), so the splats do not
 /// depend on the threads. Each pair of slabs meeting adds a band of
 /// splats seeded twice.
-const SLAB_POINTS: usize = 50_000;
+pub const SLAB_POINTS: usize = 50_000;
 
 /// The splats seeded from the points `range` of `g`'s order (their
 /// neighbours anywhere), and how many seeds grew none.
