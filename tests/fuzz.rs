@@ -15,7 +15,7 @@ mod common;
 
 use splatray::io::{Format, parse_gaussians, parse_mesh, parse_points, parse_splats};
 use splatray::scene::{build_scene, parse_scene_str};
-use splatray::splat::{SplatParams, generate};
+use splatray::splat::{LeanMode, SplatParams, generate};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -79,6 +79,13 @@ impl Target {
                     // Splat generation on what a reader accepts, while small.
                     if cloud.len() <= 400 {
                         let _ = generate(&cloud, &SplatParams::default());
+                        // Lean growth without its gate: whatever it is
+                        // given, no panic.
+                        let lean = SplatParams {
+                            lean: LeanMode::Always,
+                            ..SplatParams::default()
+                        };
+                        let _ = generate(&cloud, &lean);
                     }
                 }
             }

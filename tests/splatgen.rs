@@ -879,3 +879,30 @@ fn lean_growth_refused_grows_the_stages_splats() {
         assert!(splats == stages, "{name}: not the stages' splats");
     }
 }
+
+/// What the stages refuse or warn of, lean growth's gate refuses too:
+/// the same error for two points and for 100k points on a line (no plane a
+/// seed), the same splats for a small coplanar grid (its borders).
+#[test]
+fn lean_growth_refuses_what_the_stages_refuse() {
+    let gated = lean(LeanMode::Gated);
+    let two = cloud(vec![Vec3::ZERO, Vec3::ONE, Vec3::ONE]);
+    assert_eq!(
+        generate(&two, &gated).unwrap_err(),
+        generate(&two, &SplatParams::default()).unwrap_err()
+    );
+    let line = cloud((0..100_000).map(|i| Vec3::splat(i as f32 * 1e-5)).collect());
+    assert_eq!(
+        generate(&line, &gated).unwrap_err(),
+        GenerateError::Collinear
+    );
+    let grid = cloud(
+        (0..900)
+            .map(|i| Vec3::new((i % 30) as f32, (i / 30) as f32, 2.0))
+            .collect(),
+    );
+    let (splats, rep) = generate(&grid, &gated).unwrap();
+    let refused = rep.lean.as_ref().and_then(|l| l.refused.clone());
+    assert!(refused.is_some(), "{:?}", rep.lean);
+    assert!(splats == generate(&grid, &SplatParams::default()).unwrap().0);
+}

@@ -244,12 +244,13 @@ fn print_generated(args: &SplatArgs, p: &PointsOutcome) {
     if let Some(lean) = &report.lean {
         let g = &lean.gate;
         let measured = format!(
-            "{} points sampled: scatter {:.3} epsilon, {:.1} % curving off the growth slab, {:.2} % off the epsilon slab, {:.2} % across a crease, {:.2} % at a border",
+            "{} points sampled: scatter {:.3} epsilon, {:.1} % curving off the growth slab, {:.2} % off the epsilon slab, {:.2} % across a crease, {:.2} % along lines, {:.2} % at a border",
             g.sampled,
             g.sigma,
             100.0 * g.hard,
             100.0 * g.hard_eps,
             100.0 * g.crease,
+            100.0 * g.line,
             100.0 * g.border
         );
         match &lean.refused {

@@ -644,12 +644,17 @@ fn lean_stages(
     // A few far points widen the box, and `ϵ` with it, past what the
     // stages would take (they leave them out as outliers first).
     let robust = robust_diagonal(points, &vec![true; points.len()], points.len());
-    let spread = (gated && robust < LEAN_SPREAD * diagonal).then(|| {
-        format!(
+    let spread = if !points.iter().all(|p| p.is_finite()) {
+        Some("non-finite coordinates".to_string())
+    } else if robust < LEAN_SPREAD * diagonal {
+        Some(format!(
             "the bounding box is {:.1} % wider than the box of all but the 0.1 % most extreme points (outliers?)",
             100.0 * (diagonal / robust - 1.0)
-        )
-    });
+        ))
+    } else {
+        None
+    }
+    .filter(|_| gated);
     notify(progress, "lean growth", 0.0);
     let when = match (gated, spread.is_some()) {
         (false, _) => super::lean::GrowWhen::Always,

@@ -96,6 +96,15 @@ pub const GATE_HARD_EPS: f32 = 0.005;
 /// (its 99.9th percentile 0.15), the 1M's 0.05 %, the solids' about 3 %.
 pub const CREASE_SCATTER: f32 = 0.12;
 
+/// A sampled point's nearest lie along a line where the second eigenvalue
+/// of their covariance is under this share of the largest (a disc's
+/// nearest about 1/1; a line's 0).
+pub const LINE_SPREAD: f64 = 0.02;
+
+/// The gate's bound on the share of points whose nearest lie along a line
+/// ([`LINE_SPREAD`]): growth needs a plane a seed.
+pub const GATE_LINE: f32 = 0.01;
+
 /// The gate's bound on the share of points across a crease
 /// ([`CREASE_SCATTER`]).
 pub const GATE_CREASE: f32 = 0.01;
@@ -130,6 +139,10 @@ pub struct Gate {
     /// more than [`CREASE_SCATTER`] of their spread (a crease or a corner
     /// between them).
     pub crease: f32,
+    /// Share of sampled points whose nearest lie along a line (a scan
+    /// line, a wire): their spread across under [`LINE_SPREAD`] of their
+    /// spread along.
+    pub line: f32,
     /// Share of sampled points at a border (an open edge or a hole's):
     /// their [`GATE_RING`] nearest lie to one side of them.
     pub border: f32,
@@ -144,6 +157,7 @@ impl Gate {
             && self.hard <= GATE_HARD
             && self.hard_eps <= GATE_HARD_EPS
             && self.crease <= GATE_CREASE
+            && self.line <= GATE_LINE
             && self.border <= GATE_BORDER
     }
 
@@ -162,6 +176,12 @@ impl Gate {
                 "{:.1} % of the points have a neighbour epsilon off their plane (creases or corners; at most {:.1} %)",
                 100.0 * self.hard_eps,
                 100.0 * GATE_HARD_EPS
+            ))
+        } else if self.line > GATE_LINE {
+            Some(format!(
+                "{:.1} % of the points have nearest along a line (scan lines; at most {:.0} %)",
+                100.0 * self.line,
+                100.0 * GATE_LINE
             ))
         } else if self.crease > GATE_CREASE {
             Some(format!(
@@ -445,6 +465,7 @@ const NO_GATE: Gate = Gate {
     hard_eps: 1.0,
     spacing: f32::INFINITY,
     crease: 1.0,
+    line: 1.0,
     border: 1.0,
 };
 
@@ -456,6 +477,7 @@ struct Sample {
     dk: f32,
     hard: bool,
     hard_eps: bool,
+    line: bool,
     border: bool,
 }
 
@@ -488,6 +510,7 @@ fn sample(g: &Grid, near: &mut Near, i: usize, eps: f32) -> Option<Sample> {
         dk: idx[K0].0.sqrt() / eps,
         hard: off > GROW_EPS * eps,
         hard_eps: off > eps,
+        line: vals[1] <= LINE_SPREAD * vals[2],
         border: mean.length() > BORDER_OFFSET * far,
     })
 }
@@ -510,6 +533,7 @@ fn gate(g: &Grid, eps: f32) -> (Gate, f32) {
     let mut dks: Vec<f32> = samples.iter().map(|s| s.dk).collect();
     let count = |f: fn(&Sample) -> bool| samples.iter().filter(|s| f(s)).count();
     let (hard, hard_eps, border) = (count(|s| s.hard), count(|s| s.hard_eps), count(|s| s.border));
+    let line = count(|s| s.line);
     let sampled = sig.len();
     if sampled == 0 {
         return (NO_GATE, f32::INFINITY);
@@ -527,6 +551,7 @@ fn gate(g: &Grid, eps: f32) -> (Gate, f32) {
         hard_eps: hard_eps as f32 / sampled as f32,
         spacing,
         crease: crease as f32 / sampled as f32,
+        line: line as f32 / sampled as f32,
         border: border as f32 / sampled as f32,
     };
     (gate, spacing * eps)
