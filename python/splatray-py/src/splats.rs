@@ -352,7 +352,7 @@ impl Splats {
 #[pyfunction]
 #[pyo3(signature = (points, normals=None, colors=None, viewpoint=None, *, epsilon=None, k=None,
     density=None, ellipses=false, flat_colors=false, creases=None, no_viewpoint=false, thin=None,
-    progress=None))]
+    lean=false, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn splat(
     py: Python<'_>,
@@ -368,6 +368,7 @@ pub fn splat(
     creases: Option<bool>,
     no_viewpoint: bool,
     thin: Option<f64>,
+    lean: bool,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Splats> {
     let given = points.cast::<PointCloud>().ok();
@@ -403,7 +404,7 @@ pub fn splat(
         viewpoint: vp,
         no_viewpoint,
         thin,
-        lean: false,
+        lean,
     }
     .params(cloud);
     let cb = Callback::new(progress);
