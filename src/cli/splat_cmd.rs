@@ -241,30 +241,8 @@ fn print_generated(args: &SplatArgs, p: &PointsOutcome) {
             report.flat_faces, report.face_points
         );
     }
-    if let Some(lean) = &report.lean {
-        let g = &lean.gate;
-        let measured = format!(
-            "{} points sampled: scatter {:.3} epsilon, {:.1} % curving off the growth slab, {:.2} % off the epsilon slab, {:.2} % across a crease, {:.2} % along lines, {:.2} % at a border",
-            g.sampled,
-            g.sigma,
-            100.0 * g.hard,
-            100.0 * g.hard_eps,
-            100.0 * g.crease,
-            100.0 * g.line,
-            100.0 * g.border
-        );
-        match &lean.refused {
-            Some(why) => eprintln!(
-                "splatray: note: lean growth refused: {why} ({measured}); the default stages grew the splats"
-            ),
-            None => {
-                eprintln!(
-                    "splatray: lean growth: {measured}; {} outlier seeds; no creases, noise or holes looked for (the gate found none)",
-                    lean.outliers
-                );
-                return;
-            }
-        }
+    if print_lean(report) {
+        return;
     }
     eprintln!(
         "splatray: large splats over holes: {} (> {}x median radius, centre farther than half a radius from their points), {} (> {}x, kept disc less than half covered by points; {} shrunk to what their points cover, {} small splats added for the points they left)",
@@ -275,6 +253,40 @@ fn print_generated(args: &SplatArgs, p: &PointsOutcome) {
         report.shrunk_over_holes,
         report.added_for_holes,
     );
+}
+
+/// What lean growth's gate found (`--lean`); true when lean growth grew the
+/// splats (the stages' figures about holes then were not measured).
+fn print_lean(report: &crate::splat::SplatReport) -> bool {
+    let Some(lean) = &report.lean else {
+        return false;
+    };
+    let g = &lean.gate;
+    let measured = format!(
+        "{} points sampled: scatter {:.3} epsilon, {:.1} % curving off the growth slab, {:.2} % off the epsilon slab, {:.2} % across a crease, {:.2} % along lines, {:.2} % at a border",
+        g.sampled,
+        g.sigma,
+        100.0 * g.hard,
+        100.0 * g.hard_eps,
+        100.0 * g.crease,
+        100.0 * g.line,
+        100.0 * g.border
+    );
+    match &lean.refused {
+        Some(why) => {
+            eprintln!(
+                "splatray: note: lean growth refused: {why} ({measured}); the default stages grew the splats"
+            );
+            false
+        }
+        None => {
+            eprintln!(
+                "splatray: lean growth: {measured}; {} outlier seeds; no creases, noise or holes looked for (the gate found none)",
+                lean.outliers
+            );
+            true
+        }
+    }
 }
 
 /// A Gaussian file's lines.
