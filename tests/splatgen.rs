@@ -828,6 +828,13 @@ fn lean_growth_serves_a_dense_clean_sphere() {
     let (splats, rep) = generate(&c, &lean(LeanMode::Gated)).unwrap();
     let l = rep.lean.as_ref().expect("a lean report");
     assert!(l.used, "{l:?}");
+    // Measured on the points themselves: every one on a splat; the largest
+    // splat 3.84 times its seed's spacing.
+    assert_eq!(rep.coverage, 1.0);
+    assert!(
+        rep.largest_over_spacing > 1.0 && rep.largest_over_spacing < 4.5,
+        "{rep:?}"
+    );
     assert!(
         splats
             .iter()

@@ -325,7 +325,9 @@ pub struct SplatReport {
     pub lean: Option<LeanReport>,
 }
 
-/// What lean growth ([`super::lean`]) did.
+/// What lean growth ([`super::lean`]) did. Where it grew the splats, the
+/// report's figures of the stages' hole rules (`hollow_large_splats` and
+/// the rest) are not measured (0), and its `noise` is the gate's scatter.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct LeanReport {
     /// Whether it grew the splats (else the gate refused the cloud, and
@@ -641,20 +643,7 @@ fn lean_stages(
         None => (f64::from(params.epsilon_rel) * diagonal) as f32,
     };
     let gated = params.lean == LeanMode::Gated;
-    // A few far points widen the box, and `ϵ` with it, past what the
-    // stages would take (they leave them out as outliers first).
-    let robust = robust_diagonal(points, &vec![true; points.len()], points.len());
-    let spread = if !points.iter().all(|p| p.is_finite()) {
-        Some("non-finite coordinates".to_string())
-    } else if robust < LEAN_SPREAD * diagonal {
-        Some(format!(
-            "the bounding box is {:.1} % wider than the box of all but the 0.1 % most extreme points (outliers?)",
-            100.0 * (diagonal / robust - 1.0)
-        ))
-    } else {
-        None
-    }
-    .filter(|_| gated);
+    let spread = if gated { lean_spread(points, diagonal) } else { None };
     notify(progress, "lean growth", 0.0);
     let when = match (gated, spread.is_some()) {
         (false, _) => super::lean::GrowWhen::Always,
@@ -681,9 +670,16 @@ fn lean_stages(
     report.epsilon = f64::from(epsilon);
     report.k = super::lean::K0;
     report.fallback_normal_fields = lean.flat_fields;
-    report.estimated_normals = points.len();
-    // Every point is taken by a splat but the outlier seeds' own.
-    report.coverage = 1.0 - lean.outliers as f64 / points.len().max(1) as f64;
+    // No normal a point; the scatter the gate measured about the nearest's
+    // planes (curvature in it too) stands for the noise.
+    report.estimated_normals = 0;
+    report.noise = f64::from(lean.gate.sigma) * f64::from(epsilon);
+    report.largest_over_spacing = f64::from(lean.largest_over_spacing);
+    // A point a splat took within ϵ of its plane lies on it (inside its
+    // radius); the rest are looked for on the splats.
+    let unsure = &lean.unsure_points;
+    let off = unsure.len() - count_on_splats(unsure, &splats, epsilon);
+    report.coverage = 1.0 - off as f64 / points.len().max(1) as f64;
     report.mean_radius = mean_radius(&splats);
     if let Some(grown) = grown {
         let mut whole = report.clone();
@@ -704,6 +700,23 @@ fn lean_stages(
         total: t0.elapsed().as_secs_f64(),
     };
     Ok(Some((splats, report.clone(), Vec::new())))
+}
+
+/// Why lean growth must not run on `points` whatever its gate finds: a
+/// non-finite point, or a few far points widening the box (`diagonal`),
+/// and `ϵ` with it, past what the stages would take (they leave them out
+/// as outliers first).
+fn lean_spread(points: &[Vec3], diagonal: f64) -> Option<String> {
+    if !points.iter().all(|p| p.is_finite()) {
+        return Some("non-finite coordinates".to_string());
+    }
+    let robust = robust_diagonal(points, &vec![true; points.len()], points.len());
+    (robust < LEAN_SPREAD * diagonal).then(|| {
+        format!(
+            "the bounding box is {:.1} % wider than the box of all but the 0.1 % most extreme points (outliers?)",
+            100.0 * (diagonal / robust - 1.0)
+        )
+    })
 }
 
 /// Lean growth runs only where the box of all but the 0.1 % most extreme

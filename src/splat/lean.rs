@@ -440,6 +440,11 @@ struct Grown {
     members: Vec<u32>,
     /// The points beyond them within [`REACH`] radii (its field's too).
     extra: Vec<u32>,
+    /// Its seed's distance to its [`K0`]-th neighbour.
+    spacing: f32,
+    /// Grown from a seed whose nearest already left the growth slab: its
+    /// points may lie off its plane by more than `ϵ`.
+    hard: bool,
 }
 
 /// What lean growth made.
@@ -451,6 +456,13 @@ pub struct Lean {
     pub gate: Gate,
     /// Seeds left without a splat as outliers.
     pub outliers: usize,
+    /// The points no splat took within `ϵ` of its plane (an outlier
+    /// seed's, a point off the plane of a splat grown from nearest that
+    /// left the growth slab): to be looked for on the splats.
+    pub unsure_points: Vec<Vec3>,
+    /// The most, over the splats, of its radius over its seed's distance
+    /// to its [`K0`]-th neighbour.
+    pub largest_over_spacing: f32,
     /// Splats whose field stayed flat (too few points, a singular fit).
     pub flat_fields: usize,
     /// Seconds: the grid and the gate, growth, orientation, fields.
@@ -591,9 +603,12 @@ fn grow(g: &Grid, near: &mut Near, i: u32, eps: f32, far: f32) -> Option<Grown> 
             radius: radius * SCALE,
             members,
             extra: Vec::new(),
+            spacing: radius,
+            hard: true,
         });
     }
     let cap = MAX_RADIUS_EPS * eps;
+    let spacing = g.pos[members[K0] as usize].distance(p);
     let mut next_fit = 2 * members.len();
     let mut j = members.len();
     let stop = loop {
@@ -634,6 +649,8 @@ fn grow(g: &Grid, near: &mut Near, i: u32, eps: f32, far: f32) -> Option<Grown> 
         radius: radius * SCALE,
         members,
         extra,
+        spacing,
+        hard: false,
     })
 }
 
@@ -806,12 +823,12 @@ fn solve6(mut m: [[f64; 6]; 6], mut r: [f64; 6]) -> Option<[f64; 6]> {
 pub const SLAB_POINTS: usize = 50_000;
 
 /// The splats seeded from the points `range` of `g`'s order (their
-/// neighbours anywhere), and how many seeds grew none.
-fn grow_slab(g: &Grid, range: std::ops::Range<usize>, eps: f32, far: f32) -> (Vec<Grown>, usize) {
+/// neighbours anywhere), and the seeds that grew none.
+fn grow_slab(g: &Grid, range: std::ops::Range<usize>, eps: f32, far: f32) -> (Vec<Grown>, Vec<u32>) {
     let start = range.start;
     let mut covered = vec![false; range.len()];
     let mut near = Near::default();
-    let (mut grown, mut outliers) = (Vec::new(), 0);
+    let (mut grown, mut outliers) = (Vec::new(), Vec::new());
     for i in range.clone() {
         if covered[i - start] {
             continue;
@@ -826,10 +843,26 @@ fn grow_slab(g: &Grid, range: std::ops::Range<usize>, eps: f32, far: f32) -> (Ve
                 }
                 grown.push(s);
             }
-            None => outliers += 1,
+            None => outliers.push(i as u32),
         }
     }
     (grown, outliers)
+}
+
+/// The points of `g` no splat of `grown` took within `eps` of its plane
+/// (a taken point lies inside the splat's radius).
+fn unsure(g: &Grid, grown: &[Grown], eps: f32) -> Vec<Vec3> {
+    let mut sure = vec![false; g.pos.len()];
+    for s in grown {
+        for &k in &s.members {
+            let q = g.pos[k as usize];
+            if !s.hard || s.normal.dot(q - s.centre).abs() <= eps {
+                sure[k as usize] = true;
+            }
+        }
+    }
+    let off = sure.iter().zip(&g.pos).filter(|(s, _)| !**s);
+    off.map(|(_, &p)| p).collect()
 }
 
 /// Whether [`grow_lean`] grows splats after measuring its gate.
@@ -855,6 +888,8 @@ pub fn grow_lean(points: &[Vec3], eps: f32, when: GrowWhen, progress: impl Fn(f6
         splats: Vec::new(),
         gate,
         outliers: 0,
+        unsure_points: Vec::new(),
+        largest_over_spacing: 0.0,
         flat_fields: 0,
         seconds: [t0.elapsed().as_secs_f64(), 0.0, 0.0, 0.0],
     };
@@ -870,15 +905,21 @@ pub fn grow_lean(points: &[Vec3], eps: f32, when: GrowWhen, progress: impl Fn(f6
     let far = OUTLIER_SPACINGS * spacing;
     let n = g.pos.len();
     let slabs = n.div_ceil(SLAB_POINTS).max(1);
-    let per_slab: Vec<(Vec<Grown>, usize)> = (0..slabs)
+    let per_slab: Vec<(Vec<Grown>, Vec<u32>)> = (0..slabs)
         .into_par_iter()
         .map(|s| grow_slab(&g, s * n / slabs..(s + 1) * n / slabs, eps, far))
         .collect();
     let mut grown = Vec::new();
     for (g_s, outliers) in per_slab {
         grown.extend(g_s);
-        lean.outliers += outliers;
+        lean.outliers += outliers.len();
     }
+    lean.unsure_points = unsure(&g, &grown, eps);
+    lean.largest_over_spacing = grown
+        .iter()
+        .map(|s| s.radius / s.spacing)
+        .filter(|x| x.is_finite())
+        .fold(0.0, f32::max);
     progress(1.0);
     let t2 = std::time::Instant::now();
     orient(&mut grown);
