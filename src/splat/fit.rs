@@ -194,6 +194,14 @@ pub fn quadric_fit(offsets: &[Vec3], n: Vec3, tol: f32) -> Option<f32> {
 /// One least-squares row of a height field: `(1, x, y, x², xy, y²)` and `h`.
 pub(crate) type HeightRow = ([f64; 6], f64);
 
+/// The axes `(n, u, v)` of [`height_rows`]' height field (`x` along `u`,
+/// `y` along `v`, `h` along `n`); `None` for a zero normal.
+pub(crate) fn height_axes(n: Vec3) -> Option<(DVec3, DVec3, DVec3)> {
+    let n = n.as_dvec3().try_normalize()?;
+    let u = n.any_orthonormal_vector();
+    Some((n, u, n.cross(u)))
+}
+
 /// The rows `(1, x, y, x², xy, y²; h)` of the height field over the plane
 /// of normal `n` through the origin, `offsets` scaled into the unit ball,
 /// and that scale; `None` for fewer than `min_points`, a zero normal or no
@@ -203,9 +211,7 @@ pub(crate) fn height_rows(
     n: Vec3,
     min_points: usize,
 ) -> Option<(Vec<HeightRow>, f64)> {
-    let n = n.as_dvec3().try_normalize()?;
-    let u = n.any_orthonormal_vector();
-    let v = n.cross(u);
+    let (n, u, v) = height_axes(n)?;
     // The longest offset's length: the root of the largest square (a
     // root is monotonic and correctly rounded, so it is the largest of
     // the roots, bit for bit; NaN passed over either way).

@@ -633,11 +633,7 @@ fn lean_stages(
     t0: Instant,
 ) -> Result<Option<Stages>, GenerateError> {
     let points = &cloud.positions;
-    let (lo, hi) = points.iter().fold(
-        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
-        |(a, b), p| (a.min(*p), b.max(*p)),
-    );
-    let diagonal = f64::from((hi - lo).length());
+    let diagonal = box_diagonal(points);
     let epsilon = match params.epsilon_abs {
         Some(e) => (e / frame.scale) as f32,
         None => (f64::from(params.epsilon_rel) * diagonal) as f32,
@@ -739,12 +735,17 @@ fn graph_stage(
     if params.remove_outliers {
         drop_outliers(&mut w, report);
     }
-    let (lo, hi) = w.points.iter().fold(
+    report.bbox_diagonal = box_diagonal(&w.points);
+    Ok(w)
+}
+
+/// The diagonal of `points`' bounding box.
+fn box_diagonal(points: &[Vec3]) -> f64 {
+    let (lo, hi) = points.iter().fold(
         (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
         |(a, b), p| (a.min(*p), b.max(*p)),
     );
-    report.bbox_diagonal = f64::from((hi - lo).length());
-    Ok(w)
+    f64::from((hi - lo).length())
 }
 
 /// The surface growth reads: points (moved onto their local surfaces

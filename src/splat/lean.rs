@@ -35,10 +35,9 @@
 //! sparser, noisy samples and the solids are refused
 //! (`docs/notes/generation.md`, "Issue 54, fifty-sixth session").
 
-use super::fit::plane_fit;
+use super::fit::{height_axes, height_rows, normal_equations, plane_fit, solve6};
 use super::grow::MAX_RADIUS_EPS;
 use crate::data::{NormalField, Splat};
-use crate::geometry::tangent_frame;
 use crate::splat::clip::Clip;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -535,10 +534,9 @@ fn gate(g: &Grid, eps: f32) -> (Gate, f32) {
     }
     let stride = n.div_ceil(GATE_SAMPLE).max(1);
     let samples: Vec<Sample> = (0..n)
+        .into_par_iter()
         .step_by(stride)
-        .collect::<Vec<_>>()
-        .par_iter()
-        .map_init(Near::default, |near, &i| sample(g, near, i, eps))
+        .map_init(Near::default, |near, i| sample(g, near, i, eps))
         .flatten()
         .collect();
     let mut sig: Vec<f32> = samples.iter().map(|s| s.sigma).collect();
@@ -729,7 +727,6 @@ fn orient(splats: &mut [Grown]) {
 /// centre `(x_c, y_c)` minus the slopes `(d, e)`.
 fn finish(g: &Grid, s: &Grown) -> (Splat, bool) {
     let n = s.normal;
-    let (u0, v0) = tangent_frame(n);
     let mut splat = Splat::disc(s.centre, n, s.radius).unwrap_or(Splat {
         center: s.centre,
         normal: Vec3::Z,
@@ -740,32 +737,19 @@ fn finish(g: &Grid, s: &Grown) -> (Splat, bool) {
         field: NormalField::FLAT,
         clip: Clip::NONE,
     });
-    let count = s.members.len() + s.extra.len();
-    if count < FIELD_MIN {
-        return (splat, true);
-    }
-    let mut ata = [[0f64; 6]; 6];
-    let mut atb = [0f64; 6];
-    for &k in s.members.iter().chain(&s.extra) {
-        let q = g.pos[k as usize] - s.centre;
-        let (x, y, z) = (f64::from(u0.dot(q)), f64::from(v0.dot(q)), f64::from(n.dot(q)));
-        let row = [x * x, x * y, y * y, x, y, 1.0];
-        for a in 0..6 {
-            for b in a..6 {
-                ata[a][b] += row[a] * row[b];
-            }
-            atb[a] += row[a] * z;
-        }
-    }
-    for a in 1..6 {
-        let (upper, lower) = ata.split_at_mut(a);
-        for (b, row) in upper.iter().enumerate() {
-            lower[0][b] = row[a];
-        }
-    }
-    let Some([a, b, c, d, e, _]) = solve6(ata, atb) else {
+    let offsets: Vec<Vec3> = (s.members.iter().chain(&s.extra))
+        .map(|&k| g.pos[k as usize] - s.centre)
+        .collect();
+    // The fit of `fit::height_rows`: offsets scaled into the unit ball,
+    // terms `1, x, y, x², xy, y²` over its axes.
+    let (Some((rows, scale)), Some((_, u0, v0))) = (height_rows(&offsets, n, FIELD_MIN), height_axes(n)) else {
         return (splat, true);
     };
+    let (ata, atb) = normal_equations(&rows);
+    let Some([_, d, e, a, b, c]) = solve6(ata, atb) else {
+        return (splat, true);
+    };
+    let (a, b, c) = (a / scale, b / scale, c / scale);
     // The Hessian [[2a, b], [b, 2c]]: its eigenvalues and first direction.
     let th = 0.5 * b.atan2(a - c);
     let (sn, cs) = th.sin_cos();
@@ -779,7 +763,7 @@ fn finish(g: &Grid, s: &Grown) -> (Splat, bool) {
         alpha: (-k1 * r) as f32,
         beta: (-k2 * r) as f32,
     };
-    let u = u0 * cs as f32 + v0 * sn as f32;
+    let u = (u0 * cs + v0 * sn).as_vec3();
     if ![field.xc, field.yc, field.alpha, field.beta].iter().all(|x| x.is_finite()) || !u.is_finite() {
         return (splat, true);
     }
@@ -787,32 +771,6 @@ fn finish(g: &Grid, s: &Grown) -> (Splat, bool) {
     splat.v_axis = n.cross(u);
     splat.field = field;
     (splat, false)
-}
-
-/// Solves `m x = r` by Gaussian elimination with partial pivoting; `None`
-/// when a pivot vanishes against the matrix's scale.
-fn solve6(mut m: [[f64; 6]; 6], mut r: [f64; 6]) -> Option<[f64; 6]> {
-    let scale = m.iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()));
-    if !(scale > 0.0 && scale.is_finite()) {
-        return None;
-    }
-    for col in 0..6 {
-        let piv = (col..6).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;
-        if m[piv][col].abs() <= scale * 1e-13 {
-            return None;
-        }
-        m.swap(col, piv);
-        r.swap(col, piv);
-        let (pivot, pr) = (m[col], r[col]);
-        for (row, rr) in m.iter_mut().zip(r.iter_mut()).enumerate().filter(|(i, _)| *i != col).map(|(_, x)| x) {
-            let f = row[col] / pivot[col];
-            for (x, p) in row.iter_mut().zip(&pivot).skip(col) {
-                *x -= f * p;
-            }
-            *rr -= f * pr;
-        }
-    }
-    Some(std::array::from_fn(|i| r[i] / m[i][i]))
 }
 
 /// Points a slab of the grid's order holds at most: slabs grow at once,
