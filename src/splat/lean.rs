@@ -652,59 +652,68 @@ fn grow(g: &Grid, near: &mut Near, i: u32, eps: f32, far: f32) -> Option<Grown> 
     })
 }
 
-/// Orients the splats' normals along a spanning tree over splats whose
-/// discs meet, most parallel first, from the splat farthest from the
+/// Orients the splats' normals along a spanning tree over splats that took
+/// a point in common, most parallel first, from the splat farthest from the
 /// centroid facing away from it (each part of the tree from its own).
-fn orient(splats: &mut [Grown]) {
+/// Sharing a point, not overlapping discs, makes two splats neighbours: the
+/// discs on the two faces of a thin sheet (a bunny's ear) overlap and stand
+/// nearly parallel, and joining them would turn one face inside out; a
+/// splat takes only points within its slab, never the far face's.
+fn orient(splats: &mut [Grown], points: usize) {
     let n = splats.len();
     if n == 0 {
         return;
     }
-    let mean_r = splats.iter().map(|s| s.radius).sum::<f32>() / n as f32;
-    let centres: Vec<Vec3> = splats.iter().map(|s| s.centre).collect();
-    let h = 2.0 * mean_r.max(f32::MIN_POSITIVE);
-    let g = Grid::build(&centres, h);
-    // The grid's order back to splat indices (its sort is by (key, index)).
-    let top = (1 << AXIS_BITS) - 1;
-    let mut order: Vec<(u64, u32)> = centres
-        .iter()
-        .enumerate()
-        .map(|(i, &c)| (key_of(cell_of(g.lo, h, c, top)), i as u32))
-        .collect();
-    order.sort_unstable();
-    let centroid = centres.iter().copied().sum::<Vec3>() / n as f32;
-    let away = |s: &mut Grown| {
-        if s.normal.dot(s.centre - centroid) < 0.0 {
-            s.normal = -s.normal;
+    // Each point's splats, as compressed rows.
+    let mut start = vec![0u32; points + 1];
+    for s in splats.iter() {
+        for &k in &s.members {
+            start[k as usize + 1] += 1;
         }
-    };
+    }
+    for i in 0..points {
+        start[i + 1] += start[i];
+    }
+    let mut at = start.clone();
+    let mut took = vec![0u32; start[points] as usize];
+    for (i, s) in splats.iter().enumerate() {
+        for &k in &s.members {
+            took[at[k as usize] as usize] = i as u32;
+            at[k as usize] += 1;
+        }
+    }
+    let centroid = splats.iter().map(|s| s.centre).sum::<Vec3>() / n as f32;
     let mut done = vec![false; n];
+    // The last splat that pushed each splat, so that one pushes it once.
+    let mut seen = vec![u32::MAX; n];
     let mut heap = BinaryHeap::new();
-    let reach = (2.0 * splats.iter().map(|s| s.radius).fold(0.0, f32::max) / h).ceil() as i32;
     let mut by_distance: Vec<u32> = (0..n as u32).collect();
     by_distance.sort_unstable_by(|&a, &b| {
-        let (da, db) = (centres[a as usize].distance_squared(centroid), centres[b as usize].distance_squared(centroid));
+        let (da, db) = (splats[a as usize].centre.distance_squared(centroid), splats[b as usize].centre.distance_squared(centroid));
         db.total_cmp(&da).then(a.cmp(&b))
     });
+    let mut push = |heap: &mut BinaryHeap<(u32, u32, u32)>, s: &[Grown], done: &[bool], a: usize| {
+        for &k in &s[a].members {
+            for &b in &took[start[k as usize] as usize..start[k as usize + 1] as usize] {
+                let bu = b as usize;
+                if !done[bu] && seen[bu] != a as u32 {
+                    seen[bu] = a as u32;
+                    let w = s[a].normal.dot(s[bu].normal).abs();
+                    heap.push(((w * 1e6) as u32, u32::MAX - b, a as u32));
+                }
+            }
+        }
+    };
     for &root in &by_distance {
         let root = root as usize;
         if done[root] {
             continue;
         }
-        away(&mut splats[root]);
+        let s = &mut splats[root];
+        if s.normal.dot(s.centre - centroid) < 0.0 {
+            s.normal = -s.normal;
+        }
         done[root] = true;
-        let push = |heap: &mut BinaryHeap<(u32, u32, u32)>, s: &[Grown], done: &[bool], a: usize| {
-            let c = g.cell(s[a].centre);
-            for sh in 0..=reach.min(1) {
-                g.shell(c, sh, |pj| {
-                    let b = order[pj as usize].1 as usize;
-                    if !done[b] && s[a].centre.distance(s[b].centre) <= s[a].radius + s[b].radius {
-                        let w = s[a].normal.dot(s[b].normal).abs();
-                        heap.push(((w * 1e6) as u32, u32::MAX - b as u32, a as u32));
-                    }
-                });
-            }
-        };
         push(&mut heap, splats, &done, root);
         while let Some((_, b, a)) = heap.pop() {
             let (a, b) = (a as usize, (u32::MAX - b) as usize);
@@ -880,7 +889,7 @@ pub fn grow_lean(points: &[Vec3], eps: f32, when: GrowWhen, progress: impl Fn(f6
         .fold(0.0, f32::max);
     progress(1.0);
     let t2 = std::time::Instant::now();
-    orient(&mut grown);
+    orient(&mut grown, g.pos.len());
     let t3 = std::time::Instant::now();
     let finished: Vec<(Splat, bool)> = grown.par_iter().map(|s| finish(&g, s)).collect();
     lean.flat_fields = finished.iter().filter(|f| f.1).count();
