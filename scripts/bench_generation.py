@@ -8,7 +8,7 @@ time, the medians of the pair-by-pair ratios, and points per second of
 each generation stage (from the run's own `--report`).
 
     python/.venv/bin/python scripts/bench_generation.py [--pairs 3]
-        [--baseline OLD_SPLATRAY] [--only bunny-200k,survey] [--large] [--lean]
+        [--baseline OLD_SPLATRAY] [--only bunny-200k,survey] [--large] [--stages]
 
 Clouds (made once into --work, default target/bench-generation):
   bunny-200k, bunny-2m  points sampled uniformly from the bundled bunny
@@ -180,8 +180,8 @@ def main():
     ap.add_argument("--pairs", type=int, default=3)
     ap.add_argument("--only", help="comma-separated cloud names")
     ap.add_argument("--large", action="store_true", help="also the 3.6M-point survey")
-    ap.add_argument("--lean", action="store_true",
-                    help="also `splat --lean` (lean growth where its gate allows), with its ratio to Open3D")
+    ap.add_argument("--stages", action="store_true",
+                    help="also `splat --no-lean` (the stages where lean growth's gate would pass)")
     ap.add_argument("--work", default=str(ROOT / "target/bench-generation"))
     a = ap.parse_args()
     names = ["bunny-200k", "bunny-2m", "survey", "noisy-scan", "sphere"] + (["survey-3.6m"] if a.large else [])
@@ -201,8 +201,8 @@ def main():
                     "no-creases": splat_cmd(a.bin, cloud, tmp / "b.ply", tmp / "b.json", ["--no-creases"])}
             if a.baseline:
                 cmds["baseline"] = splat_cmd(a.baseline, cloud, tmp / "c.ply", tmp / "c.json")
-            if a.lean:
-                cmds["lean"] = splat_cmd(a.bin, cloud, tmp / "d.ply", tmp / "d.json", ["--lean"])
+            if a.stages:
+                cmds["stages"] = splat_cmd(a.bin, cloud, tmp / "d.ply", tmp / "d.json", ["--no-lean"])
             times = {k: [] for k in cmds}
             o3d = have_o3d
             for _ in range(a.pairs):
@@ -221,11 +221,8 @@ def main():
             med = {k: statistics.median(v) for k, v in times.items()}
             ratio = {k: statistics.median(x / y for x, y in zip(times["splat"], v))
                      for k, v in times.items() if k != "splat"}
-            if "lean" in times and "open3d" in times:
-                ratio["lean/open3d"] = statistics.median(
-                    x / y for x, y in zip(times["lean"], times["open3d"]))
-                used = (json.loads((tmp / "d.json").read_text()).get("lean") or {}).get("used")
-                print(f"{name}: lean growth {'used' if used else 'refused by its gate'}", flush=True)
+            used = (rep.get("lean") or {}).get("used")
+            print(f"{name}: lean growth {'used' if used else 'refused by its gate'}", flush=True)
             # A stage that found nothing to do (trimming without a viewpoint,
             # colours of a cloud without them) takes microseconds: no rate.
             stages = {k: v for k, v in s.items() if k not in ("total",) and v >= 1e-3}
@@ -238,14 +235,13 @@ def main():
                   + "; points/s by stage " + ", ".join(f"{k} {n / v / 1e3:.0f}k" for k, v in stages.items()),
                   flush=True)
     print()
-    cols = ["splat"] + [k for k in ("no-creases", "baseline", "lean", "open3d") if any(k in r[2] for r in rows)]
-    extra = ["lean/open3d"] if any("lean/open3d" in r[3] for r in rows) else []
+    cols = ["splat"] + [k for k in ("no-creases", "baseline", "stages", "open3d") if any(k in r[2] for r in rows)]
     print("| cloud | points | " + " | ".join(f"{c} s" for c in cols) + " | "
-          + " | ".join(f"splat / {c}" for c in cols[1:]) + "".join(" | lean / open3d" for _ in extra) + " |")
-    print("|---|---:|" + "---:|" * (2 * len(cols) - 1 + len(extra)))
+          + " | ".join(f"splat / {c}" for c in cols[1:]) + " |")
+    print("|---|---:|" + "---:|" * (2 * len(cols) - 1))
     for name, pts, med, ratio, _, _ in rows:
         cells = [f"{med[c]:.2f}" if c in med else "–" for c in cols]
-        rcells = [f"{ratio[c]:.2f}" if c in ratio else "–" for c in cols[1:] + extra]
+        rcells = [f"{ratio[c]:.2f}" if c in ratio else "–" for c in cols[1:]]
         print(f"| {name} | {pts:,} | " + " | ".join(cells) + " | " + " | ".join(rcells) + " |")
 
 

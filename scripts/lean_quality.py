@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Lean growth (`splat --lean`) against the default stages, measured
+"""Lean growth (`splat`, the default) against the stages (`splat --no-lean`), measured
 against the bunny mesh: for each seed, `splatray sample` draws POINTS
 points from scenes/data/bunny-mesh.ply (positions only, as a scan gives
 them), both make splats, and `compare --truth` renders each at four views
@@ -98,14 +98,14 @@ def main():
     work = Path(a.work)
     work.mkdir(parents=True, exist_ok=True)
     diffs = []
-    print("| seed | view | default dB | lean dB | default normal | lean normal | default false hits | lean false hits |")
+    print("| seed | view | stages dB | lean dB | stages normal | lean normal | stages false hits | lean false hits |")
     print("|---:|---|---:|---:|---:|---:|---:|---:|")
     for seed in a.seeds.split(","):
         full, cloud = work / f"s{seed}-normals.ply", work / f"s{seed}.ply"
         run([a.bin, "sample", MESH, "-n", a.points, "--seed", seed, "-o", full])
         positions_only(full, cloud)
         rows = {}
-        for kind, extra in (("default", []), ("lean", ["--lean"])):
+        for kind, extra in (("stages", ["--no-lean"]), ("lean", [])):
             out = work / f"s{seed}-{kind}.ply"
             r = run([a.bin, "splat", cloud, "-o", out, "--holdout", "0"] + extra)
             if kind == "lean":
@@ -113,11 +113,11 @@ def main():
                 print(f"<!-- seed {seed}: {note[0] if note else 'no lean line'} -->")
             rows[kind] = views(a.bin, out, work)
         for name in VIEWS:
-            d, l = rows["default"][name], rows["lean"][name]
+            d, l = rows["stages"][name], rows["lean"][name]
             diffs.append(l[0] - d[0])
             print(f"| {seed} | {name} | {d[0]:.2f} | {l[0]:.2f} | {d[1]:.3f}° | {l[1]:.3f}° | "
                   f"{100 * d[2]:.3f} % | {100 * l[2]:.3f} % |", flush=True)
-    print(f"\nlean over default: mean {sum(diffs) / len(diffs):+.2f} dB, "
+    print(f"\nlean over the stages: mean {sum(diffs) / len(diffs):+.2f} dB, "
           f"from {min(diffs):+.2f} to {max(diffs):+.2f} dB over {len(diffs)} views")
 
 

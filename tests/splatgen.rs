@@ -520,27 +520,40 @@ fn windowed_held_out_coverage_tests_the_window_cores() {
 }
 
 /// The number of splats follows epsilon and the surface, not the sampling
-/// density: eight times the points on a sphere give about as many splats
-/// (with a growth cap of 12 k-th neighbour distances alone: 106 and 493).
+/// density: eight times the points on a sphere give about as many splats,
+/// grown by the stages (with a growth cap of 12 k-th neighbour distances
+/// alone: 106 and 493) and by lean growth.
 #[test]
 fn splat_count_does_not_follow_the_density() {
     // Growth itself: 160k points would be thinned unasked at this ϵ.
     let params = SplatParams {
         epsilon_rel: 0.03,
         auto_thin: false,
-        ..SplatParams::default()
+        ..lean(LeanMode::Off)
     };
-    let count = |n: usize| {
+    let count = |n: usize, params: &SplatParams| {
         // (The grown-from coverage, 1 by construction, is not checked:
         // held-out coverage is, in the tests above.)
-        let (splats, _) = generate(&cloud(sphere(n, Vec3::ZERO, 1.0, 0.0)), &params).unwrap();
+        let (splats, _) = generate(&cloud(sphere(n, Vec3::ZERO, 1.0, 0.0)), params).unwrap();
         splats.len()
     };
-    let (sparse, dense) = (count(20_000), count(160_000));
-    eprintln!("{sparse} splats from 20k points, {dense} from 160k");
+    let (sparse, dense) = (count(20_000, &params), count(160_000, &params));
+    eprintln!("stages: {sparse} splats from 20k points, {dense} from 160k");
     assert!(
         (dense as f64) < 1.3 * sparse as f64,
         "{sparse} splats from 20k points, {dense} from 160k"
+    );
+    let lean_params = SplatParams {
+        lean: LeanMode::Gated,
+        ..params
+    };
+    let (sparse, dense) = (count(20_000, &lean_params), count(160_000, &lean_params));
+    eprintln!("lean growth: {sparse} splats from 20k points, {dense} from 160k");
+    // Measured: 126 and 165 (its slab of a quarter of ϵ holds the
+    // splats of a denser cloud a little smaller).
+    assert!(
+        (dense as f64) < 1.4 * sparse as f64,
+        "lean growth: {sparse} splats from 20k points, {dense} from 160k"
     );
 }
 
@@ -624,9 +637,10 @@ fn sphere_normal_error(splats: &[Splat]) -> f64 {
 /// splats those of `--thin 0` bit for bit.
 #[test]
 fn a_cloud_far_denser_than_epsilon_needs_is_thinned_unasked() {
+    // Thinning is the stages' (lean growth takes every point).
     let base = SplatParams {
         epsilon_rel: 0.03,
-        ..SplatParams::default()
+        ..lean(LeanMode::Off)
     };
     let off = SplatParams {
         auto_thin: false,
@@ -675,11 +689,13 @@ fn a_cloud_far_denser_than_epsilon_needs_is_thinned_unasked() {
 #[test]
 fn a_cloud_far_denser_than_its_splats_need_is_thinned_at_one_epsilon() {
     let dense = cloud(sphere(3_200_000, Vec3::ZERO, 1.0, 0.0));
+    // Thinning is the stages' (lean growth takes every point).
+    let stages = lean(LeanMode::Off);
     let off = SplatParams {
         auto_thin: false,
-        ..SplatParams::default()
+        ..stages.clone()
     };
-    let (auto, rep) = generate(&dense, &SplatParams::default()).unwrap();
+    let (auto, rep) = generate(&dense, &stages).unwrap();
     let (whole, _) = generate(&dense, &off).unwrap();
     let dropped: usize = (rep.skipped_points.iter())
         .filter(|s| s.reason.contains("cell 1 epsilon wide"))
@@ -843,7 +859,7 @@ fn lean_growth_serves_a_dense_clean_sphere() {
     let fresh = sphere(20_000, Vec3::ZERO, 1.0, 0.37);
     let on = count_on_splats(&fresh, &splats, rep.epsilon as f32);
     assert!(on == fresh.len(), "{on} of {}", fresh.len());
-    let (stages, _) = generate(&c, &SplatParams::default()).unwrap();
+    let (stages, _) = generate(&c, &lean(LeanMode::Off)).unwrap();
     let (e_lean, e_stages) = (sphere_normal_error(&splats), sphere_normal_error(&stages));
     // Measured: lean 0.0059° over 3,513 splats, the stages 0.0249° over
     // 1,567 (lean growth keeps its points within a quarter of `ϵ` of the
@@ -882,7 +898,7 @@ fn lean_growth_refused_grows_the_stages_splats() {
         assert!(!l.used, "{name}: {l:?}");
         let refused = l.refused.as_deref().unwrap_or("");
         assert!(refused.contains(why), "{name}: {refused}");
-        let (stages, _) = generate(&c, &SplatParams::default()).unwrap();
+        let (stages, _) = generate(&c, &lean(LeanMode::Off)).unwrap();
         assert!(splats == stages, "{name}: not the stages' splats");
     }
 }
@@ -896,7 +912,7 @@ fn lean_growth_refuses_what_the_stages_refuse() {
     let two = cloud(vec![Vec3::ZERO, Vec3::ONE, Vec3::ONE]);
     assert_eq!(
         generate(&two, &gated).unwrap_err(),
-        generate(&two, &SplatParams::default()).unwrap_err()
+        generate(&two, &lean(LeanMode::Off)).unwrap_err()
     );
     let line = cloud((0..100_000).map(|i| Vec3::splat(i as f32 * 1e-5)).collect());
     assert_eq!(
@@ -911,7 +927,7 @@ fn lean_growth_refuses_what_the_stages_refuse() {
     let (splats, rep) = generate(&grid, &gated).unwrap();
     let refused = rep.lean.as_ref().and_then(|l| l.refused.clone());
     assert!(refused.is_some(), "{:?}", rep.lean);
-    assert!(splats == generate(&grid, &SplatParams::default()).unwrap().0);
+    assert!(splats == generate(&grid, &lean(LeanMode::Off)).unwrap().0);
 }
 
 /// Lean growth orients the two faces of a thin sheet apart: flattened

@@ -538,8 +538,9 @@ fn compare_as_triangles_renders_the_meshes_beside_the_splats() {
         (Some(1.0), Some(1.0)),
         "{a}"
     );
-    // The splats against the exact triangles: measured 34.36 dB at
-    // 80 × 60 (34.50 at 400 × 300), the same on every backend.
+    // The splats against the exact triangles: measured 35.26 dB at
+    // 80 × 60, the same on every backend (the stages' splats, before
+    // lean growth grew the bunny's by default: 34.36).
     let psnr: Vec<f64> = t["splats_psnr_db"]
         .as_array()
         .unwrap()
@@ -547,7 +548,7 @@ fn compare_as_triangles_renders_the_meshes_beside_the_splats() {
         .map(|p| p.as_f64().unwrap())
         .collect();
     assert!(
-        psnr.iter().all(|&p| p == psnr[0] && p > 34.0 && p < 34.7),
+        psnr.iter().all(|&p| p == psnr[0] && p > 35.0 && p < 35.5),
         "{psnr:?}"
     );
     // No mesh to turn into triangles: refused before rendering, one line.

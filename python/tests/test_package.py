@@ -74,25 +74,33 @@ def test_numpy_splats_and_render_are_the_cli_bytes(binary, points, cli, tmp_path
 
 
 def test_lean_growth_is_the_cli_lean_bytes(binary, points, tmp_path):
-    """lean=True is --lean: on a dense clean sphere its gate passes and the
-    file is the CLI's bytes; on the noisy bunny sample it refuses, says why,
-    and the splats are the default's."""
+    """Lean growth by default: on a dense clean sphere its gate passes and
+    the file is the CLI's bytes; lean=False is --no-lean, the stages; on the
+    noisy bunny sample it refuses, says why, and the splats are the
+    stages'."""
     n = 150_000
     i = np.arange(n) + 0.5
     y = 1.0 - 2.0 * i / n
     t = np.pi * (3.0 - np.sqrt(5.0)) * np.arange(n)
     r = np.sqrt(1.0 - y * y)
     sphere = np.c_[r * np.cos(t), y, r * np.sin(t)]
-    lean = splatray.splat(sphere, lean=True)
+    lean = splatray.splat(sphere)
     assert lean.report["generation"]["lean"]["used"] is True
     np.savetxt(tmp_path / "sphere.xyz", sphere, fmt="%.17g")
-    run(binary, "splat", str(tmp_path / "sphere.xyz"), "--lean", "--holdout", "0", "-o", str(tmp_path / "cli.ply"))
+    xyz = str(tmp_path / "sphere.xyz")
+    run(binary, "splat", xyz, "--holdout", "0", "-o", str(tmp_path / "cli.ply"))
     lean.save(tmp_path / "py.ply")
     assert (tmp_path / "py.ply").read_bytes() == (tmp_path / "cli.ply").read_bytes()
-    refused = splatray.splat(points, epsilon=0.004, lean=True)
+    stages = splatray.splat(sphere, lean=False)
+    assert stages.report["generation"]["lean"] is None
+    run(binary, "splat", xyz, "--no-lean", "--holdout", "0", "-o", str(tmp_path / "cli-stages.ply"))
+    stages.save(tmp_path / "py-stages.ply")
+    assert (tmp_path / "py-stages.ply").read_bytes() == (tmp_path / "cli-stages.ply").read_bytes()
+    assert len(stages) != len(lean)
+    refused = splatray.splat(points, epsilon=0.004)
     report = refused.report["generation"]["lean"]
     assert report["used"] is False and "scatter" in report["refused"], report
-    assert np.array_equal(refused.centers, splatray.splat(points, epsilon=0.004).centers)
+    assert np.array_equal(refused.centers, splatray.splat(points, epsilon=0.004, lean=False).centers)
 
 
 def test_creases_give_clip_lines_and_the_cli_creases_bytes(binary, tmp_path):

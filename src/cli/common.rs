@@ -50,13 +50,13 @@ pub struct SplatOptions {
     /// 0: every point).
     #[arg(long)]
     pub thin: Option<f64>,
-    /// Lean growth: one plane fit a splat over a grid of the points, no
-    /// normal a point, several times faster, for clean, closed, densely
-    /// sampled surfaces without creases; where its gate finds the cloud
-    /// noisy, sparse, creased or open it says why and the default stages
-    /// run (docs/usage.md, "Lean growth").
+    /// No lean growth: the stages (normals, creases, growth) on any cloud.
+    /// By default lean growth (one plane fit a splat, no normal a point,
+    /// several times faster) grows the splats of a clean, closed, densely
+    /// sampled surface without creases, where its gate finds one
+    /// (docs/usage.md, "Lean growth").
     #[arg(long)]
-    pub lean: bool,
+    pub no_lean: bool,
 }
 
 impl SplatOptions {
@@ -91,7 +91,7 @@ impl SplatOptions {
             viewpoint: self.viewpoint()?,
             no_viewpoint: self.no_viewpoint,
             thin: self.thin,
-            lean: self.lean,
+            no_lean: self.no_lean,
         })
     }
 }

@@ -255,7 +255,7 @@ fn print_generated(args: &SplatArgs, p: &PointsOutcome) {
     );
 }
 
-/// What lean growth's gate found (`--lean`); true when lean growth grew the
+/// What lean growth's gate found; true when lean growth grew the
 /// splats (the stages' figures about holes then were not measured).
 fn print_lean(report: &crate::splat::SplatReport) -> bool {
     let Some(lean) = &report.lean else {
@@ -275,7 +275,7 @@ fn print_lean(report: &crate::splat::SplatReport) -> bool {
     match &lean.refused {
         Some(why) => {
             eprintln!(
-                "splatray: note: lean growth refused: {why} ({measured}); the default stages grew the splats"
+                "splatray: lean growth refused: {why} ({measured}); the stages grew the splats"
             );
             false
         }

@@ -196,6 +196,10 @@ pub struct SplatSpec {
     /// true everywhere, false nowhere; absent, the default
     /// (`Creases::Auto`: on but for a cloud sampled along scan lines).
     pub creases: Option<bool>,
+    /// `false`: never lean growth, the stages on any cloud
+    /// (`SplatParams::lean`; absent or true: lean growth where its gate
+    /// finds the cloud suits it).
+    pub lean: Option<bool>,
     /// Orient estimated normals toward this point (model space: the point
     /// file's coordinates).
     #[serde(default, deserialize_with = "num::finite")]

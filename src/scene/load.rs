@@ -673,6 +673,7 @@ fn generate_splats(
         flat_colors: spec.splat.color_fields == Some(false),
         creases: spec.splat.creases,
         viewpoint: spec.splat.viewpoint.map(|v| Vec3::from(v).as_dvec3()),
+        no_lean: spec.splat.lean == Some(false),
         ..crate::splat::GenerationOptions::default()
     }
     .params(cloud);

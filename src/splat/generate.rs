@@ -87,7 +87,9 @@ pub struct SplatParams {
     /// `Grower::clip_lines` in `grow.rs`). Default [`Creases::Auto`]: on,
     /// but for a cloud sampled along scan lines.
     pub creases: Creases,
-    /// Grow the splats by [`super::lean`] (default [`LeanMode::Off`]).
+    /// Grow the splats by [`super::lean`] where its gate passes (default
+    /// [`LeanMode::Gated`]; the stages where the parameters ask for what only
+    /// they make, see [`SplatParams::stages_only`]).
     pub lean: LeanMode,
 }
 
@@ -95,11 +97,11 @@ pub struct SplatParams {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum LeanMode {
-    /// Never: the stages.
-    #[default]
+    /// Never: the stages (`--no-lean`).
     Off,
     /// Where its gate finds the cloud clean, closed, densely sampled and
-    /// without creases (`--lean`); else the stages, the report saying why.
+    /// without creases; else the stages, the report saying why.
+    #[default]
     Gated,
     /// Always, the gate measured but not asked (the held-out check's
     /// windows of a cloud grown by it: their cut edges are no border of
@@ -176,7 +178,32 @@ impl Default for SplatParams {
             auto_thin: true,
             color_fields: true,
             creases: Creases::Auto,
-            lean: LeanMode::Off,
+            lean: LeanMode::Gated,
+        }
+    }
+}
+
+impl SplatParams {
+    /// What these parameters ask for that only the stages make, so that
+    /// lean growth is not tried ([`LeanMode::Gated`]): elliptical splats,
+    /// creases everywhere, another `k` or density than the defaults (the
+    /// stages' knobs), or thinning asked for. `None` when lean growth may
+    /// grow the splats.
+    #[must_use]
+    pub fn stages_only(&self) -> Option<&'static str> {
+        let d = SplatParams::default();
+        if self.ellipses {
+            Some("elliptical splats")
+        } else if self.creases == Creases::On {
+            Some("creases everywhere")
+        } else if self.k != d.k {
+            Some("another k")
+        } else if self.density != d.density {
+            Some("another density")
+        } else if self.thin > 0.0 {
+            Some("thinning")
+        } else {
+            None
         }
     }
 }
@@ -575,7 +602,12 @@ pub(crate) fn generate_stages(
     let (unit_cloud, unit_params) = to_unit(&frame, cloud, params);
     let (cloud, params) = (&unit_cloud, &unit_params);
     let mut report = start_report(cloud);
-    if params.lean != LeanMode::Off
+    let try_lean = match params.lean {
+        LeanMode::Off => false,
+        LeanMode::Gated => params.stages_only().is_none(),
+        LeanMode::Always => true,
+    };
+    if try_lean
         && let Some(done) = lean_stages(cloud, params, &frame, &mut report, (progress, grown), t0)?
     {
         return Ok(done);

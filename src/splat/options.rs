@@ -33,9 +33,9 @@ pub struct GenerationOptions {
     /// Keep one point per cell this many ϵ wide (default: a cloud far
     /// denser than ϵ needs is thinned unasked; 0 keeps every point).
     pub thin: Option<f64>,
-    /// Grow by lean growth where its gate finds the cloud suits it
-    /// (`SplatParams::lean`).
-    pub lean: bool,
+    /// Never grow by lean growth (`SplatParams::lean`; by default it grows
+    /// the splats where its gate finds the cloud suits it).
+    pub no_lean: bool,
 }
 
 impl GenerationOptions {
@@ -72,7 +72,7 @@ impl GenerationOptions {
             scan_viewpoints: !self.no_viewpoint,
             thin: self.thin.unwrap_or(defaults.thin),
             auto_thin: self.thin.is_none(),
-            lean: if self.lean { LeanMode::Gated } else { LeanMode::Off },
+            lean: if self.no_lean { LeanMode::Off } else { LeanMode::Gated },
             ..defaults
         }
     }

@@ -352,7 +352,7 @@ impl Splats {
 #[pyfunction]
 #[pyo3(signature = (points, normals=None, colors=None, viewpoint=None, *, epsilon=None, k=None,
     density=None, ellipses=false, flat_colors=false, creases=None, no_viewpoint=false, thin=None,
-    lean=false, progress=None))]
+    lean=true, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn splat(
     py: Python<'_>,
@@ -404,7 +404,7 @@ pub fn splat(
         viewpoint: vp,
         no_viewpoint,
         thin,
-        lean,
+        no_lean: !lean,
     }
     .params(cloud);
     let cb = Callback::new(progress);

@@ -74,7 +74,7 @@ pub fn scan_check<'py>(
             viewpoint,
             no_viewpoint,
             thin,
-            lean: false,
+            no_lean: false,
         },
         tolerance,
         holdout,

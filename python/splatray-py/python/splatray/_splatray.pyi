@@ -103,16 +103,16 @@ def splat(
     creases: Optional[bool] = None,
     no_viewpoint: bool = False,
     thin: Optional[float] = None,
-    lean: bool = False,
+    lean: bool = True,
     progress: Optional[Progress] = None,
 ) -> Splats:
     """Splats from points as `splatray splat` makes them; the options are
     its flags (epsilon: fraction of the bounding-box diagonal; creases=True
     is --creases: splats clipped at creases, corners and borders everywhere,
     False --no-creases: whole discs, None the default: clipped but in a cloud
-    sampled along scan lines; lean=True is --lean: lean growth where its
-    gate finds the cloud clean, dense and closed, the report's "lean"
-    saying what it found)."""
+    sampled along scan lines; lean=False is --no-lean: the stages on any
+    cloud; by default lean growth where its gate finds the cloud clean,
+    dense and closed, the report's "lean" saying what it found)."""
 
 class CastResult(TypedDict, total=False):
     t_hit: Required[npt.NDArray[np.float32]]
