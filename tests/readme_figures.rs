@@ -156,12 +156,14 @@ fn check(scene: &str) {
         near("normal_deg_p99", p99, NORMAL_P99_MARGIN_DEG, &rat);
         near("coverage", coverage, COVERAGE_MARGIN, &rat);
         // False hits (neither file prints them; the report does): a pixel
-        // the splats hit where the exact surface is missed. Measured 64 of
-        // 480,000 pixels on the bunny (0.000133), 34 on the glass
-        // (0.000071); held within 1.5 times those, a handful of pixels.
+        // the splats hit where the exact surface is missed. Measured 56 of
+        // 480,000 pixels on the bunny (0.000117), 47 on the glass
+        // (0.000098; both grown by lean growth, whose rims reach a tenth
+        // past their points: the stages' 64 and 34); held within 1.5
+        // times those, a handful of pixels.
         let false_hits_max = match scene {
-            "bunny.toml" => 1.5 * 64.0 / 480_000.0,
-            "glass.toml" => 1.5 * 34.0 / 480_000.0,
+            "bunny.toml" => 1.5 * 56.0 / 480_000.0,
+            "glass.toml" => 1.5 * 47.0 / 480_000.0,
             _ => unreachable!(),
         };
         assert!(

@@ -100,7 +100,9 @@ pub enum LeanMode {
     /// Never: the stages (`--no-lean`).
     Off,
     /// Where its gate finds the cloud clean, closed, densely sampled and
-    /// without creases; else the stages, the report saying why.
+    /// without creases, and the cloud has no viewpoint (a scan's normals
+    /// face its scanner: the stages'); else the stages, the report saying
+    /// why.
     #[default]
     Gated,
     /// Always, the gate measured but not asked (the held-out check's
@@ -602,9 +604,11 @@ pub(crate) fn generate_stages(
     let (unit_cloud, unit_params) = to_unit(&frame, cloud, params);
     let (cloud, params) = (&unit_cloud, &unit_params);
     let mut report = start_report(cloud);
+    // A scan's viewpoints turn its normals toward the scanner, which only
+    // the stages do (lean growth turns a closed surface's outward).
     let try_lean = match params.lean {
         LeanMode::Off => false,
-        LeanMode::Gated => params.stages_only().is_none(),
+        LeanMode::Gated => params.stages_only().is_none() && viewpoints_of(cloud, params).is_none(),
         LeanMode::Always => true,
     };
     if try_lean
