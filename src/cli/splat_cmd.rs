@@ -386,6 +386,13 @@ fn print_merged(args: &SplatArgs, report: &TiledReport) {
         eprintln!("splatray: note: held-out coverage is not measured in tiled generation");
     }
     let resumed = report.tiles.iter().filter(|t| t.resumed).count();
+    let lean = report.tiles.iter().filter(|t| t.lean).count();
+    if lean > 0 {
+        eprintln!(
+            "splatray: lean growth grew {lean} of the {} tiles (its gate passed on their cores' points); the stages the rest",
+            report.tiles.len()
+        );
+    }
     let thinned: u64 = report.tiles.iter().map(|t| t.thinned).sum();
     if thinned > 0 {
         eprintln!(

@@ -87,6 +87,11 @@ pub struct SplatParams {
     /// `Grower::clip_lines` in `grow.rs`). Default [`Creases::Auto`]: on,
     /// but for a cloud sampled along scan lines.
     pub creases: Creases,
+    /// A tile's core, the box `[lo, hi]` in the cloud's frame: lean
+    /// growth's gate samples only its points (the halo's cut edges are no
+    /// border of the surface), and only they seed splats; `None`: the
+    /// whole cloud.
+    pub gate_within: Option<[Vec3; 2]>,
     /// Grow the splats by [`super::lean`] where its gate passes (default
     /// [`LeanMode::Gated`]; the stages where the parameters ask for what only
     /// they make, see [`SplatParams::stages_only`]).
@@ -181,6 +186,7 @@ impl Default for SplatParams {
             color_fields: true,
             creases: Creases::Auto,
             lean: LeanMode::Gated,
+            gate_within: None,
         }
     }
 }
@@ -682,7 +688,7 @@ fn lean_stages(
         (true, false) => super::lean::GrowWhen::Gated,
         (true, true) => super::lean::GrowWhen::Never,
     };
-    let lean = super::lean::grow_lean(points, epsilon, when, |f| {
+    let lean = super::lean::grow_lean(points, epsilon, (when, params.gate_within), |f| {
         notify(progress, "lean growth", f);
     });
     let refused = if gated { spread.or_else(|| lean.gate.refusal()) } else { None };
@@ -1098,6 +1104,7 @@ fn to_unit(
     };
     let unit_params = SplatParams {
         viewpoint: params.viewpoint.map(|v| frame.unit_viewpoint(v)),
+        gate_within: params.gate_within.map(|b| b.map(|c| frame.unit(c))),
         ..params.clone()
     };
     (unit_cloud, unit_params)

@@ -534,17 +534,18 @@ fn sample(g: &Grid, near: &mut Near, i: usize, eps: f32) -> Option<Sample> {
 }
 
 /// The gate's figures over a stride sample of about `most` of `g`'s
-/// points.
-fn gate(g: &Grid, eps: f32, most: usize) -> (Gate, f32) {
+/// points, of those inside `within` where given.
+fn gate(g: &Grid, eps: f32, most: usize, within: Option<[Vec3; 2]>) -> (Gate, f32) {
     let n = g.pos.len();
     if n <= K0 {
         return (NO_GATE, f32::INFINITY);
     }
-    let stride = n.div_ceil(most).max(1);
-    let samples: Vec<Sample> = (0..n)
+    let candidates: Vec<u32> = (0..n as u32).filter(|&i| inside(g.pos[i as usize], within)).collect();
+    let stride = candidates.len().div_ceil(most).max(1);
+    let samples: Vec<Sample> = candidates
         .into_par_iter()
         .step_by(stride)
-        .map_init(Near::default, |near, i| sample(g, near, i, eps))
+        .map_init(Near::default, |near, i| sample(g, near, i as usize, eps))
         .flatten()
         .collect();
     let mut sig: Vec<f32> = samples.iter().map(|s| s.sigma).collect();
@@ -797,15 +798,25 @@ fn finish(g: &Grid, s: &Grown) -> (Splat, bool) {
 /// splats seeded twice.
 pub const SLAB_POINTS: usize = 50_000;
 
-/// The splats seeded from the points `range` of `g`'s order (their
-/// neighbours anywhere), and the seeds that grew none.
-fn grow_slab(g: &Grid, range: std::ops::Range<usize>, eps: f32, far: f32) -> (Vec<Grown>, Vec<u32>) {
+/// Whether `p` lies in the box `b` (every point without one).
+fn inside(p: Vec3, b: Option<[Vec3; 2]>) -> bool {
+    b.is_none_or(|[lo, hi]| p.cmpge(lo).all() && p.cmple(hi).all())
+}
+
+/// The splats seeded from the points `range` of `g`'s order that lie in
+/// `core` (their neighbours anywhere), and the seeds that grew none.
+fn grow_slab(
+    g: &Grid,
+    range: std::ops::Range<usize>,
+    (eps, far): (f32, f32),
+    core: Option<[Vec3; 2]>,
+) -> (Vec<Grown>, Vec<u32>) {
     let start = range.start;
     let mut covered = vec![false; range.len()];
     let mut near = Near::default();
     let (mut grown, mut outliers) = (Vec::new(), Vec::new());
     for i in range.clone() {
-        if covered[i - start] {
+        if covered[i - start] || !inside(g.pos[i], core) {
             continue;
         }
         covered[i - start] = true;
@@ -852,16 +863,24 @@ pub enum GrowWhen {
 }
 
 /// Lean growth over `points` at error `eps` (see the module's
-/// documentation): the gate, and the splats when `when` says so;
-/// `progress` is told when growth is done, on the calling thread.
+/// documentation): the gate, and the splats when `when` says so. Where
+/// `within` (a tile's core) is given, the gate samples only its points and
+/// only they seed splats (the halo's are taken, never seeded: a splat
+/// centred in the core covers every core point). `progress` is told when
+/// growth is done, on the calling thread.
 #[must_use]
-pub fn grow_lean(points: &[Vec3], eps: f32, when: GrowWhen, progress: impl Fn(f64)) -> Lean {
+pub fn grow_lean(
+    points: &[Vec3],
+    eps: f32,
+    (when, within): (GrowWhen, Option<[Vec3; 2]>),
+    progress: impl Fn(f64),
+) -> Lean {
     let t0 = std::time::Instant::now();
     let g = Grid::build(points, CELL_EPS * eps);
     // Growing whatever the gate finds (the held-out check's windows, a few
     // thousand points each), its figures serve only the median spacing.
     let most = if when == GrowWhen::Always { ALWAYS_SAMPLE } else { GATE_SAMPLE };
-    let (gate, spacing) = gate(&g, eps, most);
+    let (gate, spacing) = gate(&g, eps, most, within);
     let mut lean = Lean {
         splats: Vec::new(),
         gate,
@@ -885,7 +904,7 @@ pub fn grow_lean(points: &[Vec3], eps: f32, when: GrowWhen, progress: impl Fn(f6
     let slabs = n.div_ceil(SLAB_POINTS).max(1);
     let per_slab: Vec<(Vec<Grown>, Vec<u32>)> = (0..slabs)
         .into_par_iter()
-        .map(|s| grow_slab(&g, s * n / slabs..(s + 1) * n / slabs, eps, far))
+        .map(|s| grow_slab(&g, s * n / slabs..(s + 1) * n / slabs, (eps, far), within))
         .collect();
     let mut grown = Vec::new();
     for (g_s, outliers) in per_slab {

@@ -51,6 +51,10 @@ pub struct TileSummary {
     /// or unasked: `crate::splat::thin`).
     #[serde(default)]
     pub thinned: u64,
+    /// Grown by lean growth (`crate::splat::lean`), its gate reading the
+    /// core's points.
+    #[serde(default)]
+    pub lean: bool,
 }
 
 /// What tiled generation reports.

@@ -61,10 +61,15 @@ pub(super) fn generate_tile(
     let mut halo: Vec<Splat> = Vec::new();
     let grown = plan.tiles[t].grown(plan.halo);
     if counts.1 > 0 && cloud.len() >= 3 {
+        let core = &plan.tiles[t];
+        let local = |c: [f64; 3]| (DVec3::from(c) - cloud.origin).as_vec3();
         let tile_params = SplatParams {
             epsilon_abs: Some(plan.epsilon),
             viewpoint: cloud.viewpoint,
             color_fields: with_fields,
+            // Lean growth's gate reads the core: the halo's cut edges are
+            // no border of the surface.
+            gate_within: Some([local(core.lo), local(core.hi)]),
             ..params.clone()
         };
         let generated = crate::pipeline::generate(&cloud, &tile_params, progress);
@@ -72,6 +77,7 @@ pub(super) fn generate_tile(
             Ok(g) => {
                 let (splats, mut fields) = (g.splats, g.color_fields);
                 summary.grown = splats.len();
+                summary.lean = g.report.lean.as_ref().is_some_and(|l| l.used);
                 summary.warnings = g.report.warnings;
                 summary.thinned = (g.report.skipped_points.iter())
                     .filter(|s| s.reason.starts_with("denser than"))
