@@ -714,6 +714,34 @@ fn a_cloud_far_denser_than_its_splats_need_is_thinned_at_one_epsilon() {
     assert!(e_auto <= 0.012, "{e_auto} against {e_whole}");
 }
 
+/// Lean growth keeps every point, so it leaves a cloud far denser than its
+/// splats need to the stages' thinning: by default the gate refuses 1M
+/// points of a unit sphere at ϵ 0.01 of the diagonal (a point's 12th
+/// nearest 0.20 ϵ away; told from a sample of 250k, without the whole
+/// cloud's grid) and the splats are the stages'.
+#[test]
+fn lean_growth_leaves_a_far_denser_cloud_to_the_stages() {
+    let dense = cloud(sphere(1_000_000, Vec3::ZERO, 1.0, 0.0));
+    let at = |lean: LeanMode| SplatParams {
+        epsilon_rel: 0.01,
+        lean,
+        ..SplatParams::default()
+    };
+    let (dflt, drep) = generate(&dense, &at(LeanMode::Gated)).unwrap();
+    let l = drep.lean.as_ref().expect("a lean report");
+    eprintln!("{l:?}");
+    let refused = l.refused.clone().unwrap_or_default();
+    assert!(refused.contains("denser than epsilon needs"), "{l:?}");
+    assert!(
+        l.gate.spacing < 0.4 * splatray::splat::lean::GATE_DENSE,
+        "{l:?}"
+    );
+    assert!(
+        dflt == generate(&dense, &at(LeanMode::Off)).unwrap().0,
+        "not the stages' splats"
+    );
+}
+
 /// The held-out coverage of `c` (10 % held out, seed 1: splats regrown
 /// from the rest, and the share of held-out points lying on one), checked
 /// to be at least `min`; printed.
