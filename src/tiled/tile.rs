@@ -95,9 +95,15 @@ pub(super) fn generate_tile(
                         }
                         continue;
                     }
-                    let reach = f64::from(params.field_radius_factor)
-                        * f64::from(s.radii.max_element())
-                        + NORMALS_REACH_EPS * plan.epsilon;
+                    let r = f64::from(s.radii.max_element());
+                    // Lean growth's field reads its points within `REACH`
+                    // of its radius before the `SCALE`, and no normal a
+                    // point; the stages' reads normals of neighbourhoods.
+                    let reach = if summary.lean {
+                        f64::from(crate::splat::lean::REACH / crate::splat::lean::SCALE) * r
+                    } else {
+                        f64::from(params.field_radius_factor) * r + NORMALS_REACH_EPS * plan.epsilon
+                    };
                     if reach > plan.halo {
                         summary.past_halo += 1;
                     }
