@@ -555,11 +555,17 @@ fn gate(g: &Grid, eps: f32, most: usize, within: Option<[Vec3; 2]>) -> (Gate, f3
     if n <= K0 {
         return (NO_GATE, f32::INFINITY);
     }
-    let candidates: Vec<u32> = (0..n as u32).filter(|&i| inside(g.pos[i as usize], within)).collect();
-    let stride = candidates.len().div_ceil(most).max(1);
-    let samples: Vec<Sample> = candidates
+    // The sampled points alone: no list of every point where no box limits them.
+    let picked: Vec<u32> = match within {
+        None => (0..n as u32).step_by(n.div_ceil(most).max(1)).collect(),
+        Some(_) => {
+            let inner: Vec<u32> = (0..n as u32).filter(|&i| inside(g.pos[i as usize], within)).collect();
+            let stride = inner.len().div_ceil(most).max(1);
+            inner.into_iter().step_by(stride).collect()
+        }
+    };
+    let samples: Vec<Sample> = picked
         .into_par_iter()
-        .step_by(stride)
         .map_init(Near::default, |near, i| sample(g, near, i as usize, eps))
         .flatten()
         .collect();
