@@ -9,7 +9,7 @@ use splatray::io::{PointCloud, read_mesh, read_points, sample_mesh};
 use splatray::splat::knn::{Knn, build_tree};
 use splatray::splat::normals::{estimate, orient, sym_eigen3};
 use splatray::splat::{
-    GenerateError, LeanMode, Splat, SplatParams, count_on_splats, generate, on_splat,
+    Creases, GenerateError, LeanMode, Splat, SplatParams, count_on_splats, generate, on_splat,
 };
 
 /// `n` points on a Fibonacci sphere around `c` with radius `r`.
@@ -774,7 +774,9 @@ fn a_smooth_cloud_searches_few_neighbourhoods_for_faces() {
             positions: s.positions,
             ..PointCloud::default()
         };
-        let (_, rep) = generate(&cloud, &SplatParams::default()).unwrap();
+        // The stages' face search (clean solids grow lean with clip lines
+        // by default).
+        let (_, rep) = generate(&cloud, &lean(LeanMode::Off)).unwrap();
         let share = rep.face_searches as f64 / rep.used_points as f64;
         eprintln!(
             "{name}: {} of {} searched",
@@ -902,7 +904,8 @@ fn lean_growth_serves_a_dense_clean_sphere() {
 
 /// Where lean growth's gate refuses a cloud (noise, an open border, a
 /// closed cube's edges), the report says why and the splats are the
-/// stages' bit for bit.
+/// stages' bit for bit; with creases off for the border and the edges,
+/// which lean growth with clip lines grows by default.
 #[test]
 fn lean_growth_refused_grows_the_stages_splats() {
     let mut rng = splatray::rng::SplitMix64::new(7);
@@ -920,13 +923,27 @@ fn lean_growth_refused_grows_the_stages_splats() {
         ("cube", cube_surface(200_000, 3), "epsilon off"),
     ] {
         let c = cloud(pts);
-        let (splats, rep) = generate(&c, &lean(LeanMode::Gated)).unwrap();
+        let (_, sharp) = generate(&c, &lean(LeanMode::Gated)).unwrap();
+        let sharp = sharp.lean.expect("a lean report");
+        // Noise refuses both; a border and edges only lean growth without
+        // clip lines.
+        assert_eq!(sharp.used, why != "scatter", "{name}: {sharp:?}");
+        assert_eq!(sharp.sharp, sharp.used, "{name}: {sharp:?}");
+        let whole = SplatParams {
+            creases: Creases::Off,
+            ..lean(LeanMode::Gated)
+        };
+        let (splats, rep) = generate(&c, &whole).unwrap();
         let l = rep.lean.as_ref().expect("a lean report");
         eprintln!("{name}: {l:?}");
         assert!(!l.used, "{name}: {l:?}");
         let refused = l.refused.as_deref().unwrap_or("");
         assert!(refused.contains(why), "{name}: {refused}");
-        let (stages, _) = generate(&c, &lean(LeanMode::Off)).unwrap();
+        let off = SplatParams {
+            lean: LeanMode::Off,
+            ..whole
+        };
+        let (stages, _) = generate(&c, &off).unwrap();
         assert!(splats == stages, "{name}: not the stages' splats");
     }
 }

@@ -279,6 +279,13 @@ fn print_lean(report: &crate::splat::SplatReport) -> bool {
             );
             false
         }
+        None if lean.sharp => {
+            eprintln!(
+                "splatray: lean growth with clip lines: {measured}; {} outlier seeds; {} splats clipped at creases and borders (a clean cloud: no noise looked for)",
+                lean.outliers, report.clipped
+            );
+            true
+        }
         None => {
             eprintln!(
                 "splatray: lean growth: {measured}; {} outlier seeds; no creases, noise or holes looked for (the gate found none)",

@@ -114,6 +114,9 @@ pub enum LeanMode {
     /// windows of a cloud grown by it: their cut edges are no border of
     /// the surface).
     Always,
+    /// Always, with clip lines at creases and borders (the windows of a
+    /// cloud grown so).
+    AlwaysSharp,
 }
 
 /// Whether generation finds creases ([`SplatParams::creases`]).
@@ -374,6 +377,9 @@ pub struct LeanReport {
     pub gate: super::lean::Gate,
     /// Seeds left without a splat as outliers.
     pub outliers: usize,
+    /// Grown with clip lines at creases and borders (where the gate found
+    /// them in a clean cloud, `splat::lean`'s `sharp`).
+    pub sharp: bool,
 }
 
 impl SplatReport {
@@ -615,7 +621,7 @@ pub(crate) fn generate_stages(
     let try_lean = match params.lean {
         LeanMode::Off => false,
         LeanMode::Gated => params.stages_only().is_none() && viewpoints_of(cloud, params).is_none(),
-        LeanMode::Always => true,
+        LeanMode::Always | LeanMode::AlwaysSharp => true,
     };
     if try_lean
         && let Some(done) = lean_stages(cloud, params, &frame, &mut report, (progress, grown), t0)?
@@ -683,20 +689,30 @@ fn lean_stages(
     let gated = params.lean == LeanMode::Gated;
     let spread = if gated { lean_spread(points, diagonal) } else { None };
     notify(progress, "lean growth", 0.0);
-    let when = match (gated, spread.is_some()) {
-        (false, _) => super::lean::GrowWhen::Always,
-        (true, false) => super::lean::GrowWhen::Gated,
-        (true, true) => super::lean::GrowWhen::Never,
+    use super::lean::GrowWhen;
+    let when = match (params.lean, spread.is_some()) {
+        (LeanMode::AlwaysSharp, _) => GrowWhen::AlwaysSharp,
+        (LeanMode::Always | LeanMode::Off, _) => GrowWhen::Always,
+        (LeanMode::Gated, true) => GrowWhen::Never,
+        // Creases off: whole discs, so no clip lines either.
+        (LeanMode::Gated, false) if params.creases == Creases::Off => GrowWhen::Gated,
+        (LeanMode::Gated, false) => GrowWhen::GatedSharp,
     };
     let lean = super::lean::grow_lean(points, epsilon, (when, params.gate_within), |f| {
         notify(progress, "lean growth", f);
     });
-    let refused = if gated { spread.or_else(|| lean.gate.refusal()) } else { None };
+    let refused = match when {
+        GrowWhen::Gated => lean.gate.refusal(),
+        GrowWhen::GatedSharp => lean.gate.sharp_refusal(),
+        _ => None,
+    };
+    let refused = spread.or(refused);
     report.lean = Some(LeanReport {
         used: refused.is_none(),
         refused: refused.clone(),
         gate: lean.gate,
         outliers: lean.outliers,
+        sharp: lean.sharp,
     });
     if refused.is_some() {
         return Ok(None);
@@ -708,6 +724,7 @@ fn lean_stages(
     report.epsilon = f64::from(epsilon);
     report.k = super::lean::K0;
     report.fallback_normal_fields = lean.flat_fields;
+    report.clipped = lean.clipped;
     // No normal a point; the scatter the gate measured about the nearest's
     // planes (curvature in it too) stands for the noise.
     report.estimated_normals = 0;

@@ -35,10 +35,12 @@
 //! sparser, noisy samples and the solids are refused
 //! (`docs/notes/generation.md`, "Issue 54, fifty-sixth session").
 
+mod sharp;
+
 use super::fit::{height_axes, height_rows, normal_equations, plane_fit, solve6};
 use super::grow::MAX_RADIUS_EPS;
 use crate::data::{NormalField, Splat};
-use crate::splat::clip::Clip;
+use crate::splat::clip::{Clip, ClipLine};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::collections::BinaryHeap;
@@ -166,6 +168,31 @@ impl Gate {
             && self.line <= GATE_LINE
             && self.border <= GATE_BORDER
             && self.spacing >= GATE_DENSE
+    }
+
+    /// Whether sharp lean growth (clip lines at creases and borders,
+    /// [`sharp`]) serves this cloud: clean, not along lines, not denser than
+    /// `ϵ` needs, whatever its creases and borders.
+    #[must_use]
+    pub fn sharp_passes(&self) -> bool {
+        self.sampled > 0 && self.sigma <= GATE_SIGMA && self.line <= GATE_LINE && self.spacing >= GATE_DENSE
+    }
+
+    /// Why neither lean growth nor sharp lean growth serves it (`None`
+    /// where one does).
+    #[must_use]
+    pub fn sharp_refusal(&self) -> Option<String> {
+        if self.passes() || self.sharp_passes() {
+            return None;
+        }
+        let plain = Gate {
+            hard: 0.0,
+            hard_eps: 0.0,
+            crease: 0.0,
+            border: 0.0,
+            ..*self
+        };
+        plain.refusal()
     }
 
     /// Why it does not, in a few words (`None` where it passes).
@@ -466,6 +493,8 @@ struct Grown {
     /// Grown from a seed whose nearest already left the growth slab: its
     /// points may lie off its plane by more than `ϵ`.
     hard: bool,
+    /// Its clip lines (sharp lean growth only).
+    clips: [Option<sharp::Line>; 2],
 }
 
 /// What lean growth made.
@@ -486,6 +515,10 @@ pub struct Lean {
     pub largest_over_spacing: f32,
     /// Splats whose field stayed flat (too few points, a singular fit).
     pub flat_fields: usize,
+    /// Grown with clip lines at creases and borders ([`sharp`]).
+    pub sharp: bool,
+    /// Splats with a clip line.
+    pub clipped: usize,
     /// Seconds: the grid and the gate, growth, orientation, fields.
     pub seconds: [f64; 4],
 }
@@ -599,7 +632,7 @@ fn gate(g: &Grid, eps: f32, most: usize, within: Option<[Vec3; 2]>) -> (Gate, f3
 
 /// Grows one splat from the point `i` (grid order); `None` where it grows
 /// none (a degenerate fit, an outlier).
-fn grow(g: &Grid, near: &mut Near, i: u32, eps: f32, far: f32) -> Option<Grown> {
+fn grow(g: &Grid, near: &mut Near, i: u32, (eps, far, sharp): (f32, f32, bool)) -> Option<Grown> {
     let p = g.pos[i as usize];
     near.start(g, p);
     let mut members = Vec::with_capacity(64);
@@ -633,6 +666,7 @@ fn grow(g: &Grid, near: &mut Near, i: u32, eps: f32, far: f32) -> Option<Grown> 
             extra: Vec::new(),
             spacing: radius,
             hard: true,
+            clips: [None; 2],
         });
     }
     let cap = MAX_RADIUS_EPS * eps;
@@ -671,6 +705,27 @@ fn grow(g: &Grid, near: &mut Near, i: u32, eps: f32, far: f32) -> Option<Grown> 
         extra.push(idx);
         j += 1;
     }
+    let mut clips = [None; 2];
+    if sharp {
+        let disc = sharp::Disc {
+            g,
+            centre,
+            normal: n,
+            radius: radius * SCALE,
+            members: &members,
+            others: &extra,
+            slab,
+            spacing,
+        };
+        clips = sharp::lines(&disc);
+        // The field's points on the kept side, near the plane: the other
+        // face's points bend a quadric fitted across a crease.
+        let near_plane = sharp::FIELD_SLABS * slab;
+        extra.retain(|&k| {
+            let q = g.pos[k as usize];
+            n.dot(q - centre).abs() <= near_plane && sharp::kept(&clips, n, centre, q)
+        });
+    }
     Some(Grown {
         centre,
         normal: n,
@@ -679,6 +734,7 @@ fn grow(g: &Grid, near: &mut Near, i: u32, eps: f32, far: f32) -> Option<Grown> 
         extra,
         spacing,
         hard: false,
+        clips,
     })
 }
 
@@ -764,7 +820,7 @@ fn orient(splats: &mut [Grown], points: usize) {
 /// over its plane: the field's slopes along the quadric's principal
 /// directions (its axes) are minus its curvatures times the radius, its
 /// centre `(x_c, y_c)` minus the slopes `(d, e)`.
-fn finish(g: &Grid, s: &Grown) -> (Splat, bool) {
+fn fitted(g: &Grid, s: &Grown) -> (Splat, bool) {
     let n = s.normal;
     let mut splat = Splat::disc(s.centre, n, s.radius).unwrap_or(Splat {
         center: s.centre,
@@ -812,6 +868,23 @@ fn finish(g: &Grid, s: &Grown) -> (Splat, bool) {
     (splat, false)
 }
 
+/// The splat of `s` with its field ([`fitted`]) and its clip lines, in its
+/// axes normalised by its radius.
+fn finish(g: &Grid, s: &Grown) -> (Splat, bool) {
+    let (mut splat, flat) = fitted(g, s);
+    let line = |&(w, d): &sharp::Line| {
+        let (a, b) = (w.dot(splat.u_axis), w.dot(splat.v_axis));
+        let l = (a * a + b * b).sqrt();
+        ClipLine { a: a / l, b: b / l, d: d / s.radius }
+    };
+    splat.clip = match s.clips {
+        [None, None] => Clip::NONE,
+        [Some(x), None] | [None, Some(x)] => Clip::one(line(&x)),
+        [Some(x), Some(y)] => Clip::two(line(&x), line(&y)),
+    };
+    (splat, flat)
+}
+
 /// Points a slab of the grid's order holds at most: slabs grow at once,
 /// each seeding only from its own points and covering only them (a splat
 /// takes its neighbours across the slab's ends too), so the splats do not
@@ -845,6 +918,20 @@ fn inside(p: Vec3, b: Option<[Vec3; 2]>) -> bool {
     b.is_none_or(|[lo, hi]| p.cmpge(lo).all() && p.cmple(hi).all())
 }
 
+/// How a slab's seeds grow.
+#[derive(Clone, Copy)]
+enum Pass<'a> {
+    /// Lean growth without clip lines.
+    Plain,
+    /// Sharp lean growth's first pass: splats with clip lines, a seed on a
+    /// crease left for the second.
+    SharpFirst,
+    /// Its second: each point still uncovered on its face's plane
+    /// ([`sharp::face_splat`]); `owner` is a point's splat of `grown` (an
+    /// index past them: none, or a seed left as an outlier).
+    SharpFaces { grown: &'a [Grown], owner: &'a [u32] },
+}
+
 /// The splats seeded from the points `range` of `g`'s order that lie in
 /// `core` (their neighbours anywhere), and the seeds that grew none.
 fn grow_slab(
@@ -852,17 +939,29 @@ fn grow_slab(
     range: std::ops::Range<usize>,
     (eps, far): (f32, f32),
     core: Option<[Vec3; 2]>,
+    pass: Pass<'_>,
 ) -> (Vec<Grown>, Vec<u32>) {
     let start = range.start;
-    let mut covered = vec![false; range.len()];
+    let mut covered = match pass {
+        Pass::SharpFaces { owner, .. } => range.clone().map(|i| owner[i] != u32::MAX).collect(),
+        _ => vec![false; range.len()],
+    };
     let mut near = Near::default();
     let (mut grown, mut outliers) = (Vec::new(), Vec::new());
+    let sharp = !matches!(pass, Pass::Plain);
     for i in range.clone() {
         if covered[i - start] || !inside(g.pos[i], core) {
             continue;
         }
         covered[i - start] = true;
-        match grow(g, &mut near, i as u32, eps, far) {
+        let splat = match pass {
+            Pass::SharpFaces { grown, owner } => sharp::face_splat(g, &mut near, i as u32, eps, (grown, owner))
+                .or_else(|| grow(g, &mut near, i as u32, (eps, far, true))),
+            _ => grow(g, &mut near, i as u32, (eps, far, sharp)),
+        };
+        match splat {
+            // Left for the faces' pass.
+            Some(s) if s.hard && matches!(pass, Pass::SharpFirst) => covered[i - start] = false,
             Some(s) => {
                 for &k in &s.members {
                     if range.contains(&(k as usize)) {
@@ -893,13 +992,60 @@ fn unsure(g: &Grid, grown: &[Grown], eps: f32) -> Vec<Vec3> {
     off.map(|(_, &p)| p).collect()
 }
 
+/// Every slab's splats ([`grow_slab`]), and how many seeds were left as
+/// outliers; with clip lines and a second pass over the points left on
+/// creases where `sharp`.
+fn grow_all(g: &Grid, (eps, far): (f32, f32), within: Option<[Vec3; 2]>, sharp: bool) -> (Vec<Grown>, usize) {
+    let n = g.pos.len();
+    let slabs = n.div_ceil(SLAB_POINTS).max(1);
+    let range = |s: usize| s * n / slabs..(s + 1) * n / slabs;
+    let first = if sharp { Pass::SharpFirst } else { Pass::Plain };
+    let per_slab: Vec<(Vec<Grown>, Vec<u32>)> = (0..slabs)
+        .into_par_iter()
+        .map(|s| grow_slab(g, range(s), (eps, far), within, first))
+        .collect();
+    let (mut grown, mut outliers) = (Vec::new(), Vec::new());
+    for (g_s, o) in per_slab {
+        grown.extend(g_s);
+        outliers.extend(o);
+    }
+    if !sharp {
+        return (grown, outliers.len());
+    }
+    // Each point's splat (past them: none), an outlier seed as covered.
+    let mut owner = vec![u32::MAX; n];
+    for &i in &outliers {
+        owner[i as usize] = u32::MAX - 1;
+    }
+    for (i, s) in grown.iter().enumerate() {
+        for &k in &s.members {
+            owner[k as usize] = i as u32;
+        }
+    }
+    let faces = Pass::SharpFaces { grown: &grown, owner: &owner };
+    let more: Vec<(Vec<Grown>, Vec<u32>)> = (0..slabs)
+        .into_par_iter()
+        .map(|s| grow_slab(g, range(s), (eps, far), within, faces))
+        .collect();
+    for (g_s, o) in more {
+        grown.extend(g_s);
+        outliers.extend(o);
+    }
+    (grown, outliers.len())
+}
+
 /// Whether [`grow_lean`] grows splats after measuring its gate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GrowWhen {
     /// Where the gate passes.
     Gated,
+    /// Where the gate passes, else with clip lines ([`sharp`]) where
+    /// [`Gate::sharp_passes`].
+    GatedSharp,
     /// Whatever the gate found.
     Always,
+    /// Whatever the gate found, with clip lines.
+    AlwaysSharp,
     /// Never (the gate's figures alone).
     Never,
 }
@@ -928,13 +1074,16 @@ pub fn grow_lean(
             unsure_points: Vec::new(),
             largest_over_spacing: 0.0,
             flat_fields: 0,
+            sharp: false,
+            clipped: 0,
             seconds: [t0.elapsed().as_secs_f64(), 0.0, 0.0, 0.0],
         };
     }
     let g = Grid::build(points, CELL_EPS * eps);
     // Growing whatever the gate finds (the held-out check's windows, a few
     // thousand points each), its figures serve only the median spacing.
-    let most = if when == GrowWhen::Always { ALWAYS_SAMPLE } else { GATE_SAMPLE };
+    let always = matches!(when, GrowWhen::Always | GrowWhen::AlwaysSharp);
+    let most = if always { ALWAYS_SAMPLE } else { GATE_SAMPLE };
     let (gate, spacing) = gate(&g, eps, most, within);
     let mut lean = Lean {
         splats: Vec::new(),
@@ -943,29 +1092,26 @@ pub fn grow_lean(
         unsure_points: Vec::new(),
         largest_over_spacing: 0.0,
         flat_fields: 0,
+        sharp: false,
+        clipped: 0,
         seconds: [t0.elapsed().as_secs_f64(), 0.0, 0.0, 0.0],
     };
     let grow_now = match when {
-        GrowWhen::Gated => gate.passes(),
-        GrowWhen::Always => true,
-        GrowWhen::Never => false,
+        GrowWhen::Gated => Some(false).filter(|_| gate.passes()),
+        GrowWhen::GatedSharp if gate.passes() => Some(false),
+        GrowWhen::GatedSharp => Some(true).filter(|_| gate.sharp_passes()),
+        GrowWhen::Always => Some(false),
+        GrowWhen::AlwaysSharp => Some(true),
+        GrowWhen::Never => None,
     };
-    if !grow_now {
+    let Some(sharp) = grow_now else {
         return lean;
-    }
+    };
+    lean.sharp = sharp;
     let t1 = std::time::Instant::now();
-    let far = OUTLIER_SPACINGS * spacing;
-    let n = g.pos.len();
-    let slabs = n.div_ceil(SLAB_POINTS).max(1);
-    let per_slab: Vec<(Vec<Grown>, Vec<u32>)> = (0..slabs)
-        .into_par_iter()
-        .map(|s| grow_slab(&g, s * n / slabs..(s + 1) * n / slabs, (eps, far), within))
-        .collect();
-    let mut grown = Vec::new();
-    for (g_s, outliers) in per_slab {
-        grown.extend(g_s);
-        lean.outliers += outliers.len();
-    }
+    let (mut grown, outliers) = grow_all(&g, (eps, OUTLIER_SPACINGS * spacing), within, sharp);
+    lean.outliers = outliers;
+    lean.clipped = grown.iter().filter(|s| s.clips.iter().any(Option::is_some)).count();
     lean.unsure_points = unsure(&g, &grown, eps);
     lean.largest_over_spacing = grown
         .iter()
