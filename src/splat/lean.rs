@@ -705,27 +705,11 @@ fn grow(g: &Grid, near: &mut Near, i: u32, (eps, far, sharp): (f32, f32, bool)) 
         extra.push(idx);
         j += 1;
     }
-    let mut clips = [None; 2];
-    if sharp {
-        let disc = sharp::Disc {
-            g,
-            centre,
-            normal: n,
-            radius: radius * SCALE,
-            members: &members,
-            others: &extra,
-            slab,
-            spacing,
-        };
-        clips = sharp::lines(&disc);
-        // The field's points on the kept side, near the plane: the other
-        // face's points bend a quadric fitted across a crease.
-        let near_plane = sharp::FIELD_SLABS * slab;
-        extra.retain(|&k| {
-            let q = g.pos[k as usize];
-            n.dot(q - centre).abs() <= near_plane && sharp::kept(&clips, n, centre, q)
-        });
-    }
+    let clips = if sharp {
+        sharp::clip(g, (centre, n, radius * SCALE), (slab, spacing), &members, &mut extra)
+    } else {
+        [None; 2]
+    };
     Some(Grown {
         centre,
         normal: n,

@@ -109,6 +109,28 @@ impl Disc<'_> {
     }
 }
 
+/// The clip lines ([`lines`]) of a splat (its centre, normal and radius)
+/// grown in a slab of half-width `slab` from a seed whose [`K0`]-th
+/// neighbour lies `spacing` away, and `extra` (its field's points beyond
+/// its own) cut to those on the kept side within [`FIELD_SLABS`] slabs of
+/// its plane: the other face's points bend a quadric fitted across a
+/// crease.
+pub fn clip(
+    g: &Grid,
+    (centre, normal, radius): (Vec3, Vec3, f32),
+    (slab, spacing): (f32, f32),
+    members: &[u32],
+    extra: &mut Vec<u32>,
+) -> [Option<Line>; 2] {
+    let clips = lines(&Disc { g, centre, normal, radius, members, others: extra, slab, spacing });
+    let near_plane = FIELD_SLABS * slab;
+    extra.retain(|&k| {
+        let q = g.pos[k as usize];
+        normal.dot(q - centre).abs() <= near_plane && kept(&clips, normal, centre, q)
+    });
+    clips
+}
+
 /// The splat's clip lines (at most two), across a crease first.
 #[must_use]
 pub fn lines(s: &Disc<'_>) -> [Option<Line>; 2] {
@@ -194,7 +216,7 @@ fn goes_on(s: &Disc<'_>, w: Vec3, h: f32) -> bool {
 
 /// Whether `q` lies on the kept side of every line.
 #[must_use]
-pub fn kept(lines: &[Option<Line>; 2], n: Vec3, centre: Vec3, q: Vec3) -> bool {
+fn kept(lines: &[Option<Line>; 2], n: Vec3, centre: Vec3, q: Vec3) -> bool {
     let f = flat(n, centre, q);
     lines.iter().flatten().all(|(w, d)| w.dot(f) <= *d)
 }
