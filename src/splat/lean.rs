@@ -171,11 +171,12 @@ impl Gate {
     }
 
     /// Whether sharp lean growth (clip lines at creases and borders,
-    /// [`sharp`]) serves this cloud: clean, not along lines, not denser than
-    /// `ϵ` needs, whatever its creases and borders.
+    /// [`sharp`]) serves this cloud: its scatter at most
+    /// [`sharp::SHARP_SIGMA`], not along lines, not denser than `ϵ` needs,
+    /// whatever its creases and borders.
     #[must_use]
     pub fn sharp_passes(&self) -> bool {
-        self.sampled > 0 && self.sigma <= GATE_SIGMA && self.line <= GATE_LINE && self.spacing >= GATE_DENSE
+        self.sampled > 0 && self.sigma <= sharp::SHARP_SIGMA && self.line <= GATE_LINE && self.spacing >= GATE_DENSE
     }
 
     /// Why neither lean growth nor sharp lean growth serves it (`None`
@@ -184,6 +185,13 @@ impl Gate {
     pub fn sharp_refusal(&self) -> Option<String> {
         if self.passes() || self.sharp_passes() {
             return None;
+        }
+        if self.sampled > 0 && self.sigma > sharp::SHARP_SIGMA {
+            return Some(format!(
+                "the points scatter {:.3} epsilon about their nearest's plane, with creases or borders (noise or sparse sampling; lean growth needs at most {GATE_SIGMA}, at most {} with creases or borders)",
+                self.sigma,
+                sharp::SHARP_SIGMA
+            ));
         }
         let plain = Gate {
             hard: 0.0,
