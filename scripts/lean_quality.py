@@ -9,6 +9,10 @@ and false hits per view, and the mean PSNR difference.
 
     python3 scripts/lean_quality.py [--bin target/release/splatray]
         [--points 200000] [--seeds 1,11,12] [--work target/lean-quality]
+        [--noise SIGMA]
+
+--noise adds isotropic Gaussian noise of SIGMA (the mesh's units; the
+bunny's epsilon is 0.0064) to the samples (`sample --noise`).
 """
 
 import argparse
@@ -94,6 +98,7 @@ def main():
     ap.add_argument("--points", type=int, default=200000)
     ap.add_argument("--seeds", default="1,11,12")
     ap.add_argument("--work", default=str(ROOT / "target/lean-quality"))
+    ap.add_argument("--noise", type=float, default=0.0, help="sample noise, in the mesh's units")
     a = ap.parse_args()
     work = Path(a.work)
     work.mkdir(parents=True, exist_ok=True)
@@ -102,7 +107,7 @@ def main():
     print("|---:|---|---:|---:|---:|---:|---:|---:|")
     for seed in a.seeds.split(","):
         full, cloud = work / f"s{seed}-normals.ply", work / f"s{seed}.ply"
-        run([a.bin, "sample", MESH, "-n", a.points, "--seed", seed, "-o", full])
+        run([a.bin, "sample", MESH, "-n", a.points, "--seed", seed, "-o", full, "--noise", a.noise])
         positions_only(full, cloud)
         rows = {}
         for kind, extra in (("stages", ["--no-lean"]), ("lean", [])):

@@ -53,7 +53,8 @@ pub struct SplatOptions {
     /// No lean growth: the stages (normals, creases, growth) on any cloud.
     /// By default lean growth (one plane fit a splat, no normal a point,
     /// several times faster) grows the splats of a clean, closed, densely
-    /// sampled surface without creases, where its gate finds one
+    /// sampled surface without creases, where its gate finds one, and of
+    /// exact samples with creases and borders, its splats clipped there
     /// (docs/usage.md, "Lean growth").
     #[arg(long)]
     pub no_lean: bool,

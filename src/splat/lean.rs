@@ -32,8 +32,10 @@
 //! sampled from the bunny rendered 0.09 dB under the stages' splats on
 //! average (-1.12 to +1.29 dB a view) at a fifth of the time and less than
 //! half the memory, 1M points 1.2-2.9 dB over them; 140k points and
-//! sparser, noisy samples and the solids are refused
-//! (`docs/notes/generation.md`, "Issue 54, fifty-sixth session").
+//! sparser, noisy samples are refused (`docs/notes/generation.md`, "Issue
+//! 54, fifty-sixth session"). A clean cloud refused only for its creases
+//! and borders (exact samples of a solid) grows with clip lines there
+//! ([`sharp`]; "fifty-eighth session").
 
 mod sharp;
 
