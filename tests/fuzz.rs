@@ -86,6 +86,12 @@ impl Target {
                             ..SplatParams::default()
                         };
                         let _ = generate(&cloud, &lean);
+                        // And with its clip lines.
+                        let sharp = SplatParams {
+                            lean: LeanMode::AlwaysSharp,
+                            ..SplatParams::default()
+                        };
+                        let _ = generate(&cloud, &sharp);
                     }
                 }
             }

@@ -866,15 +866,19 @@ fn fitted(g: &Grid, s: &Grown) -> (Splat, bool) {
 /// axes normalised by its radius.
 fn finish(g: &Grid, s: &Grown) -> (Splat, bool) {
     let (mut splat, flat) = fitted(g, s);
+    // In the splat's axes over its radius; none that is not finite (a
+    // splat of coincident points, of radius 0).
     let line = |&(w, d): &sharp::Line| {
         let (a, b) = (w.dot(splat.u_axis), w.dot(splat.v_axis));
         let l = (a * a + b * b).sqrt();
-        ClipLine { a: a / l, b: b / l, d: d / s.radius }
+        let line = ClipLine { a: a / l, b: b / l, d: d / s.radius };
+        [line.a, line.b, line.d].iter().all(|x| x.is_finite()).then_some(line)
     };
-    splat.clip = match s.clips {
-        [None, None] => Clip::NONE,
-        [Some(x), None] | [None, Some(x)] => Clip::one(line(&x)),
-        [Some(x), Some(y)] => Clip::two(line(&x), line(&y)),
+    let lines: Vec<ClipLine> = s.clips.iter().flatten().filter_map(line).collect();
+    splat.clip = match lines.as_slice() {
+        [] => Clip::NONE,
+        [x] => Clip::one(*x),
+        [x, y, ..] => Clip::two(*x, *y),
     };
     (splat, flat)
 }
