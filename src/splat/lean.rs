@@ -178,7 +178,10 @@ impl Gate {
     /// whatever its creases and borders.
     #[must_use]
     pub fn sharp_passes(&self) -> bool {
-        self.sampled > 0 && self.sigma <= sharp::SHARP_SIGMA && self.line <= GATE_LINE && self.spacing >= GATE_DENSE
+        self.sampled > 0
+            && self.sigma <= sharp::SHARP_SIGMA
+            && self.line <= GATE_LINE
+            && (GATE_DENSE..=sharp::SHARP_SPARSE).contains(&self.spacing)
     }
 
     /// Why neither lean growth nor sharp lean growth serves it (`None`
@@ -193,6 +196,14 @@ impl Gate {
                 "the points scatter {:.3} epsilon about their nearest's plane, with creases or borders (noise or sparse sampling; lean growth needs at most {GATE_SIGMA}, at most {} with creases or borders)",
                 self.sigma,
                 sharp::SHARP_SIGMA
+            ));
+        }
+        if self.sampled > 0 && self.spacing > sharp::SHARP_SPARSE {
+            return Some(format!(
+                "a point's 12th nearest lies {:.1} epsilon away, with creases or borders (lean growth's splats stop at {} epsilon, the stages' grow past; at most {} with creases or borders)",
+                self.spacing,
+                super::grow::MAX_RADIUS_EPS,
+                sharp::SHARP_SPARSE
             ));
         }
         let plain = Gate {
