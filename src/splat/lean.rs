@@ -1008,16 +1008,20 @@ fn grow_all(g: &Grid, (eps, far): (f32, f32), within: Option<[Vec3; 2]>, sharp: 
     let n = g.pos.len();
     let slabs = n.div_ceil(SLAB_POINTS).max(1);
     let range = |s: usize| s * n / slabs..(s + 1) * n / slabs;
-    let first = if sharp { Pass::SharpFirst } else { Pass::Plain };
-    let per_slab: Vec<(Vec<Grown>, Vec<u32>)> = (0..slabs)
-        .into_par_iter()
-        .map(|s| grow_slab(g, range(s), (eps, far), within, first))
-        .collect();
+    // Every slab at once, their splats and outliers appended in order.
+    let pass = |pass: Pass<'_>, grown: &mut Vec<Grown>, outliers: &mut Vec<u32>| {
+        let per_slab: Vec<(Vec<Grown>, Vec<u32>)> = (0..slabs)
+            .into_par_iter()
+            .map(|s| grow_slab(g, range(s), (eps, far), within, pass))
+            .collect();
+        for (g_s, o) in per_slab {
+            grown.extend(g_s);
+            outliers.extend(o);
+        }
+    };
     let (mut grown, mut outliers) = (Vec::new(), Vec::new());
-    for (g_s, o) in per_slab {
-        grown.extend(g_s);
-        outliers.extend(o);
-    }
+    let first = if sharp { Pass::SharpFirst } else { Pass::Plain };
+    pass(first, &mut grown, &mut outliers);
     if !sharp {
         return (grown, outliers.len());
     }
@@ -1031,16 +1035,10 @@ fn grow_all(g: &Grid, (eps, far): (f32, f32), within: Option<[Vec3; 2]>, sharp: 
             owner[k as usize] = i as u32;
         }
     }
-    let faces = Pass::SharpFaces { grown: &grown, owner: &owner };
-    let more: Vec<(Vec<Grown>, Vec<u32>)> = (0..slabs)
-        .into_par_iter()
-        .map(|s| grow_slab(g, range(s), (eps, far), within, faces))
-        .collect();
-    for (g_s, o) in more {
-        grown.extend(g_s);
-        outliers.extend(o);
-    }
-    (grown, outliers.len())
+    let (mut more, mut left) = (Vec::new(), Vec::new());
+    pass(Pass::SharpFaces { grown: &grown, owner: &owner }, &mut more, &mut left);
+    grown.append(&mut more);
+    (grown, outliers.len() + left.len())
 }
 
 /// Whether [`grow_lean`] grows splats after measuring its gate.
@@ -1073,28 +1071,8 @@ pub fn grow_lean(
     progress: impl Fn(f64),
 ) -> Lean {
     let t0 = std::time::Instant::now();
-    if when != GrowWhen::Always
-        && let Some(dense) = too_dense(points, eps, within)
-    {
-        return Lean {
-            splats: Vec::new(),
-            gate: dense,
-            outliers: 0,
-            unsure_points: Vec::new(),
-            largest_over_spacing: 0.0,
-            flat_fields: 0,
-            sharp: false,
-            clipped: 0,
-            seconds: [t0.elapsed().as_secs_f64(), 0.0, 0.0, 0.0],
-        };
-    }
-    let g = Grid::build(points, CELL_EPS * eps);
-    // Growing whatever the gate finds (the held-out check's windows, a few
-    // thousand points each), its figures serve only the median spacing.
-    let always = matches!(when, GrowWhen::Always | GrowWhen::AlwaysSharp);
-    let most = if always { ALWAYS_SAMPLE } else { GATE_SAMPLE };
-    let (gate, spacing) = gate(&g, eps, most, within);
-    let mut lean = Lean {
+    // Nothing grown yet: the gate's figures and the seconds so far.
+    let none = |gate: Gate| Lean {
         splats: Vec::new(),
         gate,
         outliers: 0,
@@ -1105,6 +1083,16 @@ pub fn grow_lean(
         clipped: 0,
         seconds: [t0.elapsed().as_secs_f64(), 0.0, 0.0, 0.0],
     };
+    // Growing whatever the gate finds (the held-out check's windows, a few
+    // thousand points each), its figures serve only the median spacing.
+    let always = matches!(when, GrowWhen::Always | GrowWhen::AlwaysSharp);
+    if !always && let Some(dense) = too_dense(points, eps, within) {
+        return none(dense);
+    }
+    let g = Grid::build(points, CELL_EPS * eps);
+    let most = if always { ALWAYS_SAMPLE } else { GATE_SAMPLE };
+    let (gate, spacing) = gate(&g, eps, most, within);
+    let mut lean = none(gate);
     let grow_now = match when {
         GrowWhen::Gated => Some(false).filter(|_| gate.passes()),
         GrowWhen::GatedSharp if gate.passes() => Some(false),
