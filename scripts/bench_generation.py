@@ -221,8 +221,12 @@ def main():
             med = {k: statistics.median(v) for k, v in times.items()}
             ratio = {k: statistics.median(x / y for x, y in zip(times["splat"], v))
                      for k, v in times.items() if k != "splat"}
-            used = (rep.get("lean") or {}).get("used")
-            print(f"{name}: lean growth {'used' if used else 'refused by its gate'}", flush=True)
+            if "tiles" in rep:  # a tiled run: each tile's own gate
+                lean = sum(bool(t.get("lean")) for t in rep["tiles"])
+                said = f"used in {lean} of {len(rep['tiles'])} tiles"
+            else:
+                said = "used" if (rep.get("lean") or {}).get("used") else "refused by its gate"
+            print(f"{name}: lean growth {said}", flush=True)
             # A stage that found nothing to do (trimming without a viewpoint,
             # colours of a cloud without them) takes microseconds: no rate.
             stages = {k: v for k, v in s.items() if k not in ("total",) and v >= 1e-3}

@@ -54,8 +54,9 @@ pub struct SplatOptions {
     /// By default lean growth (one plane fit a splat, no normal a point,
     /// several times faster) grows the splats of a clean, closed, densely
     /// sampled surface without creases, where its gate finds one, and of
-    /// exact samples with creases and borders, its splats clipped there
-    /// (docs/usage.md, "Lean growth").
+    /// such a cloud with creases and borders (a solid's samples, an
+    /// airborne survey), its splats clipped there (docs/usage.md, "Lean
+    /// growth").
     #[arg(long)]
     pub no_lean: bool,
 }

@@ -237,14 +237,18 @@ fn batches(
         }
         world.clear();
         colors.clear();
-        for p in batch.points() {
-            let p = p.map_err(|e| IoErrorKind::Data(format!("point {read}: {e}")))?;
-            world.push(DVec3::new(p.x, p.y, p.z));
-            read += 1;
-            if with_color {
-                let c = p.color.unwrap_or_default();
-                let lin = |v: u16| srgb_to_linear(f32::from(v) / 65535.0);
-                colors.push(Vec3::new(lin(c.red), lin(c.green), lin(c.blue)));
+        // The records' columns read in place (the `las` crate's own
+        // scale-and-offset transform), not as whole `las::Point`s: a third
+        // of reading a LAZ survey went to building those.
+        let xy = batch.x().zip(batch.y());
+        world.extend(xy.zip(batch.z()).map(|((x, y), z)| DVec3::new(x, y, z)));
+        read += batch.len() as u64;
+        if with_color {
+            let lin = |v: u16| srgb_to_linear(f32::from(v) / 65535.0);
+            let rgb = |(r, g, b): (u16, u16, u16)| Vec3::new(lin(r), lin(g), lin(b));
+            match batch.rgb() {
+                Some(c) => colors.extend(c.map(rgb)),
+                None => colors.resize(world.len(), rgb((0, 0, 0))),
             }
         }
         each((&world, with_color.then_some(&colors[..]))).map_err(IoErrorKind::Data)?;

@@ -1,6 +1,7 @@
 //! Sharp lean growth: clip lines for lean splats at creases and borders
-//! (issue 54), so that a clean cloud with flat faces meeting at edges
-//! (a sampled solid, a CAD model) grows lean instead of by the stages.
+//! (issue 54), so that a cloud with flat faces meeting at edges (a
+//! sampled solid, a CAD model, an airborne survey's buildings) grows lean
+//! instead of by the stages.
 //!
 //! A lean splat stops where its neighbours leave its slab (a crease) or
 //! where there are none (a border), but its disc reaches [`super::SCALE`]
@@ -29,16 +30,6 @@
 use super::{GROW_EPS, Grid, Grown, K0, Near, SCALE};
 use crate::splat::fit::plane_fit;
 use glam::Vec3;
-
-/// The gate's bound on the scatter of a point's nearest about their plane,
-/// in `ϵ`, for sharp lean growth (plain lean growth's is
-/// [`super::GATE_SIGMA`]): the solids' exact samples scatter 0.000 and
-/// grow at the stages' quality or above (30.36 against 29.52 dB at 60k
-/// samples, 36.59-37.61 against 36.36-36.97 at 300k); the default survey (0.03 m
-/// of noise) 0.027, and grown sharp it lost 1.5 dB against its truth
-/// (28.05 against 29.56 dB, twice the false hits at the buildings' feet);
-/// a half sphere 0.009.
-pub const SHARP_SIGMA: f32 = 0.01;
 
 /// The gate's most median distance to a point's [`K0`]-th neighbour, in
 /// `ϵ`, for sharp lean growth: a gable roof of 8,000 points at 7.9 grew
@@ -199,8 +190,22 @@ fn border_lines(s: &Disc<'_>, out: &mut [Option<Line>; 2]) {
         let a = i as f32 * std::f32::consts::TAU / DIRS as f32;
         t1 * a.cos() + t2 * a.sin()
     });
-    let h: [f32; DIRS] = std::array::from_fn(|i| s.reach(dirs[i]));
-    let ext = s.members.iter().map(|&k| s.flat(k).length()).fold(0.0, f32::max);
+    // Each point's reach along every direction in one pass over the
+    // points (the same products and maxima as `Disc::reach` direction by
+    // direction), the directions' components apart so the lanes line up.
+    let (dx, dy, dz): ([f32; DIRS], [f32; DIRS], [f32; DIRS]) = (
+        std::array::from_fn(|i| dirs[i].x),
+        std::array::from_fn(|i| dirs[i].y),
+        std::array::from_fn(|i| dirs[i].z),
+    );
+    let (mut h, mut ext) = ([f32::MIN; DIRS], 0.0f32);
+    for &k in s.members {
+        let f = s.flat(k);
+        for i in 0..DIRS {
+            h[i] = h[i].max(f.x * dx[i] + f.y * dy[i] + f.z * dz[i]);
+        }
+        ext = ext.max(f.length());
+    }
     let density = s.members.len() as f32 / (std::f32::consts::PI * ext * ext);
     // Area of the circle of radius `ext` beyond the chord at `x`.
     let beyond = |x: f32| {
