@@ -200,8 +200,9 @@ fn a_clean_solid_grows_lean_with_clip_lines() {
         splatray::splat::generate(&cloud, &splatray::splat::SplatParams::default()).unwrap();
     let lean = rep.lean.as_ref().expect("a lean report");
     assert!(lean.used && lean.sharp, "{lean:?}");
-    // Measured: 1,119 of 3,686 splats clipped.
-    assert!(rep.clipped > 1000, "{} clipped", rep.clipped);
+    // Measured: 1,294 of 3,686 splats clipped (1,119 before the lines
+    // where too few points cross a crease, `lean::sharp::stop_line`).
+    assert!(rep.clipped > 1200, "{} clipped", rep.clipped);
     let text = std::fs::read_to_string(root.join("solids.toml"))
         .unwrap()
         .replace("samples = 300000", "samples = 60000")
@@ -212,16 +213,16 @@ fn a_clean_solid_grows_lean_with_clip_lines() {
     let e = common::errors_against_truth(&scene);
     eprintln!("lean with clip lines: {e:?}");
     let (psnr_stages, _) = solids_figures(&text, &root, true);
-    // Measured: 30.36 dB, 0.133 % false hits, against the stages' (creases
-    // on) 29.52 dB, 0.12 % (29.38 dB, 0.41 % with border lines where 6
-    // points, not 4, were expected past them: `lean::sharp`'s
-    // `BORDER_EXPECTED`); at 300k samples 36.59 against 36.36 at this
-    // size, 37.61 against 36.47 at 400x300, 36.93 against 36.97 at
-    // 800x600; whole discs 18.26 dB.
+    // Measured: 31.00 dB, 0.130 % false hits, against the stages' (creases
+    // on) 29.52 dB, 0.12 % (30.36 dB, 0.133 % without `stop_line`; 29.38
+    // dB, 0.41 % with border lines where 6 points, not 4, were expected
+    // past them: `lean::sharp`'s `BORDER_EXPECTED`); at 300k samples 36.77
+    // against 36.36 at this size, 38.44 against 36.47 at 400x300, 37.26
+    // against 36.97 at 800x600; whole discs 18.26 dB.
     let psnr = e.image_psnr_db.unwrap();
-    assert!(psnr > 30.2, "{psnr}");
+    assert!(psnr > 30.85, "{psnr}");
     assert!(
-        psnr > psnr_stages + 0.6,
+        psnr > psnr_stages + 1.3,
         "{psnr} against the stages' {psnr_stages}"
     );
     assert!(e.false_hits < 0.0016, "{}", e.false_hits);

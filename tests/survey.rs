@@ -176,10 +176,11 @@ fn the_default_survey_grows_lean_with_clip_lines() {
     let lean = errors_seen_from(&dir, view, "{ }");
     let stages = errors_seen_from(&dir, view, "{ creases = true }");
     let (p_lean, p_stages) = (lean.image_psnr_db.unwrap(), stages.image_psnr_db.unwrap());
-    // Measured: lean with clip lines 29.79 dB, 0.075 % false hits, mean
-    // normal error 1.48° (9,929 splats); the stages 29.54 dB, 0.062 %,
-    // 1.69° (10,578). At 800×600 29.52 and 29.56 dB.
-    assert!(p_lean > 29.6, "{p_lean}");
+    // Measured: lean with clip lines 29.83 dB, 0.078 % false hits, mean
+    // normal error 1.47° (9,929 splats; 29.79 dB before
+    // `lean::sharp::stop_line`); the stages 29.54 dB, 0.062 %, 1.69°
+    // (10,578). At 800×600 29.63 and 29.56 dB.
+    assert!(p_lean > 29.7, "{p_lean}");
     assert!(p_lean > p_stages, "lean {p_lean} stages {p_stages}");
     assert!(lean.false_hits < 0.0009, "{}", lean.false_hits);
     assert!(lean.normal_deg_mean < 1.6, "{}", lean.normal_deg_mean);

@@ -91,9 +91,10 @@ const ALWAYS_SAMPLE: usize = 512;
 /// crosses the stages' near 0.06 on surveys (`splatray terrain --noise`,
 /// 800×600 against the truth: +0.26 to +1.6 dB at 0.015-0.054 over
 /// seeds and noise, +0.75 to +2.3 on the other scan patterns at 0.042,
-/// -0.2 and +0.16 at 0.067, -1.0 at 0.092) and near 0.03 on the solids'
-/// noisy samples (mean of five views: +0.23 at 0.013, +2.0 at 0.025,
-/// -0.07 at 0.031, -0.50 at 0.037, -0.45 at 0.044, -1.49 at 0.062).
+/// -0.2 and +0.16 at 0.067, -1.0 at 0.092) and near 0.045 on the solids'
+/// noisy samples (mean of five views: +0.65 at 0.013, +2.26 at 0.025,
+/// +0.44 at 0.031, -0.02 at 0.037, +0.04 at 0.044; before
+/// `sharp::stop_line` +0.23, +2.0, -0.07, -0.50, -0.45).
 pub const GATE_SIGMA: f32 = 0.046;
 
 /// The gate's bound on the share of points with a neighbour outside the
