@@ -128,6 +128,24 @@ impl Disc<'_> {
         flat(self.normal, self.centre, self.g.pos[k as usize])
     }
 
+    /// The points near it more than `off` off its plane and within its
+    /// radius along it.
+    fn across(&self, off: f32) -> Vec<Vec3> {
+        let n = self.normal;
+        (self.others.iter())
+            .map(|&k| self.g.pos[k as usize])
+            .filter(|&q| n.dot(q - self.centre).abs() > off && flat(n, self.centre, q).length() <= self.radius)
+            .collect()
+    }
+
+    /// The sum of the unit directions in its plane toward `across`, where
+    /// they lie to one side (the sum at least [`ACROSS_SIDE`] of their
+    /// count long).
+    fn to_one_side(&self, across: &[Vec3]) -> Option<Vec3> {
+        let side = across.iter().map(|&q| flat(self.normal, self.centre, q).normalize_or_zero()).sum::<Vec3>();
+        (side.length() >= ACROSS_SIDE * across.len() as f32).then_some(side)
+    }
+
     /// How far its points reach along `w`.
     fn reach(&self, w: Vec3) -> f32 {
         self.members.iter().map(|&k| self.flat(k).dot(w)).fold(f32::MIN, f32::max)
@@ -167,17 +185,11 @@ pub fn lines(s: &Disc<'_>) -> [Option<Line>; 2] {
 /// The crease the points across the disc show, if they do.
 fn meet_line(s: &Disc<'_>) -> Option<Line> {
     let n = s.normal;
-    let across: Vec<Vec3> = (s.others.iter())
-        .map(|&k| s.g.pos[k as usize])
-        .filter(|&q| n.dot(q - s.centre).abs() > s.slab && flat(n, s.centre, q).length() <= s.radius)
-        .collect();
+    let across = s.across(s.slab);
     if across.len() < ACROSS_MIN {
         return None;
     }
-    let side = across.iter().map(|&q| flat(n, s.centre, q).normalize_or_zero()).sum::<Vec3>();
-    if side.length() < ACROSS_SIDE * across.len() as f32 {
-        return None;
-    }
+    s.to_one_side(&across)?;
     let (c2, vals, vecs) = plane_fit(across.iter().copied());
     let (c2, n2) = (c2.as_vec3(), vecs[0].as_vec3());
     let scatter = (vals[0].max(0.0) / across.len() as f64).sqrt() as f32;
@@ -200,20 +212,11 @@ fn meet_line(s: &Disc<'_>) -> Option<Line> {
 /// across a crease): the line through its own points' farthest reach
 /// toward them.
 fn stop_line(s: &Disc<'_>) -> Option<Line> {
-    let n = s.normal;
-    let off = STOP_SLABS * s.slab;
-    let across: Vec<Vec3> = (s.others.iter())
-        .map(|&k| s.g.pos[k as usize])
-        .filter(|&q| n.dot(q - s.centre).abs() > off && flat(n, s.centre, q).length() <= s.radius)
-        .collect();
+    let across = s.across(STOP_SLABS * s.slab);
     if across.is_empty() || across.len() >= ACROSS_MIN {
         return None;
     }
-    let side = across.iter().map(|&q| flat(n, s.centre, q).normalize_or_zero()).sum::<Vec3>();
-    if side.length() < ACROSS_SIDE * across.len() as f32 {
-        return None;
-    }
-    let w = side.normalize_or_zero();
+    let w = s.to_one_side(&across)?.normalize_or_zero();
     let d = s.reach(w);
     (w.is_finite() && d > 0.0 && d < s.radius).then_some((w, d))
 }
