@@ -128,13 +128,13 @@ impl Disc<'_> {
         flat(self.normal, self.centre, self.g.pos[k as usize])
     }
 
-    /// The points near it more than `off` off its plane and within its
-    /// radius along it.
-    fn across(&self, off: f32) -> Vec<Vec3> {
+    /// The points near it that left its slab, within its radius along its
+    /// plane.
+    fn across(&self) -> Vec<Vec3> {
         let n = self.normal;
         (self.others.iter())
             .map(|&k| self.g.pos[k as usize])
-            .filter(|&q| n.dot(q - self.centre).abs() > off && flat(n, self.centre, q).length() <= self.radius)
+            .filter(|&q| n.dot(q - self.centre).abs() > self.slab && flat(n, self.centre, q).length() <= self.radius)
             .collect()
     }
 
@@ -177,19 +177,20 @@ pub fn clip(
 /// The splat's clip lines (at most two), across a crease first.
 #[must_use]
 pub fn lines(s: &Disc<'_>) -> [Option<Line>; 2] {
-    let mut out = [meet_line(s).or_else(|| stop_line(s)), None];
+    let across = s.across();
+    let mut out = [meet_line(s, &across).or_else(|| stop_line(s, &across)), None];
     border_lines(s, &mut out);
     out
 }
 
 /// The crease the points across the disc show, if they do.
-fn meet_line(s: &Disc<'_>) -> Option<Line> {
+/// (`across`: [`Disc::across`]).
+fn meet_line(s: &Disc<'_>, across: &[Vec3]) -> Option<Line> {
     let n = s.normal;
-    let across = s.across(s.slab);
     if across.len() < ACROSS_MIN {
         return None;
     }
-    s.to_one_side(&across)?;
+    s.to_one_side(across)?;
     let (c2, vals, vecs) = plane_fit(across.iter().copied());
     let (c2, n2) = (c2.as_vec3(), vecs[0].as_vec3());
     let scatter = (vals[0].max(0.0) / across.len() as f64).sqrt() as f32;
@@ -210,9 +211,12 @@ fn meet_line(s: &Disc<'_>) -> Option<Line> {
 /// Where one to three points more than [`STOP_SLABS`] slabs off the
 /// disc's plane lie within it, to one side (too few to fit the plane
 /// across a crease): the line through its own points' farthest reach
-/// toward them.
-fn stop_line(s: &Disc<'_>) -> Option<Line> {
-    let across = s.across(STOP_SLABS * s.slab);
+/// toward them (`across`: the points that left its slab, [`Disc::across`]).
+fn stop_line(s: &Disc<'_>, across: &[Vec3]) -> Option<Line> {
+    let off = STOP_SLABS * s.slab;
+    let across: Vec<Vec3> = (across.iter().copied())
+        .filter(|&q| s.normal.dot(q - s.centre).abs() > off)
+        .collect();
     if across.is_empty() || across.len() >= ACROSS_MIN {
         return None;
     }
