@@ -15,6 +15,7 @@ use crate::accel::octree::{Octree, OctreeParams};
 use crate::accel::{Backend, CandidateHits, Ray};
 use crate::primitive::{ClippedDisc, Disc, Primitive};
 use crate::splat::knn::{PointTree, build_tree};
+use crate::data::FACING_AWAY_MAX;
 use crate::splat::{PointCloud, Splat, SplatParams, SplatReport, Viewpoints};
 use crate::{Error, Result};
 use glam::{Vec2, Vec3};
@@ -51,13 +52,6 @@ pub const MARGIN_ALONG: f32 = 2.0;
 /// or a default `VIEWPOINT`): nothing is trimmed and a warning says so.
 pub const IMPLAUSIBLE: f64 = 0.2;
 
-/// If more than this share of the points face away from the viewpoint
-/// ([`SplatReport::facing_away`]), the viewpoint is not the scanner's:
-/// nothing is trimmed and a warning says so. Single scans measure under
-/// 0.01 % (the synthetic bunny scans, milk.pcd); the bundled lamppost,
-/// points on every side of a pole and few on the side facing its
-/// default `VIEWPOINT`, 14 %.
-pub const FACING_AWAY_MAX: f64 = 0.05;
 
 /// What trimming did.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]

@@ -55,8 +55,8 @@ pub struct SplatOptions {
     /// several times faster) grows the splats of a clean, closed, densely
     /// sampled surface without creases, where its gate finds one, and of
     /// such a cloud with creases and borders (a solid's samples, an
-    /// airborne survey), its splats clipped there (docs/usage.md, "Lean
-    /// growth").
+    /// airborne survey, a clean scan), its splats clipped there
+    /// (docs/usage.md, "Lean growth").
     #[arg(long)]
     pub no_lean: bool,
 }

@@ -9,6 +9,6 @@ mod cloud;
 mod robust;
 mod splat;
 
-pub use cloud::{PointCloud, Scans, Viewpoints};
+pub use cloud::{FACING_AWAY_COS, FACING_AWAY_MAX, PointCloud, Scans, Viewpoints};
 pub use robust::robust_centre_size;
 pub use splat::{ColorField, NormalField, Splat};

@@ -406,10 +406,7 @@ impl SplatReport {
     }
 }
 
-/// A normal facing away from the line of sight by more than this cosine
-/// (past edge-on by about 11.5°; noise tilts grazing normals slightly
-/// past it) counts as seen from behind.
-pub const FACING_AWAY_COS: f32 = -0.2;
+use crate::data::FACING_AWAY_COS;
 
 /// The share of the points with estimated (not `fixed`) normals that face
 /// away from `viewpoint` by more than [`FACING_AWAY_COS`].
@@ -616,11 +613,11 @@ pub(crate) fn generate_stages(
     let (unit_cloud, unit_params) = to_unit(&frame, cloud, params);
     let (cloud, params) = (&unit_cloud, &unit_params);
     let mut report = start_report(cloud);
-    // A scan's viewpoints turn its normals toward the scanner, which only
-    // the stages do (lean growth turns a closed surface's outward).
+    // A scan's viewpoints turn lean growth's splats toward its scanners, as
+    // they turn the stages' normals.
     let try_lean = match params.lean {
         LeanMode::Off => false,
-        LeanMode::Gated => params.stages_only().is_none() && viewpoints_of(cloud, params).is_none(),
+        LeanMode::Gated => params.stages_only().is_none(),
         LeanMode::Always | LeanMode::AlwaysSharp => true,
     };
     if try_lean
@@ -669,8 +666,8 @@ pub(crate) fn generate_stages(
 type Stages = (Vec<Splat>, SplatReport, Vec<u32>);
 
 /// [`generate_stages`] by [`super::lean`] (`cloud` in the unit frame), where
-/// its gate passes: the splats in the cloud's units, the report, and no
-/// outliers. `None` where the gate refuses the cloud (`report` then says
+/// its gate passes: the splats in the cloud's units, the report, and the
+/// outlier seeds of a scan (none without viewpoints). `None` where the gate refuses the cloud (`report` then says
 /// why, and the stages run as without it).
 fn lean_stages(
     cloud: &PointCloud,
@@ -698,7 +695,8 @@ fn lean_stages(
         (LeanMode::Gated, false) if params.creases == Creases::Off => GrowWhen::Gated,
         (LeanMode::Gated, false) => GrowWhen::GatedSharp,
     };
-    let lean = super::lean::grow_lean(points, epsilon, (when, params.gate_within), |f| {
+    let views = viewpoints_of(cloud, params);
+    let lean = super::lean::grow_lean(points, epsilon, (when, params.gate_within, views.as_ref()), |f| {
         notify(progress, "lean growth", f);
     });
     let refused = match when {
@@ -730,6 +728,7 @@ fn lean_stages(
     report.estimated_normals = 0;
     report.noise = f64::from(lean.gate.sigma) * f64::from(epsilon);
     report.largest_over_spacing = f64::from(lean.largest_over_spacing);
+    report.facing_away = lean.facing_away;
     // A point a splat took within ϵ of its plane lies on it (inside its
     // radius); the rest are looked for on the splats.
     let unsure = &lean.unsure_points;
@@ -754,7 +753,7 @@ fn lean_stages(
         colors: 0.0,
         total: t0.elapsed().as_secs_f64(),
     };
-    Ok(Some((splats, report.clone(), Vec::new())))
+    Ok(Some((splats, report.clone(), lean.outlier_points)))
 }
 
 /// Why lean growth must not run on `points` whatever its gate finds: a

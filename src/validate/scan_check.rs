@@ -97,7 +97,7 @@ pub struct ScanCheckReport {
     /// What free-space trimming did (on the points not held out).
     pub trim: Option<TrimReport>,
     /// False when too many points face away from the viewpoint
-    /// ([`crate::freespace::FACING_AWAY_MAX`]): it is not the scanner's
+    /// ([`crate::data::FACING_AWAY_MAX`]): it is not the scanner's
     /// position, points behind real surfaces are counted early, and the
     /// lines of sight check nothing.
     pub viewpoint_is_scanner: bool,
@@ -254,7 +254,7 @@ pub fn scan_check(
         max_over_median_radius: max_radius / median_radius.max(f64::MIN_POSITIVE),
         viewpoint_is_scanner: generation
             .facing_away
-            .is_none_or(|a| a <= crate::freespace::FACING_AWAY_MAX),
+            .is_none_or(|a| a <= crate::data::FACING_AWAY_MAX),
         surface: SurfaceCounts {
             window: f64::from(window),
             consistent_fraction: frac(5),

@@ -273,13 +273,16 @@ fn border_lines(s: &Disc<'_>, out: &mut [Option<Line>; 2]) {
     }
 }
 
-/// Whether a point in the slab lies well past `h` along `w`, near the disc.
+/// Whether a point in the slab lies well past `h` along `w`, near the disc
+/// (in a scan's, within the slab widened by [`super::SCAN_BEND`] times its
+/// distance past `h`: a surface curving away toward its silhouette).
 fn goes_on(s: &Disc<'_>, w: Vec3, h: f32) -> bool {
     let n = s.normal;
     s.others.iter().any(|&k| {
         let q = s.g.pos[k as usize];
         let f = flat(n, s.centre, q);
-        n.dot(q - s.centre).abs() <= s.slab && f.dot(w) > h + GOES_ON * s.spacing && f.length() <= 1.2 * s.radius
+        let past = f.dot(w) - h;
+        n.dot(q - s.centre).abs() <= s.slab + s.g.bend * past && past > GOES_ON * s.spacing && f.length() <= 1.2 * s.radius
     })
 }
 
