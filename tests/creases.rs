@@ -285,13 +285,15 @@ fn an_exact_scan_grows_lean_facing_its_scanner() {
     let (psnr_stages, _) = solids_figures(&text, &root, true);
     let psnr = e.image_psnr_db.unwrap();
     // Measured: 33.58 dB, 0.09 % false hits, normal error 0.53°, against
-    // the stages' (creases on) 31.89 dB, 0.10 %, 1.00°. At 1000x750 rays
-    // and 400x300 pixels 35.52 against 35.03 dB (35.70 with trimming
-    // given the outlier seeds' lines of sight too); from two stations
-    // (800x600 rays each) 37.75 against 36.58.
+    // the stages' (creases on) 31.89 dB, 0.10 %, 1.00° (the scan traced
+    // by Embree forced to avx2: 33.76 against 31.95 dB; to sse4.2: 33.77
+    // against 32.37, 0.097 % false hits). At 1000x750 rays and 400x300
+    // pixels 35.52 against 35.03 dB (35.70 with trimming given the
+    // outlier seeds' lines of sight too); from two stations (800x600 rays
+    // each) 37.75 against 36.58.
     assert!(psnr > 33.4, "{psnr}");
     assert!(
-        psnr > psnr_stages + 1.5,
+        psnr > psnr_stages + 1.2,
         "{psnr} against the stages' {psnr_stages}"
     );
     assert!(e.false_hits < 0.0011, "{}", e.false_hits);

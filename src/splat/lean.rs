@@ -816,12 +816,13 @@ fn grow(g: &Grid, near: &mut Near, i: u32, (eps, far, sharp): (f32, f32, bool)) 
 /// splat takes only points within its slab, never the far face's.
 ///
 /// A scan's splats (`views`: where each point of the grid's order was seen
-/// from, and the points) are then turned tree by tree to face the scanners, as the stages
-/// turn their normals (`normals::orient`): a tree whose points mostly see
-/// its splats from behind is turned over. Returns the share of the points
-/// taken (counted once a splat) whose splat then faces away from their
-/// viewpoint past [`FACING_AWAY_COS`] (`None` without `views`), which
-/// tells free-space trimming whether the viewpoint is the scanner's.
+/// from, and the points) are then turned tree by tree to face the
+/// scanners, as the stages turn their normals (`normals::orient`): a tree
+/// whose points mostly see its splats from behind is turned over
+/// ([`face_the_scanners`]). Returns the share of the points taken (counted
+/// once a splat) whose splat then faces away from their viewpoint past
+/// [`FACING_AWAY_COS`] (`None` without `views`), which tells free-space
+/// trimming whether the viewpoint is the scanner's.
 fn orient(splats: &mut [Grown], points: usize, views: Option<(&[Vec3], &[Vec3])>) -> Option<f64> {
     let n = splats.len();
     if n == 0 {
@@ -937,10 +938,11 @@ fn turned(a: &Grown, b: &Grown, scan: bool) -> bool {
 /// [`turned`]'s cosine below which two splats meet across a crease.
 const CREASE_AGREE: f32 = 0.5;
 
-
 /// [`orient`]'s turn of each tree (`tree`: each splat's root) toward the
 /// viewpoints `views` (by the grid's order) of the points it took, and the
-/// share of them that face away after it.
+/// share of them that face away after it; where that share is at most
+/// [`FACING_AWAY_MAX`] (the viewpoint holds), each splat then faces the
+/// most of its own points' viewpoints.
 fn face_the_scanners(splats: &mut [Grown], tree: &[u32], (views, pos): (&[Vec3], &[Vec3])) -> f64 {
     // Per splat: its points seeing it from the front, from behind.
     let votes: Vec<(u32, u32)> = splats
