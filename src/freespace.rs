@@ -13,9 +13,9 @@
 
 use crate::accel::octree::{Octree, OctreeParams};
 use crate::accel::{Backend, CandidateHits, Ray};
+use crate::data::FACING_AWAY_MAX;
 use crate::primitive::{ClippedDisc, Disc, Primitive};
 use crate::splat::knn::{PointTree, build_tree};
-use crate::data::FACING_AWAY_MAX;
 use crate::splat::{PointCloud, Splat, SplatParams, SplatReport, Viewpoints};
 use crate::{Error, Result};
 use glam::{Vec2, Vec3};
@@ -51,7 +51,6 @@ pub const MARGIN_ALONG: f32 = 2.0;
 /// viewpoint is not the scanner's (a cloud registered from several scans,
 /// or a default `VIEWPOINT`): nothing is trimmed and a warning says so.
 pub const IMPLAUSIBLE: f64 = 0.2;
-
 
 /// What trimming did.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]

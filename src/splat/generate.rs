@@ -10,7 +10,7 @@ use super::knn::{Knn, MortonGrid, build_tree};
 use super::normals;
 use super::outliers;
 use crate::data::Splat;
-use crate::data::{PointCloud, Viewpoints};
+use crate::data::{FACING_AWAY_COS, PointCloud, Viewpoints};
 use crate::progress::{Progress, notify};
 use glam::Vec3;
 use kiddo::SquaredEuclidean;
@@ -406,8 +406,6 @@ impl SplatReport {
     }
 }
 
-use crate::data::FACING_AWAY_COS;
-
 /// The share of the points with estimated (not `fixed`) normals that face
 /// away from `viewpoint` by more than [`FACING_AWAY_COS`].
 fn facing_away(points: &[Vec3], normals: &[Vec3], fixed: &[bool], viewpoint: &Viewpoints) -> f64 {
@@ -667,8 +665,9 @@ type Stages = (Vec<Splat>, SplatReport, Vec<u32>);
 
 /// [`generate_stages`] by [`super::lean`] (`cloud` in the unit frame), where
 /// its gate passes: the splats in the cloud's units, the report, and the
-/// outlier seeds of a scan (none without viewpoints). `None` where the gate refuses the cloud (`report` then says
-/// why, and the stages run as without it).
+/// outlier seeds of a scan (none without viewpoints). `None` where the
+/// gate refuses the cloud (`report` then says why, and the stages run as
+/// without it).
 fn lean_stages(
     cloud: &PointCloud,
     params: &SplatParams,

@@ -281,8 +281,10 @@ fn goes_on(s: &Disc<'_>, w: Vec3, h: f32) -> bool {
     s.others.iter().any(|&k| {
         let q = s.g.pos[k as usize];
         let f = flat(n, s.centre, q);
-        let past = f.dot(w) - h;
-        n.dot(q - s.centre).abs() <= s.slab + s.g.bend * past && past > GOES_ON * s.spacing && f.length() <= 1.2 * s.radius
+        let along = f.dot(w);
+        n.dot(q - s.centre).abs() <= s.slab + s.g.bend * (along - h)
+            && along > h + GOES_ON * s.spacing
+            && f.length() <= 1.2 * s.radius
     })
 }
 
