@@ -944,47 +944,42 @@ const CREASE_AGREE: f32 = 0.5;
 /// [`FACING_AWAY_MAX`] (the viewpoint holds), each splat then faces the
 /// most of its own points' viewpoints.
 fn face_the_scanners(splats: &mut [Grown], tree: &[u32], (views, pos): (&[Vec3], &[Vec3])) -> f64 {
-    // Per splat: its points seeing it from the front, from behind.
-    let votes: Vec<(u32, u32)> = splats
+    // Per splat, in one pass over its points' lines of sight: those seeing
+    // it from the front and from behind, those that would see it face away
+    // past the bound as it stands and turned over (`-n · s` is `n · s`
+    // negated exactly), and all of them.
+    let votes: Vec<[u32; 5]> = splats
         .par_iter()
         .map(|s| {
-            let (mut front, mut back) = (0, 0);
+            let mut v = [0u32; 5];
             for &k in &s.members {
                 if let Some(sight) = (views[k as usize] - pos[k as usize]).try_normalize() {
                     let c = s.normal.dot(sight);
-                    front += u32::from(c > 0.0);
-                    back += u32::from(c < 0.0);
+                    v[0] += u32::from(c > 0.0);
+                    v[1] += u32::from(c < 0.0);
+                    v[2] += u32::from(c < FACING_AWAY_COS);
+                    v[3] += u32::from(-c < FACING_AWAY_COS);
+                    v[4] += 1;
                 }
             }
-            (front, back)
+            v
         })
         .collect();
+    let all: usize = votes.iter().map(|v| v[4] as usize).sum();
     let mut balance = vec![0i64; splats.len()];
-    for (t, &(f, b)) in tree.iter().zip(&votes) {
-        balance[*t as usize] += i64::from(f) - i64::from(b);
+    for (t, v) in tree.iter().zip(&votes) {
+        balance[*t as usize] += i64::from(v[0]) - i64::from(v[1]);
     }
-    let (mut away, mut all) = (0usize, 0usize);
-    for (s, t) in splats.iter_mut().zip(tree) {
-        if balance[*t as usize] < 0 {
-            s.normal = -s.normal;
-        }
-        for &k in &s.members {
-            if let Some(sight) = (views[k as usize] - pos[k as usize]).try_normalize() {
-                all += 1;
-                away += usize::from(s.normal.dot(sight) < FACING_AWAY_COS);
-            }
-        }
-    }
+    let turned = |t: u32| balance[t as usize] < 0;
+    let away: usize = votes.iter().zip(tree).map(|(v, &t)| v[if turned(t) { 3 } else { 2 }] as usize).sum();
     let away = if all == 0 { 0.0 } else { away as f64 / all as f64 };
     // A viewpoint the trees bear out is the scanner's: each splat then
     // faces the points it took, whatever its tree's turn.
-    if away <= FACING_AWAY_MAX {
-        for (s, (&(f, b), t)) in splats.iter_mut().zip(votes.iter().zip(tree)) {
-            let tree_turned = balance[*t as usize] < 0;
-            let (front, back) = if tree_turned { (b, f) } else { (f, b) };
-            if back > front {
-                s.normal = -s.normal;
-            }
+    let each = away <= FACING_AWAY_MAX;
+    for (s, (v, &t)) in splats.iter_mut().zip(votes.iter().zip(tree)) {
+        let (front, back) = if turned(t) { (v[1], v[0]) } else { (v[0], v[1]) };
+        if turned(t) != (each && back > front) {
+            s.normal = -s.normal;
         }
     }
     away
