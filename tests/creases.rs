@@ -299,6 +299,99 @@ fn an_exact_scan_grows_lean_facing_its_scanner() {
     assert!(e.false_hits < 0.0011, "{}", e.false_hits);
 }
 
+/// Stray returns near a scanned surface (a point on a scan ray at 0.5-1.5
+/// times its range, inside the box, as mixed pixels at silhouettes are)
+/// grow no splat standing off the surface: lean growth leaves a seed lying
+/// off its nearest's plane out as an outlier (`lean::SEED_OFF_SPACINGS`),
+/// so no disc hangs in the air and trimming does not cut the surface
+/// behind it for the stray point's line of sight.
+#[test]
+fn stray_returns_inside_a_scan_grow_no_splat_off_the_surface() {
+    use rayon::prelude::*;
+    let mesh = splatray::io::read_mesh(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data/solids.ply"),
+    )
+    .unwrap();
+    let params = splatray::scanner::ScanParams {
+        from: glam::DVec3::new(1.9, 1.5, 2.4),
+        at: Some(glam::DVec3::new(0.0, 0.2, 0.0)),
+        columns: 1000,
+        rows: 750,
+        seed: 1,
+        ..Default::default()
+    };
+    let clean = splatray::scanner::scan_mesh(&mesh, &params).unwrap().cloud;
+    let strays = splatray::scanner::ScanParams {
+        outliers: 0.002,
+        ..params
+    };
+    let scan = splatray::scanner::scan_mesh(&mesh, &strays).unwrap().cloud;
+    assert_eq!(scan.origin, clean.origin);
+    // A return the clean scan has is the surface's (no range noise: the
+    // same ray, the same point); the rest are strays, kept inside the
+    // clean scan's box (the farther ones would widen the box and keep lean
+    // growth off the cloud).
+    let surface: std::collections::HashSet<[u32; 3]> = clean
+        .positions
+        .iter()
+        .map(|p| p.to_array().map(f32::to_bits))
+        .collect();
+    let (lo, hi) = clean
+        .positions
+        .iter()
+        .fold((glam::Vec3::MAX, glam::Vec3::MIN), |(a, b), p| {
+            (a.min(*p), b.max(*p))
+        });
+    let stray: Vec<bool> = scan
+        .positions
+        .iter()
+        .map(|p| !surface.contains(&p.to_array().map(f32::to_bits)))
+        .collect();
+    let drop: Vec<bool> = scan
+        .positions
+        .iter()
+        .zip(&stray)
+        .map(|(p, &s)| s && !(p.cmpge(lo).all() && p.cmple(hi).all()))
+        .collect();
+    let cloud = scan.subset(&drop.iter().map(|d| !d).collect::<Vec<_>>());
+    let inside = stray.iter().zip(&drop).filter(|(s, d)| **s && !**d).count();
+    // Measured: 87 strays inside the box (218 in all).
+    assert!(inside >= 80, "{inside} strays inside the box");
+    let params = splatray::splat::SplatParams {
+        viewpoint: cloud.viewpoint,
+        ..Default::default()
+    };
+    let (splats, rep) = splatray::splat::generate(&cloud, &params).unwrap();
+    let lean = rep.lean.as_ref().expect("a lean report");
+    assert!(lean.used && lean.sharp, "{lean:?}");
+    // A splat standing off the surface: its centre farther than two `ϵ`
+    // from every return of the clean scan (a centre on a face lies within
+    // about a spacing of one, 0.6-1.2 `ϵ` here).
+    let eps = rep.epsilon as f32;
+    let off: Vec<f32> = splats
+        .par_iter()
+        .map(|s| {
+            let c = s.center;
+            clean
+                .positions
+                .iter()
+                .map(|p| p.distance_squared(c))
+                .fold(f32::INFINITY, f32::min)
+                .sqrt()
+                / eps
+        })
+        .filter(|&d| d > 2.0)
+        .collect();
+    eprintln!(
+        "{} of {} splats off the surface: {off:?}",
+        off.len(),
+        splats.len()
+    );
+    // Measured: none of 2,162, against 10 of 2,173 (4.1-6.6 `ϵ` off) with
+    // every seed kept (the rule's bound raised out of reach).
+    assert!(off.len() <= 1, "{off:?}");
+}
+
 /// The same solids scanned from the camera's position by a range scanner
 /// with noise (`scan = { ..., range_noise_spacing = 0.5 }`, 400x300 rays,
 /// about 16k returns), 200x150 against the mesh: crease clipping still
