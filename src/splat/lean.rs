@@ -100,7 +100,8 @@ const ALWAYS_SAMPLE: usize = 512;
 /// 0.028-0.029 on 200k bunny samples (+0.81 dB over the stages), 0.039 at
 /// 140k (+0.44), 0.043-0.045 at 120k (+0.14), 0.047-0.048 at 110k
 /// (-0.16), 0.050 at 100k (-0.27); 0.14 and 0.26 under noise of 0.16 and
-/// 0.31 `ϵ`, 0.041 on the default survey's tile, 0.105 on the noisy scan.
+/// 0.31 `ϵ`, 0.041 on the default survey's tile, 0.170 on the noisy scan
+/// (at its robust box's `ϵ`; 0.105 at its whole box's, 1.6 times wider).
 ///
 /// Sharp lean growth ([`sharp`]) takes the same bound. Its quality
 /// crosses the stages' near 0.06 on surveys (`splatray terrain --noise`,
