@@ -238,19 +238,7 @@ fn a_clean_solid_grows_lean_with_clip_lines() {
 /// points facing away measured on the splats. 200x150 against the mesh.
 #[test]
 fn an_exact_scan_grows_lean_facing_its_scanner() {
-    let mesh = splatray::io::read_mesh(
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data/solids.ply"),
-    )
-    .unwrap();
-    let params = splatray::scanner::ScanParams {
-        from: glam::DVec3::new(1.9, 1.5, 2.4),
-        at: Some(glam::DVec3::new(0.0, 0.2, 0.0)),
-        columns: 1000,
-        rows: 750,
-        seed: 1,
-        ..Default::default()
-    };
-    let cloud = splatray::scanner::scan_mesh(&mesh, &params).unwrap().cloud;
+    let cloud = solids_scan([1000, 750], 0.0);
     let eye = cloud.viewpoint.expect("a scan's viewpoint");
     // The scanner's position, as `splat` and a scene take a cloud's own.
     let params = splatray::splat::SplatParams {
@@ -275,14 +263,7 @@ fn an_exact_scan_grows_lean_facing_its_scanner() {
         "{facing} of {} face the scanner",
         splats.len()
     );
-    let (root, text) = solids_scanned(
-        "seed = 1\nscan = { from = [1.9, 1.5, 2.4], at = [0.0, 0.2, 0.0], rays = [400, 300] }",
-    );
-    let lean_text = text.replace("splat = { creases = true }", "splat = { }");
-    let scene = build_scene(&parse_scene_str(&lean_text).unwrap(), &root, None).unwrap();
-    let e = common::errors_against_truth(&scene);
-    eprintln!("lean scan: {e:?}");
-    let (psnr_stages, _) = solids_figures(&text, &root, true);
+    let (e, psnr_stages) = lean_and_stages_scanned("rays = [400, 300]");
     let psnr = e.image_psnr_db.unwrap();
     // Measured: 33.58 dB, 0.09 % false hits, normal error 0.53°, against
     // the stages' (creases on) 31.89 dB, 0.10 %, 1.00° (the scan traced
@@ -306,20 +287,7 @@ fn an_exact_scan_grows_lean_facing_its_scanner() {
 /// the stages: better than theirs, with a warning saying why `ϵ` differs.
 #[test]
 fn a_scan_with_far_stray_returns_grows_lean() {
-    let mesh = splatray::io::read_mesh(
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data/solids.ply"),
-    )
-    .unwrap();
-    let params = splatray::scanner::ScanParams {
-        from: glam::DVec3::new(1.9, 1.5, 2.4),
-        at: Some(glam::DVec3::new(0.0, 0.2, 0.0)),
-        columns: 400,
-        rows: 300,
-        outliers: 0.002,
-        seed: 1,
-        ..Default::default()
-    };
-    let cloud = splatray::scanner::scan_mesh(&mesh, &params).unwrap().cloud;
+    let cloud = solids_scan([400, 300], 0.002);
     let params = SplatParams {
         viewpoint: cloud.viewpoint,
         ..Default::default()
@@ -334,15 +302,7 @@ fn a_scan_with_far_stray_returns_grows_lean() {
         "{:?}",
         rep.warnings
     );
-    let (root, text) = solids_scanned(
-        "seed = 1\nscan = { from = [1.9, 1.5, 2.4], at = [0.0, 0.2, 0.0], rays = [400, 300], \
-         outliers = 0.002 }",
-    );
-    let lean_text = text.replace("splat = { creases = true }", "splat = { }");
-    let scene = build_scene(&parse_scene_str(&lean_text).unwrap(), &root, None).unwrap();
-    let e = common::errors_against_truth(&scene);
-    eprintln!("lean scan with strays: {e:?}");
-    let (psnr_stages, _) = solids_figures(&text, &root, true);
+    let (e, psnr_stages) = lean_and_stages_scanned("rays = [400, 300], outliers = 0.002");
     let psnr = e.image_psnr_db.unwrap();
     // Measured (the scan traced by Embree at avx512 / avx2 / sse4.2):
     // 32.97 / 33.21 / 32.96 dB against the stages' 31.67 / 31.91 / 31.97,
@@ -365,24 +325,8 @@ fn a_scan_with_far_stray_returns_grows_lean() {
 #[test]
 fn stray_returns_inside_a_scan_grow_no_splat_off_the_surface() {
     use rayon::prelude::*;
-    let mesh = splatray::io::read_mesh(
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data/solids.ply"),
-    )
-    .unwrap();
-    let params = splatray::scanner::ScanParams {
-        from: glam::DVec3::new(1.9, 1.5, 2.4),
-        at: Some(glam::DVec3::new(0.0, 0.2, 0.0)),
-        columns: 1000,
-        rows: 750,
-        seed: 1,
-        ..Default::default()
-    };
-    let clean = splatray::scanner::scan_mesh(&mesh, &params).unwrap().cloud;
-    let strays = splatray::scanner::ScanParams {
-        outliers: 0.002,
-        ..params
-    };
-    let scan = splatray::scanner::scan_mesh(&mesh, &strays).unwrap().cloud;
+    let clean = solids_scan([1000, 750], 0.0);
+    let scan = solids_scan([1000, 750], 0.002);
     assert_eq!(scan.origin, clean.origin);
     // A return the clean scan has is the surface's (no range noise: the
     // same ray, the same point); the rest are strays, kept inside the
@@ -530,6 +474,43 @@ fn a_solid_scanned_from_two_stations_renders_near_its_mesh() {
     // samples' 36.42 (issue 39 asks for 3; 33.69 dB before the faces).
     assert!(psnr > 34.95, "{psnr}");
     assert!(false_hits < 0.0008, "{false_hits}");
+}
+
+/// The solids scanned exactly from the camera's position in
+/// scenes/solids.toml (1.9, 1.5, 2.4, looking at 0, 0.2, 0), `rays`
+/// columns and rows, `outliers` of the returns replaced by strays on
+/// their rays (0.5-1.5 times the range), seed 1.
+fn solids_scan([columns, rows]: [u32; 2], outliers: f32) -> PointCloud {
+    let mesh = splatray::io::read_mesh(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data/solids.ply"),
+    )
+    .unwrap();
+    let params = splatray::scanner::ScanParams {
+        from: glam::DVec3::new(1.9, 1.5, 2.4),
+        at: Some(glam::DVec3::new(0.0, 0.2, 0.0)),
+        columns,
+        rows,
+        outliers,
+        seed: 1,
+        ..Default::default()
+    };
+    splatray::scanner::scan_mesh(&mesh, &params).unwrap().cloud
+}
+
+/// The solids' scene scanned from its camera (`scan`: the scan's keys
+/// after its position, e.g. `rays = [400, 300]`) at 200x150: lean
+/// growth's errors against the mesh (the default `splat`), and the
+/// stages' PSNR (creases on).
+fn lean_and_stages_scanned(scan: &str) -> (splatray::validate::compare::TruthErrors, f64) {
+    let (root, text) = solids_scanned(&format!(
+        "seed = 1\nscan = {{ from = [1.9, 1.5, 2.4], at = [0.0, 0.2, 0.0], {scan} }}"
+    ));
+    let lean_text = text.replace("splat = { creases = true }", "splat = { }");
+    let scene = build_scene(&parse_scene_str(&lean_text).unwrap(), &root, None).unwrap();
+    let e = common::errors_against_truth(&scene);
+    eprintln!("lean, scan {scan}: {e:?}");
+    let (psnr_stages, _) = solids_figures(&text, &root, true);
+    (e, psnr_stages)
 }
 
 /// The scenes folder and scenes/solids.toml with its exact samples
