@@ -302,6 +302,21 @@ fn a_scan_with_far_stray_returns_grows_lean() {
         "{:?}",
         rep.warnings
     );
+    // A given `ϵ` (as a tile's is) owes nothing to the box: lean growth,
+    // and no word of the box.
+    let given = SplatParams {
+        epsilon_abs: Some(rep.epsilon),
+        ..params
+    };
+    let (_, rep) = generate(&cloud, &given).unwrap();
+    assert!(rep.lean.as_ref().is_some_and(|l| l.used), "{:?}", rep.lean);
+    assert!(
+        !rep.warnings
+            .iter()
+            .any(|w| w.contains("widen the bounding box")),
+        "{:?}",
+        rep.warnings
+    );
     let (e, psnr_stages) = lean_and_stages_scanned("rays = [400, 300], outliers = 0.002");
     let psnr = e.image_psnr_db.unwrap();
     // Measured (the scan traced by Embree at avx512 / avx2 / sse4.2):
