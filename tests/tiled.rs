@@ -870,3 +870,78 @@ fn lean_growth_grows_the_tiles_of_a_dense_clean_cloud() {
         "seam {t_seam} rest {t_rest}"
     );
 }
+
+/// A scan with stray returns (0.2 % of its rays, out to twice their range)
+/// is tiled at the whole cloud's `ϵ`: the plan takes it from the box of
+/// the survey sample without its extreme thousandth along each axis, as
+/// whole-cloud generation does (`tiled::plan::epsilon_scale`), and says
+/// so. Before, the strays widened the tiles' `ϵ` 1.5 times (1.053e-2
+/// against 6.913e-3), and the tiles grew 1,158 splats against the whole
+/// cloud's 1,399.
+#[test]
+fn a_scan_with_far_strays_is_tiled_at_the_whole_clouds_epsilon() {
+    let dir = scratch("tiled-strays");
+    let mesh = read_mesh(&data("solids.ply")).unwrap();
+    let params = splatray::scanner::ScanParams {
+        from: DVec3::new(1.9, 1.5, 2.4),
+        at: Some(DVec3::new(0.0, 0.2, 0.0)),
+        columns: 400,
+        rows: 300,
+        outliers: 0.002,
+        seed: 1,
+        ..Default::default()
+    };
+    let scan = splatray::scanner::scan_mesh(&mesh, &params).unwrap().cloud;
+    let input = dir.join("scan.pcd");
+    write_points(&input, &scan).unwrap();
+    let whole = splatray::io::read_points(&input).unwrap();
+    let splat = SplatParams {
+        viewpoint: whole.viewpoint,
+        ..Default::default()
+    };
+    let (untiled, ureport) = generate(&whole, &splat).unwrap();
+    let opts = TiledOptions {
+        tiling: Tiling {
+            tile_points: Some(6_000),
+            ..options(dir.join("work")).tiling
+        },
+        ..options(dir.join("work"))
+    };
+    let out = dir.join("tiled.ply");
+    let report = generate_tiled(
+        std::slice::from_ref(&input),
+        &SplatParams::default(),
+        &opts,
+        &out,
+        None,
+    )
+    .unwrap();
+    eprintln!(
+        "epsilon {} tiled, {} whole; {} splats against {}; {} of {} tiles lean",
+        report.epsilon,
+        ureport.epsilon,
+        report.splats,
+        untiled.len(),
+        report.tiles.iter().filter(|t| t.lean).count(),
+        report.tiles.len()
+    );
+    assert!(report.tiles.len() >= 4, "{} tiles", report.tiles.len());
+    // Measured: the same to four digits (6.913e-3).
+    assert!((report.epsilon / ureport.epsilon - 1.0).abs() < 0.005);
+    assert!(
+        report
+            .warnings
+            .iter()
+            .any(|w| w.contains("widen the bounding box")),
+        "{:?}",
+        report.warnings
+    );
+    // Measured: 1,341 against 1,399.
+    let ratio = report.splats as f64 / untiled.len() as f64;
+    assert!(
+        (ratio - 1.0).abs() < 0.08,
+        "{} against {}",
+        report.splats,
+        untiled.len()
+    );
+}

@@ -39,6 +39,30 @@ pub fn robust_centre_size(n: usize, point: impl Fn(usize) -> DVec3) -> Option<(D
     Some((DVec3::from(centre), size))
 }
 
+/// A box whose diagonal is under this share of the bounding box's is
+/// widened by a few far points: `ϵ` is then taken from it
+/// ([`trimmed_diagonal`]), by whole-cloud generation's lean growth and by a
+/// tiled plan alike.
+pub const WIDENED_SHARE: f64 = 0.98;
+
+/// The diagonal of the box holding all but the 0.1 % most extreme of
+/// `points` along each axis (0 when there are none). A tiled plan reads it
+/// from the survey's sample, whole-cloud generation from every point.
+pub fn trimmed_diagonal(points: &[DVec3]) -> f64 {
+    let n = points.len();
+    if n == 0 {
+        return 0.0;
+    }
+    let cut = n / 1000;
+    let sq = (0..3).map(|axis| {
+        let mut vals: Vec<f64> = points.iter().map(|p| p[axis]).collect();
+        let (_, &mut lo, _) = vals.select_nth_unstable_by(cut, f64::total_cmp);
+        let (_, &mut hi, _) = vals.select_nth_unstable_by(n - 1 - cut, f64::total_cmp);
+        (hi - lo).powi(2)
+    });
+    sq.sum::<f64>().sqrt()
+}
+
 /// One axis's median and 10th-to-90th percentile range (`vals` reordered).
 fn centre_and_range(vals: &mut [f64]) -> (f64, f64) {
     let last = (vals.len() - 1) as f64;
@@ -106,5 +130,20 @@ mod tests {
             assert_eq!(bits(robust_centre_size(n, |i| pts[i])), bits(serial(n, |i| pts[i])), "{n}");
         }
         assert!(robust_centre_size(3, |_| DVec3::NAN).is_none());
+    }
+
+    /// The trimmed box leaves out the extreme thousandth on each side of
+    /// each axis: 3,000 points on a unit cube's diagonal and three far ones
+    /// give the cube's diagonal whatever the far points; 999 points (no
+    /// cut) keep them.
+    #[test]
+    fn the_trimmed_diagonal_leaves_out_the_extreme_thousandth() {
+        let mut pts: Vec<DVec3> = (0..3000).map(|i| DVec3::splat(i as f64 / 2999.0)).collect();
+        let cube = 3f64.sqrt();
+        assert!((trimmed_diagonal(&pts) - cube).abs() < 3e-3 * cube);
+        pts.extend([DVec3::splat(-50.0), DVec3::new(80.0, 0.5, 0.5), DVec3::new(0.5, 0.5, 1e6)]);
+        assert!((trimmed_diagonal(&pts) - cube).abs() < 3e-3 * cube, "{}", trimmed_diagonal(&pts));
+        assert!(trimmed_diagonal(&pts[2100..]) > 1e6);
+        assert_eq!(trimmed_diagonal(&[]), 0.0);
     }
 }

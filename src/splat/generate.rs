@@ -10,7 +10,7 @@ use super::knn::{Knn, MortonGrid, build_tree};
 use super::normals;
 use super::outliers;
 use crate::data::Splat;
-use crate::data::{FACING_AWAY_COS, PointCloud, Viewpoints};
+use crate::data::{FACING_AWAY_COS, PointCloud, Viewpoints, WIDENED_SHARE};
 use crate::progress::{Progress, notify};
 use glam::Vec3;
 use kiddo::SquaredEuclidean;
@@ -766,7 +766,7 @@ fn lean_stages(
 /// Lean growth's scale for `ϵ` over `points` (in the unit frame) and why
 /// it must not run whatever its gate finds (`gated`): a non-finite point.
 /// Where a few far points (outliers) widen the bounding box past
-/// [`LEAN_SPREAD`], `ϵ` is taken from the box of all but the 0.1 % most
+/// [`WIDENED_SHARE`], `ϵ` is taken from the box of all but the 0.1 % most
 /// extreme points along each axis (the stages take it from the box left
 /// after their outliers), and the box's widening over it is returned;
 /// lean growth leaves the far points out as outlier seeds. The solids
@@ -774,9 +774,8 @@ fn lean_stages(
 /// rays, three seeds): 34.82 / 34.53 / 35.40 dB (mean 34.92) against the
 /// stages' 35.35 / 34.12 / 34.84 (34.77), where lean growth was refused
 /// before (`docs/notes/generation.md`, "Issue 54, sixty-first session").
-/// Where `ϵ` is `given` (a tile's), a box so widened still refuses lean
-/// growth, as before: in tiles of that scan two of eleven grew splats
-/// half of whose points faced away from the scanner (not yet understood).
+/// Where `ϵ` is `given` (a tile's, from the plan's own trimmed box), the
+/// box plays no part.
 fn lean_scale(points: &[Vec3], gated: bool, given: bool) -> (f64, Option<String>, Option<f64>) {
     let diagonal = box_diagonal(points);
     if !gated {
@@ -785,27 +784,16 @@ fn lean_scale(points: &[Vec3], gated: bool, given: bool) -> (f64, Option<String>
     if !points.iter().all(|p| p.is_finite()) {
         return (diagonal, Some("non-finite coordinates".to_string()), None);
     }
+    if given {
+        return (diagonal, None, None);
+    }
     let robust = robust_diagonal(points, &vec![true; points.len()], points.len());
-    if robust < LEAN_SPREAD * diagonal && robust > 0.0 {
-        let wider = diagonal / robust - 1.0;
-        if given {
-            let why = format!(
-                "the bounding box is {:.1} % wider than the box of all but the 0.1 % most extreme \
-                 points (outliers?)",
-                100.0 * wider
-            );
-            return (diagonal, Some(why), None);
-        }
-        (robust, None, Some(wider))
+    if robust < WIDENED_SHARE * diagonal && robust > 0.0 {
+        (robust, None, Some(diagonal / robust - 1.0))
     } else {
         (diagonal, None, None)
     }
 }
-
-/// Lean growth takes `ϵ` from the plain bounding box where the box of all
-/// but the 0.1 % most extreme points along each axis has at least this
-/// share of its diagonal, else from that box ([`lean_scale`]).
-const LEAN_SPREAD: f64 = 0.98;
 
 /// The first stage: the cloud (in the unit frame; `raw` as read) cleaned,
 /// thinned and reordered, its neighbourhood graph, its statistical

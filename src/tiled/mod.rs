@@ -4,7 +4,8 @@
 //! 1. **Survey** (one streaming pass over every input): the count, the
 //!    bounds in f64, and a reservoir sample of 2^20 positions.
 //! 2. **Plan**: `ϵ` is the whole cloud's (`epsilon_rel` times its
-//!    diagonal); the halo is `HALO_EPS` (12) `ϵ` wide. The bounds are split
+//!    diagonal, or where a few far points widen the box, the diagonal of
+//!    the sample's box without its extreme thousandth); the halo is `HALO_EPS` (12) `ϵ` wide. The bounds are split
 //!    k-d fashion at the sample's medians along the longest side until each
 //!    tile's core plus halo holds at most the budget's points (estimated
 //!    from the sample). The split planes give every point of space exactly
