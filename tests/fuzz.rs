@@ -304,7 +304,7 @@ fn las_seed(compressed: bool) -> Vec<u8> {
 fn e57_seed() -> Vec<u8> {
     use e57::{Quaternion, Record, RecordValue, Transform, Translation};
     // The writer needs a file (it reads back what it wrote).
-    let path = std::env::temp_dir().join(format!("splatray-e57-seed-{}.e57", std::process::id()));
+    let path = common::scratch("e57-seed").join("seed.e57");
     let mut w = e57::E57Writer::from_file(&path, "fuzz-seed").unwrap();
     let mut pc = w
         .add_pointcloud(

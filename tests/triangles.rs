@@ -7,6 +7,8 @@
 //! departure point but does meet a blocker, and NaN or infinite rays meet
 //! nothing.
 
+mod common;
+
 use glam::Vec3;
 use splatray::accel::{Backend, CandidateHits, Departure, Query, registry};
 use splatray::geometry::Ray;
@@ -461,7 +463,7 @@ fn the_hybrid_scene_renders_the_same_on_octree_and_embree() {
 /// agreement and the triangles.
 #[test]
 fn hybrid_render_and_compare_on_the_command_line() {
-    let dir = std::env::temp_dir().join(format!("splatray-hybrid-{}", std::process::id()));
+    let dir = common::scratch("hybrid");
     std::fs::create_dir_all(&dir).unwrap();
     let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/hybrid.toml");
     let run = |args: &[&str]| {
@@ -504,7 +506,7 @@ fn hybrid_render_and_compare_on_the_command_line() {
 /// mesh is refused in one line.
 #[test]
 fn compare_as_triangles_renders_the_meshes_beside_the_splats() {
-    let dir = std::env::temp_dir().join(format!("splatray-as-tri-{}", std::process::id()));
+    let dir = common::scratch("as-tri");
     std::fs::create_dir_all(&dir).unwrap();
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let report = dir.join("r.json");
@@ -649,7 +651,7 @@ fn the_hybrid_backends_packets_answer_as_single_queries() {
 /// on any other model is refused in one line.
 #[test]
 fn smooth_triangles_shade_with_area_weighted_vertex_normals() {
-    let dir = std::env::temp_dir().join(format!("splatray-smooth-{}", std::process::id()));
+    let dir = common::scratch("smooth");
     std::fs::create_dir_all(&dir).unwrap();
     // Two unit right triangles meeting at the ridge x = 0, tilted 45° each way.
     std::fs::write(

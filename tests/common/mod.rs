@@ -20,9 +20,13 @@ pub fn data(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// A fresh, empty scratch folder for one test (unique per process and name).
+/// A fresh, empty scratch folder for one test, `NAME` in the build's own
+/// temporary folder (`target/tmp`): a run leaves one copy a name there,
+/// not a folder a process in the system's temporary folder (a hundred runs
+/// had left 15,000 of them). Test binaries run one at a time, and a name
+/// is one test's.
 pub fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("splatray-{name}-{}", std::process::id()));
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
