@@ -133,9 +133,9 @@ mod tests {
     }
 
     /// The trimmed box leaves out the extreme thousandth on each side of
-    /// each axis: 3,000 points on a unit cube's diagonal and three far ones
-    /// give the cube's diagonal whatever the far points; 999 points (no
-    /// cut) keep them.
+    /// each axis: 3,000 points on a unit cube's diagonal give its diagonal
+    /// less the three trimmed at each end (0.2 %), and as much with three
+    /// far points added; 903 points (no cut) keep them.
     #[test]
     fn the_trimmed_diagonal_leaves_out_the_extreme_thousandth() {
         let mut pts: Vec<DVec3> = (0..3000).map(|i| DVec3::splat(i as f64 / 2999.0)).collect();

@@ -5,11 +5,12 @@
 //!    bounds in f64, and a reservoir sample of 2^20 positions.
 //! 2. **Plan**: `ϵ` is the whole cloud's (`epsilon_rel` times its
 //!    diagonal, or where a few far points widen the box, the diagonal of
-//!    the sample's box without its extreme thousandth); the halo is `HALO_EPS` (12) `ϵ` wide. The bounds are split
-//!    k-d fashion at the sample's medians along the longest side until each
-//!    tile's core plus halo holds at most the budget's points (estimated
-//!    from the sample). The split planes give every point of space exactly
-//!    one tile: the tile whose core holds it.
+//!    the sample's box without its extreme thousandth); the halo is
+//!    `HALO_EPS` (12) `ϵ` wide. The bounds are split k-d fashion at the
+//!    sample's medians along the longest side until each tile's core plus
+//!    halo holds at most the budget's points (estimated from the sample).
+//!    The split planes give every point of space exactly one tile: the
+//!    tile whose core holds it.
 //! 3. **Spill** (a second streaming pass): each point is appended to the
 //!    file of every tile whose core-plus-halo box holds it (positions as
 //!    f32 offsets from the tile's centre, normals and colours carried).
