@@ -1007,12 +1007,13 @@ fn lean_growth_orients_a_thin_sheet_outward() {
 /// solids' 60k exact samples pass it; the 115k-point bunny sample, a
 /// smooth cloud refused only for curving off its slab, does not (grown
 /// sharp it lost 3.2 dB), nor the survey under 0.05 m of noise (scatter
-/// 0.067) or sampled sparser than lean splats reach; each refusal says
-/// why.
+/// 0.067; a scan with creases takes 0.065) or sampled sparser than lean
+/// splats reach; each refusal says why.
 #[test]
 fn sharp_lean_growth_takes_edges_not_noise_nor_a_smooth_cloud_refused_for_curving() {
     use splatray::splat::lean::Gate;
     let survey = Gate {
+        scan: false,
         sampled: 4093,
         sigma: 0.0405,
         hard: 0.0308,
@@ -1025,6 +1026,7 @@ fn sharp_lean_growth_takes_edges_not_noise_nor_a_smooth_cloud_refused_for_curvin
     assert!(!survey.passes() && survey.sharp_passes(), "{survey:?}");
     assert_eq!(survey.sharp_refusal(), None);
     let solids = Gate {
+        scan: false,
         sampled: 4000,
         sigma: 1.7e-6,
         hard: 0.0978,
@@ -1036,6 +1038,7 @@ fn sharp_lean_growth_takes_edges_not_noise_nor_a_smooth_cloud_refused_for_curvin
     };
     assert!(solids.sharp_passes(), "{solids:?}");
     let bunny = Gate {
+        scan: false,
         sampled: 3966,
         sigma: 0.0453,
         hard: 0.1009,
@@ -1057,6 +1060,33 @@ fn sharp_lean_growth_takes_edges_not_noise_nor_a_smooth_cloud_refused_for_curvin
     };
     let why = noisy.sharp_refusal().unwrap();
     assert!(why.contains("scatter 0.067"), "{why}");
+    // From a scan (its scanners known) with creases, sharp lean growth
+    // takes a scatter up to `SCAN_SHARP_SIGMA` (0.065): 0.06 passes there
+    // and nowhere else, 0.0666 nowhere; a scan whose only sharp features
+    // are borders (its silhouettes) keeps the plain bound.
+    let scan = |sigma| Gate {
+        sigma,
+        scan: true,
+        ..survey
+    };
+    assert!(scan(0.06).sharp_passes());
+    assert!(
+        !Gate {
+            sigma: 0.06,
+            ..survey
+        }
+        .sharp_passes()
+    );
+    assert!(!scan(0.0666).sharp_passes());
+    let why = scan(0.0666).sharp_refusal().unwrap();
+    assert!(why.contains("at most 0.065"), "{why}");
+    assert!(
+        !Gate {
+            crease: 0.005,
+            ..scan(0.06)
+        }
+        .sharp_passes()
+    );
     let sparse = Gate {
         spacing: 7.9,
         ..survey
