@@ -414,7 +414,8 @@ fn a_noisy_scan_with_creases_grows_lean_under_the_scans_bound() {
         lean.gate.sigma > splatray::splat::lean::GATE_SIGMA && lean.gate.scan,
         "{lean:?}"
     );
-    assert!(!lean.used, "{lean:?}");
+    let why = lean.refused.as_deref().unwrap_or_default();
+    assert!(!lean.used && why.contains("at most 0.046"), "{lean:?}");
 }
 
 /// Stray returns near a scanned surface (a point on a scan ray at 0.5-1.5

@@ -945,3 +945,52 @@ fn a_scan_with_far_strays_is_tiled_at_the_whole_clouds_epsilon() {
         untiled.len()
     );
 }
+
+/// The tiles of a scan with creases and range noise (the solids, 1000×750
+/// rays, 0.18 spacings) face their scanner: in a scan's orientation tree a
+/// link across a crease whose splats' sides cannot decide it is no link
+/// (`lean::link_weight`). With such links kept, weighed last, one
+/// 60k-point tile turned 23.3 % of its points away through one link
+/// trusted 0.012, and trimming refused the viewpoint there.
+#[test]
+fn the_tiles_of_a_noisy_scan_with_creases_face_their_scanner() {
+    let dir = scratch("tiled-noisy-scan");
+    let mesh = read_mesh(&data("solids.ply")).unwrap();
+    let params = splatray::scanner::ScanParams {
+        from: DVec3::new(1.9, 1.5, 2.4),
+        at: Some(DVec3::new(0.0, 0.2, 0.0)),
+        columns: 1000,
+        rows: 750,
+        range_noise: splatray::scanner::RangeNoise::Spacing(0.18),
+        seed: 1,
+        ..Default::default()
+    };
+    let scan = splatray::scanner::scan_mesh(&mesh, &params).unwrap().cloud;
+    let input = dir.join("scan.pcd");
+    write_points(&input, &scan).unwrap();
+    let opts = TiledOptions {
+        tiling: Tiling {
+            tile_points: Some(60_000),
+            ..options(dir.join("work")).tiling
+        },
+        ..options(dir.join("work"))
+    };
+    let out = dir.join("tiled.ply");
+    let report = generate_tiled(
+        std::slice::from_ref(&input),
+        &SplatParams::default(),
+        &opts,
+        &out,
+        None,
+    )
+    .unwrap();
+    let lean = report.tiles.iter().filter(|t| t.lean).count();
+    let away: Vec<&String> = (report.tiles.iter())
+        .flat_map(|t| &t.warnings)
+        .filter(|w| w.contains("face away"))
+        .collect();
+    eprintln!("{lean} of {} tiles lean; {away:?}", report.tiles.len());
+    // Measured: 2 of 3 tiles lean, none facing away.
+    assert!(lean >= 1, "{lean} tiles lean");
+    assert!(away.is_empty(), "{away:?}");
+}

@@ -40,14 +40,15 @@ pub fn robust_centre_size(n: usize, point: impl Fn(usize) -> DVec3) -> Option<(D
 }
 
 /// A box whose diagonal is under this share of the bounding box's is
-/// widened by a few far points: `ϵ` is then taken from it
-/// ([`trimmed_diagonal`]), by whole-cloud generation's lean growth and by a
-/// tiled plan alike.
+/// widened by a few far points: `ϵ` is then taken from the box without
+/// them, by whole-cloud generation's lean growth (its own f32 copy of
+/// [`trimmed_diagonal`] over every point) and by a tiled plan (this one,
+/// over the survey's sample).
 pub const WIDENED_SHARE: f64 = 0.98;
 
 /// The diagonal of the box holding all but the 0.1 % most extreme of
-/// `points` along each axis (0 when there are none). A tiled plan reads it
-/// from the survey's sample, whole-cloud generation from every point.
+/// `points` along each axis (0 when there are none): a tiled plan's, over
+/// the survey's sample.
 pub fn trimmed_diagonal(points: &[DVec3]) -> f64 {
     let n = points.len();
     if n == 0 {

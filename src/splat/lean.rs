@@ -103,7 +103,8 @@ const ALWAYS_SAMPLE: usize = 512;
 /// 0.31 `ϵ`, 0.041 on the default survey's tile, 0.170 on the noisy scan
 /// (at its robust box's `ϵ`; 0.105 at its whole box's, 1.6 times wider).
 ///
-/// Sharp lean growth ([`sharp`]) takes the same bound. Its quality
+/// Sharp lean growth ([`sharp`]) takes the same bound, but for a scan with
+/// creases ([`SCAN_SHARP_SIGMA`]). Its quality
 /// crosses the stages' near 0.06 on surveys (`splatray terrain --noise`,
 /// 800×600 against the truth: +0.26 to +1.6 dB at 0.015-0.054 over
 /// seeds and noise, +0.75 to +2.3 on the other scan patterns at 0.042,
@@ -181,8 +182,9 @@ const BORDER_OFFSET: f32 = 0.3;
 pub struct Gate {
     /// Points sampled.
     pub sampled: usize,
-    /// Taken from a scan (its scanners known): sharp lean growth takes
-    /// [`SCAN_SHARP_SIGMA`] where it has creases.
+    /// Taken from a cloud with its scanners' positions (a scan's, or a
+    /// viewpoint given): sharp lean growth takes [`SCAN_SHARP_SIGMA`] where
+    /// it has creases.
     pub scan: bool,
     /// Median scatter of a sampled point's nearest about their plane, in `ϵ`.
     pub sigma: f32,
@@ -932,8 +934,9 @@ fn orient(splats: &mut [Grown], points: usize, views: Option<(&[Vec3], &[Vec3])>
                         let bu = b as usize;
                         if bu != a && seen[bu] != a as u32 {
                             seen[bu] = a as u32;
-                            let w = link_weight(&splats[a], &splats[bu], views.is_some());
-                            out.push(((w * 1e6) as u32, b));
+                            if let Some(w) = link_weight(&splats[a], &splats[bu], views.is_some()) {
+                                out.push(((w * 1e6) as u32, b));
+                            }
                         }
                     }
                 }
@@ -1015,24 +1018,31 @@ const CREASE_AGREE: f32 = 0.5;
 /// (`scan`) across a crease, where [`turned`] reads the sides, the nearer
 /// of the two centres' distances from the other's plane over the larger
 /// radius, scaled under [`CREASE_AGREE`] (so after every link that is not
-/// across a crease). A centre nearly in the other's plane gives a side
-/// that a splat tilted at the edge decides: by `|n_a · n_b|` alone, the
-/// exactly scanned solids at `ϵ` 0.0032 of the diagonal (1000×750 rays)
-/// had 30.5 % of their points facing away from the scanner after the
-/// trees' turns, so trimming refused the viewpoint; the sparse scan
-/// (400×300) 9.2 % at 0.0035 and 8.9 % at 0.008, two stations in an E57
-/// file 22.1 % at 0.0025. By this weight none (`docs/notes/generation.md`,
-/// "Issue 54, sixty-second session").
-fn link_weight(a: &Grown, b: &Grown, scan: bool) -> f32 {
+/// across a crease), and no link at all under [`CREASE_TRUST`] (the two
+/// then turn by their own trees' votes). A centre nearly in the other's
+/// plane gives a side that a splat tilted at the edge decides: by `|n_a ·
+/// n_b|` alone, the exactly scanned solids at `ϵ` 0.0032 of the diagonal
+/// (1000×750 rays) had 30.5 % of their points facing away from the
+/// scanner after the trees' turns, so trimming refused the viewpoint; the
+/// sparse scan (400×300) 9.2 % at 0.0035 and 8.9 % at 0.008, two stations
+/// in an E57 file 22.1 % at 0.0025; with the links weighed but none
+/// dropped, a 60k-point tile of the scan with range noise of 0.18 spacings
+/// still 23.3 % through one link trusted 0.012. By this rule none
+/// (`docs/notes/generation.md`, "Issue 54, sixty-second session").
+fn link_weight(a: &Grown, b: &Grown, scan: bool) -> Option<f32> {
     let d = a.normal.dot(b.normal).abs();
     if !scan || d >= CREASE_AGREE {
-        return d;
+        return Some(d);
     }
     let off = a.normal.dot(b.centre - a.centre).abs().min(b.normal.dot(a.centre - b.centre).abs());
+    // A NaN or a zero radius (coincident points) gives no trust.
     let trust = off / a.radius.max(b.radius);
-    // Just under the links along a surface; 0 for a NaN.
-    if trust > 0.0 { CREASE_AGREE * 0.999 * trust.min(1.0) } else { 0.0 }
+    (trust.is_finite() && trust >= CREASE_TRUST).then(|| CREASE_AGREE * 0.999 * trust.min(1.0))
 }
+
+/// [`link_weight`]'s least trust in a link across a crease: the links
+/// that turned a scan's trees the wrong way were trusted 0.00002-0.07.
+const CREASE_TRUST: f32 = 0.1;
 
 /// [`orient`]'s turn of each tree (`tree`: each splat's root) toward the
 /// viewpoints `views` (by the grid's order) of the points it took, and the
@@ -1353,7 +1363,10 @@ pub fn grow_lean(
     // thousand points each), its figures serve only the median spacing.
     let always = matches!(when, GrowWhen::Always | GrowWhen::AlwaysSharp);
     if !always && let Some(dense) = too_dense(points, eps, within) {
-        return none(dense);
+        return none(Gate {
+            scan: views.is_some(),
+            ..dense
+        });
     }
     let g = Grid::build(points, CELL_EPS * eps, views.is_some());
     let most = if always { ALWAYS_SAMPLE } else { GATE_SAMPLE };

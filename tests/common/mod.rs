@@ -20,13 +20,15 @@ pub fn data(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// A fresh, empty scratch folder for one test, `NAME` in the build's own
-/// temporary folder (`target/tmp`): a run leaves one copy a name there,
-/// not a folder a process in the system's temporary folder (a hundred runs
-/// had left 15,000 of them). Test binaries run one at a time, and a name
-/// is one test's.
+/// A fresh, empty scratch folder for one test, `SUITE-NAME` in the
+/// build's own temporary folder (`target/tmp`): a run leaves one copy a
+/// name there, not a folder a process in the system's temporary folder (a
+/// hundred runs had left 15,000 of them). A name is one test's within its
+/// suite; two runs of one suite at once (a debug and a release build, say)
+/// would share it.
 pub fn scratch(name: &str) -> PathBuf {
-    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let d =
+        Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("{}-{name}", env!("CARGO_CRATE_NAME")));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
