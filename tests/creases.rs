@@ -4,6 +4,8 @@
 
 mod common;
 
+use common::solids_scan;
+
 use glam::Vec3;
 use splatray::scene::{build_scene, parse_scene_str};
 use splatray::splat::{Creases, PointCloud, SplatParams, generate};
@@ -576,28 +578,6 @@ fn a_solid_scanned_from_two_stations_renders_near_its_mesh() {
     // samples' 36.42 (issue 39 asks for 3; 33.69 dB before the faces).
     assert!(psnr > 34.95, "{psnr}");
     assert!(false_hits < 0.0008, "{false_hits}");
-}
-
-/// The solids scanned exactly from the camera's position in
-/// scenes/solids.toml (1.9, 1.5, 2.4, looking at 0, 0.2, 0), `rays`
-/// columns and rows, `outliers` of the returns replaced by strays on
-/// their rays (0.5-1.5 times the range), seed 1.
-fn solids_scan([columns, rows]: [u32; 2], outliers: f32, noise: f32) -> PointCloud {
-    let mesh = splatray::io::read_mesh(
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data/solids.ply"),
-    )
-    .unwrap();
-    let params = splatray::scanner::ScanParams {
-        from: glam::DVec3::new(1.9, 1.5, 2.4),
-        at: Some(glam::DVec3::new(0.0, 0.2, 0.0)),
-        columns,
-        rows,
-        outliers,
-        range_noise: splatray::scanner::RangeNoise::Spacing(noise),
-        seed: 1,
-        ..Default::default()
-    };
-    splatray::scanner::scan_mesh(&mesh, &params).unwrap().cloud
 }
 
 /// The solids' scene scanned from its camera (`scan`: the scan's keys

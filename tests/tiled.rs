@@ -881,41 +881,13 @@ fn lean_growth_grows_the_tiles_of_a_dense_clean_cloud() {
 #[test]
 fn a_scan_with_far_strays_is_tiled_at_the_whole_clouds_epsilon() {
     let dir = scratch("tiled-strays");
-    let mesh = read_mesh(&data("solids.ply")).unwrap();
-    let params = splatray::scanner::ScanParams {
-        from: DVec3::new(1.9, 1.5, 2.4),
-        at: Some(DVec3::new(0.0, 0.2, 0.0)),
-        columns: 400,
-        rows: 300,
-        outliers: 0.002,
-        seed: 1,
-        ..Default::default()
-    };
-    let scan = splatray::scanner::scan_mesh(&mesh, &params).unwrap().cloud;
-    let input = dir.join("scan.pcd");
-    write_points(&input, &scan).unwrap();
+    let (input, report) = solids_scanned_in_tiles(&dir, [400, 300], 0.002, 0.0, 6_000);
     let whole = splatray::io::read_points(&input).unwrap();
     let splat = SplatParams {
         viewpoint: whole.viewpoint,
         ..Default::default()
     };
     let (untiled, ureport) = generate(&whole, &splat).unwrap();
-    let opts = TiledOptions {
-        tiling: Tiling {
-            tile_points: Some(6_000),
-            ..options(dir.join("work")).tiling
-        },
-        ..options(dir.join("work"))
-    };
-    let out = dir.join("tiled.ply");
-    let report = generate_tiled(
-        std::slice::from_ref(&input),
-        &SplatParams::default(),
-        &opts,
-        &out,
-        None,
-    )
-    .unwrap();
     eprintln!(
         "epsilon {} tiled, {} whole; {} splats against {}; {} of {} tiles lean",
         report.epsilon,
@@ -955,22 +927,35 @@ fn a_scan_with_far_strays_is_tiled_at_the_whole_clouds_epsilon() {
 #[test]
 fn the_tiles_of_a_noisy_scan_with_creases_face_their_scanner() {
     let dir = scratch("tiled-noisy-scan");
-    let mesh = read_mesh(&data("solids.ply")).unwrap();
-    let params = splatray::scanner::ScanParams {
-        from: DVec3::new(1.9, 1.5, 2.4),
-        at: Some(DVec3::new(0.0, 0.2, 0.0)),
-        columns: 1000,
-        rows: 750,
-        range_noise: splatray::scanner::RangeNoise::Spacing(0.18),
-        seed: 1,
-        ..Default::default()
-    };
-    let scan = splatray::scanner::scan_mesh(&mesh, &params).unwrap().cloud;
+    let (_, report) = solids_scanned_in_tiles(&dir, [1000, 750], 0.0, 0.18, 60_000);
+    let lean = report.tiles.iter().filter(|t| t.lean).count();
+    let away: Vec<&String> = (report.tiles.iter())
+        .flat_map(|t| &t.warnings)
+        .filter(|w| w.contains("face away"))
+        .collect();
+    eprintln!("{lean} of {} tiles lean; {away:?}", report.tiles.len());
+    // Measured: 2 of 3 tiles lean, none facing away.
+    assert!(lean >= 1, "{lean} tiles lean");
+    assert!(away.is_empty(), "{away:?}");
+}
+
+/// The solids scanned from their camera (`columns`×`rows` rays, seed 1)
+/// with `outliers` stray returns and range noise of `noise` spacings,
+/// written into `dir` as a PCD (its viewpoint the scanner's), and that
+/// file generated in tiles of `tile_points` at the defaults.
+fn solids_scanned_in_tiles(
+    dir: &Path,
+    [columns, rows]: [u32; 2],
+    outliers: f32,
+    noise: f32,
+    tile_points: u64,
+) -> (PathBuf, splatray::tiled::TiledReport) {
+    let scan = common::solids_scan([columns, rows], outliers, noise);
     let input = dir.join("scan.pcd");
     write_points(&input, &scan).unwrap();
     let opts = TiledOptions {
         tiling: Tiling {
-            tile_points: Some(60_000),
+            tile_points: Some(tile_points),
             ..options(dir.join("work")).tiling
         },
         ..options(dir.join("work"))
@@ -984,13 +969,5 @@ fn the_tiles_of_a_noisy_scan_with_creases_face_their_scanner() {
         None,
     )
     .unwrap();
-    let lean = report.tiles.iter().filter(|t| t.lean).count();
-    let away: Vec<&String> = (report.tiles.iter())
-        .flat_map(|t| &t.warnings)
-        .filter(|w| w.contains("face away"))
-        .collect();
-    eprintln!("{lean} of {} tiles lean; {away:?}", report.tiles.len());
-    // Measured: 2 of 3 tiles lean, none facing away.
-    assert!(lean >= 1, "{lean} tiles lean");
-    assert!(away.is_empty(), "{away:?}");
+    (input, report)
 }

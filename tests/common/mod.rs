@@ -830,3 +830,27 @@ pub fn secondary_queries<'a>(
     }
     out
 }
+
+/// The solids (scenes/data/solids.ply) scanned from the camera of
+/// scenes/solids.toml (1.9, 1.5, 2.4, looking at 0, 0.2, 0) with
+/// `columns`×`rows` rays, seed 1: `outliers` of the returns replaced by
+/// strays on their rays (0.5-1.5 times the range), range noise of `noise`
+/// spacings.
+pub fn solids_scan(
+    [columns, rows]: [u32; 2],
+    outliers: f32,
+    noise: f32,
+) -> splatray::splat::PointCloud {
+    let mesh = splatray::io::read_mesh(&data("solids.ply")).unwrap();
+    let params = splatray::scanner::ScanParams {
+        from: glam::DVec3::new(1.9, 1.5, 2.4),
+        at: Some(glam::DVec3::new(0.0, 0.2, 0.0)),
+        columns,
+        rows,
+        outliers,
+        range_noise: splatray::scanner::RangeNoise::Spacing(noise),
+        seed: 1,
+        ..Default::default()
+    };
+    splatray::scanner::scan_mesh(&mesh, &params).unwrap().cloud
+}
