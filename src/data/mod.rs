@@ -10,5 +10,5 @@ mod robust;
 mod splat;
 
 pub use cloud::{FACING_AWAY_COS, FACING_AWAY_MAX, PointCloud, Scans, Viewpoints};
-pub use robust::{WIDENED_SHARE, robust_centre_size, trimmed_diagonal};
+pub use robust::{WIDENED_SHARE, robust_centre_size, trimmed_diagonal, trimmed_diagonal_of};
 pub use splat::{ColorField, NormalField, Splat};

@@ -41,27 +41,39 @@ pub fn robust_centre_size(n: usize, point: impl Fn(usize) -> DVec3) -> Option<(D
 
 /// A box whose diagonal is under this share of the bounding box's is
 /// widened by a few far points: `ϵ` is then taken from the box without
-/// them, by whole-cloud generation's lean growth (its own f32 copy of
-/// [`trimmed_diagonal`] over every point) and by a tiled plan (this one,
-/// over the survey's sample).
+/// them ([`trimmed_diagonal`]), by whole-cloud generation's lean growth
+/// and by a tiled plan alike.
 pub const WIDENED_SHARE: f64 = 0.98;
 
 /// The diagonal of the box holding all but the 0.1 % most extreme of
 /// `points` along each axis (0 when there are none): a tiled plan's, over
 /// the survey's sample.
 pub fn trimmed_diagonal(points: &[DVec3]) -> f64 {
-    let n = points.len();
+    let mut axes: [Vec<f64>; 3] = std::array::from_fn(|a| points.iter().map(|p| p[a]).collect());
+    trimmed_diagonal_of(&mut axes, f64::total_cmp, |v| v)
+}
+
+/// [`trimmed_diagonal`] of points given as one buffer of coordinates an
+/// axis (the same length; reordered), compared by `cmp` and widened to
+/// f64 by `wide` (whole-cloud generation keeps them in f32): the three
+/// axes' selects at once, the squares summed in axis order.
+pub fn trimmed_diagonal_of<T: Copy + Send>(
+    axes: &mut [Vec<T>; 3],
+    cmp: fn(&T, &T) -> std::cmp::Ordering,
+    wide: fn(T) -> f64,
+) -> f64 {
+    let n = axes[0].len();
     if n == 0 {
         return 0.0;
     }
     let cut = n / 1000;
-    let sq = (0..3).map(|axis| {
-        let mut vals: Vec<f64> = points.iter().map(|p| p[axis]).collect();
-        let (_, &mut lo, _) = vals.select_nth_unstable_by(cut, f64::total_cmp);
-        let (_, &mut hi, _) = vals.select_nth_unstable_by(n - 1 - cut, f64::total_cmp);
-        (hi - lo).powi(2)
+    let mut sq = [0f64; 3];
+    axes.par_iter_mut().zip(sq.par_iter_mut()).for_each(|(axis, sq)| {
+        let lo = wide(*axis.select_nth_unstable_by(cut, cmp).1);
+        let hi = wide(*axis.select_nth_unstable_by(n - 1 - cut, cmp).1);
+        *sq = (hi - lo).powi(2);
     });
-    sq.sum::<f64>().sqrt()
+    sq.iter().fold(0.0, |d2, s| d2 + s).sqrt()
 }
 
 /// One axis's median and 10th-to-90th percentile range (`vals` reordered).

@@ -1619,24 +1619,15 @@ fn normals_of(
 /// the `n` kept points as a mask, [`super::thin::members`]) rather than
 /// Morton order, whose loads miss the cache.
 fn robust_diagonal(positions: &[Vec3], member: &[bool], n: usize) -> f64 {
-    let cut = n / 1000;
     // One buffer an axis, filled on the calling thread (see
-    // `robust_centre_size`), the three axes' selects at once: the same
-    // selects on the same arrays, the squares summed in axis order.
+    // `robust_centre_size`).
     let mut axes: [Vec<f32>; 3] = std::array::from_fn(|_| Vec::with_capacity(n));
     for (p, _) in positions.iter().zip(member).filter(|e| *e.1) {
         for (v, c) in axes.iter_mut().zip(p.to_array()) {
             v.push(c);
         }
     }
-    let mut sq = [0f64; 3];
-    axes.par_iter_mut().zip(sq.par_iter_mut()).for_each(|(axis, sq)| {
-        let (_, lo, _) = axis.select_nth_unstable_by(cut, f32::total_cmp);
-        let lo = f64::from(*lo);
-        let (_, hi, _) = axis.select_nth_unstable_by(n - 1 - cut, f32::total_cmp);
-        *sq = (f64::from(*hi) - lo).powi(2);
-    });
-    sq.iter().fold(0.0, |d2, s| d2 + s).sqrt()
+    crate::data::trimmed_diagonal_of(&mut axes, f32::total_cmp, f64::from)
 }
 
 /// Keeps the items of `v` whose flag is false.
