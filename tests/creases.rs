@@ -290,11 +290,7 @@ fn an_exact_scan_grows_lean_facing_its_scanner() {
 #[test]
 fn a_scan_with_far_stray_returns_grows_lean() {
     let cloud = solids_scan([400, 300], 0.002, 0.0);
-    let params = SplatParams {
-        viewpoint: cloud.viewpoint,
-        ..Default::default()
-    };
-    let (_, rep) = generate(&cloud, &params).unwrap();
+    let (_, rep) = common::grown_from_its_viewpoint(&cloud);
     let lean = rep.lean.as_ref().expect("a lean report");
     assert!(lean.used && lean.sharp, "{lean:?}");
     assert!(
@@ -308,8 +304,9 @@ fn a_scan_with_far_stray_returns_grows_lean() {
     // box plays no part: lean growth runs, as many splats within a few.
     let (n_whole, eps) = (rep.splats, rep.epsilon);
     let given = SplatParams {
+        viewpoint: cloud.viewpoint,
         epsilon_abs: Some(eps),
-        ..params
+        ..Default::default()
     };
     let (_, rep) = generate(&cloud, &given).unwrap();
     let lean = rep.lean.as_ref().expect("a lean report");
@@ -372,11 +369,7 @@ fn a_scan_grown_lean_faces_its_scanner_at_coarse_epsilons() {
 #[test]
 fn a_noisy_scan_with_creases_grows_lean_under_the_scans_bound() {
     let cloud = solids_scan([400, 300], 0.0, 0.07);
-    let params = SplatParams {
-        viewpoint: cloud.viewpoint,
-        ..Default::default()
-    };
-    let (_, rep) = generate(&cloud, &params).unwrap();
+    let (_, rep) = common::grown_from_its_viewpoint(&cloud);
     let lean = rep.lean.as_ref().expect("a lean report");
     let g = lean.gate;
     eprintln!("{lean:?}");
@@ -406,11 +399,7 @@ fn a_noisy_scan_with_creases_grows_lean_under_the_scans_bound() {
         ..Default::default()
     };
     let bunny = splatray::scanner::scan_mesh(&mesh, &scan).unwrap().cloud;
-    let params = SplatParams {
-        viewpoint: bunny.viewpoint,
-        ..Default::default()
-    };
-    let (_, rep) = generate(&bunny, &params).unwrap();
+    let (_, rep) = common::grown_from_its_viewpoint(&bunny);
     let lean = rep.lean.as_ref().expect("a lean report");
     assert!(
         lean.gate.sigma > splatray::splat::lean::GATE_SIGMA && lean.gate.scan,
@@ -462,11 +451,7 @@ fn stray_returns_inside_a_scan_grow_no_splat_off_the_surface() {
     let inside = stray.iter().zip(&drop).filter(|(s, d)| **s && !**d).count();
     // Measured: 87 strays inside the box (218 in all).
     assert!(inside >= 80, "{inside} strays inside the box");
-    let params = splatray::splat::SplatParams {
-        viewpoint: cloud.viewpoint,
-        ..Default::default()
-    };
-    let (splats, rep) = splatray::splat::generate(&cloud, &params).unwrap();
+    let (splats, rep) = common::grown_from_its_viewpoint(&cloud);
     let lean = rep.lean.as_ref().expect("a lean report");
     assert!(lean.used && lean.sharp, "{lean:?}");
     // A splat standing off the surface: its centre farther than two `ϵ`

@@ -883,11 +883,7 @@ fn a_scan_with_far_strays_is_tiled_at_the_whole_clouds_epsilon() {
     let dir = scratch("tiled-strays");
     let (input, report) = solids_scanned_in_tiles(&dir, [400, 300], 0.002, 0.0, 6_000);
     let whole = splatray::io::read_points(&input).unwrap();
-    let splat = SplatParams {
-        viewpoint: whole.viewpoint,
-        ..Default::default()
-    };
-    let (untiled, ureport) = generate(&whole, &splat).unwrap();
+    let (untiled, ureport) = common::grown_from_its_viewpoint(&whole);
     eprintln!(
         "epsilon {} tiled, {} whole; {} splats against {}; {} of {} tiles lean",
         report.epsilon,

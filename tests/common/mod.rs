@@ -854,3 +854,15 @@ pub fn solids_scan(
     };
     splatray::scanner::scan_mesh(&mesh, &params).unwrap().cloud
 }
+
+/// `cloud` grown at the defaults from its own viewpoint (a scan's
+/// scanner), as `splat` and a scene grow a file's.
+pub fn grown_from_its_viewpoint(
+    cloud: &splatray::splat::PointCloud,
+) -> (Vec<splatray::data::Splat>, splatray::splat::SplatReport) {
+    let params = splatray::splat::SplatParams {
+        viewpoint: cloud.viewpoint,
+        ..Default::default()
+    };
+    splatray::splat::generate(cloud, &params).unwrap()
+}
