@@ -10,7 +10,13 @@ splats' bounding box, directions normal-distributed: many start inside
 the model); and --camera^2 pinhole rays from one eye (sharing an
 origin: packets), each through
 cast_rays with every output, with the distance alone (when the package
-has optional outputs) and through occluded.
+has optional outputs) and through occluded. Then the nearest-distance
+query (`compute_distance`, the same search whichever backend) on --rays
+points uniform in the splats' box and on as many near the surface (splat
+centres moved by a normal-distributed 1 % of the box's diagonal), with,
+beside Open3D's `compute_distance` on the mesh, how far the splats'
+distances lie from the mesh's (the median and 95th percentile of the
+absolute difference).
 
 needs the splatray wheel (scripts/python-package.sh) and the release
 binary (for `splatray sample`); Open3D is optional (a separate venv:
@@ -53,6 +59,16 @@ def rays_around(centre: np.ndarray, radius: float, n: int, seed: int = 1) -> np.
     o = centre + radius * d / np.linalg.norm(d, axis=1, keepdims=True)
     target = centre + rng.uniform(-0.6, 0.6, size=(n, 3)) * radius / 3
     return np.hstack([o, target - o]).astype(np.float32)
+
+
+def points_for_distance(centres: np.ndarray, n: int, seed: int = 5) -> list:
+    """n points uniform in the centres' box, and n near the surface: a
+    random centre each, moved by a normal-distributed 1 % of the box's
+    diagonal."""
+    rng = np.random.default_rng(seed)
+    lo, hi = centres.min(0), centres.max(0)
+    near = centres[rng.integers(0, len(centres), n)] + rng.normal(scale=0.01 * np.linalg.norm(hi - lo), size=(n, 3))
+    return [("in box", rng.uniform(lo, hi, size=(n, 3))), ("near surface", near)]
 
 
 def rays_in_box(lo: np.ndarray, hi: np.ndarray, n: int, seed: int = 7) -> np.ndarray:
@@ -136,6 +152,16 @@ def main() -> None:
             dist = mrays(lambda: t_only(r), len(r), a.repeat) if t_only else float("nan")
             occ = mrays(lambda: ss.occluded(r), len(r), a.repeat)
             print(f"    {label:14s}: cast_rays {full:6.2f}, t_hit only {dist:6.2f}, occluded {occ:6.2f} Mrays/s")
+    queries = points_for_distance(c, a.rays)
+    diag = float(np.linalg.norm(np.ptp(c, 0)))
+    ss = splatray.SplatScene(splats, "octree")
+    t0 = time.perf_counter()
+    ss.compute_distance(queries[0][1][:1])
+    print(f"splatray compute_distance: search built in {time.perf_counter() - t0:.3f} s")
+    ours = {}
+    for label, q in queries:
+        ours[label] = ss.compute_distance(q)
+        print(f"    {label:14s}: {mrays(lambda: ss.compute_distance(q), len(q), a.repeat):6.2f} Mpoints/s")
     try:
         import open3d as o3d
     except ImportError:
@@ -159,6 +185,13 @@ def main() -> None:
         n = a.camera * a.camera
         print(f"    {f'camera {a.camera}^2':14s}: cast_rays {mrays(lambda: scene.cast_rays(c), n, a.repeat):6.2f}, "
               f"test_occlusions {mrays(lambda: scene.test_occlusions(c), n, a.repeat):6.2f} Mrays/s")
+    print("open3d compute_distance on the mesh (and the splats' distances against it):")
+    for label, q in queries:
+        t = o3d.core.Tensor(q.astype(np.float32))
+        speed = mrays(lambda: scene.compute_distance(t), len(q), a.repeat)
+        off = np.abs(ours[label] - scene.compute_distance(t).numpy())
+        print(f"    {label:14s}: {speed:6.2f} Mpoints/s; splats against mesh: median {np.median(off):.2e}, "
+              f"95th percentile {np.percentile(off, 95):.2e} (box diagonal {diag:.3f})")
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@
 //! | build a scene | [`load_scene`] (a TOML file), [`parse_scene_file`] + [`build_scene`], [`splats_scene`] (splats and a [`Camera`]) → [`Scene`] |
 //! | render | [`render`] → [`Frame`] ([`RayCounts`]), [`write_image`] |
 //! | cast rays on a chosen backend | [`backend_names`], [`build_backend`] → a [`Backend`], [`SplatSurfaces`], [`cast_rays`] ([`Ray`], [`CastOutputs`]) or [`cast_rays_owned`] ([`CastAnswers`]) |
+//! | nearest surface to a point | [`Nearest`] over a [`Scene`]'s splats and triangles → [`Closest`] |
 //! | compare backends | [`compare`] ([`CompareOptions`]) → [`Compared`]: a [`CompareReport`] ([`BackendRun`], [`Agreement`], [`TruthReport`], [`NamedTruthErrors`], [`TruthErrors`], [`ErrorBudget`]) and the frames |
 //! | speed against error | [`sweep`] ([`SweepRequest`]) → [`SweepResult`]: [`SweepRow`]s and a [`MeshRow`] ([`BackendFigures`]) |
 //! | the command line | [`run_cli`] |
@@ -112,6 +113,7 @@ pub use resolve::ShadingMode;
 pub use accel::{Backend, CandidateHits, FAN_ELSEWHERE, FAN_MISS, Fan, Ray};
 pub use render::cast::{CastAnswers, CastOutputs, cast_rays, cast_rays_owned};
 pub use render::integrator::SplatSurfaces;
+pub use render::nearest::{Closest, Nearest};
 
 // Comparing backends, speed against error.
 pub use validate::causes::ErrorBudget;

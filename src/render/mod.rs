@@ -4,4 +4,5 @@
 pub mod budget;
 pub mod cast;
 pub mod integrator;
+pub mod nearest;
 pub mod output;

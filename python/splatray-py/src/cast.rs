@@ -19,6 +19,7 @@ use splatray::render::cast::{
     CastAnswers, CastScratch, RayRows, cast_rays_owned, cast_rows_owned, occluded_rows,
 };
 use splatray::render::integrator::{SplatSurfaces, Surfaces};
+use splatray::render::nearest::{Closest, Nearest};
 use splatray::resolve::{Silhouette, silhouettes};
 use splatray::scene::Scene;
 use splatray::simd::RowNumber;
@@ -46,6 +47,9 @@ pub struct SplatScene {
     /// first call that resolves windows (`cast_rays`,
     /// `count_intersections`; 16 bytes a splat), none for `occluded`.
     kept: OnceLock<Vec<Silhouette>>,
+    /// The nearest-surface search, built on the first distance query
+    /// (`compute_distance` and its kin; 21-26 bytes a primitive).
+    nearest: OnceLock<Nearest>,
 }
 
 /// A ray array's rows of six numbers, as its memory holds them.
@@ -72,7 +76,28 @@ impl SplatScene {
             name: info.name,
             scratch: Mutex::default(),
             kept: OnceLock::new(),
+            nearest: OnceLock::new(),
         })
+    }
+
+    /// The nearest surface to each row of `points` ((N, 3) floats, the
+    /// splats' coordinates), with the query points in the scene's frame.
+    fn closest(
+        &self,
+        py: Python<'_>,
+        points: &Bound<'_, PyAny>,
+    ) -> PyResult<(Vec<DVec3>, Vec<Closest>)> {
+        let v = rows::<f64>(points, "query_points", 3, true)?;
+        Ok(py.detach(|| {
+            let (splats, tris) = (&self.scene.splats[..], &self.scene.triangles.tris[..]);
+            let near = self.nearest.get_or_init(|| Nearest::build(splats, tris));
+            let ps: Vec<DVec3> = v
+                .chunks_exact(3)
+                .map(|r| DVec3::new(r[0], r[1], r[2]) - self.to_internal)
+                .collect();
+            let got = near.closest_all(splats, tris, &ps);
+            (ps, got)
+        }))
     }
 
     fn surfaces(&self) -> SplatSurfaces<'_> {
@@ -464,6 +489,60 @@ impl SplatScene {
             Rows::F64(v) => s.occluded_rows(py, v, (tnear, tfar)),
         })?;
         Ok(vector(py, out))
+    }
+
+    /// The point of the nearest surface (a splat's disc within its clip
+    /// lines, or a triangle) to each of `query_points` ((N, 3) float32 or
+    /// float64, the splats' coordinates): a dict of `points` (N, 3)
+    /// float64, `splat_ids` (N,) uint32 (ids as `cast_rays` gives them;
+    /// on equal distances the lowest) and `normals` (N, 3) float32 (the
+    /// surface's geometric normal). A NaN or infinite row raises
+    /// ValueError naming it.
+    fn compute_closest_points<'py>(
+        &self,
+        py: Python<'py>,
+        query_points: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (_, got) = self.closest(py, query_points)?;
+        let mut points = Vec::with_capacity(3 * got.len());
+        let mut normals = Vec::with_capacity(3 * got.len());
+        for c in &got {
+            points.extend((c.point + self.to_internal).to_array());
+            normals.extend(c.normal.to_array());
+        }
+        let d = pyo3::types::PyDict::new(py);
+        d.set_item("points", matrix(py, 3, points))?;
+        d.set_item("splat_ids", vector(py, got.iter().map(|c| c.id).collect()))?;
+        d.set_item("normals", matrix(py, 3, normals))?;
+        Ok(d.into_any())
+    }
+
+    /// The distance from each of `query_points` ((N, 3) floats) to the
+    /// nearest surface, (N,) float32 (as `compute_closest_points` finds it).
+    fn compute_distance<'py>(
+        &self,
+        py: Python<'py>,
+        query_points: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (_, got) = self.closest(py, query_points)?;
+        Ok(vector(py, got.iter().map(|c| c.distance as f32).collect()))
+    }
+
+    /// `compute_distance`, negative where the point lies behind the
+    /// nearest surface (against its normal: inside a closed object whose
+    /// normals face out).
+    fn compute_signed_distance<'py>(
+        &self,
+        py: Python<'py>,
+        query_points: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (ps, got) = self.closest(py, query_points)?;
+        let signed = ps
+            .iter()
+            .zip(&got)
+            .map(|(p, c)| c.signed(*p) as f32)
+            .collect();
+        Ok(vector(py, signed))
     }
 
     /// Seconds the Rust call of `cast_rays` takes on `rays`, without the

@@ -150,6 +150,14 @@ class SplatScene:
         when asked for (both are by default)."""
     def count_intersections(self, rays: ArrayF, limit: int = 1024) -> npt.NDArray[np.int32]: ...
     def occluded(self, rays: ArrayF, tnear: float = 0.0, tfar: float = ...) -> npt.NDArray[np.bool_]: ...
+    def compute_closest_points(self, query_points: ArrayF) -> dict[str, np.ndarray]:
+        """query_points (N, 3) float32/float64, the splats' coordinates:
+        points (N, 3) float64 on the nearest surface (a splat's disc within
+        its clip lines, or a triangle), splat_ids (N,) uint32 (the lowest on
+        equal distances), normals (N, 3) float32 (its geometric normal)."""
+    def compute_distance(self, query_points: ArrayF) -> npt.NDArray[np.float32]: ...
+    def compute_signed_distance(self, query_points: ArrayF) -> npt.NDArray[np.float32]:
+        """compute_distance, negative behind the nearest surface's normal."""
 
 class Image:
     """A render: linear RGB and AOVs; `_repr_png_` shows it in a notebook."""
