@@ -5,7 +5,7 @@
 //! file's viewpoint, whether it has colours, and an organised cloud's
 //! sensor ([`crate::scene::sensor`]).
 
-use crate::io::{CloudRead, SplatSet, read_any};
+use crate::io::{CloudRead, Format, SplatSet, read_any};
 use crate::scene::model::MAX_EXTENT;
 use crate::scene::sensor::{Sensor, recover};
 use crate::{Error, Result};
@@ -60,6 +60,9 @@ pub struct Survey {
     /// The sensor of an organised cloud (a PCD with `HEIGHT` > 1), or why
     /// none could be fitted.
     pub sensor: Option<std::result::Result<Sensor, String>>,
+    /// Whether the file's format fixes `+z` as up (LAS and LAZ: z is
+    /// elevation), so the up rules of [`super::up`] take it.
+    pub z_is_elevation: bool,
 }
 
 impl Survey {
@@ -108,6 +111,7 @@ pub fn read_and_survey(path: &Path) -> Result<(Survey, CloudRead)> {
     };
     let mut s = s.map_err(|e| e.context(path.display()))?;
     s.sensor = grid.map(|g| recover(&g));
+    s.z_is_elevation = matches!(read, CloudRead::Points(_)) && is_las(path);
     let span = 2.0 * s.radius();
     if span.is_nan() || span > f64::from(MAX_EXTENT) {
         return Err(Error::invalid(format!(
@@ -118,6 +122,21 @@ pub fn read_and_survey(path: &Path) -> Result<(Survey, CloudRead)> {
         )));
     }
     Ok((s, read))
+}
+
+/// Whether `path` is a LAS or LAZ file, by its extension or its first
+/// bytes (`LASF`).
+fn is_las(path: &Path) -> bool {
+    let head = || {
+        let mut b = [0u8; 4];
+        std::fs::File::open(path)
+            .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut b))
+            .map(|()| b)
+    };
+    match Format::from_extension(path) {
+        Some(f) => f == Format::Las,
+        None => head().is_ok_and(|b| Format::sniff(&b) == Some(Format::Las)),
+    }
 }
 
 /// [`survey`] of a splat file's centres; it has colours when a splat is
@@ -175,6 +194,7 @@ pub fn survey(
         lo,
         hi,
         sensor: None,
+        z_is_elevation: false,
     })
 }
 

@@ -138,6 +138,34 @@ fn up_axis_rules() {
     assert!(cone(true).sample.iter().all(|p| in_frame(&v, *p, 1.0)));
 }
 
+/// Rule 0: a LAS or LAZ file's z is its elevation, whatever its box. The
+/// bundled airborne tile is thinnest along y (28 m against 200 m of z), so
+/// the same points in a PLY stand on their y side by rule 1; a `--up`
+/// still wins.
+#[test]
+fn a_las_files_up_is_its_z() {
+    let laz = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/data/32-1-472-150-76.laz");
+    let s = survey_file(&laz).expect("the bundled tile reads");
+    assert!(s.z_is_elevation);
+    let v = choose_view(&s, None, 4.0 / 3.0);
+    assert_eq!(v.up, DVec3::Z, "{}", v.note);
+    assert!(v.note.contains("a LAS file"), "{}", v.note);
+    assert_eq!(choose_view(&s, Some(DVec3::X), 1.0).up, DVec3::X);
+    let dir = std::env::temp_dir().join(format!("splatray-cloud-las-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("a temporary folder");
+    let ply = dir.join("tile.ply");
+    let (cloud, _) = crate::io::read_any(&laz).expect("the bundled tile reads");
+    let crate::io::CloudRead::Points(cloud) = cloud else {
+        panic!("a LAZ file holds points");
+    };
+    crate::io::write_points(&ply, &cloud).expect("the PLY is written");
+    let p = survey_file(&ply).expect("the PLY reads");
+    std::fs::remove_dir_all(&dir).ok();
+    assert!(!p.z_is_elevation);
+    let v = choose_view(&p, None, 4.0 / 3.0);
+    assert_eq!(v.up.abs(), DVec3::Y, "{}", v.note);
+}
+
 #[test]
 fn viewpoints_that_are_not_sensible() {
     let obj = box_points(Vec3::ZERO, Vec3::ONE, 10);

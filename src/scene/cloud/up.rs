@@ -1,5 +1,7 @@
 //! The up vector of a cloud's camera, unless given (`--up`):
 //!
+//! 0. **A LAS or LAZ file**: `+z`, its elevation (the ASPRS format's
+//!    axes: a projected x-y and z up), whatever the box's shape.
 //! 1. **A flat cloud** (its thinnest bounding-box side under a quarter of the
 //!    middle one: terrain, a floor, a table top): its thinnest axis, on the
 //!    viewpoint's side — unless the camera at the viewpoint looks along that
@@ -30,8 +32,12 @@ pub(super) struct Ups {
     pub framing: (DVec3, String),
 }
 
-/// [`Ups`] of `s`; `given_up` (unit), when there is one, wins everywhere.
+/// [`Ups`] of `s`; `given_up` (unit), when there is one, wins everywhere,
+/// then a LAS file's `+z` (rule 0).
 pub(super) fn ups(s: &Survey, given_up: Option<DVec3>) -> Ups {
+    let given_up = given_up.map(|u| (u, "given")).or(s
+        .z_is_elevation
+        .then_some((DVec3::Z, "a LAS file: z is elevation")));
     let flat = flat_axis(s.hi - s.lo);
     let c = s.center();
     let at_viewpoint = s.viewpoint.and_then(|v| {
@@ -48,10 +54,10 @@ pub(super) fn ups(s: &Survey, given_up: Option<DVec3>) -> Ups {
 /// The up axis of a framing camera (rules 1 and 3), and why: `given_up`, else
 /// the thinnest side of a `flat` cloud (toward the viewpoint), else `+y`
 /// or `-y`.
-fn framing_up(s: &Survey, given_up: Option<DVec3>, flat: Option<DVec3>) -> (DVec3, String) {
+fn framing_up(s: &Survey, given_up: Option<(DVec3, &str)>, flat: Option<DVec3>) -> (DVec3, String) {
     let c = s.center();
     match (given_up, flat) {
-        (Some(u), _) => (u, "given".to_string()),
+        (Some((u, why)), _) => (u, why.to_string()),
         (None, Some(axis)) => {
             let up = match s.viewpoint {
                 Some(v) if (v - c).dot(axis) < 0.0 => -axis,
@@ -80,13 +86,13 @@ fn viewpoint_up(
     v: DVec3,
     c: DVec3,
     f: DVec3,
-    given_up: Option<DVec3>,
+    given_up: Option<(DVec3, &str)>,
     flat: Option<DVec3>,
 ) -> (DVec3, String) {
     // An up axis must be at least 40° away from the line of sight.
     let usable = |a: DVec3| a.dot(f).abs() < 40f64.to_radians().cos();
-    if let Some(u) = given_up {
-        (u, "given".to_string())
+    if let Some((u, why)) = given_up {
+        (u, why.to_string())
     } else if let Some(axis) = flat.filter(|a| usable(*a)) {
         let up = if (v - c).dot(axis) < 0.0 { -axis } else { axis };
         (up, "the thinnest side of a flat cloud".to_string())
