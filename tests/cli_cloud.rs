@@ -371,3 +371,61 @@ fn given_up_axis_turns_the_camera() {
     let saved = std::fs::read_to_string(dir.join("z.toml")).unwrap();
     assert!(saved.contains("up = [-1, 0, 0]"), "{saved}");
 }
+
+/// A cloud through a pipe without an extension (`render <(cat scan.pcd)`,
+/// a FIFO) renders: its bytes are read once, not sniffed first (which
+/// used them up and left the reader waiting for a writer, forever).
+#[test]
+fn a_cloud_through_a_pipe_renders() {
+    let dir = scratch("cloud-pipe");
+    let fifo = dir.join("scan");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    assert!(
+        made.is_ok_and(|s| s.success()),
+        "mkfifo {} failed",
+        fifo.display()
+    );
+    let bytes = std::fs::read(data("lamppost-ascii.pcd")).unwrap();
+    let path = fifo.clone();
+    // The writer blocks until the reader opens the pipe, and ends when
+    // the reader closes it (a second open would wait for it forever).
+    let writer = std::thread::spawn(move || std::fs::write(&path, bytes));
+    let out = dir.join("pipe.png");
+    let mut child = bin()
+        .args([
+            "render",
+            s(&fifo),
+            "-o",
+            s(&out),
+            "--width",
+            "80",
+            "--height",
+            "60",
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if started.elapsed() > std::time::Duration::from_secs(60) {
+            child.kill().ok();
+            // Free the writer, should it still wait for a reader (a
+            // non-blocking open for reading does not wait for a writer).
+            use std::os::unix::fs::OpenOptionsExt;
+            let nonblock = rustix::fs::OFlags::NONBLOCK.bits() as i32;
+            drop(
+                std::fs::OpenOptions::new()
+                    .read(true)
+                    .custom_flags(nonblock)
+                    .open(&fifo),
+            );
+            panic!("render of a pipe still running after 60 s: it waits on the pipe");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(writer.join().unwrap().is_ok());
+    assert!(out.exists());
+}

@@ -43,7 +43,7 @@ use std::path::{Path, PathBuf};
 /// Whether `path` names a point cloud rather than a scene file: a `.ply`,
 /// `.pcd`, `.xyz` or `.txt` extension, or (any extension but `.toml`) a file
 /// whose first bytes are PLY, PCD or XYZ; or a folder (of point files, read
-/// as one cloud: `crate::io::read_folder`).
+/// as one cloud: `crate::io::read_folder`); or a pipe.
 #[must_use]
 pub fn is_cloud_path(path: &Path) -> bool {
     if path.is_dir() {
@@ -57,6 +57,13 @@ pub fn is_cloud_path(path: &Path) -> bool {
         return false;
     }
     if Format::from_extension(path).is_some() {
+        return true;
+    }
+    // A pipe (`<(cat scan.pcd)`, a FIFO) gives its bytes once: sniffing
+    // its head would use them up and leave the reader waiting for a
+    // writer, so it is read as a cloud (a scene file through a pipe is
+    // then one clear error, not a wait).
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
         return true;
     }
     crate::io::file_head(path).is_some_and(|h| Format::sniff(&h).is_some())

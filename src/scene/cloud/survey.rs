@@ -124,8 +124,9 @@ pub fn read_and_survey(path: &Path) -> Result<(Survey, CloudRead)> {
     Ok((s, read))
 }
 
-/// Whether `path` is a LAS or LAZ file, by its extension or its first
-/// bytes (`LASF`).
+/// Whether `path` is a LAS or LAZ file, by its extension or, for a
+/// regular file without one, its first bytes (`LASF`; a pipe, already
+/// read, is not opened again: that would wait for a writer).
 fn is_las(path: &Path) -> bool {
     let head = || {
         let mut b = [0u8; 4];
@@ -135,7 +136,10 @@ fn is_las(path: &Path) -> bool {
     };
     match Format::from_extension(path) {
         Some(f) => f == Format::Las,
-        None => head().is_ok_and(|b| Format::sniff(&b) == Some(Format::Las)),
+        None => {
+            std::fs::metadata(path).is_ok_and(|m| m.is_file())
+                && head().is_ok_and(|b| Format::sniff(&b) == Some(Format::Las))
+        }
     }
 }
 

@@ -160,6 +160,10 @@ fn a_las_files_up_is_its_z() {
     };
     crate::io::write_points(&ply, &cloud).expect("the PLY is written");
     let p = survey_file(&ply).expect("the PLY reads");
+    // The same LAZ bytes without an extension: found by their `LASF`.
+    let bare = dir.join("tile");
+    std::fs::copy(&laz, &bare).expect("the copy is written");
+    assert!(survey_file(&bare).expect("the bare file reads").z_is_elevation);
     std::fs::remove_dir_all(&dir).ok();
     assert!(!p.z_is_elevation);
     let v = choose_view(&p, None, 4.0 / 3.0);
