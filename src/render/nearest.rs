@@ -20,7 +20,7 @@
 //! which neither the octree's ray walk nor Embree's ray queries give.
 
 use crate::data::Splat;
-use crate::primitive::Triangle;
+use crate::primitive::{Primitive, Triangle};
 use glam::{DVec2, DVec3, Vec3};
 use rayon::prelude::*;
 
@@ -95,8 +95,8 @@ impl Nearest {
     pub fn build(splats: &[Splat], tris: &[Triangle]) -> Nearest {
         let boxes: Vec<Box3> = splats
             .iter()
-            .map(splat_box)
-            .chain(tris.iter().map(triangle_box))
+            .map(|s| prim_box(&s.disc_geometry()))
+            .chain(tris.iter().map(prim_box))
             .collect();
         let mut order: Vec<u32> = (0..boxes.len() as u32)
             .filter(|&i| {
@@ -180,12 +180,9 @@ impl Nearest {
             if node.count > 0 {
                 let ids = &self.order[node.first as usize..(node.first + node.count) as usize];
                 for &id in ids {
-                    let (q, normal) = if (id as usize) < splats.len() {
-                        let s = &splats[id as usize];
-                        (splat_closest(s, p), s.normal)
-                    } else {
-                        let t = &tris[id as usize - splats.len()];
-                        (Some(triangle_closest(t, p)), t.unit_normal())
+                    let q = match id.checked_sub(self.splats as u32) {
+                        None => splat_closest(&splats[id as usize], p),
+                        Some(t) => Some(triangle_closest(&tris[t as usize], p)),
                     };
                     // A splat its lines leave nothing of, or a degenerate
                     // triangle, is no surface.
@@ -199,7 +196,7 @@ impl Nearest {
                             id,
                             point: q,
                             distance: e2.sqrt(),
-                            normal,
+                            normal: Vec3::ZERO,
                         };
                     }
                 }
@@ -216,6 +213,13 @@ impl Nearest {
             if near.1 <= best2 {
                 stack.push(near);
             }
+        }
+        // The normal of the one primitive kept, not of every one offered.
+        if best.id != u32::MAX {
+            best.normal = match best.id.checked_sub(self.splats as u32) {
+                None => splats[best.id as usize].normal,
+                Some(t) => tris[t as usize].unit_normal(),
+            };
         }
         best
     }
@@ -289,29 +293,16 @@ fn box_distance2(n: &Node, p: DVec3) -> f64 {
     d2
 }
 
-/// A splat's box: its centre plus and minus, on each axis, the half
-/// extent of its elliptical disc, `sqrt((r_u u_k)² + (r_v v_k)²)`, padded
-/// by a few ulps of its coordinates so that the f32 box holds the disc.
-fn splat_box(s: &Splat) -> Box3 {
-    let c = s.center.as_dvec3();
-    let (u, v) = (s.u_axis.as_dvec3(), s.v_axis.as_dvec3());
-    let (ru, rv) = (f64::from(s.radii.x), f64::from(s.radii.y));
-    let mut lo = [0.0f32; 3];
-    let mut hi = [0.0f32; 3];
-    for k in 0..3 {
-        let e = ((ru * u[k]).powi(2) + (rv * v[k]).powi(2)).sqrt();
-        let pad = 1e-6 * (c[k].abs() + e);
-        lo[k] = (c[k] - e - pad) as f32;
-        hi[k] = (c[k] + e + pad) as f32;
-    }
-    (lo, hi)
-}
-
-/// A triangle's box: its vertices' bounds.
-fn triangle_box(t: &Triangle) -> Box3 {
-    let lo = t.v[0].min(t.v[1]).min(t.v[2]).to_array();
-    let hi = t.v[0].max(t.v[1]).max(t.v[2]).to_array();
-    (lo, hi)
+/// A primitive's box: [`Primitive::center`] and
+/// [`Primitive::half_extent`] (the octree's tight box), padded by a few
+/// ulps of its coordinates so that the f32 box holds the primitive.
+fn prim_box<P: Primitive>(p: &P) -> Box3 {
+    let (c, h) = (p.center().as_dvec3(), p.half_extent().as_dvec3());
+    let pad = 1e-6 * (c.abs() + h);
+    (
+        (c - h - pad).as_vec3().to_array(),
+        (c + h + pad).as_vec3().to_array(),
+    )
 }
 
 /// The point of splat `s` closest to `p`: `p` projected onto the splat's

@@ -128,17 +128,11 @@ pub fn read_and_survey(path: &Path) -> Result<(Survey, CloudRead)> {
 /// regular file without one, its first bytes (`LASF`; a pipe, already
 /// read, is not opened again: that would wait for a writer).
 fn is_las(path: &Path) -> bool {
-    let head = || {
-        let mut b = [0u8; 4];
-        std::fs::File::open(path)
-            .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut b))
-            .map(|()| b)
-    };
     match Format::from_extension(path) {
         Some(f) => f == Format::Las,
         None => {
             std::fs::metadata(path).is_ok_and(|m| m.is_file())
-                && head().is_ok_and(|b| Format::sniff(&b) == Some(Format::Las))
+                && crate::io::file_head(path).is_some_and(|h| Format::sniff(&h) == Some(Format::Las))
         }
     }
 }
