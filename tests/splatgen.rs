@@ -1007,8 +1007,9 @@ fn lean_growth_orients_a_thin_sheet_outward() {
 /// solids' 60k exact samples pass it; the 115k-point bunny sample, a
 /// smooth cloud refused only for curving off its slab, does not (grown
 /// sharp it lost 3.2 dB), nor the survey under 0.05 m of noise (scatter
-/// 0.067; a scan with creases takes 0.065) or sampled sparser than lean
-/// splats reach; each refusal says why.
+/// 0.067; a scan with creases takes 0.065, a dense noisy scan is settled
+/// first) or sampled sparser than lean splats reach; each refusal says
+/// why.
 #[test]
 fn sharp_lean_growth_takes_edges_not_noise_nor_a_smooth_cloud_refused_for_curving() {
     use splatray::splat::lean::Gate;
@@ -1078,8 +1079,29 @@ fn sharp_lean_growth_takes_edges_not_noise_nor_a_smooth_cloud_refused_for_curvin
         .sharp_passes()
     );
     assert!(!scan(0.0666).sharp_passes());
-    let why = scan(0.0666).sharp_refusal().unwrap();
+    // Past it, a scan dense enough has its points settled onto their
+    // surfaces first (`lean::settle`), up to a scatter of 0.45; a sparser
+    // one, or a noisier, keeps the stages, saying why.
+    assert!(scan(0.0666).settle_passes() && scan(0.45).settle_passes());
+    assert_eq!(scan(0.0666).sharp_refusal(), None);
+    assert!(
+        !Gate {
+            scan: false,
+            ..scan(0.0666)
+        }
+        .settle_passes()
+    );
+    let why = scan(0.46).sharp_refusal().unwrap();
     assert!(why.contains("at most 0.065"), "{why}");
+    let sparse_scan = Gate {
+        spacing: 4.66,
+        ..scan(0.43)
+    };
+    let why = sparse_scan.sharp_refusal().unwrap();
+    assert!(
+        why.contains("settling the points") && why.contains("lies 4.7 epsilon"),
+        "{why}"
+    );
     assert!(
         !Gate {
             crease: 0.005,

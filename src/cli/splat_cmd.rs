@@ -279,6 +279,13 @@ fn print_lean(report: &crate::splat::SplatReport) -> bool {
             );
             false
         }
+        None if lean.settled => {
+            eprintln!(
+                "splatray: lean growth on the points settled onto their surfaces first (a dense noisy scan; --no-lean: the stages): {measured}; {} outlier seeds; {} splats clipped at creases and borders",
+                lean.outliers, report.clipped
+            );
+            true
+        }
         None if lean.sharp => {
             eprintln!(
                 "splatray: lean growth with clip lines: {measured}; {} outlier seeds; {} splats clipped at creases and borders (a clean cloud: no noise looked for)",

@@ -117,6 +117,9 @@ pub enum LeanMode {
     /// Always, with clip lines at creases and borders (the windows of a
     /// cloud grown so).
     AlwaysSharp,
+    /// Always, a scan's points settled onto their surfaces first, then
+    /// with clip lines (the windows of a scan grown so).
+    AlwaysSettled,
 }
 
 /// Whether generation finds creases ([`SplatParams::creases`]).
@@ -380,6 +383,9 @@ pub struct LeanReport {
     /// Grown with clip lines at creases and borders (where the gate found
     /// them in a clean cloud, `splat::lean`'s `sharp`).
     pub sharp: bool,
+    /// Grown on a scan's points settled onto their surfaces first (a
+    /// noisy scan, `splat::lean`'s `settle`).
+    pub settled: bool,
 }
 
 impl SplatReport {
@@ -616,7 +622,7 @@ pub(crate) fn generate_stages(
     let try_lean = match params.lean {
         LeanMode::Off => false,
         LeanMode::Gated => params.stages_only().is_none(),
-        LeanMode::Always | LeanMode::AlwaysSharp => true,
+        LeanMode::Always | LeanMode::AlwaysSharp | LeanMode::AlwaysSettled => true,
     };
     if try_lean
         && let Some(done) = lean_stages(cloud, params, &frame, &mut report, (progress, grown), t0)?
@@ -687,6 +693,7 @@ fn lean_stages(
     use super::lean::GrowWhen;
     let when = match (params.lean, spread.is_some()) {
         (LeanMode::AlwaysSharp, _) => GrowWhen::AlwaysSharp,
+        (LeanMode::AlwaysSettled, _) => GrowWhen::AlwaysSettled,
         (LeanMode::Always | LeanMode::Off, _) => GrowWhen::Always,
         (LeanMode::Gated, true) => GrowWhen::Never,
         // Creases off: whole discs, so no clip lines either.
@@ -709,6 +716,7 @@ fn lean_stages(
         gate: lean.gate,
         outliers: lean.outliers,
         sharp: lean.sharp,
+        settled: lean.settled,
     });
     if refused.is_some() {
         return Ok(None);

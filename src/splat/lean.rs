@@ -35,15 +35,18 @@
 //! sparser, noisy samples are refused (`docs/notes/generation.md`, "Issue
 //! 54, fifty-sixth session"). A cloud refused only for its creases and
 //! borders (exact samples of a solid, an airborne survey) grows with clip
-//! lines there ([`sharp`]; "fifty-eighth" and "fifty-ninth session").
+//! lines there ([`sharp`]; "fifty-eighth" and "fifty-ninth session"). A
+//! dense scan too noisy for that has its points settled onto their
+//! surfaces first ([`settle`]; "sixty-fifth session").
 
+mod settle;
 mod sharp;
 
 use super::fit::{height_axes, height_rows, normal_equations, plane_fit, solve6};
 use super::grow::MAX_RADIUS_EPS;
 use crate::data::{FACING_AWAY_COS, FACING_AWAY_MAX, NormalField, Splat, Viewpoints};
 use crate::splat::clip::{Clip, ClipLine};
-use glam::{Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use std::collections::BinaryHeap;
 
@@ -233,6 +236,24 @@ impl Gate {
         self.crease > GATE_CREASE || self.hard_eps > GATE_HARD_EPS || self.border > GATE_BORDER
     }
 
+    /// Whether sharp lean growth serves this scan once its points are
+    /// settled onto their surfaces ([`settle`]): a scan refused by lean and
+    /// sharp lean growth for its scatter, scattering at most
+    /// [`settle::SETTLE_SIGMA`] and no sparser than
+    /// [`settle::SETTLE_SPARSE`], its nearest not along a line.
+    #[must_use]
+    pub fn settle_passes(&self) -> bool {
+        self.scan
+            && self.sampled > 0
+            && !self.passes()
+            && !self.sharp_passes()
+            && self.sigma > SCAN_SHARP_SIGMA
+            && self.sigma <= settle::SETTLE_SIGMA
+            && self.line <= GATE_LINE
+            && self.spacing >= GATE_DENSE
+            && self.spacing <= settle::SETTLE_SPARSE
+    }
+
     /// Whether sharp lean growth (clip lines at creases and borders,
     /// [`sharp`]) serves this cloud: it has creases or borders
     /// ([`Gate::sharp_features`]) and passes lean growth's other bounds,
@@ -273,8 +294,17 @@ impl Gate {
     /// where one does).
     #[must_use]
     pub fn sharp_refusal(&self) -> Option<String> {
-        if self.passes() || self.sharp_passes() {
+        if self.passes() || self.sharp_passes() || self.settle_passes() {
             return None;
+        }
+        let noisy = self.scan && self.sigma > SCAN_SHARP_SIGMA && self.sigma <= settle::SETTLE_SIGMA;
+        if noisy && self.spacing > settle::SETTLE_SPARSE {
+            return Some(format!(
+                "the points scatter {:.3} epsilon about their nearest's plane (noise; lean growth needs at most {SCAN_SHARP_SIGMA}) and a point's 12th nearest lies {:.1} epsilon away (settling the points onto their surfaces first needs at most {})",
+                self.sigma,
+                self.spacing,
+                settle::SETTLE_SPARSE
+            ));
         }
         if !self.sharp_features() {
             return self.refusal();
@@ -616,6 +646,16 @@ impl Near {
     }
 }
 
+/// How a splat grows: at error `eps` (its radius capped at
+/// [`MAX_RADIUS_EPS`] of it), taking points within `slab` of its plane, from
+/// a seed whose [`K0`]-th neighbour lies within `far` (else an outlier).
+#[derive(Clone, Copy)]
+struct Growth {
+    eps: f32,
+    slab: f32,
+    far: f32,
+}
+
 /// A grown splat before its field.
 struct Grown {
     centre: Vec3,
@@ -661,6 +701,8 @@ pub struct Lean {
     pub flat_fields: usize,
     /// Grown with clip lines at creases and borders ([`sharp`]).
     pub sharp: bool,
+    /// Grown on the points settled onto their surfaces first ([`settle`]).
+    pub settled: bool,
     /// Splats with a clip line.
     pub clipped: usize,
     /// Seconds: the grid and the gate, growth, orientation, fields.
@@ -778,7 +820,9 @@ fn gate(g: &Grid, eps: f32, most: usize, within: Option<[Vec3; 2]>) -> (Gate, f3
 
 /// Grows one splat from the point `i` (grid order); `None` where it grows
 /// none (a degenerate fit, an outlier).
-fn grow(g: &Grid, near: &mut Near, i: u32, (eps, far, sharp): (f32, f32, bool)) -> Option<Grown> {
+fn grow(g: &Grid, near: &mut Near, i: u32, (growth, sharp): (Growth, bool)) -> Option<Grown> {
+    let Growth { eps, slab, far } = growth;
+    let cap = MAX_RADIUS_EPS * eps;
     let p = g.pos[i as usize];
     near.start(g, p);
     let mut members = Vec::with_capacity(64);
@@ -789,7 +833,6 @@ fn grow(g: &Grid, near: &mut Near, i: u32, (eps, far, sharp): (f32, f32, bool)) 
         }
         members.push(idx);
     }
-    let slab = GROW_EPS * eps;
     let fit = |m: &[u32]| {
         let (c, _, vecs) = plane_fit(m.iter().map(|&k| g.pos[k as usize]));
         (vecs[0].as_vec3(), c.as_vec3())
@@ -817,7 +860,6 @@ fn grow(g: &Grid, near: &mut Near, i: u32, (eps, far, sharp): (f32, f32, bool)) 
             clips: [None; 2],
         });
     }
-    let cap = MAX_RADIUS_EPS * eps;
     let spacing = g.pos[members[K0] as usize].distance(p);
     let mut next_fit = 2 * members.len();
     let mut j = members.len();
@@ -1091,6 +1133,33 @@ fn face_the_scanners(splats: &mut [Grown], tree: &[u32], (views, pos): (&[Vec3],
     away
 }
 
+/// A splat's quadric height field `h = f + d x + e y + a x² + b x y + c y²`
+/// over its axes `(u, v)` along its unit normal `n`, offsets from its
+/// centre scaled by `1 / scale` (into the unit ball, `fit::height_rows`).
+struct Quadric {
+    n: DVec3,
+    u: DVec3,
+    v: DVec3,
+    scale: f64,
+    /// `[f, d, e, a, b, c]`.
+    coef: [f64; 6],
+}
+
+/// The [`Quadric`] fitted to the heights of the points `s` took and of
+/// those within its field's reach; `None` for too few points or a singular
+/// fit.
+fn quadric(g: &Grid, s: &Grown) -> Option<Quadric> {
+    let offsets: Vec<Vec3> = (s.members.iter().chain(&s.extra))
+        .map(|&k| g.pos[k as usize] - s.centre)
+        .collect();
+    let (Some((rows, scale)), Some((n, u, v))) = (height_rows(&offsets, s.normal, FIELD_MIN), height_axes(s.normal)) else {
+        return None;
+    };
+    let (ata, atb) = normal_equations(&rows);
+    let coef = solve6(ata, atb)?;
+    Some(Quadric { n, u, v, scale, coef })
+}
+
 /// The splat of `s` with its normal field (eq. 4) from the quadric
 /// `h = a x² + b x y + c y² + d x + e y + f` fitted to its points' heights
 /// over its plane: the field's slopes along the quadric's principal
@@ -1108,16 +1177,7 @@ fn fitted(g: &Grid, s: &Grown) -> (Splat, bool) {
         field: NormalField::FLAT,
         clip: Clip::NONE,
     });
-    let offsets: Vec<Vec3> = (s.members.iter().chain(&s.extra))
-        .map(|&k| g.pos[k as usize] - s.centre)
-        .collect();
-    // The fit of `fit::height_rows`: offsets scaled into the unit ball,
-    // terms `1, x, y, x², xy, y²` over its axes.
-    let (Some((rows, scale)), Some((_, u0, v0))) = (height_rows(&offsets, n, FIELD_MIN), height_axes(n)) else {
-        return (splat, true);
-    };
-    let (ata, atb) = normal_equations(&rows);
-    let Some([_, d, e, a, b, c]) = solve6(ata, atb) else {
+    let Some(Quadric { u: u0, v: v0, scale, coef: [_, d, e, a, b, c], .. }) = quadric(g, s) else {
         return (splat, true);
     };
     let (a, b, c) = (a / scale, b / scale, c / scale);
@@ -1217,7 +1277,7 @@ enum Pass<'a> {
 fn grow_slab(
     g: &Grid,
     range: std::ops::Range<usize>,
-    (eps, far): (f32, f32),
+    growth: Growth,
     core: Option<[Vec3; 2]>,
     pass: Pass<'_>,
 ) -> (Vec<Grown>, Vec<u32>) {
@@ -1235,9 +1295,9 @@ fn grow_slab(
         }
         covered[i - start] = true;
         let splat = match pass {
-            Pass::SharpFaces { grown, owner } => sharp::face_splat(g, &mut near, i as u32, eps, (grown, owner))
-                .or_else(|| grow(g, &mut near, i as u32, (eps, far, true))),
-            _ => grow(g, &mut near, i as u32, (eps, far, sharp)),
+            Pass::SharpFaces { grown, owner } => sharp::face_splat(g, &mut near, i as u32, growth.eps, (grown, owner))
+                .or_else(|| grow(g, &mut near, i as u32, (growth, true))),
+            _ => grow(g, &mut near, i as u32, (growth, sharp)),
         };
         match splat {
             // Left for the faces' pass.
@@ -1256,26 +1316,26 @@ fn grow_slab(
     (grown, outliers)
 }
 
-/// The points of `g` no splat of `grown` took within `eps` of its plane
-/// (a taken point lies inside the splat's radius).
-fn unsure(g: &Grid, grown: &[Grown], eps: f32) -> Vec<Vec3> {
-    let mut sure = vec![false; g.pos.len()];
+/// The points of `pos` (the grid's order) no splat of `grown` took within
+/// `eps` of its plane (a taken point lies inside the splat's radius).
+fn unsure(pos: &[Vec3], grown: &[Grown], eps: f32) -> Vec<Vec3> {
+    let mut sure = vec![false; pos.len()];
     for s in grown {
         for &k in &s.members {
-            let q = g.pos[k as usize];
+            let q = pos[k as usize];
             if !s.hard || s.normal.dot(q - s.centre).abs() <= eps {
                 sure[k as usize] = true;
             }
         }
     }
-    let off = sure.iter().zip(&g.pos).filter(|(s, _)| !**s);
+    let off = sure.iter().zip(pos).filter(|(s, _)| !**s);
     off.map(|(_, &p)| p).collect()
 }
 
 /// Every slab's splats ([`grow_slab`]), and the seeds left as outliers
 /// (grid order); with clip lines and a second pass over the points left on
 /// creases where `sharp`.
-fn grow_all(g: &Grid, (eps, far): (f32, f32), within: Option<[Vec3; 2]>, sharp: bool) -> (Vec<Grown>, Vec<u32>) {
+fn grow_all(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, sharp: bool) -> (Vec<Grown>, Vec<u32>) {
     let n = g.pos.len();
     let slabs = n.div_ceil(SLAB_POINTS).max(1);
     let range = |s: usize| s * n / slabs..(s + 1) * n / slabs;
@@ -1283,7 +1343,7 @@ fn grow_all(g: &Grid, (eps, far): (f32, f32), within: Option<[Vec3; 2]>, sharp: 
     let pass = |pass: Pass<'_>, grown: &mut Vec<Grown>, outliers: &mut Vec<u32>| {
         let per_slab: Vec<(Vec<Grown>, Vec<u32>)> = (0..slabs)
             .into_par_iter()
-            .map(|s| grow_slab(g, range(s), (eps, far), within, pass))
+            .map(|s| grow_slab(g, range(s), growth, within, pass))
             .collect();
         for (g_s, o) in per_slab {
             grown.extend(g_s);
@@ -1325,6 +1385,8 @@ pub enum GrowWhen {
     Always,
     /// Whatever the gate found, with clip lines.
     AlwaysSharp,
+    /// Whatever the gate found, a scan's points settled first ([`settle`]).
+    AlwaysSettled,
     /// Never (the gate's figures alone).
     Never,
 }
@@ -1356,6 +1418,7 @@ pub fn grow_lean(
         largest_over_spacing: 0.0,
         flat_fields: 0,
         sharp: false,
+        settled: false,
         clipped: 0,
         seconds: [t0.elapsed().as_secs_f64(), 0.0, 0.0, 0.0],
     };
@@ -1376,27 +1439,41 @@ pub fn grow_lean(
         ..gate
     };
     let mut lean = none(gate);
+    // (with clip lines, the points settled first)
     let grow_now = match when {
-        GrowWhen::Gated => Some(false).filter(|_| gate.passes()),
-        GrowWhen::GatedSharp if gate.passes() => Some(false),
-        GrowWhen::GatedSharp => Some(true).filter(|_| gate.sharp_passes()),
-        GrowWhen::Always => Some(false),
-        GrowWhen::AlwaysSharp => Some(true),
+        GrowWhen::Gated => Some((false, false)).filter(|_| gate.passes()),
+        GrowWhen::GatedSharp if gate.passes() => Some((false, false)),
+        GrowWhen::GatedSharp if gate.sharp_passes() => Some((true, false)),
+        GrowWhen::GatedSharp => Some((true, true)).filter(|_| gate.settle_passes()),
+        GrowWhen::Always => Some((false, false)),
+        GrowWhen::AlwaysSharp => Some((true, false)),
+        GrowWhen::AlwaysSettled => Some((true, views.is_some())),
         GrowWhen::Never => None,
     };
-    let Some(sharp) = grow_now else {
+    let Some((sharp, settled)) = grow_now else {
         return lean;
     };
-    lean.sharp = sharp;
+    (lean.sharp, lean.settled) = (sharp, settled);
     let t1 = std::time::Instant::now();
-    let (mut grown, outliers) = grow_all(&g, (eps, OUTLIER_SPACINGS * spacing), within, sharp);
+    let growth = Growth {
+        eps,
+        slab: GROW_EPS * eps,
+        far: OUTLIER_SPACINGS * spacing,
+    };
+    let g = match views {
+        Some(views) if settled => Grid::build(&settle::settle(&g, growth, within, views, gate.sigma * eps), g.h, true),
+        _ => g,
+    };
+    let (mut grown, outliers) = grow_all(&g, growth, within, sharp);
     lean.outliers = outliers.len();
     if views.is_some() {
         lean.outlier_points = outliers.iter().map(|&i| g.order[i as usize]).collect();
         lean.outlier_points.sort_unstable();
     }
     lean.clipped = grown.iter().filter(|s| s.clips.iter().any(Option::is_some)).count();
-    lean.unsure_points = unsure(&g, &grown, eps);
+    // A settled point is sure where the point as given lies on its splat.
+    let given: Vec<Vec3> = if settled { g.order.iter().map(|&i| points[i as usize]).collect() } else { Vec::new() };
+    lean.unsure_points = unsure(if settled { &given } else { &g.pos }, &grown, eps);
     lean.largest_over_spacing = grown
         .iter()
         .map(|s| s.radius / s.spacing)

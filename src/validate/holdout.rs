@@ -323,6 +323,7 @@ pub fn heldout_coverage_windows(
     // Grown as the whole was: by lean growth without its gate where that
     // grew the whole (a window's cut edges are no border of the surface).
     let lean = match &whole.lean {
+        Some(l) if l.used && l.settled => LeanMode::AlwaysSettled,
         Some(l) if l.used && l.sharp => LeanMode::AlwaysSharp,
         Some(l) if l.used => LeanMode::Always,
         _ => LeanMode::Off,
