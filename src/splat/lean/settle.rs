@@ -29,12 +29,13 @@ use rayon::prelude::*;
 /// median scatter of a point's nearest about their plane): a first pass
 /// wide enough for the noise, then a narrower one over the once-moved
 /// points. The solids scanned from one station (1000×750 rays, `compare
-/// --truth` at 400×300 against the stages), range noise of 0.22 / 0.3 /
-/// 0.5 / 1.0 / 1.5 spacings (scatter 0.074 / 0.10 / 0.17 / 0.32 / 0.43
-/// `ϵ`): +1.54 and +0.34, +0.79 and +0.55, -0.67 (seeds 1-3), +0.31 and
-/// +0.32, +0.24 and +0.80 dB (seeds 1, 2). Slabs fixed at 0.83 and 0.5
-/// `ϵ` instead read -0.93 at 0.5 spacings and -6.9 at 1.5 (the noise past
-/// the slab); 4.9 and 2.9 scatters -0.93 at 0.5, 3.5 and 2.1 -0.89.
+/// --truth` at 400×300 against the stages, means of seeds 1-3), range
+/// noise of 0.2 / 0.22 / 0.3 / 0.5 / 1.0 / 1.5 spacings (scatter 0.069 /
+/// 0.074 / 0.10 / 0.17 / 0.32 / 0.43 `ϵ`): +2.23 / +0.79 / +0.61 / -0.67 /
+/// +0.50 / +0.65 dB. At half a spacing, 4.9 and 2.9 scatters (0.83 and
+/// 0.5 `ϵ`, slabs fixed in `ϵ` as first tried) read -0.93, 3.3 and 2.0
+/// -0.89; fixed in `ϵ`, 1.5 spacings fell 6.9 dB (the noise past the
+/// slab).
 pub const PASSES: [f32; 2] = [4.15, 2.5];
 
 /// A point whose line of sight meets its splat's plane at a sine under
