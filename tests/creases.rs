@@ -267,16 +267,16 @@ fn an_exact_scan_grows_lean_facing_its_scanner() {
     );
     let (e, psnr_stages) = lean_and_stages_scanned("rays = [400, 300]");
     let psnr = e.image_psnr_db.unwrap();
-    // Measured: 33.58 dB, 0.09 % false hits, normal error 0.53°, against
-    // the stages' (creases on) 31.89 dB, 0.10 %, 1.00° (the scan traced
-    // by Embree forced to avx2: 33.76 against 31.95 dB; to sse4.2: 33.77
-    // against 32.37, 0.097 % false hits). At 1000x750 rays and 400x300
+    // Measured (the scan traced by the octree, the same on every ISA):
+    // 34.09 dB, 0.103 % false hits, against the stages' (creases on)
+    // 31.77 dB, 0.127 %. Traced by Embree: 33.58 dB, 0.09 %, normal error
+    // 0.53°, against 31.89 dB, 0.10 %, 1.00°. At 1000x750 rays and 400x300
     // pixels 35.52 against 35.03 dB (35.70 with trimming given the
     // outlier seeds' lines of sight too); from two stations (800x600 rays
     // each) 37.75 against 36.58.
-    assert!(psnr > 33.4, "{psnr}");
+    assert!(psnr > 33.9, "{psnr}");
     assert!(
-        psnr > psnr_stages + 1.2,
+        psnr > psnr_stages + 2.0,
         "{psnr} against the stages' {psnr_stages}"
     );
     assert!(e.false_hits < 0.0011, "{}", e.false_hits);
@@ -307,9 +307,10 @@ fn a_dense_noisy_scan_grows_lean_on_settled_points() {
     );
     let (e, stages) = lean_and_stages_scanned("rays = [1000, 750], range_noise_spacing = 0.3");
     let psnr = e.image_psnr_db.unwrap();
-    // Measured: 35.73 dB, 0.023 % false hits, against the stages' 34.63 dB,
-    // 0.093 % (Embree forced to avx2: 35.73 against 34.76; to sse4.2:
-    // 35.93, 0.030 %, against 34.56).
+    // Measured (the scan traced by the octree): 35.73 dB, 0.023 % false
+    // hits, against the stages' 34.71 dB, 0.093 % (traced by Embree at
+    // avx512 / avx2 / sse4.2: 35.73 / 35.73 / 35.93 against 34.63 / 34.76
+    // / 34.56).
     assert!(
         psnr > 35.5 && psnr > stages + 0.8,
         "{psnr} against the stages' {stages}"
@@ -317,8 +318,9 @@ fn a_dense_noisy_scan_grows_lean_on_settled_points() {
     assert!(e.false_hits < 0.0004, "{}", e.false_hits);
     let (e, stages) = lean_and_stages_scanned("rays = [1000, 750], range_noise_spacing = 0.5");
     let psnr = e.image_psnr_db.unwrap();
-    // Measured: 34.27 against 35.29 dB (avx2: 34.29 against 35.15; sse4.2:
-    // 34.23 against 35.26), 0.043 % false hits against 0.060 %.
+    // Measured (traced by the octree): 34.24 against 35.15 dB, 0.040 %
+    // false hits against 0.060 % (by Embree at avx512 / avx2 / sse4.2:
+    // 34.27 / 34.29 / 34.23 against 35.29 / 35.15 / 35.26).
     assert!(
         psnr > 34.0 && psnr > stages - 1.2,
         "{psnr} against the stages' {stages}"
@@ -363,16 +365,18 @@ fn a_scan_with_far_stray_returns_grows_lean() {
     );
     let (e, psnr_stages) = lean_and_stages_scanned("rays = [400, 300], outliers = 0.002");
     let psnr = e.image_psnr_db.unwrap();
-    // Measured (the scan traced by Embree at avx512 / avx2 / sse4.2):
-    // 32.97 / 33.21 / 32.96 dB against the stages' 31.67 / 31.91 / 31.97,
-    // false hits 0.087 / 0.080 / 0.087 % (the stages' 0.117-0.123 %).
-    // Seeds 2 and 3: 33.05 and 32.80 against 31.59 and 32.26.
-    assert!(psnr > 32.8, "{psnr}");
+    // Measured (the scan traced by the octree): 33.33 dB against the
+    // stages' 32.03, false hits 0.077 % (the stages' 0.127 %). Traced by
+    // Embree at avx512 / avx2 / sse4.2 on an AMD EPYC: 32.97 / 33.21 /
+    // 32.96 dB against 31.67 / 31.91 / 31.97, false hits 0.087 / 0.080 /
+    // 0.087 %; on an Intel Xeon at avx2, 0.117 %. Seeds 2 and 3: 33.05
+    // and 32.80 against 31.59 and 32.26.
+    assert!(psnr > 33.1, "{psnr}");
     assert!(
-        psnr > psnr_stages + 0.8,
+        psnr > psnr_stages + 1.0,
         "{psnr} against the stages' {psnr_stages}"
     );
-    assert!(e.false_hits < 0.001, "{}", e.false_hits);
+    assert!(e.false_hits < 0.0009, "{}", e.false_hits);
 }
 
 /// A scan grown lean faces its scanner at any `ϵ`: the orientation tree
@@ -424,8 +428,9 @@ fn a_noisy_scan_with_creases_grows_lean_under_the_scans_bound() {
     assert!(lean.used && lean.sharp, "{lean:?}");
     let (e, psnr_stages) = lean_and_stages_scanned("rays = [400, 300], range_noise_spacing = 0.07");
     let psnr = e.image_psnr_db.unwrap();
-    // Measured (200x150 against the mesh): 32.67 dB against the stages'
-    // 31.67 (seeds 2 and 3 of the scan: 32.93 / 31.94 against 31.43 /
+    // Measured (200x150 against the mesh, the scan traced by the octree):
+    // 32.67 dB against the stages' 31.68 (traced by Embree, 32.67 against
+    // 31.67; seeds 2 and 3 of the scan: 32.93 / 31.94 against 31.43 /
     // 31.07).
     assert!(psnr > 32.3, "{psnr}");
     assert!(
@@ -612,10 +617,14 @@ fn a_solid_scanned_from_two_stations_renders_near_its_mesh() {
 /// The solids' scene scanned from its camera (`scan`: the scan's keys
 /// after its position, e.g. `rays = [400, 300]`) at 200x150: lean
 /// growth's errors against the mesh (the default `splat`), and the
-/// stages' PSNR (creases on).
+/// stages' PSNR (creases on). The scan is traced by the octree's exact
+/// triangles (`tracer = "octree"`), so its points are the same on every
+/// machine and Embree ISA: traced by Embree forced to avx2, the exact
+/// 400x300 scan read 0.137 % false hits on an Intel Xeon against 0.090 %
+/// at its avx512, past the bound its other machines had measured.
 fn lean_and_stages_scanned(scan: &str) -> (splatray::validate::compare::TruthErrors, f64) {
     let (root, text) = solids_scanned(&format!(
-        "seed = 1\nscan = {{ from = [1.9, 1.5, 2.4], at = [0.0, 0.2, 0.0], {scan} }}"
+        "seed = 1\nscan = {{ from = [1.9, 1.5, 2.4], at = [0.0, 0.2, 0.0], tracer = \"octree\", {scan} }}"
     ));
     let lean_text = text.replace("splat = { creases = true }", "splat = { }");
     let scene = build_scene(&parse_scene_str(&lean_text).unwrap(), &root, None).unwrap();

@@ -50,14 +50,24 @@ pub const GRAZING_SIN: f64 = 0.29;
 pub const SETTLE_SPARSE: f32 = 2.5;
 
 /// The most scatter, in `ϵ`, at which a scan is settled: the noisy solids
-/// at 1.5 spacings read 0.43 (settled: +0.24 and +0.80 dB over the stages).
+/// at 1.5 spacings read 0.43 (settled: +0.65 dB over the stages, seeds
+/// 1-3); with slabs fixed in `ϵ` they fell 6.9 dB, so past what was
+/// measured a scan keeps the stages.
 pub const SETTLE_SIGMA: f32 = 0.45;
 
 /// The points of `g` (as given, not in grid order), settled by the passes
 /// of [`PASSES`] from the scanners of `views`: the splats grown at
 /// `growth`'s error and outlier distance, seeded within `within`, their
-/// slabs [`PASSES`] times `scatter`.
+/// slabs [`PASSES`] times `scatter` (the points as given where it is not
+/// a positive length: a window too small for the gate to measure).
 pub fn settle(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, views: &Viewpoints, scatter: f32) -> Vec<Vec3> {
+    if !(scatter.is_finite() && scatter > 0.0) {
+        let mut given = vec![Vec3::ZERO; g.pos.len()];
+        for (i, &p) in g.pos.iter().enumerate() {
+            given[g.order[i] as usize] = p;
+        }
+        return given;
+    }
     let pass = |slab: f32| Growth {
         slab: slab * scatter,
         ..growth
@@ -90,7 +100,9 @@ fn moved(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, views: &Viewpoints
 }
 
 /// Where the quadric of splat `s` moves each point it took (grid order),
-/// with the point's weight; none where the fit fails.
+/// with the point's weight: along its line of sight, or along the splat's
+/// normal where that line grazes the splat or misses the quadric; none
+/// where the fit fails.
 fn projections(g: &Grid, s: &Grown, views: &Viewpoints) -> Vec<(u32, Vec3, f32)> {
     let Some(q) = quadric(g, s) else {
         return Vec::new();
