@@ -243,10 +243,9 @@ impl Gate {
     /// [`settle::SETTLE_SPARSE`], its nearest not along a line.
     #[must_use]
     pub fn settle_passes(&self) -> bool {
+        // Past SCAN_SHARP_SIGMA, neither lean nor sharp lean growth passes.
         self.scan
             && self.sampled > 0
-            && !self.passes()
-            && !self.sharp_passes()
             && self.sigma > SCAN_SHARP_SIGMA
             && self.sigma <= settle::SETTLE_SIGMA
             && self.line <= GATE_LINE
