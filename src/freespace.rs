@@ -15,12 +15,12 @@ use crate::accel::octree::{Octree, OctreeParams};
 use crate::accel::{Backend, CandidateHits, Ray};
 use crate::data::FACING_AWAY_MAX;
 use crate::primitive::{ClippedDisc, Disc, Primitive};
-use crate::splat::knn::{PointTree, build_tree};
 use crate::splat::{PointCloud, Splat, SplatParams, SplatReport, Viewpoints};
 use crate::{Error, Result};
 use glam::{Vec2, Vec3};
-use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
+use std::collections::HashMap;
+use std::hash::BuildHasherDefault;
 
 /// Most passes of trimming (they stop when no line is blocked): a shrunk
 /// splat can uncover a splat behind it that blocks the same line of sight,
@@ -309,7 +309,6 @@ fn opened_holes(
     splats: &[Splat],
     cut: &[(usize, Splat, usize)],
     points: &[Vec3],
-    tree: &PointTree,
     vp: &Viewpoints,
     misses: &Misses,
     margin: f32,
@@ -318,10 +317,20 @@ fn opened_holes(
         return Vec::new();
     }
     let octree = octree_of(splats);
+    // The points within twice the old disc's reach of its centre.
+    let around: Vec<(Vec3, f32)> = cut
+        .iter()
+        .map(|(_, old, _)| {
+            let reach = old.radii.max_element();
+            (old.center, 4.0 * reach * reach)
+        })
+        .collect();
+    let around = points_within(points, &around);
     cut.par_iter()
+        .zip(&around)
         .map_init(
             || (CandidateHits::new(0.0), Vec::new()),
-            |(hits, near), &(id, old, i)| {
+            |(hits, near), (&(id, old, i), around)| {
                 // A miss (past the points) is checked for holes like any
                 // line: a cluster of dropped returns inside the surface
                 // looks like one.
@@ -347,10 +356,8 @@ fn opened_holes(
                 // The points on the old disc's plane within its reach of
                 // any sample, in its tangent coordinates.
                 near.clear();
-                for nb in
-                    tree.within_unsorted::<SquaredEuclidean>(&c.to_array(), 4.0 * reach * reach)
-                {
-                    let d = points[nb.item as usize] - c;
+                for &k in around {
+                    let d = points[k as usize] - c;
                     if n.dot(d).abs() <= margin {
                         near.push(Vec2::new(u.dot(d), v.dot(d)));
                     }
@@ -386,6 +393,93 @@ fn opened_holes(
         .collect()
 }
 
+/// For each ball of `balls` (a centre and a squared radius), the points
+/// of `points` within it, the boundary included (indices, in no order):
+/// one pass over the points on the threads, each point looked up among
+/// the cells its balls' boxes cover. A shrink asks about a few splats, so
+/// this is cheaper than a tree over every point (a third of trimming's
+/// time on a 100k-point scan, on one thread). The squared distance sums
+/// the axes' squares in order, as a k-d tree's query does.
+fn points_within(points: &[Vec3], balls: &[(Vec3, f32)]) -> Vec<Vec<u32>> {
+    let usable = |&(c, r2): &(Vec3, f32)| c.is_finite() && r2.is_finite() && r2 >= 0.0;
+    let widest = balls.iter().filter(|b| usable(b)).map(|b| b.1.sqrt()).fold(0.0f32, f32::max);
+    let mut within = vec![Vec::new(); balls.len()];
+    // Cells wider than any ball (a ball's box covers at most two a side),
+    // keyed by their coordinates' low 21 bits: cells that share a key only
+    // cost distance tests.
+    let h = (2.5 * widest).max(f32::MIN_POSITIVE);
+    let cell = |p: Vec3| ((p / h).floor()).to_array().map(|x| x as i64);
+    let key = |c: [i64; 3]| {
+        let bits = |x: i64| (x as u64) & ((1 << 21) - 1);
+        bits(c[0]) | bits(c[1]) << 21 | bits(c[2]) << 42
+    };
+    let mut cells: HashMap<u64, Vec<u32>, BuildHasherDefault<CellHash>> = HashMap::default();
+    let mut keys = Vec::new();
+    for (b, &(c, r2)) in balls.iter().enumerate() {
+        if !usable(&(c, r2)) {
+            continue;
+        }
+        // Padded: a point within the ball in f32 may lie a rounding outside.
+        let r = Vec3::splat(r2.sqrt() * 1.001);
+        let (lo, hi) = (cell(c - r), cell(c + r));
+        keys.clear();
+        for x in lo[0]..=hi[0] {
+            for y in lo[1]..=hi[1] {
+                for z in lo[2]..=hi[2] {
+                    keys.push(key([x, y, z]));
+                }
+            }
+        }
+        keys.sort_unstable();
+        keys.dedup();
+        for &k in &keys {
+            cells.entry(k).or_default().push(b as u32);
+        }
+    }
+    if cells.is_empty() {
+        return within;
+    }
+    let found: Vec<(u32, u32)> = points
+        .par_iter()
+        .enumerate()
+        .with_min_len(4096)
+        .flat_map_iter(|(i, &p)| {
+            let list = cells.get(&key(cell(p))).map_or(&[][..], Vec::as_slice);
+            list.iter().filter_map(move |&b| {
+                let (c, r2) = balls[b as usize];
+                let d = p - c;
+                (d.x * d.x + d.y * d.y + d.z * d.z <= r2).then_some((b, i as u32))
+            })
+        })
+        .collect();
+    for (b, i) in found {
+        within[b as usize].push(i);
+    }
+    within
+}
+
+/// A hash of a cell key for [`points_within`]'s table: a multiply, its high
+/// half folded into the low bits the table indexes by.
+#[derive(Default)]
+struct CellHash(u64);
+
+impl std::hash::Hasher for CellHash {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(self.0 ^ u64::from(b));
+        }
+    }
+
+    fn write_u64(&mut self, k: u64) {
+        let h = (self.0 ^ k).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        self.0 = h ^ (h >> 29);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
 /// Trims `splats` so that no line of sight from its viewpoint to one of
 /// `points` is blocked more than `margin` in front of its point.
 #[must_use]
@@ -404,9 +498,6 @@ pub fn trim(
     if splats.is_empty() || points.is_empty() {
         return report;
     }
-    // The points' tree, for the holes a shrink would open; built when
-    // something is first shrunk.
-    let mut tree: Option<PointTree> = None;
     // Splats a shrink would have holed (see [`opened_holes`]): kept whole,
     // never shrunk again.
     let mut kept = vec![false; splats.len()];
@@ -453,8 +544,7 @@ pub fn trim(
             report.still_blocked = count;
             return report;
         }
-        let tree = tree.get_or_insert_with(|| build_tree(points));
-        let holes = opened_holes(splats, &cut, points, tree, viewpoint, misses, margin);
+        let holes = opened_holes(splats, &cut, points, viewpoint, misses, margin);
         let mut changed = vec![false; splats.len()];
         for (&(id, before, _), hole) in cut.iter().zip(holes) {
             if hole {
@@ -578,6 +668,54 @@ mod tests {
 
     const MARGIN: f32 = 0.005;
     const EYE: Vec3 = Vec3::new(0.0, 0.0, 5.0);
+
+    /// The points of each ball are those a k-d tree finds within it, the
+    /// boundary included: balls of mixed radii far from the origin, points
+    /// on a lattice (some exactly on a boundary), and one not finite.
+    #[test]
+    fn points_within_balls_are_a_trees_points_within_them() {
+        use crate::rng::SplitMix64;
+        let mut rng = SplitMix64::new(5);
+        let base = Vec3::new(4.0e5, -2.5e5, 120.0);
+        let mut points: Vec<Vec3> = (0..6000)
+            .map(|_| base + Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32() * 0.1) * 40.0)
+            .collect();
+        // A lattice a quarter apart: balls centred on it with radius 1 have
+        // points exactly on their boundary.
+        for i in 0..40 {
+            for j in 0..40 {
+                points.push(base + Vec3::new(i as f32, j as f32, 0.0) * 0.25);
+            }
+        }
+        points.push(Vec3::NAN);
+        let mut balls: Vec<(Vec3, f32)> = (0..300)
+            .map(|k| {
+                let c = points[(k * 37) % 6000];
+                let r = 0.05 + 3.0 * rng.next_f32().powi(3);
+                (c, r * r)
+            })
+            .collect();
+        balls.push((base + Vec3::new(2.5, 2.5, 0.0), 1.0));
+        balls.push((Vec3::NAN, 1.0));
+        let found = points_within(&points, &balls);
+        let tree = crate::splat::knn::build_tree(&points);
+        let mut on_boundary = 0;
+        for (b, &(c, r2)) in balls.iter().enumerate() {
+            let mut got = found[b].clone();
+            got.sort_unstable();
+            let mut want: Vec<u32> = if c.is_finite() {
+                tree.within_unsorted::<kiddo::SquaredEuclidean>(&c.to_array(), r2).iter().map(|nb| nb.item).collect()
+            } else {
+                Vec::new()
+            };
+            want.sort_unstable();
+            assert_eq!(got, want, "ball {b} at {c} radius² {r2}");
+            on_boundary += got.iter().filter(|&&i| (points[i as usize] - c).length_squared() == r2).count();
+        }
+        // Measured: 4 lattice points at exactly the radius of the last ball.
+        assert!(on_boundary >= 4, "{on_boundary} points on a boundary");
+        assert!(found.iter().map(Vec::len).sum::<usize>() > 3000);
+    }
 
     /// A square of overlapping discs on the plane `z = 0` (spacing 0.25,
     /// radius 0.2: every point of the square is covered) and its scanned
