@@ -1455,8 +1455,12 @@ pub fn grow_lean(
         seconds: [t0.elapsed().as_secs_f64(), 0.0, 0.0, 0.0],
     };
     // Growing whatever the gate finds (the held-out check's windows, a few
-    // thousand points each), its figures serve only the median spacing.
-    let always = matches!(when, GrowWhen::Always | GrowWhen::AlwaysSharp);
+    // thousand points each), its figures serve only the median spacing and
+    // a settled window's scatter: a sample of ALWAYS_SAMPLE. (Settled
+    // windows sampled GATE_SAMPLE of their 8k points until the sixty-sixth
+    // session: a quarter of the held-out check's time on the noisy scan,
+    // its coverage within a point of 360 on four scans.)
+    let always = matches!(when, GrowWhen::Always | GrowWhen::AlwaysSharp | GrowWhen::AlwaysSettled);
     if !always && let Some(dense) = too_dense(points, eps, within) {
         return none(Gate {
             scan: views.is_some(),
