@@ -84,11 +84,16 @@ pub fn settle(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, views: &Viewp
 /// sharp lean splats grown at `growth`.
 fn moved(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, views: &Viewpoints) -> Vec<Vec3> {
     let (grown, _) = grow_all(g, growth, within, true);
-    // Each point's line of sight, once (a point lies in several splats).
-    let sights: Vec<DVec3> = (g.pos.par_iter().zip(&g.order))
-        .map(|(p, &i)| (p.as_dvec3() - views.at(i as usize).as_dvec3()).normalize_or_zero())
+    // The reciprocal of each point's distance from its viewpoint, once (a
+    // point lies in several splats; 0 where its sight line has no length).
+    let recips: Vec<f64> = (g.pos.par_iter().zip(&g.order))
+        .map(|(p, &i)| {
+            let r = (p.as_dvec3() - views.at(i as usize).as_dvec3()).length_recip();
+            if r.is_finite() && r > 0.0 { r } else { 0.0 }
+        })
         .collect();
-    let onto: Vec<Vec<(u32, Vec3, f32)>> = grown.par_iter().map(|s| projections(g, s, &sights)).collect();
+    let sights = (views, recips.as_slice());
+    let onto: Vec<Vec<(u32, Vec3, f32)>> = grown.par_iter().map(|s| projections(g, s, sights)).collect();
     let mut sum = vec![(Vec3::ZERO, 0.0f32); g.pos.len()];
     for (k, q, w) in onto.into_iter().flatten() {
         let e = &mut sum[k as usize];
@@ -104,11 +109,11 @@ fn moved(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, views: &Viewpoints
 }
 
 /// Where the quadric of splat `s` moves each point it took (grid order),
-/// with the point's weight: along its line of sight (`sights`, unit, in
-/// grid order), or along the splat's
+/// with the point's weight: along its line of sight (from its viewpoint
+/// of `sights`, scaled by its reciprocal length there, in grid order), or along the splat's
 /// normal where that line grazes the splat or misses the quadric; none
 /// where the fit fails.
-fn projections(g: &Grid, s: &Grown, sights: &[DVec3]) -> Vec<(u32, Vec3, f32)> {
+fn projections(g: &Grid, s: &Grown, (views, recips): (&Viewpoints, &[f64])) -> Vec<(u32, Vec3, f32)> {
     let Some(q) = quadric(g, s) else {
         return Vec::new();
     };
@@ -122,7 +127,10 @@ fn projections(g: &Grid, s: &Grown, sights: &[DVec3]) -> Vec<(u32, Vec3, f32)> {
         let o = (p - centre) / q.scale;
         let (x, y, h) = (o.dot(u), o.dot(v), o.dot(n));
         let height = f + d * x + e * y + a * x * x + b * x * y + c * y * y;
-        let sight = sights[k as usize];
+        // `normalize_or_zero`, its reciprocal computed once.
+        let r = recips[k as usize];
+        let d = p - views.at(g.order[k as usize] as usize).as_dvec3();
+        let sight = if r > 0.0 { d * r } else { DVec3::ZERO };
         let dn = sight.dot(n);
         let t = if dn.abs() < GRAZING_SIN {
             None
