@@ -429,16 +429,19 @@ impl Grid {
     /// The grid of `points` in cells `h` wide; a scan's (`scan`) keeps the
     /// points' order and bends its borders ([`Grid::order`], [`Grid::bend`]).
     fn build(points: &[Vec3], h: f32, scan: bool) -> Grid {
-        let lo = points.iter().fold(Vec3::splat(f32::INFINITY), |a, p| a.min(*p));
+        // On the threads (a minimum and maps: the same values).
+        let inf = Vec3::splat(f32::INFINITY);
+        let lo = points.par_iter().with_min_len(8192).fold(|| inf, |a, p| a.min(*p)).reduce(|| inf, Vec3::min);
         let top = (1i32 << AXIS_BITS) - 1;
         let mut keyed: Vec<(u64, u32)> = points
-            .iter()
+            .par_iter()
+            .with_min_len(8192)
             .enumerate()
             .map(|(i, &p)| (key_of(cell_of(lo, h, p, top)), i as u32))
             .collect();
         keyed.par_sort_unstable();
-        let pos = keyed.iter().map(|&(_, i)| points[i as usize]).collect();
-        let order = if scan { keyed.iter().map(|&(_, i)| i).collect() } else { Vec::new() };
+        let pos = keyed.par_iter().with_min_len(8192).map(|&(_, i)| points[i as usize]).collect();
+        let order = if scan { keyed.par_iter().with_min_len(8192).map(|&(_, i)| i).collect() } else { Vec::new() };
         let (mut keys, mut start) = (Vec::new(), Vec::new());
         for (i, &(k, _)) in keyed.iter().enumerate() {
             if keys.last() != Some(&k) {
