@@ -1371,29 +1371,86 @@ fn unsure(pos: &[Vec3], grown: &[Grown], eps: f32) -> Vec<Vec3> {
 /// (grid order); with clip lines and a second pass over the points left on
 /// creases where `sharp`.
 fn grow_all(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, sharp: bool) -> (Vec<Grown>, Vec<u32>) {
-    let n = g.pos.len();
-    let slabs = n.div_ceil(SLAB_POINTS).max(1);
-    let range = |s: usize| s * n / slabs..(s + 1) * n / slabs;
+    let slabs = slab_count(g);
     // Every slab at once, their splats and outliers appended in order.
-    let pass = |pass: Pass<'_>, grown: &mut Vec<Grown>, outliers: &mut Vec<u32>| {
-        let per_slab: Vec<(Vec<Grown>, Vec<u32>)> = (0..slabs)
-            .into_par_iter()
-            .map(|s| grow_slab(g, range(s), growth, within, pass))
-            .collect();
-        for (g_s, o) in per_slab {
-            grown.extend(g_s);
-            outliers.extend(o);
-        }
-    };
+    let per_slab: Vec<(Vec<Grown>, Vec<u32>)> = (0..slabs)
+        .into_par_iter()
+        .map(|s| grow_slab(g, slab_range(g, s), growth, within, if sharp { Pass::SharpFirst } else { Pass::Plain }))
+        .collect();
     let (mut grown, mut outliers) = (Vec::new(), Vec::new());
-    let first = if sharp { Pass::SharpFirst } else { Pass::Plain };
-    pass(first, &mut grown, &mut outliers);
-    if !sharp {
-        return (grown, outliers);
+    for (g_s, o) in per_slab {
+        grown.extend(g_s);
+        outliers.extend(o);
     }
+    if sharp {
+        let (mut more, mut left) = faces_pass(g, growth, within, (&grown, &outliers));
+        grown.append(&mut more);
+        outliers.append(&mut left);
+    }
+    (grown, outliers)
+}
+
+/// [`grow_all`] with clip lines, `then` run on each slab's splats of the
+/// first pass as soon as the slab is grown (on a thread the other slabs
+/// leave idle) and on the second pass's splats: its answers, in the
+/// splats' order. The splats and outliers are [`grow_all`]'s.
+fn grow_all_then<T: Send>(
+    g: &Grid,
+    growth: Growth,
+    within: Option<[Vec3; 2]>,
+    then: &(dyn Fn(&[Grown]) -> T + Sync),
+) -> (Vec<Grown>, Vec<u32>, Vec<T>) {
+    let slabs = slab_count(g);
+    type Slot<T> = std::sync::Mutex<Option<(Vec<Grown>, Vec<u32>, T)>>;
+    let slots: Vec<Slot<T>> = (0..slabs).map(|_| std::sync::Mutex::new(None)).collect();
+    rayon::scope_fifo(|sc| {
+        for s in 0..slabs {
+            let slots = &slots;
+            sc.spawn_fifo(move |sc| {
+                let (grown, outliers) = grow_slab(g, slab_range(g, s), growth, within, Pass::SharpFirst);
+                sc.spawn_fifo(move |_| {
+                    let t = then(&grown);
+                    *slots[s].lock().unwrap_or_else(std::sync::PoisonError::into_inner) = Some((grown, outliers, t));
+                });
+            });
+        }
+    });
+    let (mut grown, mut outliers, mut answers) = (Vec::new(), Vec::new(), Vec::new());
+    for slot in slots {
+        let (g_s, o, t) = slot.into_inner().unwrap_or_else(std::sync::PoisonError::into_inner).expect("every slab grown");
+        grown.extend(g_s);
+        outliers.extend(o);
+        answers.push(t);
+    }
+    let (mut more, mut left) = faces_pass(g, growth, within, (&grown, &outliers));
+    answers.push(then(&more));
+    grown.append(&mut more);
+    outliers.append(&mut left);
+    (grown, outliers, answers)
+}
+
+/// Slabs of [`SLAB_POINTS`] in the grid's order (at least one).
+fn slab_count(g: &Grid) -> usize {
+    g.pos.len().div_ceil(SLAB_POINTS).max(1)
+}
+
+/// The points of slab `s` of [`slab_count`], as a range of the grid's order.
+fn slab_range(g: &Grid, s: usize) -> std::ops::Range<usize> {
+    let (n, slabs) = (g.pos.len(), slab_count(g));
+    s * n / slabs..(s + 1) * n / slabs
+}
+
+/// Sharp lean growth's second pass over every slab, after the first grew
+/// `grown` and left `outliers`: its splats and outliers, in slab order.
+fn faces_pass(
+    g: &Grid,
+    growth: Growth,
+    within: Option<[Vec3; 2]>,
+    (grown, outliers): (&[Grown], &[u32]),
+) -> (Vec<Grown>, Vec<u32>) {
     // Each point's splat (past them: none), an outlier seed as covered.
-    let mut owner = vec![u32::MAX; n];
-    for &i in &outliers {
+    let mut owner = vec![u32::MAX; g.pos.len()];
+    for &i in outliers {
         owner[i as usize] = u32::MAX - 1;
     }
     for (i, s) in grown.iter().enumerate() {
@@ -1401,11 +1458,17 @@ fn grow_all(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, sharp: bool) ->
             owner[k as usize] = i as u32;
         }
     }
+    let pass = Pass::SharpFaces { grown, owner: &owner };
+    let per_slab: Vec<(Vec<Grown>, Vec<u32>)> = (0..slab_count(g))
+        .into_par_iter()
+        .map(|s| grow_slab(g, slab_range(g, s), growth, within, pass))
+        .collect();
     let (mut more, mut left) = (Vec::new(), Vec::new());
-    pass(Pass::SharpFaces { grown: &grown, owner: &owner }, &mut more, &mut left);
-    grown.append(&mut more);
-    outliers.append(&mut left);
-    (grown, outliers)
+    for (g_s, o) in per_slab {
+        more.extend(g_s);
+        left.extend(o);
+    }
+    (more, left)
 }
 
 /// Whether [`grow_lean`] grows splats after measuring its gate.

@@ -20,7 +20,7 @@
 //! `docs/notes/generation.md`, "Issue 54, sixtieth" and "sixty-fifth
 //! session").
 
-use super::{Grid, Growth, Grown, grow_all, quadric};
+use super::{Grid, Growth, Grown, grow_all_then, quadric};
 use crate::data::Viewpoints;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -83,7 +83,6 @@ pub fn settle(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, views: &Viewp
 /// One pass: the points of `g` (as given) moved onto the quadrics of the
 /// sharp lean splats grown at `growth`.
 fn moved(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, views: &Viewpoints) -> Vec<Vec3> {
-    let (grown, _) = grow_all(g, growth, within, true);
     // The reciprocal of each point's distance from its viewpoint, once (a
     // point lies in several splats; 0 where its sight line has no length).
     let recips: Vec<f64> = (g.pos.par_iter().zip(&g.order))
@@ -93,9 +92,12 @@ fn moved(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, views: &Viewpoints
         })
         .collect();
     let sights = (views, recips.as_slice());
-    let onto: Vec<Vec<(u32, Vec3, f32)>> = grown.par_iter().map(|s| projections(g, s, sights)).collect();
+    // Each slab's projections as soon as it is grown, beside the others.
+    let project = |grown: &[Grown]| -> Vec<Vec<(u32, Vec3, f32)>> { grown.par_iter().map(|s| projections(g, s, sights)).collect() };
+    let (_, _, per_slab) = grow_all_then(g, growth, within, &project);
+    let onto = per_slab.into_iter().flatten();
     let mut sum = vec![(Vec3::ZERO, 0.0f32); g.pos.len()];
-    for (k, q, w) in onto.into_iter().flatten() {
+    for (k, q, w) in onto.flatten() {
         let e = &mut sum[k as usize];
         e.0 += q * w;
         e.1 += w;
