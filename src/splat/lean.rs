@@ -1371,21 +1371,26 @@ fn unsure(pos: &[Vec3], grown: &[Grown], eps: f32) -> Vec<Vec3> {
 /// (grid order); with clip lines and a second pass over the points left on
 /// creases where `sharp`.
 fn grow_all(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, sharp: bool) -> (Vec<Grown>, Vec<u32>) {
-    let slabs = slab_count(g);
-    // Every slab at once, their splats and outliers appended in order.
-    let per_slab: Vec<(Vec<Grown>, Vec<u32>)> = (0..slabs)
+    let (mut grown, mut outliers) = every_slab(g, growth, within, if sharp { Pass::SharpFirst } else { Pass::Plain });
+    if sharp {
+        let (mut more, mut left) = faces_pass(g, growth, within, (&grown, &outliers));
+        grown.append(&mut more);
+        outliers.append(&mut left);
+    }
+    (grown, outliers)
+}
+
+/// Every slab grown at once by `pass`: their splats and outliers appended
+/// in slab order.
+fn every_slab(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, pass: Pass<'_>) -> (Vec<Grown>, Vec<u32>) {
+    let per_slab: Vec<(Vec<Grown>, Vec<u32>)> = (0..slab_count(g))
         .into_par_iter()
-        .map(|s| grow_slab(g, slab_range(g, s), growth, within, if sharp { Pass::SharpFirst } else { Pass::Plain }))
+        .map(|s| grow_slab(g, slab_range(g, s), growth, within, pass))
         .collect();
     let (mut grown, mut outliers) = (Vec::new(), Vec::new());
     for (g_s, o) in per_slab {
         grown.extend(g_s);
         outliers.extend(o);
-    }
-    if sharp {
-        let (mut more, mut left) = faces_pass(g, growth, within, (&grown, &outliers));
-        grown.append(&mut more);
-        outliers.append(&mut left);
     }
     (grown, outliers)
 }
@@ -1458,17 +1463,7 @@ fn faces_pass(
             owner[k as usize] = i as u32;
         }
     }
-    let pass = Pass::SharpFaces { grown, owner: &owner };
-    let per_slab: Vec<(Vec<Grown>, Vec<u32>)> = (0..slab_count(g))
-        .into_par_iter()
-        .map(|s| grow_slab(g, slab_range(g, s), growth, within, pass))
-        .collect();
-    let (mut more, mut left) = (Vec::new(), Vec::new());
-    for (g_s, o) in per_slab {
-        more.extend(g_s);
-        left.extend(o);
-    }
-    (more, left)
+    every_slab(g, growth, within, Pass::SharpFaces { grown, owner: &owner })
 }
 
 /// Whether [`grow_lean`] grows splats after measuring its gate.
@@ -1523,9 +1518,10 @@ pub fn grow_lean(
     // Growing whatever the gate finds (the held-out check's windows, a few
     // thousand points each), its figures serve only the median spacing and
     // a settled window's scatter: a sample of ALWAYS_SAMPLE. (Settled
-    // windows sampled GATE_SAMPLE of their 8k points until the sixty-sixth
-    // session: a quarter of the held-out check's time on the noisy scan,
-    // its coverage within a point of 360 on four scans.)
+    // windows sampled GATE_SAMPLE of their 8k points before: a quarter of
+    // the held-out check's time on the noisy scan, its coverage the same
+    // within a point of 360 on four scans; `docs/notes/generation.md`,
+    // "Issue 54, sixty-sixth session".)
     let always = matches!(when, GrowWhen::Always | GrowWhen::AlwaysSharp | GrowWhen::AlwaysSettled);
     if !always && let Some(dense) = too_dense(points, eps, within) {
         return none(Gate {

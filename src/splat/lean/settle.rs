@@ -111,10 +111,10 @@ fn moved(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, views: &Viewpoints
 }
 
 /// Where the quadric of splat `s` moves each point it took (grid order),
-/// with the point's weight: along its line of sight (from its viewpoint
-/// of `sights`, scaled by its reciprocal length there, in grid order), or along the splat's
-/// normal where that line grazes the splat or misses the quadric; none
-/// where the fit fails.
+/// with the point's weight: along its line of sight (from its viewpoint,
+/// scaled by the reciprocal of its length, both in `sights` by grid
+/// order), or along the splat's normal where that line grazes the splat
+/// or misses the quadric; none where the fit fails.
 fn projections(g: &Grid, s: &Grown, (views, recips): (&Viewpoints, &[f64])) -> Vec<(u32, Vec3, f32)> {
     let Some(q) = quadric(g, s) else {
         return Vec::new();
@@ -131,8 +131,8 @@ fn projections(g: &Grid, s: &Grown, (views, recips): (&Viewpoints, &[f64])) -> V
         let height = f + d * x + e * y + a * x * x + b * x * y + c * y * y;
         // `normalize_or_zero`, its reciprocal computed once.
         let r = recips[k as usize];
-        let d = p - views.at(g.order[k as usize] as usize).as_dvec3();
-        let sight = if r > 0.0 { d * r } else { DVec3::ZERO };
+        let from_view = p - views.at(g.order[k as usize] as usize).as_dvec3();
+        let sight = if r > 0.0 { from_view * r } else { DVec3::ZERO };
         let dn = sight.dot(n);
         let t = if dn.abs() < GRAZING_SIN {
             None
