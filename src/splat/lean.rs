@@ -1520,7 +1520,7 @@ pub fn grow_lean(
     // a settled window's scatter: a sample of ALWAYS_SAMPLE. (Settled
     // windows sampled GATE_SAMPLE of their 8k points before: a quarter of
     // the held-out check's time on the noisy scan, its coverage the same
-    // within a point of 360 on four scans; `docs/notes/generation.md`,
+    // within two points of 360 on four scans; `docs/notes/generation.md`,
     // "Issue 54, sixty-sixth session".)
     let always = matches!(when, GrowWhen::Always | GrowWhen::AlwaysSharp | GrowWhen::AlwaysSettled);
     if !always && let Some(dense) = too_dense(points, eps, within) {
