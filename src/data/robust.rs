@@ -107,14 +107,13 @@ fn centre_and_range(vals: &mut [f64]) -> (f64, f64) {
     let at_median = vals[k5];
     let (lower, rest) = vals.split_at_mut(k5);
     let above = &mut rest[1..];
+    // A percentile on the median's own rank (two or three values) leans
+    // toward the least value above the median.
+    let on_median = |t, above: &[f64]| quantile(&mut [at_median], (0, t), above.iter().copied().fold(f64::INFINITY, f64::min));
     let (k9, t9) = rank(0.9);
-    let q9 = if k9 == k5 { quantile(&mut [at_median], (0, t9), above.iter().copied().fold(f64::INFINITY, f64::min)) } else { quantile(above, (k9 - k5 - 1, t9), f64::INFINITY) };
+    let q9 = if k9 == k5 { on_median(t9, above) } else { quantile(above, (k9 - k5 - 1, t9), f64::INFINITY) };
     let (k1, t1) = rank(0.1);
-    let q1 = if k1 == k5 {
-        quantile(&mut [at_median], (0, t1), above.iter().copied().fold(f64::INFINITY, f64::min))
-    } else {
-        quantile(lower, (k1, t1), at_median)
-    };
+    let q1 = if k1 == k5 { on_median(t1, above) } else { quantile(lower, (k1, t1), at_median) };
     // Halves first: the difference of two coordinates near f64::MAX
     // overflows.
     (centre, 2.0 * (q9 * 0.5 - q1 * 0.5))
