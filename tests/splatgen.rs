@@ -1079,6 +1079,20 @@ fn sharp_lean_growth_takes_edges_not_noise_nor_a_smooth_cloud_refused_for_curvin
         .sharp_passes()
     );
     assert!(!scan(0.0666).sharp_passes());
+    // Over `SCAN_SETTLE_SIGMA` (0.05), a scan with creases dense enough to
+    // be settled is settled first; a sparser one is grown sharp as its
+    // points lie, and one without creases keeps the bounds above.
+    assert!(scan(0.06).settle_passes() && !scan(0.049).settle_passes());
+    let sparse = Gate {
+        spacing: 4.66,
+        ..scan(0.06)
+    };
+    assert!(!sparse.settle_passes() && sparse.sharp_passes());
+    let smooth = Gate {
+        crease: 0.005,
+        ..scan(0.06)
+    };
+    assert!(!smooth.settle_passes());
     // Past it, a scan dense enough has its points settled onto their
     // surfaces first (`lean::settle`), up to a scatter of 0.45; a sparser
     // one, or a noisier, keeps the stages, saying why.

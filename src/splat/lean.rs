@@ -136,6 +136,19 @@ pub const GATE_SIGMA: f32 = 0.046;
 /// 54, sixty-second session").
 pub const SCAN_SHARP_SIGMA: f32 = 0.065;
 
+/// The scatter past which a scan with creases ([`GATE_CREASE`]) dense
+/// enough to be settled ([`settle::SETTLE_SPARSE`]) is settled before
+/// sharp lean growth rather than grown sharp from its points as they lie
+/// (below [`SCAN_SHARP_SIGMA`] both serve it). The solids scanned from one
+/// station (1000×750 rays, `compare --truth` at 400×300, seeds 1-6) with
+/// range noise of 0.15 and 0.18 spacings (scatter 0.051 and 0.062) read
+/// 35.50 and 35.38 dB settled against 35.30 and 35.03 grown sharp
+/// (+0.20, +0.35; no seed lost more than 0.03), at 0.12 spacings (0.041)
+/// the same, for 1.68 and 1.66 times the time (0.144 against 0.084 s on
+/// 103,721 points) and 9 MiB more (`docs/notes/generation.md`, "Issue 54,
+/// sixty-seventh session").
+pub const SCAN_SETTLE_SIGMA: f32 = 0.05;
+
 /// The gate's bound on the share of points with a neighbour outside the
 /// [`GROW_EPS`] slab, where quality crosses as for [`GATE_SIGMA`]:
 /// 3.4-4.2 % of the 200k bunny samples', 6.9 % at 140k, 8.6-9.4 % at 120k,
@@ -237,20 +250,28 @@ impl Gate {
     }
 
     /// Whether sharp lean growth serves this scan once its points are
-    /// settled onto their surfaces ([`settle`]): a scan refused by lean and
-    /// sharp lean growth for its scatter, scattering at most
+    /// settled onto their surfaces ([`settle`]), asked before sharp lean
+    /// growth: a scan scattering over [`SCAN_SHARP_SIGMA`] (over
+    /// [`SCAN_SETTLE_SIGMA`] with creases), at most
     /// [`settle::SETTLE_SIGMA`] and no sparser than
     /// [`settle::SETTLE_SPARSE`], its nearest not along a line.
     #[must_use]
     pub fn settle_passes(&self) -> bool {
-        // Past SCAN_SHARP_SIGMA, neither lean nor sharp lean growth passes.
         self.scan
             && self.sampled > 0
-            && self.sigma > SCAN_SHARP_SIGMA
+            && self.sigma > self.settle_from()
             && self.sigma <= settle::SETTLE_SIGMA
             && self.line <= GATE_LINE
             && self.spacing >= GATE_DENSE
             && self.spacing <= settle::SETTLE_SPARSE
+    }
+
+    /// The scatter past which a dense scan is settled: [`SCAN_SETTLE_SIGMA`]
+    /// on a scan with creases (over [`GATE_CREASE`]), else
+    /// [`SCAN_SHARP_SIGMA`] (past which neither lean nor sharp lean growth
+    /// passes).
+    fn settle_from(&self) -> f32 {
+        if self.scan && self.crease > GATE_CREASE { SCAN_SETTLE_SIGMA } else { SCAN_SHARP_SIGMA }
     }
 
     /// Whether sharp lean growth (clip lines at creases and borders,
@@ -1541,8 +1562,8 @@ pub fn grow_lean(
     let grow_now = match when {
         GrowWhen::Gated => Some((false, false)).filter(|_| gate.passes()),
         GrowWhen::GatedSharp if gate.passes() => Some((false, false)),
-        GrowWhen::GatedSharp if gate.sharp_passes() => Some((true, false)),
-        GrowWhen::GatedSharp => Some((true, true)).filter(|_| gate.settle_passes()),
+        GrowWhen::GatedSharp if gate.settle_passes() => Some((true, true)),
+        GrowWhen::GatedSharp => Some((true, false)).filter(|_| gate.sharp_passes()),
         GrowWhen::Always => Some((false, false)),
         GrowWhen::AlwaysSharp => Some((true, false)),
         GrowWhen::AlwaysSettled => Some((true, views.is_some())),

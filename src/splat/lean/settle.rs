@@ -1,6 +1,7 @@
 //! Points settled onto their surfaces before sharp lean growth: a scan too
-//! noisy for lean growth's slab (its scatter over [`super::SCAN_SHARP_SIGMA`])
-//! but dense enough ([`SETTLE_SPARSE`]).
+//! noisy for lean growth's slab (its scatter over [`super::SCAN_SHARP_SIGMA`],
+//! or with creases over [`super::SCAN_SETTLE_SIGMA`]) but dense enough
+//! ([`SETTLE_SPARSE`]).
 //!
 //! Each pass grows sharp lean splats (clip lines at creases and borders,
 //! [`super::sharp`]) in a slab wider than the noise ([`PASSES`]), fits each
