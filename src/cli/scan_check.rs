@@ -81,7 +81,7 @@ fn print_lines(args: &ScanCheckArgs, r: &ScanCheckReport) {
     }
     let pct = |f: f64| 100.0 * f;
     println!(
-        "{}: {} points, {} held out ({} of them outliers, not checked), {} splats; lines of sight at tolerance {}: consistent {:.2} %, early {:.2} %, gross early {:.2} %, late {:.2} %, miss {:.2} % (against the rendered surface: consistent {:.2} %, early {:.2} %, late {:.2} %); largest splat {:.1}x its local spacing ({:.1}x the median radius)",
+        "{}: {} points, {} held out ({} of them outliers, not checked), {} splats; lines of sight at tolerance {}: consistent {:.2} %, early {:.2} %, gross early {:.2} %, late {:.2} %, miss {:.2} % ({} of {} at a rim of the scanned surface) (against the rendered surface: consistent {:.2} %, early {:.2} %, late {:.2} %); largest splat {:.1}x its local spacing ({:.1}x the median radius)",
         args.input.display(),
         r.points,
         r.held_out,
@@ -93,6 +93,8 @@ fn print_lines(args: &ScanCheckArgs, r: &ScanCheckReport) {
         pct(r.gross_early_fraction),
         pct(r.late_fraction),
         pct(r.miss_fraction),
+        r.miss_at_rim,
+        r.miss,
         pct(r.surface.consistent_fraction),
         pct(r.surface.early_fraction),
         pct(r.surface.late_fraction),
