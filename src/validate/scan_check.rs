@@ -289,8 +289,8 @@ pub const RIM_NEIGHBOURS: usize = 24;
 /// seen in their plane, leave a gap of at least this many degrees round it
 /// (a point on a straight border 180°, inside a surface about 30-60°):
 /// 4.1 % of `milk.pcd`'s points (the median gap 38°, the 95th percentile
-/// 96°), and every held-out point its splats missed over seeds 1-30, with
-/// creases or without.
+/// 96°); of the held-out points its splats missed over seeds 1-30, 35 of
+/// 48 with creases and 22 of 31 with whole discs.
 pub const RIM_GAP_DEG: f32 = 120.0;
 
 /// How many of `missed` lie on the rim of `points` ([`at_rim`]); no tree
@@ -346,9 +346,9 @@ mod tests {
     use super::*;
 
     /// A jittered square lattice off the origin (as a cloud re-centred on
-    /// its medians lies), tilted: a point in
-    /// its middle is inside, one on an edge or a corner on its rim, and
-    /// one with a quarter of the disc round it missing (a gap of 90°) is
+    /// its medians lies), tilted: a point in its middle is inside, one on
+    /// an edge or a corner on its rim; the middle one with half the
+    /// lattice cut away is on it, with a quarter cut away (a gap of 90°)
     /// not.
     #[test]
     fn a_point_is_on_the_rim_where_its_neighbours_leave_a_wide_gap() {
