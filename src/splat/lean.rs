@@ -1392,12 +1392,10 @@ fn unsure(pos: &[Vec3], grown: &[Grown], eps: f32) -> Vec<Vec3> {
 /// (grid order); with clip lines and a second pass over the points left on
 /// creases where `sharp`.
 fn grow_all(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, sharp: bool) -> (Vec<Grown>, Vec<u32>) {
-    let (mut grown, mut outliers) = every_slab(g, growth, within, if sharp { Pass::SharpFirst } else { Pass::Plain });
-    if sharp {
-        let (mut more, mut left) = faces_pass(g, growth, within, (&grown, &outliers));
-        grown.append(&mut more);
-        outliers.append(&mut left);
+    if !sharp {
+        return every_slab(g, growth, within, Pass::Plain);
     }
+    let (grown, outliers, _) = grow_all_then(g, growth, within, &|_| ());
     (grown, outliers)
 }
 
@@ -1416,10 +1414,11 @@ fn every_slab(g: &Grid, growth: Growth, within: Option<[Vec3; 2]>, pass: Pass<'_
     (grown, outliers)
 }
 
-/// [`grow_all`] with clip lines, `then` run on each slab's splats of the
-/// first pass as soon as the slab is grown (on a thread the other slabs
-/// leave idle) and on the second pass's splats: its answers, in the
-/// splats' order. The splats and outliers are [`grow_all`]'s.
+/// [`grow_all`] with clip lines: the first pass slab by slab, `then` run
+/// on each slab's splats as soon as the slab is grown (on a thread the
+/// other slabs leave idle), then the second pass ([`faces_pass`]) and
+/// `then` on its splats. The splats, the outliers and `then`'s answers,
+/// in the splats' order.
 fn grow_all_then<T: Send>(
     g: &Grid,
     growth: Growth,
