@@ -86,7 +86,8 @@ impl<R> Beside<R> {
 /// threads as the stages after growth, given the report as it will end
 /// for everything those stages leave alone (`ϵ`, the noise, the diagonal
 /// and the splats' mean radius, in the cloud's units; see
-/// [`crate::splat::generate_with_progress`]). The progress names `stage`
+/// [`crate::splat::generate_with_progress`]) and the points it left out as
+/// outliers (indices into `cloud`, ascending). The progress names `stage`
 /// while the pipeline waits for it.
 ///
 /// # Errors
@@ -96,15 +97,15 @@ pub fn generate_beside<R: Send>(
     params: &SplatParams,
     progress: Option<Progress<'_>>,
     stage: &str,
-    beside: impl Fn(&SplatReport) -> R + Sync,
+    beside: impl Fn(&SplatReport, &[u32]) -> R + Sync,
 ) -> Result<(Generated, Beside<R>)> {
     let value = Mutex::new(None);
     let (generated, done) = rayon::scope(|s| {
         let (beside, value) = (&beside, &value);
-        let grown = |whole: &SplatReport| {
-            let whole = whole.clone();
+        let grown = |whole: &SplatReport, left_out: &[u32]| {
+            let (whole, left_out) = (whole.clone(), left_out.to_vec());
             s.spawn(move |_| {
-                let r = beside(&whole);
+                let r = beside(&whole, &left_out);
                 *value.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = Some(r);
             });
         };

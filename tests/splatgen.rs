@@ -421,8 +421,15 @@ fn held_out_coverage_can_fail() {
 fn the_check_beside_generation_reads_the_report_generation_ends_with() {
     use splatray::pipeline::{generate as pipeline_generate, generate_beside};
     let mesh = read_mesh(&common::data("bunny-mesh.ply")).unwrap();
-    let params = SplatParams::default();
-    for (sigma, moved) in [(0.0, false), (0.002, true)] {
+    for (sigma, moved, epsilon_rel) in [
+        (0.0, false, 0.002),
+        (0.002, true, 0.002),
+        (0.0, false, 0.01),
+    ] {
+        let params = SplatParams {
+            epsilon_rel,
+            ..SplatParams::default()
+        };
         let mut c = sample_mesh(&mesh, 20_000, sigma, 5);
         c.normals = None;
         let read = |r: &splatray::splat::SplatReport| {
@@ -435,7 +442,27 @@ fn the_check_beside_generation_reads_the_report_generation_ends_with() {
             ]
             .map(f64::to_bits)
         };
-        let (g, beside) = generate_beside(&c, &params, None, "check", read).unwrap();
+        // A few strays far off the surface: generation leaves them out
+        // and hands them to the check as such.
+        let n = c.positions.len();
+        let strays: Vec<u32> = (0..6).map(|i| (n / 7 * (i + 1)) as u32).collect();
+        for (j, &i) in strays.iter().enumerate() {
+            let t = j as f32;
+            c.positions[i as usize] += 3.0 * Vec3::new(t.cos(), (2.0 * t).sin(), t.sin());
+        }
+        let check =
+            |r: &splatray::splat::SplatReport, left_out: &[u32]| (read(r), left_out.to_vec());
+        let (g, beside) = generate_beside(&c, &params, None, "check", check).unwrap();
+        let (bits, left_out) = beside.value.clone().unwrap();
+        eprintln!(
+            "left out {left_out:?} lean {:?}",
+            g.report.lean.as_ref().map(|l| l.used)
+        );
+        assert!(strays.iter().all(|i| left_out.contains(i)), "{left_out:?}");
+        assert!(
+            left_out.windows(2).all(|w| w[0] < w[1]) && left_out.len() < 40,
+            "{left_out:?}"
+        );
         let r = &g.report;
         eprintln!(
             "sigma {sigma}: {} splats, noise / epsilon {:.2}, waited {:.4} s",
@@ -445,7 +472,7 @@ fn the_check_beside_generation_reads_the_report_generation_ends_with() {
         );
         assert_eq!(r.moved_onto_surfaces(), moved, "{r:?}");
         assert!(r.mean_radius > 0.0);
-        assert_eq!(beside.value, Some(read(r)));
+        assert_eq!(bits, read(r));
         assert!(beside.waited >= 0.0);
         let plain = pipeline_generate(&c, &params, None).unwrap();
         assert_eq!(plain.splats, g.splats);
@@ -483,7 +510,7 @@ fn windowed_held_out_coverage_tests_the_window_cores() {
     };
     let budget = |c: &PointCloud| (MAX_SHARE * c.len() as f64) as usize;
     let c = sample_mesh(&mesh, 200_000, 0.0, 21);
-    let (h, w) = heldout_coverage_windows(&c, &params, 0.1, 1, &whole(&c)).unwrap();
+    let (h, w) = heldout_coverage_windows(&c, &params, 0.1, 1, (&whole(&c), &[])).unwrap();
     eprintln!("{h:?} {w:?}");
     assert_eq!(w.windows, 4, "{w:?}");
     // Measured: 5.8 % of the cloud in the windows, 828 points tested.
@@ -495,7 +522,7 @@ fn windowed_held_out_coverage_tests_the_window_cores() {
     // Holding out 1 %, `MIN_TESTED` points would need cores holding a
     // third of the cloud: the windows stop at the budget (measured: 8.0 %
     // of it, 133 tested).
-    let (h, w) = heldout_coverage_windows(&c, &params, 0.01, 1, &whole(&c)).unwrap();
+    let (h, w) = heldout_coverage_windows(&c, &params, 0.01, 1, (&whole(&c), &[])).unwrap();
     eprintln!("1 %: {h:?} {w:?}");
     assert!(w.points <= budget(&c) && w.share > 0.05, "{w:?}");
     assert!(h.tested > 50 && h.tested < MIN_TESTED, "{h:?}");
@@ -505,7 +532,7 @@ fn windowed_held_out_coverage_tests_the_window_cores() {
     // 0.886-1), and holding the whole cloud's figure (a regrowth of 4,500
     // points).
     let small = sample_mesh(&mesh, 5_000, 0.0, 21);
-    let (h, w) = heldout_coverage_windows(&small, &params, 0.1, 1, &whole(&small)).unwrap();
+    let (h, w) = heldout_coverage_windows(&small, &params, 0.1, 1, (&whole(&small), &[])).unwrap();
     eprintln!("5,000: {h:?} {w:?}");
     assert!(w.windows > 0 && w.points <= budget(&small), "{w:?}");
     assert!(h.tested >= 10 && h.tested < 100, "{h:?}");

@@ -594,8 +594,9 @@ pub fn generate_with_progress(
 /// then (`ϵ`, the noise, the diagonal) and the splats' mean radius, which
 /// no later stage changes. A check that regrows splats with the cloud's
 /// `ϵ` and tolerance (the held-out check) can start from it while the
-/// fields are fitted.
-pub(crate) type Grown<'a> = &'a (dyn Fn(&SplatReport) + Sync);
+/// fields are fitted; and the points generation left out as outliers
+/// (indices into the cloud, ascending), which such a check need not test.
+pub(crate) type Grown<'a> = &'a (dyn Fn(&SplatReport, &[u32]) + Sync);
 
 /// [`generate_with_progress`], and the points it left out as statistical
 /// outliers (indices into `cloud`, ascending): free-space trimming leaves
@@ -642,7 +643,7 @@ pub(crate) fn generate_stages(
         let mut whole = report.clone();
         whole.mean_radius = mean_radius(&splats);
         lengths_from_unit(&frame, &mut whole);
-        grown(&whole);
+        grown(&whole, &outliers);
     }
     let t3 = Instant::now();
     notify(progress, "normal fields", 0.0);
@@ -753,7 +754,7 @@ fn lean_stages(
     if let Some(grown) = grown {
         let mut whole = report.clone();
         lengths_from_unit(frame, &mut whole);
-        grown(&whole);
+        grown(&whole, &lean.outlier_points);
     }
     from_unit(frame, &mut splats, report)?;
     report.origin = cloud.origin.to_array();

@@ -739,9 +739,9 @@ pub struct Lean {
     pub gate: Gate,
     /// Seeds left without a splat as outliers.
     pub outliers: usize,
-    /// A scan's outlier seeds, as indices into the points given
-    /// (ascending; empty without viewpoints): free-space trimming leaves
-    /// their lines of sight out, as it does the stages' outliers.
+    /// The outlier seeds, as indices into the points given (ascending):
+    /// free-space trimming leaves their lines of sight out, as it does the
+    /// stages' outliers, and the held-out check does not test them.
     pub outlier_points: Vec<u32>,
     /// A scan's share of points whose splat faces away from their
     /// viewpoint ([`orient`]; `None` without viewpoints).
@@ -1372,6 +1372,25 @@ fn grow_slab(
     (grown, outliers)
 }
 
+/// The grid's points `at` (indices into `g.pos`) as indices into the
+/// `points` given, ascending: by the grid's order where it keeps one (a
+/// scan's), else by their positions, in one pass over the points where
+/// there are any (the grid's positions are the points as given; a copy
+/// of a point shares its index set).
+fn given_indices(points: &[Vec3], g: &Grid, at: &[u32]) -> Vec<u32> {
+    let mut out: Vec<u32> = if at.is_empty() {
+        Vec::new()
+    } else if g.order.is_empty() {
+        let bits = |p: Vec3| p.to_array().map(f32::to_bits);
+        let wanted: std::collections::HashSet<[u32; 3]> = at.iter().map(|&i| bits(g.pos[i as usize])).collect();
+        (0..points.len() as u32).filter(|&i| wanted.contains(&bits(points[i as usize]))).collect()
+    } else {
+        at.iter().map(|&i| g.order[i as usize]).collect()
+    };
+    out.sort_unstable();
+    out
+}
+
 /// The points of `pos` (the grid's order) no splat of `grown` took within
 /// `eps` of its plane (a taken point lies inside the splat's radius).
 fn unsure(pos: &[Vec3], grown: &[Grown], eps: f32) -> Vec<Vec3> {
@@ -1584,10 +1603,7 @@ pub fn grow_lean(
     };
     let (mut grown, outliers) = grow_all(&g, growth, within, sharp);
     lean.outliers = outliers.len();
-    if views.is_some() {
-        lean.outlier_points = outliers.iter().map(|&i| g.order[i as usize]).collect();
-        lean.outlier_points.sort_unstable();
-    }
+    lean.outlier_points = given_indices(points, &g, &outliers);
     lean.clipped = grown.iter().filter(|s| s.clips.iter().any(Option::is_some)).count();
     // A settled point is sure where the point as given lies on its splat.
     let given: Vec<Vec3> = if settled { g.order.iter().map(|&i| points[i as usize]).collect() } else { Vec::new() };

@@ -225,7 +225,9 @@ fn points(
     let params = req.generation.params(&cloud);
     // The held-out check beside the stages after growth (it reads what
     // growth leaves: `pipeline::generate_beside`).
-    let measure = |whole: &SplatReport| HeldOut::measure(req, &cloud, &params, whole);
+    let measure = |whole: &SplatReport, left_out: &[u32]| {
+        HeldOut::measure(req, &cloud, &params, (whole, left_out))
+    };
     let (generated, beside) = if req.holdout > 0.0 {
         crate::pipeline::generate_beside(&cloud, &params, progress, "held-out coverage", measure)
     } else {
@@ -316,12 +318,13 @@ impl HeldOut {
     /// Measures it (nothing with a held-out fraction of 0): over the whole
     /// cloud with `holdout_full`, else in windows; `generation` is the
     /// report of the cloud's own generation (its `ϵ`, mean radius and
-    /// tolerance, as growth leaves them).
+    /// tolerance, as growth leaves them) and the points it left out as
+    /// outliers.
     fn measure(
         req: &SplatRequest,
         cloud: &PointCloud,
         params: &SplatParams,
-        generation: &SplatReport,
+        generation: (&SplatReport, &[u32]),
     ) -> HeldOut {
         let mut out = HeldOut::none();
         let t = Instant::now();
