@@ -715,14 +715,8 @@ impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, P, S> {
         false
     }
 
-    /// [`Visitor::packs_met`] where the pack keeps its lanes' answers
-    /// ([`Pack::LANE_HITS`]): each lane the filter passes decided from the
-    /// filter's own `(t, u, v)` ([`Pack::hits_met`], [`Pack::lane_hit`]:
-    /// [`Primitive::intersect`]'s answer with the window's current end,
-    /// bit for bit), not by running the exact test again. A closest-hit
-    /// ray decides every hit in its window, about 2.7 a random box ray of
-    /// the bunny where an any-hit ray stops at its first, 0.5
-    /// (`docs/notes/backends.md`, "Issue 55, thirty-first session").
+    /// [`packs_met_kept`], with the window's current end as the cut-off:
+    /// each hit it keeps is offered to the window.
     #[inline(always)]
     fn packs_met(
         &mut self,
@@ -732,47 +726,94 @@ impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, P, S> {
         isa: Isa,
         side: &<P::Pack as Pack<P>>::Side,
     ) -> bool {
-        if !<P::Pack as Pack<P>>::LANE_HITS {
-            return packs_met_exact(self, packs, ids, met, isa, side);
+        packs_met_kept(self, packs, ids, met, isa, side)
+    }
+}
+
+impl<P: Primitive, S: Skip> Decides<P> for Gather<'_, P, S> {
+    type S = S;
+
+    #[inline(always)]
+    fn query(&self) -> &Query<'_, P, S> {
+        &self.query
+    }
+
+    #[inline(always)]
+    fn take(&mut self, id: u32, h: Hit) -> bool {
+        self.offer(id, h);
+        false
+    }
+}
+
+/// A visitor whose lanes [`packs_met_kept`] decides from the filter's own
+/// answers: its query, and what it does with a hit its rule keeps.
+trait Decides<P: Primitive>: Visitor<P> {
+    type S: Skip;
+    fn query(&self) -> &Query<'_, P, Self::S>;
+    /// Takes the hit `h` on primitive `id`; true stops the traversal.
+    fn take(&mut self, id: u32, h: Hit) -> bool;
+}
+
+/// [`Visitor::packs_met`] where the pack keeps its lanes' answers
+/// ([`Pack::LANE_HITS`], else [`packs_met_exact`]): each lane the filter
+/// passes decided from the filter's own `(t, u, v)` ([`Pack::hits_met`],
+/// [`Pack::lane_hit`]: [`Primitive::intersect`]'s answer with the visitor's
+/// current cut-off, bit for bit), not by running the exact test again,
+/// and a hit the query's rule keeps handed to [`Decides::take`]. A
+/// closest-hit ray decides every hit in its window, about 2.7 a random box
+/// ray of the bunny, where an any-hit ray stops at its first, 0.5
+/// (`docs/notes/backends.md`, "Issue 55, thirty-first session").
+#[inline(always)]
+fn packs_met_kept<P: Primitive, V: Decides<P>>(
+    v: &mut V,
+    packs: &[P::Pack],
+    ids: &[u32],
+    met: impl Fn(usize, usize, f32) -> u32,
+    isa: Isa,
+    side: &<P::Pack as Pack<P>>::Side,
+) -> bool {
+    if !<P::Pack as Pack<P>>::LANE_HITS {
+        return packs_met_exact(v, packs, ids, met, isa, side);
+    }
+    let l = super::lanes::<P>();
+    let (ray, t_min, skip) = {
+        let q = v.query();
+        (*q.ray, q.lanes.t_min, q.skip)
+    };
+    for (c, chunk) in packs.chunks(CHUNK).enumerate() {
+        let mut m = met(c * CHUNK, chunk.len(), v.cutoff());
+        #[cfg(test)]
+        tests::count(chunk.len(), m.count_ones() as usize);
+        if m == 0 {
+            continue;
         }
-        let l = super::lanes::<P>();
-        let (ray, t_min) = (self.query.ray, self.query.lanes.t_min);
-        for (c, chunk) in packs.chunks(CHUNK).enumerate() {
-            let mut m = met(c * CHUNK, chunk.len(), self.cut);
-            #[cfg(test)]
-            tests::count(chunk.len(), m.count_ones() as usize);
-            if m == 0 {
-                continue;
-            }
-            let mut masks = [0u32; CHUNK];
-            let mut slots = HitSlots::new();
-            let mut hits = LaneHits::new(&mut slots);
-            let span = self.filter();
-            <P::Pack as Pack<P>>::hits_met(chunk, m, &span, self.prep(), isa, &mut masks, &mut hits);
-            while m != 0 {
-                let j = m.trailing_zeros() as usize;
-                m &= m - 1;
-                let (pack, mut mask) = (&chunk[j], masks[j]);
-                let ids = &ids[(c * CHUNK + j) * l..];
-                while mask != 0 {
-                    let lane = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
-                    let id = ids[lane];
-                    let h = pack.lane_hit(lane, id, side, ray, (t_min, self.cut), hits.get(j, lane));
-                    #[cfg(test)]
-                    tests::count_lane(h.is_some());
-                    let Some(h) = h else {
-                        continue;
-                    };
-                    let skip = self.query.skip;
-                    if !skip.skips(ray.dir, id, &pack.get(lane, id, side), &h) {
-                        self.offer(id, h);
-                    }
+        let mut masks = [0u32; CHUNK];
+        let mut slots = HitSlots::new();
+        let mut hits = LaneHits::new(&mut slots);
+        let span = v.filter();
+        <P::Pack as Pack<P>>::hits_met(chunk, m, &span, v.prep(), isa, &mut masks, &mut hits);
+        while m != 0 {
+            let j = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let (pack, mut mask) = (&chunk[j], masks[j]);
+            let ids = &ids[(c * CHUNK + j) * l..];
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let id = ids[lane];
+                let h = pack.lane_hit(lane, id, side, &ray, (t_min, v.cutoff()), hits.get(j, lane));
+                #[cfg(test)]
+                tests::count_lane(h.is_some());
+                let Some(h) = h else {
+                    continue;
+                };
+                if !skip.skips(ray.dir, id, &pack.get(lane, id, side), &h) && v.take(id, h) {
+                    return true;
                 }
             }
         }
-        false
     }
+    false
 }
 
 impl<P: Primitive, S: Skip> Gather<'_, P, S> {
@@ -820,6 +861,35 @@ impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, P, S> {
     #[inline(always)]
     fn lane(&mut self, prim: P, id: u32) -> bool {
         self.0.hit(&prim, id, self.0.lanes.t_max).is_some()
+    }
+
+    /// [`packs_met_kept`]: a shadow ray leaving a surface decides the
+    /// discs it starts on (the departure's, skipped) before its first
+    /// occluder, so its lanes too are decided from the filter's answers.
+    #[inline(always)]
+    fn packs_met(
+        &mut self,
+        packs: &[P::Pack],
+        ids: &[u32],
+        met: impl Fn(usize, usize, f32) -> u32,
+        isa: Isa,
+        side: &<P::Pack as Pack<P>>::Side,
+    ) -> bool {
+        packs_met_kept(self, packs, ids, met, isa, side)
+    }
+}
+
+impl<P: Primitive, S: Skip> Decides<P> for AnyHit<'_, P, S> {
+    type S = S;
+
+    #[inline(always)]
+    fn query(&self) -> &Query<'_, P, S> {
+        &self.0
+    }
+
+    #[inline(always)]
+    fn take(&mut self, _id: u32, _h: Hit) -> bool {
+        true
     }
 }
 
