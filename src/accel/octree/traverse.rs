@@ -686,24 +686,6 @@ impl<'a, P: Primitive, S: Skip> Gather<'a, P, S> {
     }
 }
 
-/// [`Visitor::packs_met`] as [`packs_met_kept`], in a [`Decides`] visitor's
-/// `Visitor` impl.
-macro_rules! kept_lanes {
-    () => {
-        #[inline(always)]
-        fn packs_met(
-            &mut self,
-            packs: &[P::Pack],
-            ids: &[u32],
-            met: impl Fn(usize, usize, f32) -> u32,
-            isa: Isa,
-            side: &<P::Pack as Pack<P>>::Side,
-        ) -> bool {
-            packs_met_kept(self, packs, ids, met, isa, side)
-        }
-    };
-}
-
 impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, P, S> {
     #[inline]
     fn cutoff(&self) -> f32 {
@@ -733,9 +715,19 @@ impl<P: Primitive, S: Skip> Visitor<P> for Gather<'_, P, S> {
         false
     }
 
-    // The window's current end is the cut-off; each hit kept is offered
-    // to the window.
-    kept_lanes!();
+    /// [`packs_met_kept`]: the window's current end is the cut-off, and
+    /// each hit kept is offered to the window.
+    #[inline(always)]
+    fn packs_met(
+        &mut self,
+        packs: &[P::Pack],
+        ids: &[u32],
+        met: impl Fn(usize, usize, f32) -> u32,
+        isa: Isa,
+        side: &<P::Pack as Pack<P>>::Side,
+    ) -> bool {
+        packs_met_kept(self, packs, ids, met, isa, side)
+    }
 }
 
 impl<P: Primitive, S: Skip> Decides<P> for Gather<'_, P, S> {
@@ -871,10 +863,20 @@ impl<P: Primitive, S: Skip> Visitor<P> for AnyHit<'_, P, S> {
         self.0.hit(&prim, id, self.0.lanes.t_max).is_some()
     }
 
-    // A shadow ray leaving a surface decides the discs it starts on (the
-    // departure's, skipped) before its first occluder: its lanes too are
-    // decided from the filter's answers.
-    kept_lanes!();
+    /// [`packs_met_kept`]: a shadow ray leaving a surface decides the
+    /// discs it starts on (the departure's, skipped) before its first
+    /// occluder, so its lanes too are decided from the filter's answers.
+    #[inline(always)]
+    fn packs_met(
+        &mut self,
+        packs: &[P::Pack],
+        ids: &[u32],
+        met: impl Fn(usize, usize, f32) -> u32,
+        isa: Isa,
+        side: &<P::Pack as Pack<P>>::Side,
+    ) -> bool {
+        packs_met_kept(self, packs, ids, met, isa, side)
+    }
 }
 
 impl<P: Primitive, S: Skip> Decides<P> for AnyHit<'_, P, S> {
