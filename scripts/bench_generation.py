@@ -18,6 +18,8 @@ Clouds (made once into --work, default target/bench-generation):
   noisy-scan            the solids scanned from one station, 1000 x 750
                         rays, range noise of half a spacing and 0.2 %
                         outliers (`sample --scan-from`);
+  table-scan            a real laser scan of a table scene, 460,400 points
+                        (scenes/data/table_scene_lms400.pcd, as bundled);
   sphere, torus         200k points uniform on a unit sphere and on a torus
                         (radii 1 and 0.35): clouds with no crease, where
                         creases should cost next to nothing.
@@ -112,6 +114,8 @@ def make_clouds(bin_, work, names):
                      "--scan-at", "0,0.2,0", "--rays", "1000,750", "--range-noise-spacing", "0.5",
                      "--outliers", "0.002", "-o", path, "--seed", "1"])
             out[name] = path
+        elif name == "table-scan":
+            out[name] = ROOT / "scenes/data/table_scene_lms400.pcd"
         elif name in ("sphere", "torus"):
             path = work / f"{name}.ply"
             if not path.exists():
@@ -145,6 +149,8 @@ p = pathlib.Path(sys.argv[1])
 if p.suffix == ".ply":
     from bench_generation import read_ply_xyz
     xyz = read_ply_xyz(p)
+elif p.suffix == ".pcd" and b"DATA binary_compressed" in p.read_bytes()[:1024]:
+    xyz = np.asarray(o3d.io.read_point_cloud(str(p)).points)
 elif p.suffix == ".pcd":
     from bench_generation import read_pcd_xyz
     xyz = read_pcd_xyz(p)
@@ -184,7 +190,7 @@ def main():
                     help="also `splat --no-lean` (the stages where lean growth's gate would pass)")
     ap.add_argument("--work", default=str(ROOT / "target/bench-generation"))
     a = ap.parse_args()
-    names = ["bunny-200k", "bunny-2m", "survey", "noisy-scan", "sphere"] + (["survey-3.6m"] if a.large else [])
+    names = ["bunny-200k", "bunny-2m", "survey", "noisy-scan", "table-scan", "sphere"] + (["survey-3.6m"] if a.large else [])
     if a.only:
         names = a.only.split(",")
     clouds = make_clouds(a.bin, Path(a.work), names)

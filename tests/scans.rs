@@ -227,6 +227,33 @@ fn milk_lines_of_sight_with_creases_nearly_as_whole_discs() {
     assert!(misses <= 10, "{misses} misses");
 }
 
+/// The real laser scan of a table scene (460,400 points, the scanner at
+/// the origin; `scenes/data/README.md`), checked from its scanner at the
+/// defaults (settled, then grown sharp and lean). Seed 1 reads consistent
+/// 97.23 %, misses 1.48 % (619 of the 677 in the band of about five times
+/// the density along the sweep's first lines, at the capture's edge), gross
+/// early 0.18 %, and no large splat over a hole (issue 54 counted 6 on this
+/// scan before clipped splats). Whole discs (`Creases::Off`, the stages)
+/// read 98.10 % and 0.58 %; seeds 2 and 3 97.45 / 1.26 against 98.25 /
+/// 0.43 and 97.30 / 1.35 against 98.15 / 0.51. So creases do not yet meet
+/// whole discs on this scan (issue 54's bar); the test holds it where it
+/// stands.
+#[test]
+fn a_real_table_scan_meets_its_scanners_lines_of_sight() {
+    let cloud = read_points(&data("table_scene_lms400.pcd")).unwrap();
+    assert_eq!(cloud.len(), 460_400);
+    let r = scan_check(&cloud, &ScanCheckParams::default(), None).unwrap();
+    let lean = r.generation.lean.as_ref().unwrap();
+    assert!(lean.used && lean.settled, "{lean:?}");
+    assert!(r.viewpoint_is_scanner, "{:?}", r.generation.facing_away);
+    assert_eq!(r.generation.hollow_large_splats, 0, "{:?}", r.generation);
+    assert_eq!(r.generation.uncovered_large_splats, 0, "{:?}", r.generation);
+    assert!(r.rays > 40_000, "{r:?}");
+    assert!(r.consistent_fraction >= 0.970, "{r:?}");
+    assert!(r.miss_fraction <= 0.016, "{r:?}");
+    assert!(r.gross_early_fraction <= 0.003, "{r:?}");
+}
+
 fn sphere(n: usize, r: f32, seed: u64) -> Vec<Vec3> {
     let mut rng = Rng::new(seed);
     (0..n).map(|_| rng.unit() * r).collect()
