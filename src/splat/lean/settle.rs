@@ -229,7 +229,7 @@ mod tests {
         }
         let eps = 0.02;
         let g = Grid::build(&pts, CELL_EPS * eps, true);
-        let growth = Growth { eps, slab: GROW_EPS * eps, far: 1.0 };
+        let growth = Growth { eps, slab: GROW_EPS * eps, far: 1.0, scanners: None };
         let views = Viewpoints::One(eye);
         let moved = settle(&g, growth, None, &views, sigma * 0.8);
         let mean_off = |p: &[Vec3]| p.iter().map(|q| f64::from(q.z.abs())).sum::<f64>() / p.len() as f64;
