@@ -1018,10 +1018,10 @@ fn grow(g: &Grid, near: &mut Near, i: u32, (growth, sharp): (Growth, bool)) -> O
 /// 0.151 `ϵ`, reads a median 6.9 (its 5th percentile 4.5) and 2.0 in its
 /// band of five times the density, where a tilting scanner turned and swept
 /// the same lines again. The solids scanned at 1000×750 rays with range
-/// noise up to half a spacing read none but one point under 8 (their splat
-/// files unchanged; under 10, 23 points, and 0.23 dB lost at half a
-/// spacing); with 0.75, 1 and 1.5 spacings, where it widens planes,
-/// `compare --truth` (400×300, means of seeds 1-3) reads 32.87, 31.91 and
+/// noise up to half a spacing have a seed's plane widened at most (one at
+/// half a spacing, seed 1; `compare --truth` the same for seeds 1-3; with
+/// the bound at 10, 23 there and 0.23 dB lost); with 0.75, 1 and 1.5
+/// spacings, where it widens many, `compare --truth` (400×300, means of seeds 1-3) reads 32.87, 31.91 and
 /// 30.56 dB against 32.87, 31.88 and 30.14 without.
 pub const NOISY_NEAREST: f32 = 8.0;
 
@@ -1034,8 +1034,8 @@ pub const NOISY_NEAREST: f32 = 8.0;
 /// (`docs/notes/generation.md`, "Issue 54, sixty-ninth session").
 pub const LEANING_SIN: f32 = 0.5;
 
-/// The most nearest a leaning seed's plane is fitted to: its [`K0`] and
-/// the seed widened four times over, three times.
+/// The most nearest a leaning seed's plane is refitted to: its [`K0`]
+/// nearest and itself, four times over three times (832).
 const WIDEST: usize = (K0 + 1) * 64;
 
 /// The plane of a seed's nearest (`n`, `c` of `members`, the seed
