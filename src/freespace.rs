@@ -19,6 +19,7 @@ use crate::splat::{PointCloud, Splat, SplatParams, SplatReport, Viewpoints};
 use crate::{Error, Result};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
+use std::cell::OnceCell;
 use std::collections::HashMap;
 use std::hash::BuildHasherDefault;
 
@@ -311,7 +312,7 @@ fn opened_holes(
     points: &[Vec3],
     vp: &Viewpoints,
     misses: &Misses,
-    margin: f32,
+    (margin, cells): (f32, &OnceCell<PointCells>),
 ) -> Vec<bool> {
     if cut.is_empty() {
         return Vec::new();
@@ -325,7 +326,7 @@ fn opened_holes(
             (old.center, 4.0 * reach * reach)
         })
         .collect();
-    let around = points_within(points, &around);
+    let around = cells.get_or_init(|| PointCells::new(points, &around)).within(points, &around);
     cut.par_iter()
         .zip(&around)
         .map_init(
@@ -394,71 +395,121 @@ fn opened_holes(
 }
 
 /// For each ball of `balls` (a centre and a squared radius), the points
-/// of `points` within it, the boundary included (indices, in no order):
-/// one pass over the points on the threads, each point looked up among
-/// the cells its balls' boxes cover. A shrink asks about a few splats, so
-/// this is cheaper than a tree over every point (a third of trimming's
-/// time on a 100k-point scan, on one thread). The squared distance sums
-/// the axes' squares in order, as a k-d tree's query does.
+/// of `points` within it, the boundary included: [`PointCells`] built for
+/// them and asked once.
+#[cfg(test)]
 fn points_within(points: &[Vec3], balls: &[(Vec3, f32)]) -> Vec<Vec<u32>> {
-    let usable = |&(c, r2): &(Vec3, f32)| c.is_finite() && r2.is_finite() && r2 >= 0.0;
-    let widest = balls.iter().filter(|b| usable(b)).map(|b| b.1.sqrt()).fold(0.0f32, f32::max);
-    let mut within = vec![Vec::new(); balls.len()];
-    // Cells wider than any ball (a ball's box covers at most two a side),
-    // keyed by their coordinates' low 21 bits: cells that share a key only
-    // cost distance tests.
-    let h = (2.5 * widest).max(f32::MIN_POSITIVE);
-    let cell = |p: Vec3| ((p / h).floor()).to_array().map(|x| x as i64);
-    let key = |c: [i64; 3]| {
-        let bits = |x: i64| (x as u64) & ((1 << 21) - 1);
-        bits(c[0]) | bits(c[1]) << 21 | bits(c[2]) << 42
-    };
-    let mut cells: HashMap<u64, Vec<u32>, BuildHasherDefault<CellHash>> = HashMap::default();
-    let mut keys = Vec::new();
-    for (b, &(c, r2)) in balls.iter().enumerate() {
-        if !usable(&(c, r2)) {
-            continue;
-        }
-        // Padded: a point within the ball in f32 may lie a rounding outside.
-        let r = Vec3::splat(r2.sqrt() * 1.001);
-        let (lo, hi) = (cell(c - r), cell(c + r));
-        keys.clear();
-        for x in lo[0]..=hi[0] {
-            for y in lo[1]..=hi[1] {
-                for z in lo[2]..=hi[2] {
-                    keys.push(key([x, y, z]));
-                }
-            }
-        }
-        keys.sort_unstable();
-        keys.dedup();
-        for &k in &keys {
-            cells.entry(k).or_default().push(b as u32);
-        }
-    }
-    if cells.is_empty() {
-        return within;
-    }
-    let found: Vec<(u32, u32)> = points
-        .par_iter()
-        .enumerate()
-        .with_min_len(4096)
-        .flat_map_iter(|(i, &p)| {
-            let list = cells.get(&key(cell(p))).map_or(&[][..], Vec::as_slice);
-            list.iter().filter_map(move |&b| {
-                let (c, r2) = balls[b as usize];
-                let d = p - c;
-                (d.x * d.x + d.y * d.y + d.z * d.z <= r2).then_some((b, i as u32))
-            })
-        })
-        .collect();
-    for (b, i) in found {
-        within[b as usize].push(i);
-    }
-    within
+    PointCells::new(points, balls).within(points, balls)
 }
 
-/// A hash of a cell key for [`points_within`]'s table: a multiply, its high
+/// The points of a trimming, bucketed once into cells for the balls of
+/// every pass's shrinks ([`opened_holes`]): a pass asks about a few
+/// splats, and each asking looks only at the points of its balls' cells.
+/// Looking every point up among a pass's balls' cells instead cost 4 to 12
+/// ms a pass however few its shrinks: the real table scan's trimming took
+/// 0.19-0.20 s, with the cells 0.17 (`docs/notes/generation.md`, "Issue 54,
+/// seventieth session").
+struct PointCells {
+    /// The cells' width.
+    h: f32,
+    /// The points' indices, cell by cell.
+    order: Vec<u32>,
+    /// A cell's key ([`PointCells::key`]) to its run of `order`.
+    runs: HashMap<u64, (u32, u32), BuildHasherDefault<CellHash>>,
+}
+
+impl PointCells {
+    /// The cells of `points`, two and a half times as wide as the median
+    /// radius of `balls` (the first pass's; a wider ball of a later pass
+    /// covers more cells).
+    fn new(points: &[Vec3], balls: &[(Vec3, f32)]) -> PointCells {
+        let mut radii: Vec<f32> = balls.iter().filter(|b| usable(b)).map(|b| b.1.sqrt()).collect();
+        let mid = radii.len() / 2;
+        let median = if radii.is_empty() { 0.0 } else { *radii.select_nth_unstable_by(mid, f32::total_cmp).1 };
+        let h = (2.5 * median).max(f32::MIN_POSITIVE);
+        let mut keyed: Vec<(u64, u32)> = points
+            .par_iter()
+            .enumerate()
+            .with_min_len(4096)
+            .map(|(i, &p)| (Self::key(Self::cell(h, p)), i as u32))
+            .collect();
+        keyed.par_sort_unstable();
+        let mut runs: HashMap<u64, (u32, u32), BuildHasherDefault<CellHash>> = HashMap::default();
+        let mut start = 0;
+        for (i, w) in keyed.windows(2).enumerate() {
+            if w[0].0 != w[1].0 {
+                runs.insert(w[0].0, (start, i as u32 + 1));
+                start = i as u32 + 1;
+            }
+        }
+        if let Some(last) = keyed.last() {
+            runs.insert(last.0, (start, keyed.len() as u32));
+        }
+        PointCells {
+            h,
+            order: keyed.into_iter().map(|k| k.1).collect(),
+            runs,
+        }
+    }
+
+    fn cell(h: f32, p: Vec3) -> [i64; 3] {
+        ((p / h).floor()).to_array().map(|x| x as i64)
+    }
+
+    /// A cell's key, its coordinates' low 21 bits: cells that share a key
+    /// share a run, and cost only distance tests.
+    fn key(c: [i64; 3]) -> u64 {
+        let bits = |x: i64| (x as u64) & ((1 << 21) - 1);
+        bits(c[0]) | bits(c[1]) << 21 | bits(c[2]) << 42
+    }
+
+    /// For each ball of `balls` (a centre and a squared radius), the points
+    /// of `points` (those the cells were built of) within it, the boundary
+    /// included, in ascending order; none for a ball not finite. The
+    /// squared distance sums the axes' squares in order, as a k-d tree's
+    /// query does.
+    fn within(&self, points: &[Vec3], balls: &[(Vec3, f32)]) -> Vec<Vec<u32>> {
+        balls
+            .par_iter()
+            .map_init(Vec::new, |keys, &(c, r2)| {
+                let mut found = Vec::new();
+                if !usable(&(c, r2)) {
+                    return found;
+                }
+                // Padded: a point within the ball in f32 may lie a rounding
+                // outside.
+                let r = Vec3::splat(r2.sqrt() * 1.001);
+                let (lo, hi) = (Self::cell(self.h, c - r), Self::cell(self.h, c + r));
+                keys.clear();
+                for x in lo[0]..=hi[0] {
+                    for y in lo[1]..=hi[1] {
+                        for z in lo[2]..=hi[2] {
+                            keys.push(Self::key([x, y, z]));
+                        }
+                    }
+                }
+                keys.sort_unstable();
+                keys.dedup();
+                for k in keys.iter() {
+                    let Some(&(a, b)) = self.runs.get(k) else { continue };
+                    found.extend(self.order[a as usize..b as usize].iter().copied().filter(|&i| {
+                        let d = points[i as usize] - c;
+                        d.x * d.x + d.y * d.y + d.z * d.z <= r2
+                    }));
+                }
+                found.sort_unstable();
+                found
+            })
+            .collect()
+    }
+}
+
+/// A ball with a finite centre and a finite squared radius, not negative.
+fn usable(&(c, r2): &(Vec3, f32)) -> bool {
+    c.is_finite() && r2.is_finite() && r2 >= 0.0
+}
+
+/// A hash of a cell key for [`PointCells`]' table: a multiply, its high
 /// half folded into the low bits the table indexes by.
 #[derive(Default)]
 struct CellHash(u64);
@@ -501,6 +552,8 @@ pub fn trim(
     // Splats a shrink would have holed (see [`opened_holes`]): kept whole,
     // never shrunk again.
     let mut kept = vec![false; splats.len()];
+    // The points in cells, once a pass has shrunk a splat.
+    let cells = OnceCell::new();
     // Each pass casts only the lines a shrink of the pass before can have
     // changed ([`to_recast`]); the first casts them all.
     let mut sights = blocked(splats, points, viewpoint, misses, margin, None);
@@ -544,7 +597,7 @@ pub fn trim(
             report.still_blocked = count;
             return report;
         }
-        let holes = opened_holes(splats, &cut, points, viewpoint, misses, margin);
+        let holes = opened_holes(splats, &cut, points, viewpoint, misses, (margin, &cells));
         let mut changed = vec![false; splats.len()];
         for (&(id, before, _), hole) in cut.iter().zip(holes) {
             if hole {
@@ -671,7 +724,8 @@ mod tests {
 
     /// The points of each ball are those a k-d tree finds within it, the
     /// boundary included: balls of mixed radii far from the origin, points
-    /// on a lattice (some exactly on a boundary), and one not finite.
+    /// on a lattice (some exactly on a boundary), and one not finite; the
+    /// same from cells built for the narrowest balls.
     #[test]
     fn points_within_balls_are_a_trees_points_within_them() {
         use crate::rng::SplitMix64;
@@ -698,6 +752,12 @@ mod tests {
         balls.push((base + Vec3::new(2.5, 2.5, 0.0), 1.0));
         balls.push((Vec3::NAN, 1.0));
         let found = points_within(&points, &balls);
+        // Cells built for a first pass's smallest balls answer wider ones.
+        let mut small = balls.clone();
+        small.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let narrow = PointCells::new(&points, &small[..20]);
+        assert!(narrow.h < 0.1 * PointCells::new(&points, &balls).h, "{}", narrow.h);
+        assert_eq!(narrow.within(&points, &balls), found);
         let tree = crate::splat::knn::build_tree(&points);
         let mut on_boundary = 0;
         for (b, &(c, r2)) in balls.iter().enumerate() {

@@ -111,9 +111,15 @@ pub fn lzf_decompress(input: &[u8], expected_len: usize) -> Result<Vec<u8>, LzfE
                 });
             }
             let start = out.len() - back;
-            for k in 0..len {
-                let b = out[start + k];
-                out.push(b);
+            if back >= len {
+                // No overlap: one copy.
+                out.extend_from_within(start..start + len);
+            } else {
+                // The copy reads what it writes: byte by byte.
+                for k in 0..len {
+                    let b = out[start + k];
+                    out.push(b);
+                }
             }
         }
     }
@@ -135,6 +141,16 @@ mod tests {
         // "abc" literal, then copy 6 bytes from 3 back: "abcabcabc".
         let input = [2, b'a', b'b', b'c', (4 << 5), 2];
         assert_eq!(lzf_decompress(&input, 9).unwrap(), b"abcabcabc");
+    }
+
+    /// A back-reference that reads only what was there before it (one
+    /// copy), next to one that overlaps what it writes.
+    #[test]
+    fn back_references_within_and_across_what_they_write() {
+        // "abcdef", then 3 bytes from 5 back ("bcd"), then 4 from 2 back
+        // ("cdcd", reading its own output).
+        let input = [5, b'a', b'b', b'c', b'd', b'e', b'f', (1 << 5), 4, (2 << 5), 1];
+        assert_eq!(lzf_decompress(&input, 13).unwrap(), b"abcdefbcdcdcd");
     }
 
     #[test]

@@ -572,6 +572,9 @@ struct Near {
     /// than all the rest, the rest in no order.
     cand: Vec<u64>,
     sorted: usize,
+    /// The first `picked` candidates are nearer than all the rest (the
+    /// first `sorted` of them in order): [`Near::nearest_unordered`]'s.
+    picked: usize,
     shell: i32,
     /// Every point within this distance has been gathered.
     sure: f32,
@@ -581,8 +584,6 @@ struct Near {
     /// a row is looked up once, at the first shell that reaches it, and
     /// each later shell steps its gathered cells out by one at each end.
     rows: Vec<RowSeen>,
-    /// The keys of [`Near::nearest_unordered`].
-    wide: Vec<u64>,
 }
 
 /// A candidate's key: a squared distance is finite and not negative (a
@@ -602,6 +603,7 @@ impl Near {
     fn start(&mut self, g: &Grid, p: Vec3) {
         self.cand.clear();
         self.sorted = 0;
+        self.picked = 0;
         self.shell = -1;
         self.sure = 0.0;
         self.centre = p;
@@ -651,24 +653,43 @@ impl Near {
         true
     }
 
-    /// The `n` nearest (those [`Near::get`] gives as `0..n`), in no order,
-    /// as keys in `self.wide`: the shells gathered until `n` lie within
-    /// `sure`, then a selection, not a sort. `None` when fewer than `n`
-    /// lie within [`MAX_SHELL`]. The search is left to be started again.
+    /// The `n` nearest (those [`Near::get`] gives as `0..n`), in no order:
+    /// the shells gathered until `n` lie within `sure`, then a selection
+    /// among those within it past the nearest known (`sorted`, `picked`),
+    /// not a sort. `None` when fewer than `n` lie within [`MAX_SHELL`].
+    /// The search goes on from there ([`Near::get`] sorts what it needs).
+    #[inline(never)]
     fn nearest_unordered(&mut self, g: &Grid, n: usize) -> Option<&[u64]> {
+        let front = self.sorted.max(self.picked);
+        // Those within `sure` are moved up behind the front, shell by shell.
+        let mut inside = front;
         loop {
             let sure = (self.sure * self.sure).to_bits();
-            if self.cand.iter().filter(|&&k| (k >> 32) as u32 <= sure).count() >= n || !self.reach(g) {
+            let rest = &mut self.cand[inside..];
+            let mut within = 0;
+            for i in 0..rest.len() {
+                // Branch-free, as in [`Near::widen`].
+                let near = (rest[i] >> 32) as u32 <= sure;
+                rest.swap(i, within);
+                within += usize::from(near);
+            }
+            inside += within;
+            if inside >= n || !self.reach(g) {
                 break;
             }
         }
         if self.cand.len() < n {
             return None;
         }
-        self.wide.clear();
-        self.wide.extend_from_slice(&self.cand);
-        self.wide.select_nth_unstable(n - 1);
-        Some(&self.wide[..n])
+        if inside < n {
+            // At [`MAX_SHELL`]: the nearest of all gathered.
+            inside = self.cand.len();
+        }
+        if n > front {
+            self.cand[front..inside].select_nth_unstable(n - front - 1);
+        }
+        self.picked = self.picked.max(n);
+        Some(&self.cand[..n])
     }
 
     /// Gathers the points of the cells at Chebyshev distance `shell` from
@@ -1044,6 +1065,7 @@ const WIDEST: usize = (K0 + 1) * 64;
 /// times as many nearest, the first refit that does not lean; `None` keeps
 /// it (it does not lean, or every refit leans as well: a surface seen at a
 /// glancing angle).
+#[inline(never)]
 fn off_the_sight_line(g: &Grid, near: &mut Near, (members, n, c): (&[u32], Vec3, Vec3), eye: Vec3) -> Option<(Vec3, Vec3)> {
     let leans = |n: Vec3, c: Vec3| {
         let to = c - eye;
@@ -1063,8 +1085,6 @@ fn off_the_sight_line(g: &Grid, near: &mut Near, (members, n, c): (&[u32], Vec3,
         let (m, mc) = (vecs[0].as_vec3(), wc.as_vec3());
         wider = (m.is_finite() && mc.is_finite() && !leans(m, mc)).then_some((m, mc));
     }
-    // Growth takes the nearest in order again from the seed.
-    near.start(g, g.pos[members[0] as usize]);
     wider
 }
 
@@ -1769,7 +1789,7 @@ mod tests {
     }
 
     /// The nearest taken unordered are the ones a search in order gives,
-    /// and a search started again after them gives them in order: a
+    /// and the search going on after them gives them in order: a
     /// jittered sheet, from its points and from beside it, 52 to 3,328 at a
     /// time (the last past what [`MAX_SHELL`] cells hold: none then, as a
     /// search in order finds fewer).
@@ -1784,9 +1804,12 @@ mod tests {
         let (mut compared, mut short) = (0, 0);
         for q in 0..40 {
             let p = if q % 2 == 0 { g.pos[q * 701] } else { g.pos[q * 701] + Vec3::new(0.1, 0.4, -0.2) };
+            // As growth asks: its nearest in order, then ever more, unordered,
+            // on the same search, then in order again.
+            near.start(&g, p);
+            ordered.start(&g, p);
+            assert_eq!(near.get(&g, K0), ordered.get(&g, K0));
             for n in [52, 208, 832, 3328] {
-                near.start(&g, p);
-                ordered.start(&g, p);
                 let Some(keys) = near.nearest_unordered(&g, n) else {
                     // Fewer than n within MAX_SHELL cells, as in order.
                     assert_eq!(ordered.get(&g, n - 1), None, "query {q}, {n} nearest");
@@ -1797,9 +1820,10 @@ mod tests {
                 keys.sort_unstable();
                 let first: Vec<u64> = (0..n).map(|j| ordered.get(&g, j).map(|(d2, k)| key(d2, k)).unwrap()).collect();
                 assert_eq!(keys, first, "query {q}, {n} nearest");
-                near.start(&g, p);
-                assert_eq!(near.get(&g, n - 1), ordered.get(&g, n - 1));
                 compared += 1;
+            }
+            for j in [K0 + 1, 40, 100, 500, 900] {
+                assert_eq!(near.get(&g, j), ordered.get(&g, j), "query {q}, neighbour {j}");
             }
         }
         // Measured: 119 compared, 41 short (every query at 3,328, and at
