@@ -479,14 +479,6 @@ fn opened_holes(
         .collect()
 }
 
-/// For each ball of `balls` (a centre and a squared radius), the points
-/// of `points` within it, the boundary included: [`PointCells`] built for
-/// them and asked once.
-#[cfg(test)]
-fn points_within(points: &[Vec3], balls: &[(Vec3, f32)]) -> Vec<Vec<u32>> {
-    PointCells::new(points, balls).within(points, balls)
-}
-
 /// The points of a trimming, bucketed once into cells for the balls of
 /// every pass's shrinks ([`opened_holes`]): a pass asks about a few
 /// splats, and each asking looks only at the points of its balls' cells.
@@ -815,6 +807,13 @@ mod tests {
 
     const MARGIN: f32 = 0.005;
     const EYE: Vec3 = Vec3::new(0.0, 0.0, 5.0);
+
+    /// For each ball of `balls` (a centre and a squared radius), the points
+    /// of `points` within it, the boundary included: [`PointCells`] built
+    /// for them and asked once.
+    fn points_within(points: &[Vec3], balls: &[(Vec3, f32)]) -> Vec<Vec<u32>> {
+        PointCells::new(points, balls).within(points, balls)
+    }
 
     /// One octree over every splat, as trimming casts through.
     fn octree_of(splats: &[Splat]) -> Box<dyn Backend> {
