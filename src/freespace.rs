@@ -498,7 +498,8 @@ struct PointCells {
 impl PointCells {
     /// The cells of `points`, two and a half times as wide as the median
     /// radius of `balls` (the first pass's; a wider ball of a later pass
-    /// covers more cells).
+    /// covers more cells, and one over more cells than there are points
+    /// tests every point).
     fn new(points: &[Vec3], balls: &[(Vec3, f32)]) -> PointCells {
         let mut radii: Vec<f32> = balls.iter().filter(|b| usable(b)).map(|b| b.1.sqrt()).collect();
         let mid = radii.len() / 2;
@@ -557,6 +558,17 @@ impl PointCells {
                 // outside.
                 let r = Vec3::splat(r2.sqrt() * 1.001);
                 let (lo, hi) = (Self::cell(self.h, c - r), Self::cell(self.h, c + r));
+                let inside = |i: &u32| {
+                    let d = points[*i as usize] - c;
+                    d.x * d.x + d.y * d.y + d.z * d.z <= r2
+                };
+                // A ball over more cells than there are points (far wider
+                // than the first pass's): every point tested.
+                let span = |a: usize| (hi[a].saturating_sub(lo[a]) as u128).saturating_add(1);
+                if span(0).saturating_mul(span(1)).saturating_mul(span(2)) > self.order.len() as u128 {
+                    found.extend((0..points.len() as u32).filter(inside));
+                    return found;
+                }
                 keys.clear();
                 for x in lo[0]..=hi[0] {
                     for y in lo[1]..=hi[1] {
@@ -569,10 +581,7 @@ impl PointCells {
                 keys.dedup();
                 for k in keys.iter() {
                     let Some(&(a, b)) = self.runs.get(k) else { continue };
-                    found.extend(self.order[a as usize..b as usize].iter().copied().filter(|&i| {
-                        let d = points[i as usize] - c;
-                        d.x * d.x + d.y * d.y + d.z * d.z <= r2
-                    }));
+                    found.extend(self.order[a as usize..b as usize].iter().copied().filter(inside));
                 }
                 found.sort_unstable();
                 found
@@ -856,6 +865,10 @@ mod tests {
         let narrow = PointCells::new(&points, &small[..20]);
         assert!(narrow.h < 0.1 * PointCells::new(&points, &balls).h, "{}", narrow.h);
         assert_eq!(narrow.within(&points, &balls), found);
+        // Some over more of those cells than there are points: every point
+        // tested for them.
+        let wide = balls.iter().filter(|b| (2.0 * b.1.sqrt() / narrow.h).powi(3) > points.len() as f32).count();
+        assert!(wide >= 10, "{wide}");
         let tree = crate::splat::knn::build_tree(&points);
         let mut on_boundary = 0;
         for (b, &(c, r2)) in balls.iter().enumerate() {

@@ -692,7 +692,6 @@ impl Near {
     /// among those within it past the nearest known (`sorted`, `picked`),
     /// not a sort. `None` when fewer than `n` lie within [`MAX_SHELL`].
     /// The search goes on from there ([`Near::get`] sorts what it needs).
-    #[inline(never)]
     fn nearest_unordered(&mut self, g: &Grid, n: usize) -> Option<&[u64]> {
         let front = self.sorted.max(self.picked);
         // Those within `sure` are moved up behind the front (and those known
@@ -1103,7 +1102,6 @@ const WIDEST: usize = (K0 + 1) * 64;
 /// times as many nearest, the first refit that does not lean; `None` keeps
 /// it (it does not lean, or every refit leans as well: a surface seen at a
 /// glancing angle).
-#[inline(never)]
 fn off_the_sight_line(g: &Grid, near: &mut Near, (members, n, c): (&[u32], Vec3, Vec3), eye: Vec3) -> Option<(Vec3, Vec3)> {
     let leans = |n: Vec3, c: Vec3| {
         let to = c - eye;
