@@ -14,7 +14,7 @@
 use crate::accel::octree::{Octree, OctreeParams};
 use crate::accel::{Backend, Candidate, CandidateHits, Ray};
 use crate::data::FACING_AWAY_MAX;
-use crate::primitive::{Disc, Primitive};
+use crate::primitive::Primitive;
 use crate::splat::{PointCloud, Splat, SplatParams, SplatReport, Viewpoints};
 use crate::{Error, Result};
 use glam::{Vec2, Vec3};
@@ -138,10 +138,7 @@ fn blocked(
     // default").
     let whole =
         (misses.whole_discs && !misses.dirs.is_empty() && splats.iter().any(Splat::is_clipped))
-            .then(|| {
-                let discs: Vec<Disc> = splats.iter().map(Splat::disc_geometry).collect();
-                Octree::new(&discs, &OctreeParams::default())
-            });
+            .then(|| octree_over(splats, None, false));
     let cast = |(hits, part): &mut (CandidateHits, CandidateHits), i: usize| -> Sight {
         let none = Sight {
             first: NO_SPLAT,

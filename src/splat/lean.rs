@@ -599,6 +599,20 @@ fn key(d2: f32, j: u32) -> u64 {
     (u64::from(d2.to_bits()) << 32) | u64::from(j)
 }
 
+/// Moves the keys within `bits` (a squared distance's bits, [`key`]) to
+/// the front of `keys`, in no order, and counts them: branch-free, a key
+/// past `bits` swaps with another past it (or with itself) and the count
+/// stays.
+fn move_up_within(keys: &mut [u64], bits: u32) -> usize {
+    let mut within = 0;
+    for i in 0..keys.len() {
+        let near = (keys[i] >> 32) as u32 <= bits;
+        keys.swap(i, within);
+        within += usize::from(near);
+    }
+    within
+}
+
 /// The (squared distance, index) pair of a [`key`].
 fn unkey(k: u64) -> (f32, u32) {
     (f32::from_bits((k >> 32) as u32), k as u32)
@@ -625,17 +639,7 @@ impl Near {
             return false;
         }
         // Those within `sure` are the nearest of all: moved up, known.
-        let sure_bits = (self.sure * self.sure).to_bits();
-        let rest = &mut self.cand[self.known..];
-        let mut within = 0;
-        for i in 0..rest.len() {
-            // Branch-free: a candidate past `sure` swaps with another past
-            // it (or with itself), and `within` stays.
-            let near = (rest[i] >> 32) as u32 <= sure_bits;
-            rest.swap(i, within);
-            within += usize::from(near);
-        }
-        self.known += within;
+        self.known += move_up_within(&mut self.cand[self.known..], (self.sure * self.sure).to_bits());
         true
     }
 
@@ -652,13 +656,7 @@ impl Near {
         if 2 * want < known.len() {
             // On a surface the count within `r` grows as `r²`.
             let share = (self.sorted as f32 + 1.25 * want as f32) / self.known as f32;
-            let bits = (self.sure * self.sure * share).to_bits();
-            let mut within = 0;
-            for i in 0..known.len() {
-                let near = (known[i] >> 32) as u32 <= bits;
-                known.swap(i, within);
-                within += usize::from(near);
-            }
+            let within = move_up_within(known, (self.sure * self.sure * share).to_bits());
             if within >= want {
                 known[..within].sort_unstable();
                 self.sorted += within;
@@ -698,16 +696,7 @@ impl Near {
         // already), shell by shell.
         let mut inside = front.max(self.known);
         loop {
-            let sure = (self.sure * self.sure).to_bits();
-            let rest = &mut self.cand[inside..];
-            let mut within = 0;
-            for i in 0..rest.len() {
-                // Branch-free, as in [`Near::widen`].
-                let near = (rest[i] >> 32) as u32 <= sure;
-                rest.swap(i, within);
-                within += usize::from(near);
-            }
-            inside += within;
+            inside += move_up_within(&mut self.cand[inside..], (self.sure * self.sure).to_bits());
             if inside >= n || !self.reach(g) {
                 break;
             }
