@@ -138,7 +138,10 @@ fn blocked(
     // default").
     let whole =
         (misses.whole_discs && !misses.dirs.is_empty() && splats.iter().any(Splat::is_clipped))
-            .then(|| octree_over(splats, None, false));
+            .then(|| Lines {
+                parts: vec![(octree_over(splats, None, false), None)],
+                clipped: false,
+            });
     let cast = |(hits, part): &mut (CandidateHits, CandidateHits), i: usize| -> Sight {
         let none = Sight {
             first: NO_SPLAT,
@@ -150,14 +153,8 @@ fn blocked(
                 origin: misses.origin(k),
                 dir: misses.dirs[k],
             };
-            let h = match &whole {
-                Some(o) => {
-                    o.intersect(&ray, 0.0, f32::INFINITY, hits);
-                    hits.nearest().copied()
-                }
-                None => lines.nearest(&ray, (0.0, f32::INFINITY), hits, part),
-            };
-            return h.map_or(none, |h| Sight {
+            let past = whole.as_ref().unwrap_or(lines);
+            return past.nearest(&ray, (0.0, f32::INFINITY), hits, part).map_or(none, |h| Sight {
                 first: h.id,
                 block: Some((h.id, Vec2::new(h.u, h.v))),
             });
