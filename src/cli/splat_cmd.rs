@@ -281,22 +281,22 @@ fn print_lean(report: &crate::splat::SplatReport) -> bool {
         }
         None if lean.settled => {
             eprintln!(
-                "splatray: lean growth on the points settled onto their surfaces first (a dense noisy scan; --no-lean: the stages): {measured}; {} outlier seeds; {} splats clipped at creases and borders",
-                lean.outliers, report.clipped
+                "splatray: lean growth on the points settled onto their surfaces first (a dense noisy scan; --no-lean: the stages): {measured}; {} outlier seeds; {} splats clipped at creases and borders, {} discs widened over pinholes",
+                lean.outliers, report.clipped, report.widened_at_pinholes
             );
             true
         }
         None if lean.sharp => {
             eprintln!(
-                "splatray: lean growth with clip lines: {measured}; {} outlier seeds; {} splats clipped at creases and borders (a clean cloud: no noise looked for)",
-                lean.outliers, report.clipped
+                "splatray: lean growth with clip lines: {measured}; {} outlier seeds; {} splats clipped at creases and borders, {} discs widened over pinholes (a clean cloud: no noise looked for)",
+                lean.outliers, report.clipped, report.widened_at_pinholes
             );
             true
         }
         None => {
             eprintln!(
-                "splatray: lean growth: {measured}; {} outlier seeds; no creases, noise or holes looked for (the gate found none)",
-                lean.outliers
+                "splatray: lean growth: {measured}; {} outlier seeds; {} discs widened over pinholes; no creases, noise or holes looked for (the gate found none)",
+                lean.outliers, report.widened_at_pinholes
             );
             true
         }

@@ -286,6 +286,9 @@ pub struct SplatReport {
     /// Crease lines moved onto the plane of the splat across them (clip
     /// partners, `splat::partners`).
     pub partner_lines: usize,
+    /// Lean growth's discs widened to close a pinhole where three discs
+    /// met and none covered (`splat::lean`'s gap pass).
+    pub widened_at_pinholes: usize,
     /// Whole discs cut by a clipped neighbour's plane (under strong range
     /// noise, `splat::partners`).
     pub partner_cut: usize,
@@ -739,6 +742,7 @@ fn lean_stages(
     report.k = super::lean::K0;
     report.fallback_normal_fields = lean.flat_fields;
     report.clipped = lean.clipped;
+    report.widened_at_pinholes = lean.widened;
     // No normal a point; the scatter the gate measured about the nearest's
     // planes (curvature in it too) stands for the noise.
     report.estimated_normals = 0;

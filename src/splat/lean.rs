@@ -39,6 +39,7 @@
 //! dense scan too noisy for that has its points settled onto their
 //! surfaces first ([`settle`]; "sixty-fifth session").
 
+mod gaps;
 mod settle;
 mod sharp;
 
@@ -843,6 +844,8 @@ pub struct Lean {
     pub settled: bool,
     /// Splats with a clip line.
     pub clipped: usize,
+    /// Discs widened to close a pinhole where three met ([`gaps`]).
+    pub widened: usize,
     /// Seconds: the grid and the gate, growth, orientation, fields.
     pub seconds: [f64; 4],
 }
@@ -1124,27 +1127,12 @@ fn off_its_nearest(members: &[u32], p: Vec3, off: f32, fit: impl Fn(&[u32]) -> (
     n.dot(p - c).abs() > off
 }
 
-/// Orients the splats' normals along a spanning tree over splats that took
-/// a point in common, most parallel first, from the splat farthest from the
-/// centroid facing away from it (each part of the tree from its own).
-/// Sharing a point, not overlapping discs, makes two splats neighbours: the
-/// discs on the two faces of a thin sheet (a bunny's ear) overlap and stand
-/// nearly parallel, and joining them would turn one face inside out; a
-/// splat takes only points within its slab, never the far face's.
-///
-/// A scan's splats (`views`: where each point of the grid's order was seen
-/// from, and the points) are then turned tree by tree to face the
-/// scanners, as the stages turn their normals (`normals::orient`): a tree
-/// whose points mostly see its splats from behind is turned over
-/// ([`face_the_scanners`]). Returns the share of the points taken (counted
-/// once a splat) whose splat then faces away from their viewpoint past
-/// [`FACING_AWAY_COS`] (`None` without `views`), which tells free-space
-/// trimming whether the viewpoint is the scanner's.
-fn orient(splats: &mut [Grown], points: usize, views: Option<(&[Vec3], &[Vec3])>) -> Option<f64> {
+/// Each splat's links: the splats sharing a point with it, each once,
+/// with how far the link is trusted ([`link_weight`], as `w * 1e6`),
+/// found on every thread. `points` is how many points the grid holds;
+/// `scan` as [`link_weight`]'s.
+fn links(splats: &[Grown], points: usize, scan: bool) -> Vec<Vec<(u32, u32)>> {
     let n = splats.len();
-    if n == 0 {
-        return views.map(|_| 0.0);
-    }
     // Each point's splats, as compressed rows.
     let mut start = vec![0u32; points + 1];
     for s in splats.iter() {
@@ -1163,10 +1151,8 @@ fn orient(splats: &mut [Grown], points: usize, views: Option<(&[Vec3], &[Vec3])>
             at[k as usize] += 1;
         }
     }
-    // Each splat's neighbours (the splats sharing a point with it, each
-    // once) and how far the link is trusted ([`link_weight`], which no
-    // turn of either changes), found on every thread.
-    let adjacent: Vec<Vec<(u32, u32)>> = (0..n)
+    // (`link_weight` reads no normal's sign, which orientation turns.)
+    (0..n)
         .into_par_iter()
         .map_init(
             || vec![u32::MAX; n],
@@ -1177,7 +1163,7 @@ fn orient(splats: &mut [Grown], points: usize, views: Option<(&[Vec3], &[Vec3])>
                         let bu = b as usize;
                         if bu != a && seen[bu] != a as u32 {
                             seen[bu] = a as u32;
-                            if let Some(w) = link_weight(&splats[a], &splats[bu], views.is_some()) {
+                            if let Some(w) = link_weight(&splats[a], &splats[bu], scan) {
                                 out.push(((w * 1e6) as u32, b));
                             }
                         }
@@ -1186,8 +1172,30 @@ fn orient(splats: &mut [Grown], points: usize, views: Option<(&[Vec3], &[Vec3])>
                 out
             },
         )
-        .collect();
-    drop((start, took));
+        .collect()
+}
+
+/// Orients the splats' normals along a spanning tree over splats that took
+/// a point in common, most parallel first, from the splat farthest from the
+/// centroid facing away from it (each part of the tree from its own).
+/// Sharing a point, not overlapping discs, makes two splats neighbours: the
+/// discs on the two faces of a thin sheet (a bunny's ear) overlap and stand
+/// nearly parallel, and joining them would turn one face inside out; a
+/// splat takes only points within its slab, never the far face's.
+///
+/// A scan's splats (`views`: where each point of the grid's order was seen
+/// from, and the points) are then turned tree by tree to face the
+/// scanners, as the stages turn their normals (`normals::orient`): a tree
+/// whose points mostly see its splats from behind is turned over
+/// ([`face_the_scanners`]). Returns the share of the points taken (counted
+/// once a splat) whose splat then faces away from their viewpoint past
+/// [`FACING_AWAY_COS`] (`None` without `views`), which tells free-space
+/// trimming whether the viewpoint is the scanner's.
+fn orient(splats: &mut [Grown], adjacent: &[Vec<(u32, u32)>], views: Option<(&[Vec3], &[Vec3])>) -> Option<f64> {
+    let n = splats.len();
+    if n == 0 {
+        return views.map(|_| 0.0);
+    }
     let centroid = splats.iter().map(|s| s.centre).sum::<Vec3>() / n as f32;
     let mut done = vec![false; n];
     // Each splat's tree, by its root.
@@ -1697,6 +1705,7 @@ pub fn grow_lean(
         sharp: false,
         settled: false,
         clipped: 0,
+        widened: 0,
         seconds: [t0.elapsed().as_secs_f64(), 0.0, 0.0, 0.0],
     };
     // Growing whatever the gate finds (the held-out check's windows, a few
@@ -1763,7 +1772,10 @@ pub fn grow_lean(
     let t2 = std::time::Instant::now();
     // Where each point of the grid's order was seen from.
     let seen: Option<Vec<Vec3>> = views.map(|v| g.order.iter().map(|&i| v.at(i as usize)).collect());
-    lean.facing_away = orient(&mut grown, g.pos.len(), seen.as_deref().map(|v| (v, g.pos.as_slice())));
+    let links = links(&grown, g.pos.len(), views.is_some());
+    lean.facing_away = orient(&mut grown, &links, seen.as_deref().map(|v| (v, g.pos.as_slice())));
+    lean.widened = gaps::close_pinholes(&mut grown, &links, eps);
+    drop(links);
     let t3 = std::time::Instant::now();
     let finished: Vec<(Splat, bool)> = grown.par_iter().map(|s| finish(&g, s)).collect();
     lean.flat_fields = finished.iter().filter(|f| f.1).count();
