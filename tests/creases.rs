@@ -782,7 +782,8 @@ fn the_smooth_bunny_gets_no_false_creases() {
 /// normal turned onto one of them is worse than the smooth one, so the face
 /// search turns a normal only where its two planes hold its neighbourhood
 /// closely (`splat::normals::TWO_FACES_HOLD`), and creases cost the smooth
-/// bunny little.
+/// bunny nothing against the same stages without them. Lean growth, which
+/// looks for no crease, is held to its own figure.
 #[test]
 fn the_estimated_bunny_keeps_its_smooth_normals() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
@@ -794,25 +795,32 @@ fn the_estimated_bunny_keeps_its_smooth_normals() {
     splatray::io::write_points(&points, &cloud).unwrap();
     let model = "mesh = \"data/bunny-mesh.ply\"\nsamples = 200000\nseed = 1";
     let text = bunny_at_400x300(&root, model);
-    let psnr = |creases: bool| {
+    let psnr = |splat: &str| {
         let t = text.replace(
             model,
             &format!(
-                "points = {:?}\ntruth = \"data/bunny-mesh.ply\"\nsplat = {{ creases = {creases} }}",
+                "points = {:?}\ntruth = \"data/bunny-mesh.ply\"\nsplat = {{ {splat} }}",
                 points.display().to_string()
             ),
         );
         let scene = build_scene(&parse_scene_str(&t).unwrap(), &root, None).unwrap();
         let e = common::errors_against_truth(&scene);
-        eprintln!("creases {creases}: {} splats, {e:?}", scene.splats.len());
+        eprintln!("{splat}: {} splats, {e:?}", scene.splats.len());
         e.image_psnr_db.unwrap()
     };
-    let (on, off) = (psnr(true), psnr(false));
+    let on = psnr("creases = true");
+    let (off, lean) = (
+        psnr("creases = false, lean = false"),
+        psnr("creases = false"),
+    );
     let _ = std::fs::remove_dir_all(&dir);
-    // Measured: on 38.67 dB, off 38.46 (21,323 and 21,277 splats); with
-    // every normal the search turned kept (before `TWO_FACES_HOLD`) on
-    // 38.03, 0.43 dB below off.
-    assert!(on > off + 0.1, "on {on} off {off}");
+    // Measured: on 38.67 dB, the same stages without creases 38.46, lean
+    // growth (no creases looked for) 39.18 (21,323, 21,277 and 21,492
+    // splats; without `lean::gaps` closing its pinholes, lean fails the
+    // bound); with every normal the search turned kept (before `TWO_FACES_HOLD`)
+    // on 38.03.
+    assert!(on > off, "on {on} off {off}");
+    assert!(on > 38.57 && lean > 39.08, "on {on} lean {lean}");
 }
 
 /// A pole 1.6 scan spacings in radius with a thin sign (a plate 0.5
