@@ -19,9 +19,9 @@
 //! parallel first (Prim), from the splat farthest from the centroid facing
 //! away from it. Where three discs still leave a pinhole between them, the
 //! third is widened over it before the fields ([`gaps`]: 15 pinholes of
-//! the default scene to 4, 38.54 to 39.09 dB). Slabs of [`SLAB_POINTS`] of the grid's order grow at once,
-//! each seeding from its own points only, so the splats are the same for
-//! any number of threads.
+//! the default scene to 4, 38.54 to 39.09 dB). Slabs of [`SLAB_POINTS`] of
+//! the grid's order grow at once, each seeding from its own points only,
+//! so the splats are the same for any number of threads.
 //!
 //! It has none of the pipeline's rules for noise, outliers, thin sheets,
 //! creases or real scans, so it runs only where its [`Gate`] finds a cloud
@@ -1192,7 +1192,8 @@ fn links(splats: &[Grown], points: usize, scan: bool) -> Vec<Vec<(u32, u32)>> {
 /// ([`face_the_scanners`]). Returns the share of the points taken (counted
 /// once a splat) whose splat then faces away from their viewpoint past
 /// [`FACING_AWAY_COS`] (`None` without `views`), which tells free-space
-/// trimming whether the viewpoint is the scanner's.
+/// trimming whether the viewpoint is the scanner's. `adjacent` are the
+/// splats' [`links`].
 fn orient(splats: &mut [Grown], adjacent: &[Vec<(u32, u32)>], views: Option<(&[Vec3], &[Vec3])>) -> Option<f64> {
     let n = splats.len();
     if n == 0 {
