@@ -13,8 +13,9 @@
 //! at again against every disc that may reach them; where the discs around
 //! surround such a crossing (it is not on the surface's border), the
 //! samples of a small square around it that no disc holds are the gap,
-//! and the disc around it that needs the least growth to hold them all
-//! (at most [`GAP_WIDEN_MAX`] times its radius) is widened to them. It
+//! and the disc around it, other than the two whose rims cross there,
+//! that needs the least growth to hold them all (at most
+//! [`GAP_WIDEN_MAX`] times its radius) is widened to them. It
 //! runs before the fields are fitted, so a widened disc's field is fitted
 //! over its new radius. A cloud with no gap builds no search tree.
 
@@ -53,9 +54,10 @@ const GAP_WINDOW_RADII: f32 = 0.3;
 const GAP_SAMPLES: i32 = 13;
 
 /// What the pass reads of a grown splat, packed: its centre, normal and
-/// radius, and whether it can be widened or pair ([`Disc::plain`]).
+/// radius, and whether it can be widened or pair ([`Circle::plain`]);
+/// a circle, as lean growth's discs are.
 #[derive(Clone, Copy)]
-struct Disc {
+struct Circle {
     centre: Vec3,
     normal: Vec3,
     radius: f32,
@@ -65,9 +67,9 @@ struct Disc {
     plain: bool,
 }
 
-impl Disc {
-    fn of(s: &Grown) -> Disc {
-        Disc {
+impl Circle {
+    fn of(s: &Grown) -> Circle {
+        Circle {
             centre: s.centre,
             normal: s.normal,
             radius: s.radius,
@@ -78,7 +80,7 @@ impl Disc {
 
 /// Whether disc `m` holds `p`: its projection on `m`'s plane within the
 /// radius, `p` within `eps` of that plane.
-fn holds(m: &Disc, p: Vec3, eps: f32) -> bool {
+fn holds(m: &Circle, p: Vec3, eps: f32) -> bool {
     let d = p - m.centre;
     let h = m.normal.dot(d);
     h.abs() <= eps && (d - m.normal * h).length_squared() <= m.radius * m.radius
@@ -86,7 +88,7 @@ fn holds(m: &Disc, p: Vec3, eps: f32) -> bool {
 
 /// The points where the rims of discs `i` and `j` cross, in `i`'s plane
 /// (`j`'s centre projected onto it); `(u, v)` are `i`'s plane axes.
-fn rim_crossings(i: &Disc, j: &Disc, (u, v): (Vec3, Vec3)) -> Option<[Vec3; 2]> {
+fn rim_crossings(i: &Circle, j: &Circle, (u, v): (Vec3, Vec3)) -> Option<[Vec3; 2]> {
     let to = j.centre - i.centre;
     let a = Vec2::new(to.dot(u), to.dot(v));
     let d = a.length();
@@ -107,7 +109,7 @@ fn rim_crossings(i: &Disc, j: &Disc, (u, v): (Vec3, Vec3)) -> Option<[Vec3; 2]> 
 /// The rim crossings of disc `i` with its linked discs on its sheet that
 /// no disc linked to `i` or to the other holds: the candidates for a
 /// gap's corner. Each pair is looked at from its larger disc.
-fn open_crossings(splats: &[Disc], links: &[Vec<(u32, u32)>], i: usize, eps: f32) -> Vec<(usize, usize, Vec3)> {
+fn open_crossings(splats: &[Circle], links: &[Vec<(u32, u32)>], i: usize, eps: f32) -> Vec<(usize, usize, Vec3)> {
     let s = &splats[i];
     let mut out = Vec::new();
     if !s.plain {
@@ -135,7 +137,7 @@ fn open_crossings(splats: &[Disc], links: &[Vec<(u32, u32)>], i: usize, eps: f32
 /// [`SURROUND_RADII`] of `i`'s radius) surround it: seen from `p` in `i`'s
 /// plane, no angle between the directions to their centres is wider than
 /// [`BORDER_GAP_RAD`].
-fn surrounded(splats: &[Disc], around: &[usize], i: usize, p: Vec3) -> bool {
+fn surrounded(splats: &[Circle], around: &[usize], i: usize, p: Vec3) -> bool {
     let si = &splats[i];
     let (u, v) = si.normal.any_orthonormal_pair();
     let reach = SURROUND_RADII * si.radius;
@@ -156,10 +158,10 @@ fn surrounded(splats: &[Disc], around: &[usize], i: usize, p: Vec3) -> bool {
 
 /// The widening a candidate corner `p` on disc `i`'s rim asks: `None`
 /// where a disc holds it, where the discs around do not surround it or
-/// where every disc would grow past [`GAP_WIDEN_MAX`]; else the disc
-/// that needs the least relative growth to hold the gap's samples, with
-/// its new radius.
-fn widening(splats: &[Disc], tree: &ImmutableKdTree<f32, u32, 3, 32>, (i, j, p): (usize, usize, Vec3), eps: f32) -> Option<(usize, f32)> {
+/// where every disc would grow past [`GAP_WIDEN_MAX`]; else the disc,
+/// other than `i` and `j`, that needs the least relative growth to hold
+/// the gap's samples, with its new radius.
+fn widening(splats: &[Circle], tree: &ImmutableKdTree<f32, u32, 3, 32>, (i, j, p): (usize, usize, Vec3), eps: f32) -> Option<(usize, f32)> {
     let si = &splats[i];
     let window = GAP_WINDOW_RADII * si.radius;
     let reach = SURROUND_RADII * si.radius + 2.0 * window;
@@ -220,7 +222,7 @@ fn widening(splats: &[Disc], tree: &ImmutableKdTree<f32, u32, 3, 32>, (i, j, p):
 /// `ϵ`: a disc holds a point within it of its plane. Returns how many
 /// discs were widened.
 pub(super) fn close_pinholes(splats: &mut [Grown], links: &[Vec<(u32, u32)>], eps: f32) -> usize {
-    let discs: Vec<Disc> = splats.par_iter().map(Disc::of).collect();
+    let discs: Vec<Circle> = splats.par_iter().map(Circle::of).collect();
     let open: Vec<(usize, usize, Vec3)> = (0..discs.len()).into_par_iter().flat_map_iter(|i| open_crossings(&discs, links, i, eps)).collect();
     if open.is_empty() {
         return 0;
@@ -275,7 +277,7 @@ mod tests {
     }
 
     fn held(discs: &[Grown], p: Vec3) -> bool {
-        discs.iter().any(|s| holds(&Disc::of(s), p, 1e-3))
+        discs.iter().any(|s| holds(&Circle::of(s), p, 1e-3))
     }
 
     /// Three discs whose rims cross pairwise but leave the triangle's
