@@ -280,18 +280,25 @@ mod tests {
         discs.iter().any(|s| holds(&Circle::of(s), p, 1e-3))
     }
 
+    /// [`triangle`] of `side`, checked open at its centre, after
+    /// [`close_pinholes`]: the discs widened, their radii, and whether
+    /// the centre is held now.
+    fn close_triangle(side: f32) -> (usize, Vec<f32>, bool) {
+        let (mut discs, centre) = triangle(side);
+        assert!(!held(&discs, centre));
+        let widened = close_pinholes(&mut discs, &all_linked(3), 1e-3);
+        (widened, discs.iter().map(|d| d.radius).collect(), held(&discs, centre))
+    }
+
     /// Three discs whose rims cross pairwise but leave the triangle's
     /// centre open, as at a pinhole of the default scene (side 1.77:
     /// circumradius 1.0219, the gap about 0.05 across): the one that
     /// needs least growth is widened, and then holds it.
     #[test]
     fn three_discs_leaving_a_gap_have_one_widened_over_it() {
-        let (mut discs, centre) = triangle(1.77);
-        assert!(!held(&discs, centre));
-        let widened = close_pinholes(&mut discs, &all_linked(3), 1e-3);
-        let r: Vec<f32> = discs.iter().map(|d| d.radius).collect();
+        let (widened, r, closed) = close_triangle(1.77);
         assert_eq!(widened, 1);
-        assert!(held(&discs, centre));
+        assert!(closed);
         // Measured: [1.0, 1.0, 1.0683]: the third disc reaches the corner
         // of the other two's rims (1.0219 + 0.0454 from its centre).
         assert!(r[..2] == [1.0, 1.0] && r[2] > 1.06 && r[2] < 1.075, "{r:?}");
@@ -302,13 +309,10 @@ mod tests {
     /// for, none past [`GAP_WIDEN_MAX`].
     #[test]
     fn a_wider_gap_is_closed_by_the_discs_its_corners_ask_for() {
-        let (mut discs, centre) = triangle(1.9);
-        assert!(!held(&discs, centre));
-        let widened = close_pinholes(&mut discs, &all_linked(3), 1e-3);
-        let r: Vec<f32> = discs.iter().map(|d| d.radius).collect();
+        let (widened, r, closed) = close_triangle(1.9);
         // Measured: 1 widened, [1.2345, 1.0, 1.02].
         assert_eq!(widened, 1, "{r:?}");
-        assert!(held(&discs, centre), "{r:?}");
+        assert!(closed, "{r:?}");
         assert!(r.iter().all(|&r| r <= GAP_WIDEN_MAX), "{r:?}");
     }
 
