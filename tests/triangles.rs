@@ -573,7 +573,7 @@ fn compare_as_triangles_renders_the_meshes_beside_the_splats() {
 /// calls give (`Backend::intersect_packet`'s contract), on both backends:
 /// the camera rays of `scenes/hybrid.toml` in packets of 8, and shadow
 /// rays from their hits toward the lamp, some leaving splats and some
-/// triangles.
+/// triangles, in packets and as one batch (`Backend::occluded_each`).
 #[test]
 fn the_hybrid_backends_packets_answer_as_single_queries() {
     let scene = hybrid(64, 48);
@@ -631,8 +631,13 @@ fn the_hybrid_backends_packets_answer_as_single_queries() {
             }
             let mut out = vec![false; shadows.len()];
             b.occluded_packet(&shadows, &mut out);
-            for (q, o) in shadows.iter().zip(&out) {
-                assert_eq!(*o, b.occluded_from(q), "{name}");
+            // And as one batch of scattered rays (stale answers first).
+            let mut each = vec![true; shadows.len()];
+            b.occluded_each(&shadows, &mut each);
+            for ((q, o), e) in shadows.iter().zip(&out).zip(&each) {
+                let alone = b.occluded_from(q);
+                assert_eq!(*o, alone, "{name}");
+                assert_eq!(*e, alone, "{name}: occluded_each");
             }
         }
         // Measured at 64 × 48 (3,072 rays): 760 end on triangles, 1,200

@@ -135,6 +135,21 @@ impl Backend for Hybrid {
             }
         }
     }
+
+    /// Each side's call for scattered rays, the triangles asked only of
+    /// the queries the splats leave open.
+    fn occluded_each(&self, qs: &[Query], out: &mut [bool]) {
+        assert!(out.len() >= qs.len(), "an answer per query");
+        let sq: Vec<Query> = qs.iter().map(|q| self.splat_query(q)).collect();
+        self.splats.occluded_each(&sq, out);
+        let open: Vec<usize> = (0..qs.len()).filter(|&i| !out[i]).collect();
+        let tq: Vec<Query> = open.iter().map(|&i| self.tri_query(&qs[i], qs[i].t_max)).collect();
+        let mut blocked = vec![false; open.len()];
+        self.tris.occluded_each(&tq, &mut blocked);
+        for (&i, b) in open.iter().zip(blocked) {
+            out[i] = b;
+        }
+    }
 }
 
 impl BackendInfo<Disc> {

@@ -198,6 +198,19 @@ pub trait Backend: Send + Sync {
             *o = self.occluded_from(q);
         }
     }
+
+    /// [`Backend::occluded_from`] for a batch of scattered rays (no shared
+    /// origin): `out[i]` is its answer for `qs[i]`. The default asks one
+    /// query at a time.
+    ///
+    /// # Panics
+    /// If `out` is shorter than `qs`.
+    fn occluded_each(&self, qs: &[Query], out: &mut [bool]) {
+        assert!(out.len() >= qs.len(), "an answer per query");
+        for (q, o) in qs.iter().zip(out.iter_mut()) {
+            *o = self.occluded_from(q);
+        }
+    }
 }
 
 /// A backend's knowledge of the rays leaving one origin

@@ -705,12 +705,15 @@ fn occluded_planned(
         let mut got = vec![false; n];
         got.par_chunks_mut(CHUNK)
             .enumerate()
-            .for_each_init(GatheredRays::new, |buf, (c, got)| {
-                let chunk = order.gather(c, rays, lens, buf);
-                for (g, (ray, len)) in got.iter_mut().zip(chunk.iter()) {
-                    *g = backend.occluded_from(&query(ray, len));
-                }
-            });
+            .for_each_init(
+                || (GatheredRays::new(), Vec::with_capacity(CHUNK)),
+                |(buf, qs), (c, got)| {
+                    let chunk = order.gather(c, rays, lens, buf);
+                    qs.clear();
+                    qs.extend(chunk.iter().map(|(ray, len)| query(ray, len)));
+                    backend.occluded_each(qs, got);
+                },
+            );
         out[..n]
             .par_iter_mut()
             .zip(&order.at)

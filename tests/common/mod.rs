@@ -576,11 +576,12 @@ fn packet_orders(n: usize) -> Vec<(&'static str, Vec<usize>, Vec<usize>)> {
 }
 
 /// Checks `backend`'s packet queries (`Backend::intersect_packet`,
-/// `Backend::occluded_packet`) against its own single-ray answers on
-/// every query, in every order of [`packet_orders`]: identical candidate
-/// windows bit for bit, overflow flags and any-hit answers (the backend
-/// contract: a ray's candidates do not depend on the batch it is traced
-/// in).
+/// `Backend::occluded_packet`) and its scattered batches
+/// (`Backend::occluded_each`, each batch and then every query at once)
+/// against its own single-ray answers on every query, in every order of
+/// [`packet_orders`]: identical candidate windows bit for bit, overflow
+/// flags and any-hit answers (the backend contract: a ray's candidates do
+/// not depend on the batch it is traced in).
 pub fn packets_agree(backend: &Named, queries: &[Query], xi: f32) -> Result<(), String> {
     let bits = |h: &CandidateHits| {
         let c: Vec<_> = h
@@ -615,9 +616,21 @@ pub fn packets_agree(backend: &Named, queries: &[Query], xi: f32) -> Result<(), 
                 });
             }
             let mut occ = vec![true; len + 1];
+            let mut each = vec![true; len + 1];
             backend.intersect_packet(&qs, &mut hits);
             backend.occluded_packet(&qs, &mut occ);
+            backend.occluded_each(&qs, &mut each);
             for (j, &i) in idx.iter().enumerate() {
+                if each[j] != single[i].1 {
+                    return Err(format!(
+                        "{}: {what}: query {i} (ray {j} of {len}) asked as one of scattered rays \
+                         (occluded_each) gives {} against {} alone\n  {:?}",
+                        backend.name(),
+                        each[j],
+                        single[i].1,
+                        queries[i]
+                    ));
+                }
                 if bits(&hits[j]) != single[i].0 || occ[j] != single[i].1 {
                     return Err(format!(
                         "{}: {what}: query {i} (lane {j} of {len}) traced in a packet differs from                          the same query alone: {:?} / {} vs {:?} / {}\n  {:?}",
@@ -630,6 +643,21 @@ pub fn packets_agree(backend: &Named, queries: &[Query], xi: f32) -> Result<(), 
                     ));
                 }
             }
+        }
+        let qs: Vec<Query> = order.iter().map(|&i| queries[i]).collect();
+        let mut each = vec![true; qs.len() + 1];
+        backend.occluded_each(&qs, &mut each);
+        if let Some(j) = (0..qs.len()).find(|&j| each[j] != single[order[j]].1) {
+            let i = order[j];
+            return Err(format!(
+                "{}: {what}: query {i} asked among all {} at once (occluded_each) gives {} \
+                 against {} alone\n  {:?}",
+                backend.name(),
+                qs.len(),
+                each[j],
+                single[i].1,
+                queries[i]
+            ));
         }
     }
     Ok(())

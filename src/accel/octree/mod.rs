@@ -71,6 +71,7 @@ mod fan;
 mod packet;
 mod parallel;
 mod parts;
+mod stream;
 mod traverse;
 
 use super::{Backend, BuildStats, CandidateHits, NoSkip, Query};
@@ -436,6 +437,10 @@ impl<P: Primitive> Backend for Octree<P> {
 
     fn occluded_packet(&self, qs: &[Query], out: &mut [bool]) {
         self.any_hit_packets(qs, out);
+    }
+
+    fn occluded_each(&self, qs: &[Query], out: &mut [bool]) {
+        self.occluded_stream(qs, out);
     }
 
     /// True: with a leaf taken once for the rays of a packet that share an

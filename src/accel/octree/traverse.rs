@@ -85,7 +85,7 @@ impl<P: Primitive> Tree<P> {
     /// around the content); `visitor` sees the leaves.
     /// Returns true when the visitor stopped it.
     #[inline(always)]
-    fn traverse<V: Visitor<P>>(&self, ray: &Ray, ctx: &RayCtx, visitor: &mut V) -> bool {
+    pub(super) fn traverse<V: Visitor<P>>(&self, ray: &Ray, ctx: &RayCtx, visitor: &mut V) -> bool {
         if self.references == 0 {
             return false;
         }
@@ -119,44 +119,15 @@ impl<P: Primitive> Tree<P> {
         ctx: &RayCtx,
         visitor: &mut V,
     ) -> bool {
-        let n = g.n as i32;
-        let p = (ray.origin + ray.dir * entry - self.root_lo) / g.cell;
-        // Truncation, not `floor` (a libm call without SSE4.1): the two
-        // differ only on negative `c`, where both clamp to cell 0; NaN and
-        // out-of-range values saturate alike.
-        let start = |c: f32| (c as i32).clamp(0, n - 1);
-        let idx = [start(p.x), start(p.y), start(p.z)];
-        let d = ray.dir.to_array();
-        let o = ray.origin.to_array();
-        let inv = ctx.inv_dir.to_array();
-        let lo = self.root_lo.to_array();
+        let at = self.grid_start(g, ray, ctx, entry);
         // Per axis, in registers: the step of the cell index, the cells
         // left before the grid's face, where the next crossing is, and
         // how far apart crossings are.
-        let axis = |a: usize, stride: i32| {
-            let i = idx[a];
-            if d[a] > 0.0 {
-                (
-                    stride,
-                    n - 1 - i,
-                    (lo[a] + (i + 1) as f32 * g.cell - o[a]) * inv[a],
-                    g.cell * inv[a],
-                )
-            } else if d[a] < 0.0 {
-                (
-                    -stride,
-                    i,
-                    (lo[a] + i as f32 * g.cell - o[a]) * inv[a],
-                    -g.cell * inv[a],
-                )
-            } else {
-                (0, 0, f32::INFINITY, f32::INFINITY)
-            }
-        };
-        let (sx, mut left_x, mut tx, dx) = axis(0, 1);
-        let (sy, mut left_y, mut ty, dy) = axis(1, n);
-        let (sz, mut left_z, mut tz, dz) = axis(2, n * n);
-        let mut i = idx[0] + n * (idx[1] + n * idx[2]);
+        let axis = |a: usize| (at.step[a] as i32, at.left[a] as i32, at.t[a], at.dt[a]);
+        let (sx, mut left_x, mut tx, dx) = axis(0);
+        let (sy, mut left_y, mut ty, dy) = axis(1);
+        let (sz, mut left_z, mut tz, dz) = axis(2);
+        let mut i = at.cell;
         let mut last = super::NO_NODE;
         // One step: the axis crossed first ends the walk when the crossing
         // lies beyond the window or the content (or is NaN), or leaves the
@@ -204,6 +175,46 @@ impl<P: Primitive> Tree<P> {
             } else {
                 step!(tz, left_z, sz, dz)
             }
+        }
+    }
+
+    /// Where the grid walk of `ray` (entering the content at `entry`)
+    /// starts (3D-DDA, Amanatides and Woo): its first cell, and per axis
+    /// the step of the cell index, the cells left before the grid's face,
+    /// where the ray next crosses into a cell and how far apart crossings
+    /// are. Computed for both signs of the direction and chosen by masks,
+    /// not by a branch a scattered batch of rays mispredicts; counts as
+    /// `f32` (whole numbers, exact), an axis the ray does not move along
+    /// `(0, 0, inf, inf)`.
+    #[inline(always)]
+    pub(super) fn grid_start(&self, g: &super::Grid, ray: &Ray, ctx: &RayCtx, entry: f32) -> GridStart {
+        let n = g.n as i32;
+        let p = (ray.origin + ray.dir * entry - self.root_lo) / g.cell;
+        // Truncation, not `floor` (a libm call without SSE4.1): the two
+        // differ only on negative `c`, where both clamp to cell 0; NaN and
+        // out-of-range values saturate alike.
+        let start = |c: f32| (c as i32).clamp(0, n - 1);
+        let idx = [start(p.x), start(p.y), start(p.z)];
+        let d = Vec3A::from(ray.dir);
+        let (pos, neg) = (d.cmpgt(Vec3A::ZERO), d.cmplt(Vec3A::ZERO));
+        let at = Vec3A::new(idx[0] as f32, idx[1] as f32, idx[2] as f32);
+        let size = Vec3A::splat(g.cell);
+        let inv = ctx.inv_dir_a;
+        // The face crossed next: the cell's upper one moving up, its
+        // lower one moving down.
+        let face = Vec3A::select(pos, at + Vec3A::ONE, at);
+        let t = (Vec3A::from(self.root_lo) + face * size - ctx.origin_a) * inv;
+        let dt = Vec3A::select(pos, size, -size) * inv;
+        let stride = Vec3A::new(1.0, n as f32, (n * n) as f32);
+        let step = Vec3A::select(pos, stride, -stride);
+        let left = Vec3A::select(pos, Vec3A::splat((n - 1) as f32) - at, at);
+        let moves = pos | neg;
+        GridStart {
+            cell: idx[0] + n * (idx[1] + n * idx[2]),
+            step: Vec3A::select(moves, step, Vec3A::ZERO),
+            left: Vec3A::select(moves, left, Vec3A::ZERO),
+            t: Vec3A::select(moves, t, Vec3A::INFINITY),
+            dt: Vec3A::select(moves, dt, Vec3A::INFINITY),
         }
     }
 
@@ -259,7 +270,7 @@ impl<P: Primitive> Tree<P> {
     /// `[t_min, cut]` (NaN compares false: a NaN entry or exit skips the
     /// node).
     #[inline(always)]
-    fn meets(&self, index: usize, ctx: &RayCtx, cut: f32) -> bool {
+    pub(super) fn meets(&self, index: usize, ctx: &RayCtx, cut: f32) -> bool {
         let [blo, bhi] = self.boxes[index];
         let (near, far) = slab_a(
             (Vec3A::from(blo) - ctx.origin_a) * ctx.inv_dir_a,
@@ -269,7 +280,7 @@ impl<P: Primitive> Tree<P> {
     }
 
     /// [`Tree::visit`] of a node whose content box the ray meets.
-    fn enter<V: Visitor<P>>(
+    pub(super) fn enter<V: Visitor<P>>(
         &self,
         index: usize,
         lo: Vec3,
@@ -314,6 +325,20 @@ impl<P: Primitive> Tree<P> {
     }
 }
 
+/// Where a ray's grid walk starts ([`Tree::grid_start`]).
+pub(super) struct GridStart {
+    /// The first cell (`x + n (y + n z)`).
+    pub(super) cell: i32,
+    /// Per axis: the step of the cell index.
+    pub(super) step: Vec3A,
+    /// Per axis: the cells left before the grid's face.
+    pub(super) left: Vec3A,
+    /// Per axis: where the ray next crosses into a cell.
+    pub(super) t: Vec3A,
+    /// Per axis: how far apart its crossings are.
+    pub(super) dt: Vec3A,
+}
+
 /// Per-ray constants of the traversal.
 pub(super) struct RayCtx {
     pub(super) origin: Vec3,
@@ -323,8 +348,8 @@ pub(super) struct RayCtx {
     pub(super) sign_mask: usize,
     pub(super) t_min: f32,
     /// `origin` and `inv_dir` in SIMD lanes.
-    origin_a: Vec3A,
-    inv_dir_a: Vec3A,
+    pub(super) origin_a: Vec3A,
+    pub(super) inv_dir_a: Vec3A,
 }
 
 impl RayCtx {
