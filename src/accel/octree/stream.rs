@@ -1,4 +1,5 @@
-//! Scattered occlusion rays walked through the grid several at once.
+//! Scattered occlusion rays walked through the grid several at once (the
+//! front-to-back traversal of report §3.2, eight rays abreast).
 //!
 //! One ray at a time, the grid walk of [`Tree::walk_grid`] chooses the
 //! axis it crosses next by a branch the processor mispredicts about every
@@ -153,7 +154,7 @@ impl<P: Primitive> Tree<P> {
 
     /// Sets lane `k` of `w` walking query `q` (number `i`) from the grid
     /// cell where it enters the content, as [`Tree::walk_grid`] starts;
-    /// `None` when the ray misses the content within its span.
+    /// false when the ray misses the content within its span.
     fn start_lane(&self, g: &Grid, q: &Query, i: usize, w: &mut Lanes, k: usize, ctx: &mut RayCtx) -> bool {
         *ctx = RayCtx::new(&q.ray, q.t_min);
         let (entry, far) = self.window(ctx);
@@ -173,7 +174,7 @@ impl<P: Primitive> Tree<P> {
             w.dt[a][g4][l] = at.dt[a];
         }
         w.cell[g4][l] = at.cell as f32;
-        w.exit[k >> 2][k & 3] = exit;
+        w.exit[g4][l] = exit;
         w.last[k] = NO_NODE;
         w.ray[k] = i;
         true
