@@ -2,9 +2,10 @@
 //! front-to-back traversal of report §3.2, eight rays abreast).
 //!
 //! One ray at a time, the grid walk of [`Tree::walk_grid`] chooses the
-//! axis it crosses next by a branch the processor mispredicts about every
-//! other step on rays of scattered directions, and a ray that meets
-//! nothing spends most of its time in those steps. Here [`LANES`] rays
+//! axis it crosses next by a branch that rays of scattered directions
+//! leave unpredictable, and a ray that meets nothing spends most of its
+//! time in those steps (7.5 of them on a bunny's box rays, about 60 ns:
+//! `docs/notes/backends.md`, issue 55, seventy-fourth session). Here [`LANES`] rays
 //! walk side by side: each round every lane takes one step chosen by
 //! comparisons kept as masks (no branch, and the lanes' chains are
 //! independent, so one lane's latency hides behind the others'), and only
